@@ -1,0 +1,78 @@
+"""The ``jointid`` command line: one entry point, one module per subcommand.
+
+Each subcommand module exposes ``register(subparsers)``, which adds its parser and sets
+``func`` (a callable ``args -> int`` exit code). Errors raised on purpose by any of the
+packages (their exception roots) print one line on stderr and exit 2; Ctrl-C exits 130.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+
+from . import __version__
+
+# subcommand modules, in the order of `jointid --help`
+SUBCOMMANDS = (
+    "daq.cli_plan",  # jointid plan
+    "daq.cli_run",  # jointid run
+    "ident.cli",  # jointid fit
+    "daq.cli_demo",  # jointid demo, jointid report
+)
+
+
+def _user_errors() -> tuple[type[BaseException], ...]:
+    from ident import IdentError
+    from sim_drivers import SimError
+    from trajectories import TrajectoryError
+
+    from . import DaqError
+
+    return (DaqError, TrajectoryError, IdentError, SimError, OSError)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="jointid",
+        description="Dynamic identification of robot joints over CANopen "
+        "(plan the excitation, run it, log to MCAP, fit and refine friction models).",
+    )
+    parser.add_argument("--version", action="version", version=f"jointid {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in SUBCOMMANDS:
+        try:
+            module = importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name != name:  # a real missing dependency, not a missing subcommand
+                raise
+            continue
+        module.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``jointid`` console script."""
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        print("jointid: interrupted", file=sys.stderr)
+        return 130
+    except _user_errors() as exc:
+        if isinstance(exc, OSError) and exc.filename:
+            msg = f"{exc.filename}: {exc.strerror or exc}"
+        else:
+            msg = str(exc)
+        print(f"jointid {args.command}: error: {msg}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,63 @@
+"""The sampled signals every regressor term reads (pure data, no I/O)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, replace
+
+import numpy as np
+
+G = 9.81  # [m/s^2] gravity, as in the paper (section IV.A)
+
+
+@dataclass(frozen=True)
+class Signals:
+    """Aligned samples of one or more concatenated experiments (paper eq. 36-37).
+
+    All arrays have shape ``(n,)``. Positions, velocities and torques are joint-side SI.
+
+    Attributes
+    ----------
+    t : ndarray
+        Time since the start of the sample's own run [s] (restarts for each experiment).
+    q, dq, ddq : ndarray
+        Position [rad or m], velocity [rad/s or m/s], acceleration [rad/s^2 or m/s^2].
+    tau : ndarray
+        Motor torque from the current reference, tau = g_f v_f (eq. 7) [N m or N].
+    payload_mass : ndarray
+        Weighed additional mass M_aw of the sample's experiment [kg] (0 without payload).
+    payload_arm : ndarray
+        Lever arm L_a of the additional mass [m].
+    experiment : ndarray of int
+        Index of the experiment (input file / payload run) each sample comes from.
+    revolute : bool
+        Revolute joints have gravity terms g cos q, g sin q; prismatic joints have none.
+    dtau : ndarray or None
+        Time derivative of ``tau`` [N m/s], when a term needs it (torque lag).
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    dq: np.ndarray
+    ddq: np.ndarray
+    tau: np.ndarray
+    payload_mass: np.ndarray
+    payload_arm: np.ndarray
+    experiment: np.ndarray
+    revolute: bool = True
+    dtau: np.ndarray | None = field(default=None)
+
+    def __len__(self) -> int:
+        return int(self.q.shape[0])
+
+    def take(self, index: np.ndarray) -> Signals:
+        """Samples selected by a boolean mask or an index array."""
+        kw = {}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            kw[f.name] = v[index] if isinstance(v, np.ndarray) else v
+        return replace(self, **kw)
+
+    @property
+    def sign_power(self) -> np.ndarray:
+        """sign(P) = sign(tau * dq), the paper's proxy for sign(P_out) (eq. 26)."""
+        return np.sign(self.tau * self.dq)
