@@ -1,0 +1,63 @@
+"""The HTML report is self-contained, shows the paper's tables, and marks truth mismatches."""
+
+from __future__ import annotations
+
+import base64
+import json
+import re
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import pytest  # noqa: E402
+
+from daq import DaqError  # noqa: E402
+from daq.report_build import build_report  # noqa: E402
+
+
+def _fit_json():
+    p = lambda v, s: {"value": v, "std2": 2 * s, "rel_std_pct": 100 * s / abs(v)}  # noqa: E731
+    return {
+        "models": {
+            "usual": {"rel_error": 0.0733, "rel_error_low_velocity": 0.0737,
+                      "rel_error_high_velocity": 0.0863,
+                      "parameters": {"J": p(30.9, 0.14), "F_C": p(39.9, 0.04)}},
+            "new": {"rel_error": 0.0484, "rel_error_low_velocity": 0.0401,
+                    "rel_error_high_velocity": 0.0881,
+                    "parameters": {"a_m_J": p(32.4, 0.13), "c_m": p(21.0, 0.07)}},
+        },
+        "refinement": {"steps": [{"effect": "position_ripple", "variable": "position",
+                                  "parameters": {"A": {"value": 5.0, "std2": 0.1}},
+                                  "rel_error_before": 0.05, "rel_error_after": 0.03,
+                                  "validation_rel_error_before": None,
+                                  "validation_rel_error_after": None}],
+                       "rel_error_final": 0.03},
+    }
+
+
+def test_report_embeds_figures_and_flags_truth(tmp_path):
+    (tmp_path / "fit.json").write_text(json.dumps(_fit_json()))
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1])
+    fig.savefig(tmp_path / "validation_new.png")
+    plt.close(fig)
+    demo = {
+        "truth": {"a_m_J": 32.5, "c_m": 25.0},  # c_m is 57 sigma away: must be flagged
+        "truth_effects": {"position_ripple": {"amplitude_Nm": 5.0}},
+        "figures": {"new": [{"file": "validation_new.png", "caption": "Direct validation"}]},
+    }
+    (tmp_path / "demo.json").write_text(json.dumps(demo))
+    out = build_report(tmp_path, title="t")
+    text = out.read_text()
+    # the figure is embedded, not linked: the report stands alone
+    m = re.search(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', text)
+    assert m and base64.b64decode(m.group(1))[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "Table III" in text and "0.0484" in text and "position_ripple" in text
+    rows = re.findall(r'<tr class="(good|bad)"><td>([^<]+)</td>', text)
+    assert ("good", "a_m_J") in rows and ("bad", "c_m") in rows
+
+
+def test_report_refuses_missing_fit(tmp_path):
+    with pytest.raises(DaqError, match="fit.json"):
+        build_report(tmp_path)
