@@ -1,0 +1,428 @@
+"""Regressor terms of the paper's two models and the estimator wrapper :class:`IdentModel`.
+
+Every effect is a :class:`~ident.terms.Term` (columns linear in its parameters); the usual
+model (eq. 38-39) and the new load- and velocity-dependent model (eq. 42-44) are two
+compositions of the same terms::
+
+    usual = RigidBody() + Payload() + Coulomb() + Viscous() + Offset()
+    new = LoadDependent(RigidBody() + Payload(), qs) + QuadrantCoulomb(qs) + Viscous() + Offset()
+
+Parameter names follow ``docs/architecture.md``. Pure numerics: no file access.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from . import DataError
+from .signals import G, Signals
+from .terms import Library, Term
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .estimate import LSResult
+    from .preprocess import Design
+
+__all__ = [
+    "RigidBody",
+    "Payload",
+    "Coulomb",
+    "Viscous",
+    "Offset",
+    "LoadDependent",
+    "QuadrantCoulomb",
+    "usual_model",
+    "new_model",
+    "IdentModel",
+    "power_split",
+    "exp_velocity",
+]
+
+
+def power_split(s: Signals) -> tuple[np.ndarray, np.ndarray]:
+    """Diagonals of P+ and P- (eq. 27-28, 44) from sign(P) = sign(tau dq) (eq. 26).
+
+    Returns
+    -------
+    p_plus, p_minus : ndarray, shape (n,)
+        (1 + sign P)/2 and (1 - sign P)/2; both 0.5 where tau dq = 0.
+    """
+    sp = s.sign_power
+    return 0.5 * (1.0 + sp), 0.5 * (1.0 - sp)
+
+
+def exp_velocity(s: Signals, qs: float) -> np.ndarray:
+    """E_xp = exp(-|dq| / q_s) (eq. 29, 44), shape (n,); q_s in [rad/s] or [m/s]."""
+    return np.exp(-np.abs(s.dq) / qs)
+
+
+def _check_qs(qs: float) -> float:
+    qs = float(qs)
+    if not np.isfinite(qs) or qs <= 0:
+        raise DataError(f"q_s: expected a positive velocity constant [rad/s], got {qs!r}")
+    return qs
+
+
+class RigidBody(Term):
+    """Rigid-body regressor of one joint (eq. 31): ``[ddq, g cos q, g sin q]`` -> J, MX, MY.
+
+    Parameters
+    ----------
+    revolute : bool or None
+        ``True``: columns J, MX, MY. ``False`` (prismatic, no gravity): column J only
+        (J is then the moving mass [kg]). ``None``: names J, MX, MY and the gravity columns
+        follow ``Signals.revolute`` (zero on prismatic data, reported by the estimator).
+    """
+
+    effect = "rigid_body"
+    variable = "model"
+
+    def __init__(self, revolute: bool | None = None) -> None:
+        self.revolute = revolute
+
+    def names(self) -> tuple[str, ...]:
+        return ("J",) if self.revolute is False else ("J", "MX", "MY")
+
+    def columns(self, s: Signals) -> np.ndarray:
+        n = len(s)
+        if self.revolute is False:
+            return s.ddq.reshape(n, 1).astype(float, copy=True)
+        out = np.zeros((n, 3))
+        out[:, 0] = s.ddq
+        if s.revolute:
+            out[:, 1] = G * np.cos(s.q)
+            out[:, 2] = G * np.sin(s.q)
+        return out
+
+    def describe(self) -> str:
+        if self.revolute is False:
+            return "rigid body J ddq (prismatic)"
+        return "rigid body J ddq + MX g cos q + MY g sin q (eq. 31)"
+
+
+class Payload(Term):
+    """Known additional mass (eq. 34-35): ``M_aw L_a (L_a ddq + g cos q)`` -> ``Ma_ratio``.
+
+    The parameter is M_ae/M_aw, the identified over the weighed mass (1 for an exact
+    weighing). On prismatic data the column is ``M_aw ddq`` (no lever arm, no gravity).
+    """
+
+    effect = "payload"
+    variable = "load"
+
+    def names(self) -> tuple[str, ...]:
+        return ("Ma_ratio",)
+
+    def columns(self, s: Signals) -> np.ndarray:
+        if s.revolute:
+            col = s.payload_mass * s.payload_arm * (s.payload_arm * s.ddq + G * np.cos(s.q))
+        else:
+            col = s.payload_mass * s.ddq
+        return col.reshape(-1, 1).astype(float, copy=False)
+
+    def describe(self) -> str:
+        return "payload (M_ae/M_aw) M_aw L_a (L_a ddq + g cos q) (eq. 35)"
+
+
+class Coulomb(Term):
+    """Symmetric dry friction ``F_C sign(dq)`` (eq. 5) -> ``F_C`` [N m]."""
+
+    effect = "coulomb"
+    variable = "direction"
+
+    def names(self) -> tuple[str, ...]:
+        return ("F_C",)
+
+    def columns(self, s: Signals) -> np.ndarray:
+        return np.sign(s.dq).reshape(-1, 1).astype(float)
+
+    def describe(self) -> str:
+        return "Coulomb F_C sign(dq)"
+
+
+class Viscous(Term):
+    """Viscous friction ``F_V dq`` (eq. 5) -> ``F_V`` [N m s/rad]."""
+
+    effect = "viscous"
+    variable = "velocity"
+
+    def names(self) -> tuple[str, ...]:
+        return ("F_V",)
+
+    def columns(self, s: Signals) -> np.ndarray:
+        return np.asarray(s.dq, dtype=float).reshape(-1, 1).copy()
+
+    def describe(self) -> str:
+        return "viscous F_V dq"
+
+
+class Offset(Term):
+    """Offset ``tau_off`` (amplifier offset + asymmetric Coulomb, eq. 6) -> ``tau_off`` [N m]."""
+
+    effect = "offset"
+    variable = "direction"
+
+    def names(self) -> tuple[str, ...]:
+        return ("tau_off",)
+
+    def columns(self, s: Signals) -> np.ndarray:
+        return np.ones((len(s), 1))
+
+    def describe(self) -> str:
+        return "offset tau_off"
+
+
+class LoadDependent(Term):
+    """Load- and velocity-dependent dry friction on tau_out (eq. 30, 42-44).
+
+    With W_in the columns of ``inner`` (the rigid body and payload, tau_out = W_in chi_in),
+    the columns are ``[P+ W_in, P+ Exp W_in, P- W_in, -P- Exp W_in]``, arranged as in
+    eq. 43: for each inner column n, ``a_m_<n>, b_m_<n>``, then for each, ``a_g_<n>, b_g_<n>``.
+    The payload column keeps the bare names ``a_m, b_m, a_g, b_g`` (its coefficient is
+    a_m M_ae/M_aw, i.e. a_m for an exact weighing).
+
+    Parameters
+    ----------
+    inner : Term
+        The terms whose sum is tau_out (usually ``RigidBody() + Payload()``).
+    qs : float
+        Velocity constant q_s of E_xp = exp(-|dq|/q_s) [rad/s] (eq. 29), fixed a priori.
+    """
+
+    effect = "load_dependent"
+    variable = "quadrant"
+
+    def __init__(self, inner: Term, qs: float) -> None:
+        self.inner = inner
+        self.qs = _check_qs(qs)
+
+    def _suffixes(self) -> list[str]:
+        out = []
+        for t in self.inner.terms():
+            for n in t.names():
+                out.append("" if isinstance(t, Payload) else "_" + n)
+        return out
+
+    def names(self) -> tuple[str, ...]:
+        suf = self._suffixes()
+        m = [f"{p}{x}" for x in suf for p in ("a_m", "b_m")]
+        g = [f"{p}{x}" for x in suf for p in ("a_g", "b_g")]
+        return tuple(m + g)
+
+    def columns(self, s: Signals) -> np.ndarray:
+        w = self.inner.columns(s)
+        pp, pm = power_split(s)
+        e = exp_velocity(s, self.qs)
+        n, k = w.shape
+        out = np.empty((n, 4 * k))
+        out[:, 0 : 2 * k : 2] = pp[:, None] * w
+        out[:, 1 : 2 * k : 2] = (pp * e)[:, None] * w
+        out[:, 2 * k :: 2] = pm[:, None] * w
+        out[:, 2 * k + 1 :: 2] = -(pm * e)[:, None] * w
+        return out
+
+    def describe(self) -> str:
+        return (
+            f"load-dependent friction P+(a_m + b_m Exp) tau_out + P-(a_g - b_g Exp) tau_out, "
+            f"q_s={self.qs:g} (eq. 30, 42)"
+        )
+
+    def __repr__(self) -> str:
+        return f"LoadDependent({self.inner!r}, qs={self.qs:g})"
+
+
+class QuadrantCoulomb(Term):
+    """Quadrant dry friction (eq. 30): ``[P+ sign, P+ Exp sign, P- sign, P- Exp sign]``.
+
+    Parameters c_m, d_m, c_g, d_g [N m]; ``qs`` as in :class:`LoadDependent`.
+    """
+
+    effect = "quadrant_coulomb"
+    variable = "quadrant"
+
+    def __init__(self, qs: float) -> None:
+        self.qs = _check_qs(qs)
+
+    def names(self) -> tuple[str, ...]:
+        return ("c_m", "d_m", "c_g", "d_g")
+
+    def columns(self, s: Signals) -> np.ndarray:
+        pp, pm = power_split(s)
+        e = exp_velocity(s, self.qs)
+        sg = np.sign(s.dq)
+        return np.column_stack([pp * sg, pp * e * sg, pm * sg, pm * e * sg])
+
+    def describe(self) -> str:
+        return f"quadrant dry friction P+(c_m + d_m Exp) sign + P-(c_g + d_g Exp) sign, q_s={self.qs:g}"
+
+    def __repr__(self) -> str:
+        return f"QuadrantCoulomb(qs={self.qs:g})"
+
+
+def usual_model(revolute: bool | None = None, *, payload: bool = True) -> Library:
+    """The usual model, eq. 38-39: J, MX, MY, Ma_ratio, F_C, F_V, tau_off.
+
+    Parameters
+    ----------
+    revolute : bool or None
+        See :class:`RigidBody`.
+    payload : bool
+        Include the :class:`Payload` term (drop it when no run carries a payload).
+    """
+    inner: list[Term] = [RigidBody(revolute)]
+    if payload:
+        inner.append(Payload())
+    return Library(*inner, Coulomb(), Viscous(), Offset())
+
+
+def new_model(qs: float = 0.03, revolute: bool | None = None, *, payload: bool = True) -> Library:
+    """The new model, eq. 42-43, with q_s [rad/s] (the paper's 0.03 rad/s by default)."""
+    inner: list[Term] = [RigidBody(revolute)]
+    if payload:
+        inner.append(Payload())
+    return Library(LoadDependent(Library(*inner), qs), QuadrantCoulomb(qs), Viscous(), Offset())
+
+
+class IdentModel:
+    """A model (a :class:`~ident.terms.Library`) and its least-squares fit (sklearn style).
+
+    Parameters
+    ----------
+    library : Term
+        The regressor terms.
+    name : str
+        Label used in tables and JSON (``"usual"``, ``"new"``).
+
+    Attributes (after :meth:`fit`)
+    ------------------------------
+    coef_ : dict[str, float]
+        Identified values of the kept parameters (eq. 12).
+    names_ : tuple[str, ...]
+        Kept parameter names, in column order; ``coef_array_`` the values as an array.
+    std_, rel_std_pct_ : dict[str, float]
+        Standard deviations sigma_chi (eq. 15) and relative deviations 100 sigma/|chi| (eq. 16).
+    cov_ : ndarray, shape (b, b)
+        Covariance of the estimate (eq. 15).
+    sigma_rho_ : float
+        Estimated residual standard deviation (eq. 14).
+    residual_ : ndarray, shape (m,)
+        rho = Y - W chi on the design's samples.
+    rel_error_ : float
+        ||rho|| / ||Y||.
+    cond_ : float
+        Condition number of the kept (column-scaled) regressor.
+    removed_ : list[tuple[str, str]]
+        Eliminated parameter names and why (unidentifiable, zero column, not significant).
+    result_ : LSResult
+        The final estimator result.
+    """
+
+    def __init__(self, library: Term, name: str = "usual") -> None:
+        self.library = library if isinstance(library, Library) else Library(library)
+        self.name = name
+
+    def fit(
+        self,
+        design: Design,
+        *,
+        eliminate: bool = True,
+        threshold_pct: float | None = None,
+        drop_unidentifiable: bool = True,
+    ) -> IdentModel:
+        """Fit on a :class:`~ident.preprocess.Design` built with this model's library.
+
+        Parameters
+        ----------
+        design : Design
+            Y and W (decimated, selected). Its columns must include this library's names.
+        eliminate : bool
+            Iteratively remove the parameter with the largest relative deviation above
+            ``threshold_pct`` and refit (the paper's Tables I-II keep significant values).
+        threshold_pct : float or None
+            Relative-deviation threshold [%]; default :data:`ident.estimate.DEFAULT_THRESHOLD_PCT`.
+        drop_unidentifiable : bool
+            Remove (and report) zero or linearly dependent columns instead of raising
+            :class:`~ident.IdentifiabilityError`.
+        """
+        from .estimate import DEFAULT_THRESHOLD_PCT, fit_least_squares
+
+        names = tuple(self.library.names())
+        missing = [n for n in names if n not in design.names]
+        if missing:
+            raise DataError(f"design has no column for parameters {missing}; rebuild it")
+        idx = [design.names.index(n) for n in names]
+        W = design.W[:, idx]
+        res = fit_least_squares(
+            W,
+            design.Y,
+            names,
+            eliminate=eliminate,
+            threshold_pct=DEFAULT_THRESHOLD_PCT if threshold_pct is None else threshold_pct,
+            drop_unidentifiable=drop_unidentifiable,
+        )
+        self._set(res)
+        return self
+
+    def _set(self, res: LSResult) -> None:
+        self.result_ = res
+        self.names_ = res.names
+        self.coef_array_ = res.chi
+        self.coef_ = dict(zip(res.names, res.chi.tolist(), strict=True))
+        self.std_ = dict(zip(res.names, res.std.tolist(), strict=True))
+        self.rel_std_pct_ = dict(zip(res.names, res.rel_std_pct.tolist(), strict=True))
+        self.cov_ = res.cov
+        self.sigma_rho_ = res.sigma_rho
+        self.residual_ = res.residual
+        self.rel_error_ = res.rel_error
+        self.cond_ = res.cond
+        self.removed_ = list(res.removed)
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "result_"):
+            raise DataError(f"model {self.name!r} is not fitted; call fit(design) first")
+
+    def predict(self, design: Design) -> np.ndarray:
+        """W chi_hat on a design's samples [N m], shape (m,)."""
+        self._check_fitted()
+        missing = [n for n in self.names_ if n not in design.names]
+        if missing:
+            raise DataError(f"design has no column for parameters {missing}")
+        idx = [design.names.index(n) for n in self.names_]
+        return design.W[:, idx] @ self.coef_array_
+
+    def rel_error_on(self, design: Design) -> float:
+        """||Y - W chi_hat|| / ||Y|| on a design (e.g. cross-validation files)."""
+        rho = design.Y - self.predict(design)
+        return float(np.linalg.norm(rho) / np.linalg.norm(design.Y))
+
+    def rel_error_bands(
+        self,
+        design: Design,
+        vmax: float | None = None,
+        bands: dict[str, tuple[float, float]] | None = None,
+    ) -> dict[str, float]:
+        """Relative error ||rho||/||Y|| per velocity band (Table III).
+
+        Parameters
+        ----------
+        design : Design
+            Samples to evaluate.
+        vmax : float or None
+            Maximum velocity [rad/s]; default max |dq| of the design.
+        bands : dict or None
+            name -> (low, high) fractions of vmax; default ``all`` (0-1), ``low`` (0-0.10),
+            ``high`` (0.35-1), as in the paper.
+
+        Returns
+        -------
+        dict
+            name -> relative error (NaN when a band holds no sample).
+        """
+        from .results import DEFAULT_BANDS, band_errors
+
+        rho = design.Y - self.predict(design)
+        return band_errors(design.Y, rho, design.signals.dq, vmax, bands or DEFAULT_BANDS)
+
+    def __repr__(self) -> str:
+        return f"IdentModel({self.name!r}: {self.library!r})"
