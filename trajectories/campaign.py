@@ -1,0 +1,534 @@
+"""The campaign description: joint, limits, control settings, payloads and excitation segments.
+
+A campaign is read from a TOML file by :func:`daq.campaign_file.load_campaign` and validated
+here by :meth:`Campaign.from_dict` (pure: dictionaries in, frozen dataclasses out). Every
+mistake raises :class:`trajectories.SchemaError` with one line naming the source, the dotted
+key and the expected value, e.g.::
+
+    campaign.toml: segments[1].amplitude: expected center +/- amplitude within
+    joint.limits.position [-1.2, 1.4] rad, got 1.5
+
+File format (units: [rad] or [m] for prismatic joints, seconds)::
+
+    name = "rx130l-joint3"
+    [joint]
+    kind = "revolute"                 # or "prismatic"
+    start = 0.1                       # optional rest position where every run starts and ends;
+                                      # default: the centre of joint.limits.position
+    [joint.limits]
+    position = [-1.2, 1.4]            # [rad], min < max
+    max_velocity = 1.2                # [rad/s]
+    max_acceleration = 4.0            # [rad/s^2]
+    max_jerk = 40.0                   # [rad/s^3]
+    max_torque = 700.0                # [N m]
+    [control]
+    cycle_s = 0.001                   # [s]
+    kp = 6000.0                       # [N m/rad]
+    kd = 200.0                        # [N m s/rad]
+    velocity_cutoff_hz = 100.0        # optional [Hz]
+    [control.feedforward]             # optional, each default 0: J, MX, MY, Fc, Fv
+    J = 30.0
+    [[payloads]]                      # one run per payload, in order
+    mass_kg = 0.0
+    arm_m = 1.277
+    [[segments]]                      # ordered; repeated identically for every payload
+    kind = "trapezoid"
+    speeds = [0.08, 0.2, 0.5, 1.0]    # fractions of max_velocity, in (0, 1]
+    range = [-1.1, 1.3]               # within joint.limits.position
+    dwell_s = 0.3
+    cycles = 1
+    [[segments]]
+    kind = "sine"
+    amplitude = 1.1
+    frequency_hz = 0.15
+    center = 0.1
+    periods = 2
+    [daq]                             # optional, kept raw for daq/
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any, Literal
+
+from . import SchemaError
+from .schema import ArrayOfTables, Field, Table, fail
+
+__all__ = [
+    "Campaign",
+    "ControlSettings",
+    "FEEDFORWARD_KEYS",
+    "Joint",
+    "JointLimits",
+    "Payload",
+    "Segment",
+    "SineSegment",
+    "TrapezoidSegment",
+    "shorten",
+]
+
+#: feed-forward keys of ``[control.feedforward]`` and the matching ControllerGains fields
+FEEDFORWARD_KEYS = {"J": "J_ff", "MX": "MX_ff", "MY": "MY_ff", "Fc": "Fc_ff", "Fv": "Fv_ff"}
+
+
+# --------------------------------------------------------------------------- dataclasses
+@dataclass(frozen=True)
+class JointLimits:
+    """Joint limits, joint side.
+
+    Attributes
+    ----------
+    position : tuple of float
+        ``(min, max)`` [rad] (revolute) or [m] (prismatic), ``min < max``.
+    max_velocity : float
+        [rad/s] or [m/s], > 0.
+    max_acceleration : float
+        [rad/s^2] or [m/s^2], > 0.
+    max_jerk : float
+        [rad/s^3] or [m/s^3], > 0.
+    max_torque : float
+        [N m] or [N], > 0.
+    """
+
+    position: tuple[float, float]
+    max_velocity: float
+    max_acceleration: float
+    max_jerk: float
+    max_torque: float
+
+    @property
+    def span(self) -> float:
+        """Width of the position range [rad] or [m]."""
+        return self.position[1] - self.position[0]
+
+
+@dataclass(frozen=True)
+class Joint:
+    """The identified joint.
+
+    Attributes
+    ----------
+    kind : {"revolute", "prismatic"}
+    limits : JointLimits
+    start : float
+        Rest position [rad] or [m] where each payload run starts and ends (default: the
+        centre of ``limits.position``).
+    """
+
+    kind: Literal["revolute", "prismatic"]
+    limits: JointLimits
+    start: float
+
+    @property
+    def revolute(self) -> bool:
+        return self.kind == "revolute"
+
+    @property
+    def unit(self) -> str:
+        """Position unit, ``"rad"`` or ``"m"``."""
+        return "rad" if self.revolute else "m"
+
+
+@dataclass(frozen=True)
+class ControlSettings:
+    """Control cycle and position-loop gains (converted to ``daq.control.ControllerGains`` by daq).
+
+    Attributes
+    ----------
+    cycle_s : float
+        Control cycle [s]; the plan is sampled at this period.
+    kp : float
+        Proportional gain [N m/rad] or [N/m].
+    kd : float
+        Derivative gain [N m s/rad] or [N s/m].
+    feedforward : dict
+        ``{"J", "MX", "MY", "Fc", "Fv"}`` -> value (all keys present, default 0): inertia
+        [kg m^2], first moments [kg m], Coulomb [N m], viscous [N m s/rad].
+    velocity_cutoff_hz : float
+        Cut-off of the controller's velocity-estimate low-pass [Hz].
+    """
+
+    cycle_s: float
+    kp: float
+    kd: float
+    feedforward: Mapping[str, float] = field(default_factory=dict)
+    velocity_cutoff_hz: float = 100.0
+
+    def gains_kwargs(self) -> dict[str, float]:
+        """Keyword arguments for ``daq.control.ControllerGains(**kwargs)``."""
+        out = {"kp": self.kp, "kd": self.kd, "velocity_cutoff_hz": self.velocity_cutoff_hz}
+        for key, name in FEEDFORWARD_KEYS.items():
+            out[name] = float(self.feedforward.get(key, 0.0))
+        return out
+
+
+@dataclass(frozen=True)
+class Payload:
+    """An additional mass fixed on the arm (paper IV.C, eq. 32-34).
+
+    Attributes
+    ----------
+    mass_kg : float
+        Mass M_a [kg], >= 0.
+    arm_m : float
+        Lever arm L_a [m] from the joint axis, >= 0.
+    """
+
+    mass_kg: float
+    arm_m: float
+
+
+@dataclass(frozen=True)
+class TrapezoidSegment:
+    """Back-and-forth jerk-limited moves across ``range`` at each speed of ``speeds``.
+
+    For each speed, ``cycles`` times: move to ``range[1]``, dwell, move to ``range[0]``,
+    dwell. The segment first goes to ``range[0]`` at the positioning speed.
+
+    Attributes
+    ----------
+    speeds : tuple of float
+        Cruise speeds as fractions of ``max_velocity``, each in (0, 1].
+    range : tuple of float
+        ``(low, high)`` [rad] or [m], within the joint's position limits.
+    dwell_s : float
+        Rest after each move [s], >= 0.
+    cycles : int
+        Back-and-forth repetitions per speed, >= 1.
+    """
+
+    speeds: tuple[float, ...]
+    range: tuple[float, float]
+    dwell_s: float = 0.3
+    cycles: int = 1
+    kind: Literal["trapezoid"] = "trapezoid"
+
+
+@dataclass(frozen=True)
+class SineSegment:
+    """``periods`` periods of ``q = center - amplitude * cos(2 pi f tau)``.
+
+    Ruckig blends the joint from rest to the sinusoid's state at its start phase (lowest
+    point: ``q = center - amplitude``, ``dq = 0``, ``ddq = amplitude (2 pi f)^2``) and back
+    to rest after the last period, so the segment is continuous in q, dq and ddq.
+
+    Attributes
+    ----------
+    amplitude : float
+        [rad] or [m], > 0.
+    frequency_hz : float
+        [Hz], > 0. Peaks: velocity A w, acceleration A w^2, jerk A w^3 (w = 2 pi f).
+    center : float
+        [rad] or [m].
+    periods : int
+        Number of full periods, >= 1.
+    """
+
+    amplitude: float
+    frequency_hz: float
+    center: float
+    periods: int = 1
+    kind: Literal["sine"] = "sine"
+
+    @property
+    def omega(self) -> float:
+        """Angular frequency w = 2 pi f [rad/s]."""
+        return 2.0 * math.pi * self.frequency_hz
+
+    def peaks(self) -> tuple[float, float, float]:
+        """Peak velocity, acceleration and jerk of the sinusoid ``(A w, A w^2, A w^3)``."""
+        w = self.omega
+        a = self.amplitude
+        return a * w, a * w * w, a * w**3
+
+
+Segment = TrapezoidSegment | SineSegment
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """A validated campaign (immutable).
+
+    Attributes
+    ----------
+    name : str
+    joint : Joint
+    control : ControlSettings
+    payloads : tuple of Payload
+        One run per payload, in file order.
+    segments : tuple of Segment
+        The excitation, repeated identically in every run.
+    daq : dict
+        The raw ``[daq]`` table (validated by :mod:`daq`), ``{}`` when absent.
+    source : str
+        Where the campaign came from (file name), used in messages.
+    """
+
+    name: str
+    joint: Joint
+    control: ControlSettings
+    payloads: tuple[Payload, ...]
+    segments: tuple[Segment, ...]
+    daq: Mapping[str, Any] = field(default_factory=dict)
+    source: str = ""
+
+    @property
+    def cycle_s(self) -> float:
+        """Control cycle [s]."""
+        return self.control.cycle_s
+
+    @property
+    def limits(self) -> JointLimits:
+        return self.joint.limits
+
+    def quick(self) -> Campaign:
+        """A short version for smoke runs and demos (about 10-15 s per payload run).
+
+        See :func:`shorten`; keeps low-velocity moves in both directions.
+        """
+        return shorten(self, QUICK_FACTOR)
+
+    @classmethod
+    def from_dict(cls, raw: Mapping[str, Any], source: str = "") -> Campaign:
+        """Validate a parsed TOML mapping and build the campaign.
+
+        Parameters
+        ----------
+        raw : mapping
+            Output of ``tomllib.load``.
+        source : str
+            File name shown at the start of error messages.
+
+        Raises
+        ------
+        trajectories.SchemaError
+            Unknown key, wrong type, missing field, non-positive limit, segment outside the
+            position range...; the one-line message names the key and the expected value.
+        """
+        top = _CAMPAIGN.validate(raw, "", source)
+        j = top["joint"]
+        lim = j["limits"]
+        limits = JointLimits(
+            position=(lim["position"][0], lim["position"][1]),
+            max_velocity=lim["max_velocity"],
+            max_acceleration=lim["max_acceleration"],
+            max_jerk=lim["max_jerk"],
+            max_torque=lim["max_torque"],
+        )
+        lo, hi = limits.position
+        unit = "rad" if j["kind"] == "revolute" else "m"
+        if len(lim["position"]) != 2 or not lo < hi:
+            raise fail(source, "joint.limits.position", "[min, max] with min < max",
+                       list(lim["position"]))
+        rng = f"joint.limits.position [{lo:g}, {hi:g}] {unit}"
+        start = j["start"] if j["start"] is not None else 0.5 * (lo + hi)
+        if not lo <= start <= hi:
+            raise fail(source, "joint.start", f"a position within {rng}", start)
+        joint = Joint(kind=j["kind"], limits=limits, start=float(start))
+
+        c = top["control"]
+        ff = c["feedforward"] or {k: 0.0 for k in FEEDFORWARD_KEYS}
+        control = ControlSettings(
+            cycle_s=c["cycle_s"],
+            kp=c["kp"],
+            kd=c["kd"],
+            feedforward={k: float(ff[k]) for k in FEEDFORWARD_KEYS},
+            velocity_cutoff_hz=c["velocity_cutoff_hz"],
+        )
+        payloads = tuple(Payload(p["mass_kg"], p["arm_m"]) for p in top["payloads"])
+
+        segments: list[Segment] = []
+        for i, s in enumerate(top["segments"]):
+            segments.append(_segment(s, f"segments[{i}]", source, limits, rng))
+        daq = top["daq"] if isinstance(top["daq"], dict) else {}
+        return cls(
+            name=top["name"],
+            joint=joint,
+            control=control,
+            payloads=payloads,
+            segments=tuple(segments),
+            daq=daq,
+            source=source,
+        )
+
+
+# --------------------------------------------------------------------------- schema
+class _RawTable:
+    """Any TOML table, kept as is (validated elsewhere)."""
+
+    required = False
+
+    def validate(self, value: Any, key: str, source: str = "") -> dict:
+        if not isinstance(value, Mapping):
+            raise fail(source, key, "a table", value)
+        return dict(value)
+
+
+def _nonempty(value: str) -> str | None:
+    return None if value.strip() else "a non-empty string"
+
+
+_LIMITS = Table(
+    {
+        "position": Field(float, list_of=True, min_len=2, unit="rad or m"),
+        "max_velocity": Field(float, gt=0, unit="rad/s or m/s"),
+        "max_acceleration": Field(float, gt=0, unit="rad/s^2 or m/s^2"),
+        "max_jerk": Field(float, gt=0, unit="rad/s^3 or m/s^3"),
+        "max_torque": Field(float, gt=0, unit="N m or N"),
+    }
+)
+
+_JOINT = Table(
+    {
+        "kind": Field(str, choices=("revolute", "prismatic")),
+        "start": Field(float, required=False, default=None, unit="rad or m"),
+        "limits": _LIMITS,
+    }
+)
+
+_FEEDFORWARD = Table(
+    {k: Field(float, required=False, default=0.0) for k in FEEDFORWARD_KEYS},
+    required=False,
+)
+
+_CONTROL = Table(
+    {
+        "cycle_s": Field(float, gt=0, le=0.1, unit="s"),
+        "kp": Field(float, gt=0, unit="N m/rad"),
+        "kd": Field(float, ge=0, unit="N m s/rad"),
+        "velocity_cutoff_hz": Field(float, required=False, default=100.0, gt=0, unit="Hz"),
+        "feedforward": _FEEDFORWARD,
+    }
+)
+
+_PAYLOAD = Table(
+    {
+        "mass_kg": Field(float, ge=0, unit="kg"),
+        "arm_m": Field(float, ge=0, unit="m"),
+    }
+)
+
+_TRAPEZOID = Table(
+    {
+        "kind": Field(str, choices=("trapezoid", "sine")),
+        "speeds": Field(float, list_of=True, gt=0, le=1, unit="fraction of max_velocity"),
+        "range": Field(float, list_of=True, min_len=2, unit="rad or m"),
+        "dwell_s": Field(float, required=False, default=0.3, ge=0, unit="s"),
+        "cycles": Field(int, required=False, default=1, ge=1),
+    }
+)
+
+_SINE = Table(
+    {
+        "kind": Field(str, choices=("trapezoid", "sine")),
+        "amplitude": Field(float, gt=0, unit="rad or m"),
+        "frequency_hz": Field(float, gt=0, unit="Hz"),
+        "center": Field(float, unit="rad or m"),
+        "periods": Field(int, required=False, default=1, ge=1),
+    }
+)
+
+_KINDS = {"trapezoid": _TRAPEZOID, "sine": _SINE}
+
+
+class _SegmentSpec:
+    """A segment table: ``kind`` selects the trapezoid or sine schema."""
+
+    required = True
+
+    def validate(self, value: Any, key: str, source: str = "") -> dict:
+        if not isinstance(value, Mapping):
+            raise fail(source, key, "a table", value)
+        if "kind" not in value:
+            raise fail(source, f"{key}.kind", "a value ('trapezoid' or 'sine'), it is missing")
+        kind = value["kind"]
+        if kind not in _KINDS:
+            raise fail(source, f"{key}.kind", "one of 'trapezoid', 'sine'", kind)
+        return _KINDS[kind].validate(value, key, source)
+
+
+_CAMPAIGN = Table(
+    {
+        "name": Field(str, check=_nonempty),
+        "joint": _JOINT,
+        "control": _CONTROL,
+        "payloads": ArrayOfTables(_PAYLOAD),
+        "segments": ArrayOfTables(_SegmentSpec()),  # type: ignore[arg-type]
+        "daq": _RawTable(),
+    }
+)
+
+
+def _segment(s: dict, key: str, source: str, limits: JointLimits, rng: str) -> Segment:
+    lo, hi = limits.position
+    if s["kind"] == "trapezoid":
+        r = s["range"]
+        if len(r) != 2 or not r[0] < r[1]:
+            raise fail(source, f"{key}.range", "[low, high] with low < high", list(r))
+        if r[0] < lo or r[1] > hi:
+            raise fail(source, f"{key}.range", f"[low, high] within {rng}", list(r))
+        return TrapezoidSegment(
+            speeds=tuple(s["speeds"]),
+            range=(r[0], r[1]),
+            dwell_s=s["dwell_s"],
+            cycles=s["cycles"],
+        )
+    c, a = s["center"], s["amplitude"]
+    if not lo <= c <= hi:
+        raise fail(source, f"{key}.center", f"a position within {rng}", c)
+    if c - a < lo or c + a > hi:
+        raise fail(source, f"{key}.amplitude", f"center +/- amplitude within {rng}", a)
+    return SineSegment(amplitude=a, frequency_hz=s["frequency_hz"], center=c,
+                       periods=s["periods"])
+
+
+# --------------------------------------------------------------------------- quick runs
+#: factor used by :meth:`Campaign.quick`
+QUICK_FACTOR = 0.12
+
+
+def shorten(campaign: Campaign, factor: float) -> Campaign:
+    """Scale a campaign down for quick runs; the result stays within the joint limits.
+
+    - trapezoid segments: range span x ``factor`` around its centre, only the lowest and
+      the highest speed kept (so low-velocity moves in both directions remain), one cycle,
+      dwell x ``factor``;
+    - sine segments: amplitude x ``sqrt(factor)`` around the same centre (the sine keeps
+      a wider position range, where gravity changes), frequency raised until A w, A w^2
+      or A w^3 reaches 90 % of its limit (never lowered), ``max(1, round(periods x
+      factor))`` periods.
+
+    Parameters
+    ----------
+    campaign : Campaign
+    factor : float
+        In (0, 1]; 1 keeps the geometry (still trims speeds and cycles).
+
+    Returns
+    -------
+    Campaign
+        A new campaign, same joint, control and payloads.
+    """
+    if not 0.0 < factor <= 1.0:
+        raise SchemaError(f"shorten: factor: expected a number in (0, 1], got {factor!r}")
+    lim = campaign.joint.limits
+    out: list[Segment] = []
+    for seg in campaign.segments:
+        if isinstance(seg, TrapezoidSegment):
+            mid = 0.5 * (seg.range[0] + seg.range[1])
+            half = 0.5 * (seg.range[1] - seg.range[0]) * factor
+            speeds = (min(seg.speeds), max(seg.speeds))
+            if speeds[0] == speeds[1]:
+                speeds = speeds[:1]
+            out.append(replace(seg, range=(mid - half, mid + half), speeds=speeds,
+                               cycles=1, dwell_s=seg.dwell_s * factor))
+        else:
+            a = seg.amplitude * math.sqrt(factor)
+            w = min(0.9 * lim.max_velocity / a, math.sqrt(0.9 * lim.max_acceleration / a),
+                    (0.9 * lim.max_jerk / a) ** (1.0 / 3.0))
+            w = max(w, seg.omega)  # never slower than the original (its peaks fit already)
+            out.append(replace(seg, amplitude=a, frequency_hz=w / (2.0 * math.pi),
+                               periods=max(1, round(seg.periods * factor))))
+    return replace(campaign, segments=tuple(out), name=f"{campaign.name} (quick)")
