@@ -1,0 +1,521 @@
+"""The simulated joint: rigid body + load- and velocity-dependent friction + undeclared effects.
+
+Pure numerics, no bus. Joint side SI units: q [rad], dq [rad/s], torques [N m] (prismatic:
+[m], [m/s], [N]); positive torque drives positive velocity (motor convention).
+
+Inverse model (what :func:`inverse_torque` computes)
+----------------------------------------------------
+Output (load) torque, paper eq. 31/34, with payload mass M_a [kg] at lever arm L_a [m]::
+
+    revolute:   tau_out = J ddq + MX g cos q + MY g sin q + M_a L_a (L_a ddq + g cos q)
+    prismatic:  tau_out = J ddq + M_a ddq          (no gravity; L_a is ignored)
+
+Friction, eq. 30, with E = exp(-|dq| / q_s) (eq. 29), P = sign(tau_out dq) and
+P+ = (1 + P)/2, P- = (1 - P)/2 (eq. 27-28, sign(0) = 0)::
+
+    tau = P+ (a_m + b_m E) tau_out + P- (a_g - b_g E) tau_out
+        + P+ (c_m + d_m E) sign(dq) + P- (c_g + d_g E) sign(dq) + F_V dq + tau_off
+        + tau_effects
+
+The undeclared effects (each off unless enabled in the plant file) add ``tau_effects``:
+
+* position ripple   ``A sin(2 pi q / period + phase)``
+* spring            ``k (q - q0)``
+* warm-up           ``w exp(-t / T_w) [P+ (c_m + d_m E) + P- (c_g + d_g E)] sign(dq)``
+  (the dry terms c, d of eq. 30 scaled by 1 + w exp(-t/T_w); t = time since the run start)
+* asymmetric viscous ``(F_V+ - F_V) dq`` for dq > 0, ``(F_V- - F_V) dq`` for dq < 0
+* quadratic viscous ``F_VV dq |dq|``
+* torque lag        dynamic: the torque acting on the joint follows the command with
+  ``d tau_applied / dt = (tau_cmd - tau_applied) / T_lag``; it is not a term of the balance
+  (the balance holds with tau = tau_applied, not tau_cmd).
+
+Forward dynamics (what :class:`JointPlant` integrates)
+------------------------------------------------------
+Given the applied torque tau, q, dq and t, the balance above is piecewise linear in ddq through
+tau_out. With s = sign(dq) and ``r = tau - tau_off - viscous - ripple - spring``:
+
+* motor candidate ``tau_out = (r - s D_m) / A_m`` (A_m = a_m + b_m E, D_m = (c_m + d_m E)(1 +
+  warm-up)), consistent when ``tau_out s > 0``;
+* generator candidate ``tau_out = (r - s D_g) / A_g`` (A_g = a_g - b_g E), consistent when
+  ``tau_out s < 0``;
+* when both are consistent (possible only if D_g > D_m) the joint keeps the quadrant it was in
+  (tau_out is continuous in time); when neither is (|r| between D_g and D_m, as when the joint
+  coasts through tau_out = 0), the joint moves with ``tau_out = 0`` and the dry friction takes any
+  value in the band between the two quadrants' values, like a set-valued Coulomb law. Eq. 30
+  then does not hold exactly (it would average the quadrants); such instants are flagged with
+  ``regime == REGIME_ZERO_LOAD``.
+
+Then ``ddq = (tau_out - gravity) / (J + M_a L_a^2)``.
+
+Stiction (eq. 21-23): at dq = 0 the joint stays stuck (ddq = 0) while the driving torque
+``r0 = tau - tau_off - ripple - spring`` lies in the static band at the current load
+``tau_l = MX g cos q + MY g sin q + M_a L_a g cos q`` — the limit of eq. 30 as dq -> 0 (E = 1),
+i.e. the rectangle of section III.B::
+
+    tau_l > 0:  A_g1 tau_l - D_g1 <= r0 <= A_m1 tau_l + D_m1
+    tau_l < 0:  A_m1 tau_l - D_m1 <= r0 <= A_g1 tau_l + D_g1
+
+with A_m1 = a_m + b_m, A_g1 = a_g - b_g, D_m1 = c_m + d_m, D_g1 = c_g + d_g (times the warm-up
+factor). Above the band it breaks away in the positive direction, below in the negative one.
+
+Integration: ``substeps`` fixed sub-steps per control cycle; in each, the acceleration is
+evaluated at the start and held (velocity explicit, position exact for constant acceleration).
+A sub-step in which the velocity would change sign is split at the zero crossing (event
+detection): the joint stops there, the stiction test decides whether it sticks or reverses for
+the rest of the sub-step. There is thus no sign chattering: a velocity reversal always passes
+through an exact rest state.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from typing import Any
+
+import numpy as np
+
+from .plant_config import G, PlantParams
+
+#: The joint slides and eq. 30 (+ effects) holds exactly.
+REGIME_SLIDING = 0
+#: The joint is at rest (dq == 0): stuck, or breaking away during the next sub-step.
+REGIME_REST = 1
+#: The joint slides with tau_out == 0 and the dry friction inside the quadrant band.
+REGIME_ZERO_LOAD = 2
+
+_INT16_MIN, _INT16_MAX = -32768, 32767
+_TWO_PI = 2.0 * math.pi
+
+
+# --------------------------------------------------------------------------- inverse model
+def output_torque(
+    params: PlantParams,
+    q: Any,
+    ddq: Any,
+    payload_mass: Any = 0.0,
+    payload_arm: Any = 0.0,
+) -> np.ndarray:
+    """Output (load) torque tau_out of the drive chain, paper eq. 31/34.
+
+    Parameters
+    ----------
+    params : PlantParams
+    q, ddq : array_like, shape (n,) or scalar
+        Position [rad] and acceleration [rad/s^2] (prismatic: [m], [m/s^2]).
+    payload_mass, payload_arm : array_like or float
+        Payload M_a [kg] and lever arm L_a [m] (arm ignored for prismatic joints).
+
+    Returns
+    -------
+    ndarray
+        tau_out [N m] (prismatic [N]), broadcast shape of the inputs.
+    """
+    q = np.asarray(q, dtype=float)
+    ddq = np.asarray(ddq, dtype=float)
+    ma = np.asarray(payload_mass, dtype=float)
+    la = np.asarray(payload_arm, dtype=float)
+    b = params.body
+    if params.revolute:
+        c = np.cos(q)
+        return (b.J * ddq + b.MX * G * c + b.MY * G * np.sin(q)
+                + ma * la * (la * ddq + G * c))
+    return (b.J + ma) * ddq
+
+
+def effect_torques(
+    params: PlantParams,
+    q: Any,
+    dq: Any,
+    ddq: Any,
+    payload_mass: Any = 0.0,
+    payload_arm: Any = 0.0,
+    t: Any = 0.0,
+) -> dict[str, np.ndarray]:
+    """Torque of each enabled undeclared effect (torque lag excluded: it is dynamic).
+
+    Returns
+    -------
+    dict
+        Effect name -> torque [N m], broadcast shape of the inputs; formulas in the module
+        docstring. Empty when no static effect is enabled.
+    """
+    e = params.effects
+    q = np.asarray(q, dtype=float)
+    dq = np.asarray(dq, dtype=float)
+    out: dict[str, np.ndarray] = {}
+    if e.position_ripple.enabled:
+        r = e.position_ripple
+        out["position_ripple"] = r.amplitude_Nm * np.sin(_TWO_PI * q / r.period_rad
+                                                         + r.phase_rad)
+    if e.spring.enabled:
+        out["spring"] = e.spring.stiffness_Nm_per_rad * (q - e.spring.rest_position_rad)
+    if e.warm_up.enabled:
+        f = params.friction
+        tau_out = output_torque(params, q, ddq, payload_mass, payload_arm)
+        p = np.sign(tau_out * dq)
+        ex = np.exp(-np.abs(dq) / params.joint.q_s)
+        dry = (0.5 * (1.0 + p) * (f.c_m + f.d_m * ex)
+               + 0.5 * (1.0 - p) * (f.c_g + f.d_g * ex)) * np.sign(dq)
+        w = e.warm_up.fraction * np.exp(-np.asarray(t, dtype=float) / e.warm_up.time_constant_s)
+        out["warm_up"] = w * dry
+    if e.asymmetric_viscous.enabled:
+        a = e.asymmetric_viscous
+        fv = params.friction.F_V
+        out["asymmetric_viscous"] = np.where(dq > 0, (a.F_V_pos - fv) * dq,
+                                             (a.F_V_neg - fv) * dq)
+    if e.quadratic_viscous.enabled:
+        out["quadratic_viscous"] = e.quadratic_viscous.F_VV * dq * np.abs(dq)
+    return out
+
+
+def inverse_torque(
+    params: PlantParams,
+    q: Any,
+    dq: Any,
+    ddq: Any,
+    payload_mass: Any = 0.0,
+    payload_arm: Any = 0.0,
+    t: Any = 0.0,
+    *,
+    effects: bool = True,
+) -> np.ndarray:
+    """Motor torque of the plant's inverse model: eq. 30 with eq. 34, plus enabled effects.
+
+    This is the ground truth the identification is compared with: ``tau`` is the torque that
+    acts on the joint (``JointPlant.tau_applied``). The torque-lag effect is dynamic and not
+    part of it.
+
+    Parameters
+    ----------
+    params : PlantParams
+    q, dq, ddq : array_like, shape (n,) or scalar
+        Position [rad], velocity [rad/s], acceleration [rad/s^2].
+    payload_mass, payload_arm : array_like or float
+        M_a [kg] and L_a [m] of the sample's experiment.
+    t : array_like or float
+        Time since the start of the run [s] (warm-up effect only).
+    effects : bool
+        Add the enabled undeclared effects (default) or return eq. 30 alone.
+
+    Returns
+    -------
+    ndarray
+        tau [N m], broadcast shape of the inputs. sign(0) = 0 as in eq. 27-28, so at dq = 0 or
+        tau_out = 0 the quadrant weights are 1/2 each.
+    """
+    f = params.friction
+    q = np.asarray(q, dtype=float)
+    dq = np.asarray(dq, dtype=float)
+    tau_out = output_torque(params, q, ddq, payload_mass, payload_arm)
+    ex = np.exp(-np.abs(dq) / params.joint.q_s)
+    p = np.sign(tau_out * dq)
+    pp = 0.5 * (1.0 + p)
+    pm = 0.5 * (1.0 - p)
+    s = np.sign(dq)
+    tau = (pp * (f.a_m + f.b_m * ex) * tau_out + pm * (f.a_g - f.b_g * ex) * tau_out
+           + pp * (f.c_m + f.d_m * ex) * s + pm * (f.c_g + f.d_g * ex) * s
+           + f.F_V * dq + f.tau_off)
+    if effects:
+        for v in effect_torques(params, q, dq, ddq, payload_mass, payload_arm, t).values():
+            tau = tau + v
+    return tau
+
+
+# --------------------------------------------------------------------------- forward model
+class JointPlant:
+    """One simulated joint, stepped once per control cycle (pure Python, no numpy per step).
+
+    Parameters
+    ----------
+    params : PlantParams
+    cycle_s : float
+        Control cycle [s]; :meth:`step` integrates over one cycle.
+    substeps : int
+        Fixed integration sub-steps per cycle (10 by default: 0.1 ms at 1 kHz).
+    seed : int, optional
+        Seed of the applied-torque noise; default ``params.drive.seed``.
+
+    Attributes
+    ----------
+    q, dq : float
+        Position [rad] and velocity [rad/s] at the end of the last cycle (time :attr:`t`).
+    ddq : float
+        Acceleration [rad/s^2] at time ``t`` under the torque applied during the last cycle.
+    t : float
+        Simulated time [s].
+    tau_cmd : float
+        Commanded joint-side torque of the last cycle [N m].
+    tau_applied : float
+        Torque acting on the joint at time ``t`` (lagged command + noise) [N m]; the
+        balance ``inverse_torque(q, dq, ddq, t) == tau_applied`` holds in ``REGIME_SLIDING``.
+    tau_noise : float
+        Ripple-noise sample of the last cycle (held over the cycle) [N m].
+    regime : int
+        ``REGIME_SLIDING``, ``REGIME_REST`` or ``REGIME_ZERO_LOAD`` at time ``t``.
+    q_start, dq_start, ddq_start, tau_applied_start, regime_start
+        The same quantities at the start of the last cycle, with the acceleration and torque
+        taken just after the cycle's command was applied (right limits): what an offline
+        record aligned with the measured position of that cycle needs.
+    """
+
+    __slots__ = (
+        "params", "cycle_s", "substeps", "_h", "_rng", "_noise_std",
+        "q", "dq", "ddq", "t", "t0", "tau_cmd", "tau_applied", "tau_noise", "regime",
+        "q_start", "dq_start", "ddq_start", "tau_applied_start", "regime_start",
+        "payload_mass", "payload_arm", "_tau_lag", "_lag_keep", "_quad",
+        "_jtot", "_gc", "_gs", "_qs_inv",
+        "_am", "_bm", "_cm", "_dm", "_ag", "_bg", "_cg", "_dg", "_fv", "_off",
+        "_rip_a", "_rip_k", "_rip_ph", "_spr_k", "_spr_q0", "_wu_w", "_wu_tinv",
+        "_fv_pos", "_fv_neg", "_fvv", "_counts_per_rad", "_per_mille",
+    )
+
+    def __init__(
+        self,
+        params: PlantParams,
+        cycle_s: float,
+        *,
+        substeps: int = 10,
+        seed: int | None = None,
+    ) -> None:
+        if not cycle_s > 0:
+            raise ValueError(f"cycle_s: expected a number > 0 [s], got {cycle_s!r}")
+        if substeps < 1:
+            raise ValueError(f"substeps: expected an integer >= 1, got {substeps!r}")
+        self.params = params
+        self.cycle_s = float(cycle_s)
+        self.substeps = int(substeps)
+        self._h = self.cycle_s / self.substeps
+        self._rng = random.Random(params.drive.seed if seed is None else seed)
+        self._noise_std = params.drive.torque_noise_std_Nm
+        f, e, d = params.friction, params.effects, params.drive
+        self._qs_inv = 1.0 / params.joint.q_s
+        self._am, self._bm, self._cm, self._dm = f.a_m, f.b_m, f.c_m, f.d_m
+        self._ag, self._bg, self._cg, self._dg = f.a_g, f.b_g, f.c_g, f.d_g
+        self._fv, self._off = f.F_V, f.tau_off
+        r = e.position_ripple
+        self._rip_a = r.amplitude_Nm if r.enabled else 0.0
+        self._rip_k = _TWO_PI / r.period_rad
+        self._rip_ph = r.phase_rad
+        self._spr_k = e.spring.stiffness_Nm_per_rad if e.spring.enabled else 0.0
+        self._spr_q0 = e.spring.rest_position_rad
+        self._wu_w = e.warm_up.fraction if e.warm_up.enabled else 0.0
+        self._wu_tinv = 1.0 / e.warm_up.time_constant_s
+        av = e.asymmetric_viscous
+        self._fv_pos = av.F_V_pos if av.enabled else f.F_V
+        self._fv_neg = av.F_V_neg if av.enabled else f.F_V
+        self._fvv = e.quadratic_viscous.F_VV if e.quadratic_viscous.enabled else 0.0
+        lag = e.torque_lag
+        self._lag_keep = math.exp(-self._h / lag.time_constant_s) if lag.enabled else 0.0
+        self._counts_per_rad = d.counts_per_joint_rad
+        self._per_mille = d.torque_per_permille
+        self.payload_mass = 0.0
+        self.payload_arm = 0.0
+        self._update_body()
+        self.reset()
+
+    # ----------------------------------------------------------------- configuration
+    def _update_body(self) -> None:
+        b = self.params.body
+        ma, la = self.payload_mass, self.payload_arm
+        if self.params.revolute:
+            self._jtot = b.J + ma * la * la
+            self._gc = (b.MX + ma * la) * G
+            self._gs = b.MY * G
+        else:
+            self._jtot = b.J + ma
+            self._gc = 0.0
+            self._gs = 0.0
+
+    def set_payload(self, mass_kg: float, arm_m: float) -> None:
+        """Mount a payload M_a [kg] at lever arm L_a [m] (eq. 34; arm ignored if prismatic)."""
+        if mass_kg < 0 or arm_m < 0 or not (math.isfinite(mass_kg) and math.isfinite(arm_m)):
+            raise ValueError(f"payload: expected mass >= 0 [kg] and arm >= 0 [m], "
+                             f"got {mass_kg!r}, {arm_m!r}")
+        self.payload_mass = float(mass_kg)
+        self.payload_arm = float(arm_m)
+        self._update_body()
+
+    def reset(self, q0: float = 0.0, t0: float = 0.0) -> None:
+        """Put the joint at rest at ``q0`` [rad], time ``t0`` [s] (warm-up time origin is 0),
+        with zero applied torque. The noise generator is not reseeded (see :meth:`reseed`)."""
+        self.q = float(q0)
+        self.dq = 0.0
+        self.ddq = 0.0
+        self.t = float(t0)
+        self.t0 = float(t0)
+        self.tau_cmd = 0.0
+        self.tau_applied = 0.0
+        self.tau_noise = 0.0
+        self._tau_lag = 0.0
+        self._quad = 0
+        self.regime = REGIME_REST
+        self.q_start = self.q
+        self.dq_start = 0.0
+        self.ddq_start = 0.0
+        self.tau_applied_start = 0.0
+        self.regime_start = REGIME_REST
+
+    def reseed(self, seed: int) -> None:
+        """Restart the applied-torque noise sequence from ``seed``."""
+        self._rng.seed(seed)
+
+    # ----------------------------------------------------------------- drive chain
+    @property
+    def encoder_counts(self) -> int:
+        """Encoder position [counts], motor side: round(q N counts_per_rev / 2 pi)."""
+        return round(self.q * self._counts_per_rad)
+
+    def counts_to_rad(self, counts: int) -> float:
+        """Joint position [rad] of an encoder reading: counts 2 pi / (counts_per_rev N)."""
+        return counts / self._counts_per_rad
+
+    def rad_to_counts(self, q: float) -> int:
+        """Encoder reading [counts] of a joint position [rad] (rounded)."""
+        return round(q * self._counts_per_rad)
+
+    def torque_from_permille(self, x: int) -> float:
+        """Joint-side torque [N m] of a target torque x [per-mille of rated torque]:
+        N rated_torque_Nm x / 1000."""
+        return x * self._per_mille
+
+    def permille_from_torque(self, tau: float) -> int:
+        """Target torque [per-mille of rated torque] of a joint-side torque [N m], rounded and
+        clipped to int16."""
+        x = round(tau / self._per_mille)
+        return _INT16_MIN if x < _INT16_MIN else _INT16_MAX if x > _INT16_MAX else x
+
+    # ----------------------------------------------------------------- dynamics
+    def acceleration(self, tau: float, q: float, dq: float, t: float) -> tuple[float, int]:
+        """Forward dynamics: ``(ddq, regime)`` for applied torque ``tau`` [N m] at state
+        (q [rad], dq [rad/s], t [s]); see the module docstring. Does not change the state
+        (except the remembered quadrant used to break ties)."""
+        if dq == 0.0:
+            return self._rest(tau, q, t)[0], REGIME_REST
+        return self._slide(tau, q, dq, t)
+
+    def _slide(self, tau: float, q: float, v: float, t: float) -> tuple[float, int]:
+        """Acceleration while sliding (v != 0, or v == 0 with the breakaway direction)."""
+        av = v if v > 0.0 else -v
+        ex = math.exp(-av * self._qs_inv)
+        cq = math.cos(q)
+        r = tau - self._off
+        if v > 0.0:
+            r -= self._fv_pos * v
+        else:
+            r -= self._fv_neg * v
+        if self._fvv:
+            r -= self._fvv * v * av
+        if self._rip_a:
+            r -= self._rip_a * math.sin(self._rip_k * q + self._rip_ph)
+        if self._spr_k:
+            r -= self._spr_k * (q - self._spr_q0)
+        wf = 1.0 + self._wu_w * math.exp(-(t - self.t0) * self._wu_tinv) if self._wu_w else 1.0
+        grav = self._gc * cq + self._gs * math.sin(q) if self._gs else self._gc * cq
+        return self._solve(r, ex, wf, grav, 1.0 if v > 0.0 else -1.0)
+
+    def _solve(self, r: float, ex: float, wf: float, grav: float, s: float) -> tuple[float, int]:
+        dm = s * wf * (self._cm + self._dm * ex)
+        dg = s * wf * (self._cg + self._dg * ex)
+        xm = (r - dm) / (self._am + self._bm * ex)
+        xg = (r - dg) / (self._ag - self._bg * ex)
+        mot = xm * s > 0.0
+        gen = xg * s < 0.0
+        if mot and (not gen or self._quad >= 0):
+            self._quad = 1
+            tau_out = xm
+            regime = REGIME_SLIDING
+        elif gen:
+            self._quad = -1
+            tau_out = xg
+            regime = REGIME_SLIDING
+        else:
+            tau_out = 0.0
+            regime = REGIME_ZERO_LOAD
+        return (tau_out - grav) / self._jtot, regime
+
+    def _rest(self, tau: float, q: float, t: float) -> tuple[float, int]:
+        """At dq == 0: ``(ddq, direction)``, direction 0 when stuck (ddq = 0), else +1/-1."""
+        r = tau - self._off
+        if self._rip_a:
+            r -= self._rip_a * math.sin(self._rip_k * q + self._rip_ph)
+        if self._spr_k:
+            r -= self._spr_k * (q - self._spr_q0)
+        wf = 1.0 + self._wu_w * math.exp(-(t - self.t0) * self._wu_tinv) if self._wu_w else 1.0
+        load = self._gc * math.cos(q) + self._gs * math.sin(q)
+        am1 = self._am + self._bm
+        ag1 = self._ag - self._bg
+        dm1 = wf * (self._cm + self._dm)
+        dg1 = wf * (self._cg + self._dg)
+        if load > 0.0:
+            upper = am1 * load + dm1
+            lower = ag1 * load - dg1
+        elif load < 0.0:
+            upper = ag1 * load + dg1
+            lower = am1 * load - dm1
+        else:
+            upper = dm1 if dm1 > dg1 else dg1
+            lower = -upper
+        if lower <= r <= upper:
+            return 0.0, 0
+        s = 1.0 if r > upper else -1.0
+        # quadrant the joint leaves rest in: continuity of tau_out from the static load
+        self._quad = 1 if load * s > 0.0 else -1 if load * s < 0.0 else 0
+        ddq, _ = self._solve(r, 1.0, wf, load, s)
+        if ddq * s <= 0.0:  # cannot happen with a valid plant; stay at rest rather than flip
+            return 0.0, 0
+        return ddq, int(s)
+
+    def step(self, tau_cmd: float) -> None:
+        """Advance one control cycle with the commanded joint-side torque ``tau_cmd`` [N m]
+        held over the cycle (what the drive applies from the per-mille target)."""
+        self.tau_cmd = tau_cmd
+        noise = self._rng.gauss(0.0, self._noise_std) if self._noise_std else 0.0
+        self.tau_noise = noise
+        h = self._h
+        keep = self._lag_keep
+        lag = self._tau_lag if keep else tau_cmd
+        q, v, t = self.q, self.dq, self.t
+        self.q_start, self.dq_start = q, v
+        slide, rest = self._slide, self._rest
+        for i in range(self.substeps):
+            tau = lag + noise
+            if v != 0.0:
+                a, regime = slide(tau, q, v, t)
+                vn = v + a * h
+                if (vn > 0.0) == (v > 0.0) and vn != 0.0:
+                    q += 0.5 * (v + vn) * h
+                    v = vn
+                else:
+                    # velocity reaches zero inside the sub-step: stop there, then re-test
+                    th = -v / a if a != 0.0 else h
+                    if th > h:
+                        th = h
+                    q += 0.5 * v * th
+                    v = 0.0
+                    a2, direction = rest(tau, q, t + th)
+                    rem = h - th
+                    if direction:
+                        v = a2 * rem
+                        q += 0.5 * v * rem
+            else:
+                a, direction = rest(tau, q, t)
+                regime = REGIME_REST
+                if direction:
+                    v = a * h
+                    q += 0.5 * v * h
+            if i == 0:
+                self.ddq_start = a
+                self.tau_applied_start = tau
+                self.regime_start = regime
+            t += h
+            if keep:
+                lag = tau_cmd + (lag - tau_cmd) * keep
+        self.q, self.dq, self.t = q, v, t
+        self._tau_lag = lag
+        tau = lag + noise
+        self.tau_applied = tau
+        if v != 0.0:
+            self.ddq, self.regime = slide(tau, q, v, t)
+        else:
+            self.ddq, _ = rest(tau, q, t)
+            self.regime = REGIME_REST
