@@ -190,6 +190,15 @@ def _pick(
     raise DataError(f"{path}: missing column/variable {name!r} for {key!r} (found: {avail})")
 
 
+def _gain_variable(table: Mapping[str, np.ndarray], gain: str, path: Path) -> float:
+    if gain not in table:
+        raise DataError(f"{path}: gain variable {gain!r} not found")
+    gv = np.unique(table[gain])
+    if gv.size != 1:
+        raise DataError(f"{path}: gain variable {gain!r} is not a scalar or constant column")
+    return float(gv[0])
+
+
 def _from_table(
     table: Mapping[str, np.ndarray],
     path: Path,
@@ -208,12 +217,7 @@ def _from_table(
             try:
                 g = float(gain)
             except ValueError:
-                if gain not in table:
-                    raise DataError(f"{path}: gain variable {gain!r} not found") from None
-                gv = table[gain]
-                if gv.size != 1:
-                    raise DataError(f"{path}: gain variable {gain!r} is not a scalar")
-                g = float(gv[0])
+                g = _gain_variable(table, gain, path)
         else:
             g = float(gain)
     consts = {}
@@ -275,7 +279,9 @@ def make_experiment(
     d = np.diff(t)
     if np.any(d <= 0):
         k = int(np.argmax(d <= 0))
-        raise DataError(f"{source}: time is not strictly increasing at sample {k + 1} (t={t[k + 1]})")
+        raise DataError(
+            f"{source}: time is not strictly increasing at sample {k + 1} (t={t[k + 1]})"
+        )
     med = float(np.median(d))
     if np.max(np.abs(d - med)) > IRREGULAR_TOL * med:
         n = int(round((t[-1] - t[0]) / med)) + 1

@@ -254,7 +254,10 @@ class QuadrantCoulomb(Term):
         return np.column_stack([pp * sg, pp * e * sg, pm * sg, pm * e * sg])
 
     def describe(self) -> str:
-        return f"quadrant dry friction P+(c_m + d_m Exp) sign + P-(c_g + d_g Exp) sign, q_s={self.qs:g}"
+        return (
+            "quadrant dry friction P+(c_m + d_m Exp) sign + P-(c_g + d_g Exp) sign, "
+            f"q_s={self.qs:g}"
+        )
 
     def __repr__(self) -> str:
         return f"QuadrantCoulomb(qs={self.qs:g})"

@@ -1,0 +1,325 @@
+"""The identification pipeline used by ``jointid fit`` and the demo.
+
+:func:`fit_models` takes experiments (or concatenated signals), builds the decimated system
+once per model with the same preprocessing and the same samples ("the two models are
+compared using exactly the same identification method with the same measurements",
+section IV.C), fits the usual model (eq. 38-39) and/or the new model (eq. 42-43),
+optionally scans q_s, evaluates Table III bands, Table IV and cross-validation files, and
+returns a :class:`FitReport` (``.to_json()``, ``.format_tables()``).
+Pure numerics: loading belongs to :mod:`ident.loaders`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from . import DataError
+from .loaders import Experiment, concat
+from .models import IdentModel, new_model, usual_model
+from .preprocess import Design, build_design
+from .results import (
+    band_errors,
+    format_error_table,
+    format_parameter_table,
+    format_table_iv,
+    json_float,
+    parameters_json,
+    removed_json,
+)
+from .signals import Signals
+from .terms import Library
+
+__all__ = ["FitReport", "fit_models", "qs_grid", "FORMAT", "DEFAULT_QS"]
+
+FORMAT = "jointid-fit/1"
+#: The paper's final a-priori velocity constant [rad/s] (section III.D).
+DEFAULT_QS = 0.03
+MODEL_NAMES = ("usual", "new")
+
+
+def qs_grid(vmax: float, n: int = 13) -> np.ndarray:
+    """Candidate q_s for the scan [rad/s]: geometric, 0.5 %..20 % of the maximum velocity
+    (the paper's 0.03-0.04 rad/s are 2.5-3.3 % of its 1.2 rad/s)."""
+    return vmax * np.geomspace(0.005, 0.2, n)
+
+
+def _as_signals(data: Sequence[Experiment] | Signals, joint: str | bool | None) -> Signals:
+    if isinstance(data, Signals):
+        s = data
+    else:
+        if not data:
+            raise DataError("no experiment given")
+        s = concat(list(data))
+    if joint is not None:
+        rev = joint if isinstance(joint, bool) else str(joint).lower() == "revolute"
+        if not isinstance(joint, bool) and str(joint).lower() not in ("revolute", "prismatic"):
+            raise DataError(f"joint kind {joint!r}: expected 'revolute' or 'prismatic'")
+        if rev != s.revolute:
+            from dataclasses import replace
+
+            s = replace(s, revolute=rev)
+    return s
+
+
+def _library(name: str, qs: float, revolute: bool, payload: bool) -> Library:
+    if name == "usual":
+        return usual_model(revolute, payload=payload)
+    if name == "new":
+        return new_model(qs, revolute, payload=payload)
+    raise DataError(f"model {name!r}: expected 'usual' or 'new'")
+
+
+@dataclass
+class FitReport:
+    """Everything :func:`fit_models` identified.
+
+    Attributes
+    ----------
+    models : dict[str, IdentModel]
+        Fitted models by name (``"usual"``, ``"new"``).
+    designs : dict[str, Design]
+        The identification system of each model.
+    validation_designs : dict[str, Design]
+        The cross-validation system of each model (empty without validation data).
+    vmax : float
+        Maximum |dq| of the identification samples [rad/s] (Table III bands).
+    qs : float
+        q_s used by the new model [rad/s].
+    qs_scan : list of (q_s, rel_error)
+        The scan, when q_s was scanned.
+    table_iv : dict or None
+        ``{"with_payloads": {model: err}, "without_payload": {model: err}}``.
+    sources, validation_sources : list of str
+        Input files.
+    notes : list of str
+        Remarks for the user (terms dropped because of the data, ...).
+    """
+
+    models: dict[str, IdentModel]
+    designs: dict[str, Design]
+    validation_designs: dict[str, Design]
+    vmax: float
+    qs: float
+    revolute: bool
+    qs_scan: list[tuple[float, float]] = field(default_factory=list)
+    table_iv: dict[str, dict[str, float | None]] | None = None
+    sources: list[str] = field(default_factory=list)
+    validation_sources: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    def errors(self, name: str) -> dict[str, float | None]:
+        """Table III entries of one model: ``all``, ``low``, ``high``, ``validation``."""
+        m, d = self.models[name], self.designs[name]
+        rho = d.Y - m.predict(d)
+        out: dict[str, float | None] = dict(band_errors(d.Y, rho, d.signals.dq, self.vmax))
+        out["all"] = m.rel_error_
+        vd = self.validation_designs.get(name)
+        out["validation"] = m.rel_error_on(vd) if vd is not None else None
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        """The JSON record documented in ``docs/fit-json.md``."""
+        any_design = next(iter(self.designs.values()))
+        models: dict[str, Any] = {}
+        for name, m in self.models.items():
+            e = self.errors(name)
+            rec: dict[str, Any] = {
+                "description": m.library.describe(),
+                "rel_error": json_float(e["all"]),
+                "rel_error_low_velocity": json_float(e["low"]),
+                "rel_error_high_velocity": json_float(e["high"]),
+                "sigma_rho": json_float(m.sigma_rho_),
+                "cond": json_float(m.cond_),
+                "cond_raw": json_float(m.result_.cond_raw),
+                "samples": int(m.result_.m),
+                "parameters": parameters_json(m),
+                "removed": removed_json(m),
+            }
+            if e["validation"] is not None:
+                rec["validation_rel_error"] = json_float(e["validation"])
+            if name == "new":
+                rec["qs"] = self.qs
+            models[name] = rec
+        out: dict[str, Any] = {
+            "format": FORMAT,
+            "inputs": list(self.sources),
+            "validation_inputs": list(self.validation_sources),
+            "joint": "revolute" if self.revolute else "prismatic",
+            "preprocessing": any_design.settings(),
+            "vmax": json_float(self.vmax),
+            "bands": {"low": [0.0, 0.10], "high": [0.35, 1.0]},
+            "qs": self.qs,
+            "models": models,
+            "notes": list(self.notes),
+        }
+        if self.qs_scan:
+            out["qs_scan"] = [{"qs": q, "rel_error": json_float(e)} for q, e in self.qs_scan]
+        if self.table_iv is not None:
+            out["table_iv"] = {
+                k: {m: json_float(v) for m, v in d.items()} for k, d in self.table_iv.items()
+            }
+        return out
+
+    def format_tables(self) -> str:
+        """Tables I-IV as plain text."""
+        parts = []
+        for name, m in self.models.items():
+            title = f"Identified values with the {name} model"
+            if name == "new":
+                title += f" (q_s = {self.qs:g})"
+            parts.append(format_parameter_table(m, title))
+        parts.append(format_error_table({n: self.errors(n) for n in self.models}))
+        if self.table_iv is not None:
+            parts.append(format_table_iv(self.table_iv))
+        if self.qs_scan:
+            parts.append(
+                "q_s scan (new model): " + ", ".join(f"{q:.4g}: {e:.4g}" for q, e in self.qs_scan)
+            )
+        parts.extend(f"note: {n}" for n in self.notes)
+        return "\n\n".join(parts)
+
+
+def fit_models(
+    data: Sequence[Experiment] | Signals,
+    models: Sequence[str] = MODEL_NAMES,
+    *,
+    qs: float | str = DEFAULT_QS,
+    joint: str | bool | None = None,
+    validation: Sequence[Experiment] | Signals | None = None,
+    cutoff_hz: float | None = None,
+    decimation: int | None = None,
+    dq_min: float | None = None,
+    tau_min: float | None = None,
+    trim: int | None = None,
+    eliminate: bool = True,
+    threshold_pct: float | None = None,
+    table_iv: bool = True,
+) -> FitReport:
+    """Identify the usual and/or the new model on all experiments in one LS (eq. 36, 40).
+
+    Parameters
+    ----------
+    data : list of Experiment or Signals
+        Identification experiments (one per payload run).
+    models : sequence of {"usual", "new"}
+        Models to fit.
+    qs : float or "scan"
+        q_s [rad/s] of the new model, or ``"scan"`` to pick the one of :func:`qs_grid`
+        that minimises the new model's residual norm (section III.D).
+    joint : {"revolute", "prismatic"} or None
+        Overrides the joint kind of the data.
+    validation : list of Experiment or Signals or None
+        Files not used for the fit; their relative error is reported per model.
+    cutoff_hz, decimation, dq_min, tau_min, trim
+        Preprocessing, see :func:`ident.preprocess.build_design`. The same settings (the
+        cut-off and decimation found on the identification data) apply to validation data.
+    eliminate, threshold_pct
+        Elimination of non-significant parameters, see :meth:`IdentModel.fit`.
+    table_iv : bool
+        Also identify on the runs without payload only (Table IV) when there are both.
+
+    Returns
+    -------
+    FitReport
+    """
+    models = list(dict.fromkeys(models))
+    for name in models:
+        if name not in MODEL_NAMES:
+            raise DataError(f"model {name!r}: expected 'usual' or 'new'")
+    if not models:
+        raise DataError("no model to fit")
+    s = _as_signals(data, joint)
+    sv = _as_signals(validation, joint) if validation is not None else None
+    sources = [e.source for e in data] if not isinstance(data, Signals) else []
+    vsources = (
+        [e.source for e in validation]
+        if validation is not None and not isinstance(validation, Signals)
+        else []
+    )
+    has_payload = bool(np.any(s.payload_mass != 0))
+    notes: list[str] = []
+    if not has_payload:
+        notes.append(
+            "no run carries a payload: the payload term (Ma_ratio / a_m, b_m...) is left out"
+        )
+    if not s.revolute:
+        notes.append("prismatic joint: no gravity columns (MX, MY)")
+    pre = dict(
+        decimation=decimation, cutoff_hz=cutoff_hz, dq_min=dq_min, tau_min=tau_min, trim=trim
+    )
+
+    # settle the preprocessing once (cut-off and decimation chosen from the data)
+    probe = build_design(usual_model(s.revolute, payload=has_payload), s, **pre)
+    pre.update(cutoff_hz=probe.cutoff_hz, decimation=probe.decimation, trim=probe.trim)
+    vmax = float(np.max(np.abs(probe.signals.dq)))
+
+    def fit_one(
+        name: str, q: float, sig: Signals, payload: bool, elim: bool = eliminate
+    ) -> tuple[IdentModel, Design]:
+        lib = _library(name, q, sig.revolute, payload)
+        d = probe if (name == "usual" and sig is s and payload == has_payload) else None
+        if d is None:
+            d = build_design(lib, sig, **pre)
+        m = IdentModel(lib, name).fit(d, eliminate=elim, threshold_pct=threshold_pct)
+        return m, d
+
+    scan: list[tuple[float, float]] = []
+    if isinstance(qs, str):
+        if qs != "scan":
+            raise DataError(f"qs {qs!r}: expected a number [rad/s] or 'scan'")
+        if "new" in models:
+            for q in qs_grid(vmax):
+                # full model (no elimination): the residual as a function of q_s alone
+                m, _ = fit_one("new", float(q), s, has_payload, False)
+                scan.append((float(q), m.rel_error_))
+            qs_val = min(scan, key=lambda x: x[1])[0]
+        else:
+            qs_val = DEFAULT_QS
+    else:
+        qs_val = float(qs)
+        if not qs_val > 0:
+            raise DataError(f"qs must be positive [rad/s], got {qs_val}")
+
+    fitted: dict[str, IdentModel] = {}
+    designs: dict[str, Design] = {}
+    vdesigns: dict[str, Design] = {}
+    for name in models:
+        m, d = fit_one(name, qs_val, s, has_payload)
+        fitted[name], designs[name] = m, d
+        if sv is not None:
+            vdesigns[name] = build_design(m.library, sv, **pre)
+        identifiable = [n for n, r in m.removed_ if not r.startswith("not significant")]
+        if identifiable:
+            notes.append(f"{name} model: not identifiable on these data: {', '.join(identifiable)}")
+
+    t4 = None
+    exp_ids = np.unique(s.experiment)
+    no_payload_ids = np.unique(s.experiment[s.payload_mass == 0])
+    if table_iv and has_payload and 0 < no_payload_ids.size < exp_ids.size:
+        s0 = s.take(np.isin(s.experiment, no_payload_ids))
+        t4 = {"with_payloads": {}, "without_payload": {}}
+        for name in models:
+            t4["with_payloads"][name] = fitted[name].rel_error_
+            try:
+                m0, _ = fit_one(name, qs_val, s0, False)
+                t4["without_payload"][name] = m0.rel_error_
+            except DataError as exc:  # too few samples without payload
+                notes.append(f"Table IV without payload, {name} model: {exc}")
+                t4["without_payload"][name] = None
+    return FitReport(
+        models=fitted,
+        designs=designs,
+        validation_designs=vdesigns,
+        vmax=vmax,
+        qs=qs_val,
+        revolute=s.revolute,
+        qs_scan=scan,
+        table_iv=t4,
+        sources=sources,
+        validation_sources=vsources,
+        notes=notes,
+    )

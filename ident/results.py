@@ -1,0 +1,164 @@
+"""Results in the paper's form: parameter tables (Tables I-II), relative error norms per
+velocity band (Table III), with and without payload runs (Table IV), and JSON records.
+
+Pure formatting and numerics; ``docs/fit-json.md`` documents the JSON layout.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .models import IdentModel
+
+__all__ = [
+    "DEFAULT_BANDS",
+    "band_errors",
+    "json_float",
+    "parameters_json",
+    "removed_json",
+    "format_parameter_table",
+    "format_error_table",
+    "format_table_iv",
+]
+
+#: Velocity bands of Table III, as fractions of the maximum velocity.
+DEFAULT_BANDS: dict[str, tuple[float, float]] = {
+    "all": (0.0, 1.0),
+    "low": (0.0, 0.10),
+    "high": (0.35, 1.0),
+}
+
+
+def band_errors(
+    Y: np.ndarray,
+    rho: np.ndarray,
+    dq: np.ndarray,
+    vmax: float | None = None,
+    bands: Mapping[str, tuple[float, float]] = DEFAULT_BANDS,
+) -> dict[str, float]:
+    """Relative error norms ||rho_band|| / ||Y_band|| per velocity band (Table III).
+
+    Parameters
+    ----------
+    Y, rho, dq : ndarray, shape (m,)
+        Measurements [N m], residuals [N m] and velocities [rad/s] of the same samples.
+    vmax : float or None
+        Maximum velocity [rad/s]; default max |dq|.
+    bands : mapping
+        name -> (low, high) fractions of vmax; a sample is in a band when
+        low vmax <= |dq| <= high vmax.
+
+    Returns
+    -------
+    dict
+        name -> relative error (NaN for an empty band).
+    """
+    a = np.abs(dq)
+    vm = float(a.max(initial=0.0)) if vmax is None else float(vmax)
+    out = {}
+    for name, (lo, hi) in bands.items():
+        sel = (a >= lo * vm) & (a <= hi * vm)
+        ny = float(np.linalg.norm(Y[sel]))
+        out[name] = float(np.linalg.norm(rho[sel]) / ny) if sel.any() and ny > 0 else float("nan")
+    return out
+
+
+def json_float(x: Any) -> float | None:
+    """A float for JSON: NaN and infinities become ``None``."""
+    if x is None:
+        return None
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def parameters_json(model: IdentModel) -> dict[str, dict[str, float | None]]:
+    """``{param: {"value", "std", "std2", "rel_std_pct"}}`` of a fitted model."""
+    return {
+        n: {
+            "value": json_float(model.coef_[n]),
+            "std": json_float(model.std_[n]),
+            "std2": json_float(2 * model.std_[n]),
+            "rel_std_pct": json_float(model.rel_std_pct_[n]),
+        }
+        for n in model.names_
+    }
+
+
+def removed_json(model: IdentModel) -> list[dict[str, str]]:
+    """``[{"name", "reason"}]`` of the eliminated parameters."""
+    return [{"name": n, "reason": r} for n, r in model.removed_]
+
+
+def _fmt(x: float | None, digits: int = 4) -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "-"
+    return f"{x:.{digits}g}"
+
+
+def format_parameter_table(model: IdentModel, title: str | None = None) -> str:
+    """Table I/II: parameter, identified value, 2 x standard deviation, relative deviation."""
+    rows = [("Parameter", "Identified value", "Std dev x 2", "Rel. dev. [%]")]
+    for n in model.names_:
+        rows.append(
+            (
+                n,
+                _fmt(model.coef_[n], 6),
+                _fmt(2 * model.std_[n], 3),
+                _fmt(model.rel_std_pct_[n], 3),
+            )
+        )
+    out = [title or f"Identified values with the {model.name} model"]
+    out.append(_grid(rows))
+    for n, r in model.removed_:
+        out.append(f"  eliminated {n}: {r}")
+    return "\n".join(out)
+
+
+def format_error_table(errors: Mapping[str, Mapping[str, float | None]]) -> str:
+    """Table III. ``errors[model] = {"all", "low", "high", optional "validation"}``."""
+    names = list(errors)
+    labels = [
+        ("all", "All samples (all velocities)"),
+        ("low", "Low velocities (0-10 % of max)"),
+        ("high", "High velocities (35-100 % of max)"),
+        ("validation", "Validation files"),
+    ]
+    rows = [("Measurements used", *[f"{n} model" for n in names])]
+    for key, label in labels:
+        if any(errors[n].get(key) is not None for n in names):
+            rows.append((label, *[_fmt(errors[n].get(key)) for n in names]))
+    return "Relative norm of errors ||rho||/||Y||\n" + _grid(rows)
+
+
+def format_table_iv(table_iv: Mapping[str, Mapping[str, float | None]]) -> str:
+    """Table IV: errors of the identification with and without payload runs."""
+    found = {m for v in table_iv.values() for m in v}
+    names = [n for n in ("usual", "new") if n in found] + sorted(found - {"usual", "new"})
+    rows = [("Identification carried out", *[f"{n} model" for n in names])]
+    for key, label in (
+        ("with_payloads", "With payload variations"),
+        ("without_payload", "Without payload"),
+    ):
+        if key in table_iv:
+            rows.append((label, *[_fmt(table_iv[key].get(n)) for n in names]))
+    return "Relative norm of errors for 2 identifications\n" + _grid(rows)
+
+
+def _grid(rows: list[tuple[str, ...]]) -> str:
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = []
+    for k, r in enumerate(rows):
+        lines.append(
+            "  ".join(
+                c.ljust(w) if i == 0 else c.rjust(w)
+                for i, (c, w) in enumerate(zip(r, widths, strict=True))
+            )
+        )
+        if k == 0:
+            lines.append("  ".join("-" * w for w in widths))
+    return "\n".join(lines)
