@@ -1,0 +1,684 @@
+"""Refinement loop: diagnose the residual, add the effect it points to, refit, repeat.
+
+This automates the paper's own method (section III): the usual model's residual at low
+velocity and varying load points to the load- and velocity-dependent dry friction.
+
+One step of :func:`refine`:
+
+1. fit the current library on the design (least squares, eq. 12, no elimination) and
+   diagnose its residual against the seven candidate variables (:mod:`ident.diagnose`);
+2. score every candidate effect (:mod:`ident.effects`) by the residual sum of squares it
+   removes, with its nonlinear hyper-parameter (ripple period, q_s, T_w) scanned then
+   refined by a 1-D bounded search; a generic basis in each significantly implicated
+   continuous variable competes, and is chosen only when it removes clearly more than
+   every named effect (named effects win within :data:`GENERIC_MARGIN`);
+3. accept the best candidate only if (a) the nested-model F test, with the effective
+   sample size of the autocorrelated residual and one extra degree of freedom per scanned
+   hyper-parameter, rejects "noise only" at level ``alpha`` / number of candidates,
+   (b) it lowers the relative error by at least ``min_gain`` (relative), and (c) where
+   validation data exist, it lowers the validation relative error too; otherwise the next
+   best candidate is tried (at most ``max_tries``);
+4. add the term (:meth:`~ident.preprocess.Design.with_term`: columns filtered and decimated
+   like the others), refit, report; stop when nothing is accepted or after ``max_steps``.
+
+Pure numerics (no file access); plots are in :mod:`ident.refine_plots`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from scipy import optimize, stats
+
+from . import DataError
+from .diagnose import Diagnosis, diagnose
+from .effects import (
+    DirectionalViscous,
+    Effect,
+    GenericBasis,
+    PositionRipple,
+    PositionSmooth,
+    Prediction,
+    QuadrantLoad,
+    QuadraticViscous,
+    Spring,
+    Stribeck,
+    TorqueLag,
+    WarmUp,
+    variable_values,
+)
+from .models import IdentModel
+from .terms import Library, Term
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .preprocess import Design
+
+#: A named effect is preferred to a generic basis when it removes at least this share of
+#: what the best generic basis removes.
+GENERIC_MARGIN = 0.75
+#: Continuous variables a generic basis may expand.
+CONTINUOUS = ("position", "velocity", "acceleration", "load", "time")
+
+
+# ----------------------------------------------------------------------------- results
+@dataclass
+class Step:
+    """One accepted refinement step.
+
+    Attributes
+    ----------
+    variable : str
+        Candidate variable of the added effect (one of the seven).
+    strength : float
+        Share of the residual variance explained by that variable before the step (η²).
+    statistic, p_value : float
+        F statistic and p-value of the variable's dependence before the step.
+    leading_variable : str
+        The top variable of the diagnosis table before the step.
+    effect : str
+        Effect name (``"position_ripple"``, ``"generic_velocity"``, ...).
+    term : Effect
+        The added term (with its hyper-parameters).
+    parameters : dict
+        ``{name: {"value": v, "std2": 2σ}}`` of the effect, hyper-parameters included.
+    f_statistic, f_p_value : float
+        Nested-model F test of the acceptance.
+    rel_error_before, rel_error_after : float
+        ||ρ|| / ||Y|| on the identification samples.
+    low_before, low_after, high_before, high_after : float
+        The same in the low- and high-velocity bands (paper Table III).
+    validation_rel_error_before, validation_rel_error_after : float or None
+        On the validation design (``None`` without one).
+    diagnosis : Diagnosis
+        The diagnosis that led to the step.
+    generic : bool
+        ``True`` when no named effect fitted and a generic basis was added.
+    """
+
+    variable: str
+    strength: float
+    statistic: float
+    p_value: float
+    leading_variable: str
+    effect: str
+    term: Effect
+    parameters: dict[str, dict[str, float]]
+    f_statistic: float
+    f_p_value: float
+    rel_error_before: float
+    rel_error_after: float
+    low_before: float
+    low_after: float
+    high_before: float
+    high_after: float
+    validation_rel_error_before: float | None
+    validation_rel_error_after: float | None
+    diagnosis: Diagnosis = field(repr=False)
+    generic: bool = False
+
+    def to_json(self) -> dict[str, Any]:
+        """The step as in ``refinement.steps[]`` of the fit JSON."""
+        return {
+            "effect": self.effect,
+            "variable": self.variable,
+            "description": self.term.describe(),
+            "generic": self.generic,
+            "parameters": self.parameters,
+            "strength": {
+                "explained": _num(self.strength),
+                "statistic": _num(self.statistic),
+                "p_value": _num(self.p_value),
+            },
+            "leading_variable": self.leading_variable,
+            "test": {"F": _num(self.f_statistic), "p_value": _num(self.f_p_value)},
+            "rel_error_before": _num(self.rel_error_before),
+            "rel_error_after": _num(self.rel_error_after),
+            "low_velocity_rel_error_before": _num(self.low_before),
+            "low_velocity_rel_error_after": _num(self.low_after),
+            "high_velocity_rel_error_before": _num(self.high_before),
+            "high_velocity_rel_error_after": _num(self.high_after),
+            "validation_rel_error_before": _num(self.validation_rel_error_before),
+            "validation_rel_error_after": _num(self.validation_rel_error_after),
+            "diagnosis": self.diagnosis.to_json(),
+        }
+
+
+@dataclass
+class Rejected:
+    """A candidate that was the best of its round but failed a test."""
+
+    step: int
+    effect: str
+    variable: str
+    reason: str
+    rel_error_after: float
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "step": self.step,
+            "effect": self.effect,
+            "variable": self.variable,
+            "reason": self.reason,
+            "rel_error_after": _num(self.rel_error_after),
+        }
+
+
+@dataclass
+class Refinement:
+    """Outcome of :func:`refine`.
+
+    Attributes
+    ----------
+    steps : list of Step
+        Accepted steps, in order.
+    rejected : list of Rejected
+        Best candidates that failed the tests (why the loop stopped).
+    initial_model, final_model : IdentModel
+        Fits of the declared and of the refined library.
+    final_design : Design
+        The design with every added term's columns.
+    final_diagnosis : Diagnosis
+        Diagnosis of the final residual (what is left).
+    rel_error_initial, rel_error_final : float
+        ||ρ|| / ||Y|| before and after.
+    validation_rel_error_initial, validation_rel_error_final : float or None
+    stop_reason : str
+    """
+
+    steps: list[Step]
+    rejected: list[Rejected]
+    initial_model: IdentModel
+    final_model: IdentModel
+    final_design: Design
+    final_diagnosis: Diagnosis
+    rel_error_initial: float
+    rel_error_final: float
+    validation_rel_error_initial: float | None
+    validation_rel_error_final: float | None
+    stop_reason: str
+
+    @property
+    def terms(self) -> list[Effect]:
+        """The added terms, in order."""
+        return [s.term for s in self.steps]
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``refinement`` object of the fit JSON (see docs/refinement.md)."""
+        return {
+            "steps": [s.to_json() for s in self.steps],
+            "rejected": [r.to_json() for r in self.rejected],
+            "rel_error_initial": _num(self.rel_error_initial),
+            "rel_error_final": _num(self.rel_error_final),
+            "validation_rel_error_initial": _num(self.validation_rel_error_initial),
+            "validation_rel_error_final": _num(self.validation_rel_error_final),
+            "stop_reason": self.stop_reason,
+            "final_parameters": {
+                n: {"value": float(self.final_model.coef_[n]),
+                    "std2": float(2 * self.final_model.std_[n])}
+                for n in self.final_model.names_
+            },
+            "final_diagnosis": self.final_diagnosis.to_json(),
+        }
+
+    def format_report(self) -> str:
+        """Human-readable report of every step."""
+        out = [
+            f"Refinement: relative error {_pct(self.rel_error_initial)} -> "
+            f"{_pct(self.rel_error_final)}"
+            + (
+                f" (validation {_pct(self.validation_rel_error_initial)} -> "
+                f"{_pct(self.validation_rel_error_final)})"
+                if self.validation_rel_error_initial is not None
+                else ""
+            )
+        ]
+        for i, s in enumerate(self.steps, 1):
+            out.append("")
+            out.append(
+                f"step {i}: residual depends on {s.variable} "
+                f"(explains {100 * s.strength:.1f}% of it, F={s.statistic:.3g}, "
+                f"p={s.p_value:.1e}; leading variable: {s.leading_variable})"
+            )
+            out.append(
+                f"  added {s.effect}: {s.term.describe()}"
+                + ("  [generic basis: no named effect fitted]" if s.generic else "")
+            )
+            for n, v in s.parameters.items():
+                out.append(f"    {n:<18} = {v['value']:.6g} ± {v['std2']:.2g} (2σ)")
+            out.append(
+                f"  F test {s.f_statistic:.3g} (p={s.f_p_value:.1e}); relative error "
+                f"{_pct(s.rel_error_before)} -> {_pct(s.rel_error_after)}, "
+                f"low velocity {_pct(s.low_before)} -> {_pct(s.low_after)}, "
+                f"high velocity {_pct(s.high_before)} -> {_pct(s.high_after)}"
+            )
+            if s.validation_rel_error_before is not None:
+                out.append(
+                    f"  validation {_pct(s.validation_rel_error_before)} -> "
+                    f"{_pct(s.validation_rel_error_after)}"
+                )
+        for r in self.rejected:
+            out.append(f"rejected at step {r.step}: {r.effect} ({r.variable}): {r.reason}")
+        out.append(f"stopped: {self.stop_reason}")
+        out.append("remaining residual:")
+        out.append(self.final_diagnosis.format_table())
+        return "\n".join(out)
+
+
+def _num(x: float | None) -> float | None:
+    if x is None:
+        return None
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _pct(x: float | None) -> str:
+    return "n/a" if x is None or not math.isfinite(x) else f"{100 * x:.2f} %"
+
+
+# ------------------------------------------------------------------------ scoring
+class _Scorer:
+    """RSS removed by extra columns C from the current fit: with Q an orthonormal basis of
+    the current (kept) regressor and r the residual (r ⟂ Q), the gain is
+    (Cᵀr)ᵀ (CᵀC - (QᵀC)ᵀ(QᵀC))⁻¹ (Cᵀr)."""
+
+    def __init__(self, W: np.ndarray, r: np.ndarray) -> None:
+        norms = np.linalg.norm(W, axis=0)
+        Ws = W / np.where(norms > 0, norms, 1.0)
+        self.Q, _ = np.linalg.qr(Ws)
+        self.r = r
+        self.rss = float(r @ r)
+
+    def gain(self, C: np.ndarray) -> float:
+        C = np.asarray(C, dtype=float)
+        if C.ndim == 1:
+            C = C[:, None]
+        if not np.all(np.isfinite(C)):
+            return 0.0
+        cn = np.linalg.norm(C, axis=0)
+        ok = cn > 0
+        if not ok.any():
+            return 0.0
+        C = C[:, ok] / cn[ok]
+        QC = self.Q.T @ C
+        M = C.T @ C - QC.T @ QC
+        b = C.T @ self.r
+        w, V = np.linalg.eigh(M)
+        keep = w > 1e-9 * max(float(w.max()), 1e-300)
+        z = (V[:, keep].T @ b) / np.sqrt(w[keep])
+        return float(min(z @ z, self.rss))
+
+
+@dataclass
+class _Candidate:
+    effect: Effect
+    gain: float
+    n_hyper: int
+    generic: bool = False
+
+
+def _scan_log(scorer: _Scorer, s, make: Callable[[float], Effect], lo: float, hi: float,
+              n: int = 24) -> tuple[Effect, float]:
+    """Best hyper-parameter on a log grid, refined by a bounded 1-D search."""
+    grid = np.geomspace(lo, hi, n)
+    gains = np.array([scorer.gain(make(h).columns(s)) for h in grid])
+    i = int(np.argmax(gains))
+    a, b = grid[max(i - 1, 0)], grid[min(i + 1, n - 1)]
+    if b > a:
+        res = optimize.minimize_scalar(
+            lambda lh: -scorer.gain(make(math.exp(lh)).columns(s)),
+            bounds=(math.log(a), math.log(b)),
+            method="bounded",
+            options={"xatol": 1e-4},
+        )
+        if -res.fun > gains[i]:
+            return make(math.exp(res.x)), float(-res.fun)
+    return make(float(grid[i])), float(gains[i])
+
+
+def _scan_period(scorer: _Scorer, s, p0: float, span: float, tag: str) -> tuple[Effect, float]:
+    """Ripple period refined around the periodogram peak p0 (±1.5 frequency bins)."""
+    f0, df = 1 / p0, 1.5 / span
+    lo, hi = max(f0 - df, 0.5 * f0), f0 + df
+    fgrid = np.linspace(lo, hi, 31)
+    gains = np.array([scorer.gain(PositionRipple(1 / f, tag).columns(s)) for f in fgrid])
+    i = int(np.argmax(gains))
+    a, b = fgrid[max(i - 1, 0)], fgrid[min(i + 1, len(fgrid) - 1)]
+    res = optimize.minimize_scalar(
+        lambda f: -scorer.gain(PositionRipple(1 / f, tag).columns(s)),
+        bounds=(a, b), method="bounded", options={"xatol": 1e-9 * f0},
+    )
+    if -res.fun > gains[i]:
+        return PositionRipple(1 / res.x, tag), float(-res.fun)
+    return PositionRipple(1 / fgrid[i], tag), float(gains[i])
+
+
+def _unique_tag(effect_cls_names: tuple[str, ...], existing: set[str]) -> str:
+    if not set(effect_cls_names) & existing:
+        return ""
+    k = 2
+    while True:
+        tag = f"_{k}"
+        if not {n + tag for n in effect_cls_names} & existing:
+            return tag
+        k += 1
+
+
+def _rigid_prediction(lib: Library, coef: dict[str, float]) -> Prediction | None:
+    terms = [t for t in lib.terms() if t.effect in ("rigid_body", "payload")]
+    if not terms:
+        return None
+    c = np.array([coef.get(n, 0.0) for t in terms for n in t.names()])
+    if not np.any(c):
+        return None
+    return Prediction(terms, c)
+
+
+def _candidates(
+    scorer: _Scorer,
+    s,
+    diag: Diagnosis,
+    lib: Library,
+    coef: dict[str, float],
+    alpha: float,
+    generic_knots: int,
+) -> list[_Candidate]:
+    names = set(lib.names())
+    effects = {t.effect for t in lib.terms()}
+    out: list[_Candidate] = []
+
+    def add(e: Effect, g: float | None = None, n_hyper: int = 0, generic: bool = False):
+        tag = _unique_tag(e.names(), names)
+        if tag:
+            e = e.with_tag(tag) if not e.hyper_names else e.with_hyper(**e.hyper).with_tag(tag)
+        gain = scorer.gain(e.columns(s)) if g is None else g
+        out.append(_Candidate(e, gain, n_hyper, generic))
+
+    q, dq, t = s.q, s.dq, s.t
+    span = float(q.max() - q.min())
+    vmax = float(np.max(np.abs(dq)))
+    pp = diag.position_periodogram
+    if span > 0 and math.isfinite(pp.peak_period) and pp.false_alarm < alpha:
+        tag = _unique_tag(("ripple_sin", "ripple_cos"), names)
+        e, g = _scan_period(scorer, s, pp.peak_period, span, tag)
+        out.append(_Candidate(e, g, 1))
+    if span > 0 and "spring" not in effects:
+        add(Spring(float(np.mean(q))))
+    if span > 0 and "position_smooth" not in effects:
+        add(PositionSmooth(float(q.min()), float(q.max()), 4))
+    if "directional_viscous" not in effects:
+        add(DirectionalViscous())
+    if "quadratic_viscous" not in effects:
+        add(QuadraticViscous())
+    has_exp = any(t.effect in ("stribeck", "quadrant_coulomb") for t in lib.terms())
+    if vmax > 0 and not has_exp:
+        e, g = _scan_log(scorer, s, Stribeck, vmax / 1000, vmax / 2)
+        out.append(_Candidate(e, g, 1))
+    tmax = float(t.max())
+    if tmax > 0 and "warm_up" not in effects:
+        e, g = _scan_log(scorer, s, WarmUp, tmax / 300, 3 * tmax)
+        out.append(_Candidate(e, g, 1))
+    tau_out = _rigid_prediction(lib, coef)
+    has_quadrant = any(t.effect in ("quadrant_load", "load_dependent") for t in lib.terms())
+    if tau_out is not None and not has_quadrant:
+        add(QuadrantLoad(tau_out))
+    if "torque_lag" not in effects:
+        c_all = np.array([coef.get(n, 0.0) for n in lib.names()])
+        add(TorqueLag(Prediction(lib.terms(), c_all)))
+    # generic expansions in the significantly implicated continuous variables
+    for d in diag.significant:
+        if d.variable not in CONTINUOUS:
+            continue
+        x = variable_values(d.variable, s, tau_out)
+        lo, hi = np.quantile(x, [0.005, 0.995])
+        if not hi > lo:
+            continue
+        for signed in (False, True):
+            e = GenericBasis(d.variable, float(lo), float(hi), generic_knots, signed, tau_out)
+            add(e, generic=True)
+    return out
+
+
+def _f_test(rss0: float, rss1: float, k: int, p: int, n: int, n_eff: float) -> tuple[float, float]:
+    """Nested-model F test, degrees of freedom from the effective sample size."""
+    d2 = max(min(n_eff, n) - p - k, 1.0)
+    if rss1 <= 0 or k < 1:
+        return float("inf"), 0.0
+    F = ((rss0 - rss1) / k) / (rss1 / max(n - p - k, 1)) * (min(n_eff, n) / n)
+    return float(F), float(stats.f.sf(F, k, d2))
+
+
+def _effect_parameters(
+    term: Effect, model: IdentModel, design: Design, all_coef: dict[str, float]
+) -> dict[str, dict[str, float]]:
+    """Term parameters with 2σ; hyper-parameters via the linearised model (Jacobian column
+    d(W_term χ_term)/dh appended to the kept regressor)."""
+    names = list(model.names_)
+    tnames = [n for n in term.names() if n in model.coef_]
+    s = design.signals
+    W = design.W[:, [design.names.index(n) for n in names]]
+    extra = []
+    if term.hyper_names and len(tnames) == len(term.names()):
+        c = np.array([model.coef_[n] for n in term.names()])
+        for h in term.hyper_names:
+            h0 = getattr(term, h)
+            dh = 1e-6 * h0
+            up = term.with_hyper(**{h: h0 + dh}).columns(s) @ c
+            dn = term.with_hyper(**{h: h0 - dh}).columns(s) @ c
+            extra.append((up - dn) / (2 * dh))
+    A = np.column_stack([W, *extra]) if extra else W
+    norms = np.linalg.norm(A, axis=0)
+    norms = np.where(norms > 0, norms, 1.0)
+    As = A / norms
+    n, p = A.shape
+    rss = float(model.residual_ @ model.residual_)
+    sigma2 = rss / max(n - len(names), 1)
+    try:
+        cov = sigma2 * np.linalg.pinv(As.T @ As) / np.outer(norms, norms)
+    except np.linalg.LinAlgError:  # pragma: no cover
+        cov = np.full((p, p), np.nan)
+    idx = [names.index(n) for n in tnames] + list(range(len(names), p))
+    coef = np.array([model.coef_[n] for n in tnames] + [getattr(term, h) for h in
+                                                         (term.hyper_names if extra else ())])
+    sub = cov[np.ix_(idx, idx)]
+    if len(tnames) < len(term.names()):
+        # some columns were dropped as unidentifiable: report what is left as it is
+        sd = np.sqrt(np.clip(np.diag(sub), 0, None))
+        return {n: {"value": float(v), "std2": float(2 * d)} for n, v, d in
+                zip(tnames, coef, sd, strict=False)}
+    par = term.parameters(coef, sub)
+    out = {k: {"value": float(v), "std2": float(e)} for k, (v, e) in par.items()}
+    if isinstance(term, DirectionalViscous) and "F_V" in model.coef_:
+        i_fv, i_d = names.index("F_V"), names.index(tnames[0])
+        fv, d = model.coef_["F_V"], model.coef_[tnames[0]]
+        for key, sgn in (("F_V_pos", 0.5), ("F_V_neg", -0.5)):
+            g = np.zeros(cov.shape[0])
+            g[i_fv], g[i_d] = 1.0, sgn
+            out[key] = {"value": float(fv + sgn * d),
+                        "std2": float(2 * math.sqrt(max(g @ cov @ g, 0.0)))}
+    if isinstance(term, WarmUp) and all_coef.get("F_C"):
+        out["w_warm"] = {
+            "value": float(model.coef_[tnames[0]] / all_coef["F_C"]),
+            "std2": float(out[tnames[0]]["std2"] / abs(all_coef["F_C"])),
+        }
+    return out
+
+
+def _bands(model: IdentModel, design: Design, vmax: float | None) -> dict[str, float]:
+    try:
+        return model.rel_error_bands(design, vmax)
+    except Exception:  # noqa: BLE001 - bands are informative only
+        return {"all": model.rel_error_on(design), "low": float("nan"), "high": float("nan")}
+
+
+def _fit(lib: Library, design: Design, name: str) -> IdentModel:
+    return IdentModel(lib, name).fit(design, eliminate=False, drop_unidentifiable=True)
+
+
+# ------------------------------------------------------------------------ the loop
+def refine(
+    design: Design,
+    model: IdentModel | Term,
+    *,
+    validation: Design | None = None,
+    max_steps: int = 5,
+    vmax: float | None = None,
+    progress: Callable[[str], None] | None = None,
+    alpha: float = 1e-3,
+    min_gain: float = 0.01,
+    max_tries: int = 3,
+    generic_knots: int = 12,
+) -> Refinement:
+    """Refine a declared model by adding the effects its residual points to.
+
+    Parameters
+    ----------
+    design : Design
+        Identification samples built with the declared model's library
+        (:func:`ident.preprocess.build_design`).
+    model : IdentModel or Term
+        The declared model (its library is used; it is refitted without elimination so
+        that every step compares nested least-squares fits).
+    validation : Design, optional
+        Validation samples built with the same library and preprocessing settings; a step
+        is accepted only if it lowers their relative error too.
+    max_steps : int
+        Maximum number of added effects.
+    vmax : float, optional
+        Maximum velocity for the low/high-velocity bands [rad/s] (default max |q̇|).
+    progress : callable, optional
+        Receives one line per step (for the CLI).
+    alpha : float
+        Family-wise level of the acceptance F test (divided by the number of candidates).
+    min_gain : float
+        Minimum relative decrease of the relative error for a step to count (0.01: 1 %).
+    max_tries : int
+        Candidates tried per step, best first, before giving up.
+    generic_knots : int
+        Knots of a generic basis expansion.
+
+    Returns
+    -------
+    Refinement
+    """
+    if max_steps < 0:
+        raise DataError(f"max_steps must be >= 0, got {max_steps}")
+    say = progress or (lambda _m: None)
+    lib = model.library if isinstance(model, IdentModel) else Library(model)
+    name = model.name if isinstance(model, IdentModel) else "declared"
+    missing = [n for n in lib.names() if n not in design.names]
+    if missing:
+        raise DataError(f"design has no column for parameters {missing}; build it with the model")
+    cur_design = design
+    cur_val = validation
+    cur = _fit(lib, cur_design, name)
+    initial = cur
+    val_err = cur.rel_error_on(cur_val) if cur_val is not None else None
+    val_initial = val_err
+    steps: list[Step] = []
+    rejected: list[Rejected] = []
+    stop = f"step limit ({max_steps}) reached"
+    s = cur_design.signals
+    diag = None
+    for k in range(1, max_steps + 1):
+        r = cur.residual_
+        tau_out = _rigid_prediction(lib, cur.coef_)
+        diag = diagnose(r, s, Y=cur_design.Y, tau_out=tau_out, alpha=alpha)
+        kept = [cur_design.names.index(n) for n in cur.names_]
+        scorer = _Scorer(cur_design.W[:, kept], r)
+        cands = _candidates(scorer, s, diag, lib, cur.coef_, alpha, generic_knots)
+        named = sorted((c for c in cands if not c.generic), key=lambda c: -c.gain)
+        generic = sorted((c for c in cands if c.generic), key=lambda c: -c.gain)
+        order = list(named)
+        if generic and (not named or named[0].gain < GENERIC_MARGIN * generic[0].gain):
+            order = [generic[0], *named]
+        n_cand = max(len(cands), 1)
+        before_bands = _bands(cur, cur_design, vmax)
+        accepted = None
+        for c in order[:max_tries]:
+            e = c.effect
+            try:
+                d1 = cur_design.with_term(e)
+                m1 = _fit(Library(*lib.terms(), e), d1, name)
+            except DataError as exc:
+                rejected.append(Rejected(k, e.effect, e.variable, f"not fitted: {exc}", math.nan))
+                continue
+            kk = sum(1 for n in e.names() if n in m1.coef_) + c.n_hyper
+            F, pval = _f_test(cur.result_.residual @ cur.result_.residual,
+                              float(m1.residual_ @ m1.residual_), max(kk, 1),
+                              len(cur.names_), len(cur_design), diag.n_eff)
+            reason = None
+            if pval >= alpha / n_cand:
+                reason = f"F test not significant (F={F:.3g}, p={pval:.2e})"
+            elif m1.rel_error_ > cur.rel_error_ * (1 - min_gain):
+                reason = (f"relative error {_pct(cur.rel_error_)} -> {_pct(m1.rel_error_)}: "
+                          f"less than {100 * min_gain:g} % better")
+            v1 = None
+            if reason is None and cur_val is not None:
+                val1 = cur_val.with_term(e)
+                v1 = m1.rel_error_on(val1)
+                if not v1 < val_err:
+                    reason = f"validation error not lowered ({_pct(val_err)} -> {_pct(v1)})"
+            if reason is not None:
+                rejected.append(Rejected(k, e.effect, e.variable, reason, m1.rel_error_))
+                say(f"step {k}: {e.effect} rejected: {reason}")
+                continue
+            accepted = (c, d1, m1, F, pval, v1, val1 if cur_val is not None else None)
+            break
+        if accepted is None:
+            stop = "no candidate effect passed the tests"
+            break
+        c, d1, m1, F, pval, v1, val1 = accepted
+        e = c.effect
+        dep = diag.get(e.variable)
+        after_bands = _bands(m1, d1, vmax)
+        step = Step(
+            variable=e.variable,
+            strength=dep.explained,
+            statistic=dep.statistic,
+            p_value=dep.p_value,
+            leading_variable=diag.table[0].variable,
+            effect=e.effect,
+            term=e,
+            parameters=_effect_parameters(e, m1, d1, m1.coef_),
+            f_statistic=F,
+            f_p_value=pval,
+            rel_error_before=cur.rel_error_,
+            rel_error_after=m1.rel_error_,
+            low_before=before_bands.get("low", math.nan),
+            low_after=after_bands.get("low", math.nan),
+            high_before=before_bands.get("high", math.nan),
+            high_after=after_bands.get("high", math.nan),
+            validation_rel_error_before=val_err,
+            validation_rel_error_after=v1,
+            diagnosis=diag,
+            generic=c.generic,
+        )
+        steps.append(step)
+        say(
+            f"step {k}: added {e.effect} ({e.variable}); relative error "
+            f"{_pct(cur.rel_error_)} -> {_pct(m1.rel_error_)}"
+        )
+        lib = Library(*lib.terms(), e)
+        cur_design, cur = d1, m1
+        if cur_val is not None:
+            cur_val, val_err = val1, v1
+    if diag is None or steps and diag is steps[-1].diagnosis:
+        diag = diagnose(cur.residual_, s, Y=cur_design.Y,
+                        tau_out=_rigid_prediction(lib, cur.coef_), alpha=alpha)
+    return Refinement(
+        steps=steps,
+        rejected=rejected,
+        initial_model=initial,
+        final_model=cur,
+        final_design=cur_design,
+        final_diagnosis=diag,
+        rel_error_initial=initial.rel_error_,
+        rel_error_final=cur.rel_error_,
+        validation_rel_error_initial=val_initial,
+        validation_rel_error_final=val_err,
+        stop_reason=stop,
+    )
