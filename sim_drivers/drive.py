@@ -1,0 +1,950 @@
+"""Simulated CiA 402 joint drive: a canopen ``LocalNode`` on a python-can bus around a plant.
+
+What canopen's ``LocalNode`` does not do and this class adds (``/work/shared/notes/canopen.md``):
+
+- NMT slave: boot-up frame (0x700+id, data 0x00) on :meth:`SimulatedDrive.start`, on reset
+  node and on reset communication, then PRE-OPERATIONAL; heartbeat producer per 0x1017;
+  PRE-OPERATIONAL / OPERATIONAL / STOPPED (no SDO while STOPPED, PDOs only while OPERATIONAL).
+  Reset node restores every object to its EDS/DCF value and the CiA 402 state machine to
+  SWITCH ON DISABLED; reset communication restores 0x1000-0x1FFF.
+- PDOs: mapping writes over SDO are validated (mappable objects only 0x06040041, at most 64
+  bits 0x06040042, only while the PDO is disabled and sub 0 is 0 0x08000022); the layouts
+  are rebuilt from the dictionary on NMT start (and on the next SYNC after a communication
+  object changed) into ``struct.Struct`` objects. Synchronous RPDOs (types 0-240) are
+  latched and applied on SYNC; event RPDOs (254/255) are applied on reception. On each SYNC
+  the drive applies the latched RPDOs, steps the plant one cycle and sends the synchronous
+  TPDOs (type n in 1-240: every n-th SYNC; 0: every SYNC); event TPDOs (254/255) are sent when
+  their content changed (after a SYNC cycle or an SDO/RPDO write).
+- CiA 402: the state machine of :mod:`daq.cia402` driven by 0x6040 (SDO or RPDO), 0x6041 with
+  bit 12 set in OPERATION ENABLED in a cyclic mode and bit 13 on a CSP following error,
+  0x6060/0x6061 restricted to the modes 0x6502 advertises (abort 0x06090030 otherwise).
+
+Modes and units
+---------------
+- CST (10): joint-side torque command ``tau = plant.torque_from_permille(0x6071 + 0x60B2)``
+  [N m] (0x6071 and 0x60B2 in per-mille of the rated torque 0x6076); a demand beyond 0x6072
+  (per-mille) is a fault 0x8311.
+- CSP (8): a cycle-synchronous PD position loop on the joint angle decoded from counts,
+  ``tau = kp (q_target - q) - kd dq + torque_from_permille(0x60B2)`` with 0x607A [counts],
+  clamped to 0x6072 (bit 11 "internal limit" set while clamped); a following error larger
+  than 0x6065 [counts] is a fault 0x8611 (0xFFFFFFFF disables the check).
+- Other advertised modes are accepted but produce no torque in the simulation.
+- 0x6064 position actual [counts] = ``plant.encoder_counts`` (wrapped to int32); 0x606C
+  velocity actual [counts/s] = ``round(dq * counts_per_rad)``; 0x6077 torque actual and 0x6074
+  torque demand [per-mille of rated torque]; 0x6078 current actual [per-mille of rated
+  current]; 0x6076 [mN m] is served from the plant's rated motor torque and cannot be changed.
+- Software position limits 0x607D (min, max) [counts]: outside -> fault 0x8612 (off while
+  min >= max).
+- Outside OPERATION ENABLED and QUICK STOP ACTIVE the power stage is off and the holding
+  brake engaged: the plant is not stepped (the joint does not fall under gravity).
+- Quick stop (0x605A): option 0 switches off at once (transition 12); 1-4 brake with a
+  viscous torque then transition 12 when ``|dq|`` < 1e-3 rad/s; 5-8 brake and stay in QUICK
+  STOP ACTIVE (enable operation returns, transition 16).
+
+Faults (codes in :mod:`sim_drivers.faults`) go through FAULT REACTION ACTIVE to FAULT at once
+(transitions 13, 14), set 0x603F and 0x1001 and send one EMCY frame; a rising edge of
+controlword bit 7 resets them (transition 15, EMCY "error reset" frame).
+
+Threading: every bus callback (SDO, NMT, RPDO, SYNC) runs in the drive network's notifier
+thread, so they are serialised; the heartbeat is python-can's periodic-send task.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import operator
+import struct
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import can
+import canopen
+import numpy as np
+from canopen.sdo.exceptions import SdoAbortedError
+
+from daq.cia402 import (
+    CYCLIC_MODES,
+    Mode,
+    State,
+    automatic_transition,
+    next_state,
+    statusword,
+)
+from sim_drivers import SimError
+from sim_drivers.faults import (
+    EXCESS_TORQUE,
+    FOLLOWING_ERROR,
+    PLANT_FAULT,
+    POSITION_LIMIT,
+    FaultInjector,
+    error_register,
+)
+from sim_drivers.od import STRUCT_CODE, DriveOD, load_drive_od, struct_code
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["DriveError", "SimulatedDrive", "open_virtual_bus", "NMT_STATE_NAMES"]
+
+# NMT states (heartbeat byte values).
+NMT_INITIALISING = 0
+NMT_STOPPED = 4
+NMT_OPERATIONAL = 5
+NMT_PRE_OPERATIONAL = 127
+NMT_STATE_NAMES = {
+    NMT_INITIALISING: "INITIALISING",
+    NMT_STOPPED: "STOPPED",
+    NMT_OPERATIONAL: "OPERATIONAL",
+    NMT_PRE_OPERATIONAL: "PRE-OPERATIONAL",
+}
+
+# Objects the drive keeps as attributes: served live over SDO, written by SDO or RPDO,
+# packed into TPDOs. (index, subindex) -> attribute name.
+_LIVE: dict[tuple[int, int], str] = {
+    (0x1001, 0): "error_register",
+    (0x603F, 0): "error_code",
+    (0x6040, 0): "controlword",
+    (0x6041, 0): "statusword",
+    (0x605A, 0): "quick_stop_option",
+    (0x6060, 0): "mode_request",
+    (0x6061, 0): "mode_display",
+    (0x6064, 0): "position_actual",
+    (0x6065, 0): "following_window",
+    (0x606C, 0): "velocity_actual",
+    (0x6071, 0): "target_torque",
+    (0x6072, 0): "max_torque",
+    (0x6074, 0): "torque_demand",
+    (0x6076, 0): "rated_torque_mNm",
+    (0x6077, 0): "torque_actual",
+    (0x6078, 0): "current_actual",
+    (0x607A, 0): "target_position",
+    (0x607D, 1): "position_limit_min",
+    (0x607D, 2): "position_limit_max",
+    (0x60B1, 0): "velocity_offset",
+    (0x60B2, 0): "torque_offset",
+    (0x60FF, 0): "target_velocity",
+}
+# Written by the master (SDO or RPDO); everything else in _LIVE is computed by the drive
+# or is a parameter written over SDO only.
+_RX_ATTRS = frozenset(
+    {
+        "controlword",
+        "mode_request",
+        "target_torque",
+        "target_position",
+        "velocity_offset",
+        "torque_offset",
+        "target_velocity",
+    }
+)
+_PARAM_ATTRS = {
+    "quick_stop_option": 2,
+    "following_window": 0xFFFFFFFF,
+    "max_torque": 0x7FFF,
+    "position_limit_min": 0,
+    "position_limit_max": 0,
+}
+
+_PDO_NOT_VALID = 0x80000000
+_RECORD_CHUNK = 65536
+_QS_DONE_SPEED = 1e-3  # [rad/s]
+
+_RECORD_FIELDS: tuple[tuple[str, Any], ...] = (
+    ("cycle", np.int64),  # drive cycle index
+    ("counts", np.int64),  # 0x6064 sent [counts]
+    ("target_torque", np.int32),  # 0x6071 received [per-mille]
+    ("target_position", np.int64),  # 0x607A received [counts]
+    ("torque_demand", np.int32),  # demand after offset / position loop [per-mille]
+    ("tau_cmd", np.float64),  # joint-side torque command to the plant [N m]
+    ("tau_applied", np.float64),  # plant's applied torque [N m]
+    ("q", np.float64),  # plant's true joint position [rad]
+    ("statusword", np.int32),  # 0x6041 sent
+    ("mode", np.int8),  # 0x6061
+)
+
+
+class DriveError(SimError):
+    """The simulated drive cannot be built or driven as asked; the message says why."""
+
+
+def open_virtual_bus(channel: str) -> can.BusABC:
+    """A python-can virtual bus on ``channel`` (each participant opens its own)."""
+    return can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+
+
+def _wrap_i32(x: int) -> int:
+    return ((x + 0x80000000) & 0xFFFFFFFF) - 0x80000000
+
+
+def _clip(x: int, lo: int, hi: int) -> int:
+    return lo if x < lo else hi if x > hi else x
+
+
+class _RxPdo:
+    __slots__ = ("cob_id", "sync", "struct", "names", "latched", "number", "handler")
+
+    def __init__(self, number: int, cob_id: int, sync: bool, st: struct.Struct, names: tuple):
+        self.number = number
+        self.cob_id = cob_id
+        self.sync = sync
+        self.struct = st
+        self.names = names
+        self.latched: bytes | None = None
+        self.handler: Callable | None = None
+
+
+class _TxPdo:
+    __slots__ = ("cob_id", "every", "count", "struct", "getter", "single", "last", "number")
+
+    def __init__(
+        self, number: int, cob_id: int, every: int, st: struct.Struct, names: tuple[str, ...]
+    ):
+        self.number = number
+        self.cob_id = cob_id
+        self.every = every  # 0: event driven
+        self.count = 0
+        self.struct = st
+        self.getter = operator.attrgetter(*names) if names else (lambda obj: ())
+        self.single = len(names) == 1
+        self.last: bytes | None = None
+
+    def payload(self, drive: SimulatedDrive) -> bytes:
+        values = self.getter(drive)
+        return self.struct.pack(values) if self.single else self.struct.pack(*values)
+
+
+class SimulatedDrive:
+    """One CiA 402 joint drive on a CAN bus, simulating its joint with a plant.
+
+    Parameters
+    ----------
+    network_or_bus : canopen.Network or can.BusABC
+        A bus (the drive builds its own ``canopen.Network`` and notifier on it and stops the
+        notifier in :meth:`stop`, leaving the bus open) or a connected network of its own.
+        On a virtual bus the master must use another bus object on the same channel.
+    node_id : int
+        CANopen node ID, 1-127.
+    plant : sim_drivers.plant.JointPlant
+        The joint (``step(tau)``, ``encoder_counts``, ``dq``, ``tau_applied``,
+        ``torque_from_permille``, ``permille_from_torque``, ``counts_to_rad``,
+        ``rad_to_counts``, ``set_payload``).
+    eds : str or Path or DriveOD or None
+        EDS/DCF (``None``: the generic ``jointid_cia402.eds``).
+    fault_injector : FaultInjector or None
+        Scripted faults for tests.
+    cycle_s : float
+        SYNC period the plant is stepped with [s] (the plant's own ``cycle_s`` decides its
+        integration; this is used for the CSP loop tuning and records).
+    csp_gains : (float, float) or None
+        CSP position-loop gains ``(kp [N m/rad], kd [N m s/rad])``; default: critically damped
+        at 15 Hz for the plant's rigid-body inertia when the plant exposes it, else for 1 kg m².
+    """
+
+    def __init__(
+        self,
+        network_or_bus: canopen.Network | can.BusABC,
+        node_id: int,
+        plant: Any,
+        eds: str | Path | DriveOD | None = None,
+        *,
+        fault_injector: FaultInjector | None = None,
+        cycle_s: float = 0.001,
+        csp_gains: tuple[float, float] | None = None,
+    ) -> None:
+        self.dod = eds if isinstance(eds, DriveOD) else load_drive_od(eds, node_id)
+        self.plant = plant
+        self.injector = fault_injector
+        self.cycle_s = float(cycle_s)
+        if isinstance(network_or_bus, canopen.Network):
+            self.network = network_or_bus
+            self._own_notifier = False
+        elif isinstance(network_or_bus, can.BusABC):
+            self.network = canopen.Network(network_or_bus)
+            self._own_notifier = True
+        else:
+            raise DriveError(
+                f"SimulatedDrive: expected a canopen.Network or can.BusABC, "
+                f"got {type(network_or_bus).__name__}"
+            )
+        self.node = canopen.LocalNode(node_id, self.dod.od)
+        self.node_id = node_id
+        self._supported = frozenset(int(m) for m in self.dod.supported)
+
+        # plant-derived scales
+        self._counts_per_rad = float(plant.rad_to_counts(1000.0)) / 1000.0
+        self.rated_torque_mNm = int(round(self._rated_torque_nm() * 1000.0))
+        self._current_scale = self._current_per_torque()
+        if csp_gains is None:
+            inertia = self._plant_inertia()
+            w = 2.0 * math.pi * 15.0
+            csp_gains = (inertia * w * w, 2.0 * inertia * w)
+        self.kp, self.kd = float(csp_gains[0]), float(csp_gains[1])
+
+        # live values
+        self.cycle = 0
+        self.nmt = NMT_INITIALISING
+        self.cia_state = State.NOT_READY_TO_SWITCH_ON
+        self.error_code = 0
+        self.error_register = 0
+        self.controlword = 0
+        self._prev_cw = 0
+        self.statusword = 0
+        self.mode_request = 0
+        self.mode_display = 0
+        self.position_actual = 0
+        self.velocity_actual = 0
+        self.target_torque = 0
+        self.target_position = 0
+        self.velocity_offset = 0
+        self.torque_offset = 0
+        self.target_velocity = 0
+        self.torque_demand = 0
+        self.torque_actual = 0
+        self.current_actual = 0
+        self.tau_cmd = 0.0
+        self._internal_limit = False
+        self._following_error = False
+        self._heartbeat_stopped = False
+        self._layout_dirty = False
+        self._sync_cob = 0x80
+        self._rx: list[_RxPdo] = []
+        self._rx_sync: list[_RxPdo] = []
+        self._tx_sync: list[_TxPdo] = []
+        self._tx_event: list[_TxPdo] = []
+        self._extra_names: dict[tuple[int, int], str] = {}
+        self._live = {k: v for k, v in _LIVE.items() if self._has(*k)}
+        self.rx_length_errors = 0
+        self.rx_rejected_modes = 0
+        self.tpdo_sent = 0
+        self._n = 0
+        self._rec = {name: np.zeros(_RECORD_CHUNK, dtype=dtyp) for name, dtyp in _RECORD_FIELDS}
+        self._started = False
+        self._load_application()
+        self._update_actuals()
+
+        self.node.add_read_callback(self._on_sdo_read)
+        self.node.add_write_callback(self._on_sdo_write)
+
+    # ------------------------------------------------------------------ plant glue
+    def _params_attr(self, *names: str) -> Any:
+        params = getattr(self.plant, "params", None)
+        for name in names:
+            obj = params
+            for part in name.split("."):
+                obj = getattr(obj, part, None)
+                if obj is None:
+                    break
+            if obj is not None:
+                return obj
+        return None
+
+    def _rated_torque_nm(self) -> float:
+        v = self._params_attr("drive.rated_torque_Nm", "rated_torque_Nm")
+        if v is not None:
+            return float(v)
+        # torque_from_permille(1000) is the joint-side rated torque N * rated_torque
+        gear = self._params_attr("drive.gear_ratio", "gear_ratio") or 1.0
+        return float(self.plant.torque_from_permille(1000)) / float(gear)
+
+    def _current_per_torque(self) -> float:
+        """Per-mille of rated current per per-mille of rated torque (motor side)."""
+        kt = self._params_attr("drive.torque_constant_Nm_per_A", "torque_constant_Nm_per_A")
+        i_rated = self._params_attr("drive.rated_current_A", "rated_current_A")
+        if kt and i_rated:
+            return self._rated_torque_nm() / (float(kt) * float(i_rated))
+        return 1.0
+
+    def _plant_inertia(self) -> float:
+        v = self._params_attr("J", "dynamics.J", "rigid.J", "body.J")
+        try:
+            return float(v) if v else 1.0
+        except (TypeError, ValueError):
+            return 1.0
+
+    # ------------------------------------------------------------------ OD helpers
+    def _has(self, index: int, subindex: int) -> bool:
+        od = self.dod.od
+        if index not in od:
+            return False
+        obj = od[index]
+        if isinstance(obj, canopen.objectdictionary.ODVariable):
+            return subindex == 0
+        return subindex in obj
+
+    def _var(self, index: int, subindex: int) -> canopen.objectdictionary.ODVariable:
+        return self.node._find_object(index, subindex)
+
+    def _stored(self, index: int, subindex: int) -> Any:
+        """Value of a non-live object: stored by SDO, else DCF value, else EDS default."""
+        var = self._var(index, subindex)
+        try:
+            return var.decode_raw(self.node.data_store[index][subindex])
+        except KeyError:
+            return var.value if var.value is not None else var.default
+
+    def _load_application(self) -> None:
+        """(Re)load the parameters and targets the drive keeps as attributes from the OD."""
+        for attr, fallback in _PARAM_ATTRS.items():
+            key = next((k for k, v in _LIVE.items() if v == attr), None)
+            value = self._stored(*key) if key and self._has(*key) else None
+            setattr(self, attr, fallback if value is None else int(value))
+        for attr in _RX_ATTRS:
+            key = next(k for k, v in _LIVE.items() if v == attr)
+            value = self._stored(*key) if self._has(*key) else None
+            setattr(self, attr, 0 if value is None else int(value))
+        mode = self.mode_request
+        self.mode_display = mode if mode in self._supported else 0
+        self.mode_request = self.mode_display
+        self._prev_cw = self.controlword
+
+    # ------------------------------------------------------------------ life cycle
+    @property
+    def state(self) -> State:
+        """CiA 402 state of the drive."""
+        return self.cia_state
+
+    @property
+    def nmt_state(self) -> str:
+        """NMT state name (``"PRE-OPERATIONAL"``, ``"OPERATIONAL"``, ``"STOPPED"``, ...)."""
+        return NMT_STATE_NAMES[self.nmt]
+
+    def start(self) -> None:
+        """Attach to the bus, send boot-up, enter PRE-OPERATIONAL and start the heartbeat."""
+        if self._started:
+            raise DriveError(f"SimulatedDrive node {self.node_id}: already started")
+        net = self.network
+        net.add_node(self.node)
+        # replace LocalNode's NMT and SDO subscriptions by gated ones
+        net.unsubscribe(0, self.node.nmt.on_command)
+        net.subscribe(0, self._on_nmt)
+        net.unsubscribe(self.node.sdo.rx_cobid, self.node.sdo.on_request)
+        net.subscribe(self.node.sdo.rx_cobid, self._on_sdo_request)
+        if self._own_notifier:
+            net.connect()
+        self._started = True
+        self._boot()
+
+    def stop(self) -> None:
+        """Stop heartbeat and PDO traffic and detach from the bus (the bus stays open)."""
+        if not self._started:
+            return
+        self._started = False
+        self.node.nmt.stop_heartbeat()
+        self._unsubscribe_pdos()
+        net = self.network
+        self._safe_unsubscribe(self._sync_cob, self._on_sync)
+        self._safe_unsubscribe(0, self._on_nmt)
+        self._safe_unsubscribe(self.node.sdo.rx_cobid, self._on_sdo_request)
+        if self._own_notifier and net.notifier is not None:
+            net.notifier.stop(1.0)
+            net.notifier = None
+        # give LocalNode its own subscriptions back so that it can detach itself
+        net.subscribe(0, self.node.nmt.on_command)
+        net.subscribe(self.node.sdo.rx_cobid, self.node.sdo.on_request)
+        self.node.remove_network()
+        net.nodes.pop(self.node_id, None)
+
+    def __enter__(self) -> SimulatedDrive:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def _safe_unsubscribe(self, cob: int, cb: Callable) -> None:
+        try:
+            self.network.unsubscribe(cob, cb)
+        except (KeyError, ValueError):
+            pass
+
+    def _boot(self) -> None:
+        """Initialisation -> boot-up frame -> PRE-OPERATIONAL, heartbeat per 0x1017."""
+        self._set_nmt(NMT_INITIALISING)
+        self.cia_state = State.NOT_READY_TO_SWITCH_ON
+        self.cia_state, _ = automatic_transition(self.cia_state, "self_test_done")
+        self._update_statusword()
+        self._resubscribe_sync()
+        self.network.send_message(0x700 + self.node_id, b"\x00")
+        self._set_nmt(NMT_PRE_OPERATIONAL)
+        hb = int(self._stored(0x1017, 0) or 0) if self._has(0x1017, 0) else 0
+        self._heartbeat_stopped = False
+        self.node.nmt.start_heartbeat(hb)
+
+    def _set_nmt(self, state: int) -> None:
+        was = self.nmt
+        self.nmt = state
+        self.node.nmt._state = state
+        if state == NMT_OPERATIONAL and was != NMT_OPERATIONAL:
+            self._build_layouts()
+        elif state != NMT_OPERATIONAL and was == NMT_OPERATIONAL:
+            self._unsubscribe_pdos()
+        if not self._heartbeat_stopped:
+            self.node.nmt.update_heartbeat()
+
+    def _reset(self, application: bool) -> None:
+        self.node.nmt.stop_heartbeat()
+        self._unsubscribe_pdos()
+        store = self.node.data_store
+        for index in list(store):
+            if application or 0x1000 <= index <= 0x1FFF:
+                del store[index]
+        if application:
+            self.error_code = 0
+            self.error_register = 0
+            self._internal_limit = self._following_error = False
+            self._load_application()
+        self._boot()
+
+    # ------------------------------------------------------------------ NMT / SDO handlers
+    def _on_nmt(self, can_id: int, data: bytes, timestamp: float) -> None:
+        if len(data) < 2 or data[1] not in (0, self.node_id):
+            return
+        cmd = data[0]
+        if cmd == 0x01 and self.nmt in (NMT_PRE_OPERATIONAL, NMT_STOPPED):
+            self._set_nmt(NMT_OPERATIONAL)
+        elif cmd == 0x02:
+            self._set_nmt(NMT_STOPPED)
+        elif cmd == 0x80:
+            self._set_nmt(NMT_PRE_OPERATIONAL)
+        elif cmd == 0x81:
+            self._reset(application=True)
+        elif cmd == 0x82:
+            self._reset(application=False)
+
+    def _on_sdo_request(self, can_id: int, data: bytes, timestamp: float) -> None:
+        if self.nmt == NMT_STOPPED:
+            return  # no SDO in STOPPED
+        self.node.sdo.on_request(can_id, data, timestamp)
+
+    def _on_sdo_read(self, index: int, subindex: int, od: Any) -> Any:
+        name = self._live.get((index, subindex)) or self._extra_names.get((index, subindex))
+        if name is None:
+            return None
+        return getattr(self, name)
+
+    def _on_sdo_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
+        if 0x1400 <= index <= 0x1BFF:
+            self._check_pdo_write(index, subindex, od, data)
+            self._layout_dirty = True
+            return
+        if index == 0x1005:
+            self._layout_dirty = True
+            return
+        key = (index, subindex)
+        name = self._live.get(key)
+        if name is None:
+            name = self._extra_names.get(key)
+            if name is not None:
+                setattr(self, name, od.decode_raw(data))
+            return
+        value = od.decode_raw(data)
+        if name == "controlword":
+            self.controlword = value
+            self._evaluate_controlword()
+            self._send_event_tpdos()
+        elif name == "mode_request":
+            if value != 0 and value not in self._supported:
+                raise SdoAbortedError(0x06090030)
+            self.mode_request = value
+            self.mode_display = value
+            self._update_statusword()
+            self._send_event_tpdos()
+        elif name == "rated_torque_mNm":
+            if value != self.rated_torque_mNm:
+                raise SdoAbortedError(0x06090030)
+        elif name in _RX_ATTRS or name in _PARAM_ATTRS:
+            setattr(self, name, value)
+        else:
+            raise SdoAbortedError(0x06010002)  # computed by the drive: read only
+
+    def _check_pdo_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
+        """Validate a write to a PDO communication (14xx/18xx) or mapping (16xx/1Axx) object."""
+        is_map = 0x1600 <= index <= 0x17FF or 0x1A00 <= index <= 0x1BFF
+        comm = index - 0x200 if is_map else index
+        cob = self._stored(comm, 1) if self._has(comm, 1) else _PDO_NOT_VALID
+        enabled = not (int(cob) & _PDO_NOT_VALID)
+        value = od.decode_raw(data)
+        if not is_map:
+            if subindex == 1 and enabled and not value & _PDO_NOT_VALID:
+                if (value ^ int(cob)) & 0x1FFFFFFF:
+                    raise SdoAbortedError(0x06090030)  # COB-ID change of a valid PDO
+            if subindex == 2 and not (value <= 240 or value >= 252):
+                raise SdoAbortedError(0x06090030)
+            return
+        if enabled:
+            raise SdoAbortedError(0x08000022)  # mapping change while the PDO is valid
+        receive = index < 0x1A00
+        if subindex == 0:
+            obj = self.dod.od[index]
+            slots = max((s for s in obj.subindices if s > 0), default=0) if hasattr(
+                obj, "subindices"
+            ) else 0
+            if isinstance(obj, canopen.objectdictionary.ODArray):
+                slots = max(slots, int(obj[0].default or 0))
+            if value > max(slots, 0) or value > 64:
+                raise SdoAbortedError(0x06090031)
+            bits = 0
+            for s in range(1, value + 1):
+                entry = int(self._stored(index, s) or 0)
+                if entry >> 16:
+                    self._check_entry(entry, receive)
+                bits += entry & 0xFF
+            if bits > 64:
+                raise SdoAbortedError(0x06040042)
+            return
+        if int(self._stored(index, 0) or 0) != 0:
+            raise SdoAbortedError(0x08000022)  # entries only while sub 0 is 0
+        if value >> 16:
+            self._check_entry(value, receive)
+
+    def _check_entry(self, entry: int, receive: bool) -> None:
+        index, subindex, bits = entry >> 16, (entry >> 8) & 0xFF, entry & 0xFF
+        if 1 <= index <= 7:  # dummy entries: data type sizes
+            if bits % 8:
+                raise SdoAbortedError(0x06040041)
+            return
+        if not self._has(index, subindex):
+            raise SdoAbortedError(0x06020000)
+        var = self._var(index, subindex)
+        if not var.pdo_mappable or var.data_type not in _STRUCT_TYPES:
+            raise SdoAbortedError(0x06040041)
+        if receive and not var.writable or not receive and not var.readable:
+            raise SdoAbortedError(0x06040041)
+        if bits != len(var):
+            raise SdoAbortedError(0x06040041)
+        if bits > 64:
+            raise SdoAbortedError(0x06040042)
+
+    # ------------------------------------------------------------------ PDO layouts
+    def _resubscribe_sync(self) -> None:
+        self._safe_unsubscribe(self._sync_cob, self._on_sync)
+        cob = self._stored(0x1005, 0) if self._has(0x1005, 0) else 0x80
+        self._sync_cob = int(cob if cob is not None else 0x80) & 0x7FF
+        self.network.subscribe(self._sync_cob, self._on_sync)
+
+    def _unsubscribe_pdos(self) -> None:
+        for rx in self._rx:
+            if rx.handler is not None:
+                self._safe_unsubscribe(rx.cob_id, rx.handler)
+        self._rx = []
+        self._rx_sync = []
+        self._tx_sync = []
+        self._tx_event = []
+
+    def _entries(self, map_index: int) -> tuple[struct.Struct, tuple]:
+        count = int(self._stored(map_index, 0) or 0)
+        codes: list[str] = []
+        names: list[str] = []
+        for s in range(1, count + 1):
+            entry = int(self._stored(map_index, s) or 0)
+            index, subindex, bits = entry >> 16, (entry >> 8) & 0xFF, entry & 0xFF
+            if index == 0 or bits == 0:
+                continue
+            if 1 <= index <= 7:
+                codes.append(f"{bits // 8}x")
+                continue
+            var = self._var(index, subindex)
+            codes.append(struct_code(var))
+            names.append(self._name_for(index, subindex))
+        return struct.Struct("<" + "".join(codes)), tuple(names)
+
+    def _name_for(self, index: int, subindex: int) -> str:
+        name = self._live.get((index, subindex))
+        if name is not None:
+            return name
+        name = self._extra_names.get((index, subindex))
+        if name is None:
+            name = f"_obj_{index:04X}_{subindex:02X}"
+            self._extra_names[(index, subindex)] = name
+            value = self._stored(index, subindex)
+            setattr(self, name, 0 if value is None else value)
+        return name
+
+    def _build_layouts(self) -> None:
+        """Read the PDO configuration from the dictionary into struct layouts and subscribe."""
+        self._unsubscribe_pdos()
+        self._layout_dirty = False
+        self._resubscribe_sync()
+        od = self.dod.od
+        for n in range(512):
+            comm = 0x1400 + n
+            if comm not in od:
+                continue
+            cob = int(self._stored(comm, 1) or _PDO_NOT_VALID)
+            if cob & _PDO_NOT_VALID or 0x1600 + n not in od:
+                continue
+            trans = int(self._stored(comm, 2) or 0) if self._has(comm, 2) else 255
+            st, names = self._entries(0x1600 + n)
+            rx = _RxPdo(n + 1, cob & 0x7FF, trans <= 240, st, names)
+            self._rx.append(rx)
+            if rx.sync:
+                self._rx_sync.append(rx)
+            self.network.subscribe(rx.cob_id, self._make_rx_handler(rx))
+        for n in range(512):
+            comm = 0x1800 + n
+            if comm not in od:
+                continue
+            cob = int(self._stored(comm, 1) or _PDO_NOT_VALID)
+            if cob & _PDO_NOT_VALID or 0x1A00 + n not in od:
+                continue
+            trans = int(self._stored(comm, 2) or 0) if self._has(comm, 2) else 255
+            st, names = self._entries(0x1A00 + n)
+            if trans <= 240:
+                tx = _TxPdo(n + 1, cob & 0x7FF, max(trans, 1), st, names)
+                self._tx_sync.append(tx)
+            elif trans >= 254:
+                self._tx_event.append(_TxPdo(n + 1, cob & 0x7FF, 0, st, names))
+            # 252/253 (RTR only): not served, LocalNode drops remote frames
+
+    def _make_rx_handler(self, rx: _RxPdo) -> Callable:
+        if rx.sync:
+
+            def handler(can_id: int, data: bytes, timestamp: float) -> None:
+                rx.latched = data
+        else:
+
+            def handler(can_id: int, data: bytes, timestamp: float) -> None:
+                if self.nmt == NMT_OPERATIONAL:
+                    if self._apply_rpdo(rx, data):
+                        self._after_rx()
+
+        rx.handler = handler
+        return handler
+
+    def _apply_rpdo(self, rx: _RxPdo, data: bytes) -> bool:
+        if len(data) < rx.struct.size:
+            self.rx_length_errors += 1
+            return False
+        self.__dict__.update(zip(rx.names, rx.struct.unpack_from(data), strict=False))
+        return True
+
+    def _after_rx(self) -> None:
+        """Apply what RPDOs changed: mode request, controlword; then event TPDOs."""
+        if self.mode_request != self.mode_display:
+            if self.mode_request in self._supported or self.mode_request == 0:
+                self.mode_display = self.mode_request
+            else:
+                self.rx_rejected_modes += 1
+                self.mode_request = self.mode_display
+        self._evaluate_controlword()
+        self._send_event_tpdos()
+
+    # ------------------------------------------------------------------ CiA 402
+    def _evaluate_controlword(self) -> None:
+        cw = self.controlword
+        new, number = next_state(
+            self.cia_state, cw, self._prev_cw, quick_stop_option=self.quick_stop_option
+        )
+        self._prev_cw = cw
+        if number is not None:
+            self.cia_state = new
+            if number == 15:
+                self.error_code = 0
+                self.error_register = 0
+                self._following_error = False
+                self.node.emcy.reset()
+            elif number == 11:
+                self._quick_stop_started()
+        self._update_statusword()
+
+    def _quick_stop_started(self) -> None:
+        if self.quick_stop_option == 0 or (
+            1 <= self.quick_stop_option <= 4 and abs(self.plant.dq) < _QS_DONE_SPEED
+        ):
+            self.cia_state, _ = automatic_transition(self.cia_state, "quick_stop_done")
+
+    def _update_statusword(self) -> None:
+        st = self.cia_state
+        enabled = st is State.OPERATION_ENABLED
+        self.statusword = statusword(
+            st,
+            internal_limit=self._internal_limit,
+            bit12=enabled and self.mode_display in _CYCLIC_INTS,
+            bit13=self._following_error and self.mode_display == 8,
+        )
+
+    def fault(self, code: int) -> None:
+        """Enter FAULT (transitions 13 and 14) with error ``code``: 0x603F, 0x1001, EMCY."""
+        if self.cia_state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
+            return
+        self.cia_state, _ = automatic_transition(self.cia_state, "fault")
+        self.error_code = code
+        self.error_register = error_register(code)
+        self.node.emcy.send(code, self.error_register)
+        self.cia_state, _ = automatic_transition(self.cia_state, "fault_reaction_done")
+        self.tau_cmd = 0.0
+        self._update_statusword()
+
+    # ------------------------------------------------------------------ cycle
+    def _on_sync(self, can_id: int, data: bytes, timestamp: float) -> None:
+        if self.nmt != NMT_OPERATIONAL:
+            return
+        if self._layout_dirty:
+            self._build_layouts()
+        got = False
+        for rx in self._rx_sync:
+            latched = rx.latched
+            if latched is not None:
+                rx.latched = None
+                got = self._apply_rpdo(rx, latched) or got
+        if got:
+            if self.mode_request != self.mode_display:
+                if self.mode_request in self._supported or self.mode_request == 0:
+                    self.mode_display = self.mode_request
+                else:
+                    self.rx_rejected_modes += 1
+                    self.mode_request = self.mode_display
+            self._evaluate_controlword()
+        self.step()
+
+    def step(self) -> None:
+        """One drive cycle: injector, control law, plant step, checks, record, TPDOs.
+
+        Called on every SYNC in OPERATIONAL; exposed for benchmarks and offline use.
+        """
+        cycle = self.cycle
+        inj = self.injector
+        if inj is not None:
+            if inj.fault_now(cycle):
+                self.fault(inj.fault_code)
+            if inj.stop_heartbeat_now(cycle):
+                self._heartbeat_stopped = True
+                self.node.nmt.stop_heartbeat()
+        plant = self.plant
+        st = self.cia_state
+        powered = st is State.OPERATION_ENABLED or st is State.QUICK_STOP_ACTIVE
+        tau = 0.0
+        demand = 0
+        if st is State.OPERATION_ENABLED:
+            mode = self.mode_display
+            if mode == 10:
+                demand = self.target_torque + self.torque_offset
+                if demand > self.max_torque or -demand > self.max_torque:
+                    self.fault(EXCESS_TORQUE)
+                    powered = False
+                    demand = 0
+                else:
+                    tau = plant.torque_from_permille(demand)
+            elif mode == 8:
+                err = self.target_position - self.position_actual
+                window = self.following_window
+                if window != 0xFFFFFFFF and (err > window or -err > window):
+                    self._following_error = True
+                    self.fault(FOLLOWING_ERROR)
+                    powered = False
+                else:
+                    tau = (
+                        self.kp * err / self._counts_per_rad
+                        - self.kd * plant.dq
+                        + plant.torque_from_permille(self.torque_offset)
+                    )
+                    demand = plant.permille_from_torque(tau)
+                    limit = self.max_torque
+                    limited = demand > limit or -demand > limit
+                    if limited:
+                        demand = limit if demand > 0 else -limit
+                        tau = plant.torque_from_permille(demand)
+                    if limited != self._internal_limit:
+                        self._internal_limit = limited
+                        self._update_statusword()
+        elif st is State.QUICK_STOP_ACTIVE:
+            tau = -self.kd * plant.dq
+            demand = plant.permille_from_torque(tau)
+            if 1 <= self.quick_stop_option <= 4 and abs(plant.dq) < _QS_DONE_SPEED:
+                self.cia_state, _ = automatic_transition(st, "quick_stop_done")
+                self._update_statusword()
+        self.tau_cmd = tau
+        self.torque_demand = demand
+        if powered:
+            try:
+                plant.step(tau)
+                if not math.isfinite(plant.q):
+                    raise SimError("plant state is not finite")
+            except Exception:  # any plant failure is a drive fault, not a dead bus thread
+                logger.exception("plant step failed at cycle %d", cycle)
+                self.fault(PLANT_FAULT)
+        self._update_actuals()
+        lo, hi = self.position_limit_min, self.position_limit_max
+        if lo < hi and not lo <= self.position_actual <= hi:
+            self.fault(POSITION_LIMIT)
+        self._record(cycle)
+        if inj is not None and inj.drop_tpdo(cycle):
+            for tx in self._tx_sync:
+                tx.count += 1
+                if tx.count >= tx.every:
+                    tx.count = 0
+        else:
+            send = self.network.send_message
+            for tx in self._tx_sync:
+                tx.count += 1
+                if tx.count >= tx.every:
+                    tx.count = 0
+                    send(tx.cob_id, tx.payload(self))
+                    self.tpdo_sent += 1
+            if self._tx_event:
+                self._send_event_tpdos()
+        self.cycle = cycle + 1
+
+    def _update_actuals(self) -> None:
+        plant = self.plant
+        self.position_actual = _wrap_i32(int(plant.encoder_counts))
+        v = round(plant.dq * self._counts_per_rad)
+        self.velocity_actual = _clip(v, -0x80000000, 0x7FFFFFFF)
+        ta = int(plant.permille_from_torque(plant.tau_applied))
+        self.torque_actual = ta
+        self.current_actual = _clip(round(ta * self._current_scale), -0x8000, 0x7FFF)
+
+    def _send_event_tpdos(self) -> None:
+        if self.nmt != NMT_OPERATIONAL:
+            return
+        send = self.network.send_message
+        for tx in self._tx_event:
+            payload = tx.payload(self)
+            if payload != tx.last:
+                tx.last = payload
+                send(tx.cob_id, payload)
+                self.tpdo_sent += 1
+
+    def _record(self, cycle: int) -> None:
+        n = self._n
+        rec = self._rec
+        if n >= rec["cycle"].shape[0]:
+            for name in rec:
+                rec[name] = np.concatenate([rec[name], np.zeros_like(rec[name][:_RECORD_CHUNK])])
+        rec["cycle"][n] = cycle
+        rec["counts"][n] = self.position_actual
+        rec["target_torque"][n] = self.target_torque
+        rec["target_position"][n] = self.target_position
+        rec["torque_demand"][n] = self.torque_demand
+        rec["tau_cmd"][n] = self.tau_cmd
+        rec["tau_applied"][n] = self.plant.tau_applied
+        rec["q"][n] = self.plant.q
+        rec["statusword"][n] = self.statusword
+        rec["mode"][n] = self.mode_display
+        self._n = n + 1
+
+    @property
+    def record(self) -> dict[str, np.ndarray]:
+        """Per-cycle record (copies), one entry per SYNC processed in OPERATIONAL.
+
+        Keys: ``cycle``, ``counts`` (0x6064 sent), ``target_torque`` (0x6071 received,
+        per-mille), ``target_position`` (0x607A received, counts), ``torque_demand``
+        (per-mille), ``tau_cmd`` and ``tau_applied`` [N m], ``q`` [rad] (true),
+        ``statusword`` (sent), ``mode`` (0x6061).
+        """
+        n = self._n
+        return {name: arr[:n].copy() for name, arr in self._rec.items()}
+
+    def set_payload(self, mass_kg: float, arm_m: float) -> None:
+        """Mount a payload of ``mass_kg`` [kg] at ``arm_m`` [m] on the joint (the operator)."""
+        self.plant.set_payload(mass_kg, arm_m)
+
+    @property
+    def supported_modes(self) -> frozenset[Mode]:
+        """Modes advertised by 0x6502."""
+        return self.dod.supported
+
+
+_CYCLIC_INTS = frozenset(int(m) for m in CYCLIC_MODES)
+_STRUCT_TYPES = frozenset(STRUCT_CODE)

@@ -1,0 +1,105 @@
+"""Fault codes of the simulated drive and the configurable fault injector used by tests.
+
+Error codes (0x603F, EMCY) follow CiA 301 / CiA 402's error-code table:
+
+==========  ==========================================================================
+ code        meaning
+==========  ==========================================================================
+ 0x8611      following error (CSP: ``|0x607A - 0x6064| > 0x6065``)
+ 0x8311      excess torque (CST: ``|0x6071 + 0x60B2| > 0x6072``)
+ 0x8612      reference limit (``0x6064`` outside the software limits ``0x607D``)
+ 0xFF01      injected fault (device specific; :class:`FaultInjector` default)
+ 0xFF02      plant-detected fault (the plant raised or its state became non-finite)
+==========  ==========================================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+FOLLOWING_ERROR = 0x8611
+EXCESS_TORQUE = 0x8311
+POSITION_LIMIT = 0x8612
+INJECTED_FAULT = 0xFF01
+PLANT_FAULT = 0xFF02
+
+FAULT_NAMES: dict[int, str] = {
+    FOLLOWING_ERROR: "following error",
+    EXCESS_TORQUE: "excess torque",
+    POSITION_LIMIT: "software position limit",
+    INJECTED_FAULT: "injected fault",
+    PLANT_FAULT: "plant fault",
+}
+
+
+def error_register(code: int) -> int:
+    """0x1001 error register for an error code: bit 0 (generic) plus the class bit.
+
+    Bit 1 current (0x2xxx), bit 2 voltage (0x3xxx), bit 3 temperature (0x4xxx), bit 5 device
+    profile (0x8xxx motion errors of CiA 402), bit 7 manufacturer (0xFFxx).
+    """
+    reg = 0x01 if code else 0x00
+    top = code >> 12
+    if top == 0x2:
+        reg |= 0x02
+    elif top == 0x3:
+        reg |= 0x04
+    elif top == 0x4:
+        reg |= 0x08
+    elif top == 0x8:
+        reg |= 0x20
+    elif code >> 8 == 0xFF:
+        reg |= 0x80
+    return reg
+
+
+@dataclass
+class FaultInjector:
+    """Scripted misbehaviour of a :class:`sim_drivers.drive.SimulatedDrive`, by SYNC cycle.
+
+    Cycle numbers are the drive's cycle counter (:attr:`SimulatedDrive.cycle`): 0 for the
+    first SYNC it processes in NMT OPERATIONAL, counted over the drive's lifetime.
+
+    Parameters
+    ----------
+    fault_at_cycle : int or None
+        Raise ``fault_code`` at that cycle (FAULT state, 0x603F set, one EMCY frame).
+    fault_code : int
+        Error code of the injected fault (default 0xFF01, device specific).
+    stop_heartbeat_at_cycle : int or None
+        Stop the heartbeat producer from that cycle on (the node keeps working otherwise).
+    drop_tpdo_from_cycle : int or None
+        Send no TPDO at cycles ``drop_tpdo_from_cycle`` to
+        ``drop_tpdo_from_cycle + drop_tpdo_cycles - 1``.
+    drop_tpdo_cycles : int
+        How many consecutive cycles lose their TPDOs.
+    """
+
+    fault_at_cycle: int | None = None
+    fault_code: int = INJECTED_FAULT
+    stop_heartbeat_at_cycle: int | None = None
+    drop_tpdo_from_cycle: int | None = None
+    drop_tpdo_cycles: int = 1
+
+    def __post_init__(self) -> None:
+        if not 0 < self.fault_code <= 0xFFFF:
+            raise ValueError(
+                f"FaultInjector.fault_code: expected 0x0001..0xFFFF, got {self.fault_code}"
+            )
+        if self.drop_tpdo_cycles < 0:
+            raise ValueError(
+                f"FaultInjector.drop_tpdo_cycles: expected >= 0, got {self.drop_tpdo_cycles}"
+            )
+
+    def fault_now(self, cycle: int) -> bool:
+        """True at the cycle the fault is injected."""
+        return self.fault_at_cycle is not None and cycle == self.fault_at_cycle
+
+    def stop_heartbeat_now(self, cycle: int) -> bool:
+        """True at the cycle the heartbeat producer stops."""
+        return self.stop_heartbeat_at_cycle is not None and cycle == self.stop_heartbeat_at_cycle
+
+    def drop_tpdo(self, cycle: int) -> bool:
+        """True when the TPDOs of ``cycle`` must not be sent."""
+        start = self.drop_tpdo_from_cycle
+        return start is not None and start <= cycle < start + self.drop_tpdo_cycles
