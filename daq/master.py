@@ -1,0 +1,358 @@
+"""Master side of one CiA 402 drive: presence, mode, PDO configuration, cyclic frames.
+
+SDO, NMT, EMCY and heartbeat go through a ``canopen.RemoteNode``; the cyclic PDOs are packed
+and unpacked with :mod:`struct` directly (the mapping is fixed and verified here), because
+canopen's object-dictionary encode/decode costs about twice a raw frame per cycle
+(``notes/performance.md``). canopen's ``BaseNode402`` is not used (0.4 s per transition,
+bare ``RuntimeError``); the CiA 402 sequencing uses :mod:`daq.cia402`.
+
+PDOs are configured by explicit SDO writes, never by ``PdoMap.save()`` (canopen 2.4.x
+writes no entries when the EDS declares the mapping objects as ARRAY), and every written
+sub-index is read back before the drive is started; a mismatch raises
+:class:`daq.ConfigError` naming the node, the PDO and the object.
+
+Cyclic layout (all synchronous, transmission type 1):
+
+=====  ===========  =====================================================  =======
+ PDO    COB-ID       mapping                                                 bytes
+=====  ===========  =====================================================  =======
+RPDO1  0x200 + id   0x6040 controlword u16, 0x6071 target torque i16 (CST)   4
+                    0x6040 controlword u16, 0x607A target position i32 (CSP) 6
+TPDO1  0x180 + id   0x6041 statusword u16, 0x6064 position i32,
+                    0x6077 torque actual i16                                 8
+TPDO2  0x280 + id   0x606C velocity actual i32, 0x6061 mode display i8      5
+=====  ===========  =====================================================  =======
+
+Every other RPDO/TPDO the EDS declares is disabled (COB-ID bit 31).
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+
+import canopen
+from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
+
+from . import ConfigError
+from .cia402 import SUPPORTED_MODE_BIT, Mode, supported_modes
+from .config import DriveConfig, Scaling
+
+OBJECT_NAMES = {
+    0x6040: "controlword",
+    0x6041: "statusword",
+    0x6060: "modes of operation",
+    0x6061: "modes of operation display",
+    0x6064: "position actual value",
+    0x606C: "velocity actual value",
+    0x6071: "target torque",
+    0x6076: "motor rated torque",
+    0x6077: "torque actual value",
+    0x607A: "target position",
+    0x6502: "supported drive modes",
+}
+
+RPDO_CST = ((0x6040, 0, 16), (0x6071, 0, 16))
+RPDO_CSP = ((0x6040, 0, 16), (0x607A, 0, 32))
+TPDO1 = ((0x6041, 0, 16), (0x6064, 0, 32), (0x6077, 0, 16))
+TPDO2 = ((0x606C, 0, 32), (0x6061, 0, 8))
+
+RPDO_CST_STRUCT = struct.Struct("<Hh")
+RPDO_CSP_STRUCT = struct.Struct("<Hi")
+TPDO1_STRUCT = struct.Struct("<Hih")
+TPDO2_STRUCT = struct.Struct("<ib")
+
+COB_DISABLED = 0x80000000
+
+
+@dataclass(frozen=True)
+class PdoSpec:
+    """One PDO to configure: number (1-based), direction, COB-ID and mapping."""
+
+    name: str  # "RPDO1"
+    comm_index: int  # 0x1400 / 0x1800 + n - 1
+    map_index: int  # 0x1600 / 0x1A00 + n - 1
+    cob_id: int
+    entries: tuple[tuple[int, int, int], ...]  # (index, subindex, bits)
+
+    @property
+    def n_bytes(self) -> int:
+        return sum(b for _, _, b in self.entries) // 8
+
+    def words(self) -> list[int]:
+        return [(i << 16) | (s << 8) | b for i, s, b in self.entries]
+
+
+def pdo_specs(node_id: int, mode: Mode) -> tuple[PdoSpec, PdoSpec, PdoSpec]:
+    """The cyclic PDO layout of a drive (RPDO1, TPDO1, TPDO2)."""
+    rpdo = RPDO_CST if mode is Mode.CYCLIC_SYNC_TORQUE else RPDO_CSP
+    return (
+        PdoSpec("RPDO1", 0x1400, 0x1600, 0x200 + node_id, rpdo),
+        PdoSpec("TPDO1", 0x1800, 0x1A00, 0x180 + node_id, TPDO1),
+        PdoSpec("TPDO2", 0x1801, 0x1A01, 0x280 + node_id, TPDO2),
+    )
+
+
+def pdo_lengths(mode: Mode) -> tuple[int, int, int]:
+    """Data lengths [byte] of the cyclic frames of one drive (RPDO1, TPDO1, TPDO2)."""
+    return tuple(s.n_bytes for s in pdo_specs(1, mode))  # type: ignore[return-value]
+
+
+def _u(data: bytes) -> int:
+    return int.from_bytes(data, "little")
+
+
+class MasterDrive:
+    """The master's handle on one drive.
+
+    Parameters
+    ----------
+    network : canopen.Network
+        Connected network.
+    cfg : DriveConfig
+        Node id, EDS, mode, heartbeat, scaling.
+    sdo_timeout_s : float
+        SDO response timeout [s].
+
+    Raises
+    ------
+    daq.ConfigError
+        The EDS cannot be read, lacks an object of the cyclic layout or does not advertise
+        the requested mode in 0x6502.
+    """
+
+    def __init__(self, network: canopen.Network, cfg: DriveConfig, sdo_timeout_s: float = 0.3):
+        self.cfg = cfg
+        self.node_id = cfg.node_id
+        self.name = f"node {cfg.node_id}"
+        try:
+            od = canopen.import_od(str(cfg.eds), cfg.node_id)
+        except Exception as exc:  # canopen raises bare errors on malformed files
+            raise ConfigError(f"{cfg.eds}: cannot read the EDS ({exc})") from None
+        self.od = od
+        self.check_eds()
+        self.node = canopen.RemoteNode(cfg.node_id, od)
+        network.add_node(self.node)
+        self.node.sdo.RESPONSE_TIMEOUT = sdo_timeout_s
+        self.specs = pdo_specs(cfg.node_id, cfg.mode)
+        self.rpdo_struct = RPDO_CST_STRUCT if cfg.mode is Mode.CYCLIC_SYNC_TORQUE else (
+            RPDO_CSP_STRUCT)
+        self.scaling: Scaling | None = cfg.scaling
+
+    # -- static checks ------------------------------------------------------------------
+    def check_eds(self) -> None:
+        """Refuse an EDS that lacks an object of the cyclic layout or the requested mode."""
+        od, cfg = self.od, self.cfg
+        for spec in pdo_specs(cfg.node_id, cfg.mode):
+            for idx in (spec.comm_index, spec.map_index):
+                if idx not in od:
+                    raise ConfigError(f"{self.name}: {cfg.eds.name} has no object 0x{idx:04X} "
+                                      f"needed for {spec.name}")
+            for idx, _, _ in spec.entries:
+                if idx not in od:
+                    raise ConfigError(f"{self.name}: {cfg.eds.name} has no object 0x{idx:04X} "
+                                      f"({OBJECT_NAMES.get(idx, '')}) needed in {spec.name}")
+        if 0x6502 in od:
+            default = getattr(od[0x6502], "default", None)
+            if isinstance(default, int):
+                self._check_mode_mask(default, f"{cfg.eds.name} 0x6502 default")
+
+    def _check_mode_mask(self, mask: int, where: str) -> None:
+        mode = self.cfg.mode
+        if not mask >> SUPPORTED_MODE_BIT[mode] & 1:
+            have = ", ".join(sorted(m.name.lower() for m in supported_modes(mask))) or "none"
+            raise ConfigError(
+                f"{self.name}: {where} = 0x{mask:X} does not support {mode.name.lower()} "
+                f"(mode {int(mode)}; supported: {have})"
+            )
+
+    # -- SDO helpers --------------------------------------------------------------------
+    def upload(self, index: int, sub: int = 0) -> bytes:
+        try:
+            return self.node.sdo.upload(index, sub)
+        except SdoAbortedError as exc:
+            raise ConfigError(f"{self.name}: reading 0x{index:04X}.{sub} aborted: {exc}") from None
+        except SdoCommunicationError:
+            raise ConfigError(f"{self.name}: no SDO answer reading 0x{index:04X}.{sub}") from None
+
+    def download(self, index: int, sub: int, value: int, size: int, what: str = "") -> None:
+        data = (value & ((1 << (8 * size)) - 1)).to_bytes(size, "little")
+        try:
+            self.node.sdo.download(index, sub, data)
+        except SdoAbortedError as exc:
+            raise ConfigError(
+                f"{self.name}: {what or 'writing'} 0x{index:04X}.{sub} = 0x{value:X} refused "
+                f"by the drive: {exc}"
+            ) from None
+        except SdoCommunicationError:
+            raise ConfigError(f"{self.name}: no SDO answer writing 0x{index:04X}.{sub}") from None
+
+    # -- start-up sequence --------------------------------------------------------------
+    def check_present(self) -> int:
+        """Read 0x1000 (device type); refuse a node that does not answer."""
+        try:
+            raw = self.node.sdo.upload(0x1000, 0)
+        except SdoCommunicationError:
+            raise ConfigError(
+                f"{self.name}: no answer to SDO (is node {self.node_id} on the bus and powered?)"
+            ) from None
+        except SdoAbortedError as exc:
+            raise ConfigError(f"{self.name}: reading device type 0x1000 aborted: {exc}") from None
+        return _u(raw)
+
+    def check_mode_supported(self) -> int:
+        """Read 0x6502 from the drive and refuse the configured mode if it is missing."""
+        mask = _u(self.upload(0x6502, 0))
+        self._check_mode_mask(mask, "0x6502 (supported drive modes)")
+        return mask
+
+    def configure_pdos(self) -> None:
+        """Write the cyclic PDO layout by SDO, disable the other PDOs, read everything back.
+
+        Raises
+        ------
+        daq.ConfigError
+            ``"node 1: RPDO1 mapping 0x1600.2 read back 0x00000000 != written 0x60710010"``.
+        """
+        for spec in self.specs:
+            words = spec.words()
+            self.download(spec.comm_index, 1, spec.cob_id | COB_DISABLED, 4, f"{spec.name} COB-ID")
+            self.download(spec.map_index, 0, 0, 1, f"{spec.name} mapping count")
+            for k, w in enumerate(words, start=1):
+                self.download(spec.map_index, k, w, 4, f"{spec.name} mapping")
+            self.download(spec.map_index, 0, len(words), 1, f"{spec.name} mapping count")
+            self.download(spec.comm_index, 2, 1, 1, f"{spec.name} transmission type")
+            self.download(spec.comm_index, 1, spec.cob_id, 4, f"{spec.name} COB-ID")
+        used = {s.comm_index for s in self.specs}
+        others = [(0x1400 + n, f"RPDO{n + 1}") for n in range(512)] + [
+            (0x1800 + n, f"TPDO{n + 1}") for n in range(512)
+        ]
+        disabled = []
+        for idx, name in others:
+            if idx in used or idx not in self.od:
+                continue
+            cob = _u(self.upload(idx, 1))
+            if not cob & COB_DISABLED:
+                self.download(idx, 1, cob | COB_DISABLED, 4, f"{name} COB-ID (disable)")
+            disabled.append((idx, name))
+        self.verify_pdos(disabled)
+
+    def verify_pdos(self, disabled: list[tuple[int, str]] = ()) -> None:
+        """Read every configured sub-index back and compare with what was written."""
+        for spec in self.specs:
+            cob = _u(self.upload(spec.comm_index, 1))
+            if cob & 0x9FFFFFFF != spec.cob_id:  # bits 29/30 (frame format, RTR) may differ
+                raise ConfigError(f"{self.name}: {spec.name} COB-ID 0x{spec.comm_index:04X}.1 "
+                                  f"read back 0x{cob:08X} != written 0x{spec.cob_id:08X}")
+            tt = _u(self.upload(spec.comm_index, 2))
+            if tt != 1:
+                raise ConfigError(f"{self.name}: {spec.name} transmission type "
+                                  f"0x{spec.comm_index:04X}.2 read back {tt} != written 1")
+            words = spec.words()
+            n = _u(self.upload(spec.map_index, 0))
+            if n != len(words):
+                raise ConfigError(f"{self.name}: {spec.name} mapping count "
+                                  f"0x{spec.map_index:04X}.0 read back {n} != written "
+                                  f"{len(words)}")
+            for k, w in enumerate(words, start=1):
+                got = _u(self.upload(spec.map_index, k))
+                if got != w:
+                    raise ConfigError(
+                        f"{self.name}: {spec.name} mapping 0x{spec.map_index:04X}.{k} read back "
+                        f"0x{got:08X} != written 0x{w:08X} "
+                        f"({OBJECT_NAMES.get(w >> 16, 'object')} 0x{w >> 16:04X})"
+                    )
+        for idx, name in disabled:
+            cob = _u(self.upload(idx, 1))
+            if not cob & COB_DISABLED:
+                raise ConfigError(f"{self.name}: {name} COB-ID 0x{idx:04X}.1 read back "
+                                  f"0x{cob:08X}: still enabled after disabling it")
+
+    def set_mode(self) -> None:
+        """Write 0x6060 (modes of operation) and check 0x6061 follows."""
+        mode = int(self.cfg.mode)
+        self.download(0x6060, 0, mode, 1, "modes of operation")
+        shown = int.from_bytes(self.upload(0x6061, 0)[:1], "little", signed=True)
+        if shown != mode:
+            raise ConfigError(f"{self.name}: 0x6061 (modes of operation display) = {shown} "
+                              f"after writing 0x6060 = {mode}")
+
+    def set_heartbeat(self) -> None:
+        """Write the heartbeat producer time 0x1017 [ms] (skipped when 0)."""
+        if self.cfg.heartbeat_ms:
+            self.download(0x1017, 0, self.cfg.heartbeat_ms, 2, "heartbeat producer time")
+
+    def set_interpolation_period(self, cycle_s: float) -> None:
+        """Write 0x60C2 (interpolation time period) when present; ignore a refusal."""
+        if 0x60C2 not in self.od:
+            return
+        ms = round(cycle_s * 1000)
+        if abs(ms - cycle_s * 1000) > 1e-9 or not 1 <= ms <= 255:
+            return
+        try:
+            self.node.sdo.download(0x60C2, 1, bytes([ms]))
+            self.node.sdo.download(0x60C2, 2, (-3 & 0xFF).to_bytes(1, "little"))
+        except (SdoAbortedError, SdoCommunicationError):
+            pass
+
+    def read_scaling(self) -> Scaling:
+        """The scaling from the campaign, else from the drive (0x6076, 0x6091, 0x608F).
+
+        Raises
+        ------
+        daq.ConfigError
+            When neither the campaign nor the drive gives the rated torque and encoder
+            resolution.
+        """
+        if self.scaling is not None:
+            return self.scaling
+        try:
+            rated = _u(self.upload(0x6076, 0)) / 1000.0
+        except ConfigError:
+            rated = 0.0
+        gear = 1.0
+        counts = 0
+        try:
+            num, den = _u(self.upload(0x6091, 1)), _u(self.upload(0x6091, 2))
+            gear = num / den if num and den else 1.0
+        except ConfigError:
+            pass
+        try:
+            inc, rev = _u(self.upload(0x608F, 1)), _u(self.upload(0x608F, 2))
+            counts = inc // rev if inc and rev else 0
+        except ConfigError:
+            pass
+        if rated <= 0 or counts <= 0:
+            raise ConfigError(
+                f"{self.name}: the drive gives no rated torque (0x6076) or encoder resolution "
+                f"(0x608F): set daq.drives.scaling (rated_torque_Nm, encoder_counts_per_rev, "
+                f"gear_ratio)"
+            )
+        self.scaling = Scaling(rated, gear, counts)
+        return self.scaling
+
+    def start_up(self, cycle_s: float) -> Scaling:
+        """Full start-up sequence before NMT start: presence, mode, PDOs, heartbeat.
+
+        Returns
+        -------
+        Scaling
+        """
+        self.check_present()
+        self.node.nmt.send_command(0x80)  # enter PRE-OPERATIONAL
+        self.check_mode_supported()
+        self.configure_pdos()
+        self.set_mode()
+        self.set_interpolation_period(cycle_s)
+        self.set_heartbeat()
+        return self.read_scaling()
+
+    def nmt_start(self) -> None:
+        self.node.nmt.send_command(0x01)
+
+    def nmt_preop(self) -> None:
+        self.node.nmt.send_command(0x80)
+
+    def eds_bytes(self) -> bytes:
+        return Path(self.cfg.eds).read_bytes()
