@@ -365,6 +365,19 @@ class JointPlant:
         """Encoder position [counts], motor side: round(q N counts_per_rev / 2 pi)."""
         return round(self.q * self._counts_per_rad)
 
+    @property
+    def counts_per_rad(self) -> float:
+        """Encoder counts per joint radian, N counts_per_rev / 2 pi [counts/rad]; velocity in
+        counts/s (object 0x606C) is ``dq * counts_per_rad``."""
+        return self._counts_per_rad
+
+    @property
+    def motor_current_A(self) -> float:
+        """Motor current of the applied torque, tau_applied / (N K_t) [A] (ideal current loop;
+        object 0x6078 is this in per-mille of the rated current)."""
+        d = self.params.drive
+        return self.tau_applied / (d.gear_ratio * d.torque_constant_Nm_per_A)
+
     def counts_to_rad(self, counts: int) -> float:
         """Joint position [rad] of an encoder reading: counts 2 pi / (counts_per_rev N)."""
         return counts / self._counts_per_rad

@@ -16,7 +16,7 @@ from sim_drivers.plant import (
     inverse_torque,
     output_torque,
 )
-from sim_drivers.plant_config import G, default_plant
+from sim_drivers.plant_config import G, default_plant, plant_from_dict
 
 MA, LA = 3.4584, 1.277
 
@@ -86,8 +86,6 @@ def test_prismatic_payload_adds_mass_and_no_gravity():
     raw = default_plant().as_dict()
     raw["joint"]["kind"] = "prismatic"
     raw["body"] = {"J": 12.0}
-    from sim_drivers.plant_config import plant_from_dict
-
     p = plant_from_dict(raw)
     q = np.array([0.0, 1.0, 2.0])
     np.testing.assert_allclose(output_torque(p, q, 2.0, 3.0, 1.277), (12.0 + 3.0) * 2.0)
@@ -278,6 +276,10 @@ def test_drive_chain_conversions():
     assert plant.permille_from_torque(plant.torque_from_permille(-321)) == -321
     assert plant.permille_from_torque(1e9) == 32767 and plant.permille_from_torque(-1e9) == -32768
     assert d.g_f == pytest.approx(d.gear_ratio * d.amplifier_gain * d.torque_constant_Nm_per_A)
+    assert plant.counts_per_rad == pytest.approx(1.0 / per_count)
+    plant.step(plant.torque_from_permille(1000))  # rated torque -> rated current (K_t I = T_r)
+    assert plant.motor_current_A == pytest.approx(
+        d.rated_torque_Nm / d.torque_constant_Nm_per_A + plant.tau_noise / (d.gear_ratio * d.torque_constant_Nm_per_A))
 
 
 def test_warm_up_clock_restarts_at_reset():
