@@ -278,8 +278,9 @@ def test_drive_chain_conversions():
     assert d.g_f == pytest.approx(d.gear_ratio * d.amplifier_gain * d.torque_constant_Nm_per_A)
     assert plant.counts_per_rad == pytest.approx(1.0 / per_count)
     plant.step(plant.torque_from_permille(1000))  # rated torque -> rated current (K_t I = T_r)
+    kt = d.torque_constant_Nm_per_A
     assert plant.motor_current_A == pytest.approx(
-        d.rated_torque_Nm / d.torque_constant_Nm_per_A + plant.tau_noise / (d.gear_ratio * d.torque_constant_Nm_per_A))
+        d.rated_torque_Nm / kt + plant.tau_noise / (d.gear_ratio * kt))
 
 
 def test_warm_up_clock_restarts_at_reset():
