@@ -407,26 +407,49 @@ class JointPlant:
         return self._slide(tau, q, dq, t)
 
     def _slide(self, tau: float, q: float, v: float, t: float) -> tuple[float, int]:
-        """Acceleration while sliding (v != 0, or v == 0 with the breakaway direction)."""
-        av = v if v > 0.0 else -v
-        ex = math.exp(-av * self._qs_inv)
-        cq = math.cos(q)
-        r = tau - self._off
+        """Acceleration while sliding (v != 0): ``(ddq, regime)``; the hot path (the quadrant
+        choice is :meth:`_solve`, inlined)."""
         if v > 0.0:
-            r -= self._fv_pos * v
+            s = 1.0
+            ex = math.exp(-v * self._qs_inv)
+            r = tau - self._off - self._fv_pos * v
+            if self._fvv:
+                r -= self._fvv * v * v
         else:
-            r -= self._fv_neg * v
-        if self._fvv:
-            r -= self._fvv * v * av
+            s = -1.0
+            ex = math.exp(v * self._qs_inv)
+            r = tau - self._off - self._fv_neg * v
+            if self._fvv:
+                r += self._fvv * v * v
         if self._rip_a:
             r -= self._rip_a * math.sin(self._rip_k * q + self._rip_ph)
         if self._spr_k:
             r -= self._spr_k * (q - self._spr_q0)
-        wf = 1.0 + self._wu_w * math.exp(-(t - self.t0) * self._wu_tinv) if self._wu_w else 1.0
-        grav = self._gc * cq + self._gs * math.sin(q) if self._gs else self._gc * cq
-        return self._solve(r, ex, wf, grav, 1.0 if v > 0.0 else -1.0)
+        grav = self._gc * math.cos(q)
+        if self._gs:
+            grav += self._gs * math.sin(q)
+        if self._wu_w:
+            wf = s + s * self._wu_w * math.exp(-(t - self.t0) * self._wu_tinv)
+        else:
+            wf = s
+        xm = (r - wf * (self._cm + self._dm * ex)) / (self._am + self._bm * ex)
+        if xm * s > 0.0:
+            if self._quad < 0:  # was generator: keep it if it is still consistent
+                xg = (r - wf * (self._cg + self._dg * ex)) / (self._ag - self._bg * ex)
+                if xg * s < 0.0:
+                    return (xg - grav) / self._jtot, REGIME_SLIDING
+            self._quad = 1
+            return (xm - grav) / self._jtot, REGIME_SLIDING
+        xg = (r - wf * (self._cg + self._dg * ex)) / (self._ag - self._bg * ex)
+        if xg * s < 0.0:
+            self._quad = -1
+            return (xg - grav) / self._jtot, REGIME_SLIDING
+        return -grav / self._jtot, REGIME_ZERO_LOAD
 
     def _solve(self, r: float, ex: float, wf: float, grav: float, s: float) -> tuple[float, int]:
+        """Quadrant choice of the module docstring: ``(ddq, regime)`` for the reduced torque
+        ``r`` [N m], exponential ``ex``, warm-up factor ``wf``, gravity ``grav`` [N m] and
+        direction ``s``."""
         dm = s * wf * (self._cm + self._dm * ex)
         dg = s * wf * (self._cg + self._dg * ex)
         xm = (r - dm) / (self._am + self._bm * ex)

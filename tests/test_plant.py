@@ -293,3 +293,25 @@ def test_warm_up_clock_restarts_at_reset():
     assert a_new == a_zero
     a_late, _ = plant.acceleration(400.0, 0.0, 0.5, 100.0)
     assert a_late > a_zero  # less dry friction once warm
+
+
+def test_ambiguous_quadrant_keeps_the_current_one():
+    """With generator dry friction above the motor one, some torques are consistent with both
+    quadrants (both satisfy eq. 30); the plant stays in the quadrant it was in."""
+    raw = default_plant().as_dict()
+    raw["friction"].update(c_m=10.0, d_m=0.0, c_g=40.0, d_g=0.0)
+    p = quiet(plant_from_dict(raw))
+    plant = JointPlant(p, 0.001)
+    q, v = 0.0, 0.5
+    grav = p.body.MX * G  # tau_out = grav + J ddq
+    tau = p.friction.tau_off + p.friction.F_V * v + 25.0  # between s D_m = 10 and s D_g = 40
+    results = {}
+    for quad in (1, -1):
+        plant._quad = quad
+        ddq, regime = plant.acceleration(tau, q, v, 0.0)
+        assert regime == REGIME_SLIDING
+        tau_out = grav + p.body.J * ddq
+        assert np.sign(tau_out * v) == quad  # stayed in its quadrant
+        assert float(inverse_torque(p, q, v, ddq)) == pytest.approx(tau, abs=1e-9)
+        results[quad] = ddq
+    assert results[1] != results[-1]
