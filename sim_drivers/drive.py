@@ -25,7 +25,8 @@ Modes and units
   [N m] (0x6071 and 0x60B2 in per-mille of the rated torque 0x6076); a demand beyond 0x6072
   (per-mille) is a fault 0x8311.
 - CSP (8): a cycle-synchronous PD position loop on the joint angle decoded from counts,
-  ``tau = kp (q_target - q) - kd dq + torque_from_permille(0x60B2)`` with 0x607A [counts],
+  ``tau = kp (q_target - q) + kd (dq_target - dq) + torque_from_permille(0x60B2)`` with
+  0x607A [counts] and dq_target the target's difference over one cycle,
   clamped to 0x6072 (bit 11 "internal limit" set while clamped); a following error larger
   than 0x6065 [counts] is a fault 0x8611 (0xFFFFFFFF disables the check).
 - Other advertised modes are accepted but produce no torque in the simulation.
@@ -393,6 +394,7 @@ class SimulatedDrive:
             key = next(k for k, v in _LIVE.items() if v == attr)
             value = self._stored(*key) if self._has(*key) else None
             setattr(self, attr, 0 if value is None else int(value))
+        self._prev_target = self.target_position
         mode = self.mode_request
         self.mode_display = mode if mode in self._supported else 0
         self.mode_request = self.mode_display
@@ -421,8 +423,10 @@ class SimulatedDrive:
         net.unsubscribe(self.node.sdo.rx_cobid, self.node.sdo.on_request)
         net.subscribe(self.node.sdo.rx_cobid, self._on_sdo_request)
         if self._own_notifier:
+            net.NOTIFIER_CYCLE = 0.05  # notifier poll period [s]: quick stop()
             net.connect()
         self._started = True
+        self._reset_state_machine()
         self._boot()
 
     def stop(self) -> None:
@@ -461,15 +465,18 @@ class SimulatedDrive:
     def _boot(self) -> None:
         """Initialisation -> boot-up frame -> PRE-OPERATIONAL, heartbeat per 0x1017."""
         self._set_nmt(NMT_INITIALISING)
-        self.cia_state = State.NOT_READY_TO_SWITCH_ON
-        self.cia_state, _ = automatic_transition(self.cia_state, "self_test_done")
-        self._update_statusword()
         self._resubscribe_sync()
         self.network.send_message(0x700 + self.node_id, b"\x00")
         self._set_nmt(NMT_PRE_OPERATIONAL)
         hb = int(self._stored(0x1017, 0) or 0) if self._has(0x1017, 0) else 0
         self._heartbeat_stopped = False
         self.node.nmt.start_heartbeat(hb)
+
+    def _reset_state_machine(self) -> None:
+        """Power-on of the CiA 402 side: transitions 0 and 1 to SWITCH ON DISABLED."""
+        self.cia_state = State.NOT_READY_TO_SWITCH_ON
+        self.cia_state, _ = automatic_transition(self.cia_state, "self_test_done")
+        self._update_statusword()
 
     def _set_nmt(self, state: int) -> None:
         was = self.nmt
@@ -494,6 +501,7 @@ class SimulatedDrive:
             self.error_register = 0
             self._internal_limit = self._following_error = False
             self._load_application()
+            self._reset_state_machine()
         self._boot()
 
     # ------------------------------------------------------------------ NMT / SDO handlers
@@ -834,9 +842,10 @@ class SimulatedDrive:
                     self.fault(FOLLOWING_ERROR)
                     powered = False
                 else:
+                    v_target = (self.target_position - self._prev_target) / self.cycle_s
                     tau = (
                         self.kp * err / self._counts_per_rad
-                        - self.kd * plant.dq
+                        + self.kd * (v_target / self._counts_per_rad - plant.dq)
                         + plant.torque_from_permille(self.torque_offset)
                     )
                     demand = plant.permille_from_torque(tau)
@@ -864,6 +873,7 @@ class SimulatedDrive:
             except Exception:  # any plant failure is a drive fault, not a dead bus thread
                 logger.exception("plant step failed at cycle %d", cycle)
                 self.fault(PLANT_FAULT)
+        self._prev_target = self.target_position
         self._update_actuals()
         lo, hi = self.position_limit_min, self.position_limit_max
         if lo < hi and not lo <= self.position_actual <= hi:
