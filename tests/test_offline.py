@@ -22,11 +22,11 @@ MA, LA = 3.4584, 1.277
 GAINS = ControllerGains(kp=20000.0, kd=1000.0, J_ff=31.0, MX_ff=21.1, Fc_ff=25.0, Fv_ff=40.0)
 
 
-def sine_reference(duration=12.0, dt=0.001):
-    """Two sines (fast and slow) starting at rest-ish: reversals, both quadrants, low speed."""
+def sine_reference(duration=12.0, dt=0.001, offset=0.0):
+    """Two sines (fast and slow): reversals, both power quadrants, low speed."""
     t = np.arange(0.0, duration, dt)
     w = 2 * np.pi * 0.2
-    q = 0.8 * np.sin(w * t) + 0.3 * np.sin(0.5 * w * t)
+    q = offset + 0.8 * np.sin(w * t) + 0.3 * np.sin(0.5 * w * t)
     dq = 0.8 * w * np.cos(w * t) + 0.15 * w * np.cos(0.5 * w * t)
     ddq = -0.8 * w * w * np.sin(w * t) - 0.075 * w * w * np.sin(0.5 * w * t)
     return SimpleNamespace(t=t, q=q, dq=dq, ddq=ddq)
@@ -125,3 +125,42 @@ def test_bad_reference_is_refused():
         simulate(p, SimpleNamespace(t=ref.t, q=ref.q, dq=ref.dq[:-1], ddq=ref.ddq), GAINS)
     with pytest.raises(SimError, match=r"reference: expected arrays"):
         simulate(p, SimpleNamespace(t=ref.t, q=ref.q), GAINS)
+
+
+def _eq42_columns(q, dq, ddq, ma, la, power, qs):
+    """W_new of eq. 42, column by column, in the order of eq. 43."""
+    g = 9.81
+    pp, pm = (1 + power) / 2, (1 - power) / 2
+    e = np.exp(-np.abs(dq) / qs)
+    pay = ma * la * (la * ddq + g * np.cos(q))
+    load = [ddq, g * np.cos(q), g * np.sin(q), pay]
+    cols = []
+    for p, sb in ((pp, 1.0), (pm, -1.0)):
+        for x in load:
+            cols += [p * x, sb * p * e * x]
+    s = np.sign(dq)
+    cols += [pp * s, pp * e * s, pm * s, pm * e * s, dq, np.ones_like(q)]
+    return np.column_stack(cols)
+
+
+def test_truth_is_the_exact_least_squares_solution_of_eq42():
+    """On the true states and applied torque of two payload runs, the LS solution of eq. 40-43
+    is PlantParams.truth(): the truth mapping, the eq. 42 sign conventions and the simulator
+    agree. The motion crosses q = pi/2, so that tau_out changes sign: otherwise
+    P+ sign(dq) - P- sign(dq) = 1 and c_m, c_g, tau_off are not separable."""
+    p = default_plant()
+    ref = sine_reference(duration=6.0, offset=0.9)
+    w_blocks, y_blocks = [], []
+    for ma in (0.0, 6.970):
+        r = simulate(p, ref, GAINS, payload_mass=ma, payload_arm=LA, seed=5)
+        keep = r.regime == REGIME_SLIDING
+        power = np.sign(output_torque(p, r.q_true, r.ddq_true, ma, LA) * r.dq_true)
+        assert (power[keep] * np.sign(r.dq_true[keep]) < 0).mean() > 0.05  # tau_out < 0 too
+        w_blocks.append(_eq42_columns(r.q_true, r.dq_true, r.ddq_true, ma, LA, power,
+                                      p.joint.q_s)[keep])
+        y_blocks.append(r.tau_applied[keep])
+    w, y = np.vstack(w_blocks), np.concatenate(y_blocks)
+    scale = np.linalg.norm(w, axis=0)
+    chi = np.linalg.lstsq(w / scale, y, rcond=None)[0] / scale
+    truth = p.truth()
+    np.testing.assert_allclose(chi, list(truth.values()), rtol=1e-6, atol=1e-6)
