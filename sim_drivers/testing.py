@@ -214,8 +214,19 @@ class LockstepMaster:
         for cob in self.tpdos:
             self.network.unsubscribe(cob, self._on_tpdo)
 
-    def run(self, controlword: int, setpoints: Sequence[int] | np.ndarray) -> LockstepResult:
-        """Run ``len(setpoints)`` cycles; raise ``TimeoutError`` when a TPDO is lost."""
+    def run(
+        self,
+        controlword: int,
+        setpoints: Sequence[int] | np.ndarray,
+        *,
+        missing: Sequence[int] = (),
+    ) -> LockstepResult:
+        """Run ``len(setpoints)`` cycles; raise ``TimeoutError`` when a TPDO is lost.
+
+        Cycles listed in ``missing`` are expected to bring no TPDO (their rows stay 0):
+        the master does not wait for them.
+        """
+        skip = frozenset(missing)
         n = len(setpoints)
         names = [nm for _, nms in self.tpdos.values() for nm in nms]
         out = {nm: np.zeros(n, dtype=np.int64) for nm in names}
@@ -229,6 +240,8 @@ class LockstepMaster:
         for i, x in enumerate(np.asarray(setpoints, dtype=np.int64).tolist()):
             send(self.rpdo_cob, pack(controlword, x))
             send(self.sync_cob, sync)
+            if i in skip:
+                continue
             seen = 0
             while seen < expected:
                 try:
