@@ -12,7 +12,7 @@ import pytest
 
 from daq.control import ControllerGains
 from sim_drivers import SimError
-from sim_drivers.offline import SimRun, simulate
+from sim_drivers.offline import SimRun, simulate, simulate_payloads
 from sim_drivers.plant import REGIME_SLIDING, inverse_torque, output_torque
 from sim_drivers.plant_config import default_plant, load_plant
 
@@ -151,8 +151,11 @@ def test_truth_is_the_exact_least_squares_solution_of_eq42():
     p = default_plant()
     ref = sine_reference(duration=6.0, offset=0.9)
     w_blocks, y_blocks = [], []
-    for ma in (0.0, 6.970):
-        r = simulate(p, ref, GAINS, payload_mass=ma, payload_arm=LA, seed=5)
+    runs = simulate_payloads(p, ref, GAINS, [(0.0, LA), SimpleNamespace(mass_kg=6.970, arm_m=LA)])
+    assert [r.payload_mass_kg for r in runs] == [0.0, 6.970]
+    assert not np.array_equal(runs[0].tau_noise, runs[1].tau_noise)  # seeds 0 and 1
+    for r in runs:
+        ma = r.payload_mass_kg
         keep = r.regime == REGIME_SLIDING
         power = np.sign(output_torque(p, r.q_true, r.ddq_true, ma, LA) * r.dq_true)
         assert (power[keep] * np.sign(r.dq_true[keep]) < 0).mean() > 0.05  # tau_out < 0 too
