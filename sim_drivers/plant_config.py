@@ -16,9 +16,15 @@ each off unless its table says ``enabled = true``. Layout (all keys; units in br
     MX = 21.0                              # [kg m]   (revolute only; 0 / absent if prismatic)
     MY = -0.8                              # [kg m]
 
-    [friction]                             # eq. 25/30
-    a_m = 1.06  b_m = 0.2  c_m = 21.0  d_m = 8.0     # motor quadrants      [-, -, N m, N m]
-    a_g = 0.93  b_g = 0.2  c_g = 16.0  d_g = 6.0     # generator quadrants  [-, -, N m, N m]
+    [friction]                             # eq. 25/30; m: motor, g: generator quadrants
+    a_m = 1.06                             # [-]   (a_m > 0, a_m + b_m > 0)
+    b_m = 0.2                              # [-]
+    c_m = 21.0                             # [N m] (>= 0; c_m + d_m >= 0)
+    d_m = 8.0                              # [N m]
+    a_g = 0.93                             # [-]   (a_g > 0, a_g - b_g > 0, a_g - b_g <= a_m + b_m)
+    b_g = 0.2                              # [-]
+    c_g = 16.0                             # [N m]
+    d_g = 6.0                              # [N m]
     F_V = 40.0                             # [N m s/rad]
     tau_off = 10.0                         # [N m]
 
