@@ -28,6 +28,7 @@ Every other RPDO/TPDO the EDS declares is disabled (COB-ID bit 31).
 
 from __future__ import annotations
 
+import math
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -296,6 +297,19 @@ class MasterDrive:
         except (SdoAbortedError, SdoCommunicationError):
             pass
 
+    def set_max_torque(self, max_torque: float) -> int | None:
+        """Write 0x6072 (max torque, per mille of rated) to cover ``max_torque`` [N m].
+
+        The master saturates its own command at ``max_torque``; a drive whose 0x6072 is lower
+        (Nanotec's default is 100 per mille) would fault on excess torque. Returns the value
+        written, or None when the drive has no 0x6072.
+        """
+        if 0x6072 not in self.od or self.scaling is None:
+            return None
+        x = min(32767, int(math.ceil(max_torque / self.scaling.torque_per_unit)))
+        self.download(0x6072, 0, x, 2, "max torque")
+        return x
+
     def read_scaling(self) -> Scaling:
         """The scaling from the campaign, else from the drive (0x6076, 0x6091, 0x608F).
 
@@ -332,8 +346,9 @@ class MasterDrive:
         self.scaling = Scaling(rated, gear, counts)
         return self.scaling
 
-    def start_up(self, cycle_s: float) -> Scaling:
-        """Full start-up sequence before NMT start: presence, mode, PDOs, heartbeat.
+    def start_up(self, cycle_s: float, max_torque: float | None = None) -> Scaling:
+        """Full start-up sequence before NMT start: presence, mode, PDOs, heartbeat,
+        max torque (0x6072) covering ``max_torque`` [N m].
 
         Returns
         -------
@@ -346,7 +361,10 @@ class MasterDrive:
         self.set_mode()
         self.set_interpolation_period(cycle_s)
         self.set_heartbeat()
-        return self.read_scaling()
+        scaling = self.read_scaling()
+        if max_torque is not None:
+            self.set_max_torque(max_torque)
+        return scaling
 
     def nmt_start(self) -> None:
         self.node.nmt.send_command(0x01)

@@ -459,6 +459,10 @@ class Engine:
                 mask = self._exchange(cycle, 0.0)
             stopping = mode != "run" and mode != "enable"
             tpdo_fault = ""
+            if io.emcy and not stopping:  # before the state checks: name the first cause
+                dd, code, reg = io.emcy.pop(0)
+                self._fault(f"{self.drives[dd].name}: EMCY 0x{code:04X} (error register "
+                            f"0x{reg:02X})", cycle, t, log, dd, kind="emcy")
             for d in range(n_dr):
                 flags = FLAG_STOPPING if stopping else 0
                 b1 = 1 << (2 * d)
@@ -561,10 +565,6 @@ class Engine:
                          time.time_ns(), cycle)
             # watchdogs that do not depend on the drive's answer of this cycle
             if not stopping:
-                if io.emcy:
-                    dd, code, reg = io.emcy.pop(0)
-                    self._fault(f"{self.drives[dd].name}: EMCY 0x{code:04X} (error register "
-                                f"0x{reg:02X})", cycle, t, log, dd, kind="emcy")
                 hb_check += 1
                 if hb_check >= 16:
                     hb_check = 0
@@ -863,7 +863,9 @@ def run_campaign(
         network.listeners.append(io)
         network.connect()
         drives = [MasterDrive(network, d) for d in cfg.drives]
-        scalings = [d.start_up(campaign.cycle_s) for d in drives]
+        tau_max = cfg.max_torque if cfg.max_torque is not None else (
+            campaign.joint.limits.max_torque)
+        scalings = [d.start_up(campaign.cycle_s, tau_max) for d in drives]
         engine = Engine(campaign, cfg, network, io, drives, scalings, load, progress)
         if threading.current_thread() is threading.main_thread():
             def on_sigint(signum: int, frame: Any) -> None:

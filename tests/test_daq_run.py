@@ -1,0 +1,168 @@
+"""Full campaigns through the whole stack on python-can's virtual bus (simulated drives)."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import can
+import canopen
+import numpy as np
+import pytest
+
+from daq import ConfigError
+from daq.cia402 import State, state_from_statusword
+from daq.config import parse_daq
+from daq.master import MasterDrive
+from daq.reader import list_runs, read_attachments, read_frames, read_run
+from daq.runner import run_campaign
+from sim_drivers.plant_config import default_plant
+from tests.conftest import VENDOR_EDS, shared_path
+from trajectories.campaign import Campaign
+from trajectories.plan import plan_campaign
+
+_chan = itertools.count()
+
+
+def small_campaign(n_payloads=3, daq=None, periods=1, freq=0.5, amplitude=0.3, name="small",
+                   cycle_s=0.001):
+    raw = {
+        "name": name,
+        "joint": {"kind": "revolute", "limits": {
+            "position": [-1.0, 1.0], "max_velocity": 1.0, "max_acceleration": 4.0,
+            "max_jerk": 40.0, "max_torque": 700.0}},
+        "control": {"cycle_s": cycle_s, "kp": 6000.0, "kd": 200.0,
+                    "feedforward": {"J": 30.0, "MX": 21.0}},
+        "payloads": [{"mass_kg": 3.0 * k, "arm_m": 1.0} for k in range(n_payloads)],
+        "segments": [{"kind": "sine", "amplitude": amplitude, "frequency_hz": freq,
+                      "center": 0.0, "periods": periods}],
+        "daq": {"channel": f"test_run_{next(_chan)}", **(daq or {})},
+    }
+    return Campaign.from_dict(raw, "small.toml")
+
+
+def drive_cycles(result, run):
+    """Index into the simulated drive's record of every logged cycle of ``run``."""
+    a = read_run(run.path)
+    c0 = int(a.metadata["result"]["sync_offset"])
+    rec = result.sim_records[0]
+    idx = np.searchsorted(rec["cycle"], c0 + a.cycle)
+    assert np.array_equal(rec["cycle"][idx], c0 + a.cycle)
+    return a, rec, idx
+
+
+def test_three_payload_campaign_logs_every_cycle_and_matches_the_drive(tmp_path):
+    c = small_campaign()
+    result = run_campaign(c, out_dir=tmp_path, simulate=default_plant(), yes=True)
+    assert result.ok, result.reason
+    paths = list_runs(tmp_path)
+    assert [p.name for p in paths] == [f"small_payload{k}.mcap" for k in range(3)]
+    plant = default_plant()
+    per_unit = plant.drive.torque_per_permille
+    for k, run in enumerate(result.runs):
+        a, rec, idx = drive_cycles(result, run)
+        assert not a.truncated
+        assert a.cycle[0] == 0 and np.array_equal(a.cycle, np.arange(len(a)))  # no gaps
+        assert len(a) == run.cycles
+        assert a.payload_mass_kg == 3.0 * k and a.payload_arm_m == 1.0
+        # positions: exactly the counts the drive sent, scaled as in docs/architecture.md
+        assert np.array_equal(a.counts, rec["counts"][idx])
+        assert np.array_equal(a.q, a.counts * (2 * math.pi / (4096 * 100.0)))
+        # current reference of cycle k is what the drive latched and applied at SYNC k+1
+        x = np.round(a.tau_ref / per_unit).astype(np.int64)
+        assert np.array_equal(x[:-1], rec["target_torque"][idx[1:]])
+        assert np.allclose(a.tau_ref, x * per_unit)
+        # it tracked the plan: the setpoint channel lines up with the reference
+        moving = a.segment >= 0
+        c_ref = plan_campaign(c).reference.q
+        assert moving.sum() == len(c_ref)
+        assert np.array_equal(a.q_ref[moving], c_ref)
+        assert np.max(np.abs(a.q - a.q_ref)[moving]) < 0.05
+        # ended disabled, said so
+        assert state_from_statusword(int(a.statusword[-1])) is State.READY_TO_SWITCH_ON
+        assert any(e["message"] == "drives disabled" for e in a.events)
+        md = a.metadata
+        assert md["campaign"]["name"] == "small" and md["drive0"]["mode"] == "cst"
+        assert md["software"]["jointid"]
+        assert md["result"]["status"] == "done"
+    frames = read_frames(result.runs[0].path)
+    ids = set(frames["id"].tolist())
+    assert {0x80, 0x201, 0x181, 0x281} <= ids  # SYNC, RPDO1, TPDO1, TPDO2
+    assert (frames["id"] == 0x80).sum() == result.runs[0].cycles
+    att = read_attachments(result.runs[0].path)
+    assert "jointid_cia402.eds" in att
+
+
+def test_resume_skips_completed_payloads(tmp_path):
+    c = small_campaign(n_payloads=2, periods=1, freq=1.0, amplitude=0.1)
+    first = run_campaign(c, out_dir=tmp_path, simulate=default_plant(), yes=True, payloads=[0])
+    assert first.ok and [r.index for r in first.runs] == [0]
+    again = run_campaign(c, out_dir=tmp_path, simulate=default_plant(), yes=True, resume=True)
+    assert again.ok and [r.index for r in again.runs] == [1] and again.skipped == (0,)
+
+
+def test_operator_prompt_between_payloads_can_abort(tmp_path):
+    c = small_campaign(n_payloads=2, periods=1, freq=1.0, amplitude=0.1)
+    asked = []
+
+    def prompt(i, p, n):
+        asked.append(i)
+        return i == 0
+
+    r = run_campaign(c, out_dir=tmp_path, simulate=default_plant(), prompt=prompt)
+    assert asked == [0, 1]
+    assert r.status == "aborted" and "payload 1" in r.reason and len(r.runs) == 1
+
+
+def test_three_drives_lockstep(tmp_path):
+    # 3 drives x (SYNC share + RPDO + 2 TPDOs) need 106 % of 1 Mbit/s at 1 kHz: 500 Hz
+    c = small_campaign(n_payloads=1, periods=1, freq=1.0, amplitude=0.1, cycle_s=0.002, daq={
+        "drives": [{"node_id": n} for n in (1, 2, 3)]})
+    r = run_campaign(c, out_dir=tmp_path, simulate=default_plant(), yes=True)
+    assert r.ok, r.reason
+    axes = [read_run(r.runs[0].path, axis=k) for k in range(3)]
+    for k, a in enumerate(axes):
+        rec = r.sim_records[k]
+        c0 = int(a.metadata["result"]["sync_offset"])
+        idx = np.searchsorted(rec["cycle"], c0 + a.cycle)
+        assert np.array_equal(a.counts, rec["counts"][idx])
+        assert np.array_equal(a.cycle, np.arange(len(a)))
+
+
+def test_bus_load_over_the_limit_is_refused(tmp_path):
+    c = small_campaign(n_payloads=1, daq={"bitrate": 250000})
+    with pytest.raises(ConfigError, match=r"daq.max_bus_load: cyclic traffic needs .*156\.0 %"):
+        run_campaign(c, out_dir=tmp_path, simulate=default_plant(), yes=True)
+    assert not list(tmp_path.glob("*.mcap"))
+
+
+def test_unknown_node_is_refused(tmp_path):
+    # a bus with nobody on it: the start-up sequence refuses at the first SDO
+    c = small_campaign(n_payloads=1)
+    cfg = parse_daq({"drives": [{"node_id": 7}]})
+    net = canopen.Network(can.Bus(interface="virtual", channel="nobody_here"))
+    net.NOTIFIER_CYCLE = 0.02
+    net.connect()
+    try:
+        d = MasterDrive(net, cfg.drives[0], sdo_timeout_s=0.05)
+        with pytest.raises(ConfigError, match="node 7: no answer to SDO"):
+            d.start_up(c.cycle_s)
+    finally:
+        net.disconnect()
+
+
+@pytest.mark.parametrize("name", VENDOR_EDS)
+def test_vendor_eds_campaign(tmp_path, name):
+    eds = shared_path("eds", name)
+    c = small_campaign(n_payloads=1, periods=1, freq=1.0, amplitude=0.1,
+                       daq={"drives": [{"node_id": 1, "eds": str(eds)}]})
+    if name.startswith("ingenia"):
+        with pytest.raises(ConfigError, match="does not support cyclic_sync_torque"):
+            run_campaign(c, out_dir=tmp_path, simulate=default_plant(), yes=True)
+        return
+    r = run_campaign(c, out_dir=tmp_path, simulate=default_plant(), yes=True)
+    assert r.ok, r.reason
+    a, rec, idx = drive_cycles(r, r.runs[0])
+    assert np.array_equal(a.cycle, np.arange(len(a)))
+    assert np.array_equal(a.counts, rec["counts"][idx])
+    assert read_attachments(r.runs[0].path).keys() >= {eds.name}
