@@ -39,6 +39,9 @@ FORMAT = "jointid-fit/1"
 #: The paper's final a-priori velocity constant [rad/s] (section III.D).
 DEFAULT_QS = 0.03
 MODEL_NAMES = ("usual", "new")
+#: Default stiction-area threshold: samples with |dq| below this fraction of the maximum
+#: velocity (and their neighbours, see ``guard``) are left out (section III.D, eq. 26).
+DQ_MIN_FRACTION = 0.01
 
 
 def qs_grid(vmax: float, n: int = 13) -> np.ndarray:
@@ -195,6 +198,7 @@ def fit_models(
     dq_min: float | None = None,
     tau_min: float | None = None,
     trim: int | None = None,
+    guard: int | None = None,
     eliminate: bool = True,
     threshold_pct: float | None = None,
     table_iv: bool = True,
@@ -214,9 +218,11 @@ def fit_models(
         Overrides the joint kind of the data.
     validation : list of Experiment or Signals or None
         Files not used for the fit; their relative error is reported per model.
-    cutoff_hz, decimation, dq_min, tau_min, trim
+    cutoff_hz, decimation, dq_min, tau_min, trim, guard
         Preprocessing, see :func:`ident.preprocess.build_design`. The same settings (the
         cut-off and decimation found on the identification data) apply to validation data.
+        ``dq_min`` defaults to :data:`DQ_MIN_FRACTION` of the maximum velocity; pass 0 to
+        keep every sample.
     eliminate, threshold_pct
         Elimination of non-significant parameters, see :meth:`IdentModel.fit`.
     table_iv : bool
@@ -248,14 +254,26 @@ def fit_models(
         )
     if not s.revolute:
         notes.append("prismatic joint: no gravity columns (MX, MY)")
-    pre = dict(
-        decimation=decimation, cutoff_hz=cutoff_hz, dq_min=dq_min, tau_min=tau_min, trim=trim
+    pre: dict[str, Any] = dict(
+        decimation=decimation,
+        cutoff_hz=cutoff_hz,
+        dq_min=dq_min,
+        tau_min=tau_min,
+        trim=trim,
+        guard=guard,
     )
 
     # settle the preprocessing once (cut-off and decimation chosen from the data)
-    probe = build_design(usual_model(s.revolute, payload=has_payload), s, **pre)
-    pre.update(cutoff_hz=probe.cutoff_hz, decimation=probe.decimation, trim=probe.trim)
+    lib0 = usual_model(s.revolute, payload=has_payload)
+    probe = build_design(lib0, s, **{**pre, "dq_min": None, "tau_min": None})
+    pre.update(
+        cutoff_hz=probe.cutoff_hz, decimation=probe.decimation, trim=probe.trim, guard=probe.guard
+    )
     vmax = float(np.max(np.abs(probe.signals.dq)))
+    if dq_min is None:
+        pre["dq_min"] = DQ_MIN_FRACTION * vmax
+    if pre["dq_min"] or tau_min:
+        probe = build_design(lib0, s, **pre)
 
     def fit_one(
         name: str, q: float, sig: Signals, payload: bool, elim: bool = eliminate
