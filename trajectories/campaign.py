@@ -462,7 +462,8 @@ _CAMPAIGN = Table(
 
 
 def _segment(s: dict, key: str, source: str, limits: JointLimits, rng: str) -> Segment:
-    lo, hi = limits.position
+    tol = 1e-9 * max(1.0, limits.span)  # float rounding of center +/- amplitude
+    lo, hi = limits.position[0] - tol, limits.position[1] + tol
     if s["kind"] == "trapezoid":
         r = s["range"]
         if len(r) != 2 or not r[0] < r[1]:

@@ -65,6 +65,8 @@ G = 9.81  # [m/s^2], as in daq.control
 # relative tolerances of the sampled limit check (float rounding only)
 _REL_TOL = 1e-9
 _JERK_REL_TOL = 1e-6
+# absolute position tolerance relative to the span of the position range
+_POS_TOL = 1e-9
 
 
 # --------------------------------------------------------------------------- results
@@ -75,7 +77,9 @@ class Piece:
     Attributes
     ----------
     kind : str
-        ``"move"``, ``"dwell"``, ``"blend_in"``, ``"sine"``, ``"blend_out"`` or ``"return"``.
+        ``"position"`` (move to a trapezoid's range at the positioning speed), ``"move"``
+        (a trapezoid move at one of its speeds), ``"dwell"``, ``"blend_in"``, ``"sine"``,
+        ``"blend_out"`` or ``"return"``.
     segment : int
         Index into ``Reference.segment_names``.
     t0, t1 : float
@@ -291,7 +295,8 @@ class _Phases:
         inp.target_velocity = [state1[1]]
         inp.target_acceleration = [state1[2]]
         inp.max_velocity = [vmax]
-        inp.max_acceleration = [lim.max_acceleration]
+        # a sine at exactly the limit can have A w^2 one ulp above it: accept the rounding
+        inp.max_acceleration = [max(lim.max_acceleration, abs(state0[2]), abs(state1[2]))]
         inp.max_jerk = [lim.max_jerk]
         traj = ruckig.Trajectory(1)
         try:
@@ -308,8 +313,9 @@ class _Phases:
             )
         ext = traj.position_extrema[0]
         lo, hi = lim.position
-        if ext.min < lo - 1e-9 or ext.max > hi + 1e-9:
-            bad = ext.min if ext.min < lo - 1e-9 else ext.max
+        tol = _POS_TOL * max(1.0, lim.span)
+        if ext.min < lo - tol or ext.max > hi + tol:
+            bad = ext.min if ext.min < lo - tol else ext.max
             raise LimitError(
                 f"{self._label(seg)}: the {kind} reaches position {bad:.4g} {self.joint.unit}, "
                 f"outside joint.limits.position [{lo:g}, {hi:g}] {self.joint.unit}"
@@ -427,7 +433,8 @@ def _check_segment(i: int, seg: Segment, joint: Joint) -> None:
             raise LimitError(f"{name}: speeds must be fractions of max_velocity in (0, 1], "
                              f"got {list(seg.speeds)}")
         ext = seg.range
-    if ext[0] < lo or ext[1] > hi:
+    tol = _POS_TOL * max(1.0, lim.span)  # e.g. 0.1 - 1.3 = -1.2000000000000002 is fine
+    if ext[0] < lo - tol or ext[1] > hi + tol:
         raise LimitError(
             f"{name}: positions [{ext[0]:.4g}, {ext[1]:.4g}] {u} leave joint.limits.position "
             f"[{lo:g}, {hi:g}] {u}"
@@ -440,7 +447,7 @@ def _add_segment(ph: _Phases, i: int, seg: Segment) -> None:
         ph.sine(i, seg)
         return
     lo, hi = seg.range
-    ph.move(i, lo, POSITIONING_SPEED)
+    ph.move(i, lo, POSITIONING_SPEED, kind="position")
     ph.dwell(i, seg.dwell_s if ph.t > 0.0 else 0.0)
     for speed in seg.speeds:
         for _ in range(seg.cycles):
@@ -455,7 +462,7 @@ def _check_samples(ref: Reference, joint: Joint) -> None:
     lim = joint.limits
     u = joint.unit
     lo, hi = lim.position
-    tol_q = 1e-9 * max(1.0, lim.span)
+    tol_q = _POS_TOL * max(1.0, lim.span)
     checks = (
         ("position", (ref.q < lo - tol_q) | (ref.q > hi + tol_q), ref.q,
          "position", f"[{lo:g}, {hi:g}]", u),
