@@ -28,7 +28,9 @@ Modes and units
   ``tau = kp (q_target - q) + kd (dq_target - dq) + torque_from_permille(0x60B2)`` with
   0x607A [counts] and dq_target the target's difference over one cycle,
   clamped to 0x6072 (bit 11 "internal limit" set while clamped); a following error larger
-  than 0x6065 [counts] is a fault 0x8611 (0xFFFFFFFF disables the check).
+  than 0x6065 [counts] is a fault 0x8611 (0xFFFFFFFF disables the check, and so does 0,
+  the default of several vendor files). Enabling operation (transitions 4, 16) sets 0x607A
+  to the actual position, so the loop starts where the joint is.
 - Other advertised modes are accepted but produce no torque in the simulation.
 - 0x6064 position actual [counts] = ``plant.encoder_counts`` (wrapped to int32); 0x606C
   velocity actual [counts/s] = ``round(dq * counts_per_rad)``; 0x6077 torque actual and 0x6074
@@ -754,6 +756,9 @@ class SimulatedDrive:
                 self.node.emcy.reset()
             elif number == 11:
                 self._quick_stop_started()
+            elif number in (4, 16):
+                # enabling: the position loop starts from where the joint is
+                self.target_position = self._prev_target = self.position_actual
         self._update_statusword()
 
     def _quick_stop_started(self) -> None:
@@ -837,7 +842,7 @@ class SimulatedDrive:
             elif mode == 8:
                 err = self.target_position - self.position_actual
                 window = self.following_window
-                if window != 0xFFFFFFFF and (err > window or -err > window):
+                if 0 < window < 0xFFFFFFFF and (err > window or -err > window):
                     self._following_error = True
                     self.fault(FOLLOWING_ERROR)
                     powered = False
