@@ -467,7 +467,8 @@ def _segment(s: dict, key: str, source: str, limits: JointLimits, rng: str) -> S
     if s["kind"] == "trapezoid":
         r = s["range"]
         if len(r) != 2 or not r[0] < r[1]:
-            raise fail(source, f"{key}.range", "[low, high] with low < high", list(r))
+            raise fail(source, f"{key}.range", "two numbers [low, high] with low < high",
+                       list(r))
         if r[0] < lo or r[1] > hi:
             raise fail(source, f"{key}.range", f"[low, high] within {rng}", list(r))
         return TrapezoidSegment(
