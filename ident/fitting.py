@@ -272,7 +272,7 @@ def fit_models(
     vmax = float(np.max(np.abs(probe.signals.dq)))
     if dq_min is None:
         pre["dq_min"] = DQ_MIN_FRACTION * vmax
-    if pre["dq_min"] or tau_min:
+    if pre["dq_min"] is not None or tau_min is not None:
         probe = build_design(lib0, s, **pre)
 
     def fit_one(

@@ -141,7 +141,7 @@ def choose_cutoff(q: np.ndarray, dt: float) -> float:
     if c[-1] <= 0:
         return 0.1 * fs
     fb = float(f[int(np.searchsorted(c, 0.995 * c[-1]))])
-    return float(np.clip(5.0 * fb, 0.1 * fs, 0.4 * fs))
+    return float(f"{np.clip(5.0 * fb, 0.1 * fs, 0.4 * fs):.6g}")
 
 
 def split_experiments(s: Signals) -> list[slice]:

@@ -1,0 +1,177 @@
+"""``jointid fit INPUTS... [--model usual|new|both] [--joint revolute|prismatic] [--qs VALUE|scan]
+[--validate FILES...] [--report DIR] [--json FILE]``: identify the usual and the new model.
+
+Every input file (MCAP log of ``jointid run``, CSV or MATLAB ``.mat``) is one experiment;
+all are concatenated into one least-squares system (paper eq. 36). Prints Tables I-IV,
+writes the JSON record (``docs/fit-json.md``) and the direct-validation plots (Fig. 4-5).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+__all__ = ["register", "run"]
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``fit`` subcommand to the ``jointid`` parser."""
+    p = subparsers.add_parser(
+        "fit",
+        help="identify the usual and the load/velocity-dependent friction model",
+        description=(__doc__ or "").split("\n\n")[1] if __doc__ else None,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=(
+            "examples:\n"
+            "  jointid fit runs/*.mcap --json fit.json --report fit/\n"
+            "  jointid fit DATA_EMPS.mat --joint prismatic --map q=qm,tau=vir --gain gtau \\\n"
+            "      --model usual --dq-min 0 --validate DATA_EMPS_PULSES.mat"
+        ),
+    )
+    p.add_argument("inputs", nargs="+", type=Path, help="experiment files (.mcap, .csv, .mat)")
+    p.add_argument(
+        "--model",
+        choices=("usual", "new", "both"),
+        default="both",
+        help="model(s) to fit (default both)",
+    )
+    p.add_argument(
+        "--joint",
+        choices=("revolute", "prismatic"),
+        help="joint kind (default: MCAP metadata; revolute for CSV/MAT)",
+    )
+    p.add_argument(
+        "--qs",
+        default="0.03",
+        metavar="VALUE|scan",
+        help="q_s of the new model [rad/s], or 'scan' to minimise the residual (default 0.03)",
+    )
+    p.add_argument(
+        "--validate",
+        nargs="+",
+        type=Path,
+        metavar="FILE",
+        default=[],
+        help="files not used for the fit: cross-validation error per model",
+    )
+    p.add_argument("--report", type=Path, metavar="DIR", help="write tables and PNG plots here")
+    p.add_argument("--json", type=Path, metavar="FILE", help="write the JSON record here")
+    g = p.add_argument_group("foreign data (CSV/MAT)")
+    g.add_argument(
+        "--map",
+        action="append",
+        metavar="KEY=NAME[,...]",
+        help="column/variable names: t=, q=, tau=, payload_kg=, payload_arm_m= "
+        "(payload entries may be numbers)",
+    )
+    g.add_argument("--gain", metavar="NUMBER|NAME", help="drive gain: tau = gain x column")
+    g.add_argument("--axis", type=int, default=0, help="axis of a multi-axis MCAP log")
+    g2 = p.add_argument_group("preprocessing and estimation")
+    g2.add_argument("--cutoff", type=float, metavar="HZ", help="low-pass cut-off on q [Hz]")
+    g2.add_argument("--decimation", type=int, metavar="R", help="decimation factor")
+    g2.add_argument(
+        "--dq-min",
+        type=float,
+        metavar="V",
+        help="stiction area: drop |dq| below V [rad/s] (default 1 %% of max; 0 keeps all)",
+    )
+    g2.add_argument("--tau-min", type=float, metavar="T", help="drop |tau| below T [N m]")
+    g2.add_argument("--trim", type=int, metavar="N", help="samples cut at both ends of each file")
+    g2.add_argument(
+        "--threshold",
+        type=float,
+        metavar="PCT",
+        help="eliminate parameters with relative deviation above PCT %% (default 30)",
+    )
+    g2.add_argument("--no-eliminate", action="store_true", help="keep every identifiable parameter")
+    g3 = p.add_argument_group("refinement")
+    g3.add_argument(
+        "--refine",
+        action="store_true",
+        help="add the effects the residual points to (ident.refine), on the new model "
+        "(or the only model fitted)",
+    )
+    g3.add_argument("--max-steps", type=int, default=5, metavar="N", help="refinement steps")
+    p.set_defaults(func=run)
+
+
+def _qs(value: str) -> float | str:
+    if value.strip().lower() == "scan":
+        return "scan"
+    from . import DataError
+
+    try:
+        return float(value)
+    except ValueError:
+        raise DataError(f"--qs {value!r}: expected a number [rad/s] or 'scan'") from None
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``jointid fit``; returns the exit code."""
+    from .fitting import fit_models
+    from .loaders import load_experiments, parse_mapping
+
+    mapping = parse_mapping(args.map)
+    gain: float | str | None = args.gain
+    load_kw: dict[str, Any] = dict(mapping=mapping, gain=gain, joint=args.joint, axis=args.axis)
+    exps = load_experiments(args.inputs, **load_kw)
+    val = load_experiments(args.validate, **load_kw) if args.validate else None
+    models = ("usual", "new") if args.model == "both" else (args.model,)
+    report = fit_models(
+        exps,
+        models,
+        qs=_qs(args.qs),
+        joint=args.joint,
+        validation=val,
+        cutoff_hz=args.cutoff,
+        decimation=args.decimation,
+        dq_min=args.dq_min,
+        tau_min=args.tau_min,
+        trim=args.trim,
+        eliminate=not args.no_eliminate,
+        threshold_pct=args.threshold,
+    )
+    out = report.to_json()
+    text = report.format_tables()
+    print(text)
+    if args.refine:
+        out["refinement"] = _refine(report, args.max_steps)
+    if args.report is not None:
+        from .plots import write_plots
+
+        args.report.mkdir(parents=True, exist_ok=True)
+        (args.report / "tables.txt").write_text(text + "\n")
+        files = write_plots(report, args.report)
+        out["figures"] = [str(f) for f in files]
+        print(f"\nreport: {args.report} ({len(files)} figures, tables.txt)")
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(out, indent=2) + "\n")
+        print(f"json: {args.json}")
+    return 0
+
+
+def _refine(report: Any, max_steps: int) -> dict[str, Any]:
+    from . import IdentError
+
+    if importlib.util.find_spec("ident.refine") is None:
+        raise IdentError("--refine: the refinement module (ident.refine) is not installed")
+    from .refine import refine
+
+    name = "new" if "new" in report.models else next(iter(report.models))
+    ref = refine(
+        report.designs[name],
+        report.models[name],
+        validation=report.validation_designs.get(name),
+        max_steps=max_steps,
+        vmax=report.vmax,
+        progress=lambda msg: print(msg, file=sys.stderr),
+    )
+    print("\n" + (ref.format_table() if hasattr(ref, "format_table") else ""))
+    rec = ref.to_json()
+    rec.setdefault("model", name)
+    return rec
