@@ -69,7 +69,7 @@ limits_st = st.builds(
     j=st.floats(2.0, 200.0),
 )
 cycle_st = st.sampled_from([0.001, 0.002, 0.005])
-HSET = settings(max_examples=120, deadline=None,
+HSET = settings(max_examples=200, deadline=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
 
 
