@@ -214,7 +214,28 @@ class _TxPdo:
 
     def payload(self, drive: SimulatedDrive) -> bytes:
         values = self.getter(drive)
-        return self.struct.pack(values) if self.single else self.struct.pack(*values)
+        try:
+            return self.struct.pack(values) if self.single else self.struct.pack(*values)
+        except struct.error:  # a value outside its mapped type: saturate, like a drive
+            values = (values,) if self.single else values
+            return self.struct.pack(*_saturate(self.struct.format, values))
+
+
+_INT_RANGES = {
+    "b": (-0x80, 0x7F), "B": (0, 0xFF), "h": (-0x8000, 0x7FFF), "H": (0, 0xFFFF),
+    "i": (-0x80000000, 0x7FFFFFFF), "I": (0, 0xFFFFFFFF),
+    "q": (-(1 << 63), (1 << 63) - 1), "Q": (0, (1 << 64) - 1),
+}
+
+
+def _saturate(fmt: str, values: tuple) -> list:
+    """Clip integer values to the ranges of their struct codes (padding codes skipped)."""
+    codes = [c for c in fmt.lstrip("<") if not c.isdigit() and c != "x"]
+    out = []
+    for code, v in zip(codes, values, strict=True):
+        rng = _INT_RANGES.get(code)
+        out.append(_clip(int(v), *rng) if rng else v)
+    return out
 
 
 class SimulatedDrive:
@@ -242,6 +263,8 @@ class SimulatedDrive:
     csp_gains : (float, float) or None
         CSP position-loop gains ``(kp [N m/rad], kd [N m s/rad])``; default: critically damped
         at 15 Hz for the plant's rigid-body inertia when the plant exposes it, else for 1 kg m².
+    record_chunk : int
+        Rows the per-cycle record grows by (preallocated numpy arrays).
     """
 
     def __init__(
@@ -254,6 +277,7 @@ class SimulatedDrive:
         fault_injector: FaultInjector | None = None,
         cycle_s: float = 0.001,
         csp_gains: tuple[float, float] | None = None,
+        record_chunk: int = _RECORD_CHUNK,
     ) -> None:
         self.dod = eds if isinstance(eds, DriveOD) else load_drive_od(eds, node_id)
         self.plant = plant
@@ -321,7 +345,8 @@ class SimulatedDrive:
         self.rx_rejected_modes = 0
         self.tpdo_sent = 0
         self._n = 0
-        self._rec = {name: np.zeros(_RECORD_CHUNK, dtype=dtyp) for name, dtyp in _RECORD_FIELDS}
+        self._chunk = int(record_chunk)
+        self._rec = {name: np.zeros(self._chunk, dtype=dtyp) for name, dtyp in _RECORD_FIELDS}
         self._started = False
         self._load_application()
         self._update_actuals()
@@ -926,7 +951,7 @@ class SimulatedDrive:
         rec = self._rec
         if n >= rec["cycle"].shape[0]:
             for name in rec:
-                rec[name] = np.concatenate([rec[name], np.zeros_like(rec[name][:_RECORD_CHUNK])])
+                rec[name] = np.concatenate([rec[name], np.zeros(self._chunk, rec[name].dtype)])
         rec["cycle"][n] = cycle
         rec["counts"][n] = self.position_actual
         rec["target_torque"][n] = self.target_torque

@@ -399,3 +399,60 @@ def test_csp_lockstep_10000_cycles_tracks_target(rig):
     err = np.abs(res.received["6064"] - target)
     assert err.max() < load_drive_od(generic_eds_path(), NODE).od[0x6065].default
     assert err[2000:].max() < 0.02 * amp  # the PD loop follows within 2 % of the swing
+
+
+# ---------------------------------------------------------------------------- misc
+def test_event_tpdo_is_sent_when_its_content_changes(rig):
+    node = rig.node
+    configure_pdo(node, "tpdo", 1, [(0x6041, 0)], trans_type=255)
+    configure_pdo(node, "tpdo", 2, [(0x6077, 0)], enabled=False)
+    t1 = _frames(rig, 0x180 + NODE)
+    node.nmt.state = "OPERATIONAL"
+    _barrier(rig)
+    node.sdo[0x6040].raw = Command.SHUTDOWN  # statusword changes -> one TPDO
+    node.sdo[0x6040].raw = Command.SHUTDOWN  # no change -> none
+    for _ in range(3):
+        rig.network.send_message(0x80, b"")  # cycles, statusword unchanged -> none
+    _barrier(rig)
+    assert [struct.unpack("<H", d)[0] for d in _drain(t1)] == [0x0231]
+
+
+def test_record_grows_by_chunks():
+    from sim_drivers.drive import SimulatedDrive, open_virtual_bus
+    from sim_drivers.plant import JointPlant
+    from sim_drivers.plant_config import load_plant
+    from sim_drivers.testing import DEFAULT_PLANT, unique_channel
+
+    bus = open_virtual_bus(unique_channel())
+    plant = JointPlant(load_plant(DEFAULT_PLANT), 0.001, seed=1)
+    drive = SimulatedDrive(bus, 9, plant, record_chunk=64)
+    try:
+        drive.start()
+        for i in range(150):
+            drive.target_torque = i
+            drive.step()
+        rec = drive.record
+        assert np.array_equal(rec["cycle"], np.arange(150))
+        assert np.array_equal(rec["target_torque"], np.arange(150))
+        assert rec["q"].dtype == np.float64 and len(rec["statusword"]) == 150
+    finally:
+        drive.stop()
+        bus.shutdown()
+
+
+def test_drive_configuration_errors_name_the_problem(tmp_path):
+    from sim_drivers.drive import DriveError, SimulatedDrive
+    from sim_drivers.od import DriveConfigError
+
+    with pytest.raises(DriveConfigError, match="not found"):
+        load_drive_od(tmp_path / "missing.eds", 1)
+    with pytest.raises(DriveConfigError, match="node id 0"):
+        load_drive_od(None, 0)
+    text = generic_eds_path().read_text()
+    start = text.index("[6041]")
+    cut = text[:start] + text[text.index("[", start + 1):]
+    (tmp_path / "no6041.eds").write_text(cut.replace("=0x6041\n", "=0x6040\n"))
+    with pytest.raises(DriveConfigError, match="0x6041 missing"):
+        load_drive_od(tmp_path / "no6041.eds", 1)
+    with pytest.raises(DriveError, match="canopen.Network or can.BusABC"):
+        SimulatedDrive("vcan0", 1, object())
