@@ -58,8 +58,8 @@ def test_optional_keys_start_daq_and_feedforward(tmp_path):
 # (what to replace in the example, replacement, key named in the message, expected text)
 MISTAKES = {
     "unknown top-level key": ('name = "rx130l-joint3"', 'name = "x"\ncolour = "red"',
-                              "colour", "no such key"),
-    "unknown nested key": ("J = 30.0 ", "Jm = 30.0 ", "control.feedforward.Jm", "no such key"),
+                              "colour", "unknown key"),
+    "unknown nested key": ("J = 30.0 ", "Jm = 30.0 ", "control.feedforward.Jm", "unknown key"),
     "wrong type": ("max_velocity = 1.2 ", 'max_velocity = "fast" ',
                    "joint.limits.max_velocity", "a number > 0"),
     "boolean as number": ("cycle_s = 0.001 ", "cycle_s = true ", "control.cycle_s", "a number"),

@@ -78,7 +78,7 @@ def test_console_entry_point_no_traceback(tmp_path):
     assert run.returncode == 2
     assert run.stderr.strip() == (
         f"jointid plan: error: {f}: joint.limits.max_jerk: expected a number > 0 "
-        "[rad/s^3 or m/s^3], got -1.0")
+        "[rad/s^3 or m/s^3], got -1")
     missing = subprocess.run([sys.executable, "-m", "daq.cli", "plan", str(tmp_path / "no.toml")],
                              capture_output=True, text=True, timeout=120)
     assert missing.returncode == 2 and "no.toml" in missing.stderr

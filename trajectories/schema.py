@@ -43,6 +43,14 @@ def fail(source: str, key: str, expected: str, got: Any = _MISSING) -> SchemaErr
     return SchemaError(f"{where}{key}: expected {expected}{tail}")
 
 
+def unknown(source: str, key: str, allowed: str) -> SchemaError:
+    """Build the one-line error for a key the schema does not know."""
+    where = f"{source}: " if source else ""
+    return SchemaError(
+        f"{where}{key}: expected one of the known keys ({allowed}), not this unknown key"
+    )
+
+
 @dataclass(frozen=True)
 class Field:
     """A scalar (or list of scalars) field.
@@ -96,14 +104,15 @@ class Field:
         t = self.type
         if isinstance(value, bool) and t is not bool:
             raise fail(source, key, self._expect(), value)
+        original = value
         if t is float and isinstance(value, int):
             value = float(value)
         if not isinstance(value, t):
-            raise fail(source, key, self._expect(), value)
+            raise fail(source, key, self._expect(), original)
         if t is float and not math.isfinite(value):
-            raise fail(source, key, "a finite number", value)
+            raise fail(source, key, "a finite number", original)
         if self.choices is not None and value not in self.choices:
-            raise fail(source, key, self._expect(), value)
+            raise fail(source, key, self._expect(), original)
         if t in (float, int):
             if (
                 (self.gt is not None and not value > self.gt)
@@ -111,11 +120,11 @@ class Field:
                 or (self.lt is not None and not value < self.lt)
                 or (self.le is not None and not value <= self.le)
             ):
-                raise fail(source, key, self._expect(), value)
+                raise fail(source, key, self._expect(), original)
         if self.check is not None:
             problem = self.check(value)
             if problem:
-                raise fail(source, key, problem, value)
+                raise fail(source, key, problem, original)
         return value
 
     def validate(self, value: Any, key: str, source: str = "") -> Any:
@@ -143,11 +152,11 @@ class Table:
     def validate(self, value: Any, key: str, source: str = "") -> dict:
         if not isinstance(value, Mapping):
             raise fail(source, key or "<top level>", "a table", value)
-        unknown = sorted(set(value) - set(self.fields))
-        if unknown:
+        extra = sorted(set(value) - set(self.fields))
+        if extra:
             where = f"{key}." if key else ""
             allowed = ", ".join(sorted(self.fields))
-            raise fail(source, f"{where}{unknown[0]}", f"no such key (allowed: {allowed})")
+            raise unknown(source, f"{where}{extra[0]}", allowed)
         out: dict = {}
         for name, spec in self.fields.items():
             sub = f"{key}.{name}" if key else name
@@ -178,6 +187,8 @@ class ArrayOfTables:
 
 def spec_expect(spec: Any) -> str:
     if isinstance(spec, Field):
+        if spec.list_of:
+            return f"a list of {spec._expect()}"
         return spec._expect()
     if isinstance(spec, ArrayOfTables):
         return "an array of tables"
