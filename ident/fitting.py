@@ -19,7 +19,7 @@ import numpy as np
 
 from . import DataError
 from .loaders import Experiment, concat
-from .models import IdentModel, new_model, usual_model
+from .models import IdentModel, Payload, RigidBody, new_model, usual_model
 from .preprocess import Design, build_design
 from .results import (
     band_errors,
@@ -199,6 +199,7 @@ def fit_models(
     tau_min: float | None = None,
     trim: int | None = None,
     guard: int | None = None,
+    sign_check: bool = False,
     eliminate: bool = True,
     threshold_pct: float | None = None,
     table_iv: bool = True,
@@ -223,6 +224,12 @@ def fit_models(
         cut-off and decimation found on the identification data) apply to validation data.
         ``dq_min`` defaults to :data:`DQ_MIN_FRACTION` of the maximum velocity; pass 0 to
         keep every sample.
+    sign_check : bool
+        When the new model is fitted, estimate tau_out with a first fit of the usual model
+        and leave out the samples where sign(tau) differs from sign(tau_out), where eq. 26's
+        sign(P) is wrong (see ``load_model`` of :func:`ident.preprocess.build_design`).
+        Both models then use these same samples. Off by default: on the simulated
+        campaign it removed few samples and did not reduce the biases.
     eliminate, threshold_pct
         Elimination of non-significant parameters, see :meth:`IdentModel.fit`.
     table_iv : bool
@@ -273,6 +280,13 @@ def fit_models(
     if dq_min is None:
         pre["dq_min"] = DQ_MIN_FRACTION * vmax
     if pre["dq_min"] is not None or tau_min is not None:
+        probe = build_design(lib0, s, **pre)
+    if sign_check and "new" in models:
+        # a first usual fit estimates tau_out; drop samples where sign(tau) != sign(tau_out)
+        first = IdentModel(lib0, "usual").fit(probe, eliminate=False)
+        inner = Library(*[t for t in lib0.terms() if isinstance(t, RigidBody | Payload)])
+        chi = np.array([first.coef_.get(n, 0.0) for n in inner.names()])
+        pre["load_model"] = (inner, chi)
         probe = build_design(lib0, s, **pre)
 
     def fit_one(

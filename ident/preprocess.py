@@ -278,7 +278,12 @@ def _dilate(bad: np.ndarray, k: int) -> np.ndarray:
 
 
 def _selection(
-    full: Signals, index: np.ndarray, dq_min: float | None, tau_min: float | None, guard: int
+    full: Signals,
+    index: np.ndarray,
+    dq_min: float | None,
+    tau_min: float | None,
+    guard: int,
+    load_model: tuple[Term, np.ndarray] | None,
 ) -> np.ndarray:
     """Mask over the decimated samples ``index`` of one experiment (see build_design)."""
     bad = np.zeros(len(full), dtype=bool)
@@ -286,6 +291,10 @@ def _selection(
         bad |= np.abs(full.dq) < dq_min
     if tau_min is not None:
         bad |= np.abs(full.tau) < tau_min
+    if load_model is not None:
+        term, chi = load_model
+        tau_out = term.columns(full) @ np.asarray(chi, dtype=float)
+        bad |= np.sign(full.tau) != np.sign(tau_out)
     return ~_dilate(bad, guard)[index]
 
 
@@ -299,6 +308,7 @@ def build_design(
     dq_min: float | None = None,
     trim: int | None = None,
     guard: int | None = None,
+    load_model: tuple[Term, np.ndarray] | None = None,
 ) -> Design:
     """Filter, differentiate, build W, decimate in parallel and select (see module doc).
 
@@ -325,7 +335,13 @@ def build_design(
         The stiction and small-torque criteria are evaluated at full rate on the filtered
         dq and tau, and every sample within ``guard`` full-rate samples of a rejected one is
         rejected too, so that no kept decimated sample is smeared by the anti-alias filter
-        with samples of the stiction area; default r.
+        with samples of the stiction area; default 3 r.
+    load_model : (Term, array) or None
+        A model of the load torque, tau_out_hat = W_out chi_out (e.g. the rigid body and
+        payload terms with the values of a first fit of the usual model). Samples where
+        sign(tau) differs from sign(tau_out_hat) are dropped (with the guard): there the
+        proxy sign(P) = sign(tau dq) of eq. 26 is not sign(P_out) (the friction exceeds
+        the load, the paper's "stiction area" rectangle of Fig. 2.b).
 
     Returns
     -------
@@ -360,7 +376,7 @@ def build_design(
         raise DataError(f"trim must be >= 0, got {trim}")
 
     if guard is None:
-        guard = decimation
+        guard = 3 * decimation
     guard = int(guard)
     blocks: list[_Block] = []
     ys, ws, sigs = [], [], []
@@ -383,7 +399,7 @@ def build_design(
         stack = np.column_stack([sub.tau, full.q, full.dq, full.ddq, W])
         dec, index = decimate(stack, decimation)
         y, qd, dqd, ddqd, wd = dec[:, 0], dec[:, 1], dec[:, 2], dec[:, 3], dec[:, 4:]
-        mask = _selection(full, index, dq_min, tau_min, guard)
+        mask = _selection(full, index, dq_min, tau_min, guard, load_model)
         blocks.append(_Block(full=full, index=index, mask=mask))
         ys.append(y[mask])
         ws.append(wd[mask])
