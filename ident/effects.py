@@ -14,6 +14,8 @@ effect                      variable      columns (parameters)
 ``quadratic_viscous``       velocity      q̇|q̇|  (F_VV)
 ``stribeck``                velocity      exp(-|q̇|/q_s) sign(q̇)  (F_S; q_s scanned, eq. 22)
 ``quadrant_load``           quadrant      sign(P) τ̂_out  (alpha_P, eq. 17-20, 26)
+``quadrant_coulomb``        quadrant      sign(P) sign(q̇) / 2  (dF_Cq = c_m - c_g)
+``quadrant_load_stribeck``  quadrant      sign(P) τ̂_out exp(-|q̇|/q_s)  (beta_P; eq. 24)
 ``warm_up``                 time          exp(-t/T_w) sign(q̇)  (dF_C_warm; T_w scanned)
 ``torque_lag``              acceleration  dτ̂/dt  (T_lag)
 ``generic_<variable>``      any           hat functions of the variable (× sign(q̇))
@@ -134,9 +136,7 @@ class Effect(Term):
         other.tag = tag
         return other
 
-    def parameters(
-        self, coef: np.ndarray, cov: np.ndarray
-    ) -> dict[str, tuple[float, float]]:
+    def parameters(self, coef: np.ndarray, cov: np.ndarray) -> dict[str, tuple[float, float]]:
         """Physical parameters with their 2σ from the coefficients of this term.
 
         Parameters
@@ -358,6 +358,61 @@ class QuadrantLoad(Effect):
 
     def describe(self) -> str:
         return "load-dependent dry friction alpha_P sign(P) tau_out"
+
+
+class QuadrantCoulomb(Effect):
+    """Different dry friction in the motor and generator quadrants (c_m != c_g, eq. 25):
+    (dF_Cq / 2) sign(P) sign(q̇) = (dF_Cq / 2) sign(τ) for q̇ != 0, with dF_Cq = c_m - c_g."""
+
+    effect = "quadrant_coulomb"
+    variable = "quadrant"
+
+    def names(self) -> tuple[str, ...]:
+        return (self._n("dF_Cq"),)
+
+    def columns(self, s: Signals) -> np.ndarray:
+        return (0.5 * _sign(s.tau * s.dq) * _sign(s.dq))[:, None]
+
+    def describe(self) -> str:
+        return "quadrant dry friction (c_m - c_g) sign(P) sign(dq) / 2"
+
+
+class QuadrantLoadStribeck(Effect):
+    """Velocity dependence of the load-dependent dry friction (the b terms of eq. 24-25):
+    beta_P sign(P) τ̂_out exp(-|q̇|/q_s), added after :class:`QuadrantLoad`.
+
+    Parameters
+    ----------
+    tau_out : Prediction
+        Load-torque predictor τ̂_out [N m].
+    qs : float
+        Stribeck velocity q_s [rad/s or m/s]; a hyper-parameter scanned on the residual.
+    """
+
+    effect = "quadrant_load_stribeck"
+    variable = "quadrant"
+    hyper_names = ("qs",)
+
+    def __init__(self, tau_out: Prediction, qs: float, tag: str = "") -> None:
+        super().__init__(tag)
+        if not qs > 0:
+            raise ValueError(f"QuadrantLoadStribeck: qs must be > 0, got {qs}")
+        self.tau_out, self.qs = tau_out, float(qs)
+
+    def with_hyper(self, **values: float) -> QuadrantLoadStribeck:
+        return QuadrantLoadStribeck(self.tau_out, values.get("qs", self.qs), self.tag)
+
+    def names(self) -> tuple[str, ...]:
+        return (self._n("beta_P"),)
+
+    def columns(self, s: Signals) -> np.ndarray:
+        e = np.exp(-np.abs(s.dq) / self.qs)
+        return (_sign(s.tau * s.dq) * self.tau_out(s) * e)[:, None]
+
+    def describe(self) -> str:
+        return (
+            f"low-velocity load-dependent friction beta_P sign(P) tau_out exp(-|dq|/{self.qs:.4g})"
+        )
 
 
 class WarmUp(Effect):

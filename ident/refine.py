@@ -43,7 +43,9 @@ from .effects import (
     PositionRipple,
     PositionSmooth,
     Prediction,
+    QuadrantCoulomb,
     QuadrantLoad,
+    QuadrantLoadStribeck,
     QuadraticViscous,
     Spring,
     Stribeck,
@@ -60,7 +62,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 #: A named effect is preferred to a generic basis when it removes at least this share of
 #: what the best generic basis removes.
-GENERIC_MARGIN = 0.75
+GENERIC_MARGIN = 0.5
 #: Continuous variables a generic basis may expand.
 CONTINUOUS = ("position", "velocity", "acceleration", "load", "time")
 
@@ -218,8 +220,10 @@ class Refinement:
             "validation_rel_error_final": _num(self.validation_rel_error_final),
             "stop_reason": self.stop_reason,
             "final_parameters": {
-                n: {"value": float(self.final_model.coef_[n]),
-                    "std2": float(2 * self.final_model.std_[n])}
+                n: {
+                    "value": float(self.final_model.coef_[n]),
+                    "std2": float(2 * self.final_model.std_[n]),
+                }
                 for n in self.final_model.names_
             },
             "final_diagnosis": self.final_diagnosis.to_json(),
@@ -361,13 +365,22 @@ class _Columns:
         return self.scorer.gain(e.columns(self.s))
 
 
-def _refine_1d(cols: _Columns, make: Callable[[float], Effect], a: float, b: float,
-               x0: float, g0: float, xtol: float) -> tuple[Effect, float]:
+def _refine_1d(
+    cols: _Columns,
+    make: Callable[[float], Effect],
+    a: float,
+    b: float,
+    x0: float,
+    g0: float,
+    xtol: float,
+) -> tuple[Effect, float]:
     """Bounded 1-D maximisation of the gain over x in [a, b] (x0, g0: coarse best)."""
     if not b > a:
         return make(x0), g0
     res = optimize.minimize_scalar(
-        lambda x: -cols.gain(make(x)), bounds=(a, b), method="bounded",
+        lambda x: -cols.gain(make(x)),
+        bounds=(a, b),
+        method="bounded",
         options={"xatol": xtol, "maxiter": 40},
     )
     if -res.fun > g0:
@@ -375,16 +388,18 @@ def _refine_1d(cols: _Columns, make: Callable[[float], Effect], a: float, b: flo
     return make(x0), g0
 
 
-def _scan_log(cols: _Columns, make: Callable[[float], Effect], lo: float, hi: float,
-              n: int = 24) -> tuple[Effect, float]:
+def _scan_log(
+    cols: _Columns, make: Callable[[float], Effect], lo: float, hi: float, n: int = 24
+) -> tuple[Effect, float]:
     """Best hyper-parameter: log grid, then a bounded 1-D search between the grid
     neighbours of the best point."""
     grid = np.geomspace(lo, hi, n)
     gains = np.array([cols.gain(make(h)) for h in grid])
     i = int(np.argmax(gains))
     a, b = math.log(grid[max(i - 1, 0)]), math.log(grid[min(i + 1, n - 1)])
-    return _refine_1d(cols, lambda lh: make(math.exp(lh)), a, b, math.log(grid[i]),
-                      float(gains[i]), 1e-4)
+    return _refine_1d(
+        cols, lambda lh: make(math.exp(lh)), a, b, math.log(grid[i]), float(gains[i]), 1e-4
+    )
 
 
 def _scan_period(cols: _Columns, p0: float, span: float, tag: str) -> tuple[Effect, float]:
@@ -396,8 +411,9 @@ def _scan_period(cols: _Columns, p0: float, span: float, tag: str) -> tuple[Effe
     gains = np.array([cols.gain(PositionRipple(1 / f, tag)) for f in fgrid])
     i = int(np.argmax(gains))
     a, b = fgrid[max(i - 1, 0)], fgrid[min(i + 1, len(fgrid) - 1)]
-    return _refine_1d(cols, lambda f: PositionRipple(1 / f, tag), a, b, fgrid[i],
-                      float(gains[i]), 1e-7 * f0)
+    return _refine_1d(
+        cols, lambda f: PositionRipple(1 / f, tag), a, b, fgrid[i], float(gains[i]), 1e-7 * f0
+    )
 
 
 def _unique_tag(effect_cls_names: tuple[str, ...], existing: set[str]) -> str:
@@ -466,9 +482,20 @@ def _candidates(
         e, g = _scan_log(cols, WarmUp, tmax / 300, 3 * tmax)
         out.append(_Candidate(e, g, 1))
     tau_out = _rigid_prediction(lib, coef)
+    has_quadrant_dry = any(t.effect == "quadrant_coulomb" for t in lib.terms())
     has_quadrant = any(t.effect in ("quadrant_load", "load_dependent") for t in lib.terms())
     if tau_out is not None and not has_quadrant:
         add(QuadrantLoad(tau_out))
+    if "quadrant_coulomb" not in effects and not has_quadrant_dry:
+        add(QuadrantCoulomb())
+    if (
+        tau_out is not None
+        and vmax > 0
+        and "quadrant_load" in effects
+        and "quadrant_load_stribeck" not in effects
+    ):
+        e, g = _scan_log(cols, lambda qs: QuadrantLoadStribeck(tau_out, qs), vmax / 1000, vmax / 2)
+        out.append(_Candidate(e, g, 1))
     if "torque_lag" not in effects:
         c_all = np.array([coef.get(n, 0.0) for n in lib.names()])
         add(TorqueLag(Prediction(lib.terms(), c_all)))
@@ -493,6 +520,29 @@ def _f_test(rss0: float, rss1: float, k: int, p: int, n: int, n_eff: float) -> t
         return float("inf"), 0.0
     F = ((rss0 - rss1) / k) / (rss1 / max(n - p - k, 1)) * (min(n_eff, n) / n)
     return float(F), float(stats.f.sf(F, k, d2))
+
+
+def _pretest(
+    c: _Candidate,
+    rss0: float,
+    p: int,
+    n: int,
+    n_eff: float,
+    rel: float,
+    level: float,
+    min_gain: float,
+) -> str | None:
+    """Acceptance tests predicted from the scoring gain; the reason of a failure or None."""
+    k_fast = len(c.effect.names()) + c.n_hyper
+    F0, p0 = _f_test(rss0, rss0 - c.gain, k_fast, p, n, n_eff)
+    rel_fast = rel * math.sqrt(max(rss0 - c.gain, 0.0) / rss0) if rss0 > 0 else rel
+    if p0 >= level:
+        return f"F test not significant (F={F0:.3g}, p={p0:.2e})"
+    if rel_fast > rel * (1 - min_gain):
+        return (
+            f"relative error {_pct(rel)} -> {_pct(rel_fast)}: less than {100 * min_gain:g} % better"
+        )
+    return None
 
 
 def _effect_parameters(
@@ -525,14 +575,18 @@ def _effect_parameters(
     except np.linalg.LinAlgError:  # pragma: no cover
         cov = np.full((p, p), np.nan)
     idx = [names.index(n) for n in tnames] + list(range(len(names), p))
-    coef = np.array([model.coef_[n] for n in tnames] + [getattr(term, h) for h in
-                                                         (term.hyper_names if extra else ())])
+    coef = np.array(
+        [model.coef_[n] for n in tnames]
+        + [getattr(term, h) for h in (term.hyper_names if extra else ())]
+    )
     sub = cov[np.ix_(idx, idx)]
     if len(tnames) < len(term.names()):
         # some columns were dropped as unidentifiable: report what is left as it is
         sd = np.sqrt(np.clip(np.diag(sub), 0, None))
-        return {n: {"value": float(v), "std2": float(2 * d)} for n, v, d in
-                zip(tnames, coef, sd, strict=False)}
+        return {
+            n: {"value": float(v), "std2": float(2 * d)}
+            for n, v, d in zip(tnames, coef, sd, strict=False)
+        }
     par = term.parameters(coef, sub)
     out = {k: {"value": float(v), "std2": float(e)} for k, (v, e) in par.items()}
     if isinstance(term, DirectionalViscous) and "F_V" in model.coef_:
@@ -541,8 +595,10 @@ def _effect_parameters(
         for key, sgn in (("F_V_pos", 0.5), ("F_V_neg", -0.5)):
             g = np.zeros(cov.shape[0])
             g[i_fv], g[i_d] = 1.0, sgn
-            out[key] = {"value": float(fv + sgn * d),
-                        "std2": float(2 * math.sqrt(max(g @ cov @ g, 0.0)))}
+            out[key] = {
+                "value": float(fv + sgn * d),
+                "std2": float(2 * math.sqrt(max(g @ cov @ g, 0.0))),
+            }
     if isinstance(term, WarmUp) and all_coef.get("F_C"):
         out["w_warm"] = {
             "value": float(model.coef_[tnames[0]] / all_coef["F_C"]),
@@ -573,7 +629,7 @@ def refine(
     progress: Callable[[str], None] | None = None,
     alpha: float = 1e-3,
     min_gain: float = 0.05,
-    max_tries: int = 3,
+    max_tries: int = 2,
     generic_knots: int = 12,
 ) -> Refinement:
     """Refine a declared model by adding the effects its residual points to.
@@ -633,17 +689,42 @@ def refine(
         diag = diagnose(r, s, Y=cur_design.Y, tau_out=tau_out, alpha=alpha)
         kept = [cur_design.names.index(n) for n in cur.names_]
         scorer = _Scorer(cur_design.W[:, kept], r)
-        cands = _candidates(_Columns(s, scorer), diag, lib, cur.coef_, alpha,
-                            generic_knots)
-        named = sorted((c for c in cands if not c.generic), key=lambda c: -c.gain)
-        generic = sorted((c for c in cands if c.generic), key=lambda c: -c.gain)
-        order = list(named)
-        if generic and (not named or named[0].gain < GENERIC_MARGIN * generic[0].gain):
-            order = [generic[0], *named]
+        cands = _candidates(_Columns(s, scorer), diag, lib, cur.coef_, alpha, generic_knots)
         n_cand = max(len(cands), 1)
         before_bands = _bands(cur, cur_design, vmax)
-        accepted = None
-        for c in order[:max_tries]:
+        p_cur = len(cur.names_)
+        rss0 = float(cur.residual_ @ cur.residual_)
+
+        # 1. pre-test on the scoring columns (no full-rate rebuild for hopeless candidates)
+        def pretest(c: _Candidate) -> str | None:
+            return _pretest(
+                c,
+                rss0,
+                p_cur,
+                len(cur_design),
+                diag.n_eff,
+                cur.rel_error_,  # noqa: B023
+                alpha / n_cand,
+                min_gain,
+            )  # noqa: B023
+
+        named = sorted((c for c in cands if not c.generic), key=lambda c: -c.gain)
+        generic = sorted((c for c in cands if c.generic), key=lambda c: -c.gain)
+        short = [c for c in named if pretest(c) is None][:max_tries]
+        top_generic = [c for c in generic if pretest(c) is None][:1]
+        # the generic basis only competes when it could win the exact comparison
+        if top_generic and (
+            not short or short[0].gain < top_generic[0].gain * GENERIC_MARGIN * 1.5
+        ):
+            short += top_generic
+        if not short:
+            for c in (named + generic)[:max_tries]:
+                why = pretest(c) or "not better than the others"
+                rejected.append(Rejected(k, c.effect.effect, c.effect.variable, why, math.nan))
+                say(f"step {k}: {c.effect.effect} rejected: {why}")
+        # 2. exact refits of the short list (columns filtered and decimated like the others)
+        built = []
+        for c in short:
             e = c.effect
             try:
                 d1 = cur_design.with_term(e)
@@ -651,17 +732,42 @@ def refine(
             except DataError as exc:
                 rejected.append(Rejected(k, e.effect, e.variable, f"not fitted: {exc}", math.nan))
                 continue
+            built.append((rss0 - float(m1.residual_ @ m1.residual_), c, d1, m1))
+        best_named = max((g for g, c, *_ in built if not c.generic), default=0.0)
+        best_generic = max((g for g, c, *_ in built if c.generic), default=0.0)
+        prefer_generic = best_generic > 0 and best_named < GENERIC_MARGIN * best_generic
+        built.sort(key=lambda b: (not (b[1].generic and prefer_generic), -b[0]))
+        if not prefer_generic:
+            built = [b for b in built if not b[1].generic] + [b for b in built if b[1].generic]
+        say(
+            f"step {k}: short list "
+            + ", ".join(
+                f"{c.effect.effect} {_pct(cur.rel_error_ * math.sqrt(max(1 - g / rss0, 0)))}"
+                for g, c, *_ in built
+            )
+        )
+        # 3. acceptance tests, best first
+        accepted = None
+        for _g, c, d1, m1 in built:
+            e = c.effect
             kk = sum(1 for n in e.names() if n in m1.coef_) + c.n_hyper
-            F, pval = _f_test(cur.result_.residual @ cur.result_.residual,
-                              float(m1.residual_ @ m1.residual_), max(kk, 1),
-                              len(cur.names_), len(cur_design), diag.n_eff)
+            F, pval = _f_test(
+                rss0,
+                float(m1.residual_ @ m1.residual_),
+                max(kk, 1),
+                p_cur,
+                len(cur_design),
+                diag.n_eff,
+            )
             reason = None
             if pval >= alpha / n_cand:
                 reason = f"F test not significant (F={F:.3g}, p={pval:.2e})"
             elif m1.rel_error_ > cur.rel_error_ * (1 - min_gain):
-                reason = (f"relative error {_pct(cur.rel_error_)} -> {_pct(m1.rel_error_)}: "
-                          f"less than {100 * min_gain:g} % better")
-            v1 = None
+                reason = (
+                    f"relative error {_pct(cur.rel_error_)} -> {_pct(m1.rel_error_)}: "
+                    f"less than {100 * min_gain:g} % better"
+                )
+            v1 = val1 = None
             if reason is None and cur_val is not None:
                 val1 = cur_val.with_term(e)
                 v1 = m1.rel_error_on(val1)
@@ -671,7 +777,7 @@ def refine(
                 rejected.append(Rejected(k, e.effect, e.variable, reason, m1.rel_error_))
                 say(f"step {k}: {e.effect} rejected: {reason}")
                 continue
-            accepted = (c, d1, m1, F, pval, v1, val1 if cur_val is not None else None)
+            accepted = (c, d1, m1, F, pval, v1, val1)
             break
         if accepted is None:
             stop = "no candidate effect passed the tests"
@@ -712,8 +818,9 @@ def refine(
         if cur_val is not None:
             cur_val, val_err = val1, v1
     if diag is None or steps and diag is steps[-1].diagnosis:
-        diag = diagnose(cur.residual_, s, Y=cur_design.Y,
-                        tau_out=_rigid_prediction(lib, cur.coef_), alpha=alpha)
+        diag = diagnose(
+            cur.residual_, s, Y=cur_design.Y, tau_out=_rigid_prediction(lib, cur.coef_), alpha=alpha
+        )
     return Refinement(
         steps=steps,
         rejected=rejected,
