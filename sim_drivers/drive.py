@@ -426,6 +426,7 @@ class SimulatedDrive:
         self.mode_display = mode if mode in self._supported else 0
         self.mode_request = self.mode_display
         self._prev_cw = self.controlword
+        self._last_eval: tuple | None = None
 
     # ------------------------------------------------------------------ life cycle
     @property
@@ -501,6 +502,7 @@ class SimulatedDrive:
 
     def _reset_state_machine(self) -> None:
         """Power-on of the CiA 402 side: transitions 0 and 1 to SWITCH ON DISABLED."""
+        self._last_eval = None
         self.cia_state = State.NOT_READY_TO_SWITCH_ON
         self.cia_state, _ = automatic_transition(self.cia_state, "self_test_done")
         self._update_statusword()
@@ -576,7 +578,7 @@ class SimulatedDrive:
         value = od.decode_raw(data)
         if name == "controlword":
             self.controlword = value
-            self._evaluate_controlword()
+            self._evaluate_controlword(from_sdo=True)
             self._send_event_tpdos()
         elif name == "mode_request":
             if value != 0 and value not in self._supported:
@@ -757,22 +759,39 @@ class SimulatedDrive:
     def _after_rx(self) -> None:
         """Apply what RPDOs changed: mode request, controlword; then event TPDOs."""
         if self.mode_request != self.mode_display:
-            if self.mode_request in self._supported or self.mode_request == 0:
-                self.mode_display = self.mode_request
-            else:
-                self.rx_rejected_modes += 1
-                self.mode_request = self.mode_display
+            self._apply_mode_request()
         self._evaluate_controlword()
         self._send_event_tpdos()
 
+    def _apply_mode_request(self) -> None:
+        """0x6060 arrived by RPDO: follow it if advertised, else keep the mode (no abort)."""
+        if self.mode_request in self._supported or self.mode_request == 0:
+            self.mode_display = self.mode_request
+            self._update_statusword()
+        else:
+            self.rx_rejected_modes += 1
+            self.mode_request = self.mode_display
+
     # ------------------------------------------------------------------ CiA 402
-    def _evaluate_controlword(self) -> None:
+    def _evaluate_controlword(self, from_sdo: bool = False) -> None:
+        """Run the state machine on 0x6040 (level-triggered, edge for the fault reset).
+
+        The command is applied until it requests no further transition, so "enable
+        operation" (0x0F) in READY TO SWITCH ON takes transitions 3 and 4 at once.
+        ``next_state`` is pure: when the last evaluation with the same (state, controlword,
+        previous controlword, quick stop option) changed nothing, this one returns at once.
+        """
         cw = self.controlword
-        new, number = next_state(
-            self.cia_state, cw, self._prev_cw, quick_stop_option=self.quick_stop_option
-        )
-        self._prev_cw = cw
-        if number is not None:
+        key = (self.cia_state, cw, self._prev_cw, self.quick_stop_option)
+        if key == self._last_eval:
+            return
+        for _ in range(4):
+            new, number = next_state(
+                self.cia_state, cw, self._prev_cw, quick_stop_option=self.quick_stop_option
+            )
+            self._prev_cw = cw
+            if number is None:
+                break
             self.cia_state = new
             if number == 15:
                 self.error_code = 0
@@ -781,9 +800,11 @@ class SimulatedDrive:
                 self.node.emcy.reset()
             elif number == 11:
                 self._quick_stop_started()
-            elif number in (4, 16):
-                # enabling: the position loop starts from where the joint is
+            elif number in (4, 16) and from_sdo:
+                # enabled over SDO: the position loop starts from where the joint is (an
+                # RPDO enabling the drive carries its own 0x607A)
                 self.target_position = self._prev_target = self.position_actual
+        self._last_eval = (self.cia_state, cw, cw, self.quick_stop_option)
         self._update_statusword()
 
     def _quick_stop_started(self) -> None:
@@ -828,11 +849,7 @@ class SimulatedDrive:
                 got = self._apply_rpdo(rx, latched) or got
         if got:
             if self.mode_request != self.mode_display:
-                if self.mode_request in self._supported or self.mode_request == 0:
-                    self.mode_display = self.mode_request
-                else:
-                    self.rx_rejected_modes += 1
-                    self.mode_request = self.mode_display
+                self._apply_mode_request()
             self._evaluate_controlword()
         self.step()
 

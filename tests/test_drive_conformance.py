@@ -283,6 +283,12 @@ def test_every_controlword_transition_of_the_standard_table(rig, number):
     assert _state(rig) is dst
 
 
+def test_enable_operation_in_ready_to_switch_on_takes_3_and_4(rig):
+    _go(rig, State.READY_TO_SWITCH_ON)
+    rig.node.sdo[0x6040].raw = Command.ENABLE_OPERATION
+    assert _state(rig) is State.OPERATION_ENABLED
+
+
 def test_quick_stop_option_2_completes_to_switch_on_disabled_and_16_reenables(rig):
     _go(rig, State.OPERATION_ENABLED)
     rig.node.sdo[0x6040].raw = Command.QUICK_STOP  # 11, then 12 automatic (at rest)
