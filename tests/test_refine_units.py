@@ -113,7 +113,7 @@ def test_dependence_finds_a_binned_effect_and_not_noise():
     assert 0.015 < d.explained < 0.05  # var(0.5 x^2) / var(total) = 0.022 / 1.022
     assert d.variable == "velocity" and d.n_bins == 24
     # the bin means follow the effect (up to the mean of the residual)
-    assert np.corrcoef(d.means, d.centers**2)[0, 1] > 0.95
+    assert np.corrcoef(d.means, d.centers**2)[0, 1] > 0.9
     pv = [dependence(rng.normal(0, 1, n), x).p_value for _ in range(20)]
     assert min(pv) > 1e-4  # 20 noise draws: none looks significant
     s = np.sign(x)
