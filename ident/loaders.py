@@ -307,6 +307,15 @@ def make_experiment(
     )
 
 
+def _finite_or_zero(x: float | None) -> float:
+    """Payload metadata: absent (None/NaN) means no payload."""
+    try:
+        v = float(x)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return 0.0
+    return v if np.isfinite(v) else 0.0
+
+
 def _load_mcap(path: Path, revolute: bool | None, axis: int) -> Experiment:
     try:
         from daq.reader import read_run
@@ -319,8 +328,8 @@ def _load_mcap(path: Path, revolute: bool | None, axis: int) -> Experiment:
         run.t,
         run.q,
         run.tau_ref,
-        payload_mass=float(run.payload_mass_kg or 0.0),
-        payload_arm=float(run.payload_arm_m or 0.0),
+        payload_mass=_finite_or_zero(run.payload_mass_kg),
+        payload_arm=_finite_or_zero(run.payload_arm_m),
         revolute=rev,
     )
 

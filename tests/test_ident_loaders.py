@@ -1,0 +1,145 @@
+"""Loading experiments: CSV, MAT (with a column mapping and a drive gain), MCAP logs of
+``jointid run`` (written with the daq writer, read back with the mcap library), and the
+errors users see for bad files."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+import scipy.io
+
+from ident import DataError
+from ident.loaders import (
+    ResamplingWarning,
+    concat,
+    load_experiment,
+    load_experiments,
+    parse_mapping,
+)
+
+
+def _arrays(n=500, dt=1e-3):
+    t = np.arange(n) * dt
+    q = 0.5 * np.sin(2.0 * t)
+    tau = 10 * np.cos(2.0 * t) + 3
+    return t, q, tau
+
+
+def _write_csv(path, header, cols):
+    np.savetxt(path, np.column_stack(cols), delimiter=",", header=",".join(header), comments="")
+
+
+def test_csv_canonical_columns_with_payload(tmp_path):
+    t, q, tau = _arrays()
+    p = tmp_path / "run.csv"
+    _write_csv(p, ["t", "q", "tau", "payload_kg", "payload_arm_m"],
+               [t, q, tau, np.full_like(t, 3.4584), np.full_like(t, 1.277)])  # fmt: skip
+    e = load_experiment(p)
+    np.testing.assert_allclose(e.q, q)
+    np.testing.assert_allclose(e.tau, tau)
+    assert e.payload_mass == 3.4584 and e.payload_arm == 1.277 and e.revolute
+    assert e.dt == pytest.approx(1e-3)
+
+
+def test_csv_mapping_and_numeric_gain(tmp_path):
+    t, q, tau = _arrays()
+    p = tmp_path / "foreign.csv"
+    _write_csv(p, ["time", "pos", "cur"], [t + 5.0, q, tau / 2.0])
+    e = load_experiment(p, mapping=parse_mapping("t=time,q=pos,tau=cur,payload_kg=2.5"),
+                        gain=2.0, joint="prismatic")  # fmt: skip
+    np.testing.assert_allclose(e.tau, tau)
+    np.testing.assert_allclose(e.t, t, atol=1e-12)  # time restarts at 0
+    assert e.payload_mass == 2.5 and not e.revolute
+
+
+def test_mat_with_variable_gain(tmp_path):
+    t, q, tau = _arrays()
+    p = tmp_path / "data.mat"
+    scipy.io.savemat(p, {"t": t[:, None], "qm": q[:, None], "vir": (tau / 35.15)[:, None],
+                         "gtau": np.array([[35.15]])})  # fmt: skip
+    e = load_experiment(p, mapping={"q": "qm", "tau": "vir"}, gain="gtau")
+    np.testing.assert_allclose(e.tau, tau)
+    with pytest.raises(DataError, match="gain variable 'nope'"):
+        load_experiment(p, mapping={"q": "qm", "tau": "vir"}, gain="nope")
+
+
+def test_missing_column_names_file_and_alternatives(tmp_path):
+    t, q, tau = _arrays()
+    p = tmp_path / "x.csv"
+    _write_csv(p, ["t", "q", "torque"], [t, q, tau])
+    with pytest.raises(DataError, match=r"x\.csv: missing column/variable 'tau'.*torque"):
+        load_experiment(p)
+
+
+@pytest.mark.parametrize(
+    "mutate, match",
+    [
+        (lambda t, q, tau: (t[::-1].copy(), q, tau), "not strictly increasing"),
+        (lambda t, q, tau: (t, np.where(np.arange(q.size) == 7, np.nan, q), tau), "NaN"),
+        (lambda t, q, tau: (t[:10], q[:10], tau[:10]), "at least"),
+    ],
+)
+def test_bad_data_errors(tmp_path, mutate, match):
+    t, q, tau = mutate(*_arrays())
+    p = tmp_path / "bad.csv"
+    _write_csv(p, ["t", "q", "tau"], [t, q, tau])
+    with pytest.raises(DataError, match=match):
+        load_experiment(p)
+
+
+def test_irregular_sampling_is_resampled_with_warning(tmp_path):
+    t, q, tau = _arrays(n=1000)
+    rng = np.random.default_rng(0)
+    tj = t + rng.uniform(-2e-4, 2e-4, t.size)
+    tj[0] = 0.0
+    p = tmp_path / "jitter.csv"
+    _write_csv(p, ["t", "q", "tau"], [tj, np.interp(tj, t, q), np.interp(tj, t, tau)])
+    with pytest.warns(ResamplingWarning, match="resampled"):
+        e = load_experiment(p)
+    assert np.allclose(np.diff(e.t), e.dt)
+    np.testing.assert_allclose(e.q, 0.5 * np.sin(2.0 * e.t), atol=1e-5)
+
+
+def test_unknown_extension_and_missing_file(tmp_path):
+    with pytest.raises(DataError, match="no such file"):
+        load_experiment(tmp_path / "none.csv")
+    p = tmp_path / "a.parquet"
+    p.write_text("x")
+    with pytest.raises(DataError, match="unknown file type"):
+        load_experiment(p)
+    with pytest.raises(DataError, match="KEY=NAME"):
+        parse_mapping("q")
+
+
+def test_concat_marks_experiments(tmp_path):
+    t, q, tau = _arrays()
+    paths = []
+    for i, m in enumerate((0.0, 6.97)):
+        p = tmp_path / f"r{i}.csv"
+        _write_csv(p, ["t", "q", "tau", "payload_kg"], [t, q, tau, np.full_like(t, m)])
+        paths.append(p)
+    s = concat(load_experiments(paths))
+    assert len(s) == 2 * t.size
+    np.testing.assert_array_equal(np.unique(s.experiment), [0, 1])
+    assert s.payload_mass[0] == 0.0 and s.payload_mass[-1] == 6.97
+
+
+def test_mcap_log_written_by_daq_is_read_back(tmp_path):
+    mcaplog = pytest.importorskip("daq.mcaplog")
+    t, q, tau = _arrays(n=300)
+    p = tmp_path / "run_payload1.mcap"
+    meta = {"payload": {"mass_kg": "3.4584", "arm_m": "1.277"},
+            "campaign": {"joint_kind": "revolute"}}  # fmt: skip
+    with mcaplog.RunLog(p, n_axes=1, cycle_s=1e-3, metadata=meta) as log:
+        for k in range(t.size):
+            log.state(0, k, 10.0 + t[k], q[k], 0.0, tau[k], tau[k], int(q[k] * 65190), 0, 0,
+                      0, 0x27)  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ResamplingWarning)
+        e = load_experiment(p)
+    np.testing.assert_allclose(e.q, q)
+    np.testing.assert_allclose(e.tau, tau)
+    np.testing.assert_allclose(e.t, t, atol=1e-9)
+    assert e.payload_mass == 3.4584 and e.payload_arm == 1.277 and e.revolute

@@ -1,0 +1,103 @@
+"""Preprocessing: central differences, decimation (MATLAB behaviour), parallel filtering of
+Y and W, selection masks, Design.with_term / without."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.signal
+
+from ident import DataError
+from ident.loaders import concat, make_experiment
+from ident.models import Coulomb, IdentModel, Offset, RigidBody, Viscous, usual_model
+from ident.preprocess import build_design, choose_cutoff, decimate, diffcent
+
+
+def test_diffcent_matches_matlab_definition():
+    y = np.array([0.0, 1.0, 4.0, 9.0, 16.0])
+    np.testing.assert_allclose(diffcent(y, 0.5), [2.0, 4.0, 8.0, 12.0, 14.0])
+
+
+def test_decimate_passes_band_kills_alias_and_keeps_last_sample():
+    fs, r = 1000.0, 10
+    t = np.arange(10001) / fs
+    low = np.sin(2 * np.pi * 3.0 * t)
+    high = np.sin(2 * np.pi * 180.0 * t)  # above the new Nyquist (50 Hz)
+    y, idx = decimate(np.column_stack([low, high]), r)
+    assert idx[-1] == t.size - 1 and np.all(np.diff(idx) == r)
+    inner = slice(20, -20)
+    # MATLAB/scipy decimate: Chebyshev I (0.05 dB ripple) forward-backward, same samples
+    ref = scipy.signal.decimate(low, r, ftype="iir", zero_phase=True)
+    np.testing.assert_allclose(y[50:-50, 0], ref[50:-50], atol=2e-4)
+    np.testing.assert_allclose(y[inner, 0], low[idx][inner], atol=0.012)  # ripple^2 <= 1.2 %
+    assert np.max(np.abs(y[inner, 1])) < 1e-3
+    # staged decimation for factors above 13
+    y2, idx2 = decimate(low, 40)
+    assert np.all(np.diff(idx2) == 40)
+    np.testing.assert_allclose(y2[5:-5], low[idx2][5:-5], atol=0.025)
+
+
+def test_cutoff_never_below_a_tenth_of_fs():
+    t = np.arange(20000) * 1e-3
+    assert choose_cutoff(np.sin(0.5 * t), 1e-3) == pytest.approx(100.0)
+
+
+def _exp(seed=0, n=8000, dt=1e-3, mass=0.0):
+    t = np.arange(n) * dt
+    q = 0.8 * np.sin(1.3 * t) + 0.2 * np.sin(5.1 * t + seed)
+    dq = 0.8 * 1.3 * np.cos(1.3 * t) + 0.2 * 5.1 * np.cos(5.1 * t + seed)
+    ddq = -0.8 * 1.69 * np.sin(1.3 * t) - 0.2 * 26.01 * np.sin(5.1 * t + seed)
+    tau = 30 * ddq + 200 * np.cos(q) + 40 * dq + 20 * np.sign(dq) + 10
+    return make_experiment(f"e{seed}", t, q, tau, payload_mass=mass, payload_arm=1.0)
+
+
+def test_build_design_recovers_smooth_model_and_shapes():
+    s = concat([_exp(0), _exp(1)])
+    lib = RigidBody() + Viscous() + Offset()
+    d = build_design(lib, s, cutoff_hz=50, decimation=5, trim=100)
+    assert d.W.shape == (d.Y.size, 5) and d.names == lib.names()
+    assert len(d.signals) == d.Y.size
+    # per experiment: (n - 2 trim) / r samples
+    assert d.Y.size == 2 * len(range((8000 - 200 - 1) % 5, 8000 - 200, 5))
+    assert set(np.unique(d.signals.experiment)) == {0, 1}
+    m = IdentModel(lib + Coulomb()).fit(d.with_term(Coulomb()), eliminate=False)
+    assert m.coef_["J"] == pytest.approx(30, rel=2e-3)
+    assert m.coef_["MX"] == pytest.approx(200 / 9.81, rel=2e-3)
+    assert m.coef_["F_V"] == pytest.approx(40, rel=5e-3)
+
+
+def test_selection_mask_is_shared_by_y_and_every_column():
+    s = concat([_exp(0)])
+    d = build_design(usual_model(payload=False), s, cutoff_hz=50, decimation=5, dq_min=0.3)
+    full = build_design(usual_model(payload=False), s, cutoff_hz=50, decimation=5)
+    assert d.Y.size < full.Y.size
+    assert np.all(np.abs(d.signals.dq) >= 0.3)
+    # the kept samples are a subset of the unselected design, identical in Y and every column
+    key = {round(t, 9): i for i, t in enumerate(full.signals.t)}
+    rows = [key[round(t, 9)] for t in d.signals.t]
+    np.testing.assert_array_equal(d.Y, full.Y[rows])
+    np.testing.assert_array_equal(d.W, full.W[rows])
+
+
+def test_with_term_equals_building_with_the_term_and_without_drops():
+    s = concat([_exp(0), _exp(2)])
+    kw = dict(cutoff_hz=50, decimation=5, dq_min=0.1, trim=40)
+    base = build_design(RigidBody() + Offset(), s, **kw)
+    both = build_design(RigidBody() + Offset() + Coulomb(), s, **kw)
+    added = base.with_term(Coulomb())
+    assert added.names == both.names
+    np.testing.assert_allclose(added.W, both.W, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(added.Y, both.Y)
+    dropped = added.without(["F_C"])
+    assert dropped.names == base.names
+    np.testing.assert_array_equal(dropped.W, base.W)
+    with pytest.raises(DataError, match="already"):
+        added.with_term(Coulomb())
+    with pytest.raises(DataError, match="not in the design"):
+        added.without(["nope"])
+
+
+def test_too_few_samples_after_trim_is_a_clear_error():
+    s = concat([_exp(0, n=300)])
+    with pytest.raises(DataError, match="too few"):
+        build_design(usual_model(), s, cutoff_hz=50, decimation=10, trim=140)
