@@ -193,3 +193,17 @@ def test_clean_synthetic_data_get_no_step_and_max_steps_zero_is_a_plain_fit():
     R0 = refine(d, lib, max_steps=0)
     assert R0.steps == [] and R0.final_model.rel_error_ == pytest.approx(R.rel_error_initial)
     assert "step limit" in R0.stop_reason
+
+
+def test_plots_are_written_for_every_step_and_the_final_residual(tmp_path):
+    from ident.refine_plots import plot_refinement
+
+    d, lib = _bump_design(True)
+    R = refine(d, IdentModel(lib), max_steps=1)
+    paths = plot_refinement(R, tmp_path / "plots")
+    names = [p.name for p in paths]
+    assert names == ["refine_step1_residual.png", "refine_step1_periodogram.png",
+                     "refine_final_residual.png", "refine_final_periodogram.png"]
+    for p in paths:
+        data = p.read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 5000
