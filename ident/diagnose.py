@@ -362,9 +362,7 @@ def diagnose(
     n_eff = effective_n(r)
     rows = []
     for v, x in candidate_variables(s, tau_out).items():
-        rows.append(
-            dependence(r, x, variable=v, bins=bins, discrete=v in DISCRETE, n_eff=n_eff)
-        )
+        rows.append(dependence(r, x, variable=v, bins=bins, discrete=v in DISCRETE, n_eff=n_eff))
     rows.sort(key=lambda d: (d.p_value, -d.statistic))
     y = s.tau if Y is None else Y
     rel = float(np.linalg.norm(r) / max(np.linalg.norm(y), 1e-300))

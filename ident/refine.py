@@ -229,6 +229,10 @@ class Refinement:
             "final_diagnosis": self.final_diagnosis.to_json(),
         }
 
+    def format_table(self) -> str:
+        """Alias of :meth:`format_report` (what ``jointid fit --refine`` prints)."""
+        return self.format_report()
+
     def format_report(self) -> str:
         """Human-readable report of every step."""
         out = [
@@ -696,17 +700,12 @@ def refine(
         rss0 = float(cur.residual_ @ cur.residual_)
 
         # 1. pre-test on the scoring columns (no full-rate rebuild for hopeless candidates)
-        def pretest(c: _Candidate) -> str | None:
-            return _pretest(
-                c,
-                rss0,
-                p_cur,
-                len(cur_design),
-                diag.n_eff,
-                cur.rel_error_,  # noqa: B023
-                alpha / n_cand,
-                min_gain,
-            )  # noqa: B023
+        ctx = (rss0, p_cur, len(cur_design), diag.n_eff, cur.rel_error_, alpha / n_cand,
+               min_gain)
+        why_not = {id(c): _pretest(c, *ctx) for c in cands}
+
+        def pretest(c: _Candidate, _w=why_not) -> str | None:
+            return _w[id(c)]
 
         named = sorted((c for c in cands if not c.generic), key=lambda c: -c.gain)
         generic = sorted((c for c in cands if c.generic), key=lambda c: -c.gain)
