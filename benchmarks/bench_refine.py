@@ -1,0 +1,94 @@
+"""Refinement time for 1e5 and 1e6 raw samples (budget: 1e6 samples < 10 s).
+
+Data: the simulated joint of ``examples/campaign.toml`` (one payload run, ~105 s at 1 kHz)
+with the usual friction and two undeclared effects (position ripple and spring); the 1e6
+case stacks ten such runs with independent measurement noise as ten experiments. The
+design is built once (``build_design``, timed apart); ``refine`` starts from the usual model.
+
+Usage: ``python benchmarks/bench_refine.py [--repeat 3]``. Prints a table of medians.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+import tomllib
+from dataclasses import replace
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from daq.control import ControllerGains  # noqa: E402
+from ident.models import IdentModel, usual_model  # noqa: E402
+from ident.preprocess import build_design  # noqa: E402
+from ident.refine import refine  # noqa: E402
+from ident.signals import Signals  # noqa: E402
+from sim_drivers.offline import simulate  # noqa: E402
+from sim_drivers.plant_config import default_plant  # noqa: E402
+from trajectories.campaign import Campaign  # noqa: E402
+from trajectories.plan import plan_campaign  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def one_run():
+    raw = tomllib.loads((ROOT / "examples" / "campaign.toml").read_text())
+    camp = Campaign.from_dict(raw, "examples/campaign.toml")
+    plan = plan_campaign(camp)
+    p = default_plant()
+    f = replace(p.friction, a_m=1, a_g=1, b_m=0, b_g=0, c_m=18, c_g=18, d_m=0, d_g=0)
+    p = replace(p, friction=f)
+    p = p.with_effect("position_ripple", amplitude_Nm=5.0, period_rad=0.0628, phase_rad=0.4)
+    p = p.with_effect("spring", stiffness_Nm_per_rad=30.0, rest_position_rad=0.2)
+    gains = ControllerGains(**camp.control.gains_kwargs())
+    return simulate(p, plan.reference, gains, seed=0)
+
+
+def signals(run, copies: int, n_target: int) -> Signals:
+    rng = np.random.default_rng(1)
+    parts = []
+    for i in range(copies):
+        n = min(len(run), n_target // copies)
+        tau = run.tau_ref[:n] + (rng.normal(0, 1.0, n) if i else 0.0)
+        parts.append((run.t[:n], run.q[:n], tau, np.full(n, i)))
+    t, q, tau, e = (np.concatenate(x) for x in zip(*parts, strict=True))
+    z = np.zeros_like(q)
+    return Signals(t, q, z, z, tau, z, z, e, revolute=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args()
+    t0 = time.perf_counter()
+    run = one_run()
+    print(f"simulated one run of {len(run)} samples in {time.perf_counter() - t0:.1f} s\n")
+    lib = usual_model(True, payload=False)
+    rows = []
+    for n_target, copies in ((100_000, 1), (1_000_000, 10)):
+        s = signals(run, copies, n_target)
+        t0 = time.perf_counter()
+        d = build_design(lib, s, cutoff_hz=25.0, decimation=20, dq_min=0.02)
+        t_design = time.perf_counter() - t0
+        times, R = [], None
+        for _ in range(args.repeat):
+            t0 = time.perf_counter()
+            R = refine(d, IdentModel(lib), max_steps=5)
+            times.append(time.perf_counter() - t0)
+        steps = ", ".join(st.effect for st in R.steps)
+        rows.append((len(s), len(d), t_design, statistics.median(times), min(times),
+                     max(times), steps, R.rel_error_initial, R.rel_error_final))
+    print(f"{'raw':>9} {'decimated':>9} {'design s':>9} {'refine s (median)':>18} "
+          f"{'min':>6} {'max':>6}  rel. error     steps")
+    for n, m, td, med, lo, hi, steps, e0, e1 in rows:
+        print(f"{n:>9} {m:>9} {td:>9.2f} {med:>18.2f} {lo:>6.2f} {hi:>6.2f}  "
+              f"{100 * e0:.2f}->{100 * e1:.2f} %  {steps}")
+    print(f"\nratio 1e6/1e5 (median refine time): {rows[1][3] / rows[0][3]:.1f}")
+
+
+if __name__ == "__main__":
+    main()
