@@ -31,6 +31,9 @@ Modes and units
   than 0x6065 [counts] is a fault 0x8611 (0xFFFFFFFF disables the check, and so does 0,
   the default of several vendor files). Enabling operation (transitions 4, 16) sets 0x607A
   to the actual position, so the loop starts where the joint is.
+- CSV (9): a PI velocity loop ``tau = kd e + ki int(e) + torque_from_permille(0x60B2)``,
+  ``e = v_target - dq``, ``ki = kd 2 pi 3 Hz``, ``v_target`` from 0x60FF + 0x60B1
+  [counts/s], clamped to 0x6072 like CSP (no integration while clamped).
 - Other advertised modes are accepted but produce no torque in the simulation.
 - 0x6064 position actual [counts] = ``plant.encoder_counts`` (wrapped to int32); 0x606C
   velocity actual [counts/s] = ``round(dq * counts_per_rad)``; 0x6077 torque actual and 0x6074
@@ -152,6 +155,7 @@ _PARAM_ATTRS = {
 _PDO_NOT_VALID = 0x80000000
 _RECORD_CHUNK = 65536
 _QS_DONE_SPEED = 1e-3  # [rad/s]
+_CSV_INTEGRAL_RATE = 2.0 * math.pi * 3.0  # CSV loop: ki = kd * this [1/s]
 
 _RECORD_FIELDS: tuple[tuple[str, Any], ...] = (
     ("cycle", np.int64),  # drive cycle index
@@ -330,6 +334,7 @@ class SimulatedDrive:
         self.torque_actual = 0
         self.current_actual = 0
         self.tau_cmd = 0.0
+        self._v_int = 0.0  # CSV integral term [N m]
         self._internal_limit = False
         self._following_error = False
         self._heartbeat_stopped = False
@@ -904,12 +909,32 @@ class SimulatedDrive:
                     if limited != self._internal_limit:
                         self._internal_limit = limited
                         self._update_statusword()
+            elif mode == 9:
+                v_err = (
+                    self.target_velocity + self.velocity_offset
+                ) / self._counts_per_rad - plant.dq
+                self._v_int += self.kd * _CSV_INTEGRAL_RATE * v_err * self.cycle_s
+                tau = (
+                    self.kd * v_err + self._v_int + plant.torque_from_permille(self.torque_offset)
+                )
+                demand = plant.permille_from_torque(tau)
+                limit = self.max_torque
+                limited = demand > limit or -demand > limit
+                if limited:
+                    demand = limit if demand > 0 else -limit
+                    tau = plant.torque_from_permille(demand)
+                    self._v_int -= self.kd * _CSV_INTEGRAL_RATE * v_err * self.cycle_s
+                if limited != self._internal_limit:
+                    self._internal_limit = limited
+                    self._update_statusword()
         elif st is State.QUICK_STOP_ACTIVE:
             tau = -self.kd * plant.dq
             demand = plant.permille_from_torque(tau)
             if 1 <= self.quick_stop_option <= 4 and abs(plant.dq) < _QS_DONE_SPEED:
                 self.cia_state, _ = automatic_transition(st, "quick_stop_done")
                 self._update_statusword()
+        if st is not State.OPERATION_ENABLED or self.mode_display != 9:
+            self._v_int = 0.0
         self.tau_cmd = tau
         self.torque_demand = demand
         if powered:

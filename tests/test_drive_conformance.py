@@ -161,7 +161,7 @@ def test_sdo_reads_every_object_and_writes_back_every_writable_one(rig):
     assert len(values) >= 100
     live = {
         (0x6041, 0): 0x0250,  # switch on disabled + voltage enabled + remote
-        (0x6502, 0): 0x280,
+        (0x6502, 0): 0x380,
         (0x6076, 0): 5000,  # plant_default: 5 N m rated motor torque [mN m]
     }
     for key, value in values.items():
@@ -200,7 +200,7 @@ def test_sdo_aborts_for_missing_objects_and_unsupported_modes(rig):
     rig.node.sdo[0x6060].raw = 10
     assert rig.node.sdo[0x6061].raw == 10
     with pytest.raises(SdoAbortedError) as err:
-        rig.node.sdo[0x6060].raw = 9  # CSV: not advertised by the generic EDS
+        rig.node.sdo[0x6060].raw = 4  # profile torque: not advertised by the generic EDS
     assert err.value.code == 0x06090030
     assert rig.node.sdo[0x6061].raw == 10
 
@@ -462,3 +462,18 @@ def test_drive_configuration_errors_name_the_problem(tmp_path):
         load_drive_od(tmp_path / "no6041.eds", 1)
     with pytest.raises(DriveError, match="canopen.Network or can.BusABC"):
         SimulatedDrive("vcan0", 1, object())
+
+
+def test_csv_follows_target_velocity(rig):
+    node = rig.node
+    configure_pdo(node, "rpdo", 1, [(0x6040, 0), (0x60FF, 0)])
+    _enable(rig, 9)
+    v = rig.plant.rad_to_counts(0.5)  # [counts/s]
+    master = LockstepMaster(
+        rig.network, 0x200 + NODE, "<Hi", {0x280 + NODE: ("<hi", ("6077", "606C"))}
+    )
+    res = master.run(0x0F, np.full(1500, v))
+    master.close()
+    assert np.all(rig.drive.record["mode"] == 9)
+    vel = res.received["606C"][500:]
+    assert abs(np.median(vel) - v) < 0.05 * v
