@@ -77,9 +77,15 @@ class Step:
     variable : str
         Candidate variable of the added effect (one of the seven).
     strength : float
-        Share of the residual variance explained by that variable before the step (η²).
+        Share of the residual sum of squares the added effect removes, in [0, 1] (how
+        strongly the residual depended on the variable through this effect).
     statistic, p_value : float
-        F statistic and p-value of the variable's dependence before the step.
+        Binned dependence of the residual on the variable before the step (diagnosis
+        table row: F statistic and p-value; ``binned_explained`` its η²). Effects odd in
+        a sign variable (direction, quadrant) interact with other variables and may show
+        little binned dependence although the effect itself is strong.
+    binned_explained : float
+        η² of the diagnosis row of the variable.
     leading_variable : str
         The top variable of the diagnosis table before the step.
     effect : str
@@ -122,6 +128,7 @@ class Step:
     validation_rel_error_after: float | None
     diagnosis: Diagnosis = field(repr=False)
     generic: bool = False
+    binned_explained: float = math.nan
 
     def to_json(self) -> dict[str, Any]:
         """The step as in ``refinement.steps[]`` of the fit JSON."""
@@ -133,8 +140,9 @@ class Step:
             "parameters": self.parameters,
             "strength": {
                 "explained": _num(self.strength),
-                "statistic": _num(self.statistic),
-                "p_value": _num(self.p_value),
+                "binned_explained": _num(self.binned_explained),
+                "binned_statistic": _num(self.statistic),
+                "binned_p_value": _num(self.p_value),
             },
             "leading_variable": self.leading_variable,
             "test": {"F": _num(self.f_statistic), "p_value": _num(self.f_p_value)},
@@ -248,9 +256,10 @@ class Refinement:
         for i, s in enumerate(self.steps, 1):
             out.append("")
             out.append(
-                f"step {i}: residual depends on {s.variable} "
-                f"(explains {100 * s.strength:.1f}% of it, F={s.statistic:.3g}, "
-                f"p={s.p_value:.1e}; leading variable: {s.leading_variable})"
+                f"step {i}: residual depends on {s.variable}: the effect explains "
+                f"{100 * s.strength:.1f} % of it (binned on {s.variable}: "
+                f"{100 * s.binned_explained:.1f} %, p={s.p_value:.1e}; leading variable of "
+                f"the diagnosis: {s.leading_variable})"
             )
             out.append(
                 f"  added {s.effect}: {s.term.describe()}"
@@ -787,7 +796,8 @@ def refine(
         after_bands = _bands(m1, d1, vmax)
         step = Step(
             variable=e.variable,
-            strength=dep.explained,
+            strength=1.0 - float(m1.residual_ @ m1.residual_) / rss0 if rss0 > 0 else 0.0,
+            binned_explained=dep.explained,
             statistic=dep.statistic,
             p_value=dep.p_value,
             leading_variable=diag.table[0].variable,
