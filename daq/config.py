@@ -13,7 +13,7 @@ project's generic EDS, cyclic synchronous torque)::
     heartbeat_timeout_s = 0.5     # watchdog: no heartbeat for this long [s] -> stop
     max_following_error = 0.2     # watchdog: |q_ref - q| above this [rad] or [m] -> stop
     quick_stop_cycles = 2         # cycles of quick stop before disable voltage
-    lockstep_wait_s = 0.05        # lockstep: wall time to wait for the TPDOs of one cycle [s]
+    lockstep_wait_s = 0.5         # lockstep: wall time to wait for the TPDOs of one cycle [s]
     chunk_seconds = 1.0           # MCAP chunk length [s of data] (lost at most on SIGKILL)
     cpu = -1                      # pin the process to this CPU (-1: the last allowed one;
                                   # -2: do not pin)
@@ -188,7 +188,7 @@ _DAQ = Table(
         "heartbeat_timeout_s": Field(float, required=False, default=0.5, gt=0, unit="s"),
         "max_following_error": Field(float, required=False, default=0.2, gt=0, unit="rad"),
         "quick_stop_cycles": Field(int, required=False, default=2, ge=1, le=1000),
-        "lockstep_wait_s": Field(float, required=False, default=0.05, gt=0, unit="s"),
+        "lockstep_wait_s": Field(float, required=False, default=0.5, gt=0, unit="s"),
         "chunk_seconds": Field(float, required=False, default=1.0, gt=0, unit="s"),
         "cpu": Field(int, required=False, default=-1, ge=-2),
         "limits": _LIMITS,

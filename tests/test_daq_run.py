@@ -48,6 +48,7 @@ def drive_cycles(result, run):
     rec = result.sim_records[0]
     idx = np.searchsorted(rec["cycle"], c0 + a.cycle)
     assert np.array_equal(rec["cycle"][idx], c0 + a.cycle)
+    assert not np.any(a.flags & 1), f"TPDO missing at cycles {a.cycle[(a.flags & 1) > 0]}"
     return a, rec, idx
 
 
