@@ -22,13 +22,13 @@ def test_example_loads_with_the_paper_joint_3_figures():
     assert c.name == "rx130l-joint3" and c.source == str(EXAMPLE)
     assert c.joint.kind == "revolute" and c.joint.revolute and c.joint.unit == "rad"
     assert c.joint.limits.max_velocity == 1.2
-    assert c.joint.limits.position == (-1.2, 1.4)
-    assert c.joint.start == pytest.approx(0.1)  # default: centre of the position range
+    assert c.joint.limits.position == (-1.0, 2.4)
+    assert c.joint.start == pytest.approx(0.7)  # default: centre of the position range
     assert [(p.mass_kg, p.arm_m) for p in c.payloads] == [
         (0.0, 1.277), (3.4584, 1.277), (6.970, 1.277)]
     assert c.cycle_s == c.control.cycle_s == 0.001
     assert [type(s) for s in c.segments] == [TrapezoidSegment, TrapezoidSegment, SineSegment]
-    assert c.segments[0].speeds == (0.08,) and c.segments[0].range == (-1.1, 1.3)
+    assert c.segments[0].speeds == (0.08,) and c.segments[0].range == (-0.9, 2.3)
     assert c.daq == {}
     with pytest.raises(dataclasses.FrozenInstanceError):
         c.name = "other"  # type: ignore[misc]
@@ -38,28 +38,28 @@ def test_control_settings_convert_to_controller_gains():
     c = load_campaign(EXAMPLE)
     g = ControllerGains(**c.control.gains_kwargs())
     assert (g.kp, g.kd, g.J_ff, g.MX_ff, g.MY_ff, g.Fc_ff, g.Fv_ff) == (
-        6000.0, 200.0, 30.0, 21.0, 0.0, 0.0, 0.0)
+        20000.0, 1000.0, 31.0, 21.1, 0.0, 25.0, 40.0)
     assert g.velocity_cutoff_hz == 100.0
 
 
 def test_optional_keys_start_daq_and_feedforward(tmp_path):
     daq = '[daq]\nbus = { interface = "virtual" }\n\n'
-    text = TEXT.replace("# start = 0.1 ", "start = -0.5 ").replace(
+    text = TEXT.replace("# start = 0.7 ", "start = -0.5 ").replace(
         "[control.feedforward]", daq + "[control.feedforward]")
-    text = text.replace("J = 30.0", "Fc = 12.5")
+    text = text.replace("J = 31.0", "MY = -0.8").replace("Fc = 25.0", "Fc = 12.5")
     f = tmp_path / "c.toml"
     f.write_text(text)
     c = load_campaign(f)
     assert c.joint.start == -0.5
     assert c.daq == {"bus": {"interface": "virtual"}}
-    assert c.control.feedforward == {"J": 0.0, "MX": 21.0, "MY": 0.0, "Fc": 12.5, "Fv": 0.0}
+    assert c.control.feedforward == {"J": 0.0, "MX": 21.1, "MY": -0.8, "Fc": 12.5, "Fv": 40.0}
 
 
 # (what to replace in the example, replacement, key named in the message, expected text)
 MISTAKES = {
     "unknown top-level key": ('name = "rx130l-joint3"', 'name = "x"\ncolour = "red"',
                               "colour", "unknown key"),
-    "unknown nested key": ("J = 30.0 ", "Jm = 30.0 ", "control.feedforward.Jm", "unknown key"),
+    "unknown nested key": ("J = 31.0 ", "Jm = 31.0 ", "control.feedforward.Jm", "unknown key"),
     "wrong type": ("max_velocity = 1.2 ", 'max_velocity = "fast" ',
                    "joint.limits.max_velocity", "a number > 0"),
     "boolean as number": ("cycle_s = 0.001 ", "cycle_s = true ", "control.cycle_s", "a number"),
@@ -71,18 +71,18 @@ MISTAKES = {
                        "joint.limits.max_velocity", "> 0"),
     "zero limit": ("max_jerk = 40.0 ", "max_jerk = 0 ", "joint.limits.max_jerk", "> 0"),
     "negative mass": ("mass_kg = 3.4584", "mass_kg = -3.4584", "payloads[1].mass_kg", ">= 0"),
-    "inverted position range": ("position = [-1.2, 1.4]", "position = [1.4, -1.2]",
+    "inverted position range": ("position = [-1.0, 2.4]", "position = [2.4, -1.0]",
                                 "joint.limits.position", "min < max"),
     "speed above 1": ("speeds = [0.08]", "speeds = [0.08, 1.5]", "segments[0].speeds[1]", "<= 1"),
-    "trapezoid outside range": ("range = [-1.1, 1.3]", "range = [-1.3, 1.3]",
-                                "segments[0].range", "within joint.limits.position [-1.2, 1.4]"),
-    "inverted trapezoid range": ("range = [-1.1, 1.3]", "range = [1.3, -1.1]",
+    "trapezoid outside range": ("range = [-0.9, 2.3]", "range = [-1.3, 2.3]",
+                                "segments[0].range", "within joint.limits.position [-1, 2.4]"),
+    "inverted trapezoid range": ("range = [-0.9, 2.3]", "range = [2.3, -0.9]",
                                  "segments[0].range", "low < high"),
-    "sine outside range": ("amplitude = 1.1", "amplitude = 1.4", "segments[2].amplitude",
+    "sine outside range": ("amplitude = 1.6", "amplitude = 1.8", "segments[2].amplitude",
                            "center +/- amplitude within joint.limits.position"),
     "unknown segment kind": ('kind = "sine"', 'kind = "square"', "segments[2].kind",
                              "'trapezoid', 'sine'"),
-    "start outside range": ("# start = 0.1 ", "start = 2.0 ", "joint.start", "within"),
+    "start outside range": ("# start = 0.7 ", "start = 2.6 ", "joint.start", "within"),
     "empty name": ('name = "rx130l-joint3"', 'name = ""', "name", "non-empty"),
 }
 

@@ -47,10 +47,10 @@ BAD = {
     "unknown key": ("[joint.limits]", "[joint.limits]\nmax_speed = 3", "joint.limits.max_speed"),
     "wrong type": ("max_acceleration = 4.0 ", 'max_acceleration = "4" ',
                    "joint.limits.max_acceleration"),
-    "missing field": ("kd = 200.0 ", "", "control.kd"),
+    "missing field": ("kd = 1000.0 ", "", "control.kd"),
     "zero limit": ("max_velocity = 1.2 ", "max_velocity = 0.0 ", "joint.limits.max_velocity"),
-    "segment outside range": ("center = 0.1", "center = 0.5", "segments[2].amplitude"),
-    "limit exceeded by a sine": ("frequency_hz = 0.15", "frequency_hz = 0.2",
+    "segment outside range": ("center = 0.7", "center = 1.0", "segments[2].amplitude"),
+    "limit exceeded by a sine": ("frequency_hz = 0.1", "frequency_hz = 0.2",
                                  "segments[2] (sine): peak velocity"),
     "TOML syntax": ("cycles = 1\n", "cycles = = 1\n", "invalid TOML"),
 }

@@ -229,7 +229,7 @@ def test_example_plan_is_valid_and_starts_and_ends_at_start(example_plan):
     ref = example_plan.reference
     joint = example_plan.campaign.joint
     assert_valid(ref, joint)
-    assert ref.q[0] == joint.start == pytest.approx(0.1)
+    assert ref.q[0] == joint.start == pytest.approx(0.7)
     assert ref.q[-1] == pytest.approx(joint.start, abs=1e-9)
     assert ref.segment_names == ref.segments == (
         "segments[0] (trapezoid)", "segments[1] (trapezoid)", "segments[2] (sine)", "return")
@@ -242,7 +242,7 @@ def test_example_plan_is_valid_and_starts_and_ends_at_start(example_plan):
 
 def test_example_meets_acceptance_figures(example_plan):
     s = example_plan.summary()
-    assert 60.0 <= s.run_duration_s <= 120.0
+    assert 60.0 <= s.run_duration_s <= 150.0
     assert s.total_duration_s == pytest.approx(3 * s.run_duration_s)
     assert s.band_edges == BANDS == (0.0, 0.1, 0.35, 1.0)
     assert sum(s.band_share) == pytest.approx(1.0)
@@ -250,7 +250,9 @@ def test_example_meets_acceptance_figures(example_plan):
     assert min(s.band_coverage) >= 0.80
     assert s.peak_dq <= 1.2 * (1 + REL) and s.peak_ddq <= 4.0 * (1 + REL)
     assert s.peak_jerk <= 40.0 * (1 + 1e-6)
-    assert s.q_min >= -1.2 and s.q_max <= 1.4
+    assert s.q_min >= -1.0 and s.q_max <= 2.4
+    # the range crosses pi/2, where gravity changes sign (motor and generator quadrants)
+    assert s.q_min < math.pi / 2 < s.q_max
     assert len(s.peak_torque) == 3 and s.peak_torque[0] < s.peak_torque[1] < s.peak_torque[2]
     # both directions in every band (motor and generator quadrants against gravity)
     ref = example_plan.reference
@@ -269,7 +271,10 @@ def test_quick_campaign_is_short_with_slow_moves_both_ways():
     plan = plan_campaign(q)
     ref = plan.reference
     assert_valid(ref, q.joint)
-    assert 8.0 <= ref.duration_s <= 16.0
+    assert ref.duration_s <= 0.3 * plan_campaign(c).reference.duration_s
+    # the sine keeps the whole range covered (gravity and position effects stay visible)
+    lo, hi = c.joint.limits.position
+    assert ref.q.max() - ref.q.min() >= 0.8 * (hi - lo)
     slow = (np.abs(ref.dq) > 0.01 * 1.2) & (np.abs(ref.dq) < 0.1 * 1.2)
     assert (slow & (ref.dq > 0)).sum() * ref.cycle_s > 1.0
     assert (slow & (ref.dq < 0)).sum() * ref.cycle_s > 1.0

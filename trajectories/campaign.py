@@ -284,9 +284,10 @@ class Campaign:
         return self.joint.limits
 
     def quick(self) -> Campaign:
-        """A short version for smoke runs and demos (about 10-15 s per payload run).
+        """A short version for smoke runs and demos (about 25 s per payload run).
 
-        See :func:`shorten`; keeps low-velocity moves in both directions.
+        See :func:`shorten`; keeps low-velocity moves in both directions and, through the
+        sines, the whole position range.
         """
         return shorten(self, QUICK_FACTOR)
 
@@ -494,19 +495,18 @@ QUICK_FACTOR = 0.12
 def shorten(campaign: Campaign, factor: float) -> Campaign:
     """Scale a campaign down for quick runs; the result stays within the joint limits.
 
-    - trapezoid segments: range span x ``factor`` around its centre, only the lowest and
-      the highest speed kept (so low-velocity moves in both directions remain), one cycle,
-      dwell x ``factor``;
-    - sine segments: amplitude x ``sqrt(factor)`` around the same centre (the sine keeps
-      a wider position range, where gravity changes), frequency raised until A w, A w^2
-      or A w^3 reaches 90 % of its limit (never lowered), ``max(1, round(periods x
-      factor))`` periods.
+    - trapezoid segments: only the lowest speed is kept (low-velocity moves in both
+      directions, where dry friction changes), across the range span x ``factor`` around
+      its centre, one cycle, dwell x ``factor``;
+    - sine segments: the full amplitude and centre (the whole position range stays covered,
+      so gravity and position-dependent effects remain identifiable), one period, the
+      frequency raised until A w, A w^2 or A w^3 reaches 90 % of its limit (never lowered).
 
     Parameters
     ----------
     campaign : Campaign
     factor : float
-        In (0, 1]; 1 keeps the geometry (still trims speeds and cycles).
+        In (0, 1]: the share of each trapezoid's range kept.
 
     Returns
     -------
@@ -521,16 +521,12 @@ def shorten(campaign: Campaign, factor: float) -> Campaign:
         if isinstance(seg, TrapezoidSegment):
             mid = 0.5 * (seg.range[0] + seg.range[1])
             half = 0.5 * (seg.range[1] - seg.range[0]) * factor
-            speeds = (min(seg.speeds), max(seg.speeds))
-            if speeds[0] == speeds[1]:
-                speeds = speeds[:1]
-            out.append(replace(seg, range=(mid - half, mid + half), speeds=speeds,
+            out.append(replace(seg, range=(mid - half, mid + half), speeds=(min(seg.speeds),),
                                cycles=1, dwell_s=seg.dwell_s * factor))
         else:
-            a = seg.amplitude * math.sqrt(factor)
+            a = seg.amplitude
             w = min(0.9 * lim.max_velocity / a, math.sqrt(0.9 * lim.max_acceleration / a),
                     (0.9 * lim.max_jerk / a) ** (1.0 / 3.0))
             w = max(w, seg.omega)  # never slower than the original (its peaks fit already)
-            out.append(replace(seg, amplitude=a, frequency_hz=w / (2.0 * math.pi),
-                               periods=max(1, round(seg.periods * factor))))
+            out.append(replace(seg, frequency_hz=w / (2.0 * math.pi), periods=1))
     return replace(campaign, segments=tuple(out), name=f"{campaign.name} (quick)")
