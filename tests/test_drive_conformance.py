@@ -477,3 +477,63 @@ def test_csv_follows_target_velocity(rig):
     assert np.all(rig.drive.record["mode"] == 9)
     vel = res.received["606C"][500:]
     assert abs(np.median(vel) - v) < 0.05 * v
+
+
+def test_canopen_pdomap_save_on_record_maps_is_accepted_and_used(rig):
+    node = rig.node
+    node.tpdo.read()
+    tpdo = node.tpdo[3]
+    tpdo.clear()
+    tpdo.add_variable(0x6061)
+    tpdo.add_variable(0x6078)
+    tpdo.trans_type = 1
+    tpdo.enabled = True
+    tpdo.save()  # canopen's own sequence: invalidate, type, count 0, entries, count, valid
+    node.tpdo.read()
+    assert [(v.index, v.length) for v in node.tpdo[3].map] == [(0x6061, 8), (0x6078, 16)]
+    t3 = _frames(rig, 0x380 + NODE)
+    node.sdo[0x6060].raw = 10
+    node.nmt.state = "OPERATIONAL"
+    rig.network.send_message(0x80, b"")
+    _barrier(rig)
+    assert [struct.unpack("<bh", d) for d in _drain(t3)] == [(10, 0)]
+
+
+def test_two_drives_share_one_sync():
+    from sim_drivers.drive import SimulatedDrive, open_virtual_bus
+    from sim_drivers.plant import JointPlant
+    from sim_drivers.plant_config import load_plant
+    from sim_drivers.testing import DEFAULT_PLANT
+
+    rig = make_rig(node_id=NODE)
+    bus2 = open_virtual_bus(rig.channel)
+    drive2 = SimulatedDrive(bus2, NODE + 1, JointPlant(load_plant(DEFAULT_PLANT), 0.001, seed=2))
+    try:
+        drive2.start()
+        node2 = rig.network.add_node(NODE + 1, str(generic_eds_path()))
+        for node in (rig.node, node2):
+            node.sdo[0x6060].raw = 10
+            for cw in (6, 7, 15):
+                node.sdo[0x6040].raw = cw
+        rig.network.nmt.send_command(0x01)  # start all nodes
+        _barrier(rig)
+        got: queue.SimpleQueue = queue.SimpleQueue()
+        cobs = [0x180 + NODE, 0x280 + NODE, 0x181 + NODE, 0x281 + NODE]
+        for cob in cobs:
+            rig.network.subscribe(cob, lambda c, d, t: got.put((c, bytes(d))))
+        counts = {NODE: [], NODE + 1: []}
+        for i in range(1000):
+            rig.network.send_message(0x200 + NODE, struct.pack("<Hh", 15, 450 + i % 50))
+            rig.network.send_message(0x201 + NODE, struct.pack("<Hh", 15, 380 - i % 30))
+            rig.network.send_message(0x80, b"")
+            frames = dict(got.get(timeout=2) for _ in range(4))
+            assert sorted(frames) == sorted(cobs)
+            counts[NODE].append(struct.unpack("<Hi", frames[0x180 + NODE])[1])
+            counts[NODE + 1].append(struct.unpack("<Hi", frames[0x181 + NODE])[1])
+        assert np.array_equal(counts[NODE], rig.drive.record["counts"])
+        assert np.array_equal(counts[NODE + 1], drive2.record["counts"])
+        assert rig.drive.cycle == drive2.cycle == 1000
+    finally:
+        drive2.stop()
+        bus2.shutdown()
+        rig.close()
