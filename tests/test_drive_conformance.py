@@ -142,6 +142,7 @@ def test_reset_communication_sends_bootup_and_restores_comm_objects(rig):
 
 
 def test_reset_node_restores_application_objects_and_state_machine(rig):
+    rig.node.sdo[0x1017].raw = 0  # no heartbeat between the drain and the boot-up
     hb = _frames(rig, 0x700 + NODE)
     rig.node.sdo[0x6065].raw = 1234
     rig.node.sdo[0x6060].raw = 8
@@ -149,6 +150,7 @@ def test_reset_node_restores_application_objects_and_state_machine(rig):
     _drain(hb)
     rig.node.nmt.state = "RESET"
     assert hb.get(timeout=2) == b"\x00"
+    assert hb.get(timeout=2) == b"\x7f"  # reset node restored 0x1017 = 100 ms
     assert rig.node.sdo[0x6065].raw == 50000
     assert rig.node.sdo[0x6061].raw == 0
     assert _state(rig) is State.SWITCH_ON_DISABLED
