@@ -579,6 +579,7 @@ class Engine:
                             break
                 if self.interrupted and not self._stop_reason:
                     self._stop_reason = ("interrupted", "interrupted by the operator (SIGINT)")
+                    self._fault_cycle = cycle
                     log.event(cycle, t, "operator", "SIGINT: stopping")
             cycle += 1
 
@@ -598,6 +599,7 @@ class Engine:
                                        self.load.share, missed, phase))
 
         self._stop_reason: tuple[str, str] | None = None
+        self._fault_cycle = -1
         n_plan = len(ref.q)
         try:
             # 1. enable, holding the position measured at the first answer
