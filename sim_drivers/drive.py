@@ -531,6 +531,9 @@ class SimulatedDrive:
             if application or 0x1000 <= index <= 0x1FFF:
                 del store[index]
         if application:
+            for name in self._extra_names.values():
+                self.__dict__.pop(name, None)
+            self._extra_names.clear()
             self.error_code = 0
             self.error_register = 0
             self._internal_limit = self._following_error = False
