@@ -65,6 +65,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("jointid: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `jointid plan ... | head`: the reader left; not an error
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 0
     except _user_errors() as exc:
         if isinstance(exc, OSError) and exc.filename:
             msg = f"{exc.filename}: {exc.strerror or exc}"

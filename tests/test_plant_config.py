@@ -98,7 +98,7 @@ _DELETE = object()
 @pytest.mark.parametrize(
     "path, value, key, expect",
     [
-        ("body.Jz", 1.0, "body.Jz", "no such key"),
+        ("body.Jz", 1.0, "body.Jz", "unknown key"),
         ("friction.c_m", "21", "friction.c_m", "a number"),
         ("drive.encoder_counts_per_rev", 4096.5, "drive.encoder_counts_per_rev", "an integer"),
         ("drive.seed", True, "drive.seed", "an integer"),
@@ -113,7 +113,7 @@ _DELETE = object()
         ("effects.spring", {"enabled": True, "stiffness_Nm_per_rad": 3.0},
          "effects.spring.rest_position_rad", "when enabled = true"),
         ("effects.torque_lag.time_constant_s", 0.0, "effects.torque_lag.time_constant_s", "> 0"),
-        ("effects.wobble", {}, "effects.wobble", "no such key"),
+        ("effects.wobble", {}, "effects.wobble", "unknown key"),
         ("effects.position_ripple.enabled", "yes", "effects.position_ripple.enabled",
          "a boolean"),
     ],
