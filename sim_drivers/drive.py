@@ -87,7 +87,7 @@ from sim_drivers.faults import (
     FaultInjector,
     error_register,
 )
-from sim_drivers.od import STRUCT_CODE, DriveOD, load_drive_od, struct_code
+from sim_drivers.od import STRUCT_CODE, DriveConfigError, DriveOD, load_drive_od, struct_code
 
 logger = logging.getLogger(__name__)
 
@@ -622,12 +622,10 @@ class SimulatedDrive:
         receive = index < 0x1A00
         if subindex == 0:
             obj = self.dod.od[index]
-            slots = max((s for s in obj.subindices if s > 0), default=0) if hasattr(
-                obj, "subindices"
-            ) else 0
+            slots = max((s for s in getattr(obj, "subindices", ()) if s > 0), default=0)
             if isinstance(obj, canopen.objectdictionary.ODArray):
                 slots = max(slots, int(obj[0].default or 0))
-            if value > max(slots, 0) or value > 64:
+            if value > slots or value > 64:
                 raise SdoAbortedError(0x06090031)
             bits = 0
             for s in range(1, value + 1):
@@ -720,7 +718,10 @@ class SimulatedDrive:
             if cob & _PDO_NOT_VALID or 0x1600 + n not in od:
                 continue
             trans = int(self._stored(comm, 2) or 0) if self._has(comm, 2) else 255
-            st, names = self._entries(0x1600 + n)
+            layout = self._layout_or_none(0x1600 + n)
+            if layout is None:
+                continue
+            st, names = layout
             rx = _RxPdo(n + 1, cob & 0x7FF, trans <= 240, st, names)
             self._rx.append(rx)
             if rx.sync:
@@ -734,13 +735,28 @@ class SimulatedDrive:
             if cob & _PDO_NOT_VALID or 0x1A00 + n not in od:
                 continue
             trans = int(self._stored(comm, 2) or 0) if self._has(comm, 2) else 255
-            st, names = self._entries(0x1A00 + n)
+            layout = self._layout_or_none(0x1A00 + n)
+            if layout is None:
+                continue
+            st, names = layout
             if trans <= 240:
                 tx = _TxPdo(n + 1, cob & 0x7FF, max(trans, 1), st, names)
                 self._tx_sync.append(tx)
             elif trans >= 254:
                 self._tx_event.append(_TxPdo(n + 1, cob & 0x7FF, 0, st, names))
             # 252/253 (RTR only): not served, LocalNode drops remote frames
+
+    def _layout_or_none(self, map_index: int) -> tuple[struct.Struct, tuple] | None:
+        """Layout of one mapping object; None for an empty mapping (sub 0 = 0: the PDO is not
+        used) or, logged, when a file's own default mapping names an object the simulation
+        cannot pack (missing, or no fixed-size type)."""
+        try:
+            st, names = self._entries(map_index)
+        except (DriveConfigError, SdoAbortedError) as exc:
+            logger.warning("node %d: PDO mapping 0x%04X not served: %s", self.node_id,
+                           map_index, exc)
+            return None
+        return (st, names) if st.size else None
 
     def _make_rx_handler(self, rx: _RxPdo) -> Callable:
         if rx.sync:

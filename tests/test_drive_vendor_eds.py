@@ -171,3 +171,23 @@ def test_fault_emcy_and_reset(rig, vendor):
     rig.node.sdo[0x6040].raw = 0x80
     assert _state(rig) is State.SWITCH_ON_DISABLED
     assert rig.node.emcy.active == []
+
+
+def test_the_files_own_default_pdo_set_is_served(rig, vendor):
+    """No remapping: NMT start builds the layouts from the file's defaults (DCF values for
+    Elmo), synchronous TPDOs go out on every SYNC, event TPDOs once (content unchanged)."""
+    node = rig.node
+    node.tpdo.read()
+    sync_cobs, event_cobs = [], []
+    for tpdo in node.tpdo.map.values():
+        if tpdo.enabled and len(tpdo.map):
+            (sync_cobs if tpdo.trans_type <= 240 else event_cobs).append(tpdo.cob_id)
+    frames: list[int] = []
+    for cob in sync_cobs + event_cobs:
+        rig.network.subscribe(cob, lambda c, d, t: frames.append(c))
+    node.nmt.state = "OPERATIONAL"
+    for _ in range(3):
+        rig.network.send_message(0x80, b"")
+    node.sdo[0x1000].raw  # noqa: B018 - barrier
+    assert rig.drive.cycle == 3
+    assert sorted(frames) == sorted(sync_cobs * 3 + event_cobs)
