@@ -539,3 +539,19 @@ def test_two_drives_share_one_sync():
         drive2.stop()
         bus2.shutdown()
         rig.close()
+
+
+def test_short_rpdo_is_ignored_and_empty_tpdo_is_not_sent(rig):
+    node = rig.node
+    configure_pdo(node, "tpdo", 4, [])  # valid COB-ID, nothing mapped
+    t4 = _frames(rig, 0x480 + NODE)
+    node.sdo[0x6060].raw = 10
+    node.nmt.state = "OPERATIONAL"
+    rig.network.send_message(0x200 + NODE, struct.pack("<Hh", 0x0F, 123))
+    rig.network.send_message(0x80, b"")
+    rig.network.send_message(0x200 + NODE, b"\x0f\x00")  # 2 of 4 bytes
+    rig.network.send_message(0x80, b"")
+    _barrier(rig)
+    assert rig.drive.rx_length_errors == 1
+    assert list(rig.drive.record["target_torque"]) == [123, 123]
+    assert _drain(t4) == []
