@@ -555,3 +555,23 @@ def test_short_rpdo_is_ignored_and_empty_tpdo_is_not_sent(rig):
     assert rig.drive.rx_length_errors == 1
     assert list(rig.drive.record["target_torque"]) == [123, 123]
     assert _drain(t4) == []
+
+
+def test_serve_starts_drives_that_a_master_reaches():
+    import canopen
+
+    from sim_drivers.serve import start_drives
+    from sim_drivers.testing import unique_channel
+
+    channel = unique_channel()
+    with start_drives("virtual", channel, [11, 12], q0=0.1) as served:
+        net = canopen.Network()
+        net.NOTIFIER_CYCLE = 0.05
+        net.connect(interface="virtual", channel=channel)
+        try:
+            for node_id, drive in zip((11, 12), served.drives, strict=True):
+                node = net.add_node(node_id, str(generic_eds_path()))
+                assert node.sdo[0x6041].raw == 0x0250
+                assert node.sdo[0x6064].raw == drive.plant.rad_to_counts(0.1)
+        finally:
+            net.disconnect()

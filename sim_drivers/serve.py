@@ -1,0 +1,120 @@
+"""Serve simulated CiA 402 drives on any python-can interface until interrupted.
+
+``python -m sim_drivers.serve --interface socketcan --channel vcan0 --node-id 1 2``
+puts one simulated joint per node ID on the bus (generic EDS and default plant unless
+``--eds`` / ``--plant`` are given), so a master in another process (``jointid``, a real PLC,
+``candump``) can talk to them. Each drive opens its own bus object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import threading
+from collections.abc import Sequence
+from pathlib import Path
+
+import can
+
+from sim_drivers.drive import SimulatedDrive
+from sim_drivers.plant import JointPlant
+from sim_drivers.plant_config import load_plant
+
+DEFAULT_PLANT = Path(__file__).with_name("data") / "plant_default.toml"
+
+
+class Served:
+    """Drives started by :func:`start_drives`; :meth:`close` stops them and shuts their buses."""
+
+    def __init__(self, drives: list[SimulatedDrive], buses: list[can.BusABC]) -> None:
+        self.drives = drives
+        self.buses = buses
+
+    def close(self) -> None:
+        for drive in self.drives:
+            drive.stop()
+        for bus in self.buses:
+            bus.shutdown()
+
+    def __enter__(self) -> Served:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def start_drives(
+    interface: str,
+    channel: str,
+    node_ids: Sequence[int],
+    *,
+    eds: str | Path | None = None,
+    plant: str | Path | None = None,
+    cycle_s: float = 0.001,
+    q0: float = 0.0,
+    bitrate: int | None = None,
+) -> Served:
+    """Start one simulated drive per node ID on ``interface``/``channel``.
+
+    Parameters
+    ----------
+    interface, channel : str
+        python-can interface name and channel (``"virtual"``, ``"socketcan"``/``"vcan0"``...).
+    node_ids : sequence of int
+        CANopen node IDs, 1-127.
+    eds, plant : path or None
+        EDS/DCF and plant file (defaults: generic EDS, ``sim_drivers/data/plant_default.toml``).
+    cycle_s : float
+        SYNC period the plants are stepped with [s].
+    q0 : float
+        Initial joint position [rad] (or [m]).
+    bitrate : int or None
+        Passed to ``can.Bus`` when given.
+    """
+    params = load_plant(plant or DEFAULT_PLANT)
+    drives: list[SimulatedDrive] = []
+    buses: list[can.BusABC] = []
+    kwargs = {} if bitrate is None else {"bitrate": bitrate}
+    served = Served(drives, buses)
+    try:
+        for k, node_id in enumerate(node_ids):
+            bus = can.Bus(interface=interface, channel=channel, **kwargs)
+            buses.append(bus)
+            joint = JointPlant(params, cycle_s, seed=int(params.drive.seed) + k)
+            joint.reset(q0)
+            drive = SimulatedDrive(bus, node_id, joint, eds, cycle_s=cycle_s)
+            drive.start()
+            drives.append(drive)
+    except Exception:
+        served.close()
+        raise
+    return served
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Command line: serve drives until SIGINT/SIGTERM."""
+    ap = argparse.ArgumentParser(prog="python -m sim_drivers.serve", description=__doc__)
+    ap.add_argument("--interface", default="socketcan", help="python-can interface")
+    ap.add_argument("--channel", default="vcan0", help="python-can channel")
+    ap.add_argument("--node-id", type=int, nargs="+", default=[1], help="node IDs 1-127")
+    ap.add_argument("--eds", type=Path, help="EDS/DCF (default: generic jointid EDS)")
+    ap.add_argument("--plant", type=Path, help="plant TOML (default: plant_default.toml)")
+    ap.add_argument("--cycle", type=float, default=0.001, help="SYNC period [s]")
+    ap.add_argument("--q0", type=float, default=0.0, help="initial joint position [rad]")
+    ap.add_argument("--bitrate", type=int, help="bus bitrate [bit/s]")
+    args = ap.parse_args(argv)
+    done = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: done.set())
+    with start_drives(
+        args.interface, args.channel, args.node_id, eds=args.eds, plant=args.plant,
+        cycle_s=args.cycle, q0=args.q0, bitrate=args.bitrate,
+    ) as served:
+        ids = ", ".join(str(d.node_id) for d in served.drives)
+        print(f"serving node(s) {ids} on {args.interface}:{args.channel}; Ctrl-C stops")
+        done.wait()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
