@@ -206,6 +206,7 @@ class CycleIO(can.Listener):
         self.hb_state = [-1] * self.n
         self.emcy: list[tuple[int, int, int]] = []  # (drive, code, register)
         self.log_frames = True
+        self.direct = False  # True: the main thread pumps the bus itself (see pump)
 
     def on_message_received(self, msg: can.Message) -> None:
         cid = msg.arbitration_id
@@ -221,7 +222,7 @@ class CycleIO(can.Listener):
             self.data[d][s] = bytes(data)
             m = self.mask | bit
             self.mask = m
-            if m == self.full:
+            if m == self.full and not self.direct:
                 self.q.put(True)
             return
         d = self.hb_index.get(cid)
@@ -253,6 +254,23 @@ class CycleIO(can.Listener):
         q = self.q
         while not q.empty():
             q.get_nowait()
+
+    def pump(self, bus: can.BusABC, timeout: float) -> bool:
+        """Receive on the calling thread until every TPDO of the cycle arrived or ``timeout``
+        [s] passed; True when complete. Used while the notifier is stopped (one thread
+        hand-off less per cycle than notifier + queue)."""
+        perf = time.perf_counter
+        end = perf() + timeout
+        recv = bus.recv
+        on = self.on_message_received
+        full = self.full
+        while self.mask != full:
+            remaining = end - perf()
+            msg = recv(remaining if remaining > 0 else 0.0)
+            if msg is None:
+                return False
+            on(msg)
+        return True
 
     def wait(self, timeout: float) -> bool:
         try:
@@ -386,10 +404,8 @@ class Engine:
         self.bus.send(self.sync_msg)
         io.sent(now, 0x80, b"")
         self.sync_count += 1
-        if self.paced:
-            ok = io.wait(deadline - time.perf_counter())
-        else:
-            ok = io.wait(self.cfg.lockstep_wait_s)
+        timeout = deadline - time.perf_counter() if self.paced else self.cfg.lockstep_wait_s
+        ok = io.pump(self.bus, timeout) if io.direct else io.wait(timeout)
         return io.full if ok else io.mask
 
     def run_payload(self, index: int, payload: Any, ref: Any, log: RunLog,
@@ -601,6 +617,11 @@ class Engine:
         self._stop_reason: tuple[str, str] | None = None
         self._fault_cycle = -1
         n_plan = len(ref.q)
+        net = self.net
+        if net.notifier is not None:  # the main thread receives itself during the run
+            net.notifier.stop(1.0)
+            net.notifier = None
+        io.direct = True
         try:
             # 1. enable, holding the position measured at the first answer
             do_cycle(0.0, 0.0, 0.0, -1, "disable")  # first SYNC: read the drives' state
@@ -657,6 +678,8 @@ class Engine:
                       "stop" if status != "done" else "info", msg)
         finally:
             wall = time.perf_counter() - t_wall0
+            io.direct = False
+            net.notifier = can.Notifier(net.bus, net.listeners, net.NOTIFIER_CYCLE)
             if timing:
                 lateness = np.array([x[1] for x in timing])
             log.close({
