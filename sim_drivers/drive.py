@@ -848,7 +848,11 @@ class SimulatedDrive:
         )
 
     def fault(self, code: int) -> None:
-        """Enter FAULT (transitions 13 and 14) with error ``code``: 0x603F, 0x1001, EMCY."""
+        """Enter FAULT (transitions 13 and 14) with error ``code``: 0x603F, 0x1001, EMCY.
+
+        The drive calls it from its bus thread; call it from elsewhere only while no SYNC
+        cycle runs (tests, or through :class:`~sim_drivers.faults.FaultInjector`).
+        """
         if self.cia_state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
             return
         self.cia_state, _ = automatic_transition(self.cia_state, "fault")
