@@ -27,8 +27,9 @@ def test_example_loads_with_the_paper_joint_3_figures():
     assert [(p.mass_kg, p.arm_m) for p in c.payloads] == [
         (0.0, 1.277), (3.4584, 1.277), (6.970, 1.277)]
     assert c.cycle_s == c.control.cycle_s == 0.001
-    assert [type(s) for s in c.segments] == [TrapezoidSegment, TrapezoidSegment, SineSegment]
-    assert c.segments[0].speeds == (0.08,) and c.segments[0].range == (-0.9, 2.3)
+    assert [type(s) for s in c.segments] == [TrapezoidSegment] * 3 + [SineSegment]
+    assert c.segments[0].speeds == (0.03,) and c.segments[0].range == (1.0, 2.1)
+    assert c.segments[1].speeds == (0.08,) and c.segments[1].range == (-0.9, 2.3)
     assert c.daq == {}
     with pytest.raises(dataclasses.FrozenInstanceError):
         c.name = "other"  # type: ignore[misc]
@@ -63,7 +64,7 @@ MISTAKES = {
     "wrong type": ("max_velocity = 1.2 ", 'max_velocity = "fast" ',
                    "joint.limits.max_velocity", "a number > 0"),
     "boolean as number": ("cycle_s = 0.001 ", "cycle_s = true ", "control.cycle_s", "a number"),
-    "float for integer": ("periods = 2", "periods = 2.5", "segments[2].periods", "an integer"),
+    "float for integer": ("periods = 2", "periods = 2.5", "segments[3].periods", "an integer"),
     "missing field": ("max_torque = 700.0 ", "", "joint.limits.max_torque", "missing"),
     "missing payload field": ("mass_kg = 0.0\narm_m = 1.277", "mass_kg = 0.0",
                               "payloads[0].arm_m", "missing"),
@@ -73,14 +74,14 @@ MISTAKES = {
     "negative mass": ("mass_kg = 3.4584", "mass_kg = -3.4584", "payloads[1].mass_kg", ">= 0"),
     "inverted position range": ("position = [-1.0, 2.4]", "position = [2.4, -1.0]",
                                 "joint.limits.position", "min < max"),
-    "speed above 1": ("speeds = [0.08]", "speeds = [0.08, 1.5]", "segments[0].speeds[1]", "<= 1"),
+    "speed above 1": ("speeds = [0.08]", "speeds = [0.08, 1.5]", "segments[1].speeds[1]", "<= 1"),
     "trapezoid outside range": ("range = [-0.9, 2.3]", "range = [-1.3, 2.3]",
-                                "segments[0].range", "within joint.limits.position [-1, 2.4]"),
+                                "segments[1].range", "within joint.limits.position [-1, 2.4]"),
     "inverted trapezoid range": ("range = [-0.9, 2.3]", "range = [2.3, -0.9]",
-                                 "segments[0].range", "low < high"),
-    "sine outside range": ("amplitude = 1.6", "amplitude = 1.8", "segments[2].amplitude",
+                                 "segments[1].range", "low < high"),
+    "sine outside range": ("amplitude = 1.6", "amplitude = 1.8", "segments[3].amplitude",
                            "center +/- amplitude within joint.limits.position"),
-    "unknown segment kind": ('kind = "sine"', 'kind = "square"', "segments[2].kind",
+    "unknown segment kind": ('kind = "sine"', 'kind = "square"', "segments[3].kind",
                              "'trapezoid', 'sine'"),
     "start outside range": ("# start = 0.7 ", "start = 2.6 ", "joint.start", "within"),
     "empty name": ('name = "rx130l-joint3"', 'name = ""', "name", "non-empty"),

@@ -28,7 +28,7 @@ def test_plan_prints_the_summary_of_the_example(capsys):
     for line in out.splitlines():
         if "% of vmax" in line:
             assert float(line.split()[-1].rstrip("%")) >= 80.0  # coverage of every band
-    for name in ("segments[0] (trapezoid)", "segments[2] (sine)", "return", "|jerk|"):
+    for name in ("segments[0] (trapezoid)", "segments[3] (sine)", "return", "|jerk|"):
         assert name in out
 
 
@@ -49,9 +49,9 @@ BAD = {
                    "joint.limits.max_acceleration"),
     "missing field": ("kd = 1000.0 ", "", "control.kd"),
     "zero limit": ("max_velocity = 1.2 ", "max_velocity = 0.0 ", "joint.limits.max_velocity"),
-    "segment outside range": ("center = 0.7", "center = 1.0", "segments[2].amplitude"),
+    "segment outside range": ("center = 0.7", "center = 1.0", "segments[3].amplitude"),
     "limit exceeded by a sine": ("frequency_hz = 0.1", "frequency_hz = 0.2",
-                                 "segments[2] (sine): peak velocity"),
+                                 "segments[3] (sine): peak velocity"),
     "TOML syntax": ("cycles = 1\n", "cycles = = 1\n", "invalid TOML"),
 }
 

@@ -33,7 +33,7 @@ def test_example_is_the_default_plant_plus_one_position_ripple():
     assert de.effects.enabled() == ()
     assert ex.without_effects().as_dict() == de.as_dict()
     r = ex.effects.position_ripple
-    assert 4.0 <= r.amplitude_Nm <= 6.0 and r.period_rad == pytest.approx(2 * math.pi / 16)
+    assert 2.0 <= r.amplitude_Nm <= 6.0 and r.period_rad == pytest.approx(2 * math.pi / 16)
     assert "UNDECLARED EFFECT SWITCHED ON" in EXAMPLE.read_text()
     te = ex.truth_effects()
     assert set(te) == {"position_ripple"}
@@ -142,7 +142,7 @@ def test_file_errors(tmp_path):
     with pytest.raises(PlantConfigError, match=r"missing\.toml: cannot read"):
         load_plant(tmp_path / "missing.toml")
     wrong = tmp_path / "wrong.toml"
-    wrong.write_text(EXAMPLE.read_text().replace("amplitude_Nm = 5.0", "amplitude_Nm = 'big'"))
+    wrong.write_text(EXAMPLE.read_text().replace("amplitude_Nm = 2.5", "amplitude_Nm = 'big'"))
     with pytest.raises(PlantConfigError) as info:
         load_plant(wrong)
     assert str(info.value).startswith(f"{wrong}: effects.position_ripple.amplitude_Nm: expected")
