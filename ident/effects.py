@@ -18,7 +18,7 @@ effect                      variable      columns (parameters)
 ``quadrant_load_stribeck``  quadrant      sign(P) τ̂_out exp(-|q̇|/q_s)  (beta_P; eq. 24)
 ``warm_up``                 time          exp(-t/T_w) sign(q̇)  (dF_C_warm; T_w scanned)
 ``torque_lag``              acceleration  dτ̂/dt  (T_lag)
-``generic_<variable>``      any           hat functions of the variable (× sign(q̇))
+``generic_<variable>``      any           hinges max(x - k_j, 0) of the variable (× sign(q̇))
 ==========================  ============  ==============================================
 
 ``τ̂_out`` is the load torque predicted by the declared rigid-body terms with their current
@@ -495,10 +495,14 @@ class TorqueLag(Effect):
 
 
 class GenericBasis(Effect):
-    """Generic basis expansion in one variable: piecewise-linear hat functions on
-    ``n_knots`` knots over [lo, hi] (first hat dropped: the offset carries the constant),
+    """Generic basis expansion in one variable: hinge functions max(x - k_j, 0) at the
+    ``n_knots - 2`` interior knots of a uniform grid over [lo, hi] (x clipped to [lo, hi]),
     optionally multiplied by sign(q̇). Used when the residual depends on a variable but no
     named effect fits.
+
+    The hinges span the piecewise-linear functions of x *without* their constant and linear
+    parts, which the declared model usually carries already (offset, viscous, Coulomb), so
+    the basis is not collinear with it; each parameter is the change of slope at a knot.
 
     Parameters
     ----------
@@ -508,9 +512,9 @@ class GenericBasis(Effect):
     lo, hi : float
         Knot range in the variable's unit.
     n_knots : int
-        Number of knots (≥ 3).
+        Number of grid points (≥ 3), ends included.
     signed : bool
-        Multiply the hats by sign(q̇) (a friction-like effect).
+        Multiply the hinges by sign(q̇) (a friction-like effect).
     tau_out : Prediction, optional
         Load predictor for ``variable="load"``.
     """
@@ -535,18 +539,20 @@ class GenericBasis(Effect):
         self.lo, self.hi, self.n_knots, self.signed = float(lo), float(hi), int(n_knots), signed
         self.tau_out = tau_out
 
+    @property
+    def knots(self) -> np.ndarray:
+        """Interior knots k_j, shape (n_knots - 2,), in the variable's unit."""
+        return np.linspace(self.lo, self.hi, self.n_knots)[1:-1]
+
     def names(self) -> tuple[str, ...]:
         v = self.variable[:3]
         return tuple(
-            self._n(f"g{'s' if self.signed else ''}_{v}_{k}") for k in range(1, self.n_knots)
+            self._n(f"g{'s' if self.signed else ''}_{v}_{k}") for k in range(1, self.n_knots - 1)
         )
 
     def columns(self, s: Signals) -> np.ndarray:
-        x = variable_values(self.variable, s, self.tau_out)
-        h = (self.hi - self.lo) / (self.n_knots - 1)
-        u = np.clip((x - self.lo) / h, 0.0, self.n_knots - 1)
-        k = np.arange(1, self.n_knots)
-        H = np.clip(1.0 - np.abs(u[:, None] - k[None, :]), 0.0, None)
+        x = np.clip(variable_values(self.variable, s, self.tau_out), self.lo, self.hi)
+        H = np.maximum(x[:, None] - self.knots[None, :], 0.0)
         if self.signed:
             H = H * _sign(s.dq)[:, None]
         return H
@@ -554,6 +560,6 @@ class GenericBasis(Effect):
     def describe(self) -> str:
         sg = " x sign(dq)" if self.signed else ""
         return (
-            f"generic basis in {self.variable}{sg}: {self.n_knots} hat functions "
+            f"generic basis in {self.variable}{sg}: {self.n_knots - 2} hinge functions "
             f"on [{self.lo:.4g}, {self.hi:.4g}] (no named effect fitted)"
         )

@@ -492,7 +492,7 @@ def _candidates(
         out.append(_Candidate(e, g, 1))
     tmax = float(t.max())
     if tmax > 0 and "warm_up" not in effects:
-        e, g = _scan_log(cols, WarmUp, tmax / 300, 3 * tmax)
+        e, g = _scan_log(cols, WarmUp, tmax / 300, tmax)
         out.append(_Candidate(e, g, 1))
     tau_out = _rigid_prediction(lib, coef)
     has_quadrant_dry = any(t.effect == "quadrant_coulomb" for t in lib.terms())
@@ -533,6 +533,17 @@ def _f_test(rss0: float, rss1: float, k: int, p: int, n: int, n_eff: float) -> t
         return float("inf"), 0.0
     F = ((rss0 - rss1) / k) / (rss1 / max(n - p - k, 1)) * (min(n_eff, n) / n)
     return float(F), float(stats.f.sf(F, k, d2))
+
+
+def _best_band_gain(before: dict[str, float], after: dict[str, float], rel0: float,
+                    rel1: float) -> float:
+    """Largest relative decrease of the relative error, overall or in a velocity band."""
+    gains = [1.0 - rel1 / rel0 if rel0 > 0 else 0.0]
+    for band in ("low", "high"):
+        b, a = before.get(band, math.nan), after.get(band, math.nan)
+        if math.isfinite(b) and math.isfinite(a) and b > 0:
+            gains.append(1.0 - a / b)
+    return max(gains)
 
 
 def _pretest(
@@ -710,7 +721,7 @@ def refine(
 
         # 1. pre-test on the scoring columns (no full-rate rebuild for hopeless candidates)
         ctx = (rss0, p_cur, len(cur_design), diag.n_eff, cur.rel_error_, alpha / n_cand,
-               min_gain)
+               min_gain / 3)
         why_not = {id(c): _pretest(c, *ctx) for c in cands}
 
         def pretest(c: _Candidate, _w=why_not) -> str | None:
@@ -770,11 +781,22 @@ def refine(
             reason = None
             if pval >= alpha / n_cand:
                 reason = f"F test not significant (F={F:.3g}, p={pval:.2e})"
-            elif m1.rel_error_ > cur.rel_error_ * (1 - min_gain):
-                reason = (
-                    f"relative error {_pct(cur.rel_error_)} -> {_pct(m1.rel_error_)}: "
-                    f"less than {100 * min_gain:g} % better"
-                )
+            else:
+                after_try = _bands(m1, d1, vmax)
+                overall = 1.0 - m1.rel_error_ / cur.rel_error_ if cur.rel_error_ > 0 else 0.0
+                best = _best_band_gain(before_bands, after_try, cur.rel_error_, m1.rel_error_)
+                # a band counts at twice the threshold; a generic basis must gain overall
+                if c.generic and overall < 2 * min_gain:
+                    reason = (
+                        f"relative error {_pct(cur.rel_error_)} -> {_pct(m1.rel_error_)}: "
+                        f"a generic basis must be {200 * min_gain:g} % better overall"
+                    )
+                elif overall < min_gain and best < 2 * min_gain:
+                    reason = (
+                        f"relative error {_pct(cur.rel_error_)} -> {_pct(m1.rel_error_)}: "
+                        f"less than {100 * min_gain:g} % better overall and "
+                        f"{200 * min_gain:g} % in the low- and high-velocity bands"
+                    )
             v1 = val1 = None
             if reason is None and cur_val is not None:
                 val1 = cur_val.with_term(e)

@@ -69,12 +69,19 @@ def test_effect_columns_follow_their_formulas():
         assert np.all(np.isfinite(c))
 
 
-def test_generic_hats_sum_to_one_with_the_first_dropped():
-    s = _signals(300)
-    g = GenericBasis("position", -1.6, 1.6, 9)
+def test_generic_hinges_exclude_constant_and_linear_parts():
+    s = _signals()
+    g = GenericBasis("position", -1.2, 1.2, 9)
     H = g.columns(s)
-    lo = np.clip(1 - np.abs((s.q + 1.6) / 0.4), 0, None)  # the dropped first hat
-    np.testing.assert_allclose(H.sum(axis=1) + lo, 1.0, atol=1e-12)
+    np.testing.assert_allclose(g.knots, np.linspace(-1.2, 1.2, 9)[1:-1])
+    np.testing.assert_allclose(H[:, 2], np.maximum(np.clip(s.q, -1.2, 1.2) - g.knots[2], 0))
+    assert H.shape == (len(s), 7) and len(g.names()) == 7
+    # not collinear with the model's offset and linear columns
+    A = np.column_stack([np.ones(len(s)), s.q, H])
+    assert np.linalg.matrix_rank(A) == A.shape[1]
+    gs = GenericBasis("velocity", -1, 1, 6, signed=True)
+    np.testing.assert_allclose(gs.columns(s)[:, 0],
+                               np.sign(s.dq) * np.maximum(np.clip(s.dq, -1, 1) + 0.6, 0))
     assert g.variable == "position" and g.effect == "generic_position"
     assert GenericBasis("time", 0, 1, signed=True).effect == "generic_time_signed"
     with pytest.raises(ValueError, match="unknown variable"):
