@@ -178,6 +178,55 @@ def truth_effects_section(demo: dict, ref: dict | None) -> Section | None:
     return s
 
 
+def _match_effect_parameter(truth_key: str, params: dict) -> str | None:
+    """The refinement parameter that estimates a true effect parameter (by its stem).
+
+    ``amplitude_Nm`` matches ``ripple_amplitude``; ``period_rad`` matches ``ripple_period``.
+    """
+    stem = truth_key.split("_")[0].lower()
+    hits = [n for n in params if stem in n.lower().split("_")]
+    return hits[0] if len(hits) == 1 else None
+
+
+def truth_comparison_section(ref: dict, truth: dict, demo: dict) -> Section | None:
+    """Side by side: the refined model's parameters against the plant's truth."""
+    final = ref.get("final_parameters")
+    if not final or not truth:
+        return None
+    s = Section("Identified after refinement against the plant's truth")
+    s.para("The refined model (the new model plus the effects the residual pointed to) is "
+           "the one to compare with the simulated joint: it is the only model whose structure "
+           "contains everything the plant does. Green: within 3σ of the truth (or 1 %).")
+    rows, classes = [], []
+
+    def add(label: str, est: dict | None, true: float | None) -> None:
+        v = est.get("value") if est else None
+        std2 = est.get("std2") if est else None
+        ratio, cls = None, ""
+        if v is not None and true is not None and std2:
+            err = abs(v - true)
+            ratio = err / (std2 / 2)
+            cls = "good" if err <= 1.5 * std2 or err <= 0.01 * abs(true) else "bad"
+        rows.append([label, v, std2, true, ratio])
+        classes.append(cls)
+
+    for p in _ordered(truth):
+        add(p, final.get(p), truth[p])
+    steps = ref.get("steps", [])
+    for effect, tparams in (demo.get("truth_effects") or {}).items():
+        step = next((st for st in steps if st.get("effect") == effect), None)
+        found = step.get("parameters", {}) if step else {}
+        for k, tv in tparams.items():
+            name = _match_effect_parameter(k, found)
+            if name is None and not found:
+                add(f"{effect}.{k} (not found)", None, tv)
+            elif name is not None:
+                add(f"{effect}.{k} ({name})", found[name], tv)
+    s.table(["Parameter", "Identified value", "Standard deviation × 2", "Plant truth",
+             "|error| / σ"], rows, classes)
+    return s
+
+
 def build_report(directory: Path | str, *, title: str = "jointid report") -> Path:
     """(Re)write ``DIR/report.html`` from ``fit.json``, ``demo.json`` and the PNG figures.
 
@@ -228,6 +277,10 @@ def build_report(directory: Path | str, *, title: str = "jointid report") -> Pat
     te = truth_effects_section(demo, ref)
     if te is not None:
         sections.append(te)
+    if ref is not None and truth:
+        tc = truth_comparison_section(ref, truth, demo)
+        if tc is not None:
+            sections.append(tc)
 
     subtitle = demo.get("subtitle") or f"Models after {PAPER}."
     out = write_html(d / "report.html", title, subtitle, sections)
