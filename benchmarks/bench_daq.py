@@ -1,0 +1,174 @@
+"""DAQ benchmarks: lockstep rate (1 and 3 drives), paced 1 kHz jitter vs a C loop, MCAP writes.
+
+Usage::
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_daq.py [--paced-seconds 60] [--repeat 3]
+
+Prints one table. Everything runs through the full stack: campaign -> plan -> runner ->
+canopen master -> python-can virtual bus -> simulated CiA 402 drive + plant -> MCAP.
+
+- lockstep cycles/s: wall-clock rate of a whole payload run (median over ``--repeat``), its
+  ratio to real time at 1 kHz, and the process CPU time per cycle (drive + plant + master +
+  log, all threads): the CPU figure is the stable one on a shared machine, the wall rate
+  depends on how much of a core the scheduler gives us.
+- paced: a 1 kHz payload run of ``--paced-seconds``; lateness of every SYNC against its
+  deadline (p50/p99/max) and missed cycles (SYNC more than half a period late), then the C
+  reference loop (``c_paced_loop.c``, compiled here with gcc) for as many cycles, same
+  criterion.
+- MCAP: messages/s written by :class:`daq.mcaplog.RunLog` with the runner's per-cycle mix
+  (one state, one setpoint, one CAN batch of 4 frames), and the logging time per cycle as a
+  share of the lockstep all-in CPU time per cycle.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from daq.mcaplog import FRAME, RunLog  # noqa: E402
+from daq.runner import run_campaign  # noqa: E402
+from sim_drivers.plant_config import default_plant  # noqa: E402
+from trajectories.campaign import Campaign  # noqa: E402
+
+HERE = Path(__file__).resolve().parent
+_chan = itertools.count()
+
+
+def campaign(seconds: float, cycle_s: float = 0.001, drives: int = 1,
+             clock: str = "lockstep") -> Campaign:
+    periods = max(1, int(round(seconds * 0.25)))
+    raw = {
+        "name": "bench",
+        "joint": {"kind": "revolute", "limits": {
+            "position": [-1.0, 1.0], "max_velocity": 1.0, "max_acceleration": 4.0,
+            "max_jerk": 40.0, "max_torque": 700.0}},
+        "control": {"cycle_s": cycle_s, "kp": 6000.0, "kd": 200.0,
+                    "feedforward": {"J": 30.0, "MX": 21.0}},
+        "payloads": [{"mass_kg": 0.0, "arm_m": 1.0}],
+        "segments": [{"kind": "sine", "amplitude": 0.3, "frequency_hz": 0.25, "center": 0.0,
+                      "periods": periods}],
+        "daq": {"channel": f"bench_{next(_chan)}", "clock": clock,
+                "drives": [{"node_id": n} for n in range(1, drives + 1)],
+                "heartbeat_timeout_s": 2.0, "tpdo_timeout_cycles": 1000,
+                "max_following_error": 1.0},
+    }
+    return Campaign.from_dict(raw, "bench.toml")
+
+
+def lockstep(drives: int, seconds: float, repeat: int, out: Path) -> tuple[float, float, int]:
+    """Median wall cycles/s, median CPU µs/cycle, cycles per run."""
+    cycle_s = 0.001 if drives == 1 else 0.002  # 3 drives at 1 kHz exceed 1 Mbit/s
+    c = campaign(seconds * (1 if drives == 1 else 0.5) / cycle_s * 0.001, cycle_s, drives)
+    rates, cpus, n = [], [], 0
+    for _ in range(repeat):
+        c0 = time.process_time()
+        r = run_campaign(c, out_dir=out, simulate=default_plant(), yes=True)
+        cpu = time.process_time() - c0
+        assert r.ok, r.reason
+        run = r.runs[0]
+        n = run.cycles
+        rates.append(run.cycles_per_s)
+        cpus.append(cpu / n * 1e6)
+    return statistics.median(rates), statistics.median(cpus), n
+
+
+def paced(seconds: float, out: Path) -> dict[str, float]:
+    c = campaign(seconds, 0.001, 1, clock="paced")
+    r = run_campaign(c, out_dir=out, simulate=default_plant(), yes=True)
+    run = r.runs[0]
+    lat = run.lateness_s * 1e6
+    return {"cycles": run.cycles, "missed": run.missed, "p50": float(np.percentile(lat, 50)),
+            "p99": float(np.percentile(lat, 99)), "max": float(lat.max()),
+            "status": r.status}
+
+
+def c_loop(cycles: int, tmp: Path) -> dict[str, float] | None:
+    gcc = shutil.which("gcc") or shutil.which("cc")
+    if gcc is None:
+        return None
+    exe = tmp / "c_paced_loop"
+    subprocess.run([gcc, "-O2", "-o", str(exe), str(HERE / "c_paced_loop.c")], check=True)
+    p = subprocess.run([str(exe), "1000", str(cycles)], capture_output=True, text=True,
+                       check=True)
+    fields = dict(kv.split("=") for kv in p.stdout.split())
+    return {"cycles": int(fields["cycles"]), "missed": int(fields["missed"]),
+            "p50": float(fields["p50_us"]), "p99": float(fields["p99_us"]),
+            "max": float(fields["max_us"])}
+
+
+def mcap_rate(cycles: int, tmp: Path) -> tuple[float, float]:
+    """Messages/s and µs of logging per cycle (1 axis, 4 frames per cycle)."""
+    frames = b"".join(FRAME.pack(1.0, cid, 8, b"\x01" * 8) for cid in (0x80, 0x201, 0x181,
+                                                                          0x281))
+    best = []
+    for _ in range(3):
+        log = RunLog(tmp / "bench_write.mcap", n_axes=1, cycle_s=0.001)
+        t0 = time.perf_counter()
+        for c in range(cycles):
+            log.state(0, c, c * 1e-3, 0.1, 0.2, 3.0, 4.0, 1000, 20, 6, 8, 0x1237, 0)
+            log.setpoint(c, c * 1e-3, 0.1, 0.2, 0.3, 0, 0)
+            log.frames(c, frames, 4)
+        log.close()
+        best.append(time.perf_counter() - t0)
+    dt = statistics.median(best)
+    return 3 * cycles / dt, dt / cycles * 1e6
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--paced-seconds", type=float, default=60.0)
+    ap.add_argument("--lockstep-seconds", type=float, default=10.0,
+                    help="simulated seconds per lockstep run")
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args()
+    tmp = Path(tempfile.mkdtemp(prefix="bench_daq_"))
+    try:
+        rows = []
+        r1, cpu1, n1 = lockstep(1, args.lockstep_seconds, args.repeat, tmp / "l1")
+        rows.append(("lockstep, 1 drive, 1 kHz plan", f"{r1:,.0f} cycles/s",
+                     f"{r1 / 1000:.2f}x real time", f"CPU {cpu1:.0f} us/cycle, {n1} cycles"))
+        r3, cpu3, n3 = lockstep(3, args.lockstep_seconds, args.repeat, tmp / "l3")
+        rows.append(("lockstep, 3 drives", f"{r3:,.0f} cycles/s",
+                     f"{r3 / 1000:.2f}x real time at 1 kHz",
+                     f"CPU {cpu3:.0f} us/cycle; 3 vs 1 drive: {r3 / r1:.2f}x rate"))
+        msg_s, log_us = mcap_rate(100_000, tmp)
+        rows.append(("MCAP write (state+setpoint+CAN)", f"{msg_s:,.0f} msg/s",
+                     f"{log_us:.1f} us/cycle",
+                     f"{100 * log_us / cpu1:.0f} % of the 1-drive all-in CPU cycle"))
+        p = paced(args.paced_seconds, tmp / "paced")
+        rows.append(("paced 1 kHz, Python runner", f"missed {p['missed']}/{p['cycles']}",
+                     f"lateness p50 {p['p50']:.0f} / p99 {p['p99']:.0f} / max "
+                     f"{p['max']:.0f} us", f"run {p['status']}"))
+        cref = c_loop(int(p["cycles"]), tmp)
+        if cref is None:
+            rows.append(("paced 1 kHz, C clock_nanosleep", "gcc not found", "", ""))
+        else:
+            ratio = (p["missed"] + 1) / (cref["missed"] + 1)
+            rows.append(("paced 1 kHz, C clock_nanosleep", f"missed {cref['missed']}/"
+                         f"{cref['cycles']}", f"lateness p50 {cref['p50']:.0f} / p99 "
+                         f"{cref['p99']:.0f} / max {cref['max']:.0f} us",
+                         f"(Python+1)/(C+1) missed = {ratio:.2f}"))
+        w = [max(len(r[i]) for r in rows) for i in range(4)]
+        print(f"bench_daq  (python {sys.version.split()[0]}, {os.cpu_count()} CPUs, load "
+              f"{os.getloadavg()[0]:.1f})")
+        for r in rows:
+            print("  ".join(x.ljust(w[i]) for i, x in enumerate(r)).rstrip())
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
