@@ -192,6 +192,7 @@ def test_injector_drops_tpdos_for_k_cycles():
 def test_injector_stops_heartbeat():
     rig = make_rig(node_id=NODE, fault_injector=FaultInjector(stop_heartbeat_at_cycle=3))
     try:
+        rig.node.sdo[0x1000].raw  # noqa: B018 - barrier: the boot-up frame is behind us
         hb: queue.SimpleQueue = queue.SimpleQueue()
         rig.network.subscribe(0x700 + NODE, lambda c, d, t: hb.put(bytes(d)))
         rig.node.sdo[0x1017].raw = 5
