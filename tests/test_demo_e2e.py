@@ -1,0 +1,114 @@
+"""End to end: `jointid demo --quick` through the real CLI, checked against the plant's truth.
+
+The demo plans the example campaign, runs it on the simulated CiA 402 drive over python-can's
+virtual bus through the real master, logs to MCAP, fits both models, refines and reports.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+from daq import examples
+from sim_drivers.plant_config import load_plant
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo")
+    run = subprocess.run(
+        [sys.executable, "-c", "import sys; from daq.cli import main; sys.exit(main())",
+         "demo", "--quick", "--out", str(out)],
+        capture_output=True, text=True, timeout=900,
+    )
+    assert run.returncode == 0, run.stderr[-3000:]
+    return out, run
+
+
+def test_demo_writes_logs_report_and_json(demo):
+    out, run = demo
+    logs = sorted((out / "logs").glob("*.mcap"))
+    assert len(logs) == 3  # one MCAP per payload
+    for log in logs:
+        with log.open("rb") as f:
+            assert sum(1 for _ in make_reader(f).iter_messages()) > 1000
+    html = (out / "report.html").read_text()
+    d = json.loads((out / "demo.json").read_text())
+    figs = [f["file"] for group in d["figures"].values() for f in group]
+    assert len(figs) >= 5
+    for f in figs:  # every figure is there as PNG and embedded in the self-contained report
+        assert (out / f).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert len(re.findall(r'src="data:image/png;base64,', html)) == len(figs)
+    assert "Table III" in html and "Table II" in html
+    # the closing summary shows Table III and the refinement's before/after
+    assert "Table III" in run.stdout and "Refinement of the new model" in run.stdout
+
+
+def test_demo_shows_the_papers_pattern(demo):
+    out, _ = demo
+    m = json.loads((out / "fit.json").read_text())["models"]
+    usual, new = m["usual"], m["new"]
+    # the new model is clearly better overall and much better at low velocity (Table III)
+    assert new["rel_error"] < 0.85 * usual["rel_error"]
+    assert new["rel_error_low_velocity"] < 0.7 * usual["rel_error_low_velocity"]
+
+
+def test_demo_refinement_finds_the_undeclared_effect(demo):
+    out, _ = demo
+    fit = json.loads((out / "fit.json").read_text())
+    plant = load_plant(examples.path("plant_rx130l.toml"))
+    true = plant.truth_effects()["position_ripple"]
+    steps = fit["refinement"]["steps"]
+    assert steps, "refinement added nothing"
+    first = steps[0]
+    assert (first["variable"], first["effect"]) == ("position", "position_ripple")
+    p = {k.split("_")[-1]: v["value"] for k, v in first["parameters"].items()}
+    assert p["period"] == pytest.approx(true["period_rad"], rel=0.01)
+    assert p["amplitude"] == pytest.approx(true["amplitude_Nm"], rel=0.15)
+    assert first["rel_error_after"] < first["rel_error_before"]
+    assert fit["refinement"]["rel_error_final"] < fit["models"]["new"]["rel_error"]
+
+
+def test_demo_load_dependent_friction_matches_truth(demo):
+    """The paper's load coefficients (eq. 25) and the gravity moment come out right."""
+    out, _ = demo
+    fit = json.loads((out / "fit.json").read_text())
+    truth = load_plant(examples.path("plant_rx130l.toml")).truth()
+    final = fit["refinement"]["final_parameters"]
+    for name in ("a_m", "a_g"):  # payload-column coefficients: a_m = 1 + alpha_m, a_g = 1 - alpha_g
+        est, std2 = final[name]["value"], final[name]["std2"]
+        assert abs(est - truth[name]) <= max(1.5 * std2, 0.01 * truth[name]), name
+    mx_true = truth["a_m_MX"] / truth["a_m"]
+    for q in ("m", "g"):  # a_q MX / a_q recovers MX within 2 %
+        mx = final[f"a_{q}_MX"]["value"] / final[f"a_{q}"]["value"]
+        assert math.isclose(mx, mx_true, rel_tol=0.02), (q, mx, mx_true)
+
+
+def test_report_command_rebuilds_the_report(demo, tmp_path):
+    out, _ = demo
+    (out / "report.html").unlink()
+    run = subprocess.run(
+        [sys.executable, "-c", "import sys; from daq.cli import main; sys.exit(main())",
+         "report", str(out)], capture_output=True, text=True, timeout=120,
+    )
+    assert run.returncode == 0, run.stderr
+    assert (out / "report.html").stat().st_size > 10_000
+    bad = subprocess.run(
+        [sys.executable, "-c", "import sys; from daq.cli import main; sys.exit(main())",
+         "report", str(tmp_path / "nowhere")], capture_output=True, text=True, timeout=120,
+    )
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "nowhere" in bad.stderr
+
+
+def test_examples_are_installed_as_package_data():
+    assert Path(examples.path("campaign.toml")).is_file()
+    assert Path(examples.path("plant_rx130l.toml")).is_file()
