@@ -9,6 +9,10 @@ project's generic EDS, cyclic synchronous torque)::
     bitrate = 1000000             # [bit/s]
     max_bus_load = 0.6            # refuse cyclic traffic above this share of the bit rate
     clock = "paced"               # "lockstep" (virtual bus + simulated drives) or "paced"
+    sync_source = "runner"        # paced: "runner" (the runner's own timed loop sends SYNC)
+                                  # or "periodic" (python-can send_periodic: the kernel's
+                                  # broadcast manager on socketcan, a thread elsewhere)
+    realtime_priority = 0         # paced: SCHED_FIFO priority 1-99 (needs CAP_SYS_NICE); 0 off
     tpdo_timeout_cycles = 3       # watchdog: TPDOs missing for k consecutive cycles -> stop
     heartbeat_timeout_s = 0.5     # watchdog: no heartbeat for this long [s] -> stop
     max_following_error = 0.2     # watchdog: |q_ref - q| above this [rad] or [m] -> stop
@@ -128,6 +132,8 @@ class DaqConfig:
     bitrate: int
     max_bus_load: float
     clock: str
+    sync_source: str
+    realtime_priority: int
     drives: tuple[DriveConfig, ...]
     tpdo_timeout_cycles: int
     heartbeat_timeout_s: float
@@ -183,6 +189,9 @@ _DAQ = Table(
                          unit="bit/s"),
         "max_bus_load": Field(float, required=False, default=0.6, gt=0, le=1),
         "clock": Field(str, required=False, default="", choices=("lockstep", "paced", "")),
+        "sync_source": Field(str, required=False, default="runner",
+                             choices=("runner", "periodic")),
+        "realtime_priority": Field(int, required=False, default=0, ge=0, le=99),
         "drives": ArrayOfTables(_DRIVE, required=False),
         "tpdo_timeout_cycles": Field(int, required=False, default=3, ge=1, unit="cycles"),
         "heartbeat_timeout_s": Field(float, required=False, default=0.5, gt=0, unit="s"),
@@ -257,6 +266,8 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "") -> DaqConfig:
         bitrate=d["bitrate"],
         max_bus_load=d["max_bus_load"],
         clock=clock,
+        sync_source=d["sync_source"],
+        realtime_priority=d["realtime_priority"],
         drives=tuple(drives),
         tpdo_timeout_cycles=d["tpdo_timeout_cycles"],
         heartbeat_timeout_s=d["heartbeat_timeout_s"],

@@ -337,6 +337,20 @@ def _pin_cpu(cpu: int) -> set[int] | None:
     return old
 
 
+def _set_realtime(cfg: DaqConfig) -> tuple[int, int] | None:
+    """SCHED_FIFO at ``cfg.realtime_priority`` for this thread and the threads it starts."""
+    if not cfg.realtime_priority:
+        return None
+    old = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(cfg.realtime_priority))
+    except (PermissionError, OSError) as exc:
+        raise ConfigError(f"{cfg.source}: daq.realtime_priority: cannot set SCHED_FIFO "
+                          f"{cfg.realtime_priority} ({exc.strerror}; needs CAP_SYS_NICE)"
+                          ) from None
+    return old
+
+
 def _quintic(q0: float, q1: float, vmax: float, amax: float, cycle_s: float):
     """Rest-to-rest quintic from q0 to q1 at <= 50 % of vmax/amax: (q, dq, ddq) arrays."""
     d = q1 - q0
@@ -378,6 +392,7 @@ class Engine:
         self.progress = progress
         self.cycle_s = campaign.cycle_s
         self.paced = cfg.clock == "paced"
+        self.periodic = self.paced and cfg.sync_source == "periodic"
         self.interrupted = False
         lim = campaign.joint.limits
         span = lim.position[1] - lim.position[0]
@@ -455,7 +470,7 @@ class Engine:
             """One full cycle; ``mode`` is "enable", "run", "quick_stop", "disable", "shutdown"."""
             nonlocal cycle, missed, next_deadline, hb_check
             t = cycle * cycle_s
-            if self.paced:
+            if self.paced and not self.periodic:
                 target = next_deadline
                 now = time.perf_counter()
                 if target - now > 0.0003:
@@ -469,6 +484,18 @@ class Engine:
                 if late > cycle_s:
                     next_deadline = t_sync  # re-anchor: no catch-up burst
                 mask = self._exchange(cycle, next_deadline + 0.8 * cycle_s)
+                next_deadline += cycle_s
+            elif self.periodic:
+                # SYNC comes from the periodic task: a cycle is the arrival of the TPDOs
+                io.mask = 0
+                ok = io.pump(self.bus, 2.0 * cycle_s)
+                mask = io.full if ok else io.mask
+                t_sync = time.perf_counter()
+                late = t_sync - next_deadline
+                if late > 0.5 * cycle_s or late < -0.5 * cycle_s:
+                    missed += 1
+                    next_deadline = t_sync  # re-anchor on the SYNC train
+                    late = 0.0 if cycle == 0 else late
                 next_deadline += cycle_s
             else:
                 t_sync = late = 0.0
@@ -622,6 +649,12 @@ class Engine:
             net.notifier.stop(1.0)
             net.notifier = None
         io.direct = True
+        sync_task = None
+        if self.periodic:
+            # first cycle's deadline: one period after the periodic task starts
+            sync_task = self.bus.send_periodic(self.sync_msg, cycle_s)
+            next_deadline = time.perf_counter() + cycle_s
+            log.event(0, 0.0, "info", f"SYNC from send_periodic ({type(sync_task).__name__})")
         try:
             # 1. enable, holding the position measured at the first answer
             do_cycle(0.0, 0.0, 0.0, -1, "disable")  # first SYNC: read the drives' state
@@ -678,6 +711,8 @@ class Engine:
                       "stop" if status != "done" else "info", msg)
         finally:
             wall = time.perf_counter() - t_wall0
+            if sync_task is not None:
+                sync_task.stop()
             io.direct = False
             net.notifier = can.Notifier(net.bus, net.listeners, net.NOTIFIER_CYCLE)
             if timing:
@@ -864,6 +899,7 @@ def run_campaign(
     completed = set(done_before)
 
     old_affinity = _pin_cpu(cfg.cpu)
+    old_sched = _set_realtime(cfg) if cfg.clock == "paced" else None
     sim: _Sim | None = None
     network: canopen.Network | None = None
     old_handler = None
@@ -944,5 +980,8 @@ def run_campaign(
         if old_affinity is not None:
             with contextlib.suppress(OSError):
                 os.sched_setaffinity(0, old_affinity)
+        if old_sched is not None:
+            with contextlib.suppress(OSError):
+                os.sched_setscheduler(0, old_sched[0], os.sched_param(old_sched[1]))
     return CampaignResult(campaign.name, out, tuple(runs), status, reason, load, skipped,
                           sim_records)
