@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import struct
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from io import BytesIO
 from pathlib import Path
 from typing import Any
@@ -95,7 +95,25 @@ class RunArrays:
     def __len__(self) -> int:
         return int(self.t.shape[0])
 
+    @property
+    def valid(self) -> np.ndarray:
+        """Cycles usable for identification, shape (n,) bool: the drive reported OPERATION
+        ENABLED (statusword & 0x6F == 0x27), its TPDOs arrived and the runner was not stopping.
+        Outside them (enable, stop, fault) the drive ignores the torque reference."""
+        return ((self.statusword & 0x6F) == 0x27) & (self.flags == 0)
 
+    def select(self, mask: np.ndarray) -> RunArrays:
+        """The same run restricted to the cycles where ``mask`` is true."""
+        arrays = {k: getattr(self, k)[mask] for k in _ARRAY_FIELDS}
+        return replace(self, **arrays)
+
+    def valid_only(self) -> RunArrays:
+        """:meth:`select` of :attr:`valid` (what an identification should fit)."""
+        return self.select(self.valid)
+
+
+_ARRAY_FIELDS = ("t", "cycle", "q", "dq", "counts", "tau_ref", "tau_actual", "statusword",
+                 "flags", "q_ref", "dq_ref", "ddq_ref", "segment")
 _HEAD = struct.Struct("<BQ")  # opcode, record length
 _MSG_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
 

@@ -79,6 +79,10 @@ def test_three_payload_campaign_logs_every_cycle_and_matches_the_drive(tmp_path)
         assert moving.sum() == len(c_ref)
         assert np.array_equal(a.q_ref[moving], c_ref)
         assert np.max(np.abs(a.q - a.q_ref)[moving]) < 0.05
+        # valid cycles: the drive was enabled; they cover the whole plan
+        v = a.valid_only()
+        assert len(v) < len(a) and np.all(v.statusword & 0x6F == 0x27)
+        assert np.all(moving <= a.valid) and np.array_equal(v.cycle, a.cycle[a.valid])
         # ended disabled, said so
         assert state_from_statusword(int(a.statusword[-1])) is State.READY_TO_SWITCH_ON
         assert any(e["message"] == "drives disabled" for e in a.events)
@@ -167,3 +171,20 @@ def test_vendor_eds_campaign(tmp_path, name):
     assert np.array_equal(a.cycle, np.arange(len(a)))
     assert np.array_equal(a.counts, rec["counts"][idx])
     assert read_attachments(r.runs[0].path).keys() >= {eds.name}
+
+
+def test_csp_mode_sends_position_targets(tmp_path):
+    c = small_campaign(n_payloads=1, periods=1, freq=1.0, amplitude=0.1,
+                       daq={"drives": [{"node_id": 1, "mode": "csp"}]})
+    r = run_campaign(c, out_dir=tmp_path, simulate=default_plant(), yes=True)
+    assert r.ok, r.reason
+    a, rec, idx = drive_cycles(r, r.runs[0])
+    assert a.metadata["drive0"]["mode"] == "csp"
+    assert np.all(np.isnan(a.tau_ref))  # the drive computes the torque in CSP
+    assert np.all(rec["mode"] == 8)
+    # the target of cycle k (planned position in counts) is what the drive applied at k+1
+    cpr = 4096 * 100.0 / (2 * math.pi)
+    moving = np.flatnonzero(a.segment >= 0)
+    target = np.round(a.q_ref[moving] * cpr).astype(np.int64)
+    assert np.array_equal(rec["target_position"][idx[moving + 1]], target)
+    assert np.max(np.abs(a.q - a.q_ref)[moving]) < 0.05
