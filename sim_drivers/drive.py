@@ -82,6 +82,7 @@ from sim_drivers import SimError
 from sim_drivers.faults import (
     EXCESS_TORQUE,
     FOLLOWING_ERROR,
+    PDO_LENGTH_ERROR,
     PLANT_FAULT,
     POSITION_LIMIT,
     FaultInjector,
@@ -776,6 +777,8 @@ class SimulatedDrive:
     def _apply_rpdo(self, rx: _RxPdo, data: bytes) -> bool:
         if len(data) < rx.struct.size:
             self.rx_length_errors += 1
+            # CiA 301: "PDO not processed due to length error", a warning (no state change)
+            self.node.emcy.send(PDO_LENGTH_ERROR, self.error_register | 0x11)
             return False
         self.__dict__.update(zip(rx.names, rx.struct.unpack_from(data), strict=False))
         return True

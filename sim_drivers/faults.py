@@ -8,6 +8,7 @@ Error codes (0x603F, EMCY) follow CiA 301 / CiA 402's error-code table:
  0x8611      following error (CSP: ``|0x607A - 0x6064| > 0x6065``)
  0x8311      excess torque (CST: ``|0x6071 + 0x60B2| > 0x6072``)
  0x8612      reference limit (``0x6064`` outside the software limits ``0x607D``)
+ 0x8210      RPDO shorter than its mapping (EMCY only: a warning, the drive keeps running)
  0xFF01      injected fault (device specific; :class:`FaultInjector` default)
  0xFF02      plant-detected fault (the plant raised or its state became non-finite)
 ==========  ==========================================================================
@@ -20,6 +21,7 @@ from dataclasses import dataclass
 FOLLOWING_ERROR = 0x8611
 EXCESS_TORQUE = 0x8311
 POSITION_LIMIT = 0x8612
+PDO_LENGTH_ERROR = 0x8210
 INJECTED_FAULT = 0xFF01
 PLANT_FAULT = 0xFF02
 
@@ -27,6 +29,7 @@ FAULT_NAMES: dict[int, str] = {
     FOLLOWING_ERROR: "following error",
     EXCESS_TORQUE: "excess torque",
     POSITION_LIMIT: "software position limit",
+    PDO_LENGTH_ERROR: "PDO length error",
     INJECTED_FAULT: "injected fault",
     PLANT_FAULT: "plant fault",
 }

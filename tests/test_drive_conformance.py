@@ -553,6 +553,8 @@ def test_short_rpdo_is_ignored_and_empty_tpdo_is_not_sent(rig):
     rig.network.send_message(0x80, b"")
     _barrier(rig)
     assert rig.drive.rx_length_errors == 1
+    assert [(e.code, e.register) for e in rig.node.emcy.log] == [(0x8210, 0x11)]
+    assert rig.drive.state is State.SWITCH_ON_DISABLED  # a warning, no fault
     assert list(rig.drive.record["target_torque"]) == [123, 123]
     assert _drain(t4) == []
 
