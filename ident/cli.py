@@ -29,7 +29,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "examples:\n"
             "  jointid fit runs/*.mcap --json fit.json --report fit/\n"
             "  jointid fit DATA_EMPS.mat --joint prismatic --map q=qm,tau=vir --gain gtau \\\n"
-            "      --model usual --dq-min 0 --validate DATA_EMPS_PULSES.mat"
+            "      --cutoff 100 --decimation 10 --dq-min 0 --no-sign-check \\\n"
+            "      --validate DATA_EMPS_PULSES.mat"
         ),
     )
     p.add_argument("inputs", nargs="+", type=Path, help="experiment files (.mcap, .csv, .mat)")
@@ -88,6 +89,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="eliminate parameters with relative deviation above PCT %% (default 30)",
     )
     g2.add_argument("--no-eliminate", action="store_true", help="keep every identifiable parameter")
+    g2.add_argument(
+        "--no-sign-check",
+        action="store_true",
+        help="keep the samples where sign(tau) differs from the sign of tau_out estimated by "
+        "a first usual fit (dropped by default when the new model is fitted: eq. 26 fails there)",
+    )
     g3 = p.add_argument_group("refinement")
     g3.add_argument(
         "--refine",
@@ -132,6 +139,7 @@ def run(args: argparse.Namespace) -> int:
         dq_min=args.dq_min,
         tau_min=args.tau_min,
         trim=args.trim,
+        sign_check=not args.no_sign_check,
         eliminate=not args.no_eliminate,
         threshold_pct=args.threshold,
     )

@@ -19,7 +19,15 @@ import numpy as np
 
 from . import DataError
 from .loaders import Experiment, concat
-from .models import IdentModel, Payload, RigidBody, new_model, usual_model
+from .models import (
+    IdentModel,
+    LoadDependent,
+    Payload,
+    QuadrantCoulomb,
+    RigidBody,
+    new_model,
+    usual_model,
+)
 from .preprocess import Design, build_design
 from .results import (
     band_errors,
@@ -31,7 +39,7 @@ from .results import (
     removed_json,
 )
 from .signals import Signals
-from .terms import Library
+from .terms import Library, Term
 
 __all__ = ["FitReport", "fit_models", "qs_grid", "FORMAT", "DEFAULT_QS"]
 
@@ -199,7 +207,7 @@ def fit_models(
     tau_min: float | None = None,
     trim: int | None = None,
     guard: int | None = None,
-    sign_check: bool = False,
+    sign_check: bool = True,
     eliminate: bool = True,
     threshold_pct: float | None = None,
     table_iv: bool = True,
@@ -228,8 +236,8 @@ def fit_models(
         When the new model is fitted, estimate tau_out with a first fit of the usual model
         and leave out the samples where sign(tau) differs from sign(tau_out), where eq. 26's
         sign(P) is wrong (see ``load_model`` of :func:`ident.preprocess.build_design`).
-        Both models then use these same samples. Off by default: on the simulated
-        campaign it removed few samples and did not reduce the biases.
+        Both models then use these same samples. Needed when the runs cross zero load at
+        low velocity (the example campaign crosses q = pi/2 at 0.03 rad/s).
     eliminate, threshold_pct
         Elimination of non-significant parameters, see :meth:`IdentModel.fit`.
     table_iv : bool
@@ -268,36 +276,67 @@ def fit_models(
         tau_min=tau_min,
         trim=trim,
         guard=guard,
+        dq_min_rel=DQ_MIN_FRACTION if dq_min is None else None,
     )
+    qs0 = DEFAULT_QS if isinstance(qs, str) else float(qs)
+    if not qs0 > 0:
+        raise DataError(f"qs must be positive [rad/s], got {qs0}")
 
-    # settle the preprocessing once (cut-off and decimation chosen from the data)
-    lib0 = usual_model(s.revolute, payload=has_payload)
-    probe = build_design(lib0, s, **{**pre, "dq_min": None, "tau_min": None})
+    def combined(sig: Signals, payload: bool) -> Design:
+        """One design holding the columns of every requested model (built once)."""
+        terms: list[Term] = []
+        seen: set[str] = set()
+        for name in models:
+            for t in _library(name, qs0, sig.revolute, payload).terms():
+                if not set(t.names()) & seen:
+                    terms.append(t)
+                    seen |= set(t.names())
+        return build_design(Library(*terms), sig, **pre)
+
+    def part(d: Design, name: str, payload: bool, q: float = qs0) -> tuple[Library, Design]:
+        lib = _library(name, q, d.signals.revolute, payload)
+        keep = set(lib.names())
+        sub = d.without([n for n in d.names if n not in keep])
+        if name == "new" and q != qs0:
+            quad = [
+                t for t in sub.library.terms() if isinstance(t, LoadDependent | QuadrantCoulomb)
+            ]
+            sub = sub.without([n for t in quad for n in t.names()])
+            for t in lib.terms():
+                if isinstance(t, LoadDependent | QuadrantCoulomb):
+                    sub = sub.with_term(t)
+        return lib, sub
+
+    def fit_part(
+        d: Design, name: str, payload: bool, q: float = qs0, elim: bool = eliminate
+    ) -> tuple[IdentModel, Design]:
+        lib, sub = part(d, name, payload, q)
+        m = IdentModel(lib, name).fit(sub, eliminate=elim, threshold_pct=threshold_pct)
+        return m, sub
+
+    # settle the preprocessing once (cut-off, decimation, stiction threshold from the data)
+    full = combined(s, has_payload)
     pre.update(
-        cutoff_hz=probe.cutoff_hz, decimation=probe.decimation, trim=probe.trim, guard=probe.guard
+        cutoff_hz=full.cutoff_hz,
+        decimation=full.decimation,
+        trim=full.trim,
+        guard=full.guard,
+        dq_min=full.dq_min,
+        dq_min_rel=None,
     )
-    vmax = float(np.max(np.abs(probe.signals.dq)))
-    if dq_min is None:
-        pre["dq_min"] = DQ_MIN_FRACTION * vmax
-    if pre["dq_min"] is not None or tau_min is not None:
-        probe = build_design(lib0, s, **pre)
     if sign_check and "new" in models:
         # a first usual fit estimates tau_out; drop samples where sign(tau) != sign(tau_out)
-        first = IdentModel(lib0, "usual").fit(probe, eliminate=False)
+        lib0 = usual_model(s.revolute, payload=has_payload)
+        d0 = full
+        for t in lib0.terms():
+            if not set(t.names()) <= set(d0.names):
+                d0 = d0.with_term(t)
+        first = IdentModel(lib0, "usual").fit(d0, eliminate=False)
         inner = Library(*[t for t in lib0.terms() if isinstance(t, RigidBody | Payload)])
         chi = np.array([first.coef_.get(n, 0.0) for n in inner.names()])
         pre["load_model"] = (inner, chi)
-        probe = build_design(lib0, s, **pre)
-
-    def fit_one(
-        name: str, q: float, sig: Signals, payload: bool, elim: bool = eliminate
-    ) -> tuple[IdentModel, Design]:
-        lib = _library(name, q, sig.revolute, payload)
-        d = probe if (name == "usual" and sig is s and payload == has_payload) else None
-        if d is None:
-            d = build_design(lib, sig, **pre)
-        m = IdentModel(lib, name).fit(d, eliminate=elim, threshold_pct=threshold_pct)
-        return m, d
+        full = combined(s, has_payload)
+    vmax = float(np.max(np.abs(full.signals.dq)))
 
     scan: list[tuple[float, float]] = []
     if isinstance(qs, str):
@@ -306,24 +345,23 @@ def fit_models(
         if "new" in models:
             for q in qs_grid(vmax):
                 # full model (no elimination): the residual as a function of q_s alone
-                m, _ = fit_one("new", float(q), s, has_payload, False)
+                m, _ = fit_part(full, "new", has_payload, float(q), False)
                 scan.append((float(q), m.rel_error_))
             qs_val = min(scan, key=lambda x: x[1])[0]
         else:
             qs_val = DEFAULT_QS
     else:
-        qs_val = float(qs)
-        if not qs_val > 0:
-            raise DataError(f"qs must be positive [rad/s], got {qs_val}")
+        qs_val = qs0
 
     fitted: dict[str, IdentModel] = {}
     designs: dict[str, Design] = {}
     vdesigns: dict[str, Design] = {}
+    vfull = combined(sv, has_payload) if sv is not None else None
     for name in models:
-        m, d = fit_one(name, qs_val, s, has_payload)
+        m, d = fit_part(full, name, has_payload, qs_val)
         fitted[name], designs[name] = m, d
-        if sv is not None:
-            vdesigns[name] = build_design(m.library, sv, **pre)
+        if vfull is not None:
+            vdesigns[name] = part(vfull, name, has_payload, qs_val)[1]
         identifiable = [n for n, r in m.removed_ if not r.startswith("not significant")]
         if identifiable:
             notes.append(f"{name} model: not identifiable on these data: {', '.join(identifiable)}")
@@ -334,14 +372,16 @@ def fit_models(
     if table_iv and has_payload and 0 < no_payload_ids.size < exp_ids.size:
         s0 = s.take(np.isin(s.experiment, no_payload_ids))
         t4 = {"with_payloads": {}, "without_payload": {}}
+        try:
+            full0 = combined(s0, False)
+        except DataError as exc:  # too few samples without payload
+            notes.append(f"Table IV without payload: {exc}")
+            full0 = None
         for name in models:
             t4["with_payloads"][name] = fitted[name].rel_error_
-            try:
-                m0, _ = fit_one(name, qs_val, s0, False)
-                t4["without_payload"][name] = m0.rel_error_
-            except DataError as exc:  # too few samples without payload
-                notes.append(f"Table IV without payload, {name} model: {exc}")
-                t4["without_payload"][name] = None
+            t4["without_payload"][name] = (
+                fit_part(full0, name, False, qs_val)[0].rel_error_ if full0 is not None else None
+            )
     return FitReport(
         models=fitted,
         designs=designs,
