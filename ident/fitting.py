@@ -335,7 +335,7 @@ def fit_models(
         inner = Library(*[t for t in lib0.terms() if isinstance(t, RigidBody | Payload)])
         chi = np.array([first.coef_.get(n, 0.0) for n in inner.names()])
         pre["load_model"] = (inner, chi)
-        full = combined(s, has_payload)
+        full = full.select(dq_min=pre["dq_min"], tau_min=tau_min, load_model=pre["load_model"])
     vmax = float(np.max(np.abs(full.signals.dq)))
 
     scan: list[tuple[float, float]] = []

@@ -181,11 +181,43 @@ def _dt(t: np.ndarray) -> float:
 
 @dataclass
 class _Block:
-    """Full-rate filtered signals of one experiment and how it was decimated."""
+    """One experiment: full-rate filtered signals, decimated rows, selection."""
 
+    sub: Signals  # raw samples after edge trim
     full: Signals  # filtered q, dq, ddq; tau low-passed (for sign P); after edge trim
     index: np.ndarray  # indices kept by decimation (into full)
+    dec: np.ndarray  # decimated rows (4 + b, m): tau, q, dq, ddq, then the design's columns
     mask: np.ndarray  # selection on the decimated samples
+
+
+def _assemble(blocks: list[_Block], n_par: int, revolute: bool) -> tuple:
+    """Y, W, decimated signals from the blocks' decimated rows and masks."""
+    ys, ws, sigs = [], [], []
+    for b in blocks:
+        m = b.mask
+        y = b.dec[0, m]
+        ys.append(y)
+        ws.append(b.dec[4:, m].T)
+        picked = b.sub.take(b.index[m])
+        sigs.append(replace(picked, q=b.dec[1, m], dq=b.dec[2, m], ddq=b.dec[3, m], tau=y))
+    Y = np.concatenate(ys)
+    if Y.size <= n_par:
+        raise DataError(
+            f"{Y.size} samples left after selection for {n_par} parameters; "
+            "lower dq_min/tau_min or the decimation"
+        )
+    dsig = Signals(
+        t=np.concatenate([s.t for s in sigs]),
+        q=np.concatenate([s.q for s in sigs]),
+        dq=np.concatenate([s.dq for s in sigs]),
+        ddq=np.concatenate([s.ddq for s in sigs]),
+        tau=Y,
+        payload_mass=np.concatenate([s.payload_mass for s in sigs]),
+        payload_arm=np.concatenate([s.payload_arm for s in sigs]),
+        experiment=np.concatenate([s.experiment for s in sigs]),
+        revolute=revolute,
+    )
+    return Y, np.concatenate(ws, axis=0), dsig
 
 
 @dataclass
@@ -237,13 +269,6 @@ class Design:
             "samples": len(self),
         }
 
-    def _columns(self, term: Term) -> np.ndarray:
-        out = []
-        for b in self._blocks:
-            wd, _ = _decimate_rows(np.ascontiguousarray(term.columns(b.full).T), self.decimation)
-            out.append(wd[:, b.mask].T)
-        return np.concatenate(out, axis=0)
-
     def with_term(self, term: Term) -> Design:
         """A new design with ``term``'s columns appended.
 
@@ -254,12 +279,17 @@ class Design:
         clash = set(new) & set(self.names)
         if clash:
             raise DataError(f"parameters {sorted(clash)} are already in the design")
-        w = self._columns(term)
+        blocks, cols = [], []
+        for b in self._blocks:
+            rows, _ = _decimate_rows(np.ascontiguousarray(term.columns(b.full).T), self.decimation)
+            blocks.append(replace(b, dec=np.concatenate([b.dec, rows], axis=0)))
+            cols.append(rows[:, b.mask].T)
         return replace(
             self,
-            W=np.concatenate([self.W, w], axis=1),
+            W=np.concatenate([self.W, np.concatenate(cols, axis=0)], axis=1),
             names=self.names + new,
             library=Library(*self.library.terms(), term),
+            _blocks=blocks,
         )
 
     def without(self, names: Iterable[str]) -> Design:
@@ -273,13 +303,31 @@ class Design:
         if unknown:
             raise DataError(f"parameters {sorted(unknown)} are not in the design")
         keep = [i for i, n in enumerate(self.names) if n not in drop]
+        rows = [0, 1, 2, 3] + [4 + i for i in keep]
         terms = [t for t in self.library.terms() if not (set(t.names()) & drop)]
         return replace(
             self,
             W=self.W[:, keep],
             names=tuple(self.names[i] for i in keep),
             library=Library(*terms),
+            _blocks=[replace(b, dec=b.dec[rows]) for b in self._blocks],
         )
+
+    def select(
+        self,
+        *,
+        dq_min: float | None = None,
+        tau_min: float | None = None,
+        load_model: tuple[Term, np.ndarray] | None = None,
+    ) -> Design:
+        """The same design with another sample selection (see :func:`build_design`),
+        without recomputing or re-filtering any column."""
+        blocks = [
+            replace(b, mask=_selection(b.full, b.index, dq_min, tau_min, self.guard, load_model))
+            for b in self._blocks
+        ]
+        Y, W, dsig = _assemble(blocks, len(self.names), self.signals.revolute)
+        return replace(self, Y=Y, W=W, signals=dsig, dq_min=dq_min, tau_min=tau_min, _blocks=blocks)
 
 
 def _dilate(bad: np.ndarray, k: int) -> np.ndarray:
@@ -420,40 +468,20 @@ def build_design(
         dq_min = dq_min_rel * vmax
 
     blocks: list[_Block] = []
-    ys, ws, sigs = [], [], []
     b = len(lib.names())
     for sub, full in fulls:
         stack = np.empty((4 + b, len(full)))
         stack[0], stack[1], stack[2], stack[3] = sub.tau, full.q, full.dq, full.ddq
-        stack[4:] = lib.columns(full).T
+        for term, sl in lib.slices():
+            stack[4 + sl.start : 4 + sl.stop] = term.columns(full).T
         dec, index = _decimate_rows(stack, decimation)
-        y, qd, dqd, ddqd = dec[0], dec[1], dec[2], dec[3]
+        del stack
         mask = _selection(full, index, dq_min, tau_min, guard, load_model)
-        blocks.append(_Block(full=full, index=index, mask=mask))
-        ys.append(y[mask])
-        ws.append(dec[4:, mask].T)
-        picked = sub.take(index[mask])
-        sigs.append(replace(picked, q=qd[mask], dq=dqd[mask], ddq=ddqd[mask], tau=y[mask]))
-    Y = np.concatenate(ys)
-    if Y.size <= len(lib.names()):
-        raise DataError(
-            f"{Y.size} samples left after selection for {len(lib.names())} parameters; "
-            "lower dq_min/tau_min or the decimation"
-        )
-    dsig = Signals(
-        t=np.concatenate([s.t for s in sigs]),
-        q=np.concatenate([s.q for s in sigs]),
-        dq=np.concatenate([s.dq for s in sigs]),
-        ddq=np.concatenate([s.ddq for s in sigs]),
-        tau=Y,
-        payload_mass=np.concatenate([s.payload_mass for s in sigs]),
-        payload_arm=np.concatenate([s.payload_arm for s in sigs]),
-        experiment=np.concatenate([s.experiment for s in sigs]),
-        revolute=signals.revolute,
-    )
+        blocks.append(_Block(sub=sub, full=full, index=index, dec=dec, mask=mask))
+    Y, W, dsig = _assemble(blocks, b, signals.revolute)
     return Design(
         Y=Y,
-        W=np.concatenate(ws, axis=0),
+        W=W,
         names=tuple(lib.names()),
         library=lib,
         signals=dsig,
