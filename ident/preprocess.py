@@ -352,6 +352,9 @@ def _selection(
 ) -> np.ndarray:
     """Mask over the decimated samples ``index`` of one experiment (see build_design)."""
     bad = np.zeros(len(full), dtype=bool)
+    if guard > 0:  # edge transients of the decimation filter
+        bad[:guard] = True
+        bad[-guard:] = True
     if dq_min is not None:
         bad |= np.abs(full.dq) < dq_min
     if tau_min is not None:
@@ -401,7 +404,9 @@ def build_design(
         The stiction and small-torque criteria are evaluated at full rate on the filtered
         dq and tau, and every sample within ``guard`` full-rate samples of a rejected one is
         rejected too, so that no kept decimated sample is smeared by the anti-alias filter
-        with samples of the stiction area; default 3 r.
+        with samples of the stiction area; default 3 r. The first and last ``guard``
+        samples of each experiment (edge transients of the decimation filter) are dropped
+        too.
     dq_min_rel : float or None
         Set ``dq_min`` to this fraction of the largest |dq| (filtered, full rate, all
         experiments); the resolved value is stored in ``Design.dq_min``.

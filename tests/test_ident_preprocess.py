@@ -54,7 +54,7 @@ def _exp(seed=0, n=8000, dt=1e-3, mass=0.0):
 def test_build_design_recovers_smooth_model_and_shapes():
     s = concat([_exp(0), _exp(1)])
     lib = RigidBody() + Viscous() + Offset()
-    d = build_design(lib, s, cutoff_hz=50, decimation=5, trim=100)
+    d = build_design(lib, s, cutoff_hz=50, decimation=5, trim=100, guard=0)
     assert d.W.shape == (d.Y.size, 5) and d.names == lib.names()
     assert len(d.signals) == d.Y.size
     # per experiment: (n - 2 trim) / r samples
