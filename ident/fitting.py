@@ -50,6 +50,9 @@ MODEL_NAMES = ("usual", "new")
 #: Default stiction-area threshold: samples with |dq| below this fraction of the maximum
 #: velocity (and their neighbours, see ``guard``) are left out (section III.D, eq. 26).
 DQ_MIN_FRACTION = 0.01
+#: The sign check (see :func:`fit_models`) is skipped when it would keep fewer samples than
+#: this fraction: then tau_out is near zero most of the time and the check is meaningless.
+SIGN_CHECK_MIN_KEPT = 0.7
 
 
 def qs_grid(vmax: float, n: int = 13) -> np.ndarray:
@@ -237,7 +240,9 @@ def fit_models(
         and leave out the samples where sign(tau) differs from sign(tau_out), where eq. 26's
         sign(P) is wrong (see ``load_model`` of :func:`ident.preprocess.build_design`).
         Both models then use these same samples. Needed when the runs cross zero load at
-        low velocity (the example campaign crosses q = pi/2 at 0.03 rad/s).
+        low velocity (the example campaign crosses q = pi/2 at 0.03 rad/s). Skipped, with a
+        note, when it would keep less than :data:`SIGN_CHECK_MIN_KEPT` of the samples (a
+        horizontal axis without payload: tau_out ~ 0 at constant velocity).
     eliminate, threshold_pct
         Elimination of non-significant parameters, see :meth:`IdentModel.fit`.
     table_iv : bool
@@ -334,8 +339,17 @@ def fit_models(
         first = IdentModel(lib0, "usual").fit(d0, eliminate=False)
         inner = Library(*[t for t in lib0.terms() if isinstance(t, RigidBody | Payload)])
         chi = np.array([first.coef_.get(n, 0.0) for n in inner.names()])
-        pre["load_model"] = (inner, chi)
-        full = full.select(dq_min=pre["dq_min"], tau_min=tau_min, load_model=pre["load_model"])
+        checked = full.select(dq_min=pre["dq_min"], tau_min=tau_min, load_model=(inner, chi))
+        kept = len(checked) / len(full)
+        if kept >= SIGN_CHECK_MIN_KEPT:
+            pre["load_model"] = (inner, chi)
+            full = checked
+        else:
+            notes.append(
+                f"sign check skipped: it would keep only {100 * kept:.0f} % of the samples "
+                "(tau_out near zero over much of the data: no gravity or payload load), so "
+                "sign(P) = sign(tau dq) of eq. 26 is used as is"
+            )
     vmax = float(np.max(np.abs(full.signals.dq)))
 
     scan: list[tuple[float, float]] = []

@@ -63,7 +63,13 @@ def test_default_settings_run_and_stay_close(tmp_path):
     js = tmp_path / "fit.json"
     assert main(["fit", str(d / "DATA_EMPS.mat"), *COMMON, "--model", "usual",
                  "--json", str(js)]) == 0  # fmt: skip
-    u = json.loads(js.read_text())["models"]["usual"]
+    assert main(["fit", str(d / "DATA_EMPS.mat"), *COMMON, "--json", str(tmp_path / "b.json")]) == 0
+    both = json.loads((tmp_path / "b.json").read_text())
+    # horizontal axis, no payload: tau_out ~ 0 at constant velocity, the sign check is skipped
+    assert any("sign check skipped" in n for n in both["notes"])
+    assert both["preprocessing"]["samples"] > 1000
+    fit = json.loads(js.read_text())
+    u = fit["models"]["usual"]
     # our defaults (50 Hz, stiction area out) differ from the reference script's choices
     assert u["parameters"]["J"]["value"] == pytest.approx(95.1, rel=0.02)
     assert u["parameters"]["F_C"]["value"] == pytest.approx(20.4, rel=0.1)
