@@ -5,6 +5,8 @@ project's generic EDS, cyclic synchronous torque)::
 
     [daq]
     interface = "socketcan"       # any python-can interface: virtual, socketcan, pcan, kvaser...
+                                  # or "config": python-can's own configuration (~/.canrc,
+                                  # CAN_INTERFACE / CAN_CHANNEL / CAN_BITRATE environment)
     channel = "can0"
     bitrate = 1000000             # [bit/s]
     max_bus_load = 0.6            # refuse cyclic traffic above this share of the bit rate

@@ -911,7 +911,9 @@ def run_campaign(
         if simulate is not None:
             sim = _start_sim(cfg, simulate, campaign, fault_injectors or {})
         kwargs: dict[str, Any] = {"interface": cfg.interface, "channel": cfg.channel}
-        if cfg.interface != "virtual":
+        if cfg.interface == "config":  # python-can's own configuration decides everything
+            kwargs = {}
+        elif cfg.interface != "virtual":
             kwargs["bitrate"] = cfg.bitrate
         try:
             bus = can.Bus(**kwargs)
@@ -940,7 +942,17 @@ def run_campaign(
                 for d in sim.drives:
                     d.set_payload(p.mass_kg, p.arm_m)
             if not yes and (n_done > 0 or sim is None or prompt is not None):
-                if not ask(i, p, n_pay):
+                if old_handler is not None:  # Ctrl-C at the prompt interrupts it at once
+                    signal.signal(signal.SIGINT, signal.default_int_handler)
+                try:
+                    accepted = ask(i, p, n_pay)
+                except KeyboardInterrupt:
+                    status, reason = "interrupted", "interrupted by the operator (SIGINT)"
+                    break
+                finally:
+                    if old_handler is not None:
+                        signal.signal(signal.SIGINT, on_sigint)
+                if not accepted:
                     status, reason = "aborted", f"operator declined payload {i}"
                     break
             if engine.interrupted:
