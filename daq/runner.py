@@ -213,9 +213,13 @@ class CycleIO(can.Listener):
         data = msg.data
         if self.log_frames:
             rec = FRAME.pack(msg.timestamp, cid, msg.dlc, bytes(data))
-            with self.lock:
+            if self.direct:
                 self.frames += rec
                 self.n_frames += 1
+            else:
+                with self.lock:
+                    self.frames += rec
+                    self.n_frames += 1
         slot = self.tpdo.get(cid)
         if slot is not None:
             d, s, bit = slot
@@ -238,6 +242,10 @@ class CycleIO(can.Listener):
 
     def sent(self, ts: float, cid: int, data: bytes) -> None:
         rec = FRAME.pack(ts, cid, len(data), data)
+        if self.direct:  # no notifier thread: nobody else appends
+            self.frames += rec
+            self.n_frames += 1
+            return
         with self.lock:
             self.frames += rec
             self.n_frames += 1
@@ -450,6 +458,7 @@ class Engine:
         tq = [0] * n_dr
         vel = [0] * n_dr
         prev_state: list[State | None] = [None] * n_dr
+        prev_sw = [-1] * n_dr
         missing_run = [0] * n_dr
         missed = 0
         cycle = 0
@@ -565,9 +574,13 @@ class Engine:
                 io_sent(time.time(), m.arbitration_id, payload_bytes)
                 log_state(d, cycle, t, q, dq, x * tpu[d] if not csp[d] else math.nan, tau_act,
                           counts[d], vel[d], x, tq[d], s, flags)
-                # state change events
-                st_now = None
-                if not flags & FLAG_TPDO_MISSING:
+                # state change events (decode only when the statusword changed)
+                if flags & FLAG_TPDO_MISSING:
+                    st_now = None
+                elif s == prev_sw[d]:
+                    st_now = prev_state[d]
+                else:
+                    prev_sw[d] = s
                     try:
                         st_now = state_from_statusword(s)
                     except ValueError:
