@@ -83,10 +83,6 @@ float64 busy_s       # [s] time from the SYNC to the end of the cycle's work
 """
 
 
-class RunStopped(DaqError):
-    """A run stopped on a fault (raised only by library users who want an exception)."""
-
-
 @dataclass(frozen=True)
 class Progress:
     """What the progress display shows (built every ~250 cycles)."""
@@ -656,7 +652,6 @@ class Engine:
 
         self._stop_reason: tuple[str, str] | None = None
         self._fault_cycle = -1
-        n_plan = len(ref.q)
         net = self.net
         if net.notifier is not None:  # the main thread receives itself during the run
             net.notifier.stop(1.0)
@@ -736,7 +731,6 @@ class Engine:
                 "missed": str(missed), "wall_s": f"{wall:.3f}",
                 "sync_offset": str(sim_drive_cycle0),
             })
-        del n_plan
         return PayloadResult(index, float(payload.mass_kg), float(payload.arm_m), log.path,
                              cycle, status, reason, fault_cycle, stop_cycle, missed, wall,
                              lateness)
