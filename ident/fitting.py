@@ -53,6 +53,8 @@ DQ_MIN_FRACTION = 0.01
 #: The sign check (see :func:`fit_models`) is skipped when it would keep fewer samples than
 #: this fraction: then tau_out is near zero most of the time and the check is meaningless.
 SIGN_CHECK_MIN_KEPT = 0.7
+#: Condition number (unit-norm columns) above which a note warns of poor excitation.
+COND_WARN = 1e3
 
 
 def qs_grid(vmax: float, n: int = 13) -> np.ndarray:
@@ -376,6 +378,11 @@ def fit_models(
         fitted[name], designs[name] = m, d
         if vfull is not None:
             vdesigns[name] = part(vfull, name, has_payload, qs_val)[1]
+        if m.cond_ > COND_WARN:
+            notes.append(
+                f"{name} model: condition number {m.cond_:.3g} (scaled columns): the data "
+                "excite some parameters poorly; their deviations are large"
+            )
         identifiable = [n for n, r in m.removed_ if not r.startswith("not significant")]
         if identifiable:
             notes.append(f"{name} model: not identifiable on these data: {', '.join(identifiable)}")
