@@ -227,6 +227,36 @@ def truth_comparison_section(ref: dict, truth: dict, demo: dict) -> Section | No
     return s
 
 
+_CAPTIONS = {
+    "direct_validation_usual.png": ("usual", "Direct validation with the usual model (Fig. 4)"),
+    "direct_validation_new.png": ("new", "Direct validation with the new model (Fig. 5)"),
+    "cross_validation_usual.png": ("usual", "Cross validation on the validation files"),
+    "cross_validation_new.png": ("new", "Cross validation on the validation files"),
+    "error_vs_velocity.png": ("new", "Residual against velocity for the fitted models"),
+    "campaign_plan.png": ("campaign", "Planned excitation"),
+}
+
+
+def discover_figures(d: Path) -> dict[str, list[dict[str, str]]]:
+    """Figures written by ``jointid fit --report`` (conventional names), grouped by section."""
+    out: dict[str, list[dict[str, str]]] = {"campaign": [], "usual": [], "new": [],
+                                            "refinement": []}
+    order = list(_CAPTIONS)
+    pngs = sorted(d.glob("*.png"), key=lambda f: (order.index(f.name) if f.name in order
+                                                   else len(order),
+                                                   f.name.replace("final", "~")))
+    for f in pngs:
+        if f.name in _CAPTIONS:
+            key, cap = _CAPTIONS[f.name]
+        elif f.name.startswith("refine_"):
+            key, cap = "refinement", "Residual diagnosis: " + f.stem[len("refine_"):].replace(
+                "_", " ")
+        else:
+            continue
+        out[key].append({"file": f.name, "caption": cap})
+    return out
+
+
 def build_report(directory: Path | str, *, title: str = "jointid report") -> Path:
     """(Re)write ``DIR/report.html`` from ``fit.json``, ``demo.json`` and the PNG figures.
 
@@ -240,10 +270,22 @@ def build_report(directory: Path | str, *, title: str = "jointid report") -> Pat
         raise DaqError(f"{d}: not a directory (expected the output folder of jointid demo/fit)")
     fit = load_json(d / "fit.json")
     demo = load_json(d / "demo.json") if (d / "demo.json").exists() else {}
+    if "figures" not in demo:
+        demo["figures"] = discover_figures(d)
     truth = demo.get("truth")
     sections: list[Section] = []
 
-    intro = Section("Campaign")
+    intro = Section("Campaign" if demo.get("campaign_summary") else "Inputs")
+    if fit.get("inputs") and not demo.get("campaign_summary"):
+        rows = [["identification", f] for f in fit["inputs"]]
+        rows += [["validation", f] for f in fit.get("validation_inputs", [])]
+        intro.table(["Use", "File"], rows)
+        pre = fit.get("preprocessing") or {}
+        if pre:
+            intro.para("Joint: " + str(fit.get("joint", "?")) + "; preprocessing: "
+                       + ", ".join(f"{k} = {fmt(v)}" for k, v in pre.items()), "muted")
+    for note in fit.get("notes", []):
+        intro.para("Note: " + str(note), "muted")
     if demo.get("description"):
         intro.para(demo["description"])
     if demo.get("campaign_summary"):

@@ -9,7 +9,6 @@ writes the JSON record (``docs/fit-json.md``) and the direct-validation plots (F
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import sys
 from pathlib import Path
@@ -146,16 +145,25 @@ def run(args: argparse.Namespace) -> int:
     out = report.to_json()
     text = report.format_tables()
     print(text)
+    ref = None
     if args.refine:
-        out["refinement"] = _refine(report, args.max_steps)
+        ref, out["refinement"] = _refine(report, args.max_steps)
     if args.report is not None:
+        from daq.report import write_json
+        from daq.report_build import build_report
+
         from .plots import write_plots
+        from .refine_plots import plot_refinement
 
         args.report.mkdir(parents=True, exist_ok=True)
         (args.report / "tables.txt").write_text(text + "\n")
         files = write_plots(report, args.report)
+        if ref is not None:
+            files += plot_refinement(ref, args.report)
         out["figures"] = [str(f) for f in files]
-        print(f"\nreport: {args.report} ({len(files)} figures, tables.txt)")
+        write_json(args.report / "fit.json", out)
+        html = build_report(args.report, title="jointid fit report")
+        print(f"\nreport: {html} ({len(files)} figures, tables.txt, fit.json)")
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(out, indent=2) + "\n")
@@ -163,11 +171,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _refine(report: Any, max_steps: int) -> dict[str, Any]:
-    from . import IdentError
-
-    if importlib.util.find_spec("ident.refine") is None:
-        raise IdentError("--refine: the refinement module (ident.refine) is not installed")
+def _refine(report: Any, max_steps: int) -> tuple[Any, dict[str, Any]]:
     from .refine import refine
 
     name = "new" if "new" in report.models else next(iter(report.models))
@@ -182,4 +186,4 @@ def _refine(report: Any, max_steps: int) -> dict[str, Any]:
     print("\n" + (ref.format_table() if hasattr(ref, "format_table") else ""))
     rec = ref.to_json()
     rec.setdefault("model", name)
-    return rec
+    return ref, rec

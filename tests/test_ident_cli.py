@@ -65,6 +65,11 @@ def test_fit_json_report_and_tables(csv_runs, tmp_path, capsys):
     assert "Ma_ratio" in fit["models"]["usual"]["parameters"]
     assert (rep / "direct_validation_new.png").stat().st_size > 10_000
     assert (rep / "cross_validation_usual.png").exists()
+    # the report folder is complete: fit.json and a self-contained HTML report embedding
+    # every figure, which `jointid report DIR` can rebuild
+    assert json.loads((rep / "fit.json").read_text())["models"].keys() == {"usual", "new"}
+    html = (rep / "report.html").read_text()
+    assert html.count("data:image/png;base64,") == len(list(rep.glob("*.png")))
     assert (rep / "tables.txt").read_text().startswith("Identified values")
 
 
