@@ -710,42 +710,34 @@ class SimulatedDrive:
         self._unsubscribe_pdos()
         self._layout_dirty = False
         self._resubscribe_sync()
-        od = self.dod.od
-        for n in range(512):
-            comm = 0x1400 + n
-            if comm not in od:
-                continue
-            cob = int(self._stored(comm, 1) or _PDO_NOT_VALID)
-            if cob & _PDO_NOT_VALID or 0x1600 + n not in od:
-                continue
-            trans = int(self._stored(comm, 2) or 0) if self._has(comm, 2) else 255
-            layout = self._layout_or_none(0x1600 + n)
-            if layout is None:
-                continue
-            st, names = layout
-            rx = _RxPdo(n + 1, cob & 0x7FF, trans <= 240, st, names)
+        for n, cob, trans, (st, names) in self._valid_pdos(0x1400, 0x1600):
+            rx = _RxPdo(n + 1, cob, trans <= 240, st, names)
             self._rx.append(rx)
             if rx.sync:
                 self._rx_sync.append(rx)
             self.network.subscribe(rx.cob_id, self._make_rx_handler(rx))
+        for n, cob, trans, (st, names) in self._valid_pdos(0x1800, 0x1A00):
+            if trans <= 240:
+                self._tx_sync.append(_TxPdo(n + 1, cob, max(trans, 1), st, names))
+            elif trans >= 254:
+                self._tx_event.append(_TxPdo(n + 1, cob, 0, st, names))
+            # 252/253 (RTR only): not served, LocalNode drops remote frames
+
+    def _valid_pdos(self, comm_base: int, map_base: int):
+        """Yield ``(n, cob_id, transmission_type, layout)`` of each valid, non-empty PDO whose
+        communication object is ``comm_base + n`` and mapping object ``map_base + n``."""
+        od = self.dod.od
         for n in range(512):
-            comm = 0x1800 + n
+            comm = comm_base + n
             if comm not in od:
                 continue
             cob = int(self._stored(comm, 1) or _PDO_NOT_VALID)
-            if cob & _PDO_NOT_VALID or 0x1A00 + n not in od:
+            if cob & _PDO_NOT_VALID or map_base + n not in od:
                 continue
             trans = int(self._stored(comm, 2) or 0) if self._has(comm, 2) else 255
-            layout = self._layout_or_none(0x1A00 + n)
-            if layout is None:
-                continue
-            st, names = layout
-            if trans <= 240:
-                tx = _TxPdo(n + 1, cob & 0x7FF, max(trans, 1), st, names)
-                self._tx_sync.append(tx)
-            elif trans >= 254:
-                self._tx_event.append(_TxPdo(n + 1, cob & 0x7FF, 0, st, names))
-            # 252/253 (RTR only): not served, LocalNode drops remote frames
+            layout = self._layout_or_none(map_base + n)
+            if layout is not None:
+                yield n, cob & 0x7FF, trans, layout
 
     def _layout_or_none(self, map_index: int) -> tuple[struct.Struct, tuple] | None:
         """Layout of one mapping object; None for an empty mapping (sub 0 = 0: the PDO is not
