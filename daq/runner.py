@@ -413,6 +413,7 @@ class Engine:
         self.rpdo_msgs = [can.Message(arbitration_id=0x200 + d.node_id, data=bytes(
             d.specs[0].n_bytes), is_extended_id=False) for d in drives]
         self.sync_count = 0
+        self._resync = False
 
     # -- one cycle ------------------------------------------------------------------------
     def _exchange(self, cycle: int, deadline: float) -> int:
@@ -425,6 +426,13 @@ class Engine:
         self.sync_count += 1
         timeout = deadline - time.perf_counter() if self.paced else self.cfg.lockstep_wait_s
         ok = io.pump(self.bus, timeout) if io.direct else io.wait(timeout)
+        if self._resync and io.direct:
+            # the previous cycle timed out: its TPDOs may have arrived since and been taken
+            # for this cycle's; take whatever is queued so that the newest values win
+            recv, on = self.bus.recv, io.on_message_received
+            while (msg := recv(0.0)) is not None:
+                on(msg)
+        self._resync = not ok
         return io.full if ok else io.mask
 
     def run_payload(self, index: int, payload: Any, ref: Any, log: RunLog,
