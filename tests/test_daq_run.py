@@ -147,8 +147,9 @@ def test_unknown_node_is_refused(tmp_path):
 
 @pytest.mark.parametrize("name", VENDOR_EDS)
 def test_vendor_eds_campaign(tmp_path, name):
+    """Three payloads against the simulated drive serving each vendor file (CST ones)."""
     eds = shared_path("eds", name)
-    c = small_campaign(n_payloads=1, periods=1, freq=1.0, amplitude=0.1,
+    c = small_campaign(n_payloads=3, periods=1, freq=1.0, amplitude=0.1,
                        daq={"drives": [{"node_id": 1, "eds": str(eds)}]})
     if name.startswith("ingenia"):
         with pytest.raises(ConfigError, match="does not support cyclic_sync_torque"):
@@ -156,10 +157,15 @@ def test_vendor_eds_campaign(tmp_path, name):
         return
     r = run_campaign(c, out_dir=tmp_path, simulate=default_plant(), yes=True)
     assert r.ok, r.reason
-    a, rec, idx = drive_cycles(r, r.runs[0])
-    assert np.array_equal(a.cycle, np.arange(len(a)))
-    assert np.array_equal(a.counts, rec["counts"][idx])
-    assert read_attachments(r.runs[0].path).keys() >= {eds.name}
+    assert len(r.runs) == 3
+    per_unit = default_plant().drive.torque_per_permille
+    for run in r.runs:
+        a, rec, idx = drive_cycles(r, run)
+        assert np.array_equal(a.cycle, np.arange(len(a)))
+        assert np.array_equal(a.counts, rec["counts"][idx])
+        x = np.round(a.tau_ref / per_unit).astype(np.int64)
+        assert np.array_equal(x[:-1], rec["target_torque"][idx[1:]])
+        assert read_attachments(run.path).keys() >= {eds.name}
 
 
 def test_csp_mode_sends_position_targets(tmp_path):
