@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -338,35 +338,15 @@ class _Candidate:
     generic: bool = False
 
 
-def _dc_gain(design: Design) -> float:
-    """DC gain of the design's decimation filter (1 when it is normalised).
-
-    A Chebyshev type I filter of even order has its DC gain at the bottom of the pass-band
-    ripple, so a zero-phase pass scales slowly varying signals by 10^(-2 ripple/20) per stage;
-    the decimated ``design.signals`` (q, dq, ddq, tau) carry that factor. The refinement
-    undoes it before evaluating nonlinear functions of q (a ripple sin(2π q/P), exp(-|q̇|/q_s)).
-    """
-    from .preprocess import decimate
-
-    r = int(getattr(design, "decimation", 1) or 1)
-    if r <= 1:
-        return 1.0
-    y, _ = decimate(np.ones(64 * r + 1), r)
-    g = float(y[len(y) // 2])
-    return g if 0.5 < g < 2.0 else 1.0
-
-
 def _unscaled(design: Design) -> Signals:
-    """``design.signals`` with the decimation filter's DC gain removed (see :func:`_dc_gain`)."""
-    s = design.signals
-    g = _dc_gain(design)
-    if g == 1.0:
-        return s
-    return replace(s, q=s.q / g, dq=s.dq / g, ddq=s.ddq / g, tau=s.tau / g)
+    """``design.signals`` (kept for :mod:`ident.refine_plots`). The decimation filter has unit
+    DC gain (:func:`ident.preprocess.decimate`), so the decimated q, dq, ddq, tau need no
+    rescaling before nonlinear functions of them are evaluated."""
+    return design.signals
 
 
 class _Columns:
-    """Scores candidates on columns computed on the decimated signals (DC gain removed):
+    """Scores candidates on columns computed on the decimated signals:
     smooth functions of slowly varying signals commute with the anti-alias filter, so these
     match :meth:`Design.with_term`'s columns closely and cost no full-rate pass. The exact
     columns are used only for the acceptance refit."""
@@ -576,7 +556,7 @@ def _effect_parameters(
     d(W_term χ_term)/dh appended to the kept regressor)."""
     names = list(model.names_)
     tnames = [n for n in term.names() if n in model.coef_]
-    s, g = _unscaled(design), _dc_gain(design)
+    s = design.signals
     W = design.W[:, [design.names.index(n) for n in names]]
     extra = []
     if term.hyper_names and len(tnames) == len(term.names()):
@@ -586,7 +566,7 @@ def _effect_parameters(
             dh = 1e-6 * h0
             up = term.with_hyper(**{h: h0 + dh}).columns(s) @ c
             dn = term.with_hyper(**{h: h0 - dh}).columns(s) @ c
-            extra.append(g * (up - dn) / (2 * dh))
+            extra.append((up - dn) / (2 * dh))
     A = np.column_stack([W, *extra]) if extra else W
     norms = np.linalg.norm(A, axis=0)
     norms = np.where(norms > 0, norms, 1.0)
@@ -705,7 +685,7 @@ def refine(
     steps: list[Step] = []
     rejected: list[Rejected] = []
     stop = f"step limit ({max_steps}) reached"
-    s = _unscaled(cur_design)
+    s = cur_design.signals
     diag = None
     for k in range(1, max_steps + 1):
         r = cur.residual_

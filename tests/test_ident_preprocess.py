@@ -26,11 +26,19 @@ def test_decimate_passes_band_kills_alias_and_keeps_last_sample():
     y, idx = decimate(np.column_stack([low, high]), r)
     assert idx[-1] == t.size - 1 and np.all(np.diff(idx) == r)
     inner = slice(20, -20)
-    # MATLAB/scipy decimate: Chebyshev I (0.05 dB ripple) forward-backward, same samples
-    ref = scipy.signal.decimate(low, r, ftype="iir", zero_phase=True)
+    # MATLAB/scipy decimate: Chebyshev I (0.05 dB ripple) forward-backward, same samples,
+    # but normalised to unit DC gain (scipy's design has 10^(-0.05/20) per pass)
+    ref = scipy.signal.decimate(low, r, ftype="iir", zero_phase=True) / 10 ** (-0.1 / 20)
     np.testing.assert_allclose(y[50:-50, 0], ref[50:-50], atol=2e-4)
     np.testing.assert_allclose(y[inner, 0], low[idx][inner], atol=0.012)  # ripple^2 <= 1.2 %
     assert np.max(np.abs(y[inner, 1])) < 1e-3
+    # unit DC gain: a constant and a ramp (slow position) come out unscaled, in one stage
+    # and in two (r = 40: 10 x 4)
+    for rr in (10, 40):
+        ramp = 0.3 + 0.5 * t
+        yc, ic = decimate(np.column_stack([np.full_like(t, 2.5), ramp]), rr)
+        np.testing.assert_allclose(yc[30:-30, 0], 2.5, rtol=1e-9)
+        np.testing.assert_allclose(yc[30:-30, 1], ramp[ic][30:-30], rtol=1e-5)
     # staged decimation for factors above 13
     y2, idx2 = decimate(low, 40)
     assert np.all(np.diff(idx2) == 40)
