@@ -259,7 +259,7 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "") -> DaqConfig:
         raise ConfigError(f"{source}: daq.limits.position: expected [min, max] with min < max, "
                           f"got {list(pos)}")
     clock = d["clock"] or ("lockstep" if d["interface"] == "virtual" else "paced")
-    if clock == "lockstep" and d["interface"] != "virtual":
+    if clock == "lockstep" and d["interface"] not in ("virtual", "config"):
         raise ConfigError(f"{source}: daq.clock: expected 'paced' on a real interface "
                           f"({d['interface']!r}), got 'lockstep'")
     return DaqConfig(

@@ -782,14 +782,16 @@ def _write_state(p: Path, name: str, completed: set[int]) -> None:
 
 
 def _metadata(campaign: Any, cfg: DaqConfig, plan: Any, index: int, payload: Any,
-              scalings: list[Scaling], plant_params: Any) -> dict[str, dict[str, str]]:
+              scalings: list[Scaling], plant_params: Any,
+              bus_info: str = "") -> dict[str, dict[str, str]]:
     ref = plan.reference
     md: dict[str, dict[str, str]] = {
         "campaign": {
             "name": campaign.name, "source": str(campaign.source),
             "joint_kind": campaign.joint.kind, "cycle_s": repr(campaign.cycle_s),
             "clock": cfg.clock, "interface": cfg.interface, "channel": cfg.channel,
-            "bitrate": str(cfg.bitrate), "n_payloads": str(len(campaign.payloads)),
+            "bitrate": str(cfg.bitrate), "bus": bus_info,
+            "n_payloads": str(len(campaign.payloads)),
             "segments": json.dumps(list(ref.segment_names)),
             "position_limits": json.dumps(list(campaign.joint.limits.position)),
             "gains": json.dumps(campaign.control.gains_kwargs()),
@@ -980,7 +982,8 @@ def run_campaign(
             drive_cycle0 = sim.drives[0].cycle if sim is not None else -1
             log = RunLog(out / f"{campaign.name}_payload{i}.mcap", n_axes=len(drives),
                          cycle_s=campaign.cycle_s,
-                         metadata=_metadata(campaign, cfg, plan, i, p, scalings, simulate),
+                         metadata=_metadata(campaign, cfg, plan, i, p, scalings, simulate,
+                                            str(getattr(bus, "channel_info", ""))),
                          attachments=_attachments(campaign, cfg, simulate),
                          chunk_seconds=cfg.chunk_seconds,
                          frames_per_cycle=1 + 3 * len(drives))

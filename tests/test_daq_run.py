@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import math
 
+import can
 import numpy as np
 import pytest
 
@@ -183,3 +184,51 @@ def test_csp_mode_sends_position_targets(tmp_path):
     target = np.round(a.q_ref[moving] * cpr).astype(np.int64)
     assert np.array_equal(rec["target_position"][idx[moving + 1]], target)
     assert np.max(np.abs(a.q - a.q_ref)[moving]) < 0.05
+
+
+def test_hardware_path_with_python_can_configuration(tmp_path, monkeypatch):
+    """No --simulate: the bus comes from python-can's own configuration (environment), the
+    scaling from [daq.drives.scaling], the operator confirms every payload, and the drive is
+    whatever answers on the bus (here a simulated drive started by the test)."""
+    from sim_drivers.drive import SimulatedDrive
+    from sim_drivers.plant import JointPlant
+
+    channel = f"test_hw_{next(_chan)}"
+    monkeypatch.setenv("CAN_INTERFACE", "virtual")
+    monkeypatch.setenv("CAN_CHANNEL", channel)
+    plant = JointPlant(default_plant(), 0.001)
+    plant.reset(0.0)
+    bus = can.Bus(interface="virtual", channel=channel)
+    drive = SimulatedDrive(bus, 4, plant, cycle_s=0.001)
+    drive.start()
+    try:
+        c = small_campaign(n_payloads=2, periods=1, freq=1.0, amplitude=0.1, daq={
+            "interface": "config", "clock": "lockstep",
+            "drives": [{"node_id": 4, "scaling": {
+                "rated_torque_Nm": 5.0, "gear_ratio": 100.0,
+                "encoder_counts_per_rev": 4096}}]})
+        asked = []
+
+        def prompt(i, p, n):
+            asked.append(i)
+            drive.set_payload(p.mass_kg, p.arm_m)  # the operator mounts it
+            return True
+
+        r = run_campaign(c, out_dir=tmp_path, prompt=prompt)
+    finally:
+        drive.stop()
+        bus.shutdown()
+    assert r.ok, r.reason
+    assert asked == [0, 1]  # on hardware the first payload is confirmed too
+    rec = drive.record
+    for run in r.runs:
+        a = read_run(run.path)
+        assert a.metadata["drive0"]["node_id"] == "4"
+        assert "plant" not in a.metadata
+        assert channel in a.metadata["campaign"]["bus"]  # the bus python-can's config opened
+        c0 = int(a.metadata["result"]["sync_offset"])
+        assert c0 == -1  # unknown without a simulated drive of our own
+        # align on the drive's record by the counts sequence of the moving part
+        moving = np.flatnonzero(a.segment >= 0)
+        assert np.max(np.abs(a.q - a.q_ref)[moving]) < 0.05
+    assert rec["counts"].shape[0] >= sum(run.cycles for run in r.runs) - 2
