@@ -147,3 +147,27 @@ def test_vendor_eds_pdo_configuration(bus_pair, name):
     for spec in drive.specs:
         for k, w in enumerate(spec.words(), start=1):
             assert _stored(local, spec.map_index, k) == w
+
+
+def test_scaling_read_from_the_drive_when_the_campaign_has_none(bus_pair):
+    master, device = bus_pair
+    eds = shared_path("eds", "elmo_gold.dcf")
+    local = _local(device, eds)
+    local.sdo[0x6076].raw = 5000  # mN m
+    local.sdo[0x608F][1].raw = 4096  # encoder increments
+    local.sdo[0x608F][2].raw = 1  # per motor revolution
+    local.sdo[0x6091][1].raw = 100  # motor revolutions
+    local.sdo[0x6091][2].raw = 1  # per shaft revolution
+    cfg = DriveConfig(1, eds, Mode.CYCLIC_SYNC_TORQUE, 100, None)
+    sc = MasterDrive(master, cfg).read_scaling()
+    assert (sc.rated_torque_Nm, sc.gear_ratio, sc.encoder_counts_per_rev) == (5.0, 100.0, 4096)
+
+
+def test_scaling_missing_everywhere_is_refused(bus_pair):
+    master, device = bus_pair
+    eds = generic_eds()  # has 0x6076 but no 0x608F encoder resolution
+    _local(device, eds)
+    cfg = DriveConfig(1, eds, Mode.CYCLIC_SYNC_TORQUE, 100, None)
+    with pytest.raises(ConfigError, match=r"node 1: the drive gives no rated torque .*set "
+                                          r"daq.drives.scaling"):
+        MasterDrive(master, cfg).read_scaling()
