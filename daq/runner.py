@@ -437,6 +437,32 @@ class Engine:
 
     def run_payload(self, index: int, payload: Any, ref: Any, log: RunLog,
                     sim_drive_cycle0: int) -> PayloadResult:
+        """Execute one payload run and close its log.
+
+        Phases (one cycle counter, no gaps): read the drives' state; enable them (CiA 402
+        path, fault reset by a rising edge of bit 7) while holding the measured position;
+        approach the plan's start with a quintic (segment -1) if needed; the plan; settle
+        (``SETTLE_CYCLES``); shutdown (controlword 0x0006). On a fault, SIGINT or a watchdog:
+        quick stop for ``quick_stop_cycles``, then disable voltage until the drives report
+        it (at most ``DISABLE_MAX_CYCLES`` more cycles).
+
+        Parameters
+        ----------
+        index : int
+            Payload index in the campaign.
+        payload : trajectories.campaign.Payload
+        ref : trajectories.plan.Reference
+            The planned reference, sampled every cycle: ``q`` [rad], ``dq`` [rad/s],
+            ``ddq`` [rad/s^2], ``segment``, ``segment_names``.
+        log : RunLog
+            Open log; closed here on every path with the ``result`` metadata.
+        sim_drive_cycle0 : int
+            Cycle counter of the simulated drive at our cycle 0 (-1: no simulation).
+
+        Returns
+        -------
+        PayloadResult
+        """
         c, cfg, io = self.c, self.cfg, self.io
         n_dr = len(self.drives)
         cycle_s = self.cycle_s
