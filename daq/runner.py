@@ -31,8 +31,13 @@ at the torque limit), following error, TPDO missing for ``tpdo_timeout_cycles`` 
 cycles, heartbeat silent for ``heartbeat_timeout_s``, EMCY, a drive leaving OPERATION ENABLED,
 SIGINT. On any of them the runner sends quick stop (controlword 0x0002) for
 ``quick_stop_cycles`` cycles, then disable voltage (0x0000) until the drive reports SWITCH ON
-DISABLED (at most 5 more cycles): motion stops within ``quick_stop_cycles + 1`` cycles of the
-detection. The run's log is closed properly and the result says why, in one line.
+DISABLED (at most 5 more cycles). A command takes effect at the SYNC after it is sent, so the
+drive is quick-stopping (or off) from the 2nd SYNC after the detection and SWITCH ON DISABLED
+by the ``quick_stop_cycles + 2``-th (tested against the simulated drive's own record).
+Detection itself takes: the same cycle for limits, following error, EMCY and state changes;
+``tpdo_timeout_cycles`` cycles for missing TPDOs; ``heartbeat_timeout_s`` of wall time for a
+lost heartbeat (checked every 16 cycles); at most one cycle for SIGINT. The run's log is
+closed properly and the result says why, in one line.
 """
 
 from __future__ import annotations
