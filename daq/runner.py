@@ -47,6 +47,7 @@ import json
 import math
 import os
 import queue
+import re
 import signal
 import struct
 import sys
@@ -794,8 +795,14 @@ class Engine:
 
 
 # ----------------------------------------------------------------------------- campaign
+def file_stem(name: str) -> str:
+    """A campaign name made safe for file names (``"rx130l (quick)"`` -> ``"rx130l_quick"``)."""
+    stem = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("_")
+    return stem or "campaign"
+
+
 def _state_path(out_dir: Path, name: str) -> Path:
-    return out_dir / f"{name}.state.json"
+    return out_dir / f"{file_stem(name)}.state.json"
 
 
 def _read_state(p: Path) -> set[int]:
@@ -1011,7 +1018,7 @@ def run_campaign(
             for d in drives:
                 d.nmt_start()
             drive_cycle0 = sim.drives[0].cycle if sim is not None else -1
-            log = RunLog(out / f"{campaign.name}_payload{i}.mcap", n_axes=len(drives),
+            log = RunLog(out / f"{file_stem(campaign.name)}_payload{i}.mcap", n_axes=len(drives),
                          cycle_s=campaign.cycle_s,
                          metadata=_metadata(campaign, cfg, plan, i, p, scalings, simulate,
                                             str(getattr(bus, "channel_info", ""))),

@@ -221,3 +221,11 @@ def test_paced_clock_records_timing_of_every_cycle(tmp_path, source):
     assert len(timing) == run.cycles
     lat = [struct.unpack_from("<qdd", m.data, 4)[2] for m in timing]
     assert np.allclose(lat, run.lateness_s)
+
+
+def test_campaign_names_become_safe_file_stems():
+    from daq.runner import file_stem
+
+    assert file_stem("rx130l-joint3 (quick)") == "rx130l-joint3_quick"
+    assert file_stem("a/b\\c") == "a_b_c"
+    assert file_stem("???") == "campaign"
