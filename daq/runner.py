@@ -11,6 +11,9 @@ file, cycle by cycle:
    (CST) or the position target (CSP), limits and watchdog, RPDO out;
 4. log the joint states, the setpoint and every CAN frame of the cycle.
 
+Several drives (``[[daq.drives]]``) all follow the campaign's one plan, each with its own
+controller; drive k logs on ``/joint/<k>/state``. With ``--simulate`` each gets its own plant.
+
 Clocks
 ------
 ``lockstep``
