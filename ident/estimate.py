@@ -1,8 +1,18 @@
-"""Ordinary least squares through QR with the paper's statistics (eq. 12-16).
+"""Ordinary least squares through QR with the paper's statistics (eq. 12-16), and its
+instrumental-variable variant (IDIM-IV).
 
 Pure numerics. The regressor columns are scaled to unit norm before the factorisation
 (the estimate is unchanged, the conditioning is not squared); a column-pivoted QR detects
 zero and linearly dependent columns and says which parameters cannot be separated.
+
+IDIM-IV (Janot, Vandanjon & Gautier, "A generic instrumental variable approach for
+industrial robot identification", IEEE TCST 2014): with instruments Z (m x b) correlated
+with W but not with the error, chi_IV = (Z^T W)^-1 Z^T Y; the statistics keep the form of
+eq. 14-16 with sigma_rho^2 = ||Y - W chi||^2 / (m - b) and
+C = sigma_rho^2 (Z^T W)^-1 Z^T Z (W^T Z)^-1 (which is eq. 15 when Z = W). In closed loop the
+measured motion contains the response to the drive's torque noise while the logged torque
+reference does not: OLS is then biased (errors in variables, strongest on the columns whose
+true signal is weak, e.g. E_xp ddq); instruments built on the reference trajectory are not.
 """
 
 from __future__ import annotations
@@ -20,6 +30,7 @@ __all__ = [
     "RANK_TOL",
     "LSResult",
     "fit_least_squares",
+    "fit_instrumental",
     "solve_ls",
     "dependent_columns",
 ]
@@ -131,7 +142,9 @@ def dependent_columns(
     return out
 
 
-def solve_ls(W: np.ndarray, Y: np.ndarray, names: Sequence[str]) -> LSResult:
+def solve_ls(
+    W: np.ndarray, Y: np.ndarray, names: Sequence[str], Z: np.ndarray | None = None
+) -> LSResult:
     """One least-squares solve with statistics (eq. 12-16), W of full column rank.
 
     Parameters
@@ -142,11 +155,13 @@ def solve_ls(W: np.ndarray, Y: np.ndarray, names: Sequence[str]) -> LSResult:
         Measurements [N m].
     names : sequence of str
         Parameter names, one per column.
+    Z : ndarray, shape (m, b), or None
+        Instruments (IDIM-IV, see the module doc), column for column with W; None: OLS.
 
     Raises
     ------
     IdentifiabilityError
-        When W is rank deficient (use :func:`fit_least_squares` to drop such columns).
+        When W (or Z) is rank deficient (use :func:`fit_least_squares` to drop such columns).
     """
     m, b = W.shape
     if m <= b:
@@ -157,17 +172,20 @@ def solve_ls(W: np.ndarray, Y: np.ndarray, names: Sequence[str]) -> LSResult:
     if b and (d[0] == 0 or d[-1] <= RANK_TOL * d[0]):
         deps = dependent_columns(W, names)
         raise IdentifiabilityError(_dependency_message(deps))
-    qty = Q.T @ Y
-    z = scipy.linalg.solve_triangular(R, qty)
-    chi_s = np.empty(b)
-    chi_s[piv] = z
+    if Z is None:
+        qty = Q.T @ Y
+        z = scipy.linalg.solve_triangular(R, qty)
+        chi_s = np.empty(b)
+        chi_s[piv] = z
+        Rinv = scipy.linalg.solve_triangular(R, np.eye(b))
+        cov_p = Rinv @ Rinv.T  # (Ws[:, piv]^T Ws[:, piv])^-1
+        cov_s = np.empty_like(cov_p)
+        cov_s[np.ix_(piv, piv)] = cov_p
+    else:
+        chi_s, cov_s = _solve_iv(Ws, Y, np.asarray(Z, dtype=float), names)
     chi = chi_s / norms
     rho = Y - W @ chi
     sigma2 = float(rho @ rho) / (m - b)
-    Rinv = scipy.linalg.solve_triangular(R, np.eye(b))
-    cov_p = Rinv @ Rinv.T  # (Ws[:, piv]^T Ws[:, piv])^-1
-    cov_s = np.empty_like(cov_p)
-    cov_s[np.ix_(piv, piv)] = cov_p
     cov = sigma2 * cov_s / np.outer(norms, norms)
     std = np.sqrt(np.clip(np.diag(cov), 0, None))
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -188,6 +206,40 @@ def solve_ls(W: np.ndarray, Y: np.ndarray, names: Sequence[str]) -> LSResult:
         cond_raw=float(sv_raw[0] / sv_raw[-1]) if sv_raw[-1] > 0 else float("inf"),
         m=m,
     )
+
+
+def _solve_iv(
+    Ws: np.ndarray, Y: np.ndarray, Z: np.ndarray, names: Sequence[str]
+) -> tuple[np.ndarray, np.ndarray]:
+    """IV estimate for the unit-norm columns ``Ws`` and ``(Z^T W)^-1 Z^T Z (W^T Z)^-1``.
+
+    Z enters only through its column space: with Z = Q_z R_z (thin QR), Z^T W = R_z^T A and
+    the estimate is A^-1 Q_z^T Y with A = Q_z^T W, the covariance factor A^-1 A^-T.
+    """
+    m, b = Ws.shape
+    if Z.shape != (m, b):
+        raise DataError(f"instruments have shape {Z.shape}, expected {(m, b)} like W")
+    if not np.all(np.isfinite(Z)):
+        raise DataError("instruments Z hold NaN or infinite values")
+    Zs, _ = _scaled(Z)
+    Qz, Rz = scipy.linalg.qr(Zs, mode="economic")
+    dz = np.abs(np.diag(Rz))
+    if b and (dz.max() == 0 or dz.min() <= RANK_TOL * dz.max()):
+        deps = dependent_columns(Z, names)
+        raise IdentifiabilityError("instruments: " + _dependency_message(deps))
+    A = Qz.T @ Ws
+    try:
+        lu = scipy.linalg.lu_factor(A, check_finite=False)
+    except (np.linalg.LinAlgError, ValueError) as exc:  # pragma: no cover
+        raise IdentifiabilityError(f"instruments uncorrelated with the regressor ({exc})") from None
+    sv = np.linalg.svd(A, compute_uv=False)
+    if sv[-1] <= RANK_TOL * sv[0]:
+        raise IdentifiabilityError(
+            "instruments: Z^T W is singular (some column's instrument is uncorrelated with it)"
+        )
+    chi_s = scipy.linalg.lu_solve(lu, Qz.T @ Y)
+    Ainv = scipy.linalg.lu_solve(lu, np.eye(b))
+    return chi_s, Ainv @ Ainv.T
 
 
 def _dependency_message(deps: list[tuple[str, list[str]]]) -> str:
@@ -215,6 +267,7 @@ def fit_least_squares(
     threshold_pct: float = DEFAULT_THRESHOLD_PCT,
     drop_unidentifiable: bool = True,
     keep: Sequence[str] = (),
+    Z: np.ndarray | None = None,
 ) -> LSResult:
     """Least squares with removal of unidentifiable and non-significant parameters.
 
@@ -239,6 +292,9 @@ def fit_least_squares(
         ``False``: raise :class:`IdentifiabilityError` on zero or dependent columns.
     keep : sequence of str
         Names never eliminated for significance.
+    Z : ndarray, shape (m, b), or None
+        Instruments, column for column with W: the IDIM-IV estimate and covariance of the
+        module doc replace OLS (the same columns are dropped from Z as from W).
 
     Returns
     -------
@@ -252,6 +308,10 @@ def fit_least_squares(
         raise DataError(f"W has shape {W.shape}, expected ({Y.shape[0]}, {len(names)})")
     if not (np.all(np.isfinite(W)) and np.all(np.isfinite(Y))):
         raise DataError("W or Y holds NaN or infinite values")
+    if Z is not None:
+        Z = np.asarray(Z, dtype=float)
+        if Z.shape != W.shape:
+            raise DataError(f"instruments Z have shape {Z.shape}, expected {W.shape} like W")
     removed: list[tuple[str, str]] = []
     norms = np.linalg.norm(W, axis=0)
     scale = max(float(norms.max(initial=0.0)), 1e-300)
@@ -276,7 +336,7 @@ def fit_least_squares(
         cols = [i for i in cols if names[i] not in drop]
     while True:
         sub = [names[i] for i in cols]
-        res = solve_ls(W[:, cols], Y, sub)
+        res = solve_ls(W[:, cols], Y, sub, None if Z is None else Z[:, cols])
         if not eliminate or len(cols) <= 1:
             break
         rel = np.where(np.isin(sub, list(keep)), -np.inf, res.rel_std_pct)
@@ -289,3 +349,44 @@ def fit_least_squares(
         del cols[k]
     res.removed = removed
     return res
+
+
+def fit_instrumental(
+    W: np.ndarray,
+    Y: np.ndarray,
+    Z: np.ndarray,
+    names: Sequence[str],
+    *,
+    eliminate: bool = True,
+    threshold_pct: float = DEFAULT_THRESHOLD_PCT,
+    drop_unidentifiable: bool = True,
+    keep: Sequence[str] = (),
+) -> LSResult:
+    """IDIM-IV: :func:`fit_least_squares` with instruments.
+
+    Parameters
+    ----------
+    W : ndarray, shape (m, b)
+        Observation matrix.
+    Y : ndarray, shape (m,)
+        Measurements [N m].
+    Z : ndarray, shape (m, b)
+        Instruments, column for column with W (see the module doc for the estimate and
+        its covariance).
+    names, eliminate, threshold_pct, drop_unidentifiable, keep
+        As in :func:`fit_least_squares`.
+
+    Returns
+    -------
+    LSResult
+    """
+    return fit_least_squares(
+        W,
+        Y,
+        names,
+        eliminate=eliminate,
+        threshold_pct=threshold_pct,
+        drop_unidentifiable=drop_unidentifiable,
+        keep=keep,
+        Z=Z,
+    )

@@ -28,7 +28,7 @@ from .models import (
     new_model,
     usual_model,
 )
-from .preprocess import Design, build_design
+from .preprocess import TORQUE_DELAY, Design, build_design
 from .results import (
     band_errors,
     format_error_table,
@@ -151,6 +151,7 @@ class FitReport:
                 "sigma_rho": json_float(m.sigma_rho_),
                 "cond": json_float(m.cond_),
                 "cond_raw": json_float(m.result_.cond_raw),
+                "estimator": getattr(m, "estimator_", "ols"),
                 "samples": int(m.result_.m),
                 "parameters": parameters_json(m),
                 "removed": removed_json(m),
@@ -199,6 +200,52 @@ class FitReport:
         return "\n\n".join(parts)
 
 
+def _references(
+    references: Sequence[Any] | np.ndarray | None,
+    data: Sequence[Experiment] | Signals,
+    s: Signals,
+) -> np.ndarray | None:
+    """The reference positions as one array aligned with ``s`` (see :func:`fit_models`)."""
+    if references is None:
+        return None
+    if isinstance(references, str):
+        if references != "auto":
+            raise DataError(f"references {references!r}: expected arrays, 'auto' or None")
+        if isinstance(data, Signals):
+            return None
+        found = [getattr(e, "q_ref", None) for e in data]
+        if any(r is None for r in found):
+            return None
+        arrays = [np.asarray(r, dtype=float).ravel() for r in found]
+        if not all(
+            a.size == len(e) and np.all(np.isfinite(a)) for a, e in zip(arrays, data, strict=True)
+        ):
+            return None
+        return np.concatenate(arrays)
+    if isinstance(data, Signals) or isinstance(references, np.ndarray):
+        parts = [references]
+    else:
+        parts = list(references)
+        if len(parts) != len(data):
+            raise DataError(
+                f"references: {len(parts)} given for {len(data)} experiments (one per experiment)"
+            )
+    arrays = []
+    for i, r in enumerate(parts):
+        a = np.asarray(getattr(r, "q_ref", r), dtype=float).ravel()
+        if not isinstance(data, Signals) and not isinstance(references, np.ndarray):
+            e = data[i]
+            if a.size != len(e):
+                raise DataError(
+                    f"references[{i}] ({e.source}): {a.size} samples, expected {len(e)}"
+                )
+        arrays.append(a)
+    ref = np.concatenate(arrays)
+    if ref.size != len(s):
+        raise DataError(f"references: {ref.size} samples, expected {len(s)}")
+    return ref
+
+
 def fit_models(
     data: Sequence[Experiment] | Signals,
     models: Sequence[str] = MODEL_NAMES,
@@ -216,6 +263,8 @@ def fit_models(
     eliminate: bool = True,
     threshold_pct: float | None = None,
     table_iv: bool = True,
+    references: Sequence[Any] | np.ndarray | str | None = "auto",
+    torque_delay: float | str = "auto",
 ) -> FitReport:
     """Identify the usual and/or the new model on all experiments in one LS (eq. 36, 40).
 
@@ -249,6 +298,22 @@ def fit_models(
         Elimination of non-significant parameters, see :meth:`IdentModel.fit`.
     table_iv : bool
         Also identify on the runs without payload only (Table IV) when there are both.
+    references : sequence or ndarray or "auto" or None
+        The reference (planned) position of every identification sample, one array per
+        experiment [rad or m] (or objects with a ``q_ref`` array, e.g.
+        :class:`daq.reader.RunArrays`), or one concatenated array with ``Signals`` data.
+        When given, every model is estimated by IDIM-IV with instruments built on the
+        reference acceleration (see :mod:`ident.estimate` and ``reference`` of
+        :func:`ident.preprocess.build_design`), and the default cut-off is at least
+        f_s/10; this removes the closed-loop noise bias of OLS on the E_xp ddq columns.
+        ``"auto"`` (default): the experiments' ``q_ref`` attributes when every experiment
+        has one without NaN, else OLS. None: OLS.
+    torque_delay : float or "auto"
+        Instant of the torque samples after the position samples, in samples, see
+        :func:`ident.preprocess.build_design`. ``"auto"``: half a cycle
+        (:data:`ident.preprocess.TORQUE_DELAY`) when every experiment is a jointid MCAP log
+        (``source`` ending in ``.mcap``: commands held over the next cycle), else 0 (files of
+        unknown timing, processed like the MATLAB reference scripts).
 
     Returns
     -------
@@ -268,6 +333,12 @@ def fit_models(
         if validation is not None and not isinstance(validation, Signals)
         else []
     )
+    ref = _references(references, data, s)
+    if isinstance(torque_delay, str):
+        if torque_delay != "auto":
+            raise DataError(f"torque_delay {torque_delay!r}: expected a number [samples] or 'auto'")
+        mcap = bool(sources) and all(str(x).lower().endswith(".mcap") for x in sources)
+        torque_delay = TORQUE_DELAY if mcap else 0.0
     has_payload = bool(np.any(s.payload_mass != 0))
     notes: list[str] = []
     if not has_payload:
@@ -284,12 +355,13 @@ def fit_models(
         trim=trim,
         guard=guard,
         dq_min_rel=DQ_MIN_FRACTION if dq_min is None else None,
+        torque_delay=torque_delay,
     )
     qs0 = DEFAULT_QS if isinstance(qs, str) else float(qs)
     if not qs0 > 0:
         raise DataError(f"qs must be positive [rad/s], got {qs0}")
 
-    def combined(sig: Signals, payload: bool) -> Design:
+    def combined(sig: Signals, payload: bool, reference: np.ndarray | None = None) -> Design:
         """One design holding the columns of every requested model (built once)."""
         terms: list[Term] = []
         seen: set[str] = set()
@@ -298,7 +370,7 @@ def fit_models(
                 if not set(t.names()) & seen:
                     terms.append(t)
                     seen |= set(t.names())
-        return build_design(Library(*terms), sig, **pre)
+        return build_design(Library(*terms), sig, reference=reference, **pre)
 
     def part(d: Design, name: str, payload: bool, q: float = qs0) -> tuple[Library, Design]:
         lib = _library(name, q, d.signals.revolute, payload)
@@ -322,7 +394,7 @@ def fit_models(
         return m, sub
 
     # settle the preprocessing once (cut-off, decimation, stiction threshold from the data)
-    full = combined(s, has_payload)
+    full = combined(s, has_payload, ref)
     pre.update(
         cutoff_hz=full.cutoff_hz,
         decimation=full.decimation,
@@ -391,10 +463,11 @@ def fit_models(
     exp_ids = np.unique(s.experiment)
     no_payload_ids = np.unique(s.experiment[s.payload_mass == 0])
     if table_iv and has_payload and 0 < no_payload_ids.size < exp_ids.size:
-        s0 = s.take(np.isin(s.experiment, no_payload_ids))
+        in0 = np.isin(s.experiment, no_payload_ids)
+        s0 = s.take(in0)
         t4 = {"with_payloads": {}, "without_payload": {}}
         try:
-            full0 = combined(s0, False)
+            full0 = combined(s0, False, None if ref is None else ref[in0])
         except DataError as exc:  # too few samples without payload
             notes.append(f"Table IV without payload: {exc}")
             full0 = None

@@ -319,6 +319,8 @@ class IdentModel:
         Eliminated parameter names and why (unidentifiable, zero column, not significant).
     result_ : LSResult
         The final estimator result.
+    estimator_ : {"ols", "iv"}
+        Least squares (eq. 12) or IDIM-IV (when the design has instruments).
     """
 
     def __init__(self, library: Term, name: str = "usual") -> None:
@@ -347,6 +349,12 @@ class IdentModel:
         drop_unidentifiable : bool
             Remove (and report) zero or linearly dependent columns instead of raising
             :class:`~ident.IdentifiabilityError`.
+
+        Notes
+        -----
+        When the design carries instruments (``design.Z``, built from a reference
+        trajectory), the estimator is IDIM-IV (:func:`ident.estimate.fit_instrumental`)
+        instead of OLS; ``estimator_`` says which.
         """
         from .estimate import DEFAULT_THRESHOLD_PCT, fit_least_squares
 
@@ -356,6 +364,7 @@ class IdentModel:
             raise DataError(f"design has no column for parameters {missing}; rebuild it")
         idx = [design.names.index(n) for n in names]
         W = design.W[:, idx]
+        Z = getattr(design, "Z", None)
         res = fit_least_squares(
             W,
             design.Y,
@@ -363,7 +372,9 @@ class IdentModel:
             eliminate=eliminate,
             threshold_pct=DEFAULT_THRESHOLD_PCT if threshold_pct is None else threshold_pct,
             drop_unidentifiable=drop_unidentifiable,
+            Z=None if Z is None else Z[:, idx],
         )
+        self.estimator_ = "ols" if Z is None else "iv"
         self._set(res)
         return self
 

@@ -2,6 +2,14 @@
 
 Per experiment (paper section IV.B and the EMPS reference script):
 
+0. alignment (optional, ``torque_delay``): when the torque reference of sample k is computed
+   from the position of sample k and held by the drive over the following cycle
+   [t_k, t_k + dt] (jointid's runner and simulators), the motion it explains is the one of
+   the cycle's middle, and q is interpolated to t_k + dt/2 (cubic Lagrange, exact for
+   polynomials up to degree 3) before anything else. Without it dq and ddq lag the torque
+   by dt/2, which biases F_V and the inertia terms by a few 0.1 % (simulated joint: F_V
+   -0.2 % at 3.5 sigma, gone with the shift). Off by default: files of unknown timing are
+   processed like the MATLAB reference scripts (on EMPS the shift moves F_V by +2 %);
 1. zero-phase Butterworth low-pass of q (order 4), central differences for dq and ddq;
    tau is low-pass filtered the same way *only* to compute sign(P) = sign(tau dq) (eq. 26);
 2. the regressor columns W are computed at full rate on these filtered signals;
@@ -10,7 +18,11 @@ Per experiment (paper section IV.B and the EMPS reference script):
    MATLAB's ``decimate`` does (Chebyshev I order 8, 0.05 dB ripple, cut-off 0.8 f_s/(2 r),
    zero phase, keeping the last sample);
 5. one selection mask (stiction area |dq| < ``dq_min``, small torques |tau| < ``tau_min``)
-   applied identically to Y and every column.
+   applied identically to Y and every column;
+6. optionally the instruments Z of the IDIM-IV estimator (:func:`ident.estimate.fit_instrumental`):
+   the same columns with the measured acceleration replaced by the reference trajectory's
+   (``reference``: the planned position, processed exactly as q), filtered, decimated and
+   selected like W.
 
 Pure numerics: no file access.
 """
@@ -36,9 +48,58 @@ __all__ = [
     "decimate",
     "choose_cutoff",
     "split_experiments",
+    "shift",
+    "TORQUE_DELAY",
+    "CUTOFF_FLOOR_IV",
 ]
 
 BUTTER_ORDER = 4
+#: Delay of the torque reference's effective instant after its position sample, in samples,
+#: for jointid's logs: a command computed from the position of cycle k and held over the
+#: cycle acts on the motion of the cycle's middle (zero-order hold: the runner with the
+#: simulated drive, the offline simulator). ``build_design`` defaults to 0 (unknown timing).
+TORQUE_DELAY = 0.5
+#: Lower bound of the default cut-off, as a fraction of f_s, when instruments are built.
+#: The columns are nonlinear in the filtered signals (E_xp ddq, sign(P)): a narrow band
+#: smears the breakaway and reversal transients, a bias no estimator removes (simulated
+#: joint, true position and applied torque: b_m_J -139 % at f_s/20, +5 % at f_s/10). A
+#: wider band lets more quantisation and torque noise into W, which biases OLS but not IV.
+CUTOFF_FLOOR_IV = 0.1
+
+
+def shift(x: np.ndarray, d: float) -> np.ndarray:
+    """Samples of a smooth signal interpolated to t_k + d dt (cubic Lagrange, 4 points).
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+        Uniformly sampled signal (n >= 4).
+    d : float
+        Fraction of a sample, 0 <= d < 1 (0 returns ``x`` unchanged).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        x(t_k + d dt): exact for polynomials of degree <= 3; at d = 1/2 the weights are
+        (-1, 9, 9, -1)/16, gain 0.99997 at 2 % of f_s and 0.996 at 10 %. The ends are
+        extrapolated linearly (they are trimmed later).
+    """
+    x = np.asarray(x, dtype=float)
+    if d == 0:
+        return x
+    if not 0 < d < 1:
+        raise DataError(f"torque_delay must lie in [0, 1) samples, got {d}")
+    if x.size < 4:
+        raise DataError(f"{x.size} samples: too few to interpolate")
+    p = np.concatenate([[2 * x[0] - x[1]], x, [2 * x[-1] - x[-2], 3 * x[-1] - 2 * x[-2]]])
+    w = (
+        -d * (d - 1) * (d - 2) / 6,
+        (d + 1) * (d - 1) * (d - 2) / 2,
+        -(d + 1) * d * (d - 2) / 2,
+        (d + 1) * d * (d - 1) / 6,
+    )
+    n = x.size
+    return w[0] * p[0:n] + w[1] * p[1 : n + 1] + w[2] * p[2 : n + 2] + w[3] * p[3 : n + 3]
 
 
 def diffcent(y: np.ndarray, dt: float) -> np.ndarray:
@@ -155,7 +216,7 @@ def _decimate_rows(x: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
     return y, index
 
 
-def choose_cutoff(q: np.ndarray, dt: float) -> float:
+def choose_cutoff(q: np.ndarray, dt: float, min_fraction: float = 0.05) -> float:
     """Low-pass cut-off [Hz] chosen from the bandwidth of the measured motion.
 
     The velocity spectrum (differences of q) is compared with its noise floor (median power
@@ -164,23 +225,24 @@ def choose_cutoff(q: np.ndarray, dt: float) -> float:
     bandwidth of the dynamics), but never below f_s/20: stiction, reversals and the
     position loop put content well above the trajectory's own bandwidth (the EMPS
     reference script uses 100 Hz at 1 kHz for its 20 Hz position loop; pass it
-    explicitly). At most 0.4 f_s.
+    explicitly). At most 0.4 f_s. ``min_fraction`` is that lower bound as a fraction of f_s
+    (:func:`build_design` raises it to 0.1 with instruments, see there).
     """
     fs = 1.0 / dt
     v = np.diff(q) / dt
     v = v - v.mean()
     n = v.size
     if n < 16:
-        return 0.05 * fs
+        return min_fraction * fs
     p = np.abs(np.fft.rfft(v * np.hanning(n))) ** 2
     f = np.fft.rfftfreq(n, dt)
     floor = float(np.median(p[f > fs / 4])) if np.any(f > fs / 4) else 0.0
     e = np.clip(p - floor, 0, None)
     c = np.cumsum(e)
     if c[-1] <= 0:
-        return 0.05 * fs
+        return min_fraction * fs
     fb = float(f[int(np.searchsorted(c, 0.995 * c[-1]))])
-    return float(f"{np.clip(5.0 * fb, 0.05 * fs, 0.4 * fs):.6g}")
+    return float(f"{np.clip(5.0 * fb, min_fraction * fs, max(min_fraction, 0.4) * fs):.6g}")
 
 
 def split_experiments(s: Signals) -> list[slice]:
@@ -209,16 +271,20 @@ class _Block:
     index: np.ndarray  # indices kept by decimation (into full)
     dec: np.ndarray  # decimated rows (4 + b, m): tau, q, dq, ddq, then the design's columns
     mask: np.ndarray  # selection on the decimated samples
+    zfull: Signals | None = None  # ``full`` with the reference acceleration (instruments)
+    zdec: np.ndarray | None = None  # decimated instrument rows (b, m), same order as columns
 
 
 def _assemble(blocks: list[_Block], n_par: int, revolute: bool) -> tuple:
-    """Y, W, decimated signals from the blocks' decimated rows and masks."""
-    ys, ws, sigs = [], [], []
+    """Y, W, decimated signals, Z (or None) from the blocks' decimated rows and masks."""
+    ys, ws, zs, sigs = [], [], [], []
     for b in blocks:
         m = b.mask
         y = b.dec[0, m]
         ys.append(y)
         ws.append(b.dec[4:, m].T)
+        if b.zdec is not None:
+            zs.append(b.zdec[:, m].T)
         picked = b.sub.take(b.index[m])
         sigs.append(replace(picked, q=b.dec[1, m], dq=b.dec[2, m], ddq=b.dec[3, m], tau=y))
     Y = np.concatenate(ys)
@@ -238,7 +304,8 @@ def _assemble(blocks: list[_Block], n_par: int, revolute: bool) -> tuple:
         experiment=np.concatenate([s.experiment for s in sigs]),
         revolute=revolute,
     )
-    return Y, np.concatenate(ws, axis=0), dsig
+    Z = np.concatenate(zs, axis=0) if zs else None
+    return Y, np.concatenate(ws, axis=0), dsig, Z
 
 
 @dataclass
@@ -258,8 +325,11 @@ class Design:
     signals : Signals
         Decimated and selected signals (q, dq, ddq from the filtered position, tau = Y, t,
         payload, experiment) for diagnosis and velocity bands.
-    cutoff_hz, decimation, trim, dq_min, tau_min
+    cutoff_hz, decimation, trim, dq_min, tau_min, guard, torque_delay
         The preprocessing settings used.
+    Z : ndarray, shape (m, b) or None
+        Instruments of the IDIM-IV estimator, column for column with ``W`` (built with the
+        reference trajectory's acceleration), or None when no reference was given.
     """
 
     Y: np.ndarray
@@ -273,6 +343,8 @@ class Design:
     dq_min: float | None
     tau_min: float | None
     guard: int = 0
+    torque_delay: float = 0.0
+    Z: np.ndarray | None = field(default=None, repr=False)
     _blocks: list[_Block] = field(default_factory=list, repr=False)
 
     def __len__(self) -> int:
@@ -287,6 +359,8 @@ class Design:
             "dq_min": self.dq_min,
             "tau_min": self.tau_min,
             "guard": self.guard,
+            "torque_delay": self.torque_delay,
+            "instruments": "reference" if self.Z is not None else None,
             "samples": len(self),
         }
 
@@ -300,14 +374,25 @@ class Design:
         clash = set(new) & set(self.names)
         if clash:
             raise DataError(f"parameters {sorted(clash)} are already in the design")
-        blocks, cols = [], []
+        blocks, cols, zcols = [], [], []
         for b in self._blocks:
             rows, _ = _decimate_rows(np.ascontiguousarray(term.columns(b.full).T), self.decimation)
-            blocks.append(replace(b, dec=np.concatenate([b.dec, rows], axis=0)))
+            zdec = None
+            if b.zfull is not None and b.zdec is not None:
+                zrows, _ = _decimate_rows(
+                    np.ascontiguousarray(term.columns(b.zfull).T), self.decimation
+                )
+                zdec = np.concatenate([b.zdec, zrows], axis=0)
+                zcols.append(zrows[:, b.mask].T)
+            blocks.append(replace(b, dec=np.concatenate([b.dec, rows], axis=0), zdec=zdec))
             cols.append(rows[:, b.mask].T)
+        Z = None
+        if self.Z is not None and zcols:
+            Z = np.concatenate([self.Z, np.concatenate(zcols, axis=0)], axis=1)
         return replace(
             self,
             W=np.concatenate([self.W, np.concatenate(cols, axis=0)], axis=1),
+            Z=Z,
             names=self.names + new,
             library=Library(*self.library.terms(), term),
             _blocks=blocks,
@@ -329,9 +414,13 @@ class Design:
         return replace(
             self,
             W=self.W[:, keep],
+            Z=self.Z[:, keep] if self.Z is not None else None,
             names=tuple(self.names[i] for i in keep),
             library=Library(*terms),
-            _blocks=[replace(b, dec=b.dec[rows]) for b in self._blocks],
+            _blocks=[
+                replace(b, dec=b.dec[rows], zdec=b.zdec[keep] if b.zdec is not None else None)
+                for b in self._blocks
+            ],
         )
 
     def select(
@@ -347,8 +436,10 @@ class Design:
             replace(b, mask=_selection(b.full, b.index, dq_min, tau_min, self.guard, load_model))
             for b in self._blocks
         ]
-        Y, W, dsig = _assemble(blocks, len(self.names), self.signals.revolute)
-        return replace(self, Y=Y, W=W, signals=dsig, dq_min=dq_min, tau_min=tau_min, _blocks=blocks)
+        Y, W, dsig, Z = _assemble(blocks, len(self.names), self.signals.revolute)
+        return replace(
+            self, Y=Y, W=W, Z=Z, signals=dsig, dq_min=dq_min, tau_min=tau_min, _blocks=blocks
+        )
 
 
 def _dilate(bad: np.ndarray, k: int) -> np.ndarray:
@@ -399,6 +490,8 @@ def build_design(
     guard: int | None = None,
     load_model: tuple[Term, np.ndarray] | None = None,
     dq_min_rel: float | None = None,
+    torque_delay: float = 0.0,
+    reference: np.ndarray | None = None,
 ) -> Design:
     """Filter, differentiate, build W, decimate in parallel and select (see module doc).
 
@@ -413,7 +506,8 @@ def build_design(
         Decimation factor r; default round(f_s / cut-off) (the EMPS script's rule:
         ``round(0.8 f_nyq / (2 f_dyn))`` with cut-off 5 f_dyn).
     cutoff_hz : float or None
-        Butterworth cut-off on q [Hz]; default :func:`choose_cutoff` of the first experiment.
+        Butterworth cut-off on q [Hz]; default :func:`choose_cutoff` of the first experiment,
+        at least f_s/20, or :data:`CUTOFF_FLOOR_IV` f_s with a ``reference``.
     tau_min : float or None
         Drop decimated samples with |tau| below it [N m] (sign of P unreliable, eq. 26).
     dq_min : float or None
@@ -437,6 +531,17 @@ def build_design(
         sign(tau) differs from sign(tau_out_hat) are dropped (with the guard): there the
         proxy sign(P) = sign(tau dq) of eq. 26 is not sign(P_out) (the friction exceeds
         the load, the paper's "stiction area" rectangle of Fig. 2.b).
+    torque_delay : float
+        Instant the torque of sample k refers to, after the position sample, in samples
+        (0 <= d < 1); q is interpolated there (step 0 of the module doc). 0 (default)
+        leaves q as sampled; :data:`TORQUE_DELAY` for zero-order-held commands.
+    reference : ndarray, shape (n,), or None
+        Reference (planned) position of every sample [rad or m], concatenated like
+        ``signals``. When given, the design carries the instruments ``Z`` of the IDIM-IV
+        estimator: the same columns computed with the measured q and dq (sign(P) from the
+        measured tau) and the acceleration of the reference, which is free of the
+        applied-torque noise that the closed loop puts into the measured motion but not
+        into the logged torque reference.
 
     Returns
     -------
@@ -457,7 +562,8 @@ def build_design(
         raise DataError("experiments have different sampling periods; resample them first")
     fs = 1.0 / dt
     if cutoff_hz is None:
-        cutoff_hz = choose_cutoff(signals.q[slices[0]], dt)
+        floor = CUTOFF_FLOOR_IV if reference is not None else 0.05
+        cutoff_hz = choose_cutoff(signals.q[slices[0]], dt, floor)
     cutoff_hz = float(cutoff_hz)
     if decimation is None:
         decimation = max(1, int(round(fs / cutoff_hz)))
@@ -473,7 +579,20 @@ def build_design(
     if guard is None:
         guard = 3 * decimation
     guard = int(guard)
-    fulls: list[tuple[Signals, Signals]] = []
+    torque_delay = float(torque_delay)
+    if reference is not None:
+        reference = np.asarray(reference, dtype=float).ravel()
+        if reference.shape != signals.q.shape:
+            raise DataError(
+                f"reference has {reference.size} samples, expected {signals.q.size} (one per "
+                "position sample)"
+            )
+        if not np.all(np.isfinite(reference)):
+            raise DataError(
+                f"reference has {int(np.sum(~np.isfinite(reference)))} NaN/inf values "
+                "(the log lacks setpoints for some cycles)"
+            )
+    fulls: list[tuple[Signals, Signals, Signals | None]] = []
     for sl in slices:
         n = sl.stop - sl.start
         if n - 2 * trim < max(4 * decimation, 10):
@@ -481,30 +600,41 @@ def build_design(
                 f"experiment {int(signals.experiment[sl.start])}: {n} samples, too few "
                 f"after trimming {trim} at each end and decimating by {decimation}"
             )
-        qf = lowpass(signals.q[sl], cutoff_hz, fs)
+        qf = lowpass(shift(signals.q[sl], torque_delay), cutoff_hz, fs)
         dq = diffcent(qf, dt)
         ddq = diffcent(dq, dt)
         tauf = lowpass(signals.tau[sl], cutoff_hz, fs)
         keep = slice(trim, n - trim if trim else n)
         sub = signals.take(np.arange(sl.start, sl.stop)[keep])
         full = replace(sub, q=qf[keep], dq=dq[keep], ddq=ddq[keep], tau=tauf[keep])
-        fulls.append((sub, full))
+        zfull = None
+        if reference is not None:
+            qr = lowpass(shift(reference[sl], torque_delay), cutoff_hz, fs)
+            zfull = replace(full, ddq=diffcent(diffcent(qr, dt), dt)[keep])
+        fulls.append((sub, full, zfull))
     if dq_min_rel is not None:
-        vmax = max(float(np.max(np.abs(f.dq))) for _, f in fulls)
+        vmax = max(float(np.max(np.abs(f.dq))) for _, f, _ in fulls)
         dq_min = dq_min_rel * vmax
 
     blocks: list[_Block] = []
     b = len(lib.names())
-    for sub, full in fulls:
-        stack = np.empty((4 + b, len(full)))
+    for sub, full, zfull in fulls:
+        stack = np.empty((4 + 2 * b if zfull is not None else 4 + b, len(full)))
         stack[0], stack[1], stack[2], stack[3] = sub.tau, full.q, full.dq, full.ddq
         for term, sl in lib.slices():
             stack[4 + sl.start : 4 + sl.stop] = term.columns(full).T
+            if zfull is not None:
+                stack[4 + b + sl.start : 4 + b + sl.stop] = term.columns(zfull).T
         dec, index = _decimate_rows(stack, decimation)
         del stack
+        zdec = None
+        if zfull is not None:
+            dec, zdec = np.ascontiguousarray(dec[: 4 + b]), np.ascontiguousarray(dec[4 + b :])
         mask = _selection(full, index, dq_min, tau_min, guard, load_model)
-        blocks.append(_Block(sub=sub, full=full, index=index, dec=dec, mask=mask))
-    Y, W, dsig = _assemble(blocks, b, signals.revolute)
+        blocks.append(
+            _Block(sub=sub, full=full, index=index, dec=dec, mask=mask, zfull=zfull, zdec=zdec)
+        )
+    Y, W, dsig, Z = _assemble(blocks, b, signals.revolute)
     return Design(
         Y=Y,
         W=W,
@@ -517,5 +647,7 @@ def build_design(
         dq_min=dq_min,
         tau_min=tau_min,
         guard=guard,
+        torque_delay=torque_delay,
+        Z=Z,
         _blocks=blocks,
     )
