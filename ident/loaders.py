@@ -316,12 +316,35 @@ def _finite_or_zero(x: float | None) -> float:
     return v if np.isfinite(v) else 0.0
 
 
+def _longest_true_run(mask: np.ndarray) -> slice:
+    """Slice of the longest contiguous stretch of True in a boolean array (empty if none)."""
+    m = np.concatenate(([False], np.asarray(mask, dtype=bool), [False]))
+    edges = np.flatnonzero(np.diff(m.astype(np.int8)))
+    if edges.size == 0:
+        return slice(0, 0)
+    starts, stops = edges[0::2], edges[1::2]
+    k = int(np.argmax(stops - starts))
+    return slice(int(starts[k]), int(stops[k]))
+
+
 def _load_mcap(path: Path, revolute: bool | None, axis: int) -> Experiment:
+    """One MCAP run, restricted to the cycles an identification can use: the drive in
+    OPERATION ENABLED with its TPDOs received (:attr:`daq.reader.RunArrays.valid`); during
+    enable, quick stop and shutdown the drive ignores the torque reference."""
     try:
         from daq.reader import read_run
     except ImportError:
         raise DataError(f"{path}: MCAP support needs daq.reader, which is not installed") from None
     run = read_run(path, axis=axis)
+    keep = _longest_true_run(run.valid)
+    inner_dropped = int(np.count_nonzero(run.valid)) - (keep.stop - keep.start)
+    if inner_dropped > 0:
+        warnings.warn(f"{path}: kept the longest stretch of cycles with the drive enabled "
+                      f"({keep.stop - keep.start} cycles); {inner_dropped} other enabled cycles "
+                      "are separated from it by a stop or missing TPDOs", stacklevel=2)
+    if keep.stop - keep.start == 0:
+        raise DataError(f"{path}: no cycle with the drive in OPERATION ENABLED")
+    run = run.select(np.arange(keep.start, keep.stop))
     rev = bool(run.revolute) if revolute is None else revolute
     return make_experiment(
         str(path),

@@ -143,3 +143,13 @@ def test_mcap_log_written_by_daq_is_read_back(tmp_path):
     np.testing.assert_allclose(e.tau, tau)
     np.testing.assert_allclose(e.t, t, atol=1e-9)
     assert e.payload_mass == 3.4584 and e.payload_arm == 1.277 and e.revolute
+
+
+def test_longest_enabled_stretch_is_kept():
+    """MCAP runs are cut to the cycles with the drive enabled (enable/stop phases dropped)."""
+    from ident.loaders import _longest_true_run
+
+    mask = np.array([0, 0, 1, 1, 1, 0, 1, 1, 1, 1, 0], dtype=bool)
+    assert _longest_true_run(mask) == slice(6, 10)
+    assert _longest_true_run(np.ones(5, bool)) == slice(0, 5)
+    assert _longest_true_run(np.zeros(4, bool)) == slice(0, 0)
