@@ -23,6 +23,10 @@ project's generic EDS, cyclic synchronous torque)::
     chunk_seconds = 1.0           # MCAP chunk length [s of data] (lost at most on SIGKILL)
     cpu = -1                      # pin the process to this CPU (-1: the last allowed one;
                                   # -2: do not pin)
+    master_node_id = 127          # node id of the master's own heartbeat (0x700 + id)
+    master_heartbeat_ms = 100     # master heartbeat period [ms] (0: none, drives not told);
+                                  # each drive with 0x1016 watches it with a consumer time
+                                  # of 3 x period + 100 ms and stops (fault) when it is lost
     [daq.limits]                  # optional, tighter than the campaign's joint.limits
     position = [-1.0, 1.0]
     max_velocity = 1.0
@@ -37,6 +41,10 @@ project's generic EDS, cyclic synchronous torque)::
     rated_current_A = 10.0
     gear_ratio = 100.0
     encoder_counts_per_rev = 4096 # per motor revolution
+    drive_gain = 0.5              # joint-side torque per per-mille of 0x6071 [N m/permille]:
+                                  # g_f of the paper's eq. 4 per unit of target torque;
+                                  # overrides gear_ratio * rated_torque_Nm / 1000 for torque
+                                  # (then rated_torque_Nm may be left out)
 """
 
 from __future__ import annotations
@@ -70,16 +78,25 @@ class Scaling:
         Encoder counts per motor revolution.
     rated_current_A : float
         Motor rated current [A] (0x6075 / 1000), informative.
+    drive_gain : float or None
+        Joint-side torque per per-mille unit of 0x6071/0x6077 [N m/permille], i.e. the drive
+        gain g_f of the paper (eq. 4, tau = g_f v_f) for v_f in units of 0x6071. When set it
+        replaces ``gear_ratio * rated_torque_Nm / 1000`` (:attr:`torque_per_unit`); the
+        position scaling still uses ``gear_ratio`` and ``encoder_counts_per_rev``.
     """
 
     rated_torque_Nm: float
     gear_ratio: float
     encoder_counts_per_rev: int
     rated_current_A: float = float("nan")
+    drive_gain: float | None = None
 
     @property
     def torque_per_unit(self) -> float:
-        """Joint-side torque of one per-mille unit of 0x6071/0x6077 [N m]."""
+        """Joint-side torque of one per-mille unit of 0x6071/0x6077 [N m]: ``drive_gain``
+        when given, else ``gear_ratio * rated_torque_Nm / 1000``."""
+        if self.drive_gain is not None:
+            return self.drive_gain
         return self.gear_ratio * self.rated_torque_Nm / 1000.0
 
     @property
@@ -93,6 +110,10 @@ class Scaling:
             "gear_ratio": repr(self.gear_ratio),
             "encoder_counts_per_rev": str(self.encoder_counts_per_rev),
             "rated_current_A": repr(self.rated_current_A),
+            "drive_gain_Nm_per_permille": ("" if self.drive_gain is None
+                                           else repr(self.drive_gain)),
+            "torque_per_unit_Nm": repr(self.torque_per_unit),
+            "torque_source": "drive_gain" if self.drive_gain is not None else "rated_torque",
         }
 
 
@@ -148,6 +169,16 @@ class DaqConfig:
     max_velocity: float | None
     max_torque: float | None
     source: str = ""
+    master_node_id: int = 127
+    master_heartbeat_ms: int = 100
+
+    @property
+    def heartbeat_consumer_ms(self) -> int:
+        """Consumer time written to the drives' 0x1016 [ms]: 3 producer periods + 100 ms
+        (0 when the master sends no heartbeat)."""
+        if not self.master_heartbeat_ms:
+            return 0
+        return min(0xFFFF, 3 * self.master_heartbeat_ms + 100)
 
     @property
     def virtual(self) -> bool:
@@ -156,10 +187,12 @@ class DaqConfig:
 
 _SCALING = Table(
     {
-        "rated_torque_Nm": Field(float, gt=0, unit="N m"),
+        "rated_torque_Nm": Field(float, gt=0, required=False, default=float("nan"),
+                                 unit="N m"),
         "gear_ratio": Field(float, gt=0, required=False, default=1.0),
         "encoder_counts_per_rev": Field(int, gt=0, unit="counts"),
         "rated_current_A": Field(float, gt=0, required=False, default=float("nan"), unit="A"),
+        "drive_gain": Field(float, gt=0, required=False, default=None, unit="N m/permille"),
     },
     required=False,
 )
@@ -202,6 +235,9 @@ _DAQ = Table(
         "lockstep_wait_s": Field(float, required=False, default=0.5, gt=0, unit="s"),
         "chunk_seconds": Field(float, required=False, default=1.0, gt=0, unit="s"),
         "cpu": Field(int, required=False, default=-1, ge=-2),
+        "master_node_id": Field(int, required=False, default=127, ge=1, le=127),
+        "master_heartbeat_ms": Field(int, required=False, default=100, ge=0, le=20000,
+                                     unit="ms"),
         "limits": _LIMITS,
     }
 )
@@ -249,7 +285,14 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "") -> DaqConfig:
             eds = base / eds
         if not eds.is_file():
             raise ConfigError(f"{source}: {key}.eds: expected an EDS/DCF file, {eds} not found")
+        if dr["node_id"] == d["master_node_id"] and d["master_heartbeat_ms"]:
+            raise ConfigError(f"{source}: {key}.node_id: expected a node id other than "
+                              f"daq.master_node_id ({d['master_node_id']}), got "
+                              f"{dr['node_id']}")
         sc = dr.get("scaling")
+        if sc and sc.get("drive_gain") is None and not sc["rated_torque_Nm"] > 0:
+            raise ConfigError(f"{source}: {key}.scaling: expected rated_torque_Nm [N m] or "
+                              f"drive_gain [N m/permille], got neither")
         scaling = Scaling(**sc) if sc else None
         drives.append(DriveConfig(dr["node_id"], eds, MODES[dr["mode"]], dr["heartbeat_ms"],
                                   scaling))
@@ -282,6 +325,8 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "") -> DaqConfig:
         max_velocity=lim.get("max_velocity"),
         max_torque=lim.get("max_torque"),
         source=source,
+        master_node_id=d["master_node_id"],
+        master_heartbeat_ms=d["master_heartbeat_ms"],
     )
 
 

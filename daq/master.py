@@ -24,15 +24,32 @@ TPDO2  0x280 + id   0x606C velocity actual i32, 0x6061 mode display i8      5
 =====  ===========  =====================================================  =======
 
 Every other RPDO/TPDO the EDS declares is disabled (COB-ID bit 31).
+
+A dead master must stop the drives
+----------------------------------
+The master produces its own heartbeat (:class:`MasterHeartbeat`: COB-ID 0x700 +
+``daq.master_node_id``, state byte 0x05, every ``daq.master_heartbeat_ms``) with python-can's
+``send_periodic`` (the kernel's broadcast manager on socketcan, a thread elsewhere): it lasts
+exactly as long as the process (and its socket), so a killed master falls silent. Each drive
+whose EDS has 0x1016 gets ``0x1016.1 = (master id << 16) | consumer time [ms]``
+(:meth:`MasterDrive.set_master_heartbeat`, read back) and faults when the heartbeat stops
+(EMCY 0x8130 on CiA 301 drives). A *hung* master whose periodic heartbeat keeps going is
+covered by the drive's SYNC-loss reaction, armed by the communication cycle period 0x1006
+(:meth:`MasterDrive.set_sync_period`: the cycle [µs] in paced mode, 0 = off in lockstep,
+where SYNCs may be far apart in wall time without anything being wrong). Without 0x1016 in
+the EDS (Ingenia EVE-NET-C) the master says so (a note in the run's log and summary) and
+carries on.
 """
 
 from __future__ import annotations
 
 import math
 import struct
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import can
 import canopen
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
@@ -104,6 +121,48 @@ def _u(data: bytes) -> int:
     return int.from_bytes(data, "little")
 
 
+class MasterHeartbeat:
+    """The master's own heartbeat producer (CiA 301): ``0x700 + node_id``, one data byte
+    0x05 (OPERATIONAL), every ``period_ms`` [ms], sent by python-can's ``send_periodic``.
+
+    Parameters
+    ----------
+    bus : can.BusABC
+        The master's bus.
+    node_id : int
+        The master's node id 1..127.
+    period_ms : int
+        Producer period [ms] (> 0).
+    """
+
+    def __init__(self, bus: can.BusABC, node_id: int, period_ms: int) -> None:
+        self.bus = bus
+        self.node_id = node_id
+        self.period_ms = period_ms
+        self.msg = can.Message(arbitration_id=0x700 + node_id, data=b"\x05",
+                               is_extended_id=False)
+        self._task: can.broadcastmanager.CyclicSendTaskABC | None = None
+        self.started_at = 0.0
+
+    def start(self) -> None:
+        """Send one heartbeat now and then every period (idempotent)."""
+        if self._task is not None:
+            return
+        self.bus.send(self.msg)
+        self.started_at = time.monotonic()
+        self._task = self.bus.send_periodic(self.msg, self.period_ms / 1000.0)
+
+    def stop(self) -> None:
+        """Stop sending (the drives' consumers time out after their consumer time)."""
+        task, self._task = self._task, None
+        if task is not None:
+            task.stop()
+
+    @property
+    def running(self) -> bool:
+        return self._task is not None
+
+
 class MasterDrive:
     """The master's handle on one drive.
 
@@ -140,6 +199,8 @@ class MasterDrive:
         self.rpdo_struct = RPDO_CST_STRUCT if cfg.mode is Mode.CYCLIC_SYNC_TORQUE else (
             RPDO_CSP_STRUCT)
         self.scaling: Scaling | None = cfg.scaling
+        self.notes: list[str] = []  # start-up problems that do not stop the run
+        self.consumer_value: int | None = None  # 0x1016.1 written, None if not
 
     # -- static checks ------------------------------------------------------------------
     def check_eds(self) -> None:
@@ -284,6 +345,51 @@ class MasterDrive:
         if self.cfg.heartbeat_ms:
             self.download(0x1017, 0, self.cfg.heartbeat_ms, 2, "heartbeat producer time")
 
+    def set_master_heartbeat(self, master_id: int, consumer_ms: int) -> int | None:
+        """Make the drive watch the master's heartbeat: 0x1016.1 = (id << 16) | time [ms].
+
+        Writes 0 first (some drives refuse to change a non-zero entry in place), then the
+        entry, and reads it back. Returns the value written, or None when the EDS has no
+        0x1016 (nothing written: the caller reports it).
+
+        Raises
+        ------
+        daq.ConfigError
+            The drive refuses the entry or reads back another value.
+        """
+        if 0x1016 not in self.od:
+            return None
+        value = ((master_id & 0xFF) << 16) | (consumer_ms & 0xFFFF)
+        self.download(0x1016, 1, 0, 4, "heartbeat consumer time")
+        self.download(0x1016, 1, value, 4, "heartbeat consumer time")
+        got = _u(self.upload(0x1016, 1))
+        if got != value:
+            raise ConfigError(f"{self.name}: heartbeat consumer 0x1016.1 read back 0x{got:08X} "
+                              f"!= written 0x{value:08X}")
+        return value
+
+    def clear_master_heartbeat(self) -> None:
+        """0x1016.1 = 0 (stop watching the master) before a normal shutdown; best effort."""
+        if 0x1016 in self.od:
+            try:
+                self.node.sdo.download(0x1016, 1, bytes(4))
+            except (SdoAbortedError, SdoCommunicationError):
+                pass
+
+    def set_sync_period(self, period_us: int) -> bool | None:
+        """Write the communication cycle period 0x1006 [µs] (0: no SYNC monitoring).
+
+        Returns True when written and read back, False when the drive refused it or read
+        back another value (the caller reports it), None when the EDS has no 0x1006.
+        """
+        if 0x1006 not in self.od:
+            return None
+        try:
+            self.node.sdo.download(0x1006, 0, int(period_us).to_bytes(4, "little"))
+            return _u(self.node.sdo.upload(0x1006, 0)) == period_us
+        except (SdoAbortedError, SdoCommunicationError):
+            return False
+
     def set_interpolation_period(self, cycle_s: float) -> None:
         """Write 0x60C2 (interpolation time period) when present; ignore a refusal."""
         if 0x60C2 not in self.od:
@@ -346,14 +452,32 @@ class MasterDrive:
         self.scaling = Scaling(rated, gear, counts)
         return self.scaling
 
-    def start_up(self, cycle_s: float, max_torque: float | None = None) -> Scaling:
+    def start_up(self, cycle_s: float, max_torque: float | None = None, *,
+                 master_id: int = 0, consumer_ms: int = 0,
+                 sync_period_us: int | None = None) -> Scaling:
         """Full start-up sequence before NMT start: presence, mode, PDOs, heartbeat,
-        max torque (0x6072) covering ``max_torque`` [N m].
+        master-loss reactions, max torque (0x6072) covering ``max_torque`` [N m].
+
+        Parameters
+        ----------
+        cycle_s : float
+            Control cycle [s].
+        max_torque : float or None
+            Torque the master may command [N m].
+        master_id, consumer_ms : int
+            Master node id and heartbeat consumer time [ms] for 0x1016.1 (0: not written).
+        sync_period_us : int or None
+            Communication cycle period written to 0x1006 [µs] (0: SYNC monitoring off;
+            None: not written).
 
         Returns
         -------
         Scaling
+            What the drive will be driven with. Problems that do not stop the run (no
+            0x1016 in the EDS, 0x1006 refused) are appended to :attr:`notes`.
         """
+        self.notes = []
+        self.consumer_value = None
         self.check_present()
         self.node.nmt.send_command(0x80)  # enter PRE-OPERATIONAL
         self.check_mode_supported()
@@ -361,6 +485,18 @@ class MasterDrive:
         self.set_mode()
         self.set_interpolation_period(cycle_s)
         self.set_heartbeat()
+        if master_id and consumer_ms:
+            self.consumer_value = self.set_master_heartbeat(master_id, consumer_ms)
+            if self.consumer_value is None:
+                self.notes.append(
+                    f"{self.name}: {self.cfg.eds.name} has no 0x1016 (heartbeat consumer): "
+                    f"the drive will not stop by itself if the master dies")
+        if sync_period_us is not None:
+            ok = self.set_sync_period(sync_period_us)
+            if ok is False:
+                self.notes.append(f"{self.name}: communication cycle period 0x1006 = "
+                                  f"{sync_period_us} us refused or not read back: no SYNC-loss "
+                                  f"reaction configured")
         scaling = self.read_scaling()
         if max_torque is not None:
             self.set_max_torque(max_torque)

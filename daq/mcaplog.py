@@ -153,7 +153,8 @@ EVENT_SCHEMA = json.dumps(
             "cycle": {"type": "integer"},
             "kind": {
                 "type": "string",
-                "description": "state, emcy, fault, stop, operator, info, limit, watchdog",
+                "description": "state, emcy, fault, stop, operator, info, warning, limit, "
+                               "watchdog",
             },
             "axis": {"type": "integer", "description": "drive index, -1 for the whole run"},
             "message": {"type": "string"},

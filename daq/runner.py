@@ -41,12 +41,24 @@ Detection itself takes: the same cycle for limits, following error, EMCY and sta
 ``tpdo_timeout_cycles`` cycles for missing TPDOs; ``heartbeat_timeout_s`` of wall time for a
 lost heartbeat (checked every 16 cycles); at most one cycle for SIGINT. The run's log is
 closed properly and the result says why, in one line.
+
+A dead master
+-------------
+The runner cannot stop the drives once it is dead, so it makes the drives watch it
+(:mod:`daq.master`): its own heartbeat (``daq.master_node_id``, ``daq.master_heartbeat_ms``,
+python-can ``send_periodic``) runs from before the drives' start-up to the end of the
+campaign, each drive with 0x1016 watches it (consumer time 3 periods + 100 ms), and 0x1006
+is written with the cycle in paced mode (0 in lockstep), arming the drive's SYNC-loss
+reaction against a hung main loop. After a normal end the runner clears 0x1016.1 before it
+stops its heartbeat. What could not be configured (no 0x1016 in the EDS, 0x1006 refused) is a
+``warning`` event at cycle 0 of every run's log, a log warning and a line of the summary.
 """
 
 from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import math
 import os
 import queue
@@ -70,8 +82,10 @@ from .busload import BusLoad, check_load, cycle_load
 from .cia402 import Mode, State, path, state_from_statusword
 from .config import DaqConfig, Scaling, parse_daq, with_scaling
 from .control import ControllerGains, PositionController
-from .master import TPDO1_STRUCT, TPDO2_STRUCT, MasterDrive, pdo_lengths
+from .master import TPDO1_STRUCT, TPDO2_STRUCT, MasterDrive, MasterHeartbeat, pdo_lengths
 from .mcaplog import FLAG_STOPPING, FLAG_TPDO_MISSING, FRAME, RunLog
+
+logger = logging.getLogger(__name__)
 
 CW_RUN = 0x0F
 CW_QUICK_STOP = 0x02
@@ -164,6 +178,7 @@ class CampaignResult:
     bus_load: BusLoad
     skipped: tuple[int, ...] = ()  # payload indices already completed (resume)
     sim_records: tuple[dict[str, np.ndarray], ...] = ()  # simulated drives' own records
+    notes: tuple[str, ...] = ()  # start-up warnings (e.g. a drive without 0x1016)
 
     @property
     def ok(self) -> bool:
@@ -180,6 +195,7 @@ class CampaignResult:
                 f"{r.cycles} cycles in {r.wall_s:.1f} s {rate}, missed {r.missed}"
                 f" -> {r.path}" + (f"\n    {r.reason}" if r.reason else "")
             )
+        lines.extend(f"  warning: {n}" for n in self.notes)
         if self.skipped:
             lines.append(f"  skipped (already completed): payloads {list(self.skipped)}")
         lines.append(f"  bus load: {self.bus_load}")
@@ -423,6 +439,7 @@ class Engine:
             d.specs[0].n_bytes), is_extended_id=False) for d in drives]
         self.sync_count = 0
         self._resync = False
+        self.notes: list[str] = []  # start-up warnings, logged at cycle 0 of every run
 
     # -- one cycle ------------------------------------------------------------------------
     def _exchange(self, cycle: int, deadline: float) -> int:
@@ -706,6 +723,8 @@ class Engine:
             sync_task = self.bus.send_periodic(self.sync_msg, cycle_s)
             next_deadline = time.perf_counter() + cycle_s
             log.event(0, 0.0, "info", f"SYNC from send_periodic ({type(sync_task).__name__})")
+        for note in self.notes:
+            log.event(0, 0.0, "warning", note)
         try:
             # 1. enable, holding the position measured at the first answer
             do_cycle(0.0, 0.0, 0.0, -1, "disable")  # first SYNC: read the drives' state
@@ -824,7 +843,8 @@ def _write_state(p: Path, name: str, completed: set[int]) -> None:
 
 def _metadata(campaign: Any, cfg: DaqConfig, plan: Any, index: int, payload: Any,
               scalings: list[Scaling], plant_params: Any,
-              bus_info: str = "") -> dict[str, dict[str, str]]:
+              bus_info: str = "", drives: Sequence[MasterDrive] = ()
+              ) -> dict[str, dict[str, str]]:
     ref = plan.reference
     md: dict[str, dict[str, str]] = {
         "campaign": {
@@ -846,6 +866,15 @@ def _metadata(campaign: Any, cfg: DaqConfig, plan: Any, index: int, payload: Any
     for k, (d, s) in enumerate(zip(cfg.drives, scalings, strict=True)):
         md[f"drive{k}"] = {"node_id": str(d.node_id), "eds": d.eds.name, "mode": d.mode_name,
                            **s.as_dict()}
+        if k < len(drives):
+            v = drives[k].consumer_value
+            md[f"drive{k}"]["heartbeat_consumer"] = ("" if v is None else f"0x{v:08X}")
+    md["safety"] = {
+        "master_node_id": str(cfg.master_node_id),
+        "master_heartbeat_ms": str(cfg.master_heartbeat_ms),
+        "heartbeat_consumer_ms": str(cfg.heartbeat_consumer_ms),
+        "sync_period_us": str(_sync_period_us(cfg, campaign.cycle_s)),
+    }
     if plant_params is not None:
         md["plant"] = {"name": str(getattr(plant_params, "name", "")),
                        "source": str(getattr(plant_params, "source", "")),
@@ -853,6 +882,12 @@ def _metadata(campaign: Any, cfg: DaqConfig, plan: Any, index: int, payload: Any
         with contextlib.suppress(Exception):
             md["plant"]["truth"] = json.dumps(plant_params.truth())
     return md
+
+
+def _sync_period_us(cfg: DaqConfig, cycle_s: float) -> int:
+    """0x1006 for the drives [µs]: the cycle when paced, 0 (SYNC monitoring off) in
+    lockstep, where SYNCs may be far apart in wall time on a loaded host."""
+    return int(round(cycle_s * 1e6)) if cfg.clock == "paced" else 0
 
 
 def _attachments(campaign: Any, cfg: DaqConfig, plant_params: Any) -> list[tuple[str, str,
@@ -964,6 +999,10 @@ def run_campaign(
     engine: Engine | None = None
     runs: list[PayloadResult] = []
     sim_records: tuple[dict[str, np.ndarray], ...] = ()
+    heartbeat: MasterHeartbeat | None = None
+    drives: list[MasterDrive] = []
+    notes: list[str] = []
+    clean = False
     status, reason = "done", ""
     try:
         if simulate is not None:
@@ -984,10 +1023,24 @@ def run_campaign(
         network.listeners.append(io)
         network.connect()
         drives = [MasterDrive(network, d) for d in cfg.drives]
+        if cfg.master_heartbeat_ms:
+            heartbeat = MasterHeartbeat(bus, cfg.master_node_id, cfg.master_heartbeat_ms)
+            heartbeat.start()
+        else:
+            notes.append("daq.master_heartbeat_ms = 0: the master sends no heartbeat, the "
+                         "drives do not watch it")
         tau_max = cfg.max_torque if cfg.max_torque is not None else (
             campaign.joint.limits.max_torque)
-        scalings = [d.start_up(campaign.cycle_s, tau_max) for d in drives]
+        scalings = [d.start_up(campaign.cycle_s, tau_max, master_id=cfg.master_node_id,
+                               consumer_ms=cfg.heartbeat_consumer_ms,
+                               sync_period_us=_sync_period_us(cfg, campaign.cycle_s))
+                    for d in drives]
+        for d in drives:
+            notes.extend(d.notes)
+        for note in notes:
+            logger.warning("%s", note)
         engine = Engine(campaign, cfg, network, io, drives, scalings, load, progress)
+        engine.notes = notes
         if threading.current_thread() is threading.main_thread():
             def on_sigint(signum: int, frame: Any) -> None:
                 if engine is not None:
@@ -1024,7 +1077,7 @@ def run_campaign(
             log = RunLog(out / f"{file_stem(campaign.name)}_payload{i}.mcap", n_axes=len(drives),
                          cycle_s=campaign.cycle_s,
                          metadata=_metadata(campaign, cfg, plan, i, p, scalings, simulate,
-                                            str(getattr(bus, "channel_info", ""))),
+                                            str(getattr(bus, "channel_info", "")), drives),
                          attachments=_attachments(campaign, cfg, simulate),
                          chunk_seconds=cfg.chunk_seconds,
                          frames_per_cycle=1 + 3 * len(drives))
@@ -1038,7 +1091,13 @@ def run_campaign(
                 break
             completed.add(i)
             _write_state(state_file, campaign.name, completed)
+        clean = True
     finally:
+        if clean:  # normal end, drives disabled: stop watching the master, then go silent
+            for d in drives:
+                d.clear_master_heartbeat()
+        if heartbeat is not None:
+            heartbeat.stop()
         if sim is not None:
             sim_records = tuple(d.record for d in sim.drives)
         if old_handler is not None:
@@ -1055,4 +1114,4 @@ def run_campaign(
             with contextlib.suppress(OSError):
                 os.sched_setscheduler(0, old_sched[0], os.sched_param(old_sched[1]))
     return CampaignResult(campaign.name, out, tuple(runs), status, reason, load, skipped,
-                          sim_records)
+                          sim_records, tuple(notes))

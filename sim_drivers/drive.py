@@ -49,10 +49,38 @@ Modes and units
 
 Faults (codes in :mod:`sim_drivers.faults`) go through FAULT REACTION ACTIVE to FAULT at once
 (transitions 13, 14), set 0x603F and 0x1001 and send one EMCY frame; a rising edge of
-controlword bit 7 resets them (transition 15, EMCY "error reset" frame).
+controlword bit 7 resets them (transition 15, EMCY "error reset" frame). The fault reaction
+is immediate (0x605E = 0 semantics: power stage off at once; the simulation engages the
+brake, the plant is no longer stepped), with no quick-stop ramp first.
+
+Losing the master
+-----------------
+- Heartbeat consumer 0x1016 (CiA 301): each sub-index ``(node id << 16) | time [ms]`` with
+  node id and time non-zero makes the drive watch that node's heartbeat (COB-ID 0x700 + id;
+  a boot-up frame counts). Monitoring starts at the first heartbeat received after the entry
+  was written (or after boot), and a timeout is reported once until the next heartbeat
+  restarts it. On a timeout the drive sends EMCY 0x8130 ("life guard error or heartbeat
+  error", error register 0x11); in OPERATION ENABLED or QUICK STOP ACTIVE it is a fault
+  0x8130 (FAULT, power off). Two entries with the same node id abort 0x06040043. The NMT
+  reaction of 0x1029 (error behaviour) is not modelled: the NMT state does not change.
+- SYNC watchdog: with 0x1006 (communication cycle period [µs]) non-zero, a drive in
+  OPERATION ENABLED in a cyclic mode (CSP, CSV, CST) in NMT OPERATIONAL faults with 0x8100
+  (see :mod:`sim_drivers.faults`) when no SYNC arrived for
+  ``max(SYNC_LOSS_PERIODS * 0x1006, sync_loss_floor_s)`` of wall time, counted from the
+  last SYNC or from enabling, whichever is later. ``SYNC_LOSS_PERIODS`` = 3; the floor
+  (default ``SYNC_LOSS_FLOOR_S`` = 0.1 s) is there because this drive is a Python thread on
+  a shared host: ``benchmarks/bench_daq.py`` measured single stalls of 30-50 ms even for a C
+  ``clock_nanosleep`` loop on the 2-core CI machine, so 3 ms at 1 kHz would trip in healthy
+  paced runs. 0x1006 = 0 (the EDS default) turns the watchdog off: the master writes 0 in
+  lockstep (SYNCs may be far apart in wall time on a loaded host, and that is not a fault)
+  and the cycle in paced mode.
+- Both run in one daemon thread per drive that sleeps until the earliest deadline (about
+  one wake-up per timeout, none while nothing is armed); on the hot path a SYNC costs one
+  ``time.monotonic()`` and an uncontended lock.
 
 Threading: every bus callback (SDO, NMT, RPDO, SYNC) runs in the drive network's notifier
-thread, so they are serialised; the heartbeat is python-can's periodic-send task.
+thread, so they are serialised, and serialised with the watchdog thread by a lock; the
+heartbeat producer is python-can's periodic-send task.
 """
 
 from __future__ import annotations
@@ -61,6 +89,8 @@ import logging
 import math
 import operator
 import struct
+import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -82,9 +112,11 @@ from sim_drivers import SimError
 from sim_drivers.faults import (
     EXCESS_TORQUE,
     FOLLOWING_ERROR,
+    HEARTBEAT_LOST,
     PDO_LENGTH_ERROR,
     PLANT_FAULT,
     POSITION_LIMIT,
+    SYNC_LOST,
     FaultInjector,
     error_register,
 )
@@ -157,6 +189,9 @@ _PDO_NOT_VALID = 0x80000000
 _RECORD_CHUNK = 65536
 _QS_DONE_SPEED = 1e-3  # [rad/s]
 _CSV_INTEGRAL_RATE = 2.0 * math.pi * 3.0  # CSV loop: ki = kd * this [1/s]
+SYNC_LOSS_PERIODS = 3  # SYNC watchdog: timeout in periods of 0x1006
+SYNC_LOSS_FLOOR_S = 0.1  # SYNC watchdog: shortest timeout [s] (host stalls, see docstring)
+_WD_IDLE_S = 0.5  # watchdog thread: re-check period while nothing is armed [s]
 
 _RECORD_FIELDS: tuple[tuple[str, Any], ...] = (
     ("cycle", np.int64),  # drive cycle index
@@ -187,6 +222,22 @@ def _wrap_i32(x: int) -> int:
 
 def _clip(x: int, lo: int, hi: int) -> int:
     return lo if x < lo else hi if x > hi else x
+
+
+class _HbConsumer:
+    """One entry of 0x1016: the heartbeat of ``node`` watched with ``time_s`` [s]."""
+
+    __slots__ = ("sub", "node", "time_s", "last", "active", "timed_out", "received", "cb")
+
+    def __init__(self, sub: int, node: int, time_s: float) -> None:
+        self.sub = sub
+        self.node = node
+        self.time_s = time_s
+        self.last = 0.0  # time.monotonic() of the last heartbeat [s]
+        self.active = False  # a heartbeat was received since the entry was set
+        self.timed_out = False
+        self.received = 0
+        self.cb: Callable | None = None
 
 
 class _RxPdo:
@@ -270,6 +321,8 @@ class SimulatedDrive:
         at 15 Hz for the plant's rigid-body inertia when the plant exposes it, else for 1 kg m².
     record_chunk : int
         Rows the per-cycle record grows by (preallocated numpy arrays).
+    sync_loss_floor_s : float
+        Shortest SYNC-loss timeout [s] (module docstring, "Losing the master").
     """
 
     def __init__(
@@ -283,6 +336,7 @@ class SimulatedDrive:
         cycle_s: float = 0.001,
         csp_gains: tuple[float, float] | None = None,
         record_chunk: int = _RECORD_CHUNK,
+        sync_loss_floor_s: float = SYNC_LOSS_FLOOR_S,
     ) -> None:
         self.dod = eds if isinstance(eds, DriveOD) else load_drive_od(eds, node_id)
         self.plant = plant
@@ -354,6 +408,20 @@ class SimulatedDrive:
         self._chunk = int(record_chunk)
         self._rec = {name: np.zeros(self._chunk, dtype=dtyp) for name, dtyp in _RECORD_FIELDS}
         self._started = False
+        # master-loss watchdogs (heartbeat consumer 0x1016, SYNC loss per 0x1006)
+        self._lock = threading.RLock()
+        self._consumers: dict[int, _HbConsumer] = {}
+        self.sync_loss_floor_s = float(sync_loss_floor_s)
+        self._sync_timeout_s = 0.0
+        self._last_sync = 0.0  # time.monotonic() of the last SYNC received [s]
+        self._enabled_at = 0.0  # time.monotonic() when OPERATION ENABLED was entered [s]
+        self._was_enabled = False
+        self._wd_wake = threading.Event()
+        self._wd_thread: threading.Thread | None = None
+        self._wd_run = False
+        self.heartbeat_timeouts = 0
+        self.sync_losses = 0
+        self.fault_time = 0.0  # time.monotonic() of the last fault [s] (tests)
         self._load_application()
         self._update_actuals()
 
@@ -462,14 +530,24 @@ class SimulatedDrive:
         self._started = True
         self._reset_state_machine()
         self._boot()
+        self._wd_run = True
+        self._wd_thread = threading.Thread(target=self._watchdog_loop, daemon=True,
+                                           name=f"sim-drive-{self.node_id}-watchdog")
+        self._wd_thread.start()
 
     def stop(self) -> None:
         """Stop heartbeat and PDO traffic and detach from the bus (the bus stays open)."""
         if not self._started:
             return
         self._started = False
+        self._wd_run = False
+        self._wd_wake.set()
+        if self._wd_thread is not None:
+            self._wd_thread.join(2.0)
+            self._wd_thread = None
         self.node.nmt.stop_heartbeat()
         self._unsubscribe_pdos()
+        self._set_consumers({})
         net = self.network
         self._safe_unsubscribe(self._sync_cob, self._on_sync)
         self._safe_unsubscribe(0, self._on_nmt)
@@ -502,6 +580,7 @@ class SimulatedDrive:
         self._resubscribe_sync()
         self.network.send_message(0x700 + self.node_id, b"\x00")
         self._set_nmt(NMT_PRE_OPERATIONAL)
+        self._load_watchdogs()
         hb = int(self._stored(0x1017, 0) or 0) if self._has(0x1017, 0) else 0
         self._heartbeat_stopped = False
         self.node.nmt.start_heartbeat(hb)
@@ -546,7 +625,10 @@ class SimulatedDrive:
     def _on_nmt(self, can_id: int, data: bytes, timestamp: float) -> None:
         if len(data) < 2 or data[1] not in (0, self.node_id):
             return
-        cmd = data[0]
+        with self._lock:
+            self._nmt_command(data[0])
+
+    def _nmt_command(self, cmd: int) -> None:
         if cmd == 0x01 and self.nmt in (NMT_PRE_OPERATIONAL, NMT_STOPPED):
             self._set_nmt(NMT_OPERATIONAL)
         elif cmd == 0x02:
@@ -561,7 +643,8 @@ class SimulatedDrive:
     def _on_sdo_request(self, can_id: int, data: bytes, timestamp: float) -> None:
         if self.nmt == NMT_STOPPED:
             return  # no SDO in STOPPED
-        self.node.sdo.on_request(can_id, data, timestamp)
+        with self._lock:
+            self.node.sdo.on_request(can_id, data, timestamp)
 
     def _on_sdo_read(self, index: int, subindex: int, od: Any) -> Any:
         name = self._live.get((index, subindex)) or self._extra_names.get((index, subindex))
@@ -576,6 +659,12 @@ class SimulatedDrive:
             return
         if index == 0x1005:
             self._layout_dirty = True
+            return
+        if index == 0x1016 and subindex > 0:
+            self._write_consumer(subindex, od.decode_raw(data))
+            return
+        if index == 0x1006:
+            self._set_sync_period(od.decode_raw(data))
             return
         key = (index, subindex)
         name = self._live.get(key)
@@ -835,6 +924,12 @@ class SimulatedDrive:
     def _update_statusword(self) -> None:
         st = self.cia_state
         enabled = st is State.OPERATION_ENABLED
+        if enabled is not self._was_enabled:
+            self._was_enabled = enabled
+            if enabled:
+                self._enabled_at = time.monotonic()
+                if self._sync_timeout_s:
+                    self._wd_wake.set()
         self.statusword = statusword(
             st,
             internal_limit=self._internal_limit,
@@ -851,6 +946,7 @@ class SimulatedDrive:
         if self.cia_state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
             return
         self.cia_state, _ = automatic_transition(self.cia_state, "fault")
+        self.fault_time = time.monotonic()
         self.error_code = code
         self.error_register = error_register(code)
         self.node.emcy.send(code, self.error_register)
@@ -860,21 +956,143 @@ class SimulatedDrive:
 
     # ------------------------------------------------------------------ cycle
     def _on_sync(self, can_id: int, data: bytes, timestamp: float) -> None:
+        self._last_sync = time.monotonic()
         if self.nmt != NMT_OPERATIONAL:
             return
-        if self._layout_dirty:
-            self._build_layouts()
-        got = False
-        for rx in self._rx_sync:
-            latched = rx.latched
-            if latched is not None:
-                rx.latched = None
-                got = self._apply_rpdo(rx, latched) or got
-        if got:
-            if self.mode_request != self.mode_display:
-                self._apply_mode_request()
-            self._evaluate_controlword()
-        self.step()
+        with self._lock:
+            if self._layout_dirty:
+                self._build_layouts()
+            got = False
+            for rx in self._rx_sync:
+                latched = rx.latched
+                if latched is not None:
+                    rx.latched = None
+                    got = self._apply_rpdo(rx, latched) or got
+            if got:
+                if self.mode_request != self.mode_display:
+                    self._apply_mode_request()
+                self._evaluate_controlword()
+            self.step()
+
+    # ------------------------------------------------------------------ master-loss watchdogs
+    @property
+    def last_sync_time(self) -> float:
+        """``time.monotonic()`` when the last SYNC was received [s] (0: none yet)."""
+        return self._last_sync
+
+    @property
+    def sync_timeout_s(self) -> float:
+        """SYNC-loss timeout [s] from 0x1006 (0: the SYNC watchdog is off)."""
+        return self._sync_timeout_s
+
+    @property
+    def heartbeat_consumers(self) -> dict[int, tuple[float, bool, int]]:
+        """Watched nodes from 0x1016: node id -> (consumer time [s], monitoring started,
+        heartbeats received)."""
+        return {c.node: (c.time_s, c.active, c.received) for c in self._consumers.values()}
+
+    def _set_sync_period(self, period_us: int) -> None:
+        period = int(period_us) * 1e-6
+        self._sync_timeout_s = (max(SYNC_LOSS_PERIODS * period, self.sync_loss_floor_s)
+                                if period > 0 else 0.0)
+        self._wd_wake.set()
+
+    def _load_watchdogs(self) -> None:
+        """(Re)read 0x1016 and 0x1006 from the dictionary (boot, reset communication)."""
+        self._set_sync_period(int(self._stored(0x1006, 0) or 0) if self._has(0x1006, 0) else 0)
+        entries: dict[int, _HbConsumer] = {}
+        if 0x1016 in self.dod.od:
+            for sub in range(1, 128):
+                if not self._has(0x1016, sub):
+                    continue
+                value = int(self._stored(0x1016, sub) or 0)
+                node, ms = (value >> 16) & 0xFF, value & 0xFFFF
+                if node and ms:
+                    entries[sub] = _HbConsumer(sub, node, ms / 1000.0)
+        self._set_consumers(entries)
+
+    def _write_consumer(self, sub: int, value: int) -> None:
+        """SDO write to 0x1016.sub: validate (CiA 301), then watch the new entry."""
+        node, ms = (value >> 16) & 0xFF, value & 0xFFFF
+        if node and ms and any(c.node == node and c.sub != sub
+                               for c in self._consumers.values()):
+            raise SdoAbortedError(0x06040043)  # general parameter incompatibility
+        entries = {s: c for s, c in self._consumers.items() if s != sub}
+        if node and ms:
+            entries[sub] = _HbConsumer(sub, node, ms / 1000.0)
+        self._set_consumers(entries)
+
+    def _set_consumers(self, entries: dict[int, _HbConsumer]) -> None:
+        for c in self._consumers.values():
+            if c.cb is not None:
+                self._safe_unsubscribe(0x700 + c.node, c.cb)
+        self._consumers = entries
+        if self._started:
+            for c in entries.values():
+                c.cb = self._make_consumer_handler(c)
+                self.network.subscribe(0x700 + c.node, c.cb)
+        self._wd_wake.set()
+
+    def _make_consumer_handler(self, c: _HbConsumer) -> Callable:
+        wake = self._wd_wake
+
+        def handler(can_id: int, data: bytes, timestamp: float) -> None:
+            c.last = time.monotonic()
+            c.received += 1
+            if not c.active or c.timed_out:
+                c.active = True
+                c.timed_out = False
+                wake.set()
+
+        return handler
+
+    def _watchdog_loop(self) -> None:
+        """Sleep until the earliest deadline, check, repeat (the drive's timer thread)."""
+        wake = self._wd_wake
+        while self._wd_run:
+            try:
+                wait = self._check_watchdogs()
+            except Exception:  # never let the safety thread die silently
+                logger.exception("node %d: watchdog check failed", self.node_id)
+                wait = _WD_IDLE_S
+            wake.wait(wait)
+            wake.clear()
+
+    def _check_watchdogs(self) -> float:
+        """Fire what timed out; return the time to the next deadline [s]."""
+        wait = _WD_IDLE_S
+        with self._lock:
+            now = time.monotonic()
+            for c in list(self._consumers.values()):
+                if not c.active or c.timed_out:
+                    continue
+                left = c.last + c.time_s - now
+                if left <= 0.0:
+                    c.timed_out = True
+                    self.heartbeat_timeouts += 1
+                    logger.warning("node %d: heartbeat of node %d lost (none for %.3f s, "
+                                   "consumer time %g s, %d received)", self.node_id, c.node,
+                                   now - c.last, c.time_s, c.received)
+                    if self.cia_state in (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE):
+                        self.fault(HEARTBEAT_LOST)
+                    else:
+                        self.node.emcy.send(HEARTBEAT_LOST,
+                                            self.error_register | error_register(HEARTBEAT_LOST))
+                elif left < wait:
+                    wait = left
+            timeout = self._sync_timeout_s
+            if (timeout and self.nmt == NMT_OPERATIONAL
+                    and self.cia_state is State.OPERATION_ENABLED
+                    and self.mode_display in _CYCLIC_INTS):
+                left = max(self._last_sync, self._enabled_at) + timeout - now
+                if left <= 0.0:
+                    self.sync_losses += 1
+                    logger.warning("node %d: no SYNC for %.3f s (timeout %g s)", self.node_id,
+                                   now - self._last_sync, timeout)
+                    self.fault(SYNC_LOST)
+                elif left < wait:
+                    wait = left
+        return wait
 
     def step(self) -> None:
         """One drive cycle: injector, control law, plant step, checks, record, TPDOs.

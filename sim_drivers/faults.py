@@ -9,6 +9,12 @@ Error codes (0x603F, EMCY) follow CiA 301 / CiA 402's error-code table:
  0x8311      excess torque (CST: ``|0x6071 + 0x60B2| > 0x6072``)
  0x8612      reference limit (``0x6064`` outside the software limits ``0x607D``)
  0x8210      RPDO shorter than its mapping (EMCY only: a warning, the drive keeps running)
+ 0x8130      heartbeat consumer timeout (CiA 301 "life guard error or heartbeat error"): a
+             node listed in 0x1016 (the master) fell silent for longer than its consumer
+             time; FAULT when OPERATION ENABLED or QUICK STOP ACTIVE, else EMCY only
+ 0x8100      SYNC lost in a cyclic mode (CiA 301 "communication, generic"; CiA 301 has no
+             code of its own for a SYNC timeout, CANopenNode reports it with 0x8100 too;
+             0x8240 is a SYNC of the wrong *length*): FAULT
  0xFF01      injected fault (device specific; :class:`FaultInjector` default)
  0xFF02      plant-detected fault (the plant raised or its state became non-finite)
 ==========  ==========================================================================
@@ -22,6 +28,8 @@ FOLLOWING_ERROR = 0x8611
 EXCESS_TORQUE = 0x8311
 POSITION_LIMIT = 0x8612
 PDO_LENGTH_ERROR = 0x8210
+HEARTBEAT_LOST = 0x8130
+SYNC_LOST = 0x8100
 INJECTED_FAULT = 0xFF01
 PLANT_FAULT = 0xFF02
 
@@ -30,6 +38,8 @@ FAULT_NAMES: dict[int, str] = {
     EXCESS_TORQUE: "excess torque",
     POSITION_LIMIT: "software position limit",
     PDO_LENGTH_ERROR: "PDO length error",
+    HEARTBEAT_LOST: "heartbeat consumer timeout",
+    SYNC_LOST: "SYNC lost",
     INJECTED_FAULT: "injected fault",
     PLANT_FAULT: "plant fault",
 }
@@ -38,8 +48,9 @@ FAULT_NAMES: dict[int, str] = {
 def error_register(code: int) -> int:
     """0x1001 error register for an error code: bit 0 (generic) plus the class bit.
 
-    Bit 1 current (0x2xxx), bit 2 voltage (0x3xxx), bit 3 temperature (0x4xxx), bit 5 device
-    profile (0x8xxx motion errors of CiA 402), bit 7 manufacturer (0xFFxx).
+    Bit 1 current (0x2xxx), bit 2 voltage (0x3xxx), bit 3 temperature (0x4xxx), bit 4
+    communication (0x81xx, 0x82xx of CiA 301), bit 5 device profile (the other 0x8xxx: motion
+    errors of CiA 402), bit 7 manufacturer (0xFFxx).
     """
     reg = 0x01 if code else 0x00
     top = code >> 12
@@ -49,6 +60,8 @@ def error_register(code: int) -> int:
         reg |= 0x04
     elif top == 0x4:
         reg |= 0x08
+    elif code >> 8 in (0x81, 0x82):
+        reg |= 0x10
     elif top == 0x8:
         reg |= 0x20
     elif code >> 8 == 0xFF:
