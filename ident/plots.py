@@ -68,10 +68,13 @@ def error_bands(report: FitReport) -> Figure:
     names = list(report.models)
     fig = Figure(figsize=(5 * len(names), 3.6), layout="constrained")
     vmax = report.vmax
+    first = None
     for i, name in enumerate(names):
         m, d = report.models[name], report.designs[name]
         rho = d.Y - m.predict(d)
-        ax = fig.add_subplot(1, len(names), i + 1)
+        # one error scale for every model, so that the panels compare at a glance
+        ax = fig.add_subplot(1, len(names), i + 1, sharey=first)
+        first = first or ax
         ax.axvspan(-0.10 * vmax, 0.10 * vmax, color="tab:green", alpha=0.12, label="low (0-10 %)")
         for s in (-1, 1):
             ax.axvspan(
@@ -85,10 +88,16 @@ def error_bands(report: FitReport) -> Figure:
         rev = d.signals.revolute
         ax.set_xlabel("velocity [rad/s]" if rev else "velocity [m/s]")
         ax.set_ylabel("error [N m]" if rev else "error [N]")
-        ax.set_title(f"{name} model")
+        errs = report.errors(name)
+        ax.set_title(f"{name} model: ||rho||/||Y|| = {errs['all']:.4f} "
+                     f"(low {_f(errs.get('low'))}, high {_f(errs.get('high'))})", fontsize=10)
         ax.grid(alpha=0.3)
         ax.legend(loc="upper right", fontsize=7)
     return fig
+
+
+def _f(x: float | None) -> str:
+    return "-" if x is None or not np.isfinite(x) else f"{x:.4f}"
 
 
 def write_plots(report: FitReport, outdir: str | Path) -> list[Path]:
