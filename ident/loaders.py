@@ -187,7 +187,8 @@ def _pick(
     if key in ("payload_kg", "payload_arm_m") and key not in mapping:
         return None
     avail = ", ".join(sorted(table)) or "none"
-    raise DataError(f"{path}: missing column/variable {name!r} for {key!r} (found: {avail})")
+    raise DataError(f"{path}: missing column/variable {name!r} for {key!r} (found: {avail}; "
+                    f"map one with --map {key}=NAME)")
 
 
 def _gain_variable(table: Mapping[str, np.ndarray], gain: str, path: Path) -> float:
