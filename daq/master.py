@@ -152,6 +152,13 @@ class MasterHeartbeat:
         self.started_at = time.monotonic()
         self._task = self.bus.send_periodic(self.msg, self.period_ms / 1000.0)
 
+    def beat(self) -> None:
+        """Send one heartbeat now, outside the period: after 0x1016 was written, so that the
+        drives start monitoring (CiA 301: at the first heartbeat received) before they are
+        started rather than up to one period later."""
+        if self._task is not None:
+            self.bus.send(self.msg)
+
     def stop(self) -> None:
         """Stop sending (the drives' consumers time out after their consumer time)."""
         task, self._task = self._task, None

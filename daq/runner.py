@@ -1035,6 +1035,8 @@ def run_campaign(
                                consumer_ms=cfg.heartbeat_consumer_ms,
                                sync_period_us=_sync_period_us(cfg, campaign.cycle_s))
                     for d in drives]
+        if heartbeat is not None:
+            heartbeat.beat()  # the drives watch the master from now on, not a period later
         for d in drives:
             notes.extend(d.notes)
         for note in notes:

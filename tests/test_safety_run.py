@@ -1,0 +1,237 @@
+"""A dead or hung master stops the drive (runner + simulated drive), and drive-gain scaling.
+
+The drive is a :class:`sim_drivers.drive.SimulatedDrive` the test starts itself on the
+campaign's virtual channel (the hardware path of the runner: the campaign's own scaling, the
+drive object reachable from the test while the runner drives it). The master "dies" inside
+the progress callback, which runs on the runner's main thread: sleeping there is a hung
+main loop (no SYNC), stopping the heartbeat task as well is a dead process.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+
+import can
+import numpy as np
+import pytest
+
+from daq import ConfigError
+from daq.cia402 import State, state_from_statusword
+from daq.config import parse_daq
+from daq.reader import read_run
+from daq.runner import run_campaign
+from sim_drivers.drive import SYNC_LOSS_FLOOR_S, SimulatedDrive
+from sim_drivers.faults import HEARTBEAT_LOST, SYNC_LOST
+from sim_drivers.plant import JointPlant
+from sim_drivers.plant_config import default_plant
+from tests.conftest import shared_path
+from trajectories.campaign import Campaign
+
+_chan = itertools.count()
+NODE = 3
+SLACK_S = 2.0  # upper margin for a loaded host [s]
+SCALING = {"rated_torque_Nm": 5.0, "gear_ratio": 100.0, "encoder_counts_per_rev": 4096}
+
+
+def campaign(daq=None, periods=1, scaling=None, clock="lockstep"):
+    raw = {
+        "name": "safety",
+        "joint": {"kind": "revolute", "limits": {
+            "position": [-1.0, 1.0], "max_velocity": 1.0, "max_acceleration": 4.0,
+            "max_jerk": 40.0, "max_torque": 700.0}},
+        "control": {"cycle_s": 0.001, "kp": 6000.0, "kd": 200.0,
+                    "feedforward": {"J": 30.0, "MX": 21.0}},
+        "payloads": [{"mass_kg": 0.0, "arm_m": 1.0}],
+        "segments": [{"kind": "sine", "amplitude": 0.1, "frequency_hz": 1.0, "center": 0.0,
+                      "periods": periods}],
+        "daq": {"channel": f"test_safety_{next(_chan)}", "clock": clock,
+                "drives": [{"node_id": NODE, "scaling": scaling or SCALING}],
+                **(daq or {})},
+    }
+    return Campaign.from_dict(raw, "safety.toml")
+
+
+class Rig:
+    """A simulated drive on the campaign's channel, started before and stopped after."""
+
+    def __init__(self, c: Campaign) -> None:
+        plant = JointPlant(default_plant(), 0.001, seed=3)
+        plant.reset(0.0)
+        self.bus = can.Bus(interface="virtual", channel=c.daq["channel"])
+        self.drive = SimulatedDrive(self.bus, NODE, plant, cycle_s=0.001)
+        self.drive.start()
+
+    def close(self) -> None:
+        self.drive.stop()
+        self.bus.shutdown()
+
+
+def _wait_for(pred, timeout: float) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(0.005)
+    return pred()
+
+
+def _run(c, **kw):
+    rig = Rig(c)
+    try:
+        return run_campaign(c, out_dir=kw.pop("out_dir"), yes=True, **kw), rig.drive
+    finally:
+        rig.close()
+
+
+def test_lockstep_run_configures_the_watchdogs_and_a_pause_is_not_a_fault(tmp_path):
+    c = campaign()
+    rig = Rig(c)
+    seen = {}
+
+    def progress(p):
+        if p.phase == "run" and "hb" not in seen:
+            time.sleep(3 * SYNC_LOSS_FLOOR_S)  # a slow lockstep cycle, not a fault
+            # monitoring starts at the first heartbeat after 0x1016 was written (CiA 301)
+            seen["hb"] = rig.drive.heartbeat_consumers
+            seen["sync"] = rig.drive.sync_timeout_s
+
+    try:
+        r = run_campaign(c, out_dir=tmp_path, yes=True, progress=progress)
+        after = rig.drive.heartbeat_consumers
+    finally:
+        rig.close()
+    assert r.ok, r.reason
+    assert r.notes == ()
+    # 0x1016.1 = master 127, 3 x 100 ms + 100 ms; monitoring started; 0x1006 = 0 in lockstep
+    assert seen["hb"][127][:2] == (0.4, True) and seen["hb"][127][2] >= 1
+    assert seen["sync"] == 0.0
+    assert after == {}  # cleared after the normal end
+    assert rig.drive.heartbeat_timeouts == 0 and rig.drive.sync_losses == 0
+    a = read_run(r.runs[0].path)
+    assert a.metadata["drive0"]["heartbeat_consumer"] == "0x007F0190"
+    assert a.metadata["safety"] == {"master_node_id": "127", "master_heartbeat_ms": "100",
+                                    "heartbeat_consumer_ms": "400", "sync_period_us": "0"}
+
+
+def test_dead_master_drive_faults_with_8130_within_the_consumer_time(tmp_path, monkeypatch):
+    import daq.runner
+
+    beats = []
+
+    class Recorded(daq.runner.MasterHeartbeat):
+        def __init__(self, *a, **k):
+            super().__init__(*a, **k)
+            beats.append(self)
+
+    monkeypatch.setattr(daq.runner, "MasterHeartbeat", Recorded)
+    c = campaign(periods=2)
+    rig = Rig(c)
+    t = {}
+
+    def progress(p):
+        if p.phase == "run" and p.cycle >= 500 and "stop" not in t:
+            t["cycle"] = p.cycle
+            beats[0].stop()  # the process dies: heartbeat and SYNC stop together
+            t["stop"] = time.monotonic()
+            _wait_for(lambda: rig.drive.state is State.FAULT, 0.4 + SLACK_S)
+
+    try:
+        r = run_campaign(c, out_dir=tmp_path, yes=True, progress=progress)
+    finally:
+        rig.close()
+    assert r.status == "stopped"
+    assert r.reason.startswith(f"node {NODE}: EMCY 0x{HEARTBEAT_LOST:04X}")
+    delay = rig.drive.fault_time - t["stop"]
+    assert 0.4 - 0.1 - 0.005 <= delay <= 0.4 + SLACK_S  # consumer 400 ms, period 100 ms
+    rec = rig.drive.record
+    states = [state_from_statusword(int(s)) for s in rec["statusword"]]
+    # p.cycle is the next cycle to run; the drive's cycle counter is the runner's here
+    assert states[t["cycle"] - 1] is State.OPERATION_ENABLED
+    assert State.OPERATION_ENABLED not in states[t["cycle"]:]  # nothing after the death
+    assert np.all(rec["tau_cmd"][t["cycle"]:] == 0.0)
+    assert r.runs[0].fault_cycle == t["cycle"]  # the runner reads the EMCY when it wakes
+
+
+def test_hung_paced_master_drive_faults_on_sync_loss(tmp_path):
+    c = campaign(clock="paced")
+    rig = Rig(c)
+    t = {}
+
+    def progress(p):
+        if p.phase == "run" and "cycle" not in t:
+            t["cycle"] = p.cycle
+            t["sync"] = rig.drive.sync_timeout_s
+            # the main loop hangs (no SYNC) while the heartbeat task keeps going
+            _wait_for(lambda: rig.drive.state is State.FAULT, t["sync"] + SLACK_S)
+
+    try:
+        r = run_campaign(c, out_dir=tmp_path, yes=True, progress=progress)
+    finally:
+        rig.close()
+    assert t["sync"] == pytest.approx(max(3 * 0.001, SYNC_LOSS_FLOOR_S))
+    assert r.status == "stopped"
+    assert r.reason.startswith(f"node {NODE}: EMCY 0x{SYNC_LOST:04X}")
+    assert rig.drive.sync_losses == 1 and rig.drive.heartbeat_timeouts == 0
+    assert t["sync"] <= rig.drive.fault_time - rig.drive.last_sync_time or (
+        rig.drive.last_sync_time > rig.drive.fault_time)  # SYNCs resumed after the fault
+    assert r.runs[0].fault_cycle >= t["cycle"]
+    a = read_run(r.runs[0].path)
+    assert a.metadata["safety"]["sync_period_us"] == "1000"
+
+
+def test_drive_without_0x1016_is_reported_not_refused(tmp_path):
+    eds = shared_path("eds", "ingenia_everest-net-c.eds")
+    c = campaign(daq={"drives": [{"node_id": 1, "eds": str(eds), "mode": "csp"}]})
+    r = run_campaign(c, out_dir=tmp_path, simulate=default_plant(), yes=True)
+    assert r.ok, r.reason
+    assert len(r.notes) == 1 and "has no 0x1016" in r.notes[0]
+    assert "warning: node 1: ingenia_everest-net-c.eds has no 0x1016" in r.summary()
+    a = read_run(r.runs[0].path)
+    assert [e["message"] for e in a.events if e["kind"] == "warning"] == list(r.notes)
+    assert a.metadata["drive0"]["heartbeat_consumer"] == ""
+
+
+# ------------------------------------------------------------------------- drive gain
+def test_drive_gain_overrides_rated_torque_times_gear_ratio(tmp_path):
+    base, _ = _run(campaign(), out_dir=tmp_path / "a")
+    same, _ = _run(campaign(scaling={"drive_gain": 0.5, "gear_ratio": 100.0,
+                                     "encoder_counts_per_rev": 4096}), out_dir=tmp_path / "b")
+    doubled, drive = _run(campaign(scaling={**SCALING, "drive_gain": 1.0}),
+                          out_dir=tmp_path / "c")
+    for r in (base, same, doubled):
+        assert r.ok, r.reason
+    a, b, d = (read_run(r.runs[0].path) for r in (base, same, doubled))
+    # the numbers agree (0.5 N m per permille): the same run
+    assert np.array_equal(a.tau_ref, b.tau_ref)
+    assert np.array_equal(a.q, b.q)
+    assert a.metadata["drive0"]["torque_source"] == "rated_torque"
+    assert b.metadata["drive0"]["torque_source"] == "drive_gain"
+    assert b.metadata["drive0"]["drive_gain_Nm_per_permille"] == "0.5"
+    assert b.metadata["drive0"]["torque_per_unit_Nm"] == "0.5"
+    # they do not: the master commands x = tau / 1.0, the drive applies 0.5 N m per unit
+    x = np.round(d.tau_ref / 1.0)
+    assert np.array_equal(d.tau_ref, x * 1.0)
+    rec = drive.record
+    n = len(d.tau_ref)
+    assert np.array_equal(rec["target_torque"][1:n], x[:-1])  # applied at the next SYNC
+    enabled = np.array([state_from_statusword(int(s)) is State.OPERATION_ENABLED
+                        for s in rec["statusword"][:n - 1]])  # state when the SYNC came
+    on = enabled & (rec["target_torque"][1:n] != 0)
+    assert on.sum() > 1000
+    assert np.allclose(rec["tau_cmd"][1:n][on], 0.5 * x[:-1][on])
+    assert d.metadata["drive0"]["torque_per_unit_Nm"] == "1.0"
+
+
+@pytest.mark.parametrize("scaling, daq, match", [
+    ({"gear_ratio": 100.0, "encoder_counts_per_rev": 4096}, {},
+     r"daq.drives\[0\].scaling: expected rated_torque_Nm \[N m\] or drive_gain"),
+    ({**SCALING, "drive_gain": -1.0}, {}, r"daq.drives\[0\].scaling.drive_gain"),
+    (SCALING, {"master_node_id": NODE}, r"daq.drives\[0\].node_id: expected a node id other "
+                                        r"than daq.master_node_id"),
+    (SCALING, {"master_heartbeat_ms": 30000}, r"daq.master_heartbeat_ms"),
+])
+def test_scaling_and_master_options_are_validated(scaling, daq, match):
+    raw = {"drives": [{"node_id": NODE, "scaling": scaling}], **daq}
+    with pytest.raises(ConfigError, match=match):
+        parse_daq(raw, "safety.toml")
