@@ -379,9 +379,12 @@ class Design:
             rows, _ = _decimate_rows(np.ascontiguousarray(term.columns(b.full).T), self.decimation)
             zdec = None
             if b.zfull is not None and b.zdec is not None:
-                zrows, _ = _decimate_rows(
-                    np.ascontiguousarray(term.columns(b.zfull).T), self.decimation
-                )
+                zrows = rows.copy()
+                diff = _instrument_rows(term.columns(b.zfull).T, term.columns(b.full).T, 0)
+                if diff:
+                    zd, _ = _decimate_rows(np.stack([r for _, r in diff]), self.decimation)
+                    for k, (i, _) in enumerate(diff):
+                        zrows[i] = zd[k]
                 zdec = np.concatenate([b.zdec, zrows], axis=0)
                 zcols.append(zrows[:, b.mask].T)
             blocks.append(replace(b, dec=np.concatenate([b.dec, rows], axis=0), zdec=zdec))
@@ -440,6 +443,16 @@ class Design:
         return replace(
             self, Y=Y, W=W, Z=Z, signals=dsig, dq_min=dq_min, tau_min=tau_min, _blocks=blocks
         )
+
+
+def _instrument_rows(zcols: np.ndarray, wcols: np.ndarray, offset: int) -> list:
+    """``(offset + i, row)`` for the instrument rows that differ from the regressor's (those
+    with the acceleration); the others are shared and decimated once."""
+    return [
+        (offset + i, np.ascontiguousarray(z))
+        for i, (z, w) in enumerate(zip(zcols, wcols, strict=True))
+        if not np.array_equal(z, w)
+    ]
 
 
 def _dilate(bad: np.ndarray, k: int) -> np.ndarray:
@@ -619,17 +632,24 @@ def build_design(
     blocks: list[_Block] = []
     b = len(lib.names())
     for sub, full, zfull in fulls:
-        stack = np.empty((4 + 2 * b if zfull is not None else 4 + b, len(full)))
+        stack = np.empty((4 + b, len(full)))
         stack[0], stack[1], stack[2], stack[3] = sub.tau, full.q, full.dq, full.ddq
+        zrows: list[tuple[int, np.ndarray]] = []
         for term, sl in lib.slices():
-            stack[4 + sl.start : 4 + sl.stop] = term.columns(full).T
+            cols = term.columns(full).T
+            stack[4 + sl.start : 4 + sl.stop] = cols
             if zfull is not None:
-                stack[4 + b + sl.start : 4 + b + sl.stop] = term.columns(zfull).T
+                zrows += _instrument_rows(term.columns(zfull).T, cols, sl.start)
+        if zrows:
+            stack = np.concatenate([stack, np.stack([r for _, r in zrows])])
         dec, index = _decimate_rows(stack, decimation)
         del stack
         zdec = None
         if zfull is not None:
-            dec, zdec = np.ascontiguousarray(dec[: 4 + b]), np.ascontiguousarray(dec[4 + b :])
+            zdec = dec[4 : 4 + b].copy()
+            for k, (i, _) in enumerate(zrows):
+                zdec[i] = dec[4 + b + k]
+            dec = np.ascontiguousarray(dec[: 4 + b])
         mask = _selection(full, index, dq_min, tau_min, guard, load_model)
         blocks.append(
             _Block(sub=sub, full=full, index=index, dec=dec, mask=mask, zfull=zfull, zdec=zdec)
