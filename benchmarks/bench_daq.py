@@ -18,6 +18,11 @@ canopen master -> python-can virtual bus -> simulated CiA 402 drive + plant -> M
 - MCAP: messages/s written by :class:`daq.mcaplog.RunLog` with the runner's per-cycle mix
   (one state, one setpoint, one CAN batch of 4 frames), and the logging time per cycle as a
   share of the lockstep all-in CPU time per cycle.
+- master loss (``--safety-repeat``): a simulated drive in CST OPERATION ENABLED watching the
+  master's heartbeat (:class:`daq.master.MasterHeartbeat`, 100 ms, consumer 400 ms) or SYNC
+  (0x1006 = 1000 us); the master stops both; time from the last heartbeat / SYNC the drive
+  received to its FAULT, against the configured time, in ms and in 1 kHz cycles (the drive
+  applies its last torque during that time, and runs no cycle since no SYNC comes).
 """
 
 from __future__ import annotations
@@ -132,43 +137,87 @@ def mcap_rate(cycles: int, tmp: Path) -> tuple[float, float]:
     return 3 * cycles / dt, dt / cycles * 1e6
 
 
+def master_loss(repeat: int) -> dict[str, list[float]]:
+    """Delays [s] from the last heartbeat / SYNC received to the drive's FAULT, and the
+    configured timeouts [s]."""
+    from daq.cia402 import State, path
+    from daq.master import MasterHeartbeat
+    from sim_drivers.testing import LockstepMaster, make_rig
+
+    node = 9
+    tpdos = {0x180 + node: ("<Hi", ("6041", "6064")), 0x280 + node: ("<hi", ("6077", "606C"))}
+    out: dict[str, list[float]] = {"hb": [], "sync": [], "hb_cfg": [], "sync_cfg": []}
+
+    def wait_fault(rig) -> None:
+        end = time.monotonic() + 5.0
+        while rig.drive.state is not State.FAULT and time.monotonic() < end:
+            time.sleep(0.001)
+
+    for kind in ("hb", "sync"):
+        for _ in range(repeat):
+            rig = make_rig(node_id=node)
+            hb = MasterHeartbeat(rig.network.bus, 127, 100)
+            try:
+                if kind == "hb":
+                    rig.node.sdo[0x1016][1].raw = (127 << 16) | 400
+                    hb.start()
+                else:
+                    rig.node.sdo[0x1006].raw = 1000
+                rig.node.sdo[0x6060].raw = 10
+                for _, cw in path(State.SWITCH_ON_DISABLED, State.OPERATION_ENABLED):
+                    rig.node.sdo[0x6040].raw = cw
+                rig.node.nmt.state = "OPERATIONAL"
+                rig.node.sdo[0x1000].raw  # noqa: B018 - barrier: NMT start processed
+                m = LockstepMaster(rig.network, 0x200 + node, "<Hh", tpdos)
+                m.run(0x0F, np.full(300, 100))
+                if kind == "hb":
+                    time.sleep(0.25)  # a few heartbeats
+                    hb.stop()
+                    c = rig.drive._consumers[1]
+                    wait_fault(rig)
+                    out["hb"].append(rig.drive.fault_time - c.last)
+                    out["hb_cfg"].append(c.time_s)
+                else:
+                    wait_fault(rig)
+                    out["sync"].append(rig.drive.fault_time - rig.drive.last_sync_time)
+                    out["sync_cfg"].append(rig.drive.sync_timeout_s)
+                m.close()
+            finally:
+                hb.stop()
+                rig.close()
+    return out
+
+
+def safety_rows(repeat: int) -> list[tuple[str, str, str, str]]:
+    ml = master_loss(repeat)
+    rows = []
+    for kind, label in (("hb", "master loss: heartbeat -> FAULT"),
+                        ("sync", "master loss: SYNC -> FAULT")):
+        d = np.array(ml[kind]) * 1e3
+        cfg = statistics.median(ml[kind + "_cfg"]) * 1e3
+        over = d - cfg
+        rows.append((label, f"median {np.median(d):.1f} ms (cfg {cfg:.0f} ms)",
+                     f"= {np.median(d):.0f} cycles at 1 kHz",
+                     f"overshoot median {np.median(over):.1f} / max {over.max():.1f} ms, "
+                     f"n={len(d)}"))
+    return rows
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--paced-seconds", type=float, default=60.0)
     ap.add_argument("--lockstep-seconds", type=float, default=10.0,
                     help="simulated seconds per lockstep run")
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--safety-repeat", type=int, default=5,
+                    help="master-loss reaction measurements per kind (0: skip)")
+    ap.add_argument("--only-safety", action="store_true", help="only the master-loss rows")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench_daq_"))
     try:
-        rows = []
-        r1, cpu1, n1 = lockstep(1, args.lockstep_seconds, args.repeat, tmp / "l1")
-        rows.append(("lockstep, 1 drive, 1 kHz plan", f"{r1:,.0f} cycles/s",
-                     f"{r1 / 1000:.2f}x real time", f"CPU {cpu1:.0f} us/cycle, {n1} cycles"))
-        r3, cpu3, n3 = lockstep(3, args.lockstep_seconds, args.repeat, tmp / "l3")
-        rows.append(("lockstep, 3 drives", f"{r3:,.0f} cycles/s",
-                     f"{r3 / 1000:.2f}x real time at 1 kHz",
-                     f"CPU {cpu3:.0f} us/cycle; 3 vs 1 drive: {r3 / r1:.2f}x rate"))
-        msg_s, log_us = mcap_rate(100_000, tmp)
-        rows.append(("MCAP write (state+setpoint+CAN)", f"{msg_s:,.0f} msg/s",
-                     f"{log_us:.1f} us/cycle",
-                     f"{100 * log_us / cpu1:.0f} % of the 1-drive all-in CPU cycle"))
-        # the plan of a paced run: ~args.paced_seconds of cycles + enable/approach/settle
-        proc = c_loop_start(int(args.paced_seconds * 1000), tmp)
-        p = paced(args.paced_seconds, tmp / "paced")
-        rows.append(("paced 1 kHz, Python runner", f"missed {p['missed']}/{p['cycles']}",
-                     f"lateness p50 {p['p50']:.0f} / p99 {p['p99']:.0f} / max "
-                     f"{p['max']:.0f} us", f"run {p['status']}"))
-        cref = c_loop_result(proc) if proc is not None else None
-        if cref is None:
-            rows.append(("paced 1 kHz, C clock_nanosleep", "gcc not found", "", ""))
-        else:
-            # runs of slightly different lengths (enable/approach/settle): compare rates
-            ratio = ((p["missed"] + 1) / p["cycles"]) / ((cref["missed"] + 1) / cref["cycles"])
-            rows.append(("paced 1 kHz, C clock_nanosleep", f"missed {cref['missed']}/"
-                         f"{cref['cycles']}", f"lateness p50 {cref['p50']:.0f} / p99 "
-                         f"{cref['p99']:.0f} / max {cref['max']:.0f} us",
-                         f"miss rate Python/C = {ratio:.2f} (+1 each)"))
+        rows = safety_rows(args.safety_repeat) if args.safety_repeat else []
+        if not args.only_safety:
+            rows.extend(speed_rows(args, tmp))
         w = [max(len(r[i]) for r in rows) for i in range(4)]
         print(f"bench_daq  (python {sys.version.split()[0]}, {os.cpu_count()} CPUs, load "
               f"{os.getloadavg()[0]:.1f})")
@@ -177,6 +226,38 @@ def main() -> int:
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return 0
+
+
+def speed_rows(args: argparse.Namespace, tmp: Path) -> list[tuple[str, str, str, str]]:
+    rows = []
+    r1, cpu1, n1 = lockstep(1, args.lockstep_seconds, args.repeat, tmp / "l1")
+    rows.append(("lockstep, 1 drive, 1 kHz plan", f"{r1:,.0f} cycles/s",
+                 f"{r1 / 1000:.2f}x real time", f"CPU {cpu1:.0f} us/cycle, {n1} cycles"))
+    r3, cpu3, n3 = lockstep(3, args.lockstep_seconds, args.repeat, tmp / "l3")
+    rows.append(("lockstep, 3 drives", f"{r3:,.0f} cycles/s",
+                 f"{r3 / 1000:.2f}x real time at 1 kHz",
+                 f"CPU {cpu3:.0f} us/cycle; 3 vs 1 drive: {r3 / r1:.2f}x rate"))
+    msg_s, log_us = mcap_rate(100_000, tmp)
+    rows.append(("MCAP write (state+setpoint+CAN)", f"{msg_s:,.0f} msg/s",
+                 f"{log_us:.1f} us/cycle",
+                 f"{100 * log_us / cpu1:.0f} % of the 1-drive all-in CPU cycle"))
+    # the plan of a paced run: ~args.paced_seconds of cycles + enable/approach/settle
+    proc = c_loop_start(int(args.paced_seconds * 1000), tmp)
+    p = paced(args.paced_seconds, tmp / "paced")
+    rows.append(("paced 1 kHz, Python runner", f"missed {p['missed']}/{p['cycles']}",
+                 f"lateness p50 {p['p50']:.0f} / p99 {p['p99']:.0f} / max "
+                 f"{p['max']:.0f} us", f"run {p['status']}"))
+    cref = c_loop_result(proc) if proc is not None else None
+    if cref is None:
+        rows.append(("paced 1 kHz, C clock_nanosleep", "gcc not found", "", ""))
+    else:
+        # runs of slightly different lengths (enable/approach/settle): compare rates
+        ratio = ((p["missed"] + 1) / p["cycles"]) / ((cref["missed"] + 1) / cref["cycles"])
+        rows.append(("paced 1 kHz, C clock_nanosleep", f"missed {cref['missed']}/"
+                     f"{cref['cycles']}", f"lateness p50 {cref['p50']:.0f} / p99 "
+                     f"{cref['p99']:.0f} / max {cref['max']:.0f} us",
+                     f"miss rate Python/C = {ratio:.2f} (+1 each)"))
+    return rows
 
 
 if __name__ == "__main__":

@@ -595,6 +595,8 @@ class SimulatedDrive:
     def _set_nmt(self, state: int) -> None:
         was = self.nmt
         self.nmt = state
+        if state != was:
+            self._wd_wake.set()  # the SYNC watchdog is armed in OPERATIONAL only
         self.node.nmt._state = state
         if state == NMT_OPERATIONAL and was != NMT_OPERATIONAL:
             self._build_layouts()
@@ -1092,6 +1094,8 @@ class SimulatedDrive:
                     self.fault(SYNC_LOST)
                 elif left < wait:
                     wait = left
+            elif timeout and timeout < wait:
+                wait = timeout  # configured, not armed: look again within one timeout
         return wait
 
     def step(self) -> None:

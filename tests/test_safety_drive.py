@@ -26,7 +26,8 @@ TPDOS = {
     0x180 + NODE: ("<Hi", ("6041", "6064")),
     0x280 + NODE: ("<hi", ("6077", "606C")),
 }
-SLACK_S = 2.0  # upper margin for a loaded host [s]
+SLACK_S = 2.0  # how long to wait for something that must happen [s]
+MARGIN_S = 0.25  # allowed lateness of a reaction on a loaded host [s]
 
 
 @pytest.fixture
@@ -78,7 +79,7 @@ def test_heartbeat_loss_faults_an_enabled_drive_with_emcy_8130(rig):
         delay = rig.drive.fault_time - t_stop
         # the last heartbeat left at most one period before t_stop
         assert delay >= (consumer_ms - period_ms) / 1000 - 0.005
-        assert delay <= consumer_ms / 1000 + SLACK_S
+        assert delay <= consumer_ms / 1000 + MARGIN_S
         assert _wait_for(lambda: HEARTBEAT_LOST in _emcy_codes(rig), SLACK_S)
         assert rig.node.sdo[0x603F].raw == HEARTBEAT_LOST
         assert rig.node.sdo[0x1001].raw == error_register(HEARTBEAT_LOST) == 0x11
@@ -142,7 +143,7 @@ def test_sync_loss_in_cyclic_mode_faults_with_8100(rig):
     # the master hangs: no more SYNC
     assert _wait_for(lambda: rig.drive.state is State.FAULT, timeout + SLACK_S)
     delay = rig.drive.fault_time - last_sync
-    assert timeout <= delay <= timeout + SLACK_S
+    assert timeout <= delay <= timeout + MARGIN_S  # armed by NMT start, too
     assert _wait_for(lambda: SYNC_LOST in _emcy_codes(rig), SLACK_S)
     assert rig.node.sdo[0x603F].raw == SYNC_LOST
     assert rig.drive.sync_losses == 1

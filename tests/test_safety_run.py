@@ -30,7 +30,8 @@ from trajectories.campaign import Campaign
 
 _chan = itertools.count()
 NODE = 3
-SLACK_S = 2.0  # upper margin for a loaded host [s]
+SLACK_S = 2.0  # how long to wait for something that must happen [s]
+MARGIN_S = 0.5  # allowed lateness of a reaction on a loaded host [s]
 SCALING = {"rated_torque_Nm": 5.0, "gear_ratio": 100.0, "encoder_counts_per_rev": 4096}
 
 
@@ -143,7 +144,7 @@ def test_dead_master_drive_faults_with_8130_within_the_consumer_time(tmp_path, m
     assert r.status == "stopped"
     assert r.reason.startswith(f"node {NODE}: EMCY 0x{HEARTBEAT_LOST:04X}")
     delay = rig.drive.fault_time - t["stop"]
-    assert 0.4 - 0.1 - 0.005 <= delay <= 0.4 + SLACK_S  # consumer 400 ms, period 100 ms
+    assert 0.4 - 0.1 - 0.005 <= delay <= 0.4 + MARGIN_S  # consumer 400 ms, period 100 ms
     rec = rig.drive.record
     states = [state_from_statusword(int(s)) for s in rec["statusword"]]
     # p.cycle is the next cycle to run; the drive's cycle counter is the runner's here
@@ -164,6 +165,7 @@ def test_hung_paced_master_drive_faults_on_sync_loss(tmp_path):
             t["sync"] = rig.drive.sync_timeout_s
             # the main loop hangs (no SYNC) while the heartbeat task keeps going
             _wait_for(lambda: rig.drive.state is State.FAULT, t["sync"] + SLACK_S)
+            t["fault_delay"] = rig.drive.fault_time - rig.drive.last_sync_time
 
     try:
         r = run_campaign(c, out_dir=tmp_path, yes=True, progress=progress)
@@ -173,8 +175,7 @@ def test_hung_paced_master_drive_faults_on_sync_loss(tmp_path):
     assert r.status == "stopped"
     assert r.reason.startswith(f"node {NODE}: EMCY 0x{SYNC_LOST:04X}")
     assert rig.drive.sync_losses == 1 and rig.drive.heartbeat_timeouts == 0
-    assert t["sync"] <= rig.drive.fault_time - rig.drive.last_sync_time or (
-        rig.drive.last_sync_time > rig.drive.fault_time)  # SYNCs resumed after the fault
+    assert t["sync"] <= t["fault_delay"] <= t["sync"] + MARGIN_S
     assert r.runs[0].fault_cycle >= t["cycle"]
     a = read_run(r.runs[0].path)
     assert a.metadata["safety"]["sync_period_us"] == "1000"
