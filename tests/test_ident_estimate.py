@@ -87,3 +87,54 @@ def test_iterative_elimination_of_insignificant_parameters():
     assert np.all(r.rel_std_pct <= 30)
     r2 = fit_least_squares(W2, Y, ["a", "b", "c", "d", "junk"], eliminate=False)
     assert "junk" in r2.names and r2.removed == []
+
+
+def _errors_in_variables(m=20000, seed=3):
+    """y = 2 x + 1 + e with x observed as x + u, u correlated with e (closed-loop-like);
+    the instrument z (the reference) drives x but is independent of u and e."""
+    rng = np.random.default_rng(seed)
+    z = rng.normal(0, 1, m)
+    u = rng.normal(0, 0.8, m)
+    e = -1.5 * u + rng.normal(0, 0.1, m)
+    x_true = z + 0.3 * rng.normal(0, 1, m)
+    W = np.column_stack([x_true + u, np.ones(m)])
+    Y = 2.0 * x_true + 1.0 + e
+    Z = np.column_stack([z, np.ones(m)])
+    return W, Y, Z
+
+
+def test_instrumental_variables_remove_the_errors_in_variables_bias():
+    from ident.estimate import fit_instrumental
+
+    W, Y, Z = _errors_in_variables()
+    ols = solve_ls(W, Y, ["k", "c"])
+    assert abs(ols.chi[0] - 2.0) > 20 * ols.std[0]  # OLS: biased, and confident about it
+    iv = fit_instrumental(W, Y, Z, ["k", "c"], eliminate=False)
+    assert abs(iv.chi[0] - 2.0) < 3 * iv.std[0] and abs(iv.chi[1] - 1.0) < 3 * iv.std[1]
+    # estimate (Z'W)^-1 Z'Y and covariance s^2 (Z'W)^-1 Z'Z (W'Z)^-1 with eq. 14's s^2
+    A = Z.T @ W
+    chi = np.linalg.solve(A, Z.T @ Y)
+    np.testing.assert_allclose(iv.chi, chi, rtol=1e-9)
+    rho = Y - W @ chi
+    s2 = rho @ rho / (W.shape[0] - 2)
+    Ai = np.linalg.inv(A)
+    np.testing.assert_allclose(iv.cov, s2 * Ai @ (Z.T @ Z) @ Ai.T, rtol=1e-6)
+    assert iv.sigma_rho == pytest.approx(np.sqrt(s2))
+    # Z = W gives back OLS (eq. 12, 15)
+    same = fit_instrumental(W, Y, W, ["k", "c"], eliminate=False)
+    np.testing.assert_allclose(same.chi, ols.chi, rtol=1e-9)
+    np.testing.assert_allclose(same.cov, ols.cov, rtol=1e-6)
+
+
+def test_instruments_follow_column_elimination_and_are_checked():
+    from ident.estimate import fit_instrumental
+
+    W, Y, Z = _errors_in_variables(m=4000)
+    W3 = np.column_stack([W, np.zeros(len(Y))])
+    Z3 = np.column_stack([Z, np.zeros(len(Y))])
+    r = fit_instrumental(W3, Y, Z3, ["k", "c", "dead"], eliminate=False)
+    assert r.names == ("k", "c") and r.removed[0][0] == "dead"
+    with pytest.raises(Exception, match="instruments Z have shape"):
+        fit_instrumental(W, Y, Z[:, :1], ["k", "c"])
+    with pytest.raises(IdentifiabilityError, match="instruments"):
+        fit_instrumental(W, Y, np.column_stack([Z[:, 1], Z[:, 1]]), ["k", "c"])

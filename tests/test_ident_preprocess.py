@@ -109,3 +109,81 @@ def test_too_few_samples_after_trim_is_a_clear_error():
     s = concat([_exp(0, n=300)])
     with pytest.raises(DataError, match="too few"):
         build_design(usual_model(), s, cutoff_hz=50, decimation=10, trim=140)
+
+
+def test_shift_interpolates_half_a_sample_exactly_for_cubics():
+    from ident.preprocess import shift
+
+    dt = 1e-3
+    t = np.arange(200) * dt
+    for d in (0.5, 0.25):
+        cubic = 3 + 2 * t - 40 * t**2 + 900 * t**3
+        tt = t + d * dt
+        np.testing.assert_allclose(
+            shift(cubic, d)[1:-2], (3 + 2 * tt - 40 * tt**2 + 900 * tt**3)[1:-2], rtol=1e-12
+        )
+    x = np.sin(2 * np.pi * 5 * t)
+    assert shift(x, 0.0) is x or np.array_equal(shift(x, 0.0), x)
+    with pytest.raises(DataError, match="torque_delay"):
+        shift(x, 1.0)
+
+
+def test_torque_delay_aligns_a_held_command_with_the_motion():
+    """A zero-order-held torque over [t_k, t_k+dt] from an exact integration: with the
+    half-cycle delay the inertia and viscous terms come out right, without it F_V is off
+    by J/T-scale terms (the lag of dq, ddq behind the torque)."""
+    dt, n = 1e-3, 20000
+    rng = np.random.default_rng(4)
+    J, fv = 30.0, 40.0
+    k = np.arange(n)
+    tau = 300 * np.sin(2 * np.pi * 1.3 * k * dt) + 200 * np.sin(2 * np.pi * 7.1 * k * dt + 1)
+    tau += rng.normal(0, 5, n)
+    q, v = np.zeros(n), 0.0
+    a_ = np.exp(-fv / J * dt)
+    qk = 0.0
+    for i in range(n):  # exact solution of J ddq + fv dq = tau_i over the cycle
+        q[i] = qk
+        vinf = tau[i] / fv
+        v_new = vinf + (v - vinf) * a_
+        qk += vinf * dt + (v - vinf) * (1 - a_) * J / fv
+        v = v_new
+    e = make_experiment("held", k * dt, q, tau, revolute=False)
+    s = concat([e])
+    lib = RigidBody(False) + Viscous()
+    fits = {}
+    for d in (0.0, 0.5):
+        des = build_design(lib, s, cutoff_hz=100, decimation=10, torque_delay=d)
+        fits[d] = IdentModel(lib).fit(des, eliminate=False).coef_
+        assert des.settings()["torque_delay"] == d
+    assert fits[0.5]["J"] == pytest.approx(J, rel=2e-3)
+    assert fits[0.5]["F_V"] == pytest.approx(fv, rel=2e-3)
+    assert abs(fits[0.0]["F_V"] - fv) > 5 * abs(fits[0.5]["F_V"] - fv)
+
+
+def test_reference_instruments_follow_the_design_through_its_edits():
+    s = concat([_exp(0), _exp(2)])
+    kw = dict(cutoff_hz=50, decimation=5, dq_min=0.1, trim=40)
+    ref = s.q + 1e-3 * np.sin(7 * s.t)  # a reference close to the motion
+    base = build_design(RigidBody() + Offset(), s, reference=ref, **kw)
+    both = build_design(RigidBody() + Offset() + Coulomb(), s, reference=ref, **kw)
+    assert base.Z.shape == base.W.shape and base.settings()["instruments"] == "reference"
+    # only the acceleration column differs from W; the others are the same samples
+    j = base.names.index("J")
+    others = [i for i in range(len(base.names)) if i != j]
+    np.testing.assert_array_equal(base.Z[:, others], base.W[:, others])
+    assert not np.allclose(base.Z[:, j], base.W[:, j])
+    added = base.with_term(Coulomb())
+    np.testing.assert_allclose(added.Z, both.Z, rtol=1e-12, atol=1e-12)
+    dropped = added.without(["F_C"])
+    np.testing.assert_array_equal(dropped.Z, base.Z)
+    sel = base.select(dq_min=0.3)
+    assert sel.Z.shape == sel.W.shape and sel.Z.shape[0] < base.Z.shape[0]
+    # without a cut-off the floor rises to f_s/10 with instruments (f_s/20 without)
+    assert build_design(RigidBody(), s, reference=ref).cutoff_hz == pytest.approx(100.0)
+    assert build_design(RigidBody(), s).cutoff_hz == pytest.approx(50.0)
+    with pytest.raises(DataError, match="reference has"):
+        build_design(RigidBody(), s, reference=ref[:-1])
+    bad = ref.copy()
+    bad[5] = np.nan
+    with pytest.raises(DataError, match="NaN"):
+        build_design(RigidBody(), s, reference=bad)
