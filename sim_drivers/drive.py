@@ -323,6 +323,13 @@ class SimulatedDrive:
         Rows the per-cycle record grows by (preallocated numpy arrays).
     sync_loss_floor_s : float
         Shortest SYNC-loss timeout [s] (module docstring, "Losing the master").
+
+    Attributes
+    ----------
+    heartbeat_timeouts, sync_losses : int
+        Heartbeat-consumer timeouts and SYNC losses detected so far.
+    fault_time : float
+        ``time.monotonic()`` when the drive last entered FAULT [s] (0: never).
     """
 
     def __init__(
