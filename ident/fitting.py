@@ -308,7 +308,7 @@ def fit_models(
         When given, every model is estimated by IDIM-IV with instruments built on the
         reference acceleration (see :mod:`ident.estimate` and ``reference`` of
         :func:`ident.preprocess.build_design`), and the default cut-off is at least
-        f_s/10; this removes the closed-loop noise bias of OLS on the E_xp ddq columns.
+        f_s/8; this removes the closed-loop noise bias of OLS on the E_xp ddq columns.
         ``"auto"`` (default): the experiments' ``q_ref`` attributes when every experiment
         has one without NaN, else OLS. None: OLS.
     torque_delay : float or "auto"

@@ -178,8 +178,8 @@ def test_reference_instruments_follow_the_design_through_its_edits():
     np.testing.assert_array_equal(dropped.Z, base.Z)
     sel = base.select(dq_min=0.3)
     assert sel.Z.shape == sel.W.shape and sel.Z.shape[0] < base.Z.shape[0]
-    # without a cut-off the floor rises to f_s/10 with instruments (f_s/20 without)
-    assert build_design(RigidBody(), s, reference=ref).cutoff_hz == pytest.approx(100.0)
+    # without a cut-off the floor rises to f_s/8 with instruments (f_s/20 without)
+    assert build_design(RigidBody(), s, reference=ref).cutoff_hz == pytest.approx(125.0)
     assert build_design(RigidBody(), s).cutoff_hz == pytest.approx(50.0)
     with pytest.raises(DataError, match="reference has"):
         build_design(RigidBody(), s, reference=ref[:-1])
