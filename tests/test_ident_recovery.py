@@ -128,3 +128,55 @@ def test_default_elimination_keeps_parameters_significant(sim):
     assert all(v <= 30 for v in m.rel_std_pct_.values())
     assert all("relative deviation" in why for _, why in m.removed_)
     assert np.isfinite(m.rel_error_)
+
+
+def test_qs_rescanned_after_refinement_recovers_the_plant():
+    """The demo's situation: quick campaign, a position ripple no model declares, q_s
+    scanned. The scan with the declared model alone is pulled off by the ripple left in the
+    residual (+36 % here); once refinement has modelled the ripple,
+    :func:`ident.fitting.rescan_qs` brings q_s back to +10 % and the q_s-sensitive b terms
+    of eq. 42 much closer. What is left is the quick campaign's own limit: little data near
+    q_s, and the residual criterion then lands 5-15 % high (0.0326 on these runs without any
+    effect; the full campaign gives 0.0300), so b_m_MX stays 3.5 sigma off."""
+    from daq.control import ControllerGains
+    from ident.fitting import rescan_qs
+    from ident.refine import refine
+    from sim_drivers.offline import simulate
+    from sim_drivers.plant_config import load_plant
+    from trajectories.campaign import Campaign
+    from trajectories.plan import plan_campaign
+
+    with open(ROOT / "examples" / "campaign.toml", "rb") as f:
+        campaign = Campaign.from_dict(tomllib.load(f), "examples/campaign.toml").quick()
+    plan = plan_campaign(campaign)
+    plant = load_plant(ROOT / "examples" / "plant_rx130l.toml")
+    assert plant.effects.position_ripple.enabled
+    gains = ControllerGains(**campaign.control.gains_kwargs())
+    exps = []
+    for i, p in enumerate(plan.payloads):
+        r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
+                     payload_arm=p.arm_m, seed=11 + i)  # fmt: skip
+        exps.append(make_experiment(f"payload{i}", r.t, r.q, r.tau_ref,
+                                    payload_mass=p.mass_kg, payload_arm=p.arm_m))  # fmt: skip
+    rep = fit_models(exps, ("new",), qs="scan", references=[plan.reference.q] * 3,
+                     table_iv=False, **SIM)  # fmt: skip
+    ref = refine(rep.designs["new"], rep.models["new"], vmax=rep.vmax)
+    assert "position_ripple" in [s.term.effect for s in ref.steps]
+    rs = rescan_qs(ref.final_design, ref.final_model, vmax=rep.vmax)
+    q_s = plant.joint.q_s
+    # the quick campaign has little data near q_s: without any effect its scan lands 5-10 %
+    # high (0.0326 on these runs), with the ripple left in the residual 36 % high
+    assert abs(rep.qs / q_s - 1) > 0.2 and abs(rs.qs / q_s - 1) < 0.15
+    assert [q for q, _ in rs.scan] == sorted(q for q, _ in rs.scan)
+    truth = plant.truth()
+
+    def rel_err(m):
+        return {n: abs(m.coef_[n] - t) / abs(t) for n, t in truth.items()}
+
+    before, after = rel_err(ref.final_model), rel_err(rs.model)
+    sensitive = ("b_m_MX", "b_g_MX", "b_m", "b_g", "b_m_J")
+    assert all(after[n] < before[n] for n in sensitive)
+    assert sum(after[n] for n in sensitive) < 0.5 * sum(before[n] for n in sensitive)
+    m = rs.model
+    z = {n: abs(m.coef_[n] - t) / m.std_[n] for n, t in truth.items()}
+    assert max(z.values()) < 4.5, z
