@@ -73,6 +73,10 @@ class Experiment:
         Lever arm L_a [m].
     revolute : bool
         Joint kind.
+    q_ref : ndarray, shape (n,), or None
+        Reference (planned) position the controller tracked [rad or m], when the data carry it
+        (MCAP logs of ``jointid run``; CSV/MAT column ``q_ref``). With it the fit uses
+        instrumental variables (IDIM-IV), which removes the closed-loop noise bias of OLS.
     """
 
     source: str
@@ -82,6 +86,7 @@ class Experiment:
     payload_mass: float = 0.0
     payload_arm: float = 0.0
     revolute: bool = True
+    q_ref: np.ndarray | None = None
 
     @property
     def dt(self) -> float:
@@ -184,7 +189,7 @@ def _pick(
         return name
     if name in table:
         return table[name]
-    if key in ("payload_kg", "payload_arm_m") and key not in mapping:
+    if key in ("payload_kg", "payload_arm_m", "q_ref") and key not in mapping:
         return None
     avail = ", ".join(sorted(table)) or "none"
     raise DataError(f"{path}: missing column/variable {name!r} for {key!r} (found: {avail}; "
@@ -233,6 +238,9 @@ def _from_table(
             if v.size == 0 or not np.all(v == v.flat[0]):
                 raise DataError(f"{path}: {key} must be constant within one file (one experiment)")
             consts[key] = float(v.flat[0])
+    q_ref = _pick(table, "q_ref", mapping, path)
+    if isinstance(q_ref, float):
+        raise DataError(f"{path}: q_ref must be a column, not a constant")
     return make_experiment(
         str(path),
         t,
@@ -241,6 +249,7 @@ def _from_table(
         payload_mass=consts["payload_kg"],
         payload_arm=consts["payload_arm_m"],
         revolute=True if revolute is None else revolute,
+        q_ref=q_ref,
     )
 
 
@@ -253,6 +262,7 @@ def make_experiment(
     payload_mass: float = 0.0,
     payload_arm: float = 0.0,
     revolute: bool = True,
+    q_ref: np.ndarray | None = None,
 ) -> Experiment:
     """Validate arrays and build an :class:`Experiment` (resampling if irregular).
 
@@ -268,9 +278,15 @@ def make_experiment(
         raise DataError(
             f"{source}: t, q, tau have different lengths ({t.size}, {q.size}, {tau.size})"
         )
+    if q_ref is not None:
+        q_ref = np.asarray(q_ref, dtype=float).ravel()
+        if q_ref.shape != t.shape:
+            raise DataError(f"{source}: q_ref has {q_ref.size} samples, t has {t.size}")
     if t.size < MIN_SAMPLES:
         raise DataError(f"{source}: {t.size} samples, need at least {MIN_SAMPLES}")
-    for name, a in (("t", t), ("q", q), ("tau", tau)):
+    for name, a in (("t", t), ("q", q), ("tau", tau), ("q_ref", q_ref)):
+        if a is None:
+            continue
         bad = ~np.isfinite(a)
         if bad.any():
             raise DataError(
@@ -296,6 +312,8 @@ def make_experiment(
         )
         q = np.interp(tu, t, q)
         tau = np.interp(tu, t, tau)
+        if q_ref is not None:
+            q_ref = np.interp(tu, t, q_ref)
         t = tu
     return Experiment(
         source=source,
@@ -305,6 +323,7 @@ def make_experiment(
         payload_mass=float(payload_mass),
         payload_arm=float(payload_arm),
         revolute=bool(revolute),
+        q_ref=q_ref,
     )
 
 
@@ -355,6 +374,8 @@ def _load_mcap(path: Path, revolute: bool | None, axis: int) -> Experiment:
         payload_mass=_finite_or_zero(run.payload_mass_kg),
         payload_arm=_finite_or_zero(run.payload_arm_m),
         revolute=rev,
+        # logs without a /setpoint channel carry NaN: no reference, plain least squares
+        q_ref=run.q_ref if np.all(np.isfinite(run.q_ref)) else None,
     )
 
 

@@ -7,7 +7,6 @@ virtual bus through the real master, logs to MCAP, fits both models, refines and
 from __future__ import annotations
 
 import json
-import math
 import re
 import subprocess
 import sys
@@ -57,9 +56,13 @@ def test_demo_shows_the_papers_pattern(demo):
     out, _ = demo
     m = json.loads((out / "fit.json").read_text())["models"]
     usual, new = m["usual"], m["new"]
-    # the new model is clearly better overall and much better at low velocity (Table III)
-    assert new["rel_error"] < 0.85 * usual["rel_error"]
-    assert new["rel_error_low_velocity"] < 0.7 * usual["rel_error_low_velocity"]
+    # the new model is clearly better overall and at low velocity (Table III); the quick
+    # campaign has little data near q_s, so its contrast is weaker than the full demo's
+    # (README: low velocity 0.0284 -> 0.0155)
+    assert new["rel_error"] < 0.9 * usual["rel_error"]
+    assert new["rel_error_low_velocity"] < 0.85 * usual["rel_error_low_velocity"]
+    # identified with instrumental variables from the logged reference trajectory
+    assert usual["estimator"] == new["estimator"] == "iv"
 
 
 def test_demo_refinement_finds_the_undeclared_effect(demo):
@@ -78,19 +81,20 @@ def test_demo_refinement_finds_the_undeclared_effect(demo):
     assert fit["refinement"]["rel_error_final"] < fit["models"]["new"]["rel_error"]
 
 
-def test_demo_load_dependent_friction_matches_truth(demo):
-    """The paper's load coefficients (eq. 25) and the gravity moment come out right."""
+def test_demo_refined_model_matches_the_plant_truth(demo):
+    """Issue 5's criterion on the demo: every parameter of the refined model (new model +
+    discovered ripple) within 3 of its reported standard deviations of the truth, or 1 %."""
     out, _ = demo
     fit = json.loads((out / "fit.json").read_text())
     truth = load_plant(examples.path("plant_rx130l.toml")).truth()
     final = fit["refinement"]["final_parameters"]
-    for name in ("a_m", "a_g"):  # payload-column coefficients: a_m = 1 + alpha_m, a_g = 1 - alpha_g
-        est, std2 = final[name]["value"], final[name]["std2"]
-        assert abs(est - truth[name]) <= max(1.5 * std2, 0.01 * truth[name]), name
-    mx_true = truth["a_m_MX"] / truth["a_m"]
-    for q in ("m", "g"):  # a_q MX / a_q recovers MX within 2 %
-        mx = final[f"a_{q}_MX"]["value"] / final[f"a_{q}"]["value"]
-        assert math.isclose(mx, mx_true, rel_tol=0.02), (q, mx, mx_true)
+    assert set(truth) <= set(final)  # nothing eliminated from the refined model
+    for name, true in truth.items():
+        est, sigma = final[name]["value"], final[name]["std2"] / 2
+        assert abs(est - true) <= max(3 * sigma, 0.01 * abs(true)), (name, est, sigma, true)
+    # q_s adjusted after refinement lands near the plant's 0.03 rad/s (a priori: 0.04)
+    assert fit["qs_a_priori"] == pytest.approx(0.04)
+    assert fit["qs"] == pytest.approx(0.03, rel=0.15)
 
 
 def test_report_command_rebuilds_the_report(demo, tmp_path):
