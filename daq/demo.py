@@ -139,7 +139,18 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, max_steps: int = 3,
                       vmax=rep.vmax, progress=lambda m: _say(stream, "      " + m))
 
     ref = refine_new(report)
-    rs = rescan_qs(ref.final_design, ref.final_model, vmax=report.vmax)
+    bar = ProgressLine(stream)
+
+    def scan_progress(done: int, expected: int, q: float, err: float) -> None:
+        bar.update(done / max(done, expected),
+                   f"adjusting q_s with the refined model: fit {done}, q_s = {q:.4g} rad/s, "
+                   f"error {100 * err:.3f} %")
+
+    try:
+        rs = rescan_qs(ref.final_design, ref.final_model, vmax=report.vmax,
+                       progress=scan_progress)
+    finally:
+        bar.close()
     if abs(rs.qs - qs0) > 0.01 * qs0:
         _say(stream, f"      q_s adjusted with the refined model: {qs0:g} -> {rs.qs:.4g} rad/s")
         report = fit_models(exps, ("usual", "new"), qs=rs.qs)

@@ -11,7 +11,7 @@ Pure numerics: loading belongs to :mod:`ident.loaders`.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -122,6 +122,10 @@ class QsScan:
     scan: list[tuple[float, float]]
 
 
+#: Typical number of evaluations of the bounded search after the grid (for progress bars).
+QS_SEARCH_EVALS = 10
+
+
 def _scan(err: Any, grid: np.ndarray) -> None:
     """Evaluate ``err`` on ``grid``, then refine the minimum between its grid neighbours on
     log q_s (bounded 1-D search to :data:`QS_XTOL`)."""
@@ -144,6 +148,7 @@ def rescan_qs(
     *,
     vmax: float,
     n_grid: int = 13,
+    progress: Callable[[int, int, float, float], None] | None = None,
 ) -> QsScan:
     """Choose q_s again for a fitted model, e.g. after refinement added undeclared effects.
 
@@ -165,6 +170,10 @@ def rescan_qs(
     n_grid : int
         Grid points.
 
+    progress : callable, optional
+        Called after each fit as ``progress(done, expected, q_s, rel_error)``; ``expected``
+        is an estimate (the grid plus a typical bounded search).
+
     Returns
     -------
     QsScan
@@ -178,6 +187,8 @@ def rescan_qs(
         m = IdentModel(lq, model.name).fit(dq_, eliminate=False)
         found[q] = (m, dq_)
         scan.append((q, m.rel_error_))
+        if progress is not None:
+            progress(len(scan), n_grid + QS_SEARCH_EVALS, q, m.rel_error_)
         return m.rel_error_
 
     _scan(err, qs_grid(vmax, n_grid))
