@@ -29,7 +29,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "  jointid fit runs/*.mcap --json fit.json --report fit/\n"
             "  jointid fit DATA_EMPS.mat --joint prismatic --map q=qm,tau=vir --gain gtau \\\n"
             "      --cutoff 100 --decimation 10 --dq-min 0 --no-sign-check \\\n"
-            "      --validate DATA_EMPS_PULSES.mat"
+            "      --validate DATA_EMPS_PULSES.mat\n"
+            "  jointid fit kuka_A.mat --q-unit deg --gain 'para.u[2]' \\\n"
+            "      --map 't=rec.time_cont,q=rec.act_pos_mot_deg[2]' \\\n"
+            "      --map 'tau=rec.act_torque_abs_nm[2]' \\\n"
+            "      --validate kuka_B.mat kuka_C.mat\n"
+            "\n"
+            "paths in --map/--gain (MAT structs, multi-axis arrays; docs/fit-json.md):\n"
+            "  NAME[.FIELD...]           a variable or a struct field, e.g. rec.time_cont\n"
+            "  NAME[.FIELD...][ROW]      row ROW of a 2-D array (one row per axis), 0-based:\n"
+            "                            rec.act_pos_mot_deg[2] is axis 3; on a 1-D array, one\n"
+            "                            element: para.u[2]\n"
+            "  NAME[.FIELD...][:, COL]   column COL of an N x axes array, 0-based\n"
+            "  a name present verbatim in the file (CSV header) is always taken as is;\n"
+            "  quote paths in the shell ([ ] are glob characters)"
         ),
     )
     p.add_argument("inputs", nargs="+", type=Path, help="experiment files (.mcap, .csv, .mat)")
@@ -64,11 +77,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     g.add_argument(
         "--map",
         action="append",
-        metavar="KEY=NAME[,...]",
-        help="column/variable names: t=, q=, tau=, payload_kg=, payload_arm_m= "
-        "(payload entries may be numbers)",
+        metavar="KEY=PATH[,...]",
+        help="column/variable names or paths (see below): t=, q=, tau=, q_ref= (reference "
+        "position: IDIM-IV), payload_kg=, payload_arm_m= (payload entries may be numbers)",
     )
-    g.add_argument("--gain", metavar="NUMBER|NAME", help="drive gain: tau = gain x column")
+    g.add_argument(
+        "--gain",
+        metavar="NUMBER|PATH[*...]",
+        help="drive gain: tau = gain x column; a number, a scalar variable/path "
+        "(para.u[2]) or a product of them (para.u[2]*1.5)",
+    )
+    g.add_argument(
+        "--q-unit",
+        choices=("rad", "deg", "m", "mm"),
+        help="unit of q and q_ref in CSV/MAT files, converted to rad or m (default: already "
+        "rad/m); deg/rad imply a revolute joint, m/mm a prismatic one",
+    )
     g.add_argument("--axis", type=int, default=0, help="axis of a multi-axis MCAP log")
     g2 = p.add_argument_group("preprocessing and estimation")
     g2.add_argument("--cutoff", type=float, metavar="HZ", help="low-pass cut-off on q [Hz]")
@@ -123,7 +147,9 @@ def run(args: argparse.Namespace) -> int:
 
     mapping = parse_mapping(args.map)
     gain: float | str | None = args.gain
-    load_kw: dict[str, Any] = dict(mapping=mapping, gain=gain, joint=args.joint, axis=args.axis)
+    load_kw: dict[str, Any] = dict(
+        mapping=mapping, gain=gain, joint=args.joint, axis=args.axis, q_unit=args.q_unit
+    )
     exps = load_experiments(args.inputs, **load_kw)
     val = load_experiments(args.validate, **load_kw) if args.validate else None
     models = ("usual", "new") if args.model == "both" else (args.model,)

@@ -14,6 +14,16 @@ MATLAB ``.mat`` files (v5/v7, not v7.3) hold named variables. A mapping renames 
     gain = "gtau"                            # tau = gain * column; a number or a variable name
 
 Payload entries of the mapping may also be numbers (a constant for the whole file).
+
+Foreign MATLAB data keep their signals in structs, several axes in one 2-D array and
+positions in degrees. A mapping value is then a *path* (see :func:`resolve_path`)::
+
+    NAME[.FIELD...][ROW]        row ROW (0-based) of a 2-D array, e.g. rec.act_pos_mot_deg[2]
+    NAME[.FIELD...][:, COL]     column COL (0-based) of a 2-D array (N x axes layouts)
+
+A name that exists as such in the file (e.g. a CSV header ``q.motor``) is always taken
+verbatim. The gain may be a number, a path to a scalar (``para.u[2]``) or a product of them
+(``para.u[2]*0.5``). ``q_unit`` converts q and q_ref to SI (degrees to radians, mm to m).
 Irregular sampling is resampled onto a uniform grid (linear interpolation) with a
 :class:`ResamplingWarning`.
 """
@@ -21,6 +31,7 @@ Irregular sampling is resampled onto a uniform grid (linear interpolation) with 
 from __future__ import annotations
 
 import csv
+import re
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -38,6 +49,8 @@ __all__ = [
     "load_experiment",
     "concat",
     "parse_mapping",
+    "resolve_path",
+    "Q_UNITS",
     "MIN_SAMPLES",
 ]
 
@@ -46,7 +59,22 @@ MIN_SAMPLES = 50
 #: Relative spread of the sampling period above which a file is resampled.
 IRREGULAR_TOL = 0.01
 
-CANONICAL = ("t", "q", "tau", "payload_kg", "payload_arm_m")
+CANONICAL = ("t", "q", "tau", "q_ref", "payload_kg", "payload_arm_m")
+
+#: Units accepted for q (and q_ref): factor to SI [rad or m] and whether the unit is an angle.
+Q_UNITS: dict[str, tuple[float, bool]] = {
+    "rad": (1.0, True),
+    "deg": (np.pi / 180.0, True),
+    "m": (1.0, False),
+    "mm": (1e-3, False),
+}
+
+_PATH_RE = re.compile(
+    r"^\s*(?P<names>[A-Za-z_]\w*(?:\s*\.\s*[A-Za-z_]\w*)*)\s*"
+    r"(?:\[\s*(?:(?P<row>\d+)|:\s*,\s*(?P<col>\d+))\s*\])?\s*$"
+)
+#: Most names listed in an error message.
+_MAX_LISTED = 40
 
 
 class ResamplingWarning(UserWarning):
@@ -100,7 +128,8 @@ class Experiment:
 def parse_mapping(items: Sequence[str] | str | None) -> dict[str, str | float]:
     """Parse ``"q=qm,tau=vir"`` or ``["q=qm", "tau=vir"]`` into a mapping.
 
-    Values that parse as numbers become floats (payload constants).
+    Values that parse as numbers become floats (payload constants). Commas inside brackets
+    belong to a path (``q=rec.pos[:, 2]``) and do not separate entries.
     """
     if not items:
         return {}
@@ -108,7 +137,7 @@ def parse_mapping(items: Sequence[str] | str | None) -> dict[str, str | float]:
         items = [items]
     out: dict[str, str | float] = {}
     for item in items:
-        for part in item.split(","):
+        for part in _split_top_commas(item):
             part = part.strip()
             if not part:
                 continue
@@ -122,6 +151,170 @@ def parse_mapping(items: Sequence[str] | str | None) -> dict[str, str | float]:
             except ValueError:
                 out[k] = v
     return out
+
+
+def _split_top_commas(text: str) -> list[str]:
+    """Split on the commas that are not inside square brackets."""
+    parts, depth, cur = [], 0, []
+    for ch in text:
+        if ch == "[":
+            depth += 1
+        elif ch == "]":
+            depth = max(depth - 1, 0)
+        if ch == "," and depth == 0:
+            parts.append("".join(cur))
+            cur = []
+        else:
+            cur.append(ch)
+    parts.append("".join(cur))
+    return parts
+
+
+def _shape_str(shape: tuple[int, ...]) -> str:
+    return " x ".join(str(n) for n in shape) if shape else "scalar"
+
+
+def _fields(obj: object) -> list[str] | None:
+    """Field names of a struct-like object (MAT struct or the file's top level), else None."""
+    if isinstance(obj, Mapping):
+        return [str(k) for k in obj]
+    names = getattr(obj, "_fieldnames", None)
+    return list(names) if names is not None else None
+
+
+def _describe(obj: object) -> str:
+    if _fields(obj) is not None:
+        return "a struct"
+    if isinstance(obj, str):
+        return "text"
+    a = np.asarray(obj)
+    if a.dtype.kind == "O":
+        return f"an array {_shape_str(a.shape)} of objects (struct array or cell)"
+    if a.dtype.kind in "US":
+        return "text"
+    return f"an array {_shape_str(a.shape)} ({a.dtype})" if a.ndim else f"a number ({a.dtype})"
+
+
+def _listing(names: Sequence[str]) -> str:
+    names = sorted(names)
+    if not names:
+        return "none"
+    more = len(names) - _MAX_LISTED
+    return ", ".join(names[:_MAX_LISTED]) + (f", ... ({more} more)" if more > 0 else "")
+
+
+def resolve_path(table: Mapping[str, object], spec: str, source: str = "") -> np.ndarray:
+    """Resolve a mapping value in a loaded file to a numeric array.
+
+    Parameters
+    ----------
+    table : mapping
+        Top level of the file: CSV column name -> column, or MAT variable name -> value
+        (``scipy.io.loadmat(..., squeeze_me=True, struct_as_record=False)``: structs are
+        objects whose fields are attributes).
+    spec : str
+        A name present verbatim in ``table``, or a path ``NAME[.FIELD...]`` followed by an
+        optional index: ``[ROW]`` takes row ROW of a 2-D array (one row per axis, e.g.
+        ``rec.act_pos_mot_deg[2]`` for axis 3) or element ROW of a 1-D array
+        (``para.u[2]``); ``[:, COL]`` takes column COL (N x axes layouts). Indices are
+        0-based and non-negative.
+    source : str
+        File name for the error messages.
+
+    Returns
+    -------
+    ndarray
+        Float array, whatever its dimension (the caller checks it: signals must be 1-D,
+        gains and payloads scalar or constant).
+
+    Raises
+    ------
+    DataError
+        Bad syntax, unknown variable or field (listing those available at that level), a
+        field taken on something that is not a struct, index out of range (with the
+        shape), or a non-numeric value.
+    """
+    where = f"{source}: " if source else ""
+    if spec in table:
+        obj: object = table[spec]
+        names, row, col = [spec], None, None
+    else:
+        m = _PATH_RE.match(spec)
+        if m is None:
+            raise DataError(
+                f"{where}{spec!r}: expected a name or a path NAME[.FIELD...], optionally "
+                "followed by [ROW] or [:, COL] (0-based)"
+            )
+        names = [n.strip() for n in m["names"].split(".")]
+        row = int(m["row"]) if m["row"] is not None else None
+        col = int(m["col"]) if m["col"] is not None else None
+        obj = table
+        for i, name in enumerate(names):
+            here = ".".join(names[:i])
+            fields = _fields(obj)
+            if fields is None:
+                raise DataError(
+                    f"{where}{spec!r}: {here!r} is {_describe(obj)}, not a struct "
+                    f"(no field {name!r})"
+                )
+            if name not in fields:
+                level = f"no field {name!r} in {here!r}" if here else f"no variable {name!r}"
+                what = "fields" if here else "variables"
+                raise DataError(f"{where}{spec!r}: {level} ({what}: {_listing(fields)})")
+            obj = obj[name] if isinstance(obj, Mapping) else getattr(obj, name)
+    label = ".".join(names)
+    if _fields(obj) is not None:
+        raise DataError(
+            f"{where}{spec!r}: {label!r} is a struct, not numeric data "
+            f"(fields: {_listing(_fields(obj) or [])})"
+        )
+    a = np.asarray(obj)
+    if a.dtype.kind not in "fiub":
+        raise DataError(f"{where}{spec!r}: {label!r} is {_describe(obj)}, not numeric")
+    if row is not None:
+        if a.ndim == 0 or row >= a.shape[0]:
+            raise DataError(
+                f"{where}{spec!r}: row index {row} out of range for {label!r} of shape "
+                f"{_shape_str(a.shape)}" + (f" (rows 0..{a.shape[0] - 1})" if a.ndim else "")
+            )
+        a = a[row]
+    elif col is not None:
+        if a.ndim != 2 or col >= a.shape[1]:
+            detail = f" (columns 0..{a.shape[1] - 1})" if a.ndim == 2 else " (not 2-D)"
+            raise DataError(
+                f"{where}{spec!r}: column index {col} out of range for {label!r} of shape "
+                f"{_shape_str(a.shape)}{detail}"
+            )
+        a = a[:, col]
+    return np.asarray(a, dtype=float)
+
+
+def _signal(table: Mapping[str, object], spec: str, key: str, source: str) -> np.ndarray:
+    """Resolve ``spec`` to a 1-D signal (a N x 1 or 1 x N array counts as 1-D)."""
+    a = resolve_path(table, spec, source)
+    if a.ndim > 1 and sum(n > 1 for n in a.shape) <= 1:
+        a = a.ravel()
+    if a.ndim != 1:
+        hint = (
+            f"; pick one row with [ROW] or one column with [:, COL] (0-based), "
+            f"e.g. {spec}[0]" if a.ndim == 2 else ""
+        )
+        raise DataError(
+            f"{source}: {spec!r} for {key!r} is {_shape_str(a.shape)}, expected a 1-D "
+            f"signal{hint}"
+        )
+    return a
+
+
+def _constant(table: Mapping[str, object], spec: str, what: str, source: str) -> float:
+    """Resolve ``spec`` to one number (a scalar, or an array whose values are all equal)."""
+    a = resolve_path(table, spec, source)
+    if a.size == 0 or not np.all(a == a.flat[0]):
+        raise DataError(
+            f"{source}: {what} {spec!r} is {_shape_str(a.shape)} with different values, "
+            "expected a scalar or a constant column"
+        )
+    return float(a.flat[0])
 
 
 def _joint_flag(joint: str | bool | None) -> bool | None:
@@ -162,94 +355,88 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
     return {h: data[:, i] for i, h in enumerate(header)}
 
 
-def _read_mat(path: Path) -> dict[str, np.ndarray]:
+def _read_mat(path: Path) -> dict[str, object]:
+    """Top-level variables of a MAT file; structs stay objects (fields as attributes)."""
     import scipy.io
 
     try:
-        raw = scipy.io.loadmat(path, squeeze_me=False)
+        raw = scipy.io.loadmat(path, squeeze_me=True, struct_as_record=False)
     except NotImplementedError:
         raise DataError(
             f"{path}: MATLAB v7.3 (HDF5) files are not supported; save with -v7"
         ) from None
     except (ValueError, OSError) as exc:
         raise DataError(f"{path}: not a readable MAT file ({exc})") from None
-    out = {}
-    for k, v in raw.items():
-        if k.startswith("__") or not isinstance(v, np.ndarray) or v.dtype.kind not in "fiub":
-            continue
-        out[k] = np.asarray(v, dtype=float).ravel()
-    return out
+    return {k: v for k, v in raw.items() if not k.startswith("__")}
 
 
 def _pick(
-    table: Mapping[str, np.ndarray], key: str, mapping: Mapping[str, str | float], path: Path
+    table: Mapping[str, object], key: str, mapping: Mapping[str, str | float], path: Path
 ) -> np.ndarray | float | None:
+    """The mapped (or same-named) entry for ``key``: a float constant, a 1-D signal, or
+    None when an optional key is neither mapped nor present."""
     name = mapping.get(key, key)
     if isinstance(name, float):
         return name
-    if name in table:
-        return table[name]
-    if key in ("payload_kg", "payload_arm_m", "q_ref") and key not in mapping:
-        return None
-    avail = ", ".join(sorted(table)) or "none"
-    raise DataError(f"{path}: missing column/variable {name!r} for {key!r} (found: {avail}; "
-                    f"map one with --map {key}=NAME)")
+    if key not in mapping and name not in table:
+        if key in ("payload_kg", "payload_arm_m", "q_ref"):
+            return None
+        avail = _listing([str(k) for k in table])
+        raise DataError(f"{path}: missing column/variable {name!r} for {key!r} (found: {avail}; "
+                        f"map one with --map {key}=NAME or a path like rec.pos[2])")
+    if key in ("payload_kg", "payload_arm_m"):
+        return _constant(table, name, key, str(path))
+    return _signal(table, name, key, str(path))
 
 
-def _gain_variable(table: Mapping[str, np.ndarray], gain: str, path: Path) -> float:
-    if gain not in table:
-        raise DataError(f"{path}: gain variable {gain!r} not found")
-    gv = np.unique(table[gain])
-    if gv.size != 1:
-        raise DataError(f"{path}: gain variable {gain!r} is not a scalar or constant column")
-    return float(gv[0])
+def _gain_value(table: Mapping[str, object], gain: float | str, path: Path) -> float:
+    """``gain``: a number, a path to a scalar/constant, or a product ``A*B*...`` of them."""
+    if not isinstance(gain, str):
+        return float(gain)
+    g = 1.0
+    for factor in gain.split("*"):
+        f = factor.strip()
+        if not f:
+            raise DataError(f"{path}: gain {gain!r}: empty factor, expected NUMBER|NAME[*...]")
+        try:
+            g *= float(f)
+        except ValueError:
+            if f not in table and _PATH_RE.match(f) and "." not in f and "[" not in f:
+                raise DataError(f"{path}: gain variable {f!r} not found (variables: "
+                                f"{_listing([str(k) for k in table])})") from None
+            g *= _constant(table, f, "gain variable", str(path))
+    return g
 
 
 def _from_table(
-    table: Mapping[str, np.ndarray],
+    table: Mapping[str, object],
     path: Path,
     mapping: Mapping[str, str | float],
     gain: float | str | None,
     revolute: bool | None,
+    q_scale: float = 1.0,
 ) -> Experiment:
+    for key in ("t", "q", "tau", "q_ref"):
+        if isinstance(mapping.get(key), float):
+            raise DataError(f"{path}: {key} must be a column/variable, not a constant")
     t = _pick(table, "t", mapping, path)
     q = _pick(table, "q", mapping, path)
     tau = _pick(table, "tau", mapping, path)
-    if isinstance(t, float) or isinstance(q, float) or isinstance(tau, float):
-        raise DataError(f"{path}: t, q and tau must be columns, not constants")
-    g = 1.0
-    if gain is not None:
-        if isinstance(gain, str):
-            try:
-                g = float(gain)
-            except ValueError:
-                g = _gain_variable(table, gain, path)
-        else:
-            g = float(gain)
+    q_ref = _pick(table, "q_ref", mapping, path)
+    g = 1.0 if gain is None else _gain_value(table, gain, path)
     consts = {}
     for key in ("payload_kg", "payload_arm_m"):
         v = _pick(table, key, mapping, path)
-        if v is None:
-            consts[key] = 0.0
-        elif isinstance(v, float):
-            consts[key] = v
-        else:
-            v = np.asarray(v, dtype=float)
-            if v.size == 0 or not np.all(v == v.flat[0]):
-                raise DataError(f"{path}: {key} must be constant within one file (one experiment)")
-            consts[key] = float(v.flat[0])
-    q_ref = _pick(table, "q_ref", mapping, path)
-    if isinstance(q_ref, float):
-        raise DataError(f"{path}: q_ref must be a column, not a constant")
+        consts[key] = 0.0 if v is None else float(v)  # type: ignore[arg-type]
     return make_experiment(
         str(path),
-        t,
-        q,
+        t,  # type: ignore[arg-type]
+        q_scale * np.asarray(q, dtype=float),
         g * np.asarray(tau, dtype=float),
         payload_mass=consts["payload_kg"],
         payload_arm=consts["payload_arm_m"],
         revolute=True if revolute is None else revolute,
-        q_ref=q_ref,
+        q_ref=None if q_ref is None else q_scale * np.asarray(q_ref, dtype=float),
     )
 
 
@@ -379,6 +566,22 @@ def _load_mcap(path: Path, revolute: bool | None, axis: int) -> Experiment:
     )
 
 
+def _q_unit(q_unit: str | None, rev: bool | None, source: str) -> tuple[float, bool | None]:
+    """Scale factor to SI for ``q_unit`` and the joint kind it implies (checked against
+    an explicit ``rev``)."""
+    if q_unit is None:
+        return 1.0, rev
+    unit = str(q_unit).strip().lower()
+    if unit not in Q_UNITS:
+        raise DataError(f"{source}: q unit {q_unit!r}: expected one of {', '.join(Q_UNITS)}")
+    scale, angle = Q_UNITS[unit]
+    if rev is not None and rev != angle:
+        kind = "revolute" if rev else "prismatic"
+        raise DataError(f"{source}: q unit {unit!r} is {'an angle' if angle else 'a length'} "
+                        f"but the joint is {kind}")
+    return scale, angle
+
+
 def load_experiment(
     path: str | Path,
     *,
@@ -386,6 +589,7 @@ def load_experiment(
     gain: float | str | None = None,
     joint: str | bool | None = None,
     axis: int = 0,
+    q_unit: str | None = None,
 ) -> Experiment:
     """Load one file (``.mcap``, ``.csv``, ``.mat``) as an :class:`Experiment`.
 
@@ -394,14 +598,27 @@ def load_experiment(
     path : str or Path
         Input file.
     mapping : mapping or None
-        Canonical name -> column/variable name (or a number for payload entries).
+        Canonical name (``t``, ``q``, ``tau``, ``q_ref``, ``payload_kg``, ``payload_arm_m``)
+        -> column/variable name or path (:func:`resolve_path`: ``rec.act_pos_mot_deg[2]``,
+        ``data[:, 1]``), or a number for payload entries.
     gain : float, str or None
-        Drive gain applied to the ``tau`` column (a number, or a scalar variable of a MAT
-        file / a constant CSV column); ``None`` = 1. Ignored for MCAP (already N m).
+        Drive gain applied to the ``tau`` signal: a number, a scalar (or constant) variable
+        or path (``para.u[2]``), or a product of them (``para.u[2]*0.5``); ``None`` = 1.
+        Ignored for MCAP (already N m).
     joint : {"revolute", "prismatic"} or bool or None
-        Joint kind; ``None``: from the MCAP metadata, revolute for CSV/MAT.
+        Joint kind; ``None``: from the MCAP metadata; for CSV/MAT from ``q_unit`` when given,
+        else revolute.
     axis : int
         Axis of a multi-axis MCAP log.
+    q_unit : {"rad", "deg", "m", "mm"} or None
+        Unit of the q (and q_ref) signals of a CSV/MAT file, converted to [rad] or [m];
+        ``None``: already SI. MCAP logs are SI: only ``None``, ``"rad"`` or ``"m"``.
+
+    Raises
+    ------
+    DataError
+        Missing or unreadable file, unknown type, bad mapping or path, unit contradicting
+        the joint kind, invalid signals (see :func:`make_experiment`).
     """
     p = Path(path)
     if not p.exists():
@@ -409,12 +626,15 @@ def load_experiment(
     rev = _joint_flag(joint)
     ext = p.suffix.lower()
     mapping = dict(mapping or {})
+    scale, rev_u = _q_unit(q_unit, rev, str(p))
     if ext == ".mcap":
+        if scale != 1.0:
+            raise DataError(f"{p}: MCAP logs are in SI units; q unit {q_unit!r} does not apply")
         return _load_mcap(p, rev, axis)
     if ext == ".csv" or ext == ".txt":
-        return _from_table(_read_csv(p), p, mapping, gain, rev)
+        return _from_table(_read_csv(p), p, mapping, gain, rev_u, scale)
     if ext == ".mat":
-        return _from_table(_read_mat(p), p, mapping, gain, rev)
+        return _from_table(_read_mat(p), p, mapping, gain, rev_u, scale)
     raise DataError(f"{p}: unknown file type {ext!r}, expected .mcap, .csv or .mat")
 
 
@@ -425,6 +645,7 @@ def load_experiments(
     gain: float | str | None = None,
     joint: str | bool | None = None,
     axis: int = 0,
+    q_unit: str | None = None,
 ) -> list[Experiment]:
     """Load every file as one experiment (see :func:`load_experiment`).
 
@@ -437,7 +658,10 @@ def load_experiments(
         paths = [paths]
     if not paths:
         raise DataError("no input file given")
-    exps = [load_experiment(p, mapping=mapping, gain=gain, joint=joint, axis=axis) for p in paths]
+    exps = [
+        load_experiment(p, mapping=mapping, gain=gain, joint=joint, axis=axis, q_unit=q_unit)
+        for p in paths
+    ]
     kinds = {e.revolute for e in exps}
     if len(kinds) > 1:
         raise DataError("input files mix revolute and prismatic joints; pass --joint")
