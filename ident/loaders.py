@@ -263,14 +263,15 @@ def resolve_path(table: Mapping[str, object], spec: str, source: str = "") -> np
                 raise DataError(f"{where}{spec!r}: {level} ({what}: {_listing(fields)})")
             obj = obj[name] if isinstance(obj, Mapping) else getattr(obj, name)
     label = ".".join(names)
+    head = f"{where}{spec!r}" if label == spec else f"{where}{spec!r}: {label!r}"
     if _fields(obj) is not None:
         raise DataError(
-            f"{where}{spec!r}: {label!r} is a struct, not numeric data "
+            f"{head} is a struct, not numeric data "
             f"(fields: {_listing(_fields(obj) or [])})"
         )
     a = np.asarray(obj)
     if a.dtype.kind not in "fiub":
-        raise DataError(f"{where}{spec!r}: {label!r} is {_describe(obj)}, not numeric")
+        raise DataError(f"{head} is {_describe(obj)}, not numeric")
     if row is not None:
         if a.ndim == 0 or row >= a.shape[0]:
             raise DataError(
@@ -310,9 +311,10 @@ def _constant(table: Mapping[str, object], spec: str, what: str, source: str) ->
     """Resolve ``spec`` to one number (a scalar, or an array whose values are all equal)."""
     a = resolve_path(table, spec, source)
     if a.size == 0 or not np.all(a == a.flat[0]):
+        hint = f" (pick one with an index, e.g. {spec}[0])" if _PATH_RE.match(spec + "[0]") else ""
         raise DataError(
-            f"{source}: {what} {spec!r} is {_shape_str(a.shape)} with different values, "
-            "expected a scalar or a constant column"
+            f"{source}: {what} {spec!r} is {_shape_str(a.shape)} values that differ, "
+            f"expected a scalar or a constant column{hint}"
         )
     return float(a.flat[0])
 

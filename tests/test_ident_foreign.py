@@ -111,9 +111,10 @@ def test_units_mm_implies_prismatic_and_verbatim_csv_names(matfile, tmp_path):
         ("t=rec.time,q=cols[:, 7],tau=rec.torque[0]", None,
          r"'cols\[:, 7\]': column index 7 out of range for 'cols' of shape 500 x 3 "
          r"\(columns 0\.\.2\)"),
-        ("t=rec.time,q=rec.name,tau=rec.torque[0]", None, r"'rec\.name' is text, not numeric"),
+        ("t=rec.time,q=rec.name,tau=rec.torque[0]", None,
+         r"axes\.mat: 'rec\.name' is text, not numeric"),
         ("t=rec.time,q=rec.sub,tau=rec.torque[0]", None,
-         r"'rec\.sub' is a struct, not numeric data \(fields: x\)"),
+         r"axes\.mat: 'rec\.sub' is a struct, not numeric data \(fields: x\)"),
         ("t=rec.time,q=rec.pos_deg,tau=rec.torque[0]", None,
          r"'rec\.pos_deg' for 'q' is 3 x 500, expected a 1-D signal; pick one row with "
          r"\[ROW\] or one column with \[:, COL\]"),
@@ -121,7 +122,9 @@ def test_units_mm_implies_prismatic_and_verbatim_csv_names(matfile, tmp_path):
          r"'para\.u\[1\]' for 'q' is scalar, expected a 1-D signal"),
         ("t=rec.time,q=rec.pos_deg[-1],tau=rec.torque[0]", None,
          r"'rec\.pos_deg\[-1\]': expected a name or a path NAME\[\.FIELD\.\.\.\]"),
-        (MAP, "rec.time", r"gain variable 'rec\.time' is 500 with different values"),
+        (MAP, "rec.time",
+         r"gain variable 'rec\.time' is 500 values that differ, expected a scalar or a constant "
+         r"column \(pick one with an index, e.g\. rec\.time\[0\]\)"),
         (MAP, "para.v[0]", r"'para\.v\[0\]': no field 'v' in 'para' \(fields: k, u\)"),
         (MAP, "nope", r"gain variable 'nope' not found \(variables: cols, para, rec\)"),
         (MAP, "para.u[1]**2", r"gain 'para\.u\[1\]\*\*2': empty factor"),
