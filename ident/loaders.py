@@ -266,8 +266,7 @@ def resolve_path(table: Mapping[str, object], spec: str, source: str = "") -> np
     head = f"{where}{spec!r}" if label == spec else f"{where}{spec!r}: {label!r}"
     if _fields(obj) is not None:
         raise DataError(
-            f"{head} is a struct, not numeric data "
-            f"(fields: {_listing(_fields(obj) or [])})"
+            f"{head} is a struct, not numeric data (fields: {_listing(_fields(obj) or [])})"
         )
     a = np.asarray(obj)
     if a.dtype.kind not in "fiub":
@@ -297,12 +296,12 @@ def _signal(table: Mapping[str, object], spec: str, key: str, source: str) -> np
         a = a.ravel()
     if a.ndim != 1:
         hint = (
-            f"; pick one row with [ROW] or one column with [:, COL] (0-based), "
-            f"e.g. {spec}[0]" if a.ndim == 2 else ""
+            f"; pick one row with [ROW] or one column with [:, COL] (0-based), e.g. {spec}[0]"
+            if a.ndim == 2
+            else ""
         )
         raise DataError(
-            f"{source}: {spec!r} for {key!r} is {_shape_str(a.shape)}, expected a 1-D "
-            f"signal{hint}"
+            f"{source}: {spec!r} for {key!r} is {_shape_str(a.shape)}, expected a 1-D signal{hint}"
         )
     return a
 
@@ -384,8 +383,10 @@ def _pick(
         if key in ("payload_kg", "payload_arm_m", "q_ref"):
             return None
         avail = _listing([str(k) for k in table])
-        raise DataError(f"{path}: missing column/variable {name!r} for {key!r} (found: {avail}; "
-                        f"map one with --map {key}=NAME or a path like rec.pos[2])")
+        raise DataError(
+            f"{path}: missing column/variable {name!r} for {key!r} (found: {avail}; "
+            f"map one with --map {key}=NAME or a path like rec.pos[2])"
+        )
     if key in ("payload_kg", "payload_arm_m"):
         return _constant(table, name, key, str(path))
     return _signal(table, name, key, str(path))
@@ -404,8 +405,10 @@ def _gain_value(table: Mapping[str, object], gain: float | str, path: Path) -> f
             g *= float(f)
         except ValueError:
             if f not in table and _PATH_RE.match(f) and "." not in f and "[" not in f:
-                raise DataError(f"{path}: gain variable {f!r} not found (variables: "
-                                f"{_listing([str(k) for k in table])})") from None
+                raise DataError(
+                    f"{path}: gain variable {f!r} not found (variables: "
+                    f"{_listing([str(k) for k in table])})"
+                ) from None
             g *= _constant(table, f, "gain variable", str(path))
     return g
 
@@ -548,9 +551,12 @@ def _load_mcap(path: Path, revolute: bool | None, axis: int) -> Experiment:
     keep = _longest_true_run(run.valid)
     inner_dropped = int(np.count_nonzero(run.valid)) - (keep.stop - keep.start)
     if inner_dropped > 0:
-        warnings.warn(f"{path}: kept the longest stretch of cycles with the drive enabled "
-                      f"({keep.stop - keep.start} cycles); {inner_dropped} other enabled cycles "
-                      "are separated from it by a stop or missing TPDOs", stacklevel=2)
+        warnings.warn(
+            f"{path}: kept the longest stretch of cycles with the drive enabled "
+            f"({keep.stop - keep.start} cycles); {inner_dropped} other enabled cycles "
+            "are separated from it by a stop or missing TPDOs",
+            stacklevel=2,
+        )
     if keep.stop - keep.start == 0:
         raise DataError(f"{path}: no cycle with the drive in OPERATION ENABLED")
     run = run.select(np.arange(keep.start, keep.stop))
@@ -579,8 +585,10 @@ def _q_unit(q_unit: str | None, rev: bool | None, source: str) -> tuple[float, b
     scale, angle = Q_UNITS[unit]
     if rev is not None and rev != angle:
         kind = "revolute" if rev else "prismatic"
-        raise DataError(f"{source}: q unit {unit!r} is {'an angle' if angle else 'a length'} "
-                        f"but the joint is {kind}")
+        raise DataError(
+            f"{source}: q unit {unit!r} is {'an angle' if angle else 'a length'} "
+            f"but the joint is {kind}"
+        )
     return scale, angle
 
 
