@@ -21,7 +21,7 @@ from sim_drivers.od import load_drive_od
 from sim_drivers.testing import LockstepMaster, configure_pdo, make_rig, read_all_variables
 
 NODE = 3
-N_VENDOR_CYCLES = 2000
+N_VENDOR_CYCLES = 10_000  # the same length as the generic EDS conformance run
 
 EXPECTED_6502 = {
     "maxon_epos4-module-50-5.eds": supported_modes_mask(
