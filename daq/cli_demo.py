@@ -14,8 +14,6 @@ import sys
 import time
 from pathlib import Path
 
-from . import DaqError
-
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -57,5 +55,3 @@ def _demo(args: argparse.Namespace) -> int:
     print(f"report: {result.report}  ({time.perf_counter() - t0:.0f} s)")
     return 0
 
-
-__all__ = ["register", "DaqError"]

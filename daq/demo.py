@@ -16,7 +16,7 @@ from typing import Any, TextIO
 from . import DaqError, __version__
 from .progress import ProgressLine
 from .report import write_json
-from .report_build import build_report
+from .report_build import build_report, discover_figures
 
 TITLE = "jointid demo: simulated Stäubli RX130L joint 3"
 
@@ -69,6 +69,7 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, max_steps: int = 3,
     from ident.loaders import load_experiments
     from ident.plots import write_plots
     from ident.refine import refine
+    from ident.refine_plots import plot_refinement
     from sim_drivers.plant_config import load_plant
     from trajectories.plan import plan_campaign
 
@@ -164,23 +165,10 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, max_steps: int = 3,
                  f"{ref.rel_error_initial:.4f} -> {ref.rel_error_final:.4f}, q_s = "
                  f"{report.qs:.4g} rad/s ({time.perf_counter() - t0:.1f} s)")
 
-    # figures
-    figures: dict[str, list[dict[str, str]]] = {
-        "campaign": [{"file": "campaign_plan.png",
-                      "caption": "Planned excitation: position, velocity and acceleration "
-                                 "(one payload run; repeated for each payload)"}],
-        "usual": [], "new": [], "refinement": [],
-    }
-    for f in write_plots(report, out):
-        name = f.name
-        key = "usual" if "usual" in name else "new" if "new" in name else "new"
-        cap = {
-            "direct_validation_usual.png": "Direct validation with the usual model (paper Fig. 4)",
-            "direct_validation_new.png": "Direct validation with the new model (paper Fig. 5)",
-            "error_vs_velocity.png": "Residual against velocity for both models",
-        }.get(name, name)
-        figures[key].append({"file": name, "caption": cap})
-    figures["refinement"] = _refinement_figures(ref, out)
+    # figures (captions and grouping: report_build.discover_figures)
+    written = [out / "campaign_plan.png", *write_plots(report, out),
+               *plot_refinement(ref, out)]
+    figures = discover_figures(out, only=written)
 
     truth = plant.truth()
     demo = {
@@ -207,23 +195,6 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, max_steps: int = 3,
     html = build_report(out, title=TITLE)
     text = _summary(fit, ref, time.perf_counter() - t_start)
     return DemoResult(out, html, fit_path, logs, text, fit)
-
-
-def _refinement_figures(ref: Any, out: Path) -> list[dict[str, str]]:
-    try:
-        from ident import refine_plots
-    except ImportError:
-        return []
-    figs = []
-    for f in refine_plots.plot_refinement(ref, out):
-        name = Path(f).name
-        step = name.split("_")[1]
-        what = ("residual against the leading candidate variables" if "residual" in name
-                else "periodogram of the residual against position and time")
-        when = "after the last step" if step == "final" else (
-            f"before {step.replace('step', 'step ')} (what led to it)")
-        figs.append({"file": name, "caption": f"Diagnosis {when}: {what}"})
-    return figs
 
 
 def _summary(fit: dict, ref: Any, wall_s: float) -> str:

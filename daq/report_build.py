@@ -12,6 +12,7 @@ Inputs (all in ``DIR``):
 
 from __future__ import annotations
 
+import html
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +38,18 @@ def _ordered(params: dict) -> list[str]:
     return known + sorted(p for p in params if p not in _ORDER)
 
 
+def truth_check(value: float | None, std2: float | None,
+                true: float | None) -> tuple[float | None, str]:
+    """``(|error| / sigma, row class)`` of an estimate against the truth: ``"good"`` within
+    3 sigma (``std2`` is 2 sigma) or 1 % of the truth, ``"bad"`` otherwise, ``""`` when
+    either is unknown."""
+    if value is None or true is None or not std2:
+        return None, ""
+    err = abs(value - true)
+    good = err <= 1.5 * std2 or err <= 0.01 * abs(true)
+    return err / (std2 / 2), "good" if good else "bad"
+
+
 def parameter_section(name: str, model: dict, truth: dict | None, table_no: str) -> Section:
     """Paper Tables I-II: identified values, 2 sigma, relative deviation (+ truth if known)."""
     s = Section(f"{table_no}: identified values with the {name} model")
@@ -48,15 +61,8 @@ def parameter_section(name: str, model: dict, truth: dict | None, table_no: str)
         row = [p, v.get("value"), v.get("std2"), v.get("rel_std_pct")]
         cls = ""
         if truth is not None:
-            t = truth.get(p)
-            row.append(t)
-            if t is not None and v.get("value") is not None and v.get("std2") is not None:
-                err = abs(v["value"] - t)
-                sigma = v["std2"] / 2.0
-                row.append(err / sigma if sigma > 0 else None)
-                cls = "good" if (sigma > 0 and err <= 3 * sigma) or err <= 0.01 * abs(t) else "bad"
-            else:
-                row.append(None)
+            ratio, cls = truth_check(v.get("value"), v.get("std2"), truth.get(p))
+            row += [truth.get(p), ratio]
         rows.append(row)
         classes.append(cls)
     if truth is not None:
@@ -202,11 +208,7 @@ def truth_comparison_section(ref: dict, truth: dict, demo: dict) -> Section | No
     def add(label: str, est: dict | None, true: float | None) -> None:
         v = est.get("value") if est else None
         std2 = est.get("std2") if est else None
-        ratio, cls = None, ""
-        if v is not None and true is not None and std2:
-            err = abs(v - true)
-            ratio = err / (std2 / 2)
-            cls = "good" if err <= 1.5 * std2 or err <= 0.01 * abs(true) else "bad"
+        ratio, cls = truth_check(v, std2, true)
         rows.append([label, v, std2, true, ratio])
         classes.append(cls)
 
@@ -228,29 +230,46 @@ def truth_comparison_section(ref: dict, truth: dict, demo: dict) -> Section | No
 
 
 _CAPTIONS = {
+    "campaign_plan.png": ("campaign", "Planned excitation: position, velocity and "
+                                      "acceleration (one payload run; repeated per payload)"),
     "direct_validation_usual.png": ("usual", "Direct validation with the usual model (Fig. 4)"),
-    "direct_validation_new.png": ("new", "Direct validation with the new model (Fig. 5)"),
     "cross_validation_usual.png": ("usual", "Cross validation on the validation files"),
+    "direct_validation_new.png": ("new", "Direct validation with the new model (Fig. 5)"),
     "cross_validation_new.png": ("new", "Cross validation on the validation files"),
     "error_vs_velocity.png": ("new", "Residual against velocity for the fitted models"),
-    "campaign_plan.png": ("campaign", "Planned excitation"),
 }
 
 
-def discover_figures(d: Path) -> dict[str, list[dict[str, str]]]:
-    """Figures written by ``jointid fit --report`` (conventional names), grouped by section."""
+def _refinement_caption(stem: str) -> str:
+    """Caption of ``refine_step<k>_<kind>`` / ``refine_final_<kind>`` (ident.refine_plots)."""
+    _, step, kind = stem.split("_", 2)
+    what = ("residual against the leading candidate variables" if kind == "residual"
+            else "periodogram of the residual against position and time")
+    when = ("after the last step" if step == "final"
+            else f"before step {step[len('step'):]} (what led to it)")
+    return f"Diagnosis {when}: {what}"
+
+
+def discover_figures(d: Path, only: list[Path] | None = None) -> dict[str, list[dict[str, str]]]:
+    """Figures with the conventional names of :mod:`ident.plots`, :mod:`ident.refine_plots`
+    and the campaign plot, grouped by report section with their captions.
+
+    ``only`` restricts them to the files just written (a folder may hold older figures)."""
     out: dict[str, list[dict[str, str]]] = {"campaign": [], "usual": [], "new": [],
                                             "refinement": []}
+    names = None if only is None else {Path(f).name for f in only}
     order = list(_CAPTIONS)
-    pngs = sorted(d.glob("*.png"), key=lambda f: (order.index(f.name) if f.name in order
-                                                   else len(order),
-                                                   f.name.replace("final", "~")))
+
+    def rank(f: Path) -> tuple[int, str]:  # known figures first, refinement steps before final
+        return (order.index(f.name) if f.name in order else len(order),
+                f.name.replace("final", "~"))
+
+    pngs = sorted((f for f in d.glob("*.png") if names is None or f.name in names), key=rank)
     for f in pngs:
         if f.name in _CAPTIONS:
             key, cap = _CAPTIONS[f.name]
-        elif f.name.startswith("refine_"):
-            key, cap = "refinement", "Residual diagnosis: " + f.stem[len("refine_"):].replace(
-                "_", " ")
+        elif f.name.startswith("refine_") and f.stem.count("_") >= 2:
+            key, cap = "refinement", _refinement_caption(f.stem)
         else:
             continue
         out[key].append({"file": f.name, "caption": cap})
@@ -289,9 +308,9 @@ def build_report(directory: Path | str, *, title: str = "jointid report") -> Pat
     if demo.get("description"):
         intro.para(demo["description"])
     if demo.get("campaign_summary"):
-        intro.raw(f"<pre>{_esc(demo['campaign_summary'])}</pre>")
+        intro.raw(f"<pre>{html.escape(demo['campaign_summary'])}</pre>")
     if demo.get("run_summary"):
-        intro.raw(f"<pre>{_esc(demo['run_summary'])}</pre>")
+        intro.raw(f"<pre>{html.escape(demo['run_summary'])}</pre>")
     for fig in demo.get("figures", {}).get("campaign", []):
         intro.figure(d / fig["file"], fig["caption"])
     sections.append(intro)
@@ -328,8 +347,3 @@ def build_report(directory: Path | str, *, title: str = "jointid report") -> Pat
     out = write_html(d / "report.html", title, subtitle, sections)
     return out
 
-
-def _esc(text: str) -> str:
-    import html
-
-    return html.escape(text)
