@@ -543,10 +543,8 @@ def _load_mcap(path: Path, revolute: bool | None, axis: int) -> Experiment:
     """One MCAP run, restricted to the cycles an identification can use: the drive in
     OPERATION ENABLED with its TPDOs received (:attr:`daq.reader.RunArrays.valid`); during
     enable, quick stop and shutdown the drive ignores the torque reference."""
-    try:
-        from daq.reader import read_run
-    except ImportError:
-        raise DataError(f"{path}: MCAP support needs daq.reader, which is not installed") from None
+    from daq.reader import read_run
+
     run = read_run(path, axis=axis)
     keep = _longest_true_run(run.valid)
     inner_dropped = int(np.count_nonzero(run.valid)) - (keep.stop - keep.start)
@@ -559,7 +557,7 @@ def _load_mcap(path: Path, revolute: bool | None, axis: int) -> Experiment:
         )
     if keep.stop - keep.start == 0:
         raise DataError(f"{path}: no cycle with the drive in OPERATION ENABLED")
-    run = run.select(np.arange(keep.start, keep.stop))
+    run = run.select(keep)
     rev = bool(run.revolute) if revolute is None else revolute
     return make_experiment(
         str(path),
