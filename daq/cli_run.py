@@ -52,9 +52,7 @@ def main(args: argparse.Namespace) -> int:
 
     def show(p: Progress) -> None:
         frac = p.cycle / p.n_cycles if p.n_cycles else 0.0
-        bar.update(frac, f"payload {p.payload + 1}/{p.n_payloads} | {p.segment} | "
-                         f"cycle {p.cycle}/{p.n_cycles} | bus {100 * p.bus_load:.0f}% | "
-                         f"missed {p.missed}")
+        bar.update(frac, p.text())
 
     def ask(index, payload, n) -> bool:
         bar.close()

@@ -100,9 +100,7 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, max_steps: int = 3,
 
     def show(p: Progress) -> None:
         done = (p.payload + (p.cycle / p.n_cycles if p.n_cycles else 0.0)) / p.n_payloads
-        bar.update(done, f"payload {p.payload + 1}/{p.n_payloads} | {p.segment} | "
-                         f"cycle {p.cycle}/{p.n_cycles} | bus {100 * p.bus_load:.0f}% | "
-                         f"missed {p.missed}")
+        bar.update(done, p.text())
 
     t0 = time.perf_counter()
     try:

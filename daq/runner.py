@@ -119,6 +119,12 @@ class Progress:
     missed: int  # paced: late SYNCs; lockstep: cycles with a missing TPDO
     phase: str  # "enable", "run", "stop"
 
+    def text(self) -> str:
+        """The progress-bar text: payload, segment, cycles, bus load, missed cycles."""
+        return (f"payload {self.payload + 1}/{self.n_payloads} | {self.segment} | "
+                f"cycle {self.cycle}/{self.n_cycles} | bus {100 * self.bus_load:.0f}% | "
+                f"missed {self.missed}")
+
 
 @dataclass(frozen=True)
 class PayloadResult:
