@@ -15,8 +15,8 @@ What canopen's ``LocalNode`` does not do and this class adds (``/work/shared/not
   the drive applies the latched RPDOs, steps the plant one cycle and sends the synchronous
   TPDOs (type n in 1-240: every n-th SYNC; 0: every SYNC); event TPDOs (254/255) are sent when
   their content changed (after a SYNC cycle or an SDO/RPDO write).
-- CiA 402: the state machine of :mod:`daq.cia402` driven by 0x6040 (SDO or RPDO), 0x6041 with
-  bit 12 set in OPERATION ENABLED in a cyclic mode and bit 13 on a CSP following error,
+- CiA 402: the state machine of :mod:`daq.protocol.cia402` driven by 0x6040 (SDO or RPDO),
+  0x6041 with bit 12 set in OPERATION ENABLED in a cyclic mode and bit 13 on a CSP following error,
   0x6060/0x6061 restricted to the modes 0x6502 advertises (abort 0x06090030 otherwise).
 
 Modes and units
@@ -100,7 +100,7 @@ import canopen
 import numpy as np
 from canopen.sdo.exceptions import SdoAbortedError
 
-from daq.cia402 import (
+from daq.protocol.cia402 import (
     CYCLIC_MODES,
     Mode,
     State,

@@ -60,7 +60,7 @@ POSITIONING_SPEED = 0.5
 BANDS = (0.0, 0.1, 0.35, 1.0)
 #: a sample is "moving" when |dq| > MOVING_FRACTION * max_velocity
 MOVING_FRACTION = 1e-3
-G = 9.81  # [m/s^2], as in daq.control
+G = 9.81  # [m/s^2], as in daq.protocol.control
 
 # relative tolerances of the sampled limit check (float rounding only)
 _REL_TOL = 1e-9
