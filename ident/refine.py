@@ -32,26 +32,18 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import stats
 
 from . import DataError
 from .diagnose import Diagnosis, diagnose
 from .effects import (
-    DirectionalViscous,
+    Candidate,
+    Columns,
+    Context,
     Effect,
-    GenericBasis,
-    PositionRipple,
-    PositionSmooth,
-    Prediction,
-    QuadrantCoulomb,
-    QuadrantLoad,
-    QuadrantLoadStribeck,
-    QuadraticViscous,
-    Spring,
-    Stribeck,
-    TorqueLag,
-    WarmUp,
-    variable_values,
+    Scorer,
+    registry,
+    rigid_prediction,
 )
 from .models import IdentModel
 from .signals import Signals
@@ -63,8 +55,6 @@ if TYPE_CHECKING:  # pragma: no cover
 #: A named effect is preferred to a generic basis when it removes at least this share of
 #: what the best generic basis removes.
 GENERIC_MARGIN = 0.5
-#: Continuous variables a generic basis may expand.
-CONTINUOUS = ("position", "velocity", "acceleration", "load", "time")
 
 
 # ----------------------------------------------------------------------------- results
@@ -298,46 +288,6 @@ def _pct(x: float | None) -> str:
 
 
 # ------------------------------------------------------------------------ scoring
-class _Scorer:
-    """RSS removed by extra columns C from the current fit: with Q an orthonormal basis of
-    the current (kept) regressor and r the residual (r ⟂ Q), the gain is
-    (Cᵀr)ᵀ (CᵀC - (QᵀC)ᵀ(QᵀC))⁻¹ (Cᵀr)."""
-
-    def __init__(self, W: np.ndarray, r: np.ndarray) -> None:
-        norms = np.linalg.norm(W, axis=0)
-        Ws = W / np.where(norms > 0, norms, 1.0)
-        self.Q, _ = np.linalg.qr(Ws)
-        self.r = r
-        self.rss = float(r @ r)
-
-    def gain(self, C: np.ndarray) -> float:
-        C = np.asarray(C, dtype=float)
-        if C.ndim == 1:
-            C = C[:, None]
-        if not np.all(np.isfinite(C)):
-            return 0.0
-        cn = np.linalg.norm(C, axis=0)
-        ok = cn > 0
-        if not ok.any():
-            return 0.0
-        C = C[:, ok] / cn[ok]
-        QC = self.Q.T @ C
-        M = C.T @ C - QC.T @ QC
-        b = C.T @ self.r
-        w, V = np.linalg.eigh(M)
-        keep = w > 1e-9 * max(float(w.max()), 1e-300)
-        z = (V[:, keep].T @ b) / np.sqrt(w[keep])
-        return float(min(z @ z, self.rss))
-
-
-@dataclass
-class _Candidate:
-    effect: Effect
-    gain: float
-    n_hyper: int
-    generic: bool = False
-
-
 def _unscaled(design: Design) -> Signals:
     """``design.signals`` (kept for :mod:`ident.refine_plots`). The decimation filter has unit
     DC gain (:func:`ident.preprocess.decimate`), so the decimated q, dq, ddq, tau need no
@@ -345,164 +295,20 @@ def _unscaled(design: Design) -> Signals:
     return design.signals
 
 
-class _Columns:
-    """Scores candidates on columns computed on the decimated signals:
-    smooth functions of slowly varying signals commute with the anti-alias filter, so these
-    match :meth:`Design.with_term`'s columns closely and cost no full-rate pass. The exact
-    columns are used only for the acceptance refit."""
-
-    def __init__(self, s: Signals, scorer: _Scorer) -> None:
-        self.scorer, self.s = scorer, s
-
-    def gain(self, e: Effect) -> float:
-        return self.scorer.gain(e.columns(self.s))
-
-
-def _refine_1d(
-    cols: _Columns,
-    make: Callable[[float], Effect],
-    a: float,
-    b: float,
-    x0: float,
-    g0: float,
-    xtol: float,
-) -> tuple[Effect, float]:
-    """Bounded 1-D maximisation of the gain over x in [a, b] (x0, g0: coarse best)."""
-    if not b > a:
-        return make(x0), g0
-    res = optimize.minimize_scalar(
-        lambda x: -cols.gain(make(x)),
-        bounds=(a, b),
-        method="bounded",
-        options={"xatol": xtol, "maxiter": 40},
-    )
-    if -res.fun > g0:
-        return make(float(res.x)), float(-res.fun)
-    return make(x0), g0
-
-
-def _scan_log(
-    cols: _Columns, make: Callable[[float], Effect], lo: float, hi: float, n: int = 24
-) -> tuple[Effect, float]:
-    """Best hyper-parameter: log grid, then a bounded 1-D search between the grid
-    neighbours of the best point."""
-    grid = np.geomspace(lo, hi, n)
-    gains = np.array([cols.gain(make(h)) for h in grid])
-    i = int(np.argmax(gains))
-    a, b = math.log(grid[max(i - 1, 0)]), math.log(grid[min(i + 1, n - 1)])
-    return _refine_1d(
-        cols, lambda lh: make(math.exp(lh)), a, b, math.log(grid[i]), float(gains[i]), 1e-4
-    )
-
-
-def _scan_period(cols: _Columns, p0: float, span: float, tag: str) -> tuple[Effect, float]:
-    """Ripple period: grid over ±1.5 frequency bins (1/span) around the periodogram peak
-    p0, then a bounded search (frequency resolution ~1e-7 f0)."""
-    f0, df = 1 / p0, 1.5 / span
-    lo, hi = max(f0 - df, 0.5 * f0), f0 + df
-    fgrid = np.linspace(lo, hi, 31)
-    gains = np.array([cols.gain(PositionRipple(1 / f, tag)) for f in fgrid])
-    i = int(np.argmax(gains))
-    a, b = fgrid[max(i - 1, 0)], fgrid[min(i + 1, len(fgrid) - 1)]
-    return _refine_1d(
-        cols, lambda f: PositionRipple(1 / f, tag), a, b, fgrid[i], float(gains[i]), 1e-7 * f0
-    )
-
-
-def _unique_tag(effect_cls_names: tuple[str, ...], existing: set[str]) -> str:
-    if not set(effect_cls_names) & existing:
-        return ""
-    k = 2
-    while True:
-        tag = f"_{k}"
-        if not {n + tag for n in effect_cls_names} & existing:
-            return tag
-        k += 1
-
-
-def _rigid_prediction(lib: Library, coef: dict[str, float]) -> Prediction | None:
-    terms = [t for t in lib.terms() if t.effect in ("rigid_body", "payload")]
-    if not terms:
-        return None
-    c = np.array([coef.get(n, 0.0) for t in terms for n in t.names()])
-    if not np.any(c):
-        return None
-    return Prediction(terms, c)
-
-
 def _candidates(
-    cols: _Columns,
+    cols: Columns,
     diag: Diagnosis,
     lib: Library,
     coef: dict[str, float],
     alpha: float,
     generic_knots: int,
-) -> list[_Candidate]:
-    names = set(lib.names())
-    effects = {t.effect for t in lib.terms()}
-    out: list[_Candidate] = []
-
-    s = cols.s
-
-    def add(e: Effect, generic: bool = False):
-        tag = _unique_tag(e.names(), names)
-        if tag:
-            e = e.with_tag(tag)
-        out.append(_Candidate(e, cols.gain(e), 0, generic))
-
-    q, dq, t = s.q, s.dq, s.t
-    span = float(q.max() - q.min())
-    vmax = float(np.max(np.abs(dq)))
-    pp = diag.position_periodogram
-    if span > 0 and math.isfinite(pp.peak_period) and pp.false_alarm < alpha:
-        tag = _unique_tag(("ripple_sin", "ripple_cos"), names)
-        e, g = _scan_period(cols, pp.peak_period, span, tag)
-        out.append(_Candidate(e, g, 1))
-    if span > 0 and "spring" not in effects:
-        add(Spring(float(np.mean(q))))
-    if span > 0 and "position_smooth" not in effects:
-        add(PositionSmooth(float(q.min()), float(q.max()), 4))
-    if "directional_viscous" not in effects:
-        add(DirectionalViscous())
-    if "quadratic_viscous" not in effects:
-        add(QuadraticViscous())
-    has_exp = any(t.effect in ("stribeck", "quadrant_coulomb") for t in lib.terms())
-    if vmax > 0 and not has_exp:
-        e, g = _scan_log(cols, Stribeck, vmax / 1000, vmax / 2)
-        out.append(_Candidate(e, g, 1))
-    tmax = float(t.max())
-    if tmax > 0 and "warm_up" not in effects:
-        e, g = _scan_log(cols, WarmUp, tmax / 300, tmax)
-        out.append(_Candidate(e, g, 1))
-    tau_out = _rigid_prediction(lib, coef)
-    has_quadrant_dry = any(t.effect == "quadrant_coulomb" for t in lib.terms())
-    has_quadrant = any(t.effect in ("quadrant_load", "load_dependent") for t in lib.terms())
-    if tau_out is not None and not has_quadrant:
-        add(QuadrantLoad(tau_out))
-    if "quadrant_coulomb" not in effects and not has_quadrant_dry:
-        add(QuadrantCoulomb())
-    if (
-        tau_out is not None
-        and vmax > 0
-        and "quadrant_load" in effects
-        and "quadrant_load_stribeck" not in effects
-    ):
-        e, g = _scan_log(cols, lambda qs: QuadrantLoadStribeck(tau_out, qs), vmax / 1000, vmax / 2)
-        out.append(_Candidate(e, g, 1))
-    if "torque_lag" not in effects:
-        c_all = np.array([coef.get(n, 0.0) for n in lib.names()])
-        add(TorqueLag(Prediction(lib.terms(), c_all)))
-    # generic expansions in the significantly implicated continuous variables
-    for d in diag.significant:
-        if d.variable not in CONTINUOUS:
-            continue
-        x = variable_values(d.variable, s, tau_out)
-        lo, hi = np.quantile(x, [0.005, 0.995])
-        if not hi > lo:
-            continue
-        for signed in (False, True):
-            e = GenericBasis(d.variable, float(lo), float(hi), generic_knots, signed, tau_out)
-            add(e, generic=True)
+) -> list[Candidate]:
+    """Every registered effect module's candidates, in registry order
+    (:func:`ident.effects.registry`)."""
+    ctx = Context(cols, diag, lib, coef, alpha, generic_knots)
+    out: list[Candidate] = []
+    for reg in registry():
+        out.extend(reg.propose(ctx))
     return out
 
 
@@ -527,7 +333,7 @@ def _best_band_gain(before: dict[str, float], after: dict[str, float], rel0: flo
 
 
 def _pretest(
-    c: _Candidate,
+    c: Candidate,
     rss0: float,
     p: int,
     n: int,
@@ -593,21 +399,7 @@ def _effect_parameters(
         }
     par = term.parameters(coef, sub)
     out = {k: {"value": float(v), "std2": float(e)} for k, (v, e) in par.items()}
-    if isinstance(term, DirectionalViscous) and "F_V" in model.coef_:
-        i_fv, i_d = names.index("F_V"), names.index(tnames[0])
-        fv, d = model.coef_["F_V"], model.coef_[tnames[0]]
-        for key, sgn in (("F_V_pos", 0.5), ("F_V_neg", -0.5)):
-            g = np.zeros(cov.shape[0])
-            g[i_fv], g[i_d] = 1.0, sgn
-            out[key] = {
-                "value": float(fv + sgn * d),
-                "std2": float(2 * math.sqrt(max(g @ cov @ g, 0.0))),
-            }
-    if isinstance(term, WarmUp) and all_coef.get("F_C"):
-        out["w_warm"] = {
-            "value": float(model.coef_[tnames[0]] / all_coef["F_C"]),
-            "std2": float(out[tnames[0]]["std2"] / abs(all_coef["F_C"])),
-        }
+    out.update(term.extra_parameters(all_coef, names, cov, out))
     return out
 
 
@@ -689,11 +481,11 @@ def refine(
     diag = None
     for k in range(1, max_steps + 1):
         r = cur.residual_
-        tau_out = _rigid_prediction(lib, cur.coef_)
+        tau_out = rigid_prediction(lib, cur.coef_)
         diag = diagnose(r, s, Y=cur_design.Y, tau_out=tau_out, alpha=alpha)
         kept = [cur_design.names.index(n) for n in cur.names_]
-        scorer = _Scorer(cur_design.W[:, kept], r)
-        cands = _candidates(_Columns(s, scorer), diag, lib, cur.coef_, alpha, generic_knots)
+        scorer = Scorer(cur_design.W[:, kept], r)
+        cands = _candidates(Columns(s, scorer), diag, lib, cur.coef_, alpha, generic_knots)
         n_cand = max(len(cands), 1)
         before_bands = _bands(cur, cur_design, vmax)
         p_cur = len(cur.names_)
@@ -704,7 +496,7 @@ def refine(
                min_gain / 3)
         why_not = {id(c): _pretest(c, *ctx) for c in cands}
 
-        def pretest(c: _Candidate, _w=why_not) -> str | None:
+        def pretest(c: Candidate, _w=why_not) -> str | None:
             return _w[id(c)]
 
         named = sorted((c for c in cands if not c.generic), key=lambda c: -c.gain)
@@ -830,7 +622,7 @@ def refine(
             cur_val, val_err = val1, v1
     if diag is None or steps and diag is steps[-1].diagnosis:
         diag = diagnose(
-            cur.residual_, s, Y=cur_design.Y, tau_out=_rigid_prediction(lib, cur.coef_), alpha=alpha
+            cur.residual_, s, Y=cur_design.Y, tau_out=rigid_prediction(lib, cur.coef_), alpha=alpha
         )
     return Refinement(
         steps=steps,
