@@ -38,6 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import scipy.io
 
 from . import DataError
 from .signals import Signals
@@ -358,8 +359,6 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
 
 def _read_mat(path: Path) -> dict[str, object]:
     """Top-level variables of a MAT file; structs stay objects (fields as attributes)."""
-    import scipy.io
-
     try:
         raw = scipy.io.loadmat(path, squeeze_me=True, struct_as_record=False)
     except NotImplementedError:
