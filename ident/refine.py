@@ -188,6 +188,8 @@ class Refinement:
         ||ρ|| / ||Y|| before and after.
     validation_rel_error_initial, validation_rel_error_final : float or None
     stop_reason : str
+    final_validation_design : Design or None
+        The validation design with every added term's columns (None without one).
     """
 
     steps: list[Step]
@@ -201,6 +203,7 @@ class Refinement:
     validation_rel_error_initial: float | None
     validation_rel_error_final: float | None
     stop_reason: str
+    final_validation_design: Design | None = None
 
     @property
     def terms(self) -> list[Effect]:
@@ -636,4 +639,5 @@ def refine(
         validation_rel_error_initial=val_initial,
         validation_rel_error_final=val_err,
         stop_reason=stop,
+        final_validation_design=cur_val,
     )
