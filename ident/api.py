@@ -339,7 +339,8 @@ class JointModel:
         ndarray, shape (m,)
             Aligned with ``transform(data).Y`` (the measured, filtered and decimated τ).
         """
-        return self.model_.predict(self.transform(data))
+        d = self.transform(data)
+        return self.model_.predict(d)
 
     def rel_error(self, data: Data) -> float:
         """‖Y - W χ̂‖/‖Y‖ on ``data`` (the paper's relative error norm, Table III)."""
