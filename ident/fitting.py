@@ -7,6 +7,10 @@ section IV.C), fits the usual model (eq. 38-39) and/or the new model (eq. 42-43)
 optionally scans q_s, evaluates Table III bands, Table IV and cross-validation files, and
 returns a :class:`FitReport` (``.to_json()``, ``.format_tables()``).
 Pure numerics: loading belongs to :mod:`ident.loaders`.
+
+Length (~680 lines): one pipeline whose steps share their settled preprocessing (sign
+check, q_s scan, Table IV without payload, validation systems) and the report built from
+it; splitting it would pass that state around between files.
 """
 
 from __future__ import annotations

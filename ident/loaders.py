@@ -26,6 +26,10 @@ verbatim. The gain may be a number, a path to a scalar (``para.u[2]``) or a prod
 (``para.u[2]*0.5``). ``q_unit`` converts q and q_ref to SI (degrees to radians, mm to m).
 Irregular sampling is resampled onto a uniform grid (linear interpolation) with a
 :class:`ResamplingWarning`.
+
+Length (~700 lines): the path language of ``--map``/``--gain`` (struct fields, row and
+column indices) and its one-line error messages are most of it; it serves CSV, MAT and
+MCAP inputs alike.
 """
 
 from __future__ import annotations
