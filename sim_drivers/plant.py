@@ -419,8 +419,9 @@ class JointPlant:
             r -= self._rip_a * math.sin(self._rip_k * q + self._rip_ph)
         if self._spr_k:
             r -= self._spr_k * (q - self._spr_q0)
-        for f in self._extra:
-            r -= f(q, v, t - self.t0)
+        if self._extra:
+            for f in self._extra:
+                r -= f(q, v, t - self.t0)
         grav = self._gc * math.cos(q)
         if self._gs:
             grav += self._gs * math.sin(q)
@@ -472,8 +473,9 @@ class JointPlant:
             r -= self._rip_a * math.sin(self._rip_k * q + self._rip_ph)
         if self._spr_k:
             r -= self._spr_k * (q - self._spr_q0)
-        for f in self._extra:
-            r -= f(q, 0.0, t - self.t0)
+        if self._extra:
+            for f in self._extra:
+                r -= f(q, 0.0, t - self.t0)
         wf = 1.0 + self._wu_w * math.exp(-(t - self.t0) * self._wu_tinv) if self._wu_w else 1.0
         load = self._gc * math.cos(q) + self._gs * math.sin(q)
         am1 = self._am + self._bm
