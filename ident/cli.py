@@ -14,6 +14,11 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from . import DataError
+from .api import JointModel, load
+from .loaders import parse_mapping
+from .plots import write_plots
+from .refine_plots import plot_refinement
 from .report import write_json
 from .report_build import build_report
 
@@ -135,52 +140,52 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _qs(value: str) -> float | str:
     if value.strip().lower() == "scan":
         return "scan"
-    from . import DataError
-
     try:
         return float(value)
     except ValueError:
         raise DataError(f"--qs {value!r}: expected a number [rad/s] or 'scan'") from None
 
 
-def run(args: argparse.Namespace) -> int:
-    """Execute ``jointid fit``; returns the exit code."""
-    from .fitting import fit_models
-    from .loaders import load_experiments, parse_mapping
-
-    mapping = parse_mapping(args.map)
-    gain: float | str | None = args.gain
-    load_kw: dict[str, Any] = dict(
-        mapping=mapping, gain=gain, joint=args.joint, axis=args.axis, q_unit=args.q_unit
-    )
-    exps = load_experiments(args.inputs, **load_kw)
-    val = load_experiments(args.validate, **load_kw) if args.validate else None
-    models = ("usual", "new") if args.model == "both" else (args.model,)
-    report = fit_models(
-        exps,
-        models,
+def estimator_from_args(args: argparse.Namespace) -> JointModel:
+    """The :class:`~ident.api.JointModel` ``jointid fit`` runs for these arguments."""
+    return JointModel(
+        model=args.model,
         qs=_qs(args.qs),
         joint=args.joint,
-        validation=val,
-        cutoff_hz=args.cutoff,
+        cutoff=args.cutoff,
         decimation=args.decimation,
         dq_min=args.dq_min,
         tau_min=args.tau_min,
         trim=args.trim,
         sign_check=not args.no_sign_check,
         eliminate=not args.no_eliminate,
-        threshold_pct=args.threshold,
+        threshold=args.threshold,
     )
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``jointid fit``; returns the exit code."""
+    mapping = parse_mapping(args.map)
+    gain: float | str | None = args.gain
+    load_kw: dict[str, Any] = dict(
+        mapping=mapping, gain=gain, joint=args.joint, axis=args.axis, q_unit=args.q_unit
+    )
+    exps = load(args.inputs, **load_kw)
+    val = load(args.validate, **load_kw) if args.validate else None
+    est = estimator_from_args(args).fit(exps, validation=val)
+    report = est.report_
     out = report.to_json()
     text = report.format_tables()
     print(text)
     ref = None
     if args.refine:
-        ref, out["refinement"] = _refine(report, args.max_steps)
+        refined = est.refine(
+            max_steps=args.max_steps, progress=lambda msg: print(msg, file=sys.stderr)
+        )
+        ref = refined.refinement_
+        print("\n" + ref.format_report())
+        out["refinement"] = refined.refinement_json()
     if args.report is not None:
-        from .plots import write_plots
-        from .refine_plots import plot_refinement
-
         args.report.mkdir(parents=True, exist_ok=True)
         (args.report / "tables.txt").write_text(text + "\n")
         files = write_plots(report, args.report)
@@ -195,21 +200,3 @@ def run(args: argparse.Namespace) -> int:
         args.json.write_text(json.dumps(out, indent=2) + "\n")
         print(f"json: {args.json}")
     return 0
-
-
-def _refine(report: Any, max_steps: int) -> tuple[Any, dict[str, Any]]:
-    from .refine import refine
-
-    name = "new" if "new" in report.models else next(iter(report.models))
-    ref = refine(
-        report.designs[name],
-        report.models[name],
-        validation=report.validation_designs.get(name),
-        max_steps=max_steps,
-        vmax=report.vmax,
-        progress=lambda msg: print(msg, file=sys.stderr),
-    )
-    print("\n" + (ref.format_table() if hasattr(ref, "format_table") else ""))
-    rec = ref.to_json()
-    rec.setdefault("model", name)
-    return ref, rec

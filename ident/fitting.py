@@ -7,15 +7,20 @@ section IV.C), fits the usual model (eq. 38-39) and/or the new model (eq. 42-43)
 optionally scans q_s, evaluates Table III bands, Table IV and cross-validation files, and
 returns a :class:`FitReport` (``.to_json()``, ``.format_tables()``).
 Pure numerics: loading belongs to :mod:`ident.loaders`.
+
+Length (~680 lines): one pipeline whose steps share their settled preprocessing (sign
+check, q_s scan, Table IV without payload, validation systems) and the report built from
+it; splitting it would pass that state around between files.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+import scipy.optimize
 
 from . import DataError
 from .loaders import Experiment, concat
@@ -132,8 +137,6 @@ def _scan(err: Any, grid: np.ndarray) -> None:
     errs = [err(float(q)) for q in grid]
     k = int(np.argmin(errs))
     if 0 < k < grid.size - 1:
-        import scipy.optimize
-
         scipy.optimize.minimize_scalar(
             lambda x: err(float(np.exp(x))),
             bounds=(float(np.log(grid[k - 1])), float(np.log(grid[k + 1]))),
@@ -210,8 +213,6 @@ def _as_signals(data: Sequence[Experiment] | Signals, joint: str | bool | None) 
         if not isinstance(joint, bool) and str(joint).lower() not in ("revolute", "prismatic"):
             raise DataError(f"joint kind {joint!r}: expected 'revolute' or 'prismatic'")
         if rev != s.revolute:
-            from dataclasses import replace
-
             s = replace(s, revolute=rev)
     return s
 
@@ -222,6 +223,39 @@ def _library(name: str, qs: float, revolute: bool, payload: bool) -> Library:
     if name == "new":
         return new_model(qs, revolute, payload=payload)
     raise DataError(f"model {name!r}: expected 'usual' or 'new'")
+
+
+def _combined(
+    models: Sequence[str],
+    qs0: float,
+    sig: Signals,
+    payload: bool,
+    pre: dict[str, Any],
+    reference: np.ndarray | None = None,
+) -> Design:
+    """One design holding the columns of every requested model (built once)."""
+    terms: list[Term] = []
+    seen: set[str] = set()
+    for name in models:
+        for t in _library(name, qs0, sig.revolute, payload).terms():
+            if not set(t.names()) & seen:
+                terms.append(t)
+                seen |= set(t.names())
+    return build_design(Library(*terms), sig, reference=reference, **pre)
+
+
+def _part(d: Design, name: str, payload: bool, q: float, qs0: float) -> tuple[Library, Design]:
+    """The library of model ``name`` (q_s ``q``) and its columns of the combined design."""
+    lib = _library(name, q, d.signals.revolute, payload)
+    keep = set(lib.names())
+    sub = d.without([n for n in d.names if n not in keep])
+    if name == "new" and q != qs0:
+        quad = [t for t in sub.library.terms() if isinstance(t, LoadDependent | QuadrantCoulomb)]
+        sub = sub.without([n for t in quad for n in t.names()])
+        for t in lib.terms():
+            if isinstance(t, LoadDependent | QuadrantCoulomb):
+                sub = sub.with_term(t)
+    return lib, sub
 
 
 @dataclass
@@ -248,6 +282,14 @@ class FitReport:
         Input files.
     notes : list of str
         Remarks for the user (terms dropped because of the data, ...).
+    has_payload : bool
+        Whether the payload term was part of the models.
+    settings : dict
+        The preprocessing settled on the identification data (keyword arguments of
+        :func:`ident.preprocess.build_design`), reused for validation data.
+    qs_design : float
+        q_s the combined design was built with (the q_s-dependent columns are rebuilt
+        when ``qs`` differs).
     """
 
     models: dict[str, IdentModel]
@@ -261,6 +303,26 @@ class FitReport:
     sources: list[str] = field(default_factory=list)
     validation_sources: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    has_payload: bool = False
+    settings: dict[str, Any] = field(default_factory=dict, repr=False)
+    qs_design: float = DEFAULT_QS
+
+    def designs_for(self, data: Sequence[Experiment] | Signals) -> dict[str, Design]:
+        """The system of other data (e.g. validation files) for every fitted model, with the
+        preprocessing settled on the identification data (same cut-off, decimation,
+        thresholds and sign check), as ``validation_designs``.
+
+        Parameters
+        ----------
+        data : list of Experiment or Signals
+            Experiments to evaluate (their joint kind is taken as the fit's).
+        """
+        sig = _as_signals(data, self.revolute)
+        full = _combined(list(self.models), self.qs_design, sig, self.has_payload, self.settings)
+        return {
+            name: _part(full, name, self.has_payload, self.qs, self.qs_design)[1]
+            for name in self.models
+        }
 
     def errors(self, name: str) -> dict[str, float | None]:
         """Table III entries of one model: ``all``, ``low``, ``high``, ``validation``."""
@@ -400,6 +462,7 @@ def fit_models(
     table_iv: bool = True,
     references: Sequence[Any] | np.ndarray | str | None = "auto",
     torque_delay: float | str = "auto",
+    payload: bool | None = None,
 ) -> FitReport:
     """Identify the usual and/or the new model on all experiments in one LS (eq. 36, 40).
 
@@ -437,7 +500,7 @@ def fit_models(
     references : sequence or ndarray or "auto" or None
         The reference (planned) position of every identification sample, one array per
         experiment [rad or m] (or objects with a ``q_ref`` array, e.g.
-        :class:`daq.reader.RunArrays`), or one concatenated array with ``Signals`` data.
+        :class:`daq.protocol.reader.RunArrays`), or one concatenated array with ``Signals`` data.
         When given, every model is estimated by IDIM-IV with instruments built on the
         reference acceleration (see :mod:`ident.estimate` and ``reference`` of
         :func:`ident.preprocess.build_design`), and the default cut-off is at least
@@ -450,6 +513,9 @@ def fit_models(
         (:data:`ident.preprocess.TORQUE_DELAY`) when every experiment is a jointid MCAP log
         (``source`` ending in ``.mcap``: commands held over the next cycle), else 0 (files of
         unknown timing, processed like the MATLAB reference scripts).
+    payload : bool or None
+        Include the payload term (eq. 35, 42). None (default): when some run carries a
+        payload (M_aw != 0).
 
     Returns
     -------
@@ -475,7 +541,7 @@ def fit_models(
             raise DataError(f"torque_delay {torque_delay!r}: expected a number [samples] or 'auto'")
         mcap = bool(sources) and all(str(x).lower().endswith(".mcap") for x in sources)
         torque_delay = TORQUE_DELAY if mcap else 0.0
-    has_payload = bool(np.any(s.payload_mass != 0))
+    has_payload = bool(np.any(s.payload_mass != 0)) if payload is None else bool(payload)
     notes: list[str] = []
     if not has_payload:
         notes.append(
@@ -498,29 +564,10 @@ def fit_models(
         raise DataError(f"qs must be positive [rad/s], got {qs0}")
 
     def combined(sig: Signals, payload: bool, reference: np.ndarray | None = None) -> Design:
-        """One design holding the columns of every requested model (built once)."""
-        terms: list[Term] = []
-        seen: set[str] = set()
-        for name in models:
-            for t in _library(name, qs0, sig.revolute, payload).terms():
-                if not set(t.names()) & seen:
-                    terms.append(t)
-                    seen |= set(t.names())
-        return build_design(Library(*terms), sig, reference=reference, **pre)
+        return _combined(models, qs0, sig, payload, pre, reference)
 
     def part(d: Design, name: str, payload: bool, q: float = qs0) -> tuple[Library, Design]:
-        lib = _library(name, q, d.signals.revolute, payload)
-        keep = set(lib.names())
-        sub = d.without([n for n in d.names if n not in keep])
-        if name == "new" and q != qs0:
-            quad = [
-                t for t in sub.library.terms() if isinstance(t, LoadDependent | QuadrantCoulomb)
-            ]
-            sub = sub.without([n for t in quad for n in t.names()])
-            for t in lib.terms():
-                if isinstance(t, LoadDependent | QuadrantCoulomb):
-                    sub = sub.with_term(t)
-        return lib, sub
+        return _part(d, name, payload, q, qs0)
 
     def fit_part(
         d: Design, name: str, payload: bool, q: float = qs0, elim: bool = eliminate
@@ -632,4 +679,7 @@ def fit_models(
         sources=sources,
         validation_sources=vsources,
         notes=notes,
+        has_payload=has_payload,
+        settings=dict(pre),
+        qs_design=qs0,
     )

@@ -26,6 +26,10 @@ verbatim. The gain may be a number, a path to a scalar (``para.u[2]``) or a prod
 (``para.u[2]*0.5``). ``q_unit`` converts q and q_ref to SI (degrees to radians, mm to m).
 Irregular sampling is resampled onto a uniform grid (linear interpolation) with a
 :class:`ResamplingWarning`.
+
+Length (~700 lines): the path language of ``--map``/``--gain`` (struct fields, row and
+column indices) and its one-line error messages are most of it; it serves CSV, MAT and
+MCAP inputs alike.
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import scipy.io
 
 from daq.protocol.reader import read_run
 
@@ -360,8 +365,6 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
 
 def _read_mat(path: Path) -> dict[str, object]:
     """Top-level variables of a MAT file; structs stay objects (fields as attributes)."""
-    import scipy.io
-
     try:
         raw = scipy.io.loadmat(path, squeeze_me=True, struct_as_record=False)
     except NotImplementedError:

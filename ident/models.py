@@ -17,11 +17,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import DataError
+from .estimate import DEFAULT_THRESHOLD_PCT, LSResult, fit_least_squares
+from .results import DEFAULT_BANDS, band_errors
 from .signals import G, Signals
 from .terms import Library, Term
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .estimate import LSResult
     from .preprocess import Design
 
 __all__ = [
@@ -356,8 +357,6 @@ class IdentModel:
         trajectory), the estimator is IDIM-IV (:func:`ident.estimate.fit_instrumental`)
         instead of OLS; ``estimator_`` says which.
         """
-        from .estimate import DEFAULT_THRESHOLD_PCT, fit_least_squares
-
         names = tuple(self.library.names())
         missing = [n for n in names if n not in design.names]
         if missing:
@@ -433,8 +432,6 @@ class IdentModel:
         dict
             name -> relative error (NaN when a band holds no sample).
         """
-        from .results import DEFAULT_BANDS, band_errors
-
         rho = design.Y - self.predict(design)
         return band_errors(design.Y, rho, design.signals.dq, vmax, bands or DEFAULT_BANDS)
 

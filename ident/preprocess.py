@@ -25,6 +25,10 @@ Per experiment (paper section IV.B and the EMPS reference script):
    selected like W.
 
 Pure numerics: no file access.
+
+Length (~680 lines): the filters, the decimation and the :class:`Design` they build are one
+chain whose settings (cut-off, decimation, delay, guard, instruments) every step reads;
+``Design.with_term`` must rebuild a column exactly as :func:`build_design` did.
 """
 
 from __future__ import annotations

@@ -21,6 +21,10 @@ One step of :func:`refine`:
 4. add the term (:meth:`~ident.preprocess.Design.with_term`: columns filtered and decimated
    like the others), refit, report; stop when nothing is accepted or after ``max_steps``.
 
+The candidates come from the effect modules of :mod:`ident.effects`, asked in registry
+order; the results (:class:`Step`, :class:`Rejected`, :class:`Refinement`) are in
+:mod:`ident.refine_result`.
+
 Pure numerics (no file access); plots are in :mod:`ident.refine_plots`.
 """
 
@@ -28,316 +32,38 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import stats
 
 from . import DataError
 from .diagnose import Diagnosis, diagnose
 from .effects import (
-    DirectionalViscous,
+    Candidate,
+    Columns,
+    Context,
     Effect,
-    GenericBasis,
-    PositionRipple,
-    PositionSmooth,
-    Prediction,
-    QuadrantCoulomb,
-    QuadrantLoad,
-    QuadrantLoadStribeck,
-    QuadraticViscous,
-    Spring,
-    Stribeck,
-    TorqueLag,
-    WarmUp,
-    variable_values,
+    Scorer,
+    registry,
+    rigid_prediction,
 )
 from .models import IdentModel
+from .refine_result import Refinement, Rejected, Step, _pct
 from .signals import Signals
 from .terms import Library, Term
 
 if TYPE_CHECKING:  # pragma: no cover
     from .preprocess import Design
 
+__all__ = ["GENERIC_MARGIN", "Refinement", "Rejected", "Step", "refine"]
+
 #: A named effect is preferred to a generic basis when it removes at least this share of
 #: what the best generic basis removes.
 GENERIC_MARGIN = 0.5
-#: Continuous variables a generic basis may expand.
-CONTINUOUS = ("position", "velocity", "acceleration", "load", "time")
-
-
-# ----------------------------------------------------------------------------- results
-@dataclass
-class Step:
-    """One accepted refinement step.
-
-    Attributes
-    ----------
-    variable : str
-        Candidate variable of the added effect (one of the seven).
-    strength : float
-        Share of the residual sum of squares the added effect removes, in [0, 1] (how
-        strongly the residual depended on the variable through this effect).
-    statistic, p_value : float
-        Binned dependence of the residual on the variable before the step (diagnosis
-        table row: F statistic and p-value; ``binned_explained`` its η²). Effects odd in
-        a sign variable (direction, quadrant) interact with other variables and may show
-        little binned dependence although the effect itself is strong.
-    binned_explained : float
-        η² of the diagnosis row of the variable.
-    leading_variable : str
-        The top variable of the diagnosis table before the step.
-    effect : str
-        Effect name (``"position_ripple"``, ``"generic_velocity"``, ...).
-    term : Effect
-        The added term (with its hyper-parameters).
-    parameters : dict
-        ``{name: {"value": v, "std2": 2σ}}`` of the effect, hyper-parameters included.
-    f_statistic, f_p_value : float
-        Nested-model F test of the acceptance.
-    rel_error_before, rel_error_after : float
-        ||ρ|| / ||Y|| on the identification samples.
-    low_before, low_after, high_before, high_after : float
-        The same in the low- and high-velocity bands (paper Table III).
-    validation_rel_error_before, validation_rel_error_after : float or None
-        On the validation design (``None`` without one).
-    diagnosis : Diagnosis
-        The diagnosis that led to the step.
-    generic : bool
-        ``True`` when no named effect fitted and a generic basis was added.
-    """
-
-    variable: str
-    strength: float
-    statistic: float
-    p_value: float
-    leading_variable: str
-    effect: str
-    term: Effect
-    parameters: dict[str, dict[str, float]]
-    f_statistic: float
-    f_p_value: float
-    rel_error_before: float
-    rel_error_after: float
-    low_before: float
-    low_after: float
-    high_before: float
-    high_after: float
-    validation_rel_error_before: float | None
-    validation_rel_error_after: float | None
-    diagnosis: Diagnosis = field(repr=False)
-    generic: bool = False
-    binned_explained: float = math.nan
-
-    def to_json(self) -> dict[str, Any]:
-        """The step as in ``refinement.steps[]`` of the fit JSON."""
-        return {
-            "effect": self.effect,
-            "variable": self.variable,
-            "description": self.term.describe(),
-            "generic": self.generic,
-            "parameters": self.parameters,
-            "strength": {
-                "explained": _num(self.strength),
-                "binned_explained": _num(self.binned_explained),
-                "binned_statistic": _num(self.statistic),
-                "binned_p_value": _num(self.p_value),
-            },
-            "leading_variable": self.leading_variable,
-            "test": {"F": _num(self.f_statistic), "p_value": _num(self.f_p_value)},
-            "rel_error_before": _num(self.rel_error_before),
-            "rel_error_after": _num(self.rel_error_after),
-            "low_velocity_rel_error_before": _num(self.low_before),
-            "low_velocity_rel_error_after": _num(self.low_after),
-            "high_velocity_rel_error_before": _num(self.high_before),
-            "high_velocity_rel_error_after": _num(self.high_after),
-            "validation_rel_error_before": _num(self.validation_rel_error_before),
-            "validation_rel_error_after": _num(self.validation_rel_error_after),
-            "diagnosis": self.diagnosis.to_json(),
-        }
-
-
-@dataclass
-class Rejected:
-    """A candidate that was the best of its round but failed a test."""
-
-    step: int
-    effect: str
-    variable: str
-    reason: str
-    rel_error_after: float
-
-    def to_json(self) -> dict[str, Any]:
-        return {
-            "step": self.step,
-            "effect": self.effect,
-            "variable": self.variable,
-            "reason": self.reason,
-            "rel_error_after": _num(self.rel_error_after),
-        }
-
-
-@dataclass
-class Refinement:
-    """Outcome of :func:`refine`.
-
-    Attributes
-    ----------
-    steps : list of Step
-        Accepted steps, in order.
-    rejected : list of Rejected
-        Best candidates that failed the tests (why the loop stopped).
-    initial_model, final_model : IdentModel
-        Fits of the declared and of the refined library.
-    final_design : Design
-        The design with every added term's columns.
-    final_diagnosis : Diagnosis
-        Diagnosis of the final residual (what is left).
-    rel_error_initial, rel_error_final : float
-        ||ρ|| / ||Y|| before and after.
-    validation_rel_error_initial, validation_rel_error_final : float or None
-    stop_reason : str
-    """
-
-    steps: list[Step]
-    rejected: list[Rejected]
-    initial_model: IdentModel
-    final_model: IdentModel
-    final_design: Design
-    final_diagnosis: Diagnosis
-    rel_error_initial: float
-    rel_error_final: float
-    validation_rel_error_initial: float | None
-    validation_rel_error_final: float | None
-    stop_reason: str
-
-    @property
-    def terms(self) -> list[Effect]:
-        """The added terms, in order."""
-        return [s.term for s in self.steps]
-
-    def to_json(self) -> dict[str, Any]:
-        """The ``refinement`` object of the fit JSON (see docs/refinement.md)."""
-        return {
-            "steps": [s.to_json() for s in self.steps],
-            "rejected": [r.to_json() for r in self.rejected],
-            "rel_error_initial": _num(self.rel_error_initial),
-            "rel_error_final": _num(self.rel_error_final),
-            "validation_rel_error_initial": _num(self.validation_rel_error_initial),
-            "validation_rel_error_final": _num(self.validation_rel_error_final),
-            "stop_reason": self.stop_reason,
-            "final_parameters": {
-                n: {
-                    "value": float(self.final_model.coef_[n]),
-                    "std2": float(2 * self.final_model.std_[n]),
-                }
-                for n in self.final_model.names_
-            },
-            "final_diagnosis": self.final_diagnosis.to_json(),
-        }
-
-    def format_table(self) -> str:
-        """Alias of :meth:`format_report` (what ``jointid fit --refine`` prints)."""
-        return self.format_report()
-
-    def format_report(self) -> str:
-        """Human-readable report of every step."""
-        out = [
-            f"Refinement: relative error {_pct(self.rel_error_initial)} -> "
-            f"{_pct(self.rel_error_final)}"
-            + (
-                f" (validation {_pct(self.validation_rel_error_initial)} -> "
-                f"{_pct(self.validation_rel_error_final)})"
-                if self.validation_rel_error_initial is not None
-                else ""
-            )
-        ]
-        for i, s in enumerate(self.steps, 1):
-            out.append("")
-            out.append(
-                f"step {i}: residual depends on {s.variable}: the effect explains "
-                f"{100 * s.strength:.1f} % of it (binned on {s.variable}: "
-                f"{100 * s.binned_explained:.1f} %, p={s.p_value:.1e}; leading variable of "
-                f"the diagnosis: {s.leading_variable})"
-            )
-            out.append(
-                f"  added {s.effect}: {s.term.describe()}"
-                + ("  [generic basis: no named effect fitted]" if s.generic else "")
-            )
-            for n, v in s.parameters.items():
-                out.append(f"    {n:<18} = {v['value']:.6g} ± {v['std2']:.2g} (2σ)")
-            out.append(
-                f"  F test {s.f_statistic:.3g} (p={s.f_p_value:.1e}); relative error "
-                f"{_pct(s.rel_error_before)} -> {_pct(s.rel_error_after)}, "
-                f"low velocity {_pct(s.low_before)} -> {_pct(s.low_after)}, "
-                f"high velocity {_pct(s.high_before)} -> {_pct(s.high_after)}"
-            )
-            if s.validation_rel_error_before is not None:
-                out.append(
-                    f"  validation {_pct(s.validation_rel_error_before)} -> "
-                    f"{_pct(s.validation_rel_error_after)}"
-                )
-        for r in self.rejected:
-            out.append(f"rejected at step {r.step}: {r.effect} ({r.variable}): {r.reason}")
-        out.append(f"stopped: {self.stop_reason}")
-        out.append("remaining residual:")
-        out.append(self.final_diagnosis.format_table())
-        return "\n".join(out)
-
-
-def _num(x: float | None) -> float | None:
-    if x is None:
-        return None
-    x = float(x)
-    return x if math.isfinite(x) else None
-
-
-def _pct(x: float | None) -> str:
-    return "n/a" if x is None or not math.isfinite(x) else f"{100 * x:.2f} %"
 
 
 # ------------------------------------------------------------------------ scoring
-class _Scorer:
-    """RSS removed by extra columns C from the current fit: with Q an orthonormal basis of
-    the current (kept) regressor and r the residual (r ⟂ Q), the gain is
-    (Cᵀr)ᵀ (CᵀC - (QᵀC)ᵀ(QᵀC))⁻¹ (Cᵀr)."""
-
-    def __init__(self, W: np.ndarray, r: np.ndarray) -> None:
-        norms = np.linalg.norm(W, axis=0)
-        Ws = W / np.where(norms > 0, norms, 1.0)
-        self.Q, _ = np.linalg.qr(Ws)
-        self.r = r
-        self.rss = float(r @ r)
-
-    def gain(self, C: np.ndarray) -> float:
-        C = np.asarray(C, dtype=float)
-        if C.ndim == 1:
-            C = C[:, None]
-        if not np.all(np.isfinite(C)):
-            return 0.0
-        cn = np.linalg.norm(C, axis=0)
-        ok = cn > 0
-        if not ok.any():
-            return 0.0
-        C = C[:, ok] / cn[ok]
-        QC = self.Q.T @ C
-        M = C.T @ C - QC.T @ QC
-        b = C.T @ self.r
-        w, V = np.linalg.eigh(M)
-        keep = w > 1e-9 * max(float(w.max()), 1e-300)
-        z = (V[:, keep].T @ b) / np.sqrt(w[keep])
-        return float(min(z @ z, self.rss))
-
-
-@dataclass
-class _Candidate:
-    effect: Effect
-    gain: float
-    n_hyper: int
-    generic: bool = False
-
-
 def _unscaled(design: Design) -> Signals:
     """``design.signals`` (kept for :mod:`ident.refine_plots`). The decimation filter has unit
     DC gain (:func:`ident.preprocess.decimate`), so the decimated q, dq, ddq, tau need no
@@ -345,164 +71,20 @@ def _unscaled(design: Design) -> Signals:
     return design.signals
 
 
-class _Columns:
-    """Scores candidates on columns computed on the decimated signals:
-    smooth functions of slowly varying signals commute with the anti-alias filter, so these
-    match :meth:`Design.with_term`'s columns closely and cost no full-rate pass. The exact
-    columns are used only for the acceptance refit."""
-
-    def __init__(self, s: Signals, scorer: _Scorer) -> None:
-        self.scorer, self.s = scorer, s
-
-    def gain(self, e: Effect) -> float:
-        return self.scorer.gain(e.columns(self.s))
-
-
-def _refine_1d(
-    cols: _Columns,
-    make: Callable[[float], Effect],
-    a: float,
-    b: float,
-    x0: float,
-    g0: float,
-    xtol: float,
-) -> tuple[Effect, float]:
-    """Bounded 1-D maximisation of the gain over x in [a, b] (x0, g0: coarse best)."""
-    if not b > a:
-        return make(x0), g0
-    res = optimize.minimize_scalar(
-        lambda x: -cols.gain(make(x)),
-        bounds=(a, b),
-        method="bounded",
-        options={"xatol": xtol, "maxiter": 40},
-    )
-    if -res.fun > g0:
-        return make(float(res.x)), float(-res.fun)
-    return make(x0), g0
-
-
-def _scan_log(
-    cols: _Columns, make: Callable[[float], Effect], lo: float, hi: float, n: int = 24
-) -> tuple[Effect, float]:
-    """Best hyper-parameter: log grid, then a bounded 1-D search between the grid
-    neighbours of the best point."""
-    grid = np.geomspace(lo, hi, n)
-    gains = np.array([cols.gain(make(h)) for h in grid])
-    i = int(np.argmax(gains))
-    a, b = math.log(grid[max(i - 1, 0)]), math.log(grid[min(i + 1, n - 1)])
-    return _refine_1d(
-        cols, lambda lh: make(math.exp(lh)), a, b, math.log(grid[i]), float(gains[i]), 1e-4
-    )
-
-
-def _scan_period(cols: _Columns, p0: float, span: float, tag: str) -> tuple[Effect, float]:
-    """Ripple period: grid over ±1.5 frequency bins (1/span) around the periodogram peak
-    p0, then a bounded search (frequency resolution ~1e-7 f0)."""
-    f0, df = 1 / p0, 1.5 / span
-    lo, hi = max(f0 - df, 0.5 * f0), f0 + df
-    fgrid = np.linspace(lo, hi, 31)
-    gains = np.array([cols.gain(PositionRipple(1 / f, tag)) for f in fgrid])
-    i = int(np.argmax(gains))
-    a, b = fgrid[max(i - 1, 0)], fgrid[min(i + 1, len(fgrid) - 1)]
-    return _refine_1d(
-        cols, lambda f: PositionRipple(1 / f, tag), a, b, fgrid[i], float(gains[i]), 1e-7 * f0
-    )
-
-
-def _unique_tag(effect_cls_names: tuple[str, ...], existing: set[str]) -> str:
-    if not set(effect_cls_names) & existing:
-        return ""
-    k = 2
-    while True:
-        tag = f"_{k}"
-        if not {n + tag for n in effect_cls_names} & existing:
-            return tag
-        k += 1
-
-
-def _rigid_prediction(lib: Library, coef: dict[str, float]) -> Prediction | None:
-    terms = [t for t in lib.terms() if t.effect in ("rigid_body", "payload")]
-    if not terms:
-        return None
-    c = np.array([coef.get(n, 0.0) for t in terms for n in t.names()])
-    if not np.any(c):
-        return None
-    return Prediction(terms, c)
-
-
 def _candidates(
-    cols: _Columns,
+    cols: Columns,
     diag: Diagnosis,
     lib: Library,
     coef: dict[str, float],
     alpha: float,
     generic_knots: int,
-) -> list[_Candidate]:
-    names = set(lib.names())
-    effects = {t.effect for t in lib.terms()}
-    out: list[_Candidate] = []
-
-    s = cols.s
-
-    def add(e: Effect, generic: bool = False):
-        tag = _unique_tag(e.names(), names)
-        if tag:
-            e = e.with_tag(tag)
-        out.append(_Candidate(e, cols.gain(e), 0, generic))
-
-    q, dq, t = s.q, s.dq, s.t
-    span = float(q.max() - q.min())
-    vmax = float(np.max(np.abs(dq)))
-    pp = diag.position_periodogram
-    if span > 0 and math.isfinite(pp.peak_period) and pp.false_alarm < alpha:
-        tag = _unique_tag(("ripple_sin", "ripple_cos"), names)
-        e, g = _scan_period(cols, pp.peak_period, span, tag)
-        out.append(_Candidate(e, g, 1))
-    if span > 0 and "spring" not in effects:
-        add(Spring(float(np.mean(q))))
-    if span > 0 and "position_smooth" not in effects:
-        add(PositionSmooth(float(q.min()), float(q.max()), 4))
-    if "directional_viscous" not in effects:
-        add(DirectionalViscous())
-    if "quadratic_viscous" not in effects:
-        add(QuadraticViscous())
-    has_exp = any(t.effect in ("stribeck", "quadrant_coulomb") for t in lib.terms())
-    if vmax > 0 and not has_exp:
-        e, g = _scan_log(cols, Stribeck, vmax / 1000, vmax / 2)
-        out.append(_Candidate(e, g, 1))
-    tmax = float(t.max())
-    if tmax > 0 and "warm_up" not in effects:
-        e, g = _scan_log(cols, WarmUp, tmax / 300, tmax)
-        out.append(_Candidate(e, g, 1))
-    tau_out = _rigid_prediction(lib, coef)
-    has_quadrant_dry = any(t.effect == "quadrant_coulomb" for t in lib.terms())
-    has_quadrant = any(t.effect in ("quadrant_load", "load_dependent") for t in lib.terms())
-    if tau_out is not None and not has_quadrant:
-        add(QuadrantLoad(tau_out))
-    if "quadrant_coulomb" not in effects and not has_quadrant_dry:
-        add(QuadrantCoulomb())
-    if (
-        tau_out is not None
-        and vmax > 0
-        and "quadrant_load" in effects
-        and "quadrant_load_stribeck" not in effects
-    ):
-        e, g = _scan_log(cols, lambda qs: QuadrantLoadStribeck(tau_out, qs), vmax / 1000, vmax / 2)
-        out.append(_Candidate(e, g, 1))
-    if "torque_lag" not in effects:
-        c_all = np.array([coef.get(n, 0.0) for n in lib.names()])
-        add(TorqueLag(Prediction(lib.terms(), c_all)))
-    # generic expansions in the significantly implicated continuous variables
-    for d in diag.significant:
-        if d.variable not in CONTINUOUS:
-            continue
-        x = variable_values(d.variable, s, tau_out)
-        lo, hi = np.quantile(x, [0.005, 0.995])
-        if not hi > lo:
-            continue
-        for signed in (False, True):
-            e = GenericBasis(d.variable, float(lo), float(hi), generic_knots, signed, tau_out)
-            add(e, generic=True)
+) -> list[Candidate]:
+    """Every registered effect module's candidates, in registry order
+    (:func:`ident.effects.registry`)."""
+    ctx = Context(cols, diag, lib, coef, alpha, generic_knots)
+    out: list[Candidate] = []
+    for reg in registry():
+        out.extend(reg.propose(ctx))
     return out
 
 
@@ -527,7 +109,7 @@ def _best_band_gain(before: dict[str, float], after: dict[str, float], rel0: flo
 
 
 def _pretest(
-    c: _Candidate,
+    c: Candidate,
     rss0: float,
     p: int,
     n: int,
@@ -593,21 +175,7 @@ def _effect_parameters(
         }
     par = term.parameters(coef, sub)
     out = {k: {"value": float(v), "std2": float(e)} for k, (v, e) in par.items()}
-    if isinstance(term, DirectionalViscous) and "F_V" in model.coef_:
-        i_fv, i_d = names.index("F_V"), names.index(tnames[0])
-        fv, d = model.coef_["F_V"], model.coef_[tnames[0]]
-        for key, sgn in (("F_V_pos", 0.5), ("F_V_neg", -0.5)):
-            g = np.zeros(cov.shape[0])
-            g[i_fv], g[i_d] = 1.0, sgn
-            out[key] = {
-                "value": float(fv + sgn * d),
-                "std2": float(2 * math.sqrt(max(g @ cov @ g, 0.0))),
-            }
-    if isinstance(term, WarmUp) and all_coef.get("F_C"):
-        out["w_warm"] = {
-            "value": float(model.coef_[tnames[0]] / all_coef["F_C"]),
-            "std2": float(out[tnames[0]]["std2"] / abs(all_coef["F_C"])),
-        }
+    out.update(term.extra_parameters(all_coef, names, cov, out))
     return out
 
 
@@ -689,11 +257,11 @@ def refine(
     diag = None
     for k in range(1, max_steps + 1):
         r = cur.residual_
-        tau_out = _rigid_prediction(lib, cur.coef_)
+        tau_out = rigid_prediction(lib, cur.coef_)
         diag = diagnose(r, s, Y=cur_design.Y, tau_out=tau_out, alpha=alpha)
         kept = [cur_design.names.index(n) for n in cur.names_]
-        scorer = _Scorer(cur_design.W[:, kept], r)
-        cands = _candidates(_Columns(s, scorer), diag, lib, cur.coef_, alpha, generic_knots)
+        scorer = Scorer(cur_design.W[:, kept], r)
+        cands = _candidates(Columns(s, scorer), diag, lib, cur.coef_, alpha, generic_knots)
         n_cand = max(len(cands), 1)
         before_bands = _bands(cur, cur_design, vmax)
         p_cur = len(cur.names_)
@@ -704,7 +272,7 @@ def refine(
                min_gain / 3)
         why_not = {id(c): _pretest(c, *ctx) for c in cands}
 
-        def pretest(c: _Candidate, _w=why_not) -> str | None:
+        def pretest(c: Candidate, _w=why_not) -> str | None:
             return _w[id(c)]
 
         named = sorted((c for c in cands if not c.generic), key=lambda c: -c.gain)
@@ -830,7 +398,7 @@ def refine(
             cur_val, val_err = val1, v1
     if diag is None or steps and diag is steps[-1].diagnosis:
         diag = diagnose(
-            cur.residual_, s, Y=cur_design.Y, tau_out=_rigid_prediction(lib, cur.coef_), alpha=alpha
+            cur.residual_, s, Y=cur_design.Y, tau_out=rigid_prediction(lib, cur.coef_), alpha=alpha
         )
     return Refinement(
         steps=steps,
@@ -844,4 +412,5 @@ def refine(
         validation_rel_error_initial=val_initial,
         validation_rel_error_final=val_err,
         stop_reason=stop,
+        final_validation_design=cur_val,
     )

@@ -13,8 +13,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from .diagnose import Diagnosis
-from .effects import Prediction, variable_values
-from .refine import Refinement, _rigid_prediction, _unscaled
+from .effects import Prediction, rigid_prediction, variable_values
+from .refine import Refinement, _unscaled
 from .signals import Signals
 
 UNITS = {
@@ -148,7 +148,7 @@ def plot_refinement(ref: Refinement, outdir: str | Path, *, n_variables: int = 3
         paths.append(plot_position_periodogram(
             st.diagnosis, out / f"refine_step{i}_periodogram.png", title=head))
     s = _unscaled(ref.final_design)
-    tau_out = _rigid_prediction(ref.final_model.library, ref.final_model.coef_)
+    tau_out = rigid_prediction(ref.final_model.library, ref.final_model.coef_)
     paths.append(plot_residual_vs_variables(
         ref.final_diagnosis, out / "refine_final_residual.png",
         residual=ref.final_model.residual_, signals=s, tau_out=tau_out,

@@ -8,12 +8,9 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .models import IdentModel
 
 __all__ = [
     "DEFAULT_BANDS",
@@ -25,6 +22,18 @@ __all__ = [
     "format_error_table",
     "format_table_iv",
 ]
+
+class IdentModel(Protocol):
+    """What the tables read of a fitted model (:class:`ident.models.IdentModel`); a
+    protocol, so that this module does not import :mod:`ident.models` (which imports it)."""
+
+    name: str
+    names_: tuple[str, ...]
+    coef_: dict[str, float]
+    std_: dict[str, float]
+    rel_std_pct_: dict[str, float]
+    removed_: list[tuple[str, str]]
+
 
 #: Velocity bands of Table III, as fractions of the maximum velocity.
 DEFAULT_BANDS: dict[str, tuple[float, float]] = {

@@ -17,7 +17,8 @@ P+ = (1 + P)/2, P- = (1 - P)/2 (eq. 27-28, sign(0) = 0)::
         + P+ (c_m + d_m E) sign(dq) + P- (c_g + d_g E) sign(dq) + F_V dq + tau_off
         + tau_effects
 
-The undeclared effects (each off unless enabled in the plant file) add ``tau_effects``:
+The undeclared effects (each off unless enabled in the plant file; one module each in
+:mod:`sim_drivers.effects`, found by its registry) add ``tau_effects``:
 
 * position ripple   ``A sin(2 pi q / period + phase)``
 * spring            ``k (q - q0)``
@@ -74,6 +75,8 @@ from typing import Any
 
 import numpy as np
 
+from .effects import Inputs, Knobs
+from .effects import registry as effect_registry
 from .plant_config import G, PlantParams
 
 #: The joint slides and eq. 30 (+ effects) holds exactly.
@@ -84,7 +87,6 @@ REGIME_REST = 1
 REGIME_ZERO_LOAD = 2
 
 _INT16_MIN, _INT16_MAX = -32768, 32767
-_TWO_PI = 2.0 * math.pi
 
 
 # --------------------------------------------------------------------------- inverse model
@@ -139,32 +141,14 @@ def effect_torques(
         Effect name -> torque [N m], broadcast shape of the inputs; formulas in the module
         docstring. Empty when no static effect is enabled.
     """
-    e = params.effects
     q = np.asarray(q, dtype=float)
     dq = np.asarray(dq, dtype=float)
+    x = Inputs(params, q, dq, ddq, payload_mass, payload_arm, t, output_torque)
     out: dict[str, np.ndarray] = {}
-    if e.position_ripple.enabled:
-        r = e.position_ripple
-        out["position_ripple"] = r.amplitude_Nm * np.sin(_TWO_PI * q / r.period_rad
-                                                         + r.phase_rad)
-    if e.spring.enabled:
-        out["spring"] = e.spring.stiffness_Nm_per_rad * (q - e.spring.rest_position_rad)
-    if e.warm_up.enabled:
-        f = params.friction
-        tau_out = output_torque(params, q, ddq, payload_mass, payload_arm)
-        p = np.sign(tau_out * dq)
-        ex = np.exp(-np.abs(dq) / params.joint.q_s)
-        dry = (0.5 * (1.0 + p) * (f.c_m + f.d_m * ex)
-               + 0.5 * (1.0 - p) * (f.c_g + f.d_g * ex)) * np.sign(dq)
-        w = e.warm_up.fraction * np.exp(-np.asarray(t, dtype=float) / e.warm_up.time_constant_s)
-        out["warm_up"] = w * dry
-    if e.asymmetric_viscous.enabled:
-        a = e.asymmetric_viscous
-        fv = params.friction.F_V
-        out["asymmetric_viscous"] = np.where(dq > 0, (a.F_V_pos - fv) * dq,
-                                             (a.F_V_neg - fv) * dq)
-    if e.quadratic_viscous.enabled:
-        out["quadratic_viscous"] = e.quadratic_viscous.F_VV * dq * np.abs(dq)
+    for spec in effect_registry():
+        cfg = getattr(params.effects, spec.name)
+        if cfg.enabled and spec.torque is not None:
+            out[spec.name] = spec.torque(cfg, x)
     return out
 
 
@@ -222,6 +206,16 @@ def inverse_torque(
 
 
 # --------------------------------------------------------------------------- forward model
+def forward_knobs(params: PlantParams) -> Knobs:
+    """The forward-dynamics knobs set by the enabled effects (registry order)."""
+    k = Knobs()
+    for spec in effect_registry():
+        cfg = getattr(params.effects, spec.name)
+        if cfg.enabled:
+            spec.configure(cfg, k, params)
+    return k
+
+
 class JointPlant:
     """One simulated joint, stepped once per control cycle (pure Python, no numpy per step).
 
@@ -266,7 +260,7 @@ class JointPlant:
         "_jtot", "_gc", "_gs", "_qs_inv",
         "_am", "_bm", "_cm", "_dm", "_ag", "_bg", "_cg", "_dg", "_fv", "_off",
         "_rip_a", "_rip_k", "_rip_ph", "_spr_k", "_spr_q0", "_wu_w", "_wu_tinv",
-        "_fv_pos", "_fv_neg", "_fvv", "_counts_per_rad", "_per_mille",
+        "_fv_pos", "_fv_neg", "_fvv", "_extra", "_counts_per_rad", "_per_mille",
     )
 
     def __init__(
@@ -287,25 +281,25 @@ class JointPlant:
         self._h = self.cycle_s / self.substeps
         self._rng = random.Random(params.drive.seed if seed is None else seed)
         self._noise_std = params.drive.torque_noise_std_Nm
-        f, e, d = params.friction, params.effects, params.drive
+        f, d = params.friction, params.drive
         self._qs_inv = 1.0 / params.joint.q_s
         self._am, self._bm, self._cm, self._dm = f.a_m, f.b_m, f.c_m, f.d_m
         self._ag, self._bg, self._cg, self._dg = f.a_g, f.b_g, f.c_g, f.d_g
         self._fv, self._off = f.F_V, f.tau_off
-        r = e.position_ripple
-        self._rip_a = r.amplitude_Nm if r.enabled else 0.0
-        self._rip_k = _TWO_PI / r.period_rad
-        self._rip_ph = r.phase_rad
-        self._spr_k = e.spring.stiffness_Nm_per_rad if e.spring.enabled else 0.0
-        self._spr_q0 = e.spring.rest_position_rad
-        self._wu_w = e.warm_up.fraction if e.warm_up.enabled else 0.0
-        self._wu_tinv = 1.0 / e.warm_up.time_constant_s
-        av = e.asymmetric_viscous
-        self._fv_pos = av.F_V_pos if av.enabled else f.F_V
-        self._fv_neg = av.F_V_neg if av.enabled else f.F_V
-        self._fvv = e.quadratic_viscous.F_VV if e.quadratic_viscous.enabled else 0.0
-        lag = e.torque_lag
-        self._lag_keep = math.exp(-self._h / lag.time_constant_s) if lag.enabled else 0.0
+        k = forward_knobs(params)
+        self._rip_a = k.ripple_amplitude
+        self._rip_k = k.ripple_wavenumber
+        self._rip_ph = k.ripple_phase
+        self._spr_k = k.spring_stiffness
+        self._spr_q0 = k.spring_rest
+        self._wu_w = k.warm_fraction
+        self._wu_tinv = k.warm_rate
+        self._fv_pos = f.F_V if k.viscous_pos is None else k.viscous_pos
+        self._fv_neg = f.F_V if k.viscous_neg is None else k.viscous_neg
+        self._fvv = k.viscous_quadratic
+        self._extra = tuple(k.extra)
+        lag = k.lag_time_constant
+        self._lag_keep = math.exp(-self._h / lag) if lag is not None else 0.0
         self._counts_per_rad = d.counts_per_joint_rad
         self._per_mille = d.torque_per_permille
         self.payload_mass = 0.0
@@ -425,6 +419,9 @@ class JointPlant:
             r -= self._rip_a * math.sin(self._rip_k * q + self._rip_ph)
         if self._spr_k:
             r -= self._spr_k * (q - self._spr_q0)
+        if self._extra:
+            for f in self._extra:
+                r -= f(q, v, t - self.t0)
         grav = self._gc * math.cos(q)
         if self._gs:
             grav += self._gs * math.sin(q)
@@ -476,6 +473,9 @@ class JointPlant:
             r -= self._rip_a * math.sin(self._rip_k * q + self._rip_ph)
         if self._spr_k:
             r -= self._spr_k * (q - self._spr_q0)
+        if self._extra:
+            for f in self._extra:
+                r -= f(q, 0.0, t - self.t0)
         wf = 1.0 + self._wu_w * math.exp(-(t - self.t0) * self._wu_tinv) if self._wu_w else 1.0
         load = self._gc * math.cos(q) + self._gs * math.sin(q)
         am1 = self._am + self._bm

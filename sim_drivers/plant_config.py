@@ -50,16 +50,18 @@ each off unless its table says ``enabled = true``. Layout (all keys; units in br
     [effects.quadratic_viscous]            # F_VV dq |dq|
     [effects.torque_lag]                   # d tau_applied / dt = (tau_cmd - tau_applied) / T_lag
 
-The formulas of the effects are given with their dataclasses below and in
-:mod:`sim_drivers.plant`. Every invalid file raises :class:`sim_drivers.PlantConfigError` with a
-one-line message naming the file and the dotted key.
+Each effect is one module of :mod:`sim_drivers.effects` (its table's keys, units and
+validation, its formula and its torque), found by a registry: the ``effects`` tables
+accepted here are exactly the registered ones. Every invalid file raises
+:class:`sim_drivers.PlantConfigError` with a one-line message naming the file and the
+dotted key.
 """
 
 from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, fields, make_dataclass, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -68,6 +70,15 @@ from trajectories import SchemaError
 from trajectories.schema import Field, Table, fail
 
 from . import PlantConfigError
+from .effects import (  # noqa: F401 - re-exported: the effects' parameter dataclasses
+    AsymmetricViscous,
+    PositionRipple,
+    QuadraticViscous,
+    Spring,
+    TorqueLag,
+    WarmUp,
+)
+from .effects import registry as effect_registry
 
 G = 9.81  # [m/s^2] gravity used by the paper (section IV.A)
 
@@ -199,102 +210,25 @@ class DriveParams:
         return self.gear_ratio * self.encoder_counts_per_rev / (2.0 * math.pi)
 
 
-@dataclass(frozen=True)
-class PositionRipple:
-    """Position-periodic ripple (cogging, gear meshing): ``A sin(2 pi q / period + phase)``.
-
-    Attributes: ``amplitude_Nm`` A [N m], ``period_rad`` [rad], ``phase_rad`` [rad].
-    """
-
-    enabled: bool = False
-    amplitude_Nm: float = 0.0
-    period_rad: float = 2.0 * math.pi / 16.0
-    phase_rad: float = 0.0
+def _enabled(self) -> tuple[str, ...]:
+    """Names of the enabled effects, in declaration order."""
+    return tuple(f.name for f in fields(self) if getattr(self, f.name).enabled)
 
 
-@dataclass(frozen=True)
-class Spring:
-    """Spring (balancer, cable) about a rest position: ``k (q - q0)``.
+#: Parameter dataclass of each undeclared effect, in plant-file order
+#: (:func:`sim_drivers.effects.registry`).
+EFFECT_TYPES: dict[str, type] = {e.name: e.params for e in effect_registry()}
 
-    Attributes: ``stiffness_Nm_per_rad`` k [N m/rad], ``rest_position_rad`` q0 [rad].
-    """
-
-    enabled: bool = False
-    stiffness_Nm_per_rad: float = 0.0
-    rest_position_rad: float = 0.0
-
-
-@dataclass(frozen=True)
-class WarmUp:
-    """Friction that drifts with time while the gearbox warms up.
-
-    The dry friction terms of eq. 30 (the c and d terms, not the load-dependent a, b terms) are
-    scaled by ``1 + w exp(-t / T_w)``, t the time since the start of the run [s]; the effect's
-    torque is therefore ``w exp(-t/T_w) [P+ (c_m + d_m E) + P- (c_g + d_g E)] sign(dq)``.
-
-    Attributes: ``fraction`` w [-] (excess at t = 0), ``time_constant_s`` T_w [s].
-    """
-
-    enabled: bool = False
-    fraction: float = 0.0
-    time_constant_s: float = 60.0
-
-
-@dataclass(frozen=True)
-class AsymmetricViscous:
-    """Direction-dependent viscous friction: F_V is replaced by ``F_V_pos`` for dq > 0 and
-    ``F_V_neg`` for dq < 0; the effect's torque is ``(F_V_pos - F_V) dq`` or ``(F_V_neg - F_V) dq``.
-
-    Attributes: ``F_V_pos``, ``F_V_neg`` [N m s/rad].
-    """
-
-    enabled: bool = False
-    F_V_pos: float = 0.0
-    F_V_neg: float = 0.0
-
-
-@dataclass(frozen=True)
-class QuadraticViscous:
-    """Quadratic viscous (drag) term ``F_VV dq |dq|``. Attribute ``F_VV`` [N m s^2/rad^2]."""
-
-    enabled: bool = False
-    F_VV: float = 0.0
-
-
-@dataclass(frozen=True)
-class TorqueLag:
-    """First-order lag between commanded and applied torque (current-loop bandwidth):
-    ``d tau_applied / dt = (tau_cmd - tau_applied) / T_lag``. Attribute ``time_constant_s`` [s].
-    """
-
-    enabled: bool = False
-    time_constant_s: float = 0.002
-
-
-EFFECT_TYPES: dict[str, type] = {
-    "position_ripple": PositionRipple,
-    "spring": Spring,
-    "warm_up": WarmUp,
-    "asymmetric_viscous": AsymmetricViscous,
-    "quadratic_viscous": QuadraticViscous,
-    "torque_lag": TorqueLag,
-}
-
-
-@dataclass(frozen=True)
-class Effects:
-    """The undeclared effects, each disabled by default."""
-
-    position_ripple: PositionRipple = field(default_factory=PositionRipple)
-    spring: Spring = field(default_factory=Spring)
-    warm_up: WarmUp = field(default_factory=WarmUp)
-    asymmetric_viscous: AsymmetricViscous = field(default_factory=AsymmetricViscous)
-    quadratic_viscous: QuadraticViscous = field(default_factory=QuadraticViscous)
-    torque_lag: TorqueLag = field(default_factory=TorqueLag)
-
-    def enabled(self) -> tuple[str, ...]:
-        """Names of the enabled effects, in declaration order."""
-        return tuple(f.name for f in fields(self) if getattr(self, f.name).enabled)
+#: The undeclared effects, each disabled by default: one field per registered effect
+#: (``effects.position_ripple``, ``effects.spring``...), built from the registry.
+Effects = make_dataclass(
+    "Effects",
+    [(name, cls, field(default_factory=cls)) for name, cls in EFFECT_TYPES.items()],
+    frozen=True,
+    namespace={"enabled": _enabled,
+               "__doc__": "The undeclared effects, each disabled by default."},
+)
+Effects.__module__ = __name__  # (make_dataclass's ``module=`` needs Python 3.12)
 
 
 _NEW_MODEL_LOAD = ("J", "MX", "MY")
@@ -362,12 +296,12 @@ class PlantParams:
         ``cos_Nm = A sin(phase)`` (A sin(x + phase) = sin_Nm sin x + cos_Nm cos x).
         """
         out: dict[str, dict[str, float]] = {}
+        specs = {e.name: e for e in effect_registry()}
         for name in self.effects.enabled():
             eff = getattr(self.effects, name)
             vals = {k: float(v) for k, v in asdict(eff).items() if k != "enabled"}
-            if name == "position_ripple":
-                vals["sin_Nm"] = eff.amplitude_Nm * math.cos(eff.phase_rad)
-                vals["cos_Nm"] = eff.amplitude_Nm * math.sin(eff.phase_rad)
+            if specs[name].truth is not None:
+                vals.update(specs[name].truth(eff))
             out[name] = vals
         return out
 
@@ -476,31 +410,7 @@ PLANT_SCHEMA = Table(
             "seed": Field(int, ge=0, required=False, default=0),
         }),
         "effects": Table(
-            {
-                "position_ripple": _effect_table(PositionRipple, {
-                    "amplitude_Nm": _num("N m"),
-                    "period_rad": _num("rad", gt=0),
-                    "phase_rad": _num("rad"),
-                }),
-                "spring": _effect_table(Spring, {
-                    "stiffness_Nm_per_rad": _num("N m/rad"),
-                    "rest_position_rad": _num("rad"),
-                }),
-                "warm_up": _effect_table(WarmUp, {
-                    "fraction": _num(gt=-1),
-                    "time_constant_s": _num("s", gt=0),
-                }),
-                "asymmetric_viscous": _effect_table(AsymmetricViscous, {
-                    "F_V_pos": _num("N m s/rad", ge=0),
-                    "F_V_neg": _num("N m s/rad", ge=0),
-                }),
-                "quadratic_viscous": _effect_table(QuadraticViscous, {
-                    "F_VV": _num("N m s^2/rad^2", ge=0),
-                }),
-                "torque_lag": _effect_table(TorqueLag, {
-                    "time_constant_s": _num("s", gt=0),
-                }),
-            },
+            {e.name: _effect_table(e.params, dict(e.schema)) for e in effect_registry()},
             required=False,
         ),
     }

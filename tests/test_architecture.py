@@ -16,18 +16,7 @@ OURS = ("trajectories", "daq", "sim_drivers", "ident")
 
 # Function-level imports of our own packages still present, by (file, imported module as
 # written). Each needs a reason; none may be added to dodge a cycle.
-ALLOWED: dict[tuple[str, str], str] = {
-    # TODO(effects helper): ident/cli.py and the models <-> results cycle are being
-    # restructured in parallel (issue 10, items 4-5); remove these entries with that work.
-    ("ident/cli.py", "."): "TODO(effects helper)",
-    ("ident/cli.py", ".fitting"): "TODO(effects helper)",
-    ("ident/cli.py", ".loaders"): "TODO(effects helper)",
-    ("ident/cli.py", ".plots"): "TODO(effects helper)",
-    ("ident/cli.py", ".refine"): "TODO(effects helper)",
-    ("ident/cli.py", ".refine_plots"): "TODO(effects helper)",
-    ("ident/models.py", ".estimate"): "TODO(effects helper)",
-    ("ident/models.py", ".results"): "TODO(effects helper)",
-}
+ALLOWED: dict[tuple[str, str], str] = {}
 
 
 def _our_module(node: ast.Import | ast.ImportFrom) -> list[str]:

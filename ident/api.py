@@ -1,0 +1,415 @@
+"""Python API for notebooks and scripts: one estimator, scikit-learn style.
+
+:class:`JointModel` identifies one joint with the paper's usual model (eq. 38-39) or its
+load- and velocity-dependent friction model (eq. 42-43) and refines it with the effects its
+residual points to (docs/refinement.md)::
+
+    from ident.api import JointModel, load
+
+    runs = load(["runs/rx130l_payload0.mcap", "runs/rx130l_payload1.mcap"])
+    est = JointModel(model="new", qs=0.03).fit(runs)
+    est.coef_["a_m"], est.std_["a_m"], est.rel_error_
+    tau_hat = est.predict(other_runs)          # W χ̂ on the preprocessed samples
+    est.score(other_runs)                      # 1 - ||ρ|| / ||Y||, higher is better
+    refined = est.refine(max_steps=5)
+    print(refined.refinement_.format_report())
+
+Hyper-parameters are stored by ``__init__`` as given; ``fit`` returns the estimator;
+fitted attributes end in ``_``. ``jointid fit`` is this estimator plus printing and files
+(:mod:`ident.cli`). Everything here is numerics on loaded data, except :func:`load`, which
+wraps :func:`ident.loaders.load_experiments`.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import DataError
+from .fitting import DEFAULT_QS, FitReport, fit_models
+from .loaders import Experiment, load_experiments
+from .models import IdentModel
+from .preprocess import Design
+from .refine import Refinement, refine
+from .signals import Signals
+
+__all__ = ["JointModel", "load"]
+
+#: What :meth:`JointModel.fit`, :meth:`~JointModel.predict` and :meth:`~JointModel.score`
+#: accept: experiments, file paths, or already concatenated signals.
+Data = Sequence[Experiment] | Sequence[str | Path] | str | Path | Signals | Experiment
+
+
+def load(
+    paths: Sequence[str | Path] | str | Path,
+    *,
+    mapping: Mapping[str, str | float] | None = None,
+    gain: float | str | None = None,
+    joint: str | None = None,
+    q_unit: str | None = None,
+    axis: int = 0,
+) -> list[Experiment]:
+    """Load files as experiments (one per file): MCAP logs of ``jointid run``, CSV, MAT.
+
+    Parameters
+    ----------
+    paths : path or sequence of paths
+        The files.
+    mapping : dict, optional
+        Where the canonical signals are in CSV/MAT files, ``{"q": "qm", "tau": "vir"}``
+        (keys ``t, q, tau, q_ref, payload_kg, payload_arm_m``; paths as in
+        docs/fit-json.md, "Foreign data mapping"). Ignored for MCAP logs.
+    gain : float or str, optional
+        Drive gain: the torque used is ``gain × tau column`` (a number or a path to a
+        scalar, e.g. ``"gtau"``).
+    joint : {"revolute", "prismatic"}, optional
+        Joint kind (default: MCAP metadata; revolute for CSV/MAT unless ``q_unit`` says).
+    q_unit : {"rad", "deg", "m", "mm"}, optional
+        Unit of q in CSV/MAT files, converted to [rad] or [m].
+    axis : int
+        Axis of a multi-axis MCAP log.
+
+    Returns
+    -------
+    list of Experiment
+        One per file; each holds ``t, q, tau`` arrays of shape (n,) [s, rad or m, N m or N].
+    """
+    return load_experiments(
+        paths, mapping=mapping, gain=gain, joint=joint, axis=axis, q_unit=q_unit
+    )
+
+
+def _experiments(data: Data, joint: str | None) -> list[Experiment] | Signals:
+    if isinstance(data, Signals):
+        return data
+    if isinstance(data, Experiment):
+        return [data]
+    if isinstance(data, str | Path):
+        return load(data, joint=joint)
+    items = list(data)
+    if not items:
+        raise DataError("no experiment given")
+    if all(isinstance(x, Experiment) for x in items):
+        return items
+    if all(isinstance(x, str | Path) for x in items):
+        return load(items, joint=joint)
+    raise DataError(
+        "data: expected Experiment objects, file paths or Signals "
+        f"(got {sorted({type(x).__name__ for x in items})})"
+    )
+
+
+class JointModel:
+    """Identification of one joint, scikit-learn style (paper section II-IV).
+
+    Parameters
+    ----------
+    model : {"new", "usual", "both"}
+        ``"usual"``: rigid body + payload + Coulomb + viscous + offset (eq. 38-39);
+        ``"new"``: load- and velocity-dependent dry friction (eq. 42-43); ``"both"``: fit
+        both on the same samples (Tables III-IV compare them), the fitted attributes then
+        describe the new model.
+    qs : float or "scan"
+        q_s of E_xp = exp(-|q̇|/q_s) (eq. 29) [rad/s or m/s], or ``"scan"`` to take the one
+        minimising the new model's residual (section III.D).
+    joint : {"revolute", "prismatic"} or None
+        Joint kind; None: the data's.
+    payload : bool or None
+        Include the payload term (eq. 35); None: when some run carries a payload.
+    cutoff : float or None
+        Butterworth cut-off on q [Hz] (None: from the data).
+    decimation : int or None
+        Decimation factor of the parallel filtering (None: from the data).
+    dq_min : float or None
+        Stiction area: samples with |q̇| below it [rad/s] are left out (None: 1 % of max).
+    tau_min : float or None
+        Samples with |τ| below it [N m] are left out.
+    trim : int or None
+        Samples cut at both ends of each experiment.
+    estimator : {"auto", "ols", "iv"}
+        ``"iv"``: IDIM-IV with instruments from the reference trajectory (every experiment
+        must carry ``q_ref``); ``"ols"``: least squares (eq. 12); ``"auto"``: IV when every
+        experiment carries a reference, else OLS.
+    eliminate : bool
+        Remove non-significant parameters (relative deviation above ``threshold``, eq. 16).
+    threshold : float or None
+        Relative-deviation threshold [%] (None: 30).
+    sign_check : bool
+        Leave out the samples where sign(τ) differs from sign(τ̂_out) (eq. 26) when the new
+        model is fitted.
+
+    Attributes
+    ----------
+    coef_ : dict[str, float]
+        Identified parameters χ̂ (eq. 12) by name (``docs/architecture.md``), e.g.
+        ``coef_["F_V"]``; eliminated parameters are absent.
+    std_ : dict[str, float]
+        Their standard deviations σ_χ̂ (eq. 15); the paper's tables print 2σ.
+    rel_std_pct_ : dict[str, float]
+        Relative deviations 100 σ/|χ̂| [%] (eq. 16).
+    residual_ : ndarray, shape (n_samples_,)
+        ρ = Y - W χ̂ on the identification samples [N m] (eq. 11).
+    rel_error_ : float
+        ‖ρ‖/‖Y‖ (Table III, first row).
+    rel_error_bands_ : dict[str, float]
+        ‖ρ‖/‖Y‖ overall (``all``), at low (``low``, ≤ 10 % of ``vmax_``) and high velocity
+        (``high``, ≥ 35 %) (Table III).
+    validation_rel_error_ : float or None
+        ‖ρ‖/‖Y‖ on the ``validation`` data given to :meth:`fit`.
+    n_samples_ : int
+        Number of equations m (decimated, selected samples).
+    qs_ : float
+        q_s used [rad/s].
+    vmax_ : float
+        max |q̇| of the identification samples [rad/s].
+    estimator_ : {"ols", "iv"}
+        The estimator used.
+    model_ : IdentModel
+        The fitted model (library of terms, covariance ``cov_``, ...).
+    design_ : Design
+        Y (shape (m,)) and W (shape (m, b)) of the identification samples.
+    models_ : dict[str, IdentModel]
+        Every fitted model by name (both with ``model="both"``).
+    report_ : FitReport
+        Tables I-IV (``format_tables()``) and the JSON record (``to_json()``).
+    refinement_ : Refinement
+        Only on the estimator returned by :meth:`refine`.
+    """
+
+    def __init__(
+        self,
+        model: str = "new",
+        *,
+        qs: float | str = DEFAULT_QS,
+        joint: str | None = None,
+        payload: bool | None = None,
+        cutoff: float | None = None,
+        decimation: int | None = None,
+        dq_min: float | None = None,
+        tau_min: float | None = None,
+        trim: int | None = None,
+        estimator: str = "auto",
+        eliminate: bool = True,
+        threshold: float | None = None,
+        sign_check: bool = True,
+    ) -> None:
+        self.model = model
+        self.qs = qs
+        self.joint = joint
+        self.payload = payload
+        self.cutoff = cutoff
+        self.decimation = decimation
+        self.dq_min = dq_min
+        self.tau_min = tau_min
+        self.trim = trim
+        self.estimator = estimator
+        self.eliminate = eliminate
+        self.threshold = threshold
+        self.sign_check = sign_check
+
+    # ------------------------------------------------------------------ sklearn protocol
+    def get_params(self) -> dict[str, Any]:
+        """The hyper-parameters, as given to ``__init__``."""
+        return {
+            k: getattr(self, k)
+            for k in (
+                "model", "qs", "joint", "payload", "cutoff", "decimation", "dq_min",
+                "tau_min", "trim", "estimator", "eliminate", "threshold", "sign_check",
+            )
+        }
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
+        return f"JointModel({args})"
+
+    def _models(self) -> tuple[str, ...]:
+        if self.model == "both":
+            return ("usual", "new")
+        if self.model in ("usual", "new"):
+            return (self.model,)
+        raise DataError(f"model {self.model!r}: expected 'usual', 'new' or 'both'")
+
+    def _references(self) -> str | None:
+        if self.estimator in ("auto", "iv"):
+            return "auto"
+        if self.estimator == "ols":
+            return None
+        raise DataError(f"estimator {self.estimator!r}: expected 'auto', 'ols' or 'iv'")
+
+    def fit(self, data: Data, validation: Data | None = None) -> JointModel:
+        """Identify the model on all experiments in one least-squares system (eq. 36, 40).
+
+        Parameters
+        ----------
+        data : list of Experiment, list of paths, path, or Signals
+            Identification experiments (one per payload run; paths are read with
+            :func:`load` and default settings, use :func:`load` for CSV/MAT mappings).
+        validation : same kinds, optional
+            Data not used for the fit; ``validation_rel_error_`` and the JSON report
+            their relative error, and :meth:`refine` uses them to accept a step.
+
+        Returns
+        -------
+        JointModel
+            ``self``, fitted.
+        """
+        exps = _experiments(data, self.joint)
+        val = _experiments(validation, self.joint) if validation is not None else None
+        report = fit_models(
+            exps,
+            self._models(),
+            qs=self.qs,
+            joint=self.joint,
+            validation=val,
+            cutoff_hz=self.cutoff,
+            decimation=self.decimation,
+            dq_min=self.dq_min,
+            tau_min=self.tau_min,
+            trim=self.trim,
+            sign_check=self.sign_check,
+            eliminate=self.eliminate,
+            threshold_pct=self.threshold,
+            references=self._references(),
+            payload=self.payload,
+        )
+        name = "new" if "new" in report.models else next(iter(report.models))
+        if self.estimator == "iv" and report.models[name].estimator_ != "iv":
+            raise DataError(
+                "estimator='iv' needs the reference trajectory q_ref of every experiment "
+                "(MCAP logs of jointid run, or a q_ref column); use 'auto' or 'ols'"
+            )
+        self.report_: FitReport = report
+        self.models_ = dict(report.models)
+        vd = report.validation_designs.get(name)
+        self._set(name, report.models[name], report.designs[name], vd, ())
+        return self
+
+    def _set(
+        self,
+        name: str,
+        model: IdentModel,
+        design: Design,
+        validation: Design | None,
+        terms: tuple,
+    ) -> None:
+        self.name_ = name
+        self.model_ = model
+        self.design_ = design
+        self._validation_design = validation
+        self._terms = tuple(terms)
+        self.coef_ = dict(model.coef_)
+        self.std_ = dict(model.std_)
+        self.rel_std_pct_ = dict(model.rel_std_pct_)
+        self.residual_ = model.residual_
+        self.rel_error_ = float(model.rel_error_)
+        self.vmax_ = float(self.report_.vmax)
+        self.rel_error_bands_ = model.rel_error_bands(design, self.vmax_)
+        self.validation_rel_error_ = (
+            model.rel_error_on(validation) if validation is not None else None
+        )
+        self.n_samples_ = int(design.Y.shape[0])
+        self.qs_ = float(self.report_.qs)
+        self.estimator_ = model.estimator_
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "model_"):
+            raise DataError("this JointModel is not fitted; call fit(experiments) first")
+
+    # ------------------------------------------------------------------ use
+    def transform(self, data: Data) -> Design:
+        """The system of ``data`` for the fitted model: Y, shape (m,), and W, shape (m, b),
+        with the fit's preprocessing (cut-off, decimation, thresholds, sign check) and
+        the columns of every term added by :meth:`refine`."""
+        self._check_fitted()
+        exps = _experiments(data, self.joint)
+        d = self.report_.designs_for(exps)[self.name_]
+        for t in self._terms:
+            d = d.with_term(t)
+        return d
+
+    def predict(self, data: Data) -> np.ndarray:
+        """Predicted torque W χ̂ [N m] on the preprocessed samples of ``data``.
+
+        Returns
+        -------
+        ndarray, shape (m,)
+            Aligned with ``transform(data).Y`` (the measured, filtered and decimated τ).
+        """
+        d = self.transform(data)
+        return self.model_.predict(d)
+
+    def rel_error(self, data: Data) -> float:
+        """‖Y - W χ̂‖/‖Y‖ on ``data`` (the paper's relative error norm, Table III)."""
+        self._check_fitted()
+        return self.model_.rel_error_on(self.transform(data))
+
+    def score(self, data: Data) -> float:
+        """1 - ‖Y - W χ̂‖/‖Y‖ on ``data``: higher is better (scikit-learn convention; 1 is
+        a perfect prediction). :meth:`rel_error` gives the relative error itself."""
+        return 1.0 - self.rel_error(data)
+
+    def refine(
+        self,
+        validation: Data | None = None,
+        *,
+        max_steps: int = 5,
+        progress: Callable[[str], None] | None = None,
+        **options: Any,
+    ) -> JointModel:
+        """Add the effects the residual points to (:func:`ident.refine.refine`).
+
+        Parameters
+        ----------
+        validation : data, optional
+            A step is accepted only if it lowers their relative error; default: the
+            validation data given to :meth:`fit` (if any).
+        max_steps : int
+            Maximum number of added effects.
+        progress : callable, optional
+            Receives one line per step.
+        **options
+            ``alpha``, ``min_gain``, ``max_tries``, ``generic_knots`` of
+            :func:`ident.refine.refine`.
+
+        Returns
+        -------
+        JointModel
+            A new fitted estimator (this one is unchanged) whose attributes describe the
+            refined model, with ``refinement_`` (steps, report, JSON).
+        """
+        self._check_fitted()
+        vd = self._validation_design
+        if validation is not None:
+            vd = self.transform(validation)
+        ref = refine(
+            self.design_,
+            self.model_,
+            validation=vd,
+            max_steps=max_steps,
+            vmax=self.vmax_,
+            progress=progress,
+            **options,
+        )
+        out = copy.copy(self)
+        out._set(
+            self.name_,
+            ref.final_model,
+            ref.final_design,
+            ref.final_validation_design,
+            self._terms + tuple(ref.terms),
+        )
+        out.refinement_: Refinement = ref
+        return out
+
+    def refinement_json(self) -> dict[str, Any]:
+        """The ``refinement`` record of the fit JSON (docs/refinement.md), with ``model``."""
+        if not hasattr(self, "refinement_"):
+            raise DataError("no refinement: call refine() first")
+        rec = self.refinement_.to_json()
+        rec.setdefault("model", self.name_)
+        return rec
+

@@ -1,0 +1,90 @@
+"""Position ripple A sin(2π q/P + φ) (cogging, gear mesh, screw pitch).
+
+Offered when the residual's periodogram against position has a significant peak; the
+period P is refined around the peak (:func:`scan_period`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..signals import Signals
+from ._base import Candidate, Context, Effect, register, unique_tag
+from ._scan import Columns, refine_1d
+
+
+class PositionRipple(Effect):
+    """Position-periodic torque A sin(2π q / P + φ) (cogging, gear mesh, screw pitch).
+
+    Parameters
+    ----------
+    period : float
+        Period P in position [rad or m]; a hyper-parameter refined on the residual.
+    """
+
+    effect = "position_ripple"
+    variable = "position"
+    hyper_names = ("period",)
+
+    def __init__(self, period: float, tag: str = "") -> None:
+        super().__init__(tag)
+        if not period > 0:
+            raise ValueError(f"PositionRipple: period must be > 0, got {period}")
+        self.period = float(period)
+
+    def with_hyper(self, **values: float) -> PositionRipple:
+        return PositionRipple(values.get("period", self.period), self.tag)
+
+    def names(self) -> tuple[str, ...]:
+        return (self._n("ripple_sin"), self._n("ripple_cos"))
+
+    def columns(self, s: Signals) -> np.ndarray:
+        th = (2 * np.pi / self.period) * s.q
+        return np.column_stack((np.sin(th), np.cos(th)))
+
+    def parameters(self, coef, cov):
+        a, b = float(coef[0]), float(coef[1])
+        amp = math.hypot(a, b)
+        # A sin(th + phi) = A cos(phi) sin(th) + A sin(phi) cos(th)
+        g = np.zeros((2, len(coef)))
+        if amp > 0:
+            g[0, :2] = (a / amp, b / amp)
+            g[1, :2] = (-b / amp**2, a / amp**2)
+        sd = np.sqrt(np.clip(np.diag(g @ cov @ g.T), 0, None))
+        out = {
+            self._n("ripple_amplitude"): (amp, float(2 * sd[0])),
+            self._n("ripple_phase"): (math.atan2(b, a), float(2 * sd[1])),
+        }
+        sdp = math.sqrt(max(float(cov[2, 2]), 0.0)) if len(coef) > 2 else 0.0
+        out[self._n("ripple_period")] = (self.period, 2 * sdp)
+        return out
+
+    def describe(self) -> str:
+        return f"position ripple A sin(2π q/{self.period:.6g} + φ)"
+
+
+def scan_period(cols: Columns, p0: float, span: float, tag: str) -> tuple[Effect, float]:
+    """Ripple period: grid over ±1.5 frequency bins (1/span) around the periodogram peak
+    p0, then a bounded search (frequency resolution ~1e-7 f0)."""
+    f0, df = 1 / p0, 1.5 / span
+    lo, hi = max(f0 - df, 0.5 * f0), f0 + df
+    fgrid = np.linspace(lo, hi, 31)
+    gains = np.array([cols.gain(PositionRipple(1 / f, tag)) for f in fgrid])
+    i = int(np.argmax(gains))
+    a, b = fgrid[max(i - 1, 0)], fgrid[min(i + 1, len(fgrid) - 1)]
+    return refine_1d(
+        cols, lambda f: PositionRipple(1 / f, tag), a, b, fgrid[i], float(gains[i]), 1e-7 * f0
+    )
+
+
+@register("position_ripple", order=10)
+def propose(ctx: Context) -> list[Candidate]:
+    """A ripple at the position periodogram's peak, when it is significant."""
+    pp = ctx.diag.position_periodogram
+    if ctx.span > 0 and math.isfinite(pp.peak_period) and pp.false_alarm < ctx.alpha:
+        tag = unique_tag(("ripple_sin", "ripple_cos"), ctx.names)
+        e, g = scan_period(ctx.cols, pp.peak_period, ctx.span, tag)
+        return [Candidate(e, g, 1)]
+    return []

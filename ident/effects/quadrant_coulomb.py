@@ -1,0 +1,34 @@
+"""Different dry friction in the motor and generator quadrants (c_m != c_g, eq. 25).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..signals import Signals
+from ._base import Candidate, Context, Effect, _sign, register
+
+
+class QuadrantCoulomb(Effect):
+    """Different dry friction in the motor and generator quadrants (c_m != c_g, eq. 25):
+    (dF_Cq / 2) sign(P) sign(q̇) = (dF_Cq / 2) sign(τ) for q̇ != 0, with dF_Cq = c_m - c_g."""
+
+    effect = "quadrant_coulomb"
+    variable = "quadrant"
+
+    def names(self) -> tuple[str, ...]:
+        return (self._n("dF_Cq"),)
+
+    def columns(self, s: Signals) -> np.ndarray:
+        return (0.5 * _sign(s.tau * s.dq) * _sign(s.dq))[:, None]
+
+    def describe(self) -> str:
+        return "quadrant dry friction (c_m - c_g) sign(P) sign(dq) / 2"
+
+
+@register("quadrant_coulomb", order=90)
+def propose(ctx: Context) -> list[Candidate]:
+    """sign(P) sign(q̇)/2, when the model has no quadrant dry friction (the new model has)."""
+    if "quadrant_coulomb" not in ctx.effects:
+        return [ctx.candidate(QuadrantCoulomb())]
+    return []

@@ -1,0 +1,63 @@
+"""First-order lag between the torque reference and the applied torque.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..signals import Signals
+from ._base import Candidate, Context, Effect, Prediction, register
+
+
+def time_derivative(x: np.ndarray, s: Signals) -> np.ndarray:
+    """dx/dt per experiment (central differences), shape (n,)."""
+    out = np.empty_like(x)
+    exp = s.experiment
+    if len(x) < 2:
+        return np.zeros_like(x)
+    cuts = np.flatnonzero(np.diff(exp) != 0) + 1
+    for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(x)], strict=True):
+        if b - a >= 2:
+            out[a:b] = np.gradient(x[a:b], s.t[a:b])
+        else:
+            out[a:b] = 0.0
+    return out
+
+
+class TorqueLag(Effect):
+    """First-order lag between the torque reference and the applied torque.
+
+    τ_ref ≈ τ_model + T_lag dτ_model/dt; the column is the time derivative of the current
+    model prediction τ̂ (not of the measured torque, which would put noise in the regressor).
+    Reported under the variable ``"acceleration"`` (the rate of change of the dynamics).
+
+    Parameters
+    ----------
+    tau_model : Prediction
+        Current model prediction τ̂ [N m].
+    """
+
+    effect = "torque_lag"
+    variable = "acceleration"
+
+    def __init__(self, tau_model: Prediction, tag: str = "") -> None:
+        super().__init__(tag)
+        self.tau_model = tau_model
+
+    def names(self) -> tuple[str, ...]:
+        return (self._n("T_lag"),)
+
+    def columns(self, s: Signals) -> np.ndarray:
+        return time_derivative(self.tau_model(s), s)[:, None]
+
+    def describe(self) -> str:
+        return "torque lag T_lag d(tau_model)/dt"
+
+
+@register("torque_lag", order=110)
+def propose(ctx: Context) -> list[Candidate]:
+    """T_lag dτ̂/dt with τ̂ the whole current model prediction, once."""
+    if "torque_lag" not in ctx.effects:
+        c_all = np.array([ctx.coef.get(n, 0.0) for n in ctx.lib.names()])
+        return [ctx.candidate(TorqueLag(Prediction(ctx.lib.terms(), c_all)))]
+    return []

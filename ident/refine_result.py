@@ -1,0 +1,251 @@
+"""Results of the refinement loop (:func:`ident.refine.refine`): accepted steps, rejected
+candidates, and the :class:`Refinement` with its report and JSON (docs/refinement.md,
+section 4). Pure data and formatting.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from .diagnose import Diagnosis
+from .effects import Effect
+from .models import IdentModel
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .preprocess import Design
+
+__all__ = ["Step", "Rejected", "Refinement"]
+
+
+@dataclass
+class Step:
+    """One accepted refinement step.
+
+    Attributes
+    ----------
+    variable : str
+        Candidate variable of the added effect (one of the seven).
+    strength : float
+        Share of the residual sum of squares the added effect removes, in [0, 1] (how
+        strongly the residual depended on the variable through this effect).
+    statistic, p_value : float
+        Binned dependence of the residual on the variable before the step (diagnosis
+        table row: F statistic and p-value; ``binned_explained`` its η²). Effects odd in
+        a sign variable (direction, quadrant) interact with other variables and may show
+        little binned dependence although the effect itself is strong.
+    binned_explained : float
+        η² of the diagnosis row of the variable.
+    leading_variable : str
+        The top variable of the diagnosis table before the step.
+    effect : str
+        Effect name (``"position_ripple"``, ``"generic_velocity"``, ...).
+    term : Effect
+        The added term (with its hyper-parameters).
+    parameters : dict
+        ``{name: {"value": v, "std2": 2σ}}`` of the effect, hyper-parameters included.
+    f_statistic, f_p_value : float
+        Nested-model F test of the acceptance.
+    rel_error_before, rel_error_after : float
+        ||ρ|| / ||Y|| on the identification samples.
+    low_before, low_after, high_before, high_after : float
+        The same in the low- and high-velocity bands (paper Table III).
+    validation_rel_error_before, validation_rel_error_after : float or None
+        On the validation design (``None`` without one).
+    diagnosis : Diagnosis
+        The diagnosis that led to the step.
+    generic : bool
+        ``True`` when no named effect fitted and a generic basis was added.
+    """
+
+    variable: str
+    strength: float
+    statistic: float
+    p_value: float
+    leading_variable: str
+    effect: str
+    term: Effect
+    parameters: dict[str, dict[str, float]]
+    f_statistic: float
+    f_p_value: float
+    rel_error_before: float
+    rel_error_after: float
+    low_before: float
+    low_after: float
+    high_before: float
+    high_after: float
+    validation_rel_error_before: float | None
+    validation_rel_error_after: float | None
+    diagnosis: Diagnosis = field(repr=False)
+    generic: bool = False
+    binned_explained: float = math.nan
+
+    def to_json(self) -> dict[str, Any]:
+        """The step as in ``refinement.steps[]`` of the fit JSON."""
+        return {
+            "effect": self.effect,
+            "variable": self.variable,
+            "description": self.term.describe(),
+            "generic": self.generic,
+            "parameters": self.parameters,
+            "strength": {
+                "explained": _num(self.strength),
+                "binned_explained": _num(self.binned_explained),
+                "binned_statistic": _num(self.statistic),
+                "binned_p_value": _num(self.p_value),
+            },
+            "leading_variable": self.leading_variable,
+            "test": {"F": _num(self.f_statistic), "p_value": _num(self.f_p_value)},
+            "rel_error_before": _num(self.rel_error_before),
+            "rel_error_after": _num(self.rel_error_after),
+            "low_velocity_rel_error_before": _num(self.low_before),
+            "low_velocity_rel_error_after": _num(self.low_after),
+            "high_velocity_rel_error_before": _num(self.high_before),
+            "high_velocity_rel_error_after": _num(self.high_after),
+            "validation_rel_error_before": _num(self.validation_rel_error_before),
+            "validation_rel_error_after": _num(self.validation_rel_error_after),
+            "diagnosis": self.diagnosis.to_json(),
+        }
+
+
+@dataclass
+class Rejected:
+    """A candidate that was the best of its round but failed a test."""
+
+    step: int
+    effect: str
+    variable: str
+    reason: str
+    rel_error_after: float
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "step": self.step,
+            "effect": self.effect,
+            "variable": self.variable,
+            "reason": self.reason,
+            "rel_error_after": _num(self.rel_error_after),
+        }
+
+
+@dataclass
+class Refinement:
+    """Outcome of :func:`refine`.
+
+    Attributes
+    ----------
+    steps : list of Step
+        Accepted steps, in order.
+    rejected : list of Rejected
+        Best candidates that failed the tests (why the loop stopped).
+    initial_model, final_model : IdentModel
+        Fits of the declared and of the refined library.
+    final_design : Design
+        The design with every added term's columns.
+    final_diagnosis : Diagnosis
+        Diagnosis of the final residual (what is left).
+    rel_error_initial, rel_error_final : float
+        ||ρ|| / ||Y|| before and after.
+    validation_rel_error_initial, validation_rel_error_final : float or None
+    stop_reason : str
+    final_validation_design : Design or None
+        The validation design with every added term's columns (None without one).
+    """
+
+    steps: list[Step]
+    rejected: list[Rejected]
+    initial_model: IdentModel
+    final_model: IdentModel
+    final_design: Design
+    final_diagnosis: Diagnosis
+    rel_error_initial: float
+    rel_error_final: float
+    validation_rel_error_initial: float | None
+    validation_rel_error_final: float | None
+    stop_reason: str
+    final_validation_design: Design | None = None
+
+    @property
+    def terms(self) -> list[Effect]:
+        """The added terms, in order."""
+        return [s.term for s in self.steps]
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``refinement`` object of the fit JSON (see docs/refinement.md)."""
+        return {
+            "steps": [s.to_json() for s in self.steps],
+            "rejected": [r.to_json() for r in self.rejected],
+            "rel_error_initial": _num(self.rel_error_initial),
+            "rel_error_final": _num(self.rel_error_final),
+            "validation_rel_error_initial": _num(self.validation_rel_error_initial),
+            "validation_rel_error_final": _num(self.validation_rel_error_final),
+            "stop_reason": self.stop_reason,
+            "final_parameters": {
+                n: {
+                    "value": float(self.final_model.coef_[n]),
+                    "std2": float(2 * self.final_model.std_[n]),
+                }
+                for n in self.final_model.names_
+            },
+            "final_diagnosis": self.final_diagnosis.to_json(),
+        }
+
+    def format_table(self) -> str:
+        """Alias of :meth:`format_report` (what ``jointid fit --refine`` prints)."""
+        return self.format_report()
+
+    def format_report(self) -> str:
+        """Human-readable report of every step."""
+        out = [
+            f"Refinement: relative error {_pct(self.rel_error_initial)} -> "
+            f"{_pct(self.rel_error_final)}"
+            + (
+                f" (validation {_pct(self.validation_rel_error_initial)} -> "
+                f"{_pct(self.validation_rel_error_final)})"
+                if self.validation_rel_error_initial is not None
+                else ""
+            )
+        ]
+        for i, s in enumerate(self.steps, 1):
+            out.append("")
+            out.append(
+                f"step {i}: residual depends on {s.variable}: the effect explains "
+                f"{100 * s.strength:.1f} % of it (binned on {s.variable}: "
+                f"{100 * s.binned_explained:.1f} %, p={s.p_value:.1e}; leading variable of "
+                f"the diagnosis: {s.leading_variable})"
+            )
+            out.append(
+                f"  added {s.effect}: {s.term.describe()}"
+                + ("  [generic basis: no named effect fitted]" if s.generic else "")
+            )
+            for n, v in s.parameters.items():
+                out.append(f"    {n:<18} = {v['value']:.6g} ± {v['std2']:.2g} (2σ)")
+            out.append(
+                f"  F test {s.f_statistic:.3g} (p={s.f_p_value:.1e}); relative error "
+                f"{_pct(s.rel_error_before)} -> {_pct(s.rel_error_after)}, "
+                f"low velocity {_pct(s.low_before)} -> {_pct(s.low_after)}, "
+                f"high velocity {_pct(s.high_before)} -> {_pct(s.high_after)}"
+            )
+            if s.validation_rel_error_before is not None:
+                out.append(
+                    f"  validation {_pct(s.validation_rel_error_before)} -> "
+                    f"{_pct(s.validation_rel_error_after)}"
+                )
+        for r in self.rejected:
+            out.append(f"rejected at step {r.step}: {r.effect} ({r.variable}): {r.reason}")
+        out.append(f"stopped: {self.stop_reason}")
+        out.append("remaining residual:")
+        out.append(self.final_diagnosis.format_table())
+        return "\n".join(out)
+
+
+def _num(x: float | None) -> float | None:
+    if x is None:
+        return None
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _pct(x: float | None) -> str:
+    return "n/a" if x is None or not math.isfinite(x) else f"{100 * x:.2f} %"

@@ -1,0 +1,179 @@
+"""Base of the plant's undeclared effects: the registry, the inputs of an effect's torque
+and the knobs of the forward dynamics an effect sets.
+
+An effect module (one file in ``sim_drivers/effects/``, see docs/refinement.md "Adding an
+effect") defines the frozen dataclass of its plant-file table ``[effects.<name>]`` (field
+``enabled`` plus its parameters, with their defaults), and registers a
+:class:`PlantEffect` with its schema (keys, units, validation), its vectorised torque (the
+inverse model, :func:`sim_drivers.plant.inverse_torque`) and how it changes the forward
+dynamics (:class:`Knobs`, read by :class:`sim_drivers.plant.JointPlant`)::
+
+    register(PlantEffect(
+        name="spring", order=20, params=Spring, formula="k (q - q0)",
+        schema={"stiffness_Nm_per_rad": Field(float, unit="N m/rad"),
+                "rest_position_rad": Field(float, unit="rad")},
+        torque=lambda p, x: p.stiffness_Nm_per_rad * (x.q - p.rest_position_rad),
+        configure=_configure,
+    ))
+
+Pure numerics: no file, no bus. Joint side SI units as in :mod:`sim_drivers.plant`.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from trajectories.schema import Field
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..plant_config import PlantParams
+
+__all__ = ["Inputs", "Knobs", "PlantEffect", "register", "registry"]
+
+
+class Inputs:
+    """States an effect's torque is evaluated at (arrays broadcast together).
+
+    Attributes
+    ----------
+    params : PlantParams
+        The whole plant (friction, joint...).
+    q, dq : ndarray
+        Position [rad] and velocity [rad/s] (float arrays).
+    ddq, payload_mass, payload_arm, t : array_like
+        Acceleration [rad/s^2], payload M_a [kg] and arm L_a [m], time since the run
+        start [s], as given.
+    tau_out : ndarray
+        Output (load) torque of eq. 31/34 [N m], computed on first use.
+    """
+
+    def __init__(
+        self,
+        params: PlantParams,
+        q: np.ndarray,
+        dq: np.ndarray,
+        ddq: Any,
+        payload_mass: Any,
+        payload_arm: Any,
+        t: Any,
+        output_torque: Callable[..., np.ndarray],
+    ) -> None:
+        self.params, self.q, self.dq, self.ddq = params, q, dq, ddq
+        self.payload_mass, self.payload_arm, self.t = payload_mass, payload_arm, t
+        self._output_torque = output_torque
+
+    @functools.cached_property
+    def tau_out(self) -> np.ndarray:
+        return self._output_torque(self.params, self.q, self.ddq, self.payload_mass,
+                                   self.payload_arm)
+
+
+@dataclass
+class Knobs:
+    """What the enabled effects change in :class:`~sim_drivers.plant.JointPlant`'s forward
+    dynamics (every default leaves eq. 30 as it is).
+
+    With ``r`` the torque left for the load and dry friction, ``s = sign(dq)``::
+
+        r = tau - tau_off - F_V(s) dq - F_VV dq |dq| - A sin(k q + phase) - K (q - q0)
+            - sum(f(q, dq, t) for f in extra)
+        dry friction (c + d E) -> (c + d E)(1 + w exp(-t / T_w))
+        d tau_applied / dt = (tau_cmd - tau_applied) / T_lag
+
+    Attributes
+    ----------
+    viscous_pos, viscous_neg : float or None
+        F_V for dq > 0 and dq < 0 [N m s/rad] (None: the friction's F_V).
+    viscous_quadratic : float
+        F_VV [N m s^2/rad^2].
+    ripple_amplitude, ripple_wavenumber, ripple_phase : float
+        A [N m], k = 2 pi / period [1/rad], phase [rad].
+    spring_stiffness, spring_rest : float
+        K [N m/rad], q0 [rad].
+    warm_fraction, warm_rate : float
+        w [-] and 1 / T_w [1/s].
+    lag_time_constant : float or None
+        T_lag [s] (None: no lag).
+    extra : list of callable
+        Any other static torque ``f(q, dq, t) -> float`` [N m] (scalars; t since the run
+        start), subtracted from ``r`` while sliding and at rest (dq = 0): the knob of a new
+        effect that none of the above expresses.
+    """
+
+    viscous_pos: float | None = None
+    viscous_neg: float | None = None
+    viscous_quadratic: float = 0.0
+    ripple_amplitude: float = 0.0
+    ripple_wavenumber: float = 0.0
+    ripple_phase: float = 0.0
+    spring_stiffness: float = 0.0
+    spring_rest: float = 0.0
+    warm_fraction: float = 0.0
+    warm_rate: float = 0.0
+    lag_time_constant: float | None = None
+    extra: list[Callable[[float, float, float], float]] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class PlantEffect:
+    """One undeclared effect of the plant.
+
+    Attributes
+    ----------
+    name : str
+        Table name in the plant file, ``[effects.<name>]``, and key of
+        ``PlantParams.effects``.
+    order : int
+        Rank in the plant file's effects, ``Effects.enabled()`` and ``effect_torques``.
+    params : type
+        Frozen dataclass: ``enabled: bool = False`` then the parameters with defaults.
+    schema : mapping of str to Field
+        Each parameter's type, unit and bounds (required once ``enabled = true``).
+    formula : str
+        One line for the docs and the plant-file comment.
+    torque : callable or None
+        ``torque(p, x: Inputs) -> ndarray`` [N m], the effect's term of the inverse model;
+        None for a dynamic effect (torque lag), which is not a term of the balance.
+    configure : callable
+        ``configure(p, knobs: Knobs, params: PlantParams)``: set the forward-dynamics knobs.
+    truth : callable or None
+        ``truth(p) -> dict`` of derived true values added to
+        :meth:`~sim_drivers.plant_config.PlantParams.truth_effects`.
+    """
+
+    name: str
+    order: int
+    params: type
+    schema: Mapping[str, Field]
+    formula: str
+    torque: Callable[[Any, Inputs], np.ndarray] | None
+    configure: Callable[[Any, Knobs, Any], None]
+    truth: Callable[[Any], dict[str, float]] | None = None
+    module: str = ""
+
+
+_REGISTRY: dict[str, PlantEffect] = {}
+
+
+def register(effect: PlantEffect) -> PlantEffect:
+    """Add an effect to the registry (called once at the bottom of its module)."""
+    old = _REGISTRY.get(effect.name)
+    if old is not None and old.module != effect.module:
+        raise ValueError(f"plant effect {effect.name!r} registered twice")
+    clash = [e.name for e in _REGISTRY.values() if e.order == effect.order
+             and e.name != effect.name]
+    if clash:
+        raise ValueError(f"plant effect {effect.name!r}: order {effect.order} already used by "
+                         f"{clash[0]!r}")
+    _REGISTRY[effect.name] = effect
+    return effect
+
+
+def registry() -> list[PlantEffect]:
+    """The registered effects, by increasing order."""
+    return sorted(_REGISTRY.values(), key=lambda e: e.order)

@@ -1,0 +1,133 @@
+"""The Python API (ident.api.JointModel): fit returns self, fitted attributes equal the
+``jointid fit`` JSON record on the same files, predict/score agree with the residual and the
+validation error, refine returns a new fitted estimator with the effect the plant has."""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from daq.app.cli import main
+from daq.protocol.control import ControllerGains
+from ident import DataError
+from ident.api import JointModel, load
+from ident.loaders import Experiment
+from sim_drivers.offline import simulate
+from sim_drivers.plant_config import load_plant
+from trajectories.campaign import Campaign
+from trajectories.plan import plan_campaign
+
+ROOT = Path(__file__).resolve().parents[1]
+RIPPLE = dict(amplitude_Nm=4.0, period_rad=2 * np.pi / 16, phase_rad=0.3)  # undeclared
+
+
+@pytest.fixture(scope="module")
+def csv_runs(tmp_path_factory):
+    """Three payload runs and a validation run of the quick example campaign on the default
+    plant plus a position ripple, as CSV files (t, q, tau, payload_kg, payload_arm_m)."""
+    with open(ROOT / "examples" / "campaign.toml", "rb") as f:
+        campaign = Campaign.from_dict(tomllib.load(f), "campaign.toml").quick()
+    plan = plan_campaign(campaign)
+    plant = load_plant(ROOT / "sim_drivers" / "data" / "plant_default.toml").with_effect(
+        "position_ripple", **RIPPLE)
+    gains = ControllerGains(**campaign.control.gains_kwargs())
+    d = tmp_path_factory.mktemp("api")
+    files = []
+    for i, p in enumerate([*plan.payloads, plan.payloads[1]]):
+        r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
+                     payload_arm=p.arm_m, seed=70 + i)
+        path = d / f"run{i}.csv"
+        cols = [r.t, r.q, r.tau_ref, np.full(len(r), p.mass_kg), np.full(len(r), p.arm_m)]
+        np.savetxt(path, np.column_stack(cols), delimiter=",", fmt="%.10g",
+                   header="t,q,tau,payload_kg,payload_arm_m", comments="")
+        files.append(path)
+    return files
+
+
+@pytest.fixture(scope="module")
+def fitted(csv_runs):
+    train, val = load(csv_runs[:3]), load(csv_runs[3])
+    est = JointModel(model="both")
+    assert est.fit(train, validation=val) is est
+    return est, train, val
+
+
+def test_fitted_attributes_equal_the_cli_json(fitted, csv_runs, tmp_path):
+    est, _, _ = fitted
+    js = tmp_path / "fit.json"
+    assert main(["fit", *map(str, csv_runs[:3]), "--validate", str(csv_runs[3]),
+                 "--json", str(js)]) == 0
+    rec = json.loads(js.read_text())["models"]["new"]
+    assert est.name_ == "new" and set(est.models_) == {"usual", "new"}
+    assert list(est.coef_) == list(rec["parameters"])
+    for n, p in rec["parameters"].items():
+        assert est.coef_[n] == p["value"] and est.std_[n] == p["std"]
+        assert est.rel_std_pct_[n] == p["rel_std_pct"]
+    assert est.rel_error_ == rec["rel_error"]
+    assert est.validation_rel_error_ == rec["validation_rel_error"]
+    assert est.rel_error_bands_["low"] == rec["rel_error_low_velocity"]
+    assert est.n_samples_ == rec["samples"] == est.residual_.shape[0] == est.design_.Y.shape[0]
+    assert est.estimator_ == rec["estimator"] == "ols" and est.qs_ == 0.03
+    assert est.report_.to_json()["models"]["new"] == rec
+
+
+def test_predict_and_score_agree_with_the_fit(fitted):
+    est, train, val = fitted
+    np.testing.assert_allclose(est.predict(train), est.design_.Y - est.residual_,
+                               rtol=0, atol=1e-9 * np.abs(est.design_.Y).max())
+    assert est.rel_error(train) == pytest.approx(est.rel_error_, rel=1e-12)
+    # validation through predict/score is the JSON's validation error
+    assert est.score(val) == pytest.approx(1.0 - est.validation_rel_error_, rel=1e-12)
+    d = est.transform(val)
+    assert est.predict(val).shape == d.Y.shape
+    # the usual model is worse than the new one on the plant's new friction
+    usual = JointModel(model="usual").fit(train, validation=val)
+    assert usual.rel_error_ > est.rel_error_ and "F_C" in usual.coef_
+    assert usual.score(val) < est.score(val)
+
+
+def test_refine_returns_a_new_estimator_with_the_ripple(fitted):
+    est, train, val = fitted
+    refined = est.refine(max_steps=1)
+    assert refined is not est and not hasattr(est, "refinement_")
+    step = refined.refinement_.steps[0]
+    assert step.effect == "position_ripple"
+    amp, period = step.parameters["ripple_amplitude"], step.parameters["ripple_period"]
+    assert abs(amp["value"] - RIPPLE["amplitude_Nm"]) < amp["std2"] + 0.05 * RIPPLE["amplitude_Nm"]
+    assert period["value"] == pytest.approx(RIPPLE["period_rad"], rel=2e-3)
+    assert {"ripple_sin", "ripple_cos"} <= set(refined.coef_) and "ripple_sin" not in est.coef_
+    assert refined.rel_error_ < est.rel_error_
+    assert refined.validation_rel_error_ == refined.refinement_.validation_rel_error_final
+    assert refined.validation_rel_error_ < est.validation_rel_error_
+    # the refined estimator predicts with the added term's columns
+    assert refined.score(val) == pytest.approx(1.0 - refined.validation_rel_error_, rel=1e-12)
+    assert refined.predict(train).shape == (refined.n_samples_,)
+    rec = refined.refinement_json()
+    assert rec["model"] == "new" and rec["steps"][0]["effect"] == "position_ripple"
+
+
+def test_paths_and_signals_are_accepted(fitted, csv_runs):
+    est, train, _ = fitted
+    again = JointModel(model="both").fit([str(p) for p in csv_runs[:3]])
+    assert again.coef_ == est.coef_
+    one = JointModel(model="usual").fit(train[0])
+    assert isinstance(train[0], Experiment) and one.n_samples_ > 100
+
+
+def test_bad_use_is_one_line_error(fitted):
+    est, train, _ = fitted
+    with pytest.raises(DataError, match="model 'bogus'"):
+        JointModel(model="bogus").fit(train)
+    with pytest.raises(DataError, match="estimator='iv' needs the reference"):
+        JointModel(model="usual", estimator="iv").fit(train)
+    with pytest.raises(DataError, match="not fitted"):
+        JointModel().predict(train)
+    with pytest.raises(DataError, match="no refinement"):
+        est.refinement_json()
+    with pytest.raises(DataError, match="expected Experiment objects"):
+        JointModel().fit([1, 2])
+    assert "model='new'" in repr(JointModel())
