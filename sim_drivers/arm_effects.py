@@ -11,8 +11,11 @@ for that joint:
 * quadratic viscous  ``F_VV dq |dq|``
 * torque lag         ``d tau_applied / dt = (tau_cmd - tau_applied) / T_lag`` (dynamic)
 
-All of the effect code of the arm simulator lives in this file so that it can be switched to a
-shared effects registry in one place.
+The effect code of the arm simulator lives in this file (parameters, vectorised formulas used
+by the inverse model), so that it can be switched to a shared effects registry in one place.
+One exception, for speed: :meth:`sim_drivers.arm_plant.ArmPlant._accel` inlines the scalar
+per-joint form of the same formulas, as ``sim_drivers.plant.JointPlant`` does; the test
+``test_one_joint_with_every_effect_is_the_joint_plant`` pins both to the single-joint plant.
 """
 
 from __future__ import annotations

@@ -57,6 +57,7 @@ index in the full chain, as ROBOT_FORMAT's parameter names use).
 """
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -179,6 +180,10 @@ def inverse_arm_torque(
 class ArmPlant:
     """The simulated arm, stepped once per control cycle.
 
+    The sliding path is plain Python over the joints (per-joint friction, like
+    ``sim_drivers.plant.JointPlant``) plus one ``pin.aba`` call: small numpy arrays cost more
+    per operation than scalar floats at k <= 6.
+
     Parameters
     ----------
     params : ArmParams
@@ -187,7 +192,7 @@ class ArmPlant:
     substeps : int
         Fixed integration sub-steps per cycle.
     seed : int
-        Seed of the applied-torque ripple noise.
+        Seed of the applied-torque ripple noise (used when :meth:`step` gets no noise).
     payload : Payload, optional
         Payload for the whole life of the plant.
 
@@ -199,6 +204,8 @@ class ArmPlant:
         Acceleration [rad/s^2] at time ``t`` under the torque applied during the last cycle.
     t : float
         Simulated time [s].
+    tau_cmd : ndarray, shape (k,)
+        Commanded joint-side torques of the last cycle [N m].
     tau_applied : ndarray, shape (k,)
         Torque acting on the joints at time ``t`` (lagged command + noise) [N m].
     tau_noise : ndarray, shape (k,)
@@ -209,6 +216,8 @@ class ArmPlant:
         The same at the start of the last cycle, acceleration and torque taken just after the
         cycle's command was applied (what an offline record aligned with the measured position
         of that cycle needs; as ``sim_drivers.plant.JointPlant``).
+    model, data : pinocchio.Model, pinocchio.Data
+        The dynamics model (rotor inertias as armature, gravity, payload) and its workspace.
     """
 
     def __init__(
@@ -235,22 +244,20 @@ class ArmPlant:
         self._rng = np.random.default_rng(seed)
         self._noise_std = np.array(params.drive.torque_noise_std_Nm)
         f, e = params.friction, params.effects
-        self._am, self._bm, self._cm, self._dm = f.a_m, f.b_m, f.c_m, f.d_m
-        self._ag, self._bg, self._cg, self._dg = f.a_g, f.b_g, f.c_g, f.d_g
-        self._off = f.tau_off
-        self._qs_inv = 1.0 / f.q_s
+        fv_pos, fv_neg = e.viscous_coefficients(f.F_V)
+        # one tuple of floats per joint (the hot loop unpacks it); effects: 0 = off
+        cols = (f.tau_off, 1.0 / f.q_s, fv_pos, fv_neg, e.F_VV,
+                f.c_m, f.d_m, f.a_m, f.b_m, f.c_g, f.d_g, f.a_g, f.b_g,
+                e.ripple_amplitude_Nm, 2.0 * math.pi / e.ripple_period_rad, e.ripple_phase_rad,
+                e.spring_stiffness_Nm_per_rad, e.spring_rest_rad,
+                e.warm_up_fraction, 1.0 / e.warm_up_time_constant_s)
+        self._jp = list(zip(*(np.asarray(c, dtype=float).tolist() for c in cols), strict=True))
         self._am1, self._ag1 = f.a_m + f.b_m, f.a_g - f.b_g
         self._dm1, self._dg1 = f.c_m + f.d_m, f.c_g + f.d_g
-        self._fv_pos, self._fv_neg = e.viscous_coefficients(f.F_V)
-        self._asym = bool(np.any(self._fv_pos != self._fv_neg))
-        self._fv = np.array(self._fv_pos)
-        self._fvv = np.array(e.F_VV) if np.any(e.F_VV) else None
-        self._eff = e
-        self._pos = e.any_position
-        self._wu = bool(np.any(e.warm_up_fraction))
         keep = e.lag_keep(self._h)
-        self._keep = keep if np.any(keep) else None
+        self._keep = keep.tolist() if np.any(keep) else None
         self._max_events = 2 * k + 2
+        self._il = np.tril_indices(k, -1)
         self.reset()
 
     # ----------------------------------------------------------------- state
@@ -266,8 +273,8 @@ class ArmPlant:
         self.tau_cmd = np.zeros(k)
         self.tau_applied = np.zeros(k)
         self.tau_noise = np.zeros(k)
-        self._lag = np.zeros(k)
-        self._quad = np.zeros(k, dtype=np.int8)
+        self._lag = [0.0] * k
+        self._quad = [0] * k
         self.regime = np.full(k, REGIME_REST, dtype=np.int8)
         self.q_start = self.q.copy()
         self.dq_start = np.zeros(k)
@@ -278,91 +285,135 @@ class ArmPlant:
     # ----------------------------------------------------------------- dynamics
     def acceleration(self, tau: Any, q: Any, dq: Any, t: float | None = None
                      ) -> tuple[np.ndarray, np.ndarray]:
-        """Forward dynamics ``(ddq, regime)`` for applied torques ``tau`` [N m] at state
+        """Forward dynamics ``(ddq, regime)`` for applied torques ``tau`` (k,) [N m] at state
         (q [rad], dq [rad/s], t [s]); see the module docstring. Does not change the state
         except the remembered quadrants used to break ties."""
-        return self._accel(np.asarray(tau, dtype=float), np.asarray(q, dtype=float),
-                           np.asarray(dq, dtype=float), self.t if t is None else float(t))
-
-    def _accel(self, tau: np.ndarray, q: np.ndarray, v: np.ndarray, t: float
-               ) -> tuple[np.ndarray, np.ndarray]:
-        r = tau - self._off
-        if self._pos:
-            r = r - self._eff.position_torque(q)
-        wf = (1.0 + self._eff.warm_up_fraction
-              * np.exp(-(t - self.t0) / self._eff.warm_up_time_constant_s)) if self._wu else None
-        rest = v == 0.0
-        n_rest = int(np.count_nonzero(rest))
-        if n_rest < self.k:
-            s = np.sign(v)
-            ex = np.exp(-np.abs(v) * self._qs_inv)
-            fv = np.where(v > 0.0, self._fv_pos, self._fv_neg) if self._asym else self._fv
-            rs = r - fv * v
-            if self._fvv is not None:
-                rs = rs - self._fvv * v * np.abs(v)
-            sw = s * wf if wf is not None else s
-            xm = (rs - sw * (self._cm + self._dm * ex)) / (self._am + self._bm * ex)
-            xg = (rs - sw * (self._cg + self._dg * ex)) / (self._ag - self._bg * ex)
-            mot = xm * s > 0.0
-            gen = xg * s < 0.0
-            use_m = mot & ~(gen & (self._quad < 0))
-            use_g = gen & ~use_m
-            tau_out = np.where(use_m, xm, np.where(use_g, xg, 0.0))
-            self._quad[use_m] = 1
-            self._quad[use_g] = -1
-            regime = np.where(use_m | use_g, REGIME_SLIDING, REGIME_ZERO_LOAD).astype(np.int8)
-        else:
-            tau_out = np.zeros(self.k)
-            regime = np.empty(self.k, dtype=np.int8)
-        if n_rest == 0:
-            return pin.aba(self.model, self.data, q, v, tau_out).copy(), regime
-        regime[rest] = REGIME_REST
-        return self._stiction(tau_out, r, q, v, rest, wf), regime
-
-    def _stiction(self, tau_out: np.ndarray, r: np.ndarray, q: np.ndarray, v: np.ndarray,
-                  rest: np.ndarray, wf: np.ndarray | None) -> np.ndarray:
-        """Constrained dynamics with the joints at rest stuck unless they break away."""
         k = self.k
-        m = pin.crba(self.model, self.data, q)
-        m = np.triu(m) + np.triu(m, 1).T
-        h = pin.nonLinearEffects(self.model, self.data, q, v).copy()
-        dm1 = self._dm1 if wf is None else wf * self._dm1
-        dg1 = self._dg1 if wf is None else wf * self._dg1
-        am1, ag1 = self._am1, self._ag1
-        stuck = rest.copy()
-        blocked = np.zeros(k, dtype=bool)
-        direction = np.zeros(k)
-        tau_out = tau_out.copy()
+        a, reg = self._accel(np.asarray(tau, dtype=float).reshape(k).tolist(),
+                             np.asarray(q, dtype=float).reshape(k).tolist(),
+                             np.asarray(dq, dtype=float).reshape(k).tolist(),
+                             self.t if t is None else float(t))
+        return np.array(a), np.array(reg, dtype=np.int8)
 
-        def solve(stuck: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            ddq = np.zeros(k)
-            free = ~stuck
-            if free.any():
-                ddq[free] = np.linalg.solve(m[np.ix_(free, free)], tau_out[free] - h[free])
-            return ddq, m[stuck] @ ddq + h[stuck]
+    def _accel(self, tau: list, q: list, v: list, t: float) -> tuple[list, list]:
+        """Hot path on lists of floats: ``(ddq, regime)``."""
+        k = self.k
+        out = [0.0] * k
+        reg = [REGIME_SLIDING] * k
+        r_rest: list = []
+        quad = self._quad
+        exp = math.exp
+        for j in range(k):
+            (off, qsi, fvp, fvn, fvv, cm, dm, am, bm, cg, dg, ag, bg,
+             rip_a, rip_k, rip_ph, spr_k, spr_q0, wu_w, wu_tinv) = self._jp[j]
+            vj = v[j]
+            r = tau[j] - off
+            if rip_a:
+                r -= rip_a * math.sin(rip_k * q[j] + rip_ph)
+            if spr_k:
+                r -= spr_k * (q[j] - spr_q0)
+            wf = 1.0 + wu_w * exp(-(t - self.t0) * wu_tinv) if wu_w else 1.0
+            if vj > 0.0:
+                s = wf
+                ex = exp(-vj * qsi)
+                r -= fvp * vj + fvv * vj * vj
+            elif vj < 0.0:
+                s = -wf
+                ex = exp(vj * qsi)
+                r -= fvn * vj - fvv * vj * vj
+            else:
+                reg[j] = REGIME_REST
+                r_rest.append((j, r, wf))
+                continue
+            # quadrant choice of sim_drivers.plant (s carries sign(dq) times the warm-up factor)
+            xm = (r - s * (cm + dm * ex)) / (am + bm * ex)
+            if xm * s > 0.0:
+                if quad[j] < 0:  # was generator: keep it if it is still consistent
+                    xg = (r - s * (cg + dg * ex)) / (ag - bg * ex)
+                    if xg * s < 0.0:
+                        out[j] = xg
+                        continue
+                quad[j] = 1
+                out[j] = xm
+            else:
+                xg = (r - s * (cg + dg * ex)) / (ag - bg * ex)
+                if xg * s < 0.0:
+                    quad[j] = -1
+                    out[j] = xg
+                else:
+                    reg[j] = REGIME_ZERO_LOAD
+        qa, va = np.array(q), np.array(v)
+        if not r_rest:
+            return pin.aba(self.model, self.data, qa, va, np.array(out)).tolist(), reg
+        return self._stiction(out, r_rest, qa, va), reg
 
-        for _ in range(k + 1):
-            ddq, load = solve(stuck)
-            idx = np.flatnonzero(stuck)
-            r0 = r[idx]
-            d_m, d_g = dm1[idx], dg1[idx]
-            a_m, a_g = am1[idx], ag1[idx]
-            dmax = np.maximum(d_m, d_g)
-            upper = np.where(load > 0, a_m * load + d_m,
-                             np.where(load < 0, a_g * load + d_g, dmax))
-            lower = np.where(load > 0, a_g * load - d_g,
-                             np.where(load < 0, a_m * load - d_m, -dmax))
-            excess = np.maximum(r0 - upper, lower - r0)
-            excess[blocked[idx]] = -np.inf
-            if not np.any(excess > 0):
+    def _stiction(self, tau_out: list, r_rest: list, q: np.ndarray, v: np.ndarray) -> list:
+        """Constrained dynamics with the joints at rest stuck unless they break away (module
+        docstring). ``tau_out``: output torques, 0 at the joints at rest; ``r_rest``: (joint,
+        driving torque r0 [N m], warm-up factor) per joint at rest.
+
+        With the unconstrained acceleration ``a0 = ABA(q, dq, tau_out)`` and ``Minv = M^-1``,
+        holding the stuck set S needs the extra torques ``lam_S = -(Minv_SS)^-1 a0_S``, which
+        are the holding (load) torques since tau_out,S = 0; then ``ddq = a0 + Minv_:S lam_S``.
+        Releasing joint j with output torque x adds ``Minv_:j x`` to a0.
+        """
+        a0 = pin.aba(self.model, self.data, q, v, np.array(tau_out))
+        minv = np.array(pin.computeMinverse(self.model, self.data, q))
+        il = self._il
+        minv[il] = minv.T[il]  # some pinocchio versions fill the upper triangle only
+        stuck = [j for j, _, _ in r_rest]
+        band = {j: (r, w) for j, r, w in r_rest}
+        blocked: set = set()
+        released: list = []  # (joint, direction)
+        quads = self._quad
+
+        def hold(stuck: list) -> tuple[np.ndarray, np.ndarray]:
+            if len(stuck) == 1:
+                j = stuck[0]
+                lam = np.array([-a0[j] / minv[j, j]])
+            else:
+                lam = -np.linalg.solve(minv[np.ix_(stuck, stuck)], a0[stuck])
+            ddq = a0 + minv[:, stuck] @ lam
+            ddq[stuck] = 0.0
+            return ddq, lam
+
+        for _ in range(len(stuck) + 1):
+            if not stuck:
+                ddq = a0.copy()
                 break
-            i = int(np.argmax(excess / (np.abs(load) + dmax + 1e-300)))
-            j = int(idx[i])
-            s = 1.0 if r0[i] > upper[i] else -1.0
-            lj = load[i]
-            quad = 1 if lj * s > 0 else -1 if lj * s < 0 else 0
-            xm = (r0[i] - s * d_m[i]) / a_m[i]
-            xg = (r0[i] - s * d_g[i]) / a_g[i]
+            ddq, lam = hold(stuck)
+            best, best_ex = -1, 0.0
+            for i, j in enumerate(stuck):
+                if j in blocked:
+                    continue
+                load = float(lam[i])
+                r, w = band[j]
+                am1, ag1 = float(self._am1[j]), float(self._ag1[j])
+                dm1, dg1 = w * float(self._dm1[j]), w * float(self._dg1[j])
+                dmax = dm1 if dm1 > dg1 else dg1
+                if abs(load) <= 1e-9 * dmax:  # round-off of a zero load (e.g. vertical axis)
+                    load = 0.0
+                if load > 0.0:
+                    upper, lower = am1 * load + dm1, ag1 * load - dg1
+                elif load < 0.0:
+                    upper, lower = ag1 * load + dg1, am1 * load - dm1
+                else:
+                    upper, lower = dmax, -dmax
+                ex = max(r - upper, lower - r)
+                if ex > 0.0:
+                    ex /= abs(load) + dmax + 1e-300  # relative excess: largest breaks first
+                    if ex > best_ex:
+                        best, best_ex = i, ex
+                        s = 1.0 if r > upper else -1.0
+                        rel = (load, am1, ag1, dm1, dg1)
+            if best < 0:
+                break
+            j = stuck[best]
+            load, am1, ag1, dm1, dg1 = rel
+            r = band[j][0]
+            quad = 1 if load * s > 0 else -1 if load * s < 0 else 0
+            xm = (r - s * dm1) / am1
+            xg = (r - s * dg1) / ag1
             mot, gen = xm * s > 0.0, xg * s < 0.0
             if mot and (not gen or quad >= 0):
                 quad, x = 1, xm
@@ -370,20 +421,22 @@ class ArmPlant:
                 quad, x = -1, xg
             else:
                 x = 0.0
-            self._quad[j] = quad
-            if (x - lj) * s <= 0.0:  # cannot happen with a valid plant: stay at rest
-                blocked[j] = True
+            quads[j] = quad
+            if (x - load) * s <= 0.0:  # cannot happen with a valid plant: stay at rest
+                blocked.add(j)
                 continue
-            tau_out[j] = x
-            stuck[j] = False
-            direction[j] = s
+            a0 = a0 + minv[:, j] * x
+            stuck.pop(best)
+            released.append((j, s, x))
         else:
-            ddq, _ = solve(stuck)
-        wrong = (direction != 0) & (ddq * direction <= 0)
-        if wrong.any():  # coupled releases pulled a joint back: hold it (see docstring)
-            stuck |= wrong
-            ddq, _ = solve(stuck)
-        return ddq
+            ddq, _ = hold(stuck) if stuck else (a0.copy(), None)
+        wrong = [(j, x) for j, s, x in released if ddq[j] * s <= 0.0]
+        if wrong:  # coupled releases pulled a joint back: hold it (see docstring)
+            for j, x in wrong:
+                a0 = a0 - minv[:, j] * x
+                stuck.append(j)
+            ddq, _ = hold(stuck)
+        return ddq.tolist()
 
     def step(self, tau_cmd: Any, noise: Any = None) -> None:
         """Advance one control cycle with the commanded joint-side torques ``tau_cmd`` (k,)
@@ -396,41 +449,55 @@ class ArmPlant:
             Ripple-noise sample of this cycle [N m]; default: drawn from the plant's generator
             with the drive's standard deviations.
         """
-        tau_cmd = np.asarray(tau_cmd, dtype=float)
+        k = self.k
+        cmd = np.asarray(tau_cmd, dtype=float).reshape(k)
         if noise is None:
-            noise = self._rng.standard_normal(self.k) * self._noise_std
-        self.tau_cmd = tau_cmd
-        self.tau_noise = noise
+            noise = self._rng.standard_normal(k) * self._noise_std
+        noise = np.asarray(noise, dtype=float).reshape(k)
+        self.tau_cmd, self.tau_noise = cmd, noise
+        cmd_l, noise_l = cmd.tolist(), noise.tolist()
         h = self._h
         keep = self._keep
-        lag = tau_cmd if keep is None else np.where(keep > 0, self._lag, tau_cmd)
-        q, v, t = self.q, self.dq, self.t
-        self.q_start, self.dq_start = q, v
+        if keep is None:
+            lag = cmd_l
+        else:
+            lag = [lg if kp > 0.0 else c for lg, kp, c in zip(self._lag, keep, cmd_l,
+                                                               strict=True)]
+        self.q_start, self.dq_start = self.q, self.dq
+        q, v, t = self.q.tolist(), self.dq.tolist(), self.t
         accel = self._accel
+        rng_k = range(k)
         for i in range(self.substeps):
-            tau = lag + noise
+            tau = [lg + n for lg, n in zip(lag, noise_l, strict=True)]
             rem, tt = h, t
             for ev in range(self._max_events):
                 a, regime = accel(tau, q, v, tt)
                 if i == 0 and ev == 0:
-                    self.ddq_start = a
-                    self.tau_applied_start = tau
-                    self.regime_start = regime
-                vn = v + a * rem
-                cross = (vn * v <= 0.0) & (v != 0.0)
-                if not cross.any():
-                    q = q + 0.5 * (v + vn) * rem
+                    a0, tau0, reg0 = a, tau, regime
+                # earliest zero crossing of a velocity within the rest of the sub-step
+                th = rem
+                hit: list = []
+                for j in rng_k:
+                    vj = v[j]
+                    if vj != 0.0 and (vj + a[j] * rem) * vj <= 0.0:
+                        aj = a[j]
+                        tj = -vj / aj if aj != 0.0 else rem
+                        if tj > rem:
+                            tj = rem
+                        if not hit or tj < th:
+                            th, hit = tj, [j]
+                        elif tj == th:
+                            hit.append(j)
+                if not hit:
+                    vn = [vj + aj * rem for vj, aj in zip(v, a, strict=True)]
+                    q = [qj + 0.5 * (vj + wj) * rem for qj, vj, wj in zip(q, v, vn, strict=True)]
                     v = vn
                     break
-                # a velocity reaches zero inside the sub-step: stop at the earliest crossing
-                ci = np.flatnonzero(cross)
-                ac = a[ci]
-                ths = np.where(ac != 0.0, -v[ci] / np.where(ac != 0.0, ac, 1.0), rem)
-                ths = np.minimum(ths, rem)
-                th = float(ths.min())
-                vn = v + a * th
-                vn[ci[ths <= th]] = 0.0
-                q = q + 0.5 * (v + vn) * th
+                # stop there (exactly), re-test stiction, integrate the rest of the sub-step
+                vn = [vj + aj * th for vj, aj in zip(v, a, strict=True)]
+                for j in hit:
+                    vn[j] = 0.0
+                q = [qj + 0.5 * (vj + wj) * th for qj, vj, wj in zip(q, v, vn, strict=True)]
                 v = vn
                 rem -= th
                 tt += th
@@ -438,17 +505,22 @@ class ArmPlant:
                     break
             else:  # too many events in one sub-step: finish it without detection
                 a, _ = accel(tau, q, v, tt)
-                vn = v + a * rem
-                q = q + 0.5 * (v + vn) * rem
+                vn = [vj + aj * rem for vj, aj in zip(v, a, strict=True)]
+                q = [qj + 0.5 * (vj + wj) * rem for qj, vj, wj in zip(q, v, vn, strict=True)]
                 v = vn
             t += h
             if keep is not None:
-                lag = tau_cmd + (lag - tau_cmd) * keep
-        self.q, self.dq, self.t = q, v, t
+                lag = [c + (lg - c) * kp for c, lg, kp in zip(cmd_l, lag, keep, strict=True)]
+        self.ddq_start = np.array(a0)
+        self.tau_applied_start = np.array(tau0)
+        self.regime_start = np.array(reg0, dtype=np.int8)
+        self.q, self.dq, self.t = np.array(q), np.array(v), t
         self._lag = lag
-        tau = lag + noise
-        self.tau_applied = tau
-        self.ddq, self.regime = accel(tau, q, v, t)
+        tau = [lg + n for lg, n in zip(lag, noise_l, strict=True)]
+        self.tau_applied = np.array(tau)
+        a, regime = accel(tau, q, v, t)
+        self.ddq = np.array(a)
+        self.regime = np.array(regime, dtype=np.int8)
 
     # ----------------------------------------------------------------- drive chain
     def encoder_counts(self) -> np.ndarray:

@@ -225,6 +225,8 @@ def _band(params, j, load):
     f = params.friction
     am1, ag1 = f.a_m[j] + f.b_m[j], f.a_g[j] - f.b_g[j]
     dm1, dg1 = f.c_m[j] + f.d_m[j], f.c_g[j] + f.d_g[j]
+    if abs(load) < 1e-9:  # no load (vertical axis): the wider of the two dry bands
+        return -max(dm1, dg1), max(dm1, dg1)
     if load > 0:
         return ag1 * load - dg1, am1 * load + dm1
     return am1 * load - dm1, ag1 * load + dg1
