@@ -189,6 +189,22 @@ class ArmRun:
     def payload_mass_kg(self) -> float:
         return 0.0 if self.payload is None else self.payload.mass
 
+    def columns(self) -> dict[str, np.ndarray]:
+        """The logged signals as multi-axis columns (ROBOT_FORMAT): ``t``, ``q1..qk``
+        (measured), ``tau1..tauk`` (torque references), ``q_ref1..q_refk``; i = 1..k is the
+        index in the moving chain."""
+        out = {"t": self.t}
+        for name, arr in (("q", self.q), ("tau", self.tau_ref), ("q_ref", self.q_ref)):
+            for i in range(self.k):
+                out[f"{name}{i + 1}"] = arr[:, i]
+        return out
+
+    def to_csv(self, path: Any) -> None:
+        """Write :meth:`columns` as a comma-separated file with a header line."""
+        cols = self.columns()
+        np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",",
+                   header=",".join(cols), comments="", fmt="%.17g")
+
 
 def _reference_arrays(reference: Any, k: int) -> tuple[np.ndarray, ...]:
     try:

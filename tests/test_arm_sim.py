@@ -5,6 +5,7 @@ the closed loop tracks, payloads change the truth as eq. 34-35 say, runs are rep
 from __future__ import annotations
 
 import dataclasses
+from types import SimpleNamespace
 
 import numpy as np
 import pinocchio as pin
@@ -198,6 +199,47 @@ def test_one_joint_with_every_effect_is_the_joint_plant():
     assert np.sum(regimes[:, 0] == PLANT_REST) > 100
     assert np.array_equal(regimes[:, 0], regimes[:, 1])
     np.testing.assert_allclose(out[:, 1], out[:, 0], rtol=0, atol=1e-10)
+
+
+def test_one_joint_closed_loop_is_the_offline_simulator():
+    """simulate_arm on the equivalent pendulum, with the single-joint controller's
+    feed-forward as an array, is sim_drivers.offline.simulate (noise off) sample for sample."""
+    try:  # the controller is moving to daq.protocol.control
+        from daq.protocol.control import ControllerGains
+    except ImportError:
+        from daq.control import ControllerGains
+    from sim_drivers.offline import simulate
+
+    plant = quiet_plant()
+    arm = pendulum(plant)
+    t = np.arange(0.0, 4.0, 0.001)
+    w = 2 * np.pi * 0.3
+    q = -1.0 + 0.5 * np.sin(w * t)
+    dq = 0.5 * w * np.cos(w * t)
+    ddq = -0.5 * w * w * np.sin(w * t)
+    g1 = ControllerGains(kp=20000.0, kd=1000.0, J_ff=31.0, MX_ff=21.1, MY_ff=-0.8, Fc_ff=25.0,
+                         Fv_ff=40.0)
+    single = simulate(plant, SimpleNamespace(t=t, q=q, dq=dq, ddq=ddq), g1, seed=0)
+    ff = (31.0 * ddq + G * (21.1 * np.cos(q) - 0.8 * np.sin(q)))[:, None]
+    ga = ArmGains(kp=[20000.0], kd=[1000.0], Fc_ff=[25.0], Fv_ff=[40.0])
+    multi = simulate_arm(arm, SimpleNamespace(t=t, q=q[:, None], dq=dq[:, None],
+                                              ddq=ddq[:, None]), ga, feedforward=ff)
+    assert np.sum(single.stuck) > 5  # it sticks at the reversals
+    assert np.array_equal(multi.x[:, 0], single.x) and np.array_equal(multi.counts[:, 0],
+                                                                      single.counts)
+    np.testing.assert_allclose(multi.q_true[:, 0], single.q_true, rtol=0, atol=1e-10)
+    np.testing.assert_array_equal(multi.regime[:, 0], single.regime)
+
+
+def test_run_columns_follow_the_multi_axis_layout(run3, tmp_path):
+    _, run = run3
+    cols = run.columns()
+    assert list(cols) == ["t", "q1", "q2", "q3", "tau1", "tau2", "tau3", "q_ref1", "q_ref2",
+                          "q_ref3"]
+    run.to_csv(tmp_path / "run.csv")
+    back = np.genfromtxt(tmp_path / "run.csv", delimiter=",", names=True)
+    np.testing.assert_array_equal(back["tau2"], run.tau_ref[:, 1])
+    np.testing.assert_array_equal(back["q3"], run.q[:, 2])
 
 
 def test_effects_enter_the_inverse_model(ur3dof):
