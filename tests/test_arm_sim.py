@@ -190,11 +190,14 @@ def test_one_joint_with_every_effect_is_the_joint_plant():
         TorqueLag,
         WarmUp,
     )
-    eff = Effects(position_ripple=PositionRipple(True, 6.0, 0.3, 0.4),
-                  spring=Spring(True, 20.0, -0.8), warm_up=WarmUp(True, 0.3, 3.0),
-                  asymmetric_viscous=AsymmetricViscous(True, 46.0, 33.0),
-                  quadratic_viscous=QuadraticViscous(True, 8.0),
-                  torque_lag=TorqueLag(True, 0.003))
+    eff = Effects(
+        position_ripple=PositionRipple(enabled=True, amplitude_Nm=6.0, period_rad=0.3,
+                                       phase_rad=0.4),
+        spring=Spring(enabled=True, stiffness_Nm_per_rad=20.0, rest_position_rad=-0.8),
+        warm_up=WarmUp(enabled=True, fraction=0.3, time_constant_s=3.0),
+        asymmetric_viscous=AsymmetricViscous(enabled=True, F_V_pos=46.0, F_V_neg=33.0),
+        quadratic_viscous=QuadraticViscous(enabled=True, F_VV=8.0),
+        torque_lag=TorqueLag(enabled=True, time_constant_s=0.003))
     out, regimes = _compare_with_joint_plant(quiet_plant(eff))
     assert np.sum(regimes[:, 0] == PLANT_REST) > 100
     assert np.array_equal(regimes[:, 0], regimes[:, 1])
@@ -292,6 +295,29 @@ def test_stiction_holds_inside_the_band_and_releases_outside(ur3dof, j):
         ddq, reg = plant.acceleration(tau, q, np.zeros(3))
         assert ddq[j] * direction > 0 and np.all(np.delete(ddq, j) == 0)
         assert np.all(reg == REGIME_REST)
+
+
+@settings(max_examples=10, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 2**31 - 1), j=st.integers(0, 5))
+def test_stiction_band_edges_on_random_configurations(ur6dof, seed, j):
+    """Six joints at rest at a random configuration, each held by its gravity torque: joint j
+    stays stuck just inside either edge of its band and breaks away just outside it."""
+    rng = np.random.default_rng(seed)
+    plant = ArmPlant(ur6dof, 0.001)
+    q = rng.uniform(-2.5, 2.5, 6)
+    hold = pin.computeGeneralizedGravity(plant.model, plant.data, q)
+    off = ur6dof.friction.tau_off
+    lo, hi = _band(ur6dof, j, hold[j])
+    for edge, direction in ((hi, 1.0), (lo, -1.0)):
+        eps = 1e-7 * (1 + abs(edge))
+        tau = hold + off
+        tau[j] = off[j] + edge - direction * eps
+        ddq, _ = plant.acceleration(tau, q, np.zeros(6))
+        assert np.all(ddq == 0)
+        tau[j] = off[j] + edge + direction * eps
+        ddq, _ = plant.acceleration(tau, q, np.zeros(6))
+        assert ddq[j] * direction > 0 and np.all(np.delete(ddq, j) == 0)
 
 
 def test_stuck_joint_holds_the_load_of_the_moving_ones(ur3dof):
