@@ -376,3 +376,32 @@ def simulate_arm(
         q_true=q_true, dq_true=dq_true, ddq_true=ddq_true, regime=regime,
         q_ref=ref_q, dq_ref=ref_dq, ddq_ref=ref_ddq, payload=payload,
         cycle_s=float(cycle_s), joint_numbers=params.joint_numbers)
+
+
+def simulate_arm_payloads(
+    params: ArmParams,
+    reference: Any,
+    gains: ArmGains,
+    payloads: Any,
+    *,
+    seed: int = 0,
+    **kw: Any,
+) -> list[ArmRun]:
+    """One :func:`simulate_arm` run per payload, as a campaign does (paper IV.B).
+
+    Parameters
+    ----------
+    payloads : iterable of Payload or None
+        None (or a Payload of mass 0) is the run without payload.
+    seed : int
+        Run i uses seed ``seed + i`` (independent noise per run, reproducible).
+    **kw
+        Other keywords of :func:`simulate_arm` (cycle_s, substeps, q0, feedforward).
+
+    Returns
+    -------
+    list of ArmRun
+        In the order of ``payloads``; each run starts at rest with a fresh plant.
+    """
+    return [simulate_arm(params, reference, gains, payload=pay, seed=seed + i, **kw)
+            for i, pay in enumerate(payloads)]

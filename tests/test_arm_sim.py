@@ -30,6 +30,7 @@ from sim_drivers.arm import (
     model_reference,
     output_arm_torque,
     simulate_arm,
+    simulate_arm_payloads,
     sine_reference,
 )
 from sim_drivers.plant import REGIME_REST as PLANT_REST
@@ -395,6 +396,20 @@ def test_payload_changes_only_the_last_link_as_eq_34():
     expected = (j_total * 2.0 + base["MX1"] * G * np.cos(0.4) - base["MY1"] * G * np.sin(0.4)
                 + ma * la * (la * 2.0 + G * np.cos(0.4)))
     assert tau_out[0, 0] == pytest.approx(expected, rel=1e-12)
+
+
+def test_payload_runs_need_more_torque(ur3dof):
+    ref = model_reference(ur3dof.model, duration_s=2.5, ramp_s=0.5, seed=6)
+    gains = ArmGains.for_params(ur3dof)
+    runs = simulate_arm_payloads(ur3dof, ref, gains, [None, Payload(8.0, [0.0, 0.0, 0.1])],
+                                 seed=3)
+    assert [r.payload_mass_kg for r in runs] == [0.0, 8.0]
+    assert not np.array_equal(runs[0].tau_noise, runs[1].tau_noise)
+    # the shoulder lift holds the extra weight: its mean torque grows in magnitude
+    assert np.abs(runs[1].tau_ref[:, 1]).mean() > np.abs(runs[0].tau_ref[:, 1]).mean() + 20
+    for r in runs:
+        tau = inverse_arm_torque(ur3dof, r.q_true, r.dq_true, r.ddq_true, r.payload, r.t)
+        assert np.max(np.abs(tau - r.tau_applied)[r.sliding]) < 1e-9 * 1e3
 
 
 def test_payload_on_a_named_frame(ur6dof):
