@@ -397,7 +397,8 @@ class ArmParams:
         model : pinocchio.Model
             Rigid body of the moving joints.
         friction : ArmFriction or dict, optional
-            Friction to use instead of the default (dict: name -> scalar or (k,) values).
+            Friction to use instead of the default; a dict (attribute name -> scalar or (k,)
+            values) overrides only the coefficients it names.
         Ia, drive, effects, gravity, joint_numbers, name
             As the attributes; defaults as above (gravity: the model's).
         """
@@ -405,13 +406,17 @@ class ArmParams:
         load, diag = cls._loads(model, acceleration_scale, seed)
         if Ia is None:
             Ia = np.maximum(0.5 * diag, 0.05)
-        if friction is None:
-            friction = ArmFriction(
+        if not isinstance(friction, ArmFriction):
+            default = dict(
                 a_m=np.full(k, 1.05), b_m=np.full(k, 0.25), a_g=np.full(k, 0.92),
                 b_g=np.full(k, 0.27), c_m=0.05 * load, d_m=0.02 * load, c_g=0.04 * load,
                 d_g=0.015 * load, F_V=0.08 * load, tau_off=0.02 * load, q_s=np.full(k, q_s))
-        elif isinstance(friction, dict):
-            friction = ArmFriction.from_dict(friction, k)
+            unknown = sorted(set(friction or {}) - set(default))
+            if unknown:
+                raise ArmParamsError(f"friction: unknown key(s) {unknown}; expected "
+                                     f"{sorted(default)}")
+            default.update({n: _vec(f"friction.{n}", v, k) for n, v in (friction or {}).items()})
+            friction = ArmFriction(**default)
         if drive is None:
             n = np.full(k, 100.0)
             drive = ArmDrive(gear_ratio=n, rated_torque_Nm=2.0 * load / n,

@@ -463,6 +463,9 @@ def test_bad_parameters_are_named(ur3dof):
         dataclasses.replace(ur3dof, Ia=[1.0, 2.0])
     with pytest.raises(ArmParamsError, match="friction: unknown key"):
         ArmParams.from_model(ur10(3), friction={"a_m": 1.0, "bogus": 2})
+    partial = ArmParams.from_model(ur10(3), friction={"q_s": 0.05, "c_m": [1.0, 2.0, 3.0]})
+    assert partial.truth()["qs2"] == 0.05 and partial.truth()["c_m3"] == 3.0
+    assert partial.truth()["a_m1"] == ur3dof.truth()["a_m1"]
     with pytest.raises(ArmParamsError, match="Payload.mass"):
         Payload(-1.0)
     with pytest.raises(SimError, match="unknown effect 'wobble'"):
