@@ -299,8 +299,8 @@ def simulate_arm(
         cycle (and ``t`` (n,) [s] when ``cycle_s`` is not given), e.g.
         :func:`sim_drivers.arm_reference.sine_reference`.
     gains : ArmGains
-    payload : Payload, optional
-        Payload at the flange for the whole run.
+    payload : Payload or RobotPayload-like, optional
+        Payload at the flange for the whole run (see ``Payload.coerce``).
     seed : int
         Seed of the ripple noise (same seed, same run).
     cycle_s : float, optional
@@ -321,6 +321,7 @@ def simulate_arm(
         Malformed reference, gains of the wrong size, unknown feed-forward.
     """
     k = params.k
+    payload = Payload.coerce(payload)
     ref_q, ref_dq, ref_ddq = _reference_arrays(reference, k)
     n = ref_q.shape[0]
     if gains.k != k:

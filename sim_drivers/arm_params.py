@@ -173,6 +173,11 @@ class ArmDrive:
 class Payload:
     """Payload fixed to the flange (paper IV.C, eq. 32-35 generalised).
 
+    Same convention as ``trajectories``' campaign payloads (``RobotPayload``): inertia about
+    the centre of mass, flange axes (eq. 32); :attr:`inertia_origin` and
+    :meth:`dynamic_parameters` give it about the flange origin (Huygens, eq. 33), as the
+    standard parameters are.
+
     Attributes
     ----------
     mass : float
@@ -180,17 +185,15 @@ class Payload:
     com : ndarray, shape (3,)
         Centre of mass in the flange frame [m].
     inertia : ndarray, shape (6,)
-        XX, XY, XZ, YY, YZ, ZZ [kg m^2] about the flange frame ORIGIN (Khalil's convention,
-        like the standard parameters and eq. 33); default (None): a point mass at ``com``,
-        ``mass (|com|^2 I - com com^T)``. Use :meth:`from_com_inertia` for an inertia about
-        the centre of mass (eq. 32).
+        XX, XY, XZ, YY, YZ, ZZ [kg m^2] about the centre of mass, axes of the flange frame
+        (default 0: a point mass).
     frame : str or None
         Pinocchio frame the payload is fixed to; None: the frame of the last moving joint.
     """
 
     mass: float
     com: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    inertia: np.ndarray | None = None
+    inertia: np.ndarray = field(default_factory=lambda: np.zeros(6))
     frame: str | None = None
 
     def __post_init__(self) -> None:
@@ -198,33 +201,38 @@ class Payload:
         if not (math.isfinite(m) and m >= 0):
             raise ArmParamsError(f"Payload.mass: expected a finite mass >= 0 [kg], got {m!r}")
         object.__setattr__(self, "mass", m)
-        c = _vec("Payload.com", self.com, 3)
-        object.__setattr__(self, "com", c)
-        if self.inertia is None:
-            i_o = m * (c @ c * np.eye(3) - np.outer(c, c))
-            inertia = [i_o[0, 0], i_o[0, 1], i_o[0, 2], i_o[1, 1], i_o[1, 2], i_o[2, 2]]
-        else:
-            inertia = self.inertia
-        object.__setattr__(self, "inertia", _vec("Payload.inertia", inertia, 6))
+        object.__setattr__(self, "com", _vec("Payload.com", self.com, 3))
+        object.__setattr__(self, "inertia", _vec("Payload.inertia", self.inertia, 6))
         if m == 0 and (np.any(self.inertia) or np.any(self.com)):
             raise ArmParamsError("Payload: a payload of mass 0 must have zero com and inertia")
 
     @classmethod
-    def from_com_inertia(cls, mass: float, com: Any, inertia_com: Any,
-                         frame: str | None = None) -> Payload:
-        """Payload from its inertia about its centre of mass (axes of the flange frame),
-        XX, XY, XZ, YY, YZ, ZZ [kg m^2]; Huygens gives the inertia about the origin (eq. 33)."""
-        c = _vec("Payload.com", com, 3)
-        xx, xy, xz, yy, yz, zz = _vec("Payload.inertia", inertia_com, 6)
-        i_c = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
-        i_o = i_c + float(mass) * (c @ c * np.eye(3) - np.outer(c, c))
-        return cls(mass, c, np.array([i_o[0, 0], i_o[0, 1], i_o[0, 2], i_o[1, 1], i_o[1, 2],
-                                      i_o[2, 2]]), frame)
+    def coerce(cls, payload: Any) -> Payload | None:
+        """A Payload from None, a Payload, or any object with ``mass_kg`` (or ``mass``),
+        ``com`` and ``inertia`` about the centre of mass (e.g. a campaign's ``RobotPayload``),
+        and optionally ``frame``."""
+        if payload is None or isinstance(payload, Payload):
+            return payload
+        mass = getattr(payload, "mass_kg", getattr(payload, "mass", None))
+        if mass is None:
+            raise ArmParamsError(f"payload: expected a Payload or an object with mass_kg, com "
+                                 f"and inertia, got {type(payload).__name__}")
+        return cls(float(mass), getattr(payload, "com", np.zeros(3)),
+                   getattr(payload, "inertia", np.zeros(6)), getattr(payload, "frame", None))
+
+    @property
+    def inertia_origin(self) -> np.ndarray:
+        """XX, XY, XZ, YY, YZ, ZZ about the flange frame origin [kg m^2] (eq. 33)."""
+        xx, xy, xz, yy, yz, zz = self.inertia
+        c = self.com
+        i_o = (np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+               + self.mass * (c @ c * np.eye(3) - np.outer(c, c)))
+        return np.array([i_o[0, 0], i_o[0, 1], i_o[0, 2], i_o[1, 1], i_o[1, 2], i_o[2, 2]])
 
     def dynamic_parameters(self) -> np.ndarray:
-        """Pinocchio order [m, mc_x, mc_y, mc_z, Ixx, Ixy, Iyy, Ixz, Iyz, Izz] (about the
-        frame origin)."""
-        xx, xy, xz, yy, yz, zz = self.inertia
+        """Pinocchio order [m, mc_x, mc_y, mc_z, Ixx, Ixy, Iyy, Ixz, Iyz, Izz] (inertia about
+        the frame origin)."""
+        xx, xy, xz, yy, yz, zz = self.inertia_origin
         mc = self.mass * self.com
         return np.array([self.mass, *mc, xx, xy, yy, xz, yz, zz])
 
@@ -320,6 +328,7 @@ class ArmParams:
     # ------------------------------------------------------------------ models
     def payload_inertia(self, payload: Payload | None) -> tuple[int, pin.Inertia]:
         """(pinocchio joint id, inertia in that joint's frame) of a payload."""
+        payload = Payload.coerce(payload)
         if payload is None or payload.mass == 0:
             return self.k, pin.Inertia.Zero()
         model = self.model
@@ -339,8 +348,7 @@ class ArmParams:
         m.armature = np.array(self.Ia, dtype=float)
         m.gravity = pin.Motion(np.array(self.gravity), np.zeros(3))
         jid, inertia = self.payload_inertia(payload)
-        if payload is not None and payload.mass > 0:
-            m.inertias[jid] = m.inertias[jid] + inertia
+        m.inertias[jid] = m.inertias[jid] + inertia
         return m
 
     def truth(self, payload: Payload | None = None) -> dict[str, float]:

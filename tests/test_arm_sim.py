@@ -54,7 +54,7 @@ def ur6dof() -> ArmParams:
     return ArmParams.from_model(ur10(6))
 
 
-PAYLOAD = Payload.from_com_inertia(3.0, [0.0, 0.05, 0.12], [0.01, 0.0, 0.0, 0.01, 0.0, 0.02])
+PAYLOAD = Payload(3.0, [0.0, 0.05, 0.12], [0.01, 0.0, 0.0, 0.01, 0.0, 0.02])
 
 
 @pytest.fixture(scope="module")
@@ -445,13 +445,18 @@ def test_truth_names_follow_the_contract(ur3dof):
                                       * (inert.lever[0] ** 2 + inert.lever[1] ** 2))
 
 
-def test_payload_from_com_inertia_is_huygens():
-    p = Payload.from_com_inertia(2.0, [0.1, 0.0, 0.0], [0.01, 0, 0, 0.02, 0, 0.03])
-    np.testing.assert_allclose(p.inertia, [0.01, 0, 0, 0.02 + 0.02, 0, 0.03 + 0.02])
+def test_payload_inertia_about_the_origin_is_huygens():
+    p = Payload(2.0, [0.1, 0.0, 0.0], [0.01, 0, 0, 0.02, 0, 0.03])  # about the CoM (eq. 32)
+    np.testing.assert_allclose(p.inertia_origin, [0.01, 0, 0, 0.02 + 0.02, 0, 0.03 + 0.02])
     point = Payload(2.0, [0.1, 0.2, 0.0])  # default inertia: a point mass
-    np.testing.assert_allclose(point.inertia, Payload.from_com_inertia(
-        2.0, [0.1, 0.2, 0.0], np.zeros(6)).inertia)
-    np.testing.assert_allclose(point.inertia, [0.08, -0.04, 0, 0.02, 0, 0.1])
+    np.testing.assert_allclose(point.inertia_origin, [0.08, -0.04, 0, 0.02, 0, 0.1])
+    # a campaign payload (mass_kg, com, inertia about the CoM) is accepted as is
+    campaign_like = SimpleNamespace(mass_kg=2.0, com=(0.1, 0.0, 0.0),
+                                    inertia=(0.01, 0, 0, 0.02, 0, 0.03))
+    np.testing.assert_array_equal(Payload.coerce(campaign_like).dynamic_parameters(),
+                                  p.dynamic_parameters())
+    with pytest.raises(ArmParamsError, match="expected a Payload"):
+        Payload.coerce(3.0)
 
 
 # --------------------------------------------------------------------------- inputs
