@@ -384,6 +384,7 @@ class ArmParams:
         effects: ArmEffects | None = None,
         gravity: Any = None,
         q_s: float = 0.03,
+        gear_ratio: Any = 100.0,
         acceleration_scale: float = 3.0,
         joint_numbers: Any = None,
         name: str = "",
@@ -397,8 +398,8 @@ class ArmParams:
         ``sim_drivers/data/plant_default.toml`` scaled by L: a_m 1.05, b_m 0.25, a_g 0.92,
         b_g 0.27, c_m 5 % L, d_m 2 % L, c_g 4 % L, d_g 1.5 % L, F_V 8 % L per rad/s, tau_off
         2 % L, q_s 0.03 rad/s; Ia = half the largest diagonal inertia of the link (at least
-        0.05 kg m^2); drive N = 100, rated torque such that 1 per-mille = 0.2 % L, 4096 counts
-        per motor revolution, ripple noise 1 % L.
+        0.05 kg m^2); drive N = ``gear_ratio``, rated torque such that 1 per-mille = 0.2 % L,
+        4096 counts per motor revolution, ripple noise 1 % L.
 
         Parameters
         ----------
@@ -407,13 +408,22 @@ class ArmParams:
         friction : ArmFriction or dict, optional
             Friction to use instead of the default; a dict (attribute name -> scalar or (k,)
             values) overrides only the coefficients it names.
-        Ia, drive, effects, gravity, joint_numbers, name
+        Ia : array_like (k,), optional
+            Rotor inertias [kg m^2]; NaN entries (or None) take the default.
+        gear_ratio : float or array_like (k,)
+            N of the default drive (ignored when ``drive`` is given).
+        drive, effects, gravity, joint_numbers, name
             As the attributes; defaults as above (gravity: the model's).
         """
         k = _check_model(model)
         load, diag = cls._loads(model, acceleration_scale, seed)
+        ia_default = np.maximum(0.5 * diag, 0.05)
         if Ia is None:
-            Ia = np.maximum(0.5 * diag, 0.05)
+            Ia = ia_default
+        else:
+            Ia = np.array([np.nan if v is None else v for v in np.broadcast_to(
+                np.asarray(Ia, dtype=object), (k,))], dtype=float)
+            Ia = np.where(np.isnan(Ia), ia_default, Ia)
         if not isinstance(friction, ArmFriction):
             default = dict(
                 a_m=np.full(k, 1.05), b_m=np.full(k, 0.25), a_g=np.full(k, 0.92),
@@ -426,7 +436,7 @@ class ArmParams:
             default.update({n: _vec(f"friction.{n}", v, k) for n, v in (friction or {}).items()})
             friction = ArmFriction(**default)
         if drive is None:
-            n = np.full(k, 100.0)
+            n = _vec("gear_ratio", gear_ratio, k)
             drive = ArmDrive(gear_ratio=n, rated_torque_Nm=2.0 * load / n,
                              encoder_counts_per_rev=np.full(k, 4096.0),
                              torque_noise_std_Nm=0.01 * load)
@@ -434,6 +444,32 @@ class ArmParams:
             gravity = np.array(model.gravity.linear)
         return cls(model=model, Ia=Ia, friction=friction, drive=drive, effects=effects,
                    gravity=gravity, joint_numbers=joint_numbers, name=name)
+
+    @classmethod
+    def from_robot(cls, robot: Any, friction: Any = None, **kw: Any) -> ArmParams:
+        """A plausible truth for a robot description (``trajectories.robot.Robot``, ROBOT_FORMAT).
+
+        Uses ``robot.reduced()`` (the moving joints, locked ones at their values), labels the
+        joints by their 1-based index in the full chain (``robot.joint_names``), and takes from
+        ``robot.drives`` (per moving joint, by name or in order; entries may be None) the gear
+        ratio N (default 100) and the rotor inertia J_m, ``Ia = N^2 J_m`` (default: as
+        :meth:`from_model`). Other keywords go to :meth:`from_model`.
+        """
+        model = robot.reduced()
+        names = list(robot.joint_names)
+        moving = list(robot.moving)
+        drives = getattr(robot, "drives", None) or {}
+        per = [drives.get(n) if hasattr(drives, "get") else drives[i]
+               for i, n in enumerate(moving)]
+        gear = np.array([float(getattr(d, "gear_ratio", None) or 100.0) for d in per])
+        jm = [getattr(d, "rotor_inertia", None) for d in per]
+        ia = [g * g * float(j) if isinstance(j, (int, float)) else None
+              for g, j in zip(gear, jm, strict=True)]
+        kw.setdefault("joint_numbers", [names.index(n) + 1 for n in moving])
+        kw.setdefault("name", getattr(robot, "name", ""))
+        kw.setdefault("Ia", ia)
+        kw.setdefault("gear_ratio", gear)
+        return cls.from_model(model, friction, **kw)
 
     @staticmethod
     def _loads(model: pin.Model, acc: float, seed: int) -> tuple[np.ndarray, np.ndarray]:

@@ -38,7 +38,7 @@ from sim_drivers.plant import REGIME_SLIDING as PLANT_SLIDING
 from sim_drivers.plant import REGIME_ZERO_LOAD as PLANT_ZERO_LOAD
 from sim_drivers.plant import JointPlant
 from sim_drivers.plant_config import default_plant
-from sim_drivers.robots import example_robot_urdf, ur10
+from sim_drivers.robots import example_robot_model, example_robot_urdf, ur10
 
 G = 9.81
 
@@ -443,6 +443,25 @@ def test_truth_names_follow_the_contract(ur3dof):
     assert tr["MX2"] == pytest.approx(inert.mass * inert.lever[0])
     assert tr["ZZ2"] == pytest.approx(inert.inertia[2, 2] + inert.mass
                                       * (inert.lever[0] ** 2 + inert.lever[1] ** 2))
+
+
+def test_params_from_a_robot_description():
+    """ROBOT_FORMAT's Robot (a stand-in built on the real UR10 until trajectories.robot lands):
+    joints labelled by their index in the full chain, gear ratios and rotor inertias used."""
+    full = ur10(6)
+    names = tuple(full.names[1:])
+    locked = {"shoulder_pan_joint": 0.0, "wrist_1_joint": -1.5, "wrist_2_joint": 0.0,
+              "wrist_3_joint": 0.0}
+    moving = ("shoulder_lift_joint", "elbow_joint")
+    drives = {"shoulder_lift_joint": SimpleNamespace(gear_ratio=120.0, rotor_inertia=2e-4),
+              "elbow_joint": None}
+    robot = SimpleNamespace(name="ur10-2", joint_names=names, moving=moving, drives=drives,
+                            reduced=lambda: example_robot_model("ur10", locked=locked))
+    p = ArmParams.from_robot(robot)
+    assert p.joint_numbers == (2, 3) and p.name == "ur10-2"
+    tr = p.truth()
+    assert tr["Ia2"] == pytest.approx(120.0**2 * 2e-4) and "ZZ3" in tr and "ZZ1" not in tr
+    assert p.drive.gear_ratio.tolist() == [120.0, 100.0]
 
 
 def test_payload_inertia_about_the_origin_is_huygens():
