@@ -149,8 +149,8 @@ def test_forward_then_inverse_on_random_states(ur6dof, seed):
     err = np.abs(back - tau)[sl]
     assert err.max() < 1e-9 * max(1.0, np.abs(tau).max())
     tau_out = output_arm_torque(ur6dof, q, dq, ddq)
-    pw = np.sign(tau_out * dq)[sl]
-    assert (pw > 0).any() and (pw < 0).any()
+    pw = np.where(sl, np.sign(tau_out * dq), 0.0)
+    assert np.all((pw > 0).any(axis=0)) and np.all((pw < 0).any(axis=0))  # every joint
 
 
 # --------------------------------------------------------------------------- one joint
