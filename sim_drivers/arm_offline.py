@@ -352,7 +352,7 @@ def simulate_arm(
     alpha = wc / (1.0 + wc)
     dq_est = np.zeros(k)
     q_prev: np.ndarray | None = None
-    step = plant.step
+    step, quantise = plant.step, drive.quantise
     for i in range(n):
         c = np.rint(plant.q * cpr)
         counts[i] = c
@@ -363,7 +363,7 @@ def simulate_arm(
             dq_est += alpha * ((qm - q_prev) / cycle_s - dq_est)
         q_prev = qm
         tau = ff[i] + kp * (ref_q[i] - qm) + kd * (ref_dq[i] - dq_est)
-        x = np.clip(np.rint(tau / per_mille), -32768, 32767)
+        x = quantise(tau)
         xs[i] = x
         step(x * per_mille, noise[i])
         ddq_true[i] = plant.ddq_start

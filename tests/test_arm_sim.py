@@ -479,6 +479,15 @@ def test_payload_inertia_about_the_origin_is_huygens():
 
 
 # --------------------------------------------------------------------------- inputs
+def test_drive_quantisation_is_0x6071_per_mille():
+    d = ArmDrive(gear_ratio=[100.0, 50.0], rated_torque_Nm=[5.0, 2.0],
+                 encoder_counts_per_rev=[4096, 1000], torque_noise_std_Nm=0.0)
+    np.testing.assert_allclose(d.torque_per_permille, [0.5, 0.1])
+    np.testing.assert_allclose(d.counts_per_rad, [100 * 4096 / (2 * np.pi), 50e3 / (2 * np.pi)])
+    x = d.quantise(np.array([[1.26, -0.26], [1e9, -1e9]]))
+    assert x.dtype == np.int16 and x.tolist() == [[3, -3], [32767, -32768]]
+
+
 def test_bad_parameters_are_named(ur3dof):
     f = ur3dof.friction
     with pytest.raises(ArmParamsError, match="a_g - b_g > 0.*joint index 2"):
