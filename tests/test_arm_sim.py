@@ -153,6 +153,31 @@ def test_forward_then_inverse_on_random_states(ur6dof, seed):
     assert np.all((pw > 0).any(axis=0)) and np.all((pw < 0).any(axis=0))  # every joint
 
 
+def test_prismatic_and_revolute_chain():
+    """A vertical prismatic axis carrying a revolute one: gravity acts on the slide (its holding
+    force is the carried weight), and the record is still the inverse model's truth."""
+    m = pin.Model()
+    m.name = "lift-and-turn"
+    j1 = m.addJoint(0, pin.JointModelPZ(), pin.SE3.Identity(), "lift")
+    m.appendBodyToJoint(j1, pin.Inertia(20.0, np.zeros(3), np.eye(3) * 0.5), pin.SE3.Identity())
+    j2 = m.addJoint(j1, pin.JointModelRX(), pin.SE3(np.eye(3), np.array([0, 0, 0.3])), "turn")
+    m.appendBodyToJoint(j2, pin.Inertia(5.0, np.array([0, 0.2, 0]), np.eye(3) * 0.05),
+                        pin.SE3.Identity())
+    m.lowerPositionLimit = np.array([-0.3, -1.5])
+    m.upperPositionLimit = np.array([0.3, 1.5])
+    m.velocityLimit = np.array([0.5, 2.0])
+    p = ArmParams.from_model(m)
+    plant = ArmPlant(p, 0.001)
+    hold = pin.computeGeneralizedGravity(plant.model, plant.data, np.zeros(2))
+    assert hold[0] == pytest.approx(25.0 * G)  # [N]: the slide carries both bodies
+    ref = model_reference(m, duration_s=3.0, seed=1)
+    run = simulate_arm(p, ref, ArmGains.for_params(p), seed=2)
+    assert np.sqrt(np.mean((run.q_true - ref.q) ** 2)) < 3e-3
+    tau = inverse_arm_torque(p, run.q_true, run.dq_true, run.ddq_true, None, run.t)
+    assert run.sliding.mean() > 0.6  # (it starts and ends at rest)
+    assert np.max(np.abs(tau - run.tau_applied)[run.sliding]) < 1e-9 * 1e3
+
+
 # --------------------------------------------------------------------------- one joint
 def _compare_with_joint_plant(plant_params, n=8000):
     arm_params = pendulum(plant_params)
