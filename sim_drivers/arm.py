@@ -5,8 +5,10 @@ velocity-dependent friction of Hamon, Gautier & Garrec (eq. 17-30) on every join
 stiction and event detection, the undeclared effects of the single-joint plant, per-joint drive
 quantisation and noise, and a PD + feed-forward closed loop. The pieces:
 
-* :mod:`sim_drivers.arm_params`    -- :class:`ArmParams` (truth, ``truth()`` by parameter name),
-  :class:`ArmFriction`, :class:`ArmDrive`, :class:`Payload`
+* :mod:`sim_drivers.arm_params`    -- :class:`ArmParams` (truth, ``truth()`` by parameter name;
+  ``from_model`` / ``from_robot`` make a plausible truth), :class:`ArmFriction`,
+  :class:`ArmDrive`, :class:`Payload` (inertia about its CoM like the campaign payloads;
+  ``Payload.coerce`` takes those)
 * :mod:`sim_drivers.arm_effects`   -- :class:`ArmEffects` (undeclared effects, per joint)
 * :mod:`sim_drivers.arm_plant`     -- :class:`ArmPlant` (forward model, equations in its
   docstring), :func:`inverse_arm_torque` (inverse model)
