@@ -296,7 +296,7 @@ def simulate_arm(
     params : ArmParams
     reference : object
         Float arrays ``q, dq, ddq`` of shape (n, k) [rad, rad/s, rad/s^2] sampled once per
-        cycle (and ``t`` (n,) [s] when ``cycle_s`` is not given), e.g.
+        cycle (optionally ``t`` (n,) [s], uniformly sampled), e.g.
         :func:`sim_drivers.arm_reference.sine_reference`.
     gains : ArmGains
     payload : Payload or RobotPayload-like, optional
@@ -304,7 +304,8 @@ def simulate_arm(
     seed : int
         Seed of the ripple noise (same seed, same run).
     cycle_s : float, optional
-        Control cycle [s]; default: the reference's sampling step.
+        Control cycle [s]; default: the sampling step of ``reference.t``, or 0.001 s when the
+        reference has no ``t``.
     substeps : int
         Plant integration sub-steps per cycle.
     q0 : array_like (k,), optional
@@ -327,7 +328,8 @@ def simulate_arm(
     if gains.k != k:
         raise SimError(f"gains: expected {k} joints, got {gains.k}")
     if cycle_s is None:
-        cycle_s = _cycle_from_reference(np.asarray(getattr(reference, "t", None), dtype=float))
+        t = getattr(reference, "t", None)
+        cycle_s = 0.001 if t is None else _cycle_from_reference(np.asarray(t, dtype=float))
     ff = feedforward_torque(params, ref_q, ref_dq, ref_ddq, feedforward, payload)
     ff = ff + gains.Fc_ff * np.sign(ref_dq) + gains.Fv_ff * ref_dq
 

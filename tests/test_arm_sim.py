@@ -540,6 +540,11 @@ def test_bad_reference_is_named(ur3dof):
         simulate_arm(ur3dof, ref, ArmGains(kp=[1.0], kd=[1.0]))
     with pytest.raises(SimError, match="feedforward"):
         simulate_arm(ur3dof, ref, gains, feedforward="magic")
+    with pytest.raises(SimError, match="reference.t: expected uniform sampling"):
+        simulate_arm(ur3dof, dataclasses.replace(ref, t=ref.t ** 1.01), gains)
+    # without t the cycle is 1 ms
+    short = SimpleNamespace(q=ref.q[:50], dq=ref.dq[:50], ddq=ref.ddq[:50])
+    assert simulate_arm(ur3dof, short, gains).cycle_s == 0.001
 
 
 def test_reference_is_smooth_within_limits_and_at_rest_at_the_ends(ur6dof):
