@@ -540,8 +540,13 @@ class _Builder:
     def multisine(self, seg: int, q0, a, b, omega: float, periods: int) -> None:
         q0 = np.asarray(q0, dtype=np.float64)
         qs, dqs, ddqs, _ = fourier_eval(q0, a, b, omega, np.zeros(1))
-        state = (qs[0], dqs[0], ddqs[0])
-        vb = np.maximum(POSITIONING_SPEED * self.vmax, np.abs(state[1]))
+        amax = np.array([lim.max_acceleration for lim in self.limits])
+        # a series at rest (rest_projection) has dq(0), ddq(0) at rounding level: snap to 0
+        dq0 = np.where(np.abs(dqs[0]) < 1e-12 * self.vmax, 0.0, dqs[0])
+        ddq0 = np.where(np.abs(ddqs[0]) < 1e-12 * amax, 0.0, ddqs[0])
+        state = (qs[0], dq0, ddq0)
+        # blends into a moving state may use the full velocity range
+        vb = self.vmax if np.any(state[1] != 0.0) else POSITIONING_SPEED * self.vmax
         self.ruckig(seg, "blend_in", *state, vb)
         blk = FourierBlock(seg, self.t, periods, q0, np.asarray(a, dtype=np.float64),
                            np.asarray(b, dtype=np.float64), omega)
@@ -600,7 +605,7 @@ def _check_multisine(label: str, names, limits, q0, a, b, omega) -> None:
             ("peak acceleration", "max_acceleration"), ("peak jerk", "max_jerk"))
     for j, nm in enumerate(names):
         for c in range(4):
-            if r[j, c] > 1.0:
+            if r[j, c] > 1.0 + 1e-9:  # fill = 1 reaches 1 up to rounding
                 raise LimitError(f"{label}: joint {nm}: {what[c][0]} reaches "
                                  f"{100 * r[j, c]:.1f} % of robot.joints.{nm}.limits."
                                  f"{what[c][1]}")

@@ -227,7 +227,8 @@ class MultisineSegment:
         Coefficients, shape (k joints, L harmonics) [rad/s]; None: seeded defaults
         (see :func:`trajectories.multi.default_coefficients`).
     harmonics : int
-        L when ``a`` and ``b`` are None.
+        L when ``a`` and ``b`` are None; >= 2 in campaign files, so that the default
+        coefficients start and end at rest.
     fill : float
         In (0, 1]: default coefficients reach this fraction of each joint's tightest limit.
     seed : int
@@ -495,7 +496,7 @@ _MULTISINE = Table(
         "center": Field(float, required=False, list_of=True, unit="rad or m"),
         "a": _Matrix("rad/s"),
         "b": _Matrix("rad/s"),
-        "harmonics": Field(int, required=False, default=5, ge=1, le=50),
+        "harmonics": Field(int, required=False, default=5, ge=2, le=50),
         "fill": Field(float, required=False, default=0.8, gt=0, le=1,
                       unit="fraction of the tightest limit"),
         "seed": Field(int, required=False, default=0, ge=0),
@@ -686,7 +687,7 @@ def _segment(s: dict, key: str, source: str, joints: tuple[RobotJoint, ...],
             raise fail(source, f"{key}.center", f"{k} positions (one per moving joint)",
                        list(center))
         _within(source, f"{key}.center", center, joints)
-    a, b = s["a"], s["b"]
+    a, b = s["a"] or None, s["b"] or None  # absent: None (the validator gives ())
     if (a is None) != (b is None):
         missing = "b" if b is None else "a"
         raise fail(source, f"{key}.{missing}", "a value when "
