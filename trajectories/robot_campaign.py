@@ -569,22 +569,32 @@ def _joint_key(source: str, key: str, name: str, moving: tuple[str, ...]) -> Non
         raise fail(source, key, f"a moving joint (one of {', '.join(moving)})", name)
 
 
-def _build(raw: Mapping[str, Any], source: str) -> RobotCampaign:
-    top = _CAMPAIGN.validate(raw, "", source)
-    r = top["robot"]
-    moving = tuple(r["moving"])
+def _precheck(raw: Mapping[str, Any], source: str) -> None:
+    """Joint-keyed tables naming a joint that does not move: report that before the rest."""
+    r = raw.get("robot") if isinstance(raw, Mapping) else None
+    if not isinstance(r, Mapping) or "moving" not in r:
+        return
+    moving = _ROBOT.fields["moving"].validate(r["moving"], "robot.moving", source)
     dup = sorted({n for n in moving if moving.count(n) > 1})
     if dup:
         raise fail(source, "robot.moving", "distinct joint names", dup[0])
-    for n in r["joints"]:
-        if n not in moving:
-            raise unknown(source, f"robot.joints.{n}", "the robot.moving joints: "
-                          + ", ".join(moving))
+    control = raw.get("control")
+    for key, table in (("robot.joints", r.get("joints")),
+                       ("control.gains", control.get("gains")
+                        if isinstance(control, Mapping) else None)):
+        if isinstance(table, Mapping):
+            for n in table:
+                if n not in moving:
+                    raise unknown(source, f"{key}.{n}", "the robot.moving joints: "
+                                  + ", ".join(moving))
+
+
+def _build(raw: Mapping[str, Any], source: str) -> RobotCampaign:
+    _precheck(raw, source)
+    top = _CAMPAIGN.validate(raw, "", source)
+    r = top["robot"]
+    moving = tuple(r["moving"])  # distinct, and the joint tables name only these (_precheck)
     gains = top["control"]["gains"]
-    for n in gains:
-        if n not in moving:
-            raise unknown(source, f"control.gains.{n}", "the robot.moving joints: "
-                          + ", ".join(moving))
     joints = []
     for n in moving:
         if n not in r["joints"]:
