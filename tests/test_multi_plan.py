@@ -380,6 +380,11 @@ def test_quadrant_shares_follow_the_power_sign():
     np.testing.assert_allclose(quadrant_shares(dq, tau, lim), [[0.25, 0.25, 0.25, 0.25]])
     np.testing.assert_allclose(quadrant_shares(dq, dq * 2.0, lim), [[0.5, 0.0, 0.5, 0.0]])
     np.testing.assert_allclose(quadrant_shares(dq, -dq, lim), [[0.0, 0.5, 0.0, 0.5]])
+    # torque at rounding level relative to the joint's peak counts in no quadrant
+    tiny = np.array([[1e-12], [-1e-12], [5.0], [-1e-12], [0.0]])
+    np.testing.assert_allclose(quadrant_shares(dq, tiny, lim), [[0.0, 0.25, 0.0, 0.0]])
+    np.testing.assert_allclose(quadrant_shares(dq, tiny, lim, tau_rtol=0.0),
+                               [[0.25, 0.25, 0.25, 0.25]])
 
 
 def test_optimiser_lowers_the_condition_number_within_the_limits(robot):

@@ -56,6 +56,7 @@ __all__ = [
     "OptimisedMultisine",
     "QUADRANTS",
     "Quality",
+    "TAU_RTOL",
     "base_columns",
     "condition_number",
     "optimise_campaign",
@@ -74,6 +75,8 @@ InverseDynamics = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 #: regressor) exceeds BASE_RTOL * |R_00|. Structurally dependent columns give |R_ii| at
 #: rounding level (~1e-15 |R_00| and below); 1e-8 leaves seven decades on either side.
 BASE_RTOL = 1e-8
+#: relative torque below which a sample counts in no quadrant (see quadrant_shares)
+TAU_RTOL = 1e-6
 #: quadrants of the (dq, tau_out) plane (paper Fig. 2.a): 1 motor (dq > 0, tau > 0),
 #: 2 generator (dq < 0, tau > 0), 3 motor (dq < 0, tau < 0), 4 generator (dq > 0, tau < 0)
 QUADRANTS = ("Q1 dq+ tau+", "Q2 dq- tau+", "Q3 dq- tau-", "Q4 dq+ tau-")
@@ -138,8 +141,8 @@ def _call(regressor: Regressor, q, dq, ddq) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- quality
-def quadrant_shares(dq: np.ndarray, tau: np.ndarray,
-                    limits: Sequence[JointLimits]) -> np.ndarray:
+def quadrant_shares(dq: np.ndarray, tau: np.ndarray, limits: Sequence[JointLimits], *,
+                    tau_rtol: float = TAU_RTOL) -> np.ndarray:
     """Per joint, share of moving samples in each quadrant of the (dq, tau_out) plane.
 
     Parameters
@@ -148,11 +151,14 @@ def quadrant_shares(dq: np.ndarray, tau: np.ndarray,
         Velocity [rad/s] and output torque [N m].
     limits : sequence of JointLimits
         A sample is moving when |dq| > MOVING_FRACTION * max_velocity.
+    tau_rtol : float
+        |tau| <= tau_rtol * max|tau| of the joint counts as zero torque (rounding of a
+        model without friction, e.g. a joint without gravity load cruising).
 
     Returns
     -------
-    ndarray, shape (k, 4), in the order of ``QUADRANTS``; samples with tau == 0 count in
-    no quadrant (rows may sum to less than 1).
+    ndarray, shape (k, 4), in the order of ``QUADRANTS``; moving samples with zero torque
+    count in no quadrant (rows sum to 1 minus their share).
     """
     dq = np.asarray(dq)
     tau = np.asarray(tau)
@@ -160,7 +166,8 @@ def quadrant_shares(dq: np.ndarray, tau: np.ndarray,
     moving = np.abs(dq) > MOVING_FRACTION * vmax
     n_mov = np.maximum(moving.sum(axis=0), 1)
     pos, neg = dq > 0, dq < 0
-    tp, tn = tau > 0, tau < 0
+    eps = tau_rtol * np.abs(tau).max(axis=0) if tau.size else 0.0
+    tp, tn = tau > eps, tau < -eps
     masks = (pos & tp, neg & tp, neg & tn, pos & tn)
     return np.stack([(m & moving).sum(axis=0) / n_mov for m in masks], axis=1)
 
@@ -210,9 +217,11 @@ class Quality:
             lines.append(f"{nm:<{w}} " + " ".join(f"{100 * x:>13.1f}%" for x in row))
         if self.quadrant_share is not None:
             lines += ["", "quadrants of (dq, tau_out): 1 and 3 motor, 2 and 4 generator",
-                      f"{'joint':<{w}} " + " ".join(f"{h:>12}" for h in QUADRANTS)]
+                      f"{'joint':<{w}} " + " ".join(f"{h:>12}" for h in QUADRANTS)
+                      + f" {'tau ~ 0':>12}"]
             for nm, row in zip(self.joint_names, self.quadrant_share, strict=True):
-                lines.append(f"{nm:<{w}} " + " ".join(f"{100 * x:>11.1f}%" for x in row))
+                lines.append(f"{nm:<{w}} " + " ".join(f"{100 * x:>11.1f}%" for x in row)
+                             + f" {100 * max(0.0, 1.0 - row.sum()):>11.1f}%")
         return "\n".join(lines)
 
     def __str__(self) -> str:
