@@ -1,6 +1,9 @@
 """Excitation planning with Ruckig: pure functions and immutable sampled plans.
 
-Nothing in this package touches files, clocks or buses.
+Nothing in this package touches files, clocks or buses. Single joint: ``campaign`` (schema),
+``plan`` (Ruckig plans). Robots: ``robot_campaign`` (``[robot]`` schema), ``multi`` (multi-DoF
+plans), ``excitation`` (regressor condition number, band and quadrant shares, multi-sine
+optimisation).
 Exception tree: every error raised on purpose derives from :class:`TrajectoryError`.
 """
 
