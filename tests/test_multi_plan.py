@@ -414,3 +414,16 @@ def test_optimiser_lowers_the_condition_number_within_the_limits(robot):
     np.testing.assert_array_equal(again.a, res.a)
     assert again.cond_end == res.cond_end
 
+
+
+def test_decimated_condition_number_matches_the_full_rate_one(robot):
+    """quality() builds the regressor on every stride-th sample: the prediction it makes for
+    the full-rate log stays within a few per cent (acceptance asks 20 % against a run)."""
+    seg = MultisineSegment(period_s=8.0, periods=1, harmonics=5, seed=4)
+    plan = plan_robot([seg], robot.names, robot.limits, robot.start, 0.002)
+    full = quality(plan, robot.regressor, max_samples=len(plan))
+    assert full.stride == 1
+    for m in (300, 1000):
+        dec = quality(plan, robot.regressor, max_samples=m, base=full.base_columns)
+        assert dec.stride > 1
+        assert dec.cond == pytest.approx(full.cond, rel=0.05)

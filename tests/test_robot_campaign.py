@@ -5,17 +5,20 @@ from __future__ import annotations
 import copy
 import math
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
+import ur_model
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from daq.campaign_file import load_campaign
-from trajectories import SchemaError, TrajectoryError
+from trajectories import LimitError, SchemaError, TrajectoryError
 from trajectories.campaign import Campaign, JointLimits
-from trajectories.multi import plan_robot_campaign
+from trajectories.excitation import optimise_campaign, quality
+from trajectories.multi import multisine_ratio, plan_robot_campaign
 from trajectories.robot_campaign import (
     DriveSpec,
     MoveSegment,
@@ -239,3 +242,28 @@ def test_valid_limits_and_drives_round_trip(data):
     c = RobotCampaign.from_dict(raw, "arm.toml")
     for j in c.joints:
         assert (j.limits, j.drive) == expect[j.name]
+
+
+# ----------------------------------------------------------------------------- with dynamics
+def test_campaign_torque_check_and_multisine_optimisation_on_ur10_3dof():
+    robot = ur_model.ur10(3)
+    c = campaign_from_dict(raw_robot3(), "campaign_robot3.toml")
+    # the example's 3 joints stand for UR10's shoulder pan, shoulder lift and elbow
+    ms_only = replace(c, segments=(c.segments[3],))
+    plan = plan_robot_campaign(ms_only, inverse_dynamics=robot.inverse_dynamics_payload)
+    q_start = quality(plan, robot.regressor)
+    opt, (res,) = optimise_campaign(ms_only, robot.regressor, max_evaluations=300)
+    seg = opt.segments[0]
+    assert seg.a is not None and np.allclose(seg.a, res.a) and seg.center == c.start
+    assert multisine_ratio(res.a, res.b, res.q0, res.omega, c.limits).max() <= seg.fill + 1e-9
+    plan_opt = plan_robot_campaign(opt, inverse_dynamics=robot.inverse_dynamics_payload)
+    q_opt = quality(plan_opt, robot.regressor, base=q_start.base_columns)
+    assert q_opt.cond < 0.9 * q_start.cond
+    # a shoulder torque limit below the 5 kg run's peak is refused, naming payload and joint
+    tight = list(c.joints)
+    tight[1] = replace(tight[1], limits=replace(tight[1].limits, max_torque=20.0))
+    with pytest.raises(LimitError, match=r"^payloads\[\d\] \(\d+ kg\): segments\[0\] "
+                       r"\(multisine\): joint j2: torque .* exceeds "
+                       r"robot\.joints\.j2\.limits\.max_torque 20 N m$"):
+        plan_robot_campaign(replace(opt, joints=tuple(tight)),
+                            inverse_dynamics=robot.inverse_dynamics_payload)
