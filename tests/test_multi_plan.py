@@ -27,6 +27,7 @@ from trajectories.multi import (
     band_shares,
     check_torques,
     default_coefficients,
+    fit_coefficients,
     fourier_eval,
     multisine_ratio,
     plan_robot,
@@ -427,3 +428,29 @@ def test_decimated_condition_number_matches_the_full_rate_one(robot):
         dec = quality(plan, robot.regressor, max_samples=m, base=full.base_columns)
         assert dec.stride > 1
         assert dec.cond == pytest.approx(full.cond, rel=0.05)
+
+
+@settings(max_examples=60, deadline=None)
+@given(data=st.data())
+def test_given_coefficients_either_plan_within_limits_or_are_refused(data):
+    """Explicit coefficients (not at rest): a plan is within limits, or a LimitError says
+    why (e.g. the blend into a fast state would overshoot the position range)."""
+    k = data.draw(st.integers(1, 3), label="k")
+    limits = data.draw(limits_st(k), label="limits")
+    n_harm = data.draw(st.integers(1, 4), label="L")
+    rng = np.random.default_rng(data.draw(st.integers(0, 10_000), label="seed"))
+    period = data.draw(st.floats(2.0, 10.0), label="period")
+    center = np.array([0.5 * (lim.position[0] + lim.position[1]) for lim in limits])
+    a, b = rng.standard_normal((2, k, n_harm))
+    a, b = fit_coefficients(a, b, center, 2 * math.pi / period, limits,
+                            data.draw(st.floats(0.05, 1.3), label="fill"))
+    seg = MultisineSegment(period_s=period, center=tuple(center), a=tuple(map(tuple, a)),
+                           b=tuple(map(tuple, b)))
+    names = tuple(f"j{i}" for i in range(k))
+    start = tuple(center)
+    try:
+        plan = plan_robot([seg], names, limits, start, 0.002)
+    except LimitError as err:
+        assert str(err).startswith("segments[0] (multisine): joint j")
+        return
+    assert_valid(plan, start)
