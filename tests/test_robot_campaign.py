@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from daq.campaign_file import load_campaign
 from trajectories import LimitError, SchemaError, TrajectoryError
 from trajectories.campaign import Campaign, JointLimits
-from trajectories.excitation import optimise_campaign, quality
+from trajectories.excitation import assess_robot_campaign, optimise_campaign, quality
 from trajectories.multi import multisine_ratio, plan_robot_campaign
 from trajectories.robot_campaign import (
     DriveSpec,
@@ -267,3 +267,25 @@ def test_campaign_torque_check_and_multisine_optimisation_on_ur10_3dof():
                        r"robot\.joints\.j2\.limits\.max_torque 20 N m$"):
         plan_robot_campaign(replace(opt, joints=tuple(tight)),
                             inverse_dynamics=robot.inverse_dynamics_payload)
+
+
+def test_assessment_is_what_jointid_plan_prints():
+    robot = ur_model.ur10(3)
+    c = campaign_from_dict(raw_robot3(), "campaign_robot3.toml")
+    c = replace(c, segments=c.segments[3:])  # multi-sine and moves: quick
+    a = assess_robot_campaign(c, regressor=robot.regressor,
+                              inverse_dynamics=robot.inverse_dynamics_payload)
+    assert a.optimised == () and a.campaign is c
+    assert a.peak_torque.shape == (2, 3) and len(a.quadrants) == 2
+    # the heavier payload loads the shoulder more; the quadrant shares are per payload
+    assert a.peak_torque[1, 1] > a.peak_torque[0, 1]
+    assert a.quality.cond == pytest.approx(quality(a.plan, robot.regressor).cond)
+    text = str(a)
+    assert text.count("quadrants of (dq, tau_out), payload") == 2
+    assert f"{a.quality.cond:.4g}" in text and "peak |tau| [N m]" in text
+    assert text.count("0-10 % vmax") == 1  # bands printed once, with the plan
+    with pytest.raises(TrajectoryError, match="needs the robot's regressor"):
+        assess_robot_campaign(c, optimise=True)
+    bare = assess_robot_campaign(c)  # no dynamics: the plan summary only
+    assert bare.quality is None and bare.peak_torque is None and str(bare) == str(
+        bare.plan.summary())

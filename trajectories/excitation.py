@@ -37,23 +37,30 @@ import scipy.optimize
 
 from . import TrajectoryError
 from .campaign import JointLimits
-from .multi import (
-    BANDS,
-    MOVING_FRACTION,
-    RobotPlan,
-    _resolve_multisine,
-    band_shares,
+from .fourier import (
     default_coefficients,
     fit_coefficients,
     fourier_eval,
     multisine_ratio,
     rest_projection,
 )
+from .multi import (
+    BANDS,
+    MOVING_FRACTION,
+    RobotPlan,
+    _resolve_multisine,
+    band_shares,
+    check_torques,
+    plan_robot_campaign,
+)
+from .multi import InverseDynamics as PayloadDynamics
 from .robot_campaign import MultisineSegment, RobotCampaign
 
 __all__ = [
+    "Assessment",
     "BASE_RTOL",
     "OptimisedMultisine",
+    "assess_robot_campaign",
     "QUADRANTS",
     "Quality",
     "TAU_RTOL",
@@ -205,16 +212,18 @@ class Quality:
     def rank(self) -> int:
         return int(self.base_columns.size)
 
-    def format_table(self) -> str:
+    def format_table(self, bands: bool = True) -> str:
+        """The table; ``bands=False`` leaves out the velocity bands (printed with the plan)."""
         lines = [f"excitation: condition number {self.cond:.4g} of the base regressor "
                  f"({self.rank} base columns, {self.n_samples} samples, every "
                  f"{self.stride}th)"]
         w = max(8, *(len(n) for n in self.joint_names))
         heads = [f"{100 * lo:.0f}-{100 * hi:.0f} % vmax"
                  for lo, hi in zip(BANDS[:-1], BANDS[1:], strict=True)]
-        lines += ["", f"{'joint':<{w}} " + " ".join(f"{h:>14}" for h in heads)]
-        for nm, row in zip(self.joint_names, self.band_share, strict=True):
-            lines.append(f"{nm:<{w}} " + " ".join(f"{100 * x:>13.1f}%" for x in row))
+        if bands:
+            lines += ["", f"{'joint':<{w}} " + " ".join(f"{h:>14}" for h in heads)]
+            for nm, row in zip(self.joint_names, self.band_share, strict=True):
+                lines.append(f"{nm:<{w}} " + " ".join(f"{100 * x:>13.1f}%" for x in row))
         if self.quadrant_share is not None:
             lines += ["", "quadrants of (dq, tau_out): 1 and 3 motor, 2 and 4 generator",
                       f"{'joint':<{w}} " + " ".join(f"{h:>12}" for h in QUADRANTS)
@@ -443,3 +452,113 @@ def optimise_campaign(campaign: RobotCampaign, regressor: Regressor, *,
                               b=tuple(map(tuple, res.b.tolist())), center=tuple(q0.tolist()))
         results.append(res)
     return replace(campaign, segments=tuple(segments)), tuple(results)
+
+
+# --------------------------------------------------------------------------- jointid plan
+@dataclass(frozen=True, eq=False)
+class Assessment:
+    """Everything ``jointid plan`` prints for a robot campaign.
+
+    Attributes
+    ----------
+    campaign : RobotCampaign
+        The campaign planned (with optimised multi-sine coefficients when asked).
+    plan : RobotPlan
+    quality : Quality or None
+        Without quadrant shares (those depend on the payload: ``quadrants``); None without
+        a regressor.
+    quadrants : tuple of ndarray, each (k, 4)
+        Quadrant shares per payload run; empty without inverse dynamics.
+    peak_torque : ndarray, shape (n_payloads, k), or None
+        Peak |tau| per payload and joint [N m] (checked against ``max_torque``).
+    optimised : tuple of OptimisedMultisine
+    """
+
+    campaign: RobotCampaign
+    plan: RobotPlan
+    quality: Quality | None
+    quadrants: tuple[np.ndarray, ...]
+    peak_torque: np.ndarray | None
+    optimised: tuple[OptimisedMultisine, ...]
+
+    def format_table(self) -> str:
+        parts = [self.plan.summary().format_table()]
+        names = self.plan.joint_names
+        w = max(8, *(len(n) for n in names))
+        if self.peak_torque is not None:
+            lines = ["", "peak |tau| [N m] (max_torque)",
+                     f"{'payload':<12} " + " ".join(f"{n:>{w + 10}}" for n in names)]
+            for pay, row in zip(self.campaign.payloads, self.peak_torque, strict=True):
+                cells = [f"{t:.4g} ({lim.max_torque:g})" for t, lim in
+                         zip(row, self.plan.limits, strict=True)]
+                lines.append(f"{f'{pay.mass_kg:g} kg':<12} "
+                             + " ".join(f"{c:>{w + 10}}" for c in cells))
+            parts.append("\n".join(lines))
+        for res in self.optimised:
+            parts.append(f"\nmulti-sine optimised: condition number {res.cond_start:.4g} -> "
+                         f"{res.cond_end:.4g} ({res.n_evaluations} evaluations, {res.stopped})")
+        if self.quality is not None:
+            parts.append("\n" + self.quality.format_table(bands=False))
+        for pay, quad in zip(self.campaign.payloads, self.quadrants, strict=False):
+            lines = ["", f"quadrants of (dq, tau_out), payload {pay.mass_kg:g} kg: 1 and 3 "
+                     "motor, 2 and 4 generator",
+                     f"{'joint':<{w}} " + " ".join(f"{h:>12}" for h in QUADRANTS)
+                     + f" {'tau ~ 0':>12}"]
+            for nm, row in zip(names, quad, strict=True):
+                lines.append(f"{nm:<{w}} " + " ".join(f"{100 * x:>11.1f}%" for x in row)
+                             + f" {100 * max(0.0, 1.0 - row.sum()):>11.1f}%")
+            parts.append("\n".join(lines))
+        return "\n".join(parts)
+
+    def __str__(self) -> str:
+        return self.format_table()
+
+
+def assess_robot_campaign(campaign: RobotCampaign, *, regressor: Regressor | None = None,
+                          inverse_dynamics: PayloadDynamics | None = None,
+                          optimise: bool = False, max_evaluations: int = 1500,
+                          max_time_s: float | None = None, max_samples: int = 4000
+                          ) -> Assessment:
+    """Optimise (optionally), plan, check torques and predict the excitation quality.
+
+    Parameters
+    ----------
+    campaign : RobotCampaign
+    regressor : callable, optional
+        ``(q, dq, ddq) -> W (n * k, p)``; needed for the condition number and ``optimise``.
+    inverse_dynamics : callable, optional
+        ``(q, dq, ddq, payload) -> tau (n, k)`` [N m]: torque check of every payload run
+        and quadrant shares per payload.
+    optimise : bool
+        Optimise the ``optimise = true`` multi-sine segments first (:func:`optimise_campaign`).
+
+    Raises
+    ------
+    trajectories.LimitError
+        The plan (or a payload's torque) exceeds a joint limit.
+    trajectories.TrajectoryError
+        ``optimise`` without a regressor, or a callable returning the wrong shape.
+    """
+    results: tuple[OptimisedMultisine, ...] = ()
+    if optimise:
+        if regressor is None:
+            raise TrajectoryError("optimising the multi-sines needs the robot's regressor")
+        campaign, results = optimise_campaign(campaign, regressor,
+                                              max_evaluations=max_evaluations,
+                                              max_time_s=max_time_s)
+    plan = plan_robot_campaign(campaign)
+    peak = None
+    quads: list[np.ndarray] = []
+    stride = max(1, math.ceil(len(plan) / max_samples))
+    if inverse_dynamics is not None:
+        peak = check_torques(plan, inverse_dynamics, campaign.payloads)
+        q, dq, ddq = plan.q[::stride], plan.dq[::stride], plan.ddq[::stride]
+        for pay in campaign.payloads:
+            tau = np.asarray(inverse_dynamics(q, dq, ddq, pay), dtype=np.float64)
+            quads.append(quadrant_shares(dq, tau, plan.limits))
+    qual = None
+    if regressor is not None:
+        base = results[0].base_columns if results else None
+        qual = quality(plan, regressor, base=base, max_samples=max_samples)
+    return Assessment(campaign=campaign, plan=plan, quality=qual, quadrants=tuple(quads),
+                      peak_torque=peak, optimised=results)
