@@ -289,3 +289,19 @@ def test_assessment_is_what_jointid_plan_prints():
     bare = assess_robot_campaign(c)  # no dynamics: the plan summary only
     assert bare.quality is None and bare.peak_torque is None and str(bare) == str(
         bare.plan.summary())
+
+
+def test_whole_plan_objective_predicts_the_plans_condition_number():
+    """With the other segments as background, the optimiser's condition number is the one
+    quality() gives for the planned campaign, before and after the optimisation."""
+    robot = ur_model.ur10(3)
+    c = campaign_from_dict(raw_robot3(), "campaign_robot3.toml")
+    c = replace(c, segments=(c.segments[2], c.segments[3]))  # base yaw trapezoids + sine
+    before = quality(plan_robot_campaign(c), robot.regressor)
+    opt, (res,) = optimise_campaign(c, robot.regressor, max_evaluations=200,
+                                    whole_plan=True)
+    after = quality(plan_robot_campaign(opt), robot.regressor, base=before.base_columns)
+    assert np.array_equal(res.base_columns, before.base_columns)
+    assert res.cond_start == pytest.approx(before.cond, rel=0.05)
+    assert res.cond_end == pytest.approx(after.cond, rel=0.05)
+    assert after.cond < before.cond
