@@ -465,10 +465,11 @@ def optimise_campaign(campaign: RobotCampaign, regressor: Regressor, *,
     The objective is the condition number of the multi-sine alone, or with ``whole_plan``
     that of the whole plan (the other segments enter as ``background``, sampled like
     :func:`quality` with ``max_samples``; segments are optimised in order, each against the
-    plan with the previous ones already optimised). On the UR10 test robots and the example
-    campaign the multi-sine-alone objective gave the lower whole-plan condition number for
-    the same budget (3-dof, 3000 evaluations: 232 -> 108 against 232 -> 127), hence the
-    default.
+    plan with the previous ones already optimised). Neither objective is better everywhere
+    (UR10 3-dof standing in for examples/campaign_robot3.toml, 1500 evaluations, whole-plan
+    condition number: full example 232 -> 117 with the multi-sine alone, -> 124 with the
+    whole plan; base-yaw trapezoids + multi-sine 202 -> 89 and -> 72); the multi-sine alone
+    is the default because it does not depend on the other segments.
 
     Returns
     -------
