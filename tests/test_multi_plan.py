@@ -59,6 +59,8 @@ def assert_valid(plan, start) -> None:
         assert q.min() >= lo - 1e-9 and q.max() <= hi + 1e-9
         assert np.abs(dq).max() <= lim.max_velocity * (1 + 1e-9)
         assert np.abs(ddq).max() <= lim.max_acceleration * (1 + 1e-9)
+        if n < 2:  # nothing moves: one rest sample
+            continue
         # continuity: increments bounded by the next derivative's limit over one cycle
         assert np.abs(np.diff(q)).max() <= lim.max_velocity * dt * (1 + 1e-6) + 1e-12
         assert np.abs(np.diff(dq)).max() <= lim.max_acceleration * dt * (1 + 1e-6) + 1e-12

@@ -1,5 +1,8 @@
 """Excitation quality of a robot plan, and multi-sine optimisation for it.
 
+(Just past 600 lines: prediction, optimisation and the assessment ``jointid plan`` prints
+share the base-column and condition-number conventions defined here.)
+
 Before anything moves, ``jointid plan`` predicts whether a plan will identify the robot's
 parameters:
 
