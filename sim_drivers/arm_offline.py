@@ -2,8 +2,9 @@
 
 Each control cycle does, per joint, what :mod:`sim_drivers.offline` does for one joint: the
 measured position comes from the encoder counts, the torque reference of a PD position loop
-(the control law of ``daq.control.PositionController``, vectorised over the joints: velocity
-from the backward difference of the measured position, low-passed at ``velocity_cutoff_hz``)
+(the control law of ``daq.protocol.control.PositionController``, vectorised over the joints:
+velocity from the backward difference of the measured position, low-passed at
+``velocity_cutoff_hz``)
 plus a model feed-forward is quantised to the int16 per-mille target torque of object 0x6071,
 and the plant (:class:`sim_drivers.arm_plant.ArmPlant`) is stepped one cycle with the joint-side
 torque of that target.

@@ -13,6 +13,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from daq.protocol.control import ControllerGains
 from sim_drivers import SimError
 from sim_drivers.arm import (
     REGIME_REST,
@@ -33,6 +34,7 @@ from sim_drivers.arm import (
     simulate_arm_payloads,
     sine_reference,
 )
+from sim_drivers.offline import simulate
 from sim_drivers.plant import REGIME_REST as PLANT_REST
 from sim_drivers.plant import REGIME_SLIDING as PLANT_SLIDING
 from sim_drivers.plant import REGIME_ZERO_LOAD as PLANT_ZERO_LOAD
@@ -233,11 +235,6 @@ def test_one_joint_with_every_effect_is_the_joint_plant():
 def test_one_joint_closed_loop_is_the_offline_simulator():
     """simulate_arm on the equivalent pendulum, with the single-joint controller's
     feed-forward as an array, is sim_drivers.offline.simulate (noise off) sample for sample."""
-    try:  # the controller is moving to daq.protocol.control
-        from daq.protocol.control import ControllerGains
-    except ImportError:
-        from daq.control import ControllerGains
-    from sim_drivers.offline import simulate
 
     plant = quiet_plant()
     arm = pendulum(plant)

@@ -2,6 +2,9 @@
 
 Nothing in this package touches clocks or buses; files only in :mod:`trajectories.campaign_file`
 (reads the campaign TOML) and :mod:`trajectories.cli` (``jointid plan``, writes the plot).
+Single joint: ``campaign`` (schema), ``plan`` (Ruckig plans). Robots: ``robot_campaign``
+(``[robot]`` schema), ``multi`` (multi-DoF plans), ``excitation`` (regressor condition number,
+band and quadrant shares, multi-sine optimisation).
 Exception tree: every error raised on purpose derives from :class:`TrajectoryError`.
 """
 

@@ -1,7 +1,10 @@
 """The campaign description: joint, limits, control settings, payloads and excitation segments.
 
 A campaign is read from a TOML file by :func:`trajectories.campaign_file.load_campaign` and
-validated here by :meth:`Campaign.from_dict` (pure: dictionaries in, frozen dataclasses out). Every
+validated here by :meth:`Campaign.from_dict` (pure: dictionaries in, frozen dataclasses out). Files
+with a ``[robot]`` table instead of ``[joint]`` are multi-joint campaigns
+(:mod:`trajectories.robot_campaign`; :func:`~trajectories.robot_campaign.campaign_from_dict`
+reads either format). Every
 mistake raises :class:`trajectories.SchemaError` with one line naming the source, the dotted
 key and the expected value, e.g.::
 
@@ -309,6 +312,9 @@ class Campaign:
             Unknown key, wrong type, missing field, non-positive limit, segment outside the
             position range...; the one-line message names the key and the expected value.
         """
+        if isinstance(raw, Mapping) and "robot" in raw and "joint" not in raw:
+            raise fail(source, "robot", "a single-joint campaign ([joint]) here; a [robot] "
+                       "campaign is read by trajectories.robot_campaign.campaign_from_dict")
         top = _CAMPAIGN.validate(raw, "", source)
         j = top["joint"]
         lim = j["limits"]
