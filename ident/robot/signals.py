@@ -1,0 +1,106 @@
+"""Multi-axis signals of a robot run: the input of every n-dof estimator (ROBOT_FORMAT)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import RobotIdentError
+
+
+@dataclass(frozen=True)
+class RobotPayloadData:
+    """Payload fixed at the flange for one experiment (eq. 34-35 generalised).
+
+    Attributes
+    ----------
+    mass : float
+        [kg]
+    com : ndarray, shape (3,)
+        Centre of mass in the flange frame [m].
+    inertia : ndarray, shape (6,)
+        XX, XY, XZ, YY, YZ, ZZ about the centre of mass, flange axes [kg m^2].
+    """
+
+    mass: float = 0.0
+    com: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    inertia: np.ndarray = field(default_factory=lambda: np.zeros(6))
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "mass", float(self.mass))
+        object.__setattr__(self, "com", np.asarray(self.com, dtype=float).reshape(3))
+        object.__setattr__(self, "inertia", np.asarray(self.inertia, dtype=float).reshape(6))
+        if self.mass < 0:
+            raise RobotIdentError(f"payload.mass: expected >= 0 [kg], got {self.mass}")
+
+
+@dataclass(frozen=True)
+class RobotSignals:
+    """Joint-side signals of the k moving joints of a robot, n samples.
+
+    Attributes
+    ----------
+    t : ndarray, shape (n,)
+        Time [s], increasing within each experiment.
+    q, dq, ddq : ndarray, shape (n, k)
+        Position [rad or m], velocity [rad/s], acceleration [rad/s^2] (filtered).
+    tau : ndarray, shape (n, k)
+        Joint-side torque [N m] (force [N] for a prismatic joint).
+    joints : tuple of str
+        Names of the k moving joints, in column order (the robot file's names).
+    experiment : ndarray of int, shape (n,)
+        Index of the experiment (run) of each sample, into ``payloads``.
+    payloads : tuple of RobotPayloadData
+        Known payload of each experiment (empty payload = none).
+    q_ref : ndarray, shape (n, k), optional
+        Reference trajectory (IV instruments), or None.
+    source : str
+        Where the signals come from (file names), for messages.
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    dq: np.ndarray
+    ddq: np.ndarray
+    tau: np.ndarray
+    joints: tuple[str, ...]
+    experiment: np.ndarray | None = None
+    payloads: tuple[RobotPayloadData, ...] = ()
+    q_ref: np.ndarray | None = None
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.t, dtype=float).reshape(-1)
+        n, k = t.size, len(self.joints)
+        object.__setattr__(self, "t", t)
+        object.__setattr__(self, "joints", tuple(self.joints))
+        for name in ("q", "dq", "ddq", "tau") + (("q_ref",) if self.q_ref is not None else ()):
+            a = np.asarray(getattr(self, name), dtype=float)
+            if a.ndim == 1 and k == 1:
+                a = a[:, None]
+            if a.shape != (n, k):
+                raise RobotIdentError(f"{self.source or 'RobotSignals'}: {name} has shape "
+                                      f"{a.shape}, expected ({n}, {k}) for joints {self.joints}")
+            object.__setattr__(self, name, a)
+        e = np.zeros(n, dtype=int) if self.experiment is None else np.asarray(
+            self.experiment, dtype=int).reshape(-1)
+        if e.shape != (n,):
+            raise RobotIdentError(f"{self.source or 'RobotSignals'}: experiment has shape "
+                                  f"{e.shape}, expected ({n},)")
+        object.__setattr__(self, "experiment", e)
+        pays = tuple(self.payloads) or (RobotPayloadData(),) * (int(e.max()) + 1 if n else 1)
+        if n and int(e.max()) >= len(pays):
+            raise RobotIdentError(f"{self.source or 'RobotSignals'}: experiment index "
+                                  f"{int(e.max())} has no payload (got {len(pays)})")
+        object.__setattr__(self, "payloads", pays)
+
+    @property
+    def n(self) -> int:
+        """Number of samples."""
+        return int(self.t.size)
+
+    @property
+    def k(self) -> int:
+        """Number of moving joints."""
+        return len(self.joints)
