@@ -4,17 +4,29 @@
 puts one simulated joint per node ID on the bus (generic EDS and default plant unless
 ``--eds`` / ``--plant`` are given), so a master in another process (``jointid``, a real PLC,
 ``candump``) can talk to them. Each drive opens its own bus object.
+
+Without a kernel CAN device (no vcan), ``--bridge-port`` makes the bus reachable from other
+processes: ``python -m sim_drivers.serve --interface virtual --channel sim --bridge-port 0``
+serves the drives on an in-process virtual bus and a python-can-remote bridge (WebSocket over
+TCP, bound to 127.0.0.1 only) on it; it prints ``bridge ws://127.0.0.1:<port>/`` once
+listening, and a master opens ``can.Bus(interface="remote", channel="ws://127.0.0.1:<port>/")``
+(campaign: ``[daq] interface = "remote"``, ``channel = "ws://127.0.0.1:<port>/"``). Each
+client gets its own bus object on the channel, so clients see each other's frames and the
+drives'. The drives' warnings (heartbeat lost, SYNC lost, faults) go to stderr.
 """
 
 from __future__ import annotations
 
 import argparse
+import logging
 import signal
 import threading
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import can
+from can_remote.server import RemoteServer
 
 from sim_drivers.drive import SimulatedDrive
 from sim_drivers.plant import JointPlant
@@ -102,7 +114,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--cycle", type=float, default=0.001, help="SYNC period [s]")
     ap.add_argument("--q0", type=float, default=0.0, help="initial joint position [rad]")
     ap.add_argument("--bitrate", type=int, help="bus bitrate [bit/s]")
+    ap.add_argument("--bridge-port", type=int, metavar="PORT",
+                    help="also serve the bus to other processes over python-can-remote on "
+                         "ws://127.0.0.1:PORT/ (0: any free port, printed)")
     args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(name)s: %(message)s")
     done = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: done.set())
@@ -111,9 +127,42 @@ def main(argv: Sequence[str] | None = None) -> int:
         cycle_s=args.cycle, q0=args.q0, bitrate=args.bitrate,
     ) as served:
         ids = ", ".join(str(d.node_id) for d in served.drives)
-        print(f"serving node(s) {ids} on {args.interface}:{args.channel}; Ctrl-C stops")
-        done.wait()
+        print(f"serving node(s) {ids} on {args.interface}:{args.channel}; Ctrl-C stops",
+              flush=True)
+        bridge = None
+        if args.bridge_port is not None:
+            bridge = start_bridge(args.interface, args.channel, args.bridge_port,
+                                  bitrate=args.bitrate)
+            print(f"bridge ws://127.0.0.1:{bridge.server_port}/", flush=True)
+        try:
+            done.wait()
+        finally:
+            if bridge is not None:
+                bridge.shutdown()
+                bridge.server_close()
     return 0
+
+
+def start_bridge(interface: str, channel: str, port: int, *,
+                 bitrate: int | None = None) -> RemoteServer:
+    """A python-can-remote server on 127.0.0.1:``port`` bridging ``interface``/``channel``.
+
+    Each WebSocket client gets its own python-can bus on the channel (opened in this
+    process), so on the virtual interface the clients and the drives share one bus. Runs
+    in a daemon thread; stop it with ``shutdown()`` then ``server_close()``.
+
+    Returns
+    -------
+    can_remote.server.RemoteServer
+        ``server_port`` is the port listened on (useful with ``port=0``).
+    """
+    config: dict[str, Any] = {"interface": interface, "channel": channel}
+    if bitrate is not None:
+        config["bitrate"] = bitrate
+    server = RemoteServer("127.0.0.1", port, **config)
+    threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.1},
+                     name="can-remote-bridge", daemon=True).start()
+    return server
 
 
 if __name__ == "__main__":
