@@ -39,6 +39,9 @@ class ServeProcess:
         More ``sim_drivers.serve`` arguments (``--cycle``, ``--q0``, ``--eds``...).
     start_timeout_s : float
         Wall time allowed for the process to print its bridge line [s].
+    realtime_priority : int
+        SCHED_FIFO priority of the serve process (0: the default policy; needs
+        CAP_SYS_NICE), for benchmarks that run the master under SCHED_FIFO too.
 
     Attributes
     ----------
@@ -48,7 +51,8 @@ class ServeProcess:
     """
 
     def __init__(self, node_ids: Sequence[int] = (1,), *, channel: str = "jointid",
-                 args: Sequence[str] = (), start_timeout_s: float = 30.0) -> None:
+                 args: Sequence[str] = (), start_timeout_s: float = 30.0,
+                 realtime_priority: int = 0) -> None:
         env = dict(os.environ, PYTHONUNBUFFERED="1", OPENBLAS_NUM_THREADS="1")
         cmd = [sys.executable, "-m", "sim_drivers.serve", "--interface", "virtual",
                "--channel", channel, "--node-id", *map(str, node_ids), "--bridge-port", "0",
@@ -57,8 +61,13 @@ class ServeProcess:
         self._lock = threading.Lock()
         self._ready = threading.Event()
         self.url = ""
+        def fifo() -> None:
+            if realtime_priority:
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(realtime_priority))
+
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     stdin=subprocess.DEVNULL, text=True, bufsize=1, env=env)
+                                     stdin=subprocess.DEVNULL, text=True, bufsize=1, env=env,
+                                     preexec_fn=fifo if realtime_priority else None)
         self._reader = threading.Thread(target=self._read, name="serve-output", daemon=True)
         self._reader.start()
         if not self._ready.wait(start_timeout_s) or not self.url:
