@@ -24,6 +24,7 @@ from sim_drivers import SimError
 __all__ = ["ServeProcess"]
 
 _BRIDGE_LINE = re.compile(r"bridge (ws://127\.0\.0\.1:\d+/)")
+_SERVING_LINE = re.compile(r"serving node\(s\) .* on \w+:(\S+);")
 
 
 class ServeProcess:
@@ -32,9 +33,16 @@ class ServeProcess:
     Parameters
     ----------
     node_ids : sequence of int
-        Drives to serve.
+        Drives to serve (empty: only the bridge).
     channel : str
         Virtual-bus channel inside the serve process.
+    interface : str
+        The serve process's interface: ``"virtual"`` (drives and bridge on a bus inside
+        it) or ``"remote"`` with ``channel`` the URL of another bridge (the drives in this
+        process reach the bus through it; ``bridge=False`` then).
+    bridge : bool
+        Serve a bridge (``--bridge-port 0``) and wait for its line; else wait for the
+        "serving" line.
     args : sequence of str
         More ``sim_drivers.serve`` arguments (``--cycle``, ``--q0``, ``--eds``...).
     start_timeout_s : float
@@ -46,17 +54,19 @@ class ServeProcess:
     Attributes
     ----------
     url : str
-        ``ws://127.0.0.1:<port>/`` once started.
+        ``ws://127.0.0.1:<port>/`` once started (its bridge; without a bridge: the channel
+        it serves on).
     proc : subprocess.Popen
     """
 
     def __init__(self, node_ids: Sequence[int] = (1,), *, channel: str = "jointid",
-                 args: Sequence[str] = (), start_timeout_s: float = 30.0,
-                 realtime_priority: int = 0) -> None:
+                 interface: str = "virtual", bridge: bool = True, args: Sequence[str] = (),
+                 start_timeout_s: float = 30.0, realtime_priority: int = 0) -> None:
         env = dict(os.environ, PYTHONUNBUFFERED="1", OPENBLAS_NUM_THREADS="1")
-        cmd = [sys.executable, "-m", "sim_drivers.serve", "--interface", "virtual",
-               "--channel", channel, "--node-id", *map(str, node_ids), "--bridge-port", "0",
-               *args]
+        cmd = [sys.executable, "-m", "sim_drivers.serve", "--interface", interface,
+               "--channel", channel, "--node-id", *map(str, node_ids),
+               *(("--bridge-port", "0") if bridge else ()), *args]
+        self._want = _BRIDGE_LINE if bridge else _SERVING_LINE
         self._lines: list[tuple[float, str]] = []
         self._lock = threading.Lock()
         self._ready = threading.Event()
@@ -73,7 +83,7 @@ class ServeProcess:
         if not self._ready.wait(start_timeout_s) or not self.url:
             out = self.output
             self.close()
-            raise SimError(f"sim_drivers.serve did not start its bridge within "
+            raise SimError(f"sim_drivers.serve did not start within "
                            f"{start_timeout_s:g} s; output: {out.strip()[-500:]!r}")
 
     def _read(self) -> None:
@@ -81,7 +91,7 @@ class ServeProcess:
         for line in self.proc.stdout:
             with self._lock:
                 self._lines.append((time.monotonic(), line.rstrip("\n")))
-            m = _BRIDGE_LINE.search(line)
+            m = self._want.search(line)
             if m and not self.url:
                 self.url = m.group(1)
                 self._ready.set()

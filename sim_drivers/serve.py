@@ -21,6 +21,7 @@ import argparse
 import logging
 import signal
 import threading
+import types
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -55,6 +56,20 @@ class Served:
         self.close()
 
 
+def local_periodic(bus: can.BusABC) -> None:
+    """Send ``bus``'s periodic frames from a thread of this process (python-can's own
+    thread-based task) instead of python-can-remote's server-side task.
+
+    python-can-remote 0.3.0 runs ``send_periodic`` in the bridge process, and its
+    ``modify_data`` is broken (``super(self)``): canopen's heartbeat producer modifies its
+    task on every NMT state change, the bridge then gets a stop for a task it no longer has
+    and drops the connection. A drive's heartbeat must also die with the drive's process,
+    which a thread here does and a task in the bridge does not.
+    """
+    bus._send_periodic_internal = types.MethodType(  # type: ignore[method-assign]
+        can.BusABC._send_periodic_internal, bus)
+
+
 def start_drives(
     interface: str,
     channel: str,
@@ -65,6 +80,7 @@ def start_drives(
     cycle_s: float = 0.001,
     q0: float = 0.0,
     bitrate: int | None = None,
+    sync_loss_floor_s: float | None = None,
 ) -> Served:
     """Start one simulated drive per node ID on ``interface``/``channel``.
 
@@ -82,6 +98,8 @@ def start_drives(
         Initial joint position [rad] (or [m]).
     bitrate : int or None
         Passed to ``can.Bus`` when given.
+    sync_loss_floor_s : float or None
+        Shortest SYNC-loss timeout of the drives [s] (default: the drive's own).
     """
     params = load_plant(plant or DEFAULT_PLANT)
     drives: list[SimulatedDrive] = []
@@ -92,9 +110,12 @@ def start_drives(
         for k, node_id in enumerate(node_ids):
             bus = can.Bus(interface=interface, channel=channel, **kwargs)
             buses.append(bus)
+            if interface == "remote":
+                local_periodic(bus)
             joint = JointPlant(params, cycle_s, seed=int(params.drive.seed) + k)
             joint.reset(q0)
-            drive = SimulatedDrive(bus, node_id, joint, eds, cycle_s=cycle_s)
+            extra = {} if sync_loss_floor_s is None else {"sync_loss_floor_s": sync_loss_floor_s}
+            drive = SimulatedDrive(bus, node_id, joint, eds, cycle_s=cycle_s, **extra)
             drive.start()
             drives.append(drive)
     except Exception:
@@ -108,16 +129,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m sim_drivers.serve", description=__doc__)
     ap.add_argument("--interface", default="socketcan", help="python-can interface")
     ap.add_argument("--channel", default="vcan0", help="python-can channel")
-    ap.add_argument("--node-id", type=int, nargs="+", default=[1], help="node IDs 1-127")
+    ap.add_argument("--node-id", type=int, nargs="*", default=[1],
+                    help="node IDs 1-127 (none: serve only the --bridge-port bridge)")
     ap.add_argument("--eds", type=Path, help="EDS/DCF (default: generic jointid EDS)")
     ap.add_argument("--plant", type=Path, help="plant TOML (default: plant_default.toml)")
     ap.add_argument("--cycle", type=float, default=0.001, help="SYNC period [s]")
     ap.add_argument("--q0", type=float, default=0.0, help="initial joint position [rad]")
     ap.add_argument("--bitrate", type=int, help="bus bitrate [bit/s]")
+    ap.add_argument("--sync-loss-floor", type=float, metavar="S",
+                    help="shortest SYNC-loss timeout of the drives [s] (default 0.1)")
     ap.add_argument("--bridge-port", type=int, metavar="PORT",
                     help="also serve the bus to other processes over python-can-remote on "
                          "ws://127.0.0.1:PORT/ (0: any free port, printed)")
     args = ap.parse_args(argv)
+    if not args.node_id and args.bridge_port is None:
+        ap.error("nothing to serve: give --node-id and/or --bridge-port")
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(name)s: %(message)s")
     done = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -125,8 +151,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     with start_drives(
         args.interface, args.channel, args.node_id, eds=args.eds, plant=args.plant,
         cycle_s=args.cycle, q0=args.q0, bitrate=args.bitrate,
+        sync_loss_floor_s=args.sync_loss_floor,
     ) as served:
-        ids = ", ".join(str(d.node_id) for d in served.drives)
+        ids = ", ".join(str(d.node_id) for d in served.drives) or "none"
         print(f"serving node(s) {ids} on {args.interface}:{args.channel}; Ctrl-C stops",
               flush=True)
         bridge = None

@@ -54,7 +54,9 @@ def remote_campaign(url: str, node_id: int = 1, *, sync_source: str = "runner",
 
 @pytest.fixture
 def served():
-    with ServeProcess((3,), channel=f"xproc{next(_chan)}") as s:
+    # the drive's SYNC-loss floor at 0.5 s: a shared CI host stalls for 0.1 s now and then
+    with ServeProcess((3,), channel=f"xproc{next(_chan)}",
+                      args=("--sync-loss-floor", "0.5")) as s:
         yield s
 
 
@@ -125,6 +127,6 @@ def test_serve_process_refuses_to_hang(tmp_path):
     bad = tmp_path / "plant.toml"
     bad.write_text("not = [valid\n")
     t0 = time.monotonic()
-    with pytest.raises(SimError, match="did not start its bridge"):
+    with pytest.raises(SimError, match="did not start within"):
         ServeProcess((1,), channel="bad", args=("--plant", str(bad)), start_timeout_s=20.0)
     assert time.monotonic() - t0 < 20.0
