@@ -364,9 +364,15 @@ def main() -> int:
                          "and a third process timing the SYNC train")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench_daq_"))
-    variants: list[tuple[str, dict]] = [("default", {})]
+    # "before": automatic garbage collection and 1 s MCAP chunks (the defaults until
+    # 2026-11); "after": the defaults now (gc frozen during a run, 0.1 s chunks)
+    before = {"gc_freeze": False, "chunk_seconds": 1.0}
+    variants: list[tuple[str, dict]] = [("before: gc on, 1 s chunks", before),
+                                        ("after: gc frozen, 0.1 s chunks", {})]
     if fifo_allowed():
-        variants.append(("SCHED_FIFO 10", {"realtime_priority": 10}))
+        fifo = {"realtime_priority": 10}
+        variants += [("before, SCHED_FIFO 10", {**before, **fifo}),
+                     ("after, SCHED_FIFO 10", fifo)]
     try:
         rows = []
         if args.only_paced:

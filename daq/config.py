@@ -24,7 +24,12 @@ project's generic EDS, cyclic synchronous torque)::
     max_following_error = 0.2     # watchdog: |q_ref - q| above this [rad] or [m] -> stop
     quick_stop_cycles = 2         # cycles of quick stop before disable voltage
     lockstep_wait_s = 0.5         # lockstep: wall time to wait for the TPDOs of one cycle [s]
-    chunk_seconds = 1.0           # MCAP chunk length [s of data] (lost at most on SIGKILL)
+    chunk_seconds = 0.1           # MCAP chunk length [s of data] (lost at most on SIGKILL);
+                                  # each chunk is compressed inside the cycle loop: 1 s chunks
+                                  # cost ~1.5 ms once a second, a missed cycle (bench_daq.py)
+    gc_freeze = true              # paced and lockstep: gc.collect() + gc.freeze() before each
+                                  # payload run, no automatic collection during it (a full
+                                  # collection stalls 10-50 ms); collections resume after it
     cpu = -1                      # pin the process to this CPU (-1: the last allowed one;
                                   # -2: do not pin)
     master_node_id = 127          # node id of the master's own heartbeat (0x700 + id)
@@ -179,6 +184,7 @@ class DaqConfig:
     master_node_id: int = 127
     master_heartbeat_ms: int = 100
     from_can_config: tuple[str, ...] = ()  # keys taken from python-can's configuration
+    gc_freeze: bool = True  # no automatic garbage collection during a payload run
 
     @property
     def heartbeat_consumer_ms(self) -> int:
@@ -246,7 +252,8 @@ _DAQ = Table(
         "max_following_error": Field(float, required=False, default=0.2, gt=0, unit="rad"),
         "quick_stop_cycles": Field(int, required=False, default=2, ge=1, le=1000),
         "lockstep_wait_s": Field(float, required=False, default=0.5, gt=0, unit="s"),
-        "chunk_seconds": Field(float, required=False, default=1.0, gt=0, unit="s"),
+        "chunk_seconds": Field(float, required=False, default=0.1, gt=0, unit="s"),
+        "gc_freeze": Field(bool, required=False, default=True),
         "cpu": Field(int, required=False, default=-1, ge=-2),
         "master_node_id": Field(int, required=False, default=127, ge=1, le=127),
         "master_heartbeat_ms": Field(int, required=False, default=100, ge=0, le=20000,
@@ -414,6 +421,7 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "", *,
         master_node_id=d["master_node_id"],
         master_heartbeat_ms=d["master_heartbeat_ms"],
         from_can_config=from_pc,
+        gc_freeze=d["gc_freeze"],
     )
 
 
