@@ -16,9 +16,10 @@ import can
 import numpy as np
 import pytest
 
-from daq.cia402 import State, state_from_statusword
-from daq.reader import read_frames, read_run
-from daq.runner import plant_scaling, run_campaign
+from daq.protocol.cia402 import State, state_from_statusword
+from daq.protocol.reader import read_frames, read_run
+from daq.runtime.runner import run_campaign
+from daq.runtime.simrig import plant_scaling
 from sim_drivers.plant_config import default_plant
 from sim_drivers.remote import ServeProcess
 from trajectories.campaign import Campaign

@@ -26,8 +26,9 @@ import pytest
 from mcap.reader import make_reader
 from test_cross_process import remote_campaign
 
-from daq.reader import read_run
-from daq.runner import plant_scaling, run_campaign
+from daq.protocol.reader import read_run
+from daq.runtime.runner import run_campaign
+from daq.runtime.simrig import plant_scaling
 from sim_drivers.plant_config import default_plant
 from sim_drivers.remote import ServeProcess
 

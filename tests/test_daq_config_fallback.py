@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from daq import ConfigError
-from daq.config import parse_daq
-from daq.reader import read_run
-from daq.runner import run_campaign
+from daq.protocol.reader import read_run
+from daq.runtime.config import parse_daq
+from daq.runtime.runner import run_campaign
 from trajectories.campaign import Campaign
 
 _chan = itertools.count()

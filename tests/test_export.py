@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from test_daq_run import small_campaign
 
-from daq.export import ExportError, export_can
-from daq.reader import read_frames
-from daq.runner import run_campaign
+from daq.protocol.export import ExportError, export_can
+from daq.protocol.reader import read_frames
+from daq.runtime.runner import run_campaign
 from sim_drivers.plant_config import default_plant
 
 # (extension, relative-time tolerance [s], absolute-time tolerance [s]) — the formats'

@@ -46,8 +46,8 @@ import numpy as np
 from mcap.records import Channel, Message, Metadata
 from mcap.stream_reader import StreamReader
 
-from . import DaqError
-from .mcaplog import FRAME_DTYPE
+from daq import DaqError
+from daq.protocol.logformat import FRAME_DTYPE
 
 __all__ = ["EXPORT_FORMATS", "ExportError", "ExportResult", "export_can"]
 

@@ -67,11 +67,10 @@ from typing import Any
 import can
 import can.util
 
+from daq import ConfigError
+from daq.protocol.cia402 import Mode
 from trajectories import SchemaError
 from trajectories.schema import ArrayOfTables, Field, Table
-
-from . import ConfigError
-from .cia402 import Mode
 
 MODES = {"cst": Mode.CYCLIC_SYNC_TORQUE, "csp": Mode.CYCLIC_SYNC_POSITION}
 
