@@ -38,6 +38,7 @@ TPDO1 = 0x180 + NODE
 RPDO1 = 0x200 + NODE
 SYNC_FLOOR_S = 0.3  # the drive's SYNC-loss timeout: max(3 x 0x1006, this) [s]
 HB_CONSUMER_S = 0.4  # 0x1016 consumer time the master writes: 3 x 100 ms + 100 ms [s]
+RPDO_TIMER_S = 0.103  # 0x1400.5 the master writes at 1 kHz paced: 3 cycles + 100 ms [s]
 
 pytestmark = pytest.mark.slow
 
@@ -85,8 +86,8 @@ class Listener:
         self.thread.join(2.0)
         try:
             self.bus.shutdown()
-        except Exception:
-            pass
+        except Exception:  # the bridge died: mark it shut down (no retry in __del__)
+            can.BusABC.shutdown(self.bus)
 
 
 def enabled(cob: int, data: bytes) -> bool:
@@ -189,7 +190,8 @@ def stop(proc: subprocess.Popen) -> str:
 def test_killed_master_the_drive_faults_by_itself(bus3, tmp_path):
     """SIGKILL the master while the joint moves: SYNC and the master's heartbeat stop, the
     drive faults on its own (SYNC loss 0x8100 after max(3 x 0x1006, floor), or heartbeat
-    0x8130 after 3 x 100 + 100 ms, whichever comes first) and says so with an EMCY a third
+    0x8130 after 3 x 100 + 100 ms, or the RPDO1 event timer 0x8250 after 103 ms, whichever
+    comes first) and says so with an EMCY a third
     listener receives; the killed master's log is readable up to its last complete chunk."""
     _, drive, listener = bus3
     master = start_master(tmp_path, listener_url(bus3))
@@ -208,11 +210,14 @@ def test_killed_master_the_drive_faults_by_itself(bus3, tmp_path):
     code = emcy[2][0] | emcy[2][1] << 8
     last_sync = listener.last(0x80, emcy[0])
     assert last_sync is not None and last_sync <= t_kill + 0.05  # SYNC stopped with it
-    # not before the first configured timeout, and within it + host stalls + bridge hops
-    assert code in (0x8100, 0x8130), f"EMCY 0x{code:04X}"
-    timeout = SYNC_FLOOR_S if code == 0x8100 else HB_CONSUMER_S
+    # the first watchdog to expire: the RPDO1 event timer the master wrote (103 ms), before
+    # the SYNC loss (0.3 s here) and the heartbeat consumer (0.4 s); never before its time
+    # (from the last RPDO, which went out with the last SYNC), within it + host stalls
+    assert code in (0x8250, 0x8100, 0x8130), f"EMCY 0x{code:04X}"
+    timeout = {0x8250: RPDO_TIMER_S, 0x8100: SYNC_FLOOR_S, 0x8130: HB_CONSUMER_S}[code]
     assert timeout - 0.02 <= emcy[0] - last_sync < timeout + 1.0
-    line = r"node 3: no SYNC for" if code == 0x8100 else r"node 3: heartbeat of node 127 lost"
+    line = {0x8250: r"node 3: RPDO1 timeout", 0x8100: r"node 3: no SYNC for",
+            0x8130: r"node 3: heartbeat of node 127 lost"}[code]
     assert drive.wait_for(line, 2.0) is not None, drive.output
     # the killed master's log: complete chunks readable, marked truncated
     log = tmp_path / "runs" / "killed_payload0.mcap"
@@ -273,3 +278,74 @@ def test_killed_drive_the_master_stops_and_names_the_cause(bus3, tmp_path):
     assert missing[-10:].all()  # the end of the run: no TPDO any more
     # the drive answered until it was killed: most of the run has its TPDOs
     assert (~missing).sum() > 200  # (0.5 s after enabling, minus host stalls)
+
+
+def test_hung_master_with_periodic_sync_the_rpdo_timer_stops_the_drive(bus3, tmp_path):
+    """SIGSTOP the master (``sync_source = "periodic"``): its SYNC and heartbeat keep coming
+    from the bridge (python-can-remote runs ``send_periodic`` there, like the kernel's
+    broadcast manager on socketcan), so neither the SYNC watchdog nor the heartbeat consumer
+    sees anything; the RPDO1 event timer the master wrote (3 cycles + 100 ms = 103 ms) stops
+    the drive: EMCY 0x8250, measured from the last RPDO the third listener saw."""
+    _, drive, listener = bus3
+    master = start_master(tmp_path, listener_url(bus3), sync_source="periodic")
+    try:
+        on = listener.wait(enabled, 60.0, alive=lambda: master.poll() is None)
+        assert on is not None, f"drive never enabled; master: {stop(master)[-800:]}"
+        time.sleep(0.5)
+        t_stop = time.monotonic()
+        master.send_signal(signal.SIGSTOP)
+        emcy = listener.wait(lambda i, d: i == EMCY and len(d) >= 2, 5.0, t_stop)
+        master.send_signal(signal.SIGKILL)
+    finally:
+        stop(master)
+    assert emcy is not None, f"no EMCY after hanging the master; drive:\n{drive.output}"
+    code = emcy[2][0] | emcy[2][1] << 8
+    assert code == 0x8250, f"EMCY 0x{code:04X}"
+    last_rpdo = listener.last(RPDO1, emcy[0])
+    assert last_rpdo is not None and last_rpdo <= t_stop + 0.05
+    # SYNC went on between the last RPDO and the fault: the hung master's SYNC source lived
+    syncs_after = [t for t, i, _ in listener.frames if i == 0x80 and last_rpdo < t < emcy[0]]
+    assert len(syncs_after) > 20
+    delay = emcy[0] - last_rpdo
+    assert RPDO_TIMER_S - 0.02 <= delay < RPDO_TIMER_S + 1.0, delay
+    assert drive.wait_for(r"node 3: RPDO1 timeout", 2.0) is not None, drive.output
+    log = tmp_path / "runs" / "killed_payload0.mcap"
+    with pytest.warns(RuntimeWarning):
+        a = read_run(log)
+    assert a.metadata["drive0"]["rpdo_event_timer_ms"] == "103"
+    assert a.metadata["safety"]["rpdo_timeout_ms"] == "103"
+
+
+def test_bridge_dies_with_the_drive_the_master_stops_bus_lost(tmp_path):
+    """The drive's process also hosts the bridge (``serve --bridge-port``): killing it takes
+    the master's bus away. The master stops with "bus lost", no traceback, and the log is
+    complete (closed properly, status stopped)."""
+    served = ServeProcess((NODE,), channel="bridge_dies", args=("--sync-loss-floor", "0.5"))
+    try:
+        c = remote_campaign(served.url, NODE, periods=20)
+        listener = Listener(served.url)
+
+        def killer() -> None:
+            if listener.wait(enabled, 60.0) is not None:
+                time.sleep(0.5)
+                served.kill(signal.SIGKILL)
+
+        th = threading.Thread(target=killer, daemon=True)
+        th.start()
+        r = run_campaign(c, out_dir=tmp_path, prompt=lambda *a: True)
+        th.join(5.0)
+        listener.close()
+    finally:
+        served.close()
+    assert r.status == "stopped"
+    assert r.reason.startswith("bus lost: "), r.reason
+    assert "\n" not in r.reason
+    run = r.runs[0]
+    with open(run.path, "rb") as f:
+        reader = make_reader(f)
+        assert reader.get_summary() is not None
+        meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+    assert meta["result"]["status"] == "stopped"
+    assert meta["result"]["reason"] == r.reason
+    a = read_run(run.path)
+    assert not a.truncated and len(a) == run.cycles > 200

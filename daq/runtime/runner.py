@@ -363,8 +363,13 @@ def run_campaign(
         if old_handler is not None:
             signal.signal(signal.SIGINT, old_handler)
         if network is not None:
-            with contextlib.suppress(Exception):
+            try:
                 network.disconnect()
+            except Exception:
+                # a bus whose transport died cannot shut down (python-can-remote raises
+                # OSError): mark it shut down, or its __del__ tries again at exit
+                with contextlib.suppress(Exception):
+                    can.BusABC.shutdown(network.bus)
         if sim is not None:
             sim.close()
         if old_affinity is not None:
