@@ -149,3 +149,23 @@ def test_not_a_run_log(tmp_path):
     with pytest.raises(ExportError, match=r"bad.mcap: expected a jointid run log"):
         export_can(bad, tmp_path / "x.blf")
     assert not (tmp_path / "x.blf").exists()
+
+
+def test_jointid_export_subcommand(run_log, tmp_path, capsys):
+    from daq.app.cli import main
+
+    out = tmp_path / "cli.asc"
+    assert main(["export", str(run_log), "--can", str(out)]) == 0
+    line = capsys.readouterr().out.strip()
+    n = read_frames(run_log).shape[0]
+    assert line.startswith(f"export: {n} CAN frames (") and line.endswith(f"-> {out}")
+    assert len(list(can.LogReader(out))) == n
+    # bad input: one line on stderr naming the file and what was expected, exit 2, no file
+    assert main(["export", str(run_log), "--can", str(tmp_path / "x.pcap")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("jointid export: error: ")
+    assert "x.pcap: expected an output file ending in .blf" in err[0]
+    assert not (tmp_path / "x.pcap").exists()
+    assert main(["export", str(tmp_path / "none.mcap"), "--can", str(tmp_path / "y.blf")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "none.mcap: expected a jointid run log" in err[0]
