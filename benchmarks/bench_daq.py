@@ -284,22 +284,23 @@ def mcap_rate(cycles: int, tmp: Path) -> tuple[float, float]:
 
 
 def master_loss(repeat: int) -> dict[str, list[float]]:
-    """Delays [s] from the last heartbeat / SYNC received to the drive's FAULT, and the
-    configured timeouts [s]."""
+    """Delays [s] from the last heartbeat / SYNC / RPDO received to the drive's FAULT, and
+    the configured timeouts [s]."""
     from daq.protocol.cia402 import State, path
-    from daq.runtime.master import MasterHeartbeat
+    from daq.runtime.master import MasterHeartbeat, rpdo_timeout_ms
     from sim_drivers.testing import LockstepMaster, make_rig
 
     node = 9
     tpdos = {0x180 + node: ("<Hi", ("6041", "6064")), 0x280 + node: ("<hi", ("6077", "606C"))}
-    out: dict[str, list[float]] = {"hb": [], "sync": [], "hb_cfg": [], "sync_cfg": []}
+    out: dict[str, list[float]] = {"hb": [], "sync": [], "rpdo": [], "hb_cfg": [],
+                                   "sync_cfg": [], "rpdo_cfg": []}
 
     def wait_fault(rig) -> None:
         end = time.monotonic() + 5.0
         while rig.drive.state is not State.FAULT and time.monotonic() < end:
             time.sleep(0.001)
 
-    for kind in ("hb", "sync"):
+    for kind in ("hb", "sync", "rpdo"):
         for _ in range(repeat):
             rig = make_rig(node_id=node)
             hb = MasterHeartbeat(rig.network.bus, 127, 100)
@@ -307,8 +308,10 @@ def master_loss(repeat: int) -> dict[str, list[float]]:
                 if kind == "hb":
                     rig.node.sdo[0x1016][1].raw = (127 << 16) | 400
                     hb.start()
-                else:
+                elif kind == "sync":
                     rig.node.sdo[0x1006].raw = 1000
+                else:  # RPDO1 event timer as the master writes it at 1 kHz paced
+                    rig.node.sdo[0x1400][5].raw = rpdo_timeout_ms(0.001, paced=True)
                 rig.node.sdo[0x6060].raw = 10
                 for _, cw in path(State.SWITCH_ON_DISABLED, State.OPERATION_ENABLED):
                     rig.node.sdo[0x6040].raw = cw
@@ -323,10 +326,20 @@ def master_loss(repeat: int) -> dict[str, list[float]]:
                     wait_fault(rig)
                     out["hb"].append(rig.drive.fault_time - c.last)
                     out["hb_cfg"].append(c.time_s)
-                else:
+                elif kind == "sync":
                     wait_fault(rig)
                     out["sync"].append(rig.drive.fault_time - rig.drive.last_sync_time)
                     out["sync_cfg"].append(rig.drive.sync_timeout_s)
+                else:  # hung master, SYNC goes on from a periodic task
+                    rig.network.sync.start(0.001)
+                    try:
+                        timer_s, _ = rig.drive.rpdo_timers[1]
+                        wait_fault(rig)
+                        last = rig.drive.rpdo_timers[1][1]
+                    finally:
+                        rig.network.sync.stop()
+                    out["rpdo"].append(rig.drive.fault_time - last)
+                    out["rpdo_cfg"].append(timer_s)
                 m.close()
             finally:
                 hb.stop()
@@ -338,7 +351,8 @@ def safety_rows(repeat: int) -> list[tuple[str, str, str, str]]:
     ml = master_loss(repeat)
     rows = []
     for kind, label in (("hb", "master loss: heartbeat -> FAULT"),
-                        ("sync", "master loss: SYNC -> FAULT")):
+                        ("sync", "master loss: SYNC -> FAULT"),
+                        ("rpdo", "hung master, SYNC on: RPDO timer -> FAULT")):
         d = np.array(ml[kind]) * 1e3
         cfg = statistics.median(ml[kind + "_cfg"]) * 1e3
         over = d - cfg
