@@ -113,3 +113,28 @@ def test_campaign_without_bus_keys_runs_on_the_configured_bus(tmp_path, monkeypa
     assert drive.record["counts"].shape[0] >= r.runs[0].cycles - 2
     moving = np.flatnonzero(a.segment >= 0)
     assert np.max(np.abs(a.q - a.q_ref)[moving]) < 0.05
+
+
+def test_simulated_run_ignores_python_can_configuration(tmp_path, monkeypatch):
+    """--simulate runs on the virtual bus even when python-can's configuration names a
+    real one (it would otherwise be refused: 'expected virtual with --simulate')."""
+    from sim_drivers.plant_config import default_plant
+
+    monkeypatch.setenv("CAN_INTERFACE", "socketcan")
+    monkeypatch.setenv("CAN_CHANNEL", "can0")
+    raw = {
+        "name": "simcfg",
+        "joint": {"kind": "revolute", "limits": {
+            "position": [-1.0, 1.0], "max_velocity": 1.0, "max_acceleration": 4.0,
+            "max_jerk": 40.0, "max_torque": 700.0}},
+        "control": {"cycle_s": 0.001, "kp": 6000.0, "kd": 200.0,
+                    "feedforward": {"J": 30.0, "MX": 21.0}},
+        "payloads": [{"mass_kg": 0.0, "arm_m": 1.0}],
+        "segments": [{"kind": "sine", "amplitude": 0.1, "frequency_hz": 1.0, "center": 0.0,
+                      "periods": 1}],
+        "daq": {"channel": f"simcfg_{next(_chan)}"},
+    }
+    r = run_campaign(Campaign.from_dict(raw, "simcfg.toml"), out_dir=tmp_path,
+                     simulate=default_plant(), yes=True)
+    assert r.ok, r.reason
+    assert read_run(r.runs[0].path).metadata["campaign"]["interface"] == "virtual"
