@@ -233,6 +233,7 @@ class Engine(Supervisor):
         prev_state: list[State | None] = [None] * n_dr
         prev_sw = [-1] * n_dr
         missing_run = [0] * n_dr
+        last_cw = [CW_DISABLE] * n_dr  # controlword sent last cycle, per drive
         missed = 0
         cycle = 0
         fault_cycle = -1
@@ -321,10 +322,15 @@ class Engine(Supervisor):
                         target_raw = 0
                     if mode == "run":
                         cw = CW_RUN
+                    elif flags:
+                        # no answer this cycle: the drive may already be one step further
+                        # than its last statusword says; a step from the stale state (e.g.
+                        # 0x06 to a drive that just reached OPERATION ENABLED) would undo
+                        # it, so repeat the command it already has (level-triggered)
+                        cw = last_cw[d]
                     else:
                         try:
-                            st = (state_from_statusword(s) if flags == 0
-                                  else State.SWITCH_ON_DISABLED)
+                            st = state_from_statusword(s)
                         except ValueError:
                             st = State.NOT_READY_TO_SWITCH_ON
                         if st is State.OPERATION_ENABLED:
@@ -340,6 +346,7 @@ class Engine(Supervisor):
                     target_raw = round(q_ref * cpr[d]) if csp[d] else 0
                     cw = (CW_QUICK_STOP if mode == "quick_stop" else
                           CW_DISABLE if mode == "disable" else CW_SHUTDOWN)
+                last_cw[d] = cw
                 payload_bytes = packs[d](cw, target_raw if csp[d] else x)
                 m = msgs[d]
                 m.data = payload_bytes
