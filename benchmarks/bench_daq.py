@@ -33,6 +33,7 @@ import itertools
 import os
 import shutil
 import statistics
+import struct
 import subprocess
 import sys
 import tempfile
@@ -54,7 +55,8 @@ _chan = itertools.count()
 
 
 def campaign(seconds: float, cycle_s: float = 0.001, drives: int = 1,
-             clock: str = "lockstep") -> Campaign:
+             clock: str = "lockstep", drive_tables: list | None = None,
+             **daq: object) -> Campaign:
     periods = max(1, int(round(seconds * 0.25)))
     raw = {
         "name": "bench",
@@ -67,9 +69,9 @@ def campaign(seconds: float, cycle_s: float = 0.001, drives: int = 1,
         "segments": [{"kind": "sine", "amplitude": 0.3, "frequency_hz": 0.25, "center": 0.0,
                       "periods": periods}],
         "daq": {"channel": f"bench_{next(_chan)}", "clock": clock,
-                "drives": [{"node_id": n} for n in range(1, drives + 1)],
+                "drives": drive_tables or [{"node_id": n} for n in range(1, drives + 1)],
                 "heartbeat_timeout_s": 2.0, "tpdo_timeout_cycles": 1000,
-                "max_following_error": 1.0},
+                "max_following_error": 1.0, **daq},
     }
     return Campaign.from_dict(raw, "bench.toml")
 
@@ -91,25 +93,167 @@ def lockstep(drives: int, seconds: float, repeat: int, out: Path) -> tuple[float
     return statistics.median(rates), statistics.median(cpus), n
 
 
-def paced(seconds: float, out: Path) -> dict[str, float]:
-    c = campaign(seconds, 0.001, 1, clock="paced")
-    r = run_campaign(c, out_dir=out, simulate=default_plant(), yes=True)
-    run = r.runs[0]
+def _paced_stats(run, status: str) -> dict[str, float]:
     lat = run.lateness_s * 1e6
+    busy = _busy_us(run.path)
     return {"cycles": run.cycles, "missed": run.missed, "p50": float(np.percentile(lat, 50)),
             "p99": float(np.percentile(lat, 99)), "max": float(lat.max()),
-            "status": r.status}
+            "busy_p99": float(np.percentile(busy, 99)) if busy.size else float("nan"),
+            "status": status}
 
 
-def c_loop_start(cycles: int, tmp: Path) -> subprocess.Popen | None:
+def _busy_us(path: Path) -> np.ndarray:
+    """``busy_s`` of every cycle from the log's ``/timing`` channel [us]."""
+    from mcap.reader import make_reader
+
+    out = []
+    with open(path, "rb") as f:
+        for _, _, m in make_reader(f).iter_messages(topics=["/timing"]):
+            out.append(struct.unpack_from("<qddd", m.data, 4)[3])
+    return np.array(out) * 1e6
+
+
+def paced(seconds: float, out: Path, **daq: object) -> dict[str, float]:
+    """One simulated 1 kHz paced payload run (drive, plant and master in this process)."""
+    c = campaign(seconds, 0.001, 1, clock="paced", **daq)
+    r = run_campaign(c, out_dir=out, simulate=default_plant(), yes=True)
+    return _paced_stats(r.runs[0], r.status)
+
+
+def _fifo(priority: int):
+    """preexec_fn: SCHED_FIFO ``priority`` for a child (0: leave the policy)."""
+    def apply() -> None:
+        if priority:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    return apply
+
+
+def c_loop_start(cycles: int, tmp: Path, priority: int = 0) -> subprocess.Popen | None:
     """Compile and start the C reference loop (it runs beside the Python paced run, so
-    both see the same host stalls)."""
+    both see the same host stalls), under SCHED_FIFO ``priority`` when the Python run
+    uses it."""
     gcc = shutil.which("gcc") or shutil.which("cc")
     if gcc is None:
         return None
     exe = tmp / "c_paced_loop"
-    subprocess.run([gcc, "-O2", "-o", str(exe), str(HERE / "c_paced_loop.c")], check=True)
-    return subprocess.Popen([str(exe), "1000", str(cycles)], stdout=subprocess.PIPE, text=True)
+    if not exe.exists():
+        subprocess.run([gcc, "-O2", "-o", str(exe), str(HERE / "c_paced_loop.c")], check=True)
+    return subprocess.Popen([str(exe), "1000", str(cycles)], stdout=subprocess.PIPE, text=True,
+                            preexec_fn=_fifo(priority))
+
+
+def fifo_allowed() -> bool:
+    """Whether this process may use SCHED_FIFO (CAP_SYS_NICE or root)."""
+    try:
+        old = os.sched_getscheduler(0), os.sched_getparam(0)
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+        os.sched_setscheduler(0, old[0], old[1])
+        return True
+    except (PermissionError, OSError, AttributeError):
+        return False
+
+
+def miss_ratio(p: dict[str, float], c: dict[str, float]) -> float:
+    """Python/C miss rate, +1 each (runs of slightly different lengths: compare rates)."""
+    return ((p["missed"] + 1) / p["cycles"]) / ((c["missed"] + 1) / c["cycles"])
+
+
+def paced_rows(seconds: float, tmp: Path, variants: list[tuple[str, dict]]
+               ) -> list[tuple[str, str, str, str]]:
+    """Each variant: a Python paced run and the C loop beside it (same scheduling policy),
+    so the ratio compares the two under the same host load."""
+    rows = []
+    for k, (label, daq) in enumerate(variants):
+        prio = int(daq.get("realtime_priority", 0))
+        proc = c_loop_start(int(seconds * 1000), tmp, prio)
+        p = paced(seconds, tmp / f"paced{k}", **daq)
+        rows.append((f"paced 1 kHz, Python [{label}]", f"missed {p['missed']}/{p['cycles']}",
+                     f"lateness p50 {p['p50']:.0f} / p99 {p['p99']:.0f} / max "
+                     f"{p['max']:.0f} us", f"busy p99 {p['busy_p99']:.0f} us, run {p['status']}"))
+        if proc is None:
+            rows.append(("  C clock_nanosleep", "gcc not found", "", ""))
+            continue
+        cref = c_loop_result(proc)
+        rows.append((f"  C clock_nanosleep [{label}]", f"missed {cref['missed']}/"
+                     f"{cref['cycles']}", f"lateness p50 {cref['p50']:.0f} / p99 "
+                     f"{cref['p99']:.0f} / max {cref['max']:.0f} us",
+                     f"miss rate Python/C = {miss_ratio(p, cref):.2f} (+1 each)"))
+    return rows
+
+
+def cross_process(seconds: float, tmp: Path, sync_source: str, **daq: object
+                  ) -> dict[str, float]:
+    """A paced 1 kHz run with the drive in another process (``sim_drivers.serve`` behind a
+    loopback python-can-remote bridge) and a third process recording the SYNC train
+    (``sync_listener.py``); the C loop runs beside it."""
+    from daq.runtime.simrig import plant_scaling
+    from sim_drivers.remote import ServeProcess
+
+    sc = plant_scaling(default_plant())
+    prio = int(daq.get("realtime_priority", 0))
+    with ServeProcess((1,), channel="bench_xproc", realtime_priority=prio) as served:
+        npy = tmp / f"sync_{sync_source}.npy"
+        lis = subprocess.Popen([sys.executable, str(HERE / "sync_listener.py"), served.url,
+                                str(npy)], stdout=subprocess.PIPE, text=True,
+                               preexec_fn=_fifo(prio))
+        try:
+            assert lis.stdout is not None and "listening" in lis.stdout.readline()
+            c = campaign(seconds, 0.001, 1, clock="paced", interface="remote",
+                         channel=served.url, sync_source=sync_source,
+                         tpdo_timeout_cycles=1000, **daq,
+                         drive_tables=[{"node_id": 1, "scaling": {
+                             "rated_torque_Nm": sc.rated_torque_Nm,
+                             "gear_ratio": sc.gear_ratio,
+                             "encoder_counts_per_rev": sc.encoder_counts_per_rev}}])
+            proc = c_loop_start(int(seconds * 1000), tmp, prio)
+            r = run_campaign(c, out_dir=tmp / f"xproc_{sync_source}", prompt=lambda *a: True)
+            cref = c_loop_result(proc) if proc is not None else None
+            time.sleep(0.2)
+        finally:
+            lis.terminate()
+            lis.wait(10)
+    out = _paced_stats(r.runs[0], r.status) if r.runs else {"status": r.status}
+    out["reason"] = r.reason
+    ts = np.load(npy)
+    period = np.diff(ts[:, 0]) * 1e6 if ts.shape[0] > 1 else np.zeros(1)
+    arrival = np.diff(ts[:, 1]) * 1e6 if ts.shape[0] > 1 else np.zeros(1)
+    out.update({
+        "syncs": int(ts.shape[0]),
+        "period_p50": float(np.percentile(period, 50)),
+        "period_p1": float(np.percentile(period, 1)),
+        "period_p99": float(np.percentile(period, 99)),
+        "period_max": float(period.max()),
+        "period_std": float(np.std(period[period < 5000])),
+        "late_periods": int(np.sum(period > 1500)),
+        "arrival_p99": float(np.percentile(arrival, 99)),
+        "c": cref,
+    })
+    return out
+
+
+def cross_process_rows(seconds: float, tmp: Path, variants: list[tuple[str, dict]]
+                       ) -> list[tuple[str, str, str, str]]:
+    rows = []
+    for sync_source in ("runner", "periodic"):
+        for label, daq in variants:
+            x = cross_process(seconds, tmp, sync_source, **daq)
+            tag = f"cross-process, SYNC {sync_source} [{label}]"
+            if "cycles" not in x:
+                rows.append((tag, f"run {x['status']}", "", ""))
+                continue
+            ratio = (f"miss rate Python/C = {miss_ratio(x, x['c']):.2f} (C missed "
+                     f"{x['c']['missed']}/{x['c']['cycles']})" if x.get("c") else "")
+            if x["status"] != "done":
+                ratio += f"; run {x['status']}: {x['reason']}"
+            rows.append((tag, f"missed {x['missed']}/{x['cycles']}",
+                         f"lateness p50 {x['p50']:.0f} / p99 {x['p99']:.0f} / max "
+                         f"{x['max']:.0f} us", ratio))
+            rows.append(("  SYNC seen by a 3rd process", f"{x['syncs']} SYNCs",
+                         f"period p1 {x['period_p1']:.0f} / p50 {x['period_p50']:.0f} / p99 "
+                         f"{x['period_p99']:.0f} / max {x['period_max']:.0f} us",
+                         f"std {x['period_std']:.0f} us, {x['late_periods']} periods > 1.5 ms,"
+                         f" arrival p99 {x['arrival_p99']:.0f} us"))
+    return rows
 
 
 def c_loop_result(proc: subprocess.Popen) -> dict[str, float]:
@@ -140,22 +284,23 @@ def mcap_rate(cycles: int, tmp: Path) -> tuple[float, float]:
 
 
 def master_loss(repeat: int) -> dict[str, list[float]]:
-    """Delays [s] from the last heartbeat / SYNC received to the drive's FAULT, and the
-    configured timeouts [s]."""
+    """Delays [s] from the last heartbeat / SYNC / RPDO received to the drive's FAULT, and
+    the configured timeouts [s]."""
     from daq.protocol.cia402 import State, path
-    from daq.runtime.master import MasterHeartbeat
+    from daq.runtime.master import MasterHeartbeat, rpdo_timeout_ms
     from sim_drivers.testing import LockstepMaster, make_rig
 
     node = 9
     tpdos = {0x180 + node: ("<Hi", ("6041", "6064")), 0x280 + node: ("<hi", ("6077", "606C"))}
-    out: dict[str, list[float]] = {"hb": [], "sync": [], "hb_cfg": [], "sync_cfg": []}
+    out: dict[str, list[float]] = {"hb": [], "sync": [], "rpdo": [], "hb_cfg": [],
+                                   "sync_cfg": [], "rpdo_cfg": []}
 
     def wait_fault(rig) -> None:
         end = time.monotonic() + 5.0
         while rig.drive.state is not State.FAULT and time.monotonic() < end:
             time.sleep(0.001)
 
-    for kind in ("hb", "sync"):
+    for kind in ("hb", "sync", "rpdo"):
         for _ in range(repeat):
             rig = make_rig(node_id=node)
             hb = MasterHeartbeat(rig.network.bus, 127, 100)
@@ -163,8 +308,10 @@ def master_loss(repeat: int) -> dict[str, list[float]]:
                 if kind == "hb":
                     rig.node.sdo[0x1016][1].raw = (127 << 16) | 400
                     hb.start()
-                else:
+                elif kind == "sync":
                     rig.node.sdo[0x1006].raw = 1000
+                else:  # RPDO1 event timer as the master writes it at 1 kHz paced
+                    rig.node.sdo[0x1400][5].raw = rpdo_timeout_ms(0.001, paced=True)
                 rig.node.sdo[0x6060].raw = 10
                 for _, cw in path(State.SWITCH_ON_DISABLED, State.OPERATION_ENABLED):
                     rig.node.sdo[0x6040].raw = cw
@@ -179,10 +326,20 @@ def master_loss(repeat: int) -> dict[str, list[float]]:
                     wait_fault(rig)
                     out["hb"].append(rig.drive.fault_time - c.last)
                     out["hb_cfg"].append(c.time_s)
-                else:
+                elif kind == "sync":
                     wait_fault(rig)
                     out["sync"].append(rig.drive.fault_time - rig.drive.last_sync_time)
                     out["sync_cfg"].append(rig.drive.sync_timeout_s)
+                else:  # hung master, SYNC goes on from a periodic task
+                    rig.network.sync.start(0.001)
+                    try:
+                        timer_s, _ = rig.drive.rpdo_timers[1]
+                        wait_fault(rig)
+                        last = rig.drive.rpdo_timers[1][1]
+                    finally:
+                        rig.network.sync.stop()
+                    out["rpdo"].append(rig.drive.fault_time - last)
+                    out["rpdo_cfg"].append(timer_s)
                 m.close()
             finally:
                 hb.stop()
@@ -194,7 +351,8 @@ def safety_rows(repeat: int) -> list[tuple[str, str, str, str]]:
     ml = master_loss(repeat)
     rows = []
     for kind, label in (("hb", "master loss: heartbeat -> FAULT"),
-                        ("sync", "master loss: SYNC -> FAULT")):
+                        ("sync", "master loss: SYNC -> FAULT"),
+                        ("rpdo", "hung master, SYNC on: RPDO timer -> FAULT")):
         d = np.array(ml[kind]) * 1e3
         cfg = statistics.median(ml[kind + "_cfg"]) * 1e3
         over = d - cfg
@@ -214,12 +372,33 @@ def main() -> int:
     ap.add_argument("--safety-repeat", type=int, default=5,
                     help="master-loss reaction measurements per kind (0: skip)")
     ap.add_argument("--only-safety", action="store_true", help="only the master-loss rows")
+    ap.add_argument("--only-paced", action="store_true",
+                    help="only the paced rows: Python vs C in the same run, per variant "
+                         "(default scheduling, and SCHED_FIFO when allowed)")
+    ap.add_argument("--cross-process", action="store_true",
+                    help="add paced runs with the drive in another process (loopback bridge) "
+                         "and a third process timing the SYNC train")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench_daq_"))
+    # "before": automatic garbage collection and 1 s MCAP chunks (the defaults until
+    # 2026-11); "after": the defaults now (gc frozen during a run, 0.1 s chunks)
+    before = {"gc_freeze": False, "chunk_seconds": 1.0}
+    variants: list[tuple[str, dict]] = [("before: gc on, 1 s chunks", before),
+                                        ("after: gc frozen, 0.1 s chunks", {})]
+    if fifo_allowed():
+        fifo = {"realtime_priority": 10}
+        variants += [("before, SCHED_FIFO 10", {**before, **fifo}),
+                     ("after, SCHED_FIFO 10", fifo)]
     try:
-        rows = safety_rows(args.safety_repeat) if args.safety_repeat else []
-        if not args.only_safety:
-            rows.extend(speed_rows(args, tmp))
+        rows = []
+        if args.only_paced:
+            rows.extend(paced_rows(args.paced_seconds, tmp, variants))
+        elif not args.cross_process or args.only_safety:
+            rows = safety_rows(args.safety_repeat) if args.safety_repeat else []
+            if not args.only_safety:
+                rows.extend(speed_rows(args, tmp))
+        if args.cross_process:
+            rows.extend(cross_process_rows(args.paced_seconds, tmp, variants))
         w = [max(len(r[i]) for r in rows) for i in range(4)]
         print(f"bench_daq  (python {sys.version.split()[0]}, {os.cpu_count()} CPUs, load "
               f"{os.getloadavg()[0]:.1f})")
@@ -244,21 +423,7 @@ def speed_rows(args: argparse.Namespace, tmp: Path) -> list[tuple[str, str, str,
                  f"{log_us:.1f} us/cycle",
                  f"{100 * log_us / cpu1:.0f} % of the 1-drive all-in CPU cycle"))
     # the plan of a paced run: ~args.paced_seconds of cycles + enable/approach/settle
-    proc = c_loop_start(int(args.paced_seconds * 1000), tmp)
-    p = paced(args.paced_seconds, tmp / "paced")
-    rows.append(("paced 1 kHz, Python runner", f"missed {p['missed']}/{p['cycles']}",
-                 f"lateness p50 {p['p50']:.0f} / p99 {p['p99']:.0f} / max "
-                 f"{p['max']:.0f} us", f"run {p['status']}"))
-    cref = c_loop_result(proc) if proc is not None else None
-    if cref is None:
-        rows.append(("paced 1 kHz, C clock_nanosleep", "gcc not found", "", ""))
-    else:
-        # runs of slightly different lengths (enable/approach/settle): compare rates
-        ratio = ((p["missed"] + 1) / p["cycles"]) / ((cref["missed"] + 1) / cref["cycles"])
-        rows.append(("paced 1 kHz, C clock_nanosleep", f"missed {cref['missed']}/"
-                     f"{cref['cycles']}", f"lateness p50 {cref['p50']:.0f} / p99 "
-                     f"{cref['p99']:.0f} / max {cref['max']:.0f} us",
-                     f"miss rate Python/C = {ratio:.2f} (+1 each)"))
+    rows.extend(paced_rows(args.paced_seconds, tmp, [("default", {})]))
     return rows
 
 

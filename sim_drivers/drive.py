@@ -74,15 +74,26 @@ Losing the master
   paced runs. 0x1006 = 0 (the EDS default) turns the watchdog off: the master writes 0 in
   lockstep (SYNCs may be far apart in wall time on a loaded host, and that is not a fault)
   and the cycle in paced mode.
-- Both run in one daemon thread per drive that sleeps until the earliest deadline (about
-  one wake-up per timeout, none while nothing is armed); on the hot path a SYNC costs one
-  ``time.monotonic()`` and an uncontended lock.
+- RPDO deadline monitoring (CiA 301 event timer of a receive PDO, 0x1400+n sub 5 [ms], when
+  the EDS has it): in NMT OPERATIONAL, OPERATION ENABLED, in a cyclic mode, an RPDO with a
+  non-zero timer that was received at least once faults with 0x8250 ("RPDO timeout") when
+  no frame of it arrived for the timer, counted from its last reception or from enabling,
+  whichever is later. It catches a hung master whose SYNC (and heartbeat) keep coming from
+  elsewhere (``send_periodic`` in the kernel or a bridge); the SYNC watchdog does not. The
+  timer is taken as written, with no floor: the master adds its own margin
+  (:func:`daq.runtime.master.rpdo_timeout_ms`: 3 cycles + 100 ms in paced mode, 0 in
+  lockstep). 0 (the EDS default) is off. Read when the PDO layouts are built (NMT start, or
+  the SYNC after a write to 0x14xx).
+- All three run in one daemon thread per drive that sleeps until the earliest deadline
+  (about one wake-up per timeout, none while nothing is armed); on the hot path a SYNC
+  costs one ``time.monotonic()`` and an uncontended lock, an RPDO one ``time.monotonic()``.
 
 Code layout: this module holds :class:`SimulatedDrive` (construction, object dictionary,
 life cycle, SDO server, SYNC entry, record); the protocol parts are mixins in
-:mod:`sim_drivers.nmt` (NMT slave, heartbeat consumer, SYNC watchdog), :mod:`sim_drivers.pdo`
-(mapping checks, layouts, RPDO/TPDO) and :mod:`sim_drivers.device402` (CiA 402 state machine,
-faults, the drive cycle); fault codes and the fault injector are :mod:`sim_drivers.faults`.
+:mod:`sim_drivers.nmt` (NMT slave, heartbeat consumer, SYNC watchdog, RPDO deadlines),
+:mod:`sim_drivers.pdo` (mapping checks, layouts, RPDO/TPDO) and
+:mod:`sim_drivers.device402` (CiA 402 state machine, faults, the drive cycle); fault codes
+and the fault injector are :mod:`sim_drivers.faults`.
 
 Threading: every bus callback (SDO, NMT, RPDO, SYNC) runs in the drive network's notifier
 thread, so they are serialised, and serialised with the watchdog thread by a lock; the
@@ -230,8 +241,8 @@ class SimulatedDrive(NmtMixin, PdoMixin, Device402Mixin):
 
     Attributes
     ----------
-    heartbeat_timeouts, sync_losses : int
-        Heartbeat-consumer timeouts and SYNC losses detected so far.
+    heartbeat_timeouts, sync_losses, rpdo_timeouts : int
+        Heartbeat-consumer timeouts, SYNC losses and RPDO timeouts detected so far.
     fault_time : float
         ``time.monotonic()`` when the drive last entered FAULT [s] (0: never).
     """
@@ -308,6 +319,7 @@ class SimulatedDrive(NmtMixin, PdoMixin, Device402Mixin):
         self._sync_cob = 0x80
         self._rx: list[RxPdo] = []
         self._rx_sync: list[RxPdo] = []
+        self._rx_timed: list[RxPdo] = []  # RPDOs with a non-zero event timer (0x1400+n.5)
         self._tx_sync: list[TxPdo] = []
         self._tx_event: list[TxPdo] = []
         self._extra_names: dict[tuple[int, int], str] = {}
@@ -332,6 +344,7 @@ class SimulatedDrive(NmtMixin, PdoMixin, Device402Mixin):
         self._wd_run = False
         self.heartbeat_timeouts = 0
         self.sync_losses = 0
+        self.rpdo_timeouts = 0
         self.fault_time = 0.0  # time.monotonic() of the last fault [s] (tests)
         self._load_application()
         self._update_actuals()

@@ -15,6 +15,9 @@ Error codes (0x603F, EMCY) follow CiA 301 / CiA 402's error-code table:
  0x8100      SYNC lost in a cyclic mode (CiA 301 "communication, generic"; CiA 301 has no
              code of its own for a SYNC timeout, CANopenNode reports it with 0x8100 too;
              0x8240 is a SYNC of the wrong *length*): FAULT
+ 0x8250      RPDO timeout (CiA 301 "RPDO timeout"): with the event timer 0x1400+n sub 5
+             non-zero, no RPDO n received for that long while OPERATION ENABLED in a
+             cyclic mode (deadline monitoring of a hung master that still sends SYNC): FAULT
  0xFF01      injected fault (device specific; :class:`FaultInjector` default)
  0xFF02      plant-detected fault (the plant raised or its state became non-finite)
 ==========  ==========================================================================
@@ -30,6 +33,7 @@ POSITION_LIMIT = 0x8612
 PDO_LENGTH_ERROR = 0x8210
 HEARTBEAT_LOST = 0x8130
 SYNC_LOST = 0x8100
+RPDO_TIMEOUT = 0x8250
 INJECTED_FAULT = 0xFF01
 PLANT_FAULT = 0xFF02
 
@@ -40,6 +44,7 @@ FAULT_NAMES: dict[int, str] = {
     PDO_LENGTH_ERROR: "PDO length error",
     HEARTBEAT_LOST: "heartbeat consumer timeout",
     SYNC_LOST: "SYNC lost",
+    RPDO_TIMEOUT: "RPDO timeout",
     INJECTED_FAULT: "injected fault",
     PLANT_FAULT: "plant fault",
 }

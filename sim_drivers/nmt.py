@@ -4,9 +4,9 @@
   communication, then PRE-OPERATIONAL; heartbeat producer per 0x1017; PRE-OPERATIONAL /
   OPERATIONAL / STOPPED. Reset node restores every object to its EDS/DCF value and the CiA 402
   state machine to SWITCH ON DISABLED; reset communication restores 0x1000-0x1FFF.
-- Heartbeat consumer 0x1016 and SYNC watchdog 0x1006: see "Losing the master" in
-  :mod:`sim_drivers.drive`. Both run in one daemon thread per drive
-  (:meth:`NmtMixin._watchdog_loop`).
+- Heartbeat consumer 0x1016, SYNC watchdog 0x1006 and RPDO deadline monitoring (event timer
+  0x1400+n sub 5): see "Losing the master" in :mod:`sim_drivers.drive`. All three run in one
+  daemon thread per drive (:meth:`NmtMixin._watchdog_loop`).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from collections.abc import Callable
 from canopen.sdo.exceptions import SdoAbortedError
 
 from daq.protocol.cia402 import CYCLIC_MODES, State
-from sim_drivers.faults import HEARTBEAT_LOST, SYNC_LOST, error_register
+from sim_drivers.faults import HEARTBEAT_LOST, RPDO_TIMEOUT, SYNC_LOST, error_register
 
 logger = logging.getLogger("sim_drivers.drive")  # one logger for the whole drive, as before
 
@@ -136,6 +136,12 @@ class NmtMixin:
         return self._sync_timeout_s
 
     @property
+    def rpdo_timers(self) -> dict[int, tuple[float, float]]:
+        """RPDOs under deadline monitoring: number -> (event timer [s], ``time.monotonic()``
+        of the last reception [s], 0 when none yet)."""
+        return {rx.number: (rx.timer_s, rx.last) for rx in self._rx_timed}
+
+    @property
     def heartbeat_consumers(self) -> dict[int, tuple[float, bool, int]]:
         """Watched nodes from 0x1016: node id -> (consumer time [s], monitoring started,
         heartbeats received)."""
@@ -244,4 +250,29 @@ class NmtMixin:
                     wait = left
             elif timeout and timeout < wait:
                 wait = timeout  # configured, not armed: look again within one timeout
+            if self._rx_timed:
+                wait = self._check_rpdo_deadlines(now, wait)
+        return wait
+
+    def _check_rpdo_deadlines(self, now: float, wait: float) -> float:
+        """RPDO deadline monitoring (CiA 301 event timer 0x1400+n sub 5): armed in NMT
+        OPERATIONAL, OPERATION ENABLED, cyclic mode, from the first reception of the RPDO;
+        counted from its last reception or from enabling, whichever is later. A timeout is
+        a fault 0x8250 (called with the lock held); returns the time to the next deadline."""
+        armed = (self.nmt == NMT_OPERATIONAL and self.cia_state is State.OPERATION_ENABLED
+                 and self.mode_display in CYCLIC_MODE_INTS)
+        for rx in self._rx_timed:
+            if not armed or rx.last <= 0.0:
+                if rx.timer_s < wait:
+                    wait = rx.timer_s  # configured, not armed: look again within one timer
+                continue
+            left = max(rx.last, self._enabled_at) + rx.timer_s - now
+            if left <= 0.0:
+                self.rpdo_timeouts += 1
+                logger.warning("node %d: RPDO%d timeout (none for %.3f s, event timer %g ms)",
+                               self.node_id, rx.number, now - rx.last, rx.timer_s * 1e3)
+                self.fault(RPDO_TIMEOUT)
+                return wait
+            if left < wait:
+                wait = left
         return wait

@@ -13,6 +13,7 @@ from __future__ import annotations
 import logging
 import operator
 import struct
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -39,9 +40,11 @@ def clip_int(x: int, lo: int, hi: int) -> int:
 
 
 class RxPdo:
-    __slots__ = ("cob_id", "sync", "struct", "names", "latched", "number", "handler")
+    __slots__ = ("cob_id", "sync", "struct", "names", "latched", "number", "handler",
+                 "timer_s", "last")
 
-    def __init__(self, number: int, cob_id: int, sync: bool, st: struct.Struct, names: tuple):
+    def __init__(self, number: int, cob_id: int, sync: bool, st: struct.Struct, names: tuple,
+                 timer_s: float = 0.0):
         self.number = number
         self.cob_id = cob_id
         self.sync = sync
@@ -49,6 +52,8 @@ class RxPdo:
         self.names = names
         self.latched: bytes | None = None
         self.handler: Callable | None = None
+        self.timer_s = timer_s  # event timer 0x1400+n sub 5 [s] (0: no deadline monitoring)
+        self.last = 0.0  # time.monotonic() of the last reception [s] (0: none yet)
 
 
 class TxPdo:
@@ -164,6 +169,7 @@ class PdoMixin:
                 self._safe_unsubscribe(rx.cob_id, rx.handler)
         self._rx = []
         self._rx_sync = []
+        self._rx_timed = []
         self._tx_sync = []
         self._tx_event = []
 
@@ -202,11 +208,16 @@ class PdoMixin:
         self._layout_dirty = False
         self._resubscribe_sync()
         for n, cob, trans, (st, names) in self._valid_pdos(0x1400, 0x1600):
-            rx = RxPdo(n + 1, cob, trans <= 240, st, names)
+            timer_ms = int(self._stored(0x1400 + n, 5) or 0) if self._has(0x1400 + n, 5) else 0
+            rx = RxPdo(n + 1, cob, trans <= 240, st, names, timer_ms / 1000.0)
             self._rx.append(rx)
             if rx.sync:
                 self._rx_sync.append(rx)
+            if rx.timer_s > 0.0:
+                self._rx_timed.append(rx)
             self.network.subscribe(rx.cob_id, self._make_rx_handler(rx))
+        if self._rx_timed:
+            self._wd_wake.set()  # deadline monitoring configured: the watchdog thread looks
         for n, cob, trans, (st, names) in self._valid_pdos(0x1800, 0x1A00):
             if trans <= 240:
                 self._tx_sync.append(TxPdo(n + 1, cob, max(trans, 1), st, names))
@@ -243,13 +254,16 @@ class PdoMixin:
         return (st, names) if st.size else None
 
     def _make_rx_handler(self, rx: RxPdo) -> Callable:
+        now = time.monotonic
         if rx.sync:
 
             def handler(can_id: int, data: bytes, timestamp: float) -> None:
                 rx.latched = data
+                rx.last = now()
         else:
 
             def handler(can_id: int, data: bytes, timestamp: float) -> None:
+                rx.last = now()
                 if self.nmt == NMT_OPERATIONAL:
                     if self._apply_rpdo(rx, data):
                         self._after_rx()

@@ -4,17 +4,30 @@
 puts one simulated joint per node ID on the bus (generic EDS and default plant unless
 ``--eds`` / ``--plant`` are given), so a master in another process (``jointid``, a real PLC,
 ``candump``) can talk to them. Each drive opens its own bus object.
+
+Without a kernel CAN device (no vcan), ``--bridge-port`` makes the bus reachable from other
+processes: ``python -m sim_drivers.serve --interface virtual --channel sim --bridge-port 0``
+serves the drives on an in-process virtual bus and a python-can-remote bridge (WebSocket over
+TCP, bound to 127.0.0.1 only) on it; it prints ``bridge ws://127.0.0.1:<port>/`` once
+listening, and a master opens ``can.Bus(interface="remote", channel="ws://127.0.0.1:<port>/")``
+(campaign: ``[daq] interface = "remote"``, ``channel = "ws://127.0.0.1:<port>/"``). Each
+client gets its own bus object on the channel, so clients see each other's frames and the
+drives'. The drives' warnings (heartbeat lost, SYNC lost, faults) go to stderr.
 """
 
 from __future__ import annotations
 
 import argparse
+import logging
 import signal
 import threading
+import types
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import can
+from can_remote.server import RemoteServer
 
 from sim_drivers.drive import SimulatedDrive
 from sim_drivers.plant import JointPlant
@@ -43,6 +56,20 @@ class Served:
         self.close()
 
 
+def local_periodic(bus: can.BusABC) -> None:
+    """Send ``bus``'s periodic frames from a thread of this process (python-can's own
+    thread-based task) instead of python-can-remote's server-side task.
+
+    python-can-remote 0.3.0 runs ``send_periodic`` in the bridge process, and its
+    ``modify_data`` is broken (``super(self)``): canopen's heartbeat producer modifies its
+    task on every NMT state change, the bridge then gets a stop for a task it no longer has
+    and drops the connection. A drive's heartbeat must also die with the drive's process,
+    which a thread here does and a task in the bridge does not.
+    """
+    bus._send_periodic_internal = types.MethodType(  # type: ignore[method-assign]
+        can.BusABC._send_periodic_internal, bus)
+
+
 def start_drives(
     interface: str,
     channel: str,
@@ -53,6 +80,7 @@ def start_drives(
     cycle_s: float = 0.001,
     q0: float = 0.0,
     bitrate: int | None = None,
+    sync_loss_floor_s: float | None = None,
 ) -> Served:
     """Start one simulated drive per node ID on ``interface``/``channel``.
 
@@ -70,6 +98,8 @@ def start_drives(
         Initial joint position [rad] (or [m]).
     bitrate : int or None
         Passed to ``can.Bus`` when given.
+    sync_loss_floor_s : float or None
+        Shortest SYNC-loss timeout of the drives [s] (default: the drive's own).
     """
     params = load_plant(plant or DEFAULT_PLANT)
     drives: list[SimulatedDrive] = []
@@ -80,9 +110,12 @@ def start_drives(
         for k, node_id in enumerate(node_ids):
             bus = can.Bus(interface=interface, channel=channel, **kwargs)
             buses.append(bus)
+            if interface == "remote":
+                local_periodic(bus)
             joint = JointPlant(params, cycle_s, seed=int(params.drive.seed) + k)
             joint.reset(q0)
-            drive = SimulatedDrive(bus, node_id, joint, eds, cycle_s=cycle_s)
+            extra = {} if sync_loss_floor_s is None else {"sync_loss_floor_s": sync_loss_floor_s}
+            drive = SimulatedDrive(bus, node_id, joint, eds, cycle_s=cycle_s, **extra)
             drive.start()
             drives.append(drive)
     except Exception:
@@ -96,24 +129,67 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m sim_drivers.serve", description=__doc__)
     ap.add_argument("--interface", default="socketcan", help="python-can interface")
     ap.add_argument("--channel", default="vcan0", help="python-can channel")
-    ap.add_argument("--node-id", type=int, nargs="+", default=[1], help="node IDs 1-127")
+    ap.add_argument("--node-id", type=int, nargs="*", default=[1],
+                    help="node IDs 1-127 (none: serve only the --bridge-port bridge)")
     ap.add_argument("--eds", type=Path, help="EDS/DCF (default: generic jointid EDS)")
     ap.add_argument("--plant", type=Path, help="plant TOML (default: plant_default.toml)")
     ap.add_argument("--cycle", type=float, default=0.001, help="SYNC period [s]")
     ap.add_argument("--q0", type=float, default=0.0, help="initial joint position [rad]")
     ap.add_argument("--bitrate", type=int, help="bus bitrate [bit/s]")
+    ap.add_argument("--sync-loss-floor", type=float, metavar="S",
+                    help="shortest SYNC-loss timeout of the drives [s] (default 0.1)")
+    ap.add_argument("--bridge-port", type=int, metavar="PORT",
+                    help="also serve the bus to other processes over python-can-remote on "
+                         "ws://127.0.0.1:PORT/ (0: any free port, printed)")
     args = ap.parse_args(argv)
+    if not args.node_id and args.bridge_port is None:
+        ap.error("nothing to serve: give --node-id and/or --bridge-port")
+    logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(name)s: %(message)s")
     done = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: done.set())
     with start_drives(
         args.interface, args.channel, args.node_id, eds=args.eds, plant=args.plant,
         cycle_s=args.cycle, q0=args.q0, bitrate=args.bitrate,
+        sync_loss_floor_s=args.sync_loss_floor,
     ) as served:
-        ids = ", ".join(str(d.node_id) for d in served.drives)
-        print(f"serving node(s) {ids} on {args.interface}:{args.channel}; Ctrl-C stops")
-        done.wait()
+        ids = ", ".join(str(d.node_id) for d in served.drives) or "none"
+        print(f"serving node(s) {ids} on {args.interface}:{args.channel}; Ctrl-C stops",
+              flush=True)
+        bridge = None
+        if args.bridge_port is not None:
+            bridge = start_bridge(args.interface, args.channel, args.bridge_port,
+                                  bitrate=args.bitrate)
+            print(f"bridge ws://127.0.0.1:{bridge.server_port}/", flush=True)
+        try:
+            done.wait()
+        finally:
+            if bridge is not None:
+                bridge.shutdown()
+                bridge.server_close()
     return 0
+
+
+def start_bridge(interface: str, channel: str, port: int, *,
+                 bitrate: int | None = None) -> RemoteServer:
+    """A python-can-remote server on 127.0.0.1:``port`` bridging ``interface``/``channel``.
+
+    Each WebSocket client gets its own python-can bus on the channel (opened in this
+    process), so on the virtual interface the clients and the drives share one bus. Runs
+    in a daemon thread; stop it with ``shutdown()`` then ``server_close()``.
+
+    Returns
+    -------
+    can_remote.server.RemoteServer
+        ``server_port`` is the port listened on (useful with ``port=0``).
+    """
+    config: dict[str, Any] = {"interface": interface, "channel": channel}
+    if bitrate is not None:
+        config["bitrate"] = bitrate
+    server = RemoteServer("127.0.0.1", port, **config)
+    threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.1},
+                     name="can-remote-bridge", daemon=True).start()
+    return server
 
 
 if __name__ == "__main__":

@@ -33,3 +33,16 @@ VENDOR_EDS = (
     "ingenia_everest-net-c.eds",
     "zeroerr_erob-edriver.eds",
 )
+
+
+@pytest.fixture(autouse=True)
+def _hermetic_python_can_config(monkeypatch):
+    """python-can's own configuration (environment, ~/.canrc ...) fills what a campaign's
+    ``[daq]`` leaves out (``daq.config.can_config_fallback``): tests start without any, and
+    set what they exercise."""
+    import can.util
+
+    for var in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
+        monkeypatch.delenv(var, raising=False)
+    monkeypatch.setattr(can.util, "CONFIG_FILES", [])
+    monkeypatch.setattr(can, "rc", {})

@@ -208,3 +208,22 @@ def test_sigkill_leaves_a_readable_log_up_to_the_last_chunk(tmp_path):
     assert np.array_equal(a.cycle, np.arange(len(a)))
     assert a.payload_mass_kg == 0.0
     assert not (out / "long.state.json").exists()  # payload 0 never completed
+
+
+@pytest.mark.parametrize("k", [1, 2, 3, 4])
+def test_tpdo_missing_while_enabling_does_not_undo_the_enable(tmp_path, k):
+    """A TPDO lost during the enable sequence (cycle k): the master repeats the command the
+    drive already has instead of stepping from a stale state (0x06 "shutdown" to a drive
+    that just reached OPERATION ENABLED would send it back to READY TO SWITCH ON)."""
+    inj = FaultInjector(drop_tpdo_from_cycle=k, drop_tpdo_cycles=1)
+    r = run_campaign(campaign({"tpdo_timeout_cycles": 3, "lockstep_wait_s": 0.02}),
+                     out_dir=tmp_path, simulate=default_plant(), yes=True,
+                     fault_injectors={1: inj})
+    assert r.ok, r.reason
+    rec = r.sim_records[0]
+    states = [state_from_statusword(int(s)) for s in rec["statusword"]]
+    first_oe = states.index(State.OPERATION_ENABLED)
+    # once enabled, the drive stays enabled until the normal shutdown at the end of payload 0
+    left = next(i for i in range(first_oe, len(states))
+                if states[i] is not State.OPERATION_ENABLED)
+    assert left >= r.runs[0].cycles - 4, (first_oe, left, states[first_oe:left + 3])

@@ -112,7 +112,9 @@ def test_lockstep_run_configures_the_watchdogs_and_a_pause_is_not_a_fault(tmp_pa
     a = read_run(r.runs[0].path)
     assert a.metadata["drive0"]["heartbeat_consumer"] == "0x007F0190"
     assert a.metadata["safety"] == {"master_node_id": "127", "master_heartbeat_ms": "100",
-                                    "heartbeat_consumer_ms": "400", "sync_period_us": "0"}
+                                    "heartbeat_consumer_ms": "400", "sync_period_us": "0",
+                                    "rpdo_timeout_ms": "0"}  # lockstep: no deadline
+    assert a.metadata["drive0"]["rpdo_event_timer_ms"] == "0"  # written: 0 (off)
 
 
 def test_dead_master_drive_faults_with_8130_within_the_consumer_time(tmp_path, monkeypatch):

@@ -11,6 +11,7 @@ import argparse
 import os
 import sys
 
+import daq.protocol.cli_export
 import daq.runtime.cli
 import ident.cli
 import ident.cli_report
@@ -29,6 +30,7 @@ SUBCOMMANDS = (
     ident.cli,  # jointid fit
     demo,  # jointid demo
     ident.cli_report,  # jointid report
+    daq.protocol.cli_export,  # jointid export
 )
 
 #: errors raised on purpose by our packages (their exception roots) and I/O errors

@@ -4,11 +4,15 @@ Format (every key optional; absent: python-can's virtual bus, one drive, node 1,
 project's generic EDS, cyclic synchronous torque)::
 
     [daq]
-    interface = "socketcan"       # any python-can interface: virtual, socketcan, pcan, kvaser...
-                                  # or "config": python-can's own configuration (~/.canrc,
-                                  # CAN_INTERFACE / CAN_CHANNEL / CAN_BITRATE environment)
+    interface = "socketcan"       # any python-can interface: virtual, socketcan, pcan, kvaser,
+                                  # remote (python-can-remote, channel "ws://127.0.0.1:54701/")
+                                  # or "config": python-can's own configuration opens the bus
     channel = "can0"
     bitrate = 1000000             # [bit/s]
+    # interface, channel, bitrate left out: taken from python-can's configuration
+    # (can.util.load_config: CAN_INTERFACE / CAN_CHANNEL / CAN_BITRATE / CAN_CONFIG
+    # environment, ~/can.conf, /etc/can.conf, ~/.can, ~/.canrc) when it names an
+    # interface; else python-can's virtual bus "jointid" at 1 Mbit/s (see can_config_fallback)
     max_bus_load = 0.6            # refuse cyclic traffic above this share of the bit rate
     clock = "paced"               # "lockstep" (virtual bus + simulated drives) or "paced"
     sync_source = "runner"        # paced: "runner" (the runner's own timed loop sends SYNC)
@@ -20,7 +24,12 @@ project's generic EDS, cyclic synchronous torque)::
     max_following_error = 0.2     # watchdog: |q_ref - q| above this [rad] or [m] -> stop
     quick_stop_cycles = 2         # cycles of quick stop before disable voltage
     lockstep_wait_s = 0.5         # lockstep: wall time to wait for the TPDOs of one cycle [s]
-    chunk_seconds = 1.0           # MCAP chunk length [s of data] (lost at most on SIGKILL)
+    chunk_seconds = 0.1           # MCAP chunk length [s of data] (lost at most on SIGKILL);
+                                  # each chunk is compressed inside the cycle loop: 1 s chunks
+                                  # cost ~1.5 ms once a second, a missed cycle (bench_daq.py)
+    gc_freeze = true              # paced and lockstep: gc.collect() + gc.freeze() before each
+                                  # payload run, no automatic collection during it (a full
+                                  # collection stalls 10-50 ms); collections resume after it
     cpu = -1                      # pin the process to this CPU (-1: the last allowed one;
                                   # -2: do not pin)
     master_node_id = 127          # node id of the master's own heartbeat (0x700 + id)
@@ -54,6 +63,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
+
+import can
+import can.util
 
 from daq import ConfigError
 from daq.protocol.cia402 import Mode
@@ -170,6 +182,8 @@ class DaqConfig:
     source: str = ""
     master_node_id: int = 127
     master_heartbeat_ms: int = 100
+    from_can_config: tuple[str, ...] = ()  # keys taken from python-can's configuration
+    gc_freeze: bool = True  # no automatic garbage collection during a payload run
 
     @property
     def heartbeat_consumer_ms(self) -> int:
@@ -215,11 +229,16 @@ _LIMITS = Table(
     required=False,
 )
 
+DEFAULT_INTERFACE = "virtual"
+DEFAULT_CHANNEL = "jointid"
+DEFAULT_BITRATE = 1_000_000  # [bit/s]
+_BUS_KEYS = ("interface", "channel", "bitrate")
+
 _DAQ = Table(
     {
-        "interface": Field(str, required=False, default="virtual"),
-        "channel": Field(str, required=False, default="jointid"),
-        "bitrate": Field(int, required=False, default=1_000_000, gt=0, le=1_000_000,
+        "interface": Field(str, required=False, default=None),
+        "channel": Field(str, required=False, default=None),
+        "bitrate": Field(int, required=False, default=None, gt=0, le=1_000_000,
                          unit="bit/s"),
         "max_bus_load": Field(float, required=False, default=0.6, gt=0, le=1),
         "clock": Field(str, required=False, default="", choices=("lockstep", "paced", "")),
@@ -232,7 +251,8 @@ _DAQ = Table(
         "max_following_error": Field(float, required=False, default=0.2, gt=0, unit="rad"),
         "quick_stop_cycles": Field(int, required=False, default=2, ge=1, le=1000),
         "lockstep_wait_s": Field(float, required=False, default=0.5, gt=0, unit="s"),
-        "chunk_seconds": Field(float, required=False, default=1.0, gt=0, unit="s"),
+        "chunk_seconds": Field(float, required=False, default=0.1, gt=0, unit="s"),
+        "gc_freeze": Field(bool, required=False, default=True),
         "cpu": Field(int, required=False, default=-1, ge=-2),
         "master_node_id": Field(int, required=False, default=127, ge=1, le=127),
         "master_heartbeat_ms": Field(int, required=False, default=100, ge=0, le=20000,
@@ -249,7 +269,75 @@ def generic_eds() -> Path:
     return Path(str(resources.files("sim_drivers.data").joinpath("jointid_cia402.eds")))
 
 
-def parse_daq(raw: Mapping[str, Any] | None, source: str = "") -> DaqConfig:
+def python_can_config(source: str = "") -> dict[str, Any]:
+    """python-can's own bus configuration (``can.util.load_config()``), or ``{}`` when no
+    source (environment, config file, ``can.rc``) names an interface.
+
+    Raises
+    ------
+    daq.ConfigError
+        The configuration names an interface python-can does not know, or is unreadable.
+    """
+    try:
+        return dict(can.util.load_config())
+    except can.CanInterfaceNotImplementedError as exc:
+        named = any(src.get("interface") or src.get("bustype") for src in (
+            can.rc, can.util.load_environment_config(), can.util.load_file_config()))
+        if not named:
+            return {}
+        raise ConfigError(f"{source or 'campaign'}: daq.interface: left out, and python-can's "
+                          f"configuration names an unusable interface ({exc})") from None
+    except (ValueError, OSError) as exc:  # malformed CAN_CONFIG JSON, unreadable file
+        raise ConfigError(f"{source or 'campaign'}: daq.interface: left out, and python-can's "
+                          f"configuration cannot be read ({exc})") from None
+
+
+def can_config_fallback(d: Mapping[str, Any], source: str = "",
+                        use_can_config: bool = True) -> tuple[dict[str, Any], tuple[str, ...]]:
+    """Fill ``interface``/``channel``/``bitrate`` left out of ``[daq]``.
+
+    From python-can's configuration (:func:`python_can_config`) when it names an interface
+    and ``[daq]`` names none or the same one; else the defaults (python-can's virtual bus,
+    channel ``"jointid"``, 1 Mbit/s). A ``bitrate`` from python-can's configuration must lie
+    in (0, 1 Mbit/s] like the table's own.
+
+    Returns
+    -------
+    (dict, tuple of str)
+        The three values and the keys taken from python-can's configuration.
+    """
+    out = {k: d.get(k) for k in _BUS_KEYS}
+    taken: list[str] = []
+    if all(out[k] is not None for k in _BUS_KEYS) or not use_can_config:
+        pc: dict[str, Any] = {}
+    else:
+        pc = python_can_config(source)
+    pc_iface = pc.get("interface")
+    if pc_iface and out["interface"] in (None, pc_iface):
+        for key in _BUS_KEYS:
+            if out[key] is None and pc.get(key) not in (None, ""):
+                out[key] = pc[key]
+                taken.append(key)
+    if "bitrate" in taken:
+        try:
+            rate = int(out["bitrate"])
+        except (TypeError, ValueError):
+            rate = -1
+        if not 0 < rate <= 1_000_000:
+            raise ConfigError(f"{source or 'campaign'}: daq.bitrate: left out, and python-can's "
+                              f"configuration gives {out['bitrate']!r}: expected an integer "
+                              f"in (0, 1000000] [bit/s]")
+        out["bitrate"] = rate
+    if "channel" in taken:
+        out["channel"] = str(out["channel"])
+    out["interface"] = out["interface"] or DEFAULT_INTERFACE
+    out["channel"] = out["channel"] if out["channel"] is not None else DEFAULT_CHANNEL
+    out["bitrate"] = out["bitrate"] or DEFAULT_BITRATE
+    return out, tuple(taken)
+
+
+def parse_daq(raw: Mapping[str, Any] | None, source: str = "", *,
+              use_can_config: bool = True) -> DaqConfig:
     """Validate a raw ``[daq]`` table.
 
     Parameters
@@ -258,6 +346,9 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "") -> DaqConfig:
         ``Campaign.daq`` (``{}`` or None when the campaign has no ``[daq]``).
     source : str
         The campaign file name: used in messages and to resolve relative EDS paths.
+    use_can_config : bool
+        Fill ``interface``/``channel``/``bitrate`` left out from python-can's configuration
+        (:func:`can_config_fallback`); False: the defaults (simulated runs).
 
     Raises
     ------
@@ -268,6 +359,8 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "") -> DaqConfig:
         d = _DAQ.validate(dict(raw or {}), "daq", source)
     except SchemaError as exc:
         raise ConfigError(str(exc)) from None
+    bus, from_pc = can_config_fallback(d, source, use_can_config)
+    d.update(bus)
     base = Path(source).parent if source else Path.cwd()
     drives_raw = d["drives"] or ({"node_id": 1, "eds": "", "mode": "cst", "heartbeat_ms": 100,
                                   "scaling": None},)
@@ -326,6 +419,8 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "") -> DaqConfig:
         source=source,
         master_node_id=d["master_node_id"],
         master_heartbeat_ms=d["master_heartbeat_ms"],
+        from_can_config=from_pc,
+        gc_freeze=d["gc_freeze"],
     )
 
 

@@ -9,8 +9,13 @@ import time
 from collections.abc import Sequence
 
 import can
+from can_remote.websocket import WebsocketClosed
 
 from daq.protocol.logformat import FRAME
+
+#: what a failing bus raises from ``send``/``recv``: python-can's errors, the OS's (socketcan,
+#: a TCP bridge reset) and python-can-remote's closed WebSocket (its bridge process died)
+BUS_ERRORS: tuple[type[BaseException], ...] = (can.CanError, OSError, WebsocketClosed)
 
 
 class CycleIO(can.Listener):

@@ -61,6 +61,7 @@ stops its heartbeat. What could not be configured (no 0x1016 in the EDS, 0x1006 
 
 from __future__ import annotations
 
+import gc
 import logging
 import math
 import struct
@@ -78,7 +79,7 @@ from daq.protocol.logformat import FLAG_STOPPING, FLAG_TPDO_MISSING
 
 from .busload import BusLoad
 from .config import DaqConfig, Scaling
-from .cycle_io import CycleIO
+from .cycle_io import BUS_ERRORS, CycleIO
 from .master import TPDO1_STRUCT, TPDO2_STRUCT, MasterDrive
 from .mcaplog import RunLog
 from .results import PayloadResult, Progress
@@ -155,6 +156,7 @@ class Engine(Supervisor):
         self.sync_count = 0
         self._resync = False
         self.notes: list[str] = []  # start-up warnings, logged at cycle 0 of every run
+        self.bus_lost = False  # a bus error ended a run: no more frames can be sent
 
     # -- one cycle ------------------------------------------------------------------------
     def _exchange(self, cycle: int, deadline: float) -> int:
@@ -231,6 +233,7 @@ class Engine(Supervisor):
         prev_state: list[State | None] = [None] * n_dr
         prev_sw = [-1] * n_dr
         missing_run = [0] * n_dr
+        last_cw = [CW_DISABLE] * n_dr  # controlword sent last cycle, per drive
         missed = 0
         cycle = 0
         fault_cycle = -1
@@ -319,10 +322,15 @@ class Engine(Supervisor):
                         target_raw = 0
                     if mode == "run":
                         cw = CW_RUN
+                    elif flags:
+                        # no answer this cycle: the drive may already be one step further
+                        # than its last statusword says; a step from the stale state (e.g.
+                        # 0x06 to a drive that just reached OPERATION ENABLED) would undo
+                        # it, so repeat the command it already has (level-triggered)
+                        cw = last_cw[d]
                     else:
                         try:
-                            st = (state_from_statusword(s) if flags == 0
-                                  else State.SWITCH_ON_DISABLED)
+                            st = state_from_statusword(s)
                         except ValueError:
                             st = State.NOT_READY_TO_SWITCH_ON
                         if st is State.OPERATION_ENABLED:
@@ -338,6 +346,7 @@ class Engine(Supervisor):
                     target_raw = round(q_ref * cpr[d]) if csp[d] else 0
                     cw = (CW_QUICK_STOP if mode == "quick_stop" else
                           CW_DISABLE if mode == "disable" else CW_SHUTDOWN)
+                last_cw[d] = cw
                 payload_bytes = packs[d](cw, target_raw if csp[d] else x)
                 m = msgs[d]
                 m.data = payload_bytes
@@ -424,6 +433,15 @@ class Engine(Supervisor):
             net.notifier.stop(1.0)
             net.notifier = None
         io.direct = True
+        gc_was = gc.isenabled()
+        if cfg.gc_freeze:  # no 10-50 ms full collection inside the run (bench_daq.py)
+            gc.collect()
+            gc.freeze()
+            gc.disable()
+        # the schedule starts now, not before the notifier stopped (up to its poll period)
+        # and the collection: either would make the first SYNC late (a missed cycle)
+        t_wall0 = time.perf_counter()
+        next_deadline = t_wall0 + cycle_s
         sync_task = None
         if self.periodic:
             # first cycle's deadline: one period after the periodic task starts
@@ -486,12 +504,23 @@ class Engine(Supervisor):
                    + ", ".join(f"{d.name} sw=0x{sw[k]:04X}" for k, d in enumerate(self.drives)))
             log.event(stop_cycle if off else cycle - 1, (cycle - 1) * cycle_s,
                       "stop" if status != "done" else "info", msg)
+        except BUS_ERRORS as exc:  # the bus itself failed: nothing more can be sent
+            status = "stopped"
+            reason = f"bus lost: {type(exc).__name__}: {exc}".splitlines()[0]
+            fault_cycle = self._fault_cycle if self._fault_cycle >= 0 else cycle
+            self.bus_lost = True
+            log.event(cycle, cycle * cycle_s, "fault", reason)
         finally:
             wall = time.perf_counter() - t_wall0
-            if sync_task is not None:
+            if cfg.gc_freeze:
+                gc.unfreeze()
+                if gc_was:
+                    gc.enable()
+            if sync_task is not None and not self.bus_lost:
                 sync_task.stop()
             io.direct = False
-            net.notifier = can.Notifier(net.bus, net.listeners, net.NOTIFIER_CYCLE)
+            if not self.bus_lost:
+                net.notifier = can.Notifier(net.bus, net.listeners, net.NOTIFIER_CYCLE)
             if timing:
                 lateness = np.array([x[1] for x in timing])
             log.close({

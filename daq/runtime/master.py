@@ -39,6 +39,14 @@ covered by the drive's SYNC-loss reaction, armed by the communication cycle peri
 where SYNCs may be far apart in wall time without anything being wrong). Without 0x1016 in
 the EDS (Ingenia EVE-NET-C) the master says so (a note in the run's log and summary) and
 carries on.
+
+A hung master whose SYNC keeps coming (``sync_source = "periodic"``: the kernel's broadcast
+manager, or a bridge, sends SYNC and heartbeat without the main loop) is caught only by the
+drive's deadline monitoring of the received PDO: the RPDO1 event timer 0x1400 sub 5 [ms]
+(CiA 301; :meth:`MasterDrive.set_rpdo_timeout`, written and read back; the simulated drive
+faults with EMCY 0x8250 "RPDO timeout"). The master writes it in paced mode (the cycle x 3 +
+100 ms, :func:`rpdo_timeout_ms`) and 0 in lockstep; an EDS whose 0x1400 has no sub-index 5
+(Maxon EPOS4, Elmo Gold, Nanotec C5-E of ``../shared/eds``) gets a note instead.
 """
 
 from __future__ import annotations
@@ -83,6 +91,17 @@ TPDO1_STRUCT = struct.Struct("<Hih")
 TPDO2_STRUCT = struct.Struct("<ib")
 
 COB_DISABLED = 0x80000000
+RPDO_TIMEOUT_CYCLES = 3  # RPDO event timer: this many cycles ...
+RPDO_TIMEOUT_MARGIN_MS = 100  # ... plus this margin [ms] (host stalls), like the heartbeat
+
+
+def rpdo_timeout_ms(cycle_s: float, paced: bool) -> int:
+    """RPDO1 event timer for the drives [ms]: ``ceil(3 x cycle) + 100`` when paced, 0 (off)
+    in lockstep, where cycles may be far apart in wall time."""
+    if not paced:
+        return 0
+    return min(0xFFFF, math.ceil(RPDO_TIMEOUT_CYCLES * cycle_s * 1000.0 - 1e-9)
+               + RPDO_TIMEOUT_MARGIN_MS)
 
 
 @dataclass(frozen=True)
@@ -209,6 +228,7 @@ class MasterDrive:
         self.scaling: Scaling | None = cfg.scaling
         self.notes: list[str] = []  # start-up problems that do not stop the run
         self.consumer_value: int | None = None  # 0x1016.1 written, None if not
+        self.rpdo_timer_ms: int | None = None  # 0x1400.5 written, None if not
 
     # -- static checks ------------------------------------------------------------------
     def check_eds(self) -> None:
@@ -398,6 +418,35 @@ class MasterDrive:
         except (SdoAbortedError, SdoCommunicationError):
             return False
 
+    def has_rpdo_timer(self) -> bool:
+        """Whether the EDS declares the RPDO1 event timer (0x1400 sub 5)."""
+        if 0x1400 not in self.od:
+            return False
+        try:
+            return 5 in self.od[0x1400]
+        except TypeError:  # a VAR at 0x1400: no sub-indices
+            return False
+
+    def set_rpdo_timeout(self, timeout_ms: int) -> int | None:
+        """RPDO1 deadline monitoring: write the event timer 0x1400.5 [ms] (0: off), read back.
+
+        Returns the value written, or None when the EDS has no 0x1400 sub 5 (nothing
+        written: the caller reports it).
+
+        Raises
+        ------
+        daq.ConfigError
+            The drive refuses the value or reads back another one.
+        """
+        if not self.has_rpdo_timer():
+            return None
+        self.download(0x1400, 5, timeout_ms, 2, "RPDO1 event timer")
+        got = _u(self.upload(0x1400, 5))
+        if got != timeout_ms:
+            raise ConfigError(f"{self.name}: RPDO1 event timer 0x1400.5 read back {got} != "
+                              f"written {timeout_ms} ms")
+        return timeout_ms
+
     def set_interpolation_period(self, cycle_s: float) -> None:
         """Write 0x60C2 (interpolation time period) when present; ignore a refusal."""
         if 0x60C2 not in self.od:
@@ -462,7 +511,8 @@ class MasterDrive:
 
     def start_up(self, cycle_s: float, max_torque: float | None = None, *,
                  master_id: int = 0, consumer_ms: int = 0,
-                 sync_period_us: int | None = None) -> Scaling:
+                 sync_period_us: int | None = None,
+                 rpdo_timeout_ms: int | None = None) -> Scaling:
         """Full start-up sequence before NMT start: presence, mode, PDOs, heartbeat,
         master-loss reactions, max torque (0x6072) covering ``max_torque`` [N m].
 
@@ -477,6 +527,10 @@ class MasterDrive:
         sync_period_us : int or None
             Communication cycle period written to 0x1006 [µs] (0: SYNC monitoring off;
             None: not written).
+        rpdo_timeout_ms : int or None
+            RPDO1 event timer written to 0x1400.5 [ms] (0: deadline monitoring off;
+            None: not written). Without 0x1400.5 in the EDS a non-zero value becomes a
+            note.
 
         Returns
         -------
@@ -486,6 +540,7 @@ class MasterDrive:
         """
         self.notes = []
         self.consumer_value = None
+        self.rpdo_timer_ms = None
         self.check_present()
         self.node.nmt.send_command(0x80)  # enter PRE-OPERATIONAL
         self.check_mode_supported()
@@ -505,6 +560,12 @@ class MasterDrive:
                 self.notes.append(f"{self.name}: communication cycle period 0x1006 = "
                                   f"{sync_period_us} us refused or not read back: no SYNC-loss "
                                   f"reaction configured")
+        if rpdo_timeout_ms is not None:
+            self.rpdo_timer_ms = self.set_rpdo_timeout(rpdo_timeout_ms)
+            if self.rpdo_timer_ms is None and rpdo_timeout_ms:
+                self.notes.append(
+                    f"{self.name}: {self.cfg.eds.name} has no RPDO1 event timer (0x1400 sub 5): "
+                    f"the drive will not stop by itself if a hung master's SYNC keeps coming")
         scaling = self.read_scaling()
         if max_torque is not None:
             self.set_max_torque(max_torque)

@@ -26,9 +26,9 @@ from trajectories.plan import plan_campaign
 
 from .busload import check_load, cycle_load
 from .config import DaqConfig, Scaling, parse_daq, with_scaling
-from .cycle_io import CycleIO
+from .cycle_io import BUS_ERRORS, CycleIO
 from .engine import Engine
-from .master import MasterDrive, MasterHeartbeat, pdo_lengths
+from .master import MasterDrive, MasterHeartbeat, pdo_lengths, rpdo_timeout_ms
 from .mcaplog import RunLog
 from .results import CampaignResult, PayloadResult, Progress
 from .simrig import SimRig, plant_scaling, start_sim
@@ -118,11 +118,14 @@ def _metadata(campaign: Any, cfg: DaqConfig, plan: Any, index: int, payload: Any
         if k < len(drives):
             v = drives[k].consumer_value
             md[f"drive{k}"]["heartbeat_consumer"] = ("" if v is None else f"0x{v:08X}")
+            t = drives[k].rpdo_timer_ms
+            md[f"drive{k}"]["rpdo_event_timer_ms"] = "" if t is None else str(t)
     md["safety"] = {
         "master_node_id": str(cfg.master_node_id),
         "master_heartbeat_ms": str(cfg.master_heartbeat_ms),
         "heartbeat_consumer_ms": str(cfg.heartbeat_consumer_ms),
         "sync_period_us": str(_sync_period_us(cfg, campaign.cycle_s)),
+        "rpdo_timeout_ms": str(rpdo_timeout_ms(campaign.cycle_s, cfg.clock == "paced")),
     }
     if plant_params is not None:
         md["plant"] = {"name": str(getattr(plant_params, "name", "")),
@@ -216,7 +219,9 @@ def run_campaign(
     trajectories.TrajectoryError
         The plan violates a limit.
     """
-    cfg = parse_daq(campaign.daq, str(campaign.source))
+    # a simulated run is on python-can's virtual bus: python-can's own configuration (which
+    # names the real bus) must not fill what [daq] leaves out
+    cfg = parse_daq(campaign.daq, str(campaign.source), use_can_config=simulate is None)
     if simulate is not None:
         cfg = with_scaling(cfg, plant_scaling(simulate))
         if cfg.interface != "virtual":
@@ -280,7 +285,9 @@ def run_campaign(
             campaign.joint.limits.max_torque)
         scalings = [d.start_up(campaign.cycle_s, tau_max, master_id=cfg.master_node_id,
                                consumer_ms=cfg.heartbeat_consumer_ms,
-                               sync_period_us=_sync_period_us(cfg, campaign.cycle_s))
+                               sync_period_us=_sync_period_us(cfg, campaign.cycle_s),
+                               rpdo_timeout_ms=rpdo_timeout_ms(campaign.cycle_s,
+                                                               cfg.clock == "paced"))
                     for d in drives]
         if heartbeat is not None:
             heartbeat.beat()  # the drives watch the master from now on, not a period later
@@ -332,6 +339,9 @@ def run_campaign(
                          frames_per_cycle=1 + 3 * len(drives))
             r = engine.run_payload(i, p, plan.reference, log, drive_cycle0)
             runs.append(r)
+            if engine.bus_lost:  # nothing can be sent any more: no NMT, no SDO
+                status, reason = r.status, r.reason
+                break
             for d in drives:
                 with contextlib.suppress(DaqError):
                     d.nmt_preop()
@@ -340,20 +350,26 @@ def run_campaign(
                 break
             completed.add(i)
             _write_state(state_file, campaign.name, completed)
-        clean = True
+        clean = engine is None or not engine.bus_lost
     finally:
         if clean:  # normal end, drives disabled: stop watching the master, then go silent
             for d in drives:
                 d.clear_master_heartbeat()
         if heartbeat is not None:
-            heartbeat.stop()
+            with contextlib.suppress(*BUS_ERRORS):  # (a lost bus: nothing to stop)
+                heartbeat.stop()
         if sim is not None:
             sim_records = tuple(d.record for d in sim.drives)
         if old_handler is not None:
             signal.signal(signal.SIGINT, old_handler)
         if network is not None:
-            with contextlib.suppress(Exception):
+            try:
                 network.disconnect()
+            except Exception:
+                # a bus whose transport died cannot shut down (python-can-remote raises
+                # OSError): mark it shut down, or its __del__ tries again at exit
+                with contextlib.suppress(Exception):
+                    can.BusABC.shutdown(network.bus)
         if sim is not None:
             sim.close()
         if old_affinity is not None:

@@ -1,0 +1,40 @@
+"""``jointid export LOG.mcap --can OUT.blf|.asc|.log|.csv|.trc``: the raw CAN frames of a run
+log as a CAN trace (:func:`daq.protocol.export.export_can`; the format follows the extension).
+
+Replay it with ``python -m can.player OUT.blf -i socketcan -c vcan0`` (any python-can
+interface), or open it in CANalyzer/CANoe (``.asc``, ``.blf``), PCAN-View (``.trc``),
+``canplayer`` (``.log``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+from pathlib import Path
+
+from .export import EXPORT_FORMATS, export_can
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``export`` subcommand to the ``jointid`` parser."""
+    p = sub.add_parser(
+        "export", help="export the raw CAN frames of a run log (.blf, .asc, .log, .csv, .trc)",
+        description="Write the CAN frames logged in a run's MCAP file (channel /can/raw) to a "
+        "CAN trace file python-can's player and the usual CAN tools read. The format follows "
+        f"the extension: {', '.join(EXPORT_FORMATS)} (text formats also with .gz).")
+    p.add_argument("log", type=Path, metavar="LOG.mcap", help="a run log written by jointid run")
+    p.add_argument("--can", type=Path, required=True, metavar="OUT",
+                   help="output trace file (.blf, .asc, .log, .csv, .trc)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    res = export_can(args.log, args.can)
+    if res.frames:
+        t0 = datetime.datetime.fromtimestamp(res.first_s, datetime.UTC)
+        span = f", {res.last_s - res.first_s:.3f} s from {t0:%Y-%m-%d %H:%M:%S} UTC"
+    else:
+        span = ""
+    print(f"export: {res.frames} CAN frames ({res.transmitted} sent by the master{span}) "
+          f"-> {res.path}")
+    return 0

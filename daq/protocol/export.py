@@ -1,0 +1,218 @@
+"""Export the raw CAN frames of a jointid run log to the usual CAN trace formats.
+
+The ``/can/raw`` channel of a run log (``docs/log-format.md``) holds every frame the master
+sent (SYNC, RPDOs) or received (TPDOs, heartbeats, EMCY, SDO) during the cycles of the run,
+with python-can timestamps (Unix epoch [s]). :func:`export_can` writes them with
+python-can's own writers, chosen by the output's extension, so that python-can's readers,
+``python -m can.player`` (replay on any interface), ``python -m can.logconvert``, Vector
+CANalyzer/CANoe (``.asc``, ``.blf``), PEAK PCAN-View (``.trc``) and ``canplayer``/``candump``
+(``.log``) read them:
+
+=========  ==========================  ============================================
+extension  writer                      timestamp resolution of the format
+=========  ==========================  ============================================
+``.blf``   ``can.BLFWriter``           1 ns from the first frame; the file's start
+                                       time is a SYSTEMTIME (1 ms)
+``.asc``   ``can.ASCWriter``           1 µs from the first frame; start date to 1 ms
+``.log``   ``can.CanutilsLogWriter``   1 µs, absolute (candump ``-l`` format)
+``.csv``   ``can.CSVWriter``           full float, absolute
+``.trc``   ``can.TRCWriter``           1 µs from the first frame (PCAN v2.1);
+                                       start time as a day fraction (≈ 1 ms)
+=========  ==========================  ============================================
+
+A ``.gz`` suffix after a text format (``out.asc.gz``, ``out.log.gz``) compresses the file,
+as python-can's logger and player do.
+
+Frames are written in time order (stable sort on the timestamp: within a cycle the log keeps
+arrival order, which is already time order up to the send/receive stamping of the master).
+Direction: the master's own cyclic frames (SYNC 0x80 and each drive's RPDO1 0x200 + node id,
+node ids from the log's ``drive<k>`` metadata) are marked transmitted (``is_rx = False``),
+every other frame received. All frames are classic CAN, 11-bit identifiers, channel
+``channel`` (default 1: the first channel in BLF/ASC numbering).
+
+A log cut short by a killed process (no summary) is exported up to its last complete chunk;
+the reader warns (``RuntimeWarning``).
+"""
+
+from __future__ import annotations
+
+import struct
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import can
+import numpy as np
+from mcap.records import Channel, Message, Metadata
+from mcap.stream_reader import StreamReader
+
+from daq import DaqError
+from daq.protocol.logformat import FRAME_DTYPE
+
+__all__ = ["EXPORT_FORMATS", "ExportError", "ExportResult", "export_can"]
+
+EXPORT_FORMATS = (".blf", ".asc", ".log", ".csv", ".trc")
+SYNC_ID = 0x80
+RPDO1_BASE = 0x200
+_CYCLE_N = struct.Struct("<qI")  # CanFrames message after its 4-byte CDR header
+
+
+class ExportError(DaqError):
+    """The export cannot be done as asked; the message names the file and the reason."""
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    """What :func:`export_can` wrote.
+
+    Attributes
+    ----------
+    path : Path
+        The file written.
+    frames : int
+        Frames written.
+    first_s, last_s : float
+        Timestamps of the first and last frame [s] (Unix epoch; NaN when no frame).
+    transmitted : int
+        Frames marked as sent by the master (SYNC, RPDO1).
+    """
+
+    path: Path
+    frames: int
+    first_s: float
+    last_s: float
+    transmitted: int
+
+
+def _format_of(out: Path) -> str:
+    suffixes = [s.lower() for s in out.suffixes]
+    if suffixes and suffixes[-1] == ".gz":
+        suffixes = suffixes[:-1]
+        if suffixes and suffixes[-1] == ".blf":
+            raise ExportError(f"{out}: expected one of {', '.join(EXPORT_FORMATS)} "
+                              f"(.gz only after a text format), got .blf.gz")
+    fmt = suffixes[-1] if suffixes else ""
+    if fmt not in EXPORT_FORMATS:
+        raise ExportError(f"{out}: expected an output file ending in "
+                          f"{', '.join(EXPORT_FORMATS)} (optionally + .gz for text), "
+                          f"got {fmt or 'no extension'!r}")
+    return fmt
+
+
+def read_log(path: Path) -> tuple[np.ndarray, dict[str, dict[str, str]], bool]:
+    """The ``/can/raw`` frames and the metadata of a run log, in one streamed pass.
+
+    Streams the records (no summary needed), so a log cut short by a killed process gives
+    every frame of its complete chunks.
+
+    Returns
+    -------
+    (ndarray, dict, bool)
+        Frames (structured: ``timestamp`` [s], ``id``, ``dlc``, ``data`` uint8 x 8), in log
+        order; metadata name -> map; True when the file ended in a damaged tail.
+    """
+    meta: dict[str, dict[str, str]] = {}
+    parts: list[np.ndarray] = []
+    can_channels: set[int] = set()
+    damaged = False
+    with open(path, "rb") as f:
+        try:
+            for rec in StreamReader(f, skip_magic=False).records:
+                if isinstance(rec, Channel):
+                    if rec.topic == "/can/raw":
+                        can_channels.add(rec.id)
+                elif isinstance(rec, Message):
+                    if rec.channel_id in can_channels:
+                        n = _CYCLE_N.unpack_from(rec.data, 4)[1]
+                        parts.append(np.frombuffer(rec.data, FRAME_DTYPE, count=n,
+                                                   offset=20))
+                elif isinstance(rec, Metadata):
+                    meta[rec.name] = dict(rec.metadata)
+        except Exception:  # the mcap library raises bare errors on a cut file
+            damaged = True
+    frames = np.concatenate(parts) if parts else np.zeros(0, FRAME_DTYPE)
+    return frames, meta, damaged
+
+
+def master_ids(metadata: dict[str, dict[str, str]]) -> frozenset[int]:
+    """COB-IDs the master sends every cycle: SYNC and each drive's RPDO1."""
+    ids = {SYNC_ID}
+    for name, rec in metadata.items():
+        if name.startswith("drive") and name[5:].isdigit():
+            try:
+                ids.add(RPDO1_BASE + int(rec.get("node_id", "")))
+            except ValueError:
+                continue
+    return frozenset(ids)
+
+
+def export_can(mcap_path: str | Path, out_path: str | Path, *, channel: int = 1) -> ExportResult:
+    """Write the raw CAN frames of a run log to a CAN trace file chosen by extension.
+
+    Parameters
+    ----------
+    mcap_path : path-like
+        A jointid run log (``<campaign>_payload<k>.mcap``).
+    out_path : path-like
+        Output file; its extension picks the format (module docstring). Written to a
+        temporary name next to it and renamed at the end: no partial file on error.
+    channel : int
+        CAN channel number written to the trace (BLF/ASC/TRC are 1-based).
+
+    Returns
+    -------
+    ExportResult
+
+    Raises
+    ------
+    ExportError
+        Unknown extension, unreadable log, log without a ``/can/raw`` channel, unwritable
+        output.
+    """
+    src = Path(mcap_path)
+    out = Path(out_path)
+    _format_of(out)
+    if not src.is_file():
+        raise ExportError(f"{src}: expected a jointid run log (.mcap), file not found")
+    try:
+        frames, meta, damaged = read_log(src)
+    except OSError as exc:
+        raise ExportError(f"{src}: cannot read ({exc.strerror or exc})") from None
+    if not frames.shape[0] and "campaign" not in meta:
+        raise ExportError(f"{src}: expected a jointid run log (MCAP with a /can/raw channel "
+                          f"and campaign metadata), found neither")
+    if damaged:
+        warnings.warn(f"{src}: log cut short (killed run?): exporting the {frames.shape[0]} "
+                      f"frames of its complete chunks", RuntimeWarning, stacklevel=2)
+    order = np.argsort(frames["timestamp"], kind="stable")
+    frames = frames[order]
+    tx_ids = master_ids(meta)
+    # python-can picks the writer by the suffix: the temporary name keeps the extension(s)
+    tmp = out.with_name(f".part-{out.name}")
+    n_tx = 0
+    try:
+        writer = can.Logger(tmp)
+        try:
+            ts, ids, dlcs, data = (frames["timestamp"].tolist(), frames["id"].tolist(),
+                                   frames["dlc"].tolist(), frames["data"])
+            for k in range(len(ts)):
+                cid = ids[k]
+                dlc = dlcs[k]
+                rx = cid not in tx_ids
+                n_tx += not rx
+                writer.on_message_received(can.Message(
+                    timestamp=ts[k], arbitration_id=cid, is_extended_id=False,
+                    dlc=dlc, data=bytes(data[k][:dlc]), is_rx=rx, channel=channel))
+        finally:
+            writer.stop()
+        tmp.replace(out)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise ExportError(f"{out}: cannot write ({exc.strerror or exc})") from None
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    n = int(frames.shape[0])
+    first = float(frames["timestamp"][0]) if n else float("nan")
+    last = float(frames["timestamp"][-1]) if n else float("nan")
+    return ExportResult(out, n, first, last, n_tx)
