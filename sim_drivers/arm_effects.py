@@ -1,0 +1,210 @@
+"""Undeclared effects of the n-dof simulator, per joint, vectorised over joints (and samples).
+
+The formulas are those of :mod:`sim_drivers.plant` (module docstring there), one set of
+coefficients per joint; a coefficient of 0 (or ``asymmetric`` False) switches the effect off
+for that joint:
+
+* position ripple    ``A sin(2 pi q / period + phase)``
+* spring             ``k (q - q0)``
+* warm-up            dry terms (c, d) of eq. 30 scaled by ``1 + w exp(-t / T_w)``
+* asymmetric viscous F_V replaced by ``F_V_pos`` (dq > 0) / ``F_V_neg`` (dq < 0)
+* quadratic viscous  ``F_VV dq |dq|``
+* torque lag         ``d tau_applied / dt = (tau_cmd - tau_applied) / T_lag`` (dynamic)
+
+The effect code of the arm simulator lives in this file (parameters, vectorised formulas used
+by the inverse model), so that it can be switched to a shared effects registry in one place.
+One exception, for speed: :meth:`sim_drivers.arm_plant.ArmPlant._accel` inlines the scalar
+per-joint form of the same formulas, as ``sim_drivers.plant.JointPlant`` does; the test
+``test_one_joint_with_every_effect_is_the_joint_plant`` pins both to the single-joint plant.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+import numpy as np
+
+from . import SimError
+
+_TWO_PI = 2.0 * math.pi
+
+#: Plant-file table name -> {key in that table: ArmEffects field}.
+_TABLES: dict[str, dict[str, str]] = {
+    "position_ripple": {"amplitude_Nm": "ripple_amplitude_Nm", "period_rad": "ripple_period_rad",
+                        "phase_rad": "ripple_phase_rad"},
+    "spring": {"stiffness_Nm_per_rad": "spring_stiffness_Nm_per_rad",
+               "rest_position_rad": "spring_rest_rad"},
+    "warm_up": {"fraction": "warm_up_fraction", "time_constant_s": "warm_up_time_constant_s"},
+    "asymmetric_viscous": {"F_V_pos": "F_V_pos", "F_V_neg": "F_V_neg"},
+    "quadratic_viscous": {"F_VV": "F_VV"},
+    "torque_lag": {"time_constant_s": "lag_time_constant_s"},
+}
+_DEFAULTS = {"ripple_period_rad": _TWO_PI / 16.0, "warm_up_time_constant_s": 60.0}
+
+
+@dataclass(frozen=True, eq=False)
+class ArmEffects:
+    """Undeclared effects per joint; every attribute is an array of shape (k,).
+
+    Attributes
+    ----------
+    ripple_amplitude_Nm, ripple_period_rad, ripple_phase_rad
+        Position ripple A [N m], period [rad], phase [rad].
+    spring_stiffness_Nm_per_rad, spring_rest_rad
+        Spring k [N m/rad] and rest position q0 [rad].
+    warm_up_fraction, warm_up_time_constant_s
+        Warm-up excess w [-] and time constant T_w [s].
+    asymmetric : ndarray of bool
+        Whether the asymmetric viscous friction replaces F_V on that joint.
+    F_V_pos, F_V_neg
+        Viscous coefficients for dq > 0 and dq < 0 [N m s/rad] (used where ``asymmetric``).
+    F_VV
+        Quadratic viscous coefficient [N m s^2/rad^2].
+    lag_time_constant_s
+        Torque lag T_lag [s] (0: no lag).
+    """
+
+    ripple_amplitude_Nm: np.ndarray
+    ripple_period_rad: np.ndarray
+    ripple_phase_rad: np.ndarray
+    spring_stiffness_Nm_per_rad: np.ndarray
+    spring_rest_rad: np.ndarray
+    warm_up_fraction: np.ndarray
+    warm_up_time_constant_s: np.ndarray
+    asymmetric: np.ndarray
+    F_V_pos: np.ndarray
+    F_V_neg: np.ndarray
+    F_VV: np.ndarray
+    lag_time_constant_s: np.ndarray
+
+    def __post_init__(self) -> None:
+        k = None
+        for f in fields(self):
+            dtype = bool if f.name == "asymmetric" else float
+            a = np.array(getattr(self, f.name), dtype=dtype).reshape(-1)
+            if k is None:
+                k = a.shape[0]
+            if a.shape != (k,):
+                raise SimError(f"ArmEffects.{f.name}: expected shape ({k},), got {a.shape}")
+            if dtype is float and not np.all(np.isfinite(a)):
+                raise SimError(f"ArmEffects.{f.name}: expected finite values, got {a}")
+            a.setflags(write=False)
+            object.__setattr__(self, f.name, a)
+        for name in ("ripple_period_rad", "warm_up_time_constant_s"):
+            if np.any(getattr(self, name) <= 0):
+                raise SimError(f"ArmEffects.{name}: expected values > 0")
+        if np.any(self.lag_time_constant_s < 0) or np.any(self.warm_up_fraction < 0):
+            raise SimError("ArmEffects: expected lag_time_constant_s >= 0 and "
+                           "warm_up_fraction >= 0")
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def none(cls, k: int) -> ArmEffects:
+        """No effect on any of ``k`` joints."""
+        kw: dict[str, Any] = {f.name: np.full(k, _DEFAULTS.get(f.name, 0.0))
+                              for f in fields(cls)}
+        kw["asymmetric"] = np.zeros(k, dtype=bool)
+        return cls(**kw)
+
+    @classmethod
+    def make(cls, k: int, **tables: dict[int, dict[str, float]]) -> ArmEffects:
+        """Effects from plant-file-like tables, per joint (0-based index in the moving chain).
+
+        Example: ``ArmEffects.make(3, spring={1: {"stiffness_Nm_per_rad": 50.0}},
+        position_ripple={0: {"amplitude_Nm": 2.0, "period_rad": 0.3}})``. Table and key names
+        are those of the plant file (``sim_drivers.plant_config``); ``enabled`` is accepted
+        and ignored (a listed joint has the effect enabled).
+        """
+        arrays = {f.name: np.array(getattr(cls.none(k), f.name)) for f in fields(cls)}
+        for table, per_joint in tables.items():
+            if table not in _TABLES:
+                raise SimError(f"ArmEffects: unknown effect {table!r}; expected one of "
+                               f"{sorted(_TABLES)}")
+            for j, values in per_joint.items():
+                if not 0 <= int(j) < k:
+                    raise SimError(f"ArmEffects.{table}: joint index {j!r} not in 0..{k - 1}")
+                if table == "asymmetric_viscous":
+                    arrays["asymmetric"][j] = True
+                for key, v in values.items():
+                    if key == "enabled":
+                        continue
+                    if key not in _TABLES[table]:
+                        raise SimError(f"ArmEffects.{table}.{key}: unknown key; expected one "
+                                       f"of {sorted(_TABLES[table])}")
+                    arrays[_TABLES[table][key]][j] = float(v)
+        return cls(**arrays)
+
+    @classmethod
+    def from_plant_effects(cls, per_joint: Any) -> ArmEffects:
+        """Effects from one ``sim_drivers.plant_config.Effects``-like object per joint (or
+        None): objects with attributes ``position_ripple``, ``spring``, ... each with
+        ``enabled`` and the plant-file keys."""
+        per_joint = list(per_joint)
+        tables: dict[str, dict[int, dict[str, float]]] = {}
+        for j, eff in enumerate(per_joint):
+            if eff is None:
+                continue
+            for table, keys in _TABLES.items():
+                e = getattr(eff, table, None)
+                if e is not None and getattr(e, "enabled", False):
+                    tables.setdefault(table, {})[j] = {key: getattr(e, key) for key in keys}
+        return cls.make(len(per_joint), **tables)
+
+    def replace(self, **changes: Any) -> ArmEffects:
+        return replace(self, **changes)
+
+    # ------------------------------------------------------------------ queries
+    @property
+    def k(self) -> int:
+        return int(self.F_VV.shape[0])
+
+    def enabled(self) -> dict[str, np.ndarray]:
+        """Effect name -> boolean mask (k,) of the joints where it is on."""
+        return {
+            "position_ripple": self.ripple_amplitude_Nm != 0,
+            "spring": self.spring_stiffness_Nm_per_rad != 0,
+            "warm_up": self.warm_up_fraction != 0,
+            "asymmetric_viscous": self.asymmetric.copy(),
+            "quadratic_viscous": self.F_VV != 0,
+            "torque_lag": self.lag_time_constant_s > 0,
+        }
+
+    @property
+    def any_position(self) -> bool:
+        """Whether a position-dependent torque (ripple or spring) is on for some joint."""
+        return bool(np.any(self.ripple_amplitude_Nm) or np.any(self.spring_stiffness_Nm_per_rad))
+
+    # ------------------------------------------------------------------ formulas
+    def position_torque(self, q: Any) -> np.ndarray:
+        """Ripple + spring torque [N m], shape of ``q`` (..., k)."""
+        q = np.asarray(q, dtype=float)
+        return (self.ripple_amplitude_Nm
+                * np.sin(_TWO_PI * q / self.ripple_period_rad + self.ripple_phase_rad)
+                + self.spring_stiffness_Nm_per_rad * (q - self.spring_rest_rad))
+
+    def viscous_coefficients(self, F_V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Viscous coefficients for dq > 0 and dq < 0 [N m s/rad], shape (k,) each."""
+        pos = np.where(self.asymmetric, self.F_V_pos, F_V)
+        neg = np.where(self.asymmetric, self.F_V_neg, F_V)
+        return pos, neg
+
+    def viscous_torque(self, F_V: np.ndarray, dq: Any) -> np.ndarray:
+        """Whole viscous torque, F_V (or F_V_pos / F_V_neg) dq + F_VV dq |dq| [N m]."""
+        dq = np.asarray(dq, dtype=float)
+        pos, neg = self.viscous_coefficients(F_V)
+        return np.where(dq > 0, pos, neg) * dq + self.F_VV * dq * np.abs(dq)
+
+    def dry_scale(self, t: Any) -> np.ndarray:
+        """Warm-up factor of the dry terms, ``1 + w exp(-t / T_w)``; t [s] since the run
+        start, shape (...,) -> (..., k)."""
+        t = np.asarray(t, dtype=float)[..., None]
+        return 1.0 + self.warm_up_fraction * np.exp(-t / self.warm_up_time_constant_s)
+
+    def lag_keep(self, h: float) -> np.ndarray:
+        """Per-step retention ``exp(-h / T_lag)`` of the torque lag over a step h [s]; 0 where
+        there is no lag (the applied torque is the command)."""
+        tl = self.lag_time_constant_s
+        with np.errstate(divide="ignore"):
+            return np.where(tl > 0, np.exp(-h / np.where(tl > 0, tl, 1.0)), 0.0)

@@ -1,0 +1,378 @@
+"""Offline closed-loop simulation of the n-dof arm: position controller + drives + plant.
+
+Each control cycle does, per joint, what :mod:`sim_drivers.offline` does for one joint: the
+measured position comes from the encoder counts, the torque reference of a PD position loop
+(the control law of ``daq.control.PositionController``, vectorised over the joints: velocity
+from the backward difference of the measured position, low-passed at ``velocity_cutoff_hz``)
+plus a model feed-forward is quantised to the int16 per-mille target torque of object 0x6071,
+and the plant (:class:`sim_drivers.arm_plant.ArmPlant`) is stepped one cycle with the joint-side
+torque of that target.
+
+Feed-forward (computed torque at the reference, computed once for the whole run): by default
+RNEA of the TRUE rigid body with rotor inertias and payload, no friction; or RNEA of a nominal
+pinocchio model you pass; or none; plus optional per-joint friction terms of the gains
+(``Fc_ff sign(dq_ref) + Fv_ff dq_ref``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from . import SimError
+from .arm_params import ArmParams, Payload, _vec
+from .arm_plant import REGIME_REST, REGIME_SLIDING, ArmPlant
+
+
+@dataclass(frozen=True, eq=False)
+class ArmGains:
+    """PD gains and friction feed-forward of the joint position loops; arrays of shape (k,).
+
+    Attributes
+    ----------
+    kp : ndarray
+        Proportional gains [N m/rad].
+    kd : ndarray
+        Derivative gains [N m s/rad].
+    Fc_ff, Fv_ff : ndarray
+        Coulomb [N m] and viscous [N m s/rad] feed-forward (default 0).
+    velocity_cutoff_hz : float
+        Cut-off of the velocity-estimate low-pass [Hz].
+    """
+
+    kp: np.ndarray
+    kd: np.ndarray
+    Fc_ff: Any = 0.0
+    Fv_ff: Any = 0.0
+    velocity_cutoff_hz: float = 100.0
+
+    def __post_init__(self) -> None:
+        k = np.size(self.kp)
+        for name in ("kp", "kd", "Fc_ff", "Fv_ff"):
+            object.__setattr__(self, name, _vec(f"ArmGains.{name}", getattr(self, name), k))
+        if not self.velocity_cutoff_hz > 0:
+            raise SimError(f"ArmGains.velocity_cutoff_hz: expected a number > 0 [Hz], got "
+                           f"{self.velocity_cutoff_hz!r}")
+
+    @property
+    def k(self) -> int:
+        return int(self.kp.shape[0])
+
+    @classmethod
+    def for_params(
+        cls,
+        params: ArmParams,
+        *,
+        payload: Payload | None = None,
+        bandwidth_hz: float = 6.0,
+        damping: float = 0.9,
+        friction_ff: bool = True,
+        velocity_cutoff_hz: float = 100.0,
+    ) -> ArmGains:
+        """Gains for a second-order loop per joint: ``kp = J w^2``, ``kd = 2 zeta J w`` with
+        w = 2 pi bandwidth_hz and J the joint's largest diagonal inertia (rotor included) over
+        64 sampled configurations; friction feed-forward from the true coefficients (the
+        motor-quadrant sliding dry friction c_m and F_V) when ``friction_ff``."""
+        model = params.dynamics_model(payload)
+        data = model.createData()
+        rng = np.random.default_rng(0)
+        lo = np.maximum(np.where(np.isfinite(model.lowerPositionLimit),
+                                 model.lowerPositionLimit, -np.pi), -np.pi)
+        hi = np.minimum(np.where(np.isfinite(model.upperPositionLimit),
+                                 model.upperPositionLimit, np.pi), np.pi)
+        j = np.zeros(params.k)
+        for q in np.vstack([np.zeros(params.k), lo + (hi - lo) * rng.random((63, params.k))]):
+            j = np.maximum(j, np.diag(pin.crba(model, data, q)))
+        w = 2.0 * math.pi * bandwidth_hz
+        f = params.friction
+        return cls(kp=j * w * w, kd=2.0 * damping * j * w,
+                   Fc_ff=f.c_m if friction_ff else 0.0, Fv_ff=f.F_V if friction_ff else 0.0,
+                   velocity_cutoff_hz=velocity_cutoff_hz)
+
+
+@dataclass(frozen=True, eq=False)
+class ArmRun:
+    """One simulated run of the arm, one record per control cycle; arrays (n,) or (n, k).
+
+    Record i holds the measurement the controller used at the start of cycle i and the command
+    it sent for that cycle (like ``sim_drivers.offline.SimRun``), plus the plant's truth.
+
+    Attributes
+    ----------
+    t : ndarray, (n,)
+        Time of the measurement, i * cycle_s [s].
+    cycle : ndarray of int64, (n,)
+    counts : ndarray of int64, (n, k)
+        Encoder readings [counts] (motor side).
+    q : ndarray, (n, k)
+        Measured joint positions from the counts [rad].
+    x : ndarray of int16, (n, k)
+        Target torques sent [per-mille of rated torque] (0x6071).
+    tau_ref : ndarray, (n, k)
+        Joint-side torque references of x (eq. 7) [N m]: what a master logs.
+    tau_applied : ndarray, (n, k)
+        Torque acting on the joints at the start of cycle i, after its command was applied
+        (lagged command + ripple noise) [N m].
+    tau_noise : ndarray, (n, k)
+        Ripple-noise samples [N m].
+    q_true, dq_true, ddq_true : ndarray, (n, k)
+        True state at time t; ddq_true right after the command of cycle i is applied, so
+        ``inverse_arm_torque(params, q_true, dq_true, ddq_true, payload, t) == tau_applied``
+        on the sliding entries.
+    regime : ndarray of int8, (n, k)
+        ``sim_drivers.arm_plant.REGIME_*`` per joint: 0 sliding, 1 at rest, 2 zero load.
+    q_ref, dq_ref, ddq_ref : ndarray, (n, k)
+        The reference tracked [rad, rad/s, rad/s^2].
+    payload : Payload or None
+    cycle_s : float
+    joint_numbers : tuple of int
+        Labels of the joints (``ArmParams.joint_numbers``).
+    """
+
+    t: np.ndarray
+    cycle: np.ndarray
+    counts: np.ndarray
+    q: np.ndarray
+    x: np.ndarray
+    tau_ref: np.ndarray
+    tau_applied: np.ndarray
+    tau_noise: np.ndarray
+    q_true: np.ndarray
+    dq_true: np.ndarray
+    ddq_true: np.ndarray
+    regime: np.ndarray
+    q_ref: np.ndarray
+    dq_ref: np.ndarray
+    ddq_ref: np.ndarray
+    payload: Payload | None
+    cycle_s: float
+    joint_numbers: tuple[int, ...]
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def k(self) -> int:
+        return int(self.q.shape[1])
+
+    @property
+    def tau(self) -> np.ndarray:
+        """The logged torque, ``tau_ref`` (n, k) [N m]."""
+        return self.tau_ref
+
+    @property
+    def dq(self) -> np.ndarray:
+        """TRUE velocity ``dq_true`` (n, k) [rad/s]; an identification estimates its own
+        from ``q``."""
+        return self.dq_true
+
+    @property
+    def ddq(self) -> np.ndarray:
+        """TRUE acceleration ``ddq_true`` (n, k) [rad/s^2]."""
+        return self.ddq_true
+
+    @property
+    def stuck(self) -> np.ndarray:
+        """Boolean mask (n, k): the joint is at rest (dq_true == 0)."""
+        return self.regime == REGIME_REST
+
+    @property
+    def sliding(self) -> np.ndarray:
+        """Boolean mask (n, k): eq. 30 holds exactly on that joint."""
+        return self.regime == REGIME_SLIDING
+
+    @property
+    def payload_mass_kg(self) -> float:
+        return 0.0 if self.payload is None else self.payload.mass
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """The logged signals as multi-axis columns (ROBOT_FORMAT): ``t``, ``q1..qk``
+        (measured), ``tau1..tauk`` (torque references), ``q_ref1..q_refk``; i = 1..k is the
+        index in the moving chain."""
+        out = {"t": self.t}
+        for name, arr in (("q", self.q), ("tau", self.tau_ref), ("q_ref", self.q_ref)):
+            for i in range(self.k):
+                out[f"{name}{i + 1}"] = arr[:, i]
+        return out
+
+    def to_csv(self, path: Any) -> None:
+        """Write :meth:`columns` as a comma-separated file with a header line."""
+        cols = self.columns()
+        np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",",
+                   header=",".join(cols), comments="", fmt="%.17g")
+
+
+def _reference_arrays(reference: Any, k: int) -> tuple[np.ndarray, ...]:
+    try:
+        arrays = [np.asarray(getattr(reference, n), dtype=float) for n in ("q", "dq", "ddq")]
+    except AttributeError as exc:
+        raise SimError(f"reference: expected arrays q, dq, ddq of shape (n, {k}) ({exc})"
+                       ) from None
+    arrays = [a.reshape(-1, 1) if a.ndim == 1 and k == 1 else a for a in arrays]
+    n = arrays[0].shape[0]
+    for name, a in zip(("q", "dq", "ddq"), arrays, strict=True):
+        if a.shape != (n, k) or not np.all(np.isfinite(a)):
+            raise SimError(f"reference.{name}: expected finite values of shape ({n}, {k}), "
+                           f"got shape {a.shape}")
+    if n < 1:
+        raise SimError("reference: expected at least one sample")
+    return tuple(arrays)
+
+
+def _cycle_from_reference(t: np.ndarray) -> float:
+    if t.ndim != 1 or t.shape[0] < 2:
+        raise SimError("reference.t: expected at least 2 samples to infer the cycle")
+    dt = np.diff(t)
+    c = float(np.median(dt))
+    if not c > 0 or np.max(np.abs(dt - c)) > 1e-6 * c + 1e-12:
+        raise SimError(f"reference.t: expected uniform sampling, got steps from "
+                       f"{float(dt.min())!r} to {float(dt.max())!r} s")
+    return c
+
+
+def feedforward_torque(
+    params: ArmParams,
+    q: np.ndarray,
+    dq: np.ndarray,
+    ddq: np.ndarray,
+    feedforward: Any = "rnea",
+    payload: Payload | None = None,
+) -> np.ndarray:
+    """Model feed-forward at the reference, (n, k) [N m].
+
+    Parameters
+    ----------
+    feedforward : "rnea", None, "none", pinocchio.Model or array_like (n, k)
+        "rnea": RNEA of the true rigid body (rotor inertias and payload, no friction); a
+        Model: RNEA of that nominal model (its own armature and gravity); None / "none": 0;
+        an array: used as given.
+    """
+    n, k = q.shape
+    if feedforward is None or (isinstance(feedforward, str) and feedforward == "none"):
+        return np.zeros((n, k))
+    if isinstance(feedforward, str):
+        if feedforward != "rnea":
+            raise SimError(f"feedforward: expected 'rnea', 'none', None, a pinocchio.Model "
+                           f"or an (n, k) array, got {feedforward!r}")
+        model = params.dynamics_model(payload)
+    elif isinstance(feedforward, pin.Model):
+        model = feedforward
+        if model.nv != k or model.nq != k:
+            raise SimError(f"feedforward: nominal model has nv={model.nv}, expected {k}")
+    else:
+        ff = np.asarray(feedforward, dtype=float)
+        if ff.shape != (n, k):
+            raise SimError(f"feedforward: expected an array of shape ({n}, {k}), got "
+                           f"{ff.shape}")
+        return ff
+    data = model.createData()
+    out = np.empty((n, k))
+    rnea = pin.rnea
+    for i in range(n):
+        out[i] = rnea(model, data, q[i], dq[i], ddq[i])
+    return out
+
+
+def simulate_arm(
+    params: ArmParams,
+    reference: Any,
+    gains: ArmGains,
+    *,
+    payload: Payload | None = None,
+    seed: int = 0,
+    cycle_s: float | None = None,
+    substeps: int = 10,
+    q0: Any = None,
+    feedforward: Any = "rnea",
+) -> ArmRun:
+    """Run the closed loop (controllers + drives + arm) over a multi-joint reference.
+
+    Parameters
+    ----------
+    params : ArmParams
+    reference : object
+        Float arrays ``q, dq, ddq`` of shape (n, k) [rad, rad/s, rad/s^2] sampled once per
+        cycle (and ``t`` (n,) [s] when ``cycle_s`` is not given), e.g.
+        :func:`sim_drivers.arm_reference.sine_reference`.
+    gains : ArmGains
+    payload : Payload, optional
+        Payload at the flange for the whole run.
+    seed : int
+        Seed of the ripple noise (same seed, same run).
+    cycle_s : float, optional
+        Control cycle [s]; default: the reference's sampling step.
+    substeps : int
+        Plant integration sub-steps per cycle.
+    q0 : array_like (k,), optional
+        Initial position [rad]; default ``reference.q[0]``. The arm starts at rest.
+    feedforward : see :func:`feedforward_torque`
+
+    Returns
+    -------
+    ArmRun
+
+    Raises
+    ------
+    SimError
+        Malformed reference, gains of the wrong size, unknown feed-forward.
+    """
+    k = params.k
+    ref_q, ref_dq, ref_ddq = _reference_arrays(reference, k)
+    n = ref_q.shape[0]
+    if gains.k != k:
+        raise SimError(f"gains: expected {k} joints, got {gains.k}")
+    if cycle_s is None:
+        cycle_s = _cycle_from_reference(np.asarray(getattr(reference, "t", None), dtype=float))
+    ff = feedforward_torque(params, ref_q, ref_dq, ref_ddq, feedforward, payload)
+    ff = ff + gains.Fc_ff * np.sign(ref_dq) + gains.Fv_ff * ref_dq
+
+    plant = ArmPlant(params, cycle_s, substeps=substeps, seed=seed, payload=payload)
+    plant.reset(ref_q[0] if q0 is None else q0)
+    rng = np.random.default_rng(seed)
+    noise = rng.standard_normal((n, k)) * params.drive.torque_noise_std_Nm
+
+    counts = np.empty((n, k), dtype=np.int64)
+    xs = np.empty((n, k), dtype=np.int16)
+    tau_applied = np.empty((n, k))
+    q_true = np.empty((n, k))
+    dq_true = np.empty((n, k))
+    ddq_true = np.empty((n, k))
+    regime = np.empty((n, k), dtype=np.int8)
+
+    drive = params.drive
+    cpr = drive.counts_per_rad
+    per_mille = drive.torque_per_permille
+    kp, kd = gains.kp, gains.kd
+    wc = 2.0 * math.pi * gains.velocity_cutoff_hz * cycle_s
+    alpha = wc / (1.0 + wc)
+    dq_est = np.zeros(k)
+    q_prev: np.ndarray | None = None
+    step = plant.step
+    for i in range(n):
+        c = np.rint(plant.q * cpr)
+        counts[i] = c
+        q_true[i] = plant.q
+        dq_true[i] = plant.dq
+        qm = c / cpr
+        if q_prev is not None:
+            dq_est += alpha * ((qm - q_prev) / cycle_s - dq_est)
+        q_prev = qm
+        tau = ff[i] + kp * (ref_q[i] - qm) + kd * (ref_dq[i] - dq_est)
+        x = np.clip(np.rint(tau / per_mille), -32768, 32767)
+        xs[i] = x
+        step(x * per_mille, noise[i])
+        ddq_true[i] = plant.ddq_start
+        tau_applied[i] = plant.tau_applied_start
+        regime[i] = plant.regime_start
+
+    cycle = np.arange(n, dtype=np.int64)
+    return ArmRun(
+        t=cycle * cycle_s, cycle=cycle, counts=counts, q=counts / cpr, x=xs,
+        tau_ref=xs.astype(float) * per_mille, tau_applied=tau_applied, tau_noise=noise,
+        q_true=q_true, dq_true=dq_true, ddq_true=ddq_true, regime=regime,
+        q_ref=ref_q, dq_ref=ref_dq, ddq_ref=ref_ddq, payload=payload,
+        cycle_s=float(cycle_s), joint_numbers=params.joint_numbers)
