@@ -1,4 +1,4 @@
-"""DAQ benchmarks: lockstep rate (1 and 3 drives), paced 1 kHz jitter vs a C loop, MCAP writes.
+"""DAQ benchmarks: lockstep rate (1, 3, 6 drives), paced 1 kHz jitter vs a C loop, MCAP writes.
 
 Usage::
 
@@ -7,10 +7,16 @@ Usage::
 Prints one table. Everything runs through the full stack: campaign -> plan -> runner ->
 canopen master -> python-can virtual bus -> simulated CiA 402 drive + plant -> MCAP.
 
-- lockstep cycles/s: wall-clock rate of a whole payload run (median over ``--repeat``), its
-  ratio to real time at 1 kHz, and the process CPU time per cycle (drive + plant + master +
-  log, all threads): the CPU figure is the stable one on a shared machine, the wall rate
-  depends on how much of a core the scheduler gives us.
+- lockstep cycles/s for 1, 3 and 6 simulated drives (``--drives``): wall-clock rate of a
+  whole payload run (median over ``--repeat``), its ratio to real time at 1 kHz, the rate
+  relative to 1 drive (linear scaling: n drives at >= 1/n of the 1-drive rate), and one
+  cycle's wall time in units of the raw python-can virtual-bus round trip measured in the
+  same run (``raw_bus.py``: one frame out, one back, two threads, pinned like the runner).
+  One bus carries at most one drive at 1 kHz within ``max_bus_load`` 0.6 (``daq.busload``):
+  the n-drive rows on one bus run a plan of ``n`` ms cycles (the lockstep rate does not
+  depend on the simulated cycle), and the "6 buses" row is the 6-axis arm at 1 kHz, one
+  drive per bus. CPU per cycle is the process time of the whole campaign (start-up
+  included) per cycle: the stable figure on a shared machine.
 - paced: a 1 kHz payload run of ``--paced-seconds``; lateness of every SYNC against its
   deadline (p50/p99/max) and missed cycles (SYNC more than half a period late); the C
   reference loop (``c_paced_loop.c``, compiled here with gcc) runs at the same time for as
@@ -52,8 +58,9 @@ _chan = itertools.count()
 
 
 def campaign(seconds: float, cycle_s: float = 0.001, drives: int = 1,
-             clock: str = "lockstep") -> Campaign:
+             clock: str = "lockstep", buses: int = 1) -> Campaign:
     periods = max(1, int(round(seconds * 0.25)))
+    chan = f"bench_{next(_chan)}"
     raw = {
         "name": "bench",
         "joint": {"kind": "revolute", "limits": {
@@ -64,18 +71,22 @@ def campaign(seconds: float, cycle_s: float = 0.001, drives: int = 1,
         "payloads": [{"mass_kg": 0.0, "arm_m": 1.0}],
         "segments": [{"kind": "sine", "amplitude": 0.3, "frequency_hz": 0.25, "center": 0.0,
                       "periods": periods}],
-        "daq": {"channel": f"bench_{next(_chan)}", "clock": clock,
-                "drives": [{"node_id": n} for n in range(1, drives + 1)],
+        "daq": {"channel": chan, "clock": clock,
+                "drives": [{"node_id": n, "channel": chan if buses == 1
+                            else f"{chan}_{(n - 1) % buses}"} for n in range(1, drives + 1)],
                 "heartbeat_timeout_s": 2.0, "tpdo_timeout_cycles": 1000,
                 "max_following_error": 1.0},
     }
     return Campaign.from_dict(raw, "bench.toml")
 
 
-def lockstep(drives: int, seconds: float, repeat: int, out: Path) -> tuple[float, float, int]:
-    """Median wall cycles/s, median CPU µs/cycle, cycles per run."""
-    cycle_s = 0.001 if drives == 1 else 0.002  # 3 drives at 1 kHz exceed 1 Mbit/s
-    c = campaign(seconds * (1 if drives == 1 else 0.5) / cycle_s * 0.001, cycle_s, drives)
+def lockstep(drives: int, cycles: int, repeat: int, out: Path, buses: int = 1
+             ) -> tuple[float, float, int]:
+    """Median wall cycles/s, median CPU µs/cycle, cycles per run: ``drives`` simulated drives
+    spread over ``buses`` buses, a plan of about ``cycles`` cycles whose cycle time fits the
+    bus budget (1 ms per drive on the busiest bus)."""
+    cycle_s = 0.001 * -(-drives // buses)
+    c = campaign(cycles * cycle_s, cycle_s, drives, buses=buses)
     rates, cpus, n = [], [], 0
     for _ in range(repeat):
         c0 = time.process_time()
@@ -206,8 +217,11 @@ def safety_rows(repeat: int) -> list[tuple[str, str, str, str]]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--paced-seconds", type=float, default=60.0)
-    ap.add_argument("--lockstep-seconds", type=float, default=10.0,
-                    help="simulated seconds per lockstep run")
+    ap.add_argument("--lockstep-cycles", type=int, default=10000,
+                    help="cycles of plan per lockstep run")
+    ap.add_argument("--drives", default="1,3,6", help="drive counts of the lockstep rows")
+    ap.add_argument("--only-lockstep", action="store_true",
+                    help="only the lockstep rows (and their raw round-trip reference)")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--safety-repeat", type=int, default=5,
                     help="master-loss reaction measurements per kind (0: skip)")
@@ -215,8 +229,11 @@ def main() -> int:
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench_daq_"))
     try:
-        rows = safety_rows(args.safety_repeat) if args.safety_repeat else []
-        if not args.only_safety:
+        rows = (safety_rows(args.safety_repeat) if args.safety_repeat and not
+                args.only_lockstep else [])
+        if args.only_lockstep:
+            rows = lockstep_rows(args, tmp)
+        elif not args.only_safety:
             rows.extend(speed_rows(args, tmp))
         w = [max(len(r[i]) for r in rows) for i in range(4)]
         print(f"bench_daq  (python {sys.version.split()[0]}, {os.cpu_count()} CPUs, load "
@@ -228,15 +245,35 @@ def main() -> int:
     return 0
 
 
+def lockstep_rows(args: argparse.Namespace, tmp: Path
+                  ) -> list[tuple[str, str, str, str]]:
+    """The raw round trip, then one row per drive count (and the 6-axis arm on 6 buses)."""
+    from raw_bus import round_trip_us
+
+    rtt = round_trip_us(20000, pin=True)
+    rows = [("raw python-can virtual round trip", f"{rtt:.1f} us",
+             f"{1e6 / rtt:,.0f} round trips/s", "2 threads, pinned to one CPU like the runner")]
+    counts = [int(x) for x in args.drives.split(",")]
+    cases = [(n, 1) for n in counts] + ([(6, 6)] if 6 in counts else [])
+    r1 = None
+    for n, buses in cases:
+        rate, cpu, cycles = lockstep(n, args.lockstep_cycles, args.repeat,
+                                     tmp / f"l{n}_{buses}", buses)
+        if n == 1:
+            r1 = rate
+        rel = f"{rate / r1:.3f}x the 1-drive rate (1/{n} = {1 / n:.3f})" if r1 and n > 1 else ""
+        where = (f"{buses} buses, 1 ms plan" if buses > 1
+                 else f"1 bus, {-(-n // buses)} ms plan")
+        rows.append((f"lockstep, {n} drive{'s' if n > 1 else ''} ({where})",
+                     f"{rate:,.0f} cycles/s", f"{rate / 1000:.2f}x real time at 1 kHz",
+                     f"cycle = {1e6 / rate / rtt:.2f} raw round trips; {rel}"
+                     f"{'; ' if rel else ''}CPU {cpu:.0f} us/cycle, {cycles} cycles"))
+    return rows
+
+
 def speed_rows(args: argparse.Namespace, tmp: Path) -> list[tuple[str, str, str, str]]:
-    rows = []
-    r1, cpu1, n1 = lockstep(1, args.lockstep_seconds, args.repeat, tmp / "l1")
-    rows.append(("lockstep, 1 drive, 1 kHz plan", f"{r1:,.0f} cycles/s",
-                 f"{r1 / 1000:.2f}x real time", f"CPU {cpu1:.0f} us/cycle, {n1} cycles"))
-    r3, cpu3, n3 = lockstep(3, args.lockstep_seconds, args.repeat, tmp / "l3")
-    rows.append(("lockstep, 3 drives", f"{r3:,.0f} cycles/s",
-                 f"{r3 / 1000:.2f}x real time at 1 kHz",
-                 f"CPU {cpu3:.0f} us/cycle; 3 vs 1 drive: {r3 / r1:.2f}x rate"))
+    rows = lockstep_rows(args, tmp)
+    cpu1 = float(rows[1][3].split("CPU ")[1].split(" ")[0])
     msg_s, log_us = mcap_rate(100_000, tmp)
     rows.append(("MCAP write (state+setpoint+CAN)", f"{msg_s:,.0f} msg/s",
                  f"{log_us:.1f} us/cycle",

@@ -19,16 +19,27 @@ bus: :class:`MultiBus` is a :class:`can.BusABC` over the member buses that
 
 Node ids are unique over all buses (``daq.config`` refuses a repeated one), so a COB-ID names
 one bus. Pure bus code: no CANopen state, no threads of its own.
+
+:func:`open_buses` opens the master's bus(es) of a ``[daq]`` configuration: one python-can
+bus per channel (``interface``, ``bitrate``), or with ``--simulate`` the master's end of the
+simulated channel (:class:`sim_drivers.simbus.SimBus`, queued: the master code reads it like
+any python-can bus); a :class:`MultiBus` over them when there are several.
 """
 
 from __future__ import annotations
 
+import contextlib
 import select
 import time
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 import can
 from can.broadcastmanager import CyclicTask
+
+from sim_drivers.simbus import SimBus
+
+from . import ConfigError
 
 BROADCAST_COB_IDS = (0x000, 0x080, 0x100)  # NMT (node 0), SYNC, TIME
 
@@ -148,3 +159,42 @@ class MultiBus(can.BusABC):
         super().shutdown()
         for b in self.members:
             b.shutdown()
+
+
+def open_buses(cfg: Any, *, simulated: bool = False) -> can.BusABC:
+    """The master's bus for a ``[daq]`` configuration (:class:`daq.config.DaqConfig`).
+
+    One bus per channel of ``cfg.channels``: ``can.Bus(interface, channel, bitrate)``
+    (``interface = "config"``: python-can's own configuration, one bus), or with
+    ``simulated`` a queued :class:`~sim_drivers.simbus.SimBus` on the virtual channel of the
+    simulated drives. Several channels: a :class:`MultiBus` routing by node id.
+
+    Raises
+    ------
+    daq.ConfigError
+        A bus cannot be opened (one line naming the interface and channel).
+    """
+    opened: dict[str, can.BusABC] = {}
+    try:
+        for ch in cfg.channels:
+            if simulated:
+                opened[ch] = SimBus(ch, dispatch="thread")
+                continue
+            kwargs: dict[str, Any] = {"interface": cfg.interface, "channel": ch}
+            if cfg.interface == "config":  # python-can's own configuration decides everything
+                kwargs = {}
+            elif cfg.interface != "virtual":
+                kwargs["bitrate"] = cfg.bitrate
+            try:
+                opened[ch] = can.Bus(**kwargs)
+            except (can.CanError, OSError, ValueError, ImportError) as exc:
+                raise ConfigError(f"{cfg.source}: daq.interface: cannot open "
+                                  f"{cfg.interface} {ch}: {exc}") from None
+    except BaseException:
+        for b in opened.values():
+            with contextlib.suppress(Exception):
+                b.shutdown()
+        raise
+    if len(opened) == 1:
+        return next(iter(opened.values()))
+    return MultiBus(opened, {d.node_id: d.channel or cfg.channel for d in cfg.drives})
