@@ -136,6 +136,19 @@ class SimBus(can.BusABC):
         for listener in listeners:
             self.add_listener(listener)
 
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        """:meth:`can.BusABC.recv` without its per-frame overhead when no filter is set."""
+        if self._filters is not None:
+            return super().recv(timeout)
+        if not self._open:
+            raise can.CanOperationError("Cannot operate on a closed bus")
+        try:
+            if timeout is None:
+                return self._rx.get()
+            return self._rx.get(timeout=timeout) if timeout > 0 else self._rx.get_nowait()
+        except queue.Empty:
+            return None
+
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         if not self._open:
             raise can.CanOperationError("Cannot operate on a closed bus")
@@ -195,6 +208,28 @@ class SimBus(can.BusABC):
                 self._listeners.clear()
 
 
+class _Dispatch(can.Listener):
+    """Frames of an inline :class:`SimBus` to the subscribers of a ``canopen.Network``: what
+    canopen's ``MessageListener`` + ``Network.notify`` do (error and remote frames dropped,
+    callbacks of the COB-ID in subscription order, a failing callback logged), without the
+    network's node scanner, which the drives' side never uses."""
+
+    def __init__(self, network: canopen.Network) -> None:
+        self.subscribers = network.subscribers
+
+    def on_message_received(self, msg: can.Message) -> None:
+        if msg.is_error_frame or msg.is_remote_frame:
+            return
+        subs = self.subscribers.get(msg.arbitration_id)
+        if subs:
+            cid, data, ts = msg.arbitration_id, msg.data, msg.timestamp
+            for callback in tuple(subs):  # a callback may (un)subscribe
+                try:
+                    callback(cid, data, ts)
+                except Exception:
+                    logger.exception("SimBus: callback for 0x%03X failed", cid)
+
+
 class SimNetwork:
     """The simulated drives of one channel: one :class:`SimBus`, one ``canopen.Network``.
 
@@ -220,7 +255,7 @@ class SimNetwork:
         self.network = canopen.Network(self.bus)
         self.network.NOTIFIER_CYCLE = 0.05  # notifier poll period [s]: quick close()
         if dispatch == "inline":
-            self.bus.add_listeners(self.network.listeners)
+            self.bus.add_listener(_Dispatch(self.network))
         else:
             self.network.connect()  # one notifier thread for every drive of the channel
         self.drives: list[Any] = []
