@@ -122,6 +122,15 @@ class MultiBus(can.BusABC):
                 return msg
         return None
 
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        """:meth:`can.BusABC.recv`, first without its overhead when a member has a frame
+        waiting and no filter is set."""
+        if self._filters is None:
+            msg = self._recv_any()
+            if msg is not None or timeout == 0:
+                return msg
+        return super().recv(timeout)
+
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         msg = self._recv_any()
         if msg is not None or timeout == 0:
