@@ -26,7 +26,7 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
-from . import ConfigError
+from daq import ConfigError
 
 
 def frame_bits(n_bytes: int) -> int:
