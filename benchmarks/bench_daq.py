@@ -12,7 +12,7 @@ canopen master -> python-can virtual bus -> simulated CiA 402 drive + plant -> M
   relative to 1 drive (linear scaling: n drives at >= 1/n of the 1-drive rate), and one
   cycle's wall time in units of the raw python-can virtual-bus round trip measured in the
   same run (``raw_bus.py``: one frame out, one back, two threads, pinned like the runner).
-  One bus carries at most one drive at 1 kHz within ``max_bus_load`` 0.6 (``daq.busload``):
+  One bus carries at most one drive at 1 kHz within ``max_bus_load`` 0.6 (``daq.runtime.busload``):
   the n-drive rows on one bus run a plan of ``n`` ms cycles (the lockstep rate does not
   depend on the simulated cycle), and the "6 buses" row is the 6-axis arm at 1 kHz, one
   drive per bus. CPU per cycle is the process time of the whole campaign (start-up
@@ -37,6 +37,7 @@ canopen master -> python-can virtual bus -> simulated CiA 402 drive + plant -> M
 from __future__ import annotations
 
 import argparse
+import contextlib
 import itertools
 import os
 import shutil
@@ -224,6 +225,8 @@ def main() -> int:
     ap.add_argument("--lockstep-cycles", type=int, default=10000,
                     help="cycles of plan per lockstep run")
     ap.add_argument("--drives", default="1,3,6", help="drive counts of the lockstep rows")
+    ap.add_argument("--before", action="store_true",
+                    help="add the lockstep rows of the rig before issue 12 (same run)")
     ap.add_argument("--only-lockstep", action="store_true",
                     help="only the lockstep rows (and their raw round-trip reference)")
     ap.add_argument("--repeat", type=int, default=3)
@@ -249,6 +252,51 @@ def main() -> int:
     return 0
 
 
+@contextlib.contextmanager
+def before_rig():
+    """The ``--simulate`` rig as it was before issue 12 (for the "before" rows, same run):
+    one python-can VirtualBus and canopen network per simulated drive, the master on its own
+    VirtualBus; every frame deep-copied to every other bus object and waking its thread."""
+    import can
+
+    from daq.runtime import runner
+    from sim_drivers.drive import SimulatedDrive
+    from sim_drivers.plant import JointPlant
+
+    class Rig:
+        def __init__(self) -> None:
+            self.drives: list = []
+            self.buses: list = []
+
+        def close(self) -> None:
+            for d in self.drives:
+                d.stop()
+            for b in self.buses:
+                b.shutdown()
+
+    def start_sim(cfg, plant_params, campaign, fault_injectors):
+        rig = Rig()
+        for k, dcfg in enumerate(cfg.drives):
+            bus = can.Bus(interface="virtual", channel=cfg.channel)
+            rig.buses.append(bus)
+            plant = JointPlant(plant_params, campaign.cycle_s,
+                               seed=int(plant_params.drive.seed) + k)
+            plant.reset(campaign.joint.start)
+            drive = SimulatedDrive(bus, dcfg.node_id, plant, dcfg.eds, cycle_s=campaign.cycle_s)
+            drive.start()
+            rig.drives.append(drive)
+        return rig
+
+    saved = runner.start_sim, runner.open_buses
+    runner.start_sim = start_sim
+    runner.open_buses = lambda cfg, simulated=False: can.Bus(interface="virtual",
+                                                             channel=cfg.channel)
+    try:
+        yield
+    finally:
+        runner.start_sim, runner.open_buses = saved
+
+
 def lockstep_rows(args: argparse.Namespace, tmp: Path
                   ) -> list[tuple[str, str, str, str]]:
     """The raw round trip, then one row per drive count (and the 6-axis arm on 6 buses)."""
@@ -258,17 +306,26 @@ def lockstep_rows(args: argparse.Namespace, tmp: Path
     rows = [("raw python-can virtual round trip", f"{rtt:.1f} us",
              f"{1e6 / rtt:,.0f} round trips/s", "2 threads, pinned to one CPU like the runner")]
     counts = [int(x) for x in args.drives.split(",")]
-    cases = [(n, 1) for n in counts] + ([(6, 6)] if 6 in counts else [])
-    r1 = None
-    for n, buses in cases:
-        rate, cpu, cycles = lockstep(n, args.lockstep_cycles, args.repeat,
-                                     tmp / f"l{n}_{buses}", buses)
+    cases = [(n, 1, False) for n in counts] + ([(6, 6, False)] if 6 in counts else [])
+    if args.before:
+        cases += [(n, 1, True) for n in counts]
+    r1 = {}
+    for n, buses, before in cases:
+        if before:
+            with before_rig():
+                rate, cpu, cycles = lockstep(n, args.lockstep_cycles, args.repeat,
+                                             tmp / f"b{n}", buses)
+        else:
+            rate, cpu, cycles = lockstep(n, args.lockstep_cycles, args.repeat,
+                                         tmp / f"l{n}_{buses}", buses)
         if n == 1:
-            r1 = rate
-        rel = f"{rate / r1:.3f}x the 1-drive rate (1/{n} = {1 / n:.3f})" if r1 and n > 1 else ""
+            r1[before] = rate
+        ref = r1.get(before)
+        rel = f"{rate / ref:.3f}x the 1-drive rate (1/{n} = {1 / n:.3f})" if ref and n > 1 else ""
         where = (f"{buses} buses, 1 ms plan" if buses > 1
                  else f"1 bus, {-(-n // buses)} ms plan")
-        rows.append((f"lockstep, {n} drive{'s' if n > 1 else ''} ({where})",
+        label = "BEFORE (a virtual bus per drive)" if before else "lockstep"
+        rows.append((f"{label}, {n} drive{'s' if n > 1 else ''} ({where})",
                      f"{rate:,.0f} cycles/s", f"{rate / 1000:.2f}x real time at 1 kHz",
                      f"cycle = {1e6 / rate / rtt:.2f} raw round trips; {rel}"
                      f"{'; ' if rel else ''}CPU {cpu:.0f} us/cycle (= {1000 / cpu:.1f}x "

@@ -8,8 +8,8 @@ import can
 import pytest
 
 from daq import ConfigError
-from daq.buses import MultiBus
-from daq.config import parse_daq
+from daq.runtime.buses import MultiBus
+from daq.runtime.config import parse_daq
 from sim_drivers.testing import unique_channel
 
 

@@ -7,7 +7,7 @@ import re
 import pytest
 
 from daq import ConfigError
-from daq.busload import (
+from daq.runtime.busload import (
     bus_loads,
     check_load,
     check_loads,

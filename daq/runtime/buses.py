@@ -1,6 +1,6 @@
 """Drives spread over several CAN buses, seen by the master as one python-can bus.
 
-A 6-axis arm at 1 kHz does not fit on one 1 Mbit/s bus (``daq.busload``): the drives are
+A 6-axis arm at 1 kHz does not fit on one 1 Mbit/s bus (``daq.runtime.busload``): the drives are
 spread over several buses (``[[daq.drives]] channel``), each with its own SYNC. The master
 code (SDO/NMT start-up, the cyclic engine, the heartbeat) stays the one it is for a single
 bus: :class:`MultiBus` is a :class:`can.BusABC` over the member buses that
@@ -17,8 +17,8 @@ bus: :class:`MultiBus` is a :class:`can.BusABC` over the member buses that
 - forwards periodic sends to the member buses' own ``send_periodic`` (the kernel's
   broadcast manager on socketcan), one per destination bus.
 
-Node ids are unique over all buses (``daq.config`` refuses a repeated one), so a COB-ID names
-one bus. Pure bus code: no CANopen state, no threads of its own.
+Node ids are unique over all buses (``daq.runtime.config`` refuses a repeated one), so a
+COB-ID names one bus. Pure bus code: no CANopen state, no threads of its own.
 
 :func:`open_buses` opens the master's bus(es) of a ``[daq]`` configuration: one python-can
 bus per channel (``interface``, ``bitrate``), or with ``--simulate`` the master's end of the
@@ -37,9 +37,8 @@ from typing import Any
 import can
 from can.broadcastmanager import CyclicTask
 
+from daq import ConfigError
 from sim_drivers.simbus import SimBus
-
-from . import ConfigError
 
 BROADCAST_COB_IDS = (0x000, 0x080, 0x100)  # NMT (node 0), SYNC, TIME
 
@@ -171,7 +170,7 @@ class MultiBus(can.BusABC):
 
 
 def open_buses(cfg: Any, *, simulated: bool = False) -> can.BusABC:
-    """The master's bus for a ``[daq]`` configuration (:class:`daq.config.DaqConfig`).
+    """The master's bus for a ``[daq]`` configuration (:class:`daq.runtime.config.DaqConfig`).
 
     One bus per channel of ``cfg.channels``: ``can.Bus(interface, channel, bitrate)``
     (``interface = "config"``: python-can's own configuration, one bus), or with
