@@ -50,6 +50,7 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+import can  # noqa: E402
 import numpy as np  # noqa: E402
 
 from daq.protocol.logformat import FRAME  # noqa: E402
@@ -225,6 +226,8 @@ def main() -> int:
     ap.add_argument("--lockstep-cycles", type=int, default=10000,
                     help="cycles of plan per lockstep run")
     ap.add_argument("--drives", default="1,3,6", help="drive counts of the lockstep rows")
+    ap.add_argument("--arm-cycles", type=int, default=3000,
+                    help="cycles of the 6-axis arm-on-the-bus rows (0: skip)")
     ap.add_argument("--before", action="store_true",
                     help="add the lockstep rows of the rig before issue 12 (same run)")
     ap.add_argument("--only-lockstep", action="store_true",
@@ -297,6 +300,89 @@ def before_rig():
         runner.start_sim, runner.open_buses = saved
 
 
+def arm_rate(k: int, cycles: int, substeps: int) -> tuple[float, float]:
+    """Lockstep cycles/s of a k-dof UR10 on the bus (``sim_drivers.arm_bus.ArmOnBus``: one
+    ArmPlant behind k simulated drives) under a minimal struct-packing master on a queued
+    SimBus (the runner plans one joint only), and the share of the wall time spent in
+    ``ArmPlant.step``."""
+    import struct
+
+    import canopen
+
+    from sim_drivers.arm import ArmParams
+    from sim_drivers.arm_bus import ArmOnBus
+    from sim_drivers.robots import ur10
+    from sim_drivers.simbus import SimBus
+
+    params = ArmParams.from_model(ur10(k))
+    ch = f"bench_arm_{next(_chan)}"
+    nodes = list(range(1, k + 1))
+    q0 = [0.1] * k
+    arm = ArmOnBus(params, ch, nodes, cycle_s=0.001, q0=q0, substeps=substeps)
+    bus = SimBus(ch, dispatch="thread")
+    plant_s = [0.0]
+    step = arm.plant.step
+
+    def timed_step(tau):
+        t0 = time.perf_counter()
+        step(tau)
+        plant_s[0] += time.perf_counter() - t0
+
+    arm.plant.step = timed_step
+    try:
+        master = canopen.Network(bus)  # start-up over SDO/NMT, then the raw loop
+        master.connect()
+        for d in arm.drives:
+            node = master.add_node(d.node_id, str(d.dod.path))
+            node.sdo[0x6060].raw = 10
+            for cw in (6, 7, 15):
+                node.sdo[0x6040].raw = cw
+        master.nmt.state = "OPERATIONAL"
+        node.sdo[0x1000].raw  # noqa: B018 - barrier: NMT start processed
+        master.notifier.stop(1.0)
+        while bus.recv(0.0) is not None:  # heartbeats and the like: not this loop's business
+            pass
+        cpr = params.drive.counts_per_rad.tolist()
+        tpu = params.drive.torque_per_permille.tolist()
+        rx, tx = struct.Struct("<Hh"), struct.Struct("<Hi")  # generic EDS defaults
+        slot = {0x180 + n: i for i, n in enumerate(nodes)}
+        counts = [round(q * c) for q, c in zip(q0, cpr, strict=True)]
+        prev = list(q0)
+        # PD at 10 Hz on each joint's inertia, within the drives' torque limit 0x6072
+        m_jj = [float(arm.drives[i].plant.params.J) for i in range(k)]
+        w = 2 * np.pi * 10.0
+        kp, kd = [m * w * w for m in m_jj], [2 * m * w for m in m_jj]
+        xmax = [d.max_torque for d in arm.drives]
+        sync = can.Message(arbitration_id=0x80, data=b"", is_extended_id=False)
+        msgs = [can.Message(arbitration_id=0x200 + n, data=bytes(4), is_extended_id=False)
+                for n in nodes]
+        t0 = time.perf_counter()
+        for _ in range(cycles):
+            for i in range(k):
+                q = counts[i] / cpr[i]
+                tau = kp[i] * (q0[i] - q) - kd[i] * (q - prev[i]) / 0.001  # PD [N m]
+                prev[i] = q
+                x = max(-xmax[i], min(xmax[i], round(tau / tpu[i])))
+                msgs[i].data = rx.pack(15, x)
+                bus.send(msgs[i])
+            bus.send(sync)
+            got = 0
+            while got < 2 * k:
+                m = bus.recv(1.0)
+                if m is None:
+                    raise TimeoutError("arm on the bus: TPDO missing")
+                if m.arbitration_id & 0x780 in (0x180, 0x280):
+                    got += 1
+                    i = slot.get(m.arbitration_id)
+                    if i is not None:
+                        counts[i] = tx.unpack_from(m.data)[1]
+        wall = time.perf_counter() - t0
+    finally:
+        bus.shutdown()
+        arm.close()
+    return cycles / wall, plant_s[0] / wall
+
+
 def lockstep_rows(args: argparse.Namespace, tmp: Path
                   ) -> list[tuple[str, str, str, str]]:
     """The raw round trip, then one row per drive count (and the 6-axis arm on 6 buses)."""
@@ -330,6 +416,13 @@ def lockstep_rows(args: argparse.Namespace, tmp: Path
                      f"cycle = {1e6 / rate / rtt:.2f} raw round trips; {rel}"
                      f"{'; ' if rel else ''}CPU {cpu:.0f} us/cycle (= {1000 / cpu:.1f}x "
                      f"real time on a free core), {cycles} cycles"))
+    if args.arm_cycles:
+        for sub in (10, 1):
+            rate, share = arm_rate(6, args.arm_cycles, sub)
+            rows.append((f"6-axis UR10 arm on the bus (ArmOnBus, {sub} substeps)",
+                         f"{rate:,.0f} cycles/s", f"{rate / 1000:.2f}x real time at 1 kHz",
+                         f"ArmPlant.step {100 * share:.0f} % of the wall time; minimal "
+                         f"struct master (the runner plans one joint)"))
     return rows
 
 
