@@ -84,6 +84,8 @@ def test_drives_over_two_buses(tmp_path):
         # bus a (2 drives) is the busiest: 55 + 2 x 335 bit per ms
         assert r.bus_load.channel == a and r.bus_load.frames_per_cycle == 7
         check_axes_equal_records(r, 3)
+        md = read_run(r.runs[0].path).metadata
+        assert [md[f"drive{k}"]["channel"] for k in range(3)] == [a, b, a]
         seen = {}
         for ch, bus in sniff.items():
             ids = set()

@@ -115,7 +115,7 @@ def _metadata(campaign: Any, cfg: DaqConfig, plan: Any, index: int, payload: Any
     }
     for k, (d, s) in enumerate(zip(cfg.drives, scalings, strict=True)):
         md[f"drive{k}"] = {"node_id": str(d.node_id), "eds": d.eds.name, "mode": d.mode_name,
-                           **s.as_dict()}
+                           "channel": d.channel or cfg.channel, **s.as_dict()}
         if k < len(drives):
             v = drives[k].consumer_value
             md[f"drive{k}"]["heartbeat_consumer"] = ("" if v is None else f"0x{v:08X}")
