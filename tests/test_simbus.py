@@ -19,6 +19,9 @@ from sim_drivers.plant_config import default_plant
 from sim_drivers.simbus import SimBus, SimNetwork
 from sim_drivers.testing import unique_channel
 
+# a bus thread dying at shutdown (e.g. a notifier reading a closed bus) fails the test
+pytestmark = pytest.mark.filterwarnings("error::pytest.PytestUnhandledThreadExceptionWarning")
+
 
 def _frame(cid: int, data: bytes) -> can.Message:
     return can.Message(arbitration_id=cid, data=data, is_extended_id=False)
@@ -92,11 +95,11 @@ def _lockstep(dispatch: str, nodes=(1, 2, 3), cycles=300):
     """3 drives on one SimNetwork, a canopen master on python-can's VirtualBus: SDO, NMT,
     CiA 402 enable, then lockstep CST cycles (RPDO per drive + SYNC, 2 TPDOs per drive)."""
     ch = unique_channel("simnet")
+    threads_before = {t.ident for t in threading.enumerate()}
     sim = SimNetwork(ch, dispatch=dispatch)
     master = canopen.Network(can.Bus(interface="virtual", channel=ch))
     master.NOTIFIER_CYCLE = 0.05
     master.connect()
-    threads_before = {t.ident for t in threading.enumerate()}
     try:
         drives = []
         for k, nid in enumerate(nodes):
@@ -142,9 +145,12 @@ def _lockstep(dispatch: str, nodes=(1, 2, 3), cycles=300):
     finally:
         master.disconnect()
         sim.close()
-        time.sleep(0.1)
-        left = [t for t in threading.enumerate() if t.ident not in threads_before
-                and t.is_alive() and not t.daemon]
+        # every thread the rig started (notifier, heartbeat tasks, watchdogs) has ended
+        end = time.monotonic() + 2.0
+        while time.monotonic() < end and [t for t in threading.enumerate()
+                                          if t.ident not in threads_before]:
+            time.sleep(0.01)
+        left = [t.name for t in threading.enumerate() if t.ident not in threads_before]
         assert not left, left
 
 
