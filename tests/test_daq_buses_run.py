@@ -107,7 +107,7 @@ def test_campaign_over_the_bus_budget_is_refused_before_anything_moves(tmp_path,
     ch = f"budget_{next(_chan)}"
     c = campaign([{"node_id": n} for n in range(1, 7)], cycle_s=0.001, clock=clock, channel=ch)
     with pytest.raises(ConfigError) as exc:
-        run_campaign(c, out_dir=tmp_path, simulate=default_plant(), yes=True)
+        run_campaign(c, out_dir=tmp_path / "logs", simulate=default_plant(), yes=True)
     msg = str(exc.value)
     assert "\n" not in msg
     assert msg == ("multi.toml: daq.max_bus_load: cyclic traffic needs 19 frames/cycle, 2065 "
@@ -115,4 +115,4 @@ def test_campaign_over_the_bus_budget_is_refused_before_anything_moves(tmp_path,
                    " 60 %; lower the rate to <= 290 Hz (control.cycle_s >= 0.003442 s) or "
                    "spread the drives over 6 buses (1 drive per bus fit at 1000 Hz)")
     assert ch not in virtual.channels  # no bus was opened, no drive started
-    assert not list(tmp_path.iterdir())  # no log, no state file
+    assert not list(tmp_path.iterdir())  # no output folder, no log, no state file

@@ -223,17 +223,18 @@ def run_campaign(
         if cfg.interface != "virtual":
             raise ConfigError(f"{campaign.source}: daq.interface: expected 'virtual' with "
                               f"--simulate, got {cfg.interface!r}")
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    plan = plan_campaign(campaign)
+    # every refusal before anything is created, opened or moved
     loads = bus_loads({ch: [pdo_lengths(d.mode) for d in cfg.drives_on(ch)]
                        for ch in cfg.channels}, campaign.cycle_s, cfg.bitrate)
     load = check_loads(loads, cfg.max_bus_load, str(campaign.source) or "campaign")
+    plan = plan_campaign(campaign)
     n_pay = len(campaign.payloads)
     todo = list(range(n_pay)) if payloads is None else list(payloads)
     for i in todo:
         if not 0 <= i < n_pay:
             raise ConfigError(f"payload index {i}: expected 0..{n_pay - 1}")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
     state_file = _state_path(out, campaign.name)
     done_before = _read_state(state_file) if resume else set()
     skipped = tuple(i for i in todo if i in done_before)
