@@ -5,12 +5,15 @@ velocity-dependent friction of Hamon, Gautier & Garrec (eq. 17-30) on every join
 stiction and event detection, the undeclared effects of the single-joint plant, per-joint drive
 quantisation and noise, and a PD + feed-forward closed loop. The pieces:
 
-* :mod:`sim_drivers.arm_params`    -- :class:`ArmParams` (truth, ``truth()`` by parameter name),
-  :class:`ArmFriction`, :class:`ArmDrive`, :class:`Payload`
+* :mod:`sim_drivers.arm_params`    -- :class:`ArmParams` (truth, ``truth()`` by parameter name;
+  ``from_model`` / ``from_robot`` make a plausible truth), :class:`ArmFriction`,
+  :class:`ArmDrive`, :class:`Payload` (inertia about its CoM like the campaign payloads;
+  ``Payload.coerce`` takes those)
 * :mod:`sim_drivers.arm_effects`   -- :class:`ArmEffects` (undeclared effects, per joint)
 * :mod:`sim_drivers.arm_plant`     -- :class:`ArmPlant` (forward model, equations in its
   docstring), :func:`inverse_arm_torque` (inverse model)
-* :mod:`sim_drivers.arm_offline`   -- :func:`simulate_arm` -> :class:`ArmRun`, :class:`ArmGains`
+* :mod:`sim_drivers.arm_offline`   -- :func:`simulate_arm` -> :class:`ArmRun`, :class:`ArmGains`,
+  :func:`simulate_arm_payloads`
 * :mod:`sim_drivers.arm_reference` -- smooth multi-joint test references
 * :mod:`sim_drivers.robots`        -- packaged robot models (UR10 from example-robot-data)
 
@@ -20,14 +23,21 @@ Example::
     from sim_drivers.robots import ur10
     params = ArmParams.from_model(ur10(3))
     ref = model_reference(params.model, duration_s=20.0)
-    run = simulate_arm(params, ref, ArmGains.for_params(params), payload=Payload(5.0), seed=1)
-    truth = params.truth(Payload(5.0))        # {"ZZ1": ..., "a_m2": ..., ...}
+    pay = Payload(5.0, com=[0.0, 0.0, 0.05], frame="tool0")   # 5 kg at the flange
+    run = simulate_arm(params, ref, ArmGains.for_params(params, payload=pay), payload=pay)
+    truth = params.truth(pay)                 # {"ZZ1": ..., "MX3": ..., "a_m2": ..., ...}
 """
 
 from __future__ import annotations
 
 from .arm_effects import ArmEffects
-from .arm_offline import ArmGains, ArmRun, feedforward_torque, simulate_arm
+from .arm_offline import (
+    ArmGains,
+    ArmRun,
+    feedforward_torque,
+    simulate_arm,
+    simulate_arm_payloads,
+)
 from .arm_params import (
     FRICTION_NAMES,
     STANDARD_NAMES,
@@ -53,5 +63,5 @@ __all__ = [
     "ArmDrive", "ArmEffects", "ArmFriction", "ArmGains", "ArmParams", "ArmParamsError",
     "ArmPlant", "ArmReference", "ArmRun", "Payload", "feedforward_torque", "friction_torque",
     "inverse_arm_torque", "model_reference", "output_arm_torque", "simulate_arm",
-    "sine_reference",
+    "simulate_arm_payloads", "sine_reference",
 ]

@@ -296,15 +296,16 @@ def simulate_arm(
     params : ArmParams
     reference : object
         Float arrays ``q, dq, ddq`` of shape (n, k) [rad, rad/s, rad/s^2] sampled once per
-        cycle (and ``t`` (n,) [s] when ``cycle_s`` is not given), e.g.
+        cycle (optionally ``t`` (n,) [s], uniformly sampled), e.g.
         :func:`sim_drivers.arm_reference.sine_reference`.
     gains : ArmGains
-    payload : Payload, optional
-        Payload at the flange for the whole run.
+    payload : Payload or RobotPayload-like, optional
+        Payload at the flange for the whole run (see ``Payload.coerce``).
     seed : int
         Seed of the ripple noise (same seed, same run).
     cycle_s : float, optional
-        Control cycle [s]; default: the reference's sampling step.
+        Control cycle [s]; default: the sampling step of ``reference.t``, or 0.001 s when the
+        reference has no ``t``.
     substeps : int
         Plant integration sub-steps per cycle.
     q0 : array_like (k,), optional
@@ -321,12 +322,14 @@ def simulate_arm(
         Malformed reference, gains of the wrong size, unknown feed-forward.
     """
     k = params.k
+    payload = Payload.coerce(payload)
     ref_q, ref_dq, ref_ddq = _reference_arrays(reference, k)
     n = ref_q.shape[0]
     if gains.k != k:
         raise SimError(f"gains: expected {k} joints, got {gains.k}")
     if cycle_s is None:
-        cycle_s = _cycle_from_reference(np.asarray(getattr(reference, "t", None), dtype=float))
+        t = getattr(reference, "t", None)
+        cycle_s = 0.001 if t is None else _cycle_from_reference(np.asarray(t, dtype=float))
     ff = feedforward_torque(params, ref_q, ref_dq, ref_ddq, feedforward, payload)
     ff = ff + gains.Fc_ff * np.sign(ref_dq) + gains.Fv_ff * ref_dq
 
@@ -351,7 +354,7 @@ def simulate_arm(
     alpha = wc / (1.0 + wc)
     dq_est = np.zeros(k)
     q_prev: np.ndarray | None = None
-    step = plant.step
+    step, quantise = plant.step, drive.quantise
     for i in range(n):
         c = np.rint(plant.q * cpr)
         counts[i] = c
@@ -362,7 +365,7 @@ def simulate_arm(
             dq_est += alpha * ((qm - q_prev) / cycle_s - dq_est)
         q_prev = qm
         tau = ff[i] + kp * (ref_q[i] - qm) + kd * (ref_dq[i] - dq_est)
-        x = np.clip(np.rint(tau / per_mille), -32768, 32767)
+        x = quantise(tau)
         xs[i] = x
         step(x * per_mille, noise[i])
         ddq_true[i] = plant.ddq_start
@@ -376,3 +379,32 @@ def simulate_arm(
         q_true=q_true, dq_true=dq_true, ddq_true=ddq_true, regime=regime,
         q_ref=ref_q, dq_ref=ref_dq, ddq_ref=ref_ddq, payload=payload,
         cycle_s=float(cycle_s), joint_numbers=params.joint_numbers)
+
+
+def simulate_arm_payloads(
+    params: ArmParams,
+    reference: Any,
+    gains: ArmGains,
+    payloads: Any,
+    *,
+    seed: int = 0,
+    **kw: Any,
+) -> list[ArmRun]:
+    """One :func:`simulate_arm` run per payload, as a campaign does (paper IV.B).
+
+    Parameters
+    ----------
+    payloads : iterable of Payload or None
+        None (or a Payload of mass 0) is the run without payload.
+    seed : int
+        Run i uses seed ``seed + i`` (independent noise per run, reproducible).
+    **kw
+        Other keywords of :func:`simulate_arm` (cycle_s, substeps, q0, feedforward).
+
+    Returns
+    -------
+    list of ArmRun
+        In the order of ``payloads``; each run starts at rest with a fresh plant.
+    """
+    return [simulate_arm(params, reference, gains, payload=pay, seed=seed + i, **kw)
+            for i, pay in enumerate(payloads)]

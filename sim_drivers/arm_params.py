@@ -173,6 +173,11 @@ class ArmDrive:
 class Payload:
     """Payload fixed to the flange (paper IV.C, eq. 32-35 generalised).
 
+    Same convention as ``trajectories``' campaign payloads (``RobotPayload``): inertia about
+    the centre of mass, flange axes (eq. 32); :attr:`inertia_origin` and
+    :meth:`dynamic_parameters` give it about the flange origin (Huygens, eq. 33), as the
+    standard parameters are.
+
     Attributes
     ----------
     mass : float
@@ -180,17 +185,15 @@ class Payload:
     com : ndarray, shape (3,)
         Centre of mass in the flange frame [m].
     inertia : ndarray, shape (6,)
-        XX, XY, XZ, YY, YZ, ZZ [kg m^2] about the flange frame ORIGIN (Khalil's convention,
-        like the standard parameters and eq. 33); default (None): a point mass at ``com``,
-        ``mass (|com|^2 I - com com^T)``. Use :meth:`from_com_inertia` for an inertia about
-        the centre of mass (eq. 32).
+        XX, XY, XZ, YY, YZ, ZZ [kg m^2] about the centre of mass, axes of the flange frame
+        (default 0: a point mass).
     frame : str or None
         Pinocchio frame the payload is fixed to; None: the frame of the last moving joint.
     """
 
     mass: float
     com: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    inertia: np.ndarray | None = None
+    inertia: np.ndarray = field(default_factory=lambda: np.zeros(6))
     frame: str | None = None
 
     def __post_init__(self) -> None:
@@ -198,33 +201,38 @@ class Payload:
         if not (math.isfinite(m) and m >= 0):
             raise ArmParamsError(f"Payload.mass: expected a finite mass >= 0 [kg], got {m!r}")
         object.__setattr__(self, "mass", m)
-        c = _vec("Payload.com", self.com, 3)
-        object.__setattr__(self, "com", c)
-        if self.inertia is None:
-            i_o = m * (c @ c * np.eye(3) - np.outer(c, c))
-            inertia = [i_o[0, 0], i_o[0, 1], i_o[0, 2], i_o[1, 1], i_o[1, 2], i_o[2, 2]]
-        else:
-            inertia = self.inertia
-        object.__setattr__(self, "inertia", _vec("Payload.inertia", inertia, 6))
+        object.__setattr__(self, "com", _vec("Payload.com", self.com, 3))
+        object.__setattr__(self, "inertia", _vec("Payload.inertia", self.inertia, 6))
         if m == 0 and (np.any(self.inertia) or np.any(self.com)):
             raise ArmParamsError("Payload: a payload of mass 0 must have zero com and inertia")
 
     @classmethod
-    def from_com_inertia(cls, mass: float, com: Any, inertia_com: Any,
-                         frame: str | None = None) -> Payload:
-        """Payload from its inertia about its centre of mass (axes of the flange frame),
-        XX, XY, XZ, YY, YZ, ZZ [kg m^2]; Huygens gives the inertia about the origin (eq. 33)."""
-        c = _vec("Payload.com", com, 3)
-        xx, xy, xz, yy, yz, zz = _vec("Payload.inertia", inertia_com, 6)
-        i_c = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
-        i_o = i_c + float(mass) * (c @ c * np.eye(3) - np.outer(c, c))
-        return cls(mass, c, np.array([i_o[0, 0], i_o[0, 1], i_o[0, 2], i_o[1, 1], i_o[1, 2],
-                                      i_o[2, 2]]), frame)
+    def coerce(cls, payload: Any) -> Payload | None:
+        """A Payload from None, a Payload, or any object with ``mass_kg`` (or ``mass``),
+        ``com`` and ``inertia`` about the centre of mass (e.g. a campaign's ``RobotPayload``),
+        and optionally ``frame``."""
+        if payload is None or isinstance(payload, Payload):
+            return payload
+        mass = getattr(payload, "mass_kg", getattr(payload, "mass", None))
+        if mass is None:
+            raise ArmParamsError(f"payload: expected a Payload or an object with mass_kg, com "
+                                 f"and inertia, got {type(payload).__name__}")
+        return cls(float(mass), getattr(payload, "com", np.zeros(3)),
+                   getattr(payload, "inertia", np.zeros(6)), getattr(payload, "frame", None))
+
+    @property
+    def inertia_origin(self) -> np.ndarray:
+        """XX, XY, XZ, YY, YZ, ZZ about the flange frame origin [kg m^2] (eq. 33)."""
+        xx, xy, xz, yy, yz, zz = self.inertia
+        c = self.com
+        i_o = (np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+               + self.mass * (c @ c * np.eye(3) - np.outer(c, c)))
+        return np.array([i_o[0, 0], i_o[0, 1], i_o[0, 2], i_o[1, 1], i_o[1, 2], i_o[2, 2]])
 
     def dynamic_parameters(self) -> np.ndarray:
-        """Pinocchio order [m, mc_x, mc_y, mc_z, Ixx, Ixy, Iyy, Ixz, Iyz, Izz] (about the
-        frame origin)."""
-        xx, xy, xz, yy, yz, zz = self.inertia
+        """Pinocchio order [m, mc_x, mc_y, mc_z, Ixx, Ixy, Iyy, Ixz, Iyz, Izz] (inertia about
+        the frame origin)."""
+        xx, xy, xz, yy, yz, zz = self.inertia_origin
         mc = self.mass * self.com
         return np.array([self.mass, *mc, xx, xy, yy, xz, yz, zz])
 
@@ -320,6 +328,7 @@ class ArmParams:
     # ------------------------------------------------------------------ models
     def payload_inertia(self, payload: Payload | None) -> tuple[int, pin.Inertia]:
         """(pinocchio joint id, inertia in that joint's frame) of a payload."""
+        payload = Payload.coerce(payload)
         if payload is None or payload.mass == 0:
             return self.k, pin.Inertia.Zero()
         model = self.model
@@ -339,8 +348,7 @@ class ArmParams:
         m.armature = np.array(self.Ia, dtype=float)
         m.gravity = pin.Motion(np.array(self.gravity), np.zeros(3))
         jid, inertia = self.payload_inertia(payload)
-        if payload is not None and payload.mass > 0:
-            m.inertias[jid] = m.inertias[jid] + inertia
+        m.inertias[jid] = m.inertias[jid] + inertia
         return m
 
     def truth(self, payload: Payload | None = None) -> dict[str, float]:
@@ -376,6 +384,7 @@ class ArmParams:
         effects: ArmEffects | None = None,
         gravity: Any = None,
         q_s: float = 0.03,
+        gear_ratio: Any = 100.0,
         acceleration_scale: float = 3.0,
         joint_numbers: Any = None,
         name: str = "",
@@ -389,31 +398,45 @@ class ArmParams:
         ``sim_drivers/data/plant_default.toml`` scaled by L: a_m 1.05, b_m 0.25, a_g 0.92,
         b_g 0.27, c_m 5 % L, d_m 2 % L, c_g 4 % L, d_g 1.5 % L, F_V 8 % L per rad/s, tau_off
         2 % L, q_s 0.03 rad/s; Ia = half the largest diagonal inertia of the link (at least
-        0.05 kg m^2); drive N = 100, rated torque such that 1 per-mille = 0.2 % L, 4096 counts
-        per motor revolution, ripple noise 1 % L.
+        0.05 kg m^2); drive N = ``gear_ratio``, rated torque such that 1 per-mille = 0.2 % L,
+        4096 counts per motor revolution, ripple noise 1 % L.
 
         Parameters
         ----------
         model : pinocchio.Model
             Rigid body of the moving joints.
         friction : ArmFriction or dict, optional
-            Friction to use instead of the default (dict: name -> scalar or (k,) values).
-        Ia, drive, effects, gravity, joint_numbers, name
+            Friction to use instead of the default; a dict (attribute name -> scalar or (k,)
+            values) overrides only the coefficients it names.
+        Ia : array_like (k,), optional
+            Rotor inertias [kg m^2]; NaN entries (or None) take the default.
+        gear_ratio : float or array_like (k,)
+            N of the default drive (ignored when ``drive`` is given).
+        drive, effects, gravity, joint_numbers, name
             As the attributes; defaults as above (gravity: the model's).
         """
         k = _check_model(model)
         load, diag = cls._loads(model, acceleration_scale, seed)
+        ia_default = np.maximum(0.5 * diag, 0.05)
         if Ia is None:
-            Ia = np.maximum(0.5 * diag, 0.05)
-        if friction is None:
-            friction = ArmFriction(
+            Ia = ia_default
+        else:
+            Ia = np.array([np.nan if v is None else v for v in np.broadcast_to(
+                np.asarray(Ia, dtype=object), (k,))], dtype=float)
+            Ia = np.where(np.isnan(Ia), ia_default, Ia)
+        if not isinstance(friction, ArmFriction):
+            default = dict(
                 a_m=np.full(k, 1.05), b_m=np.full(k, 0.25), a_g=np.full(k, 0.92),
                 b_g=np.full(k, 0.27), c_m=0.05 * load, d_m=0.02 * load, c_g=0.04 * load,
                 d_g=0.015 * load, F_V=0.08 * load, tau_off=0.02 * load, q_s=np.full(k, q_s))
-        elif isinstance(friction, dict):
-            friction = ArmFriction.from_dict(friction, k)
+            unknown = sorted(set(friction or {}) - set(default))
+            if unknown:
+                raise ArmParamsError(f"friction: unknown key(s) {unknown}; expected "
+                                     f"{sorted(default)}")
+            default.update({n: _vec(f"friction.{n}", v, k) for n, v in (friction or {}).items()})
+            friction = ArmFriction(**default)
         if drive is None:
-            n = np.full(k, 100.0)
+            n = _vec("gear_ratio", gear_ratio, k)
             drive = ArmDrive(gear_ratio=n, rated_torque_Nm=2.0 * load / n,
                              encoder_counts_per_rev=np.full(k, 4096.0),
                              torque_noise_std_Nm=0.01 * load)
@@ -421,6 +444,32 @@ class ArmParams:
             gravity = np.array(model.gravity.linear)
         return cls(model=model, Ia=Ia, friction=friction, drive=drive, effects=effects,
                    gravity=gravity, joint_numbers=joint_numbers, name=name)
+
+    @classmethod
+    def from_robot(cls, robot: Any, friction: Any = None, **kw: Any) -> ArmParams:
+        """A plausible truth for a robot description (``trajectories.robot.Robot``, ROBOT_FORMAT).
+
+        Uses ``robot.reduced()`` (the moving joints, locked ones at their values), labels the
+        joints by their 1-based index in the full chain (``robot.joint_names``), and takes from
+        ``robot.drives`` (per moving joint, by name or in order; entries may be None) the gear
+        ratio N (default 100) and the rotor inertia J_m, ``Ia = N^2 J_m`` (default: as
+        :meth:`from_model`). Other keywords go to :meth:`from_model`.
+        """
+        model = robot.reduced()
+        names = list(robot.joint_names)
+        moving = list(robot.moving)
+        drives = getattr(robot, "drives", None) or {}
+        per = [drives.get(n) if hasattr(drives, "get") else drives[i]
+               for i, n in enumerate(moving)]
+        gear = np.array([float(getattr(d, "gear_ratio", None) or 100.0) for d in per])
+        jm = [getattr(d, "rotor_inertia", None) for d in per]
+        ia = [g * g * float(j) if isinstance(j, (int, float)) else None
+              for g, j in zip(gear, jm, strict=True)]
+        kw.setdefault("joint_numbers", [names.index(n) + 1 for n in moving])
+        kw.setdefault("name", getattr(robot, "name", ""))
+        kw.setdefault("Ia", ia)
+        kw.setdefault("gear_ratio", gear)
+        return cls.from_model(model, friction, **kw)
 
     @staticmethod
     def _loads(model: pin.Model, acc: float, seed: int) -> tuple[np.ndarray, np.ndarray]:

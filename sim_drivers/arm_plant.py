@@ -27,10 +27,14 @@ else generator ``(r - s D_g)/A_g``, else zero load, ties kept in the previous qu
 then ``ddq = ABA(q, dq, tau_out)``.
 
 Stiction: joints with dq_j = 0 form the stuck set S. With ddq_S = 0 and the free joints' tau_out
-known, ``M_FF ddq_F = tau_out,F - h_F`` (h = C dq + Q, from ``pin.nonLinearEffects``, M from
-``pin.crba``), and the torque needed to hold joint j in S is ``tau_l,j = M_jF ddq_F + h_j``.
-Joint j stays stuck while its driving torque ``r0 = tau - tau_off - ripple - spring`` lies in
-the static band of section III.B (limit E = 1) at load tau_l,j::
+known, ``M_FF ddq_F = tau_out,F - h_F`` (h = C dq + Q), and the torque needed to hold joint j
+in S is ``tau_l,j = M_jF ddq_F + h_j``. Computed without factorising M_FF: with
+``a0 = ABA(q, dq, tau_out)`` (tau_out,S = 0) and ``Minv = M^-1`` (``pin.computeMinverse``),
+``tau_l,S = -(Minv_SS)^-1 a0_S`` and ``ddq = a0 + Minv_:S tau_l,S`` (one division when one
+joint is stuck). A load within 1e-9 D of zero (round-off at a vertical axis) counts as zero:
+the band is then +-max(D_m1, D_g1) as in ``sim_drivers.plant``. Joint j stays stuck while its
+driving torque ``r0 = tau - tau_off - ripple - spring`` lies in the static band of section
+III.B (limit E = 1) at load tau_l,j::
 
     tau_l > 0:  A_g1 tau_l - D_g1 <= r0 <= A_m1 tau_l + D_m1
     tau_l < 0:  A_m1 tau_l - D_m1 <= r0 <= A_g1 tau_l + D_g1

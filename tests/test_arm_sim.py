@@ -30,6 +30,7 @@ from sim_drivers.arm import (
     model_reference,
     output_arm_torque,
     simulate_arm,
+    simulate_arm_payloads,
     sine_reference,
 )
 from sim_drivers.plant import REGIME_REST as PLANT_REST
@@ -37,7 +38,7 @@ from sim_drivers.plant import REGIME_SLIDING as PLANT_SLIDING
 from sim_drivers.plant import REGIME_ZERO_LOAD as PLANT_ZERO_LOAD
 from sim_drivers.plant import JointPlant
 from sim_drivers.plant_config import default_plant
-from sim_drivers.robots import example_robot_urdf, ur10
+from sim_drivers.robots import example_robot_model, example_robot_urdf, ur10
 
 G = 9.81
 
@@ -53,7 +54,7 @@ def ur6dof() -> ArmParams:
     return ArmParams.from_model(ur10(6))
 
 
-PAYLOAD = Payload.from_com_inertia(3.0, [0.0, 0.05, 0.12], [0.01, 0.0, 0.0, 0.01, 0.0, 0.02])
+PAYLOAD = Payload(3.0, [0.0, 0.05, 0.12], [0.01, 0.0, 0.0, 0.01, 0.0, 0.02])
 
 
 @pytest.fixture(scope="module")
@@ -148,8 +149,33 @@ def test_forward_then_inverse_on_random_states(ur6dof, seed):
     err = np.abs(back - tau)[sl]
     assert err.max() < 1e-9 * max(1.0, np.abs(tau).max())
     tau_out = output_arm_torque(ur6dof, q, dq, ddq)
-    pw = np.sign(tau_out * dq)[sl]
-    assert (pw > 0).any() and (pw < 0).any()
+    pw = np.where(sl, np.sign(tau_out * dq), 0.0)
+    assert np.all((pw > 0).any(axis=0)) and np.all((pw < 0).any(axis=0))  # every joint
+
+
+def test_prismatic_and_revolute_chain():
+    """A vertical prismatic axis carrying a revolute one: gravity acts on the slide (its holding
+    force is the carried weight), and the record is still the inverse model's truth."""
+    m = pin.Model()
+    m.name = "lift-and-turn"
+    j1 = m.addJoint(0, pin.JointModelPZ(), pin.SE3.Identity(), "lift")
+    m.appendBodyToJoint(j1, pin.Inertia(20.0, np.zeros(3), np.eye(3) * 0.5), pin.SE3.Identity())
+    j2 = m.addJoint(j1, pin.JointModelRX(), pin.SE3(np.eye(3), np.array([0, 0, 0.3])), "turn")
+    m.appendBodyToJoint(j2, pin.Inertia(5.0, np.array([0, 0.2, 0]), np.eye(3) * 0.05),
+                        pin.SE3.Identity())
+    m.lowerPositionLimit = np.array([-0.3, -1.5])
+    m.upperPositionLimit = np.array([0.3, 1.5])
+    m.velocityLimit = np.array([0.5, 2.0])
+    p = ArmParams.from_model(m)
+    plant = ArmPlant(p, 0.001)
+    hold = pin.computeGeneralizedGravity(plant.model, plant.data, np.zeros(2))
+    assert hold[0] == pytest.approx(25.0 * G)  # [N]: the slide carries both bodies
+    ref = model_reference(m, duration_s=3.0, seed=1)
+    run = simulate_arm(p, ref, ArmGains.for_params(p), seed=2)
+    assert np.sqrt(np.mean((run.q_true - ref.q) ** 2)) < 3e-3
+    tau = inverse_arm_torque(p, run.q_true, run.dq_true, run.ddq_true, None, run.t)
+    assert run.sliding.mean() > 0.6  # (it starts and ends at rest)
+    assert np.max(np.abs(tau - run.tau_applied)[run.sliding]) < 1e-9 * 1e3
 
 
 # --------------------------------------------------------------------------- one joint
@@ -397,6 +423,20 @@ def test_payload_changes_only_the_last_link_as_eq_34():
     assert tau_out[0, 0] == pytest.approx(expected, rel=1e-12)
 
 
+def test_payload_runs_need_more_torque(ur3dof):
+    ref = model_reference(ur3dof.model, duration_s=2.5, ramp_s=0.5, seed=6)
+    gains = ArmGains.for_params(ur3dof)
+    runs = simulate_arm_payloads(ur3dof, ref, gains, [None, Payload(8.0, [0.0, 0.0, 0.1])],
+                                 seed=3)
+    assert [r.payload_mass_kg for r in runs] == [0.0, 8.0]
+    assert not np.array_equal(runs[0].tau_noise, runs[1].tau_noise)
+    # the shoulder lift holds the extra weight: its mean torque grows in magnitude
+    assert np.abs(runs[1].tau_ref[:, 1]).mean() > np.abs(runs[0].tau_ref[:, 1]).mean() + 20
+    for r in runs:
+        tau = inverse_arm_torque(ur3dof, r.q_true, r.dq_true, r.ddq_true, r.payload, r.t)
+        assert np.max(np.abs(tau - r.tau_applied)[r.sliding]) < 1e-9 * 1e3
+
+
 def test_payload_on_a_named_frame(ur6dof):
     pay = Payload(2.0, [0.0, 0.0, 0.05], [0.002, 0, 0, 0.002, 0, 0.001], frame="tool0")
     base, withp = ur6dof.truth(), ur6dof.truth(pay)
@@ -430,16 +470,49 @@ def test_truth_names_follow_the_contract(ur3dof):
                                       * (inert.lever[0] ** 2 + inert.lever[1] ** 2))
 
 
-def test_payload_from_com_inertia_is_huygens():
-    p = Payload.from_com_inertia(2.0, [0.1, 0.0, 0.0], [0.01, 0, 0, 0.02, 0, 0.03])
-    np.testing.assert_allclose(p.inertia, [0.01, 0, 0, 0.02 + 0.02, 0, 0.03 + 0.02])
+def test_params_from_a_robot_description():
+    """ROBOT_FORMAT's Robot (a stand-in built on the real UR10 until trajectories.robot lands):
+    joints labelled by their index in the full chain, gear ratios and rotor inertias used."""
+    full = ur10(6)
+    names = tuple(full.names[1:])
+    locked = {"shoulder_pan_joint": 0.0, "wrist_1_joint": -1.5, "wrist_2_joint": 0.0,
+              "wrist_3_joint": 0.0}
+    moving = ("shoulder_lift_joint", "elbow_joint")
+    drives = {"shoulder_lift_joint": SimpleNamespace(gear_ratio=120.0, rotor_inertia=2e-4),
+              "elbow_joint": None}
+    robot = SimpleNamespace(name="ur10-2", joint_names=names, moving=moving, drives=drives,
+                            reduced=lambda: example_robot_model("ur10", locked=locked))
+    p = ArmParams.from_robot(robot)
+    assert p.joint_numbers == (2, 3) and p.name == "ur10-2"
+    tr = p.truth()
+    assert tr["Ia2"] == pytest.approx(120.0**2 * 2e-4) and "ZZ3" in tr and "ZZ1" not in tr
+    assert p.drive.gear_ratio.tolist() == [120.0, 100.0]
+
+
+def test_payload_inertia_about_the_origin_is_huygens():
+    p = Payload(2.0, [0.1, 0.0, 0.0], [0.01, 0, 0, 0.02, 0, 0.03])  # about the CoM (eq. 32)
+    np.testing.assert_allclose(p.inertia_origin, [0.01, 0, 0, 0.02 + 0.02, 0, 0.03 + 0.02])
     point = Payload(2.0, [0.1, 0.2, 0.0])  # default inertia: a point mass
-    np.testing.assert_allclose(point.inertia, Payload.from_com_inertia(
-        2.0, [0.1, 0.2, 0.0], np.zeros(6)).inertia)
-    np.testing.assert_allclose(point.inertia, [0.08, -0.04, 0, 0.02, 0, 0.1])
+    np.testing.assert_allclose(point.inertia_origin, [0.08, -0.04, 0, 0.02, 0, 0.1])
+    # a campaign payload (mass_kg, com, inertia about the CoM) is accepted as is
+    campaign_like = SimpleNamespace(mass_kg=2.0, com=(0.1, 0.0, 0.0),
+                                    inertia=(0.01, 0, 0, 0.02, 0, 0.03))
+    np.testing.assert_array_equal(Payload.coerce(campaign_like).dynamic_parameters(),
+                                  p.dynamic_parameters())
+    with pytest.raises(ArmParamsError, match="expected a Payload"):
+        Payload.coerce(3.0)
 
 
 # --------------------------------------------------------------------------- inputs
+def test_drive_quantisation_is_0x6071_per_mille():
+    d = ArmDrive(gear_ratio=[100.0, 50.0], rated_torque_Nm=[5.0, 2.0],
+                 encoder_counts_per_rev=[4096, 1000], torque_noise_std_Nm=0.0)
+    np.testing.assert_allclose(d.torque_per_permille, [0.5, 0.1])
+    np.testing.assert_allclose(d.counts_per_rad, [100 * 4096 / (2 * np.pi), 50e3 / (2 * np.pi)])
+    x = d.quantise(np.array([[1.26, -0.26], [1e9, -1e9]]))
+    assert x.dtype == np.int16 and x.tolist() == [[3, -3], [32767, -32768]]
+
+
 def test_bad_parameters_are_named(ur3dof):
     f = ur3dof.friction
     with pytest.raises(ArmParamsError, match="a_g - b_g > 0.*joint index 2"):
@@ -448,6 +521,9 @@ def test_bad_parameters_are_named(ur3dof):
         dataclasses.replace(ur3dof, Ia=[1.0, 2.0])
     with pytest.raises(ArmParamsError, match="friction: unknown key"):
         ArmParams.from_model(ur10(3), friction={"a_m": 1.0, "bogus": 2})
+    partial = ArmParams.from_model(ur10(3), friction={"q_s": 0.05, "c_m": [1.0, 2.0, 3.0]})
+    assert partial.truth()["qs2"] == 0.05 and partial.truth()["c_m3"] == 3.0
+    assert partial.truth()["a_m1"] == ur3dof.truth()["a_m1"]
     with pytest.raises(ArmParamsError, match="Payload.mass"):
         Payload(-1.0)
     with pytest.raises(SimError, match="unknown effect 'wobble'"):
@@ -464,6 +540,11 @@ def test_bad_reference_is_named(ur3dof):
         simulate_arm(ur3dof, ref, ArmGains(kp=[1.0], kd=[1.0]))
     with pytest.raises(SimError, match="feedforward"):
         simulate_arm(ur3dof, ref, gains, feedforward="magic")
+    with pytest.raises(SimError, match="reference.t: expected uniform sampling"):
+        simulate_arm(ur3dof, dataclasses.replace(ref, t=ref.t ** 1.01), gains)
+    # without t the cycle is 1 ms
+    short = SimpleNamespace(q=ref.q[:50], dq=ref.dq[:50], ddq=ref.ddq[:50])
+    assert simulate_arm(ur3dof, short, gains).cycle_s == 0.001
 
 
 def test_reference_is_smooth_within_limits_and_at_rest_at_the_ends(ur6dof):
