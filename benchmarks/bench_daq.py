@@ -39,6 +39,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import itertools
+import math
 import os
 import shutil
 import statistics
@@ -303,8 +304,8 @@ def before_rig():
 def arm_rate(k: int, cycles: int, substeps: int) -> tuple[float, float]:
     """Lockstep cycles/s of a k-dof UR10 on the bus (``sim_drivers.arm_bus.ArmOnBus``: one
     ArmPlant behind k simulated drives) under a minimal struct-packing master on a queued
-    SimBus (the runner plans one joint only), and the share of the wall time spent in
-    ``ArmPlant.step``."""
+    SimBus (the runner plans one joint only; a PD loop swings every joint by 0.2 rad at
+    0.5 Hz), and the share of the wall time spent in ``ArmPlant.step``."""
     import struct
 
     import canopen
@@ -357,10 +358,11 @@ def arm_rate(k: int, cycles: int, substeps: int) -> tuple[float, float]:
         msgs = [can.Message(arbitration_id=0x200 + n, data=bytes(4), is_extended_id=False)
                 for n in nodes]
         t0 = time.perf_counter()
-        for _ in range(cycles):
+        for c in range(cycles):
+            ref = 0.2 * math.sin(math.pi * c * 0.001)  # every joint swings, 0.5 Hz [rad]
             for i in range(k):
                 q = counts[i] / cpr[i]
-                tau = kp[i] * (q0[i] - q) - kd[i] * (q - prev[i]) / 0.001  # PD [N m]
+                tau = kp[i] * (q0[i] + ref - q) - kd[i] * (q - prev[i]) / 0.001  # PD [N m]
                 prev[i] = q
                 x = max(-xmax[i], min(xmax[i], round(tau / tpu[i])))
                 msgs[i].data = rx.pack(15, x)
