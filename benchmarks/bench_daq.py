@@ -1,4 +1,4 @@
-"""DAQ benchmarks: lockstep rate (1 and 3 drives), paced 1 kHz jitter vs a C loop, MCAP writes.
+"""DAQ benchmarks: lockstep rate (1, 3, 6 drives), paced 1 kHz jitter vs a C loop, MCAP writes.
 
 Usage::
 
@@ -7,10 +7,18 @@ Usage::
 Prints one table. Everything runs through the full stack: campaign -> plan -> runner ->
 canopen master -> python-can virtual bus -> simulated CiA 402 drive + plant -> MCAP.
 
-- lockstep cycles/s: wall-clock rate of a whole payload run (median over ``--repeat``), its
-  ratio to real time at 1 kHz, and the process CPU time per cycle (drive + plant + master +
-  log, all threads): the CPU figure is the stable one on a shared machine, the wall rate
-  depends on how much of a core the scheduler gives us.
+- lockstep cycles/s for 1, 3 and 6 simulated drives (``--drives``): wall-clock rate of a
+  whole payload run (median over ``--repeat``), its ratio to real time at 1 kHz, the rate
+  relative to 1 drive (linear scaling: n drives at >= 1/n of the 1-drive rate), and one
+  cycle's wall time in units of the raw python-can virtual-bus round trip measured in the
+  same run (``raw_bus.py``: one frame out, one back, two threads, pinned like the runner).
+  One bus carries at most one drive at 1 kHz within ``max_bus_load`` 0.6 (``daq.runtime.busload``):
+  the n-drive rows on one bus run a plan of ``n`` ms cycles (the lockstep rate does not
+  depend on the simulated cycle), and the "6 buses" row is the 6-axis arm at 1 kHz, one
+  drive per bus. CPU per cycle is the process time of the whole campaign (start-up
+  included) per cycle: the stable figure on a shared machine; ``1e6 / CPU`` is the rate
+  one free core would give (the lockstep run is one thread: the simulated drives run inline in
+  the master's ``send``).
 - paced: a 1 kHz payload run of ``--paced-seconds``; lateness of every SYNC against its
   deadline (p50/p99/max) and missed cycles (SYNC more than half a period late); the C
   reference loop (``c_paced_loop.c``, compiled here with gcc) runs at the same time for as
@@ -29,7 +37,9 @@ canopen master -> python-can virtual bus -> simulated CiA 402 drive + plant -> M
 from __future__ import annotations
 
 import argparse
+import contextlib
 import itertools
+import math
 import os
 import shutil
 import statistics
@@ -42,6 +52,7 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+import can  # noqa: E402
 import numpy as np  # noqa: E402
 
 from daq.protocol.logformat import FRAME  # noqa: E402
@@ -55,9 +66,10 @@ _chan = itertools.count()
 
 
 def campaign(seconds: float, cycle_s: float = 0.001, drives: int = 1,
-             clock: str = "lockstep", drive_tables: list | None = None,
+             clock: str = "lockstep", buses: int = 1, drive_tables: list | None = None,
              **daq: object) -> Campaign:
     periods = max(1, int(round(seconds * 0.25)))
+    chan = f"bench_{next(_chan)}"
     raw = {
         "name": "bench",
         "joint": {"kind": "revolute", "limits": {
@@ -68,18 +80,23 @@ def campaign(seconds: float, cycle_s: float = 0.001, drives: int = 1,
         "payloads": [{"mass_kg": 0.0, "arm_m": 1.0}],
         "segments": [{"kind": "sine", "amplitude": 0.3, "frequency_hz": 0.25, "center": 0.0,
                       "periods": periods}],
-        "daq": {"channel": f"bench_{next(_chan)}", "clock": clock,
-                "drives": drive_tables or [{"node_id": n} for n in range(1, drives + 1)],
+        "daq": {"channel": chan, "clock": clock,
+                "drives": drive_tables or [
+                    {"node_id": n, "channel": chan if buses == 1
+                     else f"{chan}_{(n - 1) % buses}"} for n in range(1, drives + 1)],
                 "heartbeat_timeout_s": 2.0, "tpdo_timeout_cycles": 1000,
                 "max_following_error": 1.0, **daq},
     }
     return Campaign.from_dict(raw, "bench.toml")
 
 
-def lockstep(drives: int, seconds: float, repeat: int, out: Path) -> tuple[float, float, int]:
-    """Median wall cycles/s, median CPU µs/cycle, cycles per run."""
-    cycle_s = 0.001 if drives == 1 else 0.002  # 3 drives at 1 kHz exceed 1 Mbit/s
-    c = campaign(seconds * (1 if drives == 1 else 0.5) / cycle_s * 0.001, cycle_s, drives)
+def lockstep(drives: int, cycles: int, repeat: int, out: Path, buses: int = 1
+             ) -> tuple[float, float, int]:
+    """Median wall cycles/s, median CPU µs/cycle, cycles per run: ``drives`` simulated drives
+    spread over ``buses`` buses, a plan of about ``cycles`` cycles whose cycle time fits the
+    bus budget (1 ms per drive on the busiest bus)."""
+    cycle_s = 0.001 * -(-drives // buses)
+    c = campaign(cycles * cycle_s, cycle_s, drives, buses=buses)
     rates, cpus, n = [], [], 0
     for _ in range(repeat):
         c0 = time.process_time()
@@ -366,8 +383,15 @@ def safety_rows(repeat: int) -> list[tuple[str, str, str, str]]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--paced-seconds", type=float, default=60.0)
-    ap.add_argument("--lockstep-seconds", type=float, default=10.0,
-                    help="simulated seconds per lockstep run")
+    ap.add_argument("--lockstep-cycles", type=int, default=10000,
+                    help="cycles of plan per lockstep run")
+    ap.add_argument("--drives", default="1,3,6", help="drive counts of the lockstep rows")
+    ap.add_argument("--arm-cycles", type=int, default=3000,
+                    help="cycles of the 6-axis arm-on-the-bus rows (0: skip)")
+    ap.add_argument("--before", action="store_true",
+                    help="add the lockstep rows of the rig before issue 12 (same run)")
+    ap.add_argument("--only-lockstep", action="store_true",
+                    help="only the lockstep rows (and their raw round-trip reference)")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--safety-repeat", type=int, default=5,
                     help="master-loss reaction measurements per kind (0: skip)")
@@ -391,13 +415,15 @@ def main() -> int:
                      ("after, SCHED_FIFO 10", fifo)]
     try:
         rows = []
-        if args.only_paced:
+        if args.only_lockstep:
+            rows = lockstep_rows(args, tmp)
+        elif args.only_paced:
             rows.extend(paced_rows(args.paced_seconds, tmp, variants))
         elif not args.cross_process or args.only_safety:
             rows = safety_rows(args.safety_repeat) if args.safety_repeat else []
             if not args.only_safety:
                 rows.extend(speed_rows(args, tmp))
-        if args.cross_process:
+        if args.cross_process and not args.only_lockstep:
             rows.extend(cross_process_rows(args.paced_seconds, tmp, variants))
         w = [max(len(r[i]) for r in rows) for i in range(4)]
         print(f"bench_daq  (python {sys.version.split()[0]}, {os.cpu_count()} CPUs, load "
@@ -409,15 +435,181 @@ def main() -> int:
     return 0
 
 
+@contextlib.contextmanager
+def before_rig():
+    """The ``--simulate`` rig as it was before issue 12 (for the "before" rows, same run):
+    one python-can VirtualBus and canopen network per simulated drive, the master on its own
+    VirtualBus; every frame deep-copied to every other bus object and waking its thread."""
+    import can
+
+    from daq.runtime import runner
+    from sim_drivers.drive import SimulatedDrive
+    from sim_drivers.plant import JointPlant
+
+    class Rig:
+        def __init__(self) -> None:
+            self.drives: list = []
+            self.buses: list = []
+
+        def close(self) -> None:
+            for d in self.drives:
+                d.stop()
+            for b in self.buses:
+                b.shutdown()
+
+    def start_sim(cfg, plant_params, campaign, fault_injectors):
+        rig = Rig()
+        for k, dcfg in enumerate(cfg.drives):
+            bus = can.Bus(interface="virtual", channel=cfg.channel)
+            rig.buses.append(bus)
+            plant = JointPlant(plant_params, campaign.cycle_s,
+                               seed=int(plant_params.drive.seed) + k)
+            plant.reset(campaign.joint.start)
+            drive = SimulatedDrive(bus, dcfg.node_id, plant, dcfg.eds, cycle_s=campaign.cycle_s)
+            drive.start()
+            rig.drives.append(drive)
+        return rig
+
+    saved = runner.start_sim, runner.open_buses
+    runner.start_sim = start_sim
+    runner.open_buses = lambda cfg, simulated=False: can.Bus(interface="virtual",
+                                                             channel=cfg.channel)
+    try:
+        yield
+    finally:
+        runner.start_sim, runner.open_buses = saved
+
+
+def arm_rate(k: int, cycles: int, substeps: int) -> tuple[float, float]:
+    """Lockstep cycles/s of a k-dof UR10 on the bus (``sim_drivers.arm_bus.ArmOnBus``: one
+    ArmPlant behind k simulated drives) under a minimal struct-packing master on a queued
+    SimBus (the runner plans one joint only; a PD loop swings every joint by 0.2 rad at
+    0.5 Hz), and the share of the wall time spent in ``ArmPlant.step``."""
+    import struct
+
+    import canopen
+
+    from sim_drivers.arm import ArmParams
+    from sim_drivers.arm_bus import ArmOnBus
+    from sim_drivers.robots import ur10
+    from sim_drivers.simbus import SimBus
+
+    params = ArmParams.from_model(ur10(k))
+    ch = f"bench_arm_{next(_chan)}"
+    nodes = list(range(1, k + 1))
+    q0 = [0.1] * k
+    arm = ArmOnBus(params, ch, nodes, cycle_s=0.001, q0=q0, substeps=substeps)
+    bus = SimBus(ch, dispatch="thread")
+    plant_s = [0.0]
+    step = arm.plant.step
+
+    def timed_step(tau):
+        t0 = time.perf_counter()
+        step(tau)
+        plant_s[0] += time.perf_counter() - t0
+
+    arm.plant.step = timed_step
+    try:
+        master = canopen.Network(bus)  # start-up over SDO/NMT, then the raw loop
+        master.connect()
+        for d in arm.drives:
+            node = master.add_node(d.node_id, str(d.dod.path))
+            node.sdo[0x6060].raw = 10
+            for cw in (6, 7, 15):
+                node.sdo[0x6040].raw = cw
+        master.nmt.state = "OPERATIONAL"
+        node.sdo[0x1000].raw  # noqa: B018 - barrier: NMT start processed
+        master.notifier.stop(1.0)
+        while bus.recv(0.0) is not None:  # heartbeats and the like: not this loop's business
+            pass
+        cpr = params.drive.counts_per_rad.tolist()
+        tpu = params.drive.torque_per_permille.tolist()
+        rx, tx = struct.Struct("<Hh"), struct.Struct("<Hi")  # generic EDS defaults
+        slot = {0x180 + n: i for i, n in enumerate(nodes)}
+        counts = [round(q * c) for q, c in zip(q0, cpr, strict=True)]
+        prev = list(q0)
+        # PD at 10 Hz on each joint's inertia, within the drives' torque limit 0x6072
+        m_jj = [float(arm.drives[i].plant.params.J) for i in range(k)]
+        w = 2 * np.pi * 10.0
+        kp, kd = [m * w * w for m in m_jj], [2 * m * w for m in m_jj]
+        xmax = [d.max_torque for d in arm.drives]
+        sync = can.Message(arbitration_id=0x80, data=b"", is_extended_id=False)
+        msgs = [can.Message(arbitration_id=0x200 + n, data=bytes(4), is_extended_id=False)
+                for n in nodes]
+        t0 = time.perf_counter()
+        for c in range(cycles):
+            ref = 0.2 * math.sin(math.pi * c * 0.001)  # every joint swings, 0.5 Hz [rad]
+            for i in range(k):
+                q = counts[i] / cpr[i]
+                tau = kp[i] * (q0[i] + ref - q) - kd[i] * (q - prev[i]) / 0.001  # PD [N m]
+                prev[i] = q
+                x = max(-xmax[i], min(xmax[i], round(tau / tpu[i])))
+                msgs[i].data = rx.pack(15, x)
+                bus.send(msgs[i])
+            bus.send(sync)
+            got = 0
+            while got < 2 * k:
+                m = bus.recv(1.0)
+                if m is None:
+                    raise TimeoutError("arm on the bus: TPDO missing")
+                if m.arbitration_id & 0x780 in (0x180, 0x280):
+                    got += 1
+                    i = slot.get(m.arbitration_id)
+                    if i is not None:
+                        counts[i] = tx.unpack_from(m.data)[1]
+        wall = time.perf_counter() - t0
+    finally:
+        bus.shutdown()
+        arm.close()
+    return cycles / wall, plant_s[0] / wall
+
+
+def lockstep_rows(args: argparse.Namespace, tmp: Path
+                  ) -> list[tuple[str, str, str, str]]:
+    """The raw round trip, then one row per drive count (and the 6-axis arm on 6 buses)."""
+    from raw_bus import round_trip_us
+
+    rtt = round_trip_us(20000, pin=True)
+    rows = [("raw python-can virtual round trip", f"{rtt:.1f} us",
+             f"{1e6 / rtt:,.0f} round trips/s", "2 threads, pinned to one CPU like the runner")]
+    counts = [int(x) for x in args.drives.split(",")]
+    cases = [(n, 1, False) for n in counts] + ([(6, 6, False)] if 6 in counts else [])
+    if args.before:
+        cases += [(n, 1, True) for n in counts]
+    r1 = {}
+    for n, buses, before in cases:
+        if before:
+            with before_rig():
+                rate, cpu, cycles = lockstep(n, args.lockstep_cycles, args.repeat,
+                                             tmp / f"b{n}", buses)
+        else:
+            rate, cpu, cycles = lockstep(n, args.lockstep_cycles, args.repeat,
+                                         tmp / f"l{n}_{buses}", buses)
+        if n == 1:
+            r1[before] = rate
+        ref = r1.get(before)
+        rel = f"{rate / ref:.3f}x the 1-drive rate (1/{n} = {1 / n:.3f})" if ref and n > 1 else ""
+        where = (f"{buses} buses, 1 ms plan" if buses > 1
+                 else f"1 bus, {-(-n // buses)} ms plan")
+        label = "BEFORE (a virtual bus per drive)" if before else "lockstep"
+        rows.append((f"{label}, {n} drive{'s' if n > 1 else ''} ({where})",
+                     f"{rate:,.0f} cycles/s", f"{rate / 1000:.2f}x real time at 1 kHz",
+                     f"cycle = {1e6 / rate / rtt:.2f} raw round trips; {rel}"
+                     f"{'; ' if rel else ''}CPU {cpu:.0f} us/cycle (= {1000 / cpu:.1f}x "
+                     f"real time on a free core), {cycles} cycles"))
+    if args.arm_cycles:
+        for sub in (10, 1):
+            rate, share = arm_rate(6, args.arm_cycles, sub)
+            rows.append((f"6-axis UR10 arm on the bus (ArmOnBus, {sub} substeps)",
+                         f"{rate:,.0f} cycles/s", f"{rate / 1000:.2f}x real time at 1 kHz",
+                         f"ArmPlant.step {100 * share:.0f} % of the wall time; minimal "
+                         f"struct master (the runner plans one joint)"))
+    return rows
+
+
 def speed_rows(args: argparse.Namespace, tmp: Path) -> list[tuple[str, str, str, str]]:
-    rows = []
-    r1, cpu1, n1 = lockstep(1, args.lockstep_seconds, args.repeat, tmp / "l1")
-    rows.append(("lockstep, 1 drive, 1 kHz plan", f"{r1:,.0f} cycles/s",
-                 f"{r1 / 1000:.2f}x real time", f"CPU {cpu1:.0f} us/cycle, {n1} cycles"))
-    r3, cpu3, n3 = lockstep(3, args.lockstep_seconds, args.repeat, tmp / "l3")
-    rows.append(("lockstep, 3 drives", f"{r3:,.0f} cycles/s",
-                 f"{r3 / 1000:.2f}x real time at 1 kHz",
-                 f"CPU {cpu3:.0f} us/cycle; 3 vs 1 drive: {r3 / r1:.2f}x rate"))
+    rows = lockstep_rows(args, tmp)
+    cpu1 = float(rows[1][3].split("CPU ")[1].split(" ")[0])
     msg_s, log_us = mcap_rate(100_000, tmp)
     rows.append(("MCAP write (state+setpoint+CAN)", f"{msg_s:,.0f} msg/s",
                  f"{log_us:.1f} us/cycle",

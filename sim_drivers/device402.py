@@ -222,7 +222,7 @@ class Device402Mixin:
                 if tx.count >= tx.every:
                     tx.count = 0
         else:
-            send = self.network.send_message
+            send = self._send
             for tx in self._tx_sync:
                 tx.count += 1
                 if tx.count >= tx.every:

@@ -331,6 +331,7 @@ class SimulatedDrive(NmtMixin, PdoMixin, Device402Mixin):
         self._chunk = int(record_chunk)
         self._rec = {name: np.zeros(self._chunk, dtype=dtyp) for name, dtyp in _RECORD_FIELDS}
         self._started = False
+        self._send = self.network.send_message  # frames of the cycle (see start)
         # master-loss watchdogs (heartbeat consumer 0x1016, SYNC loss per 0x1006)
         self._lock = threading.RLock()
         self._consumers: dict[int, HbConsumer] = {}
@@ -443,6 +444,8 @@ class SimulatedDrive(NmtMixin, PdoMixin, Device402Mixin):
             net.NOTIFIER_CYCLE = 0.05  # notifier poll period [s]: quick stop()
             net.connect()
         self._started = True
+        # the cycle's frames: the bus's own fast path when it has one (SimBus)
+        self._send = getattr(net.bus, "send_frame", None) or net.send_message
         self._reset_state_machine()
         self._boot()
         self._wd_run = True

@@ -299,7 +299,7 @@ class PdoMixin:
     def _send_event_tpdos(self) -> None:
         if self.nmt != NMT_OPERATIONAL:
             return
-        send = self.network.send_message
+        send = self._send
         for tx in self._tx_event:
             payload = tx.payload(self)
             if payload != tx.last:

@@ -41,10 +41,13 @@ project's generic EDS, cyclic synchronous torque)::
     max_velocity = 1.0
     max_torque = 500.0
     [[daq.drives]]
-    node_id = 1
+    node_id = 1                   # unique over all buses
     eds = "drives/epos4.eds"      # relative to the campaign file; default: generic EDS
     mode = "cst"                  # or "csp"
     heartbeat_ms = 100            # heartbeat producer time written to 0x1017 [ms]
+    channel = "can1"              # the bus of this drive (default: daq.channel); drives on
+                                  # several channels of the same interface and bit rate, each
+                                  # bus with its own SYNC and its own load budget
     [daq.drives.scaling]          # where the EDS/drive lacks it (ignored with --simulate)
     rated_torque_Nm = 5.0         # motor rated torque [N m] (0x6076 is in mN m)
     rated_current_A = 10.0
@@ -144,6 +147,8 @@ class DriveConfig:
         Heartbeat producer time written to 0x1017 [ms] (0: leave the drive's setting).
     scaling : Scaling or None
         From the campaign, the plant (``--simulate``) or, when None, read from the drive.
+    channel : str
+        The bus the drive is on (``daq.channel`` unless the drive names another one).
     """
 
     node_id: int
@@ -151,6 +156,7 @@ class DriveConfig:
     mode: Mode
     heartbeat_ms: int
     scaling: Scaling | None
+    channel: str = ""
 
     @property
     def mode_name(self) -> str:
@@ -197,6 +203,16 @@ class DaqConfig:
     def virtual(self) -> bool:
         return self.interface == "virtual"
 
+    @property
+    def channels(self) -> tuple[str, ...]:
+        """The buses, in the order of their first drive (``daq.channel`` alone by default)."""
+        return tuple(dict.fromkeys(d.channel or self.channel for d in self.drives)) or (
+            self.channel,)
+
+    def drives_on(self, channel: str) -> tuple[DriveConfig, ...]:
+        """The drives on bus ``channel``."""
+        return tuple(d for d in self.drives if (d.channel or self.channel) == channel)
+
 
 _SCALING = Table(
     {
@@ -216,6 +232,7 @@ _DRIVE = Table(
         "eds": Field(str, required=False, default=""),
         "mode": Field(str, required=False, default="cst", choices=tuple(MODES)),
         "heartbeat_ms": Field(int, required=False, default=100, ge=0, le=65535, unit="ms"),
+        "channel": Field(str, required=False, default=""),
         "scaling": _SCALING,
     }
 )
@@ -363,7 +380,7 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "", *,
     d.update(bus)
     base = Path(source).parent if source else Path.cwd()
     drives_raw = d["drives"] or ({"node_id": 1, "eds": "", "mode": "cst", "heartbeat_ms": 100,
-                                  "scaling": None},)
+                                  "channel": "", "scaling": None},)
     drives = []
     seen: set[int] = set()
     for i, dr in enumerate(drives_raw):
@@ -386,8 +403,13 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "", *,
             raise ConfigError(f"{source}: {key}.scaling: expected rated_torque_Nm [N m] or "
                               f"drive_gain [N m/permille], got neither")
         scaling = Scaling(**sc) if sc else None
+        channel = dr.get("channel") or d["channel"]
+        if channel != d["channel"] and d["interface"] == "config":
+            raise ConfigError(f"{source}: {key}.channel: expected no channel with interface "
+                              f"'config' (python-can's configuration names one bus), got "
+                              f"{channel!r}")
         drives.append(DriveConfig(dr["node_id"], eds, MODES[dr["mode"]], dr["heartbeat_ms"],
-                                  scaling))
+                                  scaling, channel))
     lim = d["limits"] or {}
     pos = lim.get("position")
     if pos is not None and (len(pos) != 2 or not pos[0] < pos[1]):

@@ -46,9 +46,9 @@ class CycleIO(can.Listener):
 
     def on_message_received(self, msg: can.Message) -> None:
         cid = msg.arbitration_id
-        data = msg.data
+        data = bytes(msg.data)  # once: logged and kept
         if self.log_frames:
-            rec = FRAME.pack(msg.timestamp, cid, msg.dlc, bytes(data))
+            rec = FRAME.pack(msg.timestamp, cid, msg.dlc, data)
             if self.direct:
                 self.frames += rec
                 self.n_frames += 1
@@ -59,7 +59,7 @@ class CycleIO(can.Listener):
         slot = self.tpdo.get(cid)
         if slot is not None:
             d, s, bit = slot
-            self.data[d][s] = bytes(data)
+            self.data[d][s] = data
             m = self.mask | bit
             self.mask = m
             if m == self.full and not self.direct:

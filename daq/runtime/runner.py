@@ -24,7 +24,8 @@ import numpy as np
 from daq import ConfigError, DaqError, __version__
 from trajectories.plan import plan_campaign
 
-from .busload import check_load, cycle_load
+from .buses import open_buses
+from .busload import bus_loads, check_loads
 from .config import DaqConfig, Scaling, parse_daq, with_scaling
 from .cycle_io import BUS_ERRORS, CycleIO
 from .engine import Engine
@@ -114,7 +115,7 @@ def _metadata(campaign: Any, cfg: DaqConfig, plan: Any, index: int, payload: Any
     }
     for k, (d, s) in enumerate(zip(cfg.drives, scalings, strict=True)):
         md[f"drive{k}"] = {"node_id": str(d.node_id), "eds": d.eds.name, "mode": d.mode_name,
-                           **s.as_dict()}
+                           "channel": d.channel or cfg.channel, **s.as_dict()}
         if k < len(drives):
             v = drives[k].consumer_value
             md[f"drive{k}"]["heartbeat_consumer"] = ("" if v is None else f"0x{v:08X}")
@@ -227,16 +228,18 @@ def run_campaign(
         if cfg.interface != "virtual":
             raise ConfigError(f"{campaign.source}: daq.interface: expected 'virtual' with "
                               f"--simulate, got {cfg.interface!r}")
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    # every refusal before anything is created, opened or moved
+    loads = bus_loads({ch: [pdo_lengths(d.mode) for d in cfg.drives_on(ch)]
+                       for ch in cfg.channels}, campaign.cycle_s, cfg.bitrate)
+    load = check_loads(loads, cfg.max_bus_load, str(campaign.source) or "campaign")
     plan = plan_campaign(campaign)
-    load = cycle_load([pdo_lengths(d.mode) for d in cfg.drives], campaign.cycle_s, cfg.bitrate)
-    check_load(load, cfg.max_bus_load, str(campaign.source) or "campaign")
     n_pay = len(campaign.payloads)
     todo = list(range(n_pay)) if payloads is None else list(payloads)
     for i in todo:
         if not 0 <= i < n_pay:
             raise ConfigError(f"payload index {i}: expected 0..{n_pay - 1}")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
     state_file = _state_path(out, campaign.name)
     done_before = _read_state(state_file) if resume else set()
     skipped = tuple(i for i in todo if i in done_before)
@@ -259,16 +262,7 @@ def run_campaign(
     try:
         if simulate is not None:
             sim = start_sim(cfg, simulate, campaign, fault_injectors or {})
-        kwargs: dict[str, Any] = {"interface": cfg.interface, "channel": cfg.channel}
-        if cfg.interface == "config":  # python-can's own configuration decides everything
-            kwargs = {}
-        elif cfg.interface != "virtual":
-            kwargs["bitrate"] = cfg.bitrate
-        try:
-            bus = can.Bus(**kwargs)
-        except (can.CanError, OSError, ValueError, ImportError) as exc:
-            raise ConfigError(f"{campaign.source}: daq.interface: cannot open "
-                              f"{cfg.interface} {cfg.channel}: {exc}") from None
+        bus = open_buses(cfg, simulated=sim is not None)
         io = CycleIO([d.node_id for d in cfg.drives])
         network = canopen.Network(bus)
         network.NOTIFIER_CYCLE = 0.05

@@ -1,48 +1,59 @@
 """The ``--simulate`` rig: one simulated CiA 402 drive (:mod:`sim_drivers`) per configured
-drive, each on its own python-can virtual bus of the campaign's channel."""
+drive, all the drives of a channel on ONE :class:`sim_drivers.simbus.SimNetwork`.
+
+Why one shared network per channel: python-can's ``VirtualBus`` deep-copies every frame to every
+other bus object of the channel and each bus object has its own notifier thread, so one bus per
+drive made a lockstep cycle O(n^2) in the number of drives (copies and thread wake-ups). With the
+lockstep clock the drives run inline in the master's ``send`` (no thread hand-off at all); with
+the paced clock one notifier thread serves all the drives of a channel, like real drives
+answering in parallel with the master. The master's side (``daq.runtime.buses.open_buses``) is
+its ordinary code on a queued bus of the same channel.
+"""
 
 from __future__ import annotations
 
-import contextlib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
-
-import can
 
 from sim_drivers.drive import SimulatedDrive
 from sim_drivers.plant import JointPlant
+from sim_drivers.simbus import SimNetwork
 
 from .config import DaqConfig, Scaling
 
 
 @dataclass
 class SimRig:
-    drives: list[Any]
-    buses: list[can.BusABC]
+    """The simulated drives (in ``cfg.drives`` order) and their networks (one per channel)."""
+
+    drives: list[Any] = field(default_factory=list)
+    networks: dict[str, SimNetwork] = field(default_factory=dict)
 
     def close(self) -> None:
-        for d in self.drives:
-            with contextlib.suppress(Exception):
-                d.stop()
-        for b in self.buses:
-            with contextlib.suppress(Exception):
-                b.shutdown()
+        """Stop every drive, then every network's notifier and bus (idempotent)."""
+        for net in self.networks.values():
+            net.close()
 
 
 def start_sim(cfg: DaqConfig, plant_params: Any, campaign: Any, fault_injectors: dict) -> SimRig:
-    sim = SimRig([], [])
+    """Start one simulated drive per ``cfg.drives`` entry, each with its own
+    :class:`~sim_drivers.plant.JointPlant` (seed ``plant.drive.seed + k``) at the campaign's
+    start position, on the :class:`SimNetwork` of its channel (``"inline"`` dispatch for the
+    lockstep clock, one notifier thread per channel for the paced clock)."""
+    dispatch = "inline" if cfg.clock == "lockstep" else "thread"
+    sim = SimRig()
     try:
+        for ch in cfg.channels:
+            sim.networks[ch] = SimNetwork(ch, dispatch=dispatch)
         for k, dcfg in enumerate(cfg.drives):
-            bus = can.Bus(interface="virtual", channel=cfg.channel)
-            sim.buses.append(bus)
             plant = JointPlant(plant_params, campaign.cycle_s,
                                seed=int(plant_params.drive.seed) + k)
             plant.reset(campaign.joint.start)
-            drive = SimulatedDrive(bus, dcfg.node_id, plant, dcfg.eds,
+            net = sim.networks[dcfg.channel or cfg.channel]
+            drive = SimulatedDrive(net.network, dcfg.node_id, plant, dcfg.eds,
                                    fault_injector=fault_injectors.get(dcfg.node_id),
                                    cycle_s=campaign.cycle_s)
-            drive.start()
-            sim.drives.append(drive)
+            sim.drives.append(net.add(drive))
     except Exception:
         sim.close()
         raise
