@@ -1,5 +1,8 @@
 """DAQ benchmarks: lockstep rate (1, 3, 6 drives), paced 1 kHz jitter vs a C loop, MCAP writes.
 
+(Past 600 lines: one table whose row groups share the campaign builder, the rigs and the
+printing; ratios are only meaningful within one run of one script.)
+
 Usage::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_daq.py [--paced-seconds 60] [--repeat 3]

@@ -1,5 +1,9 @@
 """The identification pipeline used by ``jointid fit`` and the demo.
 
+(Past 600 lines: one pipeline -- fit both models on the same samples, validate, refine,
+assemble the result -- whose stages share the preprocessing state; split by stage it would pass
+that state between modules.)
+
 :func:`fit_models` takes experiments (or concatenated signals), builds the decimated system
 once per model with the same preprocessing and the same samples ("the two models are
 compared using exactly the same identification method with the same measurements",

@@ -1,5 +1,8 @@
 """Loading measured experiments: MCAP logs of ``jointid run``, CSV and MATLAB files.
 
+(Past 600 lines: the one module of ident that reads files, by design -- three formats sharing
+the column mapping, unit conversion and one-line error messages.)
+
 This is the only module of :mod:`ident` that reads files. Each input file is one experiment
 (one payload run); :func:`concat` stacks them into one :class:`~ident.signals.Signals`
 (paper eq. 36-37), with derivatives left to :func:`ident.preprocess.build_design`.

@@ -1,5 +1,8 @@
 """Preprocessing: from raw experiments to the decimated, selected system Y = W chi + rho.
 
+(Past 600 lines: the steps below run in this order on the same arrays and are documented
+together with the paper's section IV.B; each step is its own function.)
+
 Per experiment (paper section IV.B and the EMPS reference script):
 
 0. alignment (optional, ``torque_delay``): when the torque reference of sample k is computed

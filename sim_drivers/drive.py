@@ -1,5 +1,8 @@
 """Simulated CiA 402 joint drive: a canopen ``LocalNode`` on a python-can bus around a plant.
 
+(Just past 600 lines: the composition of :mod:`~sim_drivers.nmt`, :mod:`~sim_drivers.pdo` and
+:mod:`~sim_drivers.device402` with the object-dictionary callbacks that tie them together.)
+
 What canopen's ``LocalNode`` does not do and this class adds (``/work/shared/notes/canopen.md``):
 
 - NMT slave: boot-up frame (0x700+id, data 0x00) on :meth:`SimulatedDrive.start`, on reset
