@@ -3,7 +3,10 @@ simulated CiA 402 drives (one node id per joint), stepping together on SYNC.
 
 Each drive is an ordinary :class:`~sim_drivers.drive.SimulatedDrive` (the same CiA 402 state
 machine, PDO handling and watchdogs as for one joint); its plant is an :class:`ArmJoint`, a
-one-joint view of the shared arm. All drives are on one :class:`~sim_drivers.simbus.SimNetwork`.
+one-joint view of the shared arm. The drives of a channel are on one
+:class:`~sim_drivers.simbus.SimNetwork`; drives may be spread over several channels (buses,
+each with its own SYNC from the master): the arm is stepped once per cycle, at the first
+SYNC of the cycle on any of them (``_on_sync`` counts the SYNCs of each channel).
 
 Timing (one SYNC, k = cycle index)
 ----------------------------------
@@ -26,6 +29,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 from types import SimpleNamespace
 from typing import Any
 
@@ -128,6 +132,9 @@ class ArmOnBus:
         Virtual channel shared with the master.
     node_ids : sequence of int
         Node id of the drive of each joint, base to tip (k of them).
+    channels : sequence of str, optional
+        Channel of each joint's drive (k of them; default: all on ``channel``). Every
+        channel must receive the master's SYNC every cycle.
     cycle_s : float
         SYNC period the arm is stepped with [s].
     eds : path, DriveOD or None
@@ -156,11 +163,15 @@ class ArmOnBus:
     def __init__(self, params: ArmParams, channel: str, node_ids: Any, *, cycle_s: float,
                  eds: Any = None, substeps: int = 10, seed: int = 0, q0: Any = None,
                  dispatch: str = "inline", payload: Payload | None = None,
-                 **drive_kwargs: Any) -> None:
+                 channels: Any = None, **drive_kwargs: Any) -> None:
         node_ids = [int(n) for n in node_ids]
         if len(node_ids) != params.k:
             raise SimError(f"ArmOnBus: expected {params.k} node ids (one per moving joint), "
                            f"got {len(node_ids)}")
+        chans = [channel] * params.k if channels is None else [str(c) for c in channels]
+        if len(chans) != params.k:
+            raise SimError(f"ArmOnBus: expected {params.k} channels (one per moving joint), "
+                           f"got {len(chans)}")
         self.params = params
         self.cycle_s = float(cycle_s)
         self.substeps = int(substeps)
@@ -173,18 +184,31 @@ class ArmOnBus:
         self._powered = [False] * k
         self.steps = 0
         self._sync_state()
-        self.sim = SimNetwork(channel, dispatch=dispatch)
-        net = self.sim.network
-        # first in line on SYNC: step the arm before any drive answers (module docstring)
-        net.subscribers.setdefault(0x80, []).insert(0, self._on_sync)
+        self._lock = threading.Lock()
+        self._cycle = 0  # SYNCs seen on the channel that saw most
+        self.sims: dict[str, SimNetwork] = {}
+        self._handlers: list[tuple[Any, Any]] = []
         self.drives: list[SimulatedDrive] = []
-        p = self.plant
-        m_diag = np.diag(pin.crba(p.model, p.data, p.q))
         try:
-            for j, nid in enumerate(node_ids):
+            for ch in dict.fromkeys(chans):
+                sim = self.sims[ch] = SimNetwork(ch, dispatch=dispatch)
+                counter = [0]
+
+                def on_sync(can_id: int, data: bytes, timestamp: float,
+                            counter: list[int] = counter) -> None:
+                    self._on_sync_of(counter)
+
+                # first in line on SYNC: step the arm before any drive answers (docstring)
+                sim.network.subscribers.setdefault(0x80, []).insert(0, on_sync)
+                self._handlers.append((sim.network, on_sync))
+            self.sim = self.sims[chans[0]]
+            p = self.plant
+            m_diag = np.diag(pin.crba(p.model, p.data, p.q))
+            for j, (nid, ch) in enumerate(zip(node_ids, chans, strict=True)):
                 joint = ArmJoint(self, j, m_diag[j])
+                net = self.sims[ch].network
                 drive = SimulatedDrive(net, nid, joint, eds, cycle_s=cycle_s, **drive_kwargs)
-                self.sim.add(drive)
+                self.sims[ch].add(drive)
                 self.drives.append(drive)
         except Exception:
             self.close()
@@ -195,6 +219,16 @@ class ArmOnBus:
         self.q = p.q.tolist()
         self.dq = p.dq.tolist()
         self.tau_applied = p.tau_applied.tolist()
+
+    def _on_sync_of(self, counter: list[int]) -> None:
+        """A SYNC on one channel: step the arm if it is the cycle's first SYNC (the first
+        channel to see its n-th SYNC steps the arm for cycle n)."""
+        with self._lock:
+            counter[0] += 1
+            if counter[0] <= self._cycle:
+                return
+            self._cycle = counter[0]
+            self._on_sync(0x80, b"", 0.0)
 
     def _on_sync(self, can_id: int, data: bytes, timestamp: float) -> None:
         powered = self._powered
@@ -239,12 +273,13 @@ class ArmOnBus:
         return [d.node_id for d in self.drives]
 
     def close(self) -> None:
-        """Stop the drives and shut the bus (idempotent)."""
-        net = self.sim.network
-        subs = net.subscribers.get(0x80, [])
-        if self._on_sync in subs:
-            subs.remove(self._on_sync)
-        self.sim.close()
+        """Stop the drives and shut the buses (idempotent)."""
+        for net, handler in self._handlers:
+            subs = net.subscribers.get(0x80, [])
+            if handler in subs:
+                subs.remove(handler)
+        for sim in self.sims.values():
+            sim.close()
 
     def __enter__(self) -> ArmOnBus:
         return self

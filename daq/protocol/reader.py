@@ -60,7 +60,9 @@ class RunArrays:
     flags : ndarray of uint8, shape (n,)
         Bit 0: TPDO missing in that cycle; bit 1: the runner was stopping.
     q_ref, dq_ref, ddq_ref : ndarray, shape (n,)
-        Planned reference at the same cycles [rad], [rad/s], [rad/s^2] (NaN if absent).
+        Planned reference at the same cycles [rad], [rad/s], [rad/s^2] (NaN if absent):
+        the axis's own (``/joint/<axis>/setpoint``, robot campaigns) or the shared
+        ``/setpoint``.
     segment : ndarray of int32, shape (n,)
         Plan segment index (-1 if absent).
     payload_mass_kg, payload_arm_m : float
@@ -266,11 +268,15 @@ def read_run(path: str | Path, axis: int = 0) -> RunArrays:
     """
     path = Path(path)
     topic = f"/joint/{axis}/state"
-    scan = _scan(path, {topic, "/setpoint"})
-    if topic not in {t for t, _ in scan.channels.values()}:
+    sp_topic = f"/joint/{axis}/setpoint"
+    scan = _scan(path, {topic, "/setpoint", sp_topic})
+    topics = {t for t, _ in scan.channels.values()}
+    if topic not in topics:
         raise LogReadError(f"{path}: no channel {topic} (not a jointid run log, or no data)")
     st = _concat(scan.parts.get(topic, []), STATE_DTYPE)
-    sp = _concat(scan.parts.get("/setpoint", []), SETPOINT_DTYPE)
+    # a robot campaign's log has each axis's own reference; a single joint's, one shared
+    sp = _concat(scan.parts.get(sp_topic if sp_topic in topics else "/setpoint", []),
+                 SETPOINT_DTYPE)
     n = st.shape[0]
     q_ref = np.full(n, np.nan)
     dq_ref = np.full(n, np.nan)

@@ -16,8 +16,12 @@ file, cycle by cycle:
    limits and watchdog, RPDO out;
 4. log the joint states, the setpoint and every CAN frame of the cycle.
 
-Several drives (``[[daq.drives]]``) all follow the campaign's one plan, each with its own
-controller; drive k logs on ``/joint/<k>/state``. With ``--simulate`` each gets its own plant.
+Several drives (``[[daq.drives]]``) of a single-joint campaign all follow the campaign's one
+plan, each with its own controller; drive k logs on ``/joint/<k>/state``. With ``--simulate``
+each gets its own plant. A robot campaign (``[robot]``, :mod:`trajectories.robot_campaign`)
+has one drive per moving joint: drive k follows column k of the multi-joint plan with its
+joint's gains and limits and logs its own reference on ``/joint/<k>/setpoint``; the safety
+checks below are per drive, each against its own joint's limits.
 
 Clocks
 ------
@@ -76,6 +80,7 @@ import numpy as np
 from daq.protocol.cia402 import Mode, State, path, state_from_statusword
 from daq.protocol.control import ControllerGains, PositionController
 from daq.protocol.logformat import FLAG_STOPPING, FLAG_TPDO_MISSING
+from trajectories.robot_campaign import RobotCampaign
 
 from .busload import BusLoad
 from .config import DaqConfig, Scaling
@@ -124,6 +129,30 @@ def _quintic(q0: float, q1: float, vmax: float, amax: float, cycle_s: float):
     return q0 + d * p, d * v, d * a
 
 
+def _approach(q0: list[float], q1: list[float], vmax: list[float], amax: list[float],
+              cycle_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Synchronised rest-to-rest quintics from ``q0`` to ``q1`` (one per column), each at <=
+    50 % of its vmax/amax, all of the duration of the slowest: (q, dq, ddq), each (n, m)."""
+    m = len(q0)
+    if m == 1:  # one shared reference: the single-joint approach, unchanged
+        a = _quintic(q0[0], q1[0], vmax[0], amax[0], cycle_s)
+        return a[0][:, None], a[1][:, None], a[2][:, None]
+    T = 0.0
+    for a, b, v, acc in zip(q0, q1, vmax, amax, strict=True):
+        d = abs(b - a)
+        if d >= 1e-4:
+            T = max(T, 0.2, 1.875 * d / (0.5 * v), math.sqrt(5.7735 * d / (0.5 * acc)))
+    if T == 0.0:
+        return np.zeros((0, m)), np.zeros((0, m)), np.zeros((0, m))
+    n = int(math.ceil(T / cycle_s)) + 1
+    s = np.minimum(np.arange(n) * cycle_s / T, 1.0)[:, None]
+    p = 10 * s**3 - 15 * s**4 + 6 * s**5
+    v = (30 * s**2 - 60 * s**3 + 30 * s**4) / T
+    a = (60 * s - 180 * s**2 + 120 * s**3) / T**2
+    d = np.asarray(q1, dtype=float) - np.asarray(q0, dtype=float)
+    return np.asarray(q0, dtype=float) + d * p, d * v, d * a
+
+
 
 class Engine(Supervisor):
     """Executes the payload runs of one campaign on an open bus (built by :func:`run_campaign`).
@@ -147,9 +176,22 @@ class Engine(Supervisor):
         self.paced = cfg.clock == "paced"
         self.periodic = self.paced and cfg.sync_source == "periodic"
         self.interrupted = False
-        self._init_limits(campaign, cfg)
-        self.gains = ControllerGains(**campaign.control.gains_kwargs())
-        self.revolute = campaign.joint.revolute
+        self.robot = isinstance(campaign, RobotCampaign)
+        if self.robot:
+            if len(campaign.joints) != len(drives):
+                raise ValueError(f"Engine: {len(drives)} drives for {len(campaign.joints)} "
+                                 f"joints")
+            cut = campaign.control.velocity_cutoff_hz
+            self.gains = [ControllerGains(kp=j.kp, kd=j.kd, velocity_cutoff_hz=cut)
+                          for j in campaign.joints]
+            self.revolute = [j.kind == "revolute" for j in campaign.joints]
+            self.joint_limits = [j.limits for j in campaign.joints]
+        else:
+            gains = ControllerGains(**campaign.control.gains_kwargs())
+            self.gains = [gains] * len(drives)
+            self.revolute = [campaign.joint.revolute] * len(drives)
+            self.joint_limits = [campaign.joint.limits] * len(drives)
+        self._init_limits(self.joint_limits, cfg)
         self.sync_msg = can.Message(arbitration_id=0x80, data=b"", is_extended_id=False)
         self.rpdo_msgs = [can.Message(arbitration_id=0x200 + d.node_id, data=bytes(
             d.specs[0].n_bytes), is_extended_id=False) for d in drives]
@@ -212,9 +254,15 @@ class Engine(Supervisor):
         kq = [s.rad_per_count for s in self.scalings]
         cpr = [1.0 / k for k in kq]
         tpu = [s.torque_per_unit for s in self.scalings]
-        xmax = [min(32767, int(self.tau_max / t)) for t in tpu]
+        xmax = [min(32767, int(tm / t)) for tm, t in zip(self.tau_max, tpu, strict=True)]
         csp = [d.cfg.mode is Mode.CYCLIC_SYNC_POSITION for d in self.drives]
-        ctrls = [PositionController(self.gains, cycle_s, self.revolute) for _ in self.drives]
+        ctrls = [PositionController(g, cycle_s, rv)
+                 for g, rv in zip(self.gains, self.revolute, strict=True)]
+        q_lo, q_hi, v_max, tau_act_max = self.q_lo, self.q_hi, self.v_max, self.tau_act_max
+        robot = self.robot
+        # reference column of each drive: its own joint's (robot) or the one shared plan
+        col = list(range(n_dr)) if robot else [0] * n_dr
+        log_sp_axis = log.setpoint_axis
         packs = [d.rpdo_struct.pack for d in self.drives]
         unpack1, unpack2 = TPDO1_STRUCT.unpack, TPDO2_STRUCT.unpack
         send = self.bus.send
@@ -249,8 +297,10 @@ class Engine(Supervisor):
                                     TIMING_SCHEMA.encode())
             ch_timing = w.register_channel("/timing", "cdr", sid)
 
-        def do_cycle(q_ref: float, dq_ref: float, ddq_ref: float, seg: int, mode: str) -> None:
-            """One full cycle; ``mode`` is "enable", "run", "quick_stop", "disable", "shutdown"."""
+        def do_cycle(q_refs: list[float], dq_refs: list[float], ddq_refs: list[float], seg: int,
+                     mode: str) -> None:
+            """One full cycle; ``mode`` is "enable", "run", "quick_stop", "disable", "shutdown";
+            the references are one value per reference column (``col``)."""
             nonlocal cycle, missed, next_deadline, hb_check
             t = cycle * cycle_s
             if self.paced and not self.periodic:
@@ -304,6 +354,8 @@ class Engine(Supervisor):
                     if missing_run[d] >= cfg.tpdo_timeout_cycles and not tpdo_fault:
                         tpdo_fault = (f"{self.drives[d].name}: TPDO missing for "
                                       f"{missing_run[d]} cycles (watchdog)")
+                cd = col[d]
+                q_ref = q_refs[cd]
                 q = counts[d] * kq[d]
                 dq = vel[d] * kq[d]
                 tau_act = tq[d] * tpu[d]
@@ -313,7 +365,7 @@ class Engine(Supervisor):
                         x = 0
                         target_raw = round(q_ref * cpr[d])
                     else:
-                        tau = ctrls[d].update(q_ref, dq_ref, ddq_ref, q)
+                        tau = ctrls[d].update(q_ref, dq_refs[cd], ddq_refs[cd], q)
                         x = round(tau / tpu[d])
                         if x > xmax[d]:
                             x = xmax[d]
@@ -372,14 +424,14 @@ class Engine(Supervisor):
                 # limits and following error (only while driving)
                 if mode == "run" and not self._stop_reason:
                     why = ""
-                    if not self.q_lo <= q <= self.q_hi and not flags:
-                        why = (f"position limit: q = {q:.4f} outside [{self.q_lo:.4g}, "
-                               f"{self.q_hi:.4g}]")
-                    elif (dq > self.v_max or -dq > self.v_max) and not flags:
-                        why = f"velocity limit: |dq| = {abs(dq):.4f} > {self.v_max:.4g}"
-                    elif (tau_act > self.tau_act_max or -tau_act > self.tau_act_max) and not flags:
+                    if not q_lo[d] <= q <= q_hi[d] and not flags:
+                        why = (f"position limit: q = {q:.4f} outside [{q_lo[d]:.4g}, "
+                               f"{q_hi[d]:.4g}]")
+                    elif (dq > v_max[d] or -dq > v_max[d]) and not flags:
+                        why = f"velocity limit: |dq| = {abs(dq):.4f} > {v_max[d]:.4g}"
+                    elif (tau_act > tau_act_max[d] or -tau_act > tau_act_max[d]) and not flags:
                         why = (f"torque limit: |torque actual| = {abs(tau_act):.1f} > "
-                               f"{self.tau_act_max:.4g}")
+                               f"{tau_act_max[d]:.4g}")
                     elif abs(q_ref - q) > cfg.max_following_error and not flags:
                         why = (f"following error: |q_ref - q| = {abs(q_ref - q):.4f} > "
                                f"{cfg.max_following_error:g}")
@@ -389,8 +441,13 @@ class Engine(Supervisor):
                         self._fault(f"{self.drives[d].name}: {why}", cycle, t, log, d)
             if tpdo_fault and not stopping:
                 self._fault(tpdo_fault, cycle, t, log, -1)
-            log_sp(cycle, t, q_ref, dq_ref, ddq_ref, seg,
-                   round(q_ref * cpr[0]) if csp[0] else 0)
+            if robot:
+                for d in range(n_dr):
+                    log_sp_axis(d, cycle, t, q_refs[d], dq_refs[d], ddq_refs[d], seg,
+                                round(q_refs[d] * cpr[d]) if csp[d] else 0)
+            else:
+                log_sp(cycle, t, q_refs[0], dq_refs[0], ddq_refs[0], seg,
+                       round(q_refs[0] * cpr[0]) if csp[0] else 0)
             buf, nf = io.take_frames()
             log_frames(cycle, buf, nf)
             if self.paced:
@@ -452,13 +509,17 @@ class Engine(Supervisor):
             log.event(0, 0.0, "warning", note)
         try:
             # 1. enable, holding the position measured at the first answer
-            do_cycle(0.0, 0.0, 0.0, -1, "disable")  # first SYNC: read the drives' state
-            q_hold = counts[0] * kq[0]
-            log.event(cycle, cycle * cycle_s, "info", f"start position {q_hold:.5f}")
+            z0 = [0.0] * n_dr
+            do_cycle(z0, z0, z0, -1, "disable")  # first SYNC: read the drives' state
+            n_col = n_dr if robot else 1
+            q_hold = [counts[d] * kq[d] for d in range(n_col)]
+            zero = [0.0] * n_col
+            log.event(cycle, cycle * cycle_s, "info", "start position "
+                      + ", ".join(f"{x:.5f}" for x in q_hold))
             for _ in range(ENABLE_MAX_CYCLES):
                 if enabled_all() or self._stop_reason:
                     break
-                do_cycle(q_hold, 0.0, 0.0, -1, "enable")
+                do_cycle(q_hold, zero, zero, -1, "enable")
             if not enabled_all() and not self._stop_reason:
                 names = ", ".join(f"{d.name} {state_from_statusword(sw[k]).name}"
                                   for k, d in enumerate(self.drives))
@@ -467,37 +528,43 @@ class Engine(Supervisor):
             if not self._stop_reason:
                 log.event(cycle, cycle * cycle_s, "info", "operation enabled")
                 # 2. approach the plan start, then the plan, then settle
-                lim = c.joint.limits
-                aq, adq, addq = _quintic(q_hold, float(ref.q[0]), lim.max_velocity,
-                                         lim.max_acceleration, cycle_s)
-                rq = np.concatenate([aq, ref.q, np.full(SETTLE_CYCLES, ref.q[-1])]).tolist()
-                rdq = np.concatenate([adq, ref.dq, np.zeros(SETTLE_CYCLES)]).tolist()
-                rddq = np.concatenate([addq, ref.ddq, np.zeros(SETTLE_CYCLES)]).tolist()
+                ref_q = np.asarray(ref.q, dtype=float).reshape(len(ref.q), -1)
+                ref_dq = np.asarray(ref.dq, dtype=float).reshape(ref_q.shape)
+                ref_ddq = np.asarray(ref.ddq, dtype=float).reshape(ref_q.shape)
+                lims = self.joint_limits[:n_col]
+                aq, adq, addq = _approach(q_hold, ref_q[0].tolist(),
+                                          [lim.max_velocity for lim in lims],
+                                          [lim.max_acceleration for lim in lims], cycle_s)
+                settle = np.zeros((SETTLE_CYCLES, n_col))
+                cq = np.concatenate([aq, ref_q, settle + ref_q[-1]]).T.tolist()
+                cdq = np.concatenate([adq, ref_dq, settle]).T.tolist()
+                cddq = np.concatenate([addq, ref_ddq, settle]).T.tolist()
                 rseg = np.concatenate([np.full(len(aq), -1), ref.segment,
                                        np.full(SETTLE_CYCLES, -1)]).astype(int).tolist()
-                n_total = cycle + len(rq)
+                n_total = cycle + len(rseg)
                 report("run", -1, n_total)
-                for i in range(len(rq)):
-                    do_cycle(rq[i], rdq[i], rddq[i], rseg[i], "run")
+                for i in range(len(rseg)):
+                    do_cycle([x[i] for x in cq], [x[i] for x in cdq], [x[i] for x in cddq],
+                             rseg[i], "run")
                     if self._stop_reason:
                         break
                     if i % 250 == 0:
                         report("run", rseg[i], n_total)
             # 3. stop: normal shutdown or quick stop + disable
-            q_last = counts[0] * kq[0]
+            q_last = [counts[d] * kq[d] for d in range(n_col)]
             if self._stop_reason:
                 status, reason = self._stop_reason
                 fault_cycle = self._fault_cycle
                 report("stop", -1, cycle)
                 for _ in range(cfg.quick_stop_cycles):
-                    do_cycle(q_last, 0.0, 0.0, -1, "quick_stop")
+                    do_cycle(q_last, zero, zero, -1, "quick_stop")
                 for _ in range(DISABLE_MAX_CYCLES + 1):
-                    do_cycle(q_last, 0.0, 0.0, -1, "disable")
+                    do_cycle(q_last, zero, zero, -1, "disable")
                     if self._all_off(sw):
                         break
             else:
                 for _ in range(SHUTDOWN_CYCLES):
-                    do_cycle(q_last, 0.0, 0.0, -1, "shutdown")
+                    do_cycle(q_last, zero, zero, -1, "shutdown")
             off = self._all_off(sw)
             stop_cycle = cycle - 1 if off else -1
             msg = ("drives disabled" if off else "drives did not confirm the stop: "

@@ -9,6 +9,9 @@ Channels (see ``docs/log-format.md`` for the full description):
     field without a custom decoder.
 ``/setpoint``
     One message per cycle: the planned reference (``jointid_msgs/msg/Setpoint``, cdr).
+``/joint/<axis>/setpoint``
+    Instead of ``/setpoint`` in a robot campaign's log (``axis_setpoints=True``): each drive's
+    own joint reference, one message per cycle and drive (same schema).
 ``/can/raw``
     One message per cycle with every CAN frame sent or received during the cycle
     (``jointid_msgs/msg/CanFrames``, cdr; a sequence of fixed 24-byte frame records).
@@ -250,6 +253,9 @@ class RunLog:
         Target amount of data per chunk [s of campaign time].
     frames_per_cycle : int
         Expected CAN frames per cycle (for the chunk size only).
+    axis_setpoints : bool
+        One setpoint channel per axis (``/joint/<axis>/setpoint``, :meth:`setpoint_axis`)
+        instead of the one ``/setpoint`` (robot campaigns: every joint has its reference).
 
     Use as a context manager or call :meth:`close` on every exit path.
     """
@@ -264,6 +270,7 @@ class RunLog:
         attachments: Sequence[tuple[str, str, bytes]] = (),
         chunk_seconds: float = 1.0,
         frames_per_cycle: int = 4,
+        axis_setpoints: bool = False,
     ) -> None:
         self.path = Path(path)
         try:
@@ -284,7 +291,13 @@ class RunLog:
             w.register_channel(f"/joint/{k}/state", "cdr", sid) for k in range(n_axes)
         ]
         sid = w.register_schema(SETPOINT_SCHEMA_NAME, "ros2msg", SETPOINT_SCHEMA.encode())
-        self._setpoint_ch = w.register_channel("/setpoint", "cdr", sid)
+        if axis_setpoints:
+            self._setpoint_ch = -1
+            self._axis_sp_ch = [w.register_channel(f"/joint/{k}/setpoint", "cdr", sid)
+                                for k in range(n_axes)]
+        else:
+            self._setpoint_ch = w.register_channel("/setpoint", "cdr", sid)
+            self._axis_sp_ch = []
         sid = w.register_schema(CAN_SCHEMA_NAME, "ros2msg", CAN_SCHEMA.encode())
         self._can_ch = w.register_channel("/can/raw", "cdr", sid)
         sid = w.register_schema("jointid.Event", "jsonschema", EVENT_SCHEMA)
@@ -339,6 +352,27 @@ class RunLog:
         """Log the planned reference of one cycle."""
         self._add(
             self._setpoint_ch,
+            self.start_ns + cycle * self.cycle_ns,
+            SETPOINT_STRUCT.pack(CDR_HEADER, t, cycle, q_ref, dq_ref, ddq_ref, segment, target_raw),
+            time.time_ns(),
+            cycle,
+        )
+        self.n_messages += 1
+
+    def setpoint_axis(
+        self,
+        axis: int,
+        cycle: int,
+        t: float,
+        q_ref: float,
+        dq_ref: float,
+        ddq_ref: float,
+        segment: int,
+        target_raw: int = 0,
+    ) -> None:
+        """Log the planned reference of one axis for one cycle (``axis_setpoints`` logs)."""
+        self._add(
+            self._axis_sp_ch[axis],
             self.start_ns + cycle * self.cycle_ns,
             SETPOINT_STRUCT.pack(CDR_HEADER, t, cycle, q_ref, dq_ref, ddq_ref, segment, target_raw),
             time.time_ns(),

@@ -28,18 +28,25 @@ class Supervisor:
     path); the values they compare against are set here by :meth:`_init_limits`.
     """
 
-    def _init_limits(self, campaign: Any, cfg: DaqConfig) -> None:
-        """``[daq.limits]``, else the campaign's joint limits with 5 % of the range / 20 % of
-        the speed and torque as margins."""
-        lim = campaign.joint.limits
-        span = lim.position[1] - lim.position[0]
-        if cfg.position_limits is not None:
-            self.q_lo, self.q_hi = cfg.position_limits
-        else:
-            self.q_lo, self.q_hi = lim.position[0] - 0.05 * span, lim.position[1] + 0.05 * span
-        self.v_max = cfg.max_velocity if cfg.max_velocity is not None else 1.2 * lim.max_velocity
-        self.tau_max = cfg.max_torque if cfg.max_torque is not None else lim.max_torque
-        self.tau_act_max = self.tau_max * 1.2
+    def _init_limits(self, limits: Any, cfg: DaqConfig) -> None:
+        """Per drive: ``[daq.limits]``, else that drive's joint limits (``limits``, one
+        :class:`trajectories.campaign.JointLimits` per drive) with 5 % of the range / 20 % of
+        the speed and torque as margins. Sets lists ``q_lo``, ``q_hi``, ``v_max``,
+        ``tau_max``, ``tau_act_max`` (one entry per drive)."""
+        self.q_lo, self.q_hi, self.v_max, self.tau_max, self.tau_act_max = [], [], [], [], []
+        for lim in limits:
+            span = lim.position[1] - lim.position[0]
+            if cfg.position_limits is not None:
+                lo, hi = cfg.position_limits
+            else:
+                lo, hi = lim.position[0] - 0.05 * span, lim.position[1] + 0.05 * span
+            tau = cfg.max_torque if cfg.max_torque is not None else lim.max_torque
+            self.q_lo.append(lo)
+            self.q_hi.append(hi)
+            self.v_max.append(cfg.max_velocity if cfg.max_velocity is not None
+                              else 1.2 * lim.max_velocity)
+            self.tau_max.append(tau)
+            self.tau_act_max.append(tau * 1.2)
 
     def _check_heartbeats(self, cycle: int, t: float, log: RunLog) -> None:
         """Fault on the first drive whose heartbeat has been silent for more than
