@@ -6,10 +6,11 @@ import tomllib
 from pathlib import Path
 
 from trajectories.campaign import Campaign
+from trajectories.robot_campaign import RobotCampaign, campaign_from_dict
 
 from . import CampaignFileError
 
-__all__ = ["load_campaign"]
+__all__ = ["load_any_campaign", "load_campaign"]
 
 
 def load_campaign(path: str | Path) -> Campaign:
@@ -35,6 +36,17 @@ def load_campaign(path: str | Path) -> Campaign:
     OSError
         The file cannot be read.
     """
+    return Campaign.from_dict(_read(path), source=str(path))
+
+
+def load_any_campaign(path: str | Path) -> Campaign | RobotCampaign:
+    """Load either campaign format: a ``[joint]`` file (:class:`Campaign`) or a ``[robot]``
+    file (:class:`~trajectories.robot_campaign.RobotCampaign`). Errors as
+    :func:`load_campaign`."""
+    return campaign_from_dict(_read(path), source=str(path))
+
+
+def _read(path: str | Path) -> dict:
     path = Path(path)
     data = path.read_bytes()
     try:
@@ -44,4 +56,4 @@ def load_campaign(path: str | Path) -> Campaign:
             f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from exc
     except tomllib.TOMLDecodeError as exc:
         raise CampaignFileError(f"{path}: invalid TOML: {exc}") from exc
-    return Campaign.from_dict(raw, source=str(path))
+    return raw

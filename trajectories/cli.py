@@ -4,16 +4,29 @@ Loads and validates the campaign, plans it with Ruckig (rejecting anything beyon
 limits before anything moves), prints the summary table (durations, share of moving time
 per velocity band, position coverage, peaks against limits) and, with ``--plot``, draws
 q, dq and ddq of one payload run against time with the segments marked.
+
+A robot campaign (``[robot]``) is planned for all its joints at once: the multi-sines with
+``optimise = true`` are optimised first (``--no-optimise``: as written), then the summary per
+joint, the peak torques per payload against ``max_torque`` (robot file's inertial
+parameters), the predicted condition number of the robot model's regressor over the plan
+and the shares of moving samples per velocity band and per quadrant of (dq, tau) for every
+payload (:mod:`trajectories.excitation`, :mod:`trajectories.robot_model`).
 """
 
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
 from trajectories.plan import BANDS, CampaignPlan, plan_campaign
 
-from .campaign_file import load_campaign
+from . import TrajectoryError
+from .campaign_file import load_any_campaign
+from .excitation import assess_robot_campaign
+from .multi import RobotPlan
+from .robot_campaign import RobotCampaign
+from .robot_model import OPTIMISE_EVALUATIONS, prepare_robot_campaign, robot_for_campaign
 
 __all__ = ["plot_plan", "register", "run"]
 
@@ -29,13 +42,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--plot", type=Path, metavar="FILE.png",
                    help="draw position, velocity and acceleration against time")
     p.add_argument("--quick", action="store_true",
-                   help="plan the shortened campaign used by quick runs (Campaign.quick)")
+                   help="plan the shortened campaign used by quick runs (Campaign.quick; "
+                   "single-joint campaigns)")
+    p.add_argument("--no-optimise", action="store_true",
+                   help="robot campaigns: play the multi-sines as written even where "
+                   "optimise = true")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``jointid plan``; returns the exit code."""
-    campaign = load_campaign(args.campaign)
+    campaign = load_any_campaign(args.campaign)
+    if isinstance(campaign, RobotCampaign):
+        return _run_robot(campaign, args)
     if args.quick:
         campaign = campaign.quick()
     plan = plan_campaign(campaign)
@@ -44,6 +63,54 @@ def run(args: argparse.Namespace) -> int:
         path = plot_plan(plan, args.plot)
         print(f"plot: {path}")
     return 0
+
+
+def _run_robot(campaign: RobotCampaign, args: argparse.Namespace) -> int:
+    if args.quick:
+        raise TrajectoryError(f"{campaign.source}: --quick: expected a single-joint "
+                              f"campaign (robot campaigns have no shortened form)")
+    robot = robot_for_campaign(campaign)
+    played, dyn, results = prepare_robot_campaign(
+        campaign, robot=robot, optimise=not args.no_optimise)
+    a = assess_robot_campaign(played, regressor=dyn.regressor,
+                              inverse_dynamics=dyn.inverse_dynamics)
+    if results:
+        a = replace(a, optimised=results)
+    print(f"robot {robot.name!r} ({robot.source}): moving {', '.join(robot.moving)}; "
+          f"regressor: {len(dyn.names)} columns (standard parameters, Ia, FC FV OFF per "
+          f"joint)")
+    if results:
+        print(f"multi-sines optimised for the condition number ({OPTIMISE_EVALUATIONS} "
+              f"evaluations, deterministic: jointid run plays the same coefficients)")
+    print(a)
+    if args.plot is not None:
+        path = plot_robot_plan(a.plan, args.plot)
+        print(f"plot: {path}")
+    return 0
+
+
+def plot_robot_plan(plan: RobotPlan, path: str | Path) -> Path:
+    """Draw q and dq of every joint of a robot plan against time; save as PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    fig, axes = plt.subplots(2, 1, sharex=True, figsize=(12, 6), constrained_layout=True)
+    for j, nm in enumerate(plan.joint_names):
+        axes[0].plot(plan.t, plan.q[:, j], lw=0.9, label=nm)
+        axes[1].plot(plan.t, plan.dq[:, j], lw=0.9, label=nm)
+    axes[0].set_ylabel("q [rad]")
+    axes[1].set_ylabel("dq [rad/s]")
+    axes[1].set_xlabel("t [s]")
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="upper right", fontsize=8)
+    fig.suptitle(f"{plan.name}: one run of {plan.duration_s:.1f} s", fontsize=10)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
 
 
 def plot_plan(plan: CampaignPlan, path: str | Path) -> Path:

@@ -1,0 +1,200 @@
+"""The robot of a robot campaign as the callables :mod:`trajectories.excitation` takes.
+
+``jointid plan`` and ``jointid run`` predict the excitation quality, check torques and optimise
+multi-sines before anything moves; they need the robot model's regressor and inverse dynamics.
+:mod:`ident` owns the identification model (``ident.robot.regressor``), but trajectories is
+below ident in the package graph, so this module builds the same model from the robot's
+pinocchio model (:func:`pinocchio.computeJointTorqueRegressor`, one sample at a time: ~10 µs
+per sample, enough for the 4000-sample predictions and the multi-sine optimiser):
+
+    tau = W_rigid(q, dq, ddq) chi_St + Ia ddq + FC sign(dq) + FV dq + OFF   (paper eq. 9, 5-6)
+
+Columns per moving joint j (chain number j, ROBOT_FORMAT names): the 10 standard parameters
+of link j (``XX{j} ... M{j}``), ``Ia{j}``, then ``FC{j} FV{j} OFF{j}`` (the usual friction
+model; ``friction=False`` leaves them out). ``sign(dq)`` is 0 below ``MOVING_FRACTION`` of the
+joint's max velocity (``deadband``), so that samples at rest -- exactly 0 in a plan, encoder
+noise in a log -- enter the Coulomb column alike.
+
+Also :func:`robot_for_campaign` (the campaign's robot file, with its moving and locked
+joints) and :func:`prepare_robot_campaign` (optimise the ``optimise = true`` multi-sines
+deterministically: ``jointid plan`` and ``jointid run`` play the same plan).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from .excitation import OptimisedMultisine, optimise_campaign
+from .multi import MOVING_FRACTION
+from .robot import Robot, RobotError, load_robot
+from .robot_campaign import MultisineSegment, RobotCampaign
+
+__all__ = ["RobotDynamics", "prepare_robot_campaign", "robot_for_campaign",
+           "robot_file_path", "OPTIMISE_EVALUATIONS"]
+
+#: objective evaluations of the multi-sine optimisation in ``jointid plan`` / ``jointid run``
+#: (deterministic for a given seed: both play the same coefficients)
+OPTIMISE_EVALUATIONS = 600
+
+_LINK = ("XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M")
+# index in pinocchio's [m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz] of each _LINK entry
+_PIN_ORDER = (4, 5, 7, 6, 8, 9, 1, 2, 3, 0)
+
+
+def robot_file_path(campaign: RobotCampaign) -> str:
+    """The campaign's ``robot.file`` resolved against the campaign file's folder (kept as is
+    for ``example-robot-data:<name>`` and absolute paths)."""
+    f = campaign.robot_file
+    if f.startswith("example-robot-data:") or Path(f).is_absolute() or not campaign.source:
+        return f
+    return str(Path(campaign.source).parent / f)
+
+
+def robot_for_campaign(campaign: RobotCampaign) -> Robot:
+    """Load the campaign's robot file with the campaign's moving and locked joints.
+
+    Raises
+    ------
+    trajectories.RobotError
+        Unreadable robot file, or a campaign joint the robot file does not have (one line
+        naming the campaign, the key and the robot file).
+    """
+    path = robot_file_path(campaign)
+    robot = load_robot(path)
+    for i, n in enumerate(campaign.moving):
+        if n not in robot.joint_names:
+            raise RobotError(f"{campaign.source}: robot.moving[{i}]: expected a joint of "
+                             f"{path} ({', '.join(robot.joint_names)}), got {n!r}")
+    locked = {n: float(robot.locked.get(n, 0.0)) for n in robot.joint_names
+              if n not in campaign.moving}
+    locked.update({n: float(v) for n, v in campaign.locked.items()})
+    try:
+        return robot.with_motion(campaign.moving, locked)
+    except RobotError as exc:
+        raise RobotError(f"{campaign.source}: robot.locked: {exc}") from None
+
+
+@dataclass(frozen=True, eq=False)
+class RobotDynamics:
+    """Regressor and inverse dynamics of the moving joints of a robot (module docstring).
+
+    Parameters
+    ----------
+    robot : trajectories.robot.Robot
+    friction : bool
+        Add the usual friction columns ``FC FV OFF`` per joint.
+    """
+
+    robot: Robot
+    friction: bool = True
+
+    def __post_init__(self) -> None:
+        model = self.robot.reduced()
+        model.gravity = pin.Motion(np.concatenate([np.asarray(self.robot.gravity, float),
+                                                   np.zeros(3)]))
+        object.__setattr__(self, "model", model)
+        lim = self.robot.limits
+        vmax = np.array([lim[n].dq_max if np.isfinite(lim[n].dq_max) else 1.0
+                         for n in self.robot.moving])
+        object.__setattr__(self, "deadband", MOVING_FRACTION * vmax)
+        ia = [self.robot.drives[n].Ia if n in self.robot.drives else None
+              for n in self.robot.moving]
+        object.__setattr__(self, "Ia", np.array([0.0 if v is None else v for v in ia]))
+
+    @property
+    def k(self) -> int:
+        return len(self.robot.moving)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Column names, ROBOT_FORMAT (per joint: link parameters, Ia, [FC FV OFF])."""
+        out = []
+        nums = self.robot.numbers
+        for j in nums:
+            out += [f"{p}{j}" for p in _LINK] + [f"Ia{j}"]
+        if self.friction:
+            for j in nums:
+                out += [f"FC{j}", f"FV{j}", f"OFF{j}"]
+        return tuple(out)
+
+    def regressor(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
+        """``W`` of shape (n * k, p), rows sample-major (``trajectories.excitation``).
+
+        Parameters
+        ----------
+        q, dq, ddq : ndarray, shape (n, k)
+            Joint-side position [rad], velocity [rad/s], acceleration [rad/s^2].
+        """
+        q, dq, ddq = (np.ascontiguousarray(x, dtype=float) for x in (q, dq, ddq))
+        n, k = q.shape
+        model = self.model
+        data = model.createData()
+        p_rigid = 11 * k
+        p = p_rigid + (3 * k if self.friction else 0)
+        w = np.zeros((n, k, p))
+        order = list(_PIN_ORDER)
+        reg = pin.computeJointTorqueRegressor
+        rigid = np.empty((n, k, 10 * k))
+        for i in range(n):
+            rigid[i] = reg(model, data, q[i], dq[i], ddq[i])
+        for j in range(k):
+            w[:, :, 11 * j:11 * j + 10] = rigid[:, :, 10 * j:10 * j + 10][:, :, order]
+            w[:, j, 11 * j + 10] = ddq[:, j]
+            if self.friction:
+                moving = np.abs(dq[:, j]) > self.deadband[j]
+                w[:, j, p_rigid + 3 * j] = np.sign(dq[:, j]) * moving
+                w[:, j, p_rigid + 3 * j + 1] = dq[:, j]
+                w[:, j, p_rigid + 3 * j + 2] = 1.0
+        return w.reshape(n * k, p)
+
+    def inverse_dynamics(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray,
+                         payload: Any = None) -> np.ndarray:
+        """Rigid-body + rotor torque ``tau_out + Ia ddq`` (n, k) [N m] of the robot file's
+        inertial parameters, with a payload (``mass_kg``, ``com`` [m], ``inertia`` about the
+        CoM [kg m^2]) fixed in the frame of the last moving joint; friction not included."""
+        model = self.model
+        if payload is not None and float(payload.mass_kg) > 0:
+            model = pin.Model(model)
+            xx, xy, xz, yy, yz, zz = payload.inertia
+            extra = pin.Inertia(float(payload.mass_kg), np.asarray(payload.com, dtype=float),
+                                np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]))
+            last = model.njoints - 1
+            model.inertias[last] = model.inertias[last] + extra
+        data = model.createData()
+        q, dq, ddq = (np.ascontiguousarray(x, dtype=float) for x in (q, dq, ddq))
+        tau = np.array([pin.rnea(model, data, q[i], dq[i], ddq[i]) for i in range(len(q))])
+        return tau.reshape(q.shape) + self.Ia * ddq
+
+
+def prepare_robot_campaign(campaign: RobotCampaign, *, robot: Robot | None = None,
+                           optimise: bool = True,
+                           max_evaluations: int = OPTIMISE_EVALUATIONS
+                           ) -> tuple[RobotCampaign, RobotDynamics,
+                                      tuple[OptimisedMultisine, ...]]:
+    """The campaign to play: its ``optimise = true`` multi-sines optimised for the condition
+    number of :class:`RobotDynamics`' regressor (deterministic: same seed and evaluations,
+    same coefficients), with the dynamics used.
+
+    Returns
+    -------
+    (campaign, dynamics, results)
+    """
+    robot = robot if robot is not None else robot_for_campaign(campaign)
+    dyn = RobotDynamics(robot)
+    results: tuple[OptimisedMultisine, ...] = ()
+    if optimise and any(isinstance(s, MultisineSegment) and s.optimise
+                        for s in campaign.segments):
+        campaign, results = optimise_campaign(campaign, dyn.regressor,
+                                              max_evaluations=max_evaluations)
+    return campaign, dyn, results
+
+
+def campaign_limits(campaign: RobotCampaign) -> Sequence[Any]:
+    """Per moving joint limits of the campaign (the ones the plan respects)."""
+    return campaign.limits
