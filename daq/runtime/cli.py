@@ -1,4 +1,8 @@
-"""``jointid run CAMPAIGN.toml [--simulate PLANT.toml] [--out DIR]``: execute a campaign.
+"""``jointid run CAMPAIGN.toml [--simulate [PLANT.toml]] [--out DIR]``: execute a campaign.
+
+A robot campaign (``[robot]``) drives one drive per moving joint from one coordinated plan;
+``--simulate`` (no file) runs it against a simulated arm built from the campaign's robot file
+(:mod:`daq.runtime.robot_rig`). A single-joint campaign needs ``--simulate PLANT.toml``.
 
 Exit codes: 0 done, 2 configuration error or refusal (nothing moved), 3 a run stopped on a
 fault (the message names the cause; the log is kept), 130 interrupted (Ctrl-C), 1 the
@@ -11,8 +15,10 @@ import argparse
 import sys
 from pathlib import Path
 
+from daq import ConfigError
 from sim_drivers.plant_config import load_plant
-from trajectories.campaign_file import load_campaign
+from trajectories.campaign_file import load_any_campaign
+from trajectories.robot_campaign import RobotCampaign
 
 from .progress import ProgressLine
 from .runner import Progress, prompt_payload, run_campaign
@@ -25,8 +31,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Run the campaign's plan once per payload: one MCAP log per payload run.",
     )
     p.add_argument("campaign", type=Path, help="campaign file (TOML)")
-    p.add_argument("--simulate", type=Path, metavar="PLANT.toml", default=None,
-                   help="run against simulated drives of this plant on a virtual bus")
+    p.add_argument("--simulate", type=Path, metavar="PLANT.toml", default=None, nargs="?",
+                   const=True,
+                   help="run against simulated drives of this plant on a virtual bus; for a "
+                   "robot campaign, no file: a simulated arm of the campaign's robot file")
     p.add_argument("--out", type=Path, default=Path("runs"), metavar="DIR",
                    help="output directory (default: ./runs)")
     p.add_argument("--yes", "-y", action="store_true",
@@ -41,11 +49,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    campaign = load_campaign(args.campaign)
+    campaign = load_any_campaign(args.campaign)
+    robot = isinstance(campaign, RobotCampaign)
     if args.quick:
+        if robot:
+            raise ConfigError(f"{campaign.source}: --quick: expected a single-joint campaign "
+                              f"(robot campaigns have no shortened form)")
         campaign = campaign.quick()
     plant = None
-    if args.simulate is not None:
+    if robot and args.simulate not in (None, True):
+        raise ConfigError(f"{campaign.source}: --simulate {args.simulate}: a robot campaign "
+                          f"is simulated from its robot file; give --simulate alone")
+    if args.simulate is True:
+        plant = True
+    elif args.simulate is not None:
         plant = load_plant(args.simulate)
     bar = ProgressLine()
 

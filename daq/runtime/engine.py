@@ -596,6 +596,7 @@ class Engine(Supervisor):
                 "missed": str(missed), "wall_s": f"{wall:.3f}",
                 "sync_offset": str(sim_drive_cycle0),
             })
-        return PayloadResult(index, float(payload.mass_kg), float(payload.arm_m), log.path,
+        return PayloadResult(index, float(payload.mass_kg),
+                             float(getattr(payload, "arm_m", math.nan)), log.path,
                              cycle, status, reason, fault_cycle, stop_cycle, missed, wall,
                              lateness)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -101,7 +102,8 @@ class CampaignResult:
         for r in self.runs:
             rate = f"{r.cycles_per_s:,.0f} cycles/s" if r.wall_s else ""
             lines.append(
-                f"  payload {r.index} ({r.mass_kg:g} kg at {r.arm_m:g} m): {r.status}, "
+                f"  payload {r.index} ({r.mass_kg:g} kg"
+                f"{'' if math.isnan(r.arm_m) else f' at {r.arm_m:g} m'}): {r.status}, "
                 f"{r.cycles} cycles in {r.wall_s:.1f} s {rate}, missed {r.missed}"
                 f" -> {r.path}" + (f"\n    {r.reason}" if r.reason else "")
             )

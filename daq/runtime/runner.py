@@ -22,7 +22,10 @@ import canopen
 import numpy as np
 
 from daq import ConfigError, DaqError, __version__
+from trajectories.multi import plan_robot_campaign
 from trajectories.plan import plan_campaign
+from trajectories.robot_campaign import RobotCampaign
+from trajectories.robot_model import prepare_robot_campaign, robot_file_path
 
 from .buses import open_buses
 from .busload import bus_loads, check_loads
@@ -32,6 +35,14 @@ from .engine import Engine
 from .master import MasterDrive, MasterHeartbeat, pdo_lengths, rpdo_timeout_ms
 from .mcaplog import RunLog
 from .results import CampaignResult, PayloadResult, Progress
+from .robot_rig import (
+    arm_scalings,
+    arm_truth,
+    robot_daq_config,
+    robot_metadata,
+    start_arm_sim,
+    with_scalings,
+)
 from .simrig import SimRig, plant_scaling, start_sim
 
 __all__ = ["CampaignResult", "PayloadResult", "Progress", "file_stem", "run_campaign"]
@@ -95,27 +106,47 @@ def _metadata(campaign: Any, cfg: DaqConfig, plan: Any, index: int, payload: Any
               scalings: list[Scaling], plant_params: Any,
               bus_info: str = "", drives: Sequence[MasterDrive] = ()
               ) -> dict[str, dict[str, str]]:
-    ref = plan.reference
+    robot = isinstance(campaign, RobotCampaign)
+    ref = plan if robot else plan.reference
+    if robot:
+        kind = campaign.joints[0].kind
+        pos = [list(j.limits.position) for j in campaign.joints]
+        gains = {j.name: {"kp": j.kp, "kd": j.kd,
+                          "velocity_cutoff_hz": campaign.control.velocity_cutoff_hz}
+                 for j in campaign.joints}
+        pay = {"index": str(index), "mass_kg": repr(float(payload.mass_kg)),
+               "com": json.dumps([float(x) for x in payload.com]),
+               "inertia": json.dumps([float(x) for x in payload.inertia])}
+    else:
+        kind = campaign.joint.kind
+        pos = list(campaign.joint.limits.position)
+        gains = campaign.control.gains_kwargs()
+        pay = {"index": str(index), "mass_kg": repr(float(payload.mass_kg)),
+               "arm_m": repr(float(payload.arm_m))}
     md: dict[str, dict[str, str]] = {
         "campaign": {
             "name": campaign.name, "source": str(campaign.source),
-            "joint_kind": campaign.joint.kind, "cycle_s": repr(campaign.cycle_s),
+            "joint_kind": kind, "cycle_s": repr(campaign.cycle_s),
             "clock": cfg.clock, "interface": cfg.interface, "channel": cfg.channel,
             "bitrate": str(cfg.bitrate), "bus": bus_info,
             "n_payloads": str(len(campaign.payloads)),
             "segments": json.dumps(list(ref.segment_names)),
-            "position_limits": json.dumps(list(campaign.joint.limits.position)),
-            "gains": json.dumps(campaign.control.gains_kwargs()),
+            "position_limits": json.dumps(pos),
+            "gains": json.dumps(gains),
         },
-        "payload": {"index": str(index), "mass_kg": repr(float(payload.mass_kg)),
-                    "arm_m": repr(float(payload.arm_m))},
+        "payload": pay,
         "software": {"jointid": __version__, "python-can": can.__version__,
                      "canopen": getattr(canopen, "__version__", "?"),
                      "python": sys.version.split()[0]},
     }
+    if robot:
+        md["campaign"]["kind"] = "robot"
+        md["robot"] = robot_metadata(campaign, payload)
     for k, (d, s) in enumerate(zip(cfg.drives, scalings, strict=True)):
         md[f"drive{k}"] = {"node_id": str(d.node_id), "eds": d.eds.name, "mode": d.mode_name,
                            "channel": d.channel or cfg.channel, **s.as_dict()}
+        if robot:
+            md[f"drive{k}"]["joint"] = campaign.joints[k].name
         if k < len(drives):
             v = drives[k].consumer_value
             md[f"drive{k}"]["heartbeat_consumer"] = ("" if v is None else f"0x{v:08X}")
@@ -158,14 +189,21 @@ def _attachments(campaign: Any, cfg: DaqConfig, plant_params: Any) -> list[tuple
         p = Path(str(getattr(plant_params, "source", "")))
         if p.suffix == ".toml" and p.is_file():
             out.append((p.name, "application/toml", p.read_bytes()))
+    if isinstance(campaign, RobotCampaign):
+        p = Path(robot_file_path(campaign))
+        if p.suffix in (".toml", ".urdf") and p.is_file():
+            media = "application/toml" if p.suffix == ".toml" else "application/xml"
+            out.append((p.name, media, p.read_bytes()))
     return out
 
 
 def prompt_payload(index: int, payload: Any, n: int) -> bool:
     """Ask the operator to mount a payload; False to abort the campaign."""
+    where = (f"at {payload.arm_m:g} m" if hasattr(payload, "arm_m") else
+             f"CoM {', '.join(f'{x:g}' for x in payload.com)} m in the flange frame")
     try:
-        answer = input(f"Mount payload {index + 1}/{n}: {payload.mass_kg:g} kg at "
-                       f"{payload.arm_m:g} m, then press Enter (q to quit): ")
+        answer = input(f"Mount payload {index + 1}/{n}: {payload.mass_kg:g} kg {where}, "
+                       f"then press Enter (q to quit): ")
     except EOFError:
         return False
     return answer.strip().lower() not in ("q", "quit", "n", "no")
@@ -190,9 +228,13 @@ def run_campaign(
     campaign : trajectories.campaign.Campaign
     out_dir : path-like
         Created if needed; receives ``<name>_payload<k>.mcap`` and ``<name>.state.json``.
-    simulate : sim_drivers.plant_config.PlantParams or None
+    simulate : sim_drivers.plant_config.PlantParams, sim_drivers.arm.ArmParams, True or None
         Run against simulated drives (one plant per drive) on python-can's virtual bus; the
-        drive scaling comes from the plant's ``[drive]`` table.
+        drive scaling comes from the plant's ``[drive]`` table. A robot campaign
+        (:class:`~trajectories.robot_campaign.RobotCampaign`) runs one simulated arm behind
+        its drives (:mod:`daq.runtime.robot_rig`): ``simulate`` is its
+        :class:`~sim_drivers.arm.ArmParams`, or True for ``ArmParams.from_robot`` of the
+        campaign's robot file.
     yes : bool
         Do not ask the operator between payloads (unattended).
     progress : callable or None
@@ -222,9 +264,23 @@ def run_campaign(
     """
     # a simulated run is on python-can's virtual bus: python-can's own configuration (which
     # names the real bus) must not fill what [daq] leaves out
-    cfg = parse_daq(campaign.daq, str(campaign.source), use_can_config=simulate is None)
+    robot = isinstance(campaign, RobotCampaign)
+    if robot:
+        cfg = robot_daq_config(campaign, use_can_config=simulate is None)
+        # the multi-sines as jointid plan optimised them (deterministic)
+        campaign, _dyn, _opt = prepare_robot_campaign(campaign)
+        if simulate is True:
+            simulate = arm_truth(campaign)
+        if simulate is not None:
+            cfg = with_scalings(cfg, arm_scalings(simulate))
+    else:
+        if simulate is True:
+            raise ConfigError(f"{campaign.source}: --simulate: expected a plant file for a "
+                              f"single-joint campaign")
+        cfg = parse_daq(campaign.daq, str(campaign.source), use_can_config=simulate is None)
+        if simulate is not None:
+            cfg = with_scaling(cfg, plant_scaling(simulate))
     if simulate is not None:
-        cfg = with_scaling(cfg, plant_scaling(simulate))
         if cfg.interface != "virtual":
             raise ConfigError(f"{campaign.source}: daq.interface: expected 'virtual' with "
                               f"--simulate, got {cfg.interface!r}")
@@ -232,7 +288,7 @@ def run_campaign(
     loads = bus_loads({ch: [pdo_lengths(d.mode) for d in cfg.drives_on(ch)]
                        for ch in cfg.channels}, campaign.cycle_s, cfg.bitrate)
     load = check_loads(loads, cfg.max_bus_load, str(campaign.source) or "campaign")
-    plan = plan_campaign(campaign)
+    plan = plan_robot_campaign(campaign) if robot else plan_campaign(campaign)
     n_pay = len(campaign.payloads)
     todo = list(range(n_pay)) if payloads is None else list(payloads)
     for i in todo:
@@ -260,7 +316,9 @@ def run_campaign(
     clean = False
     status, reason = "done", ""
     try:
-        if simulate is not None:
+        if simulate is not None and robot:
+            sim = start_arm_sim(cfg, simulate, campaign, fault_injectors or {})
+        elif simulate is not None:
             sim = start_sim(cfg, simulate, campaign, fault_injectors or {})
         bus = open_buses(cfg, simulated=sim is not None)
         io = CycleIO([d.node_id for d in cfg.drives])
@@ -275,14 +333,18 @@ def run_campaign(
         else:
             notes.append("daq.master_heartbeat_ms = 0: the master sends no heartbeat, the "
                          "drives do not watch it")
-        tau_max = cfg.max_torque if cfg.max_torque is not None else (
-            campaign.joint.limits.max_torque)
+        if robot:
+            tau_maxes = [cfg.max_torque if cfg.max_torque is not None else j.limits.max_torque
+                         for j in campaign.joints]
+        else:
+            tau_maxes = [cfg.max_torque if cfg.max_torque is not None else (
+                campaign.joint.limits.max_torque)] * len(drives)
         scalings = [d.start_up(campaign.cycle_s, tau_max, master_id=cfg.master_node_id,
                                consumer_ms=cfg.heartbeat_consumer_ms,
                                sync_period_us=_sync_period_us(cfg, campaign.cycle_s),
                                rpdo_timeout_ms=rpdo_timeout_ms(campaign.cycle_s,
                                                                cfg.clock == "paced"))
-                    for d in drives]
+                    for d, tau_max in zip(drives, tau_maxes, strict=True)]
         if heartbeat is not None:
             heartbeat.beat()  # the drives watch the master from now on, not a period later
         for d in drives:
@@ -299,7 +361,9 @@ def run_campaign(
         ask = prompt or prompt_payload
         for n_done, i in enumerate(todo):
             p = campaign.payloads[i]
-            if sim is not None:
+            if sim is not None and robot:
+                sim.set_payload(p)
+            elif sim is not None:
                 for d in sim.drives:
                     d.set_payload(p.mass_kg, p.arm_m)
             if not yes and (n_done > 0 or sim is None or prompt is not None):
@@ -330,8 +394,8 @@ def run_campaign(
                                             str(getattr(bus, "channel_info", "")), drives),
                          attachments=_attachments(campaign, cfg, simulate),
                          chunk_seconds=cfg.chunk_seconds,
-                         frames_per_cycle=1 + 3 * len(drives))
-            r = engine.run_payload(i, p, plan.reference, log, drive_cycle0)
+                         frames_per_cycle=1 + 3 * len(drives), axis_setpoints=robot)
+            r = engine.run_payload(i, p, plan if robot else plan.reference, log, drive_cycle0)
             runs.append(r)
             if engine.bus_lost:  # nothing can be sent any more: no NMT, no SDO
                 status, reason = r.status, r.reason
