@@ -1,0 +1,62 @@
+"""Small robot campaigns (examples/robots/arm3.toml) for the robot run, plan and demo tests."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+from typing import Any
+
+from sim_drivers.testing import unique_channel
+from trajectories.robot_campaign import RobotCampaign
+
+ROOT = Path(__file__).resolve().parents[1]
+ARM3 = ROOT / "examples" / "robots" / "arm3.toml"
+
+_LIMITS = {
+    "j1": {"position": [-2.8, 2.8], "max_velocity": 1.5, "max_acceleration": 5.0,
+           "max_jerk": 50.0, "max_torque": 250.0},
+    "j2": {"position": [-2.4, -0.3], "max_velocity": 1.2, "max_acceleration": 4.0,
+           "max_jerk": 40.0, "max_torque": 400.0},
+    "j3": {"position": [0.2, 2.6], "max_velocity": 1.5, "max_acceleration": 5.0,
+           "max_jerk": 50.0, "max_torque": 200.0},
+}
+
+
+def arm3_raw(*, buses: tuple[str, str, str] | None = None, cycle_s: float = 0.002,
+             segments: list[dict[str, Any]] | None = None,
+             payloads: list[dict[str, Any]] | None = None, name: str = "arm3-test",
+             daq: dict[str, Any] | None = None) -> dict[str, Any]:
+    """A 3-dof arm campaign as a TOML mapping: j1 and j2 on one bus, j3 on another (unique
+    virtual channels) at 2 ms, a short multi-sine and a trapezoid of j2 under an elbow sweep,
+    payloads 0 kg and 5 kg."""
+    if buses is None:
+        a, b = unique_channel("robot_a"), unique_channel("robot_b")
+        buses = (a, a, b)
+    segments = segments if segments is not None else [
+        {"kind": "multisine", "period_s": 3.0, "periods": 1, "harmonics": 4, "fill": 0.6,
+         "seed": 1},
+        {"kind": "trapezoid", "joint": "j2", "speeds": [0.5], "range": [-1.6, -0.8],
+         "sweep": {"j3": [0.8, 1.6]}, "dwell_s": 0.1},
+    ]
+    return {
+        "name": name,
+        "robot": {
+            "file": str(ARM3), "moving": ["j1", "j2", "j3"], "start": [0.0, -1.2, 1.2],
+            "joints": {n: {"drive": {"node_id": i + 1, "bus": buses[i]},
+                           "limits": copy.deepcopy(_LIMITS[n])}
+                       for i, n in enumerate(("j1", "j2", "j3"))},
+        },
+        "control": {"cycle_s": cycle_s, "gains": {
+            "j1": {"kp": 8000.0, "kd": 300.0}, "j2": {"kp": 15000.0, "kd": 600.0},
+            "j3": {"kp": 6000.0, "kd": 200.0}}},
+        "payloads": payloads if payloads is not None else [
+            {"mass_kg": 0.0},
+            {"mass_kg": 5.0, "com": [0.1, 0.0, 0.0],
+             "inertia": [0.015, 0.0, 0.0, 0.015, 0.0, 0.01]}],
+        "segments": segments,
+        "daq": daq or {},
+    }
+
+
+def arm3_campaign(**kw: Any) -> RobotCampaign:
+    return RobotCampaign.from_dict(arm3_raw(**kw), "arm3-test.toml")
