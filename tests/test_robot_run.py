@@ -74,8 +74,8 @@ def test_log_metadata_names_the_robot_joints_buses_and_payload(robot_run):
         assert [int(md[f"drive{k}"]["node_id"]) for k in range(3)] == [1, 2, 3]
         assert [md[f"drive{k}"]["channel"] for k in range(3)] == buses
         assert float(md["payload"]["mass_kg"]) == pay.mass_kg
-        assert json.loads(md["payload"]["com"]) == list(pay.com)
-        assert json.loads(md["payload"]["inertia"]) == list(pay.inertia)
+        assert json.loads(md["payload"]["com_m"]) == list(pay.com)
+        assert json.loads(md["payload"]["inertia_kgm2"]) == list(pay.inertia)
         # each drive's scaling is its own joint's drive chain (gear 100, 100, 80)
         assert [float(md[f"drive{k}"]["gear_ratio"]) for k in range(3)] == [100.0, 100.0, 80.0]
         assert "arm3.toml" in read_attachments(run.path)

@@ -12,7 +12,7 @@ one simulated arm behind all the drives.
 - :func:`start_arm_sim`: :class:`sim_drivers.arm_bus.ArmOnBus` -- one arm behind k
   simulated CiA 402 drives (real canopen nodes) on the simulated channels of the joints'
   buses, stepping together on SYNC, at the campaign's start pose.
-- :func:`robot_metadata`: the ``robot`` metadata record (robot file, joints, payload).
+- :func:`robot_metadata`: the ``robot`` metadata record (robot file, joints, buses).
 """
 
 from __future__ import annotations
@@ -133,8 +133,9 @@ def start_arm_sim(cfg: DaqConfig, params: ArmParams, campaign: RobotCampaign,
     return ArmRig(arm)
 
 
-def robot_metadata(campaign: RobotCampaign, payload: Any) -> dict[str, str]:
-    """The ``robot`` metadata record of a robot campaign's run log."""
+def robot_metadata(campaign: RobotCampaign) -> dict[str, str]:
+    """The ``robot`` metadata record of a robot campaign's run log (the payload is in the
+    ``payload`` record: ``mass_kg``, ``com_m``, ``inertia_kgm2``)."""
     return {
         "file": robot_file_path(campaign),
         "joints": json.dumps(list(campaign.moving)),
@@ -145,7 +146,4 @@ def robot_metadata(campaign: RobotCampaign, payload: Any) -> dict[str, str]:
         "start": json.dumps(list(campaign.start)),
         "position_limits": json.dumps([list(j.limits.position) for j in campaign.joints]),
         "gains": json.dumps({j.name: {"kp": j.kp, "kd": j.kd} for j in campaign.joints}),
-        "payload_mass_kg": repr(float(payload.mass_kg)),
-        "payload_com": json.dumps([float(x) for x in payload.com]),
-        "payload_inertia": json.dumps([float(x) for x in payload.inertia]),
     }

@@ -115,8 +115,8 @@ def _metadata(campaign: Any, cfg: DaqConfig, plan: Any, index: int, payload: Any
                           "velocity_cutoff_hz": campaign.control.velocity_cutoff_hz}
                  for j in campaign.joints}
         pay = {"index": str(index), "mass_kg": repr(float(payload.mass_kg)),
-               "com": json.dumps([float(x) for x in payload.com]),
-               "inertia": json.dumps([float(x) for x in payload.inertia])}
+               "com_m": json.dumps([float(x) for x in payload.com]),
+               "inertia_kgm2": json.dumps([float(x) for x in payload.inertia])}
     else:
         kind = campaign.joint.kind
         pos = list(campaign.joint.limits.position)
@@ -141,7 +141,7 @@ def _metadata(campaign: Any, cfg: DaqConfig, plan: Any, index: int, payload: Any
     }
     if robot:
         md["campaign"]["kind"] = "robot"
-        md["robot"] = robot_metadata(campaign, payload)
+        md["robot"] = robot_metadata(campaign)
     for k, (d, s) in enumerate(zip(cfg.drives, scalings, strict=True)):
         md[f"drive{k}"] = {"node_id": str(d.node_id), "eds": d.eds.name, "mode": d.mode_name,
                            "channel": d.channel or cfg.channel, **s.as_dict()}
