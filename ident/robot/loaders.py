@@ -291,8 +291,8 @@ def _axis_columns(
     if "q" in numbered:
         idx = sorted(numbered["q"])
         if idx != list(range(1, len(idx) + 1)):
-            raise RobotIdentError(f"{path}: position columns {', '.join(numbered['q'][i] for i in idx)}"
-                                  " are not numbered 1..k")
+            listed = ", ".join(numbered["q"][i] for i in idx)
+            raise RobotIdentError(f"{path}: position columns {listed} are not numbered 1..k")
         if len(idx) != k:
             raise RobotIdentError(
                 f"{path}: {len(idx)} axes in the file (q1..q{len(idx)}), the robot moves {k} "
