@@ -534,11 +534,15 @@ class RobotModel:
         return signals.tau - self.predict(signals)
 
     def rel_error(self, signals: RobotSignals) -> dict[str, float]:
-        """||rho_j|| / ||tau_j|| per joint and ``"all"`` on ``signals`` (Table III, all)."""
+        """||rho_j|| / ||tau_j|| per joint and ``"all"`` on ``signals`` (Table III, all);
+        samples with a non-finite torque (left out of the fit) are ignored."""
         rho = self.residual(signals)
-        out = {n: float(np.linalg.norm(rho[:, j]) / np.linalg.norm(signals.tau[:, j]))
+        ok = np.isfinite(rho)
+        r2 = np.where(ok, rho, 0.0) ** 2
+        y2 = np.where(ok, signals.tau, 0.0) ** 2
+        out = {n: float(np.sqrt(r2[:, j].sum() / y2[:, j].sum()))
                for j, n in enumerate(self.joints_)}
-        out["all"] = float(np.linalg.norm(rho) / np.linalg.norm(signals.tau))
+        out["all"] = float(np.sqrt(r2.sum() / y2.sum()))
         return out
 
     def score(self, signals: RobotSignals) -> float:
