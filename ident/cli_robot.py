@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -33,6 +34,8 @@ from .robot.loaders import (
     preprocess_runs,
     resolved_settings,
 )
+from .robot.plots import write_robot_report
+from .robot.signals import RobotSignals
 
 __all__ = ["run", "fit_robot", "format_report", "FORMAT"]
 
@@ -124,6 +127,10 @@ def fit_robot(
                         "with --map q_ref=PATH, or CSV columns q_ref1..q_refk)")
     if dq_min is None:
         dq_min = 0.01 * float(np.max(np.abs(sig.dq)))
+    if val is not None:
+        # the validation error is taken on the samples the fit would use (as the single-joint
+        # validation design): joint j's torque at |dq_j| <= dq_min is left out (NaN)
+        val = selected(val, dq_min)
     out: dict[str, Any] = {
         "format": FORMAT,
         "robot": {"name": robot.name, "source": robot.source, "moving": list(joints),
@@ -136,7 +143,7 @@ def fit_robot(
         "qs": qs,
         "models": {},
         "_estimators": {},
-        "_signals": (sig, val),
+        "_signals": (selected(sig, dq_min), val),
     }
     for name in models:
         try:
@@ -168,6 +175,13 @@ def fit_robot(
     if not out["_estimators"]:
         raise DataError("; ".join(f"{n} model: {r['error']}" for n, r in out["models"].items()))
     return out
+
+
+def selected(sig: RobotSignals, dq_min: float) -> RobotSignals:
+    """``sig`` with the torque of joint j set to NaN where |dq_j| <= dq_min (the stiction
+    area the estimator leaves out of joint j's equations; non-finite torques are ignored by
+    ``RobotModel.rel_error``)."""
+    return replace(sig, tau=np.where(np.abs(sig.dq) > dq_min, sig.tau, np.nan))
 
 
 def _pct(x: float | None) -> str:
@@ -239,10 +253,11 @@ def run(args: argparse.Namespace) -> int:
     # everything computed: only now write files (a bad input leaves nothing behind)
     print(text)
     if args.report is not None:
-        args.report.mkdir(parents=True, exist_ok=True)
-        (args.report / "tables.txt").write_text(text + "\n", encoding="utf-8")
+        figures = write_robot_report(args.report, out, text)
+        public["figures"] = [str(f) for f in figures]
         write_json(args.report / "fit.json", public)
-        print(f"\nreport: {args.report} (tables.txt, fit.json)")
+        print(f"\nreport: {args.report / 'report.html'} ({len(figures)} figures, tables.txt, "
+              "fit.json)")
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         write_json(args.json, public)

@@ -5,6 +5,7 @@ written here from the arm simulator (sim_drivers.arm), and on the KUKA recording
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ import scipy.io
 from daq.app.cli import main
 from daq.runtime.mcaplog import RunLog
 from ident.api import JointModel, load
+from ident.preprocess import decimate, diffcent, lowpass
 from ident.robot import RobotIdentError
 from ident.robot.estimate import RobotModel
 from ident.robot.loaders import (
@@ -61,9 +63,10 @@ def write_mcap(path: Path, run, joints, *, n_axes: int | None = None) -> Path:
     return path
 
 
-def run_cli(capsys, *argv) -> tuple[int, str, str]:
+def run_cli(capfd, *argv) -> tuple[int, str, str]:
+    """The real entry point; capfd also catches what C libraries write to fd 1/2."""
     code = main(["fit", *map(str, argv)])
-    out, err = capsys.readouterr()
+    out, err = capfd.readouterr()
     return code, out, err
 
 
@@ -100,8 +103,6 @@ def test_csv_numbered_named_and_mcap_give_the_same_signals(tmp_path, arm_runs):
 
 def test_preprocessing_is_the_single_joint_chain_per_axis(tmp_path, arm_runs):
     """Axis j of the n-dof preprocessing equals ident.preprocess on that axis alone."""
-    from ident.preprocess import decimate, diffcent, lowpass
-
     robot, (run, _) = arm_runs
     path = tmp_path / "r.csv"
     run.to_csv(path)
@@ -153,7 +154,7 @@ def test_preprocessed_experiments_keep_their_payloads_and_index(tmp_path, arm_ru
 # -- the CLI ---------------------------------------------------------------------------------
 
 
-def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capsys):
+def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capfd):
     """``jointid fit --robot`` on CSV and MCAP: exit 0, the tables, a JSON equal to the
     estimator run in Python on the same files, and a cross-validation error of the order of
     the fit error (the model generalises to another trajectory)."""
@@ -162,11 +163,18 @@ def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capsys
     run0.to_csv(fit_csv)
     val_mcap = write_mcap(tmp_path / "val.mcap", run1, robot.moving)
     out_json = tmp_path / "out" / "fit.json"
-    code, out, err = run_cli(capsys, "--robot", ARM3, fit_csv, "--model", "usual",
-                             "--method", "ls", "--validate", val_mcap, "--json", out_json)
+    report = tmp_path / "report"
+    code, out, err = run_cli(capfd, "--robot", ARM3, fit_csv, "--model", "usual",
+                             "--method", "ls", "--validate", val_mcap, "--json", out_json,
+                             "--report", report)
     assert code == 0, err
     assert "relative error" in out and "ZZ1" in out
     rec = json.loads(out_json.read_text())
+    figures = json.loads((report / "fit.json").read_text())["figures"]
+    assert sorted(Path(f).name for f in figures) == [
+        f"direct_validation_usual_{j}.png" for j in robot.moving]
+    assert all(Path(f).stat().st_size > 1000 for f in figures)
+    assert "direct_validation_usual_j2.png" in (report / "report.html").read_text()
     assert rec["format"] == "jointid-robot-fit/1"
     assert rec["robot"]["moving"] == list(robot.moving)
     usual = rec["models"]["usual"]
@@ -186,10 +194,13 @@ def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capsys
     assert val["all"] < 2.0 * usual["rel_error"]["all"] + 0.02
 
 
-@pytest.mark.parametrize("case", ["unknown_joint", "axes_mismatch", "missing_torque",
-                                  "missing_file", "bad_urdf", "mcap_axes", "mcap_name",
-                                  "mat_key", "robot_unknown_joint"])
-def test_cli_bad_input_is_one_line_naming_the_file(tmp_path, arm_runs, capsys, case):
+@pytest.mark.parametrize("case", [
+    "unknown_joint", "axes_mismatch", "missing_torque", "missing_file",
+    pytest.param("bad_urdf", marks=pytest.mark.xfail(
+        strict=True, reason="urdfdom prints its parser error on fd 2 before pinocchio raises "
+        "(trajectories.robot.load_robot, ndof helper): two extra lines on stderr")),
+    "mcap_axes", "mcap_name", "mat_key", "robot_unknown_joint"])
+def test_cli_bad_input_is_one_line_naming_the_file(tmp_path, arm_runs, capfd, case):
     robot, (run, _) = arm_runs
     good = tmp_path / "good.csv"
     run.to_csv(good)
@@ -230,25 +241,23 @@ def test_cli_bad_input_is_one_line_naming_the_file(tmp_path, arm_runs, capsys, c
                    header=",".join(cols), comments="", fmt="%.17g")
     out_json = tmp_path / "out.json"
     extra = ["--map", "t=rec.time,q=rec.q,tau=rec.tau"] if case == "mat_key" else []
-    code, out, err = run_cli(capsys, "--robot", robot_file, data, *extra, "--model", "usual",
+    code, out, err = run_cli(capfd, "--robot", robot_file, data, *extra, "--model", "usual",
                              "--json", out_json)
     assert code != 0
     lines = err.strip().splitlines()
     assert len(lines) == 1, err
     assert "Traceback" not in err
-    import re
-
     assert re.search(expect, lines[0]), lines[0]
     assert not out_json.exists()
 
 
-def test_single_joint_fit_options_are_refused_with_robot(tmp_path, arm_runs, capsys):
+def test_single_joint_fit_options_are_refused_with_robot(tmp_path, arm_runs, capfd):
     robot, (run, _) = arm_runs
     p = tmp_path / "r.csv"
     run.to_csv(p)
-    code, _, err = run_cli(capsys, "--robot", ARM3, p, "--gain", "2")
+    code, _, err = run_cli(capfd, "--robot", ARM3, p, "--gain", "2")
     assert code != 0 and "--gain: not used with --robot" in err
-    code, _, err = run_cli(capsys, p, "--method", "wls")  # single joint
+    code, _, err = run_cli(capfd, p, "--method", "wls")  # single joint
     assert code != 0 and "--method: applies to --robot fits only" in err
 
 
@@ -256,12 +265,12 @@ def test_single_joint_fit_options_are_refused_with_robot(tmp_path, arm_runs, cap
 
 
 @pytest.mark.skipif(not KUKA_DATA.is_dir(), reason="../shared/data/kuka_kr300_weigand2021 absent")
-def test_kuka_a3_cross_validation_beats_the_single_joint_fit(tmp_path, capsys):
+def test_kuka_a3_cross_validation_beats_the_single_joint_fit(tmp_path, capfd):
     """Fit on A, cross-validate on B and C: the 6-axis model's A3 error is below the error of
     the single-joint fit of A3 (README's command), both computed here."""
     files = [KUKA_DATA / f"recorded_2020-10-21_FF_{x}_08ms.mat" for x in "ABC"]
     out_json = tmp_path / "kuka.json"
-    code, out, err = run_cli(capsys, "--robot", KUKA, files[0], "--q-unit", "deg",
+    code, out, err = run_cli(capfd, "--robot", KUKA, files[0], "--q-unit", "deg",
                              "--map", KUKA_MAP, "--model", "usual", "--validate", *files[1:],
                              "--json", out_json)
     assert code == 0, err
