@@ -303,6 +303,8 @@ def single_joint_map(base: BaseParameters, regressor: RobotRegressor,
             sign = "-" if c < 0 else "+"
             mag = "" if abs(abs(c) - 1) < 1e-9 else f"{_format(abs(c))}*"
             terms.append(f"{sign} {mag}{base.names[b]}")
-        text = " ".join(terms).removeprefix("+ ").replace("- ", "-", 1) if terms else "0"
+        if terms:
+            terms[0] = terms[0].removeprefix("+ ").replace("- ", "-", 1)
+        text = " ".join(terms) if terms else "0"
         exprs.append(f"{nm} = {text}")
     return SingleJointMap(tuple(names), T, tuple(exprs), res)
