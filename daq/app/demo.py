@@ -32,6 +32,8 @@ from trajectories.campaign_file import load_campaign
 from trajectories.cli import plot_plan
 from trajectories.plan import plan_campaign
 
+from .demo_robot import ROBOT_DEMOS, run_robot_demo
+
 TITLE = "jointid demo: simulated Stäubli RX130L joint 3"
 
 
@@ -236,13 +238,28 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="output folder (default: ./jointid-demo)")
     p.add_argument("--quick", action="store_true",
                    help="a shortened campaign (under a minute on 2 cores)")
-    p.add_argument("--max-steps", type=int, default=3, help="refinement steps (default 3)")
+    p.add_argument("--max-steps", type=int, default=None,
+                   help="refinement steps (default 3; per joint with --robot: 2)")
+    p.add_argument("--robot", nargs="?", const="3", default=None, choices=tuple(ROBOT_DEMOS),
+                   help="a whole robot campaign instead: the 3-dof arm (default, "
+                   "examples/robots/arm3.toml) or 6 for the UR10; plan, run on simulated "
+                   "buses, n-dof fit (usual and paper), Table III and refinement per joint")
     p.set_defaults(func=_demo)
 
 
 def _demo(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
-    result = run_demo(args.out, quick=args.quick, max_steps=args.max_steps,
+    if args.robot is not None:
+        if args.quick:
+            raise DaqError("--quick: expected the single-joint demo (the robot demo is "
+                           "already short)")
+        res = run_robot_demo(args.out, robot=args.robot, stream=sys.stderr,
+                             max_steps=2 if args.max_steps is None else args.max_steps)
+        print(res.summary)
+        print(f"report: {res.report}  ({time.perf_counter() - t0:.0f} s)")
+        return 0
+    result = run_demo(args.out, quick=args.quick,
+                      max_steps=3 if args.max_steps is None else args.max_steps,
                       stream=sys.stderr)
     print(result.summary)
     print(f"report: {result.report}  ({time.perf_counter() - t0:.0f} s)")
