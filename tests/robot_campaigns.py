@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import copy
+import json
+import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -60,3 +62,36 @@ def arm3_raw(*, buses: tuple[str, str, str] | None = None, cycle_s: float = 0.00
 
 def arm3_campaign(**kw: Any) -> RobotCampaign:
     return RobotCampaign.from_dict(arm3_raw(**kw), "arm3-test.toml")
+
+
+def to_toml(raw: dict) -> str:
+    """Minimal TOML writer for the campaign mappings above (tables, arrays, numbers)."""
+    def val(v):
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, str):
+            return json.dumps(v)
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(val(x) for x in v) + "]"
+        if isinstance(v, dict):
+            return "{ " + ", ".join(f"{k} = {val(x)}" for k, x in v.items()) + " }"
+        return repr(v)
+
+    lines = [f"name = {val(raw['name'])}", "[robot]"]
+    r = raw["robot"]
+    for k in ("file", "moving", "start"):
+        lines.append(f"{k} = {val(r[k])}")
+    for n, j in r["joints"].items():
+        lines += [f"[robot.joints.{n}]", f"drive = {val(j['drive'])}",
+                  f"limits = {val(j['limits'])}"]
+    lines += ["[control]", f"cycle_s = {raw['control']['cycle_s']!r}", "[control.gains]"]
+    lines += [f"{n} = {val(g)}" for n, g in raw["control"]["gains"].items()]
+    for p in raw["payloads"]:
+        lines.append("[[payloads]]")
+        lines += [f"{k} = {val(v)}" for k, v in p.items()]
+    for s in raw["segments"]:
+        lines.append("[[segments]]")
+        lines += [f"{k} = {val(v)}" for k, v in s.items()]
+    text = "\n".join(lines) + "\n"
+    assert tomllib.loads(text)["name"] == raw["name"]
+    return text

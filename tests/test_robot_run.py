@@ -7,7 +7,6 @@ import json
 import os
 import subprocess
 import sys
-import tomllib
 
 import numpy as np
 import pytest
@@ -16,7 +15,7 @@ import scipy.signal
 from daq import ConfigError
 from daq.protocol.reader import list_runs, read_attachments, read_run
 from daq.runtime.runner import run_campaign
-from tests.robot_campaigns import ARM3, ROOT, arm3_campaign, arm3_raw
+from tests.robot_campaigns import ARM3, ROOT, arm3_campaign, arm3_raw, to_toml
 from trajectories.excitation import condition_number, quality
 from trajectories.multi import plan_robot_campaign
 from trajectories.robot_model import prepare_robot_campaign
@@ -154,7 +153,7 @@ def test_bus_budget_refuses_before_anything_moves(tmp_path):
 def test_bus_budget_refusal_at_the_cli_is_one_line(tmp_path):
     raw = arm3_raw(buses=("can0", "can0", "can0"), cycle_s=0.001)
     path = tmp_path / "c.toml"
-    path.write_text(_toml(raw))
+    path.write_text(to_toml(raw))
     r = subprocess.run([sys.executable, "-m", "daq.app.cli", "run", str(path), "--simulate",
                         "--out", str(tmp_path / "out"), "-y"], capture_output=True, text=True,
                        timeout=120, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
@@ -211,36 +210,3 @@ def test_example_robot_campaign_is_within_the_bus_budget():
     loads = bus_loads({ch: [pdo_lengths(d.mode) for d in cfg.drives_on(ch)]
                        for ch in cfg.channels}, c.cycle_s, cfg.bitrate)
     assert check_loads(loads, cfg.max_bus_load).share <= cfg.max_bus_load
-
-
-def _toml(raw: dict) -> str:
-    """Minimal TOML writer for the campaign mappings above (tables, arrays, numbers)."""
-    def val(v):
-        if isinstance(v, bool):
-            return "true" if v else "false"
-        if isinstance(v, str):
-            return json.dumps(v)
-        if isinstance(v, (list, tuple)):
-            return "[" + ", ".join(val(x) for x in v) + "]"
-        if isinstance(v, dict):
-            return "{ " + ", ".join(f"{k} = {val(x)}" for k, x in v.items()) + " }"
-        return repr(v)
-
-    lines = [f"name = {val(raw['name'])}", "[robot]"]
-    r = raw["robot"]
-    for k in ("file", "moving", "start"):
-        lines.append(f"{k} = {val(r[k])}")
-    for n, j in r["joints"].items():
-        lines += [f"[robot.joints.{n}]", f"drive = {val(j['drive'])}",
-                  f"limits = {val(j['limits'])}"]
-    lines += ["[control]", f"cycle_s = {raw['control']['cycle_s']!r}", "[control.gains]"]
-    lines += [f"{n} = {val(g)}" for n, g in raw["control"]["gains"].items()]
-    for p in raw["payloads"]:
-        lines.append("[[payloads]]")
-        lines += [f"{k} = {val(v)}" for k, v in p.items()]
-    for s in raw["segments"]:
-        lines.append("[[segments]]")
-        lines += [f"{k} = {val(v)}" for k, v in s.items()]
-    text = "\n".join(lines) + "\n"
-    assert tomllib.loads(text)["name"] == raw["name"]
-    return text
