@@ -210,3 +210,22 @@ def test_example_robot_campaign_is_within_the_bus_budget():
     loads = bus_loads({ch: [pdo_lengths(d.mode) for d in cfg.drives_on(ch)]
                        for ch in cfg.channels}, c.cycle_s, cfg.bitrate)
     assert check_loads(loads, cfg.max_bus_load).share <= cfg.max_bus_load
+
+
+def test_a_fault_on_one_joint_stops_every_drive(tmp_path):
+    """Supervision per drive as for one joint: a following error of one joint (a tight
+    daq.max_following_error) stops the run; every drive ends disabled, the log says which."""
+    from daq.protocol.cia402 import State, state_from_statusword
+
+    c = arm3_campaign(daq={"max_following_error": 0.002})
+    result = run_campaign(c, out_dir=tmp_path, simulate=True, yes=True)
+    assert result.status == "stopped"
+    assert "following error" in result.reason and "node " in result.reason
+    run = result.runs[0]
+    assert len(result.runs) == 1  # the next payload is not run
+    axes = _axes(run.path)
+    faults = [e for e in axes[0].events if e["kind"] == "fault"]
+    assert len(faults) == 1 and faults[0]["axis"] in (0, 1, 2)
+    for a in axes:
+        assert state_from_statusword(int(a.statusword[-1])) is State.SWITCH_ON_DISABLED
+        assert a.metadata["result"]["status"] == "stopped"
