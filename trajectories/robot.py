@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from . import TrajectoryError
+from . import RobotError
 
 __all__ = [
     "RobotError",
@@ -58,10 +58,6 @@ _LOCATOR = "example-robot-data:"
 _DISTRIBUTIONS = ("example-robot-data", "cmeel-example-robot-data")
 _REVOLUTE = {"JointModelRX": (1, 0, 0), "JointModelRY": (0, 1, 0), "JointModelRZ": (0, 0, 1)}
 _PRISMATIC = {"JointModelPX": (1, 0, 0), "JointModelPY": (0, 1, 0), "JointModelPZ": (0, 0, 1)}
-
-
-class RobotError(TrajectoryError, ValueError):
-    """A robot file or description is unusable; the message names the file and element."""
 
 
 # --------------------------------------------------------------------------- dataclasses
