@@ -342,8 +342,8 @@ def load_robot(path: str | Path) -> Robot:
     """
     text_path = str(path)
     if text_path.startswith(_LOCATOR):
-        urdf = example_robot_urdf(text_path[len(_LOCATOR):], text_path)
-        return _from_urdf(urdf, text_path, {}, [], text_path)
+        short = text_path[len(_LOCATOR):]
+        return _from_urdf(example_robot_urdf(short, text_path), short, {}, [], text_path)
     p = Path(path)
     src = str(p)
     if p.suffix.lower() == ".urdf":
