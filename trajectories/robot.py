@@ -300,11 +300,11 @@ def example_robot_urdf(name: str, source: str = "") -> Path:
     RobotError
         Unknown name, or the package (or the file) is not installed.
     """
-    where = f"{source}: " if source else ""
+    where = f"{source}: robot.urdf: " if source else ""
     try:
         rel = EXAMPLE_ROBOTS[name]
     except KeyError:
-        raise RobotError(f"{where}robot.urdf: example robot {name!r}: expected one of "
+        raise RobotError(f"{where}example robot {name!r}: expected one of "
                          f"{sorted(EXAMPLE_ROBOTS)}") from None
     for dist_name in _DISTRIBUTIONS:
         try:
@@ -316,7 +316,7 @@ def example_robot_urdf(name: str, source: str = "") -> Path:
                 p = Path(dist.locate_file(f))
                 if p.is_file():
                     return p
-    raise RobotError(f"{where}robot.urdf: example robot {name!r}: {rel} not found; expected "
+    raise RobotError(f"{where}example robot {name!r}: {rel} not found; expected "
                      f"the PyPI package 'example-robot-data' to be installed")
 
 
