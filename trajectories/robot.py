@@ -1,5 +1,8 @@
 """Robot description: a URDF or an MDH TOML robot file -> :class:`Robot` (pinocchio model).
 
+(Past 600 lines: one file format -- its dataclasses, reader, builders and the checks that name
+each element; split, the format would be scattered.)
+
 File format (docs/robot-format.md, ROBOT_FORMAT): either a URDF (``*.urdf``: every joint moves,
 no drive data) or a TOML file with a ``[robot]`` table and EITHER ``urdf = "..."`` (a path
 relative to the TOML file, or ``"example-robot-data:ur10"`` for the packaged UR10) OR a
