@@ -41,47 +41,73 @@ CONTINUOUS = ("position", "velocity", "acceleration", "load", "time", "reversal"
 SIGNS = ("direction", "quadrant")
 
 
-def reversal_distance(s: Signals) -> np.ndarray:
+def reversal_distance(s: Signals, deadband: float | None = None) -> np.ndarray:
     """Distance travelled since the last reversal of the motion, per experiment.
+
+    A reversal is recognised on the position alone (a play operator): while moving
+    forwards the running maximum is tracked, and the motion has reversed once the position
+    falls ``deadband`` below it (conversely backwards); the distance is then counted from
+    that extreme. Using q and a dead band, not sign(q̇), keeps the variable identical on
+    full-rate and decimated samples and insensitive to velocity noise at low speed and at
+    rest.
 
     Parameters
     ----------
     s : Signals
-        Samples (full rate or decimated and selected; within an experiment in time order).
+        Samples (full rate, or decimated and selected; in time order within an experiment).
+    deadband : float, optional
+        [rad or m]; default 2e-3 x the position range of the samples (at least 1e-9).
 
     Returns
     -------
     ndarray, shape (n,)
-        |q - q_r| [rad or m], q_r the extreme position at the last change of sign(q̇): the
-        smaller of the last position moving backwards and the first moving forwards (and
-        conversely), so that samples removed around the reversal (|q̇| < dq_min) do not
-        shift the origin. Samples before the first reversal count from the first sample.
+        |q - q_r| [rad or m], q_r the position of the last reversal (the first sample of
+        the experiment before the first one).
     """
     q = np.asarray(s.q, dtype=float)
     n = q.shape[0]
     out = np.zeros(n)
     if n == 0:
         return out
-    d = np.sign(s.dq)
+    if deadband is None:
+        deadband = max(2e-3 * float(np.ptp(q)), 1e-9)
     exp = np.asarray(s.experiment)
-    # forward-fill zero velocity with the previous sign (a stop is not a reversal)
-    nz = d != 0
-    idx = np.where(nz, np.arange(n), 0)
-    np.maximum.accumulate(idx, out=idx)
-    d = d[idx]
-    new_seg = np.ones(n, dtype=bool)
-    new_seg[1:] = (d[1:] != d[:-1]) | (exp[1:] != exp[:-1])
-    starts = np.flatnonzero(new_seg)
-    seg = np.cumsum(new_seg) - 1
-    q_start = q[starts].copy()
-    # reversal point: the extreme of (last q of the previous segment, first q of this one)
-    for k in range(1, starts.size):
-        a = starts[k]
-        if exp[a] != exp[a - 1]:
-            continue
-        prev = q[a - 1]
-        q_start[k] = min(prev, q[a]) if d[a] > 0 else max(prev, q[a])
-    return np.abs(q - q_start[seg])
+    cuts = np.flatnonzero(np.diff(exp) != 0) + 1
+    for a, b in zip(np.r_[0, cuts], np.r_[cuts, n], strict=True):
+        out[a:b] = _play_distance(q[a:b].tolist(), float(deadband))
+    return out
+
+
+def _play_distance(q: list[float], db: float) -> np.ndarray:
+    """Distance from the last reversal (dead band ``db``) of one experiment; the samples
+    between an extreme and the recognition of the reversal are counted from the extreme."""
+    out = [0.0] * len(q)
+    if not q:
+        return np.asarray(out)
+    ref = hi = lo = q[0]
+    i_hi = i_lo = 0
+    direction = 0  # +1 forwards, -1 backwards, 0 not yet moving
+    for i, x in enumerate(q):
+        if direction >= 0:
+            if x > hi:
+                hi, i_hi = x, i
+            if hi - x > db:  # reversed: forwards -> backwards at hi
+                ref, direction, lo, i_lo = hi, -1, x, i
+                for k in range(i_hi, i):
+                    out[k] = abs(q[k] - ref)
+            elif direction == 0 and x - ref > db:
+                direction = 1
+        if direction < 0:
+            if x < lo:
+                lo, i_lo = x, i
+            if x - lo > db:  # backwards -> forwards at lo
+                ref, direction, hi, i_hi = lo, 1, x, i
+                for k in range(i_lo, i):
+                    out[k] = abs(q[k] - ref)
+        if direction == 0 and ref - x > db:
+            direction, lo, i_lo = -1, x, i
+        out[i] = abs(x - ref)
+    return np.asarray(out)
 
 
 def continuous_values(
