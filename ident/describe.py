@@ -16,6 +16,8 @@ variables times a modifier. This module
   (Dahl-like pre-sliding)                                   since the last reversal
   ``load_dependent_viscous``          velocity x load_quad. |τ̂_out| q̇
                                       or velocity x load
+  ``quadrant_load_velocity``          velocity x load_quad. [1, exp(-|q̇|/q_s)] sign(P) τ̂_out
+  (the paper's eq. 24)
   ==================================  ====================  ==================================
 
   and names the group by the form when the form removes at least :data:`MATCH_SHARE` of what
@@ -37,7 +39,12 @@ import numpy as np
 from scipy import optimize
 
 from .effects import Effect, Prediction
-from .interaction_effects import LoadViscous, PositionDryFriction, ReversalHysteresis
+from .interaction_effects import (
+    LoadVelocityDryFriction,
+    LoadViscous,
+    PositionDryFriction,
+    ReversalHysteresis,
+)
 from .library_search import Group
 
 #: A named form must remove this share of what the library group removes.
@@ -312,6 +319,26 @@ def describe_group(
         term = LoadViscous(tau_out) if tau_out is not None else None
         tried.append(("load_dependent_viscous", (rss0 - rss) / gain_g,
                       {"p": pars, "s": sent, "t": term}))
+    if group.variables == ("velocity",) and mod == "load_quadrant":
+        lq = values["load"] * values["quadrant"]
+        adq = np.abs(values["velocity"])
+        vmax = float(np.max(adq))
+
+        def make_lv(qs, lq=lq, adq=adq):
+            return np.column_stack((lq, lq * np.exp(-adq / qs)))
+
+        if vmax > 0:
+            rss, qs, c, cov = _fit_form(y, W, Q, make_lv, vmax / 1000, vmax / 2)
+            sd = _sd(cov)
+            pars = {"alpha_P": _p(c[0], 2 * sd[0]), "beta_P": _p(c[1], 2 * sd[1]),
+                    "qs": _p(qs, 2 * sd[2])}
+            sent = (f"the load-dependent dry friction coefficient depends on the velocity "
+                    f"(eq. 24): {c[0]:.3g} ± {2 * sd[0]:.2g} at speed, "
+                    f"{c[0] + c[1]:.3g} near rest, transition q_s = {qs:.3g} ± {2 * sd[2]:.2g}"
+                    f" {unit}")
+            term = LoadVelocityDryFriction(tau_out, qs) if tau_out is not None else None
+            tried.append(("quadrant_load_velocity", (rss0 - rss) / gain_g,
+                          {"p": pars, "s": sent, "t": term}))
     if tried:
         name, share, info = max(tried, key=lambda t: t[1])
         if share >= MATCH_SHARE:

@@ -143,3 +143,43 @@ class LoadViscous(Effect):
 
     def describe(self) -> str:
         return "load-dependent viscous F_V_load |tau_out| dq"
+
+
+class LoadVelocityDryFriction(Effect):
+    """The paper's load- and velocity-dependent dry friction in one term (eq. 24, 26):
+    (alpha_P + beta_P exp(-|q̇|/q_s)) sign(P) τ̂_out — the load-dependent friction
+    coefficient, larger at low velocity. It is what the library finds as "the load-dependent
+    friction coefficient varies with velocity" (velocity x load_quadrant); the refinement
+    otherwise reaches it in two steps (``quadrant_load`` then ``quadrant_load_stribeck``).
+
+    Parameters
+    ----------
+    tau_out : Prediction
+        Load-torque predictor τ̂_out [N m].
+    qs : float
+        Stribeck velocity q_s [rad/s or m/s] (eq. 29); a hyper-parameter.
+    """
+
+    effect = "quadrant_load_velocity"
+    variable = "quadrant"
+    hyper_names = ("qs",)
+
+    def __init__(self, tau_out: Prediction, qs: float, tag: str = "") -> None:
+        super().__init__(tag)
+        if not qs > 0:
+            raise ValueError(f"LoadVelocityDryFriction: qs must be > 0, got {qs}")
+        self.tau_out, self.qs = tau_out, float(qs)
+
+    def with_hyper(self, **values: float) -> LoadVelocityDryFriction:
+        return LoadVelocityDryFriction(self.tau_out, values.get("qs", self.qs), self.tag)
+
+    def names(self) -> tuple[str, ...]:
+        return (self._n("alpha_P"), self._n("beta_P"))
+
+    def columns(self, s: Signals) -> np.ndarray:
+        c = np.sign(s.tau * s.dq) * self.tau_out(s)
+        return np.column_stack((c, c * np.exp(-np.abs(s.dq) / self.qs)))
+
+    def describe(self) -> str:
+        return (f"load- and velocity-dependent dry friction (alpha_P + beta_P "
+                f"exp(-|dq|/{self.qs:.4g})) sign(P) tau_out")

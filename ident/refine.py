@@ -35,6 +35,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from . import DataError
+from .describe import name_torque_lag
 from .diagnose import Diagnosis, diagnose
 from .effects import (
     DirectionalViscous,
@@ -54,6 +55,7 @@ from .effects import (
     variable_values,
 )
 from .models import IdentModel
+from .refine_library import LibraryStep, library_step
 from .signals import Signals
 from .terms import Library, Term
 
@@ -129,12 +131,30 @@ class Step:
     diagnosis: Diagnosis = field(repr=False)
     generic: bool = False
     binned_explained: float = math.nan
+    #: every variable the effect involves (two for an interaction), then its modifier
+    variables: tuple[str, ...] = ()
+    #: named physical effect (``"position_periodic_dry_friction"``, ``"zero_order_hold"``...)
+    #: or None for a library basis described in words
+    named_effect: str | None = None
+    #: one line a mechanical engineer reads
+    structure: str = ""
+    heldout_rel_error_before: float = math.nan
+    heldout_rel_error_after: float = math.nan
+    library: LibraryStep | None = field(default=None, repr=False)
 
     def to_json(self) -> dict[str, Any]:
         """The step as in ``refinement.steps[]`` of the fit JSON."""
+        lib = self.library
         return {
             "effect": self.effect,
             "variable": self.variable,
+            "variables": list(self.variables or (self.variable,)),
+            "named_effect": self.named_effect,
+            "structure": self.structure or self.term.describe(),
+            "heldout_rel_error_before": _num(self.heldout_rel_error_before),
+            "heldout_rel_error_after": _num(self.heldout_rel_error_after),
+            "interactions": [t.to_json() for t in lib.interactions.significant[:10]]
+            if lib is not None else [],
             "description": self.term.describe(),
             "generic": self.generic,
             "parameters": self.parameters,
@@ -167,14 +187,18 @@ class Rejected:
     variable: str
     reason: str
     rel_error_after: float
+    heldout_rel_error_after: float = math.nan
+    variables: tuple[str, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
         return {
             "step": self.step,
             "effect": self.effect,
             "variable": self.variable,
+            "variables": list(self.variables or (self.variable,)),
             "reason": self.reason,
             "rel_error_after": _num(self.rel_error_after),
+            "heldout_rel_error_after": _num(self.heldout_rel_error_after),
         }
 
 
@@ -211,6 +235,9 @@ class Refinement:
     validation_rel_error_initial: float | None
     validation_rel_error_final: float | None
     stop_reason: str
+    #: per step, every structure of the library search with its held-out error and the
+    #: reason it was not selected (see :meth:`ident.library_search.Tried.to_json`)
+    library_tried: list[dict] = field(default_factory=list)
 
     @property
     def terms(self) -> list[Effect]:
@@ -227,6 +254,7 @@ class Refinement:
             "validation_rel_error_initial": _num(self.validation_rel_error_initial),
             "validation_rel_error_final": _num(self.validation_rel_error_final),
             "stop_reason": self.stop_reason,
+            "library_tried": self.library_tried,
             "final_parameters": {
                 n: {
                     "value": float(self.final_model.coef_[n]),
@@ -256,15 +284,24 @@ class Refinement:
         for i, s in enumerate(self.steps, 1):
             out.append("")
             out.append(
-                f"step {i}: residual depends on {s.variable}: the effect explains "
-                f"{100 * s.strength:.1f} % of it (binned on {s.variable}: "
+                f"step {i}: residual depends on {' x '.join(s.variables or (s.variable,))}: "
+                f"the effect explains {100 * s.strength:.1f} % of it (binned on {s.variable}: "
                 f"{100 * s.binned_explained:.1f} %, p={s.p_value:.1e}; leading variable of "
                 f"the diagnosis: {s.leading_variable})"
             )
+            if s.library is not None and s.library.interactions.significant:
+                t = s.library.interactions.significant[0]
+                out.append(
+                    f"  leading interaction test: {t.label} ({t.kind}, "
+                    f"{100 * t.explained:.1f} %, Holm p={t.p_adjusted:.1e}; "
+                    f"{len(s.library.interactions.tests)} tests)"
+                )
             out.append(
-                f"  added {s.effect}: {s.term.describe()}"
+                f"  added {s.named_effect or s.effect}: {s.term.describe()}"
                 + ("  [generic basis: no named effect fitted]" if s.generic else "")
             )
+            if s.structure:
+                out.append(f"    {s.structure}")
             for n, v in s.parameters.items():
                 out.append(f"    {n:<18} = {v['value']:.6g} ± {v['std2']:.2g} (2σ)")
             out.append(
@@ -273,13 +310,30 @@ class Refinement:
                 f"low velocity {_pct(s.low_before)} -> {_pct(s.low_after)}, "
                 f"high velocity {_pct(s.high_before)} -> {_pct(s.high_after)}"
             )
+            if math.isfinite(s.heldout_rel_error_before):
+                out.append(
+                    f"  held-out (blocked CV) {_pct(s.heldout_rel_error_before)} -> "
+                    f"{_pct(s.heldout_rel_error_after)}"
+                )
             if s.validation_rel_error_before is not None:
                 out.append(
                     f"  validation {_pct(s.validation_rel_error_before)} -> "
                     f"{_pct(s.validation_rel_error_after)}"
                 )
         for r in self.rejected:
-            out.append(f"rejected at step {r.step}: {r.effect} ({r.variable}): {r.reason}")
+            v = " x ".join(r.variables or (r.variable,))
+            out.append(f"rejected at step {r.step}: {r.effect} ({v}): {r.reason}")
+        if self.library_tried:
+            out.append("library search (best five structures per step; all in the JSON):")
+            for st in self.library_tried:
+                tried = sorted(st["tried"], key=lambda t: t["heldout_rel_error_after"])
+                for t in tried[:5]:
+                    out.append(
+                        f"  step {st['step']}: {t['structure']} ({t['columns']} columns): "
+                        f"{t['reason']}"
+                    )
+                if len(tried) > 5:
+                    out.append(f"  step {st['step']}: ... and {len(tried) - 5} more structures")
         out.append(f"stopped: {self.stop_reason}")
         out.append("remaining residual:")
         out.append(self.final_diagnosis.format_table())
@@ -622,6 +676,41 @@ def _fit(lib: Library, design: Design, name: str) -> IdentModel:
     return IdentModel(lib, name).fit(design, eliminate=False, drop_unidentifiable=True)
 
 
+def _library_variables(lstep: LibraryStep) -> tuple[str, ...]:
+    """Variables of the selected library group, then its modifier (if any)."""
+    g = lstep.result.selected[0]
+    return g.variables + (() if g.modifier == "none" else (g.modifier,))
+
+
+def _cycle(design: Design) -> float | None:
+    """Raw sampling period of the design's first run [s]."""
+    try:
+        t = design._blocks[0].sub.t
+    except (AttributeError, IndexError):
+        return None
+    return float(np.median(np.diff(t))) if t.shape[0] > 1 else None
+
+
+def _naming(
+    e: Effect,
+    c: _Candidate,
+    lstep: LibraryStep | None,
+    parameters: dict[str, dict[str, float]],
+    design: Design,
+) -> tuple[str | None, str]:
+    """Named effect and one-line structure of an accepted candidate."""
+    if lstep is not None and lstep.candidate is not None and (
+        e is lstep.candidate or e.effect == lstep.candidate.effect
+    ) and lstep.description is not None:
+        return lstep.description.name, lstep.description.sentence
+    if isinstance(e, TorqueLag):
+        key = next((k for k in parameters if k.startswith("T_lag")), None)
+        if key is not None:
+            return name_torque_lag(parameters[key]["value"], parameters[key]["std2"],
+                                   _cycle(design))
+    return (None if c.generic else e.effect), e.describe()
+
+
 # ------------------------------------------------------------------------ the loop
 def refine(
     design: Design,
@@ -635,6 +724,7 @@ def refine(
     min_gain: float = 0.05,
     max_tries: int = 2,
     generic_knots: int = 12,
+    library: bool = True,
 ) -> Refinement:
     """Refine a declared model by adding the effects its residual points to.
 
@@ -663,6 +753,10 @@ def refine(
         Candidates tried per step, best first, before giving up.
     generic_knots : int
         Knots of a generic basis expansion.
+    library : bool
+        Also run the interaction diagnosis and the library search
+        (:mod:`ident.refine_library`) and require every candidate to lower the held-out
+        (blocked cross-validation) error.
 
     Returns
     -------
@@ -684,6 +778,8 @@ def refine(
     val_initial = val_err
     steps: list[Step] = []
     rejected: list[Rejected] = []
+    library_tried: list[dict] = []
+    lib_variables: dict[int, tuple[str, ...]] = {}
     stop = f"step limit ({max_steps}) reached"
     s = cur_design.signals
     diag = None
@@ -693,7 +789,21 @@ def refine(
         diag = diagnose(r, s, Y=cur_design.Y, tau_out=tau_out, alpha=alpha)
         kept = [cur_design.names.index(n) for n in cur.names_]
         scorer = _Scorer(cur_design.W[:, kept], r)
-        cands = _candidates(_Columns(s, scorer), diag, lib, cur.coef_, alpha, generic_knots)
+        cols = _Columns(s, scorer)
+        cands = _candidates(cols, diag, lib, cur.coef_, alpha, generic_knots)
+        lstep = None
+        if library:
+            lstep = library_step(cur_design.Y, cur_design.W[:, kept], s, r, tau_out=tau_out,
+                                 reference=cur.coef_, min_gain=min_gain, alpha=alpha)
+            library_tried.append({"step": k, "tried": lstep.rejected_json()})
+            if lstep.candidate is not None:
+                e = lstep.candidate
+                tag = _unique_tag(e.names(), set(lib.names()))
+                if tag:
+                    e = e.with_tag(tag)
+                lc = _Candidate(e, cols.gain(e), lstep.n_hyper, lstep.generic)
+                lib_variables[id(e)] = _library_variables(lstep)
+                cands.append(lc)
         n_cand = max(len(cands), 1)
         before_bands = _bands(cur, cur_design, vmax)
         p_cur = len(cur.names_)
@@ -709,6 +819,9 @@ def refine(
 
         named = sorted((c for c in cands if not c.generic), key=lambda c: -c.gain)
         generic = sorted((c for c in cands if c.generic), key=lambda c: -c.gain)
+        if lstep is not None:
+            # generic bases and the library basis compete on the held-out error
+            generic.sort(key=lambda c: lstep.heldout(c.effect.columns(s)))
         short = [c for c in named if pretest(c) is None][:max_tries]
         top_generic = [c for c in generic if pretest(c) is None][:1]
         # the generic basis only competes when it could win the exact comparison
@@ -777,6 +890,18 @@ def refine(
                         f"less than {100 * min_gain:g} % better overall and "
                         f"{200 * min_gain:g} % in the low- and high-velocity bands"
                     )
+            h1 = math.nan
+            if lstep is not None:
+                h0 = lstep.heldout_before
+                h1 = lstep.heldout(d1.W[:, [d1.names.index(n) for n in m1.names_
+                                            if n in e.names()]])
+                need = h0 * (1 - min_gain) if c.generic else h0
+                if reason is None and not h1 < need:
+                    reason = (
+                        f"held-out error {_pct(h0)} -> {_pct(h1)}"
+                        + (f": a basis must lower it by {100 * min_gain:g} %" if c.generic
+                           else ": not lowered")
+                    )
             v1 = val1 = None
             if reason is None and cur_val is not None:
                 val1 = cur_val.with_term(e)
@@ -784,28 +909,34 @@ def refine(
                 if not v1 < val_err:
                     reason = f"validation error not lowered ({_pct(val_err)} -> {_pct(v1)})"
             if reason is not None:
-                rejected.append(Rejected(k, e.effect, e.variable, reason, m1.rel_error_))
+                rejected.append(Rejected(k, e.effect, e.variable, reason, m1.rel_error_, h1,
+                                         lib_variables.get(id(e), ())))
                 say(f"step {k}: {e.effect} rejected: {reason}")
                 continue
-            accepted = (c, d1, m1, F, pval, v1, val1)
+            accepted = (c, d1, m1, F, pval, v1, val1, h1)
             break
         if accepted is None:
             stop = "no candidate effect passed the tests"
             break
-        c, d1, m1, F, pval, v1, val1 = accepted
+        c, d1, m1, F, pval, v1, val1, h1 = accepted
         e = c.effect
-        dep = diag.get(e.variable)
+        try:
+            dep = diag.get(e.variable)
+        except KeyError:  # a variable of the interaction diagnosis only (reversal)
+            dep = None
         after_bands = _bands(m1, d1, vmax)
+        parameters = _effect_parameters(e, m1, d1, m1.coef_)
+        named, structure = _naming(e, c, lstep, parameters, cur_design)
         step = Step(
             variable=e.variable,
             strength=1.0 - float(m1.residual_ @ m1.residual_) / rss0 if rss0 > 0 else 0.0,
-            binned_explained=dep.explained,
-            statistic=dep.statistic,
-            p_value=dep.p_value,
+            binned_explained=dep.explained if dep is not None else math.nan,
+            statistic=dep.statistic if dep is not None else math.nan,
+            p_value=dep.p_value if dep is not None else math.nan,
             leading_variable=diag.table[0].variable,
             effect=e.effect,
             term=e,
-            parameters=_effect_parameters(e, m1, d1, m1.coef_),
+            parameters=parameters,
             f_statistic=F,
             f_p_value=pval,
             rel_error_before=cur.rel_error_,
@@ -818,6 +949,12 @@ def refine(
             validation_rel_error_after=v1,
             diagnosis=diag,
             generic=c.generic,
+            variables=lib_variables.get(id(e), (e.variable,)),
+            named_effect=named,
+            structure=structure,
+            heldout_rel_error_before=lstep.heldout_before if lstep is not None else math.nan,
+            heldout_rel_error_after=h1,
+            library=lstep,
         )
         steps.append(step)
         say(
@@ -844,4 +981,5 @@ def refine(
         validation_rel_error_initial=val_initial,
         validation_rel_error_final=val_err,
         stop_reason=stop,
+        library_tried=library_tried,
     )
