@@ -45,7 +45,7 @@ from .interaction_effects import (
     PositionDryFriction,
     ReversalHysteresis,
 )
-from .library_search import Group
+from .library_search import FoldGram, Group
 
 #: A named form must remove this share of what the library group removes.
 MATCH_SHARE = 0.9
@@ -128,7 +128,7 @@ def _fit_form(
     """
     h = None
     if lo is not None and hi is not None:
-        grid = np.geomspace(lo, hi, 60)
+        grid = np.geomspace(lo, hi, 40)
         rss = np.array([_rss_with(y, Q, make(g)) for g in grid])
         i = int(np.argmin(rss))
         a, b = math.log(grid[max(i - 1, 0)]), math.log(grid[min(i + 1, grid.size - 1)])
@@ -223,6 +223,8 @@ def describe_group(
     *,
     reference: Mapping[str, float] | None = None,
     tau_out: Prediction | None = None,
+    folds: np.ndarray | None = None,
+    min_gain: float = 0.05,
 ) -> Description:
     """Name (with parameters ± 2σ) or describe a selected group.
 
@@ -240,17 +242,44 @@ def describe_group(
         Variable arrays on the samples (as for the search).
     tau_out : Prediction, optional
         Load predictor, for the term of ``load_dependent_viscous``.
+    folds : ndarray of int, shape (n,), optional
+        Cross-validation folds of the samples: the shares are then ratios of held-out sums of
+        squares (a form with fewer parameters is not penalised for the noise the basis fits).
+    min_gain : float
+        With folds, a named form is also taken when the basis does not lower its held-out
+        error by this share (the library search's own selection rule).
     reference : mapping, optional
         Current model coefficients; ``F_C`` (Coulomb) scales the "±x %" of a dry-friction
         variation.
     """
     reference = reference or {}
+    # the named forms are scanned on at most ~8000 samples (regular stride)
+    stride = max(1, math.ceil(y.shape[0] / 8000))
+    if stride > 1:
+        y, W = y[::stride], W[::stride]
+        values = {k: np.asarray(v)[::stride] for k, v in values.items()}
+        folds = None if folds is None else folds[::stride]
+    fg = FoldGram(W, y, folds) if folds is not None else None
     norms = np.linalg.norm(W, axis=0)
     Q, _ = np.linalg.qr(W / np.where(norms > 0, norms, 1.0))
     r0 = y - Q @ (Q.T @ y)
     rss0 = float(r0 @ r0)
     rss_g = _rss_with(y, Q, group.columns(values))
     gain_g = max(rss0 - rss_g, 1e-300)
+    if fg is not None:
+        yy = float(y @ y)
+        cv0 = fg.cv()[0] ** 2 * yy
+        cv_g = fg.cv(group.columns(values))[0]
+        cv_gain_g = max(cv0 - cv_g**2 * yy, 1e-300)
+
+    def share(rss: float, C: np.ndarray) -> float:
+        """Share of the group's gain a named form (columns C) reaches; at least
+        MATCH_SHARE when the basis is not min_gain better on held-out data."""
+        if fg is None:
+            return (rss0 - rss) / gain_g
+        cv_n = fg.cv(C)[0]
+        sh = (cv0 - cv_n**2 * yy) / cv_gain_g
+        return max(sh, MATCH_SHARE) if cv_g >= cv_n * (1 - min_gain) else sh
     grids, f = profile(group, coef)
     var, mod = group.variables[0], group.modifier
     what = _WHAT.get(mod, "the torque")
@@ -288,7 +317,7 @@ def describe_group(
             sent = (f"{what} varies periodically with {var}: period {P:.4g} ± {2 * sd[2]:.2g} "
                     f"{unit}, amplitude {amp:.3g} ± {amp2:.2g} N m{rel(amp)}")
             term = PositionDryFriction(P) if name == "position_periodic_dry_friction" else None
-            tried.append((name, (rss0 - rss) / gain_g, {"p": pars, "s": sent, "t": term}))
+            tried.append((name, share(rss, make_sin(P)), {"p": pars, "s": sent, "t": term}))
     if group.variables == ("reversal",) and mod == "direction" and sgn is not None:
         s_rev = values["reversal"]
         span = float(np.quantile(s_rev, 0.995))
@@ -304,7 +333,7 @@ def describe_group(
                     f"{abs(c[0]):.3g} ± {2 * sd[0]:.2g} N m "
                     f"{'below' if c[0] < 0 else 'above'} its sliding value and converges "
                     f"over {L:.3g} ± {2 * sd[1]:.2g} rad of travel (Dahl-like pre-sliding)")
-            tried.append(("reversal_hysteresis", (rss0 - rss) / gain_g,
+            tried.append(("reversal_hysteresis", share(rss, make_exp(L)),
                           {"p": pars, "s": sent, "t": ReversalHysteresis(L)}))
     if "velocity" in group.variables and (
         (group.variables == ("velocity",) and mod == "load_quadrant")
@@ -317,7 +346,7 @@ def describe_group(
         sent = (f"viscous friction grows with the load: F_V_load |tau_out| dq with F_V_load = "
                 f"{c[0]:.3g} ± {2 * sd[0]:.2g} 1/(rad/s)")
         term = LoadViscous(tau_out) if tau_out is not None else None
-        tried.append(("load_dependent_viscous", (rss0 - rss) / gain_g,
+        tried.append(("load_dependent_viscous", share(rss, C),
                       {"p": pars, "s": sent, "t": term}))
     if group.variables == ("velocity",) and mod == "load_quadrant":
         lq = values["load"] * values["quadrant"]
@@ -337,7 +366,7 @@ def describe_group(
                     f"{c[0] + c[1]:.3g} near rest, transition q_s = {qs:.3g} ± {2 * sd[2]:.2g}"
                     f" {unit}")
             term = LoadVelocityDryFriction(tau_out, qs) if tau_out is not None else None
-            tried.append(("quadrant_load_velocity", (rss0 - rss) / gain_g,
+            tried.append(("quadrant_load_velocity", share(rss, make_lv(qs)),
                           {"p": pars, "s": sent, "t": term}))
     if tried:
         name, share, info = max(tried, key=lambda t: t[1])
@@ -368,8 +397,13 @@ def describe_group(
                     f"[{x[0]:.3g}, {x[-1]:.3g}] {unit}{rel(amp)}")
     else:
         a, b = group.variables
+        ones = dict(values)
+        for m_ in ("direction", "quadrant", "load"):
+            ones[m_] = np.ones_like(values[a])
+        fs = group.columns(ones) @ coef  # on the samples: no corner of the grid never visited
+        lo_, hi_ = np.quantile(fs, [0.005, 0.995])
         sent = (f"{what} varies with {a} and {b} jointly (interaction): ±"
-                f"{0.5 * float(np.ptp(f)):.3g} N m over the range")
+                f"{0.5 * float(hi_ - lo_):.3g} N m over the samples")
     if math.isfinite(best_share):
         sent += f" (no named form fits: best explains {100 * best_share:.0f} % of it)"
     return Description(None, sent, {}, best_share, grids, f, group.key)

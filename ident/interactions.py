@@ -262,7 +262,7 @@ def binned_f(
     return ss_b / ss_tot, float(F), float(stats.f.sf(F, d1, d2)), kb
 
 
-def _remove_main_effects(r: np.ndarray, i1: np.ndarray, i2: np.ndarray, iters: int = 3):
+def _remove_main_effects(r: np.ndarray, i1: np.ndarray, i2: np.ndarray, iters: int = 2):
     """Residual minus additive bin means of two variables (backfitting)."""
     out = r - r.mean()
     for _ in range(iters):

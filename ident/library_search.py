@@ -4,17 +4,19 @@ the *held-out* error of the current model?
 A PySINDy-style candidate library, organised in groups (one group = one physical structure,
 kept or dropped as a whole):
 
-* one variable x (position, velocity, acceleration, load, time, reversal distance, or any
-  "other" variable such as another joint's position) expanded in a piecewise-linear basis
-  B(x) = [1, x, max(x - k_j, 0)] (knots k_j uniform over the 0.5-99.5 % range, uniform in
-  log(1 + x/x0) for the reversal distance, whose structure sits near 0), at 6, 12 or 24
-  knots (the resolution is chosen by the held-out error like everything else);
+* one variable x (position, velocity, load, time, reversal distance, or any "other"
+  variable such as another joint's position) expanded in hat functions (degree-1 B-splines)
+  on knots uniform over the 0.5-99.5 % range (uniform in log(1 + x/x0) for the reversal
+  distance, whose structure sits near 0), at 6, 12 or 24 knots (the resolution is chosen by
+  the held-out error like everything else). Hats have local support: a hat a training fold
+  never visits gets a zero weight instead of extrapolating;
 * times a modifier m: 1, sign(q̇) (``direction``), sign(P) (``quadrant``, eq. 26),
   τ̂_out (``load``) or τ̂_out sign(P) = |τ̂_out| sign(q̇) (``load_quadrant``, eq. 19);
 * two variables: the tensor product B(x) ⊗ B(y) (5 knots each), times 1 or sign(q̇).
 
-Columns that lie in the span of the current regressor (a constant next to τ_off, sign(q̇)
-next to F_C, q̇ next to F_V) are dropped from the group.
+Columns that make the group collinear with the current regressor (the hats sum to 1, which
+is τ_off's column; times sign(q̇) they sum to F_C's) are dropped from the group, one at a
+time, until [W | group] has full rank.
 
 Selection is grouped forward selection scored by blocked cross-validation: the samples are
 cut into contiguous time blocks (several seconds each; 6 blocks per fold, interleaved over 5
@@ -59,8 +61,16 @@ MODIFIERS = ("none", "direction", "quadrant", "load", "load_quadrant")
 PAIR_MODIFIERS = ("none", "direction")
 #: Knots per one-variable basis (the held-out error chooses).
 KNOTS = (6, 12, 24)
+#: Time is expanded at the coarsest resolution only: a physical drift (warm-up, temperature)
+#: is slow, and a fine time basis stands in for anything locked to the trajectory when every
+#: run replays the same excitation (a position effect seen through q(t)).
+TIME_KNOTS = "coarsest of KNOTS"
 #: Knots per axis of a tensor basis.
 KNOTS_2D = 5
+#: A group's columns projected off the current regressor must keep a condition number below
+#: 1 / PRUNE_TOL; the design's columns are filtered at full rate and the search's are computed
+#: on decimated signals, so a dependency (hats summing to the Coulomb column) is only near-exact.
+PRUNE_TOL = 1e-3
 #: Short names for parameter names.
 _ABBR = {"position": "q", "velocity": "dq", "acceleration": "ddq", "load": "ld", "time": "t",
          "reversal": "rv", "none": "", "direction": "s", "quadrant": "P", "load_quadrant": "LP"}
@@ -69,9 +79,9 @@ _ABBR = {"position": "q", "velocity": "dq", "acceleration": "ddq", "load": "ld",
 # ----------------------------------------------------------------------------- bases
 @dataclass(frozen=True)
 class Basis:
-    """Piecewise-linear basis of one variable: [1, x, max(u - k_j, 0)], u = x or
-    log(1 + x / x0) (``log=True``), k_j the ``knots - 2`` interior points of a uniform grid in u
-    over [lo, hi]; x is clipped to [lo, hi].
+    """Hat functions (degree-1 B-splines) of one variable on ``knots`` knots uniform in u over
+    [lo, hi], u = x or log(1 + (x - lo) / x0) (``log=True``, x0 = (hi - lo)/100); x is clipped
+    to [lo, hi]. The hats sum to 1 and span the piecewise-linear functions on the knots.
     """
 
     lo: float
@@ -86,16 +96,17 @@ class Basis:
             return np.log1p((x - self.lo) / x0)
         return x
 
-    def interior(self) -> np.ndarray:
+    def grid(self) -> np.ndarray:
+        """Knots in u, shape (knots,)."""
         ends = self._u(np.array([self.lo, self.hi]))
-        return np.linspace(ends[0], ends[1], self.knots)[1:-1]
+        return np.linspace(ends[0], ends[1], self.knots)
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """Columns, shape (n, knots)."""
-        x = np.asarray(x, dtype=float)
-        u = self._u(x)
-        H = np.maximum(u[:, None] - self.interior()[None, :], 0.0)
-        return np.column_stack((np.ones_like(u), np.clip(x, self.lo, self.hi), H))
+        u = self._u(np.asarray(x, dtype=float))
+        g = self.grid()
+        h = g[1] - g[0]
+        return np.maximum(1.0 - np.abs(u[:, None] - g[None, :]) / h, 0.0)
 
     @property
     def size(self) -> int:
@@ -186,7 +197,11 @@ def signal_values(
 
 
 def prune(group: Group, values: Mapping[str, np.ndarray], Q: np.ndarray | None) -> Group | None:
-    """Drop the raw columns of ``group`` that lie (nearly) in span(Q) or are constant zero.
+    """Drop raw columns of ``group`` until [Q | group] has full rank.
+
+    Empty columns go first; then, while the columns projected off span(Q) have a (nearly)
+    null direction, the column that weighs most in it is dropped (the hats sum to 1, the
+    offset's column; times sign(q̇) to the Coulomb column).
 
     Parameters
     ----------
@@ -195,15 +210,19 @@ def prune(group: Group, values: Mapping[str, np.ndarray], Q: np.ndarray | None) 
     """
     C = group.raw(values)
     norms = np.linalg.norm(C, axis=0)
-    keep = []
-    for j in range(C.shape[1]):
-        if norms[j] <= 1e-12 * max(float(norms.max()), 1e-300):
-            continue
-        c = C[:, j] / norms[j]
-        if Q is not None and Q.size:
-            c = c - Q @ (Q.T @ c)
-        if float(c @ c) > 1e-8:
-            keep.append(j)
+    keep = [j for j in range(C.shape[1]) if norms[j] > 1e-9 * max(float(norms.max()), 1e-300)]
+    if not keep:
+        return None
+    Cn = C[:, keep] / norms[keep]
+    if Q is not None and Q.size:
+        Cn = Cn - Q @ (Q.T @ Cn)
+    while keep:
+        _, sv, Vt = np.linalg.svd(Cn, full_matrices=False)
+        if sv[-1] > PRUNE_TOL * max(float(sv[0]), 1e-300):
+            break
+        j = int(np.argmax(np.abs(Vt[-1])))
+        del keep[j]
+        Cn = np.delete(Cn, j, axis=1)
     if not keep:
         return None
     return Group(group.variables, group.modifier, group.bases, tuple(keep))
@@ -244,6 +263,8 @@ def build_library(
                           ("load", "load_quadrant")):
                 continue
             for k in knots:
+                if v == "time" and k > min(knots):
+                    continue  # see TIME_KNOTS
                 b = make_basis(v, values[v], k)
                 if b is None:
                     continue
@@ -286,7 +307,7 @@ def time_folds(experiment: np.ndarray, n_folds: int = 5, chunks_per_fold: int = 
 class FoldGram:
     """Per-fold Gram matrices of a base design [W | y] and cheap CV of W + extra columns."""
 
-    def __init__(self, W: np.ndarray, y: np.ndarray, folds: np.ndarray, ridge: float = 1e-7):
+    def __init__(self, W: np.ndarray, y: np.ndarray, folds: np.ndarray, ridge: float = 1e-5):
         self.folds = folds
         self.k = int(folds.max()) + 1
         self.idx = [np.flatnonzero(folds == f) for f in range(self.k)]
@@ -375,7 +396,8 @@ class SearchResult:
     tried : list of Tried
         Every group scored, per round (the best resolution of each structure per round).
     cv_path, fit_path : list of float
-        Held-out and in-sample relative errors: W alone, then after each selection.
+        Held-out and in-sample relative errors (on the scoring samples): W alone, then after
+        each selection.
     folds : ndarray
         Fold of every sample.
     """
@@ -406,7 +428,7 @@ def search(
     *,
     max_groups: int = 3,
     min_gain: float = 0.02,
-    max_samples: int = 20000,
+    max_samples: int = 8000,
 ) -> SearchResult:
     """Grouped forward selection by held-out error.
 
@@ -443,8 +465,9 @@ def search(
     base_W = W[sl]
     fg = FoldGram(base_W, y[sl], folds[sl])
     cv0, _ = fg.cv()
-    fit0, _ = _fit_rel(W, y)
+    fit0, _ = _fit_rel(W[sl], y[sl])
     cv_path, fit_path = [cv0], [fit0]
+    ys = y[sl]
     selected: list[Group] = []
     tried: list[Tried] = []
     remaining = list(groups)
@@ -463,9 +486,9 @@ def search(
         ranked = sorted(best.values(), key=lambda t: t[0])
         cv_b, g_b = ranked[0]
         ok = cv_b < cv_path[-1] * (1 - min_gain)
-        S = [W] + [g.columns(values) for g in selected]
+        S = [base_W] + [cols[id(g)] for g in selected]
         for cv, g in ranked:
-            fit, _ = _fit_rel(np.column_stack(S + [g.columns(values)]), y) if g is g_b else (
+            fit, _ = _fit_rel(np.column_stack(S + [cols[id(g)]]), ys) if g is g_b else (
                 math.nan, None)
             t = Tried(g, rnd, cv_path[-1], cv, fit)
             if g is g_b and ok:
@@ -484,7 +507,7 @@ def search(
         if not ok:
             break
         selected.append(g_b)
-        fit, _ = _fit_rel(np.column_stack(S + [g_b.columns(values)]), y)
+        fit, _ = _fit_rel(np.column_stack(S + [cols[id(g_b)]]), ys)
         cv_path.append(cv_b)
         fit_path.append(fit)
         C_new = cols[id(g_b)]
@@ -551,5 +574,5 @@ class LibraryTerm(Effect):
         g = self.group
         k = "x".join(str(b.knots) for b in g.bases)
         mod = "" if g.modifier == "none" else f" x {g.modifier}"
-        return (f"library basis in {' x '.join(g.variables)}{mod}: {g.size} piecewise-linear "
-                f"columns ({k} knots)")
+        return (f"library basis in {' x '.join(g.variables)}{mod}: {g.size} hat functions "
+                f"({k} knots)")

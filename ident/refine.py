@@ -36,7 +36,7 @@ from scipy import optimize, stats
 
 from . import DataError
 from .describe import name_torque_lag
-from .diagnose import Diagnosis, diagnose
+from .diagnose import Diagnosis, diagnose, effective_n
 from .effects import (
     DirectionalViscous,
     Effect,
@@ -383,6 +383,18 @@ class _Scorer:
         z = (V[:, keep].T @ b) / np.sqrt(w[keep])
         return float(min(z @ z, self.rss))
 
+    def n_eff_after(self, C: np.ndarray) -> float:
+        """Effective sample size of the residual once C is fitted too: the noise that is
+        left, not the structure C explains, sets the autocorrelation of the F test."""
+        C = np.asarray(C, dtype=float)
+        if C.ndim == 1:
+            C = C[:, None]
+        if not np.all(np.isfinite(C)):
+            return effective_n(self.r)
+        Cp = C - self.Q @ (self.Q.T @ C)
+        beta, *_ = np.linalg.lstsq(Cp, self.r, rcond=None)
+        return effective_n(self.r - Cp @ beta)
+
 
 @dataclass
 class _Candidate:
@@ -390,6 +402,7 @@ class _Candidate:
     gain: float
     n_hyper: int
     generic: bool = False
+    n_eff: float = 0.0  # effective sample size after the candidate (0: unknown)
 
 
 def _unscaled(design: Design) -> Signals:
@@ -407,9 +420,23 @@ class _Columns:
 
     def __init__(self, s: Signals, scorer: _Scorer) -> None:
         self.scorer, self.s = scorer, s
+        self._fast: _Columns | None = None
 
     def gain(self, e: Effect) -> float:
         return self.scorer.gain(e.columns(self.s))
+
+    @property
+    def fast(self) -> _Columns:
+        """The same scorer on at most ~8000 samples (regular stride), for hyper-parameter
+        scans; the gain of the chosen value is then computed on every sample."""
+        n = len(self.s)
+        if n <= 12000:
+            return self
+        if self._fast is None:
+            st = math.ceil(n / 8000)
+            sub = slice(None, None, st)
+            self._fast = _Columns(self.s.take(sub), _Scorer(self.scorer.Q[sub], self.scorer.r[sub]))
+        return self._fast
 
 
 def _refine_1d(
@@ -440,13 +467,15 @@ def _scan_log(
 ) -> tuple[Effect, float]:
     """Best hyper-parameter: log grid, then a bounded 1-D search between the grid
     neighbours of the best point."""
+    fast = cols.fast
     grid = np.geomspace(lo, hi, n)
-    gains = np.array([cols.gain(make(h)) for h in grid])
+    gains = np.array([fast.gain(make(h)) for h in grid])
     i = int(np.argmax(gains))
     a, b = math.log(grid[max(i - 1, 0)]), math.log(grid[min(i + 1, n - 1)])
-    return _refine_1d(
-        cols, lambda lh: make(math.exp(lh)), a, b, math.log(grid[i]), float(gains[i]), 1e-4
+    e, g = _refine_1d(
+        fast, lambda lh: make(math.exp(lh)), a, b, math.log(grid[i]), float(gains[i]), 1e-4
     )
+    return (e, g) if fast is cols else (e, cols.gain(e))
 
 
 def _scan_period(cols: _Columns, p0: float, span: float, tag: str) -> tuple[Effect, float]:
@@ -454,13 +483,15 @@ def _scan_period(cols: _Columns, p0: float, span: float, tag: str) -> tuple[Effe
     p0, then a bounded search (frequency resolution ~1e-7 f0)."""
     f0, df = 1 / p0, 1.5 / span
     lo, hi = max(f0 - df, 0.5 * f0), f0 + df
+    fast = cols.fast
     fgrid = np.linspace(lo, hi, 31)
-    gains = np.array([cols.gain(PositionRipple(1 / f, tag)) for f in fgrid])
+    gains = np.array([fast.gain(PositionRipple(1 / f, tag)) for f in fgrid])
     i = int(np.argmax(gains))
     a, b = fgrid[max(i - 1, 0)], fgrid[min(i + 1, len(fgrid) - 1)]
-    return _refine_1d(
-        cols, lambda f: PositionRipple(1 / f, tag), a, b, fgrid[i], float(gains[i]), 1e-7 * f0
+    e, g = _refine_1d(
+        fast, lambda f: PositionRipple(1 / f, tag), a, b, fgrid[i], float(gains[i]), 1e-7 * f0
     )
+    return (e, g) if fast is cols else (e, cols.gain(e))
 
 
 def _unique_tag(effect_cls_names: tuple[str, ...], existing: set[str]) -> str:
@@ -592,7 +623,7 @@ def _pretest(
 ) -> str | None:
     """Acceptance tests predicted from the scoring gain; the reason of a failure or None."""
     k_fast = len(c.effect.names()) + c.n_hyper
-    F0, p0 = _f_test(rss0, rss0 - c.gain, k_fast, p, n, n_eff)
+    F0, p0 = _f_test(rss0, rss0 - c.gain, k_fast, p, n, max(n_eff, c.n_eff))
     rel_fast = rel * math.sqrt(max(rss0 - c.gain, 0.0) / rss0) if rss0 > 0 else rel
     if p0 >= level:
         return f"F test not significant (F={F0:.3g}, p={p0:.2e})"
@@ -795,7 +826,7 @@ def refine(
         if library:
             lstep = library_step(cur_design.Y, cur_design.W[:, kept], s, r, tau_out=tau_out,
                                  reference=cur.coef_, min_gain=min_gain, alpha=alpha)
-            library_tried.append({"step": k, "tried": lstep.rejected_json()})
+            library_tried.append({"step": k, "tried": lstep.tried_json()})
             if lstep.candidate is not None:
                 e = lstep.candidate
                 tag = _unique_tag(e.names(), set(lib.names()))
@@ -812,7 +843,14 @@ def refine(
         # 1. pre-test on the scoring columns (no full-rate rebuild for hopeless candidates)
         ctx = (rss0, p_cur, len(cur_design), diag.n_eff, cur.rel_error_, alpha / n_cand,
                min_gain / 3)
-        why_not = {id(c): _pretest(c, *ctx) for c in cands}
+        why_not = {}
+        for c in cands:
+            why = _pretest(c, *ctx)
+            if why is not None and why.startswith("F test") and c.gain > 0:
+                # the F test uses the noise left after the candidate, not the structure it fits
+                c.n_eff = scorer.n_eff_after(c.effect.columns(s))
+                why = _pretest(c, *ctx)
+            why_not[id(c)] = why
 
         def pretest(c: _Candidate, _w=why_not) -> str | None:
             return _w[id(c)]
@@ -821,9 +859,10 @@ def refine(
         generic = sorted((c for c in cands if c.generic), key=lambda c: -c.gain)
         if lstep is not None:
             # generic bases and the library basis compete on the held-out error
-            generic.sort(key=lambda c: lstep.heldout(c.effect.columns(s)))
+            s_cv = s.take(slice(None, None, lstep.stride))
+            generic.sort(key=lambda c: lstep.heldout(c.effect.columns(s_cv), strided=True))
         short = [c for c in named if pretest(c) is None][:max_tries]
-        top_generic = [c for c in generic if pretest(c) is None][:1]
+        top_generic = [c for c in generic if pretest(c) is None][:1 if lstep is None else 2]
         # the generic basis only competes when it could win the exact comparison
         if top_generic and (
             not short or short[0].gain < top_generic[0].gain * GENERIC_MARGIN * 1.5
@@ -834,34 +873,44 @@ def refine(
                 why = pretest(c) or "not better than the others"
                 rejected.append(Rejected(k, c.effect.effect, c.effect.variable, why, math.nan))
                 say(f"step {k}: {c.effect.effect} rejected: {why}")
-        # 2. exact refits of the short list (columns filtered and decimated like the others)
-        built = []
-        for c in short:
-            e = c.effect
-            try:
-                d1 = cur_design.with_term(e)
-                m1 = _fit(Library(*lib.terms(), e), d1, name)
-            except DataError as exc:
-                rejected.append(Rejected(k, e.effect, e.variable, f"not fitted: {exc}", math.nan))
-                continue
-            built.append((rss0 - float(m1.residual_ @ m1.residual_), c, d1, m1))
-        best_named = max((g for g, c, *_ in built if not c.generic), default=0.0)
-        best_generic = max((g for g, c, *_ in built if c.generic), default=0.0)
+        # 2. order the short list by the scoring gains (columns on the decimated signals match
+        # the exact ones closely); named effects are preferred unless a basis removes clearly
+        # more; the generic bases keep their held-out order
+        best_named = max((c.gain for c in short if not c.generic), default=0.0)
+        best_generic = max((c.gain for c in short if c.generic), default=0.0)
         prefer_generic = best_generic > 0 and best_named < GENERIC_MARGIN * best_generic
-        built.sort(key=lambda b: (not (b[1].generic and prefer_generic), -b[0]))
-        if not prefer_generic:
-            built = [b for b in built if not b[1].generic] + [b for b in built if b[1].generic]
+        named_first = sorted((c for c in short if not c.generic), key=lambda c: -c.gain)
+        generic_first = [c for c in short if c.generic]
+        order = generic_first + named_first if prefer_generic else named_first + generic_first
         say(
             f"step {k}: short list "
             + ", ".join(
-                f"{c.effect.effect} {_pct(cur.rel_error_ * math.sqrt(max(1 - g / rss0, 0)))}"
-                for g, c, *_ in built
+                f"{c.effect.effect} {_pct(cur.rel_error_ * math.sqrt(max(1 - c.gain / rss0, 0)))}"
+                for c in order
             )
         )
-        # 3. acceptance tests, best first
+
+        def exact_refits(order=order, lib=lib, cur_design=cur_design, k=k):
+            """Exact refits (columns filtered and decimated like the others), on demand."""
+            for c in order:
+                e = c.effect
+                try:
+                    d1 = cur_design.with_term(e)
+                    m1 = _fit(Library(*lib.terms(), e), d1, name)
+                except DataError as exc:
+                    rejected.append(Rejected(k, e.effect, e.variable, f"not fitted: {exc}",
+                                             math.nan))
+                    continue
+                yield c, d1, m1
+
+        # 3. acceptance tests, best first; with validation data, the bases that pass (at
+        # most two) are compared on the validation error, which neither was fitted on
         accepted = None
-        for _g, c, d1, m1 in built:
+        pending: list[tuple] = []
+        for c, d1, m1 in exact_refits():
             e = c.effect
+            if pending and not c.generic:
+                break
             kk = sum(1 for n in e.names() if n in m1.coef_) + c.n_hyper
             F, pval = _f_test(
                 rss0,
@@ -869,7 +918,7 @@ def refine(
                 max(kk, 1),
                 p_cur,
                 len(cur_design),
-                diag.n_eff,
+                max(diag.n_eff, effective_n(m1.residual_)),
             )
             reason = None
             if pval >= alpha / n_cand:
@@ -914,7 +963,21 @@ def refine(
                 say(f"step {k}: {e.effect} rejected: {reason}")
                 continue
             accepted = (c, d1, m1, F, pval, v1, val1, h1)
+            if c.generic and cur_val is not None:
+                pending.append(accepted)
+                accepted = None
+                if len(pending) < 2:
+                    continue
             break
+        if pending:
+            accepted = min(pending, key=lambda a: a[5])
+            for a in pending:
+                if a is not accepted:
+                    rejected.append(Rejected(
+                        k, a[0].effect.effect, a[0].effect.variable,
+                        f"validation error {_pct(a[5])} above {accepted[0].effect.effect}'s "
+                        f"{_pct(accepted[5])}", a[2].rel_error_, a[7],
+                        lib_variables.get(id(a[0].effect), ())))
         if accepted is None:
             stop = "no candidate effect passed the tests"
             break

@@ -45,7 +45,7 @@ from .library_search import (
 from .signals import Signals
 
 #: Samples used by the library search and the held-out scores (regular stride above it).
-MAX_SAMPLES = 20000
+MAX_SAMPLES = 8000
 
 
 @dataclass
@@ -83,16 +83,22 @@ class LibraryStep:
         """Held-out relative error of the current model (blocked CV)."""
         return self.result.cv_path[0] if self.result is not None else self._fg.cv()[0]
 
-    def heldout(self, C: np.ndarray) -> float:
-        """Held-out relative error of the current model plus columns ``C`` (n, k), computed
-        on the same folds."""
+    @property
+    def stride(self) -> int:
+        """Stride of the samples the held-out errors are computed on."""
+        return self._stride
+
+    def heldout(self, C: np.ndarray, strided: bool = False) -> float:
+        """Held-out relative error of the current model plus columns ``C`` (n, k) — or
+        (n / stride, k) already taken every ``stride`` samples — on the same folds."""
         C = np.asarray(C, dtype=float)
         if C.ndim == 1:
             C = C[:, None]
-        return self._fg.cv(C[:: self._stride])[0]
+        return self._fg.cv(C if strided else C[:: self._stride])[0]
 
-    def rejected_json(self) -> list[dict]:
-        return [t.to_json() for t in (self.result.rejected() if self.result else [])]
+    def tried_json(self) -> list[dict]:
+        """Every structure scored, selected or not, with its held-out error and reason."""
+        return [t.to_json() for t in (self.result.tried if self.result else [])]
 
 
 def library_step(
@@ -138,10 +144,13 @@ def library_step(
     values = continuous_values(s, tau_out, others)
     values.update(sign_values(s))
     folds = time_folds(s.experiment)
-    sub = {k: v[::stride] for k, v in values.items()}
     Ws = W[::stride]
-    norms = np.linalg.norm(Ws, axis=0)
-    Q, _ = np.linalg.qr(Ws / np.where(norms > 0, norms, 1.0))
+    # the rank test of the groups' columns needs few samples
+    ps = max(1, math.ceil(n / 3000))
+    sub = {k: v[::ps] for k, v in values.items()}
+    Wp = W[::ps]
+    norms = np.linalg.norm(Wp, axis=0)
+    Q, _ = np.linalg.qr(Wp / np.where(norms > 0, norms, 1.0))
     variables = list(LIBRARY_VARIABLES) + list(others or {})
     groups = build_library(sub, variables, Q=Q)
     res = search(y, W, values, groups, folds, max_groups=1, min_gain=min_gain,
@@ -151,7 +160,8 @@ def library_step(
     generic, n_hyper = True, 0
     if res.selected:
         g, c = res.selected[0], res.coef[0]
-        desc = describe_group(g, c, y, W, values, reference=reference, tau_out=tau_out)
+        desc = describe_group(g, c, y, W, values, reference=reference, tau_out=tau_out,
+                              folds=folds, min_gain=min_gain)
         if desc.term is not None:
             cand, generic, n_hyper = desc.term, False, len(desc.term.hyper_names)
         elif all(v in LIBRARY_VARIABLES for v in g.variables):
