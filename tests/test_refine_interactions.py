@@ -26,6 +26,7 @@ import functools
 
 import numpy as np
 import pytest
+from test_refine_sim import SETTINGS, _campaign, _plan, _usual_plant
 
 from daq.control import ControllerGains
 from ident.interaction_effects import LoadViscous, PositionDryFriction, ReversalHysteresis
@@ -36,7 +37,6 @@ from ident.signals import Signals
 from ident.terms import Term
 from sim_drivers.offline import simulate
 from sim_drivers.plant import output_torque
-from test_refine_sim import SETTINGS, _campaign, _plan, _usual_plant
 
 F_C = 18.0
 
