@@ -15,11 +15,12 @@ canopen master -> python-can virtual bus -> simulated CiA 402 drive + plant -> M
   deadline (p50/p99/max) and missed cycles (SYNC more than half a period late); the C
   reference loop (``c_paced_loop.c``, compiled here with gcc) runs at the same time for as
   many cycles, so both see the same host stalls; same criterion.
-- MCAP: messages/s written by :class:`daq.mcaplog.RunLog` with the runner's per-cycle mix
+- MCAP: messages/s written by :class:`daq.runtime.mcaplog.RunLog` with the
+  runner's per-cycle mix
   (one state, one setpoint, one CAN batch of 4 frames), and the logging time per cycle as a
   share of the lockstep all-in CPU time per cycle.
 - master loss (``--safety-repeat``): a simulated drive in CST OPERATION ENABLED watching the
-  master's heartbeat (:class:`daq.master.MasterHeartbeat`, 100 ms, consumer 400 ms) or SYNC
+  master's heartbeat (:class:`daq.runtime.master.MasterHeartbeat`, 100 ms, consumer 400 ms) or SYNC
   (0x1006 = 1000 us); the master stops both; time from the last heartbeat / SYNC the drive
   received to its FAULT, against the configured time, in ms and in 1 kHz cycles (the drive
   applies its last torque during that time, and runs no cycle since no SYNC comes).
@@ -42,8 +43,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from daq.mcaplog import FRAME, RunLog  # noqa: E402
-from daq.runner import run_campaign  # noqa: E402
+from daq.protocol.logformat import FRAME  # noqa: E402
+from daq.runtime.mcaplog import RunLog  # noqa: E402
+from daq.runtime.runner import run_campaign  # noqa: E402
 from sim_drivers.plant_config import default_plant  # noqa: E402
 from trajectories.campaign import Campaign  # noqa: E402
 
@@ -140,8 +142,8 @@ def mcap_rate(cycles: int, tmp: Path) -> tuple[float, float]:
 def master_loss(repeat: int) -> dict[str, list[float]]:
     """Delays [s] from the last heartbeat / SYNC received to the drive's FAULT, and the
     configured timeouts [s]."""
-    from daq.cia402 import State, path
-    from daq.master import MasterHeartbeat
+    from daq.protocol.cia402 import State, path
+    from daq.runtime.master import MasterHeartbeat
     from sim_drivers.testing import LockstepMaster, make_rig
 
     node = 9

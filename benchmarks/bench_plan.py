@@ -14,7 +14,7 @@ import numpy as np
 import ruckig
 from daq.examples import path as example_path
 
-from daq.campaign_file import load_campaign
+from trajectories.campaign_file import load_campaign
 from trajectories.plan import plan_campaign
 
 

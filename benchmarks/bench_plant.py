@@ -16,7 +16,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from daq.control import ControllerGains
+from daq.protocol.control import ControllerGains
 from sim_drivers.offline import simulate
 from sim_drivers.plant import JointPlant
 from sim_drivers.plant_config import default_plant

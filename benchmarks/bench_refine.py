@@ -25,7 +25,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from daq.control import ControllerGains  # noqa: E402
+from daq.protocol.control import ControllerGains  # noqa: E402
 from ident.models import IdentModel, usual_model  # noqa: E402
 from ident.preprocess import build_design  # noqa: E402
 from ident.refine import refine  # noqa: E402

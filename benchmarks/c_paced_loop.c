@@ -3,7 +3,7 @@
  * Usage: c_paced_loop PERIOD_US CYCLES
  * Prints one line: "cycles=N missed=M p50_us=.. p99_us=.. max_us=.."
  * A wake-up later than half a period is a missed deadline (the criterion the Python paced
- * clock uses); after a whole period of delay the schedule is re-anchored, as in daq.runner. */
+ * clock uses); after a whole period of delay the schedule is re-anchored, as in daq.runtime.runner. */
 #define _GNU_SOURCE
 #include <stdio.h>
 #include <stdlib.h>

@@ -1,4 +1,6 @@
-"""jointid data acquisition: CANopen master, campaign runner, MCAP logs, and the CLI.
+"""jointid data acquisition: protocol (:mod:`daq.protocol`), runtime (:mod:`daq.runtime`:
+CANopen master, campaign runner, MCAP writer) and the application (:mod:`daq.app`: the
+``jointid`` command line and the demo). This module holds only the version and exceptions.
 
 Exception tree: every error this package raises on purpose derives from :class:`DaqError`.
 """

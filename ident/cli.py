@@ -14,6 +14,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from .report import write_json
+from .report_build import build_report
+
 __all__ = ["register", "run"]
 
 
@@ -175,9 +178,6 @@ def run(args: argparse.Namespace) -> int:
     if args.refine:
         ref, out["refinement"] = _refine(report, args.max_steps)
     if args.report is not None:
-        from daq.report import write_json
-        from daq.report_build import build_report
-
         from .plots import write_plots
         from .refine_plots import plot_refinement
 

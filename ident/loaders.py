@@ -39,6 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
+from daq.protocol.reader import read_run
+
 from . import DataError
 from .signals import Signals
 
@@ -541,10 +543,8 @@ def _longest_true_run(mask: np.ndarray) -> slice:
 
 def _load_mcap(path: Path, revolute: bool | None, axis: int) -> Experiment:
     """One MCAP run, restricted to the cycles an identification can use: the drive in
-    OPERATION ENABLED with its TPDOs received (:attr:`daq.reader.RunArrays.valid`); during
-    enable, quick stop and shutdown the drive ignores the torque reference."""
-    from daq.reader import read_run
-
+    OPERATION ENABLED with its TPDOs received (:attr:`daq.protocol.reader.RunArrays.valid`);
+    during enable, quick stop and shutdown the drive ignores the torque reference."""
     run = read_run(path, axis=axis)
     keep = _longest_true_run(run.valid)
     inner_dropped = int(np.count_nonzero(run.valid)) - (keep.stop - keep.start)

@@ -15,8 +15,8 @@ What canopen's ``LocalNode`` does not do and this class adds (``/work/shared/not
   the drive applies the latched RPDOs, steps the plant one cycle and sends the synchronous
   TPDOs (type n in 1-240: every n-th SYNC; 0: every SYNC); event TPDOs (254/255) are sent when
   their content changed (after a SYNC cycle or an SDO/RPDO write).
-- CiA 402: the state machine of :mod:`daq.cia402` driven by 0x6040 (SDO or RPDO), 0x6041 with
-  bit 12 set in OPERATION ENABLED in a cyclic mode and bit 13 on a CSP following error,
+- CiA 402: the state machine of :mod:`daq.protocol.cia402` driven by 0x6040 (SDO or RPDO),
+  0x6041 with bit 12 set in OPERATION ENABLED in a cyclic mode and bit 13 on a CSP following error,
   0x6060/0x6061 restricted to the modes 0x6502 advertises (abort 0x06090030 otherwise).
 
 Modes and units
@@ -78,6 +78,12 @@ Losing the master
   one wake-up per timeout, none while nothing is armed); on the hot path a SYNC costs one
   ``time.monotonic()`` and an uncontended lock.
 
+Code layout: this module holds :class:`SimulatedDrive` (construction, object dictionary,
+life cycle, SDO server, SYNC entry, record); the protocol parts are mixins in
+:mod:`sim_drivers.nmt` (NMT slave, heartbeat consumer, SYNC watchdog), :mod:`sim_drivers.pdo`
+(mapping checks, layouts, RPDO/TPDO) and :mod:`sim_drivers.device402` (CiA 402 state machine,
+faults, the drive cycle); fault codes and the fault injector are :mod:`sim_drivers.faults`.
+
 Threading: every bus callback (SDO, NMT, RPDO, SYNC) runs in the drive network's notifier
 thread, so they are serialised, and serialised with the watchdog thread by a lock; the
 heartbeat producer is python-can's periodic-send task.
@@ -87,8 +93,6 @@ from __future__ import annotations
 
 import logging
 import math
-import operator
-import struct
 import threading
 import time
 from collections.abc import Callable
@@ -100,43 +104,27 @@ import canopen
 import numpy as np
 from canopen.sdo.exceptions import SdoAbortedError
 
-from daq.cia402 import (
-    CYCLIC_MODES,
-    Mode,
-    State,
-    automatic_transition,
-    next_state,
-    statusword,
-)
+from daq.protocol.cia402 import Mode, State
 from sim_drivers import SimError
-from sim_drivers.faults import (
-    EXCESS_TORQUE,
-    FOLLOWING_ERROR,
-    HEARTBEAT_LOST,
-    PDO_LENGTH_ERROR,
-    PLANT_FAULT,
-    POSITION_LIMIT,
-    SYNC_LOST,
-    FaultInjector,
-    error_register,
+from sim_drivers.device402 import Device402Mixin
+from sim_drivers.faults import FaultInjector
+from sim_drivers.nmt import (
+    NMT_INITIALISING,
+    NMT_OPERATIONAL,
+    NMT_STATE_NAMES,
+    NMT_STOPPED,
+    SYNC_LOSS_FLOOR_S,
+    SYNC_LOSS_PERIODS,
+    HbConsumer,
+    NmtMixin,
 )
-from sim_drivers.od import STRUCT_CODE, DriveConfigError, DriveOD, load_drive_od, struct_code
+from sim_drivers.od import DriveOD, load_drive_od
+from sim_drivers.pdo import PdoMixin, RxPdo, TxPdo
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["DriveError", "SimulatedDrive", "open_virtual_bus", "NMT_STATE_NAMES"]
-
-# NMT states (heartbeat byte values).
-NMT_INITIALISING = 0
-NMT_STOPPED = 4
-NMT_OPERATIONAL = 5
-NMT_PRE_OPERATIONAL = 127
-NMT_STATE_NAMES = {
-    NMT_INITIALISING: "INITIALISING",
-    NMT_STOPPED: "STOPPED",
-    NMT_OPERATIONAL: "OPERATIONAL",
-    NMT_PRE_OPERATIONAL: "PRE-OPERATIONAL",
-}
+__all__ = ["DriveError", "SimulatedDrive", "open_virtual_bus", "NMT_STATE_NAMES",
+           "SYNC_LOSS_FLOOR_S", "SYNC_LOSS_PERIODS"]
 
 # Objects the drive keeps as attributes: served live over SDO, written by SDO or RPDO,
 # packed into TPDOs. (index, subindex) -> attribute name.
@@ -185,13 +173,7 @@ _PARAM_ATTRS = {
     "position_limit_max": 0,
 }
 
-_PDO_NOT_VALID = 0x80000000
 _RECORD_CHUNK = 65536
-_QS_DONE_SPEED = 1e-3  # [rad/s]
-_CSV_INTEGRAL_RATE = 2.0 * math.pi * 3.0  # CSV loop: ki = kd * this [1/s]
-SYNC_LOSS_PERIODS = 3  # SYNC watchdog: timeout in periods of 0x1006
-SYNC_LOSS_FLOOR_S = 0.1  # SYNC watchdog: shortest timeout [s] (host stalls, see docstring)
-_WD_IDLE_S = 0.5  # watchdog thread: re-check period while nothing is armed [s]
 
 _RECORD_FIELDS: tuple[tuple[str, Any], ...] = (
     ("cycle", np.int64),  # drive cycle index
@@ -216,85 +198,7 @@ def open_virtual_bus(channel: str) -> can.BusABC:
     return can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
 
 
-def _wrap_i32(x: int) -> int:
-    return ((x + 0x80000000) & 0xFFFFFFFF) - 0x80000000
-
-
-def _clip(x: int, lo: int, hi: int) -> int:
-    return lo if x < lo else hi if x > hi else x
-
-
-class _HbConsumer:
-    """One entry of 0x1016: the heartbeat of ``node`` watched with ``time_s`` [s]."""
-
-    __slots__ = ("sub", "node", "time_s", "last", "active", "timed_out", "received", "cb")
-
-    def __init__(self, sub: int, node: int, time_s: float) -> None:
-        self.sub = sub
-        self.node = node
-        self.time_s = time_s
-        self.last = 0.0  # time.monotonic() of the last heartbeat [s]
-        self.active = False  # a heartbeat was received since the entry was set
-        self.timed_out = False
-        self.received = 0
-        self.cb: Callable | None = None
-
-
-class _RxPdo:
-    __slots__ = ("cob_id", "sync", "struct", "names", "latched", "number", "handler")
-
-    def __init__(self, number: int, cob_id: int, sync: bool, st: struct.Struct, names: tuple):
-        self.number = number
-        self.cob_id = cob_id
-        self.sync = sync
-        self.struct = st
-        self.names = names
-        self.latched: bytes | None = None
-        self.handler: Callable | None = None
-
-
-class _TxPdo:
-    __slots__ = ("cob_id", "every", "count", "struct", "getter", "single", "last", "number")
-
-    def __init__(
-        self, number: int, cob_id: int, every: int, st: struct.Struct, names: tuple[str, ...]
-    ):
-        self.number = number
-        self.cob_id = cob_id
-        self.every = every  # 0: event driven
-        self.count = 0
-        self.struct = st
-        self.getter = operator.attrgetter(*names) if names else (lambda obj: ())
-        self.single = len(names) == 1
-        self.last: bytes | None = None
-
-    def payload(self, drive: SimulatedDrive) -> bytes:
-        values = self.getter(drive)
-        try:
-            return self.struct.pack(values) if self.single else self.struct.pack(*values)
-        except struct.error:  # a value outside its mapped type: saturate, like a drive
-            values = (values,) if self.single else values
-            return self.struct.pack(*_saturate(self.struct.format, values))
-
-
-_INT_RANGES = {
-    "b": (-0x80, 0x7F), "B": (0, 0xFF), "h": (-0x8000, 0x7FFF), "H": (0, 0xFFFF),
-    "i": (-0x80000000, 0x7FFFFFFF), "I": (0, 0xFFFFFFFF),
-    "q": (-(1 << 63), (1 << 63) - 1), "Q": (0, (1 << 64) - 1),
-}
-
-
-def _saturate(fmt: str, values: tuple) -> list:
-    """Clip integer values to the ranges of their struct codes (padding codes skipped)."""
-    codes = [c for c in fmt.lstrip("<") if not c.isdigit() and c != "x"]
-    out = []
-    for code, v in zip(codes, values, strict=True):
-        rng = _INT_RANGES.get(code)
-        out.append(_clip(int(v), *rng) if rng else v)
-    return out
-
-
-class SimulatedDrive:
+class SimulatedDrive(NmtMixin, PdoMixin, Device402Mixin):
     """One CiA 402 joint drive on a CAN bus, simulating its joint with a plant.
 
     Parameters
@@ -402,10 +306,10 @@ class SimulatedDrive:
         self._heartbeat_stopped = False
         self._layout_dirty = False
         self._sync_cob = 0x80
-        self._rx: list[_RxPdo] = []
-        self._rx_sync: list[_RxPdo] = []
-        self._tx_sync: list[_TxPdo] = []
-        self._tx_event: list[_TxPdo] = []
+        self._rx: list[RxPdo] = []
+        self._rx_sync: list[RxPdo] = []
+        self._tx_sync: list[TxPdo] = []
+        self._tx_event: list[TxPdo] = []
         self._extra_names: dict[tuple[int, int], str] = {}
         self._live = {k: v for k, v in _LIVE.items() if self._has(*k)}
         self.rx_length_errors = 0
@@ -417,7 +321,7 @@ class SimulatedDrive:
         self._started = False
         # master-loss watchdogs (heartbeat consumer 0x1016, SYNC loss per 0x1006)
         self._lock = threading.RLock()
-        self._consumers: dict[int, _HbConsumer] = {}
+        self._consumers: dict[int, HbConsumer] = {}
         self.sync_loss_floor_s = float(sync_loss_floor_s)
         self._sync_timeout_s = 0.0
         self._last_sync = 0.0  # time.monotonic() of the last SYNC received [s]
@@ -510,15 +414,6 @@ class SimulatedDrive:
         self._last_eval: tuple | None = None
 
     # ------------------------------------------------------------------ life cycle
-    @property
-    def state(self) -> State:
-        """CiA 402 state of the drive."""
-        return self.cia_state
-
-    @property
-    def nmt_state(self) -> str:
-        """NMT state name (``"PRE-OPERATIONAL"``, ``"OPERATIONAL"``, ``"STOPPED"``, ...)."""
-        return NMT_STATE_NAMES[self.nmt]
 
     def start(self) -> None:
         """Attach to the bus, send boot-up, enter PRE-OPERATIONAL and start the heartbeat."""
@@ -581,74 +476,7 @@ class SimulatedDrive:
         except (KeyError, ValueError):
             pass
 
-    def _boot(self) -> None:
-        """Initialisation -> boot-up frame -> PRE-OPERATIONAL, heartbeat per 0x1017."""
-        self._set_nmt(NMT_INITIALISING)
-        self._resubscribe_sync()
-        self.network.send_message(0x700 + self.node_id, b"\x00")
-        self._set_nmt(NMT_PRE_OPERATIONAL)
-        self._load_watchdogs()
-        hb = int(self._stored(0x1017, 0) or 0) if self._has(0x1017, 0) else 0
-        self._heartbeat_stopped = False
-        self.node.nmt.start_heartbeat(hb)
-
-    def _reset_state_machine(self) -> None:
-        """Power-on of the CiA 402 side: transitions 0 and 1 to SWITCH ON DISABLED."""
-        self._last_eval = None
-        self.cia_state = State.NOT_READY_TO_SWITCH_ON
-        self.cia_state, _ = automatic_transition(self.cia_state, "self_test_done")
-        self._update_statusword()
-
-    def _set_nmt(self, state: int) -> None:
-        was = self.nmt
-        self.nmt = state
-        if state != was:
-            self._wd_wake.set()  # the SYNC watchdog is armed in OPERATIONAL only
-        self.node.nmt._state = state
-        if state == NMT_OPERATIONAL and was != NMT_OPERATIONAL:
-            self._build_layouts()
-        elif state != NMT_OPERATIONAL and was == NMT_OPERATIONAL:
-            self._unsubscribe_pdos()
-        if not self._heartbeat_stopped:
-            self.node.nmt.update_heartbeat()
-
-    def _reset(self, application: bool) -> None:
-        self.node.nmt.stop_heartbeat()
-        self._unsubscribe_pdos()
-        store = self.node.data_store
-        for index in list(store):
-            if application or 0x1000 <= index <= 0x1FFF:
-                del store[index]
-        if application:
-            for name in self._extra_names.values():
-                self.__dict__.pop(name, None)
-            self._extra_names.clear()
-            self.error_code = 0
-            self.error_register = 0
-            self._internal_limit = self._following_error = False
-            self._load_application()
-            self._reset_state_machine()
-        self._boot()
-
-    # ------------------------------------------------------------------ NMT / SDO handlers
-    def _on_nmt(self, can_id: int, data: bytes, timestamp: float) -> None:
-        if len(data) < 2 or data[1] not in (0, self.node_id):
-            return
-        with self._lock:
-            self._nmt_command(data[0])
-
-    def _nmt_command(self, cmd: int) -> None:
-        if cmd == 0x01 and self.nmt in (NMT_PRE_OPERATIONAL, NMT_STOPPED):
-            self._set_nmt(NMT_OPERATIONAL)
-        elif cmd == 0x02:
-            self._set_nmt(NMT_STOPPED)
-        elif cmd == 0x80:
-            self._set_nmt(NMT_PRE_OPERATIONAL)
-        elif cmd == 0x81:
-            self._reset(application=True)
-        elif cmd == 0x82:
-            self._reset(application=False)
-
+    # ------------------------------------------------------------------ SDO handlers
     def _on_sdo_request(self, can_id: int, data: bytes, timestamp: float) -> None:
         if self.nmt == NMT_STOPPED:
             return  # no SDO in STOPPED
@@ -702,267 +530,6 @@ class SimulatedDrive:
         else:
             raise SdoAbortedError(0x06010002)  # computed by the drive: read only
 
-    def _check_pdo_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
-        """Validate a write to a PDO communication (14xx/18xx) or mapping (16xx/1Axx) object."""
-        is_map = 0x1600 <= index <= 0x17FF or 0x1A00 <= index <= 0x1BFF
-        comm = index - 0x200 if is_map else index
-        cob = self._stored(comm, 1) if self._has(comm, 1) else _PDO_NOT_VALID
-        enabled = not (int(cob) & _PDO_NOT_VALID)
-        value = od.decode_raw(data)
-        if not is_map:
-            if subindex == 1 and enabled and not value & _PDO_NOT_VALID:
-                if (value ^ int(cob)) & 0x1FFFFFFF:
-                    raise SdoAbortedError(0x06090030)  # COB-ID change of a valid PDO
-            if subindex == 2 and not (value <= 240 or value >= 252):
-                raise SdoAbortedError(0x06090030)
-            return
-        if enabled:
-            raise SdoAbortedError(0x08000022)  # mapping change while the PDO is valid
-        receive = index < 0x1A00
-        if subindex == 0:
-            obj = self.dod.od[index]
-            slots = max((s for s in getattr(obj, "subindices", ()) if s > 0), default=0)
-            if isinstance(obj, canopen.objectdictionary.ODArray):
-                slots = max(slots, int(obj[0].default or 0))
-            if value > slots or value > 64:
-                raise SdoAbortedError(0x06090031)
-            bits = 0
-            for s in range(1, value + 1):
-                entry = int(self._stored(index, s) or 0)
-                if entry >> 16:
-                    self._check_entry(entry, receive)
-                bits += entry & 0xFF
-            if bits > 64:
-                raise SdoAbortedError(0x06040042)
-            return
-        if int(self._stored(index, 0) or 0) != 0:
-            raise SdoAbortedError(0x08000022)  # entries only while sub 0 is 0
-        if value >> 16:
-            self._check_entry(value, receive)
-
-    def _check_entry(self, entry: int, receive: bool) -> None:
-        index, subindex, bits = entry >> 16, (entry >> 8) & 0xFF, entry & 0xFF
-        if 1 <= index <= 7:  # dummy entries: data type sizes
-            if bits % 8:
-                raise SdoAbortedError(0x06040041)
-            return
-        if not self._has(index, subindex):
-            raise SdoAbortedError(0x06020000)
-        var = self._var(index, subindex)
-        if not var.pdo_mappable or var.data_type not in _STRUCT_TYPES:
-            raise SdoAbortedError(0x06040041)
-        if receive and not var.writable or not receive and not var.readable:
-            raise SdoAbortedError(0x06040041)
-        if bits != len(var):
-            raise SdoAbortedError(0x06040041)
-        if bits > 64:
-            raise SdoAbortedError(0x06040042)
-
-    # ------------------------------------------------------------------ PDO layouts
-    def _resubscribe_sync(self) -> None:
-        self._safe_unsubscribe(self._sync_cob, self._on_sync)
-        cob = self._stored(0x1005, 0) if self._has(0x1005, 0) else 0x80
-        self._sync_cob = int(cob if cob is not None else 0x80) & 0x7FF
-        self.network.subscribe(self._sync_cob, self._on_sync)
-
-    def _unsubscribe_pdos(self) -> None:
-        for rx in self._rx:
-            if rx.handler is not None:
-                self._safe_unsubscribe(rx.cob_id, rx.handler)
-        self._rx = []
-        self._rx_sync = []
-        self._tx_sync = []
-        self._tx_event = []
-
-    def _entries(self, map_index: int) -> tuple[struct.Struct, tuple]:
-        count = int(self._stored(map_index, 0) or 0)
-        codes: list[str] = []
-        names: list[str] = []
-        for s in range(1, count + 1):
-            entry = int(self._stored(map_index, s) or 0)
-            index, subindex, bits = entry >> 16, (entry >> 8) & 0xFF, entry & 0xFF
-            if index == 0 or bits == 0:
-                continue
-            if 1 <= index <= 7:
-                codes.append(f"{bits // 8}x")
-                continue
-            var = self._var(index, subindex)
-            codes.append(struct_code(var))
-            names.append(self._name_for(index, subindex))
-        return struct.Struct("<" + "".join(codes)), tuple(names)
-
-    def _name_for(self, index: int, subindex: int) -> str:
-        name = self._live.get((index, subindex))
-        if name is not None:
-            return name
-        name = self._extra_names.get((index, subindex))
-        if name is None:
-            name = f"_obj_{index:04X}_{subindex:02X}"
-            self._extra_names[(index, subindex)] = name
-            value = self._stored(index, subindex)
-            setattr(self, name, 0 if value is None else value)
-        return name
-
-    def _build_layouts(self) -> None:
-        """Read the PDO configuration from the dictionary into struct layouts and subscribe."""
-        self._unsubscribe_pdos()
-        self._layout_dirty = False
-        self._resubscribe_sync()
-        for n, cob, trans, (st, names) in self._valid_pdos(0x1400, 0x1600):
-            rx = _RxPdo(n + 1, cob, trans <= 240, st, names)
-            self._rx.append(rx)
-            if rx.sync:
-                self._rx_sync.append(rx)
-            self.network.subscribe(rx.cob_id, self._make_rx_handler(rx))
-        for n, cob, trans, (st, names) in self._valid_pdos(0x1800, 0x1A00):
-            if trans <= 240:
-                self._tx_sync.append(_TxPdo(n + 1, cob, max(trans, 1), st, names))
-            elif trans >= 254:
-                self._tx_event.append(_TxPdo(n + 1, cob, 0, st, names))
-            # 252/253 (RTR only): not served, LocalNode drops remote frames
-
-    def _valid_pdos(self, comm_base: int, map_base: int):
-        """Yield ``(n, cob_id, transmission_type, layout)`` of each valid, non-empty PDO whose
-        communication object is ``comm_base + n`` and mapping object ``map_base + n``."""
-        od = self.dod.od
-        for n in range(512):
-            comm = comm_base + n
-            if comm not in od:
-                continue
-            cob = int(self._stored(comm, 1) or _PDO_NOT_VALID)
-            if cob & _PDO_NOT_VALID or map_base + n not in od:
-                continue
-            trans = int(self._stored(comm, 2) or 0) if self._has(comm, 2) else 255
-            layout = self._layout_or_none(map_base + n)
-            if layout is not None:
-                yield n, cob & 0x7FF, trans, layout
-
-    def _layout_or_none(self, map_index: int) -> tuple[struct.Struct, tuple] | None:
-        """Layout of one mapping object; None for an empty mapping (sub 0 = 0: the PDO is not
-        used) or, logged, when a file's own default mapping names an object the simulation
-        cannot pack (missing, or no fixed-size type)."""
-        try:
-            st, names = self._entries(map_index)
-        except (DriveConfigError, SdoAbortedError) as exc:
-            logger.warning("node %d: PDO mapping 0x%04X not served: %s", self.node_id,
-                           map_index, exc)
-            return None
-        return (st, names) if st.size else None
-
-    def _make_rx_handler(self, rx: _RxPdo) -> Callable:
-        if rx.sync:
-
-            def handler(can_id: int, data: bytes, timestamp: float) -> None:
-                rx.latched = data
-        else:
-
-            def handler(can_id: int, data: bytes, timestamp: float) -> None:
-                if self.nmt == NMT_OPERATIONAL:
-                    if self._apply_rpdo(rx, data):
-                        self._after_rx()
-
-        rx.handler = handler
-        return handler
-
-    def _apply_rpdo(self, rx: _RxPdo, data: bytes) -> bool:
-        if len(data) < rx.struct.size:
-            self.rx_length_errors += 1
-            # CiA 301: "PDO not processed due to length error", a warning (no state change)
-            self.node.emcy.send(PDO_LENGTH_ERROR, self.error_register | 0x11)
-            return False
-        self.__dict__.update(zip(rx.names, rx.struct.unpack_from(data), strict=False))
-        return True
-
-    def _after_rx(self) -> None:
-        """Apply what RPDOs changed: mode request, controlword; then event TPDOs."""
-        if self.mode_request != self.mode_display:
-            self._apply_mode_request()
-        self._evaluate_controlword()
-        self._send_event_tpdos()
-
-    def _apply_mode_request(self) -> None:
-        """0x6060 arrived by RPDO: follow it if advertised, else keep the mode (no abort)."""
-        if self.mode_request in self._supported or self.mode_request == 0:
-            self.mode_display = self.mode_request
-            self._update_statusword()
-        else:
-            self.rx_rejected_modes += 1
-            self.mode_request = self.mode_display
-
-    # ------------------------------------------------------------------ CiA 402
-    def _evaluate_controlword(self, from_sdo: bool = False) -> None:
-        """Run the state machine on 0x6040 (level-triggered, edge for the fault reset).
-
-        The command is applied until it requests no further transition, so "enable
-        operation" (0x0F) in READY TO SWITCH ON takes transitions 3 and 4 at once.
-        ``next_state`` is pure: when the last evaluation with the same (state, controlword,
-        previous controlword, quick stop option) changed nothing, this one returns at once.
-        """
-        cw = self.controlword
-        key = (self.cia_state, cw, self._prev_cw, self.quick_stop_option)
-        if key == self._last_eval:
-            return
-        for _ in range(4):
-            new, number = next_state(
-                self.cia_state, cw, self._prev_cw, quick_stop_option=self.quick_stop_option
-            )
-            self._prev_cw = cw
-            if number is None:
-                break
-            self.cia_state = new
-            if number == 15:
-                self.error_code = 0
-                self.error_register = 0
-                self._following_error = False
-                self.node.emcy.reset()
-            elif number == 11:
-                self._quick_stop_started()
-            elif number in (4, 16) and from_sdo:
-                # enabled over SDO: the position loop starts from where the joint is (an
-                # RPDO enabling the drive carries its own 0x607A)
-                self.target_position = self._prev_target = self.position_actual
-        self._last_eval = (self.cia_state, cw, cw, self.quick_stop_option)
-        self._update_statusword()
-
-    def _quick_stop_started(self) -> None:
-        if self.quick_stop_option == 0 or (
-            1 <= self.quick_stop_option <= 4 and abs(self.plant.dq) < _QS_DONE_SPEED
-        ):
-            self.cia_state, _ = automatic_transition(self.cia_state, "quick_stop_done")
-
-    def _update_statusword(self) -> None:
-        st = self.cia_state
-        enabled = st is State.OPERATION_ENABLED
-        if enabled is not self._was_enabled:
-            self._was_enabled = enabled
-            if enabled:
-                self._enabled_at = time.monotonic()
-                if self._sync_timeout_s:
-                    self._wd_wake.set()
-        self.statusword = statusword(
-            st,
-            internal_limit=self._internal_limit,
-            bit12=enabled and self.mode_display in _CYCLIC_INTS,
-            bit13=self._following_error and self.mode_display == 8,
-        )
-
-    def fault(self, code: int) -> None:
-        """Enter FAULT (transitions 13 and 14) with error ``code``: 0x603F, 0x1001, EMCY.
-
-        The drive calls it from its bus thread; call it from elsewhere only while no SYNC
-        cycle runs (tests, or through :class:`~sim_drivers.faults.FaultInjector`).
-        """
-        if self.cia_state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
-            return
-        self.cia_state, _ = automatic_transition(self.cia_state, "fault")
-        self.fault_time = time.monotonic()
-        self.error_code = code
-        self.error_register = error_register(code)
-        self.node.emcy.send(code, self.error_register)
-        self.cia_state, _ = automatic_transition(self.cia_state, "fault_reaction_done")
-        self.tau_cmd = 0.0
-        self._update_statusword()
-
     # ------------------------------------------------------------------ cycle
     def _on_sync(self, can_id: int, data: bytes, timestamp: float) -> None:
         self._last_sync = time.monotonic()
@@ -983,257 +550,7 @@ class SimulatedDrive:
                 self._evaluate_controlword()
             self.step()
 
-    # ------------------------------------------------------------------ master-loss watchdogs
-    @property
-    def last_sync_time(self) -> float:
-        """``time.monotonic()`` when the last SYNC was received [s] (0: none yet)."""
-        return self._last_sync
-
-    @property
-    def sync_timeout_s(self) -> float:
-        """SYNC-loss timeout [s] from 0x1006 (0: the SYNC watchdog is off)."""
-        return self._sync_timeout_s
-
-    @property
-    def heartbeat_consumers(self) -> dict[int, tuple[float, bool, int]]:
-        """Watched nodes from 0x1016: node id -> (consumer time [s], monitoring started,
-        heartbeats received)."""
-        return {c.node: (c.time_s, c.active, c.received) for c in self._consumers.values()}
-
-    def _set_sync_period(self, period_us: int) -> None:
-        period = int(period_us) * 1e-6
-        self._sync_timeout_s = (max(SYNC_LOSS_PERIODS * period, self.sync_loss_floor_s)
-                                if period > 0 else 0.0)
-        self._wd_wake.set()
-
-    def _load_watchdogs(self) -> None:
-        """(Re)read 0x1016 and 0x1006 from the dictionary (boot, reset communication)."""
-        self._set_sync_period(int(self._stored(0x1006, 0) or 0) if self._has(0x1006, 0) else 0)
-        entries: dict[int, _HbConsumer] = {}
-        if 0x1016 in self.dod.od:
-            for sub in range(1, 128):
-                if not self._has(0x1016, sub):
-                    continue
-                value = int(self._stored(0x1016, sub) or 0)
-                node, ms = (value >> 16) & 0xFF, value & 0xFFFF
-                if node and ms:
-                    entries[sub] = _HbConsumer(sub, node, ms / 1000.0)
-        self._set_consumers(entries)
-
-    def _write_consumer(self, sub: int, value: int) -> None:
-        """SDO write to 0x1016.sub: validate (CiA 301), then watch the new entry."""
-        node, ms = (value >> 16) & 0xFF, value & 0xFFFF
-        if node and ms and any(c.node == node and c.sub != sub
-                               for c in self._consumers.values()):
-            raise SdoAbortedError(0x06040043)  # general parameter incompatibility
-        entries = {s: c for s, c in self._consumers.items() if s != sub}
-        if node and ms:
-            entries[sub] = _HbConsumer(sub, node, ms / 1000.0)
-        self._set_consumers(entries)
-
-    def _set_consumers(self, entries: dict[int, _HbConsumer]) -> None:
-        for c in self._consumers.values():
-            if c.cb is not None:
-                self._safe_unsubscribe(0x700 + c.node, c.cb)
-        self._consumers = entries
-        if self._started:
-            for c in entries.values():
-                c.cb = self._make_consumer_handler(c)
-                self.network.subscribe(0x700 + c.node, c.cb)
-        self._wd_wake.set()
-
-    def _make_consumer_handler(self, c: _HbConsumer) -> Callable:
-        wake = self._wd_wake
-
-        def handler(can_id: int, data: bytes, timestamp: float) -> None:
-            c.last = time.monotonic()
-            c.received += 1
-            if not c.active or c.timed_out:
-                c.active = True
-                c.timed_out = False
-                wake.set()
-
-        return handler
-
-    def _watchdog_loop(self) -> None:
-        """Sleep until the earliest deadline, check, repeat (the drive's timer thread)."""
-        wake = self._wd_wake
-        while self._wd_run:
-            try:
-                wait = self._check_watchdogs()
-            except Exception:  # never let the safety thread die silently
-                logger.exception("node %d: watchdog check failed", self.node_id)
-                wait = _WD_IDLE_S
-            wake.wait(wait)
-            wake.clear()
-
-    def _check_watchdogs(self) -> float:
-        """Fire what timed out; return the time to the next deadline [s]."""
-        wait = _WD_IDLE_S
-        with self._lock:
-            now = time.monotonic()
-            for c in list(self._consumers.values()):
-                if not c.active or c.timed_out:
-                    continue
-                left = c.last + c.time_s - now
-                if left <= 0.0:
-                    c.timed_out = True
-                    self.heartbeat_timeouts += 1
-                    logger.warning("node %d: heartbeat of node %d lost (none for %.3f s, "
-                                   "consumer time %g s, %d received)", self.node_id, c.node,
-                                   now - c.last, c.time_s, c.received)
-                    if self.cia_state in (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE):
-                        self.fault(HEARTBEAT_LOST)
-                    else:
-                        self.node.emcy.send(HEARTBEAT_LOST,
-                                            self.error_register | error_register(HEARTBEAT_LOST))
-                elif left < wait:
-                    wait = left
-            timeout = self._sync_timeout_s
-            if (timeout and self.nmt == NMT_OPERATIONAL
-                    and self.cia_state is State.OPERATION_ENABLED
-                    and self.mode_display in _CYCLIC_INTS):
-                left = max(self._last_sync, self._enabled_at) + timeout - now
-                if left <= 0.0:
-                    self.sync_losses += 1
-                    logger.warning("node %d: no SYNC for %.3f s (timeout %g s)", self.node_id,
-                                   now - self._last_sync, timeout)
-                    self.fault(SYNC_LOST)
-                elif left < wait:
-                    wait = left
-            elif timeout and timeout < wait:
-                wait = timeout  # configured, not armed: look again within one timeout
-        return wait
-
-    def step(self) -> None:
-        """One drive cycle: injector, control law, plant step, checks, record, TPDOs.
-
-        Called on every SYNC in OPERATIONAL; exposed for benchmarks and offline use.
-        """
-        cycle = self.cycle
-        inj = self.injector
-        if inj is not None:
-            if inj.fault_now(cycle):
-                self.fault(inj.fault_code)
-            if inj.stop_heartbeat_now(cycle):
-                self._heartbeat_stopped = True
-                self.node.nmt.stop_heartbeat()
-        plant = self.plant
-        st = self.cia_state
-        powered = st is State.OPERATION_ENABLED or st is State.QUICK_STOP_ACTIVE
-        tau = 0.0
-        demand = 0
-        if st is State.OPERATION_ENABLED:
-            mode = self.mode_display
-            if mode == 10:
-                demand = self.target_torque + self.torque_offset
-                if demand > self.max_torque or -demand > self.max_torque:
-                    self.fault(EXCESS_TORQUE)
-                    powered = False
-                    demand = 0
-                else:
-                    tau = plant.torque_from_permille(demand)
-            elif mode == 8:
-                err = self.target_position - self.position_actual
-                window = self.following_window
-                if 0 < window < 0xFFFFFFFF and (err > window or -err > window):
-                    self._following_error = True
-                    self.fault(FOLLOWING_ERROR)
-                    powered = False
-                else:
-                    v_target = (self.target_position - self._prev_target) / self.cycle_s
-                    tau = (
-                        self.kp * err / self._counts_per_rad
-                        + self.kd * (v_target / self._counts_per_rad - plant.dq)
-                        + plant.torque_from_permille(self.torque_offset)
-                    )
-                    demand = plant.permille_from_torque(tau)
-                    limit = self.max_torque
-                    limited = demand > limit or -demand > limit
-                    if limited:
-                        demand = limit if demand > 0 else -limit
-                        tau = plant.torque_from_permille(demand)
-                    if limited != self._internal_limit:
-                        self._internal_limit = limited
-                        self._update_statusword()
-            elif mode == 9:
-                v_err = (
-                    self.target_velocity + self.velocity_offset
-                ) / self._counts_per_rad - plant.dq
-                self._v_int += self.kd * _CSV_INTEGRAL_RATE * v_err * self.cycle_s
-                tau = (
-                    self.kd * v_err + self._v_int + plant.torque_from_permille(self.torque_offset)
-                )
-                demand = plant.permille_from_torque(tau)
-                limit = self.max_torque
-                limited = demand > limit or -demand > limit
-                if limited:
-                    demand = limit if demand > 0 else -limit
-                    tau = plant.torque_from_permille(demand)
-                    self._v_int -= self.kd * _CSV_INTEGRAL_RATE * v_err * self.cycle_s
-                if limited != self._internal_limit:
-                    self._internal_limit = limited
-                    self._update_statusword()
-        elif st is State.QUICK_STOP_ACTIVE:
-            tau = -self.kd * plant.dq
-            demand = plant.permille_from_torque(tau)
-            if 1 <= self.quick_stop_option <= 4 and abs(plant.dq) < _QS_DONE_SPEED:
-                self.cia_state, _ = automatic_transition(st, "quick_stop_done")
-                self._update_statusword()
-        if st is not State.OPERATION_ENABLED or self.mode_display != 9:
-            self._v_int = 0.0
-        self.tau_cmd = tau
-        self.torque_demand = demand
-        if powered:
-            try:
-                plant.step(tau)
-                if not math.isfinite(plant.q):
-                    raise SimError("plant state is not finite")
-            except Exception:  # any plant failure is a drive fault, not a dead bus thread
-                logger.exception("plant step failed at cycle %d", cycle)
-                self.fault(PLANT_FAULT)
-        self._prev_target = self.target_position
-        self._update_actuals()
-        lo, hi = self.position_limit_min, self.position_limit_max
-        if lo < hi and not lo <= self.position_actual <= hi:
-            self.fault(POSITION_LIMIT)
-        self._record(cycle)
-        if inj is not None and inj.drop_tpdo(cycle):
-            for tx in self._tx_sync:
-                tx.count += 1
-                if tx.count >= tx.every:
-                    tx.count = 0
-        else:
-            send = self.network.send_message
-            for tx in self._tx_sync:
-                tx.count += 1
-                if tx.count >= tx.every:
-                    tx.count = 0
-                    send(tx.cob_id, tx.payload(self))
-                    self.tpdo_sent += 1
-            if self._tx_event:
-                self._send_event_tpdos()
-        self.cycle = cycle + 1
-
-    def _update_actuals(self) -> None:
-        plant = self.plant
-        self.position_actual = _wrap_i32(int(plant.encoder_counts))
-        v = round(plant.dq * self._counts_per_rad)
-        self.velocity_actual = _clip(v, -0x80000000, 0x7FFFFFFF)
-        ta = int(plant.permille_from_torque(plant.tau_applied))
-        self.torque_actual = ta
-        self.current_actual = _clip(round(ta * self._current_scale), -0x8000, 0x7FFF)
-
-    def _send_event_tpdos(self) -> None:
-        if self.nmt != NMT_OPERATIONAL:
-            return
-        send = self.network.send_message
-        for tx in self._tx_event:
-            payload = tx.payload(self)
-            if payload != tx.last:
-                tx.last = payload
-                send(tx.cob_id, payload)
-                self.tpdo_sent += 1
+    # ------------------------------------------------------------------ record
 
     def _record(self, cycle: int) -> None:
         n = self._n
@@ -1273,7 +590,3 @@ class SimulatedDrive:
     def supported_modes(self) -> frozenset[Mode]:
         """Modes advertised by 0x6502."""
         return self.dod.supported
-
-
-_CYCLIC_INTS = frozenset(int(m) for m in CYCLIC_MODES)
-_STRUCT_TYPES = frozenset(STRUCT_CODE)

@@ -27,7 +27,7 @@ import canopen
 from canopen.objectdictionary import ObjectDictionary, ODArray, ODRecord, ODVariable
 from canopen.objectdictionary import datatypes as dt
 
-from daq.cia402 import Mode, supported_modes, supported_modes_mask
+from daq.protocol.cia402 import Mode, supported_modes, supported_modes_mask
 from sim_drivers import SimError
 
 

@@ -2,7 +2,7 @@
 
 Each control cycle does exactly what the bus path does (``daq`` runner + simulated drive),
 minus CANopen: the measured position comes from the encoder counts, the torque reference of
-:class:`daq.control.PositionController` is quantised to the per-mille target torque (int16)
+:class:`daq.protocol.control.PositionController` is quantised to the per-mille target torque (int16)
 that object 0x6071 would carry, and the plant is stepped one cycle with the joint-side torque
 of that target, ``tau_ref = N rated_torque x / 1000``. It is the fast path for identification
 tests: a 60 s run at 1 kHz takes well under a second.
@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from daq.control import ControllerGains, PositionController
+from daq.protocol.control import ControllerGains, PositionController
 
 from . import SimError
 from .plant import REGIME_REST, JointPlant
@@ -122,7 +122,7 @@ def simulate(
         Anything with equal-length float arrays ``q`` [rad], ``dq`` [rad/s], ``ddq``
         [rad/s^2] (and ``t`` [s] when ``cycle_s`` is not given), sampled once per cycle, e.g.
         ``trajectories.plan.plan_campaign(c).reference``.
-    gains : daq.control.ControllerGains
+    gains : daq.protocol.control.ControllerGains
         Controller gains and feed-forward.
     payload_mass, payload_arm : float
         Payload M_a [kg] at lever arm L_a [m] for the whole run.

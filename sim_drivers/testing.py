@@ -25,7 +25,7 @@ from canopen.profiles.p402 import BaseNode402
 
 from sim_drivers.drive import SimulatedDrive, open_virtual_bus
 from sim_drivers.faults import FaultInjector
-from sim_drivers.od import DriveOD, generic_eds_path, load_drive_od
+from sim_drivers.od import STRUCT_CODE, DriveOD, generic_eds_path, iter_variables, load_drive_od
 from sim_drivers.plant import JointPlant
 from sim_drivers.plant_config import load_plant
 
@@ -265,8 +265,6 @@ class LockstepMaster:
 
 def read_all_variables(node: canopen.RemoteNode) -> dict[tuple[int, int], Any]:
     """SDO upload of every readable numeric variable the node's dictionary declares."""
-    from sim_drivers.od import STRUCT_CODE, iter_variables
-
     values: dict[tuple[int, int], Any] = {}
     for var in iter_variables(node.object_dictionary):
         if not var.readable or var.data_type not in STRUCT_CODE:

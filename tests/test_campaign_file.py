@@ -7,11 +7,10 @@ import dataclasses
 import pytest
 from daq.examples import path as example_path
 
-from daq import ConfigError
-from daq.campaign_file import load_campaign
-from daq.control import ControllerGains
-from trajectories import SchemaError
+from daq.protocol.control import ControllerGains
+from trajectories import CampaignFileError, SchemaError
 from trajectories.campaign import SineSegment, TrapezoidSegment
+from trajectories.campaign_file import load_campaign
 
 EXAMPLE = example_path("campaign.toml")
 TEXT = EXAMPLE.read_text()
@@ -106,7 +105,7 @@ def test_toml_syntax_error_names_file_and_line(tmp_path):
     f = tmp_path / "broken.toml"
     f.write_text(TEXT.replace("kind = \"revolute\"", "kind = revolute", 1))
     line = TEXT.splitlines().index('kind = "revolute"') + 1
-    with pytest.raises(ConfigError) as err:
+    with pytest.raises(CampaignFileError) as err:
         load_campaign(f)
     msg = str(err.value)
     assert msg.startswith(f"{f}: invalid TOML: ") and f"line {line}" in msg and "\n" not in msg

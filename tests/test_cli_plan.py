@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from daq.examples import path as example_path
 
-from daq.cli import main
+from daq.app.cli import main
 
 EXAMPLE = example_path("campaign.toml")
 TEXT = EXAMPLE.read_text()
@@ -73,13 +73,14 @@ def test_bad_campaign_exits_nonzero_with_one_line(tmp_path, capsys, mistake):
 def test_console_entry_point_no_traceback(tmp_path):
     f = tmp_path / "bad.toml"
     f.write_text(TEXT.replace("max_jerk = 40.0 ", "max_jerk = -1 ", 1))
-    run = subprocess.run([sys.executable, "-m", "daq.cli", "plan", str(f)],
+    run = subprocess.run([sys.executable, "-m", "daq.app.cli", "plan", str(f)],
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 2
     assert run.stderr.strip() == (
         f"jointid plan: error: {f}: joint.limits.max_jerk: expected a number > 0 "
         "[rad/s^3 or m/s^3], got -1")
-    missing = subprocess.run([sys.executable, "-m", "daq.cli", "plan", str(tmp_path / "no.toml")],
+    missing = subprocess.run([sys.executable, "-m", "daq.app.cli", "plan",
+                              str(tmp_path / "no.toml")],
                              capture_output=True, text=True, timeout=120)
     assert missing.returncode == 2 and "no.toml" in missing.stderr
     assert "Traceback" not in missing.stderr

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from daq.cia402 import State, state_from_statusword
-from daq.reader import read_run
-from daq.runner import run_campaign
+from daq.protocol.cia402 import State, state_from_statusword
+from daq.protocol.reader import read_run
+from daq.runtime.runner import run_campaign
 from sim_drivers.faults import FaultInjector
 from sim_drivers.plant_config import default_plant
 from trajectories.campaign import Campaign
@@ -152,7 +152,7 @@ chunk_seconds = 0.1
 
 def _cli(toml, out):
     plant = ROOT / "sim_drivers" / "data" / "plant_default.toml"
-    return [sys.executable, "-c", "import sys; from daq.cli import main; sys.exit(main())",
+    return [sys.executable, "-c", "import sys; from daq.app.cli import main; sys.exit(main())",
             "run", str(toml), "--simulate", str(plant), "--out", str(out), "--yes"]
 
 

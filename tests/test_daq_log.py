@@ -12,11 +12,12 @@ import pytest
 from mcap.reader import make_reader
 
 from daq import ConfigError
-from daq.busload import check_load, cycle_load, frame_bits
-from daq.config import parse_daq
-from daq.mcaplog import FRAME, STATE_SIZE, RunLog
-from daq.progress import ProgressLine
-from daq.reader import LogReadError, list_runs, read_frames, read_run
+from daq.protocol.logformat import FRAME, STATE_SIZE
+from daq.protocol.reader import LogReadError, list_runs, read_frames, read_run
+from daq.runtime.busload import check_load, cycle_load, frame_bits
+from daq.runtime.config import parse_daq
+from daq.runtime.mcaplog import RunLog
+from daq.runtime.progress import ProgressLine
 
 
 # ----------------------------------------------------------------------------- bus load
@@ -188,7 +189,7 @@ _chan = itertools.count()
 
 @pytest.mark.parametrize("source", ["runner", "periodic"])
 def test_paced_clock_records_timing_of_every_cycle(tmp_path, source):
-    from daq.runner import run_campaign
+    from daq.runtime.runner import run_campaign
     from sim_drivers.plant_config import default_plant
     from trajectories.campaign import Campaign
 
@@ -224,7 +225,7 @@ def test_paced_clock_records_timing_of_every_cycle(tmp_path, source):
 
 
 def test_campaign_names_become_safe_file_stems():
-    from daq.runner import file_stem
+    from daq.runtime.runner import file_stem
 
     assert file_stem("rx130l-joint3 (quick)") == "rx130l-joint3_quick"
     assert file_stem("a/b\\c") == "a_b_c"

@@ -10,9 +10,9 @@ import pytest
 from canopen.sdo.exceptions import SdoAbortedError
 
 from daq import ConfigError
-from daq.cia402 import Mode
-from daq.config import DriveConfig, Scaling, generic_eds
-from daq.master import MasterDrive, pdo_specs
+from daq.protocol.cia402 import Mode
+from daq.runtime.config import DriveConfig, Scaling, generic_eds
+from daq.runtime.master import MasterDrive, pdo_specs
 from tests.conftest import VENDOR_EDS, shared_path
 
 _chan = itertools.count()

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from daq import ConfigError
-from daq.cia402 import State, state_from_statusword
-from daq.reader import list_runs, read_attachments, read_frames, read_run
-from daq.runner import run_campaign
+from daq.protocol.cia402 import State, state_from_statusword
+from daq.protocol.reader import list_runs, read_attachments, read_frames, read_run
+from daq.runtime.runner import run_campaign
 from sim_drivers.plant_config import default_plant
 from tests.conftest import VENDOR_EDS, shared_path
 from trajectories.campaign import Campaign

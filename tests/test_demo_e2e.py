@@ -25,7 +25,7 @@ pytestmark = pytest.mark.slow
 def demo(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo")
     run = subprocess.run(
-        [sys.executable, "-c", "import sys; from daq.cli import main; sys.exit(main())",
+        [sys.executable, "-c", "import sys; from daq.app.cli import main; sys.exit(main())",
          "demo", "--quick", "--out", str(out)],
         capture_output=True, text=True, timeout=900,
     )
@@ -101,13 +101,13 @@ def test_report_command_rebuilds_the_report(demo, tmp_path):
     out, _ = demo
     (out / "report.html").unlink()
     run = subprocess.run(
-        [sys.executable, "-c", "import sys; from daq.cli import main; sys.exit(main())",
+        [sys.executable, "-c", "import sys; from daq.app.cli import main; sys.exit(main())",
          "report", str(out)], capture_output=True, text=True, timeout=120,
     )
     assert run.returncode == 0, run.stderr
     assert (out / "report.html").stat().st_size > 10_000
     bad = subprocess.run(
-        [sys.executable, "-c", "import sys; from daq.cli import main; sys.exit(main())",
+        [sys.executable, "-c", "import sys; from daq.app.cli import main; sys.exit(main())",
          "report", str(tmp_path / "nowhere")], capture_output=True, text=True, timeout=120,
     )
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "nowhere" in bad.stderr

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
-from daq.cia402 import (
+from daq.protocol.cia402 import (
     TRANSITION_CONTROLWORD,
     TRANSITIONS,
     Command,

@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from daq.cia402 import State, path, state_from_statusword
+from daq.protocol.cia402 import State, path, state_from_statusword
 from sim_drivers.faults import (
     EXCESS_TORQUE,
     FOLLOWING_ERROR,

@@ -16,7 +16,7 @@ import pytest
 from canopen.sdo.exceptions import SdoAbortedError
 from conftest import VENDOR_EDS, shared_path
 
-from daq.cia402 import Mode, State, path, state_from_statusword, supported_modes_mask
+from daq.protocol.cia402 import Mode, State, path, state_from_statusword, supported_modes_mask
 from sim_drivers.od import load_drive_od
 from sim_drivers.testing import LockstepMaster, configure_pdo, make_rig, read_all_variables
 

@@ -7,13 +7,13 @@ import sys
 
 import pytest
 
-from daq import cia402
-from daq.cia402 import Mode, State
+from daq.protocol import cia402
+from daq.protocol.cia402 import Mode, State
 
 
 def test_version_flag():
     out = subprocess.run(
-        [sys.executable, "-c", "from daq.cli import main; main(['--version'])"],
+        [sys.executable, "-c", "from daq.app.cli import main; main(['--version'])"],
         capture_output=True, text=True,
     )
     assert out.returncode == 0

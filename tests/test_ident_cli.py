@@ -10,14 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from daq.cli import main
+from daq.app.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
 def csv_runs(tmp_path_factory):
-    from daq.control import ControllerGains
+    from daq.protocol.control import ControllerGains
     from sim_drivers.offline import simulate
     from sim_drivers.plant_config import load_plant
     from trajectories.campaign import Campaign

@@ -13,7 +13,7 @@ import json
 
 import pytest
 
-from daq.cli import main
+from daq.app.cli import main
 from tests.conftest import shared_path
 
 REFERENCE = {"J": 95.1089, "F_V": 203.5034, "F_C": 20.3935, "tau_off": -3.1648}

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from daq.cli import main
+from daq.app.cli import main
 from ident import DataError
 from ident.loaders import load_experiment, load_experiments, parse_mapping, resolve_path
 from tests.conftest import shared_path

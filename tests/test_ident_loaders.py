@@ -127,7 +127,7 @@ def test_concat_marks_experiments(tmp_path):
 
 
 def test_mcap_log_written_by_daq_is_read_back(tmp_path):
-    mcaplog = pytest.importorskip("daq.mcaplog")
+    mcaplog = pytest.importorskip("daq.runtime.mcaplog")
     t, q, tau = _arrays(n=300)
     p = tmp_path / "run_payload1.mcap"
     meta = {"payload": {"mass_kg": "3.4584", "arm_m": "1.277"},

@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="module")
 def sim():
-    from daq.control import ControllerGains
+    from daq.protocol.control import ControllerGains
     from sim_drivers.offline import simulate
     from sim_drivers.plant_config import load_plant
     from trajectories.campaign import Campaign
@@ -138,7 +138,7 @@ def test_qs_rescanned_after_refinement_recovers_the_plant():
     of eq. 42 much closer. What is left is the quick campaign's own limit: little data near
     q_s, and the residual criterion then lands 5-15 % high (0.0326 on these runs without any
     effect; the full campaign gives 0.0300), so b_m_MX stays 3.5 sigma off."""
-    from daq.control import ControllerGains
+    from daq.protocol.control import ControllerGains
     from ident.fitting import rescan_qs
     from ident.refine import refine
     from sim_drivers.offline import simulate

@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from daq.control import ControllerGains
+from daq.protocol.control import ControllerGains
 from sim_drivers import SimError
 from sim_drivers.offline import SimRun, simulate, simulate_payloads
 from sim_drivers.plant import REGIME_SLIDING, inverse_torque, output_torque
@@ -102,7 +102,7 @@ def test_torque_lag_record_balances_with_applied_not_reference():
 
 def test_campaign_plan_runs_through_the_simulator():
     trajectories_plan = pytest.importorskip("trajectories.plan")
-    campaign_file = pytest.importorskip("daq.campaign_file")
+    campaign_file = pytest.importorskip("trajectories.campaign_file")
     camp = campaign_file.load_campaign(ROOT / "examples" / "campaign.toml")
     ref = trajectories_plan.plan_campaign(camp).reference
     n = min(len(ref.t), 30000)  # the first 30 s: the slow band and the first trapezoids

@@ -15,7 +15,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from daq.control import ControllerGains
+from daq.protocol.control import ControllerGains
 from ident.effects import (
     DirectionalViscous,
     PositionRipple,

@@ -12,8 +12,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import pytest  # noqa: E402
 
-from daq import DaqError  # noqa: E402
-from daq.report_build import build_report  # noqa: E402
+from ident import IdentError  # noqa: E402
+from ident.report_build import build_report  # noqa: E402
 
 
 def _fit_json():
@@ -59,5 +59,5 @@ def test_report_embeds_figures_and_flags_truth(tmp_path):
 
 
 def test_report_refuses_missing_fit(tmp_path):
-    with pytest.raises(DaqError, match="fit.json"):
+    with pytest.raises(IdentError, match="fit.json"):
         build_report(tmp_path)

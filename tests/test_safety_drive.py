@@ -1,7 +1,7 @@
 """Master loss seen from the simulated drive: heartbeat consumer 0x1016 and SYNC watchdog 0x1006.
 
 Real drive, real master frames on python-can's virtual bus (:func:`sim_drivers.testing.make_rig`),
-the master's heartbeat from :class:`daq.master.MasterHeartbeat`. Timings are checked against
+the master's heartbeat from :class:`daq.runtime.master.MasterHeartbeat`. Timings are checked against
 the configured consumer time / SYNC timeout with generous upper margins (the host is shared);
 the lower bounds (never before the configured time) are exact.
 """
@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from canopen.sdo.exceptions import SdoAbortedError
 
-from daq.cia402 import State, path, state_from_statusword
-from daq.master import MasterHeartbeat
+from daq.protocol.cia402 import State, path, state_from_statusword
+from daq.runtime.master import MasterHeartbeat
 from sim_drivers.drive import SYNC_LOSS_FLOOR_S, SYNC_LOSS_PERIODS
 from sim_drivers.faults import HEARTBEAT_LOST, SYNC_LOST, error_register
 from sim_drivers.testing import LockstepMaster, make_rig

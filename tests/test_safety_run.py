@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 from daq import ConfigError
-from daq.cia402 import State, state_from_statusword
-from daq.config import parse_daq
-from daq.reader import read_run
-from daq.runner import run_campaign
+from daq.protocol.cia402 import State, state_from_statusword
+from daq.protocol.reader import read_run
+from daq.runtime.config import parse_daq
+from daq.runtime.runner import run_campaign
 from sim_drivers.drive import SYNC_LOSS_FLOOR_S, SimulatedDrive
 from sim_drivers.faults import HEARTBEAT_LOST, SYNC_LOST
 from sim_drivers.plant import JointPlant
@@ -116,16 +116,16 @@ def test_lockstep_run_configures_the_watchdogs_and_a_pause_is_not_a_fault(tmp_pa
 
 
 def test_dead_master_drive_faults_with_8130_within_the_consumer_time(tmp_path, monkeypatch):
-    import daq.runner
+    import daq.runtime.runner
 
     beats = []
 
-    class Recorded(daq.runner.MasterHeartbeat):
+    class Recorded(daq.runtime.runner.MasterHeartbeat):
         def __init__(self, *a, **k):
             super().__init__(*a, **k)
             beats.append(self)
 
-    monkeypatch.setattr(daq.runner, "MasterHeartbeat", Recorded)
+    monkeypatch.setattr(daq.runtime.runner, "MasterHeartbeat", Recorded)
     c = campaign(periods=2)
     rig = Rig(c)
     t = {}

@@ -11,7 +11,6 @@ from daq.examples import path as example_path
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from daq.campaign_file import load_campaign
 from trajectories import LimitError, SchemaError
 from trajectories.campaign import (
     Campaign,
@@ -23,6 +22,7 @@ from trajectories.campaign import (
     TrapezoidSegment,
     shorten,
 )
+from trajectories.campaign_file import load_campaign
 from trajectories.plan import (
     BANDS,
     POSITIONING_SPEED,

@@ -1,6 +1,7 @@
 """Excitation planning with Ruckig: pure functions and immutable sampled plans.
 
-Nothing in this package touches files, clocks or buses.
+Nothing in this package touches clocks or buses; files only in :mod:`trajectories.campaign_file`
+(reads the campaign TOML) and :mod:`trajectories.cli` (``jointid plan``, writes the plot).
 Exception tree: every error raised on purpose derives from :class:`TrajectoryError`.
 """
 
@@ -11,6 +12,11 @@ class TrajectoryError(Exception):
 
 class SchemaError(TrajectoryError, ValueError):
     """A configuration mapping does not match its schema; the message names the key."""
+
+
+class CampaignFileError(TrajectoryError, ValueError):
+    """A campaign file is not readable TOML (not UTF-8, syntax error); the message names the
+    file, line and column."""
 
 
 class LimitError(TrajectoryError):

@@ -1,7 +1,7 @@
 """The campaign description: joint, limits, control settings, payloads and excitation segments.
 
-A campaign is read from a TOML file by :func:`daq.campaign_file.load_campaign` and validated
-here by :meth:`Campaign.from_dict` (pure: dictionaries in, frozen dataclasses out). Every
+A campaign is read from a TOML file by :func:`trajectories.campaign_file.load_campaign` and
+validated here by :meth:`Campaign.from_dict` (pure: dictionaries in, frozen dataclasses out). Every
 mistake raises :class:`trajectories.SchemaError` with one line naming the source, the dotted
 key and the expected value, e.g.::
 
@@ -133,7 +133,8 @@ class Joint:
 
 @dataclass(frozen=True)
 class ControlSettings:
-    """Control cycle and position-loop gains (converted to ``daq.control.ControllerGains`` by daq).
+    """Control cycle and position-loop gains (converted to
+    ``daq.protocol.control.ControllerGains`` by daq).
 
     Attributes
     ----------
@@ -157,7 +158,7 @@ class ControlSettings:
     velocity_cutoff_hz: float = 100.0
 
     def gains_kwargs(self) -> dict[str, float]:
-        """Keyword arguments for ``daq.control.ControllerGains(**kwargs)``."""
+        """Keyword arguments for ``daq.protocol.control.ControllerGains(**kwargs)``."""
         out = {"kp": self.kp, "kd": self.kd, "velocity_cutoff_hz": self.velocity_cutoff_hz}
         for key, name in FEEDFORWARD_KEYS.items():
             out[name] = float(self.feedforward.get(key, 0.0))

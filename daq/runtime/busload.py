@@ -19,7 +19,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from . import ConfigError
+from daq import ConfigError
 
 
 def frame_bits(n_bytes: int) -> int:

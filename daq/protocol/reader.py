@@ -22,8 +22,10 @@ import zstandard
 from mcap.records import Attachment, Channel, Chunk, Metadata, Opcode, Schema
 from mcap.stream_reader import StreamReader
 
-from . import DaqError
-from .mcaplog import (
+from daq import DaqError
+
+from .logformat import (
+    FRAME_DTYPE,
     SETPOINT_DTYPE,
     STATE_DTYPE,
     STATE_SCHEMA_NAME,
@@ -249,7 +251,7 @@ def read_run(path: str | Path, axis: int = 0) -> RunArrays:
     Parameters
     ----------
     path : path-like
-        A ``*.mcap`` file written by :class:`daq.mcaplog.RunLog`.
+        A ``*.mcap`` file written by :class:`daq.runtime.mcaplog.RunLog`.
     axis : int
         Drive index (channel ``/joint/<axis>/state``).
 
@@ -316,8 +318,6 @@ def read_attachments(path: str | Path) -> dict[str, bytes]:
 def read_frames(path: str | Path) -> np.ndarray:
     """Every logged CAN frame, as a structured array with fields ``cycle``, ``timestamp``,
     ``id``, ``dlc``, ``data`` (uint8 x 8)."""
-    from .mcaplog import FRAME_DTYPE
-
     path = Path(path)
     out: list[np.ndarray] = []
     with open(path, "rb") as f:

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from . import DaqError
+from . import IdentError
 
 CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:2em auto;
@@ -144,9 +144,9 @@ def load_json(path: Path) -> dict:
     try:
         return json.loads(Path(path).read_text(encoding="utf-8"))
     except FileNotFoundError:
-        raise DaqError(f"{path}: not found (expected a JSON file written by jointid)") from None
+        raise IdentError(f"{path}: not found (expected a JSON file written by jointid)") from None
     except json.JSONDecodeError as exc:
-        raise DaqError(f"{path}: invalid JSON at line {exc.lineno}: {exc.msg}") from None
+        raise IdentError(f"{path}: invalid JSON at line {exc.lineno}: {exc.msg}") from None
 
 
 def write_json(path: Path, data: Mapping[str, Any]) -> Path:

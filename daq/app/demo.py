@@ -1,22 +1,36 @@
 """The demo pipeline: plan → run on the simulated drive → fit both models → refine → report.
 
-Everything goes through the production code: the campaign is run by :func:`daq.runner.run_campaign`
-over python-can's virtual bus against :class:`sim_drivers.drive.SimulatedDrive`, the logs are the
-MCAP files a hardware run would write, and the fit reads them back with :mod:`ident.loaders`.
+Everything goes through the production code: the campaign is run by
+:func:`daq.runtime.runner.run_campaign` over python-can's virtual bus against
+:class:`sim_drivers.drive.SimulatedDrive`, the logs are the MCAP files a hardware run would
+write, and the fit reads them back with :mod:`ident.loaders`.
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
-from . import DaqError, __version__
-from .progress import ProgressLine
-from .report import write_json
-from .report_build import build_report, discover_figures
+import matplotlib
+
+from daq import DaqError, __version__, examples
+from daq.runtime.progress import ProgressLine
+from daq.runtime.runner import Progress, run_campaign
+from ident.fitting import fit_models, rescan_qs
+from ident.loaders import load_experiments
+from ident.plots import write_plots
+from ident.refine import refine
+from ident.refine_plots import plot_refinement
+from ident.report import write_json
+from ident.report_build import build_report, discover_figures
+from sim_drivers.plant_config import load_plant
+from trajectories.campaign_file import load_campaign
+from trajectories.cli import plot_plan
+from trajectories.plan import plan_campaign
 
 TITLE = "jointid demo: simulated Stäubli RX130L joint 3"
 
@@ -61,22 +75,7 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, max_steps: int = 3,
     DaqError
         When the campaign stops before its end (the message names the cause).
     """
-    import matplotlib
-
     matplotlib.use("Agg")
-    from daq import examples
-    from ident.fitting import fit_models, rescan_qs
-    from ident.loaders import load_experiments
-    from ident.plots import write_plots
-    from ident.refine import refine
-    from ident.refine_plots import plot_refinement
-    from sim_drivers.plant_config import load_plant
-    from trajectories.plan import plan_campaign
-
-    from .campaign_file import load_campaign
-    from .cli_plan import plot_plan
-    from .runner import Progress, run_campaign
-
     stream = stream if stream is not None else sys.stderr
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -222,3 +221,30 @@ def _summary(fit: dict, ref: Any, wall_s: float) -> str:
 
 def _f(x: float | None) -> str:
     return "—" if x is None else f"{x:.4f}"
+
+
+# ------------------------------------------------------------------ jointid demo
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "demo",
+        help="run the whole campaign on the simulated joint and write a report",
+        description="Plan the example campaign, run it on the simulated CiA 402 drive over a "
+        "virtual CAN bus, log to MCAP, fit the usual and the new model, refine from the "
+        "residual, and write DIR/report.html.",
+    )
+    p.add_argument("--out", type=Path, default=Path("jointid-demo"),
+                   help="output folder (default: ./jointid-demo)")
+    p.add_argument("--quick", action="store_true",
+                   help="a shortened campaign (under a minute on 2 cores)")
+    p.add_argument("--max-steps", type=int, default=3, help="refinement steps (default 3)")
+    p.set_defaults(func=_demo)
+
+
+def _demo(args: argparse.Namespace) -> int:
+    t0 = time.perf_counter()
+    result = run_demo(args.out, quick=args.quick, max_steps=args.max_steps,
+                      stream=sys.stderr)
+    print(result.summary)
+    print(f"report: {result.report}  ({time.perf_counter() - t0:.0f} s)")
+    return 0
+

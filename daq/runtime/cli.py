@@ -11,7 +11,11 @@ import argparse
 import sys
 from pathlib import Path
 
+from sim_drivers.plant_config import load_plant
+from trajectories.campaign_file import load_campaign
+
 from .progress import ProgressLine
+from .runner import Progress, prompt_payload, run_campaign
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -37,16 +41,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from .campaign_file import load_campaign
-    from .runner import Progress, run_campaign
-
     campaign = load_campaign(args.campaign)
     if args.quick:
         campaign = campaign.quick()
     plant = None
     if args.simulate is not None:
-        from sim_drivers.plant_config import load_plant
-
         plant = load_plant(args.simulate)
     bar = ProgressLine()
 
@@ -56,9 +55,7 @@ def main(args: argparse.Namespace) -> int:
 
     def ask(index, payload, n) -> bool:
         bar.close()
-        from .runner import _prompt
-
-        return _prompt(index, payload, n)
+        return prompt_payload(index, payload, n)
 
     try:
         result = run_campaign(campaign, out_dir=args.out, simulate=plant, yes=args.yes,

@@ -8,29 +8,32 @@ packages (their exception roots) print one line on stderr and exit 2; Ctrl-C exi
 from __future__ import annotations
 
 import argparse
-import importlib
 import os
 import sys
 
-from . import __version__
+import daq.runtime.cli
+import ident.cli
+import ident.cli_report
+import trajectories.cli
+from daq import DaqError, __version__
+from ident import IdentError
+from sim_drivers import SimError
+from trajectories import TrajectoryError
 
-# subcommand modules, in the order of `jointid --help`
+from . import demo
+
+# subcommand modules, in the order of `jointid --help`; each sits with the package it drives
 SUBCOMMANDS = (
-    "daq.cli_plan",  # jointid plan
-    "daq.cli_run",  # jointid run
-    "ident.cli",  # jointid fit
-    "daq.cli_demo",  # jointid demo, jointid report
+    trajectories.cli,  # jointid plan
+    daq.runtime.cli,  # jointid run
+    ident.cli,  # jointid fit
+    demo,  # jointid demo
+    ident.cli_report,  # jointid report
 )
 
-
-def _user_errors() -> tuple[type[BaseException], ...]:
-    from ident import IdentError
-    from sim_drivers import SimError
-    from trajectories import TrajectoryError
-
-    from . import DaqError
-
-    return (DaqError, TrajectoryError, IdentError, SimError, OSError)
+#: errors raised on purpose by our packages (their exception roots) and I/O errors
+USER_ERRORS: tuple[type[BaseException], ...] = (DaqError, TrajectoryError, IdentError, SimError,
+                                                 OSError)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -41,13 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"jointid {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in SUBCOMMANDS:
-        try:
-            module = importlib.import_module(name)
-        except ModuleNotFoundError as exc:
-            if exc.name != name:  # a real missing dependency, not a missing subcommand
-                raise
-            continue
+    for module in SUBCOMMANDS:
         module.register(sub)
     return parser
 
@@ -69,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 0
-    except _user_errors() as exc:
+    except USER_ERRORS as exc:
         if isinstance(exc, OSError) and exc.filename:
             msg = f"{exc.filename}: {exc.strerror or exc}"
         else:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from trajectories.campaign import Campaign
 
-from . import ConfigError
+from . import CampaignFileError
 
 __all__ = ["load_campaign"]
 
@@ -27,7 +27,7 @@ def load_campaign(path: str | Path) -> Campaign:
 
     Raises
     ------
-    daq.ConfigError
+    trajectories.CampaignFileError
         The file is not valid TOML (the one-line message names the file, line and column)
         or is not UTF-8.
     trajectories.SchemaError
@@ -40,7 +40,8 @@ def load_campaign(path: str | Path) -> Campaign:
     try:
         raw = tomllib.loads(data.decode("utf-8"))
     except UnicodeDecodeError as exc:
-        raise ConfigError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from exc
+        raise CampaignFileError(
+            f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from exc
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: invalid TOML: {exc}") from exc
+        raise CampaignFileError(f"{path}: invalid TOML: {exc}") from exc
     return Campaign.from_dict(raw, source=str(path))

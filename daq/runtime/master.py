@@ -4,7 +4,7 @@ SDO, NMT, EMCY and heartbeat go through a ``canopen.RemoteNode``; the cyclic PDO
 and unpacked with :mod:`struct` directly (the mapping is fixed and verified here), because
 canopen's object-dictionary encode/decode costs about twice a raw frame per cycle
 (``notes/performance.md``). canopen's ``BaseNode402`` is not used (0.4 s per transition,
-bare ``RuntimeError``); the CiA 402 sequencing uses :mod:`daq.cia402`.
+bare ``RuntimeError``); the CiA 402 sequencing uses :mod:`daq.protocol.cia402`.
 
 PDOs are configured by explicit SDO writes, never by ``PdoMap.save()`` (canopen 2.4.x
 writes no entries when the EDS declares the mapping objects as ARRAY), and every written
@@ -53,8 +53,9 @@ import can
 import canopen
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
-from . import ConfigError
-from .cia402 import SUPPORTED_MODE_BIT, Mode, supported_modes
+from daq import ConfigError
+from daq.protocol.cia402 import SUPPORTED_MODE_BIT, Mode, supported_modes
+
 from .config import DriveConfig, Scaling
 
 OBJECT_NAMES = {

@@ -16,7 +16,7 @@ import html
 from pathlib import Path
 from typing import Any
 
-from . import DaqError
+from . import IdentError
 from .report import Section, fmt, load_json, write_html
 
 PAPER = (
@@ -281,12 +281,12 @@ def build_report(directory: Path | str, *, title: str = "jointid report") -> Pat
 
     Raises
     ------
-    DaqError
+    IdentError
         When ``DIR`` or ``DIR/fit.json`` is missing or unreadable.
     """
     d = Path(directory)
     if not d.is_dir():
-        raise DaqError(f"{d}: not a directory (expected the output folder of jointid demo/fit)")
+        raise IdentError(f"{d}: not a directory (expected the output folder of jointid demo/fit)")
     fit = load_json(d / "fit.json")
     demo = load_json(d / "demo.json") if (d / "demo.json").exists() else {}
     if "figures" not in demo:

@@ -55,11 +55,10 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from daq import ConfigError
+from daq.protocol.cia402 import Mode
 from trajectories import SchemaError
 from trajectories.schema import ArrayOfTables, Field, Table
-
-from . import ConfigError
-from .cia402 import Mode
 
 MODES = {"cst": Mode.CYCLIC_SYNC_TORQUE, "csp": Mode.CYCLIC_SYNC_POSITION}
 

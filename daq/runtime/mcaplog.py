@@ -34,7 +34,6 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import zstandard
 from mcap.data_stream import RecordBuilder
 from mcap.records import (
@@ -54,114 +53,22 @@ from mcap.records import (
     SummaryOffset,
 )
 
-from . import DaqError, __version__
-
-CDR_HEADER = b"\x00\x01\x00\x00"  # CDR, little endian, no options
-
-STATE_SCHEMA_NAME = "jointid_msgs/msg/JointState"
-STATE_SCHEMA = """\
-# One control cycle of one drive (joint side, SI units)
-float64 t            # [s] campaign time of the cycle (cycle * cycle period)
-int64 cycle          # cycle counter from 0, no gaps
-float64 q            # [rad] or [m] joint position from the encoder (0x6064)
-float64 dq           # [rad/s] or [m/s] joint velocity from 0x606C
-float64 tau_ref      # [N m] or [N] joint-side torque of the current reference sent
-float64 tau_actual   # [N m] or [N] joint-side torque actual (0x6077)
-int32 counts         # position actual value (0x6064) [encoder counts]
-int32 velocity_raw   # velocity actual value (0x606C) [counts/s]
-int16 tau_ref_raw    # target torque sent (0x6071) [per mille of rated torque]
-int16 tau_actual_raw # torque actual (0x6077) [per mille of rated torque]
-uint16 statusword    # 0x6041
-uint8 flags          # bit 0: TPDO missing this cycle (values repeated); bit 1: stopping
-uint8 reserved
-"""
-_STATE = struct.Struct("<4sdqddddiihhHBB")
-STATE_SIZE = _STATE.size  # 68
-STATE_DTYPE = np.dtype(
-    [
-        ("hdr", "V4"),
-        ("t", "<f8"),
-        ("cycle", "<i8"),
-        ("q", "<f8"),
-        ("dq", "<f8"),
-        ("tau_ref", "<f8"),
-        ("tau_actual", "<f8"),
-        ("counts", "<i4"),
-        ("velocity_raw", "<i4"),
-        ("tau_ref_raw", "<i2"),
-        ("tau_actual_raw", "<i2"),
-        ("statusword", "<u2"),
-        ("flags", "u1"),
-        ("reserved", "u1"),
-    ]
+from daq import DaqError, __version__
+from daq.protocol.logformat import (
+    CAN_HEAD_STRUCT,
+    CAN_SCHEMA,
+    CAN_SCHEMA_NAME,
+    CDR_HEADER,
+    EVENT_SCHEMA,
+    FRAME,
+    SETPOINT_SCHEMA,
+    SETPOINT_SCHEMA_NAME,
+    SETPOINT_STRUCT,
+    STATE_SCHEMA,
+    STATE_SCHEMA_NAME,
+    STATE_SIZE,
+    STATE_STRUCT,
 )
-assert STATE_DTYPE.itemsize == STATE_SIZE
-FLAG_TPDO_MISSING = 1
-FLAG_STOPPING = 2
-
-SETPOINT_SCHEMA_NAME = "jointid_msgs/msg/Setpoint"
-SETPOINT_SCHEMA = """\
-# The planned reference of one cycle (joint side, SI units)
-float64 t          # [s] campaign time
-int64 cycle        # cycle counter
-float64 q_ref      # [rad] or [m]
-float64 dq_ref     # [rad/s] or [m/s]
-float64 ddq_ref    # [rad/s^2] or [m/s^2]
-int32 segment      # index of the plan segment (names in metadata "campaign".segments)
-int32 target_raw   # CSP: target position sent (0x607A) [counts]; CST: 0
-"""
-_SETPOINT = struct.Struct("<4sdqdddii")
-SETPOINT_DTYPE = np.dtype(
-    [
-        ("hdr", "V4"),
-        ("t", "<f8"),
-        ("cycle", "<i8"),
-        ("q_ref", "<f8"),
-        ("dq_ref", "<f8"),
-        ("ddq_ref", "<f8"),
-        ("segment", "<i4"),
-        ("target_raw", "<i4"),
-    ]
-)
-assert SETPOINT_DTYPE.itemsize == _SETPOINT.size
-
-CAN_SCHEMA_NAME = "jointid_msgs/msg/CanFrames"
-CAN_SCHEMA = """\
-# Every CAN frame sent or received during one cycle
-int64 cycle
-CanFrame[] frames
-================================================================================
-MSG: jointid_msgs/CanFrame
-float64 timestamp   # [s] python-can timestamp (monotonic or epoch, as the interface gives)
-uint32 id           # arbitration id (11-bit)
-uint8 dlc
-uint8[8] data       # zero-padded
-"""
-FRAME = struct.Struct("<dIB8s3x")  # one CanFrame element in the CDR sequence (24 bytes)
-FRAME_DTYPE = np.dtype(
-    [("timestamp", "<f8"), ("id", "<u4"), ("dlc", "u1"), ("data", "u1", (8,)), ("pad", "V3")]
-)
-assert FRAME_DTYPE.itemsize == FRAME.size
-_CAN_HEAD = struct.Struct("<4sqI4x")  # header, cycle, sequence length, pad to 8
-
-EVENT_SCHEMA = json.dumps(
-    {
-        "title": "jointid event",
-        "type": "object",
-        "properties": {
-            "t": {"type": "number", "description": "campaign time [s]"},
-            "cycle": {"type": "integer"},
-            "kind": {
-                "type": "string",
-                "description": "state, emcy, fault, stop, operator, info, warning, limit, "
-                               "watchdog",
-            },
-            "axis": {"type": "integer", "description": "drive index, -1 for the whole run"},
-            "message": {"type": "string"},
-        },
-    }
-).encode()
-
 
 MAGIC = b"\x89MCAP0\r\n"
 _MSG = struct.Struct("<BQHIQQ")  # message record header: opcode, length, channel, seq, times
@@ -319,9 +226,8 @@ class FastWriter:
 
 def chunk_size_for(n_axes: int, frames_per_cycle: int, cycle_s: float, seconds: float) -> int:
     """Chunk size [byte] holding about ``seconds`` of data at the given cycle."""
-    per_cycle = (
-        n_axes * (STATE_SIZE + 31) + (_SETPOINT.size + 31) + 47 + frames_per_cycle * FRAME.size
-    )
+    per_cycle = (n_axes * (STATE_SIZE + 31) + (SETPOINT_STRUCT.size + 31) + 47
+                 + frames_per_cycle * FRAME.size)
     return max(4096, int(per_cycle * seconds / cycle_s))
 
 
@@ -411,7 +317,7 @@ class RunLog:
         self._add(
             self._state_ch[axis],
             lt,
-            _STATE.pack(
+            STATE_STRUCT.pack(
                 CDR_HEADER, t, cycle, q, dq, tau_ref, tau_actual, counts, velocity_raw,
                 tau_ref_raw, tau_actual_raw, statusword, flags, 0,
             ),
@@ -434,7 +340,7 @@ class RunLog:
         self._add(
             self._setpoint_ch,
             self.start_ns + cycle * self.cycle_ns,
-            _SETPOINT.pack(CDR_HEADER, t, cycle, q_ref, dq_ref, ddq_ref, segment, target_raw),
+            SETPOINT_STRUCT.pack(CDR_HEADER, t, cycle, q_ref, dq_ref, ddq_ref, segment, target_raw),
             time.time_ns(),
             cycle,
         )
@@ -448,7 +354,7 @@ class RunLog:
         self._add(
             self._can_ch,
             self.start_ns + cycle * self.cycle_ns,
-            _CAN_HEAD.pack(CDR_HEADER, cycle, n_frames) + packed,
+            CAN_HEAD_STRUCT.pack(CDR_HEADER, cycle, n_frames) + packed,
             time.time_ns(),
             cycle,
         )

@@ -1,0 +1,505 @@
+"""Plan execution: the engine that runs a planned campaign on CANopen drives, cycle by cycle.
+
+Orchestration (bus, start-up, payload loop, operator) is :mod:`daq.runtime.runner`; the stop
+sequence and the watchdogs are :mod:`daq.runtime.safety`; the frame bookkeeping is
+:mod:`daq.runtime.cycle_io`.
+
+The campaign and its plan say *what* to do (:mod:`trajectories`); this engine executes it:
+start-up (presence, mode, PDO layout read back, bus load), then per payload run one MCAP
+file, cycle by cycle:
+
+1. SYNC (the drives latch the RPDOs of the previous cycle, step, and answer with TPDOs);
+2. wait for every drive's TPDO1/TPDO2 (``lockstep``: as long as needed, deterministic;
+   ``paced``: until 80 % of the period has elapsed);
+3. per drive: decode (struct), the position controller
+   :class:`daq.protocol.control.PositionController` (CST) or the position target (CSP),
+   limits and watchdog, RPDO out;
+4. log the joint states, the setpoint and every CAN frame of the cycle.
+
+Several drives (``[[daq.drives]]``) all follow the campaign's one plan, each with its own
+controller; drive k logs on ``/joint/<k>/state``. With ``--simulate`` each gets its own plant.
+
+Clocks
+------
+``lockstep``
+    The next cycle starts as soon as the drives answered: with simulated drives on the
+    virtual bus this runs as fast as the machine allows, and the result does not depend on
+    the machine's speed.
+``paced``
+    SYNC every ``cycle_s`` from the runner's own loop (sleep to 200 µs before the deadline,
+    then spin), the lateness of every SYNC is logged on ``/timing``; a SYNC more than half a
+    period late counts as a missed cycle, and after a whole period of delay the schedule is
+    re-anchored instead of sending a catch-up burst.
+
+Safety (every cycle)
+--------------------
+Position, velocity, torque limits (``[daq.limits]``, else the campaign's joint limits with
+5 % of the range / 20 % of the speed and torque as margins; the command itself is saturated
+at the torque limit), following error, TPDO missing for ``tpdo_timeout_cycles`` consecutive
+cycles, heartbeat silent for ``heartbeat_timeout_s``, EMCY, a drive leaving OPERATION ENABLED,
+SIGINT. On any of them the runner sends quick stop (controlword 0x0002) for
+``quick_stop_cycles`` cycles, then disable voltage (0x0000) until the drive reports SWITCH ON
+DISABLED (at most 5 more cycles). A command takes effect at the SYNC after it is sent, so the
+drive is quick-stopping (or off) from the 2nd SYNC after the detection and SWITCH ON DISABLED
+by the ``quick_stop_cycles + 2``-th (tested against the simulated drive's own record).
+Detection itself takes: the same cycle for limits, following error, EMCY and state changes;
+``tpdo_timeout_cycles`` cycles for missing TPDOs; ``heartbeat_timeout_s`` of wall time for a
+lost heartbeat (checked every 16 cycles); at most one cycle for SIGINT. The run's log is
+closed properly and the result says why, in one line.
+
+A dead master
+-------------
+The runner cannot stop the drives once it is dead, so it makes the drives watch it
+(:mod:`daq.runtime.master`): its own heartbeat (``daq.master_node_id``, ``daq.master_heartbeat_ms``,
+python-can ``send_periodic``) runs from before the drives' start-up to the end of the
+campaign, each drive with 0x1016 watches it (consumer time 3 periods + 100 ms), and 0x1006
+is written with the cycle in paced mode (0 in lockstep), arming the drive's SYNC-loss
+reaction against a hung main loop. After a normal end the runner clears 0x1016.1 before it
+stops its heartbeat. What could not be configured (no 0x1016 in the EDS, 0x1006 refused) is a
+``warning`` event at cycle 0 of every run's log, a log warning and a line of the summary.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import struct
+import time
+from collections.abc import Callable
+from typing import Any
+
+import can
+import canopen
+import numpy as np
+
+from daq.protocol.cia402 import Mode, State, path, state_from_statusword
+from daq.protocol.control import ControllerGains, PositionController
+from daq.protocol.logformat import FLAG_STOPPING, FLAG_TPDO_MISSING
+
+from .busload import BusLoad
+from .config import DaqConfig, Scaling
+from .cycle_io import CycleIO
+from .master import TPDO1_STRUCT, TPDO2_STRUCT, MasterDrive
+from .mcaplog import RunLog
+from .results import PayloadResult, Progress
+from .safety import (
+    CW_DISABLE,
+    CW_QUICK_STOP,
+    CW_RUN,
+    CW_SHUTDOWN,
+    DISABLE_MAX_CYCLES,
+    SHUTDOWN_CYCLES,
+    Supervisor,
+)
+
+logger = logging.getLogger(__name__)
+
+ENABLE_MAX_CYCLES = 200
+SETTLE_CYCLES = 20
+
+_TIMING = struct.Struct("<4sqddd")
+TIMING_SCHEMA = """\
+# Paced clock: timing of one cycle
+int64 cycle
+float64 wall_s       # [s] time.perf_counter() when the SYNC was sent
+float64 lateness_s   # [s] SYNC send time minus its deadline
+float64 busy_s       # [s] time from the SYNC to the end of the cycle's work
+"""
+
+
+
+
+def _quintic(q0: float, q1: float, vmax: float, amax: float, cycle_s: float):
+    """Rest-to-rest quintic from q0 to q1 at <= 50 % of vmax/amax: (q, dq, ddq) arrays."""
+    d = q1 - q0
+    if abs(d) < 1e-4:
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    T = max(0.2, 1.875 * abs(d) / (0.5 * vmax), math.sqrt(5.7735 * abs(d) / (0.5 * amax)))
+    n = int(math.ceil(T / cycle_s)) + 1
+    s = np.minimum(np.arange(n) * cycle_s / T, 1.0)
+    p = 10 * s**3 - 15 * s**4 + 6 * s**5
+    v = (30 * s**2 - 60 * s**3 + 30 * s**4) / T
+    a = (60 * s - 180 * s**2 + 120 * s**3) / T**2
+    return q0 + d * p, d * v, d * a
+
+
+
+class Engine(Supervisor):
+    """Executes the payload runs of one campaign on an open bus (built by :func:`run_campaign`).
+
+    Not thread-safe; one instance per campaign.
+    """
+
+    def __init__(self, campaign: Any, cfg: DaqConfig, network: canopen.Network,
+                 io: CycleIO, drives: list[MasterDrive], scalings: list[Scaling],
+                 load: BusLoad, progress: Callable[[Progress], None] | None) -> None:
+        self.c = campaign
+        self.cfg = cfg
+        self.net = network
+        self.bus = network.bus
+        self.io = io
+        self.drives = drives
+        self.scalings = scalings
+        self.load = load
+        self.progress = progress
+        self.cycle_s = campaign.cycle_s
+        self.paced = cfg.clock == "paced"
+        self.periodic = self.paced and cfg.sync_source == "periodic"
+        self.interrupted = False
+        self._init_limits(campaign, cfg)
+        self.gains = ControllerGains(**campaign.control.gains_kwargs())
+        self.revolute = campaign.joint.revolute
+        self.sync_msg = can.Message(arbitration_id=0x80, data=b"", is_extended_id=False)
+        self.rpdo_msgs = [can.Message(arbitration_id=0x200 + d.node_id, data=bytes(
+            d.specs[0].n_bytes), is_extended_id=False) for d in drives]
+        self.sync_count = 0
+        self._resync = False
+        self.notes: list[str] = []  # start-up warnings, logged at cycle 0 of every run
+
+    # -- one cycle ------------------------------------------------------------------------
+    def _exchange(self, cycle: int, deadline: float) -> int:
+        """SYNC and wait for the TPDOs; returns the bit mask of TPDOs received."""
+        io = self.io
+        io.begin_cycle()
+        now = time.time()
+        self.bus.send(self.sync_msg)
+        io.sent(now, 0x80, b"")
+        self.sync_count += 1
+        timeout = deadline - time.perf_counter() if self.paced else self.cfg.lockstep_wait_s
+        ok = io.pump(self.bus, timeout) if io.direct else io.wait(timeout)
+        if self._resync and io.direct:
+            # the previous cycle timed out: its TPDOs may have arrived since and been taken
+            # for this cycle's; take whatever is queued so that the newest values win
+            recv, on = self.bus.recv, io.on_message_received
+            while (msg := recv(0.0)) is not None:
+                on(msg)
+        self._resync = not ok
+        return io.full if ok else io.mask
+
+    def run_payload(self, index: int, payload: Any, ref: Any, log: RunLog,
+                    sim_drive_cycle0: int) -> PayloadResult:
+        """Execute one payload run and close its log.
+
+        Phases (one cycle counter, no gaps): read the drives' state; enable them (CiA 402
+        path, fault reset by a rising edge of bit 7) while holding the measured position;
+        approach the plan's start with a quintic (segment -1) if needed; the plan; settle
+        (``SETTLE_CYCLES``); shutdown (controlword 0x0006). On a fault, SIGINT or a watchdog:
+        quick stop for ``quick_stop_cycles``, then disable voltage until the drives report
+        it (at most ``DISABLE_MAX_CYCLES`` more cycles).
+
+        Parameters
+        ----------
+        index : int
+            Payload index in the campaign.
+        payload : trajectories.campaign.Payload
+        ref : trajectories.plan.Reference
+            The planned reference, sampled every cycle: ``q`` [rad], ``dq`` [rad/s],
+            ``ddq`` [rad/s^2], ``segment``, ``segment_names``.
+        log : RunLog
+            Open log; closed here on every path with the ``result`` metadata.
+        sim_drive_cycle0 : int
+            Cycle counter of the simulated drive at our cycle 0 (-1: no simulation).
+
+        Returns
+        -------
+        PayloadResult
+        """
+        c, cfg, io = self.c, self.cfg, self.io
+        n_dr = len(self.drives)
+        cycle_s = self.cycle_s
+        kq = [s.rad_per_count for s in self.scalings]
+        cpr = [1.0 / k for k in kq]
+        tpu = [s.torque_per_unit for s in self.scalings]
+        xmax = [min(32767, int(self.tau_max / t)) for t in tpu]
+        csp = [d.cfg.mode is Mode.CYCLIC_SYNC_POSITION for d in self.drives]
+        ctrls = [PositionController(self.gains, cycle_s, self.revolute) for _ in self.drives]
+        packs = [d.rpdo_struct.pack for d in self.drives]
+        unpack1, unpack2 = TPDO1_STRUCT.unpack, TPDO2_STRUCT.unpack
+        send = self.bus.send
+        msgs = self.rpdo_msgs
+        io_sent = io.sent
+        data = io.data
+        log_state, log_sp, log_frames = log.state, log.setpoint, log.frames
+        seg_names = list(ref.segment_names)
+        timing: list[tuple[float, float, float]] = []
+        lateness = np.zeros(0)
+        # per-drive live values (kept when a TPDO is missing)
+        sw = [0] * n_dr
+        counts = [0] * n_dr
+        tq = [0] * n_dr
+        vel = [0] * n_dr
+        prev_state: list[State | None] = [None] * n_dr
+        prev_sw = [-1] * n_dr
+        missing_run = [0] * n_dr
+        missed = 0
+        cycle = 0
+        fault_cycle = -1
+        stop_cycle = -1
+        status, reason = "done", ""
+        t_wall0 = time.perf_counter()
+        next_deadline = t_wall0 + cycle_s
+        hb_check = 0
+        ch_timing = None
+        if self.paced:
+            w = log._w
+            sid = w.register_schema("jointid_msgs/msg/CycleTiming", "ros2msg",
+                                    TIMING_SCHEMA.encode())
+            ch_timing = w.register_channel("/timing", "cdr", sid)
+
+        def do_cycle(q_ref: float, dq_ref: float, ddq_ref: float, seg: int, mode: str) -> None:
+            """One full cycle; ``mode`` is "enable", "run", "quick_stop", "disable", "shutdown"."""
+            nonlocal cycle, missed, next_deadline, hb_check
+            t = cycle * cycle_s
+            if self.paced and not self.periodic:
+                target = next_deadline
+                now = time.perf_counter()
+                if target - now > 0.0003:
+                    time.sleep(target - now - 0.0002)
+                while time.perf_counter() < target:
+                    pass
+                t_sync = time.perf_counter()
+                late = t_sync - target
+                if late > 0.5 * cycle_s:
+                    missed += 1
+                if late > cycle_s:
+                    next_deadline = t_sync  # re-anchor: no catch-up burst
+                mask = self._exchange(cycle, next_deadline + 0.8 * cycle_s)
+                next_deadline += cycle_s
+            elif self.periodic:
+                # SYNC comes from the periodic task: a cycle is the arrival of the TPDOs
+                io.mask = 0
+                ok = io.pump(self.bus, 2.0 * cycle_s)
+                mask = io.full if ok else io.mask
+                t_sync = time.perf_counter()
+                late = t_sync - next_deadline
+                if late > 0.5 * cycle_s or late < -0.5 * cycle_s:
+                    missed += 1
+                    next_deadline = t_sync  # re-anchor on the SYNC train
+                    late = 0.0 if cycle == 0 else late
+                next_deadline += cycle_s
+            else:
+                t_sync = late = 0.0
+                mask = self._exchange(cycle, 0.0)
+            stopping = mode != "run" and mode != "enable"
+            tpdo_fault = ""
+            if io.emcy and not stopping:  # before the state checks: name the first cause
+                dd, code, reg = io.emcy.pop(0)
+                self._fault(f"{self.drives[dd].name}: EMCY 0x{code:04X} (error register "
+                            f"0x{reg:02X})", cycle, t, log, dd, kind="emcy")
+            for d in range(n_dr):
+                flags = FLAG_STOPPING if stopping else 0
+                b1 = 1 << (2 * d)
+                if mask & (b1 | b1 << 1) == (b1 | b1 << 1):
+                    sw[d], counts[d], tq[d] = unpack1(data[d][0])
+                    vel[d] = unpack2(data[d][1])[0]
+                    missing_run[d] = 0
+                else:
+                    flags |= FLAG_TPDO_MISSING
+                    missing_run[d] += 1
+                    if mode == "run" or mode == "enable":
+                        missed += 0 if self.paced else 1
+                    if missing_run[d] >= cfg.tpdo_timeout_cycles and not tpdo_fault:
+                        tpdo_fault = (f"{self.drives[d].name}: TPDO missing for "
+                                      f"{missing_run[d]} cycles (watchdog)")
+                q = counts[d] * kq[d]
+                dq = vel[d] * kq[d]
+                tau_act = tq[d] * tpu[d]
+                s = sw[d]
+                if mode == "run" or mode == "enable":
+                    if csp[d]:
+                        x = 0
+                        target_raw = round(q_ref * cpr[d])
+                    else:
+                        tau = ctrls[d].update(q_ref, dq_ref, ddq_ref, q)
+                        x = round(tau / tpu[d])
+                        if x > xmax[d]:
+                            x = xmax[d]
+                        elif x < -xmax[d]:
+                            x = -xmax[d]
+                        target_raw = 0
+                    if mode == "run":
+                        cw = CW_RUN
+                    else:
+                        try:
+                            st = (state_from_statusword(s) if flags == 0
+                                  else State.SWITCH_ON_DISABLED)
+                        except ValueError:
+                            st = State.NOT_READY_TO_SWITCH_ON
+                        if st is State.OPERATION_ENABLED:
+                            cw = CW_RUN
+                        elif st is State.FAULT:
+                            cw = 0x80 if cycle % 2 else 0x00  # rising edge of bit 7
+                        elif st in (State.NOT_READY_TO_SWITCH_ON, State.FAULT_REACTION_ACTIVE):
+                            cw = CW_DISABLE
+                        else:
+                            cw = path(st, State.OPERATION_ENABLED)[0][1]
+                else:
+                    x = 0
+                    target_raw = round(q_ref * cpr[d]) if csp[d] else 0
+                    cw = (CW_QUICK_STOP if mode == "quick_stop" else
+                          CW_DISABLE if mode == "disable" else CW_SHUTDOWN)
+                payload_bytes = packs[d](cw, target_raw if csp[d] else x)
+                m = msgs[d]
+                m.data = payload_bytes
+                send(m)
+                io_sent(time.time(), m.arbitration_id, payload_bytes)
+                log_state(d, cycle, t, q, dq, x * tpu[d] if not csp[d] else math.nan, tau_act,
+                          counts[d], vel[d], x, tq[d], s, flags)
+                # state change events (decode only when the statusword changed)
+                if flags & FLAG_TPDO_MISSING:
+                    st_now = None
+                elif s == prev_sw[d]:
+                    st_now = prev_state[d]
+                else:
+                    prev_sw[d] = s
+                    try:
+                        st_now = state_from_statusword(s)
+                    except ValueError:
+                        st_now = None
+                    if st_now is not prev_state[d]:
+                        log.event(cycle, t, "state", f"{self.drives[d].name}: "
+                                  f"{st_now.name if st_now else hex(s)}", d)
+                        prev_state[d] = st_now
+                # limits and following error (only while driving)
+                if mode == "run" and not self._stop_reason:
+                    why = ""
+                    if not self.q_lo <= q <= self.q_hi and not flags:
+                        why = (f"position limit: q = {q:.4f} outside [{self.q_lo:.4g}, "
+                               f"{self.q_hi:.4g}]")
+                    elif (dq > self.v_max or -dq > self.v_max) and not flags:
+                        why = f"velocity limit: |dq| = {abs(dq):.4f} > {self.v_max:.4g}"
+                    elif (tau_act > self.tau_act_max or -tau_act > self.tau_act_max) and not flags:
+                        why = (f"torque limit: |torque actual| = {abs(tau_act):.1f} > "
+                               f"{self.tau_act_max:.4g}")
+                    elif abs(q_ref - q) > cfg.max_following_error and not flags:
+                        why = (f"following error: |q_ref - q| = {abs(q_ref - q):.4f} > "
+                               f"{cfg.max_following_error:g}")
+                    elif st_now is not None and st_now is not State.OPERATION_ENABLED:
+                        why = f"drive left OPERATION_ENABLED (now {st_now.name})"
+                    if why:
+                        self._fault(f"{self.drives[d].name}: {why}", cycle, t, log, d)
+            if tpdo_fault and not stopping:
+                self._fault(tpdo_fault, cycle, t, log, -1)
+            log_sp(cycle, t, q_ref, dq_ref, ddq_ref, seg,
+                   round(q_ref * cpr[0]) if csp[0] else 0)
+            buf, nf = io.take_frames()
+            log_frames(cycle, buf, nf)
+            if self.paced:
+                busy = time.perf_counter() - t_sync
+                timing.append((t_sync - t_wall0, late, busy))
+                log._add(ch_timing, log.start_ns + cycle * log.cycle_ns,
+                         _TIMING.pack(b"\x00\x01\x00\x00", cycle, t_sync - t_wall0, late, busy),
+                         time.time_ns(), cycle)
+            # watchdogs that do not depend on the drive's answer of this cycle
+            if not stopping:
+                hb_check += 1
+                if hb_check >= 16:
+                    hb_check = 0
+                    self._check_heartbeats(cycle, t, log)
+                if self.interrupted and not self._stop_reason:
+                    self._stop_reason = ("interrupted", "interrupted by the operator (SIGINT)")
+                    self._fault_cycle = cycle
+                    log.event(cycle, t, "operator", "SIGINT: stopping")
+            cycle += 1
+
+        def enabled_all() -> bool:
+            for d in range(n_dr):
+                try:
+                    if state_from_statusword(sw[d]) is not State.OPERATION_ENABLED:
+                        return False
+                except ValueError:
+                    return False
+            return True
+
+        def report(phase: str, seg: int, n_total: int) -> None:
+            if self.progress is not None:
+                name = seg_names[seg] if 0 <= seg < len(seg_names) else phase
+                self.progress(Progress(index, len(c.payloads), name, cycle, n_total,
+                                       self.load.share, missed, phase))
+
+        self._stop_reason: tuple[str, str] | None = None
+        self._fault_cycle = -1
+        net = self.net
+        if net.notifier is not None:  # the main thread receives itself during the run
+            net.notifier.stop(1.0)
+            net.notifier = None
+        io.direct = True
+        sync_task = None
+        if self.periodic:
+            # first cycle's deadline: one period after the periodic task starts
+            sync_task = self.bus.send_periodic(self.sync_msg, cycle_s)
+            next_deadline = time.perf_counter() + cycle_s
+            log.event(0, 0.0, "info", f"SYNC from send_periodic ({type(sync_task).__name__})")
+        for note in self.notes:
+            log.event(0, 0.0, "warning", note)
+        try:
+            # 1. enable, holding the position measured at the first answer
+            do_cycle(0.0, 0.0, 0.0, -1, "disable")  # first SYNC: read the drives' state
+            q_hold = counts[0] * kq[0]
+            log.event(cycle, cycle * cycle_s, "info", f"start position {q_hold:.5f}")
+            for _ in range(ENABLE_MAX_CYCLES):
+                if enabled_all() or self._stop_reason:
+                    break
+                do_cycle(q_hold, 0.0, 0.0, -1, "enable")
+            if not enabled_all() and not self._stop_reason:
+                names = ", ".join(f"{d.name} {state_from_statusword(sw[k]).name}"
+                                  for k, d in enumerate(self.drives))
+                self._fault(f"drives not enabled after {ENABLE_MAX_CYCLES} cycles ({names})",
+                            cycle, cycle * cycle_s, log, -1)
+            if not self._stop_reason:
+                log.event(cycle, cycle * cycle_s, "info", "operation enabled")
+                # 2. approach the plan start, then the plan, then settle
+                lim = c.joint.limits
+                aq, adq, addq = _quintic(q_hold, float(ref.q[0]), lim.max_velocity,
+                                         lim.max_acceleration, cycle_s)
+                rq = np.concatenate([aq, ref.q, np.full(SETTLE_CYCLES, ref.q[-1])]).tolist()
+                rdq = np.concatenate([adq, ref.dq, np.zeros(SETTLE_CYCLES)]).tolist()
+                rddq = np.concatenate([addq, ref.ddq, np.zeros(SETTLE_CYCLES)]).tolist()
+                rseg = np.concatenate([np.full(len(aq), -1), ref.segment,
+                                       np.full(SETTLE_CYCLES, -1)]).astype(int).tolist()
+                n_total = cycle + len(rq)
+                report("run", -1, n_total)
+                for i in range(len(rq)):
+                    do_cycle(rq[i], rdq[i], rddq[i], rseg[i], "run")
+                    if self._stop_reason:
+                        break
+                    if i % 250 == 0:
+                        report("run", rseg[i], n_total)
+            # 3. stop: normal shutdown or quick stop + disable
+            q_last = counts[0] * kq[0]
+            if self._stop_reason:
+                status, reason = self._stop_reason
+                fault_cycle = self._fault_cycle
+                report("stop", -1, cycle)
+                for _ in range(cfg.quick_stop_cycles):
+                    do_cycle(q_last, 0.0, 0.0, -1, "quick_stop")
+                for _ in range(DISABLE_MAX_CYCLES + 1):
+                    do_cycle(q_last, 0.0, 0.0, -1, "disable")
+                    if self._all_off(sw):
+                        break
+            else:
+                for _ in range(SHUTDOWN_CYCLES):
+                    do_cycle(q_last, 0.0, 0.0, -1, "shutdown")
+            off = self._all_off(sw)
+            stop_cycle = cycle - 1 if off else -1
+            msg = ("drives disabled" if off else "drives did not confirm the stop: "
+                   + ", ".join(f"{d.name} sw=0x{sw[k]:04X}" for k, d in enumerate(self.drives)))
+            log.event(stop_cycle if off else cycle - 1, (cycle - 1) * cycle_s,
+                      "stop" if status != "done" else "info", msg)
+        finally:
+            wall = time.perf_counter() - t_wall0
+            if sync_task is not None:
+                sync_task.stop()
+            io.direct = False
+            net.notifier = can.Notifier(net.bus, net.listeners, net.NOTIFIER_CYCLE)
+            if timing:
+                lateness = np.array([x[1] for x in timing])
+            log.close({
+                "status": status, "reason": reason, "cycles": str(cycle),
+                "fault_cycle": str(fault_cycle), "stop_cycle": str(stop_cycle),
+                "missed": str(missed), "wall_s": f"{wall:.3f}",
+                "sync_offset": str(sim_drive_cycle0),
+            })
+        return PayloadResult(index, float(payload.mass_kg), float(payload.arm_m), log.path,
+                             cycle, status, reason, fault_cycle, stop_cycle, missed, wall,
+                             lateness)

@@ -1,0 +1,366 @@
+"""Campaign orchestration: ``run_campaign`` opens the bus, starts the drives (and the
+``--simulate`` rig), runs one payload after the other through :class:`daq.runtime.engine.Engine`
+(one MCAP log each), asks the operator between payloads and keeps the resume state file."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import os
+import re
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import can
+import canopen
+import numpy as np
+
+from daq import ConfigError, DaqError, __version__
+from trajectories.plan import plan_campaign
+
+from .busload import check_load, cycle_load
+from .config import DaqConfig, Scaling, parse_daq, with_scaling
+from .cycle_io import CycleIO
+from .engine import Engine
+from .master import MasterDrive, MasterHeartbeat, pdo_lengths
+from .mcaplog import RunLog
+from .results import CampaignResult, PayloadResult, Progress
+from .simrig import SimRig, plant_scaling, start_sim
+
+__all__ = ["CampaignResult", "PayloadResult", "Progress", "file_stem", "run_campaign"]
+
+
+logger = logging.getLogger(__name__)
+
+
+def _pin_cpu(cpu: int) -> set[int] | None:
+    if cpu == -2 or not hasattr(os, "sched_setaffinity"):
+        return None
+    old = os.sched_getaffinity(0)
+    target = max(old) if cpu == -1 else cpu
+    if target not in old:
+        raise ConfigError(f"daq.cpu: expected one of the allowed CPUs {sorted(old)}, got {cpu}")
+    os.sched_setaffinity(0, {target})
+    return old
+
+
+def _set_realtime(cfg: DaqConfig) -> tuple[int, int] | None:
+    """SCHED_FIFO at ``cfg.realtime_priority`` for this thread and the threads it starts."""
+    if not cfg.realtime_priority:
+        return None
+    old = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(cfg.realtime_priority))
+    except (PermissionError, OSError) as exc:
+        raise ConfigError(f"{cfg.source}: daq.realtime_priority: cannot set SCHED_FIFO "
+                          f"{cfg.realtime_priority} ({exc.strerror}; needs CAP_SYS_NICE)"
+                          ) from None
+    return old
+
+
+
+# ----------------------------------------------------------------------------- campaign
+def file_stem(name: str) -> str:
+    """A campaign name made safe for file names (``"rx130l (quick)"`` -> ``"rx130l_quick"``)."""
+    stem = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("_")
+    return stem or "campaign"
+
+
+def _state_path(out_dir: Path, name: str) -> Path:
+    return out_dir / f"{file_stem(name)}.state.json"
+
+
+def _read_state(p: Path) -> set[int]:
+    try:
+        raw = json.loads(p.read_text())
+        return {int(i) for i in raw.get("completed", [])}
+    except (OSError, ValueError, TypeError):
+        return set()
+
+
+def _write_state(p: Path, name: str, completed: set[int]) -> None:
+    tmp = p.with_suffix(".tmp")
+    tmp.write_text(json.dumps({"campaign": name, "completed": sorted(completed)}))
+    os.replace(tmp, p)
+
+
+def _metadata(campaign: Any, cfg: DaqConfig, plan: Any, index: int, payload: Any,
+              scalings: list[Scaling], plant_params: Any,
+              bus_info: str = "", drives: Sequence[MasterDrive] = ()
+              ) -> dict[str, dict[str, str]]:
+    ref = plan.reference
+    md: dict[str, dict[str, str]] = {
+        "campaign": {
+            "name": campaign.name, "source": str(campaign.source),
+            "joint_kind": campaign.joint.kind, "cycle_s": repr(campaign.cycle_s),
+            "clock": cfg.clock, "interface": cfg.interface, "channel": cfg.channel,
+            "bitrate": str(cfg.bitrate), "bus": bus_info,
+            "n_payloads": str(len(campaign.payloads)),
+            "segments": json.dumps(list(ref.segment_names)),
+            "position_limits": json.dumps(list(campaign.joint.limits.position)),
+            "gains": json.dumps(campaign.control.gains_kwargs()),
+        },
+        "payload": {"index": str(index), "mass_kg": repr(float(payload.mass_kg)),
+                    "arm_m": repr(float(payload.arm_m))},
+        "software": {"jointid": __version__, "python-can": can.__version__,
+                     "canopen": getattr(canopen, "__version__", "?"),
+                     "python": sys.version.split()[0]},
+    }
+    for k, (d, s) in enumerate(zip(cfg.drives, scalings, strict=True)):
+        md[f"drive{k}"] = {"node_id": str(d.node_id), "eds": d.eds.name, "mode": d.mode_name,
+                           **s.as_dict()}
+        if k < len(drives):
+            v = drives[k].consumer_value
+            md[f"drive{k}"]["heartbeat_consumer"] = ("" if v is None else f"0x{v:08X}")
+    md["safety"] = {
+        "master_node_id": str(cfg.master_node_id),
+        "master_heartbeat_ms": str(cfg.master_heartbeat_ms),
+        "heartbeat_consumer_ms": str(cfg.heartbeat_consumer_ms),
+        "sync_period_us": str(_sync_period_us(cfg, campaign.cycle_s)),
+    }
+    if plant_params is not None:
+        md["plant"] = {"name": str(getattr(plant_params, "name", "")),
+                       "source": str(getattr(plant_params, "source", "")),
+                       "simulated": "true"}
+        with contextlib.suppress(Exception):
+            md["plant"]["truth"] = json.dumps(plant_params.truth())
+    return md
+
+
+def _sync_period_us(cfg: DaqConfig, cycle_s: float) -> int:
+    """0x1006 for the drives [µs]: the cycle when paced, 0 (SYNC monitoring off) in
+    lockstep, where SYNCs may be far apart in wall time on a loaded host."""
+    return int(round(cycle_s * 1e6)) if cfg.clock == "paced" else 0
+
+
+def _attachments(campaign: Any, cfg: DaqConfig, plant_params: Any) -> list[tuple[str, str,
+                                                                                    bytes]]:
+    out = []
+    src = Path(str(campaign.source)) if campaign.source else None
+    if src is not None and src.is_file():
+        out.append((src.name, "application/toml", src.read_bytes()))
+    seen = set()
+    for d in cfg.drives:
+        if d.eds not in seen:
+            seen.add(d.eds)
+            out.append((d.eds.name, "text/plain", d.eds.read_bytes()))
+    if plant_params is not None:
+        p = Path(str(getattr(plant_params, "source", "")))
+        if p.suffix == ".toml" and p.is_file():
+            out.append((p.name, "application/toml", p.read_bytes()))
+    return out
+
+
+def prompt_payload(index: int, payload: Any, n: int) -> bool:
+    """Ask the operator to mount a payload; False to abort the campaign."""
+    try:
+        answer = input(f"Mount payload {index + 1}/{n}: {payload.mass_kg:g} kg at "
+                       f"{payload.arm_m:g} m, then press Enter (q to quit): ")
+    except EOFError:
+        return False
+    return answer.strip().lower() not in ("q", "quit", "n", "no")
+
+
+def run_campaign(
+    campaign: Any,
+    *,
+    out_dir: str | Path,
+    simulate: Any = None,
+    yes: bool = False,
+    progress: Callable[[Progress], None] | None = None,
+    payloads: Sequence[int] | None = None,
+    resume: bool = False,
+    fault_injectors: dict[int, Any] | None = None,
+    prompt: Callable[[int, Any, int], bool] | None = None,
+) -> CampaignResult:
+    """Run a campaign: one MCAP file per payload run in ``out_dir``.
+
+    Parameters
+    ----------
+    campaign : trajectories.campaign.Campaign
+    out_dir : path-like
+        Created if needed; receives ``<name>_payload<k>.mcap`` and ``<name>.state.json``.
+    simulate : sim_drivers.plant_config.PlantParams or None
+        Run against simulated drives (one plant per drive) on python-can's virtual bus; the
+        drive scaling comes from the plant's ``[drive]`` table.
+    yes : bool
+        Do not ask the operator between payloads (unattended).
+    progress : callable or None
+        Called with a :class:`Progress` every ~250 cycles.
+    payloads : sequence of int or None
+        Indices of the payloads to run (default: all).
+    resume : bool
+        Skip the payloads the state file lists as completed.
+    fault_injectors : dict node_id -> sim_drivers.faults.FaultInjector, optional
+        For tests with simulated drives.
+    prompt : callable or None
+        ``(index, payload, n) -> bool`` replacing the interactive prompt.
+
+    Returns
+    -------
+    CampaignResult
+        ``status`` "done", "stopped" (a fault; ``reason`` names it), "interrupted" (SIGINT)
+        or "aborted" (the operator declined a payload).
+
+    Raises
+    ------
+    daq.ConfigError
+        Refusals before any motion: invalid ``[daq]``, bus load over the limit, unknown node,
+        EDS or drive without the requested mode, PDO read-back mismatch.
+    trajectories.TrajectoryError
+        The plan violates a limit.
+    """
+    cfg = parse_daq(campaign.daq, str(campaign.source))
+    if simulate is not None:
+        cfg = with_scaling(cfg, plant_scaling(simulate))
+        if cfg.interface != "virtual":
+            raise ConfigError(f"{campaign.source}: daq.interface: expected 'virtual' with "
+                              f"--simulate, got {cfg.interface!r}")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    plan = plan_campaign(campaign)
+    load = cycle_load([pdo_lengths(d.mode) for d in cfg.drives], campaign.cycle_s, cfg.bitrate)
+    check_load(load, cfg.max_bus_load, str(campaign.source) or "campaign")
+    n_pay = len(campaign.payloads)
+    todo = list(range(n_pay)) if payloads is None else list(payloads)
+    for i in todo:
+        if not 0 <= i < n_pay:
+            raise ConfigError(f"payload index {i}: expected 0..{n_pay - 1}")
+    state_file = _state_path(out, campaign.name)
+    done_before = _read_state(state_file) if resume else set()
+    skipped = tuple(i for i in todo if i in done_before)
+    todo = [i for i in todo if i not in done_before]
+    completed = set(done_before)
+
+    old_affinity = _pin_cpu(cfg.cpu)
+    old_sched = _set_realtime(cfg) if cfg.clock == "paced" else None
+    sim: SimRig | None = None
+    network: canopen.Network | None = None
+    old_handler = None
+    engine: Engine | None = None
+    runs: list[PayloadResult] = []
+    sim_records: tuple[dict[str, np.ndarray], ...] = ()
+    heartbeat: MasterHeartbeat | None = None
+    drives: list[MasterDrive] = []
+    notes: list[str] = []
+    clean = False
+    status, reason = "done", ""
+    try:
+        if simulate is not None:
+            sim = start_sim(cfg, simulate, campaign, fault_injectors or {})
+        kwargs: dict[str, Any] = {"interface": cfg.interface, "channel": cfg.channel}
+        if cfg.interface == "config":  # python-can's own configuration decides everything
+            kwargs = {}
+        elif cfg.interface != "virtual":
+            kwargs["bitrate"] = cfg.bitrate
+        try:
+            bus = can.Bus(**kwargs)
+        except (can.CanError, OSError, ValueError, ImportError) as exc:
+            raise ConfigError(f"{campaign.source}: daq.interface: cannot open "
+                              f"{cfg.interface} {cfg.channel}: {exc}") from None
+        io = CycleIO([d.node_id for d in cfg.drives])
+        network = canopen.Network(bus)
+        network.NOTIFIER_CYCLE = 0.05
+        network.listeners.append(io)
+        network.connect()
+        drives = [MasterDrive(network, d) for d in cfg.drives]
+        if cfg.master_heartbeat_ms:
+            heartbeat = MasterHeartbeat(bus, cfg.master_node_id, cfg.master_heartbeat_ms)
+            heartbeat.start()
+        else:
+            notes.append("daq.master_heartbeat_ms = 0: the master sends no heartbeat, the "
+                         "drives do not watch it")
+        tau_max = cfg.max_torque if cfg.max_torque is not None else (
+            campaign.joint.limits.max_torque)
+        scalings = [d.start_up(campaign.cycle_s, tau_max, master_id=cfg.master_node_id,
+                               consumer_ms=cfg.heartbeat_consumer_ms,
+                               sync_period_us=_sync_period_us(cfg, campaign.cycle_s))
+                    for d in drives]
+        if heartbeat is not None:
+            heartbeat.beat()  # the drives watch the master from now on, not a period later
+        for d in drives:
+            notes.extend(d.notes)
+        for note in notes:
+            logger.warning("%s", note)
+        engine = Engine(campaign, cfg, network, io, drives, scalings, load, progress)
+        engine.notes = notes
+        if threading.current_thread() is threading.main_thread():
+            def on_sigint(signum: int, frame: Any) -> None:
+                if engine is not None:
+                    engine.interrupted = True
+            old_handler = signal.signal(signal.SIGINT, on_sigint)
+        ask = prompt or prompt_payload
+        for n_done, i in enumerate(todo):
+            p = campaign.payloads[i]
+            if sim is not None:
+                for d in sim.drives:
+                    d.set_payload(p.mass_kg, p.arm_m)
+            if not yes and (n_done > 0 or sim is None or prompt is not None):
+                if old_handler is not None:  # Ctrl-C at the prompt interrupts it at once
+                    signal.signal(signal.SIGINT, signal.default_int_handler)
+                try:
+                    accepted = ask(i, p, n_pay)
+                except KeyboardInterrupt:
+                    status, reason = "interrupted", "interrupted by the operator (SIGINT)"
+                    break
+                finally:
+                    if old_handler is not None:
+                        signal.signal(signal.SIGINT, on_sigint)
+                if not accepted:
+                    status, reason = "aborted", f"operator declined payload {i}"
+                    break
+            if engine.interrupted:
+                status, reason = "interrupted", "interrupted by the operator (SIGINT)"
+                break
+            io.emcy.clear()
+            io.hb_time = [time.monotonic()] * len(drives)
+            for d in drives:
+                d.nmt_start()
+            drive_cycle0 = sim.drives[0].cycle if sim is not None else -1
+            log = RunLog(out / f"{file_stem(campaign.name)}_payload{i}.mcap", n_axes=len(drives),
+                         cycle_s=campaign.cycle_s,
+                         metadata=_metadata(campaign, cfg, plan, i, p, scalings, simulate,
+                                            str(getattr(bus, "channel_info", "")), drives),
+                         attachments=_attachments(campaign, cfg, simulate),
+                         chunk_seconds=cfg.chunk_seconds,
+                         frames_per_cycle=1 + 3 * len(drives))
+            r = engine.run_payload(i, p, plan.reference, log, drive_cycle0)
+            runs.append(r)
+            for d in drives:
+                with contextlib.suppress(DaqError):
+                    d.nmt_preop()
+            if r.status != "done":
+                status, reason = r.status, r.reason
+                break
+            completed.add(i)
+            _write_state(state_file, campaign.name, completed)
+        clean = True
+    finally:
+        if clean:  # normal end, drives disabled: stop watching the master, then go silent
+            for d in drives:
+                d.clear_master_heartbeat()
+        if heartbeat is not None:
+            heartbeat.stop()
+        if sim is not None:
+            sim_records = tuple(d.record for d in sim.drives)
+        if old_handler is not None:
+            signal.signal(signal.SIGINT, old_handler)
+        if network is not None:
+            with contextlib.suppress(Exception):
+                network.disconnect()
+        if sim is not None:
+            sim.close()
+        if old_affinity is not None:
+            with contextlib.suppress(OSError):
+                os.sched_setaffinity(0, old_affinity)
+        if old_sched is not None:
+            with contextlib.suppress(OSError):
+                os.sched_setscheduler(0, old_sched[0], os.sched_param(old_sched[1]))
+    return CampaignResult(campaign.name, out, tuple(runs), status, reason, load, skipped,
+                          sim_records, tuple(notes))
