@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 from test_refine_sim import SETTINGS, _campaign, _plan, _usual_plant
 
-from daq.control import ControllerGains
+from daq.protocol.control import ControllerGains
 from ident.interaction_effects import LoadViscous, PositionDryFriction, ReversalHysteresis
 from ident.models import IdentModel, usual_model
 from ident.preprocess import build_design
