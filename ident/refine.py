@@ -35,7 +35,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from . import DataError
-from .describe import name_torque_lag
+from .describe import MATCH_SHARE, name_torque_lag
 from .diagnose import Diagnosis, diagnose, effective_n
 from .effects import (
     DirectionalViscous,
@@ -858,6 +858,12 @@ def refine(
         named = sorted((c for c in cands if not c.generic), key=lambda c: -c.gain)
         generic = sorted((c for c in cands if c.generic), key=lambda c: -c.gain)
         if lstep is not None:
+            # a registered effect that explains as much as the library's named form (the
+            # naming rule's share) keeps its place ahead of it
+            lib_named = [c for c in named if id(c.effect) in lib_variables]
+            if lib_named and any(c.gain >= MATCH_SHARE * lib_named[0].gain for c in named
+                                 if c is not lib_named[0]):
+                named = [c for c in named if c is not lib_named[0]] + lib_named
             # generic bases and the library basis compete on the held-out error
             s_cv = s.take(slice(None, None, lstep.stride))
             generic.sort(key=lambda c: lstep.heldout(c.effect.columns(s_cv), strided=True))
