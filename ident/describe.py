@@ -26,7 +26,7 @@ variables times a modifier. This module
   friction varies with position, period ≈ 1.57 rad, ±38 % of F_C");
 * names a torque lag of half a control cycle "zero-order hold" (:func:`name_torque_lag`).
 
-:func:`plot_description` draws the profile (matplotlib imported lazily: optional).
+:func:`ident.refine_plots.plot_structure` draws the profile.
 """
 
 from __future__ import annotations
@@ -427,28 +427,3 @@ def name_torque_lag(T_lag: float, std2: float, cycle_s: float | None) -> tuple[s
                     f"zero-order hold: the command acts half a cycle ({1e3 * half:.3g} ms) after "
                     f"the measurement (T_lag = {1e3 * T_lag:.3g} ± {1e3 * std2:.2g} ms)")
     return ("torque_lag", f"torque lag T_lag = {1e3 * T_lag:.3g} ± {1e3 * std2:.2g} ms")
-
-
-def plot_description(desc: Description, path: str) -> str:
-    """Draw the profile of a described group to ``path`` (PNG); returns the path."""
-    import matplotlib  # lazy: plotting is optional
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 3.5))
-    if len(desc.grid) == 1:
-        ax.plot(desc.grid[0], desc.profile)
-        ax.set_xlabel(desc.group_key.split(" x ")[0])
-        ax.set_ylabel("N m")
-    elif len(desc.grid) == 2:
-        im = ax.pcolormesh(desc.grid[0], desc.grid[1], desc.profile.T, shading="auto")
-        fig.colorbar(im, ax=ax, label="N m")
-        a, b = desc.group_key.split(" x ")[:2]
-        ax.set_xlabel(a)
-        ax.set_ylabel(b)
-    ax.set_title(desc.sentence[:90], fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path

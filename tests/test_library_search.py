@@ -11,7 +11,13 @@ import numpy as np
 import pytest
 
 from ident.describe import describe_group, name_torque_lag
-from ident.interactions import diagnose_interactions, holm, reversal_distance
+from ident.interactions import (
+    continuous_values,
+    diagnose_interactions,
+    holm,
+    reversal_distance,
+    sign_values,
+)
 from ident.library_search import (
     LIBRARY_VARIABLES,
     Basis,
@@ -45,8 +51,6 @@ def _W(s: Signals) -> np.ndarray:
 
 
 def _values(s: Signals, others: dict | None = None) -> dict:
-    from ident.interactions import continuous_values, sign_values
-
     v = continuous_values(s, None, others)
     v.update(sign_values(s))
     return v

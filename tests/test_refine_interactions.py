@@ -23,6 +23,7 @@ open-loop shortcut until the plant carries them as physics.
 from __future__ import annotations
 
 import functools
+import json
 
 import numpy as np
 import pytest
@@ -33,6 +34,7 @@ from ident.interaction_effects import LoadViscous, PositionDryFriction, Reversal
 from ident.models import IdentModel, usual_model
 from ident.preprocess import build_design
 from ident.refine import _rigid_prediction, refine
+from ident.refine_plots import plot_refinement
 from ident.signals import Signals
 from ident.terms import Term
 from sim_drivers.offline import simulate
@@ -231,8 +233,6 @@ def test_clean_data_get_nothing(seed, payloads):
 
 
 def test_json_and_report_show_variables_structure_and_heldout():
-    import json
-
     eff = (("position_friction", _fz(a=0.38, P=1.57, phi=0.3)),)
     R, _d, _lib = _refined(eff, 0)
     js = json.loads(json.dumps(R.to_json()))
@@ -247,3 +247,13 @@ def test_json_and_report_show_variables_structure_and_heldout():
     assert all(t["reason"] for t in tried)
     text = R.format_report()
     assert "held-out" in text and "position x direction" in text
+
+
+def test_the_structure_of_a_library_step_is_plotted(tmp_path):
+    eff = (("bump_friction", _fz(a=0.4, q0=0.5, w=0.3)),)
+    R, _d, _lib = _refined(eff, 3)
+    paths = plot_refinement(R, tmp_path)
+    shape = tmp_path / "refine_step1_structure.png"
+    assert shape in paths
+    data = shape.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 5000
