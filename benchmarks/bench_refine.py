@@ -29,6 +29,7 @@ from daq.protocol.control import ControllerGains  # noqa: E402
 from ident.models import IdentModel, usual_model  # noqa: E402
 from ident.preprocess import build_design  # noqa: E402
 from ident.refine import refine  # noqa: E402
+from ident.refine_library import library_step  # noqa: E402
 from ident.signals import Signals  # noqa: E402
 from sim_drivers.offline import simulate  # noqa: E402
 from sim_drivers.plant_config import default_plant  # noqa: E402
@@ -96,6 +97,41 @@ def main() -> None:
               f"{hi:>6.2f}  {100 * e0:.2f}->{100 * e1:.2f} %  {steps}")
     print(f"\nratio 1e6/1e5 (median refine time, library): {rows[3][4] / rows[1][4]:.1f}")
     print(f"ratio library/no library at 1e6: {rows[3][4] / rows[2][4]:.1f}")
+    robot_rows(args.repeat)
+
+
+def robot_rows(repeat: int) -> None:
+    """One joint of a 6-dof robot (the n-dof design is on another branch): the library step
+    with the five other joints' q and dq as 'other' variables, on the decimated samples of
+    1e6 raw samples (48 400 at decimation 20 after selection); joint j's residual depends on
+    joint k's position. Times one step and a five-step budget (5 x the step)."""
+    n, dt = 48_400, 0.02
+    rng = np.random.default_rng(2)
+    t = np.arange(n) * dt
+    q = np.sin(2 * np.pi * 0.05 * t) + 0.5 * np.sin(2 * np.pi * 0.013 * t + 1.0)
+    dq = np.gradient(q, t)
+    ddq = np.gradient(dq, t)
+    others = {}
+    for j in range(2, 7):
+        qj = 0.8 * np.sin(2 * np.pi * (0.02 + 0.007 * j) * t + j)
+        others[f"q{j}"], others[f"dq{j}"] = qj, np.gradient(qj, t)
+    W = np.column_stack((ddq, np.cos(q), np.sin(q), np.sign(dq), dq, np.ones(n)))
+    r = 4.0 * others["q3"] * np.sign(dq) + rng.normal(0, 0.5, n)
+    y = W @ np.array([10, 50, 0, 18, 5, 1.0]) + r
+    z = np.zeros(n)
+    # tau: the rigid-body torque (the load variable without tau_out falls back on it)
+    s = Signals(t, q, dq, ddq, 10 * ddq + 50 * np.cos(q), z, z, np.zeros(n, int),
+                revolute=True)
+    times, res = [], None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        res = library_step(y, W, s, r, tau_out=None, others=others)
+        times.append(time.perf_counter() - t0)
+    med = statistics.median(times)
+    sel = res.result.selected[0].key if res.result.selected else "-"
+    print(f"\n6-dof joint (10 other variables), {n} decimated samples: library step "
+          f"{med:.2f} s (min {min(times):.2f}), {len(res.result.tried)} structures scored, "
+          f"selected: {sel}; five steps ~{5 * med:.1f} s per joint")
 
 
 if __name__ == "__main__":

@@ -46,6 +46,9 @@ from .signals import Signals
 
 #: Samples used by the library search and the held-out scores (regular stride above it).
 MAX_SAMPLES = 8000
+#: Up to this many continuous variables every pair gets a tensor basis; beyond, only the
+#: pairs the interaction diagnosis found significant.
+MAX_ALL_PAIRS = 6
 
 
 @dataclass
@@ -152,7 +155,14 @@ def library_step(
     norms = np.linalg.norm(Wp, axis=0)
     Q, _ = np.linalg.qr(Wp / np.where(norms > 0, norms, 1.0))
     variables = list(LIBRARY_VARIABLES) + list(others or {})
-    groups = build_library(sub, variables, Q=Q)
+    pairs = None
+    if len(variables) > MAX_ALL_PAIRS:
+        # many variables (a robot joint with the other joints' states): only the pairs the
+        # interaction diagnosis found significant get a tensor basis
+        pairs = sorted({t.variables[:2] for t in idiag.significant
+                        if t.kind in ("pair", "signed_pair")
+                        and all(v in variables for v in t.variables[:2])})
+    groups = build_library(sub, variables, Q=Q, pairs=pairs)
     res = search(y, W, values, groups, folds, max_groups=1, min_gain=min_gain,
                  max_samples=max_samples)
     fg = FoldGram(Ws, y[::stride], folds[::stride])
