@@ -709,7 +709,7 @@ def _fit(lib: Library, design: Design, name: str) -> IdentModel:
 
 def _library_variables(lstep: LibraryStep) -> tuple[str, ...]:
     """Variables of the selected library group, then its modifier (if any)."""
-    g = lstep.result.selected[0]
+    g = lstep.group
     return g.variables + (() if g.modifier == "none" else (g.modifier,))
 
 

@@ -36,6 +36,7 @@ from .interactions import (
 from .library_search import (
     LIBRARY_VARIABLES,
     FoldGram,
+    Group,
     LibraryTerm,
     SearchResult,
     build_library,
@@ -46,6 +47,8 @@ from .signals import Signals
 
 #: Samples used by the library search and the held-out scores (regular stride above it).
 MAX_SAMPLES = 8000
+#: Groups selected ahead (forward) before the one most needed is offered to the loop.
+LOOKAHEAD = 2
 #: Up to this many continuous variables every pair gets a tensor basis; beyond, only the
 #: pairs the interaction diagnosis found significant.
 MAX_ALL_PAIRS = 6
@@ -80,6 +83,8 @@ class LibraryStep:
     n_hyper: int
     _fg: FoldGram = field(repr=False)
     _stride: int = 1
+    #: the group offered to the loop (None when nothing was selected)
+    group: Group | None = None
 
     @property
     def heldout_before(self) -> float:
@@ -100,8 +105,18 @@ class LibraryStep:
         return self._fg.cv(C if strided else C[:: self._stride])[0]
 
     def tried_json(self) -> list[dict]:
-        """Every structure scored, selected or not, with its held-out error and reason."""
-        return [t.to_json() for t in (self.result.tried if self.result else [])]
+        """Every structure scored, selected or not, with its held-out error and reason; the
+        one offered to the loop says so."""
+        out = []
+        for t in self.result.tried if self.result else []:
+            js = t.to_json()
+            if t.selected and t.group is self.group:
+                js["reason"] = "selected; offered to the refinement"
+            elif t.selected:
+                js["reason"] = ("selected ahead (forward look), not offered: the offered "
+                                "structure is needed more")
+            out.append(js)
+        return out
 
 
 def library_step(
@@ -163,17 +178,37 @@ def library_step(
                         if t.kind in ("pair", "signed_pair")
                         and all(v in variables for v in t.variables[:2])})
     groups = build_library(sub, variables, Q=Q, pairs=pairs)
-    res = search(y, W, values, groups, folds, max_groups=1, min_gain=min_gain,
+    res = search(y, W, values, groups, folds, max_groups=LOOKAHEAD, min_gain=min_gain,
                  max_samples=max_samples)
     fg = FoldGram(Ws, y[::stride], folds[::stride])
     desc = cand = None
     generic, n_hyper = True, 0
-    if res.selected:
-        g, c = res.selected[0], res.coef[0]
+    pick = _most_needed(res, fg, values, stride)
+    if pick is not None:
+        g, c = res.selected[pick], res.coef[pick]
         desc = describe_group(g, c, y, W, values, reference=reference, tau_out=tau_out,
                               folds=folds, min_gain=min_gain)
         if desc.term is not None:
             cand, generic, n_hyper = desc.term, False, len(desc.term.hyper_names)
         elif all(v in LIBRARY_VARIABLES for v in g.variables):
             cand = LibraryTerm(g, tau_out)
-    return LibraryStep(idiag, res, desc, cand, generic, n_hyper, fg, stride)
+    return LibraryStep(idiag, res, desc, cand, generic, n_hyper, fg, stride,
+                       None if pick is None else res.selected[pick])
+
+
+def _most_needed(res: SearchResult, fg: FoldGram, values: Mapping[str, np.ndarray],
+                 stride: int) -> int | None:
+    """Index of the selected group whose removal from the selected set raises the held-out
+    error most (forward selection, then a backward look: with several effects at once the
+    first group taken can be a stand-in for the others)."""
+    if not res.selected:
+        return None
+    if len(res.selected) == 1:
+        return 0
+    sub = {k: np.asarray(v)[::stride] for k, v in values.items()}
+    cols = [g.columns(sub) for g in res.selected]
+    worst = []
+    for i in range(len(cols)):
+        rest = [c for j, c in enumerate(cols) if j != i]
+        worst.append(fg.cv(np.column_stack(rest))[0])
+    return int(np.argmax(worst))
