@@ -64,18 +64,32 @@ def reversal_distance(s: Signals, deadband: float | None = None) -> np.ndarray:
         |q - q_r| [rad or m], q_r the position of the last reversal (the first sample of
         the experiment before the first one).
     """
+    hit = _REVERSAL_CACHE.get(id(s))
+    if deadband is None and hit is not None and hit[0] is s:
+        return hit[1]
     q = np.asarray(s.q, dtype=float)
     n = q.shape[0]
     out = np.zeros(n)
     if n == 0:
         return out
+    cache = deadband is None
     if deadband is None:
         deadband = max(2e-3 * float(np.ptp(q)), 1e-9)
     exp = np.asarray(s.experiment)
     cuts = np.flatnonzero(np.diff(exp) != 0) + 1
     for a, b in zip(np.r_[0, cuts], np.r_[cuts, n], strict=True):
         out[a:b] = _play_distance(q[a:b].tolist(), float(deadband))
+    if cache:
+        if len(_REVERSAL_CACHE) >= 4:
+            _REVERSAL_CACHE.pop(next(iter(_REVERSAL_CACHE)))
+        out.setflags(write=False)
+        _REVERSAL_CACHE[id(s)] = (s, out)
     return out
+
+
+#: The last few signals' reversal distances (the refinement asks for the same samples at
+#: every step); keyed by id, checked by identity.
+_REVERSAL_CACHE: dict[int, tuple[Signals, np.ndarray]] = {}
 
 
 def _play_distance(q: list[float], db: float) -> np.ndarray:
