@@ -868,7 +868,10 @@ def refine(
             s_cv = s.take(slice(None, None, lstep.stride))
             generic.sort(key=lambda c: lstep.heldout(c.effect.columns(s_cv), strided=True))
         short = [c for c in named if pretest(c) is None][:max_tries]
-        top_generic = [c for c in generic if pretest(c) is None][:1 if lstep is None else 2]
+        # with the library, two bases (three with validation data, which picks among those
+        # that pass) may be tried
+        n_gen = 1 if lstep is None else 3 if cur_val is not None else 2
+        top_generic = [c for c in generic if pretest(c) is None][:n_gen]
         # the generic basis only competes when it could win the exact comparison
         if top_generic and (
             not short or short[0].gain < top_generic[0].gain * GENERIC_MARGIN * 1.5
@@ -972,7 +975,7 @@ def refine(
             if c.generic and cur_val is not None:
                 pending.append(accepted)
                 accepted = None
-                if len(pending) < 2:
+                if len(pending) < 3:
                     continue
             break
         if pending:
