@@ -244,13 +244,16 @@ def quantile_bins(x: np.ndarray, bins: int) -> np.ndarray:
 
 
 def binned_f(
-    r: np.ndarray, idx: np.ndarray, n_eff: float, df_between: int | None = None
+    r: np.ndarray, idx: np.ndarray, n_eff: float | None = None, df_between: int | None = None
 ) -> tuple[float, float, float, int]:
     """η², F and p of the bin means of ``r`` (bin index ``idx``) against noise.
 
     The F statistic is scaled by n_eff / n and its second degree of freedom is n_eff - k,
-    as in :func:`ident.diagnose.dependence`. ``df_between`` overrides k - 1 (interaction
-    of a 2-D table after removing both main effects: (k1 - 1)(k2 - 1)).
+    as in :func:`ident.diagnose.dependence`; by default n_eff is that of the residual
+    *within* the bins (``r`` minus its bin means, in sample order): the autocorrelation of
+    the noise, not of the structure the bins explain (a strong smooth effect makes the raw
+    residual look like a handful of independent samples). ``df_between`` overrides k - 1
+    (interaction of a 2-D table after removing both main effects: (k1 - 1)(k2 - 1)).
 
     Returns
     -------
@@ -267,6 +270,8 @@ def binned_f(
     ss_tot = float(((r - mu) ** 2).sum())
     ss_b = float((cnt * (means - mu) ** 2)[ok].sum())
     d1 = kb - 1 if df_between is None else int(df_between)
+    if n_eff is None:
+        n_eff = effective_n(r - means[idx])
     n_eff = min(float(n_eff), float(n))
     d2 = n_eff - kb
     if d1 < 1 or d2 < 1 or ss_tot <= 0:
@@ -339,26 +344,24 @@ def diagnose_interactions(
     r = np.asarray(residual, dtype=float)
     if r.shape != (len(s),):
         raise ValueError(f"diagnose_interactions: residual has shape {r.shape}, signals {len(s)}")
-    n_eff = effective_n(r)
+    n_eff = effective_n(r)  # of the raw residual, for the record
     cont = {k: v for k, v in continuous_values(s, tau_out, others).items() if np.ptp(v) > 0}
     signs = sign_values(s)
     raw: list[tuple[tuple[str, ...], str, float, float, float, int]] = []
     idx1 = {k: quantile_bins(v, bins) for k, v in cont.items()}
     for k, idx in idx1.items():
-        raw.append(((k,), "single", *binned_f(r, idx, n_eff)))
+        raw.append(((k,), "single", *binned_f(r, idx)))
     for k, d in signs.items():
         _, idx = np.unique(d, return_inverse=True)
-        raw.append(((k,), "single", *binned_f(r, idx, n_eff)))
+        raw.append(((k,), "single", *binned_f(r, idx)))
     for sk, d in signs.items():
         rd = r * d
-        ne = effective_n(rd)
         for k, idx in idx1.items():
-            raw.append(((k, sk), "signed", *binned_f(rd, idx, ne)))
+            raw.append(((k, sk), "signed", *binned_f(rd, idx)))
     if pairs:
         names = list(cont)
         idx2 = {k: quantile_bins(cont[k], bins2) for k in names}
         rd = r * signs["direction"]
-        ne_d = effective_n(rd)
         for a in range(len(names)):
             for b in range(a + 1, len(names)):
                 i1, i2 = idx2[names[a]], idx2[names[b]]
@@ -366,9 +369,9 @@ def diagnose_interactions(
                 cell = i1 * k2 + i2
                 _, cell = np.unique(cell, return_inverse=True)
                 df = (k1 - 1) * (k2 - 1)
-                for kind, rr, ne in (("pair", r, n_eff), ("signed_pair", rd, ne_d)):
+                for kind, rr in (("pair", r), ("signed_pair", rd)):
                     resid = _remove_main_effects(rr, i1, i2)
-                    e, F, p, kb = binned_f(resid, cell, ne, df_between=df)
+                    e, F, p, kb = binned_f(resid, cell, df_between=df)
                     # share of the (signed) residual variance, not of the de-meaned remainder
                     tot = float(((rr - rr.mean()) ** 2).sum())
                     e = e * float(resid @ resid) / tot if tot > 0 else 0.0
