@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -154,7 +156,8 @@ def test_preprocessed_experiments_keep_their_payloads_and_index(tmp_path, arm_ru
 # -- the CLI ---------------------------------------------------------------------------------
 
 
-def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capfd):
+@pytest.mark.parametrize("method", ["ls", "wls", "iv"])
+def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capfd, method):
     """``jointid fit --robot`` on CSV and MCAP: exit 0, the tables, a JSON equal to the
     estimator run in Python on the same files, and a cross-validation error of the order of
     the fit error (the model generalises to another trajectory)."""
@@ -165,7 +168,7 @@ def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capfd)
     out_json = tmp_path / "out" / "fit.json"
     report = tmp_path / "report"
     code, out, err = run_cli(capfd, "--robot", ARM3, fit_csv, "--model", "usual",
-                             "--method", "ls", "--validate", val_mcap, "--json", out_json,
+                             "--method", method, "--validate", val_mcap, "--json", out_json,
                              "--report", report)
     assert code == 0, err
     assert "relative error" in out and "ZZ1" in out
@@ -182,7 +185,8 @@ def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capfd)
     pre = RobotPreprocessing(rec["preprocessing"]["cutoff_hz"],
                              rec["preprocessing"]["decimation"], rec["preprocessing"]["trim"])
     sig = load_robot_signals(fit_csv, robot.moving, preprocessing=pre)
-    est = RobotModel(robot, model="usual", method="ls",
+    assert rec["method"] == method
+    est = RobotModel(robot, model="usual", method=method,
                      dq_min=rec["preprocessing"]["dq_min"]).fit(sig)
     assert list(usual["parameters"]) == list(est.names_)
     np.testing.assert_allclose([v["value"] for v in usual["parameters"].values()], est.coef_,
@@ -249,6 +253,20 @@ def test_cli_bad_input_is_one_line_naming_the_file(tmp_path, arm_runs, capfd, ca
     assert "Traceback" not in err
     assert re.search(expect, lines[0]), lines[0]
     assert not out_json.exists()
+
+
+def test_console_entry_point_bad_input_in_a_real_process(tmp_path):
+    """The installed command's path (``python -m daq.app.cli``): exit 2, one line, nothing
+    else on stderr (C libraries included)."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "daq.app.cli", "fit", "--robot", str(ARM3),
+         str(tmp_path / "missing.csv"), "--json", str(tmp_path / "o.json")],
+        capture_output=True, text=True, cwd=ROOT, timeout=120,
+    )
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [
+        f"jointid fit: error: {tmp_path / 'missing.csv'}: no such file"]
+    assert not (tmp_path / "o.json").exists()
 
 
 def test_single_joint_fit_options_are_refused_with_robot(tmp_path, arm_runs, capfd):
