@@ -118,7 +118,7 @@ def _standard_from_factors(z: np.ndarray, k: int) -> np.ndarray:
     return out
 
 
-def check_consistency(model: Any, *, feasibility: bool = True, starts: int = 4,
+def check_consistency(model: Any, *, feasibility: bool = True, starts: int = 3,
                       seed: int = 0) -> ConsistencyReport:
     """Physical consistency of a fitted :class:`~ident.robot.estimate.RobotModel` (module doc).
 
@@ -187,7 +187,7 @@ def check_consistency(model: Any, *, feasibility: bool = True, starts: int = 4,
             L0 = np.eye(4) * rng.uniform(0.3, 1.5) + np.tril(rng.normal(0, 0.1, (4, 4)), -1)
             z0[11 * j:11 * j + 10] = L0[np.tril_indices(4)]
             z0[11 * j + 10] = rng.uniform(0.1, 1.0)
-        sol = scipy.optimize.least_squares(resid, z0, method="trf", max_nfev=2000)
+        sol = scipy.optimize.least_squares(resid, z0, method="trf", max_nfev=600)
         if best is None or sol.cost < best.cost:
             best = sol
     rep.d2 = float(2.0 * best.cost)

@@ -533,19 +533,22 @@ class RobotModel:
         """rho = tau - tau_hat (n, k) [N m]."""
         return signals.tau - self.predict(signals)
 
-    def rel_error(self, signals: RobotSignals) -> dict[str, float]:
+    def rel_error(self, signals: RobotSignals | Sequence[RobotSignals]) -> dict[str, float]:
         """||rho_j|| / ||tau_j|| per joint and ``"all"`` on ``signals`` (Table III, all);
         samples with a non-finite torque (left out of the fit) are ignored."""
-        rho = self.residual(signals)
-        ok = np.isfinite(rho)
-        r2 = np.where(ok, rho, 0.0) ** 2
-        y2 = np.where(ok, signals.tau, 0.0) ** 2
-        out = {n: float(np.sqrt(r2[:, j].sum() / y2[:, j].sum()))
-               for j, n in enumerate(self.joints_)}
+        items = [signals] if isinstance(signals, RobotSignals) else list(signals)
+        k = len(self.joints_)
+        r2, y2 = np.zeros(k), np.zeros(k)
+        for sig in items:
+            rho = self.residual(sig)
+            ok = np.isfinite(rho)
+            r2 += (np.where(ok, rho, 0.0) ** 2).sum(0)
+            y2 += (np.where(ok, sig.tau, 0.0) ** 2).sum(0)
+        out = {n: float(np.sqrt(r2[j] / y2[j])) for j, n in enumerate(self.joints_)}
         out["all"] = float(np.sqrt(r2.sum() / y2.sum()))
         return out
 
-    def score(self, signals: RobotSignals) -> float:
+    def score(self, signals: RobotSignals | Sequence[RobotSignals]) -> float:
         """1 - ||rho|| / ||tau|| over all joints (as ``ident.api.JointModel.score``)."""
         return 1.0 - self.rel_error(signals)["all"]
 

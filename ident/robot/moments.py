@@ -163,4 +163,4 @@ class JointMoments:
                 if C is not None:
                     C += D[e].T @ self.zz[s, e + f] @ D[f]
         yy = float(self.vv[0, 0, -1, -1] + self.vv[1, 0, -1, -1])
-        return A, g, rr, C, yy
+        return A, g, max(rr, 0.0), C, yy  # rr: quadratic form, clip rounding below 0
