@@ -190,6 +190,8 @@ def check_consistency(model: Any, *, feasibility: bool = True, starts: int = 3,
         sol = scipy.optimize.least_squares(resid, z0, method="trf", max_nfev=600)
         if best is None or sol.cost < best.cost:
             best = sol
+        if 2.0 * best.cost <= scipy.stats.chi2.ppf(0.99, pb):
+            break  # a consistent set is found: no need for other starts
     rep.d2 = float(2.0 * best.cost)
     rep.d2_limit = float(scipy.stats.chi2.ppf(0.99, pb))
     rep.feasible = bool(rep.d2 <= rep.d2_limit)
