@@ -61,6 +61,10 @@ METHODS = ("ls", "wls", "iv")
 #: parameters are not identifiable on the data.
 RANK_TOL = 1e-12
 
+#: Fraction of the rows whose quadrant may still change when the passes stop
+#: (``quadrant="model"``); such rows have tau_out ~ 0, where the quadrant hardly matters.
+QUADRANT_TOL = 1e-4
+
 Coeffs = Callable[[np.ndarray, np.ndarray, int], tuple[np.ndarray, ...]]
 
 
@@ -215,15 +219,20 @@ class RobotModel:
     def _structure(self) -> list[np.ndarray]:
         """Base columns that are not structurally zero in each joint's row (probed at random
         states, seeded)."""
-        reg, k = self.regressor_, len(self.regressor_.joints)
+        k = len(self.regressor_.joints)
         rng = np.random.default_rng(12345)
         m = 32
         q = rng.uniform(-np.pi, np.pi, (m, k))
-        W = np.asarray(self.base_.reduce(reg.rigid(q, rng.normal(size=(m, k)),
-                                                    rng.normal(size=(m, k)))))
-        mag = np.abs(W).max(axis=0)  # (k, pb)
+        self._kpn = False
+        W, _ = self._rows(q, rng.normal(size=(m, k)), rng.normal(size=(m, k)), None, None)
+        mag = np.abs(W).max(axis=2)  # (k, pb)
         tol = 1e-10 * max(float(mag.max()), 1e-300)
-        return [np.flatnonzero(mag[j] > tol) for j in range(k)]
+        cols = [np.flatnonzero(mag[j] > tol) for j in range(k)]
+        # gather each joint's base columns straight from the standard (k, p, m) regressor
+        self._kpn = hasattr(self.regressor_, "rigid_kpn") and hasattr(self.base_, "columns")
+        base_cols = np.asarray(self.base_.columns) if self._kpn else None
+        self.std_cols_ = [base_cols[c] if self._kpn else c for c in cols]
+        return cols
 
     # ------------------------------------------------------------------ data pass
     def _chunks(self, signals: Any):
@@ -253,9 +262,14 @@ class RobotModel:
                            None if zr is None else zr[a:a + int(self.chunk_size)], pay)
 
     def _rows(self, q, dq, ddq, tau, pay) -> tuple[np.ndarray, np.ndarray]:
-        """Base regressor (m, k, pb) and payload torque (m, k) of a chunk."""
+        """Regressor (k, p or pb, m) -- row j's base columns are ``W[j, std_cols_[j]]`` --
+        and payload torque (m, k) of a chunk."""
         reg = self.regressor_
-        W = np.asarray(self.base_.reduce(reg.rigid(q, dq, ddq)), dtype=float)
+        if self._kpn:  # standard columns, (k, p, m): joint j reads W[j, self.std_cols_[j]]
+            W = np.asarray(reg.rigid_kpn(q, dq, ddq))
+        else:
+            W = np.asarray(self.base_.reduce(reg.rigid(q, dq, ddq)), dtype=float)
+            W = np.ascontiguousarray(W.transpose(1, 2, 0))
         if pay is not None and float(getattr(pay, "mass", 0.0)) > 0:
             p = np.asarray(reg.payload_torque(q, dq, ddq, pay), dtype=float)
         else:
@@ -263,16 +277,17 @@ class RobotModel:
         return W, p
 
     @staticmethod
-    def _v(Wj: np.ndarray, pj, dqj, tauj) -> np.ndarray:
-        m, nt = Wj.shape
-        V = np.empty((m, nt + N_EXTRA))
-        V[:, :nt] = Wj
-        V[:, nt + IP] = pj
-        V[:, nt + ISG] = np.sign(dqj)
-        V[:, nt + IDQ] = dqj
-        V[:, nt + ONE] = 1.0
-        V[:, -1] = tauj
-        return V
+    def _v(WjT: np.ndarray, pj, dqj, tauj) -> np.ndarray:
+        """Rows v (module doc of :mod:`ident.robot.moments`) transposed, (nv, m)."""
+        nt, m = WjT.shape
+        VT = np.empty((nt + N_EXTRA, m))
+        VT[:nt] = WjT
+        VT[nt + IP] = pj
+        VT[nt + ISG] = np.sign(dqj)
+        VT[nt + IDQ] = dqj
+        VT[nt + ONE] = 1.0
+        VT[-1] = tauj
+        return VT
 
     def _pass(self, signals: Any, theta: np.ndarray | None, powers: int
               ) -> tuple[list[JointMoments], np.ndarray | None]:
@@ -287,22 +302,27 @@ class RobotModel:
                 Wz, pz = self._rows(q, dq, zdd, tau, pay)
             for j, cols in enumerate(self.cols_):
                 dqj = dq[:, j]
+                WjT = W[j, self.std_cols_[j], :]
                 ok = (np.abs(dqj) > self.dq_min) & np.isfinite(tau[:, j]) & np.all(
-                    np.isfinite(W[:, j, :]), axis=1)
-                Wj = W[:, j, cols][ok]
-                V = self._v(Wj, p[ok, j], dqj[ok], tau[ok, j])
-                Vz = None
+                    np.isfinite(WjT), axis=0)
+                every = bool(ok.all())
+                if not every:
+                    WjT = WjT[:, ok]
+                dqo, tauo, po = dqj[ok], tau[ok, j], p[ok, j]
+                VT = self._v(WjT, po, dqo, tauo)
+                VzT = None
                 if iv:
-                    Vz = self._v(Wz[:, j, cols][ok], pz[ok, j], dqj[ok], tau[ok, j])
+                    WzT = Wz[j, self.std_cols_[j], :]
+                    VzT = self._v(WzT if every else WzT[:, ok], pz[ok, j], dqo, tauo)
                 if theta is None:
-                    sp = tau[ok, j] * dqj[ok]
+                    sp = tauo * dqo
                 else:
-                    sp = (Wj @ theta[cols] + p[ok, j]) * dqj[ok]
+                    sp = (theta[cols] @ WjT + po) * dqo
                 pplus = quadrant_weights(sp)
                 if theta is not None:
                     quads.append(np.sign(sp))
-                E = np.exp(-np.abs(dqj[ok]) / self.qs_[j])
-                moms[j].add(V, pplus, E, Vz)
+                E = np.exp(-np.abs(dqo) / self.qs_[j])
+                moms[j].add(VT, pplus, E, VzT)
         return moms, (np.concatenate(quads) if quads else None)
 
     # ------------------------------------------------------------------ solver
@@ -481,7 +501,7 @@ class RobotModel:
                 x, w, it = self._fit_on(moms, paper_coefficients, x, free, linear=False)
                 if changed is not None:
                     self.quadrant_changes_.append(changed)
-                    if changed <= 1e-5 * quads.size:
+                    if changed <= QUADRANT_TOL * quads.size:
                         break
                 prev = quads
         self._statistics(moms, paper_coefficients, x, free, w)
@@ -512,10 +532,10 @@ class RobotModel:
                     idx = self._local(j)
                     nt = len(cols)
                     th, blk = self.coef_[idx[:nt]], self.coef_[idx[nt:]]
-                    Wj = W[:, j, cols]
-                    V = self._v(Wj, p[:, j], dq[:, j], np.zeros(len(r)))
+                    WjT = W[j, self.std_cols_[j], :]
+                    V = self._v(WjT, p[:, j], dq[:, j], np.zeros(len(r))).T
                     if self.quadrant == "model" or self.model == "usual":
-                        sp = (Wj @ theta[cols] + p[:, j]) * dq[:, j]
+                        sp = (theta[cols] @ WjT + p[:, j]) * dq[:, j]
                     else:
                         sp = tau[:, j] * dq[:, j]
                     pp = quadrant_weights(sp)
@@ -533,19 +553,22 @@ class RobotModel:
         """rho = tau - tau_hat (n, k) [N m]."""
         return signals.tau - self.predict(signals)
 
-    def rel_error(self, signals: RobotSignals) -> dict[str, float]:
+    def rel_error(self, signals: RobotSignals | Sequence[RobotSignals]) -> dict[str, float]:
         """||rho_j|| / ||tau_j|| per joint and ``"all"`` on ``signals`` (Table III, all);
         samples with a non-finite torque (left out of the fit) are ignored."""
-        rho = self.residual(signals)
-        ok = np.isfinite(rho)
-        r2 = np.where(ok, rho, 0.0) ** 2
-        y2 = np.where(ok, signals.tau, 0.0) ** 2
-        out = {n: float(np.sqrt(r2[:, j].sum() / y2[:, j].sum()))
-               for j, n in enumerate(self.joints_)}
+        items = [signals] if isinstance(signals, RobotSignals) else list(signals)
+        k = len(self.joints_)
+        r2, y2 = np.zeros(k), np.zeros(k)
+        for sig in items:
+            rho = self.residual(sig)
+            ok = np.isfinite(rho)
+            r2 += (np.where(ok, rho, 0.0) ** 2).sum(0)
+            y2 += (np.where(ok, sig.tau, 0.0) ** 2).sum(0)
+        out = {n: float(np.sqrt(r2[j] / y2[j])) for j, n in enumerate(self.joints_)}
         out["all"] = float(np.sqrt(r2.sum() / y2.sum()))
         return out
 
-    def score(self, signals: RobotSignals) -> float:
+    def score(self, signals: RobotSignals | Sequence[RobotSignals]) -> float:
         """1 - ||rho|| / ||tau|| over all joints (as ``ident.api.JointModel.score``)."""
         return 1.0 - self.rel_error(signals)["all"]
 
