@@ -1,5 +1,8 @@
 """Robot description: a URDF or an MDH TOML robot file -> :class:`Robot` (pinocchio model).
 
+(Past 600 lines: one file format -- its dataclasses, reader, builders and the checks that name
+each element; split, the format would be scattered.)
+
 File format (docs/robot-format.md, ROBOT_FORMAT): either a URDF (``*.urdf``: every joint moves,
 no drive data) or a TOML file with a ``[robot]`` table and EITHER ``urdf = "..."`` (a path
 relative to the TOML file, or ``"example-robot-data:ur10"`` for the packaged UR10) OR a
@@ -34,7 +37,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from . import TrajectoryError
+from . import RobotError
 
 __all__ = [
     "RobotError",
@@ -58,10 +61,6 @@ _LOCATOR = "example-robot-data:"
 _DISTRIBUTIONS = ("example-robot-data", "cmeel-example-robot-data")
 _REVOLUTE = {"JointModelRX": (1, 0, 0), "JointModelRY": (0, 1, 0), "JointModelRZ": (0, 0, 1)}
 _PRISMATIC = {"JointModelPX": (1, 0, 0), "JointModelPY": (0, 1, 0), "JointModelPZ": (0, 0, 1)}
-
-
-class RobotError(TrajectoryError, ValueError):
-    """A robot file or description is unusable; the message names the file and element."""
 
 
 # --------------------------------------------------------------------------- dataclasses
@@ -304,11 +303,11 @@ def example_robot_urdf(name: str, source: str = "") -> Path:
     RobotError
         Unknown name, or the package (or the file) is not installed.
     """
-    where = f"{source}: " if source else ""
+    where = f"{source}: robot.urdf: " if source else ""
     try:
         rel = EXAMPLE_ROBOTS[name]
     except KeyError:
-        raise RobotError(f"{where}robot.urdf: example robot {name!r}: expected one of "
+        raise RobotError(f"{where}example robot {name!r}: expected one of "
                          f"{sorted(EXAMPLE_ROBOTS)}") from None
     for dist_name in _DISTRIBUTIONS:
         try:
@@ -320,7 +319,7 @@ def example_robot_urdf(name: str, source: str = "") -> Path:
                 p = Path(dist.locate_file(f))
                 if p.is_file():
                     return p
-    raise RobotError(f"{where}robot.urdf: example robot {name!r}: {rel} not found; expected "
+    raise RobotError(f"{where}example robot {name!r}: {rel} not found; expected "
                      f"the PyPI package 'example-robot-data' to be installed")
 
 
@@ -346,8 +345,8 @@ def load_robot(path: str | Path) -> Robot:
     """
     text_path = str(path)
     if text_path.startswith(_LOCATOR):
-        urdf = example_robot_urdf(text_path[len(_LOCATOR):], text_path)
-        return _from_urdf(urdf, text_path, {}, [], text_path)
+        short = text_path[len(_LOCATOR):]
+        return _from_urdf(example_robot_urdf(short, text_path), short, {}, [], text_path)
     p = Path(path)
     src = str(p)
     if p.suffix.lower() == ".urdf":
