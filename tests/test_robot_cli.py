@@ -172,6 +172,7 @@ def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capfd,
                              "--report", report)
     assert code == 0, err
     assert "relative error" in out and "ZZ1" in out
+    assert "Table III per joint" in out and "Physical consistency" in out
     rec = json.loads(out_json.read_text())
     figures = json.loads((report / "fit.json").read_text())["figures"]
     assert sorted(Path(f).name for f in figures) == [
@@ -193,6 +194,10 @@ def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capfd,
                                rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose([v["std"] for v in usual["parameters"].values()], est.std_,
                                rtol=1e-9, atol=1e-12)
+    assert set(rec["table_iii"]["validation"]) == set(robot.moving)
+    assert rec["table_iii"]["fit"]["j2"]["usual"]["all"] == pytest.approx(
+        usual["rel_error"]["j2"], rel=1e-9)
+    assert isinstance(usual["consistency"]["ok"], bool)
     val = usual["validation_rel_error"]
     assert set(val) == {*robot.moving, "all"}
     assert val["all"] < 2.0 * usual["rel_error"]["all"] + 0.02
@@ -282,6 +287,7 @@ def test_single_joint_fit_options_are_refused_with_robot(tmp_path, arm_runs, cap
 # -- KUKA KR300 recordings (Weigand et al.) ---------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not KUKA_DATA.is_dir(), reason="../shared/data/kuka_kr300_weigand2021 absent")
 def test_kuka_a3_cross_validation_beats_the_single_joint_fit(tmp_path, capfd):
     """Fit on A, cross-validate on B and C: the 6-axis model's A3 error is below the error of
