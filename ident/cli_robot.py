@@ -228,6 +228,9 @@ def format_report(out: dict[str, Any]) -> str:
             rs = v["rel_std_pct"]
             rs_s = "inf" if rs is None or not math.isfinite(rs) else f"{rs:.1f}"
             lines.append(f"{p:<14}{v['value']:>14.6g}{v['std']:>12.3g}{rs_s:>9}")
+        if rec.get("base_expressions"):
+            lines.append("base parameters (standard parameters regrouped, ROBOT_FORMAT names):")
+            lines.extend(f"  {e}" for e in rec["base_expressions"])
     lines.append("")
     lines.append("relative error ||rho_j|| / ||tau_j|| [%]")
     head = f"{'joint':<8}"
