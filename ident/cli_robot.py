@@ -233,14 +233,15 @@ def format_report(out: dict[str, Any]) -> str:
             lines.extend(f"  {e}" for e in rec["base_expressions"])
     lines.append("")
     lines.append("relative error ||rho_j|| / ||tau_j|| [%]")
-    head = f"{'joint':<8}"
+    w = max(8, *(len(j) + 2 for j in r["moving"]))
+    head = f"{'joint':<{w}}"
     for name in fitted:
         head += f"{name + ' fit':>14}"
         if out["validation_inputs"]:
             head += f"{name + ' CV':>14}"
     lines.append(head)
     for j in [*r["moving"], "all"]:
-        row = f"{j:<8}"
+        row = f"{j:<{w}}"
         for rec in fitted.values():
             row += f"{_pct(rec['rel_error'].get(j)):>14}"
             if out["validation_inputs"]:
