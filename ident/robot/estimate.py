@@ -36,6 +36,7 @@ import numpy as np
 import scipy.linalg
 
 from . import RobotIdentError
+from .base import base_parameters
 from .moments import IDQ, IP, ISG, N_EXTRA, ONE, JointMoments, quadrant_weights
 from .paper import (
     PAPER_BLOCK,
@@ -44,14 +45,8 @@ from .paper import (
     paper_start,
     usual_coefficients,
 )
+from .regressor import RobotRegressor
 from .signals import RobotSignals
-
-try:  # the regressor and base parameters land with the "ndof" branch
-    from .base import base_parameters
-    from .regressor import RobotRegressor
-except ImportError:  # pragma: no cover - until that branch is merged
-    base_parameters = None
-    RobotRegressor = None
 
 __all__ = ["RobotModel", "MODELS", "METHODS"]
 
@@ -183,15 +178,10 @@ class RobotModel:
                                   f"{self.chunk_size!r}")
         reg = self.regressor
         if not hasattr(reg, "rigid"):
-            if RobotRegressor is None:  # pragma: no cover
-                raise RobotIdentError("RobotModel: a Robot needs ident.robot.regressor; pass a "
-                                      "regressor object")
             reg = RobotRegressor(reg)
         self.regressor_ = reg
         base = self.base
         if base is None:
-            if base_parameters is None:  # pragma: no cover
-                raise RobotIdentError("RobotModel.base: ident.robot.base is missing; pass base=")
             base = base_parameters(reg)
         self.base_ = base
         joints = tuple(reg.joints)
