@@ -350,3 +350,14 @@ def test_rx130l_joint3_robot_path_gives_single_joint_numbers():
     # standard deviations too (eq. 15, same rows)
     sd = dict(zip(ref.names, ref.std, strict=True))
     assert m.std_[m.names_.index("FV3")] == pytest.approx(sd["F_V"], rel=1e-6)
+
+
+def test_robot_accepted_for_regressor(arm3_usual):
+    params, reg, base, runs = arm3_usual
+    sigs = _signals(params, reg, runs, 1)
+    a = RobotModel(reg, "usual", base=base).fit(sigs)
+    b = RobotModel(load_robot(ROOT / "examples" / "robots" / "arm3.toml"), "usual").fit(sigs)
+    assert a.names_ == b.names_
+    np.testing.assert_allclose(a.coef_, b.coef_, rtol=1e-9, atol=1e-12)
+    assert repr(b).startswith("RobotModel(model='usual'")
+    assert b.get_params()["method"] == "ls"
