@@ -91,7 +91,7 @@ def main() -> None:
         n = int(size)
         sigs = synthetic(reg, base, n)
         for label, kw in CASES:
-            def fit(kw=kw):
+            def fit(kw=kw, sigs=sigs):
                 t0 = time.perf_counter()
                 m = RobotModel(reg, base=base, chunk_size=args.chunk, **kw).fit(sigs)
                 return time.perf_counter() - t0, m

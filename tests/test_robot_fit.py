@@ -19,14 +19,18 @@ Phi^-1(1 - 0.01 / (2 P S)), and at least 95 % of all comparisons must be within 
 
 from __future__ import annotations
 
+import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.stats
 
+from daq.protocol.control import ControllerGains
 from ident.estimate import fit_least_squares
-from ident.models import new_model
+from ident.loaders import concat, make_experiment
+from ident.models import new_model, usual_model
+from ident.preprocess import build_design
 from ident.robot import RobotIdentError
 from ident.robot.base import base_parameters, single_joint_map
 from ident.robot.consistency import check_consistency
@@ -36,6 +40,10 @@ from ident.robot.signals import RobotPayloadData, RobotSignals
 from ident.robot.tables import format_table_iii, table_iii
 from ident.signals import Signals
 from sim_drivers.arm import ArmGains, ArmParams, Payload, model_reference, simulate_arm
+from sim_drivers.offline import simulate
+from sim_drivers.plant_config import load_plant
+from trajectories.campaign import Campaign
+from trajectories.plan import plan_campaign
 from trajectories.robot import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -291,3 +299,65 @@ def test_one_joint_paper_model_matches_single_joint_eq42():
                 assert v == pytest.approx(r[n], rel=1e-7, abs=1e-7 * max(1, abs(r[n]))), n
             else:
                 assert abs(v - r[n]) <= 3 * rs[n] + 1e-9, (n, v, r[n], rs[n])
+
+
+# --------------------------------------------------------------------------- RX130L joint 3
+@pytest.mark.slow
+def test_rx130l_joint3_robot_path_gives_single_joint_numbers():
+    """The campaign of examples/campaign.toml on the single-joint simulator (the demo's
+    RX130L joint 3, three payloads), preprocessed once by the single-joint pipeline
+    (filtering, decimation, selection); on those samples the robot path (rx130l.toml, joints
+    1, 2, 4, 5, 6 locked, the payload as a point mass at L_a on the arm) gives the
+    single-joint usual-model numbers (J, MX, MY, F_C, F_V, tau_off with the weighed payload,
+    eq. 34) to far below the printed precision (4 significant digits)."""
+    with open(ROOT / "examples" / "campaign.toml", "rb") as fh:
+        campaign = Campaign.from_dict(tomllib.load(fh), "examples/campaign.toml")
+    plan = plan_campaign(campaign)
+    plant = load_plant(ROOT / "sim_drivers" / "data" / "plant_default.toml")
+    gains = ControllerGains(**campaign.control.gains_kwargs())
+    exps = []
+    for i, p in enumerate(plan.payloads):
+        r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
+                     payload_arm=p.arm_m, seed=11 + i)
+        exps.append(make_experiment(f"payload{i}", r.t, r.q, r.tau_ref,
+                                    payload_mass=p.mass_kg, payload_arm=p.arm_m))
+    lib = usual_model(True, payload=True)
+    design = build_design(lib, concat(exps))
+    ds = design.signals
+    # single joint: the weighed payload is known (ratio 1), i.e. its column is subtracted
+    cols = usual_model(True, payload=False)
+    names = cols.names()
+    pay_col = lib.columns(ds)[:, list(lib.names()).index("Ma_ratio")]
+    ref = fit_least_squares(cols.columns(ds), ds.tau - pay_col, names, eliminate=False)
+    single = dict(zip(ref.names, ref.chi, strict=True))
+    # robot path
+    robot = load_robot(ROOT / "examples" / "robots" / "rx130l.toml")
+    reg = RobotRegressor(robot)
+    base = base_parameters(reg)
+    smap = single_joint_map(base, reg)
+    # a point mass M_a at L_a along the arm: -MY3 plays MX (single_joint_map), so the
+    # payload's first moment M_a L_a must be along -y3
+    pays = tuple(RobotPayloadData(p.mass_kg, [0.0, -p.arm_m, 0.0]) for p in plan.payloads)
+    sig = RobotSignals(t=ds.t, q=ds.q[:, None], dq=ds.dq[:, None], ddq=ds.ddq[:, None],
+                       tau=ds.tau[:, None], joints=reg.joints, experiment=ds.experiment,
+                       payloads=pays)
+    m = RobotModel(reg, "usual", base=base).fit(sig)
+    ours = smap.values(m.coef_[:len(base.names)])
+    ours.update(F_C=m.params_["FC3"], F_V=m.params_["FV3"], tau_off=m.params_["OFF3"])
+    for n in names:
+        assert f"{ours[n]:.4g}" == f"{single[n]:.4g}", (n, ours[n], single[n])
+        assert ours[n] == pytest.approx(single[n], rel=1e-8, abs=1e-8)
+    # standard deviations too (eq. 15, same rows)
+    sd = dict(zip(ref.names, ref.std, strict=True))
+    assert m.std_[m.names_.index("FV3")] == pytest.approx(sd["F_V"], rel=1e-6)
+
+
+def test_robot_accepted_for_regressor(arm3_usual):
+    params, reg, base, runs = arm3_usual
+    sigs = _signals(params, reg, runs, 1)
+    a = RobotModel(reg, "usual", base=base).fit(sigs)
+    b = RobotModel(load_robot(ROOT / "examples" / "robots" / "arm3.toml"), "usual").fit(sigs)
+    assert a.names_ == b.names_
+    np.testing.assert_allclose(a.coef_, b.coef_, rtol=1e-9, atol=1e-12)
+    assert repr(b).startswith("RobotModel(model='usual'")
+    assert b.get_params()["method"] == "ls"

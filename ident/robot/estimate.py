@@ -36,6 +36,7 @@ import numpy as np
 import scipy.linalg
 
 from . import RobotIdentError
+from .base import base_parameters
 from .moments import IDQ, IP, ISG, N_EXTRA, ONE, JointMoments, quadrant_weights
 from .paper import (
     PAPER_BLOCK,
@@ -44,14 +45,8 @@ from .paper import (
     paper_start,
     usual_coefficients,
 )
+from .regressor import RobotRegressor
 from .signals import RobotSignals
-
-try:  # the regressor and base parameters land with the "ndof" branch
-    from .base import base_parameters
-    from .regressor import RobotRegressor
-except ImportError:  # pragma: no cover - until that branch is merged
-    base_parameters = None
-    RobotRegressor = None
 
 __all__ = ["RobotModel", "MODELS", "METHODS"]
 
@@ -183,15 +178,10 @@ class RobotModel:
                                   f"{self.chunk_size!r}")
         reg = self.regressor
         if not hasattr(reg, "rigid"):
-            if RobotRegressor is None:  # pragma: no cover
-                raise RobotIdentError("RobotModel: a Robot needs ident.robot.regressor; pass a "
-                                      "regressor object")
             reg = RobotRegressor(reg)
         self.regressor_ = reg
         base = self.base
         if base is None:
-            if base_parameters is None:  # pragma: no cover
-                raise RobotIdentError("RobotModel.base: ident.robot.base is missing; pass base=")
             base = base_parameters(reg)
         self.base_ = base
         joints = tuple(reg.joints)
@@ -289,12 +279,15 @@ class RobotModel:
         VT[-1] = tauj
         return VT
 
-    def _pass(self, signals: Any, theta: np.ndarray | None, powers: int
-              ) -> tuple[list[JointMoments], np.ndarray | None]:
-        """One pass: the moments of every joint; quadrants from ``theta`` (model) or tau."""
+    def _pass(self, signals: Any, theta: np.ndarray | None, powers: int,
+              theta_prev: np.ndarray | None = None) -> tuple[list[JointMoments], int, int]:
+        """One pass: the moments of every joint; quadrants from ``theta`` (model) or tau.
+
+        Returns the moments, the number of rows, and how many rows are in another quadrant
+        than with ``theta_prev`` (counted on the fly: nothing of size n is kept)."""
         iv = self.method == "iv"
         moms = [JointMoments(c, iv=iv, powers=powers) for c in self.cols_]
-        quads = []
+        rows = changed = 0
         for _sig, _r, q, dq, ddq, tau, zdd, pay in self._chunks(signals):
             W, p = self._rows(q, dq, ddq, tau, pay)
             Wz = pz = None
@@ -319,11 +312,13 @@ class RobotModel:
                 else:
                     sp = (theta[cols] @ WjT + po) * dqo
                 pplus = quadrant_weights(sp)
-                if theta is not None:
-                    quads.append(np.sign(sp))
+                rows += sp.size
+                if theta_prev is not None:
+                    spp = (theta_prev[cols] @ WjT + po) * dqo
+                    changed += int(np.count_nonzero(np.sign(sp) != np.sign(spp)))
                 E = np.exp(-np.abs(dqo) / self.qs_[j])
                 moms[j].add(VT, pplus, E, VzT)
-        return moms, (np.concatenate(quads) if quads else None)
+        return moms, rows, changed
 
     # ------------------------------------------------------------------ solver
     def _local(self, j: int) -> np.ndarray:
@@ -461,7 +456,7 @@ class RobotModel:
         self._setup()
         k, pb = len(self.joints_), self.n_base_
         paper = self.model == "paper"
-        moms, _ = self._pass(signals, None, 3 if paper else 1)
+        moms, _, _ = self._pass(signals, None, 3 if paper else 1)
         passes = 1
         # usual model (also the paper model's starting point)
         nbu = len(USUAL_BLOCK)
@@ -495,15 +490,15 @@ class RobotModel:
         if self.quadrant == "model":
             prev = None
             for _ in range(int(self.max_passes)):
-                moms, quads = self._pass(signals, x[:pb], 3)
+                theta = x[:pb].copy()
+                moms, rows, changed = self._pass(signals, theta, 3, prev)
                 passes += 1
-                changed = None if prev is None else int(np.sum(quads != prev))
                 x, w, it = self._fit_on(moms, paper_coefficients, x, free, linear=False)
-                if changed is not None:
+                if prev is not None:
                     self.quadrant_changes_.append(changed)
-                    if changed <= QUADRANT_TOL * quads.size:
+                    if changed <= QUADRANT_TOL * rows:
                         break
-                prev = quads
+                prev = theta
         self._statistics(moms, paper_coefficients, x, free, w)
         self.weights_ = w
         self.n_passes_, self.n_iter_ = passes, it
