@@ -361,3 +361,25 @@ def test_robot_accepted_for_regressor(arm3_usual):
     np.testing.assert_allclose(a.coef_, b.coef_, rtol=1e-9, atol=1e-12)
     assert repr(b).startswith("RobotModel(model='usual'")
     assert b.get_params()["method"] == "ls"
+
+
+def test_interleaved_experiments_give_the_same_fit(arm3_usual):
+    """Samples of two experiments interleaved in one RobotSignals (payload by sample's
+    experiment) give the fit of the two experiments given separately."""
+    params, reg, base, runs = arm3_usual
+    a, b = _signals(params, reg, runs, 2)[1:]
+    n = min(a.n, b.n) // 2
+    idx = np.arange(n)
+    cat = {f: np.empty((2 * n,) + getattr(a, f).shape[1:]) for f in ("t", "q", "dq", "ddq",
+                                                                    "tau")}
+    for f in cat:
+        cat[f][0::2] = getattr(a, f)[idx]
+        cat[f][1::2] = getattr(b, f)[idx]
+    exp = np.tile([0, 1], n)
+    mixed = RobotSignals(**cat, joints=a.joints, experiment=exp,
+                         payloads=(a.payloads[0], b.payloads[0]))
+    parts = [RobotSignals(t=s.t[idx], q=s.q[idx], dq=s.dq[idx], ddq=s.ddq[idx], tau=s.tau[idx],
+                          joints=s.joints, payloads=s.payloads) for s in (a, b)]
+    m1 = RobotModel(reg, "paper", base=base, chunk_size=5000).fit(mixed)
+    m2 = RobotModel(reg, "paper", base=base, chunk_size=5000).fit(parts)
+    np.testing.assert_allclose(m1.coef_, m2.coef_, rtol=1e-7, atol=1e-9)

@@ -11,7 +11,8 @@ to them one by one. This module does two things:
    is passed by more than 3 standard deviations.
 2. **Feasibility of the regrouped set**: is there a standard parameter vector chi_St whose
    links all have a positive semi-definite pseudo-inertia (Wensing, Kim & Slotine 2017:
-   J = [[tr(S)/1 ... ]], equivalent to mass >= 0, inertia PSD and the triangle inequalities)
+   J = [[tr(I)/2 1_3 - I, h], [h^T, m]] with I the inertia about the link origin, h the first
+   moments, m the mass; J >= 0 is mass >= 0, inertia PSD and the triangle inequalities)
    and Ia >= 0, with beta chi_St within the identified uncertainty of the base estimate
    (Mahalanobis distance d^2 = r^T C^-1 r below the 99 % chi-square quantile)? Solved by
    least squares over Cholesky factors of the pseudo-inertias (J = L L^T, Ia = s^2), a few

@@ -246,8 +246,13 @@ class RobotModel:
                                               f"needs q_ref (reference trajectory)")
                     zr = _ref_acceleration(sig.t[rows], sig.q_ref[rows])
                 pay = sig.payloads[int(e)]
+                contiguous = rows.size and rows[-1] - rows[0] + 1 == rows.size
                 for a in range(0, rows.size, int(self.chunk_size)):
-                    r = rows[a:a + int(self.chunk_size)]
+                    if contiguous:  # views, no copies
+                        r = slice(int(rows[0]) + a, int(rows[0]) + min(a + int(self.chunk_size),
+                                                                       rows.size))
+                    else:
+                        r = rows[a:a + int(self.chunk_size)]
                     yield (sig, r, sig.q[r], sig.dq[r], sig.ddq[r], sig.tau[r],
                            None if zr is None else zr[a:a + int(self.chunk_size)], pay)
 
@@ -528,14 +533,14 @@ class RobotModel:
                     nt = len(cols)
                     th, blk = self.coef_[idx[:nt]], self.coef_[idx[nt:]]
                     WjT = W[j, self.std_cols_[j], :]
-                    V = self._v(WjT, p[:, j], dq[:, j], np.zeros(len(r))).T
+                    V = self._v(WjT, p[:, j], dq[:, j], np.zeros(q.shape[0])).T
                     if self.quadrant == "model" or self.model == "usual":
                         sp = (theta[cols] @ WjT + p[:, j]) * dq[:, j]
                     else:
                         sp = tau[:, j] * dq[:, j]
                     pp = quadrant_weights(sp)
                     E = np.exp(-np.abs(dq[:, j]) / self.qs_[j])
-                    pred = np.zeros(len(r))
+                    pred = np.zeros(q.shape[0])
                     for s, ws in ((0, pp), (1, 1.0 - pp)):
                         c0, c1, _, _ = coeffs(th, blk, s)
                         pred += ws * (V @ c0 + E * (V @ c1))
