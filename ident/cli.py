@@ -1,5 +1,6 @@
 """``jointid fit INPUTS... [--model usual|new|both] [--joint revolute|prismatic] [--qs VALUE|scan]
 [--validate FILES...] [--report DIR] [--json FILE]``: identify the usual and the new model.
+With ``--robot ROBOT`` the inputs are multi-axis runs of a robot (``ident.cli_robot``).
 
 Every input file (MCAP log of ``jointid run``, CSV or MATLAB ``.mat``) is one experiment;
 all are concatenated into one least-squares system (paper eq. 36). Prints Tables I-IV,
@@ -14,7 +15,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from . import DataError
+from . import DataError, cli_robot
 from .api import JointModel, load
 from .loaders import parse_mapping
 from .plots import write_plots
@@ -38,6 +39,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "  jointid fit DATA_EMPS.mat --joint prismatic --map q=qm,tau=vir --gain gtau \\\n"
             "      --cutoff 100 --decimation 10 --dq-min 0 --no-sign-check \\\n"
             "      --validate DATA_EMPS_PULSES.mat\n"
+            "  jointid fit --robot examples/robots/kuka_kr300_r2500.toml kuka_A.mat \\\n"
+            "      --q-unit deg --map 't=rec.time_cont,q=rec.act_pos_mot_deg' \\\n"
+            "      --map 'tau=rec.act_torque_abs_nm,q_ref=rec.ref_pos_deg' --model both \\\n"
+            "      --validate kuka_B.mat kuka_C.mat          (n-dof: docs/robot-data.md)\n"
             "  jointid fit kuka_A.mat --q-unit deg --gain 'para.u[2]' \\\n"
             "      --map 't=rec.time_cont,q=rec.act_pos_mot_deg[2]' \\\n"
             "      --map 'tau=rec.act_torque_abs_nm[2]' \\\n"
@@ -55,10 +60,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("inputs", nargs="+", type=Path, help="experiment files (.mcap, .csv, .mat)")
     p.add_argument(
+        "--robot",
+        type=Path,
+        metavar="ROBOT",
+        help="robot file (.toml MDH table or .urdf): the inputs are multi-axis runs of its "
+        "moving joints, identified together (docs/robot-data.md)",
+    )
+    p.add_argument(
         "--model",
-        choices=("usual", "new", "both"),
+        choices=("usual", "new", "paper", "both"),
         default="both",
-        help="model(s) to fit (default both)",
+        help="model(s) to fit (default both); 'paper' is the new model (eq. 30)",
+    )
+    p.add_argument(
+        "--method",
+        choices=("ls", "wls", "iv"),
+        help="--robot only: estimator, least squares, weighted per joint, or instrumental "
+        "variables on the reference q_ref (default wls)",
     )
     p.add_argument(
         "--joint",
@@ -165,6 +183,13 @@ def estimator_from_args(args: argparse.Namespace) -> JointModel:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``jointid fit``; returns the exit code."""
+    if args.robot is not None:
+        return cli_robot.run(args)
+    if args.method is not None:
+        raise DataError("--method: applies to --robot fits only (one joint: IDIM-IV when the "
+                        "inputs carry q_ref, else least squares)")
+    if args.model == "paper":
+        args.model = "new"
     mapping = parse_mapping(args.map)
     gain: float | str | None = args.gain
     load_kw: dict[str, Any] = dict(

@@ -1,0 +1,587 @@
+"""IDIM estimators of an n-dof robot: :class:`RobotModel` (usual or paper friction on every
+joint; LS, WLS or IV), scikit-learn style.
+
+Model (eq. 8-10 on every joint j, base parameters theta shared by all joints)::
+
+    usual:  tau_j = W_j theta + p_j + FC_j sign(dq_j) + FV_j dq_j + OFF_j          (eq. 5, 8)
+    paper:  eq. 30 with tau_out,j = W_j theta + p_j       (see :mod:`ident.robot.paper`)
+
+W_j is the joint's row of the base regressor (rigid body + rotor inertias, ``RobotRegressor``
+reduced by ``BaseParameters.reduce``), p_j the known payload torque of the sample's experiment
+(subtracted as the paper's eq. 34 does with the weighed mass).
+
+Estimators (the sums are accumulated per chunk, :mod:`ident.robot.moments`, so memory does not
+grow with the number of samples; iterations reuse the moments):
+
+* ``"ls"``  IDIM-LS, eq. 12; sigma^2 = ||rho||^2 / (r - b) (eq. 14), C = sigma^2 (W^T W)^-1
+  (eq. 15; for the paper model W is the Jacobian at the solution).
+* ``"wls"`` IDIM-WLS (Gautier's practice): sigma_j^2 = ||rho_j||^2 / (r_j - b_j) from a first
+  LS fit, the rows of joint j scaled by 1/sigma_j, refitted; C = (sum_j W_j^T W_j / sigma_j^2)^-1
+  times the weighted residual variance (~1).
+* ``"iv"``  IDIM-IV (as :func:`ident.estimate.fit_instrumental`): instruments = the same
+  columns with the measured acceleration replaced by the reference trajectory's
+  (``RobotSignals.q_ref`` differentiated twice); chi = (Z^T W)^-1 Z^T Y,
+  C = sigma^2 (Z^T W)^-1 Z^T Z (W^T Z)^-1. Needs ``q_ref``.
+
+Samples with |dq_j| <= ``dq_min`` (the stiction area, eq. 26) or non-finite values are left
+out of joint j's rows only.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+
+from . import RobotIdentError
+from .base import base_parameters
+from .moments import IDQ, IP, ISG, N_EXTRA, ONE, JointMoments, quadrant_weights
+from .paper import (
+    PAPER_BLOCK,
+    USUAL_BLOCK,
+    paper_coefficients,
+    paper_start,
+    usual_coefficients,
+)
+from .regressor import RobotRegressor
+from .signals import RobotSignals
+
+__all__ = ["RobotModel", "MODELS", "METHODS"]
+
+MODELS = ("usual", "paper")
+METHODS = ("ls", "wls", "iv")
+#: Smallest eigenvalue / largest of the column-scaled normal matrix below which the
+#: parameters are not identifiable on the data.
+RANK_TOL = 1e-12
+
+#: Fraction of the rows whose quadrant may still change when the passes stop
+#: (``quadrant="model"``); such rows have tau_out ~ 0, where the quadrant hardly matters.
+QUADRANT_TOL = 1e-4
+
+Coeffs = Callable[[np.ndarray, np.ndarray, int], tuple[np.ndarray, ...]]
+
+
+def _ref_acceleration(t: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
+    """d^2 q_ref / dt^2 (n, k) by central differences (np.gradient twice)."""
+    if t.size < 3:
+        return np.zeros_like(q_ref)
+    return np.gradient(np.gradient(q_ref, t, axis=0), t, axis=0)
+
+
+class RobotModel:
+    """Identification of an n-dof robot with the usual or the paper friction (module doc).
+
+    Parameters
+    ----------
+    regressor : RobotRegressor or Robot
+        The rigid-body regressor (``.rigid``, ``.payload_torque``, ``.joints``, ``.numbers``);
+        a ``trajectories.robot.Robot`` is wrapped in ``RobotRegressor``.
+    model : {"usual", "paper"}
+        Friction model on every joint (eq. 5 or eq. 30).
+    method : {"ls", "wls", "iv"}
+        Estimator (module doc).
+    qs : float, sequence or mapping
+        q_s of E = exp(-|dq|/q_s) [rad/s] (eq. 29), one value, one per joint or by joint name.
+    base : BaseParameters or None
+        Base parameters (``.names``, ``.reduce``); default ``base_parameters(regressor)``.
+    quadrant : {"model", "measured"}
+        How P+/P- are decided (paper model): sign(tau_out_hat dq) iterated, or sign(tau dq)
+        (eq. 26).
+    dq_min : float
+        Samples of joint j with |dq_j| <= dq_min are not used in its rows [rad/s].
+    chunk_size : int
+        Samples per chunk of the regressor evaluation (memory ~ chunk_size k p_std floats).
+    max_iter, tol : int, float
+        Gauss-Newton iterations and relative step tolerance (paper model).
+    max_passes : int
+        Passes over the data re-deciding the quadrants (``quadrant="model"``).
+
+    Attributes (after :meth:`fit`)
+    ------------------------------
+    names_ : tuple of str
+        Parameter names: base parameters, then per joint FC/FV/OFF (usual) or
+        a_m..OFF (paper), suffixed with the joint's number.
+    coef_, std_ : ndarray (b,)
+        Estimate and standard deviations (eq. 15).
+    rel_std_ : ndarray (b,)
+        100 std / |coef| [%] (eq. 16).
+    params_ : dict
+        name -> value.
+    cov_ : ndarray (b, b)
+    sigma_ : float
+        Residual standard deviation (eq. 14; weighted for WLS).
+    sigma_joint_ : ndarray (k,)
+        Per-joint residual standard deviations [N m].
+    rel_error_ : dict
+        ``{joint name: ||rho_j||/||tau_j||, ..., "all": ||rho||/||tau||}`` on the fit data.
+    n_samples_ : ndarray (k,)
+        Rows used per joint.
+    fixed_ : dict
+        Parameters held fixed (paper model without payload torque).
+    n_passes_, n_iter_ : int
+        Data passes and Gauss-Newton iterations of the final fit.
+    quadrant_changes_ : list of int
+        Samples whose quadrant changed at each extra pass (``quadrant="model"``).
+    """
+
+    def __init__(
+        self,
+        regressor: Any,
+        model: str = "usual",
+        method: str = "ls",
+        *,
+        qs: float | Sequence[float] | Mapping[str, float] = 0.03,
+        base: Any = None,
+        quadrant: str = "model",
+        dq_min: float = 0.0,
+        chunk_size: int = 20000,
+        max_iter: int = 50,
+        tol: float = 1e-10,
+        max_passes: int = 4,
+    ) -> None:
+        self.regressor = regressor
+        self.model = model
+        self.method = method
+        self.qs = qs
+        self.base = base
+        self.quadrant = quadrant
+        self.dq_min = dq_min
+        self.chunk_size = chunk_size
+        self.max_iter = max_iter
+        self.tol = tol
+        self.max_passes = max_passes
+
+    def get_params(self, deep: bool = False) -> dict[str, Any]:
+        """Hyper-parameters (scikit-learn convention)."""
+        return {n: getattr(self, n) for n in (
+            "regressor", "model", "method", "qs", "base", "quadrant", "dq_min", "chunk_size",
+            "max_iter", "tol", "max_passes")}
+
+    def __repr__(self) -> str:
+        return f"RobotModel(model={self.model!r}, method={self.method!r}, qs={self.qs!r})"
+
+    # ------------------------------------------------------------------ setup
+    def _setup(self) -> None:
+        if self.model not in MODELS:
+            raise RobotIdentError(f"RobotModel.model: expected one of {MODELS}, got "
+                                  f"{self.model!r}")
+        if self.method not in METHODS:
+            raise RobotIdentError(f"RobotModel.method: expected one of {METHODS}, got "
+                                  f"{self.method!r}")
+        if self.quadrant not in ("model", "measured"):
+            raise RobotIdentError(f"RobotModel.quadrant: expected 'model' or 'measured', got "
+                                  f"{self.quadrant!r}")
+        if int(self.chunk_size) < 1:
+            raise RobotIdentError(f"RobotModel.chunk_size: expected >= 1, got "
+                                  f"{self.chunk_size!r}")
+        reg = self.regressor
+        if not hasattr(reg, "rigid"):
+            reg = RobotRegressor(reg)
+        self.regressor_ = reg
+        base = self.base
+        if base is None:
+            base = base_parameters(reg)
+        self.base_ = base
+        joints = tuple(reg.joints)
+        k = len(joints)
+        qs = self.qs
+        if isinstance(qs, Mapping):
+            missing = [j for j in joints if j not in qs]
+            if missing:
+                raise RobotIdentError(f"RobotModel.qs: no value for joint(s) {missing}")
+            qs = [qs[j] for j in joints]
+        qs_arr = np.broadcast_to(np.asarray(qs, dtype=float), (k,)).copy()
+        if not np.all(np.isfinite(qs_arr) & (qs_arr > 0)):
+            raise RobotIdentError(f"RobotModel.qs: expected positive velocities [rad/s], got "
+                                  f"{qs_arr}")
+        self.qs_ = qs_arr
+        self.joints_ = joints
+        self.numbers_ = tuple(int(n) for n in reg.numbers)
+        self.cols_ = self._structure()
+        self.n_base_ = len(tuple(base.names))
+        block = USUAL_BLOCK if self.model == "usual" else PAPER_BLOCK
+        self.block_ = block
+        self.names_ = tuple(base.names) + tuple(
+            f"{p}{n}" for n in self.numbers_ for p in block)
+
+    def _structure(self) -> list[np.ndarray]:
+        """Base columns that are not structurally zero in each joint's row (probed at random
+        states, seeded)."""
+        k = len(self.regressor_.joints)
+        rng = np.random.default_rng(12345)
+        m = 32
+        q = rng.uniform(-np.pi, np.pi, (m, k))
+        self._kpn = False
+        W, _ = self._rows(q, rng.normal(size=(m, k)), rng.normal(size=(m, k)), None, None)
+        mag = np.abs(W).max(axis=2)  # (k, pb)
+        tol = 1e-10 * max(float(mag.max()), 1e-300)
+        cols = [np.flatnonzero(mag[j] > tol) for j in range(k)]
+        # gather each joint's base columns straight from the standard (k, p, m) regressor
+        self._kpn = hasattr(self.regressor_, "rigid_kpn") and hasattr(self.base_, "columns")
+        base_cols = np.asarray(self.base_.columns) if self._kpn else None
+        self.std_cols_ = [base_cols[c] if self._kpn else c for c in cols]
+        return cols
+
+    # ------------------------------------------------------------------ data pass
+    def _chunks(self, signals: Any):
+        """Yield (sig, rows, q, dq, ddq, tau, ddq_ref or None, payload) per chunk."""
+        items = [signals] if isinstance(signals, RobotSignals) else list(signals)
+        if not items:
+            raise RobotIdentError("RobotModel.fit: no signals")
+        for sig in items:
+            if not isinstance(sig, RobotSignals):
+                raise RobotIdentError(f"RobotModel: expected RobotSignals, got "
+                                      f"{type(sig).__name__}")
+            if tuple(sig.joints) != self.joints_:
+                raise RobotIdentError(f"{sig.source or 'RobotSignals'}: joints {sig.joints}, "
+                                      f"expected the regressor's {self.joints_}")
+            for e in np.unique(sig.experiment):
+                rows = np.flatnonzero(sig.experiment == e)
+                zr = None
+                if self.method == "iv":
+                    if sig.q_ref is None:
+                        raise RobotIdentError(f"{sig.source or 'RobotSignals'}: method 'iv' "
+                                              f"needs q_ref (reference trajectory)")
+                    zr = _ref_acceleration(sig.t[rows], sig.q_ref[rows])
+                pay = sig.payloads[int(e)]
+                contiguous = rows.size and rows[-1] - rows[0] + 1 == rows.size
+                for a in range(0, rows.size, int(self.chunk_size)):
+                    if contiguous:  # views, no copies
+                        r = slice(int(rows[0]) + a, int(rows[0]) + min(a + int(self.chunk_size),
+                                                                       rows.size))
+                    else:
+                        r = rows[a:a + int(self.chunk_size)]
+                    yield (sig, r, sig.q[r], sig.dq[r], sig.ddq[r], sig.tau[r],
+                           None if zr is None else zr[a:a + int(self.chunk_size)], pay)
+
+    def _rows(self, q, dq, ddq, tau, pay) -> tuple[np.ndarray, np.ndarray]:
+        """Regressor (k, p or pb, m) -- row j's base columns are ``W[j, std_cols_[j]]`` --
+        and payload torque (m, k) of a chunk."""
+        reg = self.regressor_
+        if self._kpn:  # standard columns, (k, p, m): joint j reads W[j, self.std_cols_[j]]
+            W = np.asarray(reg.rigid_kpn(q, dq, ddq))
+        else:
+            W = np.asarray(self.base_.reduce(reg.rigid(q, dq, ddq)), dtype=float)
+            W = np.ascontiguousarray(W.transpose(1, 2, 0))
+        if pay is not None and float(getattr(pay, "mass", 0.0)) > 0:
+            p = np.asarray(reg.payload_torque(q, dq, ddq, pay), dtype=float)
+        else:
+            p = np.zeros(q.shape)
+        return W, p
+
+    @staticmethod
+    def _v(WjT: np.ndarray, pj, dqj, tauj) -> np.ndarray:
+        """Rows v (module doc of :mod:`ident.robot.moments`) transposed, (nv, m)."""
+        nt, m = WjT.shape
+        VT = np.empty((nt + N_EXTRA, m))
+        VT[:nt] = WjT
+        VT[nt + IP] = pj
+        VT[nt + ISG] = np.sign(dqj)
+        VT[nt + IDQ] = dqj
+        VT[nt + ONE] = 1.0
+        VT[-1] = tauj
+        return VT
+
+    def _pass(self, signals: Any, theta: np.ndarray | None, powers: int,
+              theta_prev: np.ndarray | None = None) -> tuple[list[JointMoments], int, int]:
+        """One pass: the moments of every joint; quadrants from ``theta`` (model) or tau.
+
+        Returns the moments, the number of rows, and how many rows are in another quadrant
+        than with ``theta_prev`` (counted on the fly: nothing of size n is kept)."""
+        iv = self.method == "iv"
+        moms = [JointMoments(c, iv=iv, powers=powers) for c in self.cols_]
+        rows = changed = 0
+        for _sig, _r, q, dq, ddq, tau, zdd, pay in self._chunks(signals):
+            W, p = self._rows(q, dq, ddq, tau, pay)
+            Wz = pz = None
+            if iv:
+                Wz, pz = self._rows(q, dq, zdd, tau, pay)
+            for j, cols in enumerate(self.cols_):
+                dqj = dq[:, j]
+                WjT = W[j, self.std_cols_[j], :]
+                ok = (np.abs(dqj) > self.dq_min) & np.isfinite(tau[:, j]) & np.all(
+                    np.isfinite(WjT), axis=0)
+                every = bool(ok.all())
+                if not every:
+                    WjT = WjT[:, ok]
+                dqo, tauo, po = dqj[ok], tau[ok, j], p[ok, j]
+                VT = self._v(WjT, po, dqo, tauo)
+                VzT = None
+                if iv:
+                    WzT = Wz[j, self.std_cols_[j], :]
+                    VzT = self._v(WzT if every else WzT[:, ok], pz[ok, j], dqo, tauo)
+                if theta is None:
+                    sp = tauo * dqo
+                else:
+                    sp = (theta[cols] @ WjT + po) * dqo
+                pplus = quadrant_weights(sp)
+                rows += sp.size
+                if theta_prev is not None:
+                    spp = (theta_prev[cols] @ WjT + po) * dqo
+                    changed += int(np.count_nonzero(np.sign(sp) != np.sign(spp)))
+                E = np.exp(-np.abs(dqo) / self.qs_[j])
+                moms[j].add(VT, pplus, E, VzT)
+        return moms, rows, changed
+
+    # ------------------------------------------------------------------ solver
+    def _local(self, j: int) -> np.ndarray:
+        pb, nb = self.n_base_, len(self.block_)
+        return np.concatenate([self.cols_[j], pb + j * nb + np.arange(nb)])
+
+    def _normal(self, moms, coeffs: Coeffs, x: np.ndarray, weights: np.ndarray):
+        nx = x.size
+        A = np.zeros((nx, nx))
+        g = np.zeros(nx)
+        C = np.zeros((nx, nx)) if self.method == "iv" else None
+        rr = np.zeros(len(moms))
+        yy = np.zeros(len(moms))
+        for j, mom in enumerate(moms):
+            idx = self._local(j)
+            nt = len(self.cols_[j])
+            th, blk = x[idx[:nt]], x[idx[nt:]]
+            cf = [coeffs(th, blk, 0), coeffs(th, blk, 1)]
+            Aj, gj, rrj, Cj, yyj = mom.normal(cf)
+            w = weights[j]
+            A[np.ix_(idx, idx)] += w * Aj
+            g[idx] += w * gj
+            if C is not None:
+                C[np.ix_(idx, idx)] += w * w * Cj
+            rr[j], yy[j] = rrj, yyj
+        return A, g, rr, C, yy
+
+    def _solve_step(self, A: np.ndarray, g: np.ndarray, free: np.ndarray) -> np.ndarray:
+        Af = A[np.ix_(free, free)]
+        d = np.sqrt(np.abs(np.diag(Af)))
+        zero = d == 0
+        if zero.any():
+            names = [self.names_[i] for i in np.flatnonzero(free)[zero]]
+            raise RobotIdentError(f"parameters {names} have no excitation on these data")
+        As = Af / d[:, None] / d[None, :]
+        if self.method != "iv":
+            ev, evec = np.linalg.eigh(As)
+            if ev[0] <= RANK_TOL * ev[-1]:
+                worst = np.argsort(-np.abs(evec[:, 0]))[:4]
+                names = [self.names_[i] for i in np.flatnonzero(free)[worst]]
+                raise RobotIdentError(f"parameters not identifiable on these data (cond "
+                                      f"{ev[-1] / max(ev[0], 1e-300):.2g}); the weakest "
+                                      f"direction involves {names}")
+        step = np.zeros_like(g)
+        step[free] = scipy.linalg.solve(As, g[free] / d) / d
+        return step
+
+    def _gauss_newton(self, moms, coeffs: Coeffs, x0: np.ndarray, free: np.ndarray,
+                      weights: np.ndarray, linear: bool) -> tuple[np.ndarray, int]:
+        x = x0.copy()
+        _, _, rr, _, _ = self._normal(moms, coeffs, x, weights)
+        cost = float(weights @ rr)
+        it = 0
+        for it in range(1, int(self.max_iter) + 1):
+            A, g, _, _, _ = self._normal(moms, coeffs, x, weights)
+            step = self._solve_step(A, g, free)
+            lam = 1.0
+            while True:
+                xn = x + lam * step
+                _, _, rrn, _, _ = self._normal(moms, coeffs, xn, weights)
+                cn = float(weights @ rrn)
+                if linear or self.method == "iv" or cn <= cost * (1 + 1e-12) or lam < 1e-6:
+                    break
+                lam *= 0.5
+            x, cost = xn, cn
+            if linear and it >= 2:
+                break
+            scale = np.sqrt(np.abs(np.diag(A)))
+            if np.linalg.norm((lam * step * scale)[free]) <= self.tol * max(
+                    np.linalg.norm((x * scale)[free]), 1e-300):
+                break
+        return x, it
+
+    def _statistics(self, moms, coeffs: Coeffs, x: np.ndarray, free: np.ndarray,
+                    weights: np.ndarray) -> None:
+        A, _, rr, C, yy = self._normal(moms, coeffs, x, weights)
+        nfree = int(free.sum())
+        n_rows = np.array([m.n for m in moms])
+        dof = int(n_rows.sum()) - nfree
+        if dof <= 0:
+            raise RobotIdentError(f"RobotModel.fit: {int(n_rows.sum())} rows for {nfree} "
+                                  f"parameters")
+        sigma2 = float(weights @ rr) / dof
+        Af = A[np.ix_(free, free)]
+        Ainv = np.linalg.inv(Af)
+        cov_f = sigma2 * Ainv if C is None else sigma2 * Ainv @ C[np.ix_(free, free)] @ Ainv.T
+        cov = np.zeros((x.size, x.size))
+        cov[np.ix_(free, free)] = cov_f
+        self.coef_ = x
+        self.cov_ = cov
+        self.std_ = np.sqrt(np.clip(np.diag(cov), 0, None))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            self.rel_std_ = np.where(x != 0, 100.0 * self.std_ / np.abs(x), np.inf)
+        self.params_ = dict(zip(self.names_, x.tolist(), strict=True))
+        self.sigma_ = float(np.sqrt(sigma2))
+        self.sigma_joint_ = self._joint_sigma(moms, rr, free)
+        self.n_samples_ = n_rows
+        rel = {name: float(np.sqrt(rr[j] / yy[j])) if yy[j] > 0 else float("nan")
+               for j, name in enumerate(self.joints_)}
+        rel["all"] = float(np.sqrt(rr.sum() / yy.sum()))
+        self.rel_error_ = rel
+
+    def _joint_sigma(self, moms, rr: np.ndarray, free: np.ndarray) -> np.ndarray:
+        out = np.empty(len(moms))
+        for j, m in enumerate(moms):
+            bj = int(free[self._local(j)].sum())
+            out[j] = np.sqrt(rr[j] / max(m.n - bj, 1))
+        return out
+
+    def _fit_on(self, moms, coeffs: Coeffs, x0: np.ndarray, free: np.ndarray,
+                linear: bool) -> tuple[np.ndarray, np.ndarray, int]:
+        """LS (or IV) fit, then WLS reweighting when asked; returns (x, weights, iterations)."""
+        k = len(moms)
+        w = np.ones(k)
+        x, it = self._gauss_newton(moms, coeffs, x0, free, w, linear)
+        if self.method == "wls":
+            _, _, rr, _, _ = self._normal(moms, coeffs, x, w)
+            sj = self._joint_sigma(moms, rr, free)
+            if np.any(sj <= 0):
+                raise RobotIdentError("RobotModel: a joint has zero residual; WLS weights "
+                                      "undefined (use method='ls')")
+            w = 1.0 / sj**2
+            x, it = self._gauss_newton(moms, coeffs, x, free, w, linear)
+        return x, w, it
+
+    # ------------------------------------------------------------------ public
+    def fit(self, signals: RobotSignals | Sequence[RobotSignals]) -> RobotModel:
+        """Identify the parameters on one or several :class:`RobotSignals` (all experiments
+        in one global estimation, as the paper's eq. 36-40).
+
+        Returns
+        -------
+        self
+        """
+        self._setup()
+        k, pb = len(self.joints_), self.n_base_
+        paper = self.model == "paper"
+        moms, _, _ = self._pass(signals, None, 3 if paper else 1)
+        passes = 1
+        # usual model (also the paper model's starting point)
+        nbu = len(USUAL_BLOCK)
+        saved = self.block_, self.names_
+        self.block_ = USUAL_BLOCK
+        self.names_ = tuple(saved[1][:pb]) + tuple(
+            f"{p}{n}" for n in self.numbers_ for p in USUAL_BLOCK)
+        xu0 = np.zeros(pb + nbu * k)
+        free_u = np.ones(xu0.size, dtype=bool)
+        xu, wu, it = self._fit_on(moms, usual_coefficients, xu0, free_u, linear=True)
+        self.block_, self.names_ = saved
+        self.fixed_: dict[str, float] = {}
+        self.quadrant_changes_: list[int] = []
+        if not paper:
+            self._statistics(moms, usual_coefficients, xu, free_u, wu)
+            self.weights_ = wu
+            self.n_passes_, self.n_iter_ = passes, it
+            return self
+        nb = len(PAPER_BLOCK)
+        x = np.zeros(pb + nb * k)
+        x[:pb] = xu[:pb]
+        for j in range(k):
+            x[pb + nb * j: pb + nb * (j + 1)] = paper_start(xu[pb + nbu * j: pb + nbu * (j + 1)])
+        free = np.ones(x.size, dtype=bool)
+        pay = sum(float(m.vv[:, 0, m.nv - N_EXTRA + IP, m.nv - N_EXTRA + IP].sum())
+                  for m in moms)
+        if pay == 0.0:
+            free[pb] = False  # a_m of the first joint: scale of theta (paper module doc)
+            self.fixed_ = {self.names_[pb]: 1.0}
+        x, w, it = self._fit_on(moms, paper_coefficients, x, free, linear=False)
+        if self.quadrant == "model":
+            prev = None
+            for _ in range(int(self.max_passes)):
+                theta = x[:pb].copy()
+                moms, rows, changed = self._pass(signals, theta, 3, prev)
+                passes += 1
+                x, w, it = self._fit_on(moms, paper_coefficients, x, free, linear=False)
+                if prev is not None:
+                    self.quadrant_changes_.append(changed)
+                    if changed <= QUADRANT_TOL * rows:
+                        break
+                prev = theta
+        self._statistics(moms, paper_coefficients, x, free, w)
+        self.weights_ = w
+        self.n_passes_, self.n_iter_ = passes, it
+        return self
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "coef_"):
+            raise RobotIdentError("RobotModel is not fitted; call fit(signals) first")
+
+    def predict(self, signals: RobotSignals) -> np.ndarray:
+        """Predicted joint torques tau_hat (n, k) [N m] on the samples of ``signals``."""
+        self._check_fitted()
+        if not isinstance(signals, RobotSignals):
+            raise RobotIdentError(f"predict: expected RobotSignals, got "
+                                  f"{type(signals).__name__}")
+        out = np.full(signals.tau.shape, np.nan)
+        coeffs = usual_coefficients if self.model == "usual" else paper_coefficients
+        pb = self.n_base_
+        theta = self.coef_[:pb]
+        saved = self.method
+        self.method = "ls"  # no instruments needed to predict
+        try:
+            for _sig, r, q, dq, ddq, tau, _z, pay in self._chunks(signals):
+                W, p = self._rows(q, dq, ddq, tau, pay)
+                for j, cols in enumerate(self.cols_):
+                    idx = self._local(j)
+                    nt = len(cols)
+                    th, blk = self.coef_[idx[:nt]], self.coef_[idx[nt:]]
+                    WjT = W[j, self.std_cols_[j], :]
+                    V = self._v(WjT, p[:, j], dq[:, j], np.zeros(q.shape[0])).T
+                    if self.quadrant == "model" or self.model == "usual":
+                        sp = (theta[cols] @ WjT + p[:, j]) * dq[:, j]
+                    else:
+                        sp = tau[:, j] * dq[:, j]
+                    pp = quadrant_weights(sp)
+                    E = np.exp(-np.abs(dq[:, j]) / self.qs_[j])
+                    pred = np.zeros(q.shape[0])
+                    for s, ws in ((0, pp), (1, 1.0 - pp)):
+                        c0, c1, _, _ = coeffs(th, blk, s)
+                        pred += ws * (V @ c0 + E * (V @ c1))
+                    out[r, j] = pred
+        finally:
+            self.method = saved
+        return out
+
+    def residual(self, signals: RobotSignals) -> np.ndarray:
+        """rho = tau - tau_hat (n, k) [N m]."""
+        return signals.tau - self.predict(signals)
+
+    def rel_error(self, signals: RobotSignals | Sequence[RobotSignals]) -> dict[str, float]:
+        """||rho_j|| / ||tau_j|| per joint and ``"all"`` on ``signals`` (Table III, all);
+        samples with a non-finite torque (left out of the fit) are ignored."""
+        items = [signals] if isinstance(signals, RobotSignals) else list(signals)
+        k = len(self.joints_)
+        r2, y2 = np.zeros(k), np.zeros(k)
+        for sig in items:
+            rho = self.residual(sig)
+            ok = np.isfinite(rho)
+            r2 += (np.where(ok, rho, 0.0) ** 2).sum(0)
+            y2 += (np.where(ok, sig.tau, 0.0) ** 2).sum(0)
+        out = {n: float(np.sqrt(r2[j] / y2[j])) for j, n in enumerate(self.joints_)}
+        out["all"] = float(np.sqrt(r2.sum() / y2.sum()))
+        return out
+
+    def score(self, signals: RobotSignals | Sequence[RobotSignals]) -> float:
+        """1 - ||rho|| / ||tau|| over all joints (as ``ident.api.JointModel.score``)."""
+        return 1.0 - self.rel_error(signals)["all"]
+
+    def truth_vector(self, std_values: Mapping[str, float]) -> np.ndarray:
+        """Map true standard parameters and friction (ROBOT_FORMAT names) onto ``names_``:
+        base parameters through ``base_.beta``, friction by name (``FC{j}`` of the usual model
+        is not a paper parameter and is NaN)."""
+        self._check_fitted()
+        std_names = tuple(self.regressor_.standard_names)
+        s = np.array([float(std_values.get(n, 0.0)) for n in std_names])
+        out = np.full(len(self.names_), np.nan)
+        out[:self.n_base_] = np.asarray(self.base_.beta, dtype=float) @ s
+        for i, name in enumerate(self.names_[self.n_base_:], start=self.n_base_):
+            if name in std_values:
+                out[i] = float(std_values[name])
+        return out

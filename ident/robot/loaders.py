@@ -1,0 +1,691 @@
+"""Loading multi-axis experiments: MCAP logs, CSV and MATLAB files -> :class:`RobotSignals`.
+
+Each input file is one experiment (one payload run) of the k moving joints of a robot. The
+axes of the file must match the moving joints of the robot file, in number and -- where the
+file names its axes -- by name; otherwise a one-line :class:`~ident.robot.RobotIdentError`
+names the file and the element.
+
+Formats
+-------
+MCAP (``jointid run`` logs)
+    One ``/joint/<i>/state`` channel per drive; axis i is moving joint i. The torque is
+    ``tau_ref``, already joint-side [N m] (the drive chain of the log's ``drive<i>``
+    metadata), so no drive gain is applied. A ``drive<i>`` record with a ``joint`` key names
+    the axis (checked against the robot). Only the cycles where *every* drive was in
+    OPERATION ENABLED are kept (longest common stretch). The ``/setpoint`` channel carries
+    one reference, used as ``q_ref`` only for a one-axis log. Payload: metadata ``payload``
+    ``mass_kg`` and optional ``com_m`` (JSON list, flange frame).
+CSV (header row)
+    ``t, q1..qk, tau1..tauk`` (numbered in the robot's moving order) or named by joint
+    ``q_<joint>, tau_<joint>``; optional ``q_ref*`` (IV instruments), ``dq*`` and ``ddq*``
+    (taken as given -- already filtered -- when both are present for every axis) and the
+    constant payload columns ``payload_mass_kg``, ``payload_com_x_m``, ``payload_com_y_m``,
+    ``payload_com_z_m`` (flange frame) and ``payload_ixx_kgm2``, ``payload_ixy_kgm2``, ...
+    ``payload_izz_kgm2`` (about the CoM, flange axes). The torque column times the joint's
+    ``drive_gain`` is the joint-side torque.
+MAT (v5/v7)
+    The ``--map`` paths of :func:`ident.loaders.resolve_path` with one array per signal,
+    one row (or column) per axis: ``t=rec.time_cont, q=rec.act_pos_mot_deg,
+    tau=rec.act_torque_abs_nm, q_ref=rec.ref_pos_deg``; or per-axis keys ``q1=...``.
+    ``q_unit="deg"`` converts q and q_ref, the drive gains convert the torque (motor-side
+    torque x gear ratio for the KUKA recordings).
+
+Preprocessing
+-------------
+Per experiment and per axis, exactly the single-joint chain of :mod:`ident.preprocess`
+(its functions, not a copy): zero-phase Butterworth low-pass of q (cut-off chosen from the
+motion bandwidth by :func:`~ident.preprocess.choose_cutoff`, the largest over the axes),
+central differences for dq and ddq, edge trimming, then decimation of every signal (the
+torque with its anti-alias filter, MATLAB ``decimate``). The single-joint design decimates
+the regressor columns in parallel with the torque; here the rigid-body regressor is built
+by the estimator from the decimated, already band-limited positions -- the difference is a
+second-order effect of the filter on products of smooth signals.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from daq.protocol.reader import LogReadError, read_run
+
+from ..loaders import (
+    IRREGULAR_TOL,
+    MIN_SAMPLES,
+    Q_UNITS,
+    _read_csv,
+    _read_mat,
+    resolve_path,
+)
+from ..preprocess import choose_cutoff, decimate, diffcent, lowpass
+from . import RobotIdentError
+from .signals import RobotPayloadData, RobotSignals
+
+__all__ = [
+    "RawRobotRun",
+    "RobotPreprocessing",
+    "load_robot_runs",
+    "load_robot_signals",
+    "preprocess_runs",
+    "resolved_settings",
+    "parse_robot_mapping",
+]
+
+_SIGNALS = ("t", "q", "tau", "q_ref", "dq", "ddq")
+_PAYLOAD_COLS = ("payload_mass_kg", "payload_com_x_m", "payload_com_y_m", "payload_com_z_m",
+                 *(f"payload_i{a}_kgm2" for a in ("xx", "xy", "xz", "yy", "yz", "zz")))
+_KEY_RE = re.compile(r"^(?P<sig>q_ref|ddq|dq|q|tau)(?P<idx>\d+)$")
+
+
+@dataclass(frozen=True)
+class RawRobotRun:
+    """One experiment as read from its file (joint-side SI, uniformly sampled).
+
+    Attributes
+    ----------
+    source : str
+        File name.
+    t : ndarray, shape (n,)
+        Time from the start of the run [s].
+    q, tau : ndarray, shape (n, k)
+        Positions [rad or m] and joint-side torques [N m or N].
+    q_ref : ndarray, shape (n, k), or None
+        Reference trajectory, when the file carries it.
+    dq, ddq : ndarray, shape (n, k), or None
+        Derivatives given by the file (taken as is), else None.
+    payload : RobotPayloadData
+    """
+
+    source: str
+    t: np.ndarray
+    q: np.ndarray
+    tau: np.ndarray
+    q_ref: np.ndarray | None = None
+    dq: np.ndarray | None = None
+    ddq: np.ndarray | None = None
+    payload: RobotPayloadData = RobotPayloadData()
+
+    @property
+    def dt(self) -> float:
+        """Sampling period [s]."""
+        return float((self.t[-1] - self.t[0]) / (len(self.t) - 1))
+
+
+@dataclass(frozen=True)
+class RobotPreprocessing:
+    """Settings of the per-axis filtering (see the module docstring).
+
+    Attributes
+    ----------
+    cutoff_hz : float or None
+        Butterworth cut-off on q [Hz]; None: the largest :func:`choose_cutoff` over the axes
+        of the first experiment.
+    decimation : int or None
+        Decimation factor r; None: floor(0.4 f_s / cut-off) (the anti-alias band of the
+        decimation, 0.8 (f_s/2)/r, stays at or above the cut-off), at least 1.
+    trim : int or None
+        Full-rate samples cut at both ends of each experiment; None: ceil(3 f_s / cut-off).
+    """
+
+    cutoff_hz: float | None = None
+    decimation: int | None = None
+    trim: int | None = None
+
+
+def parse_robot_mapping(items: Sequence[str] | str | None) -> dict[str, str]:
+    """Parse ``--map`` entries ``KEY=PATH`` (KEY: t, q, tau, q_ref, dq, ddq or q1, tau3...).
+
+    Commas inside brackets belong to a path and do not separate entries.
+    """
+    if not items:
+        return {}
+    if isinstance(items, str):
+        items = [items]
+    out: dict[str, str] = {}
+    for item in items:
+        depth, cur, parts = 0, [], []
+        for ch in item:
+            depth += ch == "["
+            depth -= ch == "]"
+            if ch == "," and depth == 0:
+                parts.append("".join(cur))
+                cur = []
+            else:
+                cur.append(ch)
+        parts.append("".join(cur))
+        for part in (p.strip() for p in parts):
+            if not part:
+                continue
+            if "=" not in part:
+                raise RobotIdentError(f"--map entry {part!r}: expected KEY=PATH (e.g. q=rec.q)")
+            k, v = (x.strip() for x in part.split("=", 1))
+            if k not in _SIGNALS and not _KEY_RE.match(k):
+                raise RobotIdentError(
+                    f"--map key {k!r}: expected one of {', '.join(_SIGNALS)} or a per-axis "
+                    "key such as q1, tau2, q_ref3"
+                )
+            out[k] = v
+    return out
+
+
+# -- reading --------------------------------------------------------------------------------
+
+
+def _check_gains(gains: Sequence[float] | None, k: int) -> np.ndarray:
+    g = np.ones(k) if gains is None else np.asarray(gains, dtype=float).reshape(-1)
+    if g.shape != (k,):
+        raise RobotIdentError(f"drive gains: {g.size} values for {k} moving joints")
+    return g
+
+
+def _names(joints: Sequence[str]) -> str:
+    return ", ".join(joints)
+
+
+def _mcap_axes(path: Path) -> int:
+    """Number of drives of a jointid log (``drive<i>`` metadata, else probing channels)."""
+    first = read_run(path, axis=0)
+    drives = [k for k in first.metadata if re.fullmatch(r"drive\d+", k)]
+    if drives:
+        return len(drives)
+    n = 1
+    while True:
+        try:
+            read_run(path, axis=n)
+        except LogReadError:
+            return n
+        n += 1
+
+
+def _longest_true_run(mask: np.ndarray) -> slice:
+    m = np.concatenate(([False], np.asarray(mask, dtype=bool), [False]))
+    edges = np.flatnonzero(np.diff(m.astype(np.int8)))
+    if edges.size == 0:
+        return slice(0, 0)
+    starts, stops = edges[0::2], edges[1::2]
+    i = int(np.argmax(stops - starts))
+    return slice(int(starts[i]), int(stops[i]))
+
+
+def _json_vector(text: str | None, size: int, what: str, source: str) -> np.ndarray:
+    if not text:
+        return np.zeros(size)
+    try:
+        v = np.asarray(json.loads(text), dtype=float).reshape(size)
+    except (ValueError, TypeError):
+        raise RobotIdentError(f"{source}: metadata {what} {text!r}: expected a JSON list of "
+                              f"{size} numbers") from None
+    return v
+
+
+def _load_mcap(path: Path, joints: Sequence[str]) -> RawRobotRun:
+    k = len(joints)
+    n_axes = _mcap_axes(path)
+    if n_axes != k:
+        raise RobotIdentError(
+            f"{path}: the log has {n_axes} axes (/joint/0..{n_axes - 1}/state), the robot "
+            f"moves {k} joints ({_names(joints)})"
+        )
+    runs = [read_run(path, axis=i) for i in range(k)]
+    for i, (run, name) in enumerate(zip(runs, joints, strict=True)):
+        logged = run.metadata.get(f"drive{i}", {}).get("joint")
+        if logged and logged != name:
+            raise RobotIdentError(
+                f"{path}: metadata drive{i}.joint is {logged!r}, the robot's moving joint {i + 1} "
+                f"is {name!r} (moving: {_names(joints)})"
+            )
+    cycles = runs[0].cycle
+    for i, run in enumerate(runs[1:], start=1):
+        if run.cycle.shape != cycles.shape or np.any(run.cycle != cycles):
+            raise RobotIdentError(f"{path}: /joint/{i}/state does not cover the cycles of "
+                                  "/joint/0/state (one state per drive and cycle expected)")
+    valid = np.logical_and.reduce([r.valid for r in runs])
+    keep = _longest_true_run(valid)
+    if keep.stop == keep.start:
+        raise RobotIdentError(f"{path}: no cycle with every drive in OPERATION ENABLED")
+    if np.count_nonzero(valid) > keep.stop - keep.start:
+        warnings.warn(f"{path}: kept the longest stretch of cycles with every drive enabled "
+                      f"({keep.stop - keep.start} cycles)", stacklevel=3)
+    runs = [r.select(keep) for r in runs]
+    q_ref = None
+    if k == 1 and np.all(np.isfinite(runs[0].q_ref)):
+        q_ref = runs[0].q_ref[:, None]
+    meta = runs[0].metadata.get("payload", {})
+    try:
+        mass = float(meta.get("mass_kg", "nan"))
+    except ValueError:
+        raise RobotIdentError(f"{path}: metadata payload.mass_kg {meta.get('mass_kg')!r}: "
+                              "expected a number [kg]") from None
+    payload = RobotPayloadData(
+        mass=mass if np.isfinite(mass) else 0.0,
+        com=_json_vector(meta.get("com_m"), 3, "payload.com_m", str(path)),
+        inertia=_json_vector(meta.get("inertia_kgm2"), 6, "payload.inertia_kgm2", str(path)),
+    )
+    return _make_run(
+        str(path),
+        runs[0].t,
+        np.column_stack([r.q for r in runs]),
+        np.column_stack([r.tau_ref for r in runs]),
+        q_ref=q_ref,
+        payload=payload,
+    )
+
+
+def _axis_columns(
+    table: Mapping[str, object], joints: Sequence[str], path: Path
+) -> dict[str, list[str] | None]:
+    """CSV: the column name of each (signal, axis), numbered or named by joint."""
+    cols = [str(c) for c in table]
+    numbered: dict[str, dict[int, str]] = {}
+    for c in cols:
+        m = _KEY_RE.match(c)
+        if m:
+            numbered.setdefault(m["sig"], {})[int(m["idx"])] = c
+    named_q = [c[2:] for c in cols if c.startswith("q_") and not c.startswith("q_ref")]
+    k = len(joints)
+    out: dict[str, list[str] | None] = {}
+    if "q" in numbered:
+        idx = sorted(numbered["q"])
+        if idx != list(range(1, len(idx) + 1)):
+            listed = ", ".join(numbered["q"][i] for i in idx)
+            raise RobotIdentError(f"{path}: position columns {listed} are not numbered 1..k")
+        if len(idx) != k:
+            raise RobotIdentError(
+                f"{path}: {len(idx)} axes in the file (q1..q{len(idx)}), the robot moves {k} "
+                f"joints ({_names(joints)})"
+            )
+        for sig in ("q", "tau", "q_ref", "dq", "ddq"):
+            have = numbered.get(sig, {})
+            if not have:
+                if sig == "tau":
+                    raise RobotIdentError(f"{path}: no torque columns tau1..tau{k} "
+                                          f"(columns: {', '.join(cols)})")
+                out[sig] = None
+                continue
+            missing = [f"{sig}{i}" for i in range(1, k + 1) if i not in have]
+            extra = [have[i] for i in sorted(have) if i > k]
+            if missing or extra:
+                what = f"missing {', '.join(missing)}" if missing else f"extra {', '.join(extra)}"
+                raise RobotIdentError(f"{path}: column {what} (the robot moves {k} joints: "
+                                      f"{_names(joints)})")
+            out[sig] = [have[i] for i in range(1, k + 1)]
+        return out
+    if named_q:
+        unknown = [n for n in named_q if n not in joints]
+        if unknown:
+            raise RobotIdentError(
+                f"{path}: column q_{unknown[0]} names no moving joint of the robot "
+                f"(moving: {_names(joints)})"
+            )
+        for sig in ("q", "tau", "q_ref", "dq", "ddq"):
+            names = [f"{sig}_{j}" for j in joints]
+            present = [n in table for n in names]
+            if not any(present) and sig not in ("q", "tau"):
+                out[sig] = None
+                continue
+            if not all(present):
+                miss = names[present.index(False)]
+                raise RobotIdentError(f"{path}: missing column {miss!r} (the robot moves "
+                                      f"{_names(joints)})")
+            out[sig] = names
+        return out
+    raise RobotIdentError(
+        f"{path}: no position columns q1..q{k} or q_<joint> (columns: {', '.join(cols)})"
+    )
+
+
+def _load_csv(path: Path, joints: Sequence[str], gains: np.ndarray,
+              q_scale: float) -> RawRobotRun:
+    from_csv = _read_csv(path)
+    table = {str(k): v for k, v in from_csv.items()}
+    if "t" not in table:
+        raise RobotIdentError(f"{path}: missing column 't' (columns: {', '.join(table)})")
+    cols = _axis_columns(table, joints, path)
+
+    def stack(sig: str) -> np.ndarray | None:
+        names = cols.get(sig)
+        return None if names is None else np.column_stack([table[c] for c in names])
+
+    pay = [float(table[c][0]) if c in table else 0.0 for c in _PAYLOAD_COLS]
+    for c in _PAYLOAD_COLS:
+        if c in table and np.ptp(table[c]) > 0:
+            raise RobotIdentError(f"{path}: column {c!r} varies, expected a constant "
+                                  "(one payload per file)")
+    dq, ddq = stack("dq"), stack("ddq")
+    q_ref = stack("q_ref")
+    return _make_run(
+        str(path),
+        table["t"],
+        q_scale * stack("q"),  # type: ignore[operator]
+        gains * stack("tau"),  # type: ignore[operator]
+        q_ref=None if q_ref is None else q_scale * q_ref,
+        dq=None if dq is None or ddq is None else q_scale * dq,
+        ddq=None if dq is None or ddq is None else q_scale * ddq,
+        payload=RobotPayloadData(mass=pay[0], com=pay[1:4], inertia=pay[4:10]),
+    )
+
+
+def _matrix(table: Mapping[str, object], spec: str, key: str, n: int | None, k: int,
+            path: Path, joints: Sequence[str]) -> np.ndarray:
+    """A mapped 2-D array as (n, k): rows or columns are axes."""
+    try:
+        a = resolve_path(table, spec, str(path))
+    except ValueError as exc:  # DataError: already one line naming the file and path
+        raise RobotIdentError(str(exc)) from None
+    if a.ndim == 1 and k == 1:
+        a = a[:, None]
+    if a.ndim != 2:
+        raise RobotIdentError(f"{path}: {spec!r} for {key!r} has shape {a.shape}, expected one "
+                              f"row (or column) per axis ({k} x samples)")
+    if n is not None and a.shape[1] == n and a.shape[0] != n:
+        a = a.T
+    elif n is None and a.shape[0] < a.shape[1]:
+        a = a.T
+    if n is not None and a.shape[0] != n:
+        raise RobotIdentError(f"{path}: {spec!r} for {key!r} has shape {a.shape}, expected "
+                              f"{n} samples (the length of t)")
+    if a.shape[1] != k:
+        raise RobotIdentError(
+            f"{path}: {spec!r} has {a.shape[1]} axes, the robot moves {k} joints "
+            f"({_names(joints)})"
+        )
+    return np.asarray(a, dtype=float)
+
+
+def _load_mat(path: Path, joints: Sequence[str], gains: np.ndarray, q_scale: float,
+              mapping: Mapping[str, str]) -> RawRobotRun:
+    table = _read_mat(path)
+    k = len(joints)
+
+    def vector(spec: str, key: str) -> np.ndarray:
+        try:
+            a = resolve_path(table, spec, str(path))
+        except ValueError as exc:
+            raise RobotIdentError(str(exc)) from None
+        if a.ndim > 1 and sum(s > 1 for s in a.shape) <= 1:
+            a = a.ravel()
+        if a.ndim != 1:
+            raise RobotIdentError(f"{path}: {spec!r} for {key!r} has shape {a.shape}, "
+                                  "expected one signal (pick one row with [ROW])")
+        return a
+
+    if "t" not in mapping and "t" not in table:
+        raise RobotIdentError(f"{path}: no variable 't'; map the time with --map t=PATH "
+                              f"(variables: {', '.join(sorted(table))})")
+    t = vector(mapping.get("t", "t"), "t")
+
+    def signal(sig: str, required: bool) -> np.ndarray | None:
+        per_axis = [f"{sig}{i}" for i in range(1, k + 1)]
+        if any(key in mapping for key in per_axis):
+            miss = [key for key in per_axis if key not in mapping]
+            if miss:
+                raise RobotIdentError(f"{path}: --map gives {sig} per axis but not {miss[0]} "
+                                      f"(the robot moves {k} joints: {_names(joints)})")
+            extra = sorted(key for key in mapping if (m := _KEY_RE.match(key))
+                           and m["sig"] == sig and int(m["idx"]) > k)
+            if extra:
+                raise RobotIdentError(f"{path}: --map {extra[0]}: the robot moves only {k} "
+                                      f"joints ({_names(joints)})")
+            return np.column_stack([vector(mapping[key], key) for key in per_axis])
+        spec = mapping.get(sig)
+        if spec is None:
+            if sig in table:
+                spec = sig
+            elif required:
+                raise RobotIdentError(
+                    f"{path}: no mapping for {sig!r} (map it with --map {sig}=PATH, one row per "
+                    f"axis, or {sig}1=PATH,...; variables: {', '.join(sorted(table))})"
+                )
+            else:
+                return None
+        return _matrix(table, spec, sig, t.size, k, path, joints)
+
+    q = signal("q", True)
+    tau = signal("tau", True)
+    q_ref = signal("q_ref", False)
+    dq, ddq = signal("dq", False), signal("ddq", False)
+    both = dq is not None and ddq is not None
+    return _make_run(
+        str(path), t, q_scale * q, gains * tau,  # type: ignore[operator]
+        q_ref=None if q_ref is None else q_scale * q_ref,
+        dq=q_scale * dq if both else None,  # type: ignore[operator]
+        ddq=q_scale * ddq if both else None,  # type: ignore[operator]
+    )
+
+
+def _make_run(source: str, t: np.ndarray, q: np.ndarray, tau: np.ndarray, *,
+              q_ref: np.ndarray | None = None, dq: np.ndarray | None = None,
+              ddq: np.ndarray | None = None,
+              payload: RobotPayloadData | None = None) -> RawRobotRun:
+    """Validate the arrays of one file (lengths, finite values, increasing time) and
+    resample an irregular grid (like :func:`ident.loaders.make_experiment`)."""
+    t = np.asarray(t, dtype=float).reshape(-1)
+    arrays = {"q": q, "tau": tau, "q_ref": q_ref, "dq": dq, "ddq": ddq}
+    for name, a in arrays.items():
+        if a is not None and a.shape[0] != t.size:
+            raise RobotIdentError(f"{source}: {name} has {a.shape[0]} samples, t has {t.size}")
+    if t.size < MIN_SAMPLES:
+        raise RobotIdentError(f"{source}: {t.size} samples, need at least {MIN_SAMPLES}")
+    for name, a in (("t", t), *arrays.items()):
+        if a is None:
+            continue
+        bad = ~np.isfinite(a)
+        if bad.any():
+            first = int(np.argmax(bad.reshape(a.shape[0], -1).any(axis=1)))
+            raise RobotIdentError(f"{source}: {name} has {int(bad.sum())} NaN/inf values "
+                                  f"(first at sample {first})")
+    d = np.diff(t)
+    if np.any(d <= 0):
+        i = int(np.argmax(d <= 0))
+        raise RobotIdentError(f"{source}: time is not strictly increasing at sample {i + 1} "
+                              f"(t={t[i + 1]})")
+    med = float(np.median(d))
+    if np.max(np.abs(d - med)) > IRREGULAR_TOL * med:
+        tu = t[0] + med * np.arange(int(round((t[-1] - t[0]) / med)) + 1)
+        tu = tu[tu <= t[-1] + 1e-12 * abs(t[-1])]
+        warnings.warn(f"{source}: irregular sampling, resampled to {tu.size} samples at "
+                      f"{med:.6g} s", stacklevel=3)
+        for name, a in arrays.items():
+            if a is not None:
+                arrays[name] = np.column_stack([np.interp(tu, t, a[:, j])
+                                                for j in range(a.shape[1])])
+        t = tu
+    return RawRobotRun(source=source, t=t - t[0], payload=payload or RobotPayloadData(),
+                       **arrays)  # type: ignore[arg-type]
+
+
+def load_robot_runs(
+    paths: Sequence[str | Path] | str | Path,
+    joints: Sequence[str],
+    *,
+    gains: Sequence[float] | None = None,
+    mapping: Mapping[str, str] | None = None,
+    q_unit: str | None = None,
+) -> list[RawRobotRun]:
+    """Read every file as one multi-axis experiment (no filtering yet).
+
+    Parameters
+    ----------
+    paths : path or sequence of paths
+        ``.mcap``, ``.csv`` (``.txt``) or ``.mat`` files.
+    joints : sequence of str
+        The robot's moving joints, in order (the axes of each file).
+    gains : sequence of float, shape (k,), or None
+        Joint-side torque per unit of the logged torque of each axis (the robot file's
+        ``drive_gain``; CSV and MAT only -- MCAP torques are already joint-side N m).
+    mapping : mapping or None
+        MAT/CSV ``--map`` entries (:func:`parse_robot_mapping`).
+    q_unit : {"rad", "deg", "m", "mm"} or None
+        Unit of q and q_ref in CSV/MAT files (converted to SI).
+
+    Raises
+    ------
+    RobotIdentError
+        Missing file, unknown type, axes that do not match ``joints``, bad mapping or values.
+    """
+    if isinstance(paths, str | Path):
+        paths = [paths]
+    if not paths:
+        raise RobotIdentError("no input file given")
+    joints = tuple(joints)
+    if not joints:
+        raise RobotIdentError("the robot has no moving joint")
+    g = _check_gains(gains, len(joints))
+    mapping = dict(mapping or {})
+    scale = 1.0
+    if q_unit is not None:
+        if q_unit not in Q_UNITS:
+            raise RobotIdentError(f"q unit {q_unit!r}: expected one of {', '.join(Q_UNITS)}")
+        scale = Q_UNITS[q_unit][0]
+    runs = []
+    for p in map(Path, paths):
+        if not p.exists():
+            raise RobotIdentError(f"{p}: no such file")
+        ext = p.suffix.lower()
+        try:
+            if ext == ".mcap":
+                if scale != 1.0:
+                    raise RobotIdentError(f"{p}: MCAP logs are SI; --q-unit does not apply")
+                runs.append(_load_mcap(p, joints))
+            elif ext in (".csv", ".txt"):
+                runs.append(_load_csv(p, joints, g, scale))
+            elif ext == ".mat":
+                runs.append(_load_mat(p, joints, g, scale, mapping))
+            else:
+                raise RobotIdentError(f"{p}: unknown file type {ext!r}, expected .mcap, .csv "
+                                      "or .mat")
+        except LogReadError as exc:
+            raise RobotIdentError(str(exc)) from None
+        except RobotIdentError:
+            raise
+        except ValueError as exc:  # DataError of the shared readers: one line with the file
+            raise RobotIdentError(str(exc)) from None
+    return runs
+
+
+# -- preprocessing --------------------------------------------------------------------------
+
+
+def _settings(runs: Sequence[RawRobotRun], pre: RobotPreprocessing) -> tuple[float, int, int]:
+    dt = runs[0].dt
+    for r in runs[1:]:
+        if abs(r.dt - dt) > IRREGULAR_TOL * dt:
+            raise RobotIdentError(
+                f"{r.source}: sampling period {r.dt:.6g} s differs from {runs[0].source} "
+                f"({dt:.6g} s)"
+            )
+    fs = 1.0 / dt
+    cutoff = pre.cutoff_hz
+    if cutoff is None:
+        q0 = runs[0].q
+        cutoff = max(choose_cutoff(q0[:, j], dt) for j in range(q0.shape[1]))
+    cutoff = float(cutoff)
+    if not 0 < cutoff < fs / 2:
+        raise RobotIdentError(f"cut-off {cutoff:g} Hz: expected between 0 and the Nyquist "
+                              f"frequency {fs / 2:g} Hz")
+    r = pre.decimation if pre.decimation is not None else max(1, int(0.4 * fs / cutoff))
+    if int(r) < 1:
+        raise RobotIdentError(f"decimation must be a positive integer, got {r}")
+    trim = pre.trim if pre.trim is not None else int(np.ceil(3 * fs / cutoff))
+    if int(trim) < 0:
+        raise RobotIdentError(f"trim must be >= 0, got {trim}")
+    return cutoff, int(r), int(trim)
+
+
+def preprocess_runs(
+    runs: Sequence[RawRobotRun],
+    joints: Sequence[str],
+    preprocessing: RobotPreprocessing | None = None,
+) -> RobotSignals:
+    """Filter, differentiate, trim and decimate every experiment; stack them.
+
+    Parameters
+    ----------
+    runs : sequence of RawRobotRun
+        Experiments of the same robot (same sampling period).
+    joints : sequence of str
+        Names of the k moving joints (column order).
+    preprocessing : RobotPreprocessing or None
+        Settings; None: all defaults.
+
+    Returns
+    -------
+    RobotSignals
+        ``experiment`` indexes ``runs``; ``payloads`` one per run; ``source`` the file names.
+        The chosen cut-off, decimation and trim are returned by :func:`resolved_settings`.
+
+    Raises
+    ------
+    RobotIdentError
+        Different sampling periods, bad settings, an experiment too short for them.
+    """
+    if not runs:
+        raise RobotIdentError("no experiment to preprocess")
+    pre = preprocessing or RobotPreprocessing()
+    cutoff, r, trim = _settings(runs, pre)
+    parts: dict[str, list[np.ndarray]] = {s: [] for s in ("t", "q", "dq", "ddq", "tau", "e")}
+    refs: list[np.ndarray] = []
+    has_ref = all(run.q_ref is not None for run in runs)
+    for i, run in enumerate(runs):
+        n, dt = run.t.size, run.dt
+        fs = 1.0 / dt
+        if n - 2 * trim < max(4 * r, 10):
+            raise RobotIdentError(f"{run.source}: {n} samples, too few after trimming {trim} "
+                                  f"at each end and decimating by {r}")
+        if run.dq is not None and run.ddq is not None:
+            q, dq, ddq = run.q, run.dq, run.ddq
+        else:
+            q = lowpass(run.q, cutoff, fs)
+            dq = diffcent(q, dt)
+            ddq = diffcent(dq, dt)
+        keep = slice(trim, n - trim if trim else n)
+        stack = [run.t[keep, None], q[keep], dq[keep], ddq[keep], run.tau[keep]]
+        if has_ref:
+            stack.append(lowpass(run.q_ref, cutoff, fs)[keep])  # type: ignore[arg-type]
+        dec, _ = decimate(np.column_stack(stack), r)
+        k = q.shape[1]
+        parts["t"].append(dec[:, 0])
+        for j, name in enumerate(("q", "dq", "ddq", "tau")):
+            parts[name].append(dec[:, 1 + j * k : 1 + (j + 1) * k])
+        if has_ref:
+            refs.append(dec[:, 1 + 4 * k :])
+        parts["e"].append(np.full(dec.shape[0], i))
+    return RobotSignals(
+        t=np.concatenate(parts["t"]),
+        q=np.concatenate(parts["q"]),
+        dq=np.concatenate(parts["dq"]),
+        ddq=np.concatenate(parts["ddq"]),
+        tau=np.concatenate(parts["tau"]),
+        joints=tuple(joints),
+        experiment=np.concatenate(parts["e"]),
+        payloads=tuple(run.payload for run in runs),
+        q_ref=np.concatenate(refs) if has_ref else None,
+        source=", ".join(run.source for run in runs),
+    )
+
+
+def resolved_settings(runs: Sequence[RawRobotRun],
+                      preprocessing: RobotPreprocessing | None = None) -> dict[str, float]:
+    """The cut-off [Hz], decimation and trim :func:`preprocess_runs` uses for ``runs``."""
+    cutoff, r, trim = _settings(runs, preprocessing or RobotPreprocessing())
+    return {"cutoff_hz": cutoff, "decimation": r, "trim": trim}
+
+
+def load_robot_signals(
+    paths: Sequence[str | Path] | str | Path,
+    joints: Sequence[str],
+    *,
+    gains: Sequence[float] | None = None,
+    mapping: Mapping[str, str] | None = None,
+    q_unit: str | None = None,
+    preprocessing: RobotPreprocessing | None = None,
+) -> RobotSignals:
+    """:func:`load_robot_runs` then :func:`preprocess_runs` (one call for notebooks)."""
+    runs = load_robot_runs(paths, joints, gains=gains, mapping=mapping, q_unit=q_unit)
+    return preprocess_runs(runs, joints, preprocessing)

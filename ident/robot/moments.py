@@ -1,0 +1,168 @@
+"""Quadrant- and E-weighted moment matrices of the n-dof identification model, accumulated in
+one pass over chunks, and the (Gauss-Newton) normal equations evaluated from them.
+
+For joint j and sample i, the row vector of everything the models read is::
+
+    v_ij = [W_ij (its non-zero base columns), p_ij, sign(dq_ij), dq_ij, 1, tau_ij]
+
+(W: base rigid-body + rotor row, p: known payload torque, tau: measured torque). Every model of
+this package predicts, in quadrant s (s = 0 motor P+, s = 1 generator P-, eq. 27-28)::
+
+    tau_hat_ij = (c0_s + E_ij c1_s)^T v_ij      E_ij = exp(-|dq_ij| / q_s,j)  (eq. 29)
+
+with coefficient vectors c0, c1 that depend on the parameters x (linearly for the usual model,
+eq. 5/8; bilinearly for the paper's, eq. 30), and its Jacobian rows are (D0_s + E D1_s)^T v.
+So every sum the estimators need -- J^T J, J^T r, ||r||^2, Z^T J, Z^T Z -- is a quadratic form
+in the moments::
+
+    M_s[e] = sum over samples in quadrant s of E^e v_z v^T,   e = 0, 1, 2
+
+(v_z = v for least squares; v with the instrument's acceleration for IDIM-IV). One pass over
+the data builds them (memory: k x 2 x 3 matrices of size (p_j + 5)^2, independent of the
+number of samples); the iterations then cost nothing per sample. Only the samples where E is
+not negligible (< :data:`E_TINY`) enter the e >= 1 moments, so the pass costs about one
+Gram matrix per joint.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import RobotIdentError
+
+__all__ = ["E_TINY", "N_EXTRA", "JointMoments", "quadrant_weights"]
+
+#: E below this is treated as 0 in the E-weighted moments (relative contribution < 1e-14).
+E_TINY = 1e-14
+#: Entries of v after the base columns: p, sign(dq), dq, 1, tau.
+N_EXTRA = 5
+#: Local indices (offsets after the base columns) of the entries of v.
+IP, ISG, IDQ, ONE, IY = 0, 1, 2, 3, 4
+
+
+def quadrant_weights(sign_power: np.ndarray) -> np.ndarray:
+    """P+ of eq. 27: (1 + sign P) / 2, shape (m,) (0.5 where P = 0, as the single-joint code)."""
+    return 0.5 * (1.0 + np.sign(sign_power))
+
+
+@dataclass
+class JointMoments:
+    """Moments of one joint (module doc). ``cols``: the base columns present in this joint's
+    rows (others are structurally zero); ``nv = len(cols) + 5``.
+
+    Attributes
+    ----------
+    vv : ndarray, shape (2, 3, nv, nv)
+        sum P^s E^e v v^T (s: 0 motor, 1 generator; e: power of E).
+    zv, zz : ndarray, shape (2, 3, nv, nv), or None
+        sum P^s E^e v_z v^T and v_z v_z^T (instrumental variables only).
+    n : int
+        Number of samples used.
+    """
+
+    cols: np.ndarray
+    iv: bool = False
+    powers: int = 3
+    vv: np.ndarray = field(init=False)
+    zv: np.ndarray | None = field(init=False, default=None)
+    zz: np.ndarray | None = field(init=False, default=None)
+    n: int = field(init=False, default=0)
+
+    def __post_init__(self) -> None:
+        nv = len(self.cols) + N_EXTRA
+        self.vv = np.zeros((2, 3, nv, nv))
+        if self.iv:
+            self.zv = np.zeros((2, 3, nv, nv))
+            self.zz = np.zeros((2, 3, nv, nv))
+
+    @property
+    def nv(self) -> int:
+        return len(self.cols) + N_EXTRA
+
+    def add(self, VT: np.ndarray, pplus: np.ndarray, E: np.ndarray,
+            VzT: np.ndarray | None = None) -> None:
+        """Accumulate the rows given TRANSPOSED, VT (nv, m), with P+ (m,) and E (m,); VzT
+        the instrument rows (nv, m)."""
+        if VT.shape[1] == 0:
+            return
+        if self.iv and VzT is None:
+            raise RobotIdentError("JointMoments.add: instrument rows missing for IDIM-IV")
+        self.n += VT.shape[1]
+        for s, w in ((0, pplus), (1, 1.0 - pplus)):
+            sel = w > 0
+            if not sel.any():
+                continue
+            every = bool(sel.all())
+            ws = w if every else w[sel]
+            a = VT if every else VT[:, sel]
+            az = None if VzT is None else (VzT if every else VzT[:, sel])
+            es = E if every else E[sel]
+            self._add(s, 0, a, az, ws)
+            if self.powers > 1:
+                big = es > E_TINY
+                if big.any():
+                    ab, eb, wb = a[:, big], es[big], ws[big]
+                    azb = None if az is None else az[:, big]
+                    for e in range(1, self.powers):
+                        self._add(s, e, ab, azb, wb * eb**e)
+
+    def _add(self, s: int, e: int, a: np.ndarray, az: np.ndarray | None,
+             w: np.ndarray) -> None:
+        aw = a * w
+        self.vv[s, e] += aw @ a.T
+        if az is not None:
+            azw = az * w
+            self.zv[s, e] += azw @ a.T
+            self.zz[s, e] += azw @ az.T
+
+    def normal(
+        self, coeffs: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
+    ) -> tuple[np.ndarray, np.ndarray, float, np.ndarray | None, float]:
+        """Normal equations of this joint at given coefficients.
+
+        Parameters
+        ----------
+        coeffs : list of 2 tuples (c0, c1, D0, D1)
+            Per quadrant: prediction coefficients c0, c1 (nv,) and Jacobian coefficients
+            D0, D1 (nv, nx) (module doc).
+
+        Returns
+        -------
+        A : ndarray (nx, nx)
+            J^T J (least squares) or Z^T J (IV).
+        g : ndarray (nx,)
+            J^T r (or Z^T r), r = tau - tau_hat.
+        rr : float
+            ||r||^2.
+        C : ndarray (nx, nx) or None
+            Z^T Z (IV only).
+        yy : float
+            ||tau||^2 over the samples used.
+        """
+        nv = self.nv
+        ey = np.zeros(nv)
+        ey[nv - N_EXTRA + IY] = 1.0
+        nx = coeffs[0][2].shape[1]
+        A = np.zeros((nx, nx))
+        g = np.zeros(nx)
+        C = np.zeros((nx, nx)) if self.iv else None
+        rr = 0.0
+        mz = self.zv if self.iv else self.vv
+        for s in (0, 1):
+            c0, c1, D0, D1 = coeffs[s]
+            d = (ey - c0, -c1)
+            D = (D0, D1)
+            lin = not (np.any(c1) or np.any(D1))
+            terms = ((0, 0),) if lin else ((0, 0), (0, 1), (1, 0), (1, 1))
+            for e, f in terms:
+                M = mz[s, e + f]
+                MD = M @ D[f]
+                A += D[e].T @ MD
+                g += D[e].T @ (M @ d[f])
+                rr += float(d[e] @ self.vv[s, e + f] @ d[f])
+                if C is not None:
+                    C += D[e].T @ self.zz[s, e + f] @ D[f]
+        yy = float(self.vv[0, 0, -1, -1] + self.vv[1, 0, -1, -1])
+        return A, g, max(rr, 0.0), C, yy  # rr: quadratic form, clip rounding below 0

@@ -1,0 +1,109 @@
+"""The paper's load- and velocity-dependent friction on every joint of a robot (eq. 17-30).
+
+For joint j (E_j = exp(-|dq_j| / q_s,j), eq. 29; P+_j, P-_j of eq. 27-28)::
+
+    tau_j = P+_j (a_m + b_m E_j) tau_out,j + P-_j (a_g - b_g E_j) tau_out,j
+          + P+_j (c_m + d_m E_j) sign(dq_j) + P-_j (c_g + d_g E_j) sign(dq_j)
+          + F_V dq_j + tau_off                                                     (eq. 30)
+
+    tau_out,j = W_j(q, dq, ddq) theta + p_j        (base rigid body + rotors; p_j: known payload)
+
+exactly as the single-joint :mod:`ident.models` maps it (``LoadDependent`` on the rigid body and
+payload, ``QuadrantCoulomb``, ``Viscous``, ``Offset``), with the per-joint parameters a_m{j}
+b_m{j} a_g{j} b_g{j} c_m{j} d_m{j} c_g{j} d_g{j} FV{j} OFF{j} (ROBOT_FORMAT names).
+
+Bilinear estimation
+-------------------
+The single-joint code identifies the products (a_m J, b_m J, ...) of eq. 42-43 as free linear
+parameters. On n joints the rigid-body base parameters theta are shared by all joints, so the
+model is bilinear in (theta, per-joint friction): the estimator here keeps that structure
+(fewer parameters: p_b + 10 k instead of sum_j 4 p_j + 6) and solves it by Gauss-Newton,
+started from the usual model's fit (a = 1, b = 0, c = F_C, d = 0), standard deviations from
+the linearised model at the solution (eq. 15 with the Jacobian for W). With the quadrants
+fixed, every Gauss-Newton step is a quadratic form in the moments
+``sum P^s E^e v v^T`` (:mod:`ident.robot.moments`) accumulated in one pass, so the iterations
+never touch the samples again.
+
+Quadrants: ``quadrant="measured"`` uses the paper's proxy sign(P) = sign(tau dq) (eq. 26);
+``quadrant="model"`` (default) decides sign(P_out) = sign(tau_out_hat dq) with the current
+estimate of theta and repeats the pass until the assignment is stable (what the simulator and
+the physics use; the proxy is wrong in the stiction band of Fig. 2.b).
+
+The scale of theta against (a, b) is fixed by the known payload torques (p_j enters with the
+coefficient a, not a free ratio): without any payload torque only products are identifiable and
+the estimator fixes a_m of the first joint to 1 (reported in ``fixed_``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .moments import IDQ, IP, ISG, N_EXTRA, ONE
+
+__all__ = ["PAPER_BLOCK", "USUAL_BLOCK", "paper_coefficients", "usual_coefficients",
+           "paper_start"]
+
+#: Per-joint parameter prefixes of the paper model (ROBOT_FORMAT order).
+PAPER_BLOCK = ("a_m", "b_m", "a_g", "b_g", "c_m", "d_m", "c_g", "d_g", "FV", "OFF")
+#: Per-joint parameter prefixes of the usual model (eq. 5).
+USUAL_BLOCK = ("FC", "FV", "OFF")
+
+
+def usual_coefficients(theta: np.ndarray, blk: np.ndarray, s: int) -> tuple[np.ndarray, ...]:
+    """(c0, c1, D0, D1) of the usual model tau = W theta + p + FC sign + FV dq + OFF (eq. 8).
+
+    ``theta``: the joint's base parameters (its non-zero columns), ``blk``: (FC, FV, OFF);
+    quadrant ``s`` is irrelevant (same coefficients in both)."""
+    nt = theta.shape[0]
+    nv = nt + N_EXTRA
+    nx = nt + 3
+    c0 = np.zeros(nv)
+    c0[:nt] = theta
+    c0[nt + IP] = 1.0
+    c0[nt + ISG], c0[nt + IDQ], c0[nt + ONE] = blk
+    D0 = np.zeros((nv, nx))
+    D0[:nt, :nt] = np.eye(nt)
+    D0[nt + ISG, nt] = D0[nt + IDQ, nt + 1] = D0[nt + ONE, nt + 2] = 1.0
+    return c0, np.zeros(nv), D0, np.zeros((nv, nx))
+
+
+def paper_coefficients(theta: np.ndarray, blk: np.ndarray, s: int) -> tuple[np.ndarray, ...]:
+    """(c0, c1, D0, D1) of eq. 30 in quadrant ``s`` (0: motor P+, 1: generator P-).
+
+    ``blk`` = (a_m, b_m, a_g, b_g, c_m, d_m, c_g, d_g, FV, OFF). Prediction
+    ``(c0 + E c1)^T v``; Jacobian row ``(D0 + E D1)^T v`` over (theta, blk)."""
+    nt = theta.shape[0]
+    nv = nt + N_EXTRA
+    nx = nt + len(PAPER_BLOCK)
+    ia, ib, ic, idd = (0, 1, 4, 5) if s == 0 else (2, 3, 6, 7)
+    a, b = blk[ia], blk[ib]
+    sb = 1.0 if s == 0 else -1.0  # generator: a_g - b_g E (eq. 25, 30)
+    c0 = np.zeros(nv)
+    c1 = np.zeros(nv)
+    c0[:nt] = a * theta
+    c0[nt + IP] = a
+    c0[nt + ISG] = blk[ic]
+    c0[nt + IDQ] = blk[8]
+    c0[nt + ONE] = blk[9]
+    c1[:nt] = sb * b * theta
+    c1[nt + IP] = sb * b
+    c1[nt + ISG] = blk[idd]
+    D0 = np.zeros((nv, nx))
+    D1 = np.zeros((nv, nx))
+    D0[:nt, :nt] = a * np.eye(nt)
+    D1[:nt, :nt] = sb * b * np.eye(nt)
+    D0[:nt, nt + ia] = theta
+    D0[nt + IP, nt + ia] = 1.0
+    D1[:nt, nt + ib] = sb * theta
+    D1[nt + IP, nt + ib] = sb
+    D0[nt + ISG, nt + ic] = 1.0
+    D1[nt + ISG, nt + idd] = 1.0
+    D0[nt + IDQ, nt + 8] = 1.0
+    D0[nt + ONE, nt + 9] = 1.0
+    return c0, c1, D0, D1
+
+
+def paper_start(usual_blk: np.ndarray) -> np.ndarray:
+    """Paper block from a usual fit (FC, FV, OFF): a = 1, b = 0, c = FC, d = 0."""
+    fc, fv, off = usual_blk
+    return np.array([1.0, 0.0, 1.0, 0.0, fc, 0.0, fc, 0.0, fv, off])

@@ -1,0 +1,89 @@
+"""The paper's Table III per joint: relative error norms ||rho|| / ||tau|| of the usual and the
+paper model over all samples, low velocities (0-10 % of the joint's maximum velocity) and high
+velocities (35-100 %), as :func:`ident.results.band_errors` does for one joint.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from ..results import DEFAULT_BANDS, band_errors
+from . import RobotIdentError
+from .signals import RobotSignals
+
+__all__ = ["table_iii", "format_table_iii"]
+
+
+def _stack(signals: RobotSignals | Sequence[RobotSignals]) -> list[RobotSignals]:
+    return [signals] if isinstance(signals, RobotSignals) else list(signals)
+
+
+def table_iii(
+    models: Mapping[str, Any],
+    signals: RobotSignals | Sequence[RobotSignals],
+    *,
+    vmax: Sequence[float] | Mapping[str, float] | None = None,
+    bands: Mapping[str, tuple[float, float]] = DEFAULT_BANDS,
+) -> dict[str, dict[str, dict[str, float]]]:
+    """Table III per joint.
+
+    Parameters
+    ----------
+    models : mapping
+        Model label (``"usual"``, ``"paper"``) -> fitted :class:`~ident.robot.estimate.RobotModel`.
+    signals : RobotSignals or sequence
+        Samples to evaluate (the identification data or validation runs); samples whose
+        torque is not finite are ignored.
+    vmax : sequence (k,) or mapping joint -> [rad/s], optional
+        Maximum velocity of each joint; default max |dq_j| over the evaluated samples.
+    bands : mapping
+        Band name -> (low, high) fractions of vmax (default the paper's all/low/high).
+
+    Returns
+    -------
+    dict
+        ``table[joint][model][band]`` = ||rho|| / ||tau|| (NaN for an empty band).
+    """
+    if not models:
+        raise RobotIdentError("table_iii: no model given")
+    sigs = _stack(signals)
+    first = next(iter(models.values()))
+    joints = tuple(first.joints_)
+    taus = np.concatenate([s.tau for s in sigs])
+    dqs = np.concatenate([s.dq for s in sigs])
+    preds = {name: np.concatenate([m.predict(s) for s in sigs]) for name, m in models.items()}
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    for j, joint in enumerate(joints):
+        ok = np.isfinite(taus[:, j])
+        for p in preds.values():
+            ok &= np.isfinite(p[:, j])
+        if isinstance(vmax, Mapping):
+            vm = float(vmax[joint])
+        elif vmax is not None:
+            vm = float(np.asarray(vmax, dtype=float)[j])
+        else:
+            vm = float(np.abs(dqs[ok, j]).max(initial=0.0))
+        out[joint] = {name: band_errors(taus[ok, j], taus[ok, j] - p[ok, j], dqs[ok, j], vm,
+                                        bands) for name, p in preds.items()}
+    return out
+
+
+def format_table_iii(table: Mapping[str, Mapping[str, Mapping[str, float]]],
+                     digits: int = 4) -> str:
+    """Plain-text Table III per joint: one row per (joint, band), one column per model."""
+    joints = list(table)
+    if not joints:
+        return ""
+    models = list(table[joints[0]])
+    bands = list(table[joints[0]][models[0]])
+    rows = [("joint", "samples", *models)]
+    for j in joints:
+        for b in bands:
+            rows.append((j, b, *(f"{table[j][m][b]:.{digits}f}" for m in models)))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)

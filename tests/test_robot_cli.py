@@ -1,0 +1,358 @@
+"""``jointid fit --robot``: multi-axis loaders (CSV, MCAP, MAT) and the n-dof CLI, on data
+written here from the arm simulator (sim_drivers.arm), and on the KUKA recordings when
+../shared is present. No mocks: real files, the real entry point (daq.app.cli.main)."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.io
+
+from daq.app.cli import main
+from daq.runtime.mcaplog import RunLog
+from ident.api import JointModel, load
+from ident.preprocess import decimate, diffcent, lowpass
+from ident.robot import RobotIdentError
+from ident.robot.estimate import RobotModel
+from ident.robot.loaders import (
+    RobotPreprocessing,
+    load_robot_runs,
+    load_robot_signals,
+    preprocess_runs,
+)
+from sim_drivers.arm import ArmGains, ArmParams, Payload, model_reference, simulate_arm
+from trajectories.robot import load_robot
+
+ROOT = Path(__file__).resolve().parents[1]
+ARM3 = ROOT / "examples" / "robots" / "arm3.toml"
+KUKA = ROOT / "examples" / "robots" / "kuka_kr300_r2500.toml"
+KUKA_DATA = ROOT.parent / "shared" / "data" / "kuka_kr300_weigand2021"
+KUKA_MAP = "t=rec.time_cont,q=rec.act_pos_mot_deg,tau=rec.act_torque_abs_nm,q_ref=rec.ref_pos_deg"
+
+
+@pytest.fixture(scope="module")
+def arm_runs():
+    """Two closed-loop runs of the 3-dof arm (different references and noise seeds)."""
+    robot = load_robot(ARM3)
+    params = ArmParams.from_robot(robot)
+    gains = ArmGains.for_params(params)
+    runs = []
+    for seed in (1, 2):
+        ref = model_reference(params.model, duration_s=8.0, seed=seed)
+        runs.append(simulate_arm(params, ref, gains, seed=seed))
+    return robot, runs
+
+
+def write_mcap(path: Path, run, joints, *, n_axes: int | None = None) -> Path:
+    """A jointid run log of a simulated run: one /joint/<i>/state channel per drive."""
+    k = run.q.shape[1] if n_axes is None else n_axes
+    meta = {f"drive{i}": {"joint": joints[i] if i < len(joints) else f"x{i}"}
+            for i in range(k)}
+    meta["payload"] = {"index": "0", "mass_kg": "0.0", "arm_m": "0.0"}
+    with RunLog(path, n_axes=k, cycle_s=float(run.t[1] - run.t[0]), metadata=meta) as log:
+        for c in range(run.t.size):
+            for i in range(k):
+                log.state(i, c, float(run.t[c]), float(run.q[c, i]), 0.0,
+                          float(run.tau_ref[c, i]), float(run.tau_ref[c, i]), 0, 0, 0, 0,
+                          0x27, 0)
+            log.setpoint(c, float(run.t[c]), float(run.q_ref[c, 0]), 0.0, 0.0, 0)
+    return path
+
+
+def run_cli(capfd, *argv) -> tuple[int, str, str]:
+    """The real entry point; capfd also catches what C libraries write to fd 1/2."""
+    code = main(["fit", *map(str, argv)])
+    out, err = capfd.readouterr()
+    return code, out, err
+
+
+# -- loaders ----------------------------------------------------------------------------------
+
+
+def test_csv_numbered_named_and_mcap_give_the_same_signals(tmp_path, arm_runs):
+    robot, (run, _) = arm_runs
+    joints = robot.moving
+    numbered = tmp_path / "numbered.csv"
+    run.to_csv(numbered)
+    named = tmp_path / "named.csv"
+    cols = {"t": run.t}
+    for i, j in enumerate(joints):
+        cols[f"tau_{j}"] = run.tau_ref[:, i]  # torque first: order of columns is free
+        cols[f"q_{j}"] = run.q[:, i]
+    np.savetxt(named, np.column_stack(list(cols.values())), delimiter=",",
+               header=",".join(cols), comments="", fmt="%.17g")
+    mcap = write_mcap(tmp_path / "run.mcap", run, joints)
+    pre = RobotPreprocessing(cutoff_hz=50.0)
+    a = load_robot_signals(numbered, joints, preprocessing=pre)
+    b = load_robot_signals(named, joints, preprocessing=pre)
+    c = load_robot_signals(mcap, joints, preprocessing=pre)
+    assert a.joints == b.joints == c.joints == joints
+    for s in (b, c):
+        np.testing.assert_allclose(s.q, a.q, atol=1e-12)
+        np.testing.assert_allclose(s.tau, a.tau, atol=1e-9)
+        np.testing.assert_allclose(s.ddq, a.ddq, atol=1e-6)
+    assert a.q_ref is not None and b.q_ref is None  # numbered CSV carries q_ref1..q_ref3
+    # the filtered velocity is the simulator's true one up to the filter and the quantisation
+    dq_true = np.interp(a.t, run.t[: run.t.size], run.dq_true[:, 1])
+    assert np.linalg.norm(a.dq[:, 1] - dq_true) < 0.02 * np.linalg.norm(dq_true)
+
+
+def test_preprocessing_is_the_single_joint_chain_per_axis(tmp_path, arm_runs):
+    """Axis j of the n-dof preprocessing equals ident.preprocess on that axis alone."""
+    robot, (run, _) = arm_runs
+    path = tmp_path / "r.csv"
+    run.to_csv(path)
+    pre = RobotPreprocessing(cutoff_hz=40.0, decimation=5, trim=30)
+    s = load_robot_signals(path, robot.moving, preprocessing=pre)
+    dt = float(run.t[1] - run.t[0])
+    j = 2
+    qf = lowpass(run.q[:, j], 40.0, 1.0 / dt)
+    ddq = diffcent(diffcent(qf, dt), dt)[30:-30]
+    np.testing.assert_allclose(s.ddq[:, j], decimate(ddq, 5)[0], rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(s.tau[:, j], decimate(run.tau_ref[30:-30, j], 5)[0], atol=1e-9)
+
+
+def test_mat_rows_or_columns_per_axis_with_units_and_gains(tmp_path, arm_runs):
+    robot, (run, _) = arm_runs
+    joints = robot.moving
+    gains = np.array([2.0, 4.0, 8.0])
+    rows = tmp_path / "rows.mat"
+    scipy.io.savemat(rows, {"rec": {"time": run.t, "pos_deg": np.degrees(run.q).T,
+                                    "tau_motor": (run.tau_ref / gains).T}})
+    cols = tmp_path / "cols.mat"
+    scipy.io.savemat(cols, {"t": run.t, "q": np.degrees(run.q), "tau": run.tau_ref / gains})
+    m = {"t": "rec.time", "q": "rec.pos_deg", "tau": "rec.tau_motor"}
+    a = load_robot_runs(rows, joints, gains=gains, mapping=m, q_unit="deg")[0]
+    b = load_robot_runs(cols, joints, gains=gains, q_unit="deg")[0]
+    np.testing.assert_allclose(a.q, run.q, atol=1e-12)
+    np.testing.assert_allclose(b.tau, run.tau_ref, rtol=1e-12, atol=1e-9)
+    with pytest.raises(RobotIdentError, match=r"rows\.mat: 'rec\.pos_deg' has 3 axes, the "
+                       r"robot moves 2 joints"):
+        load_robot_runs(rows, joints[:2], gains=gains[:2], mapping=m, q_unit="deg")
+
+
+def test_preprocessed_experiments_keep_their_payloads_and_index(tmp_path, arm_runs):
+    robot, runs = arm_runs
+    paths = []
+    for i, run in enumerate(runs):
+        p = tmp_path / f"r{i}.csv"
+        cols = {**run.columns(), "payload_mass_kg": np.full(run.t.size, 2.5 * i)}
+        np.savetxt(p, np.column_stack(list(cols.values())), delimiter=",",
+                   header=",".join(cols), comments="", fmt="%.17g")
+        paths.append(p)
+    raw = load_robot_runs(paths, robot.moving)
+    s = preprocess_runs(raw, robot.moving)
+    assert [p.mass for p in s.payloads] == [0.0, 2.5]
+    assert set(np.unique(s.experiment)) == {0, 1}
+    assert np.all(np.diff(s.experiment) >= 0)
+
+
+# -- the CLI ---------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("method", ["ls", "wls", "iv"])
+def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capfd, method):
+    """``jointid fit --robot`` on CSV and MCAP: exit 0, the tables, a JSON equal to the
+    estimator run in Python on the same files, and a cross-validation error of the order of
+    the fit error (the model generalises to another trajectory)."""
+    robot, (run0, run1) = arm_runs
+    fit_csv = tmp_path / "fit.csv"
+    run0.to_csv(fit_csv)
+    val_mcap = write_mcap(tmp_path / "val.mcap", run1, robot.moving)
+    out_json = tmp_path / "out" / "fit.json"
+    report = tmp_path / "report"
+    code, out, err = run_cli(capfd, "--robot", ARM3, fit_csv, "--model", "usual",
+                             "--method", method, "--validate", val_mcap, "--json", out_json,
+                             "--report", report)
+    assert code == 0, err
+    assert "relative error" in out and "ZZ1" in out
+    assert "Table III per joint" in out and "Physical consistency" in out
+    rec = json.loads(out_json.read_text())
+    figures = json.loads((report / "fit.json").read_text())["figures"]
+    assert sorted(Path(f).name for f in figures) == [
+        f"direct_validation_usual_{j}.png" for j in robot.moving]
+    assert all(Path(f).stat().st_size > 1000 for f in figures)
+    assert "direct_validation_usual_j2.png" in (report / "report.html").read_text()
+    assert rec["format"] == "jointid-robot-fit/1"
+    assert rec["robot"]["moving"] == list(robot.moving)
+    usual = rec["models"]["usual"]
+    # the same estimator, called directly on the same files and settings
+    pre = RobotPreprocessing(rec["preprocessing"]["cutoff_hz"],
+                             rec["preprocessing"]["decimation"], rec["preprocessing"]["trim"])
+    sig = load_robot_signals(fit_csv, robot.moving, preprocessing=pre)
+    assert rec["method"] == method
+    est = RobotModel(robot, model="usual", method=method,
+                     dq_min=rec["preprocessing"]["dq_min"]).fit(sig)
+    assert list(usual["parameters"]) == list(est.names_)
+    np.testing.assert_allclose([v["value"] for v in usual["parameters"].values()], est.coef_,
+                               rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose([v["std"] for v in usual["parameters"].values()], est.std_,
+                               rtol=1e-9, atol=1e-12)
+    assert set(rec["table_iii"]["validation"]) == set(robot.moving)
+    assert rec["table_iii"]["fit"]["j2"]["usual"]["all"] == pytest.approx(
+        usual["rel_error"]["j2"], rel=1e-9)
+    assert isinstance(usual["consistency"]["ok"], bool)
+    val = usual["validation_rel_error"]
+    assert set(val) == {*robot.moving, "all"}
+    assert val["all"] < 2.0 * usual["rel_error"]["all"] + 0.02
+
+
+@pytest.mark.slow
+def test_cli_paper_model_on_payload_runs(tmp_path, capfd):
+    """Three payload runs (0, 5 kg, 10 kg with inertia) as CSV with payload columns: the
+    paper model is identified through the CLI, equals the estimator called in Python on the
+    same files, and explains the simulated friction better than the usual model (Table III,
+    all samples, on every joint)."""
+    robot = load_robot(ARM3)
+    params = ArmParams.from_robot(robot)
+    ref = model_reference(params.model, center=[0.0, -1.9, 0.6], fraction=0.9,
+                          duration_s=10.0, seed=1)
+    pays = (None, Payload(5.0, [0.0, 0.0, 0.05]),
+            Payload(10.0, [0.02, 0.0, 0.1], [0.02, 0.0, 0.0, 0.02, 0.0, 0.03]))
+    files = []
+    for i, pay in enumerate(pays):
+        run = simulate_arm(params, ref, ArmGains.for_params(params, payload=pay), payload=pay,
+                           seed=10 + i)
+        cols = run.columns()
+        if pay is not None:
+            n = run.t.size
+            cols["payload_mass_kg"] = np.full(n, pay.mass)
+            for a, v in zip("xyz", pay.com, strict=True):
+                cols[f"payload_com_{a}_m"] = np.full(n, v)
+            for a, v in zip(("xx", "xy", "xz", "yy", "yz", "zz"), pay.inertia, strict=True):
+                cols[f"payload_i{a}_kgm2"] = np.full(n, v)
+        files.append(tmp_path / f"p{i}.csv")
+        np.savetxt(files[-1], np.column_stack(list(cols.values())), delimiter=",",
+                   header=",".join(cols), comments="", fmt="%.17g")
+    out_json = tmp_path / "fit.json"
+    code, out, err = run_cli(capfd, "--robot", ARM3, *files, "--model", "both", "--method",
+                             "ls", "--json", out_json)
+    assert code == 0, err
+    rec = json.loads(out_json.read_text())
+    assert "error" not in rec["models"]["paper"], rec["models"]["paper"]
+    pre = RobotPreprocessing(rec["preprocessing"]["cutoff_hz"],
+                             rec["preprocessing"]["decimation"], rec["preprocessing"]["trim"])
+    sig = load_robot_signals(files, robot.moving, preprocessing=pre)
+    assert [p.mass for p in sig.payloads] == [0.0, 5.0, 10.0]
+    np.testing.assert_allclose(sig.payloads[2].inertia, pays[2].inertia)
+    est = RobotModel(robot, model="paper", method="ls",
+                     dq_min=rec["preprocessing"]["dq_min"]).fit(sig)
+    paper = rec["models"]["paper"]["parameters"]
+    assert list(paper) == list(est.names_)
+    np.testing.assert_allclose([v["value"] for v in paper.values()], est.coef_, rtol=1e-6,
+                               atol=1e-9)
+    for j in robot.moving:
+        t3 = rec["table_iii"]["fit"][j]
+        assert t3["paper"]["all"] < t3["usual"]["all"], (j, t3)
+
+
+@pytest.mark.parametrize("case", [
+    "unknown_joint", "axes_mismatch", "missing_torque", "missing_file",
+    pytest.param("bad_urdf", marks=pytest.mark.xfail(
+        strict=True, reason="urdfdom prints its parser error on fd 2 before pinocchio raises "
+        "(trajectories.robot.load_robot, ndof helper): two extra lines on stderr")),
+    "mcap_axes", "mcap_name", "mat_key", "robot_unknown_joint"])
+def test_cli_bad_input_is_one_line_naming_the_file(tmp_path, arm_runs, capfd, case):
+    robot, (run, _) = arm_runs
+    good = tmp_path / "good.csv"
+    run.to_csv(good)
+    cols = run.columns()
+    robot_file, data = ARM3, tmp_path / "data.csv"
+    if case == "unknown_joint":
+        named = {"t": run.t, **{f"q_{j}": run.q[:, i] for i, j in enumerate(["j1", "j9", "j3"])},
+                 **{f"tau_{j}": run.tau_ref[:, i] for i, j in enumerate(["j1", "j9", "j3"])}}
+        cols, expect = named, r"data\.csv: column q_j9 names no moving joint"
+    elif case == "axes_mismatch":
+        cols = {k: v for k, v in cols.items() if not k.endswith("3")}
+        expect = r"data\.csv: 2 axes in the file \(q1\.\.q2\), the robot moves 3 joints"
+    elif case == "missing_torque":
+        cols = {k: v for k, v in cols.items() if k != "tau2"}
+        expect = r"data\.csv: column missing tau2"
+    elif case == "missing_file":
+        data, expect = tmp_path / "nope.csv", r"nope\.csv: no such file"
+    elif case == "bad_urdf":
+        robot_file = tmp_path / "broken.urdf"
+        robot_file.write_text("<robot name='x'><link name='a'></robot")
+        expect = r"broken\.urdf: URDF .* does not parse"
+    elif case == "robot_unknown_joint":
+        robot_file = tmp_path / "arm.toml"
+        robot_file.write_text(ARM3.read_text() + '\n[motion]\nmoving = ["j2", "j7"]\n')
+        expect = r"arm\.toml: .*j7"
+    elif case == "mcap_axes":
+        data = write_mcap(tmp_path / "two.mcap", run, robot.moving, n_axes=2)
+        expect = r"two\.mcap: the log has 2 axes .* the robot moves 3 joints"
+    elif case == "mcap_name":
+        data = write_mcap(tmp_path / "names.mcap", run, ["j1", "elbow", "j3"])
+        expect = r"names\.mcap: metadata drive1\.joint is 'elbow'"
+    elif case == "mat_key":
+        data = tmp_path / "k.mat"
+        scipy.io.savemat(data, {"rec": {"time": run.t, "q": run.q.T}})
+        expect = r"k\.mat: 'rec\.tau': no field 'tau' in 'rec'"
+    if data.suffix == ".csv" and case != "missing_file":
+        np.savetxt(data, np.column_stack(list(cols.values())), delimiter=",",
+                   header=",".join(cols), comments="", fmt="%.17g")
+    out_json = tmp_path / "out.json"
+    extra = ["--map", "t=rec.time,q=rec.q,tau=rec.tau"] if case == "mat_key" else []
+    code, out, err = run_cli(capfd, "--robot", robot_file, data, *extra, "--model", "usual",
+                             "--json", out_json)
+    assert code != 0
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert "Traceback" not in err
+    assert re.search(expect, lines[0]), lines[0]
+    assert not out_json.exists()
+
+
+def test_console_entry_point_bad_input_in_a_real_process(tmp_path):
+    """The installed command's path (``python -m daq.app.cli``): exit 2, one line, nothing
+    else on stderr (C libraries included)."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "daq.app.cli", "fit", "--robot", str(ARM3),
+         str(tmp_path / "missing.csv"), "--json", str(tmp_path / "o.json")],
+        capture_output=True, text=True, cwd=ROOT, timeout=120,
+    )
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [
+        f"jointid fit: error: {tmp_path / 'missing.csv'}: no such file"]
+    assert not (tmp_path / "o.json").exists()
+
+
+def test_single_joint_fit_options_are_refused_with_robot(tmp_path, arm_runs, capfd):
+    robot, (run, _) = arm_runs
+    p = tmp_path / "r.csv"
+    run.to_csv(p)
+    code, _, err = run_cli(capfd, "--robot", ARM3, p, "--gain", "2")
+    assert code != 0 and "--gain: not used with --robot" in err
+    code, _, err = run_cli(capfd, p, "--method", "wls")  # single joint
+    assert code != 0 and "--method: applies to --robot fits only" in err
+
+
+# -- KUKA KR300 recordings (Weigand et al.) ---------------------------------------------------
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not KUKA_DATA.is_dir(), reason="../shared/data/kuka_kr300_weigand2021 absent")
+def test_kuka_a3_cross_validation_beats_the_single_joint_fit(tmp_path, capfd):
+    """Fit on A, cross-validate on B and C: the 6-axis model's A3 error is below the error of
+    the single-joint fit of A3 (README's command), both computed here."""
+    files = [KUKA_DATA / f"recorded_2020-10-21_FF_{x}_08ms.mat" for x in "ABC"]
+    out_json = tmp_path / "kuka.json"
+    code, out, err = run_cli(capfd, "--robot", KUKA, files[0], "--q-unit", "deg",
+                             "--map", KUKA_MAP, "--model", "usual", "--validate", *files[1:],
+                             "--json", out_json)
+    assert code == 0, err
+    rec = json.loads(out_json.read_text())["models"]["usual"]
+    ndof_cv = rec["validation_rel_error"]["A3"]
+    kw = dict(mapping={"t": "rec.time_cont", "q": "rec.act_pos_mot_deg[2]",
+                       "q_ref": "rec.ref_pos_deg[2]", "tau": "rec.act_torque_abs_nm[2]"},
+              gain="para.u[2]", q_unit="deg")
+    single = JointModel(model="usual", cutoff=5.0, decimation=4).fit(
+        load(files[:1], **kw), validation=load(files[1:], **kw))
+    single_cv = single.report_.to_json()["models"]["usual"]["validation_rel_error"]
+    assert ndof_cv < single_cv, (ndof_cv, single_cv)
