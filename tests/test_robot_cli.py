@@ -254,9 +254,7 @@ def test_cli_paper_model_on_payload_runs(tmp_path, capfd):
 
 @pytest.mark.parametrize("case", [
     "unknown_joint", "axes_mismatch", "missing_torque", "missing_file",
-    pytest.param("bad_urdf", marks=pytest.mark.xfail(
-        strict=True, reason="urdfdom prints its parser error on fd 2 before pinocchio raises "
-        "(trajectories.robot.load_robot, ndof helper): two extra lines on stderr")),
+    "bad_urdf",
     "mcap_axes", "mcap_name", "mat_key", "robot_unknown_joint"])
 def test_cli_bad_input_is_one_line_naming_the_file(tmp_path, arm_runs, capfd, case):
     robot, (run, _) = arm_runs

@@ -25,10 +25,13 @@ everything else in :mod:`trajectories` is pure.
 
 from __future__ import annotations
 
+import contextlib
 import importlib.metadata as metadata
 import math
+import os
+import tempfile
 import tomllib
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -458,12 +461,37 @@ def _from_mdh(name: str, g: np.ndarray, joints: list, motion: Mapping, src: str)
     return Robot(name, model, names, mv, lk, dr, limits, g, types, src, tuple(table), inertial)
 
 
+@contextlib.contextmanager
+def _captured_stderr_fd(out: list[str]) -> Iterator[None]:
+    """Capture what C++ code writes on file descriptor 2 (urdfdom prints its parser errors
+    there before pinocchio raises), so that a bad URDF gives our one line only; the text is
+    appended to ``out``."""
+    try:
+        fd = os.dup(2)
+    except OSError:  # no fd 2 (embedded interpreter): nothing to capture
+        yield
+        return
+    with tempfile.TemporaryFile(mode="w+b") as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(fd, 2)
+            os.close(fd)
+            tmp.seek(0)
+            out.append(tmp.read().decode("utf-8", "replace"))
+
+
 def _from_urdf(urdf: Path, name: str, motion: Mapping, joints: list, src: str,
                g: np.ndarray | None = None) -> Robot:
+    said: list[str] = []
     try:
-        model = pin.buildModelFromUrdf(str(urdf))
+        with _captured_stderr_fd(said):
+            model = pin.buildModelFromUrdf(str(urdf))
     except (RuntimeError, ValueError, OSError) as e:
-        msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        lines = [ln.strip() for ln in (str(e) + "\n" + "".join(said)).splitlines()
+                 if ln.strip()]
+        msg = lines[0] if lines else type(e).__name__
         raise RobotError(f"{src}: URDF {str(urdf)!r} does not parse ({msg})") from None
     names, types = _joint_kinds(model, src)
     if g is None:
