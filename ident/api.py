@@ -372,7 +372,7 @@ class JointModel:
         progress : callable, optional
             Receives one line per step.
         **options
-            ``alpha``, ``min_gain``, ``max_tries``, ``generic_knots`` of
+            ``alpha``, ``min_gain``, ``max_tries``, ``generic_knots``, ``library`` of
             :func:`ident.refine.refine`.
 
         Returns

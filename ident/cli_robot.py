@@ -25,6 +25,7 @@ from trajectories.robot import Robot, load_robot
 
 from . import DataError, IdentError
 from .report import write_json
+from .robot.consistency import check_consistency
 from .robot.estimate import RobotModel
 from .robot.loaders import (
     RawRobotRun,
@@ -36,6 +37,7 @@ from .robot.loaders import (
 )
 from .robot.plots import write_robot_report
 from .robot.signals import RobotSignals
+from .robot.tables import format_table_iii, table_iii
 
 __all__ = ["run", "fit_robot", "format_report", "FORMAT"]
 
@@ -143,6 +145,7 @@ def fit_robot(
         "qs": qs,
         "models": {},
         "_estimators": {},
+        "_consistency": {},
         "_signals": (selected(sig, dq_min), val),
     }
     for name in models:
@@ -170,10 +173,23 @@ def fit_robot(
             rec["base_expressions"] = list(expressions)
         if val is not None:
             rec["validation_rel_error"] = {k: float(v) for k, v in est.rel_error(val).items()}
+        cons = check_consistency(est)
+        rec["consistency"] = {
+            "ok": cons.ok,
+            "checks": [{"check": c, "value": float(v), "std": float(sd), "status": st}
+                       for c, v, sd, st in cons.checks],
+            "feasible": cons.feasible, "d2": float(cons.d2), "d2_limit": float(cons.d2_limit),
+            "unchecked": list(cons.unchecked),
+        }
+        out["_consistency"][name] = cons.format()
         out["models"][name] = rec
         out["_estimators"][name] = est
     if not out["_estimators"]:
         raise DataError("; ".join(f"{n} model: {r['error']}" for n, r in out["models"].items()))
+    fit_sel = out["_signals"][0]
+    out["table_iii"] = {"fit": table_iii(out["_estimators"], fit_sel)}
+    if val is not None:
+        out["table_iii"]["validation"] = table_iii(out["_estimators"], val)
     return out
 
 
@@ -212,21 +228,34 @@ def format_report(out: dict[str, Any]) -> str:
             rs = v["rel_std_pct"]
             rs_s = "inf" if rs is None or not math.isfinite(rs) else f"{rs:.1f}"
             lines.append(f"{p:<14}{v['value']:>14.6g}{v['std']:>12.3g}{rs_s:>9}")
+        if rec.get("base_expressions"):
+            lines.append("base parameters (standard parameters regrouped, ROBOT_FORMAT names):")
+            lines.extend(f"  {e}" for e in rec["base_expressions"])
     lines.append("")
     lines.append("relative error ||rho_j|| / ||tau_j|| [%]")
-    head = f"{'joint':<8}"
+    w = max(8, *(len(j) + 2 for j in r["moving"]))
+    head = f"{'joint':<{w}}"
     for name in fitted:
         head += f"{name + ' fit':>14}"
         if out["validation_inputs"]:
             head += f"{name + ' CV':>14}"
     lines.append(head)
     for j in [*r["moving"], "all"]:
-        row = f"{j:<8}"
+        row = f"{j:<{w}}"
         for rec in fitted.values():
             row += f"{_pct(rec['rel_error'].get(j)):>14}"
             if out["validation_inputs"]:
                 row += f"{_pct(rec['validation_rel_error'].get(j)):>14}"
         lines.append(row)
+    for part, table in out.get("table_iii", {}).items():
+        lines.append("")
+        what = "identification data" if part == "fit" else "validation files"
+        lines.append(f"Table III per joint, ||rho|| / ||tau|| on the {what} "
+                     "(low: |dq| <= 10 % of the joint's max, high: 35-100 %)")
+        lines.append(format_table_iii(table))
+    for name, text in out.get("_consistency", {}).items():
+        lines.append("")
+        lines.append(f"{name} model: " + text)
     return "\n".join(lines)
 
 

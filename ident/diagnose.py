@@ -18,26 +18,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from .effects import VARIABLES, Prediction, variable_values
+from .effects import VARIABLES, Prediction, effective_n, variable_values
 from .signals import Signals
 
 DISCRETE = ("direction", "quadrant")
-
-
-def effective_n(residual: np.ndarray) -> float:
-    """Effective number of independent samples of an AR(1)-like residual.
-
-    n_eff = n (1 - ρ1) / (1 + ρ1), ρ1 the lag-1 autocorrelation (clipped to [0, 0.999]).
-    """
-    r = np.asarray(residual, dtype=float)
-    n = r.shape[0]
-    if n < 3:
-        return float(n)
-    r = r - r.mean()
-    den = float(r @ r)
-    rho = float(r[1:] @ r[:-1]) / den if den > 0 else 0.0
-    rho = min(max(rho, 0.0), 0.999)
-    return max(n * (1 - rho) / (1 + rho), 2.0)
 
 
 @dataclass(frozen=True)

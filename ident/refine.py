@@ -12,12 +12,19 @@ One step of :func:`refine`:
    refined by a 1-D bounded search; a generic basis in each significantly implicated
    continuous variable competes, and is chosen only when it removes clearly more than
    every named effect (named effects win within :data:`GENERIC_MARGIN`);
+   with ``library=True`` (default) the interaction diagnosis and the library search
+   (:mod:`ident.refine_library`) offer one more candidate, named when it matches a physical
+   form (:mod:`ident.describe`), and the generic bases compete on the held-out (blocked
+   cross-validation) error; a registered effect that explains as much as the library's
+   named form (:data:`ident.describe.MATCH_SHARE`) keeps its place ahead of it;
 3. accept the best candidate only if (a) the nested-model F test, with the effective
-   sample size of the autocorrelated residual and one extra degree of freedom per scanned
-   hyper-parameter, rejects "noise only" at level ``alpha`` / number of candidates,
-   (b) it lowers the relative error by at least ``min_gain`` (relative), and (c) where
-   validation data exist, it lowers the validation relative error too; otherwise the next
-   best candidate is tried (at most ``max_tries``);
+   sample size of the noise left after the candidate and one extra degree of freedom per
+   scanned hyper-parameter, rejects "noise only" at level ``alpha`` / number of candidates,
+   (b) it lowers the relative error by at least ``min_gain`` (relative), (c) with the
+   library search, it lowers the held-out error (a basis: by ``min_gain``), and (d) where
+   validation data exist, it lowers the validation relative error too (up to three bases
+   that pass are then compared on it); otherwise the next best candidate is tried (at
+   most ``max_tries``);
 4. add the term (:meth:`~ident.preprocess.Design.with_term`: columns filtered and decimated
    like the others), refit, report; stop when nothing is accepted or after ``max_steps``.
 
@@ -38,6 +45,7 @@ import numpy as np
 from scipy import stats
 
 from . import DataError
+from .describe import MATCH_SHARE, name_torque_lag
 from .diagnose import Diagnosis, diagnose
 from .effects import (
     Candidate,
@@ -45,10 +53,14 @@ from .effects import (
     Context,
     Effect,
     Scorer,
+    TorqueLag,
+    effective_n,
     registry,
     rigid_prediction,
+    unique_tag,
 )
 from .models import IdentModel
+from .refine_library import LibraryStep, library_step
 from .refine_result import Refinement, Rejected, Step, _pct
 from .signals import Signals
 from .terms import Library, Term
@@ -120,7 +132,7 @@ def _pretest(
 ) -> str | None:
     """Acceptance tests predicted from the scoring gain; the reason of a failure or None."""
     k_fast = len(c.effect.names()) + c.n_hyper
-    F0, p0 = _f_test(rss0, rss0 - c.gain, k_fast, p, n, n_eff)
+    F0, p0 = _f_test(rss0, rss0 - c.gain, k_fast, p, n, max(n_eff, c.n_eff))
     rel_fast = rel * math.sqrt(max(rss0 - c.gain, 0.0) / rss0) if rss0 > 0 else rel
     if p0 >= level:
         return f"F test not significant (F={F0:.3g}, p={p0:.2e})"
@@ -190,6 +202,41 @@ def _fit(lib: Library, design: Design, name: str) -> IdentModel:
     return IdentModel(lib, name).fit(design, eliminate=False, drop_unidentifiable=True)
 
 
+def _library_variables(lstep: LibraryStep) -> tuple[str, ...]:
+    """Variables of the selected library group, then its modifier (if any)."""
+    g = lstep.group
+    return g.variables + (() if g.modifier == "none" else (g.modifier,))
+
+
+def _cycle(design: Design) -> float | None:
+    """Raw sampling period of the design's first run [s]."""
+    try:
+        t = design._blocks[0].sub.t
+    except (AttributeError, IndexError):
+        return None
+    return float(np.median(np.diff(t))) if t.shape[0] > 1 else None
+
+
+def _naming(
+    e: Effect,
+    c: Candidate,
+    lstep: LibraryStep | None,
+    parameters: dict[str, dict[str, float]],
+    design: Design,
+) -> tuple[str | None, str]:
+    """Named effect and one-line structure of an accepted candidate."""
+    if lstep is not None and lstep.candidate is not None and (
+        e is lstep.candidate or e.effect == lstep.candidate.effect
+    ) and lstep.description is not None:
+        return lstep.description.name, lstep.description.sentence
+    if isinstance(e, TorqueLag):
+        key = next((k for k in parameters if k.startswith("T_lag")), None)
+        if key is not None:
+            return name_torque_lag(parameters[key]["value"], parameters[key]["std2"],
+                                   _cycle(design))
+    return (None if c.generic else e.effect), e.describe()
+
+
 # ------------------------------------------------------------------------ the loop
 def refine(
     design: Design,
@@ -203,6 +250,7 @@ def refine(
     min_gain: float = 0.05,
     max_tries: int = 2,
     generic_knots: int = 12,
+    library: bool = True,
 ) -> Refinement:
     """Refine a declared model by adding the effects its residual points to.
 
@@ -231,6 +279,10 @@ def refine(
         Candidates tried per step, best first, before giving up.
     generic_knots : int
         Knots of a generic basis expansion.
+    library : bool
+        Also run the interaction diagnosis and the library search
+        (:mod:`ident.refine_library`) and require every candidate to lower the held-out
+        (blocked cross-validation) error.
 
     Returns
     -------
@@ -252,6 +304,8 @@ def refine(
     val_initial = val_err
     steps: list[Step] = []
     rejected: list[Rejected] = []
+    library_tried: list[dict] = []
+    lib_variables: dict[int, tuple[str, ...]] = {}
     stop = f"step limit ({max_steps}) reached"
     s = cur_design.signals
     diag = None
@@ -261,7 +315,21 @@ def refine(
         diag = diagnose(r, s, Y=cur_design.Y, tau_out=tau_out, alpha=alpha)
         kept = [cur_design.names.index(n) for n in cur.names_]
         scorer = Scorer(cur_design.W[:, kept], r)
-        cands = _candidates(Columns(s, scorer), diag, lib, cur.coef_, alpha, generic_knots)
+        cols = Columns(s, scorer)
+        cands = _candidates(cols, diag, lib, cur.coef_, alpha, generic_knots)
+        lstep = None
+        if library:
+            lstep = library_step(cur_design.Y, cur_design.W[:, kept], s, r, tau_out=tau_out,
+                                 reference=cur.coef_, min_gain=min_gain, alpha=alpha)
+            library_tried.append({"step": k, "tried": lstep.tried_json()})
+            if lstep.candidate is not None:
+                e = lstep.candidate
+                tag = unique_tag(e.names(), set(lib.names()))
+                if tag:
+                    e = e.with_tag(tag)
+                lc = Candidate(e, cols.gain(e), lstep.n_hyper, lstep.generic)
+                lib_variables[id(e)] = _library_variables(lstep)
+                cands.append(lc)
         n_cand = max(len(cands), 1)
         before_bands = _bands(cur, cur_design, vmax)
         p_cur = len(cur.names_)
@@ -270,15 +338,35 @@ def refine(
         # 1. pre-test on the scoring columns (no full-rate rebuild for hopeless candidates)
         ctx = (rss0, p_cur, len(cur_design), diag.n_eff, cur.rel_error_, alpha / n_cand,
                min_gain / 3)
-        why_not = {id(c): _pretest(c, *ctx) for c in cands}
+        why_not = {}
+        for c in cands:
+            why = _pretest(c, *ctx)
+            if why is not None and why.startswith("F test") and c.gain > 0:
+                # the F test uses the noise left after the candidate, not the structure it fits
+                c.n_eff = scorer.n_eff_after(c.effect.columns(s))
+                why = _pretest(c, *ctx)
+            why_not[id(c)] = why
 
         def pretest(c: Candidate, _w=why_not) -> str | None:
             return _w[id(c)]
 
         named = sorted((c for c in cands if not c.generic), key=lambda c: -c.gain)
         generic = sorted((c for c in cands if c.generic), key=lambda c: -c.gain)
+        if lstep is not None:
+            # a registered effect that explains as much as the library's named form (the
+            # naming rule's share) keeps its place ahead of it
+            lib_named = [c for c in named if id(c.effect) in lib_variables]
+            if lib_named and any(c.gain >= MATCH_SHARE * lib_named[0].gain for c in named
+                                 if c is not lib_named[0]):
+                named = [c for c in named if c is not lib_named[0]] + lib_named
+            # generic bases and the library basis compete on the held-out error
+            s_cv = s.take(slice(None, None, lstep.stride))
+            generic.sort(key=lambda c: lstep.heldout(c.effect.columns(s_cv), strided=True))
         short = [c for c in named if pretest(c) is None][:max_tries]
-        top_generic = [c for c in generic if pretest(c) is None][:1]
+        # with the library, two bases (three with validation data, which picks among those
+        # that pass) may be tried
+        n_gen = 1 if lstep is None else 3 if cur_val is not None else 2
+        top_generic = [c for c in generic if pretest(c) is None][:n_gen]
         # the generic basis only competes when it could win the exact comparison
         if top_generic and (
             not short or short[0].gain < top_generic[0].gain * GENERIC_MARGIN * 1.5
@@ -289,34 +377,44 @@ def refine(
                 why = pretest(c) or "not better than the others"
                 rejected.append(Rejected(k, c.effect.effect, c.effect.variable, why, math.nan))
                 say(f"step {k}: {c.effect.effect} rejected: {why}")
-        # 2. exact refits of the short list (columns filtered and decimated like the others)
-        built = []
-        for c in short:
-            e = c.effect
-            try:
-                d1 = cur_design.with_term(e)
-                m1 = _fit(Library(*lib.terms(), e), d1, name)
-            except DataError as exc:
-                rejected.append(Rejected(k, e.effect, e.variable, f"not fitted: {exc}", math.nan))
-                continue
-            built.append((rss0 - float(m1.residual_ @ m1.residual_), c, d1, m1))
-        best_named = max((g for g, c, *_ in built if not c.generic), default=0.0)
-        best_generic = max((g for g, c, *_ in built if c.generic), default=0.0)
+        # 2. order the short list by the scoring gains (columns on the decimated signals match
+        # the exact ones closely); named effects are preferred unless a basis removes clearly
+        # more; the generic bases keep their held-out order
+        best_named = max((c.gain for c in short if not c.generic), default=0.0)
+        best_generic = max((c.gain for c in short if c.generic), default=0.0)
         prefer_generic = best_generic > 0 and best_named < GENERIC_MARGIN * best_generic
-        built.sort(key=lambda b: (not (b[1].generic and prefer_generic), -b[0]))
-        if not prefer_generic:
-            built = [b for b in built if not b[1].generic] + [b for b in built if b[1].generic]
+        named_first = sorted((c for c in short if not c.generic), key=lambda c: -c.gain)
+        generic_first = [c for c in short if c.generic]
+        order = generic_first + named_first if prefer_generic else named_first + generic_first
         say(
             f"step {k}: short list "
             + ", ".join(
-                f"{c.effect.effect} {_pct(cur.rel_error_ * math.sqrt(max(1 - g / rss0, 0)))}"
-                for g, c, *_ in built
+                f"{c.effect.effect} {_pct(cur.rel_error_ * math.sqrt(max(1 - c.gain / rss0, 0)))}"
+                for c in order
             )
         )
-        # 3. acceptance tests, best first
+
+        def exact_refits(order=order, lib=lib, cur_design=cur_design, k=k):
+            """Exact refits (columns filtered and decimated like the others), on demand."""
+            for c in order:
+                e = c.effect
+                try:
+                    d1 = cur_design.with_term(e)
+                    m1 = _fit(Library(*lib.terms(), e), d1, name)
+                except DataError as exc:
+                    rejected.append(Rejected(k, e.effect, e.variable, f"not fitted: {exc}",
+                                             math.nan))
+                    continue
+                yield c, d1, m1
+
+        # 3. acceptance tests, best first; with validation data, the bases that pass (at
+        # most three) are compared on the validation error, which none was fitted on
         accepted = None
-        for _g, c, d1, m1 in built:
+        pending: list[tuple] = []
+        for c, d1, m1 in exact_refits():
             e = c.effect
+            if pending and not c.generic:
+                break
             kk = sum(1 for n in e.names() if n in m1.coef_) + c.n_hyper
             F, pval = _f_test(
                 rss0,
@@ -324,7 +422,7 @@ def refine(
                 max(kk, 1),
                 p_cur,
                 len(cur_design),
-                diag.n_eff,
+                max(diag.n_eff, effective_n(m1.residual_)),
             )
             reason = None
             if pval >= alpha / n_cand:
@@ -345,6 +443,18 @@ def refine(
                         f"less than {100 * min_gain:g} % better overall and "
                         f"{200 * min_gain:g} % in the low- and high-velocity bands"
                     )
+            h1 = math.nan
+            if lstep is not None:
+                h0 = lstep.heldout_before
+                h1 = lstep.heldout(d1.W[:, [d1.names.index(n) for n in m1.names_
+                                            if n in e.names()]])
+                need = h0 * (1 - min_gain) if c.generic else h0
+                if reason is None and not h1 < need:
+                    reason = (
+                        f"held-out error {_pct(h0)} -> {_pct(h1)}"
+                        + (f": a basis must lower it by {100 * min_gain:g} %" if c.generic
+                           else ": not lowered")
+                    )
             v1 = val1 = None
             if reason is None and cur_val is not None:
                 val1 = cur_val.with_term(e)
@@ -352,28 +462,48 @@ def refine(
                 if not v1 < val_err:
                     reason = f"validation error not lowered ({_pct(val_err)} -> {_pct(v1)})"
             if reason is not None:
-                rejected.append(Rejected(k, e.effect, e.variable, reason, m1.rel_error_))
+                rejected.append(Rejected(k, e.effect, e.variable, reason, m1.rel_error_, h1,
+                                         lib_variables.get(id(e), ())))
                 say(f"step {k}: {e.effect} rejected: {reason}")
                 continue
-            accepted = (c, d1, m1, F, pval, v1, val1)
+            accepted = (c, d1, m1, F, pval, v1, val1, h1)
+            if c.generic and cur_val is not None:
+                pending.append(accepted)
+                accepted = None
+                if len(pending) < 3:
+                    continue
             break
+        if pending:
+            accepted = min(pending, key=lambda a: a[5])
+            for a in pending:
+                if a is not accepted:
+                    rejected.append(Rejected(
+                        k, a[0].effect.effect, a[0].effect.variable,
+                        f"validation error {_pct(a[5])} above {accepted[0].effect.effect}'s "
+                        f"{_pct(accepted[5])}", a[2].rel_error_, a[7],
+                        lib_variables.get(id(a[0].effect), ())))
         if accepted is None:
             stop = "no candidate effect passed the tests"
             break
-        c, d1, m1, F, pval, v1, val1 = accepted
+        c, d1, m1, F, pval, v1, val1, h1 = accepted
         e = c.effect
-        dep = diag.get(e.variable)
+        try:
+            dep = diag.get(e.variable)
+        except KeyError:  # a variable of the interaction diagnosis only (reversal)
+            dep = None
         after_bands = _bands(m1, d1, vmax)
+        parameters = _effect_parameters(e, m1, d1, m1.coef_)
+        named_effect, structure = _naming(e, c, lstep, parameters, cur_design)
         step = Step(
             variable=e.variable,
             strength=1.0 - float(m1.residual_ @ m1.residual_) / rss0 if rss0 > 0 else 0.0,
-            binned_explained=dep.explained,
-            statistic=dep.statistic,
-            p_value=dep.p_value,
+            binned_explained=dep.explained if dep is not None else math.nan,
+            statistic=dep.statistic if dep is not None else math.nan,
+            p_value=dep.p_value if dep is not None else math.nan,
             leading_variable=diag.table[0].variable,
             effect=e.effect,
             term=e,
-            parameters=_effect_parameters(e, m1, d1, m1.coef_),
+            parameters=parameters,
             f_statistic=F,
             f_p_value=pval,
             rel_error_before=cur.rel_error_,
@@ -386,6 +516,12 @@ def refine(
             validation_rel_error_after=v1,
             diagnosis=diag,
             generic=c.generic,
+            variables=lib_variables.get(id(e), (e.variable,)),
+            named_effect=named_effect,
+            structure=structure,
+            heldout_rel_error_before=lstep.heldout_before if lstep is not None else math.nan,
+            heldout_rel_error_after=h1,
+            library=lstep,
         )
         steps.append(step)
         say(
@@ -413,4 +549,5 @@ def refine(
         validation_rel_error_final=val_err,
         stop_reason=stop,
         final_validation_design=cur_val,
+        library_tried=library_tried,
     )

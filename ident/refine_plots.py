@@ -12,6 +12,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from .describe import Description
 from .diagnose import Diagnosis
 from .effects import Prediction, rigid_prediction, variable_values
 from .refine import Refinement, _unscaled
@@ -25,6 +26,7 @@ UNITS = {
     "load": "τ_out [N m or N]",
     "quadrant": "sign(P)",
     "time": "t since run start [s]",
+    "reversal": "distance since the last reversal [rad or m]",
 }
 
 
@@ -119,6 +121,29 @@ def plot_position_periodogram(diag: Diagnosis, path: str | Path, *, title: str =
     return _save(fig, Path(path))
 
 
+def plot_structure(desc: Description, path: str | Path, *, title: str = "") -> Path:
+    """The profile of a structure found by the library search (:mod:`ident.describe`): the
+    fitted function of its variable (a curve) or of its two variables (a map), without the
+    modifier (sign(q̇), sign(P), τ̂_out), with the sentence that describes it."""
+    fig = Figure(figsize=(6.4, 3.6))
+    ax = fig.add_subplot(1, 1, 1)
+    parts = desc.group_key.split(" x ")
+    if len(desc.grid) == 1:
+        ax.plot(desc.grid[0], desc.profile, lw=1.0)
+        ax.set_xlabel(UNITS.get(parts[0], parts[0]))
+        ax.set_ylabel("[N m]" + (f" x {parts[1]}" if len(parts) > 1 else ""))
+    elif len(desc.grid) == 2:
+        im = ax.pcolormesh(desc.grid[0], desc.grid[1], desc.profile.T, shading="auto")
+        fig.colorbar(im, ax=ax, label="[N m]")
+        ax.set_xlabel(UNITS.get(parts[0], parts[0]))
+        ax.set_ylabel(UNITS.get(parts[1], parts[1]))
+    ax.set_title(desc.sentence if len(desc.sentence) < 95 else desc.sentence[:92] + "...",
+                 fontsize=7)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    return _save(fig, Path(path))
+
+
 def plot_refinement(ref: Refinement, outdir: str | Path, *, n_variables: int = 3) -> list[Path]:
     """All refinement figures: per step, the residual against the leading variables and the
     periodograms that led to it; then the same for the final residual.
@@ -147,6 +172,10 @@ def plot_refinement(ref: Refinement, outdir: str | Path, *, n_variables: int = 3
             title=head))
         paths.append(plot_position_periodogram(
             st.diagnosis, out / f"refine_step{i}_periodogram.png", title=head))
+        desc = st.library.description if st.library is not None else None
+        if desc is not None and desc.group_key and " x ".join(st.variables) == desc.group_key:
+            paths.append(plot_structure(desc, out / f"refine_step{i}_structure.png",
+                                        title=head))
     s = _unscaled(ref.final_design)
     tau_out = rigid_prediction(ref.final_model.library, ref.final_model.coef_)
     paths.append(plot_residual_vs_variables(

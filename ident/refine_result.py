@@ -15,6 +15,7 @@ from .models import IdentModel
 
 if TYPE_CHECKING:  # pragma: no cover
     from .preprocess import Design
+    from .refine_library import LibraryStep
 
 __all__ = ["Step", "Rejected", "Refinement"]
 
@@ -57,6 +58,18 @@ class Step:
         The diagnosis that led to the step.
     generic : bool
         ``True`` when no named effect fitted and a generic basis was added.
+    variables : tuple of str
+        Every variable the effect involves (two for an interaction), then its modifier.
+    named_effect : str or None
+        Named physical effect (``"position_periodic_dry_friction"``, ``"zero_order_hold"``...)
+        or None for a library basis described in words.
+    structure : str
+        One line a mechanical engineer reads.
+    heldout_rel_error_before, heldout_rel_error_after : float
+        Held-out (blocked cross-validation) relative error before and after the step
+        (NaN without the library search).
+    library : LibraryStep or None
+        The library-search step of this round (:mod:`ident.refine_library`).
     """
 
     variable: str
@@ -80,12 +93,30 @@ class Step:
     diagnosis: Diagnosis = field(repr=False)
     generic: bool = False
     binned_explained: float = math.nan
+    #: every variable the effect involves (two for an interaction), then its modifier
+    variables: tuple[str, ...] = ()
+    #: named physical effect (``"position_periodic_dry_friction"``, ``"zero_order_hold"``...)
+    #: or None for a library basis described in words
+    named_effect: str | None = None
+    #: one line a mechanical engineer reads
+    structure: str = ""
+    heldout_rel_error_before: float = math.nan
+    heldout_rel_error_after: float = math.nan
+    library: LibraryStep | None = field(default=None, repr=False)
 
     def to_json(self) -> dict[str, Any]:
         """The step as in ``refinement.steps[]`` of the fit JSON."""
+        lib = self.library
         return {
             "effect": self.effect,
             "variable": self.variable,
+            "variables": list(self.variables or (self.variable,)),
+            "named_effect": self.named_effect,
+            "structure": self.structure or self.term.describe(),
+            "heldout_rel_error_before": _num(self.heldout_rel_error_before),
+            "heldout_rel_error_after": _num(self.heldout_rel_error_after),
+            "interactions": [t.to_json() for t in lib.interactions.significant[:10]]
+            if lib is not None else [],
             "description": self.term.describe(),
             "generic": self.generic,
             "parameters": self.parameters,
@@ -118,14 +149,18 @@ class Rejected:
     variable: str
     reason: str
     rel_error_after: float
+    heldout_rel_error_after: float = math.nan
+    variables: tuple[str, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
         return {
             "step": self.step,
             "effect": self.effect,
             "variable": self.variable,
+            "variables": list(self.variables or (self.variable,)),
             "reason": self.reason,
             "rel_error_after": _num(self.rel_error_after),
+            "heldout_rel_error_after": _num(self.heldout_rel_error_after),
         }
 
 
@@ -151,6 +186,9 @@ class Refinement:
     stop_reason : str
     final_validation_design : Design or None
         The validation design with every added term's columns (None without one).
+    library_tried : list of dict
+        Per step, every structure of the library search with its held-out error and the
+        reason it was not selected (see :meth:`ident.library_search.Tried.to_json`).
     """
 
     steps: list[Step]
@@ -165,6 +203,7 @@ class Refinement:
     validation_rel_error_final: float | None
     stop_reason: str
     final_validation_design: Design | None = None
+    library_tried: list[dict] = field(default_factory=list)
 
     @property
     def terms(self) -> list[Effect]:
@@ -181,6 +220,7 @@ class Refinement:
             "validation_rel_error_initial": _num(self.validation_rel_error_initial),
             "validation_rel_error_final": _num(self.validation_rel_error_final),
             "stop_reason": self.stop_reason,
+            "library_tried": self.library_tried,
             "final_parameters": {
                 n: {
                     "value": float(self.final_model.coef_[n]),
@@ -210,15 +250,24 @@ class Refinement:
         for i, s in enumerate(self.steps, 1):
             out.append("")
             out.append(
-                f"step {i}: residual depends on {s.variable}: the effect explains "
-                f"{100 * s.strength:.1f} % of it (binned on {s.variable}: "
+                f"step {i}: residual depends on {' x '.join(s.variables or (s.variable,))}: "
+                f"the effect explains {100 * s.strength:.1f} % of it (binned on {s.variable}: "
                 f"{100 * s.binned_explained:.1f} %, p={s.p_value:.1e}; leading variable of "
                 f"the diagnosis: {s.leading_variable})"
             )
+            if s.library is not None and s.library.interactions.significant:
+                t = s.library.interactions.significant[0]
+                out.append(
+                    f"  leading interaction test: {t.label} ({t.kind}, "
+                    f"{100 * t.explained:.1f} %, Holm p={t.p_adjusted:.1e}; "
+                    f"{len(s.library.interactions.tests)} tests)"
+                )
             out.append(
-                f"  added {s.effect}: {s.term.describe()}"
+                f"  added {s.named_effect or s.effect}: {s.term.describe()}"
                 + ("  [generic basis: no named effect fitted]" if s.generic else "")
             )
+            if s.structure:
+                out.append(f"    {s.structure}")
             for n, v in s.parameters.items():
                 out.append(f"    {n:<18} = {v['value']:.6g} ± {v['std2']:.2g} (2σ)")
             out.append(
@@ -227,13 +276,30 @@ class Refinement:
                 f"low velocity {_pct(s.low_before)} -> {_pct(s.low_after)}, "
                 f"high velocity {_pct(s.high_before)} -> {_pct(s.high_after)}"
             )
+            if math.isfinite(s.heldout_rel_error_before):
+                out.append(
+                    f"  held-out (blocked CV) {_pct(s.heldout_rel_error_before)} -> "
+                    f"{_pct(s.heldout_rel_error_after)}"
+                )
             if s.validation_rel_error_before is not None:
                 out.append(
                     f"  validation {_pct(s.validation_rel_error_before)} -> "
                     f"{_pct(s.validation_rel_error_after)}"
                 )
         for r in self.rejected:
-            out.append(f"rejected at step {r.step}: {r.effect} ({r.variable}): {r.reason}")
+            v = " x ".join(r.variables or (r.variable,))
+            out.append(f"rejected at step {r.step}: {r.effect} ({v}): {r.reason}")
+        if self.library_tried:
+            out.append("library search (best five structures per step; all in the JSON):")
+            for st in self.library_tried:
+                tried = sorted(st["tried"], key=lambda t: t["heldout_rel_error_after"])
+                for t in tried[:5]:
+                    out.append(
+                        f"  step {st['step']}: {t['structure']} ({t['columns']} columns): "
+                        f"{t['reason']}"
+                    )
+                if len(tried) > 5:
+                    out.append(f"  step {st['step']}: ... and {len(tried) - 5} more structures")
         out.append(f"stopped: {self.stop_reason}")
         out.append("remaining residual:")
         out.append(self.final_diagnosis.format_table())

@@ -1,34 +1,31 @@
 """Packaged test robots: find the URDFs of ``example-robot-data`` and build pinocchio models.
 
-The PyPI wheel of ``example-robot-data`` ships the robot files under its ``cmeel.prefix``
-folder and may not ship the ``example_robot_data`` Python module, so the files are located
-through the installed distribution's file list (:mod:`importlib.metadata`), never through a
-hard-coded path. The identification side has its own robot loader (trajectories.robot); this
-one only serves the simulator's tests, benchmarks and demos.
+The URDFs are located by :func:`trajectories.robot.example_robot_urdf` (through the installed
+distribution's file list, never a hard-coded path); the robot files themselves are read by
+:func:`trajectories.robot.load_robot`. These helpers only serve the simulator's tests,
+benchmarks and demos.
 """
 
 from __future__ import annotations
 
-import importlib.metadata as metadata
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
+from trajectories.robot import EXAMPLE_ROBOTS, RobotError
+from trajectories.robot import example_robot_urdf as _locate
+
 from . import SimError
 
-#: Robot name -> path of its URDF inside the example-robot-data share folder.
-URDFS: dict[str, str] = {
-    "ur10": "robots/ur_description/urdf/ur10_robot.urdf",
-    "ur5": "robots/ur_description/urdf/ur5_robot.urdf",
-    "ur3": "robots/ur_description/urdf/ur3_robot.urdf",
-}
-
-_DISTRIBUTIONS = ("example-robot-data", "cmeel-example-robot-data")
+#: Robot name -> path of its URDF inside the example-robot-data share folder (the locator
+#: lives with the robot description, :mod:`trajectories.robot`).
+URDFS: dict[str, str] = EXAMPLE_ROBOTS
 
 
 def example_robot_urdf(name: str) -> Path:
-    """Path of the URDF of a robot packaged by ``example-robot-data``.
+    """Path of the URDF of a robot packaged by ``example-robot-data``
+    (:func:`trajectories.robot.example_robot_urdf`, errors as :class:`SimError`).
 
     Parameters
     ----------
@@ -46,21 +43,9 @@ def example_robot_urdf(name: str) -> Path:
         Unknown name, or the package (or the file) is not installed.
     """
     try:
-        rel = URDFS[name]
-    except KeyError:
-        raise SimError(f"example robot {name!r}: expected one of {sorted(URDFS)}") from None
-    for dist_name in _DISTRIBUTIONS:
-        try:
-            dist = metadata.distribution(dist_name)
-        except metadata.PackageNotFoundError:
-            continue
-        for f in dist.files or ():
-            if str(f).replace("\\", "/").endswith("example-robot-data/" + rel):
-                p = Path(dist.locate_file(f))
-                if p.is_file():
-                    return p
-    raise SimError(f"example robot {name!r}: {rel} not found; expected the PyPI package "
-                   f"'example-robot-data' to be installed")
+        return _locate(name)
+    except RobotError as e:
+        raise SimError(str(e)) from None
 
 
 def example_robot_model(

@@ -312,6 +312,8 @@ def test_hung_master_with_periodic_sync_the_rpdo_timer_stops_the_drive(bus3, tmp
     syncs_after = [t for t, i, _ in listener.frames if i == 0x80 and last_rpdo < t < emcy[0]]
     assert len(syncs_after) > 20
     delay = emcy[0] - last_rpdo
+    print(f"\nRPDO timeout measured: EMCY 0x8250 {1000 * delay:.1f} ms after the last RPDO "
+          f"(configured {1000 * RPDO_TIMER_S:.0f} ms)")
     assert RPDO_TIMER_S - 0.02 <= delay < RPDO_TIMER_S + 1.0, delay
     assert drive.wait_for(r"node 3: RPDO1 timeout", 2.0) is not None, drive.output
     log = tmp_path / "runs" / "killed_payload0.mcap"

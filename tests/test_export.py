@@ -169,3 +169,22 @@ def test_jointid_export_subcommand(run_log, tmp_path, capsys):
     assert main(["export", str(tmp_path / "none.mcap"), "--can", str(tmp_path / "y.blf")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "none.mcap: expected a jointid run log" in err[0]
+
+
+@pytest.mark.parametrize("suffix", [".asc", ".asc.gz"])
+@pytest.mark.parametrize("ms", [0.004, 0.022, 0.5])
+def test_asc_start_date_keeps_milliseconds_below_100(tmp_path, suffix, ms):
+    """python-can writes the start date's milliseconds unpadded (22 ms -> ".22", read back as
+    220 ms); the exporter's ASC writer pads them."""
+    from daq.protocol.export import _open_writer
+
+    t0 = 1_795_385_585.0 + ms
+    path = tmp_path / f"one{suffix}"
+    w = _open_writer(path)
+    w.on_message_received(can.Message(timestamp=t0, arbitration_id=0x181, is_extended_id=False,
+                                      dlc=2, data=b"\x01\x02", channel=1))
+    w.stop()
+    f = gzip.open(path, "rt") if suffix.endswith(".gz") else path
+    with can.ASCReader(f, relative_timestamp=False) as r:
+        first = next(iter(r))
+    assert abs(first.timestamp - t0) < 1e-3

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +26,7 @@ from ident.robot.loaders import (
     load_robot_signals,
     preprocess_runs,
 )
-from sim_drivers.arm import ArmGains, ArmParams, model_reference, simulate_arm
+from sim_drivers.arm import ArmGains, ArmParams, Payload, model_reference, simulate_arm
 from trajectories.robot import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -154,7 +156,8 @@ def test_preprocessed_experiments_keep_their_payloads_and_index(tmp_path, arm_ru
 # -- the CLI ---------------------------------------------------------------------------------
 
 
-def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capfd):
+@pytest.mark.parametrize("method", ["ls", "wls", "iv"])
+def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capfd, method):
     """``jointid fit --robot`` on CSV and MCAP: exit 0, the tables, a JSON equal to the
     estimator run in Python on the same files, and a cross-validation error of the order of
     the fit error (the model generalises to another trajectory)."""
@@ -165,10 +168,11 @@ def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capfd)
     out_json = tmp_path / "out" / "fit.json"
     report = tmp_path / "report"
     code, out, err = run_cli(capfd, "--robot", ARM3, fit_csv, "--model", "usual",
-                             "--method", "ls", "--validate", val_mcap, "--json", out_json,
+                             "--method", method, "--validate", val_mcap, "--json", out_json,
                              "--report", report)
     assert code == 0, err
     assert "relative error" in out and "ZZ1" in out
+    assert "Table III per joint" in out and "Physical consistency" in out
     rec = json.loads(out_json.read_text())
     figures = json.loads((report / "fit.json").read_text())["figures"]
     assert sorted(Path(f).name for f in figures) == [
@@ -182,23 +186,75 @@ def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capfd)
     pre = RobotPreprocessing(rec["preprocessing"]["cutoff_hz"],
                              rec["preprocessing"]["decimation"], rec["preprocessing"]["trim"])
     sig = load_robot_signals(fit_csv, robot.moving, preprocessing=pre)
-    est = RobotModel(robot, model="usual", method="ls",
+    assert rec["method"] == method
+    est = RobotModel(robot, model="usual", method=method,
                      dq_min=rec["preprocessing"]["dq_min"]).fit(sig)
     assert list(usual["parameters"]) == list(est.names_)
     np.testing.assert_allclose([v["value"] for v in usual["parameters"].values()], est.coef_,
                                rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose([v["std"] for v in usual["parameters"].values()], est.std_,
                                rtol=1e-9, atol=1e-12)
+    assert set(rec["table_iii"]["validation"]) == set(robot.moving)
+    assert rec["table_iii"]["fit"]["j2"]["usual"]["all"] == pytest.approx(
+        usual["rel_error"]["j2"], rel=1e-9)
+    assert isinstance(usual["consistency"]["ok"], bool)
     val = usual["validation_rel_error"]
     assert set(val) == {*robot.moving, "all"}
     assert val["all"] < 2.0 * usual["rel_error"]["all"] + 0.02
 
 
+@pytest.mark.slow
+def test_cli_paper_model_on_payload_runs(tmp_path, capfd):
+    """Three payload runs (0, 5 kg, 10 kg with inertia) as CSV with payload columns: the
+    paper model is identified through the CLI, equals the estimator called in Python on the
+    same files, and explains the simulated friction better than the usual model (Table III,
+    all samples, on every joint)."""
+    robot = load_robot(ARM3)
+    params = ArmParams.from_robot(robot)
+    ref = model_reference(params.model, center=[0.0, -1.9, 0.6], fraction=0.9,
+                          duration_s=10.0, seed=1)
+    pays = (None, Payload(5.0, [0.0, 0.0, 0.05]),
+            Payload(10.0, [0.02, 0.0, 0.1], [0.02, 0.0, 0.0, 0.02, 0.0, 0.03]))
+    files = []
+    for i, pay in enumerate(pays):
+        run = simulate_arm(params, ref, ArmGains.for_params(params, payload=pay), payload=pay,
+                           seed=10 + i)
+        cols = run.columns()
+        if pay is not None:
+            n = run.t.size
+            cols["payload_mass_kg"] = np.full(n, pay.mass)
+            for a, v in zip("xyz", pay.com, strict=True):
+                cols[f"payload_com_{a}_m"] = np.full(n, v)
+            for a, v in zip(("xx", "xy", "xz", "yy", "yz", "zz"), pay.inertia, strict=True):
+                cols[f"payload_i{a}_kgm2"] = np.full(n, v)
+        files.append(tmp_path / f"p{i}.csv")
+        np.savetxt(files[-1], np.column_stack(list(cols.values())), delimiter=",",
+                   header=",".join(cols), comments="", fmt="%.17g")
+    out_json = tmp_path / "fit.json"
+    code, out, err = run_cli(capfd, "--robot", ARM3, *files, "--model", "both", "--method",
+                             "ls", "--json", out_json)
+    assert code == 0, err
+    rec = json.loads(out_json.read_text())
+    assert "error" not in rec["models"]["paper"], rec["models"]["paper"]
+    pre = RobotPreprocessing(rec["preprocessing"]["cutoff_hz"],
+                             rec["preprocessing"]["decimation"], rec["preprocessing"]["trim"])
+    sig = load_robot_signals(files, robot.moving, preprocessing=pre)
+    assert [p.mass for p in sig.payloads] == [0.0, 5.0, 10.0]
+    np.testing.assert_allclose(sig.payloads[2].inertia, pays[2].inertia)
+    est = RobotModel(robot, model="paper", method="ls",
+                     dq_min=rec["preprocessing"]["dq_min"]).fit(sig)
+    paper = rec["models"]["paper"]["parameters"]
+    assert list(paper) == list(est.names_)
+    np.testing.assert_allclose([v["value"] for v in paper.values()], est.coef_, rtol=1e-6,
+                               atol=1e-9)
+    for j in robot.moving:
+        t3 = rec["table_iii"]["fit"][j]
+        assert t3["paper"]["all"] < t3["usual"]["all"], (j, t3)
+
+
 @pytest.mark.parametrize("case", [
     "unknown_joint", "axes_mismatch", "missing_torque", "missing_file",
-    pytest.param("bad_urdf", marks=pytest.mark.xfail(
-        strict=True, reason="urdfdom prints its parser error on fd 2 before pinocchio raises "
-        "(trajectories.robot.load_robot, ndof helper): two extra lines on stderr")),
+    "bad_urdf",
     "mcap_axes", "mcap_name", "mat_key", "robot_unknown_joint"])
 def test_cli_bad_input_is_one_line_naming_the_file(tmp_path, arm_runs, capfd, case):
     robot, (run, _) = arm_runs
@@ -251,6 +307,20 @@ def test_cli_bad_input_is_one_line_naming_the_file(tmp_path, arm_runs, capfd, ca
     assert not out_json.exists()
 
 
+def test_console_entry_point_bad_input_in_a_real_process(tmp_path):
+    """The installed command's path (``python -m daq.app.cli``): exit 2, one line, nothing
+    else on stderr (C libraries included)."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "daq.app.cli", "fit", "--robot", str(ARM3),
+         str(tmp_path / "missing.csv"), "--json", str(tmp_path / "o.json")],
+        capture_output=True, text=True, cwd=ROOT, timeout=120,
+    )
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [
+        f"jointid fit: error: {tmp_path / 'missing.csv'}: no such file"]
+    assert not (tmp_path / "o.json").exists()
+
+
 def test_single_joint_fit_options_are_refused_with_robot(tmp_path, arm_runs, capfd):
     robot, (run, _) = arm_runs
     p = tmp_path / "r.csv"
@@ -264,6 +334,7 @@ def test_single_joint_fit_options_are_refused_with_robot(tmp_path, arm_runs, cap
 # -- KUKA KR300 recordings (Weigand et al.) ---------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not KUKA_DATA.is_dir(), reason="../shared/data/kuka_kr300_weigand2021 absent")
 def test_kuka_a3_cross_validation_beats_the_single_joint_fit(tmp_path, capfd):
     """Fit on A, cross-validate on B and C: the 6-axis model's A3 error is below the error of

@@ -11,7 +11,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from sim_drivers.arm_params import ArmParams
+from ident.robot.regressor import RobotRegressor
+from ident.robot.signals import RobotPayloadData
+from sim_drivers.arm_params import ArmParams, Payload
+from sim_drivers.arm_plant import output_arm_torque
 from trajectories import TrajectoryError
 from trajectories.robot import (
     JointDrive,
@@ -155,6 +158,7 @@ def test_ur10_from_example_robot_data_with_drive_data():
     assert (lim.q_min, lim.q_max, lim.dq_max, lim.tau_max) == (-2.6, -0.5, 2.16, 330.0)
     direct = load_robot("example-robot-data:ur10")
     assert direct.joint_names == r.joint_names and direct.drives["elbow_joint"] == JointDrive()
+    assert direct.name == "ur10" and direct.source == "example-robot-data:ur10"
     assert direct.model.inertias[3].mass == pytest.approx(r.model.inertias[3].mass)
 
 
@@ -254,3 +258,24 @@ def test_arm_params_from_a_loaded_robot():
     p3 = ArmParams.from_robot(load_robot(ROBOTS / "arm3.toml"))
     assert p3.joint_numbers == (1, 2, 3)
     assert p3.drive.gear_ratio.tolist() == [100.0, 100.0, 80.0]
+
+
+def test_the_simulator_truth_is_the_regressors_standard_parameters():
+    """What ident.robot recovers is what sim_drivers simulates: ArmParams.truth() names and
+    values are the regressor's standard parameters, and the simulator's output torque with a
+    payload on the flange (frame of the last moving joint) is W chi + the payload torque."""
+    robot = load_robot(ROBOTS / "arm3.toml")
+    params = ArmParams.from_robot(robot)
+    reg = RobotRegressor(robot)
+    truth = params.truth()
+    np.testing.assert_allclose([truth[n] for n in reg.standard_names], reg.standard_values(),
+                               rtol=1e-12, atol=1e-12)
+    rng = np.random.default_rng(0)
+    q = rng.uniform(-2, 2, (20, 3))
+    dq, ddq = rng.normal(size=(20, 3)), rng.normal(size=(20, 3))
+    pay = RobotPayloadData(5.0, [0.01, 0.02, 0.08], [0.015, 0.0, 0.001, 0.015, 0.0, 0.01])
+    sim = np.array([output_arm_torque(params, q[t], dq[t], ddq[t],
+                                      Payload(pay.mass, pay.com, pay.inertia))
+                    for t in range(20)])
+    ours = reg.rigid(q, dq, ddq) @ reg.standard_values() + reg.payload_torque(q, dq, ddq, pay)
+    np.testing.assert_allclose(ours, sim, rtol=1e-10, atol=1e-8)

@@ -148,6 +148,14 @@ def test_blocks_and_layout_do_not_change_the_result():
     assert kpn.flags.c_contiguous and kpn.shape == (3, 33, 10)
     np.testing.assert_array_equal(kpn.transpose(2, 0, 1), W[:10])
     assert [s.stop for s in reg.chunks(9000, 4000)] == [4000, 8000, 9000]
+    # a reused output buffer (stale content) and a column subset give the same numbers
+    buf = np.full((3, 33, 10), np.nan)
+    np.testing.assert_array_equal(reg.rigid_kpn(q[:10], dq[:10], ddq[:10], out=buf), kpn)
+    base = base_parameters(reg)
+    np.testing.assert_array_equal(reg.rigid(q[:10], dq[:10], ddq[:10], columns=base.columns),
+                                  base.reduce(W[:10]))
+    with pytest.raises(RobotIdentError, match="out: expected"):
+        reg.rigid_kpn(q[:10], dq[:10], ddq[:10], out=np.zeros((3, 33, 11)))
 
 
 def test_gravity_comes_from_the_robot_file(tmp_path):

@@ -1,10 +1,12 @@
 """Excitation planning with Ruckig: pure functions and immutable sampled plans.
 
 Nothing in this package touches clocks or buses; files only in :mod:`trajectories.campaign_file`
-(reads the campaign TOML) and :mod:`trajectories.cli` (``jointid plan``, writes the plot).
+(reads the campaign TOML), :mod:`trajectories.robot` (reads robot files) and
+:mod:`trajectories.cli` (``jointid plan``, writes the plot).
 Single joint: ``campaign`` (schema), ``plan`` (Ruckig plans). Robots: ``robot_campaign``
 (``[robot]`` schema), ``multi`` (multi-DoF plans), ``excitation`` (regressor condition number,
-band and quadrant shares, multi-sine optimisation).
+band and quadrant shares, multi-sine optimisation). Robot files: ``robot`` (MDH TOML or URDF ->
+``Robot``, docs/robot-format.md).
 Exception tree: every error raised on purpose derives from :class:`TrajectoryError`.
 """
 
@@ -24,3 +26,8 @@ class CampaignFileError(TrajectoryError, ValueError):
 
 class LimitError(TrajectoryError):
     """A plan would exceed a joint limit; the message names the segment and the limit."""
+
+
+class RobotError(TrajectoryError, ValueError):
+    """A robot file or description is unusable (:mod:`trajectories.robot`); the message names
+    the file and the element."""

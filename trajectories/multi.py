@@ -57,6 +57,16 @@ from .fourier import (
     multisine_ratio,
     rest_projection,
 )
+
+# the same speeds, velocity bands and limit-check tolerances as the single-joint plans
+from .plan import (  # noqa: F401 (BANDS, MOVING_FRACTION: part of this module's API)
+    _JERK_REL_TOL,
+    _POS_TOL,
+    _REL_TOL,
+    BANDS,
+    MOVING_FRACTION,
+    POSITIONING_SPEED,
+)
 from .robot_campaign import (
     MoveSegment,
     MultisineSegment,
@@ -83,16 +93,6 @@ __all__ = [
     "rest_projection",
 ]
 
-#: speed (fraction of max_velocity) of positioning moves, blends and the final return
-POSITIONING_SPEED = 0.5
-#: velocity bands, fractions of max_velocity (paper IV.B: 0-10 % is where dry friction changes)
-BANDS = (0.0, 0.1, 0.35, 1.0)
-#: a sample is "moving" when |dq| > MOVING_FRACTION * max_velocity
-MOVING_FRACTION = 1e-3
-
-_REL_TOL = 1e-9  # velocity / acceleration: float rounding only
-_JERK_REL_TOL = 1e-6
-_POS_TOL = 1e-9  # relative to the span of the position range
 
 #: an inverse-dynamics model: (q, dq, ddq) each (n, k), payload -> tau (n, k) [N m]
 InverseDynamics = Callable[[np.ndarray, np.ndarray, np.ndarray, RobotPayload], np.ndarray]

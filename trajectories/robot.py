@@ -1,5 +1,8 @@
 """Robot description: a URDF or an MDH TOML robot file -> :class:`Robot` (pinocchio model).
 
+(Past 600 lines: one file format -- its dataclasses, reader, builders and the checks that name
+each element; split, the format would be scattered.)
+
 File format (docs/robot-format.md, ROBOT_FORMAT): either a URDF (``*.urdf``: every joint moves,
 no drive data) or a TOML file with a ``[robot]`` table and EITHER ``urdf = "..."`` (a path
 relative to the TOML file, or ``"example-robot-data:ur10"`` for the packaged UR10) OR a
@@ -22,10 +25,13 @@ everything else in :mod:`trajectories` is pure.
 
 from __future__ import annotations
 
+import contextlib
 import importlib.metadata as metadata
 import math
+import os
+import tempfile
 import tomllib
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -34,7 +40,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from . import TrajectoryError
+from . import RobotError
 
 __all__ = [
     "RobotError",
@@ -58,10 +64,6 @@ _LOCATOR = "example-robot-data:"
 _DISTRIBUTIONS = ("example-robot-data", "cmeel-example-robot-data")
 _REVOLUTE = {"JointModelRX": (1, 0, 0), "JointModelRY": (0, 1, 0), "JointModelRZ": (0, 0, 1)}
 _PRISMATIC = {"JointModelPX": (1, 0, 0), "JointModelPY": (0, 1, 0), "JointModelPZ": (0, 0, 1)}
-
-
-class RobotError(TrajectoryError, ValueError):
-    """A robot file or description is unusable; the message names the file and element."""
 
 
 # --------------------------------------------------------------------------- dataclasses
@@ -304,11 +306,11 @@ def example_robot_urdf(name: str, source: str = "") -> Path:
     RobotError
         Unknown name, or the package (or the file) is not installed.
     """
-    where = f"{source}: " if source else ""
+    where = f"{source}: robot.urdf: " if source else ""
     try:
         rel = EXAMPLE_ROBOTS[name]
     except KeyError:
-        raise RobotError(f"{where}robot.urdf: example robot {name!r}: expected one of "
+        raise RobotError(f"{where}example robot {name!r}: expected one of "
                          f"{sorted(EXAMPLE_ROBOTS)}") from None
     for dist_name in _DISTRIBUTIONS:
         try:
@@ -320,7 +322,7 @@ def example_robot_urdf(name: str, source: str = "") -> Path:
                 p = Path(dist.locate_file(f))
                 if p.is_file():
                     return p
-    raise RobotError(f"{where}robot.urdf: example robot {name!r}: {rel} not found; expected "
+    raise RobotError(f"{where}example robot {name!r}: {rel} not found; expected "
                      f"the PyPI package 'example-robot-data' to be installed")
 
 
@@ -346,8 +348,8 @@ def load_robot(path: str | Path) -> Robot:
     """
     text_path = str(path)
     if text_path.startswith(_LOCATOR):
-        urdf = example_robot_urdf(text_path[len(_LOCATOR):], text_path)
-        return _from_urdf(urdf, text_path, {}, [], text_path)
+        short = text_path[len(_LOCATOR):]
+        return _from_urdf(example_robot_urdf(short, text_path), short, {}, [], text_path)
     p = Path(path)
     src = str(p)
     if p.suffix.lower() == ".urdf":
@@ -459,12 +461,37 @@ def _from_mdh(name: str, g: np.ndarray, joints: list, motion: Mapping, src: str)
     return Robot(name, model, names, mv, lk, dr, limits, g, types, src, tuple(table), inertial)
 
 
+@contextlib.contextmanager
+def _captured_stderr_fd(out: list[str]) -> Iterator[None]:
+    """Capture what C++ code writes on file descriptor 2 (urdfdom prints its parser errors
+    there before pinocchio raises), so that a bad URDF gives our one line only; the text is
+    appended to ``out``."""
+    try:
+        fd = os.dup(2)
+    except OSError:  # no fd 2 (embedded interpreter): nothing to capture
+        yield
+        return
+    with tempfile.TemporaryFile(mode="w+b") as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(fd, 2)
+            os.close(fd)
+            tmp.seek(0)
+            out.append(tmp.read().decode("utf-8", "replace"))
+
+
 def _from_urdf(urdf: Path, name: str, motion: Mapping, joints: list, src: str,
                g: np.ndarray | None = None) -> Robot:
+    said: list[str] = []
     try:
-        model = pin.buildModelFromUrdf(str(urdf))
+        with _captured_stderr_fd(said):
+            model = pin.buildModelFromUrdf(str(urdf))
     except (RuntimeError, ValueError, OSError) as e:
-        msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        lines = [ln.strip() for ln in (str(e) + "\n" + "".join(said)).splitlines()
+                 if ln.strip()]
+        msg = lines[0] if lines else type(e).__name__
         raise RobotError(f"{src}: URDF {str(urdf)!r} does not parse ({msg})") from None
     names, types = _joint_kinds(model, src)
     if g is None:

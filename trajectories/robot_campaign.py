@@ -73,7 +73,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from .campaign import Campaign, JointLimits
+# the single-joint schema's pieces: the same limits table, raw tables and name check
+from .campaign import _LIMITS, Campaign, JointLimits, _nonempty, _RawTable
 from .schema import ArrayOfTables, Field, Table, fail, unknown
 
 __all__ = [
@@ -373,17 +374,6 @@ def campaign_from_dict(raw: Mapping[str, Any], source: str = "") -> Campaign | R
 
 
 # --------------------------------------------------------------------------- schema pieces
-class _RawTable:
-    """Any TOML table, kept as is (validated elsewhere)."""
-
-    required = False
-
-    def validate(self, value: Any, key: str, source: str = "") -> dict:
-        if not isinstance(value, Mapping):
-            raise fail(source, key, "a table", value)
-        return dict(value)
-
-
 class _NamedTables:
     """A table whose keys are joint names and whose values follow ``item``."""
 
@@ -418,19 +408,6 @@ class _Matrix:
         return tuple(rows)
 
 
-def _nonempty(value: str) -> str | None:
-    return None if value.strip() else "a non-empty string"
-
-
-_LIMITS = Table(
-    {
-        "position": Field(float, list_of=True, min_len=2, unit="rad or m"),
-        "max_velocity": Field(float, gt=0, unit="rad/s or m/s"),
-        "max_acceleration": Field(float, gt=0, unit="rad/s^2 or m/s^2"),
-        "max_jerk": Field(float, gt=0, unit="rad/s^3 or m/s^3"),
-        "max_torque": Field(float, gt=0, unit="N m or N"),
-    }
-)
 _DRIVE = Table(
     {
         "node_id": Field(int, ge=1, le=127),

@@ -36,6 +36,7 @@ the reader warns (``RuntimeWarning``).
 
 from __future__ import annotations
 
+import gzip
 import struct
 import warnings
 from dataclasses import dataclass
@@ -52,6 +53,28 @@ from daq.protocol.logformat import FRAME_DTYPE
 __all__ = ["EXPORT_FORMATS", "ExportError", "ExportResult", "export_can"]
 
 EXPORT_FORMATS = (".blf", ".asc", ".log", ".csv", ".trc")
+
+
+class _ASCWriter(can.ASCWriter):
+    """python-can's ASC writer with the milliseconds of the start date zero-padded.
+
+    python-can 4.x writes ``msec`` with ``str.format`` unpadded, so 22 ms becomes ".22" and
+    its own reader (and CANoe) read 220 ms back; seen as a 0.2 s offset in
+    ``tests/test_export.py``.
+    """
+
+    def _format_header_datetime(self, dt):  # type: ignore[override]
+        return dt.strftime(self.FORMAT_DATE.format(f"{dt.microsecond // 1000 % 1000:03d}"))
+
+
+def _open_writer(path: Path) -> can.io.generic.MessageWriter:
+    """python-can's writer for the suffix of ``path``, with the ASC date fixed."""
+    name = path.name.lower()
+    if name.endswith(".asc"):
+        return _ASCWriter(path)
+    if name.endswith(".asc.gz"):
+        return _ASCWriter(gzip.open(path, "wt", encoding="utf-8"))
+    return can.Logger(path)
 SYNC_ID = 0x80
 RPDO1_BASE = 0x200
 _CYCLE_N = struct.Struct("<qI")  # CanFrames message after its 4-byte CDR header
@@ -191,7 +214,7 @@ def export_can(mcap_path: str | Path, out_path: str | Path, *, channel: int = 1)
     tmp = out.with_name(f".part-{out.name}")
     n_tx = 0
     try:
-        writer = can.Logger(tmp)
+        writer = _open_writer(tmp)
         try:
             ts, ids, dlcs, data = (frames["timestamp"].tolist(), frames["id"].tolist(),
                                    frames["dlc"].tolist(), frames["data"])

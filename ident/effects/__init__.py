@@ -48,7 +48,7 @@ from ._base import (
     unique_tag,
     variable_values,
 )
-from ._scan import Columns, Scorer, refine_1d, scan_log
+from ._scan import Columns, Scorer, effective_n, refine_1d, scan_log
 from .directional_viscous import DirectionalViscous
 from .generic import CONTINUOUS, GenericBasis
 from .position_ripple import PositionRipple
@@ -93,6 +93,7 @@ __all__ = [
     "Stribeck",
     "TorqueLag",
     "WarmUp",
+    "effective_n",
     "refine_1d",
     "register",
     "registry",

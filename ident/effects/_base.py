@@ -209,12 +209,17 @@ class Candidate:
         Number of scanned hyper-parameters (extra degrees of freedom of the F test).
     generic : bool
         A generic basis (competes with the named effects under a margin).
+    n_eff : float
+        Effective sample size of the residual left after the candidate
+        (:meth:`ident.effects.Scorer.n_eff_after`), set by the loop when the F pre-test
+        needs it; 0 when unknown.
     """
 
     effect: Effect
     gain: float
     n_hyper: int
     generic: bool = False
+    n_eff: float = 0.0
 
 
 def unique_tag(names: tuple[str, ...], existing: set[str]) -> str:

@@ -3,7 +3,10 @@
 A candidate is scored by the residual sum of squares its columns remove from the current
 fit (:class:`Scorer`), on columns computed from the decimated signals (:class:`Columns`);
 a nonlinear hyper-parameter (a ripple period, q_s, T_w) is chosen by a grid then a bounded
-1-D search (:func:`scan_log`, :func:`refine_1d`). Pure numerics.
+1-D search (:func:`scan_log`, :func:`refine_1d`) on at most ~8000 samples
+(:attr:`Columns.fast`), the chosen value's gain being computed on every sample. The F tests'
+effective sample size of an autocorrelated residual (:func:`effective_n`) lives here too,
+beside the scorer that needs it (re-exported by :mod:`ident.diagnose`). Pure numerics.
 """
 
 from __future__ import annotations
@@ -17,7 +20,23 @@ from scipy import optimize
 from ..signals import Signals
 from ._base import Effect
 
-__all__ = ["Scorer", "Columns", "refine_1d", "scan_log"]
+__all__ = ["Scorer", "Columns", "effective_n", "refine_1d", "scan_log"]
+
+
+def effective_n(residual: np.ndarray) -> float:
+    """Effective number of independent samples of an AR(1)-like residual.
+
+    n_eff = n (1 - ρ1) / (1 + ρ1), ρ1 the lag-1 autocorrelation (clipped to [0, 0.999]).
+    """
+    r = np.asarray(residual, dtype=float)
+    n = r.shape[0]
+    if n < 3:
+        return float(n)
+    r = r - r.mean()
+    den = float(r @ r)
+    rho = float(r[1:] @ r[:-1]) / den if den > 0 else 0.0
+    rho = min(max(rho, 0.0), 0.999)
+    return max(n * (1 - rho) / (1 + rho), 2.0)
 
 
 class Scorer:
@@ -60,6 +79,24 @@ class Scorer:
         z = (V[:, keep].T @ b) / np.sqrt(w[keep])
         return float(min(z @ z, self.rss))
 
+    def n_eff_after(self, C: np.ndarray) -> float:
+        """Effective sample size of the residual once C is fitted too: the noise that is
+        left, not the structure C explains, sets the autocorrelation of the F test.
+
+        Parameters
+        ----------
+        C : ndarray, shape (m,) or (m, k)
+            Extra columns.
+        """
+        C = np.asarray(C, dtype=float)
+        if C.ndim == 1:
+            C = C[:, None]
+        if not np.all(np.isfinite(C)):
+            return effective_n(self.r)
+        Cp = C - self.Q @ (self.Q.T @ C)
+        beta, *_ = np.linalg.lstsq(Cp, self.r, rcond=None)
+        return effective_n(self.r - Cp @ beta)
+
 
 class Columns:
     """Scores candidates on columns computed on the decimated signals:
@@ -69,10 +106,24 @@ class Columns:
 
     def __init__(self, s: Signals, scorer: Scorer) -> None:
         self.scorer, self.s = scorer, s
+        self._fast: Columns | None = None
 
     def gain(self, e: Effect) -> float:
         """RSS removed by the effect's columns on the decimated signals."""
         return self.scorer.gain(e.columns(self.s))
+
+    @property
+    def fast(self) -> Columns:
+        """The same scorer on at most ~8000 samples (regular stride), for hyper-parameter
+        scans; the gain of the chosen value is then computed on every sample."""
+        n = len(self.s)
+        if n <= 12000:
+            return self
+        if self._fast is None:
+            st = math.ceil(n / 8000)
+            sub = slice(None, None, st)
+            self._fast = Columns(self.s.take(sub), Scorer(self.scorer.Q[sub], self.scorer.r[sub]))
+        return self._fast
 
 
 def refine_1d(
@@ -102,11 +153,14 @@ def scan_log(
     cols: Columns, make: Callable[[float], Effect], lo: float, hi: float, n: int = 24
 ) -> tuple[Effect, float]:
     """Best hyper-parameter: log grid, then a bounded 1-D search between the grid
-    neighbours of the best point."""
+    neighbours of the best point (both on :attr:`Columns.fast`; the returned gain is on
+    every sample)."""
+    fast = cols.fast
     grid = np.geomspace(lo, hi, n)
-    gains = np.array([cols.gain(make(h)) for h in grid])
+    gains = np.array([fast.gain(make(h)) for h in grid])
     i = int(np.argmax(gains))
     a, b = math.log(grid[max(i - 1, 0)]), math.log(grid[min(i + 1, n - 1)])
-    return refine_1d(
-        cols, lambda lh: make(math.exp(lh)), a, b, math.log(grid[i]), float(gains[i]), 1e-4
+    e, g = refine_1d(
+        fast, lambda lh: make(math.exp(lh)), a, b, math.log(grid[i]), float(gains[i]), 1e-4
     )
+    return (e, g) if fast is cols else (e, cols.gain(e))

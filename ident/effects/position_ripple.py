@@ -67,16 +67,19 @@ class PositionRipple(Effect):
 
 def scan_period(cols: Columns, p0: float, span: float, tag: str) -> tuple[Effect, float]:
     """Ripple period: grid over ±1.5 frequency bins (1/span) around the periodogram peak
-    p0, then a bounded search (frequency resolution ~1e-7 f0)."""
+    p0, then a bounded search (frequency resolution ~1e-7 f0), both on :attr:`Columns.fast`;
+    the returned gain is on every sample."""
     f0, df = 1 / p0, 1.5 / span
     lo, hi = max(f0 - df, 0.5 * f0), f0 + df
+    fast = cols.fast
     fgrid = np.linspace(lo, hi, 31)
-    gains = np.array([cols.gain(PositionRipple(1 / f, tag)) for f in fgrid])
+    gains = np.array([fast.gain(PositionRipple(1 / f, tag)) for f in fgrid])
     i = int(np.argmax(gains))
     a, b = fgrid[max(i - 1, 0)], fgrid[min(i + 1, len(fgrid) - 1)]
-    return refine_1d(
-        cols, lambda f: PositionRipple(1 / f, tag), a, b, fgrid[i], float(gains[i]), 1e-7 * f0
+    e, g = refine_1d(
+        fast, lambda f: PositionRipple(1 / f, tag), a, b, fgrid[i], float(gains[i]), 1e-7 * f0
     )
+    return (e, g) if fast is cols else (e, cols.gain(e))
 
 
 @register("position_ripple", order=10)

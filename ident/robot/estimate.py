@@ -36,6 +36,7 @@ import numpy as np
 import scipy.linalg
 
 from . import RobotIdentError
+from .base import base_parameters
 from .moments import IDQ, IP, ISG, N_EXTRA, ONE, JointMoments, quadrant_weights
 from .paper import (
     PAPER_BLOCK,
@@ -44,14 +45,8 @@ from .paper import (
     paper_start,
     usual_coefficients,
 )
+from .regressor import RobotRegressor
 from .signals import RobotSignals
-
-try:  # the regressor and base parameters land with the "ndof" branch
-    from .base import base_parameters
-    from .regressor import RobotRegressor
-except ImportError:  # pragma: no cover - until that branch is merged
-    base_parameters = None
-    RobotRegressor = None
 
 __all__ = ["RobotModel", "MODELS", "METHODS"]
 
@@ -60,6 +55,10 @@ METHODS = ("ls", "wls", "iv")
 #: Smallest eigenvalue / largest of the column-scaled normal matrix below which the
 #: parameters are not identifiable on the data.
 RANK_TOL = 1e-12
+
+#: Fraction of the rows whose quadrant may still change when the passes stop
+#: (``quadrant="model"``); such rows have tau_out ~ 0, where the quadrant hardly matters.
+QUADRANT_TOL = 1e-4
 
 Coeffs = Callable[[np.ndarray, np.ndarray, int], tuple[np.ndarray, ...]]
 
@@ -179,15 +178,10 @@ class RobotModel:
                                   f"{self.chunk_size!r}")
         reg = self.regressor
         if not hasattr(reg, "rigid"):
-            if RobotRegressor is None:  # pragma: no cover
-                raise RobotIdentError("RobotModel: a Robot needs ident.robot.regressor; pass a "
-                                      "regressor object")
             reg = RobotRegressor(reg)
         self.regressor_ = reg
         base = self.base
         if base is None:
-            if base_parameters is None:  # pragma: no cover
-                raise RobotIdentError("RobotModel.base: ident.robot.base is missing; pass base=")
             base = base_parameters(reg)
         self.base_ = base
         joints = tuple(reg.joints)
@@ -215,15 +209,20 @@ class RobotModel:
     def _structure(self) -> list[np.ndarray]:
         """Base columns that are not structurally zero in each joint's row (probed at random
         states, seeded)."""
-        reg, k = self.regressor_, len(self.regressor_.joints)
+        k = len(self.regressor_.joints)
         rng = np.random.default_rng(12345)
         m = 32
         q = rng.uniform(-np.pi, np.pi, (m, k))
-        W = np.asarray(self.base_.reduce(reg.rigid(q, rng.normal(size=(m, k)),
-                                                    rng.normal(size=(m, k)))))
-        mag = np.abs(W).max(axis=0)  # (k, pb)
+        self._kpn = False
+        W, _ = self._rows(q, rng.normal(size=(m, k)), rng.normal(size=(m, k)), None, None)
+        mag = np.abs(W).max(axis=2)  # (k, pb)
         tol = 1e-10 * max(float(mag.max()), 1e-300)
-        return [np.flatnonzero(mag[j] > tol) for j in range(k)]
+        cols = [np.flatnonzero(mag[j] > tol) for j in range(k)]
+        # gather each joint's base columns straight from the standard (k, p, m) regressor
+        self._kpn = hasattr(self.regressor_, "rigid_kpn") and hasattr(self.base_, "columns")
+        base_cols = np.asarray(self.base_.columns) if self._kpn else None
+        self.std_cols_ = [base_cols[c] if self._kpn else c for c in cols]
+        return cols
 
     # ------------------------------------------------------------------ data pass
     def _chunks(self, signals: Any):
@@ -247,15 +246,25 @@ class RobotModel:
                                               f"needs q_ref (reference trajectory)")
                     zr = _ref_acceleration(sig.t[rows], sig.q_ref[rows])
                 pay = sig.payloads[int(e)]
+                contiguous = rows.size and rows[-1] - rows[0] + 1 == rows.size
                 for a in range(0, rows.size, int(self.chunk_size)):
-                    r = rows[a:a + int(self.chunk_size)]
+                    if contiguous:  # views, no copies
+                        r = slice(int(rows[0]) + a, int(rows[0]) + min(a + int(self.chunk_size),
+                                                                       rows.size))
+                    else:
+                        r = rows[a:a + int(self.chunk_size)]
                     yield (sig, r, sig.q[r], sig.dq[r], sig.ddq[r], sig.tau[r],
                            None if zr is None else zr[a:a + int(self.chunk_size)], pay)
 
     def _rows(self, q, dq, ddq, tau, pay) -> tuple[np.ndarray, np.ndarray]:
-        """Base regressor (m, k, pb) and payload torque (m, k) of a chunk."""
+        """Regressor (k, p or pb, m) -- row j's base columns are ``W[j, std_cols_[j]]`` --
+        and payload torque (m, k) of a chunk."""
         reg = self.regressor_
-        W = np.asarray(self.base_.reduce(reg.rigid(q, dq, ddq)), dtype=float)
+        if self._kpn:  # standard columns, (k, p, m): joint j reads W[j, self.std_cols_[j]]
+            W = np.asarray(reg.rigid_kpn(q, dq, ddq))
+        else:
+            W = np.asarray(self.base_.reduce(reg.rigid(q, dq, ddq)), dtype=float)
+            W = np.ascontiguousarray(W.transpose(1, 2, 0))
         if pay is not None and float(getattr(pay, "mass", 0.0)) > 0:
             p = np.asarray(reg.payload_torque(q, dq, ddq, pay), dtype=float)
         else:
@@ -263,23 +272,27 @@ class RobotModel:
         return W, p
 
     @staticmethod
-    def _v(Wj: np.ndarray, pj, dqj, tauj) -> np.ndarray:
-        m, nt = Wj.shape
-        V = np.empty((m, nt + N_EXTRA))
-        V[:, :nt] = Wj
-        V[:, nt + IP] = pj
-        V[:, nt + ISG] = np.sign(dqj)
-        V[:, nt + IDQ] = dqj
-        V[:, nt + ONE] = 1.0
-        V[:, -1] = tauj
-        return V
+    def _v(WjT: np.ndarray, pj, dqj, tauj) -> np.ndarray:
+        """Rows v (module doc of :mod:`ident.robot.moments`) transposed, (nv, m)."""
+        nt, m = WjT.shape
+        VT = np.empty((nt + N_EXTRA, m))
+        VT[:nt] = WjT
+        VT[nt + IP] = pj
+        VT[nt + ISG] = np.sign(dqj)
+        VT[nt + IDQ] = dqj
+        VT[nt + ONE] = 1.0
+        VT[-1] = tauj
+        return VT
 
-    def _pass(self, signals: Any, theta: np.ndarray | None, powers: int
-              ) -> tuple[list[JointMoments], np.ndarray | None]:
-        """One pass: the moments of every joint; quadrants from ``theta`` (model) or tau."""
+    def _pass(self, signals: Any, theta: np.ndarray | None, powers: int,
+              theta_prev: np.ndarray | None = None) -> tuple[list[JointMoments], int, int]:
+        """One pass: the moments of every joint; quadrants from ``theta`` (model) or tau.
+
+        Returns the moments, the number of rows, and how many rows are in another quadrant
+        than with ``theta_prev`` (counted on the fly: nothing of size n is kept)."""
         iv = self.method == "iv"
         moms = [JointMoments(c, iv=iv, powers=powers) for c in self.cols_]
-        quads = []
+        rows = changed = 0
         for _sig, _r, q, dq, ddq, tau, zdd, pay in self._chunks(signals):
             W, p = self._rows(q, dq, ddq, tau, pay)
             Wz = pz = None
@@ -287,23 +300,30 @@ class RobotModel:
                 Wz, pz = self._rows(q, dq, zdd, tau, pay)
             for j, cols in enumerate(self.cols_):
                 dqj = dq[:, j]
+                WjT = W[j, self.std_cols_[j], :]
                 ok = (np.abs(dqj) > self.dq_min) & np.isfinite(tau[:, j]) & np.all(
-                    np.isfinite(W[:, j, :]), axis=1)
-                Wj = W[:, j, cols][ok]
-                V = self._v(Wj, p[ok, j], dqj[ok], tau[ok, j])
-                Vz = None
+                    np.isfinite(WjT), axis=0)
+                every = bool(ok.all())
+                if not every:
+                    WjT = WjT[:, ok]
+                dqo, tauo, po = dqj[ok], tau[ok, j], p[ok, j]
+                VT = self._v(WjT, po, dqo, tauo)
+                VzT = None
                 if iv:
-                    Vz = self._v(Wz[:, j, cols][ok], pz[ok, j], dqj[ok], tau[ok, j])
+                    WzT = Wz[j, self.std_cols_[j], :]
+                    VzT = self._v(WzT if every else WzT[:, ok], pz[ok, j], dqo, tauo)
                 if theta is None:
-                    sp = tau[ok, j] * dqj[ok]
+                    sp = tauo * dqo
                 else:
-                    sp = (Wj @ theta[cols] + p[ok, j]) * dqj[ok]
+                    sp = (theta[cols] @ WjT + po) * dqo
                 pplus = quadrant_weights(sp)
-                if theta is not None:
-                    quads.append(np.sign(sp))
-                E = np.exp(-np.abs(dqj[ok]) / self.qs_[j])
-                moms[j].add(V, pplus, E, Vz)
-        return moms, (np.concatenate(quads) if quads else None)
+                rows += sp.size
+                if theta_prev is not None:
+                    spp = (theta_prev[cols] @ WjT + po) * dqo
+                    changed += int(np.count_nonzero(np.sign(sp) != np.sign(spp)))
+                E = np.exp(-np.abs(dqo) / self.qs_[j])
+                moms[j].add(VT, pplus, E, VzT)
+        return moms, rows, changed
 
     # ------------------------------------------------------------------ solver
     def _local(self, j: int) -> np.ndarray:
@@ -441,7 +461,7 @@ class RobotModel:
         self._setup()
         k, pb = len(self.joints_), self.n_base_
         paper = self.model == "paper"
-        moms, _ = self._pass(signals, None, 3 if paper else 1)
+        moms, _, _ = self._pass(signals, None, 3 if paper else 1)
         passes = 1
         # usual model (also the paper model's starting point)
         nbu = len(USUAL_BLOCK)
@@ -475,15 +495,15 @@ class RobotModel:
         if self.quadrant == "model":
             prev = None
             for _ in range(int(self.max_passes)):
-                moms, quads = self._pass(signals, x[:pb], 3)
+                theta = x[:pb].copy()
+                moms, rows, changed = self._pass(signals, theta, 3, prev)
                 passes += 1
-                changed = None if prev is None else int(np.sum(quads != prev))
                 x, w, it = self._fit_on(moms, paper_coefficients, x, free, linear=False)
-                if changed is not None:
+                if prev is not None:
                     self.quadrant_changes_.append(changed)
-                    if changed <= 1e-5 * quads.size:
+                    if changed <= QUADRANT_TOL * rows:
                         break
-                prev = quads
+                prev = theta
         self._statistics(moms, paper_coefficients, x, free, w)
         self.weights_ = w
         self.n_passes_, self.n_iter_ = passes, it
@@ -512,15 +532,15 @@ class RobotModel:
                     idx = self._local(j)
                     nt = len(cols)
                     th, blk = self.coef_[idx[:nt]], self.coef_[idx[nt:]]
-                    Wj = W[:, j, cols]
-                    V = self._v(Wj, p[:, j], dq[:, j], np.zeros(len(r)))
+                    WjT = W[j, self.std_cols_[j], :]
+                    V = self._v(WjT, p[:, j], dq[:, j], np.zeros(q.shape[0])).T
                     if self.quadrant == "model" or self.model == "usual":
-                        sp = (Wj @ theta[cols] + p[:, j]) * dq[:, j]
+                        sp = (theta[cols] @ WjT + p[:, j]) * dq[:, j]
                     else:
                         sp = tau[:, j] * dq[:, j]
                     pp = quadrant_weights(sp)
                     E = np.exp(-np.abs(dq[:, j]) / self.qs_[j])
-                    pred = np.zeros(len(r))
+                    pred = np.zeros(q.shape[0])
                     for s, ws in ((0, pp), (1, 1.0 - pp)):
                         c0, c1, _, _ = coeffs(th, blk, s)
                         pred += ws * (V @ c0 + E * (V @ c1))
@@ -533,19 +553,22 @@ class RobotModel:
         """rho = tau - tau_hat (n, k) [N m]."""
         return signals.tau - self.predict(signals)
 
-    def rel_error(self, signals: RobotSignals) -> dict[str, float]:
+    def rel_error(self, signals: RobotSignals | Sequence[RobotSignals]) -> dict[str, float]:
         """||rho_j|| / ||tau_j|| per joint and ``"all"`` on ``signals`` (Table III, all);
         samples with a non-finite torque (left out of the fit) are ignored."""
-        rho = self.residual(signals)
-        ok = np.isfinite(rho)
-        r2 = np.where(ok, rho, 0.0) ** 2
-        y2 = np.where(ok, signals.tau, 0.0) ** 2
-        out = {n: float(np.sqrt(r2[:, j].sum() / y2[:, j].sum()))
-               for j, n in enumerate(self.joints_)}
+        items = [signals] if isinstance(signals, RobotSignals) else list(signals)
+        k = len(self.joints_)
+        r2, y2 = np.zeros(k), np.zeros(k)
+        for sig in items:
+            rho = self.residual(sig)
+            ok = np.isfinite(rho)
+            r2 += (np.where(ok, rho, 0.0) ** 2).sum(0)
+            y2 += (np.where(ok, sig.tau, 0.0) ** 2).sum(0)
+        out = {n: float(np.sqrt(r2[j] / y2[j])) for j, n in enumerate(self.joints_)}
         out["all"] = float(np.sqrt(r2.sum() / y2.sum()))
         return out
 
-    def score(self, signals: RobotSignals) -> float:
+    def score(self, signals: RobotSignals | Sequence[RobotSignals]) -> float:
         """1 - ||rho|| / ||tau|| over all joints (as ``ident.api.JointModel.score``)."""
         return 1.0 - self.rel_error(signals)["all"]
 

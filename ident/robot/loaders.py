@@ -20,8 +20,9 @@ CSV (header row)
     ``q_<joint>, tau_<joint>``; optional ``q_ref*`` (IV instruments), ``dq*`` and ``ddq*``
     (taken as given -- already filtered -- when both are present for every axis) and the
     constant payload columns ``payload_mass_kg``, ``payload_com_x_m``, ``payload_com_y_m``,
-    ``payload_com_z_m``. The torque column times the joint's ``drive_gain`` is the
-    joint-side torque.
+    ``payload_com_z_m`` (flange frame) and ``payload_ixx_kgm2``, ``payload_ixy_kgm2``, ...
+    ``payload_izz_kgm2`` (about the CoM, flange axes). The torque column times the joint's
+    ``drive_gain`` is the joint-side torque.
 MAT (v5/v7)
     The ``--map`` paths of :func:`ident.loaders.resolve_path` with one array per signal,
     one row (or column) per axis: ``t=rec.time_cont, q=rec.act_pos_mot_deg,
@@ -77,7 +78,8 @@ __all__ = [
 ]
 
 _SIGNALS = ("t", "q", "tau", "q_ref", "dq", "ddq")
-_PAYLOAD_COLS = ("payload_mass_kg", "payload_com_x_m", "payload_com_y_m", "payload_com_z_m")
+_PAYLOAD_COLS = ("payload_mass_kg", "payload_com_x_m", "payload_com_y_m", "payload_com_z_m",
+                 *(f"payload_i{a}_kgm2" for a in ("xx", "xy", "xz", "yy", "yz", "zz")))
 _KEY_RE = re.compile(r"^(?P<sig>q_ref|ddq|dq|q|tau)(?P<idx>\d+)$")
 
 
@@ -365,7 +367,7 @@ def _load_csv(path: Path, joints: Sequence[str], gains: np.ndarray,
         q_ref=None if q_ref is None else q_scale * q_ref,
         dq=None if dq is None or ddq is None else q_scale * dq,
         ddq=None if dq is None or ddq is None else q_scale * ddq,
-        payload=RobotPayloadData(mass=pay[0], com=pay[1:4]),
+        payload=RobotPayloadData(mass=pay[0], com=pay[1:4], inertia=pay[4:10]),
     )
 
 

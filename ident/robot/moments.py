@@ -81,39 +81,41 @@ class JointMoments:
     def nv(self) -> int:
         return len(self.cols) + N_EXTRA
 
-    def add(self, V: np.ndarray, pplus: np.ndarray, E: np.ndarray,
-            Vz: np.ndarray | None = None) -> None:
-        """Accumulate the rows V (m, nv) with P+ (m,) and E (m,); Vz the instrument rows."""
-        if V.shape[0] == 0:
+    def add(self, VT: np.ndarray, pplus: np.ndarray, E: np.ndarray,
+            VzT: np.ndarray | None = None) -> None:
+        """Accumulate the rows given TRANSPOSED, VT (nv, m), with P+ (m,) and E (m,); VzT
+        the instrument rows (nv, m)."""
+        if VT.shape[1] == 0:
             return
-        if self.iv and Vz is None:
+        if self.iv and VzT is None:
             raise RobotIdentError("JointMoments.add: instrument rows missing for IDIM-IV")
-        self.n += V.shape[0]
+        self.n += VT.shape[1]
         for s, w in ((0, pplus), (1, 1.0 - pplus)):
             sel = w > 0
             if not sel.any():
                 continue
-            ws = w[sel]
-            a = V[sel]
-            az = None if Vz is None else Vz[sel]
-            es = E[sel]
+            every = bool(sel.all())
+            ws = w if every else w[sel]
+            a = VT if every else VT[:, sel]
+            az = None if VzT is None else (VzT if every else VzT[:, sel])
+            es = E if every else E[sel]
             self._add(s, 0, a, az, ws)
             if self.powers > 1:
                 big = es > E_TINY
                 if big.any():
-                    ab, eb, wb = a[big], es[big], ws[big]
-                    azb = None if az is None else az[big]
+                    ab, eb, wb = a[:, big], es[big], ws[big]
+                    azb = None if az is None else az[:, big]
                     for e in range(1, self.powers):
                         self._add(s, e, ab, azb, wb * eb**e)
 
     def _add(self, s: int, e: int, a: np.ndarray, az: np.ndarray | None,
              w: np.ndarray) -> None:
-        aw = a * w[:, None]
-        self.vv[s, e] += aw.T @ a
+        aw = a * w
+        self.vv[s, e] += aw @ a.T
         if az is not None:
-            azw = az * w[:, None]
-            self.zv[s, e] += azw.T @ a
-            self.zz[s, e] += azw.T @ az
+            azw = az * w
+            self.zv[s, e] += azw @ a.T
+            self.zz[s, e] += azw @ az.T
 
     def normal(
         self, coeffs: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
@@ -163,4 +165,4 @@ class JointMoments:
                 if C is not None:
                     C += D[e].T @ self.zz[s, e + f] @ D[f]
         yy = float(self.vv[0, 0, -1, -1] + self.vv[1, 0, -1, -1])
-        return A, g, rr, C, yy
+        return A, g, max(rr, 0.0), C, yy  # rr: quadratic form, clip rounding below 0

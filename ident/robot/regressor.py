@@ -24,7 +24,7 @@ on joint j only (the paper's model; rotor gyroscopic terms neglected).
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -236,6 +236,10 @@ class RobotRegressor:
                               if n in self.joints)
         self._joints = self._structure()
         self.flange_placement = self._flange(flange)
+        z = np.zeros((self.k, 1))
+        self._written = {(j, _P * i + c) for j, i, vals in self._pairs(z, z, z)
+                         for c, v in enumerate(vals) if v is not None}
+        self._written |= {(i, _P * i + 10) for i in range(self.k)}
 
     @property
     def p(self) -> int:
@@ -243,38 +247,68 @@ class RobotRegressor:
         return len(self.standard_names)
 
     # ------------------------------------------------------------------ public evaluation
-    def rigid(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
+    def rigid(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray,
+              columns: Sequence[int] | None = None) -> np.ndarray:
         """Regressor rows of the rigid body and the rotors (eq. 9): tau_out + Ia ddq = W chi.
 
         Parameters
         ----------
         q, dq, ddq : ndarray, shape (n, k)
             Joint positions [rad or m], velocities, accelerations of the moving joints.
+        columns : sequence of int, optional
+            Only these columns (indices into :attr:`standard_names`, in this order), e.g. a
+            base-parameter set's ``columns`` (then ``W`` is the base regressor directly).
 
         Returns
         -------
-        W : ndarray, shape (n, k, p)
+        W : ndarray, shape (n, k, p) (p = len(columns) when given)
             ``W[t, j, :] @ chi`` is the torque of moving joint j at sample t [N m or N].
             Returned as a transposed view of a (k, p, n) array, contiguous over samples
             (``W[:, j, :]`` is Fortran-ordered, fast for ``W[:, j].T @ W[:, j]``);
             ``W.reshape(-1, p)`` copies. Use :meth:`rigid_kpn` for the (k, p, n) array.
         """
-        return self.rigid_kpn(q, dq, ddq).transpose(2, 0, 1)
+        return self.rigid_kpn(q, dq, ddq, columns=columns).transpose(2, 0, 1)
 
-    def rigid_kpn(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
-        """:meth:`rigid` as a C-contiguous (k, p, n) array (joint, parameter, sample)."""
+    def rigid_kpn(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray,
+                  out: np.ndarray | None = None,
+                  columns: Sequence[int] | None = None) -> np.ndarray:
+        """:meth:`rigid` as a C-contiguous (k, p, n) array (joint, parameter, sample).
+
+        ``out``: optional C-contiguous float64 (k, p, n) array to fill (overwritten; reusing
+        it across blocks of a long log avoids paging in fresh memory every block).
+        """
         q, dq, ddq = self._check(q, dq, ddq)
         n = q.shape[0]
-        out = np.zeros((self.k, self.p, n))
+        if columns is None:
+            cols = np.arange(self.p)
+        else:
+            cols = np.asarray(columns, dtype=int).reshape(-1)
+            if cols.size and (cols.min() < 0 or cols.max() >= self.p):
+                raise RobotIdentError(f"columns: expected indices in [0, {self.p}), got "
+                                      f"{cols.tolist()}")
+        pos = np.full(self.p, -1)
+        pos[cols] = np.arange(cols.size)
+        shape = (self.k, cols.size, n)
+        if out is None:
+            out = np.empty(shape)
+        elif out.shape != shape or out.dtype != np.float64 or not out.flags.c_contiguous:
+            raise RobotIdentError(f"out: expected a C-contiguous float64 array of shape "
+                                  f"{shape}, got {out.shape} {out.dtype}")
+        for j in range(self.k):  # entries that are structurally zero are never written
+            zero = [pos[c] for c in cols if (j, int(c)) not in self._written]
+            if zero:
+                out[j, zero, :] = 0.0
         for s in range(0, n, _CHUNK):
             e = min(s + _CHUNK, n)
-            for j, i, cols in self._pairs(q[s:e].T, dq[s:e].T, ddq[s:e].T):
-                block = out[j, _P * i:_P * i + 10, s:e]
-                for c, v in enumerate(cols):
-                    if v is not None:
-                        block[c] = v
+            for j, i, vals in self._pairs(q[s:e].T, dq[s:e].T, ddq[s:e].T):
+                for c, v in enumerate(vals):
+                    pc = pos[_P * i + c]
+                    if v is not None and pc >= 0:
+                        out[j, pc, s:e] = v
             for i in range(self.k):
-                out[i, _P * i + 10, s:e] = ddq[s:e, i]
+                pc = pos[_P * i + 10]
+                if pc >= 0:
+                    out[i, pc, s:e] = ddq[s:e, i]
         return out
 
     def friction(self, dq: np.ndarray) -> np.ndarray:
@@ -475,8 +509,10 @@ class RobotRegressor:
             kin.append((w, dw, a))
             screws.append(sc)
             if i in wanted:
+                mat = _first_moment_matrix(w, dw) if any(
+                    v is not None for v, _u in sc.values()) else None
                 for jj, (v, u) in sc.items():
-                    yield jj, i, _columns(v, u, w, dw, a)
+                    yield jj, i, _columns(v, u, w, dw, a, mat)
 
 
 def _const_cross_v(v, c: np.ndarray):
@@ -498,7 +534,29 @@ def _vscale2(u, s: float):
     return tuple(None if x is None else s * x for x in u)
 
 
-def _columns(v, u, w, dw, a):
+def _first_moment_matrix(w, dw):
+    """Rows of T = K(w)^2 - K(dw) = w w^T - |w|^2 I - K(dw), so that T v = v x dw + w x (w x v)
+    (the first-moment coefficients of a force screw v); entries None when exactly zero."""
+    w = (None, None, None) if w is None else w
+    dw = (None, None, None) if dw is None else dw
+    w2 = _add(_add(_mul(w[0], w[0]), _mul(w[1], w[1])), _mul(w[2], w[2]))
+    rows = []
+    for r in range(3):
+        row = []
+        for c in range(3):
+            e = _mul(w[r], w[c])
+            if r == c:
+                e = _sub(e, w2)
+            else:  # -K(dw)[r, c]: K(x) = [[0, -z, y], [z, 0, -x], [-y, x, 0]]
+                k = 3 - r - c
+                sign = 1.0 if (r, c) in ((0, 1), (1, 2), (2, 0)) else -1.0
+                e = _add(e, _smul(sign, dw[k]))
+            row.append(e)
+        rows.append(row)
+    return rows
+
+
+def _columns(v, u, w, dw, a, mat):
     """The 10 regressor columns of one link's parameters for one joint's unit screw (v, u)
     at the link origin: v . f + u . n with f = M a + dw x c + w x (w x c) and
     n = I dw + w x (I w) + c x a (about the origin, frame of the link)."""
@@ -515,10 +573,12 @@ def _columns(v, u, w, dw, a):
         cols[3] = _add(_mul(uy, dwy), _mul(u2y, wy))
         cols[4] = _add(_add(_mul(uy, dwz), _mul(uz, dwy)), _add(_mul(u2y, wz), _mul(u2z, wy)))
         cols[5] = _add(_mul(uz, dwz), _mul(u2z, wz))
-    # first moments: v x dw + w x (w x v) + a x u
+    # first moments: a x u + T v  (T v = v x dw + w x (w x v))
     c = _cross(a, u)
     if v is not None:
-        c = _vadd(c, _vadd(_cross(v, dw), _cross(w, _cross(w, v))))
+        tv = tuple(_add(_add(_mul(row[0], v[0]), _mul(row[1], v[1])), _mul(row[2], v[2]))
+                   for row in mat)
+        c = _vadd(c, tv)
         cols[9] = _dot(v, a)
     if c is not None:
         cols[6], cols[7], cols[8] = c
