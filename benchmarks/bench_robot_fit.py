@@ -6,7 +6,11 @@ Synthetic data: a sum-of-sines motion of the six joints at 1 kHz, three payload 
 torques from the paper's friction (eq. 30) on every joint through the vectorised regressor
 (ident.robot.regressor) plus white noise. Timed: ``RobotModel.fit`` (regressor evaluation in
 chunks, moments, Gauss-Newton) for the usual model, the paper model with the paper's quadrant
-proxy (eq. 26, one data pass) and with model-decided quadrants (repeated passes). Peak memory:
+proxy (eq. 26, one data pass) and with model-decided quadrants: with the near-boundary rows
+stored (ident.robot.quadrants; "passes" counts data passes, the start pass on every
+stride-th row above 1e5 samples counted as one; "upd" store updates) and, for comparison in
+the same run, as before these two: start on every row and a full pass at every re-decision
+("paper/model-full"). Peak memory:
 tracemalloc's peak of the allocations during one fit (the input arrays excluded), which must
 stay bounded by the chunk size, not grow with the samples. Same process, same data for all.
 """
@@ -24,6 +28,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
+from ident.robot import estimate  # noqa: E402
 from ident.robot.base import base_parameters  # noqa: E402
 from ident.robot.estimate import RobotModel  # noqa: E402
 from ident.robot.regressor import RobotRegressor  # noqa: E402
@@ -74,7 +79,10 @@ def synthetic(reg, base, n_total: int, seed: int = 0, qs: float = 0.03) -> list[
 
 CASES = (("usual", dict(model="usual")),
          ("paper/measured", dict(model="paper", quadrant="measured")),
-         ("paper/model", dict(model="paper", quadrant="model")))
+         ("paper/model", dict(model="paper", quadrant="model")),
+         # the same fit with a full pass at every quadrant re-decision (no stored rows,
+         # ident.robot.quadrants): the cost before the incremental updates
+         ("paper/model-full", dict(model="paper", quadrant="model")))
 
 
 def main() -> None:
@@ -91,24 +99,33 @@ def main() -> None:
         n = int(size)
         sigs = synthetic(reg, base, n)
         for label, kw in CASES:
-            def fit(kw=kw, sigs=sigs):
-                t0 = time.perf_counter()
-                m = RobotModel(reg, base=base, chunk_size=args.chunk, **kw).fit(sigs)
-                return time.perf_counter() - t0, m
+            full = label.endswith("-full")
+
+            def fit(kw=kw, sigs=sigs, full=full):
+                keep = estimate.STORE_FRACTION, estimate.START_ROWS
+                if full:  # the code before: start on every row, a pass per re-decision
+                    estimate.STORE_FRACTION, estimate.START_ROWS = 0.0, 2**62
+                try:
+                    t0 = time.perf_counter()
+                    m = RobotModel(reg, base=base, chunk_size=args.chunk, **kw).fit(sigs)
+                    return time.perf_counter() - t0, m
+                finally:
+                    estimate.STORE_FRACTION, estimate.START_ROWS = keep
             times = [fit()[0] for _ in range(args.repeat)]
             tracemalloc.start()
             _, m = fit()
             _, peak = tracemalloc.get_traced_memory()
             tracemalloc.stop()
             rows.append((n, label, statistics.median(times), peak / 2**20, m.n_passes_,
+                         m.n_store_updates_ if hasattr(m, "n_store_updates_") else 0,
                          m.rel_error_["all"]))
     print(f"UR10, 6 joints, {len(base.names)} base parameters, chunk {args.chunk} samples, "
           f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}")
-    print(f"{'samples':>9} {'model':>15} {'fit s':>8} {'us/sample':>9} {'passes':>6} "
-          f"{'peak MiB':>9} {'rel err':>8}")
-    for n, label, t, mib, passes, rel in rows:
-        print(f"{n:>9d} {label:>15} {t:>8.2f} {1e6 * t / n:>9.2f} {passes:>6d} {mib:>9.1f} "
-              f"{rel:>8.4f}")
+    print(f"{'samples':>9} {'model':>17} {'fit s':>8} {'us/sample':>9} {'passes':>6} "
+          f"{'upd':>4} {'peak MiB':>9} {'rel err':>8}")
+    for n, label, t, mib, passes, upd, rel in rows:
+        print(f"{n:>9d} {label:>17} {t:>8.2f} {1e6 * t / n:>9.2f} {passes:>6d} {upd:>4d} "
+              f"{mib:>9.1f} {rel:>8.4f}")
     by = {}
     for n, label, t, mib, *_ in rows:
         by.setdefault(label, []).append((n, t, mib))
@@ -117,6 +134,12 @@ def main() -> None:
             (n0, t0, m0), (n1, t1, m1) = r[0], r[-1]
             print(f"{label}: {n1 / n0:.0f}x samples -> time x{t1 / t0:.1f}, "
                   f"peak memory x{m1 / m0:.2f}")
+    t = {(n, label): tt for n, label, tt, *_ in rows}
+    for n in sorted({r[0] for r in rows}):
+        u, pm, pf = t.get((n, "usual")), t.get((n, "paper/model")), t.get((n, "paper/model-full"))
+        if u and pm and pf:
+            print(f"{n} samples: paper/model / usual = {pm / u:.2f}, "
+                  f"paper/model-full / usual = {pf / u:.2f}, stored rows save x{pf / pm:.2f}")
 
 
 if __name__ == "__main__":

@@ -354,3 +354,18 @@ def test_kuka_a3_cross_validation_beats_the_single_joint_fit(tmp_path, capfd):
         load(files[:1], **kw), validation=load(files[1:], **kw))
     single_cv = single.report_.to_json()["models"]["usual"]["validation_rel_error"]
     assert ndof_cv < single_cv, (ndof_cv, single_cv)
+
+
+@pytest.mark.skipif(not KUKA_DATA.is_dir(), reason="../shared/data/kuka_kr300_weigand2021 absent")
+@pytest.mark.parametrize("method", ["wls", "iv"])
+def test_kuka_paper_model_is_refused_as_not_identifiable(tmp_path, capfd, method):
+    """One payload, no load change: the paper model's generator-quadrant terms have no
+    excitation; the fit says so in one line (no numbers, no JSON) with LS/WLS and IV alike."""
+    f = KUKA_DATA / "recorded_2020-10-21_FF_A_08ms.mat"
+    out_json = tmp_path / "kuka_paper.json"
+    code, out, err = run_cli(capfd, "--robot", KUKA, f, "--q-unit", "deg", "--map", KUKA_MAP,
+                             "--model", "paper", "--method", method, "--json", out_json)
+    assert code != 0
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "not identifiable" in lines[0], err
+    assert not out_json.exists()

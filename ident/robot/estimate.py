@@ -45,6 +45,7 @@ from .paper import (
     paper_start,
     usual_coefficients,
 )
+from .quadrants import QuadrantStore
 from .regressor import RobotRegressor
 from .signals import RobotSignals
 
@@ -59,6 +60,15 @@ RANK_TOL = 1e-12
 #: Fraction of the rows whose quadrant may still change when the passes stop
 #: (``quadrant="model"``); such rows have tau_out ~ 0, where the quadrant hardly matters.
 QUADRANT_TOL = 1e-4
+
+#: ``quadrant="model"`` on more samples than this: the starting fit reads every stride-th
+#: row (stride = samples // START_ROWS); it only gives the first theta: the quadrants are then
+#: re-decided on every row until fewer than QUADRANT_TOL of them change.
+START_ROWS = 100_000
+
+#: Rows kept per joint to re-decide the model quadrants without a pass
+#: (:mod:`ident.robot.quadrants`): at most this fraction of the samples (and one chunk).
+STORE_FRACTION = 0.05
 
 Coeffs = Callable[[np.ndarray, np.ndarray, int], tuple[np.ndarray, ...]]
 
@@ -121,9 +131,15 @@ class RobotModel:
     fixed_ : dict
         Parameters held fixed (paper model without payload torque).
     n_passes_, n_iter_ : int
-        Data passes and Gauss-Newton iterations of the final fit.
+        Data passes (the start pass counted as one, even on every ``start_stride_``-th row)
+        and Gauss-Newton iterations of the final fit.
+    start_stride_ : int
+        Rows read by the start pass: every start_stride_-th (``START_ROWS``).
+    n_store_updates_ : int
+        Quadrant re-decisions made on the stored near-boundary rows instead of a pass
+        (:mod:`ident.robot.quadrants`).
     quadrant_changes_ : list of int
-        Samples whose quadrant changed at each extra pass (``quadrant="model"``).
+        Samples whose quadrant changed at each re-decision (``quadrant="model"``).
     """
 
     def __init__(
@@ -225,8 +241,9 @@ class RobotModel:
         return cols
 
     # ------------------------------------------------------------------ data pass
-    def _chunks(self, signals: Any):
-        """Yield (sig, rows, q, dq, ddq, tau, ddq_ref or None, payload) per chunk."""
+    def _chunks(self, signals: Any, stride: int = 1):
+        """Yield (sig, rows, q, dq, ddq, tau, ddq_ref or None, payload) per chunk; every
+        ``stride``-th row of each experiment only when ``stride`` > 1."""
         items = [signals] if isinstance(signals, RobotSignals) else list(signals)
         if not items:
             raise RobotIdentError("RobotModel.fit: no signals")
@@ -244,7 +261,8 @@ class RobotModel:
                     if sig.q_ref is None:
                         raise RobotIdentError(f"{sig.source or 'RobotSignals'}: method 'iv' "
                                               f"needs q_ref (reference trajectory)")
-                    zr = _ref_acceleration(sig.t[rows], sig.q_ref[rows])
+                    zr = _ref_acceleration(sig.t[rows], sig.q_ref[rows])[::stride]
+                rows = rows[::stride]
                 pay = sig.payloads[int(e)]
                 contiguous = rows.size and rows[-1] - rows[0] + 1 == rows.size
                 for a in range(0, rows.size, int(self.chunk_size)):
@@ -285,15 +303,28 @@ class RobotModel:
         return VT
 
     def _pass(self, signals: Any, theta: np.ndarray | None, powers: int,
-              theta_prev: np.ndarray | None = None) -> tuple[list[JointMoments], int, int]:
+              theta_prev: np.ndarray | None = None, capacity: int = 0,
+              gram_from: list[JointMoments] | None = None, stride: int = 1,
+              ) -> tuple[list[JointMoments], int, int, list[QuadrantStore] | None]:
         """One pass: the moments of every joint; quadrants from ``theta`` (model) or tau.
 
-        Returns the moments, the number of rows, and how many rows are in another quadrant
-        than with ``theta_prev`` (counted on the fly: nothing of size n is kept)."""
+        Returns the moments, the number of rows, how many rows are in another quadrant
+        than with ``theta_prev`` (counted on the fly: nothing of size n is kept), and with
+        ``theta`` and ``capacity`` > 0 the per-joint :class:`QuadrantStore` of the rows
+        nearest to their quadrant boundary (:mod:`ident.robot.quadrants`), in the metric of
+        the base columns' Gram matrices of ``gram_from`` (moments of the same rows).
+        ``stride`` > 1: every stride-th row only (the start of ``quadrant="model"``)."""
         iv = self.method == "iv"
         moms = [JointMoments(c, iv=iv, powers=powers) for c in self.cols_]
+        stores = None
+        if theta is not None and capacity > 0:
+            grams = [None] * len(self.cols_) if gram_from is None else [
+                (m.vv[0, 0, :len(c), :len(c)] + m.vv[1, 0, :len(c), :len(c)]) / max(m.n, 1)
+                for m, c in zip(gram_from, self.cols_, strict=True)]
+            stores = [QuadrantStore(theta[c], capacity, g)
+                      for c, g in zip(self.cols_, grams, strict=True)]
         rows = changed = 0
-        for _sig, _r, q, dq, ddq, tau, zdd, pay in self._chunks(signals):
+        for _sig, _r, q, dq, ddq, tau, zdd, pay in self._chunks(signals, stride):
             W, p = self._rows(q, dq, ddq, tau, pay)
             Wz = pz = None
             if iv:
@@ -315,7 +346,8 @@ class RobotModel:
                 if theta is None:
                     sp = tauo * dqo
                 else:
-                    sp = (theta[cols] @ WjT + po) * dqo
+                    tout = theta[cols] @ WjT + po
+                    sp = tout * dqo
                 pplus = quadrant_weights(sp)
                 rows += sp.size
                 if theta_prev is not None:
@@ -323,7 +355,21 @@ class RobotModel:
                     changed += int(np.count_nonzero(np.sign(sp) != np.sign(spp)))
                 E = np.exp(-np.abs(dqo) / self.qs_[j])
                 moms[j].add(VT, pplus, E, VzT)
-        return moms, rows, changed
+                if stores is not None:
+                    stores[j].offer(VT, VzT, E, pplus, tout)
+        return moms, rows, changed, stores
+
+    @staticmethod
+    def _n_samples(signals: Any) -> int:
+        items = [signals] if isinstance(signals, RobotSignals) else list(signals)
+        return sum(int(np.shape(getattr(s, "t", ()))[0]) for s in items
+                   if isinstance(s, RobotSignals))
+
+    def _store_capacity(self, signals: Any) -> int:
+        """Rows kept per joint for the incremental quadrant updates: at most
+        ``STORE_FRACTION`` of the samples and one chunk (memory ~ one chunk's rows)."""
+        n = self._n_samples(signals)
+        return int(min(np.ceil(STORE_FRACTION * n), int(self.chunk_size)))
 
     # ------------------------------------------------------------------ solver
     def _local(self, j: int) -> np.ndarray:
@@ -361,12 +407,17 @@ class RobotModel:
         As = Af / d[:, None] / d[None, :]
         if self.method != "iv":
             ev, evec = np.linalg.eigh(As)
-            if ev[0] <= RANK_TOL * ev[-1]:
-                worst = np.argsort(-np.abs(evec[:, 0]))[:4]
-                names = [self.names_[i] for i in np.flatnonzero(free)[worst]]
-                raise RobotIdentError(f"parameters not identifiable on these data (cond "
-                                      f"{ev[-1] / max(ev[0], 1e-300):.2g}); the weakest "
-                                      f"direction involves {names}")
+            lo, hi, weak = ev[0], ev[-1], evec[:, 0]
+        else:
+            # IDIM-IV: A = Z^T W is not symmetric; its smallest singular value decides
+            _, sv, vt = np.linalg.svd(As)
+            lo, hi, weak = sv[-1], sv[0], vt[-1]
+        if not np.isfinite(hi) or lo <= RANK_TOL * hi:
+            worst = np.argsort(-np.abs(weak))[:4]
+            names = [self.names_[i] for i in np.flatnonzero(free)[worst]]
+            raise RobotIdentError(f"parameters not identifiable on these data (cond "
+                                  f"{hi / max(lo, 1e-300):.2g}); the weakest "
+                                  f"direction involves {names}")
         step = np.zeros_like(g)
         step[free] = scipy.linalg.solve(As, g[free] / d) / d
         return step
@@ -461,8 +512,15 @@ class RobotModel:
         self._setup()
         k, pb = len(self.joints_), self.n_base_
         paper = self.model == "paper"
-        moms, _, _ = self._pass(signals, None, 3 if paper else 1)
+        # quadrant="model": the start (usual fit, paper fit with the measured quadrants) only
+        # needs a first theta; on large data it is taken on every stride-th row, and the full
+        # pass with the model quadrants follows (module constant START_ROWS)
+        stride = 1
+        if paper and self.quadrant == "model" and int(self.max_passes) > 0:
+            stride = max(1, self._n_samples(signals) // int(START_ROWS))
+        moms, _, _, _ = self._pass(signals, None, 3 if paper else 1, stride=stride)
         passes = 1
+        self.start_stride_ = stride
         # usual model (also the paper model's starting point)
         nbu = len(USUAL_BLOCK)
         saved = self.block_, self.names_
@@ -475,6 +533,7 @@ class RobotModel:
         self.block_, self.names_ = saved
         self.fixed_: dict[str, float] = {}
         self.quadrant_changes_: list[int] = []
+        self.n_store_updates_ = 0
         if not paper:
             self._statistics(moms, usual_coefficients, xu, free_u, wu)
             self.weights_ = wu
@@ -492,18 +551,30 @@ class RobotModel:
             free[pb] = False  # a_m of the first joint: scale of theta (paper module doc)
             self.fixed_ = {self.names_[pb]: 1.0}
         x, w, it = self._fit_on(moms, paper_coefficients, x, free, linear=False)
-        if self.quadrant == "model":
-            prev = None
-            for _ in range(int(self.max_passes)):
+        if self.quadrant == "model" and int(self.max_passes) > 0:
+            cap = self._store_capacity(signals)
+            theta_q = x[:pb].copy()  # the theta that decided the moments' quadrants
+            moms, rows, _, stores = self._pass(signals, theta_q, 3, capacity=cap,
+                                               gram_from=moms)
+            passes += 1
+            x, w, it = self._fit_on(moms, paper_coefficients, x, free, linear=False)
+            for _ in range(int(self.max_passes) - 1):
                 theta = x[:pb].copy()
-                moms, rows, changed = self._pass(signals, theta, 3, prev)
-                passes += 1
+                if stores is not None and all(
+                        st.covers(theta[c]) for st, c in zip(stores, self.cols_, strict=True)):
+                    # no row outside the stores can flip: update by the flipped rows only
+                    changed = sum(st.update(theta[c], m) for st, c, m in
+                                  zip(stores, self.cols_, moms, strict=True))
+                    self.n_store_updates_ += 1
+                else:
+                    moms, rows, changed, stores = self._pass(signals, theta, 3, theta_q,
+                                                             capacity=cap, gram_from=moms)
+                    passes += 1
+                theta_q = theta
                 x, w, it = self._fit_on(moms, paper_coefficients, x, free, linear=False)
-                if prev is not None:
-                    self.quadrant_changes_.append(changed)
-                    if changed <= QUADRANT_TOL * rows:
-                        break
-                prev = theta
+                self.quadrant_changes_.append(changed)
+                if changed <= QUADRANT_TOL * rows:
+                    break
         self._statistics(moms, paper_coefficients, x, free, w)
         self.weights_ = w
         self.n_passes_, self.n_iter_ = passes, it

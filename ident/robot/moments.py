@@ -108,6 +108,25 @@ class JointMoments:
                     for e in range(1, self.powers):
                         self._add(s, e, ab, azb, wb * eb**e)
 
+    def move(self, VT: np.ndarray, dplus: np.ndarray, E: np.ndarray,
+             VzT: np.ndarray | None = None) -> None:
+        """Move rows between the quadrants: P+ of the rows VT (nv, m) changed by ``dplus``
+        (m,) (new - old), so their terms are added to s = 0 with weight dplus and to s = 1
+        with -dplus (the row count does not change)."""
+        if VT.shape[1] == 0:
+            return
+        if self.iv and VzT is None:
+            raise RobotIdentError("JointMoments.move: instrument rows missing for IDIM-IV")
+        for s, w in ((0, dplus), (1, -dplus)):
+            self._add(s, 0, VT, VzT, w)
+            if self.powers > 1:
+                big = E > E_TINY
+                if big.any():
+                    ab, eb, wb = VT[:, big], E[big], w[big]
+                    azb = None if VzT is None else VzT[:, big]
+                    for e in range(1, self.powers):
+                        self._add(s, e, ab, azb, wb * eb**e)
+
     def _add(self, s: int, e: int, a: np.ndarray, az: np.ndarray | None,
              w: np.ndarray) -> None:
         aw = a * w

@@ -1,0 +1,140 @@
+"""Incremental re-decision of the model quadrants (``RobotModel(quadrant="model")``) without
+new passes over the data.
+
+With ``quadrant="model"`` the quadrant of row i of joint j is sign(P_out) =
+sign(tau_out_hat_ij dq_ij), tau_out_hat_ij = W_ij theta + p_ij (eq. 27-28 with the model's
+output torque), so it moves with the estimate of theta. Instead of re-evaluating the regressor
+on every sample at each re-decision, one pass with a reference theta_0 keeps, per joint, the
+rows closest to their quadrant boundary in theta-space::
+
+    r_ij = |W_ij theta_0 + p_ij| / ||L^-1 W_ij^T||     (distance of theta_0 to the hyperplane
+                                                      W_ij theta + p_ij = 0 in the metric G)
+
+with G = L L^T = sum_i W_ij^T W_ij / m_j the joint's Gram matrix of the base columns (from the
+previous pass; any symmetric positive definite G gives a valid bound, this one makes it scale-
+invariant: ||L^T (theta - theta_0)|| is the RMS change of tau_out_hat over the joint's rows).
+For any theta, |W_ij (theta - theta_0)| <= ||L^-1 W_ij^T|| ||L^T (theta - theta_0)||
+(Cauchy-Schwarz), so a row with r_ij > ||L^T (theta_j - theta_0,j)|| (theta_j: the joint's base
+columns) keeps its quadrant. The store keeps the rows of smallest r (at most ``capacity``) and
+R_j = the smallest r of the rows it dropped: while ||L^T (theta_j - theta_0,j)|| < R_j (with a
+rounding margin) every row outside the store provably keeps its quadrant, and the quadrants of
+the stored rows are re-decided exactly; the moments are updated by the flipped rows only
+(:meth:`JointMoments.move`). When the bound fails the caller makes a new full pass (a new
+theta_0). The result is the same as with full passes at every re-decision, up to rounding.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .moments import IDQ, IP, JointMoments, quadrant_weights
+
+__all__ = ["QuadrantStore", "MARGIN"]
+
+#: Relative safety margin on the bound (rounding of tau_out_hat in the two evaluations).
+MARGIN = 1e-6
+
+
+class QuadrantStore:
+    """Rows of one joint nearest to their quadrant boundary (module doc).
+
+    Parameters
+    ----------
+    theta0 : ndarray (nt,)
+        The joint's base parameters used to decide the quadrants of the pass.
+    capacity : int
+        Rows kept at most (memory: capacity x nv floats, twice for IDIM-IV).
+    gram : ndarray (nt, nt) or None
+        Metric G of the bound (module doc); None: the identity (Euclidean norm).
+
+    Attributes
+    ----------
+    radius : float
+        R_j: smallest r of the rows not kept (inf while every row is kept).
+    VT, VzT : ndarray (nv, m)
+        Kept rows (transposed) and their instrument rows (IV) or None.
+    WT, p, dq, E, pplus : ndarray
+        Their regressor columns (nt, m), payload torque, velocity, E and current P+.
+    """
+
+    def __init__(self, theta0: np.ndarray, capacity: int,
+                 gram: np.ndarray | None = None) -> None:
+        self.theta0 = np.array(theta0, dtype=float)
+        nt = self.theta0.size
+        self.L = np.eye(nt)
+        if gram is not None and nt:
+            G = 0.5 * (gram + gram.T)
+            dmax = float(np.max(np.abs(np.diag(G)), initial=0.0))
+            # a ridge keeps G positive definite; it only loosens the bound
+            G = G + max(1e-9 * dmax, 1e-300) * np.eye(nt)
+            try:
+                self.L = np.linalg.cholesky(G)
+            except np.linalg.LinAlgError:
+                self.L = np.eye(nt)
+        self.Linv = np.linalg.inv(self.L) if nt else self.L
+        self.capacity = max(int(capacity), 0)
+        self.radius = np.inf
+        self.r = np.empty(0)
+        self.VT: np.ndarray | None = None
+        self.VzT: np.ndarray | None = None
+        self.E = np.empty(0)
+        self.pplus = np.empty(0)
+        self.nt = self.theta0.size
+
+    def offer(self, VT: np.ndarray, VzT: np.ndarray | None, E: np.ndarray,
+              pplus: np.ndarray, tau_out: np.ndarray) -> None:
+        """Offer the rows of one chunk (VT (nv, m), tau_out = W theta_0 + p (m,)); keeps the
+        ``capacity`` rows of smallest r over everything offered so far."""
+        nt = self.nt
+        U = self.Linv @ VT[:nt]
+        wn = np.sqrt(np.einsum("im,im->m", U, U))
+        a = np.abs(tau_out)
+        # ||W|| = 0: tau_out = p does not depend on theta, the row never changes quadrant
+        r = np.divide(a, wn, out=np.full(a.shape, np.inf), where=wn > 0)
+        cand = r < self.radius
+        if not cand.all():
+            dropped = r[~cand]
+            self.radius = min(self.radius, float(dropped.min()))
+        if not cand.any():
+            return
+        idx = np.flatnonzero(cand)
+        r_all = np.concatenate([self.r, r[idx]])
+        V_all = VT[:, idx] if self.VT is None else np.concatenate([self.VT, VT[:, idx]], 1)
+        Vz_all = None
+        if VzT is not None:
+            Vz_all = (VzT[:, idx] if self.VzT is None
+                      else np.concatenate([self.VzT, VzT[:, idx]], 1))
+        E_all = np.concatenate([self.E, E[idx]])
+        p_all = np.concatenate([self.pplus, pplus[idx]])
+        if r_all.size > self.capacity:
+            keep = np.argpartition(r_all, self.capacity)[:self.capacity] if self.capacity \
+                else np.empty(0, dtype=int)
+            mask = np.ones(r_all.size, dtype=bool)
+            mask[keep] = False
+            self.radius = min(self.radius, float(r_all[mask].min()))
+            r_all, V_all, E_all, p_all = r_all[keep], V_all[:, keep], E_all[keep], p_all[keep]
+            if Vz_all is not None:
+                Vz_all = Vz_all[:, keep]
+        self.r, self.VT, self.VzT, self.E, self.pplus = r_all, V_all, Vz_all, E_all, p_all
+
+    def covers(self, theta: np.ndarray) -> bool:
+        """True when no row outside the store can be in another quadrant at ``theta``."""
+        dist = np.linalg.norm(self.L.T @ (theta - self.theta0))
+        return bool(dist < self.radius * (1.0 - MARGIN))
+
+    def update(self, theta: np.ndarray, mom: JointMoments) -> int:
+        """Re-decide the stored rows' quadrants at ``theta``, move the flipped rows' terms in
+        ``mom``; returns how many rows changed quadrant."""
+        if self.VT is None or self.r.size == 0:
+            return 0
+        nt = self.nt
+        VT = self.VT
+        tau_out = theta @ VT[:nt] + VT[nt + IP]
+        pnew = quadrant_weights(tau_out * VT[nt + IDQ])
+        changed = pnew != self.pplus
+        n = int(np.count_nonzero(changed))
+        if n:
+            Vz = None if self.VzT is None else self.VzT[:, changed]
+            mom.move(VT[:, changed], pnew[changed] - self.pplus[changed], self.E[changed], Vz)
+            self.pplus = pnew
+        return n

@@ -1,0 +1,119 @@
+"""Incremental model-quadrant re-decision (ident.robot.quadrants, JointMoments.move): the bound
+that lets rows outside the store keep their quadrant, the moment update, and equality of the
+fit with the one that makes a full pass at every re-decision."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ident.robot import estimate
+from ident.robot.estimate import RobotModel
+from ident.robot.moments import IDQ, IP, N_EXTRA, JointMoments, quadrant_weights
+from ident.robot.quadrants import QuadrantStore
+from tests.test_robot_fit import _signals, _simulate
+
+
+def _rows(rng, m: int, nt: int):
+    """Random rows v^T (nv, m) with badly scaled base columns, like inertia vs mass columns."""
+    scale = 10.0 ** rng.uniform(-3, 2, nt)
+    VT = np.empty((nt + N_EXTRA, m))
+    VT[:nt] = rng.standard_normal((nt, m)) * scale[:, None]
+    VT[nt + IP] = rng.standard_normal(m)
+    dq = rng.standard_normal(m)
+    VT[nt:] = [VT[nt + IP], np.sign(dq), dq, np.ones(m), rng.standard_normal(m)]
+    return VT, np.exp(-np.abs(dq) / 0.3)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_rows_outside_the_store_keep_their_quadrant_while_covered(seed):
+    rng = np.random.default_rng(seed)
+    nt, m, cap = 6, 5000, 400
+    VT, E = _rows(rng, m, nt)
+    theta0 = rng.standard_normal(nt)
+    gram = VT[:nt] @ VT[:nt].T / m
+    tau0 = theta0 @ VT[:nt] + VT[nt + IP]
+    st = QuadrantStore(theta0, cap, gram)
+    for a in range(0, m, 777):  # chunked offers keep the cap smallest r of all rows
+        sl = slice(a, a + 777)
+        st.offer(VT[:, sl], None, E[sl], quadrant_weights(tau0[sl] * VT[nt + IDQ, sl]),
+                 tau0[sl])
+    assert st.r.size == cap
+    L = np.linalg.cholesky(gram + 1e-9 * np.max(np.diag(gram)) * np.eye(nt))
+    r_all = np.abs(tau0) / np.linalg.norm(np.linalg.solve(L, VT[:nt]), axis=0)
+    order = np.sort(r_all)
+    np.testing.assert_allclose(np.sort(st.r), order[:cap], rtol=1e-9)
+    assert st.radius == pytest.approx(order[cap], rel=1e-9)
+    stored = r_all < st.radius * (1 - 1e-9)  # the cap rows of smallest r
+    assert stored.sum() == cap
+    covered = 0
+    for scale in np.geomspace(1e-4, 10, 40):
+        d = rng.standard_normal(nt)
+        theta = theta0 + scale * d / np.linalg.norm(L.T @ d) * st.radius
+        tau = theta @ VT[:nt] + VT[nt + IP]
+        if st.covers(theta):
+            covered += 1
+            # no row outside the store changes sign
+            assert np.all(np.sign(tau[~stored]) == np.sign(tau0[~stored]))
+        else:
+            assert scale >= 1 - 1e-6
+    assert covered >= 20
+
+
+def test_move_equals_accumulating_in_the_new_quadrants():
+    rng = np.random.default_rng(3)
+    nt, m = 4, 3000
+    VT, E = _rows(rng, m, nt)
+    VzT = VT + 0.1 * rng.standard_normal(VT.shape)
+    p_old = quadrant_weights(rng.standard_normal(m))
+    p_new = p_old.copy()
+    flip = rng.random(m) < 0.1
+    p_new[flip] = 1.0 - p_new[flip]
+    p_new[:5] = 0.5  # P = 0 exactly
+    a = JointMoments(np.arange(nt), iv=True)
+    a.add(VT, p_old, E, VzT)
+    ch = p_new != p_old
+    a.move(VT[:, ch], (p_new - p_old)[ch], E[ch], VzT[:, ch])
+    b = JointMoments(np.arange(nt), iv=True)
+    b.add(VT, p_new, E, VzT)
+    for x, y in ((a.vv, b.vv), (a.zv, b.zv), (a.zz, b.zz)):
+        np.testing.assert_allclose(x, y, rtol=1e-10, atol=1e-10 * np.abs(y).max())
+    assert a.n == b.n == m
+
+
+@pytest.fixture(scope="module")
+def arm3_short():
+    params, reg, base, runs = _simulate("arm3", duration_s=8.0, seed=2)
+    return reg, base, _signals(params, reg, runs, 5)
+
+
+@pytest.mark.parametrize("method", ["wls", "iv"])
+def test_store_updates_give_the_fit_of_full_passes(arm3_short, method, monkeypatch):
+    """Same estimate and statistics with the stored rows as with a pass at each re-decision;
+    the store saves passes."""
+    reg, base, sigs = arm3_short
+    a = RobotModel(reg, "paper", method, base=base, quadrant="model").fit(sigs)
+    monkeypatch.setattr(estimate, "STORE_FRACTION", 0.0)
+    b = RobotModel(reg, "paper", method, base=base, quadrant="model").fit(sigs)
+    assert b.n_store_updates_ == 0
+    assert a.n_store_updates_ >= 1 and a.n_passes_ < b.n_passes_
+    assert a.quadrant_changes_ == b.quadrant_changes_
+    np.testing.assert_allclose(a.coef_, b.coef_, rtol=1e-7, atol=1e-9 * np.abs(b.coef_).max())
+    np.testing.assert_allclose(a.std_, b.std_, rtol=1e-6)
+
+
+def test_start_on_every_stride_th_row_gives_the_same_fit(arm3_short, monkeypatch):
+    """quadrant="model" on large data starts from a fit on every stride-th row; the quadrants
+    are then re-decided on every row, so the estimate is the one of a start on all rows."""
+    reg, base, sigs = arm3_short
+    a = RobotModel(reg, "paper", "wls", base=base, quadrant="model").fit(sigs)
+    assert a.start_stride_ == 1  # fewer rows than START_ROWS
+    monkeypatch.setattr(estimate, "START_ROWS", 5000)
+    b = RobotModel(reg, "paper", "wls", base=base, quadrant="model").fit(sigs)
+    assert b.start_stride_ >= 4
+    assert b.quadrant_changes_[-1] <= estimate.QUADRANT_TOL * b.n_samples_.sum()
+    # both stop with fewer than QUADRANT_TOL of the rows still flipping: a small fraction of
+    # a standard deviation apart
+    dz = np.abs(b.coef_ - a.coef_) / a.std_
+    assert dz.max() <= 0.1, dz.max()
+    np.testing.assert_allclose(b.std_, a.std_, rtol=1e-2)
