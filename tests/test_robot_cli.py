@@ -49,12 +49,13 @@ def arm_runs():
     return robot, runs
 
 
-def write_mcap(path: Path, run, joints, *, n_axes: int | None = None) -> Path:
+def write_mcap(path: Path, run, joints, *, n_axes: int | None = None,
+               payload: dict | None = None) -> Path:
     """A jointid run log of a simulated run: one /joint/<i>/state channel per drive."""
     k = run.q.shape[1] if n_axes is None else n_axes
     meta = {f"drive{i}": {"joint": joints[i] if i < len(joints) else f"x{i}"}
             for i in range(k)}
-    meta["payload"] = {"index": "0", "mass_kg": "0.0", "arm_m": "0.0"}
+    meta["payload"] = payload or {"index": "0", "mass_kg": "0.0", "arm_m": "0.0"}
     with RunLog(path, n_axes=k, cycle_s=float(run.t[1] - run.t[0]), metadata=meta) as log:
         for c in range(run.t.size):
             for i in range(k):
@@ -369,3 +370,23 @@ def test_kuka_paper_model_is_refused_as_not_identifiable(tmp_path, capfd, method
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "not identifiable" in lines[0], err
     assert not out_json.exists()
+
+
+def test_single_joint_lever_arm_is_refused_on_several_joints(tmp_path, arm_runs, capfd):
+    """A single-joint log's payload (mass at a lever arm, eq. 34-35, no CoM in the flange
+    frame) is read as such and refused on a 3-joint robot in one line naming the file; with a
+    CoM it is used."""
+    robot, (run, _) = arm_runs
+    f = write_mcap(tmp_path / "arm.mcap", run, robot.moving,
+                   payload={"index": "1", "mass_kg": "5.0", "arm_m": "0.4"})
+    (r,) = load_robot_runs([f], robot.moving)
+    assert r.payload.mass == 5.0 and r.payload.arm_m == 0.4 and not np.any(r.payload.com)
+    code, out, err = run_cli(capfd, "--robot", ARM3, f, "--model", "usual")
+    assert code != 0
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and str(f) in lines[0] and "arm_m = 0.4" in lines[0], err
+    g = write_mcap(tmp_path / "arm_com.mcap", run, robot.moving,
+                   payload={"index": "1", "mass_kg": "5.0", "arm_m": "0.4",
+                            "com_m": "[0.0, 0.0, 0.1]"})
+    (r,) = load_robot_runs([g], robot.moving)
+    assert r.payload.arm_m is None and r.payload.com[2] == 0.1

@@ -20,6 +20,7 @@ Phi^-1(1 - 0.01 / (2 P S)), and at least 95 % of all comparisons must be within 
 from __future__ import annotations
 
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +33,7 @@ from ident.loaders import concat, make_experiment
 from ident.models import new_model, usual_model
 from ident.preprocess import build_design
 from ident.robot import RobotIdentError
-from ident.robot.base import base_parameters, single_joint_map
+from ident.robot.base import base_parameters, lever_arm_payload, single_joint_map
 from ident.robot.consistency import check_consistency
 from ident.robot.estimate import RobotModel
 from ident.robot.regressor import RobotRegressor
@@ -350,6 +351,16 @@ def test_rx130l_joint3_robot_path_gives_single_joint_numbers():
     # standard deviations too (eq. 15, same rows)
     sd = dict(zip(ref.names, ref.std, strict=True))
     assert m.std_[m.names_.index("FV3")] == pytest.approx(sd["F_V"], rel=1e-6)
+    # the single-joint log's payload as it is logged (mass, lever arm L_a): placed by the
+    # estimator (lever_arm_payload) where the point mass above was put by hand
+    arms = tuple(RobotPayloadData(p.mass_kg, arm_m=p.arm_m) if p.mass_kg else
+                 RobotPayloadData() for p in plan.payloads)
+    placed = [lever_arm_payload(a, reg, base) for a in arms]
+    for a, b in zip(placed, pays, strict=True):
+        if b.mass:
+            np.testing.assert_allclose(a.com, b.com, atol=1e-9)
+    m2 = RobotModel(reg, "usual", base=base).fit(replace(sig, payloads=arms))
+    np.testing.assert_allclose(m2.coef_, m.coef_, rtol=1e-9, atol=1e-12)
 
 
 def test_robot_accepted_for_regressor(arm3_usual):

@@ -33,8 +33,10 @@ import scipy.linalg
 from ..signals import G
 from . import RobotIdentError
 from .regressor import RobotRegressor
+from .signals import RobotPayloadData
 
 __all__ = ["BaseParameters", "base_parameters", "SingleJointMap", "single_joint_map",
+           "lever_arm_payload",
            "DEFAULT_RTOL"]
 
 #: Relative rank tolerance on |R_ii| of the unit-norm columns.
@@ -308,3 +310,64 @@ def single_joint_map(base: BaseParameters, regressor: RobotRegressor,
         text = " ".join(terms) if terms else "0"
         exprs.append(f"{nm} = {text}")
     return SingleJointMap(tuple(names), T, tuple(exprs), res)
+
+
+def lever_arm_payload(payload: RobotPayloadData, regressor: RobotRegressor,
+                      base: BaseParameters, smap: SingleJointMap | None = None
+                      ) -> RobotPayloadData:
+    """Place a single-joint log's payload (mass M_a at lever arm L_a, eq. 34-35) on a robot
+    with one moving revolute joint: the point mass in the flange frame whose base parameters
+    add ``M_a L_a^2`` to J, ``M_a L_a`` to MX and nothing to MY of :func:`single_joint_map`.
+
+    Parameters
+    ----------
+    payload : RobotPayloadData
+        Returned unchanged when ``payload.arm_m`` is None.
+    regressor, base
+        The one-joint robot and its base parameters.
+    smap : SingleJointMap, optional
+        ``single_joint_map(base, regressor)`` (computed when not given).
+
+    Returns
+    -------
+    RobotPayloadData
+        Same mass, ``com`` [m] in the flange frame, no inertia about the CoM, ``arm_m`` None.
+
+    Raises
+    ------
+    RobotIdentError
+        More than one moving joint (the arm has no direction there), a prismatic joint, or no
+        point mass gives the single-joint payload columns.
+    """
+    if payload.arm_m is None:
+        return payload
+    if regressor.k != 1:
+        raise RobotIdentError(f"payload of {payload.mass} kg with a single-joint lever arm "
+                              f"(arm_m = {payload.arm_m} m): on {regressor.k} moving joints "
+                              "the arm has no direction; give the payload's CoM in the flange "
+                              "frame (metadata payload.com_m)")
+    smap = single_joint_map(base, regressor) if smap is None else smap
+    if smap.names[:3] != ("J", "MX", "MY"):
+        raise RobotIdentError(f"payload lever arm (arm_m = {payload.arm_m} m): joint "
+                              f"{regressor.joints[0]} is not revolute")
+    m, arm = payload.mass, payload.arm_m
+    if m == 0.0:
+        return RobotPayloadData()
+    n_std = len(base.standard_names)
+    last = (regressor.k - 1) * (regressor.p // regressor.k)
+
+    def single(c: np.ndarray) -> np.ndarray:
+        chi = np.zeros(n_std)
+        chi[last:last + 10] = regressor.payload_parameters(RobotPayloadData(m, c))
+        return smap.matrix[:3] @ base.values(chi)  # (J, MX, MY) of the point mass at c
+
+    f0 = single(np.zeros(3))
+    A = np.column_stack([single(e)[1:] - f0[1:] for e in np.eye(3)])
+    com, *_ = np.linalg.lstsq(A, np.array([m * arm, 0.0]) - f0[1:], rcond=None)
+    got = single(com)
+    want = np.array([m * arm**2, m * arm, 0.0])
+    if not np.allclose(got, want, rtol=1e-9, atol=1e-9 * max(1.0, float(np.abs(want).max()))):
+        raise RobotIdentError(f"payload lever arm (arm_m = {arm} m): no point mass on the "
+                              f"flange of {regressor.joints[0]} adds (J, MX, MY) = "
+                              f"{tuple(want)}")
+    return RobotPayloadData(m, com)

@@ -36,7 +36,7 @@ import numpy as np
 import scipy.linalg
 
 from . import RobotIdentError
-from .base import base_parameters
+from .base import base_parameters, lever_arm_payload
 from .moments import IDQ, IP, ISG, N_EXTRA, ONE, JointMoments, quadrant_weights
 from .paper import (
     PAPER_BLOCK,
@@ -216,6 +216,7 @@ class RobotModel:
         self.joints_ = joints
         self.numbers_ = tuple(int(n) for n in reg.numbers)
         self.cols_ = self._structure()
+        self._placed: dict[tuple[float, float], Any] = {}  # lever-arm payloads, placed
         self.n_base_ = len(tuple(base.names))
         block = USUAL_BLOCK if self.model == "usual" else PAPER_BLOCK
         self.block_ = block
@@ -264,6 +265,16 @@ class RobotModel:
                     zr = _ref_acceleration(sig.t[rows], sig.q_ref[rows])[::stride]
                 rows = rows[::stride]
                 pay = sig.payloads[int(e)]
+                if pay.arm_m is not None:  # a single-joint log's lever arm (eq. 34-35)
+                    key = (pay.mass, pay.arm_m)
+                    if key not in self._placed:
+                        try:
+                            self._placed[key] = lever_arm_payload(pay, self.regressor_,
+                                                                  self.base_)
+                        except RobotIdentError as err:
+                            raise RobotIdentError(f"{sig.source or 'RobotSignals'}: "
+                                                  f"{err}") from None
+                    pay = self._placed[key]
                 contiguous = rows.size and rows[-1] - rows[0] + 1 == rows.size
                 for a in range(0, rows.size, int(self.chunk_size)):
                     if contiguous:  # views, no copies

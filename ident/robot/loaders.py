@@ -14,7 +14,9 @@ MCAP (``jointid run`` logs)
     the axis (checked against the robot). Only the cycles where *every* drive was in
     OPERATION ENABLED are kept (longest common stretch). The ``/setpoint`` channel carries
     one reference, used as ``q_ref`` only for a one-axis log. Payload: metadata ``payload``
-    ``mass_kg`` and optional ``com_m`` (JSON list, flange frame).
+    ``mass_kg`` and optional ``com_m`` (JSON list, flange frame); a single-joint log's
+    ``arm_m`` (lever arm, eq. 34-35) when there is no ``com_m`` (placed on a one-joint robot,
+    refused on several).
 CSV (header row)
     ``t, q1..qk, tau1..tauk`` (numbered in the robot's moving order) or named by joint
     ``q_<joint>, tau_<joint>``; optional ``q_ref*`` (IV instruments), ``dq*`` and ``ddq*``
@@ -262,10 +264,20 @@ def _load_mcap(path: Path, joints: Sequence[str]) -> RawRobotRun:
     except ValueError:
         raise RobotIdentError(f"{path}: metadata payload.mass_kg {meta.get('mass_kg')!r}: "
                               "expected a number [kg]") from None
+    arm = None
+    if meta.get("com_m") is None and meta.get("arm_m") is not None and np.isfinite(mass) \
+            and mass > 0:
+        # a single-joint log: lever arm L_a, placed on a one-joint robot by the estimator
+        try:
+            arm = float(meta["arm_m"])
+        except ValueError:
+            raise RobotIdentError(f"{path}: metadata payload.arm_m {meta['arm_m']!r}: "
+                                  "expected a number [m]") from None
     payload = RobotPayloadData(
         mass=mass if np.isfinite(mass) else 0.0,
         com=_json_vector(meta.get("com_m"), 3, "payload.com_m", str(path)),
         inertia=_json_vector(meta.get("inertia_kgm2"), 6, "payload.inertia_kgm2", str(path)),
+        arm_m=arm,
     )
     return _make_run(
         str(path),

@@ -353,6 +353,11 @@ class RobotRegressor:
     def payload_parameters(self, payload: RobotPayloadData) -> np.ndarray:
         """Standard parameters (XX..M, (10,)) of a payload in the frame of the last moving
         joint, about its origin (eq. 32-33 generalised: rotation to the link axes, Huygens)."""
+        if payload.arm_m is not None:
+            raise RobotIdentError(f"payload of {payload.mass} kg: a single-joint lever arm "
+                                  f"(arm_m = {payload.arm_m} m) has no place on the robot; "
+                                  "place it with ident.robot.base.lever_arm_payload (one "
+                                  "moving joint) or give its CoM in the flange frame")
         xx, xy, xz, yy, yz, zz = payload.inertia
         i_c = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
         pl = self.flange_placement
