@@ -79,6 +79,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "variables on the reference q_ref (default wls)",
     )
     p.add_argument(
+        "--known-rotor-inertia",
+        action="store_true",
+        help="--robot only: take the rotor inertias the robot file gives (rotor_inertia) as "
+        "known instead of identifying Ia_j",
+    )
+    p.add_argument(
         "--joint",
         choices=("revolute", "prismatic"),
         help="joint kind (default: MCAP metadata; revolute for CSV/MAT)",
@@ -188,6 +194,9 @@ def run(args: argparse.Namespace) -> int:
     if args.method is not None:
         raise DataError("--method: applies to --robot fits only (one joint: IDIM-IV when the "
                         "inputs carry q_ref, else least squares)")
+    if args.known_rotor_inertia:
+        raise DataError("--known-rotor-inertia: applies to --robot fits only (one joint: J "
+                        "includes the rotor)")
     if args.model == "paper":
         args.model = "new"
     mapping = parse_mapping(args.map)

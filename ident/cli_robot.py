@@ -36,6 +36,7 @@ from .robot.loaders import (
     resolved_settings,
 )
 from .robot.plots import write_robot_report
+from .robot.regressor import RobotRegressor
 from .robot.signals import RobotSignals
 from .robot.tables import format_table_iii, table_iii
 
@@ -89,6 +90,7 @@ def fit_robot(
     qs: float = 0.03,
     dq_min: float | None = None,
     preprocessing: RobotPreprocessing | None = None,
+    known_rotor_inertia: bool = False,
 ) -> dict[str, Any]:
     """Preprocess, fit each model, cross-validate; the JSON record (no file written).
 
@@ -109,6 +111,9 @@ def fit_robot(
         Stiction area |dq_j| <= dq_min left out of joint j's rows [rad/s]; None: 1 % of the
         largest |dq| of the identification data.
     preprocessing : RobotPreprocessing or None
+    known_rotor_inertia : bool
+        Rotor inertias of the robot file known, not identified
+        (:class:`~ident.robot.regressor.RobotRegressor`).
 
     Returns
     -------
@@ -117,6 +122,7 @@ def fit_robot(
         and the signals under ``"_signals"`` (not serialised).
     """
     joints = robot.moving
+    reg = RobotRegressor(robot, known_rotor_inertia=known_rotor_inertia)
     settings = resolved_settings(runs, preprocessing)
     pre = RobotPreprocessing(settings["cutoff_hz"], int(settings["decimation"]),
                              int(settings["trim"]))
@@ -142,6 +148,7 @@ def fit_robot(
         "preprocessing": {**settings, "dq_min": dq_min, "samples": sig.n,
                           "validation_samples": 0 if val is None else val.n},
         "method": method,
+        "known_rotor_inertia": bool(known_rotor_inertia),
         "qs": qs,
         "models": {},
         "_estimators": {},
@@ -150,7 +157,7 @@ def fit_robot(
     }
     for name in models:
         try:
-            est = RobotModel(robot, model=name, method=method, qs=qs, dq_min=dq_min).fit(sig)
+            est = RobotModel(reg, model=name, method=method, qs=qs, dq_min=dq_min).fit(sig)
         except IdentError as exc:
             if len(models) == 1:
                 raise
@@ -276,7 +283,8 @@ def run(args: argparse.Namespace) -> int:
     val = load_robot_runs(args.validate, robot.moving, **kw) if args.validate else None
     pre = RobotPreprocessing(args.cutoff, args.decimation, args.trim)
     out = fit_robot(robot, runs, val, models=models, method=args.method, qs=qs,
-                    dq_min=args.dq_min, preprocessing=pre)
+                    dq_min=args.dq_min, preprocessing=pre,
+                    known_rotor_inertia=args.known_rotor_inertia)
     text = format_report(out)
     public = _public(out)
     # everything computed: only now write files (a bad input leaves nothing behind)

@@ -26,6 +26,7 @@ from ident.robot.loaders import (
     load_robot_signals,
     preprocess_runs,
 )
+from ident.robot.regressor import RobotRegressor
 from sim_drivers.arm import ArmGains, ArmParams, Payload, model_reference, simulate_arm
 from trajectories.robot import load_robot
 
@@ -390,3 +391,31 @@ def test_single_joint_lever_arm_is_refused_on_several_joints(tmp_path, arm_runs,
                             "com_m": "[0.0, 0.0, 0.1]"})
     (r,) = load_robot_runs([g], robot.moving)
     assert r.payload.arm_m is None and r.payload.com[2] == 0.1
+
+
+def test_known_rotor_inertia_through_the_cli(tmp_path, arm_runs, capfd):
+    """--known-rotor-inertia: no Ia among the parameters, the estimator with
+    RobotRegressor(known_rotor_inertia=True) in Python gives the same JSON; refused in one
+    line without --robot."""
+    robot, (run0, _) = arm_runs
+    f = tmp_path / "fit.csv"
+    run0.to_csv(f)
+    out_json = tmp_path / "fit.json"
+    code, out, err = run_cli(capfd, "--robot", ARM3, f, "--model", "usual", "--method", "ls",
+                             "--known-rotor-inertia", "--json", out_json)
+    assert code == 0, err
+    rec = json.loads(out_json.read_text())
+    assert rec["known_rotor_inertia"] is True
+    pars = rec["models"]["usual"]["parameters"]
+    pre = RobotPreprocessing(rec["preprocessing"]["cutoff_hz"],
+                             rec["preprocessing"]["decimation"], rec["preprocessing"]["trim"])
+    sig = load_robot_signals(f, robot.moving, preprocessing=pre)
+    reg = RobotRegressor(robot, known_rotor_inertia=True)
+    est = RobotModel(reg, model="usual", method="ls",
+                     dq_min=rec["preprocessing"]["dq_min"]).fit(sig)
+    assert list(pars) == list(est.names_)
+    assert not any(n.startswith("Ia") for n in pars)
+    np.testing.assert_allclose([v["value"] for v in pars.values()], est.coef_, rtol=1e-9,
+                               atol=1e-12)
+    code, out, err = run_cli(capfd, f, "--known-rotor-inertia")
+    assert code != 0 and "--known-rotor-inertia" in err and len(err.strip().splitlines()) == 1

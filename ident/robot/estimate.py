@@ -287,7 +287,8 @@ class RobotModel:
 
     def _rows(self, q, dq, ddq, tau, pay) -> tuple[np.ndarray, np.ndarray]:
         """Regressor (k, p or pb, m) -- row j's base columns are ``W[j, std_cols_[j]]`` --
-        and payload torque (m, k) of a chunk."""
+        and known torque (m, k) of a chunk: the payload's plus, with
+        ``RobotRegressor(known_rotor_inertia=True)``, the known rotors' Ia_j ddq_j."""
         reg = self.regressor_
         if self._kpn:  # standard columns, (k, p, m): joint j reads W[j, self.std_cols_[j]]
             W = np.asarray(reg.rigid_kpn(q, dq, ddq))
@@ -298,6 +299,9 @@ class RobotModel:
             p = np.asarray(reg.payload_torque(q, dq, ddq, pay), dtype=float)
         else:
             p = np.zeros(q.shape)
+        known = getattr(reg, "known_Ia", None)
+        if known is not None and np.any(known):  # known rotor inertias (RobotRegressor)
+            p = p + reg.known_torque(ddq)
         return W, p
 
     @staticmethod

@@ -198,6 +198,12 @@ class RobotRegressor:
         Pinocchio frame of the reduced model the payload is fixed to (a frame on the last
         moving link, e.g. the name of a locked joint after it, or ``"tool0"`` of a URDF);
         default: the joint frame of the last moving joint (the simulator's default).
+    known_rotor_inertia : bool
+        Take the rotor inertias the robot file gives (``rotor_inertia``: Ia_j = N_j^2 J_m) as
+        known: their columns are zero (no ``Ia{j}`` among the base parameters) and their
+        torque ``Ia_j ddq_j`` is :meth:`known_torque`, which the estimator subtracts like a
+        known payload. Default False: every Ia_j is identified (regrouped with ZZ_j where
+        the structure demands it).
 
     Attributes
     ----------
@@ -218,7 +224,8 @@ class RobotRegressor:
         Payload frame in the frame of the last moving joint.
     """
 
-    def __init__(self, robot: Robot, flange: str | None = None) -> None:
+    def __init__(self, robot: Robot, flange: str | None = None, *,
+                 known_rotor_inertia: bool = False) -> None:
         self.robot = robot
         self.model = robot.reduced()
         self.joints = tuple(robot.moving)
@@ -239,7 +246,15 @@ class RobotRegressor:
         z = np.zeros((self.k, 1))
         self._written = {(j, _P * i + c) for j, i, vals in self._pairs(z, z, z)
                          for c, v in enumerate(vals) if v is not None}
-        self._written |= {(i, _P * i + 10) for i in range(self.k)}
+        # rotor inertias given by the robot file (N^2 J_m) are known with
+        # known_rotor_inertia: their torque Ia ddq goes to known_torque, their column is 0
+        self.known_Ia = np.zeros(self.k)
+        if known_rotor_inertia:
+            for i, name in enumerate(self.joints):
+                d = robot.drives.get(name)
+                if d is not None and d.Ia is not None:
+                    self.known_Ia[i] = float(d.Ia)
+        self._written |= {(i, _P * i + 10) for i in range(self.k) if self.known_Ia[i] == 0.0}
 
     @property
     def p(self) -> int:
@@ -307,9 +322,17 @@ class RobotRegressor:
                         out[j, pc, s:e] = v
             for i in range(self.k):
                 pc = pos[_P * i + 10]
-                if pc >= 0:
+                if pc >= 0 and self.known_Ia[i] == 0.0:
                     out[i, pc, s:e] = ddq[s:e, i]
         return out
+
+    def known_torque(self, ddq: np.ndarray) -> np.ndarray:
+        """Torque of the known rotor inertias, ``Ia_j ddq_j`` (n, k) [N m] (zero for the
+        joints whose Ia is identified; all zero without ``known_rotor_inertia``)."""
+        ddq = np.asarray(ddq, dtype=float)
+        if ddq.ndim == 1 and self.k == 1:
+            ddq = ddq[:, None]
+        return ddq * self.known_Ia
 
     def friction(self, dq: np.ndarray) -> np.ndarray:
         """Usual friction columns (eq. 5-6) ``FC sign(dq) + FV dq + OFF`` per joint.
