@@ -1,5 +1,8 @@
 """Excitation plans: Ruckig jerk-limited moves and exact sinusoids, sampled at the control cycle.
 
+(Past 600 lines: one sampled plan -- its types, the Ruckig moves, the exact sinusoids and
+the limit checks they share.)
+
 The paper (Hamon, Gautier & Garrec, section IV.B) excites friction with trapezoidal-velocity
 and sinusoidal trajectories, with and without payloads. Identification needs many samples at
 low velocity (0-10 % of max speed, where dry friction changes), the whole position range

@@ -1,5 +1,8 @@
 """Plan execution: the engine that runs a planned campaign on CANopen drives, cycle by cycle.
 
+(Just past 600 lines: the cycle loop and the per-cycle exchange it drives; orchestration
+is runner.py, supervision safety.py.)
+
 Orchestration (bus, start-up, payload loop, operator) is :mod:`daq.runtime.runner`; the stop
 sequence and the watchdogs are :mod:`daq.runtime.safety`; the frame bookkeeping is
 :mod:`daq.runtime.cycle_io`.

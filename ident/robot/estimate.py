@@ -1,4 +1,8 @@
 """IDIM estimators of an n-dof robot: :class:`RobotModel` (usual or paper friction on every
+
+(Past 600 lines: one estimator class -- setup, the chunked data pass, the Gauss-Newton
+solver on the moments, the statistics and prediction share its fitted state; the moments, the
+paper's coefficients and the quadrant store are their own modules.)
 joint; LS, WLS or IV), scikit-learn style.
 
 Model (eq. 8-10 on every joint j, base parameters theta shared by all joints)::

@@ -1,5 +1,8 @@
 """Loading multi-axis experiments: MCAP logs, CSV and MATLAB files -> :class:`RobotSignals`.
 
+(Past 600 lines: the one module of ident.robot that reads files, by format -- MCAP, CSV,
+MAT -- and the preprocessing chain they share.)
+
 Each input file is one experiment (one payload run) of the k moving joints of a robot. The
 axes of the file must match the moving joints of the robot file, in number and -- where the
 file names its axes -- by name; otherwise a one-line :class:`~ident.robot.RobotIdentError`

@@ -1,5 +1,8 @@
 """Vectorised Newton-Euler regressor of the standard parameters (paper eq. 9), n samples.
 
+(Just past 600 lines: one class -- the vectorised Newton-Euler recursion and the column
+bookkeeping it needs to stay fast belong together.)
+
 For the k moving joints of a :class:`trajectories.robot.Robot`, the joint-side torque is
 linear in the standard parameters of every moving link (Khalil's convention, frame j of the
 reduced pinocchio model, eq. 9)::
