@@ -19,7 +19,6 @@ import matplotlib
 
 from daq import DaqError, __version__, examples
 from daq.runtime.progress import ProgressLine
-from daq.runtime.runner import Progress, run_campaign
 from ident.fitting import fit_models, rescan_qs
 from ident.loaders import load_experiments
 from ident.plots import write_plots
@@ -33,6 +32,7 @@ from trajectories.cli import plot_plan
 from trajectories.plan import plan_campaign
 
 from .demo_robot import ROBOT_DEMOS, run_robot_demo
+from .running import run_with_bar
 
 TITLE = "jointid demo: simulated Stäubli RX130L joint 3"
 
@@ -97,19 +97,7 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, max_steps: int = 3,
                  f"{plan.run_duration_s:.1f} s at {1 / campaign.cycle_s:.0f} Hz")
 
     # 2. run on the simulated drive over the virtual CAN bus
-    bar = ProgressLine(stream)
-
-    def show(p: Progress) -> None:
-        done = (p.payload + (p.cycle / p.n_cycles if p.n_cycles else 0.0)) / p.n_payloads
-        bar.update(done, p.text())
-
-    t0 = time.perf_counter()
-    try:
-        result = run_campaign(campaign, out_dir=out / "logs", simulate=plant, yes=True,
-                              progress=show)
-    finally:
-        bar.close()
-    run_wall = time.perf_counter() - t0
+    result, run_wall = run_with_bar(campaign, out / "logs", plant, stream)
     if result.status != "done":
         raise DaqError(f"demo campaign {result.status}: {result.reason} "
                        f"(logs kept in {out / 'logs'})")

@@ -32,9 +32,7 @@ import scipy.signal
 
 from daq import DaqError, __version__, examples
 from daq.protocol.reader import read_run
-from daq.runtime.progress import ProgressLine
 from daq.runtime.robot_rig import arm_truth
-from daq.runtime.runner import Progress, run_campaign
 from ident import IdentError
 from ident.cli_robot import fit_robot, format_report
 from ident.loaders import concat, make_experiment
@@ -56,6 +54,8 @@ from trajectories.cli import plot_robot_plan
 from trajectories.excitation import Quality, assess_robot_campaign, condition_number
 from trajectories.robot_campaign import RobotCampaign
 from trajectories.robot_model import RobotDynamics, prepare_robot_campaign, robot_for_campaign
+
+from .running import run_with_bar
 
 __all__ = ["ROBOT_DEMOS", "RobotDemoResult", "logged_condition_number", "run_robot_demo"]
 
@@ -181,19 +181,7 @@ def run_robot_demo(out_dir: str | Path, *, robot: str = "3", max_steps: int = 2,
                     if opt else ""))
 
     # 2. run on the simulated buses
-    bar = ProgressLine(stream)
-
-    def show(p: Progress) -> None:
-        done = (p.payload + (p.cycle / p.n_cycles if p.n_cycles else 0.0)) / p.n_payloads
-        bar.update(done, p.text())
-
-    t0 = time.perf_counter()
-    try:
-        result = run_campaign(campaign, out_dir=out / "logs", simulate=True, yes=True,
-                              progress=show)
-    finally:
-        bar.close()
-    run_wall = time.perf_counter() - t0
+    result, run_wall = run_with_bar(campaign, out / "logs", True, stream)
     timing["run_s"] = run_wall
     if result.status != "done":
         raise DaqError(f"robot demo campaign {result.status}: {result.reason} "

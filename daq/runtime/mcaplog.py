@@ -350,14 +350,8 @@ class RunLog:
         target_raw: int = 0,
     ) -> None:
         """Log the planned reference of one cycle."""
-        self._add(
-            self._setpoint_ch,
-            self.start_ns + cycle * self.cycle_ns,
-            SETPOINT_STRUCT.pack(CDR_HEADER, t, cycle, q_ref, dq_ref, ddq_ref, segment, target_raw),
-            time.time_ns(),
-            cycle,
-        )
-        self.n_messages += 1
+        self._setpoint_on(self._setpoint_ch, cycle, t, q_ref, dq_ref, ddq_ref, segment,
+                          target_raw)
 
     def setpoint_axis(
         self,
@@ -371,8 +365,13 @@ class RunLog:
         target_raw: int = 0,
     ) -> None:
         """Log the planned reference of one axis for one cycle (``axis_setpoints`` logs)."""
+        self._setpoint_on(self._axis_sp_ch[axis], cycle, t, q_ref, dq_ref, ddq_ref, segment,
+                          target_raw)
+
+    def _setpoint_on(self, channel: int, cycle: int, t: float, q_ref: float, dq_ref: float,
+                     ddq_ref: float, segment: int, target_raw: int) -> None:
         self._add(
-            self._axis_sp_ch[axis],
+            channel,
             self.start_ns + cycle * self.cycle_ns,
             SETPOINT_STRUCT.pack(CDR_HEADER, t, cycle, q_ref, dq_ref, ddq_ref, segment, target_raw),
             time.time_ns(),
