@@ -11,9 +11,13 @@ applied to each joint's residual of each n-dof fit (usual and paper): the residu
 (one experiment per payload run, the samples the fit used) is the torque of a single-joint
 design whose declared model is the usual friction (F_C, F_V, tau_off, refitted on the
 residual); the refinement then looks for effects left in it (quadrant Coulomb, Stribeck,
-position ripple, warm-up, generic bases in load or position, ...). The named load-dependent
-candidate needs a rigid-body prediction in the declared model and is not proposed there (a
-generic basis in the load stands in for it). No n-dof refinement exists yet.
+position ripple, warm-up, generic bases in load or position, ...); the other joints'
+positions and velocities are given to it as ``q<m>``, ``dq<m>`` (m: 1-based index in the
+moving chain), so that an effect of another joint's state (a cable, a coupled bearing load)
+is found and named by that variable (:mod:`ident.robot.refine_joint`). The named
+load-dependent candidate needs a rigid-body prediction in the declared model and is not
+proposed there (a generic basis in the load stands in for it). No n-dof refinement exists
+yet.
 """
 
 from __future__ import annotations
@@ -37,10 +41,6 @@ from daq.runtime.robot_rig import arm_truth
 from daq.runtime.runner import Progress, run_campaign
 from ident import IdentError
 from ident.cli_robot import fit_robot, format_report
-from ident.loaders import concat, make_experiment
-from ident.models import Coulomb, IdentModel, Offset, Viscous
-from ident.preprocess import build_design
-from ident.refine import refine
 from ident.report import Section, html_table, write_html, write_json
 from ident.robot.loaders import (
     RobotPreprocessing,
@@ -49,8 +49,8 @@ from ident.robot.loaders import (
     resolved_settings,
 )
 from ident.robot.plots import joint_validation
+from ident.robot.refine_joint import refine_joint
 from ident.robot.tables import format_table_iii, table_iii
-from ident.terms import Library
 from trajectories.campaign_file import load_any_campaign
 from trajectories.cli import plot_robot_plan
 from trajectories.excitation import Quality, assess_robot_campaign, condition_number
@@ -112,20 +112,11 @@ def logged_condition_number(paths: list[Path], dyn: RobotDynamics, predicted: Qu
 
 def _refine_joint(sig: Any, residual: np.ndarray, j: int, revolute: bool, vmax: float,
                   dq_min: float, max_steps: int) -> Any:
-    """ident.refine on joint j's residual of the n-dof fit (module docstring); the samples
-    the n-dof fit used (|dq_j| > dq_min) only."""
-    exps = []
-    for e in np.unique(sig.experiment):
-        m = sig.experiment == e
-        n = int(m.sum())
-        dt = float(np.median(np.diff(sig.t[m])))  # the decimated period (uniform samples)
-        exps.append(make_experiment(f"{sig.joints[j]} run {e}", dt * np.arange(n),
-                                    sig.q[m, j], residual[m, j],
-                                    payload_mass=float(sig.payloads[e].mass),
-                                    revolute=revolute))
-    lib = Library(Coulomb(), Viscous(), Offset())
-    design = build_design(lib, concat(exps), decimation=1, dq_min=dq_min)
-    return refine(design, IdentModel(lib, "residual"), max_steps=max_steps, vmax=vmax)
+    """ident.refine on joint j's residual of the n-dof fit (module docstring), the other
+    joints' q and dq given as ``q<m>``, ``dq<m>`` (:func:`ident.robot.refine_joint.refine_joint`);
+    the samples the n-dof fit used (|dq_j| > dq_min) only."""
+    return refine_joint(sig, residual, j, revolute=revolute, vmax=vmax, dq_min=dq_min,
+                        max_steps=max_steps)
 
 
 def run_robot_demo(out_dir: str | Path, *, robot: str = "3", max_steps: int = 2,
@@ -348,7 +339,9 @@ def _write_report(out: Path, campaign: RobotCampaign, rob: Any, assessment: Any,
         "n-dof fit (the samples the fit used), the declared model being the usual friction "
         "(F_C, F_V, tau_off) refitted on the residual; an accepted step names an effect "
         "still in the residual. The relative errors are those of the residual's own model "
-        "(1 = nothing explained). No n-dof refinement exists yet: this is the single-joint "
+        "(1 = nothing explained). The other joints' positions and velocities (q<m>, dq<m>, "
+        "m = joint number in the moving chain) are searched too: a step in one of them is a "
+        "cross-joint effect. No n-dof refinement exists yet: this is the single-joint "
         "loop joint by joint.")
     rows = []
     for model, per in refinements.items():
