@@ -115,8 +115,8 @@ def _refine_joint(sig: Any, residual: np.ndarray, j: int, revolute: bool, vmax: 
     """ident.refine on joint j's residual of the n-dof fit (module docstring), the other
     joints' q and dq given as ``q<m>``, ``dq<m>`` (:func:`ident.robot.refine_joint.refine_joint`);
     the samples the n-dof fit used (|dq_j| > dq_min) only."""
-    return refine_joint(sig, residual, j, revolute=revolute, vmax=vmax, dq_min=dq_min,
-                        max_steps=max_steps)
+    return refine_joint(sig, sig.tau - residual, j, revolute=revolute, vmax=vmax,
+                        dq_min=dq_min, max_steps=max_steps, torque="residual")
 
 
 def run_robot_demo(out_dir: str | Path, *, robot: str = "3", max_steps: int = 2,

@@ -81,6 +81,7 @@ def refine_joint(
     dq_min: float | None = None,
     max_steps: int = 2,
     others: bool = True,
+    torque: str = "measured",
     **kwargs,
 ) -> Refinement:
     """:func:`ident.refine.refine` on joint j of an n-dof fit (module docstring).
@@ -105,6 +106,11 @@ def refine_joint(
         Refinement steps at most.
     others : bool
         Give the other joints' q and dq to the refinement (``q<m>``, ``dq<m>``).
+    torque : {"measured", "residual"}
+        The design's torque: the measured tau_j with the prediction as declared column
+        (module docstring), or the residual tau_j - tau_hat_j with the usual friction refitted
+        on it (``jointid demo --robot`` so far; sign(P) and the load are then read from the
+        residual itself).
     **kwargs
         Passed to :func:`ident.refine.refine` (``alpha``, ``min_gain``, ``progress``, ...).
 
@@ -131,12 +137,15 @@ def refine_joint(
             raise DataError(f"refine_joint: {what} of joint {sig.joints[j]} has "
                             f"{int(bad.sum())} non-finite samples (give the samples the fit "
                             "used, uniform in time)")
+    if torque not in ("measured", "residual"):
+        raise DataError(f"refine_joint: torque must be 'measured' or 'residual', got {torque!r}")
+    y = sig.tau[:, j] if torque == "measured" else sig.tau[:, j] - prediction[:, j]
     exps, idx = [], []
     for e in np.unique(sig.experiment):
         m = np.flatnonzero(sig.experiment == e)
         dt = float(np.median(np.diff(sig.t[m])))  # the (decimated) period: uniform samples
         exps.append(make_experiment(f"{sig.joints[j]} run {e}", dt * np.arange(m.size),
-                                    sig.q[m, j], sig.tau[m, j],
+                                    sig.q[m, j], y[m],
                                     payload_mass=float(sig.payloads[e].mass),
                                     revolute=revolute))
         idx.append(m)
@@ -149,7 +158,9 @@ def refine_joint(
             extra[dqn] = sig.dq[order, m]
             names += [qn, dqn]
     s = replace(concat(exps), extra=extra)
-    lib = Library(NdofPrediction(), Coulomb(), Viscous(), Offset())
+    lib = Library(Coulomb(), Viscous(), Offset())
+    if torque == "measured":
+        lib = Library(NdofPrediction(), *lib.terms())
     design = build_design(lib, s, decimation=1, dq_min=dq_min)
-    return refine(design, IdentModel(lib, "ndof"), max_steps=max_steps, vmax=vmax,
-                  others=names, **kwargs)
+    return refine(design, IdentModel(lib, "ndof" if torque == "measured" else "residual"),
+                  max_steps=max_steps, vmax=vmax, others=names, **kwargs)
