@@ -38,7 +38,7 @@ Pure numerics (no file access); plots are in :mod:`ident.refine_plots`.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -252,6 +252,7 @@ def refine(
     generic_knots: int = 12,
     library: bool = True,
     others: Sequence[str] | None = None,
+    reference: Mapping[str, float] | None = None,
 ) -> Refinement:
     """Refine a declared model by adding the effects its residual points to.
 
@@ -289,6 +290,10 @@ def refine(
         <ident.signals.Signals.extra>`) the library search also expands (default: all of
         them); a selected group in them is added as a term that reads them by name
         (validation data without them reject it).
+    reference : mapping, optional
+        Coefficients that scale the descriptions of the library search (``F_C``: "±x % of
+        F_C") in place of the current fit's, when those are not the physical ones (a joint
+        of an n-dof fit, whose F_C is in the n-dof model: :mod:`ident.robot.refine_joint`).
 
     Returns
     -------
@@ -332,7 +337,8 @@ def refine(
         lstep = None
         if library:
             lstep = library_step(cur_design.Y, cur_design.W[:, kept], s, r, tau_out=tau_out,
-                                 reference=cur.coef_, others=other_values, min_gain=min_gain,
+                                 reference={**cur.coef_, **(reference or {})}, others=other_values,
+                                 min_gain=min_gain,
                                  alpha=alpha)
             library_tried.append({"step": k, "tried": lstep.tried_json()})
             if lstep.candidate is not None:

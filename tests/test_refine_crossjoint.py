@@ -11,7 +11,8 @@ Each case: the n-dof usual model is fitted (ident.robot.estimate.RobotModel), th
 refined with the other joints' q and dq available (ident.robot.refine_joint). Asserted:
 
 * the first accepted step uses the coupled joint's position (``q<m>``) and nothing else of
-  another joint;
+  another joint, and is named by its form (``periodic_q<m>_direction`` for a sinusoid,
+  ``linear_q<m>_direction`` for a line);
 * the final relative error is within 10 % of the error of the TRUE structure (the declared
   model plus the true coupling column, sin(2 pi q_m / P + phi) sign(dq_j) or
   (q_m - q0) sign(dq_j), fitted on the same design);
@@ -25,15 +26,20 @@ the excitation and the noise seed; the thresholds are the refinement's defaults.
 from __future__ import annotations
 
 import dataclasses
+import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from ident.models import IdentModel
+from ident import DataError
+from ident.loaders import concat, make_experiment
+from ident.models import Coulomb, IdentModel, Offset, Viscous, usual_model
+from ident.preprocess import build_design
+from ident.refine import refine
 from ident.robot.base import base_parameters
 from ident.robot.estimate import RobotModel
-from ident.robot.refine_joint import refine_joint
+from ident.robot.refine_joint import joint_coulomb, refine_joint
 from ident.robot.regressor import RobotRegressor
 from ident.robot.signals import RobotPayloadData, RobotSignals
 from ident.signals import Signals
@@ -104,12 +110,13 @@ def _arm(coupling: dict | None, seed: int, duration_s: float):
 
 def _refine(sig, fit, j):
     vmax = float(np.max(np.abs(sig.dq[:, j])))
-    return refine_joint(sig, fit.predict(sig), j, vmax=vmax, dq_min=DQ_MIN, max_steps=2)
+    return refine_joint(sig, fit.predict(sig), j, vmax=vmax, dq_min=DQ_MIN, max_steps=2,
+                        coulomb=joint_coulomb(fit, j))
 
 
 def _others(ref) -> set[str]:
     """Variables of other joints used by the accepted steps."""
-    return {v for s in ref.steps for v in s.variables if v.startswith(("q", "dq"))}
+    return {v for s in ref.steps for v in s.variables if re.fullmatch(r"d?q\d+", v)}
 
 
 def _true_error(ref, name: str, form: dict) -> float:
@@ -143,9 +150,14 @@ def _case(j, m, form, seed, duration_s):
     first = ref.steps[0]
     assert name in first.variables, (first.effect, first.variables, first.structure)
     assert _others(ref) <= {name}, [(s.effect, s.variables) for s in ref.steps]
+    # named by its form: a sinusoid of q_m is periodic, a line linear (times sign(dq_j))
+    form_name = "periodic" if "amplitude" in form else "linear"
+    assert first.named_effect == f"{form_name}_{name}_direction", (first.named_effect,
+                                                                    first.structure)
     true = _true_error(ref, name, form)
     ratio = ref.rel_error_final / true
-    print(f"\n{first.effect} {first.variables}: {ref.rel_error_initial:.4%} -> "
+    print(f"\n{first.named_effect} {first.variables} ({first.structure}): "
+          f"{ref.rel_error_initial:.4%} -> "
           f"{ref.rel_error_final:.4%}, true structure {true:.4%}, ratio {ratio:.3f}")
     assert ratio <= WITHIN, (ref.rel_error_initial, ref.rel_error_final, true)
     # the step's JSON names the other joint's variable
@@ -179,3 +191,49 @@ def test_clean_arm_gets_nothing(seed):
         # the other joints' variables were offered to the search
         tried = {v for t in ref.library_tried for x in t["tried"] for v in x["variables"]}
         assert {f"q{m + 1}" for m in range(3) if m != j} <= tried
+
+
+# --------------------------------------------------------------------------- plumbing
+def _one_joint(seed: int, n: int = 6000, dt: float = 0.01, extra: bool = True) -> Signals:
+    """One joint (inertia, gravity, Coulomb, viscous) whose dry friction follows
+    q2 = 0.8 sin(0.3 t + phi), another joint's position given in ``extra`` (with dq2)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * dt
+    q = np.sin(2 * np.pi * 0.4 * t) + 0.3 * np.sin(2 * np.pi * 0.13 * t)
+    q2 = 0.8 * np.sin(0.3 * t + rng.random())
+    dq = np.gradient(q, t)
+    tau = (0.3 * np.gradient(dq, t) + 20.0 * np.cos(q) + 1.5 * dq + 0.1 * rng.standard_normal(n)
+           + 2.0 * np.sign(dq) * (1 + 0.4 * np.sin(2 * np.pi * q2 / 0.7)))
+    s = concat([make_experiment(f"seed {seed}", t, q, tau)])
+    return dataclasses.replace(s, extra={"q2": q2, "dq2": np.gradient(q2, t)} if extra else None)
+
+
+def test_extra_variables_follow_the_design_rows():
+    s = _one_joint(0)
+    lib = Library(Coulomb(), Viscous(), Offset())
+    for r in (1, 4):
+        d = build_design(lib, s, decimation=r, dq_min=0.05)
+        assert len(d) < len(s)  # trimmed, decimated, selected
+        t = d.signals.t
+        q2 = 0.8 * np.sin(0.3 * t + np.random.default_rng(0).random())
+        np.testing.assert_allclose(d.signals.extra["q2"], q2, atol=1e-12)
+    with pytest.raises(DataError, match=r"signals.extra\['q2'\]: expected 6000 finite"):
+        build_design(lib, dataclasses.replace(s, extra={"q2": np.zeros(5)}))
+    with pytest.raises(DataError, match=r"others \['q9'\] are not in"):
+        refine(build_design(lib, s), IdentModel(lib), others=["q9"])
+
+
+def test_cross_joint_term_on_validation_data_or_rejected():
+    """The term evaluates on validation data carrying q2; validation data without it reject
+    the step, naming the variable."""
+    lib = usual_model(True, payload=False)
+    d, v = (build_design(lib, _one_joint(seed), dq_min=0.05, cutoff_hz=5.0, decimation=2)
+            for seed in (1, 2))
+    ref = refine(d, IdentModel(lib), validation=v, max_steps=1)
+    assert ref.steps and "q2" in ref.steps[0].variables
+    assert ref.validation_rel_error_final < 0.8 * ref.validation_rel_error_initial
+    bare = build_design(lib, _one_joint(2, extra=False), dq_min=0.05, cutoff_hz=5.0, decimation=2)
+    ref = refine(d, IdentModel(lib), validation=bare, max_steps=1)
+    assert not any("q2" in s.variables for s in ref.steps)
+    assert any("not computable on the validation data" in x.reason and "q2" in x.reason
+               for x in ref.rejected), [(x.effect, x.reason) for x in ref.rejected]

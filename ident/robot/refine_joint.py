@@ -26,6 +26,7 @@ Pure numerics (no file access).
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -39,7 +40,8 @@ from ..signals import Signals
 from ..terms import Library, Term
 from .signals import RobotSignals
 
-__all__ = ["NDOF_PREDICTION", "NdofPrediction", "other_joint_names", "refine_joint"]
+__all__ = ["NDOF_PREDICTION", "NdofPrediction", "joint_coulomb", "other_joint_names",
+           "refine_joint"]
 
 #: Key of the n-dof prediction in ``Signals.extra`` (not searched as an "other" variable).
 NDOF_PREDICTION = "tau_hat"
@@ -82,6 +84,7 @@ def refine_joint(
     max_steps: int = 2,
     others: bool = True,
     torque: str = "measured",
+    coulomb: float | None = None,
     **kwargs,
 ) -> Refinement:
     """:func:`ident.refine.refine` on joint j of an n-dof fit (module docstring).
@@ -111,6 +114,9 @@ def refine_joint(
         (module docstring), or the residual tau_j - tau_hat_j with the usual friction refitted
         on it (``jointid demo --robot`` so far; sign(P) and the load are then read from the
         residual itself).
+    coulomb : float, optional
+        Joint j's Coulomb friction of the n-dof fit [N m] (:func:`joint_coulomb`): the scale
+        of "±x % of F_C" in the descriptions (the design's own F_C is a correction ~0).
     **kwargs
         Passed to :func:`ident.refine.refine` (``alpha``, ``min_gain``, ``progress``, ...).
 
@@ -163,4 +169,15 @@ def refine_joint(
         lib = Library(NdofPrediction(), *lib.terms())
     design = build_design(lib, s, decimation=1, dq_min=dq_min)
     return refine(design, IdentModel(lib, "ndof" if torque == "measured" else "residual"),
-                  max_steps=max_steps, vmax=vmax, others=names, **kwargs)
+                  max_steps=max_steps, vmax=vmax, others=names,
+                  reference=None if coulomb is None else {"F_C": float(coulomb)}, **kwargs)
+
+
+def joint_coulomb(model: Any, j: int) -> float | None:
+    """Joint j's Coulomb friction in a fitted n-dof model [N m]: ``FC<n>`` (usual) or
+    ``c_m<n>`` (paper, motor quadrant at speed), n the joint's number; None if absent."""
+    n = model.numbers_[j]
+    for name in (f"FC{n}", f"c_m{n}"):
+        if name in model.params_:
+            return float(model.params_[name])
+    return None
