@@ -32,6 +32,7 @@ variables times a modifier. This module
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
@@ -52,6 +53,17 @@ MATCH_SHARE = 0.9
 
 _UNITS = {"position": "rad", "velocity": "rad/s", "load": "N m", "time": "s",
           "reversal": "rad", "acceleration": "rad/s^2"}
+#: Other joints' positions and velocities (``q<m>``, ``dq<m>``: ident.robot.refine_joint).
+_OTHER_UNITS = ((re.compile(r"q\d+"), "rad"), (re.compile(r"dq\d+"), "rad/s"))
+
+
+def _unit(var: str) -> str:
+    """Unit of a variable, other joints' states included ("" when unknown)."""
+    if var in _UNITS:
+        return _UNITS[var]
+    return next((u for pat, u in _OTHER_UNITS if pat.fullmatch(var)), "")
+
+
 _WHAT = {
     "none": "the torque",
     "direction": "dry friction",
@@ -283,7 +295,7 @@ def describe_group(
     grids, f = profile(group, coef)
     var, mod = group.variables[0], group.modifier
     what = _WHAT.get(mod, "the torque")
-    unit = _UNITS.get(var, "")
+    unit = _unit(var)
     F_C = reference.get("F_C")
     sgn = values.get("direction")
 
@@ -368,6 +380,29 @@ def describe_group(
             term = LoadVelocityDryFriction(tau_out, qs) if tau_out is not None else None
             tried.append(("quadrant_load_velocity", share(rss, make_lv(qs)),
                           {"p": pars, "s": sent, "t": term}))
+    linear = None
+    if len(group.variables) == 1 and var not in _UNITS:
+        # another joint's state (q<m>, dq<m>): a linear dependence, one column, is preferred
+        # to the periodic form (which a long period can bend into a line) when it matches
+        x = values[var]
+        m = np.ones_like(x) if mod == "none" else (
+            values["load"] * values["quadrant"] if mod == "load_quadrant" else values[mod])
+        C = ((x - float(np.mean(x))) * m)[:, None]
+        rss, _h, c, cov = _fit_form(y, W, Q, lambda _h, C=C: C, None, None)
+        sd = _sd(cov)
+        name = f"linear_{var}" + ("" if mod == "none" else f"_{mod}")
+        pars = {"slope": _p(c[0], 2 * sd[0])}
+        if mod == "direction" and F_C:
+            pars["relative_slope"] = _p(c[0] / abs(F_C), 2 * sd[0] / abs(F_C))
+        half = 0.5 * abs(c[0]) * float(np.ptp(x))
+        sent = (f"{what} varies linearly with {var}: slope {c[0]:.3g} ± {2 * sd[0]:.2g} "
+                f"N m/{unit or 'unit'}, ±{half:.3g} N m over [{float(np.min(x)):.3g}, "
+                f"{float(np.max(x)):.3g}] {unit}{rel(half)}")
+        linear = (name, share(rss, C), {"p": pars, "s": sent, "t": None})
+        tried.append(linear)
+    if linear is not None and linear[1] >= MATCH_SHARE:
+        name, share, info = linear
+        return Description(name, info["s"], info["p"], share, grids, f, group.key, info["t"])
     if tried:
         name, share, info = max(tried, key=lambda t: t[1])
         if share >= MATCH_SHARE:

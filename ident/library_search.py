@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import DataError
 from .effects import Effect, Prediction, variable_values
 from .interactions import CONTINUOUS, reversal_distance
 from .signals import Signals
@@ -535,15 +536,15 @@ class LibraryTerm(Effect):
     tau_out : Prediction, optional
         Load predictor τ̂_out for the ``load`` variable and the load modifiers.
 
-    Only variables computable from :class:`~ident.signals.Signals` (:data:`CONTINUOUS`) can
-    make a term; "other" variables (another joint's state) stay in the search result.
+    A variable is one of :data:`CONTINUOUS` (computed from the signals) or an "other"
+    variable (another joint's state) read from :attr:`Signals.extra
+    <ident.signals.Signals.extra>` by name: signals without it cannot give the columns
+    (:class:`~ident.DataError` naming the variable, e.g. validation data lacking the other
+    joints).
     """
 
     def __init__(self, group: Group, tau_out: Prediction | None = None, tag: str = "") -> None:
         super().__init__(tag)
-        bad = [v for v in group.variables if v not in CONTINUOUS]
-        if bad:
-            raise ValueError(f"LibraryTerm: variables {bad} are not computable from signals")
         self.group = group
         self.tau_out = tau_out
         self.variable = group.variables[0]
@@ -560,6 +561,12 @@ class LibraryTerm(Effect):
 
     def _values(self, s: Signals) -> dict[str, np.ndarray]:
         g = self.group
+        missing = [v for v in g.variables if v not in CONTINUOUS
+                   and (s.extra is None or v not in s.extra)]
+        if missing:
+            raise DataError(f"library term {self.effect}: the signals have no variable "
+                            f"{', '.join(missing)} (Signals.extra: "
+                            f"{sorted(s.extra or {}) or 'none'})")
         need = list(g.variables)
         if g.modifier in ("direction", "quadrant", "load"):
             need.append(g.modifier)

@@ -315,6 +315,10 @@ def _assemble(blocks: list[_Block], n_par: int, revolute: bool) -> tuple:
         payload_arm=np.concatenate([s.payload_arm for s in sigs]),
         experiment=np.concatenate([s.experiment for s in sigs]),
         revolute=revolute,
+        # other variables (other joints' states) are picked at the kept instants, not
+        # anti-alias filtered: slow signals, see Signals.extra
+        extra=None if sigs[0].extra is None else {
+            k: np.concatenate([s.extra[k] for s in sigs]) for k in sigs[0].extra},
     )
     Z = np.concatenate(zs, axis=0) if zs else None
     return Y, np.concatenate(ws, axis=0), dsig, Z
@@ -617,6 +621,10 @@ def build_design(
                 f"reference has {int(np.sum(~np.isfinite(reference)))} NaN/inf values "
                 "(the log lacks setpoints for some cycles)"
             )
+    for k, v in (signals.extra or {}).items():
+        if np.shape(v) != signals.q.shape or not np.all(np.isfinite(v)):
+            raise DataError(f"signals.extra[{k!r}]: expected {signals.q.size} finite values "
+                            "(one per position sample)")
     fulls: list[tuple[Signals, Signals, Signals | None]] = []
     for sl in slices:
         n = sl.stop - sl.start

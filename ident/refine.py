@@ -38,7 +38,7 @@ Pure numerics (no file access); plots are in :mod:`ident.refine_plots`.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -251,6 +251,8 @@ def refine(
     max_tries: int = 2,
     generic_knots: int = 12,
     library: bool = True,
+    others: Sequence[str] | None = None,
+    reference: Mapping[str, float] | None = None,
 ) -> Refinement:
     """Refine a declared model by adding the effects its residual points to.
 
@@ -283,6 +285,15 @@ def refine(
         Also run the interaction diagnosis and the library search
         (:mod:`ident.refine_library`) and require every candidate to lower the held-out
         (blocked cross-validation) error.
+    others : sequence of str, optional
+        Variables of ``design.signals.extra`` (other joints' states, :attr:`Signals.extra
+        <ident.signals.Signals.extra>`) the library search also expands (default: all of
+        them); a selected group in them is added as a term that reads them by name
+        (validation data without them reject it).
+    reference : mapping, optional
+        Coefficients that scale the descriptions of the library search (``F_C``: "±x % of
+        F_C") in place of the current fit's, when those are not the physical ones (a joint
+        of an n-dof fit, whose F_C is in the n-dof model: :mod:`ident.robot.refine_joint`).
 
     Returns
     -------
@@ -296,6 +307,12 @@ def refine(
     missing = [n for n in lib.names() if n not in design.names]
     if missing:
         raise DataError(f"design has no column for parameters {missing}; build it with the model")
+    extra = design.signals.extra or {}
+    unknown = [v for v in (others or ()) if v not in extra]
+    if unknown:
+        raise DataError(f"refine: others {unknown} are not in the design's signals.extra "
+                        f"({sorted(extra) or 'none'})")
+    other_values = {v: extra[v] for v in (extra if others is None else others)} or None
     cur_design = design
     cur_val = validation
     cur = _fit(lib, cur_design, name)
@@ -320,7 +337,9 @@ def refine(
         lstep = None
         if library:
             lstep = library_step(cur_design.Y, cur_design.W[:, kept], s, r, tau_out=tau_out,
-                                 reference=cur.coef_, min_gain=min_gain, alpha=alpha)
+                                 reference={**cur.coef_, **(reference or {})}, others=other_values,
+                                 min_gain=min_gain,
+                                 alpha=alpha)
             library_tried.append({"step": k, "tried": lstep.tried_json()})
             if lstep.candidate is not None:
                 e = lstep.candidate
@@ -457,9 +476,13 @@ def refine(
                     )
             v1 = val1 = None
             if reason is None and cur_val is not None:
-                val1 = cur_val.with_term(e)
-                v1 = m1.rel_error_on(val1)
-                if not v1 < val_err:
+                try:
+                    val1 = cur_val.with_term(e)
+                except DataError as exc:  # e.g. a term in other joints the validation lacks
+                    reason = f"not computable on the validation data: {exc}"
+                else:
+                    v1 = m1.rel_error_on(val1)
+                if reason is None and not v1 < val_err:
                     reason = f"validation error not lowered ({_pct(val_err)} -> {_pct(v1)})"
             if reason is not None:
                 rejected.append(Rejected(k, e.effect, e.variable, reason, m1.rel_error_, h1,

@@ -110,8 +110,15 @@ class LibraryStep:
         out = []
         for t in self.result.tried if self.result else []:
             js = t.to_json()
-            if t.selected and t.group is self.group:
-                js["reason"] = "selected; offered to the refinement"
+            simplified = self.result is not None and self.group is not None and not any(
+                g is self.group for g in self.result.selected)
+            if t.group is self.group:
+                js["reason"] = ("selected; offered to the refinement" if t.selected else
+                                "offered to the refinement: a selected pair in its variable "
+                                "does not lower its held-out error enough (simpler structure)")
+            elif t.selected and simplified and len(t.group.variables) == 2:
+                js["reason"] = ("selected, not offered: a one-variable structure in one of its "
+                                "variables is as good on held-out data")
             elif t.selected:
                 js["reason"] = ("selected ahead (forward look), not offered: the offered "
                                 "structure is needed more")
@@ -149,8 +156,10 @@ def library_step(
     reference : mapping, optional
         Current coefficients (``F_C`` scales dry-friction descriptions).
     others : mapping, optional
-        Extra continuous variables (other joints); diagnosed and searched, but a group using
-        them cannot become a term (:class:`~ident.library_search.LibraryTerm`).
+        Extra continuous variables (other joints' states, :attr:`Signals.extra
+        <ident.signals.Signals.extra>`), aligned with the samples; diagnosed and searched
+        like the others, a group using them becomes a
+        :class:`~ident.library_search.LibraryTerm` that reads them from the signals by name.
     min_gain : float
         Relative decrease of the held-out error a group must bring.
     alpha : float
@@ -186,14 +195,40 @@ def library_step(
     pick = _most_needed(res, fg, values, stride)
     if pick is not None:
         g, c = res.selected[pick], res.coef[pick]
+        simple = _simplest(res, g, min_gain)
+        if simple is not None:
+            g = simple
+            X = np.column_stack((W, g.columns(values)))
+            c = np.linalg.lstsq(X, y, rcond=None)[0][W.shape[1]:]
         desc = describe_group(g, c, y, W, values, reference=reference, tau_out=tau_out,
                               folds=folds, min_gain=min_gain)
         if desc.term is not None:
             cand, generic, n_hyper = desc.term, False, len(desc.term.hyper_names)
-        elif all(v in LIBRARY_VARIABLES for v in g.variables):
+        elif all(v in LIBRARY_VARIABLES or v in (others or {}) for v in g.variables):
             cand = LibraryTerm(g, tau_out)
     return LibraryStep(idiag, res, desc, cand, generic, n_hyper, fg, stride,
-                       None if pick is None else res.selected[pick])
+                       None if pick is None else g)
+
+
+def _simplest(res: SearchResult, g: Group, min_gain: float) -> Group | None:
+    """A one-variable group, in one of the variables of the selected pair ``g`` and with its
+    modifier, scored in the same round, whose held-out error the pair does not lower by
+    ``min_gain`` (the rule :func:`~ident.describe.describe_group` applies to named forms):
+    the simpler structure is offered instead (a pair contains each variable's own basis, and
+    at a few tenths of a percent of held-out error it wins by its extra columns' luck)."""
+    if len(g.variables) != 2:
+        return None
+    mine = next((t for t in res.tried if t.group is g), None)
+    if mine is None:
+        return None
+    best = None
+    for t in res.tried:
+        h = t.group
+        if (t.round == mine.round and len(h.variables) == 1 and h.variables[0] in g.variables
+                and h.modifier == g.modifier and mine.cv_after >= t.cv_after * (1 - min_gain)
+                and (best is None or t.cv_after < best.cv_after)):
+            best = t
+    return None if best is None else best.group
 
 
 def _most_needed(res: SearchResult, fg: FoldGram, values: Mapping[str, np.ndarray],

@@ -33,6 +33,12 @@ class Signals:
         Revolute joints have gravity terms g cos q, g sin q; prismatic joints have none.
     dtau : ndarray or None
         Time derivative of ``tau`` [N m/s], when a term needs it (torque lag).
+    extra : dict of str to ndarray, or None
+        Other continuous variables of the same samples, by name, e.g. the other joints'
+        positions and velocities of a robot (``q2``, ``dq2``: :mod:`ident.robot.refine_joint`).
+        They follow every row selection (:meth:`take`, :func:`ident.preprocess.build_design`)
+        and the refinement's library search may build a term in them
+        (:class:`ident.library_search.LibraryTerm`, docs/refinement.md "Cross-joint effects").
     """
 
     t: np.ndarray
@@ -45,6 +51,7 @@ class Signals:
     experiment: np.ndarray
     revolute: bool = True
     dtau: np.ndarray | None = field(default=None)
+    extra: dict[str, np.ndarray] | None = field(default=None)
 
     def __len__(self) -> int:
         return int(self.q.shape[0])
@@ -54,7 +61,10 @@ class Signals:
         kw = {}
         for f in fields(self):
             v = getattr(self, f.name)
-            kw[f.name] = v[index] if isinstance(v, np.ndarray) else v
+            if isinstance(v, dict):
+                kw[f.name] = {k: x[index] for k, x in v.items()}
+            else:
+                kw[f.name] = v[index] if isinstance(v, np.ndarray) else v
         return replace(self, **kw)
 
     @property

@@ -11,6 +11,15 @@ for that joint:
 * quadratic viscous  ``F_VV dq |dq|``
 * torque lag         ``d tau_applied / dt = (tau_cmd - tau_applied) / T_lag`` (dynamic)
 
+and one cross-joint effect, per ordered joint pair (j, m), the only effect of the arm that
+depends on another joint's state (n-dof only, no single-joint plant table):
+
+* dry coupling       dry terms (c, d) of joint j scaled by
+  ``max(0, 1 + sum_m [c_jm sin(2 pi q_m / P_jm + phi_jm) + a_jm (q_m - q0_jm)])``: a cable
+  or hose dragged through joint j whose tension, or a bearing whose preload, follows the
+  position of joint m (sinusoidal and linear forms; the factor is clipped at 0 so the dry
+  friction never changes sign). It multiplies the warm-up factor.
+
 The effect code of the arm simulator lives in this file (parameters, vectorised formulas used
 by the inverse model), so that it can be switched to a shared effects registry in one place.
 One exception, for speed: :meth:`sim_drivers.arm_plant.ArmPlant._accel` inlines the scalar
@@ -41,7 +50,12 @@ _TABLES: dict[str, dict[str, str]] = {
     "quadratic_viscous": {"F_VV": "F_VV"},
     "torque_lag": {"time_constant_s": "lag_time_constant_s"},
 }
-_DEFAULTS = {"ripple_period_rad": _TWO_PI / 16.0, "warm_up_time_constant_s": 60.0}
+_DEFAULTS = {"ripple_period_rad": _TWO_PI / 16.0, "warm_up_time_constant_s": 60.0,
+             "coupling_period_rad": _TWO_PI}
+#: ``make(dry_coupling={(j, m): {...}})`` key -> ArmEffects field (shape (k, k), row j, col m).
+_COUPLING = {"amplitude": "coupling_amplitude", "period_rad": "coupling_period_rad",
+             "phase_rad": "coupling_phase_rad", "slope_per_rad": "coupling_slope_per_rad",
+             "rest_position_rad": "coupling_rest_rad"}
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,6 +78,11 @@ class ArmEffects:
         Quadratic viscous coefficient [N m s^2/rad^2].
     lag_time_constant_s
         Torque lag T_lag [s] (0: no lag).
+    coupling_amplitude, coupling_period_rad, coupling_phase_rad : ndarray, shape (k, k)
+        Dry coupling, sinusoidal form: row j (the joint whose dry friction changes), column m
+        (the joint whose position drives it): c_jm [-], P_jm [rad], phi_jm [rad].
+    coupling_slope_per_rad, coupling_rest_rad : ndarray, shape (k, k)
+        Dry coupling, linear form: a_jm [1/rad] and q0_jm [rad].
     """
 
     ripple_amplitude_Nm: np.ndarray
@@ -78,21 +97,31 @@ class ArmEffects:
     F_V_neg: np.ndarray
     F_VV: np.ndarray
     lag_time_constant_s: np.ndarray
+    coupling_amplitude: np.ndarray | None = None
+    coupling_period_rad: np.ndarray | None = None
+    coupling_phase_rad: np.ndarray | None = None
+    coupling_slope_per_rad: np.ndarray | None = None
+    coupling_rest_rad: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        k = None
+        k = int(np.size(self.lag_time_constant_s))
         for f in fields(self):
             dtype = bool if f.name == "asymmetric" else float
-            a = np.array(getattr(self, f.name), dtype=dtype).reshape(-1)
-            if k is None:
-                k = a.shape[0]
-            if a.shape != (k,):
-                raise SimError(f"ArmEffects.{f.name}: expected shape ({k},), got {a.shape}")
+            pair = f.name.startswith("coupling_")
+            v = getattr(self, f.name)
+            if v is None:  # a coupling left out: off (default period)
+                v = np.full((k, k), _DEFAULTS.get(f.name, 0.0))
+            a = np.array(v, dtype=dtype)
+            if not pair:
+                a = a.reshape(-1)
+            if a.shape != ((k, k) if pair else (k,)):
+                shape = f"({k}, {k})" if pair else f"({k},)"
+                raise SimError(f"ArmEffects.{f.name}: expected shape {shape}, got {a.shape}")
             if dtype is float and not np.all(np.isfinite(a)):
                 raise SimError(f"ArmEffects.{f.name}: expected finite values, got {a}")
             a.setflags(write=False)
             object.__setattr__(self, f.name, a)
-        for name in ("ripple_period_rad", "warm_up_time_constant_s"):
+        for name in ("ripple_period_rad", "warm_up_time_constant_s", "coupling_period_rad"):
             if np.any(getattr(self, name) <= 0):
                 raise SimError(f"ArmEffects.{name}: expected values > 0")
         if np.any(self.lag_time_constant_s < 0) or np.any(self.warm_up_fraction < 0):
@@ -104,7 +133,7 @@ class ArmEffects:
     def none(cls, k: int) -> ArmEffects:
         """No effect on any of ``k`` joints."""
         kw: dict[str, Any] = {f.name: np.full(k, _DEFAULTS.get(f.name, 0.0))
-                              for f in fields(cls)}
+                              for f in fields(cls) if not f.name.startswith("coupling_")}
         kw["asymmetric"] = np.zeros(k, dtype=bool)
         return cls(**kw)
 
@@ -115,13 +144,25 @@ class ArmEffects:
         Example: ``ArmEffects.make(3, spring={1: {"stiffness_Nm_per_rad": 50.0}},
         position_ripple={0: {"amplitude_Nm": 2.0, "period_rad": 0.3}})``. Table and key names
         are those of the plant file (``sim_drivers.plant_config``); ``enabled`` is accepted
-        and ignored (a listed joint has the effect enabled).
+        and ignored (a listed joint has the effect enabled). The cross-joint table is keyed by
+        joint pairs (j, m), 0-based: ``dry_coupling={(0, 1): {"amplitude": 0.3,
+        "period_rad": 2.0, "phase_rad": 0.5}}`` (joint 0's dry friction follows q of joint 1;
+        keys of :data:`_COUPLING`).
         """
         arrays = {f.name: np.array(getattr(cls.none(k), f.name)) for f in fields(cls)}
+        for (j, m), values in tables.pop("dry_coupling", {}).items():
+            if not (0 <= int(j) < k and 0 <= int(m) < k) or int(j) == int(m):
+                raise SimError(f"ArmEffects.dry_coupling: joint pair {(j, m)!r}: expected two "
+                               f"different indices in 0..{k - 1}")
+            for key, v in values.items():
+                if key not in _COUPLING:
+                    raise SimError(f"ArmEffects.dry_coupling.{key}: unknown key; expected one "
+                                   f"of {sorted(_COUPLING)}")
+                arrays[_COUPLING[key]][int(j), int(m)] = float(v)
         for table, per_joint in tables.items():
             if table not in _TABLES:
                 raise SimError(f"ArmEffects: unknown effect {table!r}; expected one of "
-                               f"{sorted(_TABLES)}")
+                               f"{sorted([*_TABLES, 'dry_coupling'])}")
             for j, values in per_joint.items():
                 if not 0 <= int(j) < k:
                     raise SimError(f"ArmEffects.{table}: joint index {j!r} not in 0..{k - 1}")
@@ -169,7 +210,13 @@ class ArmEffects:
             "asymmetric_viscous": self.asymmetric.copy(),
             "quadratic_viscous": self.F_VV != 0,
             "torque_lag": self.lag_time_constant_s > 0,
+            "dry_coupling": self.coupled(),
         }
+
+    def coupled(self) -> np.ndarray:
+        """Boolean mask (k,) of the joints whose dry friction follows another joint."""
+        return (np.any(self.coupling_amplitude != 0, axis=1)
+                | np.any(self.coupling_slope_per_rad != 0, axis=1))
 
     @property
     def any_position(self) -> bool:
@@ -201,6 +248,16 @@ class ArmEffects:
         start, shape (...,) -> (..., k)."""
         t = np.asarray(t, dtype=float)[..., None]
         return 1.0 + self.warm_up_fraction * np.exp(-t / self.warm_up_time_constant_s)
+
+    def coupling_scale(self, q: Any) -> np.ndarray:
+        """Dry-coupling factor of every joint (module docstring), 1 where off; q [rad] of all
+        joints, shape (..., k) -> (..., k)."""
+        q = np.asarray(q, dtype=float)[..., None, :]  # (..., 1, k): column m
+        f = 1.0 + np.sum(
+            self.coupling_amplitude
+            * np.sin(_TWO_PI * q / self.coupling_period_rad + self.coupling_phase_rad)
+            + self.coupling_slope_per_rad * (q - self.coupling_rest_rad), axis=-1)
+        return np.maximum(f, 0.0)
 
     def lag_keep(self, h: float) -> np.ndarray:
         """Per-step retention ``exp(-h / T_lag)`` of the torque lag over a step h [s]; 0 where

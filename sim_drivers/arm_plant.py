@@ -18,6 +18,11 @@ Friction of joint j, eq. 30 with E_j = exp(-|dq_j| / q_s,j), P_j = sign(tau_out,
           + P+ (c_m + d_m E) sign(dq_j) + P- (c_g + d_g E) sign(dq_j) + F_V dq_j + tau_off
           + effects_j(q_j, dq_j, t)                          (sim_drivers.arm_effects)
 
+The dry terms (c, d) of joint j are multiplied by the warm-up factor and by the dry-coupling
+factor of :meth:`~sim_drivers.arm_effects.ArmEffects.coupling_scale` (the position of other
+joints: the arm's one cross-joint effect), in the inverse model, the sliding friction and the
+stiction band alike.
+
 Forward dynamics (:class:`ArmPlant`)
 ------------------------------------
 Friction is per joint: tau_out,j depends only on joint j's own applied torque and velocity.
@@ -68,6 +73,8 @@ import numpy as np
 import pinocchio as pin
 
 from .arm_params import ArmParams, Payload
+
+_TWO_PI = 2.0 * math.pi
 
 #: The joint slides and eq. 30 (+ effects) holds exactly (same values as sim_drivers.plant).
 REGIME_SLIDING = 0
@@ -151,6 +158,7 @@ def friction_torque(
     scale = e.dry_scale(t)
     if np.ndim(t) == 0:
         scale = scale[0]
+    scale = scale * e.coupling_scale(q)
     return tau + scale * dry * s + e.viscous_torque(f.F_V, dq) + e.position_torque(q)
 
 
@@ -258,6 +266,12 @@ class ArmPlant:
         self._jp = list(zip(*(np.asarray(c, dtype=float).tolist() for c in cols), strict=True))
         self._am1, self._ag1 = f.a_m + f.b_m, f.a_g - f.b_g
         self._dm1, self._dg1 = f.c_m + f.d_m, f.c_g + f.d_g
+        # dry coupling: per joint j, (m, c, 2 pi / P, phase, slope, q0) of its driving joints
+        pairs = [[(m, *(float(a[j, m]) for a in (
+            e.coupling_amplitude, _TWO_PI / e.coupling_period_rad, e.coupling_phase_rad,
+            e.coupling_slope_per_rad, e.coupling_rest_rad))) for m in range(k)
+            if e.coupling_amplitude[j, m] or e.coupling_slope_per_rad[j, m]] for j in range(k)]
+        self._cpl = pairs if any(pairs) else None
         keep = e.lag_keep(self._h)
         self._keep = keep.tolist() if np.any(keep) else None
         self._max_events = 2 * k + 2
@@ -307,6 +321,7 @@ class ArmPlant:
         r_rest: list = []
         quad = self._quad
         exp = math.exp
+        cpl = self._cpl
         for j in range(k):
             (off, qsi, fvp, fvn, fvv, cm, dm, am, bm, cg, dg, ag, bg,
              rip_a, rip_k, rip_ph, spr_k, spr_q0, wu_w, wu_tinv) = self._jp[j]
@@ -317,6 +332,11 @@ class ArmPlant:
             if spr_k:
                 r -= spr_k * (q[j] - spr_q0)
             wf = 1.0 + wu_w * exp(-(t - self.t0) * wu_tinv) if wu_w else 1.0
+            if cpl is not None and cpl[j]:
+                cf = 1.0
+                for m, c, kp, ph, a, q0 in cpl[j]:
+                    cf += c * math.sin(kp * q[m] + ph) + a * (q[m] - q0)
+                wf *= cf if cf > 0.0 else 0.0
             if vj > 0.0:
                 s = wf
                 ex = exp(-vj * qsi)

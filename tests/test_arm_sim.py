@@ -288,6 +288,39 @@ def test_effects_enter_the_inverse_model(ur3dof):
     assert np.max(np.abs(d[:, 0])) > 1.0 and np.max(np.abs(d[:, 1:])) < 1e-9
 
 
+def test_dry_coupling_follows_the_other_joints_position(ur3dof):
+    """The cross-joint effect: joint 0's dry friction scaled by a sinusoid of q of joint 1 and
+    joint 2's by a line in q of joint 0; the forward plant (sliding, stiction band) and the
+    inverse model agree, and the difference with the effect off is exactly the scaled dry
+    friction of the coupled joints (the others are untouched)."""
+    eff = ArmEffects.make(3, dry_coupling={
+        (0, 1): {"amplitude": 0.4, "period_rad": 1.7, "phase_rad": 0.3},
+        (2, 0): {"slope_per_rad": 0.5, "rest_position_rad": 0.1}})
+    assert eff.coupled().tolist() == [True, False, True]
+    params = dataclasses.replace(ur3dof, effects=eff)
+    ref = model_reference(params.model, duration_s=3.0, seed=6)
+    run = simulate_arm(params, ref, ArmGains.for_params(params), seed=2)
+    sl = run.sliding
+    tau = inverse_arm_torque(params, run.q_true, run.dq_true, run.ddq_true, None, run.t)
+    assert np.max(np.abs(tau - run.tau_applied)[sl]) < 1e-8
+    off = dataclasses.replace(params, effects=ArmEffects.none(3))
+    bare = inverse_arm_torque(off, run.q_true, run.dq_true, run.ddq_true, None, run.t)
+    f, q, dq = params.friction, run.q_true, run.dq_true
+    ex = np.exp(-np.abs(dq) / f.q_s)
+    from_out = output_arm_torque(params, q, dq, run.ddq_true)
+    p = np.sign(from_out * dq)
+    dry = np.where(p > 0, f.c_m + f.d_m * ex, f.c_g + f.d_g * ex) * np.sign(dq)
+    scale = np.ones_like(q)
+    scale[:, 0] = 1 + 0.4 * np.sin(2 * np.pi * q[:, 1] / 1.7 + 0.3)
+    scale[:, 2] = np.maximum(1 + 0.5 * (q[:, 0] - 0.1), 0.0)
+    np.testing.assert_allclose((tau - bare)[sl], ((scale - 1) * dry)[sl], atol=1e-9)
+    assert np.ptp((tau - bare)[:, 0]) > 0.3 * np.max(np.abs(dry[:, 0]))
+    with pytest.raises(SimError, match="dry_coupling: joint pair"):
+        ArmEffects.make(3, dry_coupling={(1, 1): {"amplitude": 0.1}})
+    with pytest.raises(SimError, match="dry_coupling.gain: unknown key"):
+        ArmEffects.make(3, dry_coupling={(0, 1): {"gain": 0.1}})
+
+
 # --------------------------------------------------------------------------- stiction
 def _band(params, j, load):
     f = params.friction

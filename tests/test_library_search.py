@@ -7,9 +7,12 @@ the Holm correction, the reversal distance and the zero-order-hold naming.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
+from ident import DataError
 from ident.describe import describe_group, name_torque_lag
 from ident.interactions import (
     continuous_values,
@@ -185,9 +188,14 @@ def test_other_joint_position_is_diagnosed_and_searched(seed):
     res = search(y, W, vals, groups, time_folds(s.experiment), min_gain=0.05)
     assert res.selected and res.selected[0].variables == ("q2",)
     assert res.selected[0].modifier == "direction"
-    # a group in another joint's variable is a result, not a term of this joint's signals
-    with pytest.raises(ValueError, match="q2"):
-        LibraryTerm(res.selected[0])
+    # a group in another joint's variable is a term reading it from Signals.extra; signals
+    # without it (validation data lacking the other joints) are refused naming the variable
+    term = LibraryTerm(res.selected[0])
+    np.testing.assert_array_equal(term.columns(dataclasses.replace(s, extra=others)),
+                                  res.selected[0].columns(vals))
+    assert term.names()[0].startswith("lb_q2_s_")
+    with pytest.raises(DataError, match="no variable q2"):
+        term.columns(s)
 
 
 def test_prune_drops_the_hat_collinear_with_the_coulomb_column():

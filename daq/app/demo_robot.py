@@ -7,13 +7,17 @@ model (:mod:`ident.robot`) -> Table III per joint -> per-joint refinement of eac
 residual -> ``report.html``.
 
 The per-joint refinement is ident's single-joint refinement (:func:`ident.refine.refine`)
-applied to each joint's residual of each n-dof fit (usual and paper): the residual of joint j
-(one experiment per payload run, the samples the fit used) is the torque of a single-joint
-design whose declared model is the usual friction (F_C, F_V, tau_off, refitted on the
-residual); the refinement then looks for effects left in it (quadrant Coulomb, Stribeck,
-position ripple, warm-up, generic bases in load or position, ...). The named load-dependent
-candidate needs a rigid-body prediction in the declared model and is not proposed there (a
-generic basis in the load stands in for it). No n-dof refinement exists yet.
+applied to each joint of each n-dof fit (usual and paper), :func:`ident.robot.refine_joint.
+refine_joint`: joint j's measured torque (one experiment per payload run, the samples the fit
+used) is the torque of a single-joint design whose declared model is the n-dof prediction
+(times a gain ~1, taken as the load tau_out) plus the usual friction (F_C, F_V, tau_off, ~0),
+so its residual is the n-dof residual and sign(P), the load are not read from the residual
+itself; the refinement then looks for effects left in it (quadrant and load-dependent
+friction, Stribeck, position ripple, torque lag, generic bases, ...). The other joints'
+positions and velocities are given to it as ``q<m>``, ``dq<m>`` (m: 1-based index in the
+moving chain), so that an effect of another joint's state (a cable, a coupled bearing load)
+is found and named by that variable. Relative errors are ||rho_j|| / ||tau_j||. No n-dof
+refinement exists yet.
 """
 
 from __future__ import annotations
@@ -35,10 +39,6 @@ from daq.protocol.reader import read_run
 from daq.runtime.robot_rig import arm_truth
 from ident import IdentError
 from ident.cli_robot import fit_robot, format_report
-from ident.loaders import concat, make_experiment
-from ident.models import Coulomb, IdentModel, Offset, Viscous
-from ident.preprocess import build_design
-from ident.refine import refine
 from ident.report import Section, html_table, write_html, write_json
 from ident.robot.loaders import (
     RobotPreprocessing,
@@ -47,8 +47,8 @@ from ident.robot.loaders import (
     resolved_settings,
 )
 from ident.robot.plots import joint_validation
+from ident.robot.refine_joint import joint_coulomb, refine_joint
 from ident.robot.tables import format_table_iii, table_iii
-from ident.terms import Library
 from trajectories.campaign_file import load_any_campaign
 from trajectories.cli import plot_robot_plan
 from trajectories.excitation import Quality, assess_robot_campaign, condition_number
@@ -111,21 +111,13 @@ def logged_condition_number(paths: list[Path], dyn: RobotDynamics, predicted: Qu
 
 
 def _refine_joint(sig: Any, residual: np.ndarray, j: int, revolute: bool, vmax: float,
-                  dq_min: float, max_steps: int) -> Any:
-    """ident.refine on joint j's residual of the n-dof fit (module docstring); the samples
-    the n-dof fit used (|dq_j| > dq_min) only."""
-    exps = []
-    for e in np.unique(sig.experiment):
-        m = sig.experiment == e
-        n = int(m.sum())
-        dt = float(np.median(np.diff(sig.t[m])))  # the decimated period (uniform samples)
-        exps.append(make_experiment(f"{sig.joints[j]} run {e}", dt * np.arange(n),
-                                    sig.q[m, j], residual[m, j],
-                                    payload_mass=float(sig.payloads[e].mass),
-                                    revolute=revolute))
-    lib = Library(Coulomb(), Viscous(), Offset())
-    design = build_design(lib, concat(exps), decimation=1, dq_min=dq_min)
-    return refine(design, IdentModel(lib, "residual"), max_steps=max_steps, vmax=vmax)
+                  dq_min: float, max_steps: int, coulomb: float | None = None) -> Any:
+    """ident.refine on joint j of the n-dof fit whose residual is ``residual`` (module
+    docstring), the other joints' q and dq given as ``q<m>``, ``dq<m>``
+    (:func:`ident.robot.refine_joint.refine_joint`); the samples the n-dof fit used
+    (|dq_j| > dq_min) only."""
+    return refine_joint(sig, sig.tau - residual, j, revolute=revolute, vmax=vmax,
+                        dq_min=dq_min, max_steps=max_steps, coulomb=coulomb)
 
 
 def run_robot_demo(out_dir: str | Path, *, robot: str = "3", max_steps: int = 2,
@@ -227,7 +219,7 @@ def run_robot_demo(out_dir: str | Path, *, robot: str = "3", max_steps: int = 2,
             try:
                 per[name] = _refine_joint(
                     sig, residual, j, campaign.joints[j].kind == "revolute", vmax[j], dq_min,
-                    max_steps)
+                    max_steps, joint_coulomb(est, j))
             except IdentError as exc:
                 per[name] = str(exc)
         refinements[model] = per
@@ -271,8 +263,8 @@ def _summary(campaign: RobotCampaign, t3: dict, refinements: dict, pred: float,
              + ", ".join(f"{c:.4g}" for c in logged), "",
              "Table III per joint — relative norm of errors ||rho||/||tau||",
              format_table_iii(t3), ""]
-    lines.append("Refinement of each joint's residual (ident.refine; relative error of the "
-                 "residual's model)")
+    lines.append("Refinement of each joint's residual (ident.refine; relative error "
+                 "||rho_j||/||tau_j||)")
     for model, per in refinements.items():
         for name, r in per.items():
             if isinstance(r, str):
@@ -332,11 +324,14 @@ def _write_report(out: Path, campaign: RobotCampaign, rob: Any, assessment: Any,
             sec.figure(out / fname, f"{name} model, {fname.split('_')[-1][:-4]}")
         sections.append(sec)
     ref = Section("Refinement of each joint's residual").para(
-        "ident's single-joint refinement (ident.refine) on each joint's residual of each "
-        "n-dof fit (the samples the fit used), the declared model being the usual friction "
-        "(F_C, F_V, tau_off) refitted on the residual; an accepted step names an effect "
-        "still in the residual. The relative errors are those of the residual's own model "
-        "(1 = nothing explained). No n-dof refinement exists yet: this is the single-joint "
+        "ident's single-joint refinement (ident.refine) on each joint of each n-dof fit "
+        "(the samples the fit used): the declared model is the n-dof prediction (times a gain "
+        "~1, also the load prediction) plus the usual friction (F_C, F_V, tau_off) refitted "
+        "on the joint's measured torque, so the residual is the n-dof residual; an accepted "
+        "step names an effect still in it. Relative errors are ||rho_j|| / ||tau_j||. The "
+        "other joints' positions and velocities (q<m>, dq<m>, m = joint number in the moving "
+        "chain) are searched too: a step in one of them is a cross-joint effect. No n-dof "
+        "refinement exists yet: this is the single-joint "
         "loop joint by joint.")
     rows = []
     for model, per in refinements.items():

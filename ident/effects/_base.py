@@ -112,6 +112,8 @@ def variable_values(variable: str, s: Signals, tau_out: Prediction | None = None
         return _sign(s.tau * s.dq)
     if variable == "time":
         return s.t
+    if s.extra is not None and variable in s.extra:  # another joint's state (Signals.extra)
+        return s.extra[variable]
     raise ValueError(f"unknown candidate variable {variable!r}; expected one of {VARIABLES}")
 
 

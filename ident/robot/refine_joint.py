@@ -1,0 +1,183 @@
+"""Refinement of one joint of an n-dof fit, the other joints' states available.
+
+Joint j's measured torque tau_j is the Y of a single-joint design whose declared model is the
+n-dof fit's prediction tau_hat_j times a gain (:class:`NdofPrediction`, ~1) plus the usual
+friction (F_C, F_V, tau_off; ~0, they take what the n-dof fit left in those shapes); its
+residual is the n-dof fit's residual, and :func:`ident.refine.refine` looks for the effects
+left in it (docs/refinement.md). The measured torque, not the residual, is the design's
+torque so that the variables the refinement reads from it are not the residual itself:
+sign(P) = sign(tau_j dq_j) (eq. 26) and the load tau_out, taken as the n-dof prediction
+(:func:`ident.effects.rigid_prediction`: the declared "rigid body" is that column; it includes
+joint j's fitted friction, a small bias of the load variable where friction is a large part
+of the torque). With the residual as the torque, sign(residual dq) and a basis in the
+"load" = residual fit the noise itself (a quadrant Coulomb or a load basis accepted on clean
+data).
+
+The other joints' positions and velocities ride along as :attr:`Signals.extra
+<ident.signals.Signals.extra>`, named ``q<m>`` and ``dq<m>`` with m the joint's 1-based index
+in ``RobotSignals.joints`` (the moving chain): they follow the design's row selection, the
+interaction diagnosis and the library search expand them, and a selected group in them
+becomes a term of joint j (a cross-joint effect: a cable or a bearing load following another
+joint, ``sim_drivers.arm_effects`` "dry coupling").
+
+Pure numerics (no file access).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from .. import DataError
+from ..loaders import concat, make_experiment
+from ..models import Coulomb, IdentModel, Offset, Viscous
+from ..preprocess import build_design
+from ..refine import refine
+from ..refine_result import Refinement
+from ..signals import Signals
+from ..terms import Library, Term
+from .signals import RobotSignals
+
+__all__ = ["NDOF_PREDICTION", "NdofPrediction", "joint_coulomb", "other_joint_names",
+           "refine_joint"]
+
+#: Key of the n-dof prediction in ``Signals.extra`` (not searched as an "other" variable).
+NDOF_PREDICTION = "tau_hat"
+
+
+class NdofPrediction(Term):
+    """The n-dof fit's prediction of the joint's torque, tau_hat_j [N m], times a gain
+    ``k_ndof`` (1 when the n-dof fit is kept as it is); read from
+    ``Signals.extra[NDOF_PREDICTION]``. Its effect is ``"rigid_body"``: the refinement takes
+    it as the load prediction tau_out (module docstring)."""
+
+    effect = "rigid_body"
+    variable = "model"
+
+    def names(self) -> tuple[str, ...]:
+        return ("k_ndof",)
+
+    def columns(self, s: Signals) -> np.ndarray:
+        if s.extra is None or NDOF_PREDICTION not in s.extra:
+            raise DataError(f"NdofPrediction: the signals have no extra[{NDOF_PREDICTION!r}]")
+        return np.asarray(s.extra[NDOF_PREDICTION], dtype=float)[:, None]
+
+    def describe(self) -> str:
+        return "n-dof fit's prediction of the joint torque x k_ndof"
+
+
+def other_joint_names(k: int, j: int) -> list[tuple[int, str, str]]:
+    """``(m, "q<m+1>", "dq<m+1>")`` for every joint m != j of a k-joint robot."""
+    return [(m, f"q{m + 1}", f"dq{m + 1}") for m in range(k) if m != j]
+
+
+def refine_joint(
+    sig: RobotSignals,
+    prediction: np.ndarray,
+    j: int,
+    *,
+    revolute: bool = True,
+    vmax: float | None = None,
+    dq_min: float | None = None,
+    max_steps: int = 2,
+    others: bool = True,
+    torque: str = "measured",
+    coulomb: float | None = None,
+    **kwargs,
+) -> Refinement:
+    """:func:`ident.refine.refine` on joint j of an n-dof fit (module docstring).
+
+    Parameters
+    ----------
+    sig : RobotSignals
+        The samples the n-dof fit used (n samples, k joints), uniform in time within each
+        experiment (one experiment per payload run).
+    prediction : ndarray, shape (n, k)
+        The n-dof fit's torque prediction tau_hat [N m] (``RobotModel.predict``); joint j's
+        column and ``sig.tau`` must be finite.
+    j : int
+        Joint index (0-based, column of ``sig``).
+    revolute : bool
+        Joint j is revolute.
+    vmax : float, optional
+        Joint j's maximum velocity for the velocity bands [rad/s].
+    dq_min : float, optional
+        Samples with |dq_j| below it are left out (as the n-dof fit did) [rad/s].
+    max_steps : int
+        Refinement steps at most.
+    others : bool
+        Give the other joints' q and dq to the refinement (``q<m>``, ``dq<m>``).
+    torque : {"measured", "residual"}
+        The design's torque: the measured tau_j with the prediction as declared column
+        (module docstring), or the residual tau_j - tau_hat_j with the usual friction refitted
+        on it (``jointid demo --robot`` so far; sign(P) and the load are then read from the
+        residual itself).
+    coulomb : float, optional
+        Joint j's Coulomb friction of the n-dof fit [N m] (:func:`joint_coulomb`): the scale
+        of "±x % of F_C" in the descriptions (the design's own F_C is a correction ~0).
+    **kwargs
+        Passed to :func:`ident.refine.refine` (``alpha``, ``min_gain``, ``progress``, ...).
+
+    Returns
+    -------
+    Refinement
+        Relative errors are ||rho_j|| / ||tau_j||; the initial one is the n-dof fit's (up to
+        the refitted gain and friction).
+
+    Raises
+    ------
+    DataError
+        Bad shapes or joint index, non-finite samples, too few samples.
+    """
+    prediction = np.asarray(prediction, dtype=float)
+    if prediction.shape != sig.tau.shape:
+        raise DataError(f"refine_joint: prediction has shape {prediction.shape}, expected "
+                        f"{sig.tau.shape} (samples, joints of {sig.source or 'the signals'})")
+    if not 0 <= j < sig.k:
+        raise DataError(f"refine_joint: joint index {j} not in 0..{sig.k - 1}")
+    for what, a in (("torque", sig.tau[:, j]), ("prediction", prediction[:, j])):
+        bad = ~np.isfinite(a)
+        if bad.any():
+            raise DataError(f"refine_joint: {what} of joint {sig.joints[j]} has "
+                            f"{int(bad.sum())} non-finite samples (give the samples the fit "
+                            "used, uniform in time)")
+    if torque not in ("measured", "residual"):
+        raise DataError(f"refine_joint: torque must be 'measured' or 'residual', got {torque!r}")
+    y = sig.tau[:, j] if torque == "measured" else sig.tau[:, j] - prediction[:, j]
+    exps, idx = [], []
+    for e in np.unique(sig.experiment):
+        m = np.flatnonzero(sig.experiment == e)
+        dt = float(np.median(np.diff(sig.t[m])))  # the (decimated) period: uniform samples
+        exps.append(make_experiment(f"{sig.joints[j]} run {e}", dt * np.arange(m.size),
+                                    sig.q[m, j], y[m],
+                                    payload_mass=float(sig.payloads[e].mass),
+                                    revolute=revolute))
+        idx.append(m)
+    order = np.concatenate(idx)
+    extra = {NDOF_PREDICTION: prediction[order, j]}
+    names: list[str] = []
+    if others:
+        for m, qn, dqn in other_joint_names(sig.k, j):
+            extra[qn] = sig.q[order, m]
+            extra[dqn] = sig.dq[order, m]
+            names += [qn, dqn]
+    s = replace(concat(exps), extra=extra)
+    lib = Library(Coulomb(), Viscous(), Offset())
+    if torque == "measured":
+        lib = Library(NdofPrediction(), *lib.terms())
+    design = build_design(lib, s, decimation=1, dq_min=dq_min)
+    return refine(design, IdentModel(lib, "ndof" if torque == "measured" else "residual"),
+                  max_steps=max_steps, vmax=vmax, others=names,
+                  reference=None if coulomb is None else {"F_C": float(coulomb)}, **kwargs)
+
+
+def joint_coulomb(model: Any, j: int) -> float | None:
+    """Joint j's Coulomb friction in a fitted n-dof model [N m]: ``FC<n>`` (usual) or
+    ``c_m<n>`` (paper, motor quadrant at speed), n the joint's number; None if absent."""
+    n = model.numbers_[j]
+    for name in (f"FC{n}", f"c_m{n}"):
+        if name in model.params_:
+            return float(model.params_[name])
+    return None
