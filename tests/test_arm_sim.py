@@ -1,6 +1,10 @@
 """The n-dof arm simulator: its record is its own truth (inverse model on the true states),
 one joint is exactly the single-joint plant, stiction holds and releases at the band edges,
-the closed loop tracks, payloads change the truth as eq. 34-35 say, runs are reproducible."""
+the closed loop tracks, payloads change the truth as eq. 34-35 say, runs are reproducible.
+
+(Just past 600 lines: one simulator's acceptance -- forward/inverse consistency, stiction, every
+undeclared effect -- kept in one file so the shared fixtures stay in one place.)
+"""
 
 from __future__ import annotations
 
