@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import optimize
 
-from .effects import Effect, Prediction
+from .effects import Effect, Prediction, amplitude_phase
 from .interaction_effects import (
     LoadVelocityDryFriction,
     LoadViscous,
@@ -171,17 +171,6 @@ def _fit_form(
 
 def _sd(cov: np.ndarray) -> np.ndarray:
     return np.sqrt(np.clip(np.diag(cov), 0.0, None))
-
-
-def _amp_phase(coef: np.ndarray, cov: np.ndarray) -> tuple[float, float, float, float]:
-    a, b = float(coef[0]), float(coef[1])
-    amp = math.hypot(a, b)
-    g = np.zeros((2, len(coef)))
-    if amp > 0:
-        g[0, :2] = (a / amp, b / amp)
-        g[1, :2] = (-b / amp**2, a / amp**2)
-    sd = np.sqrt(np.clip(np.diag(g @ cov @ g.T), 0, None))
-    return amp, 2 * float(sd[0]), math.atan2(b, a), 2 * float(sd[1])
 
 
 def _p(v: float, s2: float) -> dict[str, float]:
@@ -318,7 +307,7 @@ def describe_group(
 
         if span > 0:
             rss, P, c, cov = _fit_form(y, W, Q, make_sin, span / 40, 2 * span)
-            amp, amp2, ph, ph2 = _amp_phase(c, cov)
+            amp, amp2, ph, ph2 = amplitude_phase(c, cov)
             sd = _sd(cov)
             name = ("position_periodic_dry_friction" if (var, mod) == ("position", "direction")
                     else f"periodic_{var}" + ("" if mod == "none" else f"_{mod}"))

@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from .effects import Effect, Prediction
+from .effects import Effect, Prediction, amplitude_phase
 from .interactions import reversal_distance
 from .signals import Signals
 
@@ -61,17 +61,11 @@ class PositionDryFriction(Effect):
         return np.column_stack((np.sin(th) * sg, np.cos(th) * sg))
 
     def parameters(self, coef, cov):
-        a, b = float(coef[0]), float(coef[1])
-        amp = math.hypot(a, b)
-        g = np.zeros((2, len(coef)))
-        if amp > 0:
-            g[0, :2] = (a / amp, b / amp)
-            g[1, :2] = (-b / amp**2, a / amp**2)
-        sd = np.sqrt(np.clip(np.diag(g @ cov @ g.T), 0, None))
+        amp, amp2, phase, phase2 = amplitude_phase(coef, cov)
         sdp = math.sqrt(max(float(cov[2, 2]), 0.0)) if len(coef) > 2 else 0.0
         return {
-            self._n("fcq_amplitude"): (amp, float(2 * sd[0])),
-            self._n("fcq_phase"): (math.atan2(b, a), float(2 * sd[1])),
+            self._n("fcq_amplitude"): (amp, amp2),
+            self._n("fcq_phase"): (phase, phase2),
             self._n("fcq_period"): (self.period, 2 * sdp),
         }
 

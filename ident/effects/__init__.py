@@ -42,6 +42,7 @@ from ._base import (
     Effect,
     Prediction,
     Registration,
+    amplitude_phase,
     register,
     registry,
     rigid_prediction,
@@ -72,6 +73,7 @@ for _name in EFFECT_MODULES:
 
 __all__ = [
     "VARIABLES",
+    "amplitude_phase",
     "CONTINUOUS",
     "EFFECT_MODULES",
     "Candidate",

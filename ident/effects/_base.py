@@ -21,6 +21,7 @@ candidates. Nothing here touches files; everything is vectorised over samples.
 from __future__ import annotations
 
 import copy
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -37,6 +38,7 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = [
     "VARIABLES",
     "Prediction",
+    "amplitude_phase",
     "variable_values",
     "Effect",
     "Candidate",
@@ -358,3 +360,28 @@ def register(
 def registry() -> list[Registration]:
     """The registered effects, by increasing order."""
     return sorted(_REGISTRY.values(), key=lambda r: r.order)
+
+
+def amplitude_phase(coef: np.ndarray, cov: np.ndarray) -> tuple[float, float, float, float]:
+    """Amplitude and phase of ``a sin th + b cos th = A sin(th + phi)`` from the first two
+    coefficients, with twice their standard deviations by the delta method.
+
+    Parameters
+    ----------
+    coef : ndarray, shape (p,)
+        ``a``, ``b`` first (further entries, e.g. a period, are not used).
+    cov : ndarray, shape (p, p)
+        Covariance of ``coef``.
+
+    Returns
+    -------
+    (A, 2 sigma_A, phi [rad], 2 sigma_phi)
+    """
+    a, b = float(coef[0]), float(coef[1])
+    amp = math.hypot(a, b)
+    g = np.zeros((2, len(coef)))
+    if amp > 0:
+        g[0, :2] = (a / amp, b / amp)
+        g[1, :2] = (-b / amp**2, a / amp**2)
+    sd = np.sqrt(np.clip(np.diag(g @ cov @ g.T), 0, None))
+    return amp, 2 * float(sd[0]), math.atan2(b, a), 2 * float(sd[1])

@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from ..signals import Signals
-from ._base import Candidate, Context, Effect, register, unique_tag
+from ._base import Candidate, Context, Effect, amplitude_phase, register, unique_tag
 from ._scan import Columns, refine_1d
 
 
@@ -45,17 +45,11 @@ class PositionRipple(Effect):
         return np.column_stack((np.sin(th), np.cos(th)))
 
     def parameters(self, coef, cov):
-        a, b = float(coef[0]), float(coef[1])
-        amp = math.hypot(a, b)
         # A sin(th + phi) = A cos(phi) sin(th) + A sin(phi) cos(th)
-        g = np.zeros((2, len(coef)))
-        if amp > 0:
-            g[0, :2] = (a / amp, b / amp)
-            g[1, :2] = (-b / amp**2, a / amp**2)
-        sd = np.sqrt(np.clip(np.diag(g @ cov @ g.T), 0, None))
+        amp, amp2, phase, phase2 = amplitude_phase(coef, cov)
         out = {
-            self._n("ripple_amplitude"): (amp, float(2 * sd[0])),
-            self._n("ripple_phase"): (math.atan2(b, a), float(2 * sd[1])),
+            self._n("ripple_amplitude"): (amp, amp2),
+            self._n("ripple_phase"): (phase, phase2),
         }
         sdp = math.sqrt(max(float(cov[2, 2]), 0.0)) if len(coef) > 2 else 0.0
         out[self._n("ripple_period")] = (self.period, 2 * sdp)
