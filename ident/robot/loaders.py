@@ -64,6 +64,7 @@ from ..loaders import (
     IRREGULAR_TOL,
     MIN_SAMPLES,
     Q_UNITS,
+    _longest_true_run,
     _read_csv,
     _read_mat,
     resolve_path,
@@ -206,16 +207,6 @@ def _mcap_axes(path: Path) -> int:
         except LogReadError:
             return n
         n += 1
-
-
-def _longest_true_run(mask: np.ndarray) -> slice:
-    m = np.concatenate(([False], np.asarray(mask, dtype=bool), [False]))
-    edges = np.flatnonzero(np.diff(m.astype(np.int8)))
-    if edges.size == 0:
-        return slice(0, 0)
-    starts, stops = edges[0::2], edges[1::2]
-    i = int(np.argmax(stops - starts))
-    return slice(int(starts[i]), int(stops[i]))
 
 
 def _json_vector(text: str | None, size: int, what: str, source: str) -> np.ndarray:
