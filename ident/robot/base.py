@@ -354,11 +354,10 @@ def lever_arm_payload(payload: RobotPayloadData, regressor: RobotRegressor,
     if m == 0.0:
         return RobotPayloadData()
     n_std = len(base.standard_names)
-    last = (regressor.k - 1) * (regressor.p // regressor.k)
 
     def single(c: np.ndarray) -> np.ndarray:
-        chi = np.zeros(n_std)
-        chi[last:last + 10] = regressor.payload_parameters(RobotPayloadData(m, c))
+        chi = np.zeros(n_std)  # the one moving link's XX..M come first
+        chi[:10] = regressor.payload_parameters(RobotPayloadData(m, c))
         return smap.matrix[:3] @ base.values(chi)  # (J, MX, MY) of the point mass at c
 
     f0 = single(np.zeros(3))
