@@ -85,6 +85,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "known instead of identifying Ia_j",
     )
     p.add_argument(
+        "--chain",
+        choices=("columns", "states"),
+        help="--robot only: 'columns' (default) builds the regressor at full rate and decimates "
+        "its columns with the torque, exactly the single-joint chain; 'states' decimates q, dq, "
+        "ddq and builds the regressor on them (memory bounded on very long logs)",
+    )
+    p.add_argument(
+        "--payload",
+        choices=("known", "ratio"),
+        help="--robot only: the logged payload's torque is known, or scaled by an identified "
+        "ratio M_ae/M_aw (eq. 35); default ratio for single-joint logs (payload lever arm), "
+        "else known",
+    )
+    p.add_argument(
         "--joint",
         choices=("revolute", "prismatic"),
         help="joint kind (default: MCAP metadata; revolute for CSV/MAT)",
@@ -197,6 +211,9 @@ def run(args: argparse.Namespace) -> int:
     if args.known_rotor_inertia:
         raise DataError("--known-rotor-inertia: applies to --robot fits only (one joint: J "
                         "includes the rotor)")
+    for flag, attr in (("--chain", "chain"), ("--payload", "payload")):
+        if getattr(args, attr, None) is not None:
+            raise DataError(f"{flag}: applies to --robot fits only")
     if args.model == "paper":
         args.model = "new"
     mapping = parse_mapping(args.map)

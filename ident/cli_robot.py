@@ -24,8 +24,10 @@ import numpy as np
 from trajectories.robot import Robot, load_robot
 
 from . import DataError, IdentError
+from .fitting import SIGN_CHECK_MIN_KEPT
 from .report import write_json
 from .robot.consistency import check_consistency
+from .robot.design import design_runs, resolve_design, sign_checked
 from .robot.estimate import RobotModel
 from .robot.loaders import (
     RawRobotRun,
@@ -43,6 +45,10 @@ from .robot.tables import format_table_iii, table_iii
 __all__ = ["run", "fit_robot", "format_report", "FORMAT"]
 
 FORMAT = "jointid-robot-fit/1"
+#: Preprocessing chains (``fit_robot(chain=...)``, ``--chain``).
+CHAINS = ("columns", "states")
+#: Payload treatments (``fit_robot(payload=...)``, ``--payload``).
+PAYLOADS = ("known", "ratio")
 #: Options of the single-joint ``jointid fit`` that have no meaning with ``--robot``.
 _SINGLE_ONLY = (("joint", "--joint", "the robot file gives the joint types"),
                 ("gain", "--gain", "use drive_gain in the robot file's [joints.drive]"),
@@ -91,6 +97,9 @@ def fit_robot(
     dq_min: float | None = None,
     preprocessing: RobotPreprocessing | None = None,
     known_rotor_inertia: bool = False,
+    chain: str = "columns",
+    payload: str | None = None,
+    sign_check: bool = True,
 ) -> dict[str, Any]:
     """Preprocess, fit each model, cross-validate; the JSON record (no file written).
 
@@ -108,12 +117,26 @@ def fit_robot(
     qs : float
         q_s of the paper model [rad/s].
     dq_min : float or None
-        Stiction area |dq_j| <= dq_min left out of joint j's rows [rad/s]; None: 1 % of the
+        Stiction area |dq_j| < dq_min left out of joint j's rows [rad/s]; None: 1 % of the
         largest |dq| of the identification data.
     preprocessing : RobotPreprocessing or None
+        Cut-off, decimation, trim (None entries: chosen by the chain's rules).
     known_rotor_inertia : bool
         Rotor inertias of the robot file known, not identified
         (:class:`~ident.robot.regressor.RobotRegressor`).
+    chain : {"columns", "states"}
+        ``"columns"``: the single-joint chain, regressor columns filtered and decimated in
+        parallel with the torque (:mod:`ident.robot.design`); ``"states"``: the states
+        decimated and the regressor built on them (:func:`preprocess_runs`).
+    payload : {"known", "ratio"} or None
+        The payload torque known, or scaled by an identified ratio M_ae/M_aw (eq. 35,
+        ``RobotModel(payload_ratio=True)``); None: "ratio" when some run gives its payload
+        as a single-joint lever arm (``arm_m``), as the single-joint fit does, else "known".
+    sign_check : bool
+        Columns chain with the paper model: leave out, for both models, the rows where
+        sign(tau_j) != sign(tau_out_j) of a first usual fit (the single-joint ``sign_check``
+        of :func:`ident.fitting.fit_models`; skipped with a note when it would keep fewer
+        than :data:`ident.fitting.SIGN_CHECK_MIN_KEPT` of the rows).
 
     Returns
     -------
@@ -123,21 +146,58 @@ def fit_robot(
     """
     joints = robot.moving
     reg = RobotRegressor(robot, known_rotor_inertia=known_rotor_inertia)
-    settings = resolved_settings(runs, preprocessing)
-    pre = RobotPreprocessing(settings["cutoff_hz"], int(settings["decimation"]),
-                             int(settings["trim"]))
-    sig = preprocess_runs(runs, joints, pre)
-    val = preprocess_runs(validation, joints, pre) if validation else None
     if method is None:
         method = "wls"
-    if method == "iv" and sig.q_ref is None:
+    if method == "iv" and any(r.q_ref is None for r in runs):
         raise DataError("--method iv: the inputs carry no reference trajectory q_ref (map one "
                         "with --map q_ref=PATH, or CSV columns q_ref1..q_refk)")
-    if dq_min is None:
-        dq_min = 0.01 * float(np.max(np.abs(sig.dq)))
+    if chain not in CHAINS:
+        raise DataError(f"chain {chain!r}: expected one of {CHAINS}")
+    if payload is None:
+        payload = "ratio" if any(r.payload.arm_m is not None and r.payload.mass > 0
+                                 for r in runs) else "known"
+    if payload not in PAYLOADS:
+        raise DataError(f"payload {payload!r}: expected one of {PAYLOADS}")
+    pre = preprocessing or RobotPreprocessing()
+    notes: list[str] = []
+    if chain == "columns":
+        design = resolve_design(runs, instruments=method == "iv", cutoff_hz=pre.cutoff_hz,
+                                decimation=pre.decimation, trim=pre.trim, dq_min=dq_min)
+        sig, dq_min = design_runs(runs, reg, design, instruments=method == "iv")
+        design = replace(design, dq_min=dq_min)
+        val = design_runs(validation, reg, design)[0] if validation else None
+        settings: dict[str, Any] = design.as_dict()
+        est_dq_min = 0.0  # the stiction area is in the columns' keep mask
+        if sign_check and "paper" in models:
+            # as the single-joint fit: a first usual fit estimates tau_out; rows where
+            # sign(tau) != sign(tau_out) are left out of both models (and the validation)
+            first = RobotModel(reg, model="usual", method=method,
+                               payload_ratio=payload == "ratio").fit(sig)
+            sig, kept = sign_checked(sig, runs, design, first.load_torque,
+                                     SIGN_CHECK_MIN_KEPT)
+            if val is not None:
+                # checked on the joints the identification data were checked on
+                val = sign_checked(val, validation, design, first.load_torque,
+                                   np.where(kept >= SIGN_CHECK_MIN_KEPT, 0.0, np.inf))[0]
+            for j, f in zip(joints, kept, strict=True):
+                if f >= SIGN_CHECK_MIN_KEPT:
+                    notes.append(f"sign check, joint {j}: {100 * (1 - f):.1f} % of its rows "
+                                 "left out (sign(tau) != sign(tau_out) of a first usual fit)")
+                else:
+                    notes.append(f"sign check skipped on joint {j}: it would keep only "
+                                 f"{100 * f:.0f} % of its rows (tau_out near zero)")
+    else:
+        settings = resolved_settings(runs, pre)
+        pre = RobotPreprocessing(settings["cutoff_hz"], int(settings["decimation"]),
+                                 int(settings["trim"]))
+        sig = preprocess_runs(runs, joints, pre)
+        val = preprocess_runs(validation, joints, pre) if validation else None
+        if dq_min is None:
+            dq_min = 0.01 * float(np.max(np.abs(sig.dq)))
+        est_dq_min = dq_min
     if val is not None:
         # the validation error is taken on the samples the fit would use (as the single-joint
-        # validation design): joint j's torque at |dq_j| <= dq_min is left out (NaN)
+        # validation design): joint j's torque in its stiction area is left out (NaN)
         val = selected(val, dq_min)
     out: dict[str, Any] = {
         "format": FORMAT,
@@ -145,11 +205,13 @@ def fit_robot(
                   "numbers": list(robot.numbers)},
         "inputs": [r.source for r in runs],
         "validation_inputs": [r.source for r in validation or []],
-        "preprocessing": {**settings, "dq_min": dq_min, "samples": sig.n,
+        "preprocessing": {**settings, "chain": chain, "dq_min": dq_min, "samples": sig.n,
                           "validation_samples": 0 if val is None else val.n},
         "method": method,
         "known_rotor_inertia": bool(known_rotor_inertia),
+        "payload": payload,
         "qs": qs,
+        "notes": notes,
         "models": {},
         "_estimators": {},
         "_consistency": {},
@@ -157,7 +219,8 @@ def fit_robot(
     }
     for name in models:
         try:
-            est = RobotModel(reg, model=name, method=method, qs=qs, dq_min=dq_min).fit(sig)
+            est = RobotModel(reg, model=name, method=method, qs=qs, dq_min=est_dq_min,
+                             payload_ratio=payload == "ratio").fit(sig)
         except IdentError as exc:
             if len(models) == 1:
                 raise
@@ -174,6 +237,7 @@ def fit_robot(
             "n_base": int(est.n_base_),
             "rel_error": {k: float(v) for k, v in est.rel_error_.items()},
             "sigma_joint": {j: float(s) for j, s in zip(joints, est.sigma_joint_, strict=True)},
+            "samples": {j: int(n) for j, n in zip(joints, est.n_samples_, strict=True)},
         }
         expressions = getattr(est.base_, "expressions", None)
         if expressions:
@@ -201,9 +265,11 @@ def fit_robot(
 
 
 def selected(sig: RobotSignals, dq_min: float) -> RobotSignals:
-    """``sig`` with the torque of joint j set to NaN where |dq_j| <= dq_min (the stiction
-    area the estimator leaves out of joint j's equations; non-finite torques are ignored by
-    ``RobotModel.rel_error``)."""
+    """``sig`` with the torque of joint j set to NaN where the estimator leaves joint j's
+    rows out: the columns' keep mask (:mod:`ident.robot.design`), else |dq_j| <= dq_min
+    (the stiction area; non-finite torques are ignored by ``RobotModel.rel_error``)."""
+    if sig.columns is not None:
+        return replace(sig, tau=np.where(sig.columns.keep, sig.tau, np.nan))
     return replace(sig, tau=np.where(np.abs(sig.dq) > dq_min, sig.tau, np.nan))
 
 
@@ -219,9 +285,11 @@ def format_report(out: dict[str, Any]) -> str:
     r = out["robot"]
     pre = out["preprocessing"]
     lines.append(f"robot {r['name']} ({r['source']}): moving joints {', '.join(r['moving'])}")
-    lines.append(f"preprocessing: cut-off {pre['cutoff_hz']:g} Hz, decimation "
-                 f"{pre['decimation']}, trim {pre['trim']}, dq_min {pre['dq_min']:.4g} rad/s, "
-                 f"{pre['samples']} samples x {len(r['moving'])} joints; method {out['method']}")
+    lines.append(f"preprocessing ({pre['chain']} chain): cut-off {pre['cutoff_hz']:g} Hz, "
+                 f"decimation {pre['decimation']}, trim {pre['trim']}, dq_min "
+                 f"{pre['dq_min']:.4g} rad/s, {pre['samples']} samples x {len(r['moving'])} "
+                 f"joints; method {out['method']}, payload {out['payload']}")
+    lines.extend(f"note: {n}" for n in out.get("notes", []))
     fitted = {n: rec for n, rec in out["models"].items() if "error" not in rec}
     for name, rec in out["models"].items():
         lines.append("")
@@ -284,7 +352,8 @@ def run(args: argparse.Namespace) -> int:
     pre = RobotPreprocessing(args.cutoff, args.decimation, args.trim)
     out = fit_robot(robot, runs, val, models=models, method=args.method, qs=qs,
                     dq_min=args.dq_min, preprocessing=pre,
-                    known_rotor_inertia=args.known_rotor_inertia)
+                    known_rotor_inertia=args.known_rotor_inertia,
+                    chain=args.chain or "columns", payload=args.payload)
     text = format_report(out)
     public = _public(out)
     # everything computed: only now write files (a bad input leaves nothing behind)

@@ -12,11 +12,17 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from mcap.reader import make_reader
 
 from daq import examples
+from ident.robot.base import base_parameters, single_joint_map
+from ident.robot.regressor import RobotRegressor
 from sim_drivers.plant_config import load_plant
+from trajectories.robot import load_robot
+
+ROOT = Path(__file__).resolve().parents[1]
 
 pytestmark = pytest.mark.slow
 
@@ -95,6 +101,57 @@ def test_demo_refined_model_matches_the_plant_truth(demo):
     # q_s adjusted after refinement lands near the plant's 0.03 rad/s (a priori: 0.04)
     assert fit["qs_a_priori"] == pytest.approx(0.04)
     assert fit["qs"] == pytest.approx(0.03, rel=0.15)
+
+
+def test_rx130l_joint3_robot_path_gives_the_demos_numbers(demo, tmp_path):
+    """Issue 11: the demo's logs through the robot path -- ``jointid fit --robot rx130l.toml``
+    (joint 3 moving, joints 1, 2, 4, 5, 6 locked; the logs' payload lever arms placed on the
+    flange; the columns chain; IDIM-IV as the single-joint fit uses on logs with references)
+    -- print the demo's usual-model numbers (J, MX, MY, Ma_ratio, F_C, F_V, tau_off to the 6
+    significant digits of its table, their standard deviations to 3) and its Table III, on
+    the same samples (the sign check of a first usual fit included)."""
+    out, _ = demo
+    fit = json.loads((out / "fit.json").read_text())
+    usual = fit["models"]["usual"]
+    assert usual["removed"] == []  # nothing eliminated: the same model on both paths
+    rec_path = tmp_path / "robot.json"
+    run = subprocess.run(
+        [sys.executable, "-c", "import sys; from daq.app.cli import main; sys.exit(main())",
+         "fit", "--robot", str(ROOT / "examples" / "robots" / "rx130l.toml"),
+         *map(str, sorted((out / "logs").glob("*.mcap"))), "--method", "iv",
+         "--json", str(rec_path)],
+        capture_output=True, text=True, timeout=600,
+    )
+    assert run.returncode == 0, run.stderr[-3000:]
+    rec = json.loads(rec_path.read_text())
+    assert rec["payload"] == "ratio" and rec["preprocessing"]["chain"] == "columns"
+    for k in ("cutoff_hz", "decimation", "trim", "guard", "torque_delay", "dq_min"):
+        assert rec["preprocessing"][k] == fit["preprocessing"][k], k
+    robot = load_robot(ROOT / "examples" / "robots" / "rx130l.toml")
+    reg = RobotRegressor(robot)
+    base = base_parameters(reg)
+    smap = single_joint_map(base, reg)
+    model = rec["models"]["usual"]
+    pars = model["parameters"]
+    theta = np.array([pars[n]["value"] for n in base.names])
+    ours = smap.values(theta)
+    # the standard deviations of J, MX, MY map as the values (signed permutation here)
+    sd = {n: abs(v) for n, v in smap.values(np.array(
+        [pars[n]["std"] for n in base.names])).items()}
+    for n, r in (("Ma_ratio", "Ma_ratio"), ("F_C", "FC3"), ("F_V", "FV3"),
+                 ("tau_off", "OFF3")):
+        ours[n], sd[n] = pars[r]["value"], pars[r]["std"]
+    assert set(ours) == set(usual["parameters"])
+    for n, v in usual["parameters"].items():
+        assert f"{ours[n]:.6g}" == f"{v['value']:.6g}", (n, ours[n], v["value"])
+        assert f"{sd[n]:.3g}" == f"{v['std']:.3g}", (n, sd[n], v["std"])
+    t3 = rec["table_iii"]["fit"]["j3"]["usual"]
+    for band, key in (("all", "rel_error"), ("low", "rel_error_low_velocity"),
+                      ("high", "rel_error_high_velocity")):
+        assert f"{t3[band]:.4f}" == f"{usual[key]:.4f}", (band, t3[band], usual[key])
+    # the same rows: the stiction area and the sign check of a first usual fit left out
+    assert model["samples"]["j3"] == usual["samples"] == fit["models"]["new"]["samples"]
+    assert rec["models"]["paper"]["samples"]["j3"] == usual["samples"]
 
 
 def test_report_command_rebuilds_the_report(demo, tmp_path):

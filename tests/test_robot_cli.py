@@ -17,8 +17,10 @@ import scipy.io
 from daq.app.cli import main
 from daq.runtime.mcaplog import RunLog
 from ident.api import JointModel, load
+from ident.fitting import SIGN_CHECK_MIN_KEPT
 from ident.preprocess import decimate, diffcent, lowpass
 from ident.robot import RobotIdentError
+from ident.robot.design import DesignSettings, design_runs, sign_checked
 from ident.robot.estimate import RobotModel
 from ident.robot.loaders import (
     RobotPreprocessing,
@@ -158,6 +160,17 @@ def test_preprocessed_experiments_keep_their_payloads_and_index(tmp_path, arm_ru
 # -- the CLI ---------------------------------------------------------------------------------
 
 
+def api_signals(paths, robot, rec, reg, method):
+    """The columns chain called in Python with the settings a CLI record reports."""
+    pre = rec["preprocessing"]
+    settings = DesignSettings(pre["cutoff_hz"], pre["decimation"], pre["trim"], pre["guard"],
+                              pre["torque_delay"], pre["dq_min"])
+    runs = load_robot_runs(paths, robot.moving)
+    sig, dq_min = design_runs(runs, reg, settings, instruments=method == "iv")
+    assert dq_min == pre["dq_min"]
+    return sig, (runs, settings)
+
+
 @pytest.mark.parametrize("method", ["ls", "wls", "iv"])
 def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capfd, method):
     """``jointid fit --robot`` on CSV and MCAP: exit 0, the tables, a JSON equal to the
@@ -184,13 +197,11 @@ def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capfd,
     assert rec["format"] == "jointid-robot-fit/1"
     assert rec["robot"]["moving"] == list(robot.moving)
     usual = rec["models"]["usual"]
-    # the same estimator, called directly on the same files and settings
-    pre = RobotPreprocessing(rec["preprocessing"]["cutoff_hz"],
-                             rec["preprocessing"]["decimation"], rec["preprocessing"]["trim"])
-    sig = load_robot_signals(fit_csv, robot.moving, preprocessing=pre)
+    # the same chain and estimator, called directly on the same files and settings
+    sig, _ = api_signals([fit_csv], robot, rec, RobotRegressor(robot), method)
     assert rec["method"] == method
-    est = RobotModel(robot, model="usual", method=method,
-                     dq_min=rec["preprocessing"]["dq_min"]).fit(sig)
+    assert rec["preprocessing"]["chain"] == "columns" and rec["payload"] == "known"
+    est = RobotModel(robot, model="usual", method=method).fit(sig)
     assert list(usual["parameters"]) == list(est.names_)
     np.testing.assert_allclose([v["value"] for v in usual["parameters"].values()], est.coef_,
                                rtol=1e-9, atol=1e-12)
@@ -238,13 +249,19 @@ def test_cli_paper_model_on_payload_runs(tmp_path, capfd):
     assert code == 0, err
     rec = json.loads(out_json.read_text())
     assert "error" not in rec["models"]["paper"], rec["models"]["paper"]
-    pre = RobotPreprocessing(rec["preprocessing"]["cutoff_hz"],
-                             rec["preprocessing"]["decimation"], rec["preprocessing"]["trim"])
-    sig = load_robot_signals(files, robot.moving, preprocessing=pre)
+    reg = RobotRegressor(robot)
+    sig, (runs, settings) = api_signals(files, robot, rec, reg, "ls")
     assert [p.mass for p in sig.payloads] == [0.0, 5.0, 10.0]
     np.testing.assert_allclose(sig.payloads[2].inertia, pays[2].inertia)
-    est = RobotModel(robot, model="paper", method="ls",
-                     dq_min=rec["preprocessing"]["dq_min"]).fit(sig)
+    # the sign check of a first usual fit, as the CLI does with the paper model
+    first = RobotModel(reg, model="usual", method="ls").fit(sig)
+    sig, kept = sign_checked(sig, runs, settings, first.load_torque, SIGN_CHECK_MIN_KEPT)
+    assert np.all(kept < 1.0), kept  # every joint has rows where sign(tau) != sign(tau_out)
+    for j, f in zip(robot.moving, kept, strict=True):  # applied where it keeps enough rows
+        done = f"sign check, joint {j}:" if f >= SIGN_CHECK_MIN_KEPT else (
+            f"sign check skipped on joint {j}:")
+        assert any(n.startswith(done) for n in rec["notes"]), (j, f, rec["notes"])
+    est = RobotModel(robot, model="paper", method="ls").fit(sig)
     paper = rec["models"]["paper"]["parameters"]
     assert list(paper) == list(est.names_)
     np.testing.assert_allclose([v["value"] for v in paper.values()], est.coef_, rtol=1e-6,
@@ -407,12 +424,9 @@ def test_known_rotor_inertia_through_the_cli(tmp_path, arm_runs, capfd):
     rec = json.loads(out_json.read_text())
     assert rec["known_rotor_inertia"] is True
     pars = rec["models"]["usual"]["parameters"]
-    pre = RobotPreprocessing(rec["preprocessing"]["cutoff_hz"],
-                             rec["preprocessing"]["decimation"], rec["preprocessing"]["trim"])
-    sig = load_robot_signals(f, robot.moving, preprocessing=pre)
     reg = RobotRegressor(robot, known_rotor_inertia=True)
-    est = RobotModel(reg, model="usual", method="ls",
-                     dq_min=rec["preprocessing"]["dq_min"]).fit(sig)
+    sig, _ = api_signals([f], robot, rec, reg, "ls")
+    est = RobotModel(reg, model="usual", method="ls").fit(sig)
     assert list(pars) == list(est.names_)
     assert not any(n.startswith("Ia") for n in pars)
     np.testing.assert_allclose([v["value"] for v in pars.values()], est.coef_, rtol=1e-9,

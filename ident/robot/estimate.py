@@ -56,6 +56,8 @@ from .signals import RobotSignals
 __all__ = ["RobotModel", "MODELS", "METHODS"]
 
 MODELS = ("usual", "paper")
+#: Name of the identified payload ratio M_ae / M_aw (eq. 35; ``payload_ratio=True``).
+RATIO = "Ma_ratio"
 METHODS = ("ls", "wls", "iv")
 #: Smallest eigenvalue / largest of the column-scaled normal matrix below which the
 #: parameters are not identifiable on the data.
@@ -160,6 +162,7 @@ class RobotModel:
         max_iter: int = 50,
         tol: float = 1e-10,
         max_passes: int = 4,
+        payload_ratio: bool = False,
     ) -> None:
         self.regressor = regressor
         self.model = model
@@ -172,12 +175,13 @@ class RobotModel:
         self.max_iter = max_iter
         self.tol = tol
         self.max_passes = max_passes
+        self.payload_ratio = payload_ratio
 
     def get_params(self, deep: bool = False) -> dict[str, Any]:
         """Hyper-parameters (scikit-learn convention)."""
         return {n: getattr(self, n) for n in (
             "regressor", "model", "method", "qs", "base", "quadrant", "dq_min", "chunk_size",
-            "max_iter", "tol", "max_passes")}
+            "max_iter", "tol", "max_passes", "payload_ratio")}
 
     def __repr__(self) -> str:
         return f"RobotModel(model={self.model!r}, method={self.method!r}, qs={self.qs!r})"
@@ -222,9 +226,15 @@ class RobotModel:
         self.cols_ = self._structure()
         self._placed: dict[tuple[float, float], Any] = {}  # lever-arm payloads, placed
         self.n_base_ = len(tuple(base.names))
+        ratio = bool(self.payload_ratio)
+        # theta = base parameters, then the payload ratio when it is identified: the known
+        # payload torque p_j is then one more column of every joint's row (eq. 35)
+        self.n_theta_ = self.n_base_ + int(ratio)
+        if ratio:
+            self.cols_ = [np.append(c, self.n_base_) for c in self.cols_]
         block = USUAL_BLOCK if self.model == "usual" else PAPER_BLOCK
         self.block_ = block
-        self.names_ = tuple(base.names) + tuple(
+        self.names_ = tuple(base.names) + (RATIO,) * ratio + tuple(
             f"{p}{n}" for n in self.numbers_ for p in block)
 
     def _structure(self) -> list[np.ndarray]:
@@ -235,7 +245,7 @@ class RobotModel:
         m = 32
         q = rng.uniform(-np.pi, np.pi, (m, k))
         self._kpn = False
-        W, _ = self._rows(q, rng.normal(size=(m, k)), rng.normal(size=(m, k)), None, None)
+        W, _, _ = self._rows(q, rng.normal(size=(m, k)), rng.normal(size=(m, k)), None, None)
         mag = np.abs(W).max(axis=2)  # (k, pb)
         tol = 1e-10 * max(float(mag.max()), 1e-300)
         cols = [np.flatnonzero(mag[j] > tol) for j in range(k)]
@@ -247,8 +257,9 @@ class RobotModel:
 
     # ------------------------------------------------------------------ data pass
     def _chunks(self, signals: Any, stride: int = 1):
-        """Yield (sig, rows, q, dq, ddq, tau, ddq_ref or None, payload) per chunk; every
-        ``stride``-th row of each experiment only when ``stride`` > 1."""
+        """Yield (sig, rows, q, dq, ddq, tau, ddq_ref or None, payload, columns or None) per
+        chunk; every ``stride``-th row of each experiment only when ``stride`` > 1.
+        ``columns``: the chunk's (W, p, sign, keep, Wz, pz) of ``RobotSignals.columns``."""
         items = [signals] if isinstance(signals, RobotSignals) else list(signals)
         if not items:
             raise RobotIdentError("RobotModel.fit: no signals")
@@ -259,10 +270,15 @@ class RobotModel:
             if tuple(sig.joints) != self.joints_:
                 raise RobotIdentError(f"{sig.source or 'RobotSignals'}: joints {sig.joints}, "
                                       f"expected the regressor's {self.joints_}")
+            given = sig.columns
+            if given is not None and self.method == "iv" and given.Wz is None:
+                raise RobotIdentError(f"{sig.source or 'RobotSignals'}: method 'iv' needs "
+                                      "the instruments' columns (design_runs(..., "
+                                      "instruments=True))")
             for e in np.unique(sig.experiment):
                 rows = np.flatnonzero(sig.experiment == e)
                 zr = None
-                if self.method == "iv":
+                if self.method == "iv" and given is None:
                     if sig.q_ref is None:
                         raise RobotIdentError(f"{sig.source or 'RobotSignals'}: method 'iv' "
                                               f"needs q_ref (reference trajectory)")
@@ -286,36 +302,63 @@ class RobotModel:
                                                                        rows.size))
                     else:
                         r = rows[a:a + int(self.chunk_size)]
+                    cc = None
+                    if given is not None:
+                        cc = (given.W[:, :, r], given.p[r], given.sign[r], given.keep[r],
+                              None if given.Wz is None else given.Wz[:, :, r],
+                              None if given.pz is None else given.pz[r])
                     yield (sig, r, sig.q[r], sig.dq[r], sig.ddq[r], sig.tau[r],
-                           None if zr is None else zr[a:a + int(self.chunk_size)], pay)
+                           None if zr is None else zr[a:a + int(self.chunk_size)], pay, cc)
 
-    def _rows(self, q, dq, ddq, tau, pay) -> tuple[np.ndarray, np.ndarray]:
+    def _rows(self, q, dq, ddq, tau, pay, given=None) -> tuple:
         """Regressor (k, p or pb, m) -- row j's base columns are ``W[j, std_cols_[j]]`` --
-        and known torque (m, k) of a chunk: the payload's plus, with
-        ``RobotRegressor(known_rotor_inertia=True)``, the known rotors' Ia_j ddq_j."""
+        the payload torque (m, k) and, with ``RobotRegressor(known_rotor_inertia=True)``, the
+        known rotors' torque Ia_j ddq_j (m, k), else None, of a chunk (see :meth:`_joint`).
+        ``given``: the standard regressor (k, p, m) and payload torque (m, k) already built
+        (``RobotSignals.columns``) instead of evaluated on (q, dq, ddq)."""
         reg = self.regressor_
-        if self._kpn:  # standard columns, (k, p, m): joint j reads W[j, self.std_cols_[j]]
+        if given is not None:
+            W, p = given
+            if not self._kpn:
+                W = np.asarray(self.base_.reduce(np.transpose(W, (2, 0, 1))), dtype=float)
+                W = np.ascontiguousarray(W.transpose(1, 2, 0))
+        elif self._kpn:  # standard columns, (k, p, m): joint j reads W[j, self.std_cols_[j]]
             W = np.asarray(reg.rigid_kpn(q, dq, ddq))
         else:
             W = np.asarray(self.base_.reduce(reg.rigid(q, dq, ddq)), dtype=float)
             W = np.ascontiguousarray(W.transpose(1, 2, 0))
-        if pay is not None and float(getattr(pay, "mass", 0.0)) > 0:
+        if given is not None:
+            p = np.asarray(p, dtype=float)
+        elif pay is not None and float(getattr(pay, "mass", 0.0)) > 0:
             p = np.asarray(reg.payload_torque(q, dq, ddq, pay), dtype=float)
         else:
             p = np.zeros(q.shape)
         known = getattr(reg, "known_Ia", None)
+        kn = None
         if known is not None and np.any(known):  # known rotor inertias (RobotRegressor)
-            p = p + reg.known_torque(ddq)
-        return W, p
+            kn = reg.known_torque(ddq)
+        return W, p, kn
+
+    def _joint(self, W: np.ndarray, p: np.ndarray, kn: np.ndarray | None,
+               j: int) -> tuple[np.ndarray, np.ndarray]:
+        """Joint j's theta columns (nt, m) and known torque (m,) of a chunk from
+        :meth:`_rows`: its base columns and the payload torque plus the known rotors' torque;
+        with ``payload_ratio`` the payload torque is the ratio's column instead."""
+        WjT = W[j, self.std_cols_[j], :]
+        if self.payload_ratio:
+            WjT = np.concatenate([WjT, p[None, :, j]], axis=0)
+            return WjT, (np.zeros(p.shape[0]) if kn is None else kn[:, j])
+        return WjT, (p[:, j] if kn is None else p[:, j] + kn[:, j])
 
     @staticmethod
-    def _v(WjT: np.ndarray, pj, dqj, tauj) -> np.ndarray:
-        """Rows v (module doc of :mod:`ident.robot.moments`) transposed, (nv, m)."""
+    def _v(WjT: np.ndarray, pj, dqj, tauj, sg=None) -> np.ndarray:
+        """Rows v (module doc of :mod:`ident.robot.moments`) transposed, (nv, m); ``sg``: the
+        Coulomb column when given (decimated sign(dq)), else sign(dq_j)."""
         nt, m = WjT.shape
         VT = np.empty((nt + N_EXTRA, m))
         VT[:nt] = WjT
         VT[nt + IP] = pj
-        VT[nt + ISG] = np.sign(dqj)
+        VT[nt + ISG] = np.sign(dqj) if sg is None else sg
         VT[nt + IDQ] = dqj
         VT[nt + ONE] = 1.0
         VT[-1] = tauj
@@ -343,25 +386,28 @@ class RobotModel:
             stores = [QuadrantStore(theta[c], capacity, g)
                       for c, g in zip(self.cols_, grams, strict=True)]
         rows = changed = 0
-        for _sig, _r, q, dq, ddq, tau, zdd, pay in self._chunks(signals, stride):
-            W, p = self._rows(q, dq, ddq, tau, pay)
-            Wz = pz = None
+        for _sig, _r, q, dq, ddq, tau, zdd, pay, cc in self._chunks(signals, stride):
+            W, p, kn = self._rows(q, dq, ddq, tau, pay, None if cc is None else cc[:2])
+            Wz = pz = knz = None
             if iv:
-                Wz, pz = self._rows(q, dq, zdd, tau, pay)
+                Wz, pz, knz = self._rows(q, dq, zdd, tau, pay, None if cc is None else cc[4:])
             for j, cols in enumerate(self.cols_):
                 dqj = dq[:, j]
-                WjT = W[j, self.std_cols_[j], :]
+                WjT, pj = self._joint(W, p, kn, j)
                 ok = (np.abs(dqj) > self.dq_min) & np.isfinite(tau[:, j]) & np.all(
                     np.isfinite(WjT), axis=0)
+                if cc is not None:
+                    ok &= cc[3][:, j]
                 every = bool(ok.all())
                 if not every:
                     WjT = WjT[:, ok]
-                dqo, tauo, po = dqj[ok], tau[ok, j], p[ok, j]
-                VT = self._v(WjT, po, dqo, tauo)
+                dqo, tauo, po = dqj[ok], tau[ok, j], pj[ok]
+                sgo = None if cc is None else cc[2][ok, j]
+                VT = self._v(WjT, po, dqo, tauo, sgo)
                 VzT = None
                 if iv:
-                    WzT = Wz[j, self.std_cols_[j], :]
-                    VzT = self._v(WzT if every else WzT[:, ok], pz[ok, j], dqo, tauo)
+                    WzT, pzj = self._joint(Wz, pz, knz, j)
+                    VzT = self._v(WzT if every else WzT[:, ok], pzj[ok], dqo, tauo, sgo)
                 if theta is None:
                     sp = tauo * dqo
                 else:
@@ -392,7 +438,7 @@ class RobotModel:
 
     # ------------------------------------------------------------------ solver
     def _local(self, j: int) -> np.ndarray:
-        pb, nb = self.n_base_, len(self.block_)
+        pb, nb = self.n_theta_, len(self.block_)
         return np.concatenate([self.cols_[j], pb + j * nb + np.arange(nb)])
 
     def _normal(self, moms, coeffs: Coeffs, x: np.ndarray, weights: np.ndarray):
@@ -422,7 +468,8 @@ class RobotModel:
         zero = d == 0
         if zero.any():
             names = [self.names_[i] for i in np.flatnonzero(free)[zero]]
-            raise RobotIdentError(f"parameters {names} have no excitation on these data")
+            raise RobotIdentError(f"parameters not identifiable on these data: {names} have no "
+                                  "excitation (their columns are zero)")
         As = Af / d[:, None] / d[None, :]
         if self.method != "iv":
             ev, evec = np.linalg.eigh(As)
@@ -529,7 +576,14 @@ class RobotModel:
         self
         """
         self._setup()
-        k, pb = len(self.joints_), self.n_base_
+        k, pb = len(self.joints_), self.n_theta_
+        if self.payload_ratio:
+            items = [signals] if isinstance(signals, RobotSignals) else list(signals)
+            if not any(pl.mass > 0 for sig in items if isinstance(sig, RobotSignals)
+                       for pl in sig.payloads):
+                raise RobotIdentError("RobotModel.payload_ratio: no experiment carries a "
+                                      "payload (mass > 0), so the ratio M_ae / M_aw (eq. 35) "
+                                      "cannot be identified")
         paper = self.model == "paper"
         # quadrant="model": the start (usual fit, paper fit with the measured quadrants) only
         # needs a first theta; on large data it is taken on every stride-th row, and the full
@@ -611,21 +665,22 @@ class RobotModel:
                                   f"{type(signals).__name__}")
         out = np.full(signals.tau.shape, np.nan)
         coeffs = usual_coefficients if self.model == "usual" else paper_coefficients
-        pb = self.n_base_
+        pb = self.n_theta_
         theta = self.coef_[:pb]
         saved = self.method
         self.method = "ls"  # no instruments needed to predict
         try:
-            for _sig, r, q, dq, ddq, tau, _z, pay in self._chunks(signals):
-                W, p = self._rows(q, dq, ddq, tau, pay)
+            for _sig, r, q, dq, ddq, tau, _z, pay, cc in self._chunks(signals):
+                W, p, kn = self._rows(q, dq, ddq, tau, pay, None if cc is None else cc[:2])
                 for j, cols in enumerate(self.cols_):
                     idx = self._local(j)
                     nt = len(cols)
                     th, blk = self.coef_[idx[:nt]], self.coef_[idx[nt:]]
-                    WjT = W[j, self.std_cols_[j], :]
-                    V = self._v(WjT, p[:, j], dq[:, j], np.zeros(q.shape[0])).T
+                    WjT, pj = self._joint(W, p, kn, j)
+                    V = self._v(WjT, pj, dq[:, j], np.zeros(q.shape[0]),
+                                None if cc is None else cc[2][:, j]).T
                     if self.quadrant == "model" or self.model == "usual":
-                        sp = (theta[cols] @ WjT + p[:, j]) * dq[:, j]
+                        sp = (theta[cols] @ WjT + pj) * dq[:, j]
                     else:
                         sp = tau[:, j] * dq[:, j]
                     pp = quadrant_weights(sp)
@@ -635,6 +690,27 @@ class RobotModel:
                         c0, c1, _, _ = coeffs(th, blk, s)
                         pred += ws * (V @ c0 + E * (V @ c1))
                     out[r, j] = pred
+        finally:
+            self.method = saved
+        return out
+
+    def load_torque(self, signals: RobotSignals) -> np.ndarray:
+        """tau_out_hat (n, k) [N m]: the rigid-body, rotor and payload torque of the fitted
+        model, W_j theta + p_j (the load of eq. 17-30, before friction), on ``signals``."""
+        self._check_fitted()
+        if not isinstance(signals, RobotSignals):
+            raise RobotIdentError(f"load_torque: expected RobotSignals, got "
+                                  f"{type(signals).__name__}")
+        out = np.full(signals.tau.shape, np.nan)
+        theta = self.coef_[:self.n_theta_]
+        saved = self.method
+        self.method = "ls"  # no instruments needed
+        try:
+            for _sig, r, q, dq, ddq, tau, _z, pay, cc in self._chunks(signals):
+                W, p, kn = self._rows(q, dq, ddq, tau, pay, None if cc is None else cc[:2])
+                for j, cols in enumerate(self.cols_):
+                    WjT, pj = self._joint(W, p, kn, j)
+                    out[r, j] = theta[cols] @ WjT + pj
         finally:
             self.method = saved
         return out

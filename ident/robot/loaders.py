@@ -76,6 +76,7 @@ from .signals import RobotPayloadData, RobotSignals
 __all__ = [
     "RawRobotRun",
     "RobotPreprocessing",
+    "check_periods",
     "load_robot_runs",
     "load_robot_signals",
     "preprocess_runs",
@@ -578,7 +579,9 @@ def load_robot_runs(
 # -- preprocessing --------------------------------------------------------------------------
 
 
-def _settings(runs: Sequence[RawRobotRun], pre: RobotPreprocessing) -> tuple[float, int, int]:
+def check_periods(runs: Sequence[RawRobotRun]) -> float:
+    """The common sampling period of ``runs`` [s]; :class:`RobotIdentError` naming the first
+    run whose period differs."""
     dt = runs[0].dt
     for r in runs[1:]:
         if abs(r.dt - dt) > IRREGULAR_TOL * dt:
@@ -586,6 +589,11 @@ def _settings(runs: Sequence[RawRobotRun], pre: RobotPreprocessing) -> tuple[flo
                 f"{r.source}: sampling period {r.dt:.6g} s differs from {runs[0].source} "
                 f"({dt:.6g} s)"
             )
+    return dt
+
+
+def _settings(runs: Sequence[RawRobotRun], pre: RobotPreprocessing) -> tuple[float, int, int]:
+    dt = check_periods(runs)
     fs = 1.0 / dt
     cutoff = pre.cutoff_hz
     if cutoff is None:

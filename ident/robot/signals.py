@@ -47,6 +47,51 @@ class RobotPayloadData:
 
 
 @dataclass(frozen=True)
+class RobotColumns:
+    """Regressor columns filtered and decimated in parallel with the torque (the single-joint
+    chain, :func:`ident.robot.design.design_runs`), n decimated samples of k joints.
+
+    Attributes
+    ----------
+    W : ndarray, shape (k, p, n)
+        Standard rigid-body regressor (``RobotRegressor.rigid_kpn`` layout: joint, standard
+        parameter, sample) computed at full rate on the filtered states, then decimated.
+    p : ndarray, shape (n, k)
+        Known payload torque of the sample's experiment [N m], computed and decimated alike.
+    sign : ndarray, shape (n, k)
+        sign(dq) computed at full rate, decimated (the Coulomb column, eq. 5).
+    keep : ndarray of bool, shape (n, k)
+        Rows of joint j outside the stiction area (|dq_j| >= dq_min at full rate, dilated by
+        the guard) and away from the experiment's edges.
+    Wz, pz : ndarray or None
+        The same with the reference trajectory's acceleration (IDIM-IV instruments).
+    """
+
+    W: np.ndarray
+    p: np.ndarray
+    sign: np.ndarray
+    keep: np.ndarray
+    Wz: np.ndarray | None = None
+    pz: np.ndarray | None = None
+
+    def check(self, n: int, k: int, source: str) -> None:
+        """Raise :class:`RobotIdentError` unless the shapes fit n samples of k joints."""
+        shapes = {"p": (n, k), "sign": (n, k), "keep": (n, k)}
+        if self.pz is not None:
+            shapes["pz"] = (n, k)
+        for name, shape in shapes.items():
+            if np.shape(getattr(self, name)) != shape:
+                raise RobotIdentError(f"{source}: columns.{name} has shape "
+                                      f"{np.shape(getattr(self, name))}, expected {shape}")
+        for name in ("W", "Wz"):
+            a = getattr(self, name)
+            if a is not None and (np.ndim(a) != 3 or np.shape(a)[0] != k
+                                  or np.shape(a)[2] != n):
+                raise RobotIdentError(f"{source}: columns.{name} has shape {np.shape(a)}, "
+                                      f"expected ({k}, p, {n})")
+
+
+@dataclass(frozen=True)
 class RobotSignals:
     """Joint-side signals of the k moving joints of a robot, n samples.
 
@@ -68,6 +113,9 @@ class RobotSignals:
         Reference trajectory (IV instruments), or None.
     source : str
         Where the signals come from (file names), for messages.
+    columns : RobotColumns or None
+        Regressor columns filtered and decimated in parallel with the torque (the
+        single-joint chain); None: the estimators build the regressor from q, dq, ddq.
     """
 
     t: np.ndarray
@@ -80,6 +128,7 @@ class RobotSignals:
     payloads: tuple[RobotPayloadData, ...] = ()
     q_ref: np.ndarray | None = None
     source: str = ""
+    columns: RobotColumns | None = None
 
     def __post_init__(self) -> None:
         t = np.asarray(self.t, dtype=float).reshape(-1)
@@ -105,6 +154,8 @@ class RobotSignals:
             raise RobotIdentError(f"{self.source or 'RobotSignals'}: experiment index "
                                   f"{int(e.max())} has no payload (got {len(pays)})")
         object.__setattr__(self, "payloads", pays)
+        if self.columns is not None:
+            self.columns.check(n, k, self.source or "RobotSignals")
 
     @property
     def n(self) -> int:

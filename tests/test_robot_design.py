@@ -1,0 +1,138 @@
+"""The robot path's columns chain (ident.robot.design) is the single-joint chain: on the
+example campaign of the single-joint simulator (RX130L joint 3, three payloads) the robot path
+with joints 1, 2, 4, 5, 6 locked gives the numbers of ``ident.fitting.fit_models`` -- same
+rows, same columns, the payload ratio identified (eq. 35), the sign check of the paper model
+included. The demo's MCAP logs (IDIM-IV, half-cycle torque delay) are checked end to end in
+``tests/test_demo_e2e.py``."""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from daq.protocol.control import ControllerGains
+from ident.cli_robot import fit_robot
+from ident.fitting import fit_models
+from ident.loaders import make_experiment
+from ident.robot import RobotIdentError
+from ident.robot import design as design_mod
+from ident.robot.base import single_joint_map
+from ident.robot.design import design_runs, resolve_design
+from ident.robot.estimate import RobotModel
+from ident.robot.loaders import RawRobotRun
+from ident.robot.regressor import RobotRegressor
+from ident.robot.signals import RobotPayloadData
+from sim_drivers.offline import simulate
+from sim_drivers.plant_config import load_plant
+from trajectories.campaign import Campaign
+from trajectories.plan import plan_campaign
+from trajectories.robot import load_robot
+
+ROOT = Path(__file__).resolve().parents[1]
+FRICTION = {"F_C": "FC3", "F_V": "FV3", "tau_off": "OFF3", "Ma_ratio": "Ma_ratio"}
+
+
+@pytest.fixture(scope="module")
+def campaign_runs():
+    """The example campaign simulated offline (seeds 11-13): single-joint experiments and the
+    same arrays as one-joint robot runs (the payload as the log gives it: mass, lever arm)."""
+    with open(ROOT / "examples" / "campaign.toml", "rb") as fh:
+        campaign = Campaign.from_dict(tomllib.load(fh), "examples/campaign.toml")
+    plan = plan_campaign(campaign)
+    plant = load_plant(ROOT / "sim_drivers" / "data" / "plant_default.toml")
+    gains = ControllerGains(**campaign.control.gains_kwargs())
+    exps, runs = [], []
+    for i, p in enumerate(plan.payloads):
+        r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
+                     payload_arm=p.arm_m, seed=11 + i)
+        exps.append(make_experiment(f"payload{i}.csv", r.t, r.q, r.tau_ref,
+                                    payload_mass=p.mass_kg, payload_arm=p.arm_m))
+        pay = RobotPayloadData(p.mass_kg, arm_m=p.arm_m) if p.mass_kg else RobotPayloadData()
+        runs.append(RawRobotRun(f"payload{i}.csv", r.t, r.q[:, None], r.tau_ref[:, None],
+                                payload=pay))
+    robot = load_robot(ROOT / "examples" / "robots" / "rx130l.toml")
+    return exps, runs, robot
+
+
+def _single_joint_values(est: RobotModel) -> dict[str, float]:
+    """J, MX, MY (single_joint_map of the base parameters) and the friction by the
+    single-joint names."""
+    smap = single_joint_map(est.base_, est.regressor_)
+    out = smap.values(est.coef_[:est.n_base_])
+    out.update({n: est.params_[r] for n, r in FRICTION.items()})
+    return out
+
+
+@pytest.mark.slow
+def test_columns_chain_gives_the_single_joint_fit(campaign_runs):
+    exps, runs, robot = campaign_runs
+    single = fit_models(exps, models=["usual", "new"])
+    rec = fit_robot(robot, runs, models=("usual", "paper"), method="ls")
+    assert rec["payload"] == "ratio"  # lever-arm payloads: the ratio is identified (eq. 35)
+    d = single.designs["usual"]
+    for k in ("cutoff_hz", "decimation", "trim", "guard", "torque_delay", "dq_min"):
+        assert rec["preprocessing"][k] == d.settings()[k], k
+    est = rec["_estimators"]["usual"]
+    assert int(est.n_samples_[0]) == len(d)  # same rows (stiction area + sign check)
+    ours = _single_joint_values(est)
+    ref = single.models["usual"]
+    assert set(ours) == set(ref.coef_)
+    for n, v in ref.coef_.items():
+        assert ours[n] == pytest.approx(v, rel=1e-8, abs=1e-10), n
+        assert f"{ours[n]:.6g}" == f"{v:.6g}", n
+    # the paper model is fitted on the same rows (its bilinear form is not eq. 42's products,
+    # so its numbers are its own: tests/test_robot_fit.py compares them on exact data)
+    assert rec["models"]["paper"]["samples"]["j3"] == len(d)
+
+
+def test_payload_ratio_needs_a_payload(campaign_runs):
+    _, runs, robot = campaign_runs
+    reg = RobotRegressor(robot)
+    empty = [RawRobotRun(r.source, r.t[:4000], r.q[:4000], r.tau[:4000]) for r in runs[:1]]
+    sig, _ = design_runs(empty, reg, resolve_design(empty))
+    with pytest.raises(RobotIdentError, match="no experiment carries a payload"):
+        RobotModel(reg, payload_ratio=True).fit(sig)
+
+
+def test_design_errors_are_one_line_naming_the_run(campaign_runs, monkeypatch):
+    _, runs, robot = campaign_runs
+    reg = RobotRegressor(robot)
+    short = [RawRobotRun("short.csv", runs[0].t[:40], runs[0].q[:40], runs[0].tau[:40])]
+    with pytest.raises(RobotIdentError, match=r"short\.csv: 40 samples, too few"):
+        design_runs(short, reg, resolve_design(short))
+    with pytest.raises(RobotIdentError, match=r"payload0\.csv: no reference trajectory"):
+        design_runs(runs[:1], reg, resolve_design(runs[:1]), instruments=True)
+    monkeypatch.setattr(design_mod, "MAX_BYTES", 1000)
+    with pytest.raises(RobotIdentError, match=r"payload0\.csv: the full-rate regressor needs"):
+        design_runs(runs[:1], reg, resolve_design(runs[:1]))
+    with pytest.raises(RobotIdentError, match="torque_delay"):
+        resolve_design(runs, torque_delay=1.5)
+
+
+def test_decimated_columns_equal_the_single_joint_design_columns(campaign_runs):
+    """Linear columns commute with the filters: the decimated inertia column is the decimated
+    ddq; sign(dq) is decided at full rate (not the sign of the decimated dq); rows of the
+    stiction area and of the edges are not kept."""
+    _, runs, robot = campaign_runs
+    reg = RobotRegressor(robot)
+    part = [RawRobotRun(r.source, r.t[:20000], r.q[:20000], r.tau[:20000], payload=r.payload)
+            for r in runs]
+    settings = resolve_design(part)
+    sig, dq_min = design_runs(part, reg, settings)
+    cols = sig.columns
+    assert cols is not None and cols.W.shape == (1, reg.p, sig.n)
+    assert settings.torque_delay == 0.0  # not jointid MCAP logs: unknown timing
+    # 1 % of the largest full-rate |dq| (DQ_MIN_FRACTION), close to the decimated one's
+    assert dq_min == pytest.approx(0.01 * np.abs(sig.dq).max(), rel=0.02)
+    zz = list(reg.standard_names).index("ZZ3")
+    np.testing.assert_allclose(cols.W[0, zz], sig.ddq[:, 0], rtol=1e-9, atol=1e-9)
+    smeared = np.abs(cols.sign[:, 0]) < 0.9
+    assert smeared.any()  # sign(dq) filtered at full rate: fractional near reversals
+    assert not np.any(cols.keep[smeared, 0])  # ... and such rows are not kept
+    assert not cols.keep[0, 0] and not cols.keep[-1, 0]  # the edges
+    # at full rate the stiction area |dq| < dq_min is out; the decimated |dq| of a kept row
+    # is then about above it (the anti-alias filter smooths the differentiated quantisation)
+    assert np.abs(sig.dq[cols.keep[:, 0], 0]).min() > 0.5 * dq_min
