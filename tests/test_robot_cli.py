@@ -216,6 +216,29 @@ def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capfd,
     assert val["all"] < 2.0 * usual["rel_error"]["all"] + 0.02
 
 
+def test_cli_states_chain_is_the_estimator_on_decimated_states(tmp_path, arm_runs, capfd):
+    """``--chain states``: the states decimated (preprocess_runs), the regressor built by the
+    estimator on them, |dq_j| <= dq_min left out; the JSON equals that call in Python."""
+    robot, (run0, _) = arm_runs
+    f = tmp_path / "fit.csv"
+    run0.to_csv(f)
+    out_json = tmp_path / "fit.json"
+    code, out, err = run_cli(capfd, "--robot", ARM3, f, "--model", "usual", "--method", "ls",
+                             "--chain", "states", "--json", out_json)
+    assert code == 0, err
+    assert "preprocessing (states chain)" in out
+    rec = json.loads(out_json.read_text())
+    pre = RobotPreprocessing(rec["preprocessing"]["cutoff_hz"],
+                             rec["preprocessing"]["decimation"], rec["preprocessing"]["trim"])
+    sig = load_robot_signals(f, robot.moving, preprocessing=pre)
+    assert sig.columns is None and rec["preprocessing"]["samples"] == sig.n
+    est = RobotModel(robot, model="usual", method="ls",
+                     dq_min=rec["preprocessing"]["dq_min"]).fit(sig)
+    pars = rec["models"]["usual"]["parameters"]
+    np.testing.assert_allclose([v["value"] for v in pars.values()], est.coef_, rtol=1e-9,
+                               atol=1e-12)
+
+
 @pytest.mark.slow
 def test_cli_paper_model_on_payload_runs(tmp_path, capfd):
     """Three payload runs (0, 5 kg, 10 kg with inertia) as CSV with payload columns: the
@@ -433,3 +456,6 @@ def test_known_rotor_inertia_through_the_cli(tmp_path, arm_runs, capfd):
                                atol=1e-12)
     code, out, err = run_cli(capfd, f, "--known-rotor-inertia")
     assert code != 0 and "--known-rotor-inertia" in err and len(err.strip().splitlines()) == 1
+    for flag, value in (("--chain", "states"), ("--payload", "ratio")):
+        code, out, err = run_cli(capfd, f, flag, value)
+        assert code != 0 and flag in err and len(err.strip().splitlines()) == 1, err

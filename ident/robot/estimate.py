@@ -28,7 +28,12 @@ grow with the number of samples; iterations reuse the moments):
   C = sigma^2 (Z^T W)^-1 Z^T Z (W^T Z)^-1. Needs ``q_ref``.
 
 Samples with |dq_j| <= ``dq_min`` (the stiction area, eq. 26) or non-finite values are left
-out of joint j's rows only.
+out of joint j's rows only; with ``RobotSignals.columns`` (the single-joint chain,
+:mod:`ident.robot.design`) the decimated columns are read instead of evaluating the regressor,
+and the rows their ``keep`` mask rejects are left out too.
+
+``payload_ratio=True``: p_j is one more column of every joint's row, its parameter
+``Ma_ratio`` = M_ae / M_aw (eq. 35) identified after the base parameters.
 """
 
 from __future__ import annotations
@@ -113,6 +118,9 @@ class RobotModel:
         Gauss-Newton iterations and relative step tolerance (paper model).
     max_passes : int
         Passes over the data re-deciding the quadrants (``quadrant="model"``).
+    payload_ratio : bool
+        Identify the payload ratio M_ae / M_aw (``Ma_ratio``, eq. 35) instead of taking the
+        payload torque as known; needs an experiment with a payload.
 
     Attributes (after :meth:`fit`)
     ------------------------------

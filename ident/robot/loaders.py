@@ -35,16 +35,17 @@ MAT (v5/v7)
     ``q_unit="deg"`` converts q and q_ref, the drive gains convert the torque (motor-side
     torque x gear ratio for the KUKA recordings).
 
-Preprocessing
--------------
-Per experiment and per axis, exactly the single-joint chain of :mod:`ident.preprocess`
-(its functions, not a copy): zero-phase Butterworth low-pass of q (cut-off chosen from the
+Preprocessing (the "states" chain)
+----------------------------------
+:func:`preprocess_runs`, per experiment and per axis, with the functions of
+:mod:`ident.preprocess`: zero-phase Butterworth low-pass of q (cut-off chosen from the
 motion bandwidth by :func:`~ident.preprocess.choose_cutoff`, the largest over the axes),
 central differences for dq and ddq, edge trimming, then decimation of every signal (the
-torque with its anti-alias filter, MATLAB ``decimate``). The single-joint design decimates
-the regressor columns in parallel with the torque; here the rigid-body regressor is built
-by the estimator from the decimated, already band-limited positions -- the difference is a
-second-order effect of the filter on products of smooth signals.
+torque with its anti-alias filter, MATLAB ``decimate``); the estimator builds the rigid-body
+regressor from the decimated, already band-limited states, chunk by chunk (memory bounded on
+any log length). The single-joint chain itself -- the regressor columns built at full rate
+and decimated in parallel with the torque, the torque delay, the IV cut-off floor, the guard
+-- is :mod:`ident.robot.design` (``jointid fit --robot``'s default).
 """
 
 from __future__ import annotations
