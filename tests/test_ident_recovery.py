@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from example_campaign import simulate_example_campaign
 
 from ident.fitting import fit_models
 from ident.loaders import make_experiment
@@ -22,21 +23,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="module")
 def sim():
-    from daq.protocol.control import ControllerGains
-    from sim_drivers.offline import simulate
-    from sim_drivers.plant_config import load_plant
-    from trajectories.campaign import Campaign
-    from trajectories.plan import plan_campaign
-
-    with open(ROOT / "examples" / "campaign.toml", "rb") as f:
-        campaign = Campaign.from_dict(tomllib.load(f), "examples/campaign.toml")
-    plan = plan_campaign(campaign)
-    plant = load_plant(ROOT / "sim_drivers" / "data" / "plant_default.toml")
-    gains = ControllerGains(**campaign.control.gains_kwargs())
+    plant, plan, runs = simulate_example_campaign(11)
     exps, refs = [], []
-    for i, p in enumerate(plan.payloads):
-        r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
-                     payload_arm=p.arm_m, seed=11 + i)  # fmt: skip
+    for i, (p, r) in enumerate(zip(plan.payloads, runs, strict=True)):
         exps.append(make_experiment(f"payload{i}", r.t, r.q, r.tau_ref,
                                     payload_mass=p.mass_kg, payload_arm=p.arm_m))  # fmt: skip
         refs.append(plan.reference.q)

@@ -7,13 +7,12 @@ included. The demo's MCAP logs (IDIM-IV, half-cycle torque delay) are checked en
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
+from example_campaign import simulate_example_campaign
 
-from daq.protocol.control import ControllerGains
 from ident.cli_robot import fit_robot
 from ident.fitting import fit_models
 from ident.loaders import make_experiment
@@ -25,10 +24,6 @@ from ident.robot.estimate import RobotModel
 from ident.robot.loaders import RawRobotRun
 from ident.robot.regressor import RobotRegressor
 from ident.robot.signals import RobotPayloadData
-from sim_drivers.offline import simulate
-from sim_drivers.plant_config import load_plant
-from trajectories.campaign import Campaign
-from trajectories.plan import plan_campaign
 from trajectories.robot import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,15 +34,9 @@ FRICTION = {"F_C": "FC3", "F_V": "FV3", "tau_off": "OFF3", "Ma_ratio": "Ma_ratio
 def campaign_runs():
     """The example campaign simulated offline (seeds 11-13): single-joint experiments and the
     same arrays as one-joint robot runs (the payload as the log gives it: mass, lever arm)."""
-    with open(ROOT / "examples" / "campaign.toml", "rb") as fh:
-        campaign = Campaign.from_dict(tomllib.load(fh), "examples/campaign.toml")
-    plan = plan_campaign(campaign)
-    plant = load_plant(ROOT / "sim_drivers" / "data" / "plant_default.toml")
-    gains = ControllerGains(**campaign.control.gains_kwargs())
+    _, plan, sims = simulate_example_campaign(11)
     exps, runs = [], []
-    for i, p in enumerate(plan.payloads):
-        r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
-                     payload_arm=p.arm_m, seed=11 + i)
+    for i, (p, r) in enumerate(zip(plan.payloads, sims, strict=True)):
         exps.append(make_experiment(f"payload{i}.csv", r.t, r.q, r.tau_ref,
                                     payload_mass=p.mass_kg, payload_arm=p.arm_m))
         pay = RobotPayloadData(p.mass_kg, arm_m=p.arm_m) if p.mass_kg else RobotPayloadData()

@@ -19,15 +19,14 @@ Phi^-1(1 - 0.01 / (2 P S)), and at least 95 % of all comparisons must be within 
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.stats
+from example_campaign import simulate_example_campaign
 
-from daq.protocol.control import ControllerGains
 from ident.estimate import fit_least_squares
 from ident.loaders import concat, make_experiment
 from ident.models import new_model, usual_model
@@ -41,10 +40,6 @@ from ident.robot.signals import RobotPayloadData, RobotSignals
 from ident.robot.tables import format_table_iii, table_iii
 from ident.signals import Signals
 from sim_drivers.arm import ArmGains, ArmParams, Payload, model_reference, simulate_arm
-from sim_drivers.offline import simulate
-from sim_drivers.plant_config import load_plant
-from trajectories.campaign import Campaign
-from trajectories.plan import plan_campaign
 from trajectories.robot import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -336,17 +331,10 @@ def test_rx130l_joint3_robot_path_gives_single_joint_numbers():
     1, 2, 4, 5, 6 locked, the payload as a point mass at L_a on the arm) gives the
     single-joint usual-model numbers (J, MX, MY, F_C, F_V, tau_off with the weighed payload,
     eq. 34) to far below the printed precision (4 significant digits)."""
-    with open(ROOT / "examples" / "campaign.toml", "rb") as fh:
-        campaign = Campaign.from_dict(tomllib.load(fh), "examples/campaign.toml")
-    plan = plan_campaign(campaign)
-    plant = load_plant(ROOT / "sim_drivers" / "data" / "plant_default.toml")
-    gains = ControllerGains(**campaign.control.gains_kwargs())
-    exps = []
-    for i, p in enumerate(plan.payloads):
-        r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
-                     payload_arm=p.arm_m, seed=11 + i)
-        exps.append(make_experiment(f"payload{i}", r.t, r.q, r.tau_ref,
-                                    payload_mass=p.mass_kg, payload_arm=p.arm_m))
+    _, plan, sims = simulate_example_campaign(11)
+    exps = [make_experiment(f"payload{i}", r.t, r.q, r.tau_ref, payload_mass=p.mass_kg,
+                            payload_arm=p.arm_m)
+            for i, (p, r) in enumerate(zip(plan.payloads, sims, strict=True))]
     lib = usual_model(True, payload=True)
     design = build_design(lib, concat(exps))
     ds = design.signals
