@@ -119,6 +119,31 @@ def _standard_from_factors(z: np.ndarray, k: int) -> np.ndarray:
     return out
 
 
+def _linear_map(J: np.ndarray) -> np.ndarray:
+    """The 10 standard parameters of a link from its pseudo-inertia J (linear in J)."""
+    S = J[:3, :3]
+    tr = S[0, 0] + S[1, 1] + S[2, 2]
+    return np.array([tr - S[0, 0], -S[0, 1], -S[0, 2], tr - S[1, 1], -S[1, 2], tr - S[2, 2],
+                     J[0, 3], J[1, 3], J[2, 3], J[3, 3]])
+
+
+def _standard_jacobian(z: np.ndarray, k: int) -> np.ndarray:
+    """d(standard parameters)/dz of :func:`_standard_from_factors`, (11 k, 11 k), block
+    diagonal: dJ/dL_ab = e_a L_b^T + L_b e_a^T (L_b: column b of L), mapped linearly."""
+    out = np.zeros((11 * k, 11 * k))
+    rows, cols = np.tril_indices(4)
+    for j in range(k):
+        L = np.zeros((4, 4))
+        L[rows, cols] = z[11 * j:11 * j + 10]
+        for i, (a, b) in enumerate(zip(rows, cols, strict=True)):
+            dJ = np.zeros((4, 4))
+            dJ[a, :] += L[:, b]
+            dJ[:, a] += L[:, b]
+            out[11 * j:11 * j + 10, 11 * j + i] = _linear_map(dJ)
+        out[11 * j + 10, 11 * j + 10] = 2.0 * z[11 * j + 10]
+    return out
+
+
 def check_consistency(model: Any, *, feasibility: bool = True, starts: int = 3,
                       seed: int = 0) -> ConsistencyReport:
     """Physical consistency of a fitted :class:`~ident.robot.estimate.RobotModel` (module doc).
@@ -180,6 +205,9 @@ def check_consistency(model: Any, *, feasibility: bool = True, starts: int = 3,
         r = beta @ _standard_from_factors(z, k) - chi_b
         return scipy.linalg.solve_triangular(Lc, r, lower=True)
 
+    def jac(z: np.ndarray) -> np.ndarray:  # analytic: 11 k times fewer residual evaluations
+        return scipy.linalg.solve_triangular(Lc, beta @ _standard_jacobian(z, k), lower=True)
+
     rng = np.random.default_rng(seed)
     best = None
     for _ in range(max(int(starts), 1)):
@@ -188,7 +216,7 @@ def check_consistency(model: Any, *, feasibility: bool = True, starts: int = 3,
             L0 = np.eye(4) * rng.uniform(0.3, 1.5) + np.tril(rng.normal(0, 0.1, (4, 4)), -1)
             z0[11 * j:11 * j + 10] = L0[np.tril_indices(4)]
             z0[11 * j + 10] = rng.uniform(0.1, 1.0)
-        sol = scipy.optimize.least_squares(resid, z0, method="trf", max_nfev=600)
+        sol = scipy.optimize.least_squares(resid, z0, jac=jac, method="trf", max_nfev=600)
         if best is None or sol.cost < best.cost:
             best = sol
         if 2.0 * best.cost <= scipy.stats.chi2.ppf(0.99, pb):
