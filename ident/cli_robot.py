@@ -141,8 +141,10 @@ def fit_robot(
     Returns
     -------
     dict
-        The record of docs/robot-data.md, plus the fitted estimators under ``"_estimators"``
-        and the signals under ``"_signals"`` (not serialised).
+        The record of docs/robot-data.md, plus the fitted estimators under ``"_estimators"``,
+        the identification and validation signals with the rows the fit leaves out as NaN
+        torques under ``"_signals"`` and the identification signals as preprocessed (every
+        decimated sample) under ``"_identification"`` (not serialised).
     """
     joints = robot.moving
     reg = RobotRegressor(robot, known_rotor_inertia=known_rotor_inertia)
@@ -216,6 +218,7 @@ def fit_robot(
         "_estimators": {},
         "_consistency": {},
         "_signals": (selected(sig, dq_min), val),
+        "_identification": sig,
     }
     for name in models:
         try:
