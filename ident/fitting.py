@@ -37,7 +37,7 @@ from .models import (
     new_model,
     usual_model,
 )
-from .preprocess import TORQUE_DELAY, Design, build_design
+from .preprocess import Design, build_design, default_torque_delay
 from .results import (
     band_errors,
     format_error_table,
@@ -543,8 +543,7 @@ def fit_models(
     if isinstance(torque_delay, str):
         if torque_delay != "auto":
             raise DataError(f"torque_delay {torque_delay!r}: expected a number [samples] or 'auto'")
-        mcap = bool(sources) and all(str(x).lower().endswith(".mcap") for x in sources)
-        torque_delay = TORQUE_DELAY if mcap else 0.0
+        torque_delay = default_torque_delay(sources)
     has_payload = bool(np.any(s.payload_mass != 0)) if payload is None else bool(payload)
     notes: list[str] = []
     if not has_payload:

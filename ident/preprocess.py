@@ -58,6 +58,10 @@ __all__ = [
     "shift",
     "TORQUE_DELAY",
     "CUTOFF_FLOOR_IV",
+    "decimation_index",
+    "default_rates",
+    "default_torque_delay",
+    "guarded_keep",
 ]
 
 BUTTER_ORDER = 4
@@ -211,10 +215,20 @@ def decimate(x: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
     return y.T, index
 
 
+def decimation_index(n: int, r: int) -> np.ndarray:
+    """Indices of the samples :func:`decimate` keeps of n by r (each stage keeps every f-th
+    sample ending on the last one)."""
+    index = np.arange(n)
+    if r > 1:
+        for f in _factors(r):
+            index = index[(index.size - 1) % f::f]
+    return index
+
+
 def _decimate_rows(x: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
     """:func:`decimate` along the last axis of a C-contiguous (k, n) array (2x faster
     than filtering along a strided axis 0)."""
-    index = np.arange(x.shape[-1])
+    index = decimation_index(x.shape[-1], r)
     if r <= 1:
         return x, index
     y = x
@@ -222,9 +236,7 @@ def _decimate_rows(x: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
         sos = _antialias(f).copy()
         padlen = min(3 * 2 * len(sos), y.shape[-1] - 1)
         y = scipy.signal.sosfiltfilt(sos, y, axis=-1, padlen=padlen)
-        start = (y.shape[-1] - 1) % f
-        y = np.ascontiguousarray(y[:, start::f])
-        index = index[start::f]
+        y = np.ascontiguousarray(y[:, (y.shape[-1] - 1) % f::f])
     return y, index
 
 
@@ -483,6 +495,34 @@ def _dilate(bad: np.ndarray, k: int) -> np.ndarray:
     return (c[hi] - c[lo]) > 0
 
 
+def guarded_keep(bad: np.ndarray, guard: int, index: np.ndarray) -> np.ndarray:
+    """Kept decimated samples ``index`` of one experiment: not within ``guard`` full-rate
+    samples of a ``bad`` one (shape (n,)) nor of the experiment's edges (transients of the
+    decimation filter); see ``guard`` of :func:`build_design`."""
+    bad = bad.copy()
+    if guard > 0:
+        bad[:guard] = True
+        bad[-guard:] = True
+    return ~_dilate(bad, guard)[index]
+
+
+def default_rates(fs: float, cutoff_hz: float, decimation: int | None = None,
+                  trim: int | None = None, guard: int | None = None) -> tuple[int, int, int]:
+    """(decimation, trim, guard) with the defaults of :func:`build_design` for the None ones:
+    r = round(f_s / cut-off) (at least 1), trim = max(ceil(3 f_s / cut-off), 2 r), guard = 3 r.
+    Given values are returned as int, unchecked."""
+    r = max(1, int(round(fs / cutoff_hz))) if decimation is None else int(decimation)
+    trim = max(int(np.ceil(3 * fs / cutoff_hz)), 2 * r) if trim is None else int(trim)
+    return r, trim, 3 * r if guard is None else int(guard)
+
+
+def default_torque_delay(sources: Iterable[str]) -> float:
+    """:data:`TORQUE_DELAY` when every source is a jointid MCAP log (commands held over the
+    next cycle), else 0 (files of unknown timing, processed like the MATLAB scripts)."""
+    names = [str(x) for x in sources]
+    return TORQUE_DELAY if names and all(x.lower().endswith(".mcap") for x in names) else 0.0
+
+
 def _selection(
     full: Signals,
     index: np.ndarray,
@@ -493,9 +533,6 @@ def _selection(
 ) -> np.ndarray:
     """Mask over the decimated samples ``index`` of one experiment (see build_design)."""
     bad = np.zeros(len(full), dtype=bool)
-    if guard > 0:  # edge transients of the decimation filter
-        bad[:guard] = True
-        bad[-guard:] = True
     if dq_min is not None:
         bad |= np.abs(full.dq) < dq_min
     if tau_min is not None:
@@ -504,7 +541,7 @@ def _selection(
         term, chi = load_model
         tau_out = term.columns(full) @ np.asarray(chi, dtype=float)
         bad |= np.sign(full.tau) != np.sign(tau_out)
-    return ~_dilate(bad, guard)[index]
+    return guarded_keep(bad, guard, index)
 
 
 def build_design(
@@ -594,20 +631,11 @@ def build_design(
         floor = CUTOFF_FLOOR_IV if reference is not None else 0.05
         cutoff_hz = choose_cutoff(signals.q[slices[0]], dt, floor)
     cutoff_hz = float(cutoff_hz)
-    if decimation is None:
-        decimation = max(1, int(round(fs / cutoff_hz)))
-    decimation = int(decimation)
-    if decimation < 1:
-        raise DataError(f"decimation must be a positive integer, got {decimation}")
-    if trim is None:
-        trim = max(int(np.ceil(3 * fs / cutoff_hz)), 2 * decimation)
-    trim = int(trim)
+    if decimation is not None and int(decimation) < 1:
+        raise DataError(f"decimation must be a positive integer, got {int(decimation)}")
+    decimation, trim, guard = default_rates(fs, cutoff_hz, decimation, trim, guard)
     if trim < 0:
         raise DataError(f"trim must be >= 0, got {trim}")
-
-    if guard is None:
-        guard = 3 * decimation
-    guard = int(guard)
     torque_delay = float(torque_delay)
     if reference is not None:
         reference = np.asarray(reference, dtype=float).ravel()

@@ -36,7 +36,7 @@ from .regressor import RobotRegressor
 from .signals import RobotPayloadData
 
 __all__ = ["BaseParameters", "base_parameters", "SingleJointMap", "single_joint_map",
-           "lever_arm_payload",
+           "lever_arm_payload", "placed_payload",
            "DEFAULT_RTOL"]
 
 #: Relative rank tolerance on |R_ii| of the unit-norm columns.
@@ -370,3 +370,21 @@ def lever_arm_payload(payload: RobotPayloadData, regressor: RobotRegressor,
                               f"flange of {regressor.joints[0]} adds (J, MX, MY) = "
                               f"{tuple(want)}")
     return RobotPayloadData(m, com)
+
+
+def placed_payload(payload: RobotPayloadData, regressor: RobotRegressor,
+                   base: BaseParameters | None, source: str,
+                   cache: dict[tuple[float, float], RobotPayloadData]) -> RobotPayloadData:
+    """``payload`` placed by :func:`lever_arm_payload` when it is a single-joint log's lever
+    arm (else unchanged), cached in ``cache`` by (mass, lever arm); ``base`` None:
+    ``base_parameters(regressor)``, computed only then. Errors name ``source``."""
+    if payload.arm_m is None:
+        return payload
+    key = (payload.mass, payload.arm_m)
+    if key not in cache:
+        try:
+            cache[key] = lever_arm_payload(payload, regressor, base if base is not None
+                                           else base_parameters(regressor))
+        except RobotIdentError as err:
+            raise RobotIdentError(f"{source}: {err}") from None
+    return cache[key]

@@ -39,17 +39,18 @@ import numpy as np
 from ..fitting import DQ_MIN_FRACTION
 from ..preprocess import (
     CUTOFF_FLOOR_IV,
-    TORQUE_DELAY,
     _decimate_rows,
-    _dilate,
-    _factors,
     choose_cutoff,
+    decimation_index,
+    default_rates,
+    default_torque_delay,
     diffcent,
+    guarded_keep,
     lowpass,
     shift,
 )
 from . import RobotIdentError
-from .base import base_parameters, lever_arm_payload
+from .base import placed_payload
 from .loaders import RawRobotRun, check_periods
 from .signals import RobotColumns, RobotSignals
 
@@ -123,18 +124,15 @@ def resolve_design(
     if not 0 < cutoff_hz < fs / 2:
         raise RobotIdentError(f"cut-off {cutoff_hz:g} Hz: expected between 0 and the Nyquist "
                               f"frequency {fs / 2:g} Hz")
-    r = max(1, int(round(fs / cutoff_hz))) if decimation is None else int(decimation)
+    r, trim, guard = default_rates(fs, cutoff_hz, decimation, trim, guard)
     if r < 1:
         raise RobotIdentError(f"decimation must be a positive integer, got {decimation}")
-    trim = max(int(np.ceil(3 * fs / cutoff_hz)), 2 * r) if trim is None else int(trim)
     if trim < 0:
         raise RobotIdentError(f"trim must be >= 0, got {trim}")
-    guard = 3 * r if guard is None else int(guard)
     if guard < 0:
         raise RobotIdentError(f"guard must be >= 0, got {guard}")
     if torque_delay is None:
-        mcap = all(str(run.source).lower().endswith(".mcap") for run in runs)
-        torque_delay = TORQUE_DELAY if mcap else 0.0
+        torque_delay = default_torque_delay(run.source for run in runs)
     torque_delay = float(torque_delay)
     if not 0 <= torque_delay < 1:
         raise RobotIdentError(f"torque_delay must lie in [0, 1) samples, got {torque_delay}")
@@ -179,22 +177,10 @@ def _states(run: RawRobotRun, s: DesignSettings, dt: float) -> tuple:
 
 
 def _keep(bad: np.ndarray, guard: int, index: np.ndarray) -> np.ndarray:
-    """Rows kept (m, k) at the decimated samples ``index``: not within ``guard`` full-rate
-    samples of a ``bad`` one (n_f, k) nor of the run's edges (decimation transients)."""
-    bad = bad.copy()
-    if guard > 0:
-        bad[:guard] = True
-        bad[-guard:] = True
-    return np.column_stack([~_dilate(bad[:, j], guard)[index] for j in range(bad.shape[1])])
-
-
-def _index(n: int, r: int) -> np.ndarray:
-    """Indices of the samples :func:`ident.preprocess.decimate` keeps of n by r."""
-    index = np.arange(n)
-    if r > 1:
-        for f in _factors(r):
-            index = index[(index.size - 1) % f::f]
-    return index
+    """Rows kept (m, k) at the decimated samples ``index``, joint by joint
+    (:func:`~ident.preprocess.guarded_keep` of each column of ``bad`` (n_f, k))."""
+    return np.column_stack([guarded_keep(bad[:, j], guard, index)
+                            for j in range(bad.shape[1])])
 
 
 def design_runs(
@@ -258,21 +244,12 @@ def design_runs(
     dq_min = settings.dq_min
     if dq_min is None:
         dq_min = DQ_MIN_FRACTION * max(float(np.max(np.abs(s[1]))) for s in states)
-    placed: dict[tuple[float, float], object] = {}
+    placed: dict = {}  # lever-arm payloads, placed (eq. 34-35)
     parts: dict[str, list[np.ndarray]] = {n: [] for n in (
         "t", "q", "dq", "ddq", "tau", "p", "sign", "keep", "W", "Wz", "pz", "ref", "e")}
     for i, (run, (q, dq, ddq, keep)) in enumerate(zip(runs, states, strict=True)):
         nf = q.shape[0]
-        pay = run.payload
-        if pay.arm_m is not None:  # a single-joint log's lever arm (eq. 34-35)
-            key = (pay.mass, pay.arm_m)
-            if key not in placed:
-                try:
-                    placed[key] = lever_arm_payload(pay, regressor, base if base is not None
-                                                    else base_parameters(regressor))
-                except RobotIdentError as err:
-                    raise RobotIdentError(f"{run.source}: {err}") from None
-            pay = placed[key]
+        pay = placed_payload(run.payload, regressor, base, run.source, placed)
 
         def torque(acc: np.ndarray, q=q, dq=dq, pay=pay) -> np.ndarray:
             if pay.mass > 0:
@@ -378,7 +355,8 @@ def sign_checked(
         tau_out = np.asarray(load_torque(full), dtype=float)
         bad = (np.abs(dq) < settings.dq_min) | (np.sign(tau_f) != np.sign(tau_out))
         rows = np.flatnonzero(signals.experiment == i)
-        keep[rows] = _keep(bad, settings.guard, _index(q.shape[0], settings.decimation))
+        keep[rows] = _keep(bad, settings.guard, decimation_index(q.shape[0],
+                                                                 settings.decimation))
     before = cols.keep.sum(axis=0)
     kept = keep.sum(axis=0) / np.maximum(before, 1)
     skip = kept < np.broadcast_to(np.asarray(min_kept, dtype=float), kept.shape)
