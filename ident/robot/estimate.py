@@ -45,7 +45,7 @@ import numpy as np
 import scipy.linalg
 
 from . import RobotIdentError
-from .base import base_parameters, lever_arm_payload
+from .base import base_parameters, placed_payload
 from .moments import IDQ, IP, ISG, N_EXTRA, ONE, JointMoments, quadrant_weights
 from .paper import (
     PAPER_BLOCK,
@@ -264,10 +264,12 @@ class RobotModel:
         return cols
 
     # ------------------------------------------------------------------ data pass
-    def _chunks(self, signals: Any, stride: int = 1):
+    def _chunks(self, signals: Any, stride: int = 1, iv: bool | None = None):
         """Yield (sig, rows, q, dq, ddq, tau, ddq_ref or None, payload, columns or None) per
         chunk; every ``stride``-th row of each experiment only when ``stride`` > 1.
-        ``columns``: the chunk's (W, p, sign, keep, Wz, pz) of ``RobotSignals.columns``."""
+        ``columns``: the chunk's (W, p, sign, keep, Wz, pz) of ``RobotSignals.columns``.
+        ``iv``: whether the instruments are needed (default: ``method == "iv"``)."""
+        iv = self.method == "iv" if iv is None else iv
         items = [signals] if isinstance(signals, RobotSignals) else list(signals)
         if not items:
             raise RobotIdentError("RobotModel.fit: no signals")
@@ -279,30 +281,23 @@ class RobotModel:
                 raise RobotIdentError(f"{sig.source or 'RobotSignals'}: joints {sig.joints}, "
                                       f"expected the regressor's {self.joints_}")
             given = sig.columns
-            if given is not None and self.method == "iv" and given.Wz is None:
+            if given is not None and iv and given.Wz is None:
                 raise RobotIdentError(f"{sig.source or 'RobotSignals'}: method 'iv' needs "
                                       "the instruments' columns (design_runs(..., "
                                       "instruments=True))")
             for e in np.unique(sig.experiment):
                 rows = np.flatnonzero(sig.experiment == e)
                 zr = None
-                if self.method == "iv" and given is None:
+                if iv and given is None:
                     if sig.q_ref is None:
                         raise RobotIdentError(f"{sig.source or 'RobotSignals'}: method 'iv' "
                                               f"needs q_ref (reference trajectory)")
                     zr = _ref_acceleration(sig.t[rows], sig.q_ref[rows])[::stride]
                 rows = rows[::stride]
                 pay = sig.payloads[int(e)]
-                if pay.arm_m is not None:  # a single-joint log's lever arm (eq. 34-35)
-                    key = (pay.mass, pay.arm_m)
-                    if key not in self._placed:
-                        try:
-                            self._placed[key] = lever_arm_payload(pay, self.regressor_,
-                                                                  self.base_)
-                        except RobotIdentError as err:
-                            raise RobotIdentError(f"{sig.source or 'RobotSignals'}: "
-                                                  f"{err}") from None
-                    pay = self._placed[key]
+                if given is None:  # (columns carry the payload torque already)
+                    pay = placed_payload(pay, self.regressor_, self.base_,
+                                         sig.source or "RobotSignals", self._placed)
                 contiguous = rows.size and rows[-1] - rows[0] + 1 == rows.size
                 for a in range(0, rows.size, int(self.chunk_size)):
                     if contiguous:  # views, no copies
@@ -665,62 +660,57 @@ class RobotModel:
         if not hasattr(self, "coef_"):
             raise RobotIdentError("RobotModel is not fitted; call fit(signals) first")
 
-    def predict(self, signals: RobotSignals) -> np.ndarray:
-        """Predicted joint torques tau_hat (n, k) [N m] on the samples of ``signals``."""
+    def _fitted_rows(self, signals: RobotSignals, what: str):
+        """Check ``signals``, then a generator of (rows, j, cols, WjT, pj, dq_j, tau_j, sign
+        column or None) per chunk and joint (no instruments): the pass of :meth:`predict`
+        and :meth:`load_torque`."""
         self._check_fitted()
         if not isinstance(signals, RobotSignals):
-            raise RobotIdentError(f"predict: expected RobotSignals, got "
+            raise RobotIdentError(f"{what}: expected RobotSignals, got "
                                   f"{type(signals).__name__}")
-        out = np.full(signals.tau.shape, np.nan)
-        coeffs = usual_coefficients if self.model == "usual" else paper_coefficients
-        pb = self.n_theta_
-        theta = self.coef_[:pb]
-        saved = self.method
-        self.method = "ls"  # no instruments needed to predict
-        try:
-            for _sig, r, q, dq, ddq, tau, _z, pay, cc in self._chunks(signals):
+
+        def rows():
+            for _sig, r, q, dq, ddq, tau, _z, pay, cc in self._chunks(signals, iv=False):
                 W, p, kn = self._rows(q, dq, ddq, tau, pay, None if cc is None else cc[:2])
                 for j, cols in enumerate(self.cols_):
-                    idx = self._local(j)
-                    nt = len(cols)
-                    th, blk = self.coef_[idx[:nt]], self.coef_[idx[nt:]]
                     WjT, pj = self._joint(W, p, kn, j)
-                    V = self._v(WjT, pj, dq[:, j], np.zeros(q.shape[0]),
-                                None if cc is None else cc[2][:, j]).T
-                    if self.quadrant == "model" or self.model == "usual":
-                        sp = (theta[cols] @ WjT + pj) * dq[:, j]
-                    else:
-                        sp = tau[:, j] * dq[:, j]
-                    pp = quadrant_weights(sp)
-                    E = np.exp(-np.abs(dq[:, j]) / self.qs_[j])
-                    pred = np.zeros(q.shape[0])
-                    for s, ws in ((0, pp), (1, 1.0 - pp)):
-                        c0, c1, _, _ = coeffs(th, blk, s)
-                        pred += ws * (V @ c0 + E * (V @ c1))
-                    out[r, j] = pred
-        finally:
-            self.method = saved
+                    yield (r, j, cols, WjT, pj, dq[:, j], tau[:, j],
+                           None if cc is None else cc[2][:, j])
+
+        return rows()
+
+    def predict(self, signals: RobotSignals) -> np.ndarray:
+        """Predicted joint torques tau_hat (n, k) [N m] on the samples of ``signals``."""
+        passes = self._fitted_rows(signals, "predict")
+        out = np.full(signals.tau.shape, np.nan)
+        coeffs = usual_coefficients if self.model == "usual" else paper_coefficients
+        theta = self.coef_[:self.n_theta_]
+        for r, j, cols, WjT, pj, dqj, tauj, sg in passes:
+            idx = self._local(j)
+            nt = len(cols)
+            th, blk = self.coef_[idx[:nt]], self.coef_[idx[nt:]]
+            V = self._v(WjT, pj, dqj, np.zeros(dqj.size), sg).T
+            if self.quadrant == "model" or self.model == "usual":
+                sp = (theta[cols] @ WjT + pj) * dqj
+            else:
+                sp = tauj * dqj
+            pp = quadrant_weights(sp)
+            E = np.exp(-np.abs(dqj) / self.qs_[j])
+            pred = np.zeros(dqj.size)
+            for s, ws in ((0, pp), (1, 1.0 - pp)):
+                c0, c1, _, _ = coeffs(th, blk, s)
+                pred += ws * (V @ c0 + E * (V @ c1))
+            out[r, j] = pred
         return out
 
     def load_torque(self, signals: RobotSignals) -> np.ndarray:
         """tau_out_hat (n, k) [N m]: the rigid-body, rotor and payload torque of the fitted
         model, W_j theta + p_j (the load of eq. 17-30, before friction), on ``signals``."""
-        self._check_fitted()
-        if not isinstance(signals, RobotSignals):
-            raise RobotIdentError(f"load_torque: expected RobotSignals, got "
-                                  f"{type(signals).__name__}")
+        passes = self._fitted_rows(signals, "load_torque")
         out = np.full(signals.tau.shape, np.nan)
         theta = self.coef_[:self.n_theta_]
-        saved = self.method
-        self.method = "ls"  # no instruments needed
-        try:
-            for _sig, r, q, dq, ddq, tau, _z, pay, cc in self._chunks(signals):
-                W, p, kn = self._rows(q, dq, ddq, tau, pay, None if cc is None else cc[:2])
-                for j, cols in enumerate(self.cols_):
-                    WjT, pj = self._joint(W, p, kn, j)
-                    out[r, j] = theta[cols] @ WjT + pj
-        finally:
-            self.method = saved
+        for r, j, cols, WjT, pj, _dq, _tau, _sg in passes:
+            out[r, j] = theta[cols] @ WjT + pj
         return out
 
     def residual(self, signals: RobotSignals) -> np.ndarray:
