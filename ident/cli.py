@@ -201,19 +201,23 @@ def estimator_from_args(args: argparse.Namespace) -> JointModel:
     )
 
 
+#: Options of ``jointid fit --robot`` refused without it: (attribute, flag, hint).
+_ROBOT_ONLY = (
+    ("method", "--method",
+     " (one joint: IDIM-IV when the inputs carry q_ref, else least squares)"),
+    ("known_rotor_inertia", "--known-rotor-inertia", " (one joint: J includes the rotor)"),
+    ("chain", "--chain", ""),
+    ("payload", "--payload", ""),
+)
+
+
 def run(args: argparse.Namespace) -> int:
     """Execute ``jointid fit``; returns the exit code."""
     if args.robot is not None:
         return cli_robot.run(args)
-    if args.method is not None:
-        raise DataError("--method: applies to --robot fits only (one joint: IDIM-IV when the "
-                        "inputs carry q_ref, else least squares)")
-    if args.known_rotor_inertia:
-        raise DataError("--known-rotor-inertia: applies to --robot fits only (one joint: J "
-                        "includes the rotor)")
-    for flag, attr in (("--chain", "chain"), ("--payload", "payload")):
-        if getattr(args, attr, None) is not None:
-            raise DataError(f"{flag}: applies to --robot fits only")
+    for attr, flag, hint in _ROBOT_ONLY:
+        if getattr(args, attr, None) not in (None, False):
+            raise DataError(f"{flag}: applies to --robot fits only{hint}")
     if args.model == "paper":
         args.model = "new"
     mapping = parse_mapping(args.map)

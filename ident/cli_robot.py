@@ -24,7 +24,7 @@ import numpy as np
 from trajectories.robot import Robot, load_robot
 
 from . import DataError, IdentError
-from .fitting import SIGN_CHECK_MIN_KEPT
+from .fitting import DQ_MIN_FRACTION, SIGN_CHECK_MIN_KEPT
 from .report import write_json
 from .robot.consistency import check_consistency
 from .robot.design import design_runs, resolve_design, sign_checked
@@ -195,7 +195,7 @@ def fit_robot(
         sig = preprocess_runs(runs, joints, pre)
         val = preprocess_runs(validation, joints, pre) if validation else None
         if dq_min is None:
-            dq_min = 0.01 * float(np.max(np.abs(sig.dq)))
+            dq_min = DQ_MIN_FRACTION * float(np.max(np.abs(sig.dq)))
         est_dq_min = dq_min
     if val is not None:
         # the validation error is taken on the samples the fit would use (as the single-joint
