@@ -17,3 +17,8 @@ class DataError(IdentError, ValueError):
 
 class IdentifiabilityError(IdentError):
     """The regressor is rank-deficient; the message says which parameters cannot be separated."""
+
+
+class OutputLeakError(IdentError, TypeError):
+    """A candidate term, variable or basis read the measured torque (the output it is fitted
+    to): refinement candidates see :meth:`ident.signals.Signals.states` only."""

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from .effects import VARIABLES, Prediction, effective_n, variable_values
+from .effects import Prediction, available_variables, effective_n, variable_values
 from .signals import Signals
 
 DISCRETE = ("direction", "quadrant")
@@ -310,8 +310,9 @@ class Diagnosis:
 
 
 def candidate_variables(s: Signals, tau_out: Prediction | None = None) -> dict[str, np.ndarray]:
-    """The seven candidate variables on the samples ``s`` (see :func:`variable_values`)."""
-    return {v: variable_values(v, s, tau_out) for v in VARIABLES}
+    """The candidate variables on the samples ``s`` (see :func:`variable_values`): all seven
+    with a load prediction, without ``load`` and ``quadrant`` otherwise."""
+    return {v: variable_values(v, s, tau_out) for v in available_variables(tau_out)}
 
 
 def diagnose(
@@ -348,6 +349,8 @@ def diagnose(
     for v, x in candidate_variables(s, tau_out).items():
         rows.append(dependence(r, x, variable=v, bins=bins, discrete=v in DISCRETE, n_eff=n_eff))
     rows.sort(key=lambda d: (d.p_value, -d.statistic))
+    if Y is None and not s.has_output:
+        raise ValueError("diagnose: give Y on a states-only view of the signals")
     y = s.tau if Y is None else Y
     rel = float(np.linalg.norm(r) / max(np.linalg.norm(y), 1e-300))
     moving = np.abs(s.dq) > 0

@@ -100,10 +100,10 @@ def with_qs(design: Design, library: Library, qs: float) -> tuple[Library, Desig
     terms: list[Term] = []
     for t in library.terms():
         if isinstance(t, LoadDependent):
-            t = LoadDependent(t.inner, qs)
+            t = LoadDependent(t.inner, qs, t.load)
             sub = sub.with_term(t)
         elif isinstance(t, QuadrantCoulomb):
-            t = QuadrantCoulomb(qs)
+            t = QuadrantCoulomb(qs, t.load)
             sub = sub.with_term(t)
         terms.append(t)
     return Library(*terms), sub

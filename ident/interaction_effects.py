@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from .effects import Effect, Prediction, amplitude_phase
+from .effects import Effect, Prediction, amplitude_phase, model_quadrant
 from .interactions import reversal_distance
 from .signals import Signals
 
@@ -171,7 +171,7 @@ class LoadVelocityDryFriction(Effect):
         return (self._n("alpha_P"), self._n("beta_P"))
 
     def columns(self, s: Signals) -> np.ndarray:
-        c = np.sign(s.tau * s.dq) * self.tau_out(s)
+        c = model_quadrant(s, self.tau_out) * self.tau_out(s)
         return np.column_stack((c, c * np.exp(-np.abs(s.dq) / self.qs)))
 
     def describe(self) -> str:

@@ -138,6 +138,8 @@ def continuous_values(
     """
     out: dict[str, np.ndarray] = {}
     for v in CONTINUOUS:
+        if v == "load" and tau_out is None:
+            continue  # no load without the model's load prediction
         out[v] = reversal_distance(s) if v == "reversal" else variable_values(v, s, tau_out)
     for k, v in (others or {}).items():
         v = np.asarray(v, dtype=float)
@@ -147,12 +149,13 @@ def continuous_values(
     return out
 
 
-def sign_values(s: Signals) -> dict[str, np.ndarray]:
-    """sign(q̇) (``direction``) and sign(P) = sign(τ q̇) (``quadrant``, eq. 26)."""
-    return {
-        "direction": variable_values("direction", s),
-        "quadrant": variable_values("quadrant", s),
-    }
+def sign_values(s: Signals, tau_out: Prediction | None = None) -> dict[str, np.ndarray]:
+    """sign(q̇) (``direction``) and the model quadrant sign(τ̂_out q̇) (``quadrant``, eq.
+    17-20; only with a load prediction ``tau_out``)."""
+    out = {"direction": variable_values("direction", s)}
+    if tau_out is not None:
+        out["quadrant"] = variable_values("quadrant", s, tau_out)
+    return out
 
 
 @dataclass(frozen=True)
@@ -346,7 +349,7 @@ def diagnose_interactions(
         raise ValueError(f"diagnose_interactions: residual has shape {r.shape}, signals {len(s)}")
     n_eff = effective_n(r)  # of the raw residual, for the record
     cont = {k: v for k, v in continuous_values(s, tau_out, others).items() if np.ptp(v) > 0}
-    signs = sign_values(s)
+    signs = sign_values(s, tau_out)
     raw: list[tuple[tuple[str, ...], str, float, float, float, int]] = []
     idx1 = {k: quantile_bins(v, bins) for k, v in cont.items()}
     for k, idx in idx1.items():

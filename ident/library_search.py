@@ -190,7 +190,7 @@ def signal_values(
     for v in set(names):
         if v == "reversal":
             out[v] = reversal_distance(s)
-        elif v == "load_quadrant":
+        elif v == "load_quadrant" or (v in ("load", "quadrant") and tau_out is None):
             continue
         else:
             out[v] = variable_values(v, s, tau_out)
@@ -257,6 +257,11 @@ def build_library(
         Orthonormal basis of the current regressor (columns in its span are dropped).
     """
     out: list[Group] = []
+    # without the model's load prediction there is no load nor quadrant (never the torque)
+    have = set(values) | {"none"} | ({"load_quadrant"} if {"load", "quadrant"} <= set(values)
+                                     else set())
+    continuous = [v for v in continuous if v in values]
+    modifiers = [m for m in modifiers if m in have]
     for v in continuous:
         for m in modifiers:
             # sign(q̇) is a function of q̇; |τ_out| sign(q̇) of τ_out and q̇: same span

@@ -41,15 +41,24 @@ __all__ = [
 ]
 
 
-def power_split(s: Signals) -> tuple[np.ndarray, np.ndarray]:
-    """Diagonals of P+ and P- (eq. 27-28, 44) from sign(P) = sign(tau dq) (eq. 26).
+def power_split(s: Signals, load: Term | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Diagonals of P+ and P- (eq. 27-28, 44).
+
+    Parameters
+    ----------
+    s : Signals
+        Samples.
+    load : Term or callable, optional
+        A load prediction τ̂_out(s) [N m] (e.g. :class:`ident.effects.Prediction`): the
+        quadrant is then the model's, sign(τ̂_out q̇), and the columns read no measured
+        torque. Without it, the paper's proxy sign(P) = sign(tau dq) of eq. 26.
 
     Returns
     -------
     p_plus, p_minus : ndarray, shape (n,)
-        (1 + sign P)/2 and (1 - sign P)/2; both 0.5 where tau dq = 0.
+        (1 + sign P)/2 and (1 - sign P)/2; both 0.5 where the product is 0.
     """
-    sp = s.sign_power
+    sp = s.sign_power if load is None else np.sign(load(s) * s.dq)
     return 0.5 * (1.0 + sp), 0.5 * (1.0 - sp)
 
 
@@ -189,14 +198,18 @@ class LoadDependent(Term):
         The terms whose sum is tau_out (usually ``RigidBody() + Payload()``).
     qs : float
         Velocity constant q_s of E_xp = exp(-|dq|/q_s) [rad/s] (eq. 29), fixed a priori.
+    load : callable, optional
+        Load prediction τ̂_out(s) deciding the quadrant (:func:`power_split`); default the
+        paper's sign(tau dq) of eq. 26.
     """
 
     effect = "load_dependent"
     variable = "quadrant"
 
-    def __init__(self, inner: Term, qs: float) -> None:
+    def __init__(self, inner: Term, qs: float, load: Term | None = None) -> None:
         self.inner = inner
         self.qs = _check_qs(qs)
+        self.load = load
 
     def _suffixes(self) -> list[str]:
         out = []
@@ -213,7 +226,7 @@ class LoadDependent(Term):
 
     def columns(self, s: Signals) -> np.ndarray:
         w = self.inner.columns(s)
-        pp, pm = power_split(s)
+        pp, pm = power_split(s, self.load)
         e = exp_velocity(s, self.qs)
         n, k = w.shape
         out = np.empty((n, 4 * k))
@@ -236,20 +249,21 @@ class LoadDependent(Term):
 class QuadrantCoulomb(Term):
     """Quadrant dry friction (eq. 30): ``[P+ sign, P+ Exp sign, P- sign, P- Exp sign]``.
 
-    Parameters c_m, d_m, c_g, d_g [N m]; ``qs`` as in :class:`LoadDependent`.
+    Parameters c_m, d_m, c_g, d_g [N m]; ``qs`` and ``load`` as in :class:`LoadDependent`.
     """
 
     effect = "quadrant_coulomb"
     variable = "quadrant"
 
-    def __init__(self, qs: float) -> None:
+    def __init__(self, qs: float, load: Term | None = None) -> None:
         self.qs = _check_qs(qs)
+        self.load = load
 
     def names(self) -> tuple[str, ...]:
         return ("c_m", "d_m", "c_g", "d_g")
 
     def columns(self, s: Signals) -> np.ndarray:
-        pp, pm = power_split(s)
+        pp, pm = power_split(s, self.load)
         e = exp_velocity(s, self.qs)
         sg = np.sign(s.dq)
         return np.column_stack([pp * sg, pp * e * sg, pm * sg, pm * e * sg])

@@ -392,11 +392,13 @@ class Design:
             "samples": len(self),
         }
 
-    def with_term(self, term: Term) -> Design:
+    def with_term(self, term: Term, *, states_only: bool = False) -> Design:
         """A new design with ``term``'s columns appended.
 
         The columns are computed on the same full-rate filtered signals, filtered,
-        decimated and selected exactly as the existing ones.
+        decimated and selected exactly as the existing ones. With ``states_only`` (every
+        refinement candidate) the term sees :meth:`Signals.states` views: its columns cannot
+        read the measured torque (:class:`~ident.OutputLeakError` if it tries).
         """
         new = tuple(term.names())
         clash = set(new) & set(self.names)
@@ -404,11 +406,13 @@ class Design:
             raise DataError(f"parameters {sorted(clash)} are already in the design")
         blocks, cols, zcols = [], [], []
         for b in self._blocks:
-            rows, _ = _decimate_rows(np.ascontiguousarray(term.columns(b.full).T), self.decimation)
+            full = b.full.states() if states_only else b.full
+            rows, _ = _decimate_rows(np.ascontiguousarray(term.columns(full).T), self.decimation)
             zdec = None
             if b.zfull is not None and b.zdec is not None:
                 zrows = rows.copy()
-                diff = _instrument_rows(term.columns(b.zfull).T, term.columns(b.full).T, 0)
+                zfull = b.zfull.states() if states_only else b.zfull
+                diff = _instrument_rows(term.columns(zfull).T, term.columns(full).T, 0)
                 if diff:
                     zd, _ = _decimate_rows(np.stack([r for _, r in diff]), self.decimation)
                     for k, (i, _) in enumerate(diff):

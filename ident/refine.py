@@ -150,7 +150,7 @@ def _effect_parameters(
     d(W_term χ_term)/dh appended to the kept regressor)."""
     names = list(model.names_)
     tnames = [n for n in term.names() if n in model.coef_]
-    s = design.signals
+    s = design.signals.states()
     W = design.W[:, [design.names.index(n) for n in names]]
     extra = []
     if term.hyper_names and len(tnames) == len(term.names()):
@@ -324,7 +324,8 @@ def refine(
     library_tried: list[dict] = []
     lib_variables: dict[int, tuple[str, ...]] = {}
     stop = f"step limit ({max_steps}) reached"
-    s = cur_design.signals
+    # candidates (terms, variables, bases) see the states only: none can read the torque
+    s = cur_design.signals.states()
     diag = None
     for k in range(1, max_steps + 1):
         r = cur.residual_
@@ -418,7 +419,7 @@ def refine(
             for c in order:
                 e = c.effect
                 try:
-                    d1 = cur_design.with_term(e)
+                    d1 = cur_design.with_term(e, states_only=True)
                     m1 = _fit(Library(*lib.terms(), e), d1, name)
                 except DataError as exc:
                     rejected.append(Rejected(k, e.effect, e.variable, f"not fitted: {exc}",
@@ -477,7 +478,7 @@ def refine(
             v1 = val1 = None
             if reason is None and cur_val is not None:
                 try:
-                    val1 = cur_val.with_term(e)
+                    val1 = cur_val.with_term(e, states_only=True)
                 except DataError as exc:  # e.g. a term in other joints the validation lacks
                     reason = f"not computable on the validation data: {exc}"
                 else:

@@ -169,7 +169,7 @@ def library_step(
     stride = max(1, math.ceil(n / max_samples))
     idiag = diagnose_interactions(residual, s, tau_out=tau_out, others=others, alpha=alpha)
     values = continuous_values(s, tau_out, others)
-    values.update(sign_values(s))
+    values.update(sign_values(s, tau_out))
     folds = time_folds(s.experiment)
     Ws = W[::stride]
     # the rank test of the groups' columns needs few samples

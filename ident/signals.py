@@ -6,7 +6,38 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
+from . import OutputLeakError
+
 G = 9.81  # [m/s^2] gravity, as in the paper (section IV.A)
+
+
+class _HiddenOutput:
+    """Stands for the measured torque in :meth:`Signals.states`: any use raises
+    :class:`~ident.OutputLeakError` (arithmetic, numpy ufuncs and conversions alike)."""
+
+    __array_ufunc__ = None  # numpy defers to the reflected operators below
+
+    def _leak(self, *_a, **_k):
+        raise OutputLeakError(
+            "a candidate read the measured torque tau: candidate terms, variables and bases "
+            "must be functions of the states and of the model's own prediction")
+
+    __array__ = __getitem__ = __len__ = __iter__ = __float__ = __bool__ = _leak
+    __add__ = __radd__ = __sub__ = __rsub__ = __mul__ = __rmul__ = _leak
+    __truediv__ = __rtruediv__ = __pow__ = __neg__ = __abs__ = _leak
+    __lt__ = __le__ = __gt__ = __ge__ = _leak
+
+    def __getattr__(self, name: str):
+        if name.startswith("__"):
+            raise AttributeError(name)
+        self._leak()
+
+    def __repr__(self) -> str:
+        return "<measured torque hidden>"
+
+
+#: The placeholder of the measured torque in a states-only view (:meth:`Signals.states`).
+HIDDEN_OUTPUT = _HiddenOutput()
 
 
 @dataclass(frozen=True)
@@ -66,6 +97,20 @@ class Signals:
             else:
                 kw[f.name] = v[index] if isinstance(v, np.ndarray) else v
         return replace(self, **kw)
+
+    def states(self) -> Signals:
+        """The same samples without the measured torque: ``tau`` (and ``dtau``) are
+        :data:`HIDDEN_OUTPUT`, whose every use raises :class:`~ident.OutputLeakError`.
+
+        The refinement gives only this view to its candidates (terms, diagnosis variables,
+        library bases), so that none can be built from the output it is fitted to.
+        """
+        return replace(self, tau=HIDDEN_OUTPUT, dtau=None)
+
+    @property
+    def has_output(self) -> bool:
+        """False on a :meth:`states` view."""
+        return self.tau is not HIDDEN_OUTPUT
 
     @property
     def sign_power(self) -> np.ndarray:

@@ -53,14 +53,15 @@ def test_effect_columns_follow_their_formulas():
     np.testing.assert_allclose(Stribeck(0.05).columns(s)[:, 0],
                                np.exp(-np.abs(s.dq) / 0.05) * sg)
     np.testing.assert_allclose(WarmUp(7.0).columns(s)[:, 0], np.exp(-s.t / 7.0) * sg)
-    np.testing.assert_allclose(QuadrantCoulomb().columns(s)[:, 0],
-                               0.5 * np.sign(s.tau * s.dq) * sg)
     rb = RigidBody(True)
     pred = Prediction([rb], np.array([30.0, 20.0, 0.0]))
     tau_out = rb.columns(s) @ np.array([30.0, 20.0, 0.0])
     np.testing.assert_allclose(pred(s), tau_out)
+    # the quadrant is the model's, sign(tau_out dq), never the measured sign(tau dq)
+    np.testing.assert_allclose(QuadrantCoulomb(pred).columns(s)[:, 0],
+                               0.5 * np.sign(tau_out * s.dq) * sg)
     np.testing.assert_allclose(QuadrantLoad(pred).columns(s)[:, 0],
-                               np.sign(s.tau * s.dq) * tau_out)
+                               np.sign(tau_out * s.dq) * tau_out)
     lag = TorqueLag(pred).columns(s)[:, 0]
     np.testing.assert_allclose(lag[1:-1], np.gradient(tau_out, s.t)[1:-1])
     for e in (PositionSmooth(-1.5, 1.5, 4), GenericBasis("velocity", -1, 1, 8, True)):
@@ -94,7 +95,7 @@ def test_tags_make_names_unique_and_every_effect_has_a_valid_variable():
     assert len(set(lib.names())) == len(lib.names())
     assert b.period == 0.05 and b.names() == ("ripple_sin_2", "ripple_cos_2")
     for e in (a, Spring(), DirectionalViscous(), QuadraticViscous(), Stribeck(0.1),
-              WarmUp(1.0), QuadrantCoulomb()):
+              WarmUp(1.0), QuadrantCoulomb(Prediction([RigidBody(True)], np.ones(3)))):
         assert e.variable in VARIABLES
         assert e.describe()
 
@@ -158,7 +159,10 @@ def test_diagnose_ranks_the_variable_the_residual_depends_on():
     diag = diagnose(r, s)
     assert diag.table[0].variable == "time"
     assert [d.variable for d in diag.significant][:1] == ["time"]
-    assert {d.variable for d in diag.table} == set(VARIABLES)
+    # without the model's load prediction there is no load nor quadrant (never the torque)
+    assert {d.variable for d in diag.table} == set(VARIABLES) - {"load", "quadrant"}
+    pred = Prediction([RigidBody(True)], np.array([30.0, 200.0, 0.0]))
+    assert {d.variable for d in diagnose(r, s, tau_out=pred).table} == set(VARIABLES)
     assert "time" in diag.format_table()
     assert diag.to_json()[0]["variable"] == "time"
 

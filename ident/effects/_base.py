@@ -39,6 +39,8 @@ __all__ = [
     "VARIABLES",
     "Prediction",
     "amplitude_phase",
+    "available_variables",
+    "model_quadrant",
     "variable_values",
     "Effect",
     "Candidate",
@@ -47,6 +49,7 @@ __all__ = [
     "register",
     "registry",
     "rigid_prediction",
+    "model_prediction",
     "unique_tag",
 ]
 
@@ -82,23 +85,49 @@ def _sign(x: np.ndarray) -> np.ndarray:
     return np.sign(x).astype(float)
 
 
+def model_quadrant(s: Signals, tau_out: Prediction) -> np.ndarray:
+    """sign(P_out) = sign(τ̂_out q̇) of the model's own load prediction (the quadrant of
+    eq. 17-20 as the n-dof fit decides it), shape (n,). The paper's proxy sign(τ q̇) of
+    eq. 26 reads the measured torque and is never a candidate variable."""
+    return _sign(tau_out(s) * s.dq)
+
+
+def available_variables(tau_out: Prediction | None) -> tuple[str, ...]:
+    """The candidate variables that exist without reading the measured torque: ``load``
+    and ``quadrant`` need the model's load prediction τ̂_out."""
+    if tau_out is not None:
+        return VARIABLES
+    return tuple(v for v in VARIABLES if v not in ("load", "quadrant"))
+
+
 def variable_values(variable: str, s: Signals, tau_out: Prediction | None = None) -> np.ndarray:
     """Samples of one candidate variable of the diagnosis.
+
+    No variable reads the measured torque: ``load`` is the model's prediction τ̂_out and
+    ``quadrant`` the model quadrant sign(τ̂_out q̇) (:func:`model_quadrant`).
 
     Parameters
     ----------
     variable : str
-        One of :data:`VARIABLES`.
+        One of :data:`VARIABLES`, or a key of ``s.extra``.
     s : Signals
-        Samples.
+        Samples (a :meth:`~ident.signals.Signals.states` view is enough).
     tau_out : Prediction, optional
-        Load torque predictor τ̂_out; without it the measured torque τ stands for the load.
+        Load torque predictor τ̂_out; without it ``load`` and ``quadrant`` do not exist
+        (:func:`available_variables`).
 
     Returns
     -------
     ndarray, shape (n,)
-        position q, velocity q̇, direction sign(q̇), acceleration q̈, load τ_out,
-        quadrant sign(P) = sign(τ q̇) (eq. 26), time t since the start of the run.
+        position q, velocity q̇, direction sign(q̇), acceleration q̈, load τ̂_out,
+        quadrant sign(τ̂_out q̇), time t since the start of the run.
+
+    Raises
+    ------
+    KeyError
+        ``load`` or ``quadrant`` without a load predictor.
+    ValueError
+        Unknown variable.
     """
     if variable == "position":
         return s.q
@@ -108,10 +137,11 @@ def variable_values(variable: str, s: Signals, tau_out: Prediction | None = None
         return _sign(s.dq)
     if variable == "acceleration":
         return s.ddq
-    if variable == "load":
-        return tau_out(s) if tau_out is not None else s.tau
-    if variable == "quadrant":
-        return _sign(s.tau * s.dq)
+    if variable in ("load", "quadrant"):
+        if tau_out is None:
+            raise KeyError(f"{variable!r} needs the model's load prediction tau_out (the model "
+                           "has no rigid body or payload term)")
+        return tau_out(s) if variable == "load" else model_quadrant(s, tau_out)
     if variable == "time":
         return s.t
     if s.extra is not None and variable in s.extra:  # another joint's state (Signals.extra)
@@ -240,15 +270,46 @@ def unique_tag(names: tuple[str, ...], existing: set[str]) -> str:
 
 
 def rigid_prediction(lib: Library, coef: dict[str, float]) -> Prediction | None:
-    """τ̂_out: the declared rigid-body and payload terms of ``lib`` with their current
-    coefficients (eq. 31, 34), or None when there are none (or all are zero)."""
+    """τ̂_out, the model's own load prediction: the declared rigid-body and payload terms of
+    ``lib`` with their current coefficients (eq. 31, 34), or, in the new model, the inner
+    terms of its load-dependent friction (eq. 42) with the mean of their motor and generator
+    products, (a_m χ + a_g χ) / 2 ≈ χ; None when there are none (or all are zero).
+
+    Never the measured torque: without a rigid body the model has no load variable.
+    """
     terms = [t for t in lib.terms() if t.effect in ("rigid_body", "payload")]
-    if not terms:
-        return None
-    c = np.array([coef.get(n, 0.0) for t in terms for n in t.names()])
+    if terms:
+        c = np.array([coef.get(n, 0.0) for t in terms for n in t.names()])
+    else:
+        dep = next((t for t in lib.terms() if t.effect == "load_dependent"), None)
+        if dep is None:
+            return None
+        terms = list(dep.inner.terms())
+        names = dep.names()
+        k = len(names) // 4  # [a_m, b_m] per inner column, then [a_g, b_g] per column
+        vals = []
+        for i in range(k):
+            pair = [coef[n] for n in (names[2 * i], names[2 * k + 2 * i])
+                    if n in coef and coef[n] != 0.0]
+            vals.append(float(np.mean(pair)) if pair else 0.0)
+        c = np.array(vals)
     if not np.any(c):
         return None
     return Prediction(terms, c)
+
+
+def model_prediction(lib: Library, coef: dict[str, float]) -> Prediction:
+    """τ̂ of the whole current model, a function of the states only: terms whose quadrant is
+    the paper's proxy sign(τ q̇) (eq. 26: the declared new model) decide it with the model's
+    load prediction instead (:func:`rigid_prediction`)."""
+    load = rigid_prediction(lib, coef)
+    terms = []
+    for t in lib.terms():
+        if hasattr(t, "load") and getattr(t, "load", None) is None and load is not None:
+            t = copy.copy(t)
+            t.load = load
+        terms.append(t)
+    return Prediction(terms, np.array([coef.get(n, 0.0) for n in lib.names()]))
 
 
 class Context:

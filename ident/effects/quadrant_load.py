@@ -6,15 +6,16 @@ from __future__ import annotations
 import numpy as np
 
 from ..signals import Signals
-from ._base import Candidate, Context, Effect, Prediction, _sign, register
+from ._base import Candidate, Context, Effect, Prediction, model_quadrant, register
 
 
 class QuadrantLoad(Effect):
     """Load-dependent dry friction in the motor/generator quadrants (eq. 17-20, 26).
 
-    Column sign(P) τ̂_out = sign(τ q̇) τ̂_out ≈ |τ̂_out| sign(q̇), with τ̂_out the load torque
-    predicted by the declared rigid-body terms. Its coefficient alpha_P is the mean of the
-    paper's alpha_m and alpha_g (their difference is absorbed by the rigid-body parameters).
+    Column sign(P) τ̂_out = sign(τ̂_out q̇) τ̂_out = |τ̂_out| sign(q̇) (model quadrant), with
+    τ̂_out the load torque predicted by the declared rigid-body terms. Its coefficient alpha_P
+    is the mean of the paper's alpha_m and alpha_g (their difference is absorbed by the
+    rigid-body parameters).
 
     Parameters
     ----------
@@ -33,7 +34,7 @@ class QuadrantLoad(Effect):
         return (self._n("alpha_P"),)
 
     def columns(self, s: Signals) -> np.ndarray:
-        return (_sign(s.tau * s.dq) * self.tau_out(s))[:, None]
+        return (model_quadrant(s, self.tau_out) * self.tau_out(s))[:, None]
 
     def describe(self) -> str:
         return "load-dependent dry friction alpha_P sign(P) tau_out"

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..signals import Signals
-from ._base import Candidate, Context, Effect, Prediction, _sign, register
+from ._base import Candidate, Context, Effect, Prediction, model_quadrant, register
 from ._scan import scan_log
 
 
@@ -40,7 +40,7 @@ class QuadrantLoadStribeck(Effect):
 
     def columns(self, s: Signals) -> np.ndarray:
         e = np.exp(-np.abs(s.dq) / self.qs)
-        return (_sign(s.tau * s.dq) * self.tau_out(s) * e)[:, None]
+        return (model_quadrant(s, self.tau_out) * self.tau_out(s) * e)[:, None]
 
     def describe(self) -> str:
         return (

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..signals import Signals
-from ._base import Candidate, Context, Effect, Prediction, register
+from ._base import Candidate, Context, Effect, Prediction, model_prediction, register
 
 
 def time_derivative(x: np.ndarray, s: Signals) -> np.ndarray:
@@ -58,6 +58,5 @@ class TorqueLag(Effect):
 def propose(ctx: Context) -> list[Candidate]:
     """T_lag dτ̂/dt with τ̂ the whole current model prediction, once."""
     if "torque_lag" not in ctx.effects:
-        c_all = np.array([ctx.coef.get(n, 0.0) for n in ctx.lib.names()])
-        return [ctx.candidate(TorqueLag(Prediction(ctx.lib.terms(), c_all)))]
+        return [ctx.candidate(TorqueLag(model_prediction(ctx.lib, ctx.coef)))]
     return []
