@@ -53,6 +53,7 @@ from .effects import (
     Context,
     Effect,
     Scorer,
+    Setting,
     TorqueLag,
     effective_n,
     registry,
@@ -64,6 +65,7 @@ from .refine_library import LibraryStep, library_step
 from .refine_result import Refinement, Rejected, Step, _pct
 from .signals import Signals
 from .terms import Library, Term
+from .unseen import LEAK_RATIO, heldout_error, heldout_kind, noise_floor
 
 if TYPE_CHECKING:  # pragma: no cover
     from .preprocess import Design
@@ -217,24 +219,53 @@ def _cycle(design: Design) -> float | None:
     return float(np.median(np.diff(t))) if t.shape[0] > 1 else None
 
 
+def _setting(design: Design) -> Setting:
+    """Sampling period, longest run and excitation time scale of the design's data."""
+    s = design.signals
+    run_s = 0.0
+    gaps = []
+    for e in np.unique(s.experiment):
+        m = s.experiment == e
+        t, dq = s.t[m], s.dq[m]
+        if t.size:
+            run_s = max(run_s, float(t.max() - t.min()))
+        sg = np.sign(dq)
+        flips = t[1:][(sg[1:] != sg[:-1]) & (sg[1:] != 0)]
+        if flips.size >= 2:
+            gaps.append(np.diff(flips))
+    exc = float(np.median(np.concatenate(gaps))) if gaps else 0.0
+    return Setting(_cycle(design), run_s, exc)
+
+
 def _naming(
     e: Effect,
     c: Candidate,
     lstep: LibraryStep | None,
     parameters: dict[str, dict[str, float]],
     design: Design,
-) -> tuple[str | None, str]:
-    """Named effect and one-line structure of an accepted candidate."""
+) -> tuple[str | None, str, str | None]:
+    """Named effect, one-line structure and the physical-range verdict (None: in range) of
+    an accepted candidate. A named effect whose parameters leave the range where its physics
+    holds is reported as the generic structure of its variables, with the reason."""
+    out_of_range = e.physical_range(parameters, _setting(design))
+    if out_of_range is not None:
+        kind = "time-derivative of the model" if isinstance(e, TorqueLag) else e.variable
+        return (None, f"a term in {kind} ({e.describe()}), not named {e.effect}: "
+                f"outside its physical range: {out_of_range}", out_of_range)
     if lstep is not None and lstep.candidate is not None and (
         e is lstep.candidate or e.effect == lstep.candidate.effect
     ) and lstep.description is not None:
-        return lstep.description.name, lstep.description.sentence
+        return lstep.description.name, lstep.description.sentence, None
     if isinstance(e, TorqueLag):
         key = next((k for k in parameters if k.startswith("T_lag")), None)
         if key is not None:
-            return name_torque_lag(parameters[key]["value"], parameters[key]["std2"],
-                                   _cycle(design))
-    return (None if c.generic else e.effect), e.describe()
+            return (*name_torque_lag(parameters[key]["value"], parameters[key]["std2"],
+                                     _cycle(design)), None)
+    return (None if c.generic else e.effect), e.describe(), None
+
+
+def _kept(design: Design, model: IdentModel) -> np.ndarray:
+    return design.W[:, [design.names.index(n) for n in model.names_]]
 
 
 # ------------------------------------------------------------------------ the loop
@@ -317,6 +348,12 @@ def refine(
     cur_val = validation
     cur = _fit(lib, cur_design, name)
     initial = cur
+    runs = cur_design.signals.experiment
+    unseen = heldout_kind(runs)
+    floor = noise_floor(cur.residual_, cur_design.Y, runs)
+    floor_initial = floor
+    h_cur = heldout_error(_kept(cur_design, cur), cur_design.Y, runs)
+    h_initial = h_cur
     val_err = cur.rel_error_on(cur_val) if cur_val is not None else None
     val_initial = val_err
     steps: list[Step] = []
@@ -463,18 +500,22 @@ def refine(
                         f"less than {100 * min_gain:g} % better overall and "
                         f"{200 * min_gain:g} % in the low- and high-velocity bands"
                     )
-            h1 = math.nan
-            if lstep is not None:
-                h0 = lstep.heldout_before
-                h1 = lstep.heldout(d1.W[:, [d1.names.index(n) for n in m1.names_
-                                            if n in e.names()]])
-                need = h0 * (1 - min_gain) if c.generic else h0
-                if reason is None and not h1 < need:
-                    reason = (
-                        f"held-out error {_pct(h0)} -> {_pct(h1)}"
-                        + (f": a basis must lower it by {100 * min_gain:g} %" if c.generic
-                           else ": not lowered")
-                    )
+            # data the candidate was not fitted on: other runs, or other blocks of one run
+            h1 = heldout_error(_kept(d1, m1), d1.Y, runs)
+            low = min(m1.rel_error_, h1)
+            if math.isfinite(floor) and low < LEAK_RATIO * floor:
+                reason = (
+                    f"leak: error {_pct(low)} below the noise floor {_pct(floor)} "
+                    f"(x{low / floor:.2f}): the candidate explains the noise, a column "
+                    "built from the output"
+                )
+            need = h_cur * (1 - min_gain) if c.generic else h_cur
+            if reason is None and not h1 < need:
+                reason = (
+                    f"{unseen} error {_pct(h_cur)} -> {_pct(h1)}"
+                    + (f": a basis must lower it by {100 * min_gain:g} %" if c.generic
+                       else ": not lowered")
+                )
             v1 = val1 = None
             if reason is None and cur_val is not None:
                 try:
@@ -517,7 +558,7 @@ def refine(
             dep = None
         after_bands = _bands(m1, d1, vmax)
         parameters = _effect_parameters(e, m1, d1, m1.coef_)
-        named_effect, structure = _naming(e, c, lstep, parameters, cur_design)
+        named_effect, structure, out_of_range = _naming(e, c, lstep, parameters, cur_design)
         step = Step(
             variable=e.variable,
             strength=1.0 - float(m1.residual_ @ m1.residual_) / rss0 if rss0 > 0 else 0.0,
@@ -543,9 +584,13 @@ def refine(
             variables=lib_variables.get(id(e), (e.variable,)),
             named_effect=named_effect,
             structure=structure,
-            heldout_rel_error_before=lstep.heldout_before if lstep is not None else math.nan,
+            heldout_rel_error_before=h_cur,
             heldout_rel_error_after=h1,
             library=lstep,
+            heldout_kind=unseen,
+            noise_floor=floor,
+            noise_floor_tested=floor,
+            physical_range=out_of_range,
         )
         steps.append(step)
         say(
@@ -553,13 +598,17 @@ def refine(
             f"{_pct(cur.rel_error_)} -> {_pct(m1.rel_error_)}"
         )
         lib = Library(*lib.terms(), e)
-        cur_design, cur = d1, m1
+        cur_design, cur, h_cur = d1, m1, h1
+        # the floor estimate only falls as effects leave the residual
+        floor = min(floor, noise_floor(m1.residual_, d1.Y, runs))
         if cur_val is not None:
             cur_val, val_err = val1, v1
     if diag is None or steps and diag is steps[-1].diagnosis:
         diag = diagnose(
             cur.residual_, s, Y=cur_design.Y, tau_out=rigid_prediction(lib, cur.coef_), alpha=alpha
         )
+    for st in steps:  # every error is reported against the final (lowest) floor estimate
+        st.noise_floor = floor
     return Refinement(
         steps=steps,
         rejected=rejected,
@@ -574,4 +623,9 @@ def refine(
         stop_reason=stop,
         final_validation_design=cur_val,
         library_tried=library_tried,
+        heldout_kind=unseen,
+        heldout_rel_error_initial=h_initial,
+        heldout_rel_error_final=h_cur,
+        noise_floor=floor,
+        noise_floor_initial=floor_initial,
     )

@@ -66,10 +66,21 @@ class Step:
     structure : str
         One line a mechanical engineer reads.
     heldout_rel_error_before, heldout_rel_error_after : float
-        Held-out (blocked cross-validation) relative error before and after the step
-        (NaN without the library search).
+        Relative error on data the fit never saw (:func:`ident.unseen.heldout_error`: leave
+        one run out, or blocked folds of a single run) before and after the step.
     library : LibraryStep or None
         The library-search step of this round (:mod:`ident.refine_library`).
+    heldout_kind : str
+        ``"leave one run out"`` or ``"blocked folds"``.
+    noise_floor : float
+        Estimated noise floor (relative error no model can go below,
+        :func:`ident.unseen.noise_floor`): the refinement's final estimate, the lowest over
+        the residuals of the accepted models; errors are reported as ratios to it.
+    noise_floor_tested : float
+        The estimate the step's leak test used (the lowest before the step).
+    physical_range : str or None
+        Why the fitted parameters leave the effect's physical range (the step is then
+        reported as a generic structure), None when inside it or undeclared.
     """
 
     variable: str
@@ -103,11 +114,28 @@ class Step:
     heldout_rel_error_before: float = math.nan
     heldout_rel_error_after: float = math.nan
     library: LibraryStep | None = field(default=None, repr=False)
+    heldout_kind: str = "blocked folds"
+    noise_floor: float = math.nan
+    physical_range: str | None = None
+    noise_floor_tested: float = math.nan
 
     def to_json(self) -> dict[str, Any]:
         """The step as in ``refinement.steps[]`` of the fit JSON."""
         lib = self.library
+        fl = self.noise_floor
         return {
+            "heldout_kind": self.heldout_kind,
+            "noise_floor": _num(fl),
+            "noise_floor_tested": _num(self.noise_floor_tested),
+            "floor_ratio": {
+                "fit_after": _ratio(self.rel_error_after, fl),
+                "heldout_after": _ratio(self.heldout_rel_error_after, fl),
+                "validation_after": _ratio(self.validation_rel_error_after, fl),
+            },
+            "leak_warning": leak_note(min(self.rel_error_after, self.heldout_rel_error_after),
+                                      fl) or None,
+            "physical_range": {"inside": self.physical_range is None,
+                               "reason": self.physical_range},
             "effect": self.effect,
             "variable": self.variable,
             "variables": list(self.variables or (self.variable,)),
@@ -204,6 +232,11 @@ class Refinement:
     stop_reason: str
     final_validation_design: Design | None = None
     library_tried: list[dict] = field(default_factory=list)
+    heldout_kind: str = "blocked folds"
+    heldout_rel_error_initial: float = math.nan
+    heldout_rel_error_final: float = math.nan
+    noise_floor: float = math.nan
+    noise_floor_initial: float = math.nan
 
     @property
     def terms(self) -> list[Effect]:
@@ -212,9 +245,19 @@ class Refinement:
 
     def to_json(self) -> dict[str, Any]:
         """The ``refinement`` object of the fit JSON (see docs/refinement.md)."""
+        fl = self.noise_floor
         return {
             "steps": [s.to_json() for s in self.steps],
             "rejected": [r.to_json() for r in self.rejected],
+            "noise_floor": _num(fl),
+            "noise_floor_initial": _num(self.noise_floor_initial),
+            "heldout_kind": self.heldout_kind,
+            "heldout_rel_error_initial": _num(self.heldout_rel_error_initial),
+            "heldout_rel_error_final": _num(self.heldout_rel_error_final),
+            "floor_ratio_final": {"fit": _ratio(self.rel_error_final, fl),
+                                  "heldout": _ratio(self.heldout_rel_error_final, fl)},
+            "leak_warning": leak_note(min(self.rel_error_final, self.heldout_rel_error_final),
+                                      fl) or None,
             "rel_error_initial": _num(self.rel_error_initial),
             "rel_error_final": _num(self.rel_error_final),
             "validation_rel_error_initial": _num(self.validation_rel_error_initial),
@@ -237,15 +280,21 @@ class Refinement:
 
     def format_report(self) -> str:
         """Human-readable report of every step."""
+        fl = self.noise_floor
         out = [
             f"Refinement: relative error {_pct(self.rel_error_initial)} -> "
-            f"{_pct(self.rel_error_final)}"
+            f"{_pct(self.rel_error_final)}{leak_note(self.rel_error_final, fl)}"
             + (
                 f" (validation {_pct(self.validation_rel_error_initial)} -> "
                 f"{_pct(self.validation_rel_error_final)})"
                 if self.validation_rel_error_initial is not None
                 else ""
-            )
+            ),
+            f"  {self.heldout_kind}: {_pct(self.heldout_rel_error_initial)} -> "
+            f"{_pct(self.heldout_rel_error_final)}"
+            f"{leak_note(self.heldout_rel_error_final, fl)}; noise floor {_pct(fl)} "
+            f"(fit / floor x{_ratio_s(self.rel_error_final, fl)}, held-out / floor "
+            f"x{_ratio_s(self.heldout_rel_error_final, fl)})",
         ]
         for i, s in enumerate(self.steps, 1):
             out.append("")
@@ -276,10 +325,16 @@ class Refinement:
                 f"low velocity {_pct(s.low_before)} -> {_pct(s.low_after)}, "
                 f"high velocity {_pct(s.high_before)} -> {_pct(s.high_after)}"
             )
+            if s.physical_range is not None:
+                out.append(f"  outside the physical range: {s.physical_range}")
             if math.isfinite(s.heldout_rel_error_before):
                 out.append(
-                    f"  held-out (blocked CV) {_pct(s.heldout_rel_error_before)} -> "
+                    f"  held-out ({s.heldout_kind}) {_pct(s.heldout_rel_error_before)} -> "
                     f"{_pct(s.heldout_rel_error_after)}"
+                    f"{leak_note(s.heldout_rel_error_after, s.noise_floor)}; noise floor "
+                    f"{_pct(s.noise_floor)} (fit x{_ratio_s(s.rel_error_after, s.noise_floor)},"
+                    f" held-out x{_ratio_s(s.heldout_rel_error_after, s.noise_floor)})"
+                    f"{leak_note(s.rel_error_after, s.noise_floor)}"
                 )
             if s.validation_rel_error_before is not None:
                 out.append(
@@ -304,6 +359,25 @@ class Refinement:
         out.append("remaining residual:")
         out.append(self.final_diagnosis.format_table())
         return "\n".join(out)
+
+
+def _ratio(x: float | None, floor: float) -> float | None:
+    """x / noise floor (None when either is unknown)."""
+    if x is None or not (math.isfinite(x) and math.isfinite(floor) and floor > 0):
+        return None
+    return float(x) / floor
+
+
+def _ratio_s(x: float | None, floor: float) -> str:
+    r = _ratio(x, floor)
+    return "n/a" if r is None else f"{r:.2f}"
+
+
+def leak_note(x: float | None, floor: float) -> str:
+    """``" [below the noise floor: leak?]"`` when an error is below the estimated noise
+    floor (no model explains noise: a column built from the output), else ``""``."""
+    r = _ratio(x, floor)
+    return " [below the noise floor: leak?]" if r is not None and r < 1.0 else ""
 
 
 def _num(x: float | None) -> float | None:

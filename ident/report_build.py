@@ -141,14 +141,24 @@ def refinement_section(ref: dict) -> Section:
                "refinement added nothing.")
     rows = []
     for i, st in enumerate(steps, 1):
+        ratio = (st.get("floor_ratio") or {}).get("fit_after")
+        rng = st.get("physical_range") or {}
         rows.append([
-            i, st.get("variable"), st.get("effect"),
+            i, st.get("variable"), st.get("named_effect") or st.get("effect"),
             st.get("rel_error_before"), st.get("rel_error_after"),
+            st.get("heldout_rel_error_after"),
+            None if ratio is None else f"{ratio:.2f}" + (" (leak?)" if ratio < 1 else ""),
             st.get("validation_rel_error_before"), st.get("validation_rel_error_after"),
+            "inside" if rng.get("inside", True) else f"outside: {rng.get('reason')}",
         ])
     if rows:
         s.table(["Step", "Residual depends on", "Effect added", "Error before", "Error after",
-                 "Validation before", "Validation after"], rows)
+                 f"{ref.get('heldout_kind', 'held-out')} after", "Error / noise floor",
+                 "Validation before", "Validation after", "Physical range"], rows)
+    if ref.get("noise_floor") is not None:
+        s.para(f"Estimated noise floor (what no model can explain): {fmt(ref['noise_floor'])}"
+               + (f"; {ref['leak_warning'].strip(' []')}" if ref.get("leak_warning") else "")
+               + ".")
     for i, st in enumerate(steps, 1):
         params = st.get("parameters", {})
         if params:

@@ -15,13 +15,12 @@ class _HiddenOutput:
     """Stands for the measured torque in :meth:`Signals.states`: any use raises
     :class:`~ident.OutputLeakError` (arithmetic, numpy ufuncs and conversions alike)."""
 
-    __array_ufunc__ = None  # numpy defers to the reflected operators below
-
     def _leak(self, *_a, **_k):
         raise OutputLeakError(
             "a candidate read the measured torque tau: candidate terms, variables and bases "
             "must be functions of the states and of the model's own prediction")
 
+    __array_ufunc__ = __array_function__ = _leak  # numpy ufuncs and functions
     __array__ = __getitem__ = __len__ = __iter__ = __float__ = __bool__ = _leak
     __add__ = __radd__ = __sub__ = __rsub__ = __mul__ = __rmul__ = _leak
     __truediv__ = __rtruediv__ = __pow__ = __neg__ = __abs__ = _leak

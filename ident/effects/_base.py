@@ -43,6 +43,7 @@ __all__ = [
     "model_quadrant",
     "variable_values",
     "Effect",
+    "Setting",
     "Candidate",
     "Context",
     "Registration",
@@ -149,6 +150,25 @@ def variable_values(variable: str, s: Signals, tau_out: Prediction | None = None
     raise ValueError(f"unknown candidate variable {variable!r}; expected one of {VARIABLES}")
 
 
+@dataclass(frozen=True)
+class Setting:
+    """Facts of the data a named effect's physical range is checked against.
+
+    Attributes
+    ----------
+    cycle_s : float or None
+        Sampling period of the raw log [s] (not the decimated one).
+    run_s : float
+        Longest run of the design [s].
+    excitation_s : float
+        Median time between two reversals of the motion [s] (the excitation's time scale).
+    """
+
+    cycle_s: float | None
+    run_s: float
+    excitation_s: float
+
+
 class Effect(Term):
     """A candidate effect: a term plus its nonlinear hyper-parameters.
 
@@ -223,6 +243,20 @@ class Effect(Term):
             More ``{name: {"value", "std2"}}`` entries for the report (none by default).
         """
         return {}
+
+    def physical_range(self, parameters: dict[str, dict[str, float]],
+                       setting: Setting) -> str | None:
+        """Why the fitted parameters leave the range where this effect's physics holds, or
+        None when they are inside it (default: no declared range).
+
+        Parameters
+        ----------
+        parameters : dict
+            ``{name: {"value", "std2"}}`` of the fitted step.
+        setting : Setting
+            Sampling period, run length and excitation time scale of the data.
+        """
+        return None
 
     def _n(self, base: str) -> str:
         return base + self.tag

@@ -6,7 +6,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..signals import Signals
-from ._base import Candidate, Context, Effect, Prediction, model_prediction, register
+from ._base import Candidate, Context, Effect, Prediction, Setting, model_prediction, register
+
+#: Longest torque lag named a physical lag [s] (drive current loop, torque filter).
+MAX_TORQUE_LAG_S = 0.02
+
+#: ... or this many raw sampling periods on logs slower than 1 / (MAX_TORQUE_LAG_S / 3).
+MAX_LAG_CYCLES = 3
 
 
 def time_derivative(x: np.ndarray, s: Signals) -> np.ndarray:
@@ -52,6 +58,23 @@ class TorqueLag(Effect):
 
     def describe(self) -> str:
         return "torque lag T_lag d(tau_model)/dt"
+
+    def physical_range(self, parameters: dict[str, dict[str, float]],
+                       setting: Setting) -> str | None:
+        """A transmission or current loop lags by at most :data:`MAX_TORQUE_LAG_S` (or
+        :data:`MAX_LAG_CYCLES` raw cycles on slow logs), and never leads: a longer lag is a
+        controller's or a filter's dynamics, not the joint's."""
+        key = next((k for k in parameters if k.startswith("T_lag")), None)
+        if key is None:
+            return None
+        lag = parameters[key]["value"]
+        cap = max(MAX_TORQUE_LAG_S, MAX_LAG_CYCLES * (setting.cycle_s or 0.0))
+        if lag < 0:
+            return f"T_lag = {1e3 * lag:.3g} ms < 0: the torque would lead the model"
+        if lag > cap:
+            return (f"T_lag = {1e3 * lag:.3g} ms > {1e3 * cap:.3g} ms, longer than a drive's "
+                    "current loop or a transmission lags (a controller's or filter's dynamics)")
+        return None
 
 
 @register("torque_lag", order=110)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..signals import Signals
-from ._base import Candidate, Context, Effect, _sign, register
+from ._base import Candidate, Context, Effect, Setting, _sign, register
 from ._scan import scan_log
 
 
@@ -42,6 +42,22 @@ class WarmUp(Effect):
 
     def describe(self) -> str:
         return f"warm-up dF_C exp(-t/{self.T_w:.4g}) sign(dq)"
+
+    def physical_range(self, parameters: dict[str, dict[str, float]],
+                       setting: Setting) -> str | None:
+        """A warm-up is slower than the excitation (T_w above the median time between
+        reversals) and shorter than the run (T_w below the longest run): otherwise the term
+        is a slow drift or follows the motion itself."""
+        key = next((k for k in parameters if k.startswith("T_w")), None)
+        if key is None:
+            return None
+        tw = parameters[key]["value"]
+        if tw <= setting.excitation_s:
+            return (f"T_w = {tw:.3g} s is not slower than the excitation (median "
+                    f"{setting.excitation_s:.3g} s between reversals)")
+        if tw >= setting.run_s:
+            return f"T_w = {tw:.3g} s is not shorter than the run ({setting.run_s:.3g} s)"
+        return None
 
     def extra_parameters(self, coef, names, cov, params):
         """w_warm = dF_C_warm / F_C, when the model has a Coulomb F_C."""
