@@ -196,6 +196,7 @@ def library_step(
     if pick is not None:
         g, c = res.selected[pick], res.coef[pick]
         simple = _simplest(res, g, min_gain)
+        simple = _plainer(res, simple or g, min_gain) or simple
         if simple is not None:
             g = simple
             X = np.column_stack((W, g.columns(values)))
@@ -226,6 +227,30 @@ def _simplest(res: SearchResult, g: Group, min_gain: float) -> Group | None:
         h = t.group
         if (t.round == mine.round and len(h.variables) == 1 and h.variables[0] in g.variables
                 and h.modifier == g.modifier and mine.cv_after >= t.cv_after * (1 - min_gain)
+                and (best is None or t.cv_after < best.cv_after)):
+            best = t
+    return None if best is None else best.group
+
+
+#: A modifier and the plainer one offered in its place when it does as well: the model
+#: quadrant sign(τ̂_out q̇) is sign(q̇) times the sign of the load, a function of the
+#: position where gravity dominates, so "x quadrant" and "x direction" can fit alike.
+PLAINER_MODIFIER = {"quadrant": "direction"}
+
+
+def _plainer(res: SearchResult, g: Group, min_gain: float) -> Group | None:
+    """The group in the same variables with the plainer modifier
+    (:data:`PLAINER_MODIFIER`), scored in the same round, whose held-out error ``g`` does not
+    lower by ``min_gain``; None when there is none."""
+    plain = PLAINER_MODIFIER.get(g.modifier)
+    mine = next((t for t in res.tried if t.group is g), None)
+    if plain is None or mine is None:
+        return None
+    best = None
+    for t in res.tried:
+        h = t.group
+        if (t.round == mine.round and h.variables == g.variables and h.modifier == plain
+                and mine.cv_after >= t.cv_after * (1 - min_gain)
                 and (best is None or t.cv_after < best.cv_after)):
             best = t
     return None if best is None else best.group
