@@ -21,7 +21,7 @@ from ident import IdentError
 from sim_drivers import SimError
 from trajectories import TrajectoryError
 
-from . import demo
+from . import demo, recover
 
 # subcommand modules, in the order of `jointid --help`; each sits with the package it drives
 SUBCOMMANDS = (
@@ -31,6 +31,7 @@ SUBCOMMANDS = (
     demo,  # jointid demo
     ident.cli_report,  # jointid report
     daq.protocol.cli_export,  # jointid export
+    recover,  # jointid recover
 )
 
 #: errors raised on purpose by our packages (their exception roots) and I/O errors
