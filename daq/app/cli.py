@@ -13,6 +13,7 @@ import sys
 
 import daq.protocol.cli_export
 import daq.runtime.cli
+import daq.runtime.cli_recover
 import ident.cli
 import ident.cli_report
 import trajectories.cli
@@ -21,7 +22,7 @@ from ident import IdentError
 from sim_drivers import SimError
 from trajectories import TrajectoryError
 
-from . import demo, recover
+from . import demo
 
 # subcommand modules, in the order of `jointid --help`; each sits with the package it drives
 SUBCOMMANDS = (
@@ -31,7 +32,7 @@ SUBCOMMANDS = (
     demo,  # jointid demo
     ident.cli_report,  # jointid report
     daq.protocol.cli_export,  # jointid export
-    recover,  # jointid recover
+    daq.runtime.cli_recover,  # jointid recover
 )
 
 #: errors raised on purpose by our packages (their exception roots) and I/O errors

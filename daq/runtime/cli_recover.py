@@ -15,7 +15,8 @@ import os
 from pathlib import Path
 
 from daq import DaqError
-from daq.runtime.mcaplog import Recovered, recover_log
+
+from .mcaplog import Recovered, recover_log
 
 
 def register(sub: argparse._SubParsersAction) -> None:
