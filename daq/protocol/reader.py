@@ -1,10 +1,13 @@
 """Read jointid MCAP run logs back into numpy arrays (for :mod:`ident`).
 
-Chunk-wise: each compressed chunk is decompressed once; the offsets of the fixed-size
-state and setpoint records are collected by a walk over the record headers and the
-records are decoded with one numpy structured dtype per chunk, so no Python object is
-created per message beyond that walk. A file truncated by a killed writer (no summary, a
-partial last chunk) is read up to its last complete chunk, with a warning.
+Chunk-wise: each compressed chunk is decompressed once and checked (sizes, CRC); the
+offsets of the fixed-size state and setpoint records are collected by a walk over the
+record headers and the records are decoded with one numpy structured dtype per chunk, so no
+Python object is created per message beyond that walk. A closed file is read through its
+chunk indexes: a damaged chunk is skipped with a warning naming the cycles lost, and the
+chunks after it are read. A file truncated by a killed writer (no summary, a partial last
+chunk) is read record by record up to its last complete chunk, with a warning. A file
+without the MCAP magic is refused as "not an MCAP file".
 """
 
 from __future__ import annotations
