@@ -24,11 +24,13 @@ import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.reader import make_reader
 from mcap.records import Chunk, MessageIndex, Opcode
+from mcap.writer import CompressionType, Writer
 
 from daq.app.cli import main
 from daq.protocol.logformat import FRAME
 from daq.protocol.reader import LogReadError, read_frames, read_run
-from daq.runtime.mcaplog import RunLog, recover_log
+from daq.runtime.mcaplog import RunLog
+from daq.runtime.mcaprecover import recover_log
 from daq.runtime.runner import run_campaign
 from sim_drivers.plant_config import default_plant
 from trajectories.campaign import Campaign
@@ -325,3 +327,28 @@ def test_recover_refuses_its_own_output_and_keeps_nothing_on_error(tmp_path):
     (tmp_path / "r.mcap.orig").write_bytes(b"")
     assert main(["recover", str(p)]) == 2
     assert read_run(p).metadata["result"]["status"] == "done"  # untouched
+
+
+def test_recover_a_file_of_the_mcap_library_writer_cut_short(tmp_path):
+    """Schemas and channels inside chunks (the library's writer puts them there) reach the
+    summary of the recovered file."""
+    p = tmp_path / "lib.mcap"
+    with open(p, "wb") as f:
+        w = Writer(f, chunk_size=2000, compression=CompressionType.ZSTD)
+        w.start()
+        sid = w.register_schema("s", "jsonschema", b"{}")
+        cid = w.register_channel("/a", "json", sid)
+        for k in range(300):
+            w.add_message(cid, 1000 + k, json.dumps({"k": k}).encode(), 1000 + k, k)
+        w.finish()
+    with open(p, "rb") as f:
+        summary = make_reader(f).get_summary()
+    last = max(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(p.read_bytes()[: last.chunk_start_offset + 20])
+    res = recover_log(cut, tmp_path / "rec.mcap")
+    n_kept = 300 - sum(1 for _ in range(last.message_start_time, last.message_end_time + 1))
+    assert res.messages == n_kept and res.chunks == len(summary.chunk_indexes) - 1
+    n, counts, rec_summary = _indexed_read(res.path)
+    assert n == n_kept and counts == {"/a": n_kept}
+    assert [c.topic for c in rec_summary.channels.values()] == ["/a"]

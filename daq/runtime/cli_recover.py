@@ -2,7 +2,7 @@
 
 A log whose writer was killed has no summary: ``read_run`` reads it, but indexed readers
 (Foxglove, ``@mcap/core``, the ``mcap`` library's seeking reader) need the index. This copies
-every intact record (:func:`daq.runtime.mcaplog.recover_log`). Without ``-o`` the log is
+every intact record (:func:`daq.runtime.mcaprecover.recover_log`). Without ``-o`` the log is
 replaced in place and the original kept as ``LOG.orig`` (a name ``*.mcap`` globs do not
 match, so ``jointid fit DIR`` reads the recovered run once). Logs written before message
 indexes were written (Foxglove could not play them) are re-indexed the same way.
@@ -16,7 +16,7 @@ from pathlib import Path
 
 from daq import DaqError
 
-from .mcaplog import Recovered, recover_log
+from .mcaprecover import Recovered, recover_log
 
 
 def register(sub: argparse._SubParsersAction) -> None:
