@@ -352,3 +352,19 @@ def test_recover_a_file_of_the_mcap_library_writer_cut_short(tmp_path):
     n, counts, rec_summary = _indexed_read(res.path)
     assert n == n_kept and counts == {"/a": n_kept}
     assert [c.topic for c in rec_summary.channels.values()] == ["/a"]
+
+
+@pytest.mark.parametrize("cut", ["closing magic", "summary"])
+def test_closed_log_without_usable_summary_is_read_to_its_data_end(tmp_path, cut):
+    """A copy that lost its tail after the data end (or a damaged footer) loses nothing."""
+    p = tmp_path / "r.mcap"
+    _write(p, 600)
+    data = p.read_bytes()
+    summary_start = struct.unpack_from("<Q", data, len(data) - 8 - 20)[0]  # footer field
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(data[:-8] + bytes(8) if cut == "closing magic" else data[:summary_start + 5])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        a = read_run(bad)
+    assert np.array_equal(a.cycle, np.arange(600)) and not a.truncated
+    assert a.metadata["result"]["status"] == "done"

@@ -101,7 +101,10 @@ def _recover(f: Any, src: Path, out: Any, dst: Path) -> Recovered:
             break
         body = f.read(length)
         if opcode == Opcode.HEADER and not started:
-            head = Header.read(ReadDataStream(io.BytesIO(body)))
+            try:
+                head = Header.read(ReadDataStream(io.BytesIO(body)))
+            except Exception:  # damaged header: ours instead
+                head = Header(profile="", library=f"jointid {__version__}")
             w.start(profile=head.profile, library=head.library)
             started = True
             continue
