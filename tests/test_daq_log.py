@@ -166,8 +166,9 @@ def test_unclosed_writer_file_is_readable_up_to_the_last_chunk(tmp_path):
 def test_not_mcap_and_list_runs(tmp_path):
     bad = tmp_path / "x_payload0.mcap"
     bad.write_bytes(b"hello world, not mcap at all")
-    with pytest.raises(LogReadError), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
+    with pytest.raises(LogReadError, match=r"x_payload0.mcap: not an MCAP file"), \
+            warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)  # said once, not as a truncated log
         read_run(bad)
     for k in (10, 2):
         (tmp_path / f"x_payload{k}.mcap").write_bytes(b"")

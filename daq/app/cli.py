@@ -13,6 +13,7 @@ import sys
 
 import daq.protocol.cli_export
 import daq.runtime.cli
+import daq.runtime.cli_recover
 import ident.cli
 import ident.cli_report
 import trajectories.cli
@@ -31,6 +32,7 @@ SUBCOMMANDS = (
     demo,  # jointid demo
     ident.cli_report,  # jointid report
     daq.protocol.cli_export,  # jointid export
+    daq.runtime.cli_recover,  # jointid recover
 )
 
 #: errors raised on purpose by our packages (their exception roots) and I/O errors

@@ -37,13 +37,13 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import zstandard
 from mcap.data_stream import RecordBuilder
 from mcap.records import (
     Attachment,
     AttachmentIndex,
     Channel,
-    Chunk,
     ChunkIndex,
     DataEnd,
     Footer,
@@ -72,23 +72,61 @@ from daq.protocol.logformat import (
     STATE_SIZE,
     STATE_STRUCT,
 )
+from daq.protocol.reader import MAGIC
 
-MAGIC = b"\x89MCAP0\r\n"
+_HEAD = struct.Struct("<BQ")  # record header: opcode, length
 _MSG = struct.Struct("<BQHIQQ")  # message record header: opcode, length, channel, seq, times
+_CHUNK_HEAD = struct.Struct("<BQQQQI")  # opcode, length, start, end, uncompressed size, crc
+_MSG_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, length, channel id, records length
+_INDEX_ENTRY = np.dtype([("log_time", "<u8"), ("offset", "<u8")])
+_ID_TO_LOG_TIME = np.arange(9, 23)  # a message record's channel id .. log time, from its start
+
+
+def message_offsets(raw: bytes) -> np.ndarray:
+    """Offsets of the message records in the uncompressed records of a chunk, shape (n,).
+
+    Walks the record headers (opcode, length); other records (schemas, channels written
+    inside chunks by other writers) are skipped.
+
+    Raises
+    ------
+    ValueError
+        If a record runs past the end of ``raw``.
+    """
+    out: list[int] = []
+    n = len(raw)
+    pos = 0
+    unpack = _HEAD.unpack_from
+    while pos < n:
+        if pos + 9 > n:
+            raise ValueError(f"record header at {pos} runs past the chunk end ({n})")
+        opcode, length = unpack(raw, pos)
+        if opcode == Opcode.MESSAGE:
+            out.append(pos)
+        pos += 9 + length
+    if pos != n:
+        raise ValueError(f"last record runs past the chunk end ({pos} > {n})")
+    return np.asarray(out, np.int64)
 
 
 class FastWriter:
     """A minimal MCAP writer with a fast path for messages.
 
-    The mcap library's ``Writer.add_message`` costs about 3.5 µs per message (a record object,
-    statistics, a message index); here a message is one ``struct.pack`` appended to the
-    chunk buffer. Everything else (header, schemas, channels, chunks, metadata,
-    attachments, summary with statistics, chunk/metadata/attachment indexes and summary
-    offsets, footer) is written with the mcap library's record classes, so the files are
-    standard MCAP read by any tool. Schema and channel records are written in the data
-    section as soon as they are registered; message index records are omitted (optional in
-    the format: readers scan the chunk). Each finished chunk is written and flushed to the OS
-    at once, so a killed process loses only the chunk being filled.
+    The mcap library's ``Writer.add_message`` builds a record object, updates its statistics
+    and message index per message (``benchmarks/bench_mcap_writer.py`` measures both
+    writers on the same messages); here a message is one ``struct.pack`` appended to the
+    chunk buffer plus the append of its offset to a list. When a chunk is full, the channel
+    ids and log times of its messages are gathered from the buffer with numpy at those
+    offsets: the chunk's time range, the per-channel counts and one MessageIndex record per
+    channel (entries sorted by log time) are computed there, once per chunk.
+
+    Layout written (standard MCAP, read by the ``mcap`` library and ``@mcap/core``): magic,
+    header; schema and channel records in the data section as soon as they are registered;
+    each chunk followed at once by its MessageIndex records; metadata and attachments
+    between chunks; on :meth:`finish`, data end, the summary (schemas, channels,
+    statistics, chunk indexes pointing to the message indexes, attachment and metadata
+    indexes, summary offsets), footer and closing magic. Each finished chunk is written and
+    flushed to the OS at once, so a killed process loses only the chunk being filled.
     """
 
     def __init__(self, stream: Any, chunk_size: int, level: int = 3) -> None:
@@ -96,18 +134,15 @@ class FastWriter:
         self.chunk_size = chunk_size
         self._z = zstandard.ZstdCompressor(level=level)
         self._buf = bytearray()
-        self._start = -1
-        self._end = 0
+        self._offs: list[int] = []
         self._schemas: list[Schema] = []
         self._channels: list[Channel] = []
-        self._counts: list[int] = []
+        self._counts: dict[int, int] = {}
         self._chunk_indexes: list[ChunkIndex] = []
         self._meta_indexes: list[MetadataIndex] = []
         self._att_indexes: list[AttachmentIndex] = []
-        self._n_chunks = 0
         self._msg_start = -1
         self._msg_end = 0
-        self._n_meta = 0
 
     def _record(self, rec: Any) -> tuple[int, int]:
         b = RecordBuilder()
@@ -121,32 +156,32 @@ class FastWriter:
         self._f.write(MAGIC)
         self._record(Header(profile=profile, library=library))
 
-    def register_schema(self, name: str, encoding: str, data: bytes) -> int:
-        sid = len(self._schemas) + 1
+    def register_schema(self, name: str, encoding: str, data: bytes, fixed_id: int = 0) -> int:
+        """Write a schema record; ids count from 1 unless ``fixed_id`` is given. Returns the
+        id."""
+        sid = fixed_id or len(self._schemas) + 1
         sch = Schema(id=sid, name=name, encoding=encoding, data=data)
         self._schemas.append(sch)
         self._record(sch)
         return sid
 
-    def register_channel(self, topic: str, message_encoding: str, schema_id: int) -> int:
-        cid = len(self._channels)
+    def register_channel(self, topic: str, message_encoding: str, schema_id: int,
+                         fixed_id: int = -1, metadata: Mapping[str, str] | None = None) -> int:
+        """Write a channel record; ids count from 0 unless ``fixed_id`` is given. Returns the
+        id."""
+        cid = fixed_id if fixed_id >= 0 else len(self._channels)
         ch = Channel(id=cid, topic=topic, message_encoding=message_encoding,
-                     schema_id=schema_id, metadata={})
+                     schema_id=schema_id, metadata=dict(metadata or {}))
         self._channels.append(ch)
-        self._counts.append(0)
         self._record(ch)
         return cid
 
     def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int,
                     sequence: int = 0) -> None:
         buf = self._buf
+        self._offs.append(len(buf))
         buf += _MSG.pack(5, 22 + len(data), channel_id, sequence, log_time, publish_time)
         buf += data
-        self._counts[channel_id] += 1
-        if self._start < 0 or log_time < self._start:
-            self._start = log_time
-        if log_time > self._end:
-            self._end = log_time
         if len(buf) > self.chunk_size:
             self.flush_chunk()
 
@@ -155,24 +190,62 @@ class FastWriter:
         if not self._buf:
             return
         raw = bytes(self._buf)
-        comp = self._z.compress(raw)
-        chunk = Chunk(message_start_time=self._start, message_end_time=self._end,
-                      uncompressed_size=len(raw), uncompressed_crc=zlib.crc32(raw),
-                      compression="zstd", data=comp)
-        offset, length = self._record(chunk)
-        self._chunk_indexes.append(ChunkIndex(
-            message_start_time=self._start, message_end_time=self._end,
-            chunk_start_offset=offset, chunk_length=length, message_index_offsets={},
-            message_index_length=0, compression="zstd", compressed_size=len(comp),
-            uncompressed_size=len(raw)))
-        self._n_chunks += 1
-        if self._msg_start < 0 or self._start < self._msg_start:
-            self._msg_start = self._start
-        self._msg_end = max(self._msg_end, self._end)
+        offs = np.asarray(self._offs, np.int64)
         self._buf = bytearray()
-        self._start = -1
-        self._end = 0
+        self._offs = []
+        self.write_chunk(raw, offs)
         self._f.flush()
+
+    def write_chunk(self, raw: bytes, offsets: np.ndarray) -> None:
+        """Write one chunk of uncompressed records ``raw`` and its message indexes.
+
+        ``offsets`` are the offsets of the message records in ``raw``
+        (:func:`message_offsets`).
+        """
+        if not len(offsets):
+            return
+        b = np.frombuffer(raw, np.uint8)
+        head_bytes = b[offsets[:, None] + _ID_TO_LOG_TIME]  # (n, 14): channel, seq, log time
+        cid = np.ascontiguousarray(head_bytes[:, :2]).view("<u2").reshape(-1)
+        lt = np.ascontiguousarray(head_bytes[:, 6:]).view("<u8").reshape(-1)
+        start, end = int(lt.min()), int(lt.max())
+        comp = self._z.compress(raw)
+        head = (_CHUNK_HEAD.pack(Opcode.CHUNK, 8 + 8 + 8 + 4 + 4 + 4 + 8 + len(comp), start, end,
+                                 len(raw), zlib.crc32(raw))
+                + b"\x04\x00\x00\x00zstd" + struct.pack("<Q", len(comp)))
+        offset = self._f.tell()
+        chunk_length = len(head) + len(comp)
+        # message indexes: one record per channel, entries by log time (stable: file order)
+        order = np.lexsort((lt, cid))
+        entries = np.empty(len(order), _INDEX_ENTRY)
+        entries["log_time"] = lt[order]
+        entries["offset"] = offsets[order]
+        flat = entries.tobytes()
+        cid_s = cid[order]
+        bounds = [0, *(np.flatnonzero(cid_s[1:] != cid_s[:-1]) + 1).tolist(), len(order)]
+        index_offsets: dict[int, int] = {}
+        pos = offset + chunk_length
+        parts = [head, comp]
+        counts = self._counts
+        for i0, i1 in zip(bounds[:-1], bounds[1:], strict=True):
+            channel = int(cid_s[i0])
+            nbytes = 16 * (i1 - i0)
+            rec = _MSG_INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + nbytes, channel, nbytes)
+            parts.append(rec)
+            parts.append(flat[16 * i0 : 16 * i1])
+            index_offsets[channel] = pos
+            pos += len(rec) + nbytes
+            counts[channel] = counts.get(channel, 0) + (i1 - i0)
+        self._f.write(b"".join(parts))
+        index_length = pos - offset - chunk_length
+        self._chunk_indexes.append(ChunkIndex(
+            message_start_time=start, message_end_time=end,
+            chunk_start_offset=offset, chunk_length=chunk_length,
+            message_index_offsets=index_offsets, message_index_length=index_length,
+            compression="zstd", compressed_size=len(comp), uncompressed_size=len(raw)))
+        if self._msg_start < 0 or start < self._msg_start:
+            self._msg_start = start
+        self._msg_end = max(self._msg_end, end)
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         self.flush_chunk()
@@ -208,12 +281,11 @@ class FastWriter:
         group(Opcode.SCHEMA, self._schemas)
         group(Opcode.CHANNEL, self._channels)
         stats = Statistics(
-            message_count=sum(self._counts), schema_count=len(self._schemas),
+            message_count=sum(self._counts.values()), schema_count=len(self._schemas),
             channel_count=len(self._channels), attachment_count=len(self._att_indexes),
-            metadata_count=len(self._meta_indexes), chunk_count=self._n_chunks,
+            metadata_count=len(self._meta_indexes), chunk_count=len(self._chunk_indexes),
             message_start_time=max(self._msg_start, 0), message_end_time=self._msg_end,
-            channel_message_counts={c.id: n for c, n in zip(self._channels, self._counts,
-                                                            strict=True) if n})
+            channel_message_counts=dict(sorted(self._counts.items())))
         group(Opcode.STATISTICS, [stats])
         group(Opcode.CHUNK_INDEX, self._chunk_indexes)
         group(Opcode.ATTACHMENT_INDEX, self._att_indexes)
@@ -421,3 +493,4 @@ class RunLog:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
