@@ -12,8 +12,15 @@ from test_refine_interactions import _effect_torque, _fz, _true_terms
 from test_refine_sim import EFFECTS, SETTINGS, _campaign, _plan, _usual_plant
 
 from daq.protocol.control import ControllerGains
-from ident.effects import DirectionalViscous, PositionRipple, Prediction, QuadraticViscous
-from ident.effects import Spring, TorqueLag, WarmUp
+from ident.effects import (
+    DirectionalViscous,
+    PositionRipple,
+    Prediction,
+    QuadraticViscous,
+    Spring,
+    TorqueLag,
+    WarmUp,
+)
 from ident.models import IdentModel, usual_model
 from ident.preprocess import build_design
 from ident.refine import refine

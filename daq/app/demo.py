@@ -24,6 +24,7 @@ from ident.loaders import load_experiments
 from ident.plots import write_plots
 from ident.refine import refine
 from ident.refine_plots import plot_refinement
+from ident.refine_result import leak_note
 from ident.report import write_json
 from ident.report_build import build_report, discover_figures
 from sim_drivers.plant_config import load_plant
@@ -197,8 +198,12 @@ def _summary(fit: dict, ref: Any, wall_s: float) -> str:
         u, n = m["usual"].get(key), m["new"].get(key)
         lines.append(f"{label:<36}{_f(u):>13}{_f(n):>13}")
     lines.append("")
+    leak = leak_note(min(ref.rel_error_final, ref.heldout_rel_error_final), ref.noise_floor)
     lines.append(f"Refinement of the new model: {_f(ref.rel_error_initial)} -> "
-                 f"{_f(ref.rel_error_final)}")
+                 f"{_f(ref.rel_error_final)} ({ref.heldout_kind} "
+                 f"{_f(ref.heldout_rel_error_initial)} -> {_f(ref.heldout_rel_error_final)}; "
+                 f"noise floor {_f(ref.noise_floor)}"
+                 f"{leak})")
     for i, s in enumerate(ref.steps, 1):
         params = ", ".join(f"{k} = {v['value']:.4g}" for k, v in s.parameters.items())
         lines.append(f"  step {i}: residual depends on {s.variable} -> added {s.effect} "
