@@ -62,12 +62,21 @@ __all__ = [
     "resolve_path",
     "Q_UNITS",
     "MIN_SAMPLES",
+    "GAP_PERIODS",
+    "MAX_ABS_SIGNAL",
 ]
 
 #: Fewest samples accepted in one experiment.
 MIN_SAMPLES = 50
 #: Relative spread of the sampling period above which a file is resampled.
 IRREGULAR_TOL = 0.01
+#: A step of the time column longer than this many median periods is a gap in the recording
+#: (samples lost, logger paused): refused, never interpolated across.
+GAP_PERIODS = 5.0
+#: Sanity bound on |q|, |q_ref| [rad or m] and |tau| [N m or N] after unit conversion and gain:
+#: no joint signal comes near it; values beyond are a wrong column, unit or gain (or garbage)
+#: and would overflow the least-squares sums.
+MAX_ABS_SIGNAL = 1e9
 
 CANONICAL = ("t", "q", "tau", "q_ref", "payload_kg", "payload_arm_m")
 
@@ -339,16 +348,29 @@ def _joint_flag(joint: str | bool | None) -> bool | None:
     raise DataError(f"joint kind {joint!r}: expected 'revolute' or 'prismatic'")
 
 
+def _read_text(path: Path) -> str:
+    """The text of a CSV file: UTF-8, with or without a byte-order mark; other encodings are
+    refused in one line (the byte and where it is), never guessed."""
+    raw = path.read_bytes()
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        bom = ", a UTF-16 byte-order mark" if raw[:2] in (b"\xff\xfe", b"\xfe\xff") else ""
+        raise DataError(
+            f"{path}: not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset {exc.start}{bom}); "
+            "save the CSV as UTF-8"
+        ) from None
+
+
 def _read_csv(path: Path) -> dict[str, np.ndarray]:
-    with path.open(newline="") as f:
-        sample = f.read(4096)
-        f.seek(0)
-        try:
-            dialect = csv.Sniffer().sniff(sample, delimiters=",;\t ")
-            delim = dialect.delimiter
-        except csv.Error:
-            delim = ","
-        header = next(csv.reader(f, delimiter=delim), None)
+    text = _read_text(path)
+    try:
+        dialect = csv.Sniffer().sniff(text[:4096], delimiters=",;\t ")
+        delim = dialect.delimiter
+    except csv.Error:
+        delim = ","
+    lines = text.splitlines()
+    header = next(csv.reader(lines[:1], delimiter=delim), None)
     if not header:
         raise DataError(f"{path}: empty CSV file, expected a header row (t,q,tau,...)")
     header = [h.strip() for h in header]
@@ -357,8 +379,13 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
         raise DataError(f"{path}: first row is numeric, expected a header row (t,q,tau,...)")
     except ValueError:
         pass
+    if not any(ln.strip() for ln in lines[1:]):
+        raise DataError(
+            f"{path}: no data rows after the header ({', '.join(header)}), expected one row "
+            "per sample"
+        )
     try:
-        data = np.loadtxt(path, delimiter=delim, skiprows=1, ndmin=2, dtype=float)
+        data = np.loadtxt(lines[1:], delimiter=delim, ndmin=2, dtype=float)
     except ValueError as exc:
         raise DataError(f"{path}: unreadable numeric data ({exc})") from None
     if data.shape[1] != len(header):
@@ -450,6 +477,7 @@ def _from_table(
         payload_arm=consts["payload_arm_m"],
         revolute=True if revolute is None else revolute,
         q_ref=None if q_ref is None else q_scale * np.asarray(q_ref, dtype=float),
+        columns={k: str(mapping.get(k, k)) for k in ("t", "q", "tau", "q_ref")},
     )
 
 
@@ -463,14 +491,24 @@ def make_experiment(
     payload_arm: float = 0.0,
     revolute: bool = True,
     q_ref: np.ndarray | None = None,
+    columns: Mapping[str, str] | None = None,
 ) -> Experiment:
     """Validate arrays and build an :class:`Experiment` (resampling if irregular).
+
+    Parameters
+    ----------
+    columns : mapping or None
+        Column/variable each signal (``t``, ``q``, ``tau``, ``q_ref``) came from, named in
+        the error messages; default the signal's own name.
 
     Raises
     ------
     DataError
-        Different lengths, NaN/inf, non-increasing time, fewer than :data:`MIN_SAMPLES`.
+        Different lengths, NaN/inf, values beyond :data:`MAX_ABS_SIGNAL`, non-increasing
+        time, a gap longer than :data:`GAP_PERIODS` median periods, fewer than
+        :data:`MIN_SAMPLES`.
     """
+    cols = dict(columns or {})
     t = np.asarray(t, dtype=float).ravel()
     q = np.asarray(q, dtype=float).ravel()
     tau = np.asarray(tau, dtype=float).ravel()
@@ -487,11 +525,21 @@ def make_experiment(
     for name, a in (("t", t), ("q", q), ("tau", tau), ("q_ref", q_ref)):
         if a is None:
             continue
+        col = cols.get(name, name)
+        label = repr(name) if col == name else f"{col!r} ({name})"
         bad = ~np.isfinite(a)
         if bad.any():
             raise DataError(
-                f"{source}: {name} has {int(bad.sum())} NaN/inf values "
+                f"{source}: {label} has {int(bad.sum())} NaN/inf values "
                 f"(first at sample {int(np.argmax(bad))})"
+            )
+        big = np.abs(a) > MAX_ABS_SIGNAL
+        if name != "t" and big.any():
+            k = int(np.argmax(big))
+            raise DataError(
+                f"{source}: {label} has {int(big.sum())} values beyond +-{MAX_ABS_SIGNAL:g} "
+                f"(first {a[k]:.6g} at sample {k}); expected SI values [rad, m, N m or N] "
+                "after --q-unit and --gain: wrong column, unit or gain?"
             )
     d = np.diff(t)
     if np.any(d <= 0):
@@ -500,6 +548,14 @@ def make_experiment(
             f"{source}: time is not strictly increasing at sample {k + 1} (t={t[k + 1]})"
         )
     med = float(np.median(d))
+    if np.max(d) > GAP_PERIODS * med:
+        k = int(np.argmax(d > GAP_PERIODS * med))
+        n_gaps = int(np.count_nonzero(d > GAP_PERIODS * med))
+        raise DataError(
+            f"{source}: gap in the recording at t={t[k]:.6g} s (next sample {d[k]:.6g} s "
+            f"later, {d[k] / med:.0f} periods of {med:.6g} s; {n_gaps} gap(s) over "
+            f"{GAP_PERIODS:g} periods): split the file at the gap into separate experiments"
+        )
     if np.max(np.abs(d - med)) > IRREGULAR_TOL * med:
         n = int(round((t[-1] - t[0]) / med)) + 1
         tu = t[0] + med * np.arange(n)
