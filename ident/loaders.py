@@ -11,7 +11,8 @@ Column mapping
 --------------
 The canonical variables are ``t`` [s], ``q`` [rad or m], ``tau`` [N m or N] and the optional
 ``payload_kg`` (M_aw [kg]) and ``payload_arm_m`` (L_a [m]). CSV files need a header row;
-MATLAB ``.mat`` files (v5/v7, not v7.3) hold named variables. A mapping renames them::
+MATLAB ``.mat`` files (v5/v7 through scipy, v7.3 -- HDF5 -- through h5py, read into the same
+structure) hold named variables. A mapping renames them::
 
     mapping = {"q": "qm", "tau": "vir"}      # canonical -> name in the file
     gain = "gtau"                            # tau = gain * column; a number or a variable name
@@ -44,6 +45,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import h5py
 import numpy as np
 import scipy.io
 
@@ -394,16 +396,70 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
 
 
 def _read_mat(path: Path) -> dict[str, object]:
-    """Top-level variables of a MAT file; structs stay objects (fields as attributes)."""
+    """Top-level variables of a MAT file; structs stay objects (fields as attributes).
+
+    v5/v7 files through ``scipy.io.loadmat(squeeze_me=True, struct_as_record=False)``;
+    v7.3 files (HDF5, which scipy refuses) through h5py into the same structure
+    (:func:`_read_mat_v73`)."""
     try:
         raw = scipy.io.loadmat(path, squeeze_me=True, struct_as_record=False)
-    except NotImplementedError:
-        raise DataError(
-            f"{path}: MATLAB v7.3 (HDF5) files are not supported; save with -v7"
-        ) from None
+    except NotImplementedError:  # scipy: "Please use HDF reader for matlab v7.3 files"
+        return _read_mat_v73(path)
     except (ValueError, OSError) as exc:
         raise DataError(f"{path}: not a readable MAT file ({exc})") from None
     return {k: v for k, v in raw.items() if not k.startswith("__")}
+
+
+class _MatStruct:
+    """A MATLAB struct of a v7.3 file, shaped like scipy's ``mat_struct`` (fields as
+    attributes, their names in ``_fieldnames``)."""
+
+    def __init__(self, fields: Mapping[str, object]) -> None:
+        self._fieldnames = list(fields)
+        for k, v in fields.items():
+            setattr(self, k, v)
+
+
+def _squeezed(a: np.ndarray) -> object:
+    """``squeeze_me=True`` of scipy: unit dimensions dropped, a single element a scalar."""
+    a = np.squeeze(a)
+    return a.item() if a.ndim == 0 and a.dtype.kind != "O" else a
+
+
+def _v73_value(node: h5py.Group | h5py.Dataset, f: h5py.File) -> object:
+    """One variable of a v7.3 file as ``loadmat(squeeze_me=True, struct_as_record=False)``
+    gives it. MATLAB writes arrays column-major, so HDF5 holds them transposed."""
+    cls = node.attrs.get("MATLAB_class", b"")
+    cls = cls.decode() if isinstance(cls, bytes) else str(cls)
+    if isinstance(node, h5py.Group):  # a struct (1 x 1); object, table... are refused later
+        return _MatStruct({k: _v73_value(node[k], f) for k in node})
+    if node.attrs.get("MATLAB_empty", 0):
+        return np.zeros(0)
+    data = node[()]
+    if isinstance(data, bytes | str):
+        return data.decode() if isinstance(data, bytes) else data
+    a = np.asarray(data).T
+    if a.dtype == h5py.ref_dtype:  # cell array, or a field of a struct array
+        out = np.empty(a.shape, dtype=object)
+        for idx, ref in np.ndenumerate(a):
+            out[idx] = _v73_value(f[ref], f)
+        return _squeezed(out)
+    if cls == "char":
+        return "".join(chr(c) for c in a.ravel(order="F"))
+    if cls == "logical":
+        a = a.astype(bool)
+    elif a.dtype.names and {"real", "imag"} <= set(a.dtype.names):
+        a = a["real"] + 1j * a["imag"]
+    return _squeezed(a)
+
+
+def _read_mat_v73(path: Path) -> dict[str, object]:
+    """Top-level variables of a MATLAB v7.3 file (HDF5 after a 512-byte MATLAB header)."""
+    try:
+        with h5py.File(path, "r") as f:
+            return {k: _v73_value(f[k], f) for k in f if not k.startswith("#")}
+    except (OSError, KeyError, ValueError, TypeError) as exc:
+        raise DataError(f"{path}: not a readable MATLAB v7.3 (HDF5) file ({exc})") from None
 
 
 def _pick(

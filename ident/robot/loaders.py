@@ -28,7 +28,7 @@ CSV (header row)
     ``payload_com_z_m`` (flange frame) and ``payload_ixx_kgm2``, ``payload_ixy_kgm2``, ...
     ``payload_izz_kgm2`` (about the CoM, flange axes). The torque column times the joint's
     ``drive_gain`` is the joint-side torque.
-MAT (v5/v7)
+MAT (v5/v7, and v7.3 through h5py)
     The ``--map`` paths of :func:`ident.loaders.resolve_path` with one array per signal,
     one row (or column) per axis: ``t=rec.time_cont, q=rec.act_pos_mot_deg,
     tau=rec.act_torque_abs_nm, q_ref=rec.ref_pos_deg``; or per-axis keys ``q1=...``.
