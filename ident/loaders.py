@@ -31,9 +31,9 @@ verbatim. The gain may be a number, a path to a scalar (``para.u[2]``) or a prod
 Irregular sampling is resampled onto a uniform grid (linear interpolation) with a
 :class:`ResamplingWarning`.
 
-Length (~700 lines): the path language of ``--map``/``--gain`` (struct fields, row and
+Length (~830 lines): the path language of ``--map``/``--gain`` (struct fields, row and
 column indices) and its one-line error messages are most of it; it serves CSV, MAT and
-MCAP inputs alike.
+MCAP inputs alike; the MATLAB v7.3 (HDF5) reader that feeds the same paths is the rest.
 """
 
 from __future__ import annotations
