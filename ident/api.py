@@ -8,21 +8,23 @@ residual points to (docs/refinement.md)::
 
     runs = load(["runs/rx130l_payload0.mcap", "runs/rx130l_payload1.mcap"])
     est = JointModel(model="new", qs=0.03).fit(runs)
-    est.coef_["a_m"], est.std_["a_m"], est.rel_error_
+    est.params_["a_m"], est.params_std_["a_m"], est.rel_error_   # or coef_ / coef_names_
     tau_hat = est.predict(other_runs)          # W χ̂ on the preprocessed samples
     est.score(other_runs)                      # 1 - ||ρ|| / ||Y||, higher is better
     refined = est.refine(max_steps=5)
     print(refined.refinement_.format_report())
 
-Hyper-parameters are stored by ``__init__`` as given; ``fit`` returns the estimator;
-fitted attributes end in ``_``. ``jointid fit`` is this estimator plus printing and files
-(:mod:`ident.cli`). Everything here is numerics on loaded data, except :func:`load`, which
-wraps :func:`ident.loaders.load_experiments`.
+Hyper-parameters are stored by ``__init__`` as given (``get_params``/``set_params``, so
+scikit-learn's ``clone`` and grid search work on it); ``fit`` returns the estimator; fitted
+attributes end in ``_``; ``coef_`` is an array aligned with ``coef_names_``. ``jointid fit``
+is this estimator plus printing and files (:mod:`ident.cli`). Everything here is numerics on
+loaded data, except :func:`load`, which wraps :func:`ident.loaders.load_experiments`.
 """
 
 from __future__ import annotations
 
 import copy
+import inspect
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -144,13 +146,19 @@ class JointModel:
 
     Attributes
     ----------
-    coef_ : dict[str, float]
-        Identified parameters χ̂ (eq. 12) by name (``docs/architecture.md``), e.g.
-        ``coef_["F_V"]``; eliminated parameters are absent.
-    std_ : dict[str, float]
-        Their standard deviations σ_χ̂ (eq. 15); the paper's tables print 2σ.
-    rel_std_pct_ : dict[str, float]
-        Relative deviations 100 σ/|χ̂| [%] (eq. 16).
+    coef_ : ndarray, shape (n_params,)
+        Identified parameters χ̂ (eq. 12) [SI units of each parameter], in the order of
+        ``coef_names_``; eliminated parameters are absent.
+    coef_names_ : ndarray of str, shape (n_params,)
+        Their names (``docs/architecture.md``), e.g. ``"F_V"``. (Not ``feature_names_in_``:
+        in scikit-learn that names the *input* columns.)
+    std_ : ndarray, shape (n_params,)
+        Standard deviations σ_χ̂ (eq. 15), aligned with ``coef_``; the paper's tables print 2σ.
+    rel_std_pct_ : ndarray, shape (n_params,)
+        Relative deviations 100 σ/|χ̂| [%] (eq. 16), aligned with ``coef_``.
+    params_, params_std_ : dict[str, float]
+        χ̂ and σ by name, e.g. ``params_["F_V"]`` (the dicts ``coef_`` and ``std_`` were
+        before they became arrays).
     residual_ : ndarray, shape (n_samples_,)
         ρ = Y - W χ̂ on the identification samples [N m] (eq. 11).
     rel_error_ : float
@@ -212,15 +220,54 @@ class JointModel:
         self.sign_check = sign_check
 
     # ------------------------------------------------------------------ sklearn protocol
-    def get_params(self) -> dict[str, Any]:
-        """The hyper-parameters, as given to ``__init__``."""
-        return {
-            k: getattr(self, k)
-            for k in (
-                "model", "qs", "joint", "payload", "cutoff", "decimation", "dq_min",
-                "tau_min", "trim", "estimator", "eliminate", "threshold", "sign_check",
-            )
-        }
+    @classmethod
+    def _get_param_names(cls) -> list[str]:
+        """The hyper-parameters: the keyword parameters of ``__init__``."""
+        sig = inspect.signature(cls.__init__)
+        return [n for n, p in sig.parameters.items() if n != "self" and p.kind != p.VAR_KEYWORD]
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """The hyper-parameters, as given to ``__init__`` (scikit-learn convention).
+
+        Parameters
+        ----------
+        deep : bool
+            Accepted for scikit-learn; no hyper-parameter is itself an estimator, so
+            ``deep`` changes nothing.
+        """
+        del deep
+        return {k: getattr(self, k) for k in self._get_param_names()}
+
+    def set_params(self, **params: Any) -> JointModel:
+        """Set hyper-parameters by name (scikit-learn convention); returns ``self``.
+
+        Values are stored as given and checked by :meth:`fit`, like the constructor's.
+        A fitted estimator keeps its fitted attributes until the next :meth:`fit`.
+
+        Raises
+        ------
+        DataError
+            A name that is not a hyper-parameter (the message lists them).
+        """
+        valid = self._get_param_names()
+        for k, v in params.items():
+            if k not in valid:
+                raise DataError(
+                    f"JointModel.set_params: unknown hyper-parameter {k!r} "
+                    f"(expected one of {', '.join(valid)})"
+                )
+            setattr(self, k, v)
+        return self
+
+    def __sklearn_tags__(self) -> Any:
+        """Estimator tags for scikit-learn >= 1.6 (its grid search asks for them): a
+        regressor-like estimator of experiments, not of 2-D arrays, without targets ``y``
+        (the torque is inside the data). Only scikit-learn calls this, so only then is it
+        imported: jointid does not depend on it."""
+        from sklearn.utils import InputTags, Tags, TargetTags
+
+        return Tags(estimator_type=None, target_tags=TargetTags(required=False),
+                    input_tags=InputTags(two_d_array=False), requires_fit=True)
 
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
@@ -301,9 +348,13 @@ class JointModel:
         self.design_ = design
         self._validation_design = validation
         self._terms = tuple(terms)
-        self.coef_ = dict(model.coef_)
-        self.std_ = dict(model.std_)
-        self.rel_std_pct_ = dict(model.rel_std_pct_)
+        names = list(model.coef_)
+        self.coef_names_ = np.array(names, dtype=object)
+        self.coef_ = np.array([model.coef_[n] for n in names], dtype=float)
+        self.std_ = np.array([model.std_[n] for n in names], dtype=float)
+        self.rel_std_pct_ = np.array([model.rel_std_pct_[n] for n in names], dtype=float)
+        self.params_ = dict(model.coef_)
+        self.params_std_ = dict(model.std_)
         self.residual_ = model.residual_
         self.rel_error_ = float(model.rel_error_)
         self.vmax_ = float(self.report_.vmax)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -211,8 +212,40 @@ _ROBOT_ONLY = (
 )
 
 
+#: Numeric options of ``jointid fit``: (attribute, flag, lowest accepted, whether it may equal
+#: it, what is expected). None (not given) always passes.
+_NUMBERS = (
+    ("cutoff", "--cutoff", 0.0, False, "a cut-off frequency > 0 [Hz]"),
+    ("decimation", "--decimation", 1, True, "a decimation factor >= 1"),
+    ("dq_min", "--dq-min", 0.0, True, "a velocity >= 0 [rad/s or m/s]"),
+    ("tau_min", "--tau-min", 0.0, True, "a torque >= 0 [N m or N]"),
+    ("trim", "--trim", 0, True, "a number of samples >= 0"),
+    ("threshold", "--threshold", 0.0, False, "a percentage > 0"),
+    ("max_steps", "--max-steps", 0, True, "a number of steps >= 0"),
+    ("axis", "--axis", 0, True, "an axis index >= 0"),
+)
+
+
+def check_numbers(args: argparse.Namespace) -> None:
+    """Refuse non-finite or out-of-range numeric options in one line naming the flag.
+
+    Raises
+    ------
+    DataError
+        E.g. ``--cutoff 0``, ``--cutoff nan``, ``--decimation 0``, ``--dq-min -1``.
+    """
+    for attr, flag, low, inclusive, expected in _NUMBERS:
+        v = getattr(args, attr, None)
+        if v is None:
+            continue
+        ok = math.isfinite(v) and (v >= low if inclusive else v > low)
+        if not ok:
+            raise DataError(f"{flag} {v:g}: expected {expected}")
+
+
 def run(args: argparse.Namespace) -> int:
     """Execute ``jointid fit``; returns the exit code."""
+    check_numbers(args)
     if args.robot is not None:
         return cli_robot.run(args)
     for attr, flag, hint in _ROBOT_ONLY:

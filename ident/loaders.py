@@ -11,7 +11,8 @@ Column mapping
 --------------
 The canonical variables are ``t`` [s], ``q`` [rad or m], ``tau`` [N m or N] and the optional
 ``payload_kg`` (M_aw [kg]) and ``payload_arm_m`` (L_a [m]). CSV files need a header row;
-MATLAB ``.mat`` files (v5/v7, not v7.3) hold named variables. A mapping renames them::
+MATLAB ``.mat`` files (v5/v7 through scipy, v7.3 -- HDF5 -- through h5py, read into the same
+structure) hold named variables. A mapping renames them::
 
     mapping = {"q": "qm", "tau": "vir"}      # canonical -> name in the file
     gain = "gtau"                            # tau = gain * column; a number or a variable name
@@ -30,9 +31,9 @@ verbatim. The gain may be a number, a path to a scalar (``para.u[2]``) or a prod
 Irregular sampling is resampled onto a uniform grid (linear interpolation) with a
 :class:`ResamplingWarning`.
 
-Length (~700 lines): the path language of ``--map``/``--gain`` (struct fields, row and
+Length (~830 lines): the path language of ``--map``/``--gain`` (struct fields, row and
 column indices) and its one-line error messages are most of it; it serves CSV, MAT and
-MCAP inputs alike.
+MCAP inputs alike; the MATLAB v7.3 (HDF5) reader that feeds the same paths is the rest.
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import h5py
 import numpy as np
 import scipy.io
 
@@ -62,12 +64,21 @@ __all__ = [
     "resolve_path",
     "Q_UNITS",
     "MIN_SAMPLES",
+    "GAP_PERIODS",
+    "MAX_ABS_SIGNAL",
 ]
 
 #: Fewest samples accepted in one experiment.
 MIN_SAMPLES = 50
 #: Relative spread of the sampling period above which a file is resampled.
 IRREGULAR_TOL = 0.01
+#: A step of the time column longer than this many median periods is a gap in the recording
+#: (samples lost, logger paused): refused, never interpolated across.
+GAP_PERIODS = 5.0
+#: Sanity bound on |q|, |q_ref| [rad or m] and |tau| [N m or N] after unit conversion and gain:
+#: no joint signal comes near it; values beyond are a wrong column, unit or gain (or garbage)
+#: and would overflow the least-squares sums.
+MAX_ABS_SIGNAL = 1e9
 
 CANONICAL = ("t", "q", "tau", "q_ref", "payload_kg", "payload_arm_m")
 
@@ -339,16 +350,29 @@ def _joint_flag(joint: str | bool | None) -> bool | None:
     raise DataError(f"joint kind {joint!r}: expected 'revolute' or 'prismatic'")
 
 
+def _read_text(path: Path) -> str:
+    """The text of a CSV file: UTF-8, with or without a byte-order mark; other encodings are
+    refused in one line (the byte and where it is), never guessed."""
+    raw = path.read_bytes()
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        bom = ", a UTF-16 byte-order mark" if raw[:2] in (b"\xff\xfe", b"\xfe\xff") else ""
+        raise DataError(
+            f"{path}: not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset {exc.start}{bom}); "
+            "save the CSV as UTF-8"
+        ) from None
+
+
 def _read_csv(path: Path) -> dict[str, np.ndarray]:
-    with path.open(newline="") as f:
-        sample = f.read(4096)
-        f.seek(0)
-        try:
-            dialect = csv.Sniffer().sniff(sample, delimiters=",;\t ")
-            delim = dialect.delimiter
-        except csv.Error:
-            delim = ","
-        header = next(csv.reader(f, delimiter=delim), None)
+    text = _read_text(path)
+    try:
+        dialect = csv.Sniffer().sniff(text[:4096], delimiters=",;\t ")
+        delim = dialect.delimiter
+    except csv.Error:
+        delim = ","
+    lines = text.splitlines()
+    header = next(csv.reader(lines[:1], delimiter=delim), None)
     if not header:
         raise DataError(f"{path}: empty CSV file, expected a header row (t,q,tau,...)")
     header = [h.strip() for h in header]
@@ -357,8 +381,13 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
         raise DataError(f"{path}: first row is numeric, expected a header row (t,q,tau,...)")
     except ValueError:
         pass
+    if not any(ln.strip() for ln in lines[1:]):
+        raise DataError(
+            f"{path}: no data rows after the header ({', '.join(header)}), expected one row "
+            "per sample"
+        )
     try:
-        data = np.loadtxt(path, delimiter=delim, skiprows=1, ndmin=2, dtype=float)
+        data = np.loadtxt(lines[1:], delimiter=delim, ndmin=2, dtype=float)
     except ValueError as exc:
         raise DataError(f"{path}: unreadable numeric data ({exc})") from None
     if data.shape[1] != len(header):
@@ -367,16 +396,70 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
 
 
 def _read_mat(path: Path) -> dict[str, object]:
-    """Top-level variables of a MAT file; structs stay objects (fields as attributes)."""
+    """Top-level variables of a MAT file; structs stay objects (fields as attributes).
+
+    v5/v7 files through ``scipy.io.loadmat(squeeze_me=True, struct_as_record=False)``;
+    v7.3 files (HDF5, which scipy refuses) through h5py into the same structure
+    (:func:`_read_mat_v73`)."""
     try:
         raw = scipy.io.loadmat(path, squeeze_me=True, struct_as_record=False)
-    except NotImplementedError:
-        raise DataError(
-            f"{path}: MATLAB v7.3 (HDF5) files are not supported; save with -v7"
-        ) from None
+    except NotImplementedError:  # scipy: "Please use HDF reader for matlab v7.3 files"
+        return _read_mat_v73(path)
     except (ValueError, OSError) as exc:
         raise DataError(f"{path}: not a readable MAT file ({exc})") from None
     return {k: v for k, v in raw.items() if not k.startswith("__")}
+
+
+class _MatStruct:
+    """A MATLAB struct of a v7.3 file, shaped like scipy's ``mat_struct`` (fields as
+    attributes, their names in ``_fieldnames``)."""
+
+    def __init__(self, fields: Mapping[str, object]) -> None:
+        self._fieldnames = list(fields)
+        for k, v in fields.items():
+            setattr(self, k, v)
+
+
+def _squeezed(a: np.ndarray) -> object:
+    """``squeeze_me=True`` of scipy: unit dimensions dropped, a single element a scalar."""
+    a = np.squeeze(a)
+    return a.item() if a.ndim == 0 and a.dtype.kind != "O" else a
+
+
+def _v73_value(node: h5py.Group | h5py.Dataset, f: h5py.File) -> object:
+    """One variable of a v7.3 file as ``loadmat(squeeze_me=True, struct_as_record=False)``
+    gives it. MATLAB writes arrays column-major, so HDF5 holds them transposed."""
+    cls = node.attrs.get("MATLAB_class", b"")
+    cls = cls.decode() if isinstance(cls, bytes) else str(cls)
+    if isinstance(node, h5py.Group):  # a struct (1 x 1); object, table... are refused later
+        return _MatStruct({k: _v73_value(node[k], f) for k in node})
+    if node.attrs.get("MATLAB_empty", 0):
+        return np.zeros(0)
+    data = node[()]
+    if isinstance(data, bytes | str):
+        return data.decode() if isinstance(data, bytes) else data
+    a = np.asarray(data).T
+    if a.dtype == h5py.ref_dtype:  # cell array, or a field of a struct array
+        out = np.empty(a.shape, dtype=object)
+        for idx, ref in np.ndenumerate(a):
+            out[idx] = _v73_value(f[ref], f)
+        return _squeezed(out)
+    if cls == "char":
+        return "".join(chr(c) for c in a.ravel(order="F"))
+    if cls == "logical":
+        a = a.astype(bool)
+    elif a.dtype.names and {"real", "imag"} <= set(a.dtype.names):
+        a = a["real"] + 1j * a["imag"]
+    return _squeezed(a)
+
+
+def _read_mat_v73(path: Path) -> dict[str, object]:
+    """Top-level variables of a MATLAB v7.3 file (HDF5 after a 512-byte MATLAB header)."""
+    try:
+        with h5py.File(path, "r") as f:
+            return {k: _v73_value(f[k], f) for k in f if not k.startswith("#")}
+    except (OSError, KeyError, ValueError, TypeError) as exc:
+        raise DataError(f"{path}: not a readable MATLAB v7.3 (HDF5) file ({exc})") from None
 
 
 def _pick(
@@ -450,6 +533,7 @@ def _from_table(
         payload_arm=consts["payload_arm_m"],
         revolute=True if revolute is None else revolute,
         q_ref=None if q_ref is None else q_scale * np.asarray(q_ref, dtype=float),
+        columns={k: str(mapping.get(k, k)) for k in ("t", "q", "tau", "q_ref")},
     )
 
 
@@ -463,14 +547,24 @@ def make_experiment(
     payload_arm: float = 0.0,
     revolute: bool = True,
     q_ref: np.ndarray | None = None,
+    columns: Mapping[str, str] | None = None,
 ) -> Experiment:
     """Validate arrays and build an :class:`Experiment` (resampling if irregular).
+
+    Parameters
+    ----------
+    columns : mapping or None
+        Column/variable each signal (``t``, ``q``, ``tau``, ``q_ref``) came from, named in
+        the error messages; default the signal's own name.
 
     Raises
     ------
     DataError
-        Different lengths, NaN/inf, non-increasing time, fewer than :data:`MIN_SAMPLES`.
+        Different lengths, NaN/inf, values beyond :data:`MAX_ABS_SIGNAL`, non-increasing
+        time, a gap longer than :data:`GAP_PERIODS` median periods, fewer than
+        :data:`MIN_SAMPLES`.
     """
+    cols = dict(columns or {})
     t = np.asarray(t, dtype=float).ravel()
     q = np.asarray(q, dtype=float).ravel()
     tau = np.asarray(tau, dtype=float).ravel()
@@ -487,11 +581,21 @@ def make_experiment(
     for name, a in (("t", t), ("q", q), ("tau", tau), ("q_ref", q_ref)):
         if a is None:
             continue
+        col = cols.get(name, name)
+        label = repr(name) if col == name else f"{col!r} ({name})"
         bad = ~np.isfinite(a)
         if bad.any():
             raise DataError(
-                f"{source}: {name} has {int(bad.sum())} NaN/inf values "
+                f"{source}: {label} has {int(bad.sum())} NaN/inf values "
                 f"(first at sample {int(np.argmax(bad))})"
+            )
+        big = np.abs(a) > MAX_ABS_SIGNAL
+        if name != "t" and big.any():
+            k = int(np.argmax(big))
+            raise DataError(
+                f"{source}: {label} has {int(big.sum())} values beyond +-{MAX_ABS_SIGNAL:g} "
+                f"(first {a[k]:.6g} at sample {k}); expected SI values [rad, m, N m or N] "
+                "after --q-unit and --gain: wrong column, unit or gain?"
             )
     d = np.diff(t)
     if np.any(d <= 0):
@@ -500,6 +604,14 @@ def make_experiment(
             f"{source}: time is not strictly increasing at sample {k + 1} (t={t[k + 1]})"
         )
     med = float(np.median(d))
+    if np.max(d) > GAP_PERIODS * med:
+        k = int(np.argmax(d > GAP_PERIODS * med))
+        n_gaps = int(np.count_nonzero(d > GAP_PERIODS * med))
+        raise DataError(
+            f"{source}: gap in the recording at t={t[k]:.6g} s (next sample {d[k]:.6g} s "
+            f"later, {d[k] / med:.0f} periods of {med:.6g} s; {n_gaps} gap(s) over "
+            f"{GAP_PERIODS:g} periods): split the file at the gap into separate experiments"
+        )
     if np.max(np.abs(d - med)) > IRREGULAR_TOL * med:
         n = int(round((t[-1] - t[0]) / med)) + 1
         tu = t[0] + med * np.arange(n)

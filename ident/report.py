@@ -47,11 +47,17 @@ class Section:
 
     def para(self, text: str, cls: str = "") -> Section:
         c = f' class="{cls}"' if cls else ""
-        self.body.append(f"<p{c}>{html.escape(text)}</p>")
+        self.body.append(f"<p{c}>{html.escape(str(text))}</p>")
         return self
 
     def raw(self, fragment: str) -> Section:
+        """Append trusted HTML (our own markup only: never text read from a file)."""
         self.body.append(fragment)
+        return self
+
+    def heading(self, text: str) -> Section:
+        """Append a sub-heading; ``text`` is escaped (it may come from ``fit.json``)."""
+        self.body.append(f"<h3>{html.escape(text)}</h3>")
         return self
 
     def table(self, header: Sequence[str], rows: Iterable[Sequence[Any]],
@@ -96,8 +102,14 @@ def html_table(header: Sequence[str], rows: Iterable[Sequence[Any]],
     return "\n".join(out)
 
 
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
 def _embed(path: Path) -> str:
-    data = base64.b64encode(path.read_bytes()).decode("ascii")
+    raw = path.read_bytes()
+    if not raw.startswith(_PNG_SIGNATURE):
+        raise IdentError(f"{path}: not a PNG file, refused as a report figure")
+    data = base64.b64encode(raw).decode("ascii")
     return f"data:image/png;base64,{data}"
 
 

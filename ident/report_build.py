@@ -7,6 +7,10 @@ Inputs (all in ``DIR``):
   knows them), run summary, and the list of figures with captions;
 - ``*.png`` — figures named in ``demo.json`` or found by their conventional names.
 
+The folder's files are data, not markup: every text from ``fit.json``/``demo.json`` is
+HTML-escaped, and only PNG files inside ``DIR`` are embedded (a figure named outside it --
+absolute, ``..`` or a link pointing out -- is refused in one line naming it).
+
 ``jointid report DIR`` calls :func:`build_report`; the demo calls it at its end.
 """
 
@@ -112,7 +116,7 @@ def errors_section(fit: dict) -> Section:
     s.table(["Measurements used"] + [f"{n} model" for n in names], rows)
     t4 = fit.get("table_iv")
     if t4:
-        s.raw("<h3>Table IV: identification with and without payload variations</h3>")
+        s.heading("Table IV: identification with and without payload variations")
         rows4 = []
         for label, key in (("With payload variations", "with_payloads"),
                            ("Without payload", "without_payload")):
@@ -162,7 +166,7 @@ def refinement_section(ref: dict) -> Section:
     for i, st in enumerate(steps, 1):
         params = st.get("parameters", {})
         if params:
-            s.raw(f"<h3>Step {i}: {st.get('effect')} ({st.get('variable')})</h3>")
+            s.heading(f"Step {i}: {st.get('effect')} ({st.get('variable')})")
             if st.get("description"):
                 s.para(str(st["description"]))
             prow = []
@@ -286,6 +290,36 @@ def discover_figures(d: Path, only: list[Path] | None = None) -> dict[str, list[
     return out
 
 
+def _figures(d: Path, demo: dict, key: str) -> list[tuple[Path, str]]:
+    """The figures of one report section as (path, caption), every path inside ``d``.
+
+    ``demo.json`` names them; a name that leaves the folder (absolute, ``..``, a symbolic
+    link pointing out) is refused: the report embeds files, and must embed only the run's own.
+
+    Raises
+    ------
+    IdentError
+        A figure entry that is not ``{"file": NAME, "caption": TEXT}`` or leaves ``d``.
+    """
+    figs = demo.get("figures", {})
+    entries = figs.get(key, []) if isinstance(figs, dict) else None
+    if not isinstance(entries, list):
+        raise IdentError(f"{d / 'demo.json'}: figures: expected a table of lists of "
+                         "{file, caption}")
+    root = d.resolve()
+    out = []
+    for fig in entries:
+        if not isinstance(fig, dict) or not isinstance(fig.get("file"), str):
+            raise IdentError(f"{d / 'demo.json'}: figures.{key}: expected entries "
+                             f"{{file, caption}}, got {fig!r}")
+        path = (d / fig["file"]).resolve()
+        if not path.is_relative_to(root):
+            raise IdentError(f"{d / 'demo.json'}: figure {fig['file']!r} is outside the report "
+                             f"folder {str(d)!r}; only figures inside it are embedded")
+        out.append((d / fig["file"], str(fig.get("caption", ""))))
+    return out
+
+
 def build_report(directory: Path | str, *, title: str = "jointid report") -> Path:
     """(Re)write ``DIR/report.html`` from ``fit.json``, ``demo.json`` and the PNG figures.
 
@@ -318,11 +352,11 @@ def build_report(directory: Path | str, *, title: str = "jointid report") -> Pat
     if demo.get("description"):
         intro.para(demo["description"])
     if demo.get("campaign_summary"):
-        intro.raw(f"<pre>{html.escape(demo['campaign_summary'])}</pre>")
+        intro.raw(f"<pre>{html.escape(str(demo['campaign_summary']))}</pre>")
     if demo.get("run_summary"):
-        intro.raw(f"<pre>{html.escape(demo['run_summary'])}</pre>")
-    for fig in demo.get("figures", {}).get("campaign", []):
-        intro.figure(d / fig["file"], fig["caption"])
+        intro.raw(f"<pre>{html.escape(str(demo['run_summary']))}</pre>")
+    for path, caption in _figures(d, demo, "campaign"):
+        intro.figure(path, caption)
     sections.append(intro)
 
     sections.append(errors_section(fit))
@@ -331,8 +365,8 @@ def build_report(directory: Path | str, *, title: str = "jointid report") -> Pat
         if name in models:
             sec = parameter_section(name, models[name], truth if name == "new" else None,
                                     table_no)
-            for fig in demo.get("figures", {}).get(name, []):
-                sec.figure(d / fig["file"], fig["caption"])
+            for path, caption in _figures(d, demo, name):
+                sec.figure(path, caption)
             sections.append(sec)
     if "usual" in models and truth:
         sections[-1 if "new" not in models else -2].para(
@@ -342,8 +376,8 @@ def build_report(directory: Path | str, *, title: str = "jointid report") -> Pat
     ref = fit.get("refinement")
     if ref is not None:
         rsec = refinement_section(ref)
-        for fig in demo.get("figures", {}).get("refinement", []):
-            rsec.figure(d / fig["file"], fig["caption"])
+        for path, caption in _figures(d, demo, "refinement"):
+            rsec.figure(path, caption)
         sections.append(rsec)
     te = truth_effects_section(demo, ref)
     if te is not None:

@@ -63,10 +63,14 @@ def test_fitted_attributes_equal_the_cli_json(fitted, csv_runs, tmp_path):
                  "--json", str(js)]) == 0
     rec = json.loads(js.read_text())["models"]["new"]
     assert est.name_ == "new" and set(est.models_) == {"usual", "new"}
-    assert list(est.coef_) == list(rec["parameters"])
+    assert list(est.coef_names_) == list(rec["parameters"])
+    assert list(est.params_) == list(rec["parameters"])
+    for k, n in enumerate(est.coef_names_):
+        assert est.coef_[k] == rec["parameters"][n]["value"]
+        assert est.std_[k] == rec["parameters"][n]["std"]
+        assert est.rel_std_pct_[k] == rec["parameters"][n]["rel_std_pct"]
     for n, p in rec["parameters"].items():
-        assert est.coef_[n] == p["value"] and est.std_[n] == p["std"]
-        assert est.rel_std_pct_[n] == p["rel_std_pct"]
+        assert est.params_[n] == p["value"] and est.params_std_[n] == p["std"]
     assert est.rel_error_ == rec["rel_error"]
     assert est.validation_rel_error_ == rec["validation_rel_error"]
     assert est.rel_error_bands_["low"] == rec["rel_error_low_velocity"]
@@ -86,7 +90,7 @@ def test_predict_and_score_agree_with_the_fit(fitted):
     assert est.predict(val).shape == d.Y.shape
     # the usual model is worse than the new one on the plant's new friction
     usual = JointModel(model="usual").fit(train, validation=val)
-    assert usual.rel_error_ > est.rel_error_ and "F_C" in usual.coef_
+    assert usual.rel_error_ > est.rel_error_ and "F_C" in usual.params_
     assert usual.score(val) < est.score(val)
 
 
@@ -99,7 +103,8 @@ def test_refine_returns_a_new_estimator_with_the_ripple(fitted):
     amp, period = step.parameters["ripple_amplitude"], step.parameters["ripple_period"]
     assert abs(amp["value"] - RIPPLE["amplitude_Nm"]) < amp["std2"] + 0.05 * RIPPLE["amplitude_Nm"]
     assert period["value"] == pytest.approx(RIPPLE["period_rad"], rel=2e-3)
-    assert {"ripple_sin", "ripple_cos"} <= set(refined.coef_) and "ripple_sin" not in est.coef_
+    assert {"ripple_sin", "ripple_cos"} <= set(refined.coef_names_)
+    assert "ripple_sin" not in est.params_
     assert refined.rel_error_ < est.rel_error_
     assert refined.validation_rel_error_ == refined.refinement_.validation_rel_error_final
     assert refined.validation_rel_error_ < est.validation_rel_error_
@@ -113,7 +118,8 @@ def test_refine_returns_a_new_estimator_with_the_ripple(fitted):
 def test_paths_and_signals_are_accepted(fitted, csv_runs):
     est, train, _ = fitted
     again = JointModel(model="both").fit([str(p) for p in csv_runs[:3]])
-    assert again.coef_ == est.coef_
+    np.testing.assert_array_equal(again.coef_, est.coef_)
+    assert again.params_ == est.params_
     one = JointModel(model="usual").fit(train[0])
     assert isinstance(train[0], Experiment) and one.n_samples_ > 100
 
@@ -131,3 +137,46 @@ def test_bad_use_is_one_line_error(fitted):
     with pytest.raises(DataError, match="expected Experiment objects"):
         JointModel().fit([1, 2])
     assert "model='new'" in repr(JointModel())
+
+
+# ---------------------------------------------------------------- scikit-learn conventions
+_GIVEN = dict(model="usual", qs="scan", joint="revolute", cutoff=12.5, decimation=7,
+              dq_min=0.0, trim=3, estimator="ols", eliminate=False, threshold=25.0)
+
+
+def test_get_set_params_and_clone_semantics():
+    est = JointModel(**_GIVEN)
+    for deep in (True, False):
+        params = est.get_params(deep=deep)
+        assert {k: params[k] for k in _GIVEN} == _GIVEN
+        assert set(params) == set(JointModel().get_params())  # every constructor parameter
+    assert est.get_params() == est.get_params(deep=False)
+    # a clone built from the parameters holds the very same objects, unfitted
+    twin = type(est)(**est.get_params(deep=False))
+    assert all(twin.get_params()[k] is v for k, v in est.get_params().items())
+    assert est.set_params(qs=0.05, model="new") is est
+    assert est.qs == 0.05 and est.model == "new" and twin.qs == "scan"
+    with pytest.raises(DataError, match=r"unknown hyper-parameter 'q_s' \(expected one of "):
+        est.set_params(q_s=0.05)
+    assert est.qs == 0.05
+
+
+def test_sklearn_clone_and_grid_search(fitted):
+    from sklearn.base import clone
+    from sklearn.model_selection import GridSearchCV
+
+    est, train, _ = fitted
+    c = clone(est)
+    assert c is not est and c.get_params() == est.get_params()
+    assert not hasattr(c, "coef_") and hasattr(est, "coef_")
+    # coef_ is an array aligned with coef_names_, the dict view kept as params_
+    assert isinstance(est.coef_, np.ndarray) and est.coef_.shape == est.coef_names_.shape
+    assert est.std_.shape == est.rel_std_pct_.shape == est.coef_.shape
+    assert dict(zip(est.coef_names_, est.coef_, strict=True)) == est.params_
+    # grid search over q_s, leaving one payload run out per fold (score: 1 - ||rho||/||Y||)
+    grid = GridSearchCV(JointModel(model="new"), {"qs": [0.01, 0.2]}, cv=3, error_score="raise")
+    grid.fit(train)
+    assert grid.best_params_["qs"] in (0.01, 0.2)
+    scores = grid.cv_results_["mean_test_score"]
+    assert np.all(np.isfinite(scores)) and np.all(scores > 0.5) and scores[0] != scores[1]
+    assert isinstance(grid.best_estimator_, JointModel) and grid.best_estimator_.coef_.size

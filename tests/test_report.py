@@ -61,3 +61,62 @@ def test_report_embeds_figures_and_flags_truth(tmp_path):
 def test_report_refuses_missing_fit(tmp_path):
     with pytest.raises(IdentError, match="fit.json"):
         build_report(tmp_path)
+
+
+_EVIL = '<script>alert("x")</script>'
+
+
+def _png(path):
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1])
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def test_report_escapes_every_field(tmp_path):
+    """Text read from fit.json / demo.json never reaches the page as markup: refinement step
+    names and variables, parameter names, notes, summaries, captions, truth effects."""
+    fit = _fit_json()
+    step = fit["refinement"]["steps"][0]
+    step["effect"], step["variable"] = _EVIL, _EVIL + "v"
+    step["description"] = _EVIL
+    fit["models"]["new"]["parameters"][_EVIL] = {"value": 1.0, "std2": 0.1}
+    fit["notes"] = [_EVIL]
+    (tmp_path / "fit.json").write_text(json.dumps(fit))
+    _png(tmp_path / "a.png")
+    demo = {"description": _EVIL, "campaign_summary": _EVIL, "run_summary": _EVIL,
+            "subtitle": _EVIL, "truth_effects": {_EVIL: {"k": 1.0}},
+            "figures": {"new": [{"file": "a.png", "caption": _EVIL}]}}
+    (tmp_path / "demo.json").write_text(json.dumps(demo))
+    text = build_report(tmp_path, title=_EVIL).read_text()
+    assert "<script" not in text
+    assert "&lt;script&gt;" in text
+    assert text.count("&lt;script&gt;") >= 10
+
+
+def test_report_embeds_only_figures_inside_its_folder(tmp_path, capsys):
+    from daq.app.cli import main
+
+    d = tmp_path / "rep"
+    d.mkdir()
+    (d / "fit.json").write_text(json.dumps(_fit_json()))
+    outside = tmp_path / "secret.png"
+    _png(outside)
+    (d / "link.png").symlink_to(outside)
+    for name in (str(outside), "../secret.png", "link.png"):
+        demo = {"figures": {"new": [{"file": name, "caption": "c"}]}}
+        (d / "demo.json").write_text(json.dumps(demo))
+        assert main(["report", str(d)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and "outside the report folder" in err and name in err
+        assert not (d / "report.html").exists()
+    # inside the folder: embedded; a file that is not a PNG: refused, naming it
+    _png(d / "ok.png")
+    (d / "notes.png").write_text("not an image")
+    (d / "demo.json").write_text(json.dumps({"figures": {"new": [{"file": "ok.png",
+                                                                  "caption": "c"}]}}))
+    assert main(["report", str(d)]) == 0
+    (d / "demo.json").write_text(json.dumps({"figures": {"new": [{"file": "notes.png",
+                                                                  "caption": "c"}]}}))
+    assert main(["report", str(d)]) == 2
+    assert "notes.png: not a PNG" in capsys.readouterr().err

@@ -382,8 +382,9 @@ _LIMITS = Table(
     {
         "position": Field(float, list_of=True, min_len=2, unit="rad or m"),
         "max_velocity": Field(float, gt=0, unit="rad/s or m/s"),
-        "max_acceleration": Field(float, gt=0, unit="rad/s^2 or m/s^2"),
-        "max_jerk": Field(float, gt=0, unit="rad/s^3 or m/s^3"),
+        # upper bounds: sanity only (no joint comes near them); Ruckig fails on absurd values
+        "max_acceleration": Field(float, gt=0, le=1e9, unit="rad/s^2 or m/s^2"),
+        "max_jerk": Field(float, gt=0, le=1e9, unit="rad/s^3 or m/s^3"),
         "max_torque": Field(float, gt=0, unit="N m or N"),
     }
 )

@@ -31,6 +31,7 @@ import math
 import os
 import tempfile
 import tomllib
+import xml.etree.ElementTree as ET
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -493,6 +494,7 @@ def _from_urdf(urdf: Path, name: str, motion: Mapping, joints: list, src: str,
                  if ln.strip()]
         msg = lines[0] if lines else type(e).__name__
         raise RobotError(f"{src}: URDF {str(urdf)!r} does not parse ({msg})") from None
+    _check_urdf_inertials(urdf, src)
     names, types = _joint_kinds(model, src)
     if g is None:
         g = np.array(model.gravity.linear, dtype=float)
@@ -517,6 +519,48 @@ def _from_urdf(urdf: Path, name: str, motion: Mapping, joints: list, src: str,
     mv, lk = _motion(src, names, motion.get("moving"), motion.get("locked"), "motion")
     dr = {n: drives.get(n, JointDrive()) for n in mv}
     return Robot(name or model.name, model, names, mv, lk, dr, limits, g, types, src)
+
+
+def _check_urdf_inertials(urdf: Path, src: str) -> None:
+    """Refuse a link whose ``<inertial>`` no body can have (pinocchio builds it anyway and the
+    simulator then integrates nonsense): a mass that is negative or not finite, an inertia
+    that is not finite or has a negative principal moment."""
+    try:
+        root = ET.parse(urdf).getroot()
+    except (ET.ParseError, OSError):  # pinocchio read it; a form ElementTree cannot is not ours
+        return
+    where = f"{src}: URDF {urdf.name!r}" if src else f"URDF {str(urdf)!r}"
+    for link in root.iter("link"):
+        inertial = link.find("inertial")
+        if inertial is None:
+            continue
+        name = link.get("name", "?")
+        mass = inertial.find("mass")
+        if mass is not None:
+            try:
+                m = float(mass.get("value", "0"))
+            except ValueError:
+                m = math.nan
+            if not (math.isfinite(m) and m >= 0):
+                raise RobotError(f"{where}: link {name!r}: mass {mass.get('value')!r}: "
+                                 "expected a number >= 0 [kg]")
+        tensor = inertial.find("inertia")
+        if tensor is None:
+            continue
+        keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+        try:
+            xx, xy, xz, yy, yz, zz = (float(tensor.get(k, "0")) for k in keys)
+        except ValueError:
+            xx = math.nan
+        i_c = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+        if not np.all(np.isfinite(i_c)):
+            raise RobotError(f"{where}: link {name!r}: inertia: expected finite numbers "
+                             f"[kg m^2], got {dict(tensor.attrib)}")
+        low = float(np.linalg.eigvalsh(i_c).min())
+        # tolerance: published URDFs round their tensors (tiago: -3.5e-8 on a tiny link)
+        if low < -max(1e-6, 1e-3 * float(np.abs(i_c).max())):
+            raise RobotError(f"{where}: link {name!r}: inertia has a negative principal moment "
+                             f"({low:.6g} kg m^2): expected a positive semi-definite tensor")
 
 
 def _joint_kinds(model: pin.Model, src: str) -> tuple[tuple[str, ...], tuple[str, ...]]:

@@ -11,6 +11,8 @@ import argparse
 import os
 import sys
 
+from threadpoolctl import threadpool_limits
+
 import daq.protocol.cli_export
 import daq.runtime.cli
 import daq.runtime.cli_recover
@@ -53,9 +55,27 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: environment variables by which a user sets the BLAS thread count (honoured as given)
+BLAS_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def limit_blas_threads() -> None:
+    """One BLAS thread, unless the user chose a count (:data:`BLAS_THREAD_VARS`).
+
+    numpy is imported (and its BLAS started) long before ``main`` runs, so setting
+    ``OPENBLAS_NUM_THREADS`` here does nothing in this process: threadpoolctl changes the
+    loaded BLAS's own setting. The many small solves of jointid lose time to BLAS threads
+    (``jointid demo --quick`` took about twice as long with them). The variable is still
+    set for the child processes (imported afresh, they read it at start)."""
+    if any(v in os.environ for v in BLAS_THREAD_VARS):
+        return
+    threadpool_limits(limits=1, user_api="blas")
+    os.environ["OPENBLAS_NUM_THREADS"] = "1"
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``jointid`` console script."""
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    limit_blas_threads()
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):

@@ -35,6 +35,8 @@ def run(args: argparse.Namespace) -> int:
         span = f", {res.last_s - res.first_s:.3f} s from {t0:%Y-%m-%d %H:%M:%S} UTC"
     else:
         span = ""
-    print(f"export: {res.frames} CAN frames ({res.transmitted} sent by the master{span}) "
+    chans = [f"{c} = {b}" if c is not None else b for c, b in res.channels]
+    on = f" on channel{'s' if len(chans) > 1 else ''} {', '.join(chans)}" if chans else ""
+    print(f"export: {res.frames} CAN frames ({res.transmitted} sent by the master{span}){on} "
           f"-> {res.path}")
     return 0

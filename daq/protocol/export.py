@@ -27,8 +27,25 @@ Frames are written in time order (stable sort on the timestamp: within a cycle t
 arrival order, which is already time order up to the send/receive stamping of the master).
 Direction: the master's own cyclic frames (SYNC 0x80 and each drive's RPDO1 0x200 + node id,
 node ids from the log's ``drive<k>`` metadata) are marked transmitted (``is_rx = False``),
-every other frame received. All frames are classic CAN, 11-bit identifiers, channel
-``channel`` (default 1: the first channel in BLF/ASC numbering).
+every other frame received. All frames are classic CAN, 11-bit identifiers.
+
+Channels: one per bus of the run, in the order of the drives (``drive<k>.channel`` of the
+log's metadata; a single-bus run has one). A frame goes to the bus of the node its COB-ID
+names (node ids are unique over all buses: ``daq.runtime.buses``); SYNC, TIME, NMT to node 0
+and COB-IDs of no logged node went out on every bus (``MultiBus``), so they are written once
+per bus. How each format numbers them:
+
+- ``.asc``, ``.blf``, ``.trc``: channel numbers from 1 (Vector, PEAK), bus k (0-based) is
+  ``channel + k``; python-can's writers add 1 to ``Message.channel`` (interface numbering
+  from 0), so the messages carry ``channel + k - 1``. The ASC file names the buses in
+  comment lines after its header (``// jointid channel 1 = can0``). python-can's ASC and BLF
+  readers give back the 0-based number, its TRC reader the 1-based one.
+- ``.log`` (candump): the bus name itself as the interface column (whitespace replaced by
+  ``_``).
+- ``.csv``: python-can's CSV has no channel column: a run on one bus only (a multi-bus run is
+  refused: it would merge the buses).
+
+:attr:`ExportResult.channels` (and ``jointid export``'s output line) gives the mapping.
 
 A log cut short by a killed process (no summary) is exported up to its last complete chunk;
 the reader warns (``RuntimeWarning``).
@@ -39,6 +56,7 @@ from __future__ import annotations
 import gzip
 import struct
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -66,17 +84,27 @@ class _ASCWriter(can.ASCWriter):
     def _format_header_datetime(self, dt):  # type: ignore[override]
         return dt.strftime(self.FORMAT_DATE.format(f"{dt.microsecond // 1000 % 1000:03d}"))
 
+    def comment(self, text: str) -> None:
+        """A ``// text`` line; before the first frame it lands in the header, where CANoe
+        writes its own (``// version ...``) and python-can's reader skips them."""
+        self.file.write(f"// {text}\n")
 
-def _open_writer(path: Path) -> can.io.generic.MessageWriter:
-    """python-can's writer for the suffix of ``path``, with the ASC date fixed."""
+
+def _open_writer(path: Path, comments: Sequence[str] = ()) -> can.io.generic.MessageWriter:
+    """python-can's writer for the suffix of ``path``, with the ASC date fixed; ``comments``
+    go into the header of an ASC file (the other formats have no place for them)."""
     name = path.name.lower()
-    if name.endswith(".asc"):
-        return _ASCWriter(path)
-    if name.endswith(".asc.gz"):
-        return _ASCWriter(gzip.open(path, "wt", encoding="utf-8"))
+    if name.endswith(".asc") or name.endswith(".asc.gz"):
+        w = _ASCWriter(path if name.endswith(".asc")
+                       else gzip.open(path, "wt", encoding="utf-8"))
+        for c in comments:
+            w.comment(c)
+        return w
     return can.Logger(path)
+
 SYNC_ID = 0x80
 RPDO1_BASE = 0x200
+NMT_ID = 0x000
 _CYCLE_N = struct.Struct("<qI")  # CanFrames message after its 4-byte CDR header
 
 
@@ -98,6 +126,9 @@ class ExportResult:
         Timestamps of the first and last frame [s] (Unix epoch; NaN when no frame).
     transmitted : int
         Frames marked as sent by the master (SYNC, RPDO1).
+    channels : tuple of (int or str, str)
+        (channel in the trace, bus name) per bus of the run: the number of ``.asc``,
+        ``.blf``, ``.trc`` (from 1), the interface name of ``.log``, None for ``.csv``.
     """
 
     path: Path
@@ -105,6 +136,7 @@ class ExportResult:
     first_s: float
     last_s: float
     transmitted: int
+    channels: tuple[tuple[int | str | None, str], ...] = ()
 
 
 def _format_of(out: Path) -> str:
@@ -169,6 +201,35 @@ def master_ids(metadata: dict[str, dict[str, str]]) -> frozenset[int]:
     return frozenset(ids)
 
 
+def buses_of(metadata: dict[str, dict[str, str]]) -> tuple[list[str], dict[int, int]]:
+    """The run's bus names (in the order of the drives) and node id -> index of its bus.
+
+    From ``drive<k>.channel`` and ``.node_id``; a log without them has one bus, named by
+    ``campaign.channel`` (or ``can0``)."""
+    default = metadata.get("campaign", {}).get("channel") or "can0"
+    drives = sorted((int(n[5:]), rec) for n, rec in metadata.items()
+                    if n.startswith("drive") and n[5:].isdigit())
+    buses: list[str] = []
+    node_bus: dict[int, int] = {}
+    for _, rec in drives:
+        name = rec.get("channel") or default
+        if name not in buses:
+            buses.append(name)
+        try:
+            node_bus[int(rec.get("node_id", ""))] = buses.index(name)
+        except ValueError:
+            continue
+    return buses or [default], node_bus
+
+
+def _frame_buses(cid: int, data: np.ndarray, dlc: int, node_bus: dict[int, int],
+                 n_buses: int) -> range | tuple[int]:
+    """Indices of the buses a frame was on: its node's, or all for a broadcast."""
+    node = data[1] if cid == NMT_ID and dlc >= 2 else cid & 0x7F
+    k = node_bus.get(int(node)) if node else None
+    return range(n_buses) if k is None else (k,)
+
+
 def export_can(mcap_path: str | Path, out_path: str | Path, *, channel: int = 1) -> ExportResult:
     """Write the raw CAN frames of a run log to a CAN trace file chosen by extension.
 
@@ -180,7 +241,8 @@ def export_can(mcap_path: str | Path, out_path: str | Path, *, channel: int = 1)
         Output file; its extension picks the format (module docstring). Written to a
         temporary name next to it and renamed at the end: no partial file on error.
     channel : int
-        CAN channel number written to the trace (BLF/ASC/TRC are 1-based).
+        Channel number of the run's first bus in ``.asc``/``.blf``/``.trc`` (1-based, as
+        those formats count); bus k is ``channel + k``. ``.log`` names the buses instead.
 
     Returns
     -------
@@ -189,8 +251,8 @@ def export_can(mcap_path: str | Path, out_path: str | Path, *, channel: int = 1)
     Raises
     ------
     ExportError
-        Unknown extension, unreadable log, log without a ``/can/raw`` channel, unwritable
-        output.
+        Unknown extension, unreadable log, log without a ``/can/raw`` channel, a multi-bus
+        run to ``.csv`` (no channel column), unwritable output.
     """
     src = Path(mcap_path)
     out = Path(out_path)
@@ -210,22 +272,42 @@ def export_can(mcap_path: str | Path, out_path: str | Path, *, channel: int = 1)
     order = np.argsort(frames["timestamp"], kind="stable")
     frames = frames[order]
     tx_ids = master_ids(meta)
+    buses, node_bus = buses_of(meta)
+    fmt = _format_of(out)
+    if fmt == ".csv" and len(buses) > 1:
+        raise ExportError(f"{out}: python-can's CSV has no channel column, the run used "
+                          f"{len(buses)} buses ({', '.join(buses)}); export it as .blf, .asc, "
+                          ".trc or .log")
+    labels: list[int | str | None]
+    if fmt == ".log":
+        labels = ["_".join(b.split()) or "can0" for b in buses]
+        msg_channel: list[int | str | None] = list(labels)
+    elif fmt == ".csv":
+        labels = msg_channel = [None]
+    else:  # the writers write Message.channel + 1
+        labels = [channel + k for k in range(len(buses))]
+        msg_channel = [c - 1 for c in labels]
+    comments = [f"jointid channel {c} = {b}" for c, b in zip(labels, buses, strict=True)]
     # python-can picks the writer by the suffix: the temporary name keeps the extension(s)
     tmp = out.with_name(f".part-{out.name}")
-    n_tx = 0
+    n_tx = n_written = 0
     try:
-        writer = _open_writer(tmp)
+        writer = _open_writer(tmp, comments)
         try:
             ts, ids, dlcs, data = (frames["timestamp"].tolist(), frames["id"].tolist(),
                                    frames["dlc"].tolist(), frames["data"])
+            n_bus = len(buses)
             for k in range(len(ts)):
                 cid = ids[k]
                 dlc = dlcs[k]
                 rx = cid not in tx_ids
-                n_tx += not rx
-                writer.on_message_received(can.Message(
-                    timestamp=ts[k], arbitration_id=cid, is_extended_id=False,
-                    dlc=dlc, data=bytes(data[k][:dlc]), is_rx=rx, channel=channel))
+                payload = bytes(data[k][:dlc])
+                for b in _frame_buses(cid, data[k], dlc, node_bus, n_bus):
+                    n_tx += not rx
+                    n_written += 1
+                    writer.on_message_received(can.Message(
+                        timestamp=ts[k], arbitration_id=cid, is_extended_id=False,
+                        dlc=dlc, data=payload, is_rx=rx, channel=msg_channel[b]))
         finally:
             writer.stop()
         tmp.replace(out)
@@ -238,4 +320,5 @@ def export_can(mcap_path: str | Path, out_path: str | Path, *, channel: int = 1)
     n = int(frames.shape[0])
     first = float(frames["timestamp"][0]) if n else float("nan")
     last = float(frames["timestamp"][-1]) if n else float("nan")
-    return ExportResult(out, n, first, last, n_tx)
+    return ExportResult(out, n_written, first, last, n_tx,
+                        tuple(zip(labels, buses, strict=True)))

@@ -47,8 +47,9 @@ def main(argv: list[str]) -> int:
           f"relative error {est.rel_error_:.4f} (low velocity "
           f"{est.rel_error_bands_['low']:.4f}, high {est.rel_error_bands_['high']:.4f})")
     for name in ("a_m", "a_g", "c_m", "c_g", "F_V"):
-        if name in est.coef_:
-            print(f"  {name:<6} = {est.coef_[name]:9.4f} ± {2 * est.std_[name]:.3g} (2σ)")
+        if name in est.params_:
+            print(f"  {name:<6} = {est.params_[name]:9.4f} ± {2 * est.params_std_[name]:.3g} "
+                  "(2σ)")
 
     refined = est.refine(max_steps=3)
     print()

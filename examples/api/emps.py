@@ -39,7 +39,7 @@ def main(argv: list[str]) -> int:
 
     print(f"{'parameter':<10}{'jointid':>12}{'2 sigma':>10}{'published':>12}{'diff %':>9}")
     for name, ref in PUBLISHED.items():
-        v, s = est.coef_[name], 2 * est.std_[name]
+        v, s = est.params_[name], 2 * est.params_std_[name]
         print(f"{name:<10}{v:>12.4f}{s:>10.3f}{ref:>12.4f}{100 * (v - ref) / abs(ref):>9.3f}")
     print(f"relative error {est.rel_error_:.4f} on {est.n_samples_} samples, "
           f"validation {est.validation_rel_error_:.4f} (score {est.score(valid):.4f})")

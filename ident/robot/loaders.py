@@ -28,7 +28,7 @@ CSV (header row)
     ``payload_com_z_m`` (flange frame) and ``payload_ixx_kgm2``, ``payload_ixy_kgm2``, ...
     ``payload_izz_kgm2`` (about the CoM, flange axes). The torque column times the joint's
     ``drive_gain`` is the joint-side torque.
-MAT (v5/v7)
+MAT (v5/v7, and v7.3 through h5py)
     The ``--map`` paths of :func:`ident.loaders.resolve_path` with one array per signal,
     one row (or column) per axis: ``t=rec.time_cont, q=rec.act_pos_mot_deg,
     tau=rec.act_torque_abs_nm, q_ref=rec.ref_pos_deg``; or per-axis keys ``q1=...``.
@@ -62,7 +62,9 @@ import numpy as np
 from daq.protocol.reader import LogReadError, read_run
 
 from ..loaders import (
+    GAP_PERIODS,
     IRREGULAR_TOL,
+    MAX_ABS_SIGNAL,
     MIN_SAMPLES,
     Q_UNITS,
     _longest_true_run,
@@ -282,6 +284,7 @@ def _load_mcap(path: Path, joints: Sequence[str]) -> RawRobotRun:
         np.column_stack([r.tau_ref for r in runs]),
         q_ref=q_ref,
         payload=payload,
+        joints=joints,
     )
 
 
@@ -376,6 +379,9 @@ def _load_csv(path: Path, joints: Sequence[str], gains: np.ndarray,
         dq=None if dq is None or ddq is None else q_scale * dq,
         ddq=None if dq is None or ddq is None else q_scale * ddq,
         payload=RobotPayloadData(mass=pay[0], com=pay[1:4], inertia=pay[4:10]),
+        joints=joints,
+        columns={sig: names for sig, names in cols.items() if names is not None},
+        first_row=2,
     )
 
 
@@ -464,15 +470,23 @@ def _load_mat(path: Path, joints: Sequence[str], gains: np.ndarray, q_scale: flo
         q_ref=None if q_ref is None else q_scale * q_ref,
         dq=q_scale * dq if both else None,  # type: ignore[operator]
         ddq=q_scale * ddq if both else None,  # type: ignore[operator]
+        joints=joints,
     )
 
 
 def _make_run(source: str, t: np.ndarray, q: np.ndarray, tau: np.ndarray, *,
               q_ref: np.ndarray | None = None, dq: np.ndarray | None = None,
               ddq: np.ndarray | None = None,
-              payload: RobotPayloadData | None = None) -> RawRobotRun:
-    """Validate the arrays of one file (lengths, finite values, increasing time) and
-    resample an irregular grid (like :func:`ident.loaders.make_experiment`)."""
+              payload: RobotPayloadData | None = None,
+              joints: Sequence[str] = (),
+              columns: Mapping[str, Sequence[str]] | None = None,
+              first_row: int | None = None) -> RawRobotRun:
+    """Validate the arrays of one file (lengths, finite values within
+    :data:`~ident.loaders.MAX_ABS_SIGNAL`, increasing time without gaps) and resample an
+    irregular grid (like :func:`ident.loaders.make_experiment`).
+
+    ``joints`` and ``columns`` (signal -> column name of each axis) name the culprit of a bad
+    value; ``first_row`` is the file line of sample 0 (CSV: 2, after the header), if any."""
     t = np.asarray(t, dtype=float).reshape(-1)
     arrays = {"q": q, "tau": tau, "q_ref": q_ref, "dq": dq, "ddq": ddq}
     for name, a in arrays.items():
@@ -480,20 +494,44 @@ def _make_run(source: str, t: np.ndarray, q: np.ndarray, tau: np.ndarray, *,
             raise RobotIdentError(f"{source}: {name} has {a.shape[0]} samples, t has {t.size}")
     if t.size < MIN_SAMPLES:
         raise RobotIdentError(f"{source}: {t.size} samples, need at least {MIN_SAMPLES}")
+
+    def where(name: str, i: int, j: int | None) -> str:
+        if j is None:
+            col = f"column {name!r}"
+        else:
+            names = (columns or {}).get(name)
+            col = f"column {names[j]!r}" if names else f"{name} of axis {j + 1}"
+            if j < len(joints):
+                col += f" (joint {joints[j]!r})"
+        row = f"sample {i}" + (f", line {i + first_row}" if first_row is not None else "")
+        return f"{col}, {row} (t={t[i]:.6g} s)" if np.isfinite(t[i]) else f"{col}, {row}"
+
     for name, a in (("t", t), *arrays.items()):
         if a is None:
             continue
-        bad = ~np.isfinite(a)
-        if bad.any():
-            first = int(np.argmax(bad.reshape(a.shape[0], -1).any(axis=1)))
-            raise RobotIdentError(f"{source}: {name} has {int(bad.sum())} NaN/inf values "
-                                  f"(first at sample {first})")
+        a2 = np.asarray(a, dtype=float).reshape(a.shape[0], -1)
+        checks = [(~np.isfinite(a2), "NaN/inf values", "")]
+        if name != "t":  # time may be an epoch stamp; the signals are SI
+            checks.append((np.abs(a2) > MAX_ABS_SIGNAL, f"values beyond +-{MAX_ABS_SIGNAL:g}",
+                           "; expected SI values after --q-unit and the drive gains"))
+        for bad, what, hint in checks:
+            if bad.any():
+                i = int(np.argmax(bad.any(axis=1)))
+                j = int(np.argmax(bad[i])) if name != "t" else None
+                raise RobotIdentError(f"{source}: {int(bad.sum())} {what}, first at "
+                                      f"{where(name, i, j)}: {float(a2[i, j or 0]):.6g}{hint}")
     d = np.diff(t)
     if np.any(d <= 0):
         i = int(np.argmax(d <= 0))
         raise RobotIdentError(f"{source}: time is not strictly increasing at sample {i + 1} "
                               f"(t={t[i + 1]})")
     med = float(np.median(d))
+    if np.max(d) > GAP_PERIODS * med:
+        i = int(np.argmax(d > GAP_PERIODS * med))
+        raise RobotIdentError(
+            f"{source}: gap in the recording at t={t[i]:.6g} s (next sample {d[i]:.6g} s later, "
+            f"{d[i] / med:.0f} periods of {med:.6g} s): split the file at the gap into separate "
+            "experiments")
     if np.max(np.abs(d - med)) > IRREGULAR_TOL * med:
         tu = t[0] + med * np.arange(int(round((t[-1] - t[0]) / med)) + 1)
         tu = tu[tu <= t[-1] + 1e-12 * abs(t[-1])]
