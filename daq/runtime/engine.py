@@ -88,7 +88,7 @@ from trajectories.robot_campaign import RobotCampaign
 from .busload import BusLoad
 from .config import DaqConfig, Scaling
 from .cycle_io import BUS_ERRORS, CycleIO
-from .master import TPDO1_STRUCT, TPDO2_STRUCT, MasterDrive
+from .master import TPDO1_STRUCT, TPDO2_STRUCT, MasterDrive, rpdo_timeout_ms
 from .mcaplog import RunLog
 from .results import PayloadResult, Progress
 from .safety import (
@@ -98,7 +98,10 @@ from .safety import (
     CW_SHUTDOWN,
     DISABLE_MAX_CYCLES,
     SHUTDOWN_CYCLES,
+    NullLog,
     Supervisor,
+    interrupt_reason,
+    log_failed,
 )
 
 logger = logging.getLogger(__name__)
@@ -178,7 +181,10 @@ class Engine(Supervisor):
         self.cycle_s = campaign.cycle_s
         self.paced = cfg.clock == "paced"
         self.periodic = self.paced and cfg.sync_source == "periodic"
-        self.interrupted = False
+        self.interrupted = ""  # the name of the stop signal received (SIGINT, SIGTERM...)
+        # paced: a SYNC later than this [s] is the master's own stall: the RPDO deadline it
+        # gave the drives (0x1400.5, 3 cycles + 100 ms), after which a drive faults anyway
+        self.stall_s = rpdo_timeout_ms(campaign.cycle_s, True) / 1000.0
         self.robot = isinstance(campaign, RobotCampaign)
         if self.robot:
             if len(campaign.joints) != len(drives):
@@ -319,6 +325,8 @@ class Engine(Supervisor):
                     missed += 1
                 if late > cycle_s:
                     next_deadline = t_sync  # re-anchor: no catch-up burst
+                    if late > self.stall_s:
+                        stalled(late, t, mode)
                 mask = self._exchange(cycle, next_deadline + 0.8 * cycle_s)
                 next_deadline += cycle_s
             elif self.periodic:
@@ -332,16 +340,27 @@ class Engine(Supervisor):
                     missed += 1
                     next_deadline = t_sync  # re-anchor on the SYNC train
                     late = 0.0 if cycle == 0 else late
+                    if late > self.stall_s:
+                        # the TPDOs queued during the stall are old: take them all, the
+                        # newest values win, and the next cycle waits for a fresh SYNC's
+                        stalled(late, t, mode)
+                        self._drain()
+                        mask = io.full if io.mask == io.full else mask
                 next_deadline += cycle_s
             else:
                 t_sync = late = 0.0
                 mask = self._exchange(cycle, 0.0)
             stopping = mode != "run" and mode != "enable"
             tpdo_fault = ""
-            if io.emcy and not stopping:  # before the state checks: name the first cause
-                dd, code, reg = io.emcy.pop(0)
-                self._fault(f"{self.drives[dd].name}: EMCY 0x{code:04X} (error register "
-                            f"0x{reg:02X})", cycle, t, log, dd, kind="emcy")
+            if io.emcy:  # before the state checks: the first one names the cause
+                for dd, code, reg in io.emcy:  # every one is an event, also while stopping
+                    why = (f"{self.drives[dd].name}: EMCY 0x{code:04X} (error register "
+                           f"0x{reg:02X})")
+                    if not stopping and not self._stop_reason:
+                        self._fault(why, cycle, t, log, dd, kind="emcy")
+                    else:
+                        log.event(cycle, t, "emcy", why, dd)
+                io.emcy.clear()
             for d in range(n_dr):
                 flags = FLAG_STOPPING if stopping else 0
                 b1 = 1 << (2 * d)
@@ -466,9 +485,9 @@ class Engine(Supervisor):
                     hb_check = 0
                     self._check_heartbeats(cycle, t, log)
                 if self.interrupted and not self._stop_reason:
-                    self._stop_reason = ("interrupted", "interrupted by the operator (SIGINT)")
+                    self._stop_reason = ("interrupted", interrupt_reason(self.interrupted))
                     self._fault_cycle = cycle
-                    log.event(cycle, t, "operator", "SIGINT: stopping")
+                    log.event(cycle, t, "operator", f"{self.interrupted}: stopping")
             cycle += 1
 
         def enabled_all() -> bool:
@@ -480,11 +499,22 @@ class Engine(Supervisor):
                     return False
             return True
 
+        def stalled(late: float, t: float, mode: str) -> None:
+            """The master's own loop was late by ``late`` [s]: a stall (host, swap, SIGSTOP)
+            during which the drives ran on their last command; stop and say so."""
+            if mode in ("run", "enable") and not self._stop_reason:
+                self._fault(f"master stalled for {late:.3f} s (the cycle loop was late by more "
+                            f"than the drives' RPDO deadline {self.stall_s:.3f} s)", cycle, t,
+                            log, -1, kind="watchdog")
+
         def report(phase: str, seg: int, n_total: int) -> None:
             if self.progress is not None:
                 name = seg_names[seg] if 0 <= seg < len(seg_names) else phase
-                self.progress(Progress(index, len(c.payloads), name, cycle, n_total,
-                                       self.load.share, missed, phase))
+                try:
+                    self.progress(Progress(index, len(c.payloads), name, cycle, n_total,
+                                           self.load.share, missed, phase))
+                except Exception:  # noqa: BLE001 - e.g. EIO on a closed terminal (SIGHUP)
+                    self.progress = None  # the display is gone; the run goes on
 
         self._stop_reason: tuple[str, str] | None = None
         self._fault_cycle = -1
@@ -510,70 +540,103 @@ class Engine(Supervisor):
             log.event(0, 0.0, "info", f"SYNC from send_periodic ({type(sync_task).__name__})")
         for note in self.notes:
             log.event(0, 0.0, "warning", note)
-        try:
-            # 1. enable, holding the position measured at the first answer
-            z0 = [0.0] * n_dr
-            do_cycle(z0, z0, z0, -1, "disable")  # first SYNC: read the drives' state
-            n_col = n_dr if robot else 1
-            q_hold = [counts[d] * kq[d] for d in range(n_col)]
-            zero = [0.0] * n_col
-            log.event(cycle, cycle * cycle_s, "info", "start position "
-                      + ", ".join(f"{x:.5f}" for x in q_hold))
-            for _ in range(ENABLE_MAX_CYCLES):
-                if enabled_all() or self._stop_reason:
-                    break
-                do_cycle(q_hold, zero, zero, -1, "enable")
-            if not enabled_all() and not self._stop_reason:
-                names = ", ".join(f"{d.name} {state_from_statusword(sw[k]).name}"
-                                  for k, d in enumerate(self.drives))
-                self._fault(f"drives not enabled after {ENABLE_MAX_CYCLES} cycles ({names})",
-                            cycle, cycle * cycle_s, log, -1)
-            if not self._stop_reason:
-                log.event(cycle, cycle * cycle_s, "info", "operation enabled")
-                # 2. approach the plan start, then the plan, then settle
-                ref_q = np.asarray(ref.q, dtype=float).reshape(len(ref.q), -1)
-                ref_dq = np.asarray(ref.dq, dtype=float).reshape(ref_q.shape)
-                ref_ddq = np.asarray(ref.ddq, dtype=float).reshape(ref_q.shape)
-                lims = self.joint_limits[:n_col]
-                aq, adq, addq = _approach(q_hold, ref_q[0].tolist(),
-                                          [lim.max_velocity for lim in lims],
-                                          [lim.max_acceleration for lim in lims], cycle_s)
-                settle = np.zeros((SETTLE_CYCLES, n_col))
-                cq = np.concatenate([aq, ref_q, settle + ref_q[-1]]).T.tolist()
-                cdq = np.concatenate([adq, ref_dq, settle]).T.tolist()
-                cddq = np.concatenate([addq, ref_ddq, settle]).T.tolist()
-                rseg = np.concatenate([np.full(len(aq), -1), ref.segment,
-                                       np.full(SETTLE_CYCLES, -1)]).astype(int).tolist()
-                n_total = cycle + len(rseg)
-                report("run", -1, n_total)
-                for i in range(len(rseg)):
-                    do_cycle([x[i] for x in cq], [x[i] for x in cdq], [x[i] for x in cddq],
-                             rseg[i], "run")
-                    if self._stop_reason:
-                        break
-                    if i % 250 == 0:
-                        report("run", rseg[i], n_total)
-            # 3. stop: normal shutdown or quick stop + disable
+        n_col = n_dr if robot else 1
+        zero = [0.0] * n_col
+        run_log = log
+
+        def stop_sequence() -> None:
+            """Quick stop for ``quick_stop_cycles``, then disable voltage until every drive
+            reports it (at most ``DISABLE_MAX_CYCLES`` + 1 cycles)."""
             q_last = [counts[d] * kq[d] for d in range(n_col)]
-            if self._stop_reason:
-                status, reason = self._stop_reason
-                fault_cycle = self._fault_cycle
-                report("stop", -1, cycle)
-                for _ in range(cfg.quick_stop_cycles):
-                    do_cycle(q_last, zero, zero, -1, "quick_stop")
-                for _ in range(DISABLE_MAX_CYCLES + 1):
-                    do_cycle(q_last, zero, zero, -1, "disable")
-                    if self._all_off(sw):
-                        break
-            else:
-                for _ in range(SHUTDOWN_CYCLES):
-                    do_cycle(q_last, zero, zero, -1, "shutdown")
+            report("stop", -1, cycle)
+            for _ in range(cfg.quick_stop_cycles):
+                do_cycle(q_last, zero, zero, -1, "quick_stop")
+            for _ in range(DISABLE_MAX_CYCLES + 1):
+                do_cycle(q_last, zero, zero, -1, "disable")
+                if self._all_off(sw):
+                    break
+
+        def stopped_event() -> int:
+            """Log whether the drives confirmed the stop; the stop cycle (-1: not confirmed)."""
             off = self._all_off(sw)
-            stop_cycle = cycle - 1 if off else -1
             msg = ("drives disabled" if off else "drives did not confirm the stop: "
                    + ", ".join(f"{d.name} sw=0x{sw[k]:04X}" for k, d in enumerate(self.drives)))
-            log.event(stop_cycle if off else cycle - 1, (cycle - 1) * cycle_s,
+            log.event(cycle - 1, (cycle - 1) * cycle_s,
                       "stop" if status != "done" else "info", msg)
+            return cycle - 1 if off else -1
+
+        try:
+            try:
+                # 1. enable, holding the position measured at the first answer
+                z0 = [0.0] * n_dr
+                do_cycle(z0, z0, z0, -1, "disable")  # first SYNC: read the drives' state
+                q_hold = [counts[d] * kq[d] for d in range(n_col)]
+                log.event(cycle, cycle * cycle_s, "info", "start position "
+                          + ", ".join(f"{x:.5f}" for x in q_hold))
+                for _ in range(ENABLE_MAX_CYCLES):
+                    if enabled_all() or self._stop_reason:
+                        break
+                    do_cycle(q_hold, zero, zero, -1, "enable")
+                if not enabled_all() and not self._stop_reason:
+                    names = ", ".join(f"{d.name} {state_from_statusword(sw[k]).name}"
+                                      for k, d in enumerate(self.drives))
+                    self._fault(f"drives not enabled after {ENABLE_MAX_CYCLES} cycles "
+                                f"({names})", cycle, cycle * cycle_s, log, -1)
+                if not self._stop_reason:
+                    log.event(cycle, cycle * cycle_s, "info", "operation enabled")
+                    # 2. approach the plan start, then the plan, then settle
+                    ref_q = np.asarray(ref.q, dtype=float).reshape(len(ref.q), -1)
+                    ref_dq = np.asarray(ref.dq, dtype=float).reshape(ref_q.shape)
+                    ref_ddq = np.asarray(ref.ddq, dtype=float).reshape(ref_q.shape)
+                    lims = self.joint_limits[:n_col]
+                    aq, adq, addq = _approach(q_hold, ref_q[0].tolist(),
+                                              [lim.max_velocity for lim in lims],
+                                              [lim.max_acceleration for lim in lims], cycle_s)
+                    settle = np.zeros((SETTLE_CYCLES, n_col))
+                    cq = np.concatenate([aq, ref_q, settle + ref_q[-1]]).T.tolist()
+                    cdq = np.concatenate([adq, ref_dq, settle]).T.tolist()
+                    cddq = np.concatenate([addq, ref_ddq, settle]).T.tolist()
+                    rseg = np.concatenate([np.full(len(aq), -1), ref.segment,
+                                           np.full(SETTLE_CYCLES, -1)]).astype(int).tolist()
+                    n_total = cycle + len(rseg)
+                    report("run", -1, n_total)
+                    for i in range(len(rseg)):
+                        do_cycle([x[i] for x in cq], [x[i] for x in cdq],
+                                 [x[i] for x in cddq], rseg[i], "run")
+                        if self._stop_reason:
+                            break
+                        if i % 250 == 0:
+                            report("run", rseg[i], n_total)
+                # 3. stop: normal shutdown or quick stop + disable
+                if self._stop_reason:
+                    status, reason = self._stop_reason
+                    fault_cycle = self._fault_cycle
+                    stop_sequence()
+                else:
+                    q_last = [counts[d] * kq[d] for d in range(n_col)]
+                    for _ in range(SHUTDOWN_CYCLES):
+                        do_cycle(q_last, zero, zero, -1, "shutdown")
+                stop_cycle = stopped_event()
+            except BUS_ERRORS as exc:
+                if not log_failed(exc):
+                    raise
+                # the log's file failed (disk full, file-size limit, I/O error), not the
+                # bus: the drives still listen. Go on without a log, and stop them.
+                err = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+                why = f"log write failed: {run_log.path}: {err}"
+                logger.error("%s", why)
+                log = NullLog(run_log.path)
+                log_state = log_sp = log_sp_axis = log_frames = log.state
+                status = "stopped"
+                if self._stop_reason:  # a fault was being handled: keep its cause first
+                    reason = f"{self._stop_reason[1]}; then {why}"
+                else:
+                    reason = why
+                    self._fault_cycle = cycle
+                self._stop_reason = (status, reason)
+                fault_cycle = self._fault_cycle
+                stop_sequence()
+                stop_cycle = stopped_event()
         except BUS_ERRORS as exc:  # the bus itself failed: nothing more can be sent
             status = "stopped"
             reason = f"bus lost: {type(exc).__name__}: {exc}".splitlines()[0]
@@ -593,13 +656,17 @@ class Engine(Supervisor):
                 net.notifier = can.Notifier(net.bus, net.listeners, net.NOTIFIER_CYCLE)
             if timing:
                 lateness = np.array([x[1] for x in timing])
-            log.close({
-                "status": status, "reason": reason, "cycles": str(cycle),
-                "fault_cycle": str(fault_cycle), "stop_cycle": str(stop_cycle),
-                "missed": str(missed), "wall_s": f"{wall:.3f}",
-                "sync_offset": str(sim_drive_cycle0),
-            })
+            try:
+                run_log.close({
+                    "status": status, "reason": reason, "cycles": str(cycle),
+                    "fault_cycle": str(fault_cycle), "stop_cycle": str(stop_cycle),
+                    "missed": str(missed), "wall_s": f"{wall:.3f}",
+                    "sync_offset": str(sim_drive_cycle0),
+                })
+            except OSError as exc:  # still failing: the file keeps its complete chunks
+                logger.error("%s: cannot close the run log: %s", run_log.path,
+                             exc.strerror or exc)
         return PayloadResult(index, float(payload.mass_kg),
-                             float(getattr(payload, "arm_m", math.nan)), log.path,
+                             float(getattr(payload, "arm_m", math.nan)), run_log.path,
                              cycle, status, reason, fault_cycle, stop_cycle, missed, wall,
                              lateness)

@@ -1,10 +1,25 @@
 """Safety supervision of the cycle loop: the stop sequence's controlwords and lengths, the
 supervision limits, the fault latch and the heartbeat watchdog (see :mod:`daq.runtime.engine`
-for where they act in a cycle)."""
+for where they act in a cycle); the signals that stop a run (:class:`StopSignals`) and what
+tells a failing log from a failing bus (:func:`log_failed`).
+
+Signals
+-------
+SIGINT (Ctrl-C), SIGTERM (``kill``, ``timeout``, ``systemctl stop``) and SIGHUP (the
+terminal closed) all stop a run the same way: while a payload runs, the engine finishes the
+cycle, quick-stops and disables the drives and closes the log (status "interrupted", the
+signal named); before or between payloads (start-up, the operator prompt) they raise
+:class:`RunInterrupted` at once (no drive is enabled then), which the runner's ``finally``
+cleans up after. The ``jointid`` exit code is 128 + the signal number (130, 143, 129).
+"""
 
 from __future__ import annotations
 
+import inspect
+import signal
+import threading
 import time
+from types import TracebackType
 from typing import Any
 
 from daq.protocol.cia402 import State, state_from_statusword
@@ -18,6 +33,90 @@ CW_DISABLE = 0x00
 CW_SHUTDOWN = 0x06
 DISABLE_MAX_CYCLES = 5
 SHUTDOWN_CYCLES = 3
+
+#: signals that stop a run with the stop sequence (the SIGINT path)
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+class RunInterrupted(KeyboardInterrupt):
+    """A stop signal arrived while no payload was running (start-up, operator prompt).
+
+    A :class:`KeyboardInterrupt`, so that every path that handles Ctrl-C handles it;
+    ``signum`` is the signal (the exit code is 128 + it).
+    """
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def interrupt_reason(name: str) -> str:
+    """The one-line reason of a run stopped by signal ``name`` ("SIGINT", "SIGTERM"...)."""
+    if name == "SIGINT":
+        return "interrupted by the operator (SIGINT)"
+    return f"interrupted by {name}"
+
+
+class StopSignals:
+    """SIGINT, SIGTERM and SIGHUP handlers for the duration of a campaign (main thread only;
+    elsewhere nothing is installed and Python's defaults stay).
+
+    While :attr:`engine` is set (a payload runs) a signal sets ``engine.interrupted`` to
+    its name and the engine stops the drives at the end of the cycle; otherwise it raises
+    :class:`RunInterrupted` in the main thread.
+    """
+
+    def __init__(self) -> None:
+        self.engine: Any = None
+        self._old: dict[int, Any] = {}
+
+    def install(self) -> None:
+        if threading.current_thread() is not threading.main_thread():
+            return
+        for s in STOP_SIGNALS:
+            self._old[s] = signal.signal(s, self._on_signal)
+
+    def restore(self) -> None:
+        old, self._old = self._old, {}
+        for s, h in old.items():
+            signal.signal(s, h)
+
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        if self.engine is not None:
+            if not self.engine.interrupted:
+                self.engine.interrupted = signal.Signals(signum).name
+            return
+        raise RunInterrupted(signum)
+
+
+_LOG_FILE = inspect.getfile(RunLog)
+
+
+def log_failed(exc: BaseException) -> bool:
+    """Whether ``exc`` (an OSError) was raised while writing the run log's file rather than
+    by the bus: its traceback passes through the log writer's module."""
+    tb: TracebackType | None = exc.__traceback__
+    while tb is not None:
+        if tb.tb_frame.f_code.co_filename == _LOG_FILE:
+            return True
+        tb = tb.tb_next
+    return False
+
+
+class NullLog:
+    """Stands in for a run log whose file failed (disk full, file-size limit): the stop
+    sequence runs the same cycles and logs nothing."""
+
+    start_ns = 0
+    cycle_ns = 0
+
+    def __init__(self, path: Any) -> None:
+        self.path = path
+
+    def _discard(self, *args: Any, **kwargs: Any) -> None:
+        return None
+
+    state = setpoint = setpoint_axis = frames = event = _add = _discard
 
 
 class Supervisor:
@@ -48,10 +147,29 @@ class Supervisor:
             self.tau_max.append(tau)
             self.tau_act_max.append(tau * 1.2)
 
+    def _drain(self) -> int:
+        """Take every frame already received (the main thread receives during a run): after
+        a stall of the master they wait in the queue, heartbeats among them; the newest
+        values win. Returns the number of frames taken."""
+        if not self.io.direct:
+            return 0
+        recv, on = self.bus.recv, self.io.on_message_received
+        n = 0
+        while (msg := recv(0.0)) is not None:
+            on(msg)
+            n += 1
+        return n
+
     def _check_heartbeats(self, cycle: int, t: float, log: RunLog) -> None:
         """Fault on the first drive whose heartbeat has been silent for more than
-        ``daq.heartbeat_timeout_s`` (the engine calls this every 16 cycles)."""
+        ``daq.heartbeat_timeout_s`` (the engine calls this every 16 cycles). Before blaming
+        a drive, the frames waiting in the receive queue are taken (:meth:`_drain`): a
+        master that stalled has not read the heartbeats that came meanwhile."""
         now = time.monotonic()
+        if any(self.drives[dd].cfg.heartbeat_ms and now - self.io.hb_time[dd]
+               > self.cfg.heartbeat_timeout_s for dd in range(len(self.drives))):
+            self._drain()
+            now = time.monotonic()
         for dd in range(len(self.drives)):
             if self.drives[dd].cfg.heartbeat_ms and (
                     now - self.io.hb_time[dd] > self.cfg.heartbeat_timeout_s):
