@@ -36,7 +36,9 @@ project's generic EDS, cyclic synchronous torque)::
     master_heartbeat_ms = 100     # master heartbeat period [ms] (0: none, drives not told);
                                   # each drive with 0x1016 watches it with a consumer time
                                   # of 3 x period + 100 ms and stops (fault) when it is lost
-    [daq.limits]                  # optional, tighter than the campaign's joint.limits
+    [daq.limits]                  # optional, tighter than the campaign's joint.limits;
+                                  # refused beyond the sanity bounds of joint limits
+                                  # (trajectories.campaign.SANE_LIMITS: 1e3 rad/s...)
     position = [-1.0, 1.0]
     max_velocity = 1.0
     max_torque = 500.0
@@ -73,6 +75,7 @@ import can.util
 from daq import ConfigError
 from daq.protocol.cia402 import Mode
 from trajectories import SchemaError
+from trajectories.campaign import SANE_LIMITS
 from trajectories.schema import ArrayOfTables, Field, Table
 
 MODES = {"cst": Mode.CYCLIC_SYNC_TORQUE, "csp": Mode.CYCLIC_SYNC_POSITION}
@@ -237,11 +240,14 @@ _DRIVE = Table(
     }
 )
 
-_LIMITS = Table(
+_LIMITS = Table(  # the sanity bounds of the joint limits (trajectories.campaign.SANE_LIMITS)
     {
-        "position": Field(float, list_of=True, min_len=2, required=False, unit="rad"),
-        "max_velocity": Field(float, gt=0, required=False, unit="rad/s"),
-        "max_torque": Field(float, gt=0, required=False, unit="N m"),
+        "position": Field(float, list_of=True, min_len=2, required=False,
+                          ge=-SANE_LIMITS["position"], le=SANE_LIMITS["position"], unit="rad"),
+        "max_velocity": Field(float, gt=0, le=SANE_LIMITS["max_velocity"], required=False,
+                              unit="rad/s"),
+        "max_torque": Field(float, gt=0, le=SANE_LIMITS["max_torque"], required=False,
+                            unit="N m"),
     },
     required=False,
 )
