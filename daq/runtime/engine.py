@@ -1,7 +1,7 @@
 """Plan execution: the engine that runs a planned campaign on CANopen drives, cycle by cycle.
 
-(Just past 600 lines: the cycle loop and the per-cycle exchange it drives; orchestration
-is runner.py, supervision safety.py.)
+(Past 600 lines: the cycle loop, the per-cycle exchange it drives and the stop paths of a
+run, one closure scope; orchestration is runner.py, supervision safety.py.)
 
 Orchestration (bus, start-up, payload loop, operator) is :mod:`daq.runtime.runner`; the stop
 sequence and the watchdogs are :mod:`daq.runtime.safety`; the frame bookkeeping is
@@ -43,16 +43,22 @@ Safety (every cycle)
 Position, velocity, torque limits (``[daq.limits]``, else the campaign's joint limits with
 5 % of the range / 20 % of the speed and torque as margins; the command itself is saturated
 at the torque limit), following error, TPDO missing for ``tpdo_timeout_cycles`` consecutive
-cycles, heartbeat silent for ``heartbeat_timeout_s``, EMCY, a drive leaving OPERATION ENABLED,
-SIGINT. On any of them the runner sends quick stop (controlword 0x0002) for
+cycles, heartbeat silent for ``heartbeat_timeout_s`` (the frames waiting in the receive queue
+are taken first: a stalled master has not read them), EMCY, a drive leaving OPERATION ENABLED,
+SIGINT/SIGTERM/SIGHUP, the master's own stall (paced: a cycle later than the RPDO deadline
+the drives were given, 3 cycles + 100 ms: "master stalled for X s"; with periodic SYNC the
+TPDOs queued meanwhile are taken at once, not logged as cycles), the run log's file failing
+(disk full, file-size limit: "log write failed: FILE: ...", the stop sequence then runs
+without a log). On any of them the runner sends quick stop (controlword 0x0002) for
 ``quick_stop_cycles`` cycles, then disable voltage (0x0000) until the drive reports SWITCH ON
 DISABLED (at most 5 more cycles). A command takes effect at the SYNC after it is sent, so the
 drive is quick-stopping (or off) from the 2nd SYNC after the detection and SWITCH ON DISABLED
 by the ``quick_stop_cycles + 2``-th (tested against the simulated drive's own record).
 Detection itself takes: the same cycle for limits, following error, EMCY and state changes;
 ``tpdo_timeout_cycles`` cycles for missing TPDOs; ``heartbeat_timeout_s`` of wall time for a
-lost heartbeat (checked every 16 cycles); at most one cycle for SIGINT. The run's log is
-closed properly and the result says why, in one line.
+lost heartbeat (checked every 16 cycles); at most one cycle for a signal. The run's log is
+closed properly and the result says why, in one line. EMCYs that arrive during the stop
+sequence are ``emcy`` events of the log (the first cause stays the reason).
 
 A dead master
 -------------
@@ -325,8 +331,7 @@ class Engine(Supervisor):
                     missed += 1
                 if late > cycle_s:
                     next_deadline = t_sync  # re-anchor: no catch-up burst
-                    if late > self.stall_s:
-                        stalled(late, t, mode)
+                    stalled(late, t, mode)
                 mask = self._exchange(cycle, next_deadline + 0.8 * cycle_s)
                 next_deadline += cycle_s
             elif self.periodic:
@@ -340,7 +345,7 @@ class Engine(Supervisor):
                     missed += 1
                     next_deadline = t_sync  # re-anchor on the SYNC train
                     late = 0.0 if cycle == 0 else late
-                    if late > self.stall_s:
+                    if late > cycle_s:
                         # the TPDOs queued during the stall are old: take them all, the
                         # newest values win, and the next cycle waits for a fresh SYNC's
                         stalled(late, t, mode)
@@ -500,9 +505,13 @@ class Engine(Supervisor):
             return True
 
         def stalled(late: float, t: float, mode: str) -> None:
-            """The master's own loop was late by ``late`` [s]: a stall (host, swap, SIGSTOP)
-            during which the drives ran on their last command; stop and say so."""
-            if mode in ("run", "enable") and not self._stop_reason:
+            """The master's own loop was late by ``late`` [s] (> 1 cycle): a stall (host,
+            swap, SIGSTOP) during which the drives ran on their last command. Beyond the
+            RPDO deadline the drives were given it stops the run; a shorter one names itself
+            in the reason of a fault found in the same or the next cycle (a drive that
+            faulted meanwhile: its EMCY waits in the queue)."""
+            self._stall = (cycle, late)
+            if late > self.stall_s and mode in ("run", "enable") and not self._stop_reason:
                 self._fault(f"master stalled for {late:.3f} s (the cycle loop was late by more "
                             f"than the drives' RPDO deadline {self.stall_s:.3f} s)", cycle, t,
                             log, -1, kind="watchdog")
@@ -518,6 +527,7 @@ class Engine(Supervisor):
 
         self._stop_reason: tuple[str, str] | None = None
         self._fault_cycle = -1
+        self._stall = (-2, 0.0)
         net = self.net
         if net.notifier is not None:  # the main thread receives itself during the run
             net.notifier.stop(1.0)
@@ -624,7 +634,6 @@ class Engine(Supervisor):
                 # bus: the drives still listen. Go on without a log, and stop them.
                 err = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
                 why = f"log write failed: {run_log.path}: {err}"
-                logger.error("%s", why)
                 log = NullLog(run_log.path)
                 log_state = log_sp = log_sp_axis = log_frames = log.state
                 status = "stopped"
@@ -663,9 +672,8 @@ class Engine(Supervisor):
                     "missed": str(missed), "wall_s": f"{wall:.3f}",
                     "sync_offset": str(sim_drive_cycle0),
                 })
-            except OSError as exc:  # still failing: the file keeps its complete chunks
-                logger.error("%s: cannot close the run log: %s", run_log.path,
-                             exc.strerror or exc)
+            except OSError:  # still failing (the reason says why): the file keeps its
+                pass  # complete chunks, read back up to there with a "truncated" warning
         return PayloadResult(index, float(payload.mass_kg),
                              float(getattr(payload, "arm_m", math.nan)), run_log.path,
                              cycle, status, reason, fault_cycle, stop_cycle, missed, wall,

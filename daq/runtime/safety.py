@@ -127,6 +127,8 @@ class Supervisor:
     path); the values they compare against are set here by :meth:`_init_limits`.
     """
 
+    _stall: tuple[int, float] = (-2, 0.0)  # (cycle, lateness [s]) of the last stall seen
+
     def _init_limits(self, limits: Any, cfg: DaqConfig) -> None:
         """Per drive: ``[daq.limits]``, else that drive's joint limits (``limits``, one
         :class:`trajectories.campaign.JointLimits` per drive) with 5 % of the range / 20 % of
@@ -193,6 +195,9 @@ class Supervisor:
                kind: str = "fault") -> None:
         if self._stop_reason:
             return
+        stall_cycle, late = self._stall
+        if 0 <= cycle - stall_cycle <= 1 and not why.startswith("master stalled"):
+            why = f"master stalled for {late:.3f} s, then {why}"
         self._stop_reason = ("stopped", why)
         self._fault_cycle = cycle
         log.event(cycle, t, kind, why, axis)
