@@ -9,7 +9,8 @@ A campaign file has either a ``[joint]`` table (the single-joint format of
 validates a robot campaign (pure: dictionaries in, frozen dataclasses out). Every mistake
 raises :class:`trajectories.SchemaError` with one line naming the source and the dotted key::
 
-    arm.toml: robot.joints.j2.limits.max_velocity: expected a number > 0 [rad/s or m/s], got -1
+    arm.toml: robot.joints.j2.limits.max_velocity: expected a number > 0 <= 1000 [rad/s or m/s],
+    got -1
 
 File format (units: SI joint side, [rad] or [m] for prismatic joints, seconds; full
 description in docs/campaign-robot.md)::
