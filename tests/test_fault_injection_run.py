@@ -27,7 +27,7 @@ import pytest
 from daq import ConfigError
 from daq.protocol.cia402 import State, state_from_statusword
 from daq.protocol.reader import read_run
-from daq.runtime import runfolder
+from daq.runtime import engine, runfolder, runner
 from daq.runtime.runner import run_campaign
 from daq.runtime.safety import DISABLE_MAX_CYCLES
 from sim_drivers.drive import SimulatedDrive
@@ -460,3 +460,62 @@ def test_stalled_master_names_itself_and_logs_no_stale_cycles(tmp_path, sync_sou
     emcy = [e for e in a.events if e["kind"] == "emcy"]
     assert emcy and all(e["cycle"] >= run.fault_cycle for e in emcy)
     assert rig.drive.state in (State.FAULT, State.SWITCH_ON_DISABLED)
+
+
+def test_sigterm_at_the_operator_prompt_interrupts_at_once(tmp_path):
+    """SIGTERM while `jointid run` waits for the operator to mount a payload (no drive
+    enabled): exit 143 at once, one line, no log of that payload."""
+    toml = write_campaign(tmp_path / "inj.toml", periods=1)
+    out = tmp_path / "out"
+    proc = subprocess.Popen(cli(str(toml), "--simulate", str(PLANT), "--out", str(out)),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            stdin=subprocess.PIPE, text=True, env=env())
+    try:
+        assert proc.stdout is not None
+        prompt = proc.stdout.read(len("Mount payload"))
+        assert prompt == "Mount payload", proc.communicate()[1][-1500:]
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 143, err
+    assert err.strip().splitlines()[-1] == "jointid run: interrupted: interrupted by SIGTERM"
+    assert "Traceback" not in err
+    assert list(out.glob("*.mcap")) == []
+
+
+def test_a_bug_in_the_cycle_loop_still_runs_the_stop_sequence(tmp_path, monkeypatch):
+    """An unexpected exception inside the cycle loop (a bug, injected into the position
+    controller at its 1500th call): the drive is quick-stopped and disabled (its own
+    record), the log is closed with the cause, and the exception is not hidden."""
+    calls = {"n": 0}
+    update = engine.PositionController.update
+
+    def buggy(self, *a):
+        calls["n"] += 1
+        if calls["n"] == 1500:
+            raise ZeroDivisionError("injected bug")
+        return update(self, *a)
+
+    monkeypatch.setattr(engine.PositionController, "update", buggy)
+    # run_campaign raises, so the drive's record is taken from the simulated rig itself
+    rigs = []
+    start_sim = runner.start_sim
+
+    def keep(*a, **k):
+        rigs.append(start_sim(*a, **k))
+        return rigs[-1]
+
+    monkeypatch.setattr(runner, "start_sim", keep)
+    with pytest.raises(ZeroDivisionError, match="injected bug"):
+        run_campaign(campaign(n_payloads=1), out_dir=tmp_path, simulate=default_plant(),
+                     yes=True)
+    a = read_run(tmp_path / "inj_payload0.mcap")
+    assert not a.truncated and a.metadata["result"]["status"] == "stopped"
+    assert a.metadata["result"]["reason"] == "internal error: ZeroDivisionError: injected bug"
+    f = int(a.metadata["result"]["fault_cycle"])
+    assert int(a.metadata["result"]["stop_cycle"]) > f
+    rec = rigs[0].drives[0].record
+    last_on, first_off = drive_stop_cycles(rec, f, 0)
+    assert last_on <= f + 1 and first_off <= f + QS + 2

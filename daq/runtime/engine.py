@@ -646,6 +646,20 @@ class Engine(Supervisor):
                 fault_cycle = self._fault_cycle
                 stop_sequence()
                 stop_cycle = stopped_event()
+            except Exception as exc:  # a bug in the loop: stop the drives, then let it out
+                status = "stopped"
+                reason = f"internal error: {type(exc).__name__}: {exc}".splitlines()[0]
+                if self._fault_cycle < 0:
+                    self._fault_cycle = cycle
+                fault_cycle = self._fault_cycle
+                self._stop_reason = (status, reason)
+                try:
+                    log.event(cycle, cycle * cycle_s, "fault", reason)
+                    stop_sequence()
+                    stop_cycle = stopped_event()
+                except Exception:  # noqa: BLE001, S110 - the same bug again: the drives'
+                    pass  # own watchdogs (RPDO timer, SYNC loss, heartbeat) remain
+                raise
         except BUS_ERRORS as exc:  # the bus itself failed: nothing more can be sent
             status = "stopped"
             reason = f"bus lost: {type(exc).__name__}: {exc}".splitlines()[0]
