@@ -46,7 +46,8 @@ at the torque limit), following error, TPDO missing for ``tpdo_timeout_cycles`` 
 cycles, heartbeat silent for ``heartbeat_timeout_s`` (the frames waiting in the receive queue
 are taken first: a stalled master has not read them), EMCY, a drive leaving OPERATION ENABLED,
 SIGINT/SIGTERM/SIGHUP, the master's own stall (paced: a cycle later than the RPDO deadline
-the drives were given, 3 cycles + 100 ms: "master stalled for X s"; with periodic SYNC the
+the drives were given, 3 cycles + 100 ms: "master stalled for X s"; a shorter stall of more
+than a cycle is named in the reason of an EMCY read right after it; with periodic SYNC the
 TPDOs queued meanwhile are taken at once, not logged as cycles), the run log's file failing
 (disk full, file-size limit: "log write failed: FILE: ...", the stop sequence then runs
 without a log). On any of them the runner sends quick stop (controlword 0x0002) for
@@ -508,8 +509,8 @@ class Engine(Supervisor):
             """The master's own loop was late by ``late`` [s] (> 1 cycle): a stall (host,
             swap, SIGSTOP) during which the drives ran on their last command. Beyond the
             RPDO deadline the drives were given it stops the run; a shorter one names itself
-            in the reason of a fault found in the same or the next cycle (a drive that
-            faulted meanwhile: its EMCY waits in the queue)."""
+            in the reason of an EMCY read in the same or the next cycle (a drive that
+            faulted meanwhile, e.g. on SYNC loss: its EMCY waited in the queue)."""
             self._stall = (cycle, late)
             if late > self.stall_s and mode in ("run", "enable") and not self._stop_reason:
                 self._fault(f"master stalled for {late:.3f} s (the cycle loop was late by more "

@@ -71,7 +71,8 @@ class FolderLock:
                 raise ConfigError(f"{self.folder}: another jointid run{holder} is writing to "
                                   f"this folder; wait for it to end or give another --out"
                                   ) from None
-            raise
+            raise ConfigError(f"{self.path}: cannot lock the run folder: "
+                              f"{exc.strerror or exc}") from None
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
         self._fd: int | None = fd

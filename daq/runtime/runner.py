@@ -451,7 +451,11 @@ def _run_locked(campaign: Any, cfg: DaqConfig, plan: Any, load: Any, out: Path, 
                 status, reason = "interrupted", interrupt_reason(engine.interrupted)
                 break
         clean = engine is None or not engine.bus_lost
+    except KeyboardInterrupt:  # a stop signal outside a payload run: no drive enabled
+        clean = engine is None or not engine.bus_lost
+        raise
     finally:
+        signals.closing = True  # a second signal does not cut the clean-up short
         if clean:  # normal end, drives disabled: stop watching the master, then go silent
             for d in drives:
                 d.clear_master_heartbeat()

@@ -62,12 +62,15 @@ class StopSignals:
     elsewhere nothing is installed and Python's defaults stay).
 
     While :attr:`engine` is set (a payload runs) a signal sets ``engine.interrupted`` to
-    its name and the engine stops the drives at the end of the cycle; otherwise it raises
-    :class:`RunInterrupted` in the main thread.
+    its name and the engine stops the drives at the end of the cycle; while :attr:`closing`
+    (the runner's clean-up) it is only noted; otherwise it raises :class:`RunInterrupted` in
+    the main thread.
     """
 
     def __init__(self) -> None:
         self.engine: Any = None
+        self.closing = False  # cleaning up: a signal is noted, nothing raised
+        self.received = ""
         self._old: dict[int, Any] = {}
 
     def install(self) -> None:
@@ -82,6 +85,9 @@ class StopSignals:
             signal.signal(s, h)
 
     def _on_signal(self, signum: int, frame: Any) -> None:
+        self.received = self.received or signal.Signals(signum).name
+        if self.closing:
+            return
         if self.engine is not None:
             if not self.engine.interrupted:
                 self.engine.interrupted = signal.Signals(signum).name
@@ -196,7 +202,9 @@ class Supervisor:
         if self._stop_reason:
             return
         stall_cycle, late = self._stall
-        if 0 <= cycle - stall_cycle <= 1 and not why.startswith("master stalled"):
+        if kind == "emcy" and 0 <= cycle - stall_cycle <= 1:
+            # a drive's reaction to the master's stall (SYNC loss, RPDO timeout) read when
+            # the master woke up: the stall is the cause
             why = f"master stalled for {late:.3f} s, then {why}"
         self._stop_reason = ("stopped", why)
         self._fault_cycle = cycle
