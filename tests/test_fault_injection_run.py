@@ -18,6 +18,7 @@ import sys
 import textwrap
 import time
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import can
@@ -34,6 +35,7 @@ from sim_drivers.drive import SimulatedDrive
 from sim_drivers.faults import FaultInjector
 from sim_drivers.plant import JointPlant
 from sim_drivers.plant_config import default_plant
+from tests.conftest import shared_path
 from trajectories import SchemaError
 from trajectories.campaign import MAX_PLAN_CYCLES, Campaign
 from trajectories.campaign_file import load_campaign
@@ -375,6 +377,37 @@ def test_absurd_limits_are_refused_naming_the_key(tmp_path, table, key, value):
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1 and f"{toml}: {table}.{key}: expected " in lines[0], p.stderr
     assert not (tmp_path / "o").exists()  # refused before anything was created
+
+
+@pytest.mark.parametrize("daq_limit, key", [
+    (40.0, "daq.limits.max_velocity"),
+    (None, "joint.limits.max_velocity"),
+])
+def test_velocity_watchdog_beyond_the_drives_max_motor_speed_is_refused(tmp_path, daq_limit,
+                                                                          key):
+    """Nanotec's EDS gives 0x6080 = 30000 rpm: at the plant's gear ratio 100 the joint can
+    turn at most 31.4 rad/s, so a watchdog at 40 rad/s (or 1.2 x 30 rad/s) could never trip:
+    refused after the start-up, before any drive is enabled, naming the key; accepted with
+    daq.allow_beyond_drive_limits = true."""
+    eds = shared_path("eds", "nanotec_c5-e-2-09.eds")
+    daq = {"drives": [{"node_id": 1, "eds": str(eds)}]}
+    if daq_limit is not None:
+        daq["limits"] = {"max_velocity": daq_limit}
+    c = campaign(daq, n_payloads=1)
+    if daq_limit is None:  # the joint's own limit: 30 rad/s, watchdog 1.2 x that
+        c = replace(c, joint=replace(c.joint, limits=replace(c.joint.limits,
+                                                             max_velocity=30.0)))
+    with pytest.raises(ConfigError) as e:
+        run_campaign(c, out_dir=tmp_path, simulate=default_plant(), yes=True)
+    msg = str(e.value)
+    assert msg.startswith(f"inj.toml: {key}: the velocity watchdog at ")
+    assert ("node 1's max motor speed 0x6080 = 30000 rpm in nanotec_c5-e-2-09.eds (31.42 "
+            "rad/s at the joint, gear ratio 100)") in msg
+    assert "daq.allow_beyond_drive_limits = true" in msg and "\n" not in msg
+    assert list(tmp_path.glob("*.mcap")) == []  # refused before any payload log
+    allowed = replace(c, daq={**c.daq, "allow_beyond_drive_limits": True})
+    r = run_campaign(allowed, out_dir=tmp_path / "allowed", simulate=default_plant(), yes=True)
+    assert r.ok, r.reason
 
 
 def test_campaign_size_is_bounded_before_planning(tmp_path):

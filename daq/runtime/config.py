@@ -36,6 +36,9 @@ project's generic EDS, cyclic synchronous torque)::
     master_heartbeat_ms = 100     # master heartbeat period [ms] (0: none, drives not told);
                                   # each drive with 0x1016 watches it with a consumer time
                                   # of 3 x period + 100 ms and stops (fault) when it is lost
+    allow_beyond_drive_limits = false  # true: accept a velocity watchdog above the drive's
+                                  # max motor speed 0x6080 (refused by default: it could
+                                  # never fire)
     [daq.limits]                  # optional, tighter than the campaign's joint.limits;
                                   # refused beyond the sanity bounds of joint limits
                                   # (trajectories.campaign.SANE_LIMITS: 1e3 rad/s...)
@@ -193,6 +196,7 @@ class DaqConfig:
     master_heartbeat_ms: int = 100
     from_can_config: tuple[str, ...] = ()  # keys taken from python-can's configuration
     gc_freeze: bool = True  # no automatic garbage collection during a payload run
+    allow_beyond_drive_limits: bool = False  # supervision limits above the drive's own
 
     @property
     def heartbeat_consumer_ms(self) -> int:
@@ -281,6 +285,7 @@ _DAQ = Table(
         "master_heartbeat_ms": Field(int, required=False, default=100, ge=0, le=20000,
                                      unit="ms"),
         "limits": _LIMITS,
+        "allow_beyond_drive_limits": Field(bool, required=False, default=False),
     }
 )
 
@@ -449,6 +454,7 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "", *,
         master_heartbeat_ms=d["master_heartbeat_ms"],
         from_can_config=from_pc,
         gc_freeze=d["gc_freeze"],
+        allow_beyond_drive_limits=d["allow_beyond_drive_limits"],
     )
 
 

@@ -386,6 +386,7 @@ def _run_locked(campaign: Any, cfg: DaqConfig, plan: Any, load: Any, out: Path, 
             logger.warning("%s", note)
         engine = Engine(campaign, cfg, network, io, drives, scalings, load, progress)
         engine.notes = notes
+        engine.check_drive_limits(tuple(j.name for j in campaign.joints) if robot else ())
         ask = prompt or prompt_payload
         for n_done, i in enumerate(todo):
             p = campaign.payloads[i]

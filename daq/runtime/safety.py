@@ -22,6 +22,7 @@ import time
 from types import TracebackType
 from typing import Any
 
+from daq import ConfigError
 from daq.protocol.cia402 import State, state_from_statusword
 
 from .config import DaqConfig
@@ -154,6 +155,41 @@ class Supervisor:
                               else 1.2 * lim.max_velocity)
             self.tau_max.append(tau)
             self.tau_act_max.append(tau * 1.2)
+
+    def check_drive_limits(self, robot_joints: tuple[str, ...] = ()) -> None:
+        """Refuse a velocity watchdog no drive could ever trip: ``v_max`` of a drive above its
+        max motor speed 0x6080 [rpm] (the EDS default) seen at the joint (rpm / 60 x 2 pi /
+        gear ratio), unless ``daq.allow_beyond_drive_limits``. Called after the start-up
+        (scaling known), before any drive is enabled.
+
+        Raises
+        ------
+        daq.ConfigError
+            Naming the key that set the limit (``daq.limits.max_velocity``,
+            ``joint.limits.max_velocity`` or ``robot.joints.<name>.limits.max_velocity``),
+            the drive and its 0x6080.
+        """
+        if self.cfg.allow_beyond_drive_limits:
+            return
+        for k, (d, sc) in enumerate(zip(self.drives, self.scalings, strict=True)):
+            rpm = d.max_motor_speed_rpm()
+            if rpm is None:
+                continue
+            joint_max = rpm / 60.0 * sc.rad_per_count * sc.encoder_counts_per_rev  # [rad/s]
+            if self.v_max[k] <= joint_max:
+                continue
+            if self.cfg.max_velocity is not None:
+                key = "daq.limits.max_velocity"
+            elif robot_joints:
+                key = f"robot.joints.{robot_joints[k]}.limits.max_velocity"
+            else:
+                key = "joint.limits.max_velocity"
+            raise ConfigError(
+                f"{self.cfg.source or 'campaign'}: {key}: the velocity watchdog at "
+                f"{self.v_max[k]:.4g} rad/s is beyond {d.name}'s max motor speed 0x6080 = "
+                f"{rpm} rpm in {d.cfg.eds.name} ({joint_max:.4g} rad/s at the joint, gear ratio "
+                f"{sc.gear_ratio:g}) and could never trip; lower it or set "
+                f"daq.allow_beyond_drive_limits = true")
 
     def _drain(self) -> int:
         """Take every frame already received (the main thread receives during a run): after
