@@ -354,16 +354,7 @@ def test_sigterm_and_sighup_stop_the_drive_and_close_the_log(tmp_path, sig):
 
 
 # ------------------------------------------------------------------ 3. limits and sizes
-@pytest.mark.parametrize("table, key, value", [
-    ("joint.limits", "max_velocity", "1e300"),
-    ("joint.limits", "max_torque", "1e12"),
-    ("joint.limits", "max_velocity", "inf"),
-    ("joint.limits", "max_acceleration", "nan"),
-    ("daq.limits", "max_velocity", "1e300"),
-    ("daq.limits", "max_torque", "inf"),
-])
-def test_absurd_limits_are_refused_naming_the_key(tmp_path, table, key, value):
-    toml = write_campaign(tmp_path / "inj.toml", periods=1)
+def _absurd(toml: Path, table: str, key: str, value: str) -> Path:
     text = toml.read_text()
     if table == "joint.limits":
         text = text.replace(f"{key} = ", f"# {key} = ").replace(
@@ -371,12 +362,37 @@ def test_absurd_limits_are_refused_naming_the_key(tmp_path, table, key, value):
     else:
         text += f"[daq.limits]\n{key} = {value}\n"
     toml.write_text(text)
+    return toml
+
+
+@pytest.mark.parametrize("table, key, value", [
+    ("joint.limits", "max_velocity", "1e300"),
+    ("joint.limits", "max_torque", "1e12"),
+    ("joint.limits", "position", "[-1e9, 1.0]"),
+    ("joint.limits", "max_velocity", "inf"),
+    ("joint.limits", "max_acceleration", "nan"),
+    ("daq.limits", "max_velocity", "1e300"),
+    ("daq.limits", "max_torque", "inf"),
+])
+def test_absurd_limits_are_refused_naming_the_key(tmp_path, table, key, value):
+    toml = _absurd(write_campaign(tmp_path / "inj.toml", periods=1), table, key, value)
+    with pytest.raises((SchemaError, ConfigError)) as e:
+        run_campaign(load_campaign(toml), out_dir=tmp_path / "o", simulate=default_plant(),
+                     yes=True)
+    msg = str(e.value)
+    where = f"{key}[0]" if key == "position" else key
+    assert msg.startswith(f"{toml}: {table}.{where}: expected ") and "\n" not in msg, msg
+    assert not (tmp_path / "o").exists()  # refused before anything was created
+
+
+def test_absurd_limit_cli_exit_code_and_one_line(tmp_path):
+    toml = _absurd(write_campaign(tmp_path / "inj.toml", periods=1), "daq.limits",
+                   "max_velocity", "1e300")
     p = subprocess.run(cli(str(toml), "--simulate", str(PLANT), "--out", str(tmp_path / "o"),
                            "--yes"), capture_output=True, text=True, timeout=120, env=env())
     assert p.returncode == 2, p.stderr
-    lines = p.stderr.strip().splitlines()
-    assert len(lines) == 1 and f"{toml}: {table}.{key}: expected " in lines[0], p.stderr
-    assert not (tmp_path / "o").exists()  # refused before anything was created
+    assert p.stderr.strip() == (f"jointid run: error: {toml}: daq.limits.max_velocity: "
+                                f"expected a number > 0 <= 1000 [rad/s], got 1e+300")
 
 
 @pytest.mark.parametrize("daq_limit, key", [
