@@ -568,3 +568,30 @@ def test_a_bug_in_the_cycle_loop_still_runs_the_stop_sequence(tmp_path, monkeypa
     rec = rigs[0].drives[0].record
     last_on, first_off = drive_stop_cycles(rec, f, 0)
     assert last_on <= f + 1 and first_off <= f + QS + 2
+
+
+def test_a_long_plan_starts_without_a_stall(tmp_path):
+    """A 10-minute plan (600 000 cycles) at 1 kHz paced: turning the plan into per-cycle
+    references used to happen between enabling and the first plan cycle (~0.15 s, longer
+    than the drives' RPDO deadline of 103 ms: the drive faulted, now the master would call
+    it a stall). It happens before the schedule starts; the run is interrupted (SIGINT to
+    this process) after 0.5 s of plan and ends as interrupted, nothing else."""
+    scaling = {"rated_torque_Nm": 5.0, "gear_ratio": 100.0, "encoder_counts_per_rev": 4096}
+    c = campaign({"clock": "paced", "tpdo_timeout_cycles": 50,
+                  "drives": [{"node_id": 1, "scaling": scaling}]}, periods=300, n_payloads=1)
+    rig = Rig(c)
+    sent: dict[str, int] = {}
+
+    def progress(p):
+        if p.phase == "run" and p.cycle >= 500 and "cycle" not in sent:
+            sent["cycle"] = p.cycle
+            os.kill(os.getpid(), signal.SIGINT)  # the runner's handler: stop at cycle end
+
+    try:
+        r = run_campaign(c, out_dir=tmp_path, yes=True, progress=progress)
+    finally:
+        rig.close()
+    assert r.status == "interrupted", r.reason
+    assert r.reason == "interrupted by the operator (SIGINT)"
+    assert sent["cycle"] <= r.runs[0].fault_cycle <= sent["cycle"] + 2
+    assert rig.drive.state is State.SWITCH_ON_DISABLED

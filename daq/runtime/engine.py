@@ -534,6 +534,14 @@ class Engine(Supervisor):
             net.notifier.stop(1.0)
             net.notifier = None
         io.direct = True
+        # the plan's columns as lists, before the schedule starts (at 600 000 cycles the
+        # conversion takes ~0.15 s: between enabling and the first plan cycle it would be a
+        # stall longer than the drives' RPDO deadline)
+        ref_q = np.asarray(ref.q, dtype=float).reshape(len(ref.q), -1)
+        plan_cols = (ref_q.T.tolist(),
+                     np.asarray(ref.dq, dtype=float).reshape(ref_q.shape).T.tolist(),
+                     np.asarray(ref.ddq, dtype=float).reshape(ref_q.shape).T.tolist(),
+                     np.asarray(ref.segment).astype(int).tolist())
         gc_was = gc.isenabled()
         if cfg.gc_freeze:  # no 10-50 ms full collection inside the run (bench_daq.py)
             gc.collect()
@@ -595,29 +603,31 @@ class Engine(Supervisor):
                                 f"({names})", cycle, cycle * cycle_s, log, -1)
                 if not self._stop_reason:
                     log.event(cycle, cycle * cycle_s, "info", "operation enabled")
-                    # 2. approach the plan start, then the plan, then settle
-                    ref_q = np.asarray(ref.q, dtype=float).reshape(len(ref.q), -1)
-                    ref_dq = np.asarray(ref.dq, dtype=float).reshape(ref_q.shape)
-                    ref_ddq = np.asarray(ref.ddq, dtype=float).reshape(ref_q.shape)
+                    # 2. approach the plan start, then the plan, then settle (columns of
+                    # the plan built before the schedule started: nothing long here)
                     lims = self.joint_limits[:n_col]
                     aq, adq, addq = _approach(q_hold, ref_q[0].tolist(),
                                               [lim.max_velocity for lim in lims],
                                               [lim.max_acceleration for lim in lims], cycle_s)
-                    settle = np.zeros((SETTLE_CYCLES, n_col))
-                    cq = np.concatenate([aq, ref_q, settle + ref_q[-1]]).T.tolist()
-                    cdq = np.concatenate([adq, ref_dq, settle]).T.tolist()
-                    cddq = np.concatenate([addq, ref_ddq, settle]).T.tolist()
-                    rseg = np.concatenate([np.full(len(aq), -1), ref.segment,
-                                           np.full(SETTLE_CYCLES, -1)]).astype(int).tolist()
-                    n_total = cycle + len(rseg)
+                    hold_end = [[x] * SETTLE_CYCLES for x in ref_q[-1].tolist()]
+                    still = [[0.0] * SETTLE_CYCLES for _ in range(n_col)]
+                    phases = ((aq.T.tolist(), adq.T.tolist(), addq.T.tolist(),
+                               [-1] * len(aq)), plan_cols,
+                              (hold_end, still, still, [-1] * SETTLE_CYCLES))
+                    n_total = cycle + sum(len(ph[3]) for ph in phases)
                     report("run", -1, n_total)
-                    for i in range(len(rseg)):
-                        do_cycle([x[i] for x in cq], [x[i] for x in cdq],
-                                 [x[i] for x in cddq], rseg[i], "run")
+                    i = 0
+                    for cq, cdq, cddq, rseg in phases:
+                        for k in range(len(rseg)):
+                            do_cycle([x[k] for x in cq], [x[k] for x in cdq],
+                                     [x[k] for x in cddq], rseg[k], "run")
+                            if self._stop_reason:
+                                break
+                            if i % 250 == 0:
+                                report("run", rseg[k], n_total)
+                            i += 1
                         if self._stop_reason:
                             break
-                        if i % 250 == 0:
-                            report("run", rseg[i], n_total)
                 # 3. stop: normal shutdown or quick stop + disable
                 if self._stop_reason:
                     status, reason = self._stop_reason
