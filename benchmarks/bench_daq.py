@@ -103,7 +103,7 @@ def lockstep(drives: int, cycles: int, repeat: int, out: Path, buses: int = 1
     rates, cpus, n = [], [], 0
     for _ in range(repeat):
         c0 = time.process_time()
-        r = run_campaign(c, out_dir=out, simulate=default_plant(), yes=True)
+        r = run_campaign(c, out_dir=out, simulate=default_plant(), yes=True, overwrite=True)
         cpu = time.process_time() - c0
         assert r.ok, r.reason
         run = r.runs[0]
@@ -136,7 +136,7 @@ def _busy_us(path: Path) -> np.ndarray:
 def paced(seconds: float, out: Path, **daq: object) -> dict[str, float]:
     """One simulated 1 kHz paced payload run (drive, plant and master in this process)."""
     c = campaign(seconds, 0.001, 1, clock="paced", **daq)
-    r = run_campaign(c, out_dir=out, simulate=default_plant(), yes=True)
+    r = run_campaign(c, out_dir=out, simulate=default_plant(), yes=True, overwrite=True)
     return _paced_stats(r.runs[0], r.status)
 
 
@@ -226,7 +226,8 @@ def cross_process(seconds: float, tmp: Path, sync_source: str, **daq: object
                              "gear_ratio": sc.gear_ratio,
                              "encoder_counts_per_rev": sc.encoder_counts_per_rev}}])
             proc = c_loop_start(int(seconds * 1000), tmp, prio)
-            r = run_campaign(c, out_dir=tmp / f"xproc_{sync_source}", prompt=lambda *a: True)
+            r = run_campaign(c, out_dir=tmp / f"xproc_{sync_source}", prompt=lambda *a: True,
+                             overwrite=True)
             cref = c_loop_result(proc) if proc is not None else None
             time.sleep(0.2)
         finally:

@@ -77,7 +77,7 @@ def test_console_entry_point_no_traceback(tmp_path):
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 2
     assert run.stderr.strip() == (
-        f"jointid plan: error: {f}: joint.limits.max_jerk: expected a number > 0 <= 1e+09 "
+        f"jointid plan: error: {f}: joint.limits.max_jerk: expected a number > 0 <= 1e+08 "
         "[rad/s^3 or m/s^3], got -1")
     missing = subprocess.run([sys.executable, "-m", "daq.app.cli", "plan",
                               str(tmp_path / "no.toml")],

@@ -47,17 +47,32 @@ File format (units: [rad] or [m] for prismatic joints, seconds)::
     center = 0.1
     periods = 2
     [daq]                             # optional, kept raw for daq/
+
+Sanity bounds (:data:`SANE_LIMITS`, :data:`MAX_PLAN_CYCLES`): a joint limit beyond them
+(|position| > 1e4, max_velocity > 1e3, max_acceleration > 1e5, max_jerk > 1e8, max_torque >
+1e6, joint side, SI units) is refused: such a value is a typo or switches a supervision check
+off (``max_velocity = 1e300`` makes the runner's velocity watchdog never fire). So is a plan
+of more than ``MAX_PLAN_CYCLES`` cycles per payload (estimated from the segments before
+anything is planned; the refusal names the segment's ``periods`` or ``cycles``).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 from . import SchemaError
 from .schema import ArrayOfTables, Field, Table, fail
+
+#: upper bounds of the joint limits (joint side; rad or m based): beyond them a value is a
+#: typo or turns a supervision check off; ``position`` bounds |min| and |max|
+SANE_LIMITS = {"position": 1e4, "max_velocity": 1e3, "max_acceleration": 1e5,
+               "max_jerk": 1e8, "max_torque": 1e6}
+#: the most cycles one payload run may plan (1 h at 1 kHz): the plan and the runner's
+#: per-cycle references are held in memory (about 150 bytes per cycle)
+MAX_PLAN_CYCLES = 3_600_000
 
 __all__ = [
     "Campaign",
@@ -350,6 +365,7 @@ class Campaign:
         segments: list[Segment] = []
         for i, s in enumerate(top["segments"]):
             segments.append(_segment(s, f"segments[{i}]", source, limits, rng))
+        check_plan_size(segments, limits, control.cycle_s, source)
         daq = top["daq"] if isinstance(top["daq"], dict) else {}
         return cls(
             name=top["name"],
@@ -360,6 +376,42 @@ class Campaign:
             daq=daq,
             source=source,
         )
+
+
+def min_duration_s(seg: Segment, limits: JointLimits) -> float:
+    """A lower bound of a segment's duration [s], cheap (before planning): a sine's periods,
+    a trapezoid's cruise moves (both directions at every speed) and dwells."""
+    if isinstance(seg, SineSegment):
+        return seg.periods / seg.frequency_hz
+    span = seg.range[1] - seg.range[0]
+    per_cycle = sum(2.0 * span / (v * limits.max_velocity) + 2.0 * seg.dwell_s
+                    for v in seg.speeds)
+    return seg.cycles * per_cycle
+
+
+def check_plan_size(segments: Sequence[Segment], limits: JointLimits, cycle_s: float,
+                    source: str) -> None:
+    """Refuse a campaign whose plan would exceed :data:`MAX_PLAN_CYCLES` cycles per payload
+    (before anything is planned or allocated).
+
+    Raises
+    ------
+    trajectories.SchemaError
+        Naming the longest segment's ``periods`` (sine) or ``cycles`` (trapezoid) and the
+        bound.
+    """
+    durations = [min_duration_s(s, limits) for s in segments]
+    n = sum(durations) / cycle_s
+    if n <= MAX_PLAN_CYCLES or not durations:
+        return
+    i = max(range(len(durations)), key=durations.__getitem__)
+    seg = segments[i]
+    key, value = (("periods", seg.periods) if isinstance(seg, SineSegment)
+                  else ("cycles", seg.cycles))
+    raise fail(source, f"segments[{i}].{key}",
+               f"a plan of at most {MAX_PLAN_CYCLES} cycles per payload "
+               f"({MAX_PLAN_CYCLES * cycle_s:g} s at cycle_s {cycle_s:g} s; this one: at "
+               f"least {n:.3g} cycles)", value)
 
 
 # --------------------------------------------------------------------------- schema
@@ -380,12 +432,14 @@ def _nonempty(value: str) -> str | None:
 
 _LIMITS = Table(
     {
-        "position": Field(float, list_of=True, min_len=2, unit="rad or m"),
-        "max_velocity": Field(float, gt=0, unit="rad/s or m/s"),
-        # upper bounds: sanity only (no joint comes near them); Ruckig fails on absurd values
-        "max_acceleration": Field(float, gt=0, le=1e9, unit="rad/s^2 or m/s^2"),
-        "max_jerk": Field(float, gt=0, le=1e9, unit="rad/s^3 or m/s^3"),
-        "max_torque": Field(float, gt=0, unit="N m or N"),
+        "position": Field(float, list_of=True, min_len=2, ge=-SANE_LIMITS["position"],
+                          le=SANE_LIMITS["position"], unit="rad or m"),
+        "max_velocity": Field(float, gt=0, le=SANE_LIMITS["max_velocity"],
+                              unit="rad/s or m/s"),
+        "max_acceleration": Field(float, gt=0, le=SANE_LIMITS["max_acceleration"],
+                                  unit="rad/s^2 or m/s^2"),
+        "max_jerk": Field(float, gt=0, le=SANE_LIMITS["max_jerk"], unit="rad/s^3 or m/s^3"),
+        "max_torque": Field(float, gt=0, le=SANE_LIMITS["max_torque"], unit="N m or N"),
     }
 )
 

@@ -9,7 +9,8 @@ A campaign file has either a ``[joint]`` table (the single-joint format of
 validates a robot campaign (pure: dictionaries in, frozen dataclasses out). Every mistake
 raises :class:`trajectories.SchemaError` with one line naming the source and the dotted key::
 
-    arm.toml: robot.joints.j2.limits.max_velocity: expected a number > 0 [rad/s or m/s], got -1
+    arm.toml: robot.joints.j2.limits.max_velocity: expected a number > 0 <= 1000 [rad/s or m/s],
+    got -1
 
 File format (units: SI joint side, [rad] or [m] for prismatic joints, seconds; full
 description in docs/campaign-robot.md)::
@@ -74,7 +75,7 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 # the single-joint schema's pieces: the same limits table, raw tables and name check
-from .campaign import _LIMITS, Campaign, JointLimits, _nonempty, _RawTable
+from .campaign import _LIMITS, MAX_PLAN_CYCLES, Campaign, JointLimits, _nonempty, _RawTable
 from .schema import ArrayOfTables, Field, Table, fail, unknown
 
 __all__ = [
@@ -624,6 +625,7 @@ def _build(raw: Mapping[str, Any], source: str) -> RobotCampaign:
     segments = tuple(_segment(s, f"segments[{i}]", source, joints_t, start)
                      for i, s in enumerate(top["segments"]))
     c = top["control"]
+    _check_plan_size(segments, joints_t, c["cycle_s"], source)
     return RobotCampaign(
         name=top["name"],
         robot_file=r["file"],
@@ -636,6 +638,37 @@ def _build(raw: Mapping[str, Any], source: str) -> RobotCampaign:
         daq=top["daq"] if isinstance(top["daq"], dict) else {},
         source=source,
     )
+
+
+def _check_plan_size(segments: tuple[RobotSegment, ...], joints: tuple[RobotJoint, ...],
+                     cycle_s: float, source: str) -> None:
+    """Refuse a plan of more than :data:`~trajectories.campaign.MAX_PLAN_CYCLES` cycles per
+    payload from a lower bound of each segment's duration (multisine: its periods;
+    trapezoid: its cruise moves and dwells; move: its dwells), before anything is planned."""
+    by_name = {j.name: j for j in joints}
+    durations = []
+    for seg in segments:
+        if isinstance(seg, MultisineSegment):
+            durations.append(seg.periods * seg.period_s)
+        elif isinstance(seg, TrapezoidSweep):
+            vmax = by_name[seg.joint].limits.max_velocity
+            span = seg.range[1] - seg.range[0]
+            durations.append(seg.cycles * sum(2.0 * span / (v * vmax) + 2.0 * seg.dwell_s
+                                              for v in seg.speeds))
+        else:
+            durations.append(len(seg.poses) * seg.dwell_s)
+    n = sum(durations) / cycle_s
+    if n <= MAX_PLAN_CYCLES:
+        return
+    i = max(range(len(durations)), key=durations.__getitem__)
+    seg = segments[i]
+    key, value = (("periods", seg.periods) if isinstance(seg, MultisineSegment) else
+                  ("cycles", seg.cycles) if isinstance(seg, TrapezoidSweep) else
+                  ("poses", len(seg.poses)))
+    raise fail(source, f"segments[{i}].{key}",
+               f"a plan of at most {MAX_PLAN_CYCLES} cycles per payload "
+               f"({MAX_PLAN_CYCLES * cycle_s:g} s at cycle_s {cycle_s:g} s; this one: at "
+               f"least {n:.3g} cycles)", value)
 
 
 def _fixed(source: str, key: str, values: tuple[float, ...], n: int) -> tuple:

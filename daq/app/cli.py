@@ -2,13 +2,15 @@
 
 Each subcommand module exposes ``register(subparsers)``, which adds its parser and sets
 ``func`` (a callable ``args -> int`` exit code). Errors raised on purpose by any of the
-packages (their exception roots) print one line on stderr and exit 2; Ctrl-C exits 130.
+packages (their exception roots) print one line on stderr and exit 2; Ctrl-C exits 130
+(SIGTERM 143, SIGHUP 129: ``jointid run`` stops the drives first).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 
 from threadpoolctl import threadpool_limits
@@ -83,9 +85,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         return int(args.func(args) or 0)
-    except KeyboardInterrupt:
-        print("jointid: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM/SIGHUP outside a payload run
+        signum = getattr(exc, "signum", signal.SIGINT)
+        print(f"jointid: interrupted ({signal.Signals(signum).name})", file=sys.stderr)
+        return 128 + int(signum)
     except BrokenPipeError:  # `jointid plan ... | head`: the reader left; not an error
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())

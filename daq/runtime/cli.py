@@ -5,13 +5,15 @@ A robot campaign (``[robot]``) drives one drive per moving joint from one coordi
 (:mod:`daq.runtime.robot_rig`). A single-joint campaign needs ``--simulate PLANT.toml``.
 
 Exit codes: 0 done, 2 configuration error or refusal (nothing moved), 3 a run stopped on a
-fault (the message names the cause; the log is kept), 130 interrupted (Ctrl-C), 1 the
+fault (the message names the cause; the log is kept), 130 / 143 / 129 interrupted by SIGINT
+(Ctrl-C) / SIGTERM / SIGHUP (the drives are quick-stopped and disabled first), 1 the
 operator declined a payload.
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from pathlib import Path
 
@@ -28,7 +30,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "run",
         help="run a campaign on CANopen drives (or simulated ones) and log it to MCAP",
-        description="Run the campaign's plan once per payload: one MCAP log per payload run.",
+        description="Run the campaign's plan once per payload: one MCAP log per payload run, "
+        "DIR/<name>_payload<k>.mcap, and DIR/<name>.state.json listing the completed payloads.",
+        epilog="One run per folder: DIR is locked (DIR/.jointid-run.lock) and a second run "
+        "into it is refused. A log is never replaced without a word: a log left in DIR "
+        "makes the run refuse unless --resume (completed payloads are skipped; the log of "
+        "one that did not complete is moved to DIR/partial/<name>_payload<k>.partial-<n>.mcap "
+        "before it runs again) or --overwrite. The state file only grows. Before each "
+        "payload the free space is checked against the log's expected size. Every end runs "
+        "the stop sequence (quick stop, disable): a fault, a failing log file (disk full: "
+        "'log write failed: FILE: ...', exit 3), SIGINT, SIGTERM or SIGHUP (exit 128 + "
+        "signal). Exit codes: 0 done, 1 the operator declined a payload, 2 refusal (nothing "
+        "moved), 3 stopped on a fault, 130/143/129 interrupted.",
     )
     p.add_argument("campaign", type=Path, help="campaign file (TOML)")
     p.add_argument("--simulate", type=Path, metavar="PLANT.toml", default=None, nargs="?",
@@ -40,7 +53,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--yes", "-y", action="store_true",
                    help="do not ask the operator to confirm each payload")
     p.add_argument("--resume", action="store_true",
-                   help="skip the payloads already completed in DIR")
+                   help="skip the payloads already completed in DIR; keep the log of a payload "
+                   "that did not complete under DIR/partial/ and run it again")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the logs of the payloads run (default: refuse)")
     p.add_argument("--payload", type=int, action="append", default=None, metavar="K",
                    help="run only payload K (0-based; repeatable)")
     p.add_argument("--quick", action="store_true",
@@ -77,11 +93,21 @@ def main(args: argparse.Namespace) -> int:
     try:
         result = run_campaign(campaign, out_dir=args.out, simulate=plant, yes=args.yes,
                               progress=show, payloads=args.payload, resume=args.resume,
-                              prompt=None if args.yes else ask)
+                              prompt=None if args.yes else ask, overwrite=args.overwrite)
     finally:
         bar.close()
     print(result.summary(), file=sys.stderr)
     if result.status == "done":
         return 0
     print(f"jointid run: {result.status}: {result.reason}", file=sys.stderr)
-    return {"stopped": 3, "interrupted": 130, "aborted": 1}.get(result.status, 3)
+    if result.status == "interrupted":
+        return 128 + _signal_number(result.reason)
+    return {"stopped": 3, "aborted": 1}.get(result.status, 3)
+
+
+def _signal_number(reason: str) -> int:
+    """The signal named in an "interrupted" reason (SIGINT when none is)."""
+    for s in (signal.SIGTERM, signal.SIGHUP):
+        if s.name in reason:
+            return int(s)
+    return int(signal.SIGINT)

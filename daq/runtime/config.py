@@ -36,7 +36,12 @@ project's generic EDS, cyclic synchronous torque)::
     master_heartbeat_ms = 100     # master heartbeat period [ms] (0: none, drives not told);
                                   # each drive with 0x1016 watches it with a consumer time
                                   # of 3 x period + 100 ms and stops (fault) when it is lost
-    [daq.limits]                  # optional, tighter than the campaign's joint.limits
+    allow_beyond_drive_limits = false  # true: accept a velocity watchdog above the drive's
+                                  # max motor speed 0x6080 (refused by default: it could
+                                  # never fire)
+    [daq.limits]                  # optional, tighter than the campaign's joint.limits;
+                                  # refused beyond the sanity bounds of joint limits
+                                  # (trajectories.campaign.SANE_LIMITS: 1e3 rad/s...)
     position = [-1.0, 1.0]
     max_velocity = 1.0
     max_torque = 500.0
@@ -73,6 +78,7 @@ import can.util
 from daq import ConfigError
 from daq.protocol.cia402 import Mode
 from trajectories import SchemaError
+from trajectories.campaign import SANE_LIMITS
 from trajectories.schema import ArrayOfTables, Field, Table
 
 MODES = {"cst": Mode.CYCLIC_SYNC_TORQUE, "csp": Mode.CYCLIC_SYNC_POSITION}
@@ -190,6 +196,7 @@ class DaqConfig:
     master_heartbeat_ms: int = 100
     from_can_config: tuple[str, ...] = ()  # keys taken from python-can's configuration
     gc_freeze: bool = True  # no automatic garbage collection during a payload run
+    allow_beyond_drive_limits: bool = False  # supervision limits above the drive's own
 
     @property
     def heartbeat_consumer_ms(self) -> int:
@@ -237,11 +244,14 @@ _DRIVE = Table(
     }
 )
 
-_LIMITS = Table(
+_LIMITS = Table(  # the sanity bounds of the joint limits (trajectories.campaign.SANE_LIMITS)
     {
-        "position": Field(float, list_of=True, min_len=2, required=False, unit="rad"),
-        "max_velocity": Field(float, gt=0, required=False, unit="rad/s"),
-        "max_torque": Field(float, gt=0, required=False, unit="N m"),
+        "position": Field(float, list_of=True, min_len=2, required=False,
+                          ge=-SANE_LIMITS["position"], le=SANE_LIMITS["position"], unit="rad"),
+        "max_velocity": Field(float, gt=0, le=SANE_LIMITS["max_velocity"], required=False,
+                              unit="rad/s"),
+        "max_torque": Field(float, gt=0, le=SANE_LIMITS["max_torque"], required=False,
+                            unit="N m"),
     },
     required=False,
 )
@@ -275,6 +285,7 @@ _DAQ = Table(
         "master_heartbeat_ms": Field(int, required=False, default=100, ge=0, le=20000,
                                      unit="ms"),
         "limits": _LIMITS,
+        "allow_beyond_drive_limits": Field(bool, required=False, default=False),
     }
 )
 
@@ -443,6 +454,7 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "", *,
         master_heartbeat_ms=d["master_heartbeat_ms"],
         from_can_config=from_pc,
         gc_freeze=d["gc_freeze"],
+        allow_beyond_drive_limits=d["allow_beyond_drive_limits"],
     )
 
 

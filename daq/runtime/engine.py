@@ -1,7 +1,7 @@
 """Plan execution: the engine that runs a planned campaign on CANopen drives, cycle by cycle.
 
-(Just past 600 lines: the cycle loop and the per-cycle exchange it drives; orchestration
-is runner.py, supervision safety.py.)
+(Past 600 lines: the cycle loop, the per-cycle exchange it drives and the stop paths of a
+run, one closure scope; orchestration is runner.py, supervision safety.py.)
 
 Orchestration (bus, start-up, payload loop, operator) is :mod:`daq.runtime.runner`; the stop
 sequence and the watchdogs are :mod:`daq.runtime.safety`; the frame bookkeeping is
@@ -43,16 +43,23 @@ Safety (every cycle)
 Position, velocity, torque limits (``[daq.limits]``, else the campaign's joint limits with
 5 % of the range / 20 % of the speed and torque as margins; the command itself is saturated
 at the torque limit), following error, TPDO missing for ``tpdo_timeout_cycles`` consecutive
-cycles, heartbeat silent for ``heartbeat_timeout_s``, EMCY, a drive leaving OPERATION ENABLED,
-SIGINT. On any of them the runner sends quick stop (controlword 0x0002) for
+cycles, heartbeat silent for ``heartbeat_timeout_s`` (the frames waiting in the receive queue
+are taken first: a stalled master has not read them), EMCY, a drive leaving OPERATION ENABLED,
+SIGINT/SIGTERM/SIGHUP, the master's own stall (paced: a cycle later than the RPDO deadline
+the drives were given, 3 cycles + 100 ms: "master stalled for X s"; a shorter stall of more
+than a cycle is named in the reason of an EMCY read right after it; with periodic SYNC the
+TPDOs queued meanwhile are taken at once, not logged as cycles), the run log's file failing
+(disk full, file-size limit: "log write failed: FILE: ...", the stop sequence then runs
+without a log). On any of them the runner sends quick stop (controlword 0x0002) for
 ``quick_stop_cycles`` cycles, then disable voltage (0x0000) until the drive reports SWITCH ON
 DISABLED (at most 5 more cycles). A command takes effect at the SYNC after it is sent, so the
 drive is quick-stopping (or off) from the 2nd SYNC after the detection and SWITCH ON DISABLED
 by the ``quick_stop_cycles + 2``-th (tested against the simulated drive's own record).
 Detection itself takes: the same cycle for limits, following error, EMCY and state changes;
 ``tpdo_timeout_cycles`` cycles for missing TPDOs; ``heartbeat_timeout_s`` of wall time for a
-lost heartbeat (checked every 16 cycles); at most one cycle for SIGINT. The run's log is
-closed properly and the result says why, in one line.
+lost heartbeat (checked every 16 cycles); at most one cycle for a signal. The run's log is
+closed properly and the result says why, in one line. EMCYs that arrive during the stop
+sequence are ``emcy`` events of the log (the first cause stays the reason).
 
 A dead master
 -------------
@@ -88,7 +95,7 @@ from trajectories.robot_campaign import RobotCampaign
 from .busload import BusLoad
 from .config import DaqConfig, Scaling
 from .cycle_io import BUS_ERRORS, CycleIO
-from .master import TPDO1_STRUCT, TPDO2_STRUCT, MasterDrive
+from .master import TPDO1_STRUCT, TPDO2_STRUCT, MasterDrive, rpdo_timeout_ms
 from .mcaplog import RunLog
 from .results import PayloadResult, Progress
 from .safety import (
@@ -98,7 +105,10 @@ from .safety import (
     CW_SHUTDOWN,
     DISABLE_MAX_CYCLES,
     SHUTDOWN_CYCLES,
+    NullLog,
     Supervisor,
+    interrupt_reason,
+    log_failed,
 )
 
 logger = logging.getLogger(__name__)
@@ -178,7 +188,10 @@ class Engine(Supervisor):
         self.cycle_s = campaign.cycle_s
         self.paced = cfg.clock == "paced"
         self.periodic = self.paced and cfg.sync_source == "periodic"
-        self.interrupted = False
+        self.interrupted = ""  # the name of the stop signal received (SIGINT, SIGTERM...)
+        # paced: a SYNC later than this [s] is the master's own stall: the RPDO deadline it
+        # gave the drives (0x1400.5, 3 cycles + 100 ms), after which a drive faults anyway
+        self.stall_s = rpdo_timeout_ms(campaign.cycle_s, True) / 1000.0
         self.robot = isinstance(campaign, RobotCampaign)
         if self.robot:
             if len(campaign.joints) != len(drives):
@@ -319,6 +332,7 @@ class Engine(Supervisor):
                     missed += 1
                 if late > cycle_s:
                     next_deadline = t_sync  # re-anchor: no catch-up burst
+                    stalled(late, t, mode)
                 mask = self._exchange(cycle, next_deadline + 0.8 * cycle_s)
                 next_deadline += cycle_s
             elif self.periodic:
@@ -332,16 +346,27 @@ class Engine(Supervisor):
                     missed += 1
                     next_deadline = t_sync  # re-anchor on the SYNC train
                     late = 0.0 if cycle == 0 else late
+                    if late > cycle_s:
+                        # the TPDOs queued during the stall are old: take them all, the
+                        # newest values win, and the next cycle waits for a fresh SYNC's
+                        stalled(late, t, mode)
+                        self._drain()
+                        mask = io.full if io.mask == io.full else mask
                 next_deadline += cycle_s
             else:
                 t_sync = late = 0.0
                 mask = self._exchange(cycle, 0.0)
             stopping = mode != "run" and mode != "enable"
             tpdo_fault = ""
-            if io.emcy and not stopping:  # before the state checks: name the first cause
-                dd, code, reg = io.emcy.pop(0)
-                self._fault(f"{self.drives[dd].name}: EMCY 0x{code:04X} (error register "
-                            f"0x{reg:02X})", cycle, t, log, dd, kind="emcy")
+            if io.emcy:  # before the state checks: the first one names the cause
+                for dd, code, reg in io.emcy:  # every one is an event, also while stopping
+                    why = (f"{self.drives[dd].name}: EMCY 0x{code:04X} (error register "
+                           f"0x{reg:02X})")
+                    if not stopping and not self._stop_reason:
+                        self._fault(why, cycle, t, log, dd, kind="emcy")
+                    else:
+                        log.event(cycle, t, "emcy", why, dd)
+                io.emcy.clear()
             for d in range(n_dr):
                 flags = FLAG_STOPPING if stopping else 0
                 b1 = 1 << (2 * d)
@@ -466,9 +491,9 @@ class Engine(Supervisor):
                     hb_check = 0
                     self._check_heartbeats(cycle, t, log)
                 if self.interrupted and not self._stop_reason:
-                    self._stop_reason = ("interrupted", "interrupted by the operator (SIGINT)")
+                    self._stop_reason = ("interrupted", interrupt_reason(self.interrupted))
                     self._fault_cycle = cycle
-                    log.event(cycle, t, "operator", "SIGINT: stopping")
+                    log.event(cycle, t, "operator", f"{self.interrupted}: stopping")
             cycle += 1
 
         def enabled_all() -> bool:
@@ -480,19 +505,43 @@ class Engine(Supervisor):
                     return False
             return True
 
+        def stalled(late: float, t: float, mode: str) -> None:
+            """The master's own loop was late by ``late`` [s] (> 1 cycle): a stall (host,
+            swap, SIGSTOP) during which the drives ran on their last command. Beyond the
+            RPDO deadline the drives were given it stops the run; a shorter one names itself
+            in the reason of an EMCY read in the same or the next cycle (a drive that
+            faulted meanwhile, e.g. on SYNC loss: its EMCY waited in the queue)."""
+            self._stall = (cycle, late)
+            if late > self.stall_s and mode in ("run", "enable") and not self._stop_reason:
+                self._fault(f"master stalled for {late:.3f} s (the cycle loop was late by more "
+                            f"than the drives' RPDO deadline {self.stall_s:.3f} s)", cycle, t,
+                            log, -1, kind="watchdog")
+
         def report(phase: str, seg: int, n_total: int) -> None:
             if self.progress is not None:
                 name = seg_names[seg] if 0 <= seg < len(seg_names) else phase
-                self.progress(Progress(index, len(c.payloads), name, cycle, n_total,
-                                       self.load.share, missed, phase))
+                try:
+                    self.progress(Progress(index, len(c.payloads), name, cycle, n_total,
+                                           self.load.share, missed, phase))
+                except Exception:  # noqa: BLE001 - e.g. EIO on a closed terminal (SIGHUP)
+                    self.progress = None  # the display is gone; the run goes on
 
         self._stop_reason: tuple[str, str] | None = None
         self._fault_cycle = -1
+        self._stall = (-2, 0.0)
         net = self.net
         if net.notifier is not None:  # the main thread receives itself during the run
             net.notifier.stop(1.0)
             net.notifier = None
         io.direct = True
+        # the plan's columns as lists, before the schedule starts (at 600 000 cycles the
+        # conversion takes ~0.15 s: between enabling and the first plan cycle it would be a
+        # stall longer than the drives' RPDO deadline)
+        ref_q = np.asarray(ref.q, dtype=float).reshape(len(ref.q), -1)
+        plan_cols = (ref_q.T.tolist(),
+                     np.asarray(ref.dq, dtype=float).reshape(ref_q.shape).T.tolist(),
+                     np.asarray(ref.ddq, dtype=float).reshape(ref_q.shape).T.tolist(),
+                     np.asarray(ref.segment).astype(int).tolist())
         gc_was = gc.isenabled()
         if cfg.gc_freeze:  # no 10-50 ms full collection inside the run (bench_daq.py)
             gc.collect()
@@ -510,70 +559,118 @@ class Engine(Supervisor):
             log.event(0, 0.0, "info", f"SYNC from send_periodic ({type(sync_task).__name__})")
         for note in self.notes:
             log.event(0, 0.0, "warning", note)
-        try:
-            # 1. enable, holding the position measured at the first answer
-            z0 = [0.0] * n_dr
-            do_cycle(z0, z0, z0, -1, "disable")  # first SYNC: read the drives' state
-            n_col = n_dr if robot else 1
-            q_hold = [counts[d] * kq[d] for d in range(n_col)]
-            zero = [0.0] * n_col
-            log.event(cycle, cycle * cycle_s, "info", "start position "
-                      + ", ".join(f"{x:.5f}" for x in q_hold))
-            for _ in range(ENABLE_MAX_CYCLES):
-                if enabled_all() or self._stop_reason:
-                    break
-                do_cycle(q_hold, zero, zero, -1, "enable")
-            if not enabled_all() and not self._stop_reason:
-                names = ", ".join(f"{d.name} {state_from_statusword(sw[k]).name}"
-                                  for k, d in enumerate(self.drives))
-                self._fault(f"drives not enabled after {ENABLE_MAX_CYCLES} cycles ({names})",
-                            cycle, cycle * cycle_s, log, -1)
-            if not self._stop_reason:
-                log.event(cycle, cycle * cycle_s, "info", "operation enabled")
-                # 2. approach the plan start, then the plan, then settle
-                ref_q = np.asarray(ref.q, dtype=float).reshape(len(ref.q), -1)
-                ref_dq = np.asarray(ref.dq, dtype=float).reshape(ref_q.shape)
-                ref_ddq = np.asarray(ref.ddq, dtype=float).reshape(ref_q.shape)
-                lims = self.joint_limits[:n_col]
-                aq, adq, addq = _approach(q_hold, ref_q[0].tolist(),
-                                          [lim.max_velocity for lim in lims],
-                                          [lim.max_acceleration for lim in lims], cycle_s)
-                settle = np.zeros((SETTLE_CYCLES, n_col))
-                cq = np.concatenate([aq, ref_q, settle + ref_q[-1]]).T.tolist()
-                cdq = np.concatenate([adq, ref_dq, settle]).T.tolist()
-                cddq = np.concatenate([addq, ref_ddq, settle]).T.tolist()
-                rseg = np.concatenate([np.full(len(aq), -1), ref.segment,
-                                       np.full(SETTLE_CYCLES, -1)]).astype(int).tolist()
-                n_total = cycle + len(rseg)
-                report("run", -1, n_total)
-                for i in range(len(rseg)):
-                    do_cycle([x[i] for x in cq], [x[i] for x in cdq], [x[i] for x in cddq],
-                             rseg[i], "run")
-                    if self._stop_reason:
-                        break
-                    if i % 250 == 0:
-                        report("run", rseg[i], n_total)
-            # 3. stop: normal shutdown or quick stop + disable
+        n_col = n_dr if robot else 1
+        zero = [0.0] * n_col
+        run_log = log
+
+        def stop_sequence() -> None:
+            """Quick stop for ``quick_stop_cycles``, then disable voltage until every drive
+            reports it (at most ``DISABLE_MAX_CYCLES`` + 1 cycles)."""
             q_last = [counts[d] * kq[d] for d in range(n_col)]
-            if self._stop_reason:
-                status, reason = self._stop_reason
-                fault_cycle = self._fault_cycle
-                report("stop", -1, cycle)
-                for _ in range(cfg.quick_stop_cycles):
-                    do_cycle(q_last, zero, zero, -1, "quick_stop")
-                for _ in range(DISABLE_MAX_CYCLES + 1):
-                    do_cycle(q_last, zero, zero, -1, "disable")
-                    if self._all_off(sw):
-                        break
-            else:
-                for _ in range(SHUTDOWN_CYCLES):
-                    do_cycle(q_last, zero, zero, -1, "shutdown")
+            report("stop", -1, cycle)
+            for _ in range(cfg.quick_stop_cycles):
+                do_cycle(q_last, zero, zero, -1, "quick_stop")
+            for _ in range(DISABLE_MAX_CYCLES + 1):
+                do_cycle(q_last, zero, zero, -1, "disable")
+                if self._all_off(sw):
+                    break
+
+        def stopped_event() -> int:
+            """Log whether the drives confirmed the stop; the stop cycle (-1: not confirmed)."""
             off = self._all_off(sw)
-            stop_cycle = cycle - 1 if off else -1
             msg = ("drives disabled" if off else "drives did not confirm the stop: "
                    + ", ".join(f"{d.name} sw=0x{sw[k]:04X}" for k, d in enumerate(self.drives)))
-            log.event(stop_cycle if off else cycle - 1, (cycle - 1) * cycle_s,
+            log.event(cycle - 1, (cycle - 1) * cycle_s,
                       "stop" if status != "done" else "info", msg)
+            return cycle - 1 if off else -1
+
+        try:
+            try:
+                # 1. enable, holding the position measured at the first answer
+                z0 = [0.0] * n_dr
+                do_cycle(z0, z0, z0, -1, "disable")  # first SYNC: read the drives' state
+                q_hold = [counts[d] * kq[d] for d in range(n_col)]
+                log.event(cycle, cycle * cycle_s, "info", "start position "
+                          + ", ".join(f"{x:.5f}" for x in q_hold))
+                for _ in range(ENABLE_MAX_CYCLES):
+                    if enabled_all() or self._stop_reason:
+                        break
+                    do_cycle(q_hold, zero, zero, -1, "enable")
+                if not enabled_all() and not self._stop_reason:
+                    names = ", ".join(f"{d.name} {state_from_statusword(sw[k]).name}"
+                                      for k, d in enumerate(self.drives))
+                    self._fault(f"drives not enabled after {ENABLE_MAX_CYCLES} cycles "
+                                f"({names})", cycle, cycle * cycle_s, log, -1)
+                if not self._stop_reason:
+                    log.event(cycle, cycle * cycle_s, "info", "operation enabled")
+                    # 2. approach the plan start, then the plan, then settle (columns of
+                    # the plan built before the schedule started: nothing long here)
+                    lims = self.joint_limits[:n_col]
+                    aq, adq, addq = _approach(q_hold, ref_q[0].tolist(),
+                                              [lim.max_velocity for lim in lims],
+                                              [lim.max_acceleration for lim in lims], cycle_s)
+                    hold_end = [[x] * SETTLE_CYCLES for x in ref_q[-1].tolist()]
+                    still = [[0.0] * SETTLE_CYCLES for _ in range(n_col)]
+                    phases = ((aq.T.tolist(), adq.T.tolist(), addq.T.tolist(),
+                               [-1] * len(aq)), plan_cols,
+                              (hold_end, still, still, [-1] * SETTLE_CYCLES))
+                    n_total = cycle + sum(len(ph[3]) for ph in phases)
+                    report("run", -1, n_total)
+                    i = 0
+                    for cq, cdq, cddq, rseg in phases:
+                        for k in range(len(rseg)):
+                            do_cycle([x[k] for x in cq], [x[k] for x in cdq],
+                                     [x[k] for x in cddq], rseg[k], "run")
+                            if self._stop_reason:
+                                break
+                            if i % 250 == 0:
+                                report("run", rseg[k], n_total)
+                            i += 1
+                        if self._stop_reason:
+                            break
+                # 3. stop: normal shutdown or quick stop + disable
+                if self._stop_reason:
+                    status, reason = self._stop_reason
+                    fault_cycle = self._fault_cycle
+                    stop_sequence()
+                else:
+                    q_last = [counts[d] * kq[d] for d in range(n_col)]
+                    for _ in range(SHUTDOWN_CYCLES):
+                        do_cycle(q_last, zero, zero, -1, "shutdown")
+                stop_cycle = stopped_event()
+            except BUS_ERRORS as exc:
+                if not log_failed(exc):
+                    raise
+                # the log's file failed (disk full, file-size limit, I/O error), not the
+                # bus: the drives still listen. Go on without a log, and stop them.
+                err = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+                why = f"log write failed: {run_log.path}: {err}"
+                log = NullLog(run_log.path)
+                log_state = log_sp = log_sp_axis = log_frames = log.state
+                status = "stopped"
+                if self._stop_reason:  # a fault was being handled: keep its cause first
+                    reason = f"{self._stop_reason[1]}; then {why}"
+                else:
+                    reason = why
+                    self._fault_cycle = cycle
+                self._stop_reason = (status, reason)
+                fault_cycle = self._fault_cycle
+                stop_sequence()
+                stop_cycle = stopped_event()
+            except Exception as exc:  # a bug in the loop: stop the drives, then let it out
+                status = "stopped"
+                reason = f"internal error: {type(exc).__name__}: {exc}".splitlines()[0]
+                if self._fault_cycle < 0:
+                    self._fault_cycle = cycle
+                fault_cycle = self._fault_cycle
+                self._stop_reason = (status, reason)
+                try:
+                    log.event(cycle, cycle * cycle_s, "fault", reason)
+                    stop_sequence()
+                    stop_cycle = stopped_event()
+                except Exception:  # noqa: BLE001, S110 - the same bug again: the drives'
+                    pass  # own watchdogs (RPDO timer, SYNC loss, heartbeat) remain
+                raise
         except BUS_ERRORS as exc:  # the bus itself failed: nothing more can be sent
             status = "stopped"
             reason = f"bus lost: {type(exc).__name__}: {exc}".splitlines()[0]
@@ -593,13 +690,16 @@ class Engine(Supervisor):
                 net.notifier = can.Notifier(net.bus, net.listeners, net.NOTIFIER_CYCLE)
             if timing:
                 lateness = np.array([x[1] for x in timing])
-            log.close({
-                "status": status, "reason": reason, "cycles": str(cycle),
-                "fault_cycle": str(fault_cycle), "stop_cycle": str(stop_cycle),
-                "missed": str(missed), "wall_s": f"{wall:.3f}",
-                "sync_offset": str(sim_drive_cycle0),
-            })
+            try:
+                run_log.close({
+                    "status": status, "reason": reason, "cycles": str(cycle),
+                    "fault_cycle": str(fault_cycle), "stop_cycle": str(stop_cycle),
+                    "missed": str(missed), "wall_s": f"{wall:.3f}",
+                    "sync_offset": str(sim_drive_cycle0),
+                })
+            except OSError:  # still failing (the reason says why): the file keeps its
+                pass  # complete chunks, read back up to there with a "truncated" warning
         return PayloadResult(index, float(payload.mass_kg),
-                             float(getattr(payload, "arm_m", math.nan)), log.path,
+                             float(getattr(payload, "arm_m", math.nan)), run_log.path,
                              cycle, status, reason, fault_cycle, stop_cycle, missed, wall,
                              lateness)

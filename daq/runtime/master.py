@@ -76,6 +76,7 @@ OBJECT_NAMES = {
     0x6071: "target torque",
     0x6076: "motor rated torque",
     0x6077: "torque actual value",
+    0x6080: "max motor speed",
     0x607A: "target position",
     0x6502: "supported drive modes",
 }
@@ -472,6 +473,18 @@ class MasterDrive:
         x = min(32767, int(math.ceil(max_torque / self.scaling.torque_per_unit)))
         self.download(0x6072, 0, x, 2, "max torque")
         return x
+
+    def max_motor_speed_rpm(self) -> int | None:
+        """The max motor speed 0x6080 [rpm] (CiA 402) the drive's EDS gives as default; None
+        when the EDS has no 0x6080, no default, or "no limit" (0 or 0xFFFFFFFF). (The EDS,
+        not the drive: some EDS declare the object without a value, and a simulated drive
+        then serves a placeholder.)"""
+        if 0x6080 not in self.od:
+            return None
+        rpm = getattr(self.od[0x6080], "default", None)
+        if not isinstance(rpm, int) or isinstance(rpm, bool):
+            return None
+        return rpm if 0 < rpm < 0xFFFFFFFF else None
 
     def read_scaling(self) -> Scaling:
         """The scaling from the campaign, else from the drive (0x6076, 0x6091, 0x608F).

@@ -11,7 +11,6 @@ import os
 import re
 import signal
 import sys
-import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -31,7 +30,7 @@ from .buses import open_buses
 from .busload import bus_loads, check_loads
 from .config import DaqConfig, Scaling, parse_daq, with_scaling
 from .cycle_io import BUS_ERRORS, CycleIO
-from .engine import Engine
+from .engine import ENABLE_MAX_CYCLES, SETTLE_CYCLES, Engine
 from .master import MasterDrive, MasterHeartbeat, pdo_lengths, rpdo_timeout_ms
 from .mcaplog import RunLog
 from .results import CampaignResult, PayloadResult, Progress
@@ -43,6 +42,18 @@ from .robot_rig import (
     start_arm_sim,
     with_scalings,
 )
+from .runfolder import (
+    FolderLock,
+    check_free_space,
+    check_logs,
+    create_log_file,
+    expected_log_bytes,
+    keep_partial,
+    log_path,
+    read_state,
+    write_state,
+)
+from .safety import StopSignals, interrupt_reason
 from .simrig import SimRig, plant_scaling, start_sim
 
 __all__ = ["CampaignResult", "PayloadResult", "Progress", "file_stem", "run_campaign"]
@@ -86,20 +97,6 @@ def file_stem(name: str) -> str:
 
 def _state_path(out_dir: Path, name: str) -> Path:
     return out_dir / f"{file_stem(name)}.state.json"
-
-
-def _read_state(p: Path) -> set[int]:
-    try:
-        raw = json.loads(p.read_text())
-        return {int(i) for i in raw.get("completed", [])}
-    except (OSError, ValueError, TypeError):
-        return set()
-
-
-def _write_state(p: Path, name: str, completed: set[int]) -> None:
-    tmp = p.with_suffix(".tmp")
-    tmp.write_text(json.dumps({"campaign": name, "completed": sorted(completed)}))
-    os.replace(tmp, p)
 
 
 def _metadata(campaign: Any, cfg: DaqConfig, plan: Any, index: int, payload: Any,
@@ -220,6 +217,7 @@ def run_campaign(
     resume: bool = False,
     fault_injectors: dict[int, Any] | None = None,
     prompt: Callable[[int, Any, int], bool] | None = None,
+    overwrite: bool = False,
 ) -> CampaignResult:
     """Run a campaign: one MCAP file per payload run in ``out_dir``.
 
@@ -228,6 +226,8 @@ def run_campaign(
     campaign : trajectories.campaign.Campaign
     out_dir : path-like
         Created if needed; receives ``<name>_payload<k>.mcap`` and ``<name>.state.json``.
+        Locked for the whole run (one run per folder); an existing log is never replaced
+        without ``overwrite`` (:mod:`daq.runtime.runfolder`).
     simulate : sim_drivers.plant_config.PlantParams, sim_drivers.arm.ArmParams, True or None
         Run against simulated drives (one plant per drive) on python-can's virtual bus; the
         drive scaling comes from the plant's ``[drive]`` table. A robot campaign
@@ -242,23 +242,32 @@ def run_campaign(
     payloads : sequence of int or None
         Indices of the payloads to run (default: all).
     resume : bool
-        Skip the payloads the state file lists as completed.
+        Skip the payloads the state file lists as completed; the log of a payload that did
+        not complete is moved to ``partial/`` before the payload runs again.
     fault_injectors : dict node_id -> sim_drivers.faults.FaultInjector, optional
         For tests with simulated drives.
     prompt : callable or None
         ``(index, payload, n) -> bool`` replacing the interactive prompt.
+    overwrite : bool
+        Replace the logs of the payloads run (the state file forgets a payload whose
+        completed log is replaced, until it completes again).
 
     Returns
     -------
     CampaignResult
-        ``status`` "done", "stopped" (a fault; ``reason`` names it), "interrupted" (SIGINT)
-        or "aborted" (the operator declined a payload).
+        ``status`` "done", "stopped" (a fault, a log write failure, too little free space
+        before a later payload; ``reason`` names it), "interrupted" (SIGINT, SIGTERM or
+        SIGHUP during a payload or at the prompt) or "aborted" (the operator declined a
+        payload).
 
     Raises
     ------
     daq.ConfigError
         Refusals before any motion: invalid ``[daq]``, bus load over the limit, unknown node,
-        EDS or drive without the requested mode, PDO read-back mismatch.
+        EDS or drive without the requested mode, PDO read-back mismatch, the folder locked
+        by another run, a log that exists, an unreadable state file, too little free space.
+    daq.runtime.safety.RunInterrupted
+        A stop signal before the first payload started (no drive enabled).
     trajectories.TrajectoryError
         The plan violates a limit.
     """
@@ -295,18 +304,41 @@ def run_campaign(
         if not 0 <= i < n_pay:
             raise ConfigError(f"payload index {i}: expected 0..{n_pay - 1}")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    stem = file_stem(campaign.name)
+    lock = FolderLock(out)  # one run per folder, from here to the end
+    try:
+        return _run_locked(campaign, cfg, plan, load, out, stem, todo, simulate, robot, yes,
+                           progress, resume, overwrite, fault_injectors, prompt)
+    finally:
+        lock.release()
+
+
+def _run_locked(campaign: Any, cfg: DaqConfig, plan: Any, load: Any, out: Path, stem: str,
+                todo: list[int], simulate: Any, robot: bool, yes: bool,
+                progress: Callable[[Progress], None] | None, resume: bool, overwrite: bool,
+                fault_injectors: dict[int, Any] | None,
+                prompt: Callable[[int, Any, int], bool] | None) -> CampaignResult:
+    """:func:`run_campaign` once the refusals passed and the folder is locked."""
+    n_pay = len(campaign.payloads)
     state_file = _state_path(out, campaign.name)
-    done_before = _read_state(state_file) if resume else set()
+    completed = read_state(state_file)  # merged into, never shrunk (runfolder)
+    done_before = completed if resume else set()
     skipped = tuple(i for i in todo if i in done_before)
     todo = [i for i in todo if i not in done_before]
-    completed = set(done_before)
+    check_logs(out, stem, todo, completed, resume=resume, overwrite=overwrite)
+    attachments = _attachments(campaign, cfg, simulate)
+    n_ref = len(plan.t) if robot else len(plan.reference.t)
+    log_bytes = expected_log_bytes(len(cfg.drives), campaign.cycle_s,
+                                   n_ref + ENABLE_MAX_CYCLES + SETTLE_CYCLES + 100,
+                                   sum(len(a[2]) for a in attachments))
+    if todo and (why := check_free_space(log_path(out, stem, todo[0]), log_bytes)):
+        raise ConfigError(why)
 
     old_affinity = _pin_cpu(cfg.cpu)
     old_sched = _set_realtime(cfg) if cfg.clock == "paced" else None
     sim: SimRig | None = None
     network: canopen.Network | None = None
-    old_handler = None
+    signals = StopSignals()
     engine: Engine | None = None
     runs: list[PayloadResult] = []
     sim_records: tuple[dict[str, np.ndarray], ...] = ()
@@ -316,6 +348,7 @@ def run_campaign(
     clean = False
     status, reason = "done", ""
     try:
+        signals.install()  # SIGINT, SIGTERM, SIGHUP: the stop sequence (safety.StopSignals)
         if simulate is not None and robot:
             sim = start_arm_sim(cfg, simulate, campaign, fault_injectors or {})
         elif simulate is not None:
@@ -353,11 +386,7 @@ def run_campaign(
             logger.warning("%s", note)
         engine = Engine(campaign, cfg, network, io, drives, scalings, load, progress)
         engine.notes = notes
-        if threading.current_thread() is threading.main_thread():
-            def on_sigint(signum: int, frame: Any) -> None:
-                if engine is not None:
-                    engine.interrupted = True
-            old_handler = signal.signal(signal.SIGINT, on_sigint)
+        engine.check_drive_limits(tuple(j.name for j in campaign.joints) if robot else ())
         ask = prompt or prompt_payload
         for n_done, i in enumerate(todo):
             p = campaign.payloads[i]
@@ -367,35 +396,46 @@ def run_campaign(
                 for d in sim.drives:
                     d.set_payload(p.mass_kg, p.arm_m)
             if not yes and (n_done > 0 or sim is None or prompt is not None):
-                if old_handler is not None:  # Ctrl-C at the prompt interrupts it at once
-                    signal.signal(signal.SIGINT, signal.default_int_handler)
-                try:
+                try:  # a stop signal at the prompt interrupts it at once (RunInterrupted)
                     accepted = ask(i, p, n_pay)
-                except KeyboardInterrupt:
-                    status, reason = "interrupted", "interrupted by the operator (SIGINT)"
+                except KeyboardInterrupt as exc:
+                    sig = signal.Signals(getattr(exc, "signum", signal.SIGINT)).name
+                    status, reason = "interrupted", interrupt_reason(sig)
                     break
-                finally:
-                    if old_handler is not None:
-                        signal.signal(signal.SIGINT, on_sigint)
                 if not accepted:
                     status, reason = "aborted", f"operator declined payload {i}"
                     break
-            if engine.interrupted:
-                status, reason = "interrupted", "interrupted by the operator (SIGINT)"
+            path = log_path(out, stem, i)
+            if n_done > 0 and (why := check_free_space(path, log_bytes)):
+                status, reason = "stopped", why
                 break
+            if path.exists() and not overwrite:  # (check_logs: resume) kept, never replaced
+                logger.warning("%s: kept as %s (payload %d did not complete)", path,
+                               keep_partial(path), i)
+            create_log_file(path, overwrite)
+            if overwrite and i in completed:  # its completed log is replaced: not done now
+                completed.discard(i)
+                write_state(state_file, campaign.name, completed)
             io.emcy.clear()
             io.hb_time = [time.monotonic()] * len(drives)
             for d in drives:
                 d.nmt_start()
             drive_cycle0 = sim.drives[0].cycle if sim is not None else -1
-            log = RunLog(out / f"{file_stem(campaign.name)}_payload{i}.mcap", n_axes=len(drives),
-                         cycle_s=campaign.cycle_s,
-                         metadata=_metadata(campaign, cfg, plan, i, p, scalings, simulate,
-                                            str(getattr(bus, "channel_info", "")), drives),
-                         attachments=_attachments(campaign, cfg, simulate),
-                         chunk_seconds=cfg.chunk_seconds,
-                         frames_per_cycle=1 + 3 * len(drives), axis_setpoints=robot)
-            r = engine.run_payload(i, p, plan if robot else plan.reference, log, drive_cycle0)
+            try:
+                log = RunLog(path, n_axes=len(drives), cycle_s=campaign.cycle_s,
+                             metadata=_metadata(campaign, cfg, plan, i, p, scalings, simulate,
+                                                str(getattr(bus, "channel_info", "")),
+                                                drives),
+                             attachments=attachments, chunk_seconds=cfg.chunk_seconds,
+                             frames_per_cycle=1 + 3 * len(drives), axis_setpoints=robot)
+            except OSError as exc:  # writing the header: nothing moved yet
+                raise DaqError(f"log write failed: {path}: {exc.strerror or exc}") from None
+            signals.engine = engine  # a stop signal now ends the run with the stop sequence
+            try:
+                r = engine.run_payload(i, p, plan if robot else plan.reference, log,
+                                       drive_cycle0)
+            finally:
+                signals.engine = None
             runs.append(r)
             if engine.bus_lost:  # nothing can be sent any more: no NMT, no SDO
                 status, reason = r.status, r.reason
@@ -407,9 +447,16 @@ def run_campaign(
                 status, reason = r.status, r.reason
                 break
             completed.add(i)
-            _write_state(state_file, campaign.name, completed)
+            write_state(state_file, campaign.name, completed)
+            if engine.interrupted:  # a signal as the run ended: it completed, stop here
+                status, reason = "interrupted", interrupt_reason(engine.interrupted)
+                break
         clean = engine is None or not engine.bus_lost
+    except KeyboardInterrupt:  # a stop signal outside a payload run: no drive enabled
+        clean = engine is None or not engine.bus_lost
+        raise
     finally:
+        signals.closing = True  # a second signal does not cut the clean-up short
         if clean:  # normal end, drives disabled: stop watching the master, then go silent
             for d in drives:
                 d.clear_master_heartbeat()
@@ -418,8 +465,7 @@ def run_campaign(
                 heartbeat.stop()
         if sim is not None:
             sim_records = tuple(d.record for d in sim.drives)
-        if old_handler is not None:
-            signal.signal(signal.SIGINT, old_handler)
+        signals.restore()
         if network is not None:
             try:
                 network.disconnect()

@@ -1,12 +1,28 @@
 """Safety supervision of the cycle loop: the stop sequence's controlwords and lengths, the
 supervision limits, the fault latch and the heartbeat watchdog (see :mod:`daq.runtime.engine`
-for where they act in a cycle)."""
+for where they act in a cycle); the signals that stop a run (:class:`StopSignals`) and what
+tells a failing log from a failing bus (:func:`log_failed`).
+
+Signals
+-------
+SIGINT (Ctrl-C), SIGTERM (``kill``, ``timeout``, ``systemctl stop``) and SIGHUP (the
+terminal closed) all stop a run the same way: while a payload runs, the engine finishes the
+cycle, quick-stops and disables the drives and closes the log (status "interrupted", the
+signal named); before or between payloads (start-up, the operator prompt) they raise
+:class:`RunInterrupted` at once (no drive is enabled then), which the runner's ``finally``
+cleans up after. The ``jointid`` exit code is 128 + the signal number (130, 143, 129).
+"""
 
 from __future__ import annotations
 
+import inspect
+import signal
+import threading
 import time
+from types import TracebackType
 from typing import Any
 
+from daq import ConfigError
 from daq.protocol.cia402 import State, state_from_statusword
 
 from .config import DaqConfig
@@ -19,6 +35,96 @@ CW_SHUTDOWN = 0x06
 DISABLE_MAX_CYCLES = 5
 SHUTDOWN_CYCLES = 3
 
+#: signals that stop a run with the stop sequence (the SIGINT path)
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+class RunInterrupted(KeyboardInterrupt):
+    """A stop signal arrived while no payload was running (start-up, operator prompt).
+
+    A :class:`KeyboardInterrupt`, so that every path that handles Ctrl-C handles it;
+    ``signum`` is the signal (the exit code is 128 + it).
+    """
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def interrupt_reason(name: str) -> str:
+    """The one-line reason of a run stopped by signal ``name`` ("SIGINT", "SIGTERM"...)."""
+    if name == "SIGINT":
+        return "interrupted by the operator (SIGINT)"
+    return f"interrupted by {name}"
+
+
+class StopSignals:
+    """SIGINT, SIGTERM and SIGHUP handlers for the duration of a campaign (main thread only;
+    elsewhere nothing is installed and Python's defaults stay).
+
+    While :attr:`engine` is set (a payload runs) a signal sets ``engine.interrupted`` to
+    its name and the engine stops the drives at the end of the cycle; while :attr:`closing`
+    (the runner's clean-up) it is only noted; otherwise it raises :class:`RunInterrupted` in
+    the main thread.
+    """
+
+    def __init__(self) -> None:
+        self.engine: Any = None
+        self.closing = False  # cleaning up: a signal is noted, nothing raised
+        self.received = ""
+        self._old: dict[int, Any] = {}
+
+    def install(self) -> None:
+        if threading.current_thread() is not threading.main_thread():
+            return
+        for s in STOP_SIGNALS:
+            self._old[s] = signal.signal(s, self._on_signal)
+
+    def restore(self) -> None:
+        old, self._old = self._old, {}
+        for s, h in old.items():
+            signal.signal(s, h)
+
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        self.received = self.received or signal.Signals(signum).name
+        if self.closing:
+            return
+        if self.engine is not None:
+            if not self.engine.interrupted:
+                self.engine.interrupted = signal.Signals(signum).name
+            return
+        raise RunInterrupted(signum)
+
+
+_LOG_FILE = inspect.getfile(RunLog)
+
+
+def log_failed(exc: BaseException) -> bool:
+    """Whether ``exc`` (an OSError) was raised while writing the run log's file rather than
+    by the bus: its traceback passes through the log writer's module."""
+    tb: TracebackType | None = exc.__traceback__
+    while tb is not None:
+        if tb.tb_frame.f_code.co_filename == _LOG_FILE:
+            return True
+        tb = tb.tb_next
+    return False
+
+
+class NullLog:
+    """Stands in for a run log whose file failed (disk full, file-size limit): the stop
+    sequence runs the same cycles and logs nothing."""
+
+    start_ns = 0
+    cycle_ns = 0
+
+    def __init__(self, path: Any) -> None:
+        self.path = path
+
+    def _discard(self, *args: Any, **kwargs: Any) -> None:
+        return None
+
+    state = setpoint = setpoint_axis = frames = event = _add = _discard
+
 
 class Supervisor:
     """Mixin of :class:`daq.runtime.engine.Engine`: supervision limits, the fault latch (the
@@ -27,6 +133,8 @@ class Supervisor:
     The per-cycle limit and following-error checks stay inline in the engine's cycle (hot
     path); the values they compare against are set here by :meth:`_init_limits`.
     """
+
+    _stall: tuple[int, float] = (-2, 0.0)  # (cycle, lateness [s]) of the last stall seen
 
     def _init_limits(self, limits: Any, cfg: DaqConfig) -> None:
         """Per drive: ``[daq.limits]``, else that drive's joint limits (``limits``, one
@@ -48,10 +156,64 @@ class Supervisor:
             self.tau_max.append(tau)
             self.tau_act_max.append(tau * 1.2)
 
+    def check_drive_limits(self, robot_joints: tuple[str, ...] = ()) -> None:
+        """Refuse a velocity watchdog no drive could ever trip: ``v_max`` of a drive above its
+        max motor speed 0x6080 [rpm] (the EDS default) seen at the joint (rpm / 60 x 2 pi /
+        gear ratio), unless ``daq.allow_beyond_drive_limits``. Called after the start-up
+        (scaling known), before any drive is enabled.
+
+        Raises
+        ------
+        daq.ConfigError
+            Naming the key that set the limit (``daq.limits.max_velocity``,
+            ``joint.limits.max_velocity`` or ``robot.joints.<name>.limits.max_velocity``),
+            the drive and its 0x6080.
+        """
+        if self.cfg.allow_beyond_drive_limits:
+            return
+        for k, (d, sc) in enumerate(zip(self.drives, self.scalings, strict=True)):
+            rpm = d.max_motor_speed_rpm()
+            if rpm is None:
+                continue
+            joint_max = rpm / 60.0 * sc.rad_per_count * sc.encoder_counts_per_rev  # [rad/s]
+            if self.v_max[k] <= joint_max:
+                continue
+            if self.cfg.max_velocity is not None:
+                key = "daq.limits.max_velocity"
+            elif robot_joints:
+                key = f"robot.joints.{robot_joints[k]}.limits.max_velocity"
+            else:
+                key = "joint.limits.max_velocity"
+            raise ConfigError(
+                f"{self.cfg.source or 'campaign'}: {key}: the velocity watchdog at "
+                f"{self.v_max[k]:.4g} rad/s is beyond {d.name}'s max motor speed 0x6080 = "
+                f"{rpm} rpm in {d.cfg.eds.name} ({joint_max:.4g} rad/s at the joint, gear ratio "
+                f"{sc.gear_ratio:g}) and could never trip; lower it or set "
+                f"daq.allow_beyond_drive_limits = true")
+
+    def _drain(self) -> int:
+        """Take every frame already received (the main thread receives during a run): after
+        a stall of the master they wait in the queue, heartbeats among them; the newest
+        values win. Returns the number of frames taken."""
+        if not self.io.direct:
+            return 0
+        recv, on = self.bus.recv, self.io.on_message_received
+        n = 0
+        while (msg := recv(0.0)) is not None:
+            on(msg)
+            n += 1
+        return n
+
     def _check_heartbeats(self, cycle: int, t: float, log: RunLog) -> None:
         """Fault on the first drive whose heartbeat has been silent for more than
-        ``daq.heartbeat_timeout_s`` (the engine calls this every 16 cycles)."""
+        ``daq.heartbeat_timeout_s`` (the engine calls this every 16 cycles). Before blaming
+        a drive, the frames waiting in the receive queue are taken (:meth:`_drain`): a
+        master that stalled has not read the heartbeats that came meanwhile."""
         now = time.monotonic()
+        if any(self.drives[dd].cfg.heartbeat_ms and now - self.io.hb_time[dd]
+               > self.cfg.heartbeat_timeout_s for dd in range(len(self.drives))):
+            self._drain()
+            now = time.monotonic()
         for dd in range(len(self.drives)):
             if self.drives[dd].cfg.heartbeat_ms and (
                     now - self.io.hb_time[dd] > self.cfg.heartbeat_timeout_s):
@@ -75,6 +237,11 @@ class Supervisor:
                kind: str = "fault") -> None:
         if self._stop_reason:
             return
+        stall_cycle, late = self._stall
+        if kind == "emcy" and 0 <= cycle - stall_cycle <= 1:
+            # a drive's reaction to the master's stall (SYNC loss, RPDO timeout) read when
+            # the master woke up: the stall is the cause
+            why = f"master stalled for {late:.3f} s, then {why}"
         self._stop_reason = ("stopped", why)
         self._fault_cycle = cycle
         log.event(cycle, t, kind, why, axis)

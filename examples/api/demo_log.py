@@ -8,7 +8,7 @@
 Without arguments it first records, in the current folder (about a minute)::
 
     jointid run examples/campaign.toml --simulate examples/plant_rx130l.toml --quick \\
-        --yes --out runs-api-example
+        --yes --overwrite --out runs-api-example
 
 whose plant has one undeclared effect, a position ripple, that the refinement finds.
 """
@@ -28,7 +28,8 @@ def record(out: Path) -> list[Path]:
     """Run the quick example campaign against the simulated plant (the ``jointid run``
     command of the module docstring, in this process); its MCAP logs."""
     args = ["run", str(EXAMPLES / "campaign.toml"), "--simulate",
-            str(EXAMPLES / "plant_rx130l.toml"), "--quick", "--yes", "--out", str(out)]
+            str(EXAMPLES / "plant_rx130l.toml"), "--quick", "--yes", "--overwrite", "--out",
+            str(out)]
     print("recording: jointid", " ".join(args), flush=True)
     if jointid(args) != 0:
         raise SystemExit("jointid run failed")
