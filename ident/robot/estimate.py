@@ -142,6 +142,12 @@ class RobotModel:
         Samples per chunk of the regressor evaluation (memory ~ chunk_size k p_std floats).
     max_iter, tol : int, float
         Gauss-Newton iterations and relative step tolerance (paper model).
+    quadrant_band : float
+        With ``quadrant="model"``: rows of joint j with |tau_out_hat| < quadrant_band x the
+        RMS of the usual fit's tau_out_hat of joint j are left out of its rows (``band_``
+        [N m]): their quadrant is uncertain, and a wrong one costs the jump c_m - c_g of the
+        dry friction (eq. 30) -- the paper's stiction-area rectangle (Fig. 2.b) around
+        P_out = 0. 0: every row.
     max_passes : int
         Quadrant decisions at most (``quadrant="model"``): the usual fit's, then re-decisions
         with the paper fit's theta; they stop earlier once fewer than ``QUADRANT_TOL`` of the
@@ -200,6 +206,7 @@ class RobotModel:
         max_passes: int = 8,
         payload_ratio: bool = False,
         quadrant_theta: Any = None,
+        quadrant_band: float = 0.03,
     ) -> None:
         self.regressor = regressor
         self.model = model
@@ -214,12 +221,14 @@ class RobotModel:
         self.max_passes = max_passes
         self.payload_ratio = payload_ratio
         self.quadrant_theta = quadrant_theta
+        self.quadrant_band = quadrant_band
 
     def get_params(self, deep: bool = False) -> dict[str, Any]:
         """Hyper-parameters (scikit-learn convention)."""
         return {n: getattr(self, n) for n in (
             "regressor", "model", "method", "qs", "base", "quadrant", "dq_min", "chunk_size",
-            "max_iter", "tol", "max_passes", "payload_ratio", "quadrant_theta")}
+            "max_iter", "tol", "max_passes", "payload_ratio", "quadrant_theta",
+            "quadrant_band")}
 
     def __repr__(self) -> str:
         return f"RobotModel(model={self.model!r}, method={self.method!r}, qs={self.qs!r})"
@@ -275,6 +284,10 @@ class RobotModel:
         self.names_ = tuple(base.names) + (RATIO,) * ratio + tuple(
             f"{p}{n}" for n in self.numbers_ for p in block)
         self._damp = 0.0
+        self._band_h = np.zeros(k)
+        if not (np.isfinite(float(self.quadrant_band)) and float(self.quadrant_band) >= 0):
+            raise RobotIdentError(f"RobotModel.quadrant_band: expected a fraction >= 0, got "
+                                  f"{self.quadrant_band!r}")
         self.quadrant_theta_ = None
         if self.quadrant_theta is not None:
             qt = np.asarray(self.quadrant_theta, dtype=float).ravel()
@@ -427,8 +440,8 @@ class RobotModel:
             grams = [None] * len(self.cols_) if gram_from is None else [
                 (m.vv[0, 0, :len(c), :len(c)] + m.vv[1, 0, :len(c), :len(c)]) / max(m.n, 1)
                 for m, c in zip(gram_from, self.cols_, strict=True)]
-            stores = [QuadrantStore(theta[c], capacity, g)
-                      for c, g in zip(self.cols_, grams, strict=True)]
+            stores = [QuadrantStore(theta[c], capacity, g, h)
+                      for c, g, h in zip(self.cols_, grams, self._band_h, strict=True)]
         rows = changed = 0
         for _sig, _r, q, dq, ddq, tau, zdd, pay, cc in self._chunks(signals, stride):
             W, p, kn = self._rows(q, dq, ddq, tau, pay, None if cc is None else cc[:2])
@@ -452,20 +465,34 @@ class RobotModel:
                 if iv:
                     WzT, pzj = self._joint(Wz, pz, knz, j)
                     VzT = self._v(WzT if every else WzT[:, ok], pzj[ok], dqo, tauo, sgo)
+                h = 0.0 if theta is None else self._band_h[j]
                 if theta is None:
                     sp = tauo * dqo
                 else:
                     tout = theta[cols] @ WjT + po
-                    sp = tout * dqo
+                    sp = np.where(np.abs(tout) < h, 0.0, tout * dqo) if h > 0 else tout * dqo
                 pplus = quadrant_weights(sp)
                 rows += sp.size
                 if theta_prev is not None:
-                    spp = (theta_prev[cols] @ WjT + po) * dqo
-                    changed += int(np.count_nonzero(np.sign(sp) != np.sign(spp)))
+                    tp = theta_prev[cols] @ WjT + po
+                    spp = np.where(np.abs(tp) < h, 0.0, tp * dqo) if h > 0 else tp * dqo
+                    # rows that changed quadrant (entering or leaving the band is no change)
+                    changed += int(np.count_nonzero(
+                        (np.sign(sp) != np.sign(spp)) & ((sp != 0) & (spp != 0) | (h == 0))))
                 E = np.exp(-np.abs(dqo) / self.qs_[j])
-                moms[j].add(VT, pplus, E, VzT)
+                pminus = None
+                if h > 0:  # rows in the band around the quadrant boundary are left out
+                    inb = np.abs(tout) < h
+                    pplus[inb] = 0.0
+                    pminus = 1.0 - pplus
+                    pminus[inb] = 0.0
+                    keep = ~inb
+                    moms[j].add(VT[:, keep], pplus[keep], E[keep],
+                                None if VzT is None else VzT[:, keep])
+                else:
+                    moms[j].add(VT, pplus, E, VzT)
                 if stores is not None:
-                    stores[j].offer(VT, VzT, E, pplus, tout)
+                    stores[j].offer(VT, VzT, E, pplus, tout, pminus)
         return moms, rows, changed, stores
 
     @staticmethod
@@ -643,6 +670,17 @@ class RobotModel:
         resid = pp - float((b / d) @ delta)
         return resid > SCALE_TOL * pp
 
+    def _rms_load(self, moms: list[JointMoments], theta: np.ndarray) -> np.ndarray:
+        """RMS of tau_out = W_j theta + p_j over each joint's rows of ``moms`` [N m]."""
+        out = np.zeros(len(moms))
+        for j, (m, c) in enumerate(zip(moms, self.cols_, strict=True)):
+            nt = len(c)
+            M = m.vv[0, 0] + m.vv[1, 0]
+            idx = np.r_[np.arange(nt), nt + IP]
+            u = np.r_[theta[c], 1.0]
+            out[j] = np.sqrt(max(float(u @ M[np.ix_(idx, idx)] @ u), 0.0) / max(m.n, 1))
+        return out
+
     def _gauge(self, moms: list[JointMoments]) -> int:
         """Index of the coefficient fixed to 1 when the payloads do not fix the scale: a_m of
         the first joint with rows in the motor quadrant (else a_g of the first with rows in
@@ -789,6 +827,10 @@ class RobotModel:
         # the theta that decides the moments' quadrants
         given = self.quadrant_theta_ is not None
         theta_q = self.quadrant_theta_.copy() if given else xu[:pb].copy()
+        self.band_ = np.zeros(k)
+        if model_q and float(self.quadrant_band) > 0:
+            self.band_ = float(self.quadrant_band) * self._rms_load(moms, theta_q)
+        self._band_h = self.band_
         if model_q:
             # the model quadrant sign(tau_out_hat dq) of the usual fit, never the measured
             # torque's: on a joint whose dry friction exceeds its load, sign(tau dq) is
@@ -808,7 +850,6 @@ class RobotModel:
         loop = model_q and not given
         x, w, it, pending = self._fit_paper(moms, x, free, damped_ok=loop)
         if loop:
-            last = None
             for _ in range(int(self.max_passes) - 1):
                 theta = x[:pb].copy()
                 if stores is not None and all(
@@ -825,9 +866,8 @@ class RobotModel:
                 self.quadrant_rows_ = self._quadrant_rows(moms)
                 x, w, it, pending = self._fit_paper(moms, x, free, damped_ok=True)
                 self.quadrant_changes_.append(changed)
-                if changed <= QUADRANT_TOL * rows or (last is not None and changed >= last):
+                if changed <= QUADRANT_TOL * rows:
                     break
-                last = changed
         if pending is not None:  # the last quadrants still leave a direction unexcited
             raise pending
         self._statistics(moms, paper_coefficients, x, free, w)
