@@ -228,8 +228,11 @@ def fit_robot(
     }
     for name in models:
         try:
+            # one joint: exactly the single-joint fit's rows (no quadrant band; the sign
+            # check plays its part there)
             est = RobotModel(reg, model=name, method=method, qs=qs, dq_min=est_dq_min,
-                             payload_ratio=payload == "ratio").fit(sig)
+                             payload_ratio=payload == "ratio",
+                             quadrant_band=0.0 if len(robot.moving) == 1 else 0.03).fit(sig)
         except IdentError as exc:
             if len(models) == 1:
                 raise
