@@ -93,6 +93,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "ddq and builds the regressor on them (memory bounded on very long logs)",
     )
     p.add_argument(
+        "--no-consistency",
+        action="store_true",
+        help="--robot only: skip the search for physically consistent standard parameters "
+        "(the slow part of the consistency report; the sign checks are kept)",
+    )
+    p.add_argument(
         "--payload",
         choices=("known", "ratio"),
         help="--robot only: the logged payload's torque is known, or scaled by an identified "
@@ -209,6 +215,7 @@ _ROBOT_ONLY = (
     ("known_rotor_inertia", "--known-rotor-inertia", " (one joint: J includes the rotor)"),
     ("chain", "--chain", ""),
     ("payload", "--payload", ""),
+    ("no_consistency", "--no-consistency", ""),
 )
 
 

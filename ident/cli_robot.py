@@ -100,6 +100,7 @@ def fit_robot(
     chain: str = "columns",
     payload: str | None = None,
     sign_check: bool = True,
+    feasibility: bool = True,
 ) -> dict[str, Any]:
     """Preprocess, fit each model, cross-validate; the JSON record (no file written).
 
@@ -137,6 +138,11 @@ def fit_robot(
         sign(tau_j) != sign(tau_out_j) of a first usual fit (the single-joint ``sign_check``
         of :func:`ident.fitting.fit_models`; skipped with a note when it would keep fewer
         than :data:`ident.fitting.SIGN_CHECK_MIN_KEPT` of the rows).
+    feasibility : bool
+        Search a physically consistent standard set reproducing the base estimate
+        (:func:`~ident.robot.consistency.check_consistency`, the slow part of the report:
+        most of a 7-axis fit's time); False (``--no-consistency``): the sign checks only,
+        ``feasible`` null.
 
     Returns
     -------
@@ -222,8 +228,11 @@ def fit_robot(
     }
     for name in models:
         try:
+            # one joint: exactly the single-joint fit's rows (no quadrant band; the sign
+            # check plays its part there)
             est = RobotModel(reg, model=name, method=method, qs=qs, dq_min=est_dq_min,
-                             payload_ratio=payload == "ratio").fit(sig)
+                             payload_ratio=payload == "ratio",
+                             quadrant_band=0.0 if len(robot.moving) == 1 else 0.03).fit(sig)
         except IdentError as exc:
             if len(models) == 1:
                 raise
@@ -247,7 +256,7 @@ def fit_robot(
             rec["base_expressions"] = list(expressions)
         if val is not None:
             rec["validation_rel_error"] = {k: float(v) for k, v in est.rel_error(val).items()}
-        cons = check_consistency(est)
+        cons = check_consistency(est, feasibility=feasibility)
         rec["consistency"] = {
             "ok": cons.ok,
             "checks": [{"check": c, "value": float(v), "std": float(sd), "status": st}
@@ -356,7 +365,8 @@ def run(args: argparse.Namespace) -> int:
     out = fit_robot(robot, runs, val, models=models, method=args.method, qs=qs,
                     dq_min=args.dq_min, preprocessing=pre,
                     known_rotor_inertia=args.known_rotor_inertia,
-                    chain=args.chain or "columns", payload=args.payload)
+                    chain=args.chain or "columns", payload=args.payload,
+                    feasibility=not getattr(args, "no_consistency", False))
     text = format_report(out)
     public = _public(out)
     # everything computed: only now write files (a bad input leaves nothing behind)

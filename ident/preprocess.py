@@ -37,6 +37,7 @@ chain whose settings (cut-off, decimation, delay, guard, instruments) every step
 from __future__ import annotations
 
 import functools
+import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 
@@ -44,6 +45,7 @@ import numpy as np
 import scipy.signal
 
 from . import DataError
+from .loaders import IRREGULAR_TOL
 from .signals import Signals
 from .terms import Library, Term
 
@@ -240,7 +242,8 @@ def _decimate_rows(x: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
     return y, index
 
 
-def choose_cutoff(q: np.ndarray, dt: float, min_fraction: float = 0.05) -> float:
+def choose_cutoff(q: np.ndarray, dt: float, min_fraction: float = 0.05,
+                  t: np.ndarray | None = None, source: str = "") -> float:
     """Low-pass cut-off [Hz] chosen from the bandwidth of the measured motion.
 
     The velocity spectrum (differences of q) is compared with its noise floor (median power
@@ -251,22 +254,63 @@ def choose_cutoff(q: np.ndarray, dt: float, min_fraction: float = 0.05) -> float
     reference script uses 100 Hz at 1 kHz for its 20 Hz position loop; pass it
     explicitly). At most 0.4 f_s. ``min_fraction`` is that lower bound as a fraction of f_s
     (:func:`build_design` raises it to :data:`CUTOFF_FLOOR_IV` with instruments).
+
+    ``t`` (the samples' time stamps [s], optional): irregular stamps (jitter above
+    ``IRREGULAR_TOL`` of the median period ``dt``) are first resampled to the uniform grid
+    of period ``dt`` (linear interpolation): differences of q over jittered instants taken
+    as uniform are broadband noise. When the rule above reaches 0.4 f_s (its floor, a
+    median over the upper half of the band, is below the top of a noise spectrum that rises
+    with f, as differenced white position noise does), the floor is taken again in the
+    position spectrum, where such noise is flat, from the band's complement of the motion
+    (above f_s/4), and differenced. A choice at a bound is warned about, with the reason
+    (``source`` names the data in the message).
     """
     fs = 1.0 / dt
+    q = np.asarray(q, dtype=float)
+    if t is not None and q.size >= 2:
+        t = np.asarray(t, dtype=float)
+        d = np.diff(t)
+        if d.size and np.max(np.abs(d - dt)) > IRREGULAR_TOL * dt:
+            tu = t[0] + dt * np.arange(int(np.floor((t[-1] - t[0]) / dt)) + 1)
+            q = np.interp(tu, t, q)
+    lo, hi = min_fraction * fs, max(min_fraction, 0.4) * fs
     v = np.diff(q) / dt
     v = v - v.mean()
     n = v.size
     if n < 16:
-        return min_fraction * fs
-    p = np.abs(np.fft.rfft(v * np.hanning(n))) ** 2
+        return lo
+    win = np.hanning(n)
+    p = np.abs(np.fft.rfft(v * win)) ** 2
     f = np.fft.rfftfreq(n, dt)
-    floor = float(np.median(p[f > fs / 4])) if np.any(f > fs / 4) else 0.0
+    upper = f > fs / 4
+    floor = float(np.median(p[upper])) if np.any(upper) else 0.0
     e = np.clip(p - floor, 0, None)
     c = np.cumsum(e)
     if c[-1] <= 0:
-        return min_fraction * fs
+        return lo
     fb = float(f[int(np.searchsorted(c, 0.995 * c[-1]))])
-    return float(f"{np.clip(5.0 * fb, min_fraction * fs, max(min_fraction, 0.4) * fs):.6g}")
+    why = "no motion above the noise floor of the velocity spectrum"
+    if 5.0 * fb >= hi and np.any(upper):
+        # white position noise: |1 - exp(-i w dt)|^2 / dt^2 times a flat floor of q
+        x = q[1:] - q[1:].mean()
+        pq = np.abs(np.fft.rfft(x * win)) ** 2
+        gain = (2.0 * np.sin(np.pi * f * dt)) ** 2 / dt**2
+        e2 = np.clip(p - float(np.median(pq[upper])) * gain, 0, None)
+        c2 = np.cumsum(e2)
+        if c2[-1] > 0:
+            fb = float(f[int(np.searchsorted(c2, 0.995 * c2[-1]))])
+        why = ("the velocity spectrum stays above its noise floor up to the Nyquist frequency "
+               "(broadband noise, e.g. jittered time stamps taken as uniform)")
+    cut = float(f"{np.clip(5.0 * fb, lo, hi):.6g}")
+    where = f"{source}: " if source else ""
+    if 5.0 * fb >= hi:
+        warnings.warn(f"{where}cut-off {cut:g} Hz is the upper bound 0.4 f_s: {why}; "
+                      "give --cutoff", stacklevel=2)
+    elif 5.0 * fb < lo and 5.0 * fb < 0.5 * lo:
+        warnings.warn(f"{where}cut-off {cut:g} Hz is the lower bound {min_fraction:g} f_s "
+                      f"(5 x the motion bandwidth is {5.0 * fb:.3g} Hz); give --cutoff to "
+                      "filter more", stacklevel=2)
+    return cut
 
 
 def split_experiments(s: Signals) -> list[slice]:

@@ -92,7 +92,10 @@ def test_store_updates_give_the_fit_of_full_passes(arm3_short, method, monkeypat
     """Same estimate and statistics with the stored rows as with a pass at each re-decision;
     the store saves passes."""
     reg, base, sigs = arm3_short
+    # a store large enough to cover the steps (rows at both band edges |tau_out| = band_)
+    monkeypatch.setattr(estimate, "STORE_FRACTION", 0.3)
     a = RobotModel(reg, "paper", method, base=base, quadrant="model").fit(sigs)
+    assert np.all(a.band_ > 0)
     monkeypatch.setattr(estimate, "STORE_FRACTION", 0.0)
     b = RobotModel(reg, "paper", method, base=base, quadrant="model").fit(sigs)
     assert b.n_store_updates_ == 0

@@ -51,6 +51,7 @@ __all__ = [
     "Robot",
     "load_robot",
     "example_robot_urdf",
+    "example_robot_names",
     "EXAMPLE_ROBOTS",
     "mdh_placement",
 ]
@@ -295,36 +296,73 @@ class Robot:
 
 
 # --------------------------------------------------------------------------- locating URDFs
-def example_robot_urdf(name: str, source: str = "") -> Path:
-    """Path of the URDF of a robot packaged by ``example-robot-data`` (e.g. ``"ur10"``).
-
-    The PyPI wheel ships the files under its ``cmeel.prefix`` folder and may not ship the
-    ``example_robot_data`` module, so the file is found through the installed distribution's
-    file list (:mod:`importlib.metadata`), never through a hard-coded path.
-
-    Raises
-    ------
-    RobotError
-        Unknown name, or the package (or the file) is not installed.
-    """
-    where = f"{source}: robot.urdf: " if source else ""
-    try:
-        rel = EXAMPLE_ROBOTS[name]
-    except KeyError:
-        raise RobotError(f"{where}example robot {name!r}: expected one of "
-                         f"{sorted(EXAMPLE_ROBOTS)}") from None
+def _packaged_urdfs() -> dict[str, Path]:
+    """Every URDF of the installed example-robot-data share: path relative to the share
+    (``robots/<pkg>/<dir>/<file>.urdf``) -> file. Empty when the package is not installed."""
+    out: dict[str, Path] = {}
     for dist_name in _DISTRIBUTIONS:
         try:
             dist = metadata.distribution(dist_name)
         except metadata.PackageNotFoundError:
             continue
         for f in dist.files or ():
-            if str(f).replace("\\", "/").endswith("example-robot-data/" + rel):
-                p = Path(dist.locate_file(f))
-                if p.is_file():
-                    return p
-    raise RobotError(f"{where}example robot {name!r}: {rel} not found; expected "
-                     f"the PyPI package 'example-robot-data' to be installed")
+            s = str(f).replace("\\", "/")
+            key = "example-robot-data/robots/"
+            if s.endswith(".urdf") and key in s:
+                rel = "robots/" + s.split(key, 1)[1]
+                out.setdefault(rel, Path(dist.locate_file(f)))
+    return out
+
+
+def example_robot_names() -> list[str]:
+    """Names ``load_robot("example-robot-data:<name>")`` accepts: ``EXAMPLE_ROBOTS`` and the
+    file name (without ``.urdf``) of every URDF of the installed share that no other file
+    shares."""
+    stems: dict[str, int] = {}
+    for rel in _packaged_urdfs():
+        stem = rel.rsplit("/", 1)[1][:-len(".urdf")]
+        stems[stem] = stems.get(stem, 0) + 1
+    return sorted(set(EXAMPLE_ROBOTS) | {n for n, c in stems.items() if c == 1})
+
+
+def example_robot_urdf(name: str, source: str = "") -> Path:
+    """Path of the URDF of a robot packaged by ``example-robot-data`` (e.g. ``"ur10"``,
+    ``"panda"``).
+
+    ``name`` is one of ``EXAMPLE_ROBOTS`` (the UR arms without gripper), else the file name of
+    a packaged URDF without ``.urdf`` (``panda``, ``xarm7``, ``kinova``, ``ur5_gripper``), or
+    its path under the share (``robots/panda_description/urdf/panda.urdf``) when the file name
+    is not unique. The PyPI wheel ships the files under its ``cmeel.prefix`` folder and may not
+    ship the ``example_robot_data`` module, so the file is found through the installed
+    distribution's file list (:mod:`importlib.metadata`), never through a hard-coded path.
+
+    Raises
+    ------
+    RobotError
+        Unknown or ambiguous name, or the package (or the file) is not installed.
+    """
+    where = f"{source}: robot.urdf: " if source else ""
+    files = _packaged_urdfs()
+    if not files:
+        raise RobotError(f"{where}example robot {name!r}: expected the PyPI package "
+                         f"'example-robot-data' to be installed")
+    if name in EXAMPLE_ROBOTS:
+        found = [EXAMPLE_ROBOTS[name]] if EXAMPLE_ROBOTS[name] in files else []
+    elif name.endswith(".urdf"):
+        found = [r for r in files if r == name or r.endswith("/" + name)]
+    else:
+        found = [r for r in files if r.rsplit("/", 1)[1] == name + ".urdf"]
+    if len(found) > 1:
+        raise RobotError(f"{where}example robot {name!r}: several packaged URDFs "
+                         f"{sorted(found)}; expected one of these paths")
+    if not found:
+        raise RobotError(f"{where}example robot {name!r}: expected one of "
+                         f"{example_robot_names()}")
+    p = files[found[0]]
+    if not p.is_file():
+        raise RobotError(f"{where}example robot {name!r}: {found[0]} is listed by the "
+                         f"package but missing on disk")
+    return p
 
 
 # --------------------------------------------------------------------------- loading

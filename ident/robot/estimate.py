@@ -81,7 +81,29 @@ START_ROWS = 100_000
 #: (:mod:`ident.robot.quadrants`): at most this fraction of the samples (and one chunk).
 STORE_FRACTION = 0.05
 
+#: sum_j ||W_j delta - p_j||^2 / sum_j ||p_j||^2 below this: the known torques lie in the span of
+#: the base columns and do not fix the scale of theta against a, b (``_payload_fixes_scale``).
+SCALE_TOL = 1e-9
+
+#: A joint with fewer than this fraction of its rows in one quadrant is named as the likely
+#: cause when the paper model is not identifiable.
+THIN_QUADRANT = 0.02
+
+#: Levenberg-Marquardt damping (relative to the column-scaled normal matrix) of the fits made
+#: while the model quadrants are still being decided and leave a direction unexcited.
+DAMPING = 1e-6
+
 Coeffs = Callable[[np.ndarray, np.ndarray, int], tuple[np.ndarray, ...]]
+
+
+class _Unidentifiable(RobotIdentError):
+    """The normal matrix is singular: ``names`` (zero columns or the weakest direction), the
+    smallest and largest singular values of the column-scaled matrix."""
+
+    def __init__(self, msg: str, names: list[str], lo: float, hi: float,
+                 zero: bool = False) -> None:
+        super().__init__(msg)
+        self.names, self.lo, self.hi, self.zero = names, lo, hi, zero
 
 
 def _ref_acceleration(t: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
@@ -108,16 +130,28 @@ class RobotModel:
     base : BaseParameters or None
         Base parameters (``.names``, ``.reduce``); default ``base_parameters(regressor)``.
     quadrant : {"model", "measured"}
-        How P+/P- are decided (paper model): sign(tau_out_hat dq) iterated, or sign(tau dq)
-        (eq. 26).
+        How P+/P- are decided (paper model): sign(tau_out_hat dq) -- from the usual fit's
+        theta first, then the paper fit's, iterated --, or sign(tau dq) (eq. 26).
+    quadrant_theta : array_like or None
+        With ``quadrant="model"``: the theta (``names_[:n_theta]``, e.g. a CAD model's or a
+        simulator's truth) that decides sign(tau_out dq) once and for all, instead of the fit's
+        own; None (default): decided by the fit.
     dq_min : float
         Samples of joint j with |dq_j| <= dq_min are not used in its rows [rad/s].
     chunk_size : int
         Samples per chunk of the regressor evaluation (memory ~ chunk_size k p_std floats).
     max_iter, tol : int, float
         Gauss-Newton iterations and relative step tolerance (paper model).
+    quadrant_band : float
+        With ``quadrant="model"``: rows of joint j with |tau_out_hat| < quadrant_band x the
+        RMS of the usual fit's tau_out_hat of joint j are left out of its rows (``band_``
+        [N m]): their quadrant is uncertain, and a wrong one costs the jump c_m - c_g of the
+        dry friction (eq. 30) -- the paper's stiction-area rectangle (Fig. 2.b) around
+        P_out = 0. 0: every row.
     max_passes : int
-        Passes over the data re-deciding the quadrants (``quadrant="model"``).
+        Quadrant decisions at most (``quadrant="model"``): the usual fit's, then re-decisions
+        with the paper fit's theta; they stop earlier once fewer than ``QUADRANT_TOL`` of the
+        rows change, or when the count stops decreasing (a cycle of boundary rows).
     payload_ratio : bool
         Identify the payload ratio M_ae / M_aw (``Ma_ratio``, eq. 35) instead of taking the
         payload torque as known; needs an experiment with a payload.
@@ -169,8 +203,10 @@ class RobotModel:
         chunk_size: int = 20000,
         max_iter: int = 50,
         tol: float = 1e-10,
-        max_passes: int = 4,
+        max_passes: int = 8,
         payload_ratio: bool = False,
+        quadrant_theta: Any = None,
+        quadrant_band: float = 0.03,
     ) -> None:
         self.regressor = regressor
         self.model = model
@@ -184,12 +220,15 @@ class RobotModel:
         self.tol = tol
         self.max_passes = max_passes
         self.payload_ratio = payload_ratio
+        self.quadrant_theta = quadrant_theta
+        self.quadrant_band = quadrant_band
 
     def get_params(self, deep: bool = False) -> dict[str, Any]:
         """Hyper-parameters (scikit-learn convention)."""
         return {n: getattr(self, n) for n in (
             "regressor", "model", "method", "qs", "base", "quadrant", "dq_min", "chunk_size",
-            "max_iter", "tol", "max_passes", "payload_ratio")}
+            "max_iter", "tol", "max_passes", "payload_ratio", "quadrant_theta",
+            "quadrant_band")}
 
     def __repr__(self) -> str:
         return f"RobotModel(model={self.model!r}, method={self.method!r}, qs={self.qs!r})"
@@ -244,6 +283,21 @@ class RobotModel:
         self.block_ = block
         self.names_ = tuple(base.names) + (RATIO,) * ratio + tuple(
             f"{p}{n}" for n in self.numbers_ for p in block)
+        self._damp = 0.0
+        self._band_h = np.zeros(k)
+        if not (np.isfinite(float(self.quadrant_band)) and float(self.quadrant_band) >= 0):
+            raise RobotIdentError(f"RobotModel.quadrant_band: expected a fraction >= 0, got "
+                                  f"{self.quadrant_band!r}")
+        self.quadrant_theta_ = None
+        if self.quadrant_theta is not None:
+            qt = np.asarray(self.quadrant_theta, dtype=float).ravel()
+            if qt.size != self.n_theta_ or not np.all(np.isfinite(qt)):
+                raise RobotIdentError(f"RobotModel.quadrant_theta: expected {self.n_theta_} "
+                                      f"finite values (the base parameters"
+                                      f"{' and ' + RATIO if ratio else ''}), got {qt.size}")
+            if self.quadrant != "model":
+                raise RobotIdentError("RobotModel.quadrant_theta: needs quadrant='model'")
+            self.quadrant_theta_ = qt
 
     def _structure(self) -> list[np.ndarray]:
         """Base columns that are not structurally zero in each joint's row (probed at random
@@ -386,8 +440,8 @@ class RobotModel:
             grams = [None] * len(self.cols_) if gram_from is None else [
                 (m.vv[0, 0, :len(c), :len(c)] + m.vv[1, 0, :len(c), :len(c)]) / max(m.n, 1)
                 for m, c in zip(gram_from, self.cols_, strict=True)]
-            stores = [QuadrantStore(theta[c], capacity, g)
-                      for c, g in zip(self.cols_, grams, strict=True)]
+            stores = [QuadrantStore(theta[c], capacity, g, h)
+                      for c, g, h in zip(self.cols_, grams, self._band_h, strict=True)]
         rows = changed = 0
         for _sig, _r, q, dq, ddq, tau, zdd, pay, cc in self._chunks(signals, stride):
             W, p, kn = self._rows(q, dq, ddq, tau, pay, None if cc is None else cc[:2])
@@ -411,20 +465,34 @@ class RobotModel:
                 if iv:
                     WzT, pzj = self._joint(Wz, pz, knz, j)
                     VzT = self._v(WzT if every else WzT[:, ok], pzj[ok], dqo, tauo, sgo)
+                h = 0.0 if theta is None else self._band_h[j]
                 if theta is None:
                     sp = tauo * dqo
                 else:
                     tout = theta[cols] @ WjT + po
-                    sp = tout * dqo
+                    sp = np.where(np.abs(tout) < h, 0.0, tout * dqo) if h > 0 else tout * dqo
                 pplus = quadrant_weights(sp)
                 rows += sp.size
                 if theta_prev is not None:
-                    spp = (theta_prev[cols] @ WjT + po) * dqo
-                    changed += int(np.count_nonzero(np.sign(sp) != np.sign(spp)))
+                    tp = theta_prev[cols] @ WjT + po
+                    spp = np.where(np.abs(tp) < h, 0.0, tp * dqo) if h > 0 else tp * dqo
+                    # rows that changed quadrant (entering or leaving the band is no change)
+                    changed += int(np.count_nonzero(
+                        (np.sign(sp) != np.sign(spp)) & ((sp != 0) & (spp != 0) | (h == 0))))
                 E = np.exp(-np.abs(dqo) / self.qs_[j])
-                moms[j].add(VT, pplus, E, VzT)
+                pminus = None
+                if h > 0:  # rows in the band around the quadrant boundary are left out
+                    inb = np.abs(tout) < h
+                    pplus[inb] = 0.0
+                    pminus = 1.0 - pplus
+                    pminus[inb] = 0.0
+                    keep = ~inb
+                    moms[j].add(VT[:, keep], pplus[keep], E[keep],
+                                None if VzT is None else VzT[:, keep])
+                else:
+                    moms[j].add(VT, pplus, E, VzT)
                 if stores is not None:
-                    stores[j].offer(VT, VzT, E, pplus, tout)
+                    stores[j].offer(VT, VzT, E, pplus, tout, pminus)
         return moms, rows, changed, stores
 
     @staticmethod
@@ -469,10 +537,20 @@ class RobotModel:
         Af = A[np.ix_(free, free)]
         d = np.sqrt(np.abs(np.diag(Af)))
         zero = d == 0
+        if self._damp > 0:  # Levenberg-Marquardt: unexcited directions stay where they are
+            d[zero] = 1.0
+            As = Af / d[:, None] / d[None, :] + self._damp * np.eye(d.size)
+            step = np.zeros_like(g)
+            step[free] = scipy.linalg.solve(As, g[free] / d) / d
+            return step
         if zero.any():
             names = [self.names_[i] for i in np.flatnonzero(free)[zero]]
-            raise RobotIdentError(f"parameters not identifiable on these data: {names} have no "
-                                  "excitation (their columns are zero)")
+            nz = ~zero
+            sv = np.linalg.svd(Af[np.ix_(nz, nz)] / d[nz, None] / d[None, nz],
+                               compute_uv=False) if nz.any() else np.zeros(1)
+            raise _Unidentifiable(f"parameters not identifiable on these data: {names} have "
+                                  "no excitation (their columns are zero)", names, 0.0,
+                                  float(sv[0]) if sv.size else 0.0, zero=True)
         As = Af / d[:, None] / d[None, :]
         if self.method != "iv":
             ev, evec = np.linalg.eigh(As)
@@ -484,9 +562,9 @@ class RobotModel:
         if not np.isfinite(hi) or lo <= RANK_TOL * hi:
             worst = np.argsort(-np.abs(weak))[:4]
             names = [self.names_[i] for i in np.flatnonzero(free)[worst]]
-            raise RobotIdentError(f"parameters not identifiable on these data (cond "
+            raise _Unidentifiable(f"parameters not identifiable on these data (cond "
                                   f"{hi / max(lo, 1e-300):.2g}); the weakest "
-                                  f"direction involves {names}")
+                                  f"direction involves {names}", names, float(lo), float(hi))
         step = np.zeros_like(g)
         step[free] = scipy.linalg.solve(As, g[free] / d) / d
         return step
@@ -569,6 +647,126 @@ class RobotModel:
             x, it = self._gauss_newton(moms, coeffs, x, free, w, linear)
         return x, w, it
 
+    def _payload_fixes_scale(self, moms: list[JointMoments]) -> bool:
+        """Whether the known torques p_j fix the scale of theta against the paper's a, b: not
+        when sum_j ||W_j delta - p_j||^2 = 0 for some delta (p in the span of the base
+        columns: no payload, or one and the same payload in every experiment, whose torque is
+        W (its base parameters)); then tau = a_j W_j (theta + delta) gives only products."""
+        pb = self.n_theta_
+        A = np.zeros((pb, pb))
+        b = np.zeros(pb)
+        pp = 0.0
+        for m, c in zip(moms, self.cols_, strict=True):
+            nt = len(c)
+            M = m.vv[0, 0] + m.vv[1, 0]
+            A[np.ix_(c, c)] += M[:nt, :nt]
+            b[c] += M[:nt, nt + IP]
+            pp += float(M[nt + IP, nt + IP])
+        if not pp > 0:
+            return False
+        d = np.sqrt(np.abs(np.diag(A)))
+        d[d == 0] = 1.0
+        delta, *_ = np.linalg.lstsq(A / d[:, None] / d[None, :], b / d, rcond=1e-12)
+        resid = pp - float((b / d) @ delta)
+        return resid > SCALE_TOL * pp
+
+    def _rms_load(self, moms: list[JointMoments], theta: np.ndarray) -> np.ndarray:
+        """RMS of tau_out = W_j theta + p_j over each joint's rows of ``moms`` [N m]."""
+        out = np.zeros(len(moms))
+        for j, (m, c) in enumerate(zip(moms, self.cols_, strict=True)):
+            nt = len(c)
+            M = m.vv[0, 0] + m.vv[1, 0]
+            idx = np.r_[np.arange(nt), nt + IP]
+            u = np.r_[theta[c], 1.0]
+            out[j] = np.sqrt(max(float(u @ M[np.ix_(idx, idx)] @ u), 0.0) / max(m.n, 1))
+        return out
+
+    def _gauge(self, moms: list[JointMoments]) -> int:
+        """Index of the coefficient fixed to 1 when the payloads do not fix the scale: a_m of
+        the first joint with rows in the motor quadrant (else a_g of the first with rows in
+        the generator quadrant)."""
+        pb, nb = self.n_theta_, len(PAPER_BLOCK)
+        rows = self._quadrant_rows(moms)
+        for s, off in ((0, PAPER_BLOCK.index("a_m")), (1, PAPER_BLOCK.index("a_g"))):
+            for j, joint in enumerate(self.joints_):
+                if rows[joint][s] > 0:
+                    return pb + nb * j + off
+        return pb
+
+    def _quadrant_rows(self, moms: list[JointMoments]) -> dict[str, tuple[int, int]]:
+        """Rows of every joint in the motor and the generator quadrant (P = 0: half each)."""
+        out = {}
+        for joint, m in zip(self.joints_, moms, strict=True):
+            i = m.nv - N_EXTRA + ONE
+            out[joint] = (int(round(m.vv[0, 0, i, i])), int(round(m.vv[1, 0, i, i])))
+        return out
+
+    def _fit_paper(self, moms: list[JointMoments], x: np.ndarray, free: np.ndarray,
+                   damped_ok: bool = False) -> tuple[np.ndarray, np.ndarray, int, Any]:
+        """The paper model on ``moms``; returns (x, weights, iterations, None), or with
+        ``damped_ok`` and singular normal equations a Levenberg-Marquardt fit (the unexcited
+        directions stay at ``x``) and the error (quadrants still being decided: the next
+        ones may excite them). A failure names its evidence (rows per quadrant and load sign
+        of the joints involved, singular values) and what data would fix it, in one line."""
+        try:
+            return (*self._fit_on(moms, paper_coefficients, x, free, linear=False), None)
+        except _Unidentifiable as e:
+            if not damped_ok:
+                raise RobotIdentError(self._evidence(e, moms)) from None
+            self._damp = DAMPING
+            try:
+                out = self._fit_on(moms, paper_coefficients, x, free, linear=False)
+            finally:
+                self._damp = 0.0
+            return (*out, RobotIdentError(self._evidence(e, moms)))
+
+    @staticmethod
+    def _load_signs(m: JointMoments) -> tuple[int, int]:
+        """Rows with a positive and a negative load (sign(P) sign(dq)): motor rows with
+        dq > 0 and generator rows with dq < 0 have tau_out > 0."""
+        i, sg = m.nv - N_EXTRA + ONE, m.nv - N_EXTRA + ISG
+        pos = 0.5 * (m.vv[0, 0, i, i] + m.vv[0, 0, sg, i] + m.vv[1, 0, i, i] - m.vv[1, 0, sg, i])
+        return int(round(pos)), int(round(m.vv[0, 0, i, i] + m.vv[1, 0, i, i] - pos))
+
+    def _evidence(self, e: _Unidentifiable, moms: list[JointMoments]) -> str:
+        rows = self._quadrant_rows(moms)
+        loads = {j: self._load_signs(m) for j, m in zip(self.joints_, moms, strict=True)}
+        by_number = dict(zip((str(n) for n in self.numbers_), self.joints_, strict=True))
+        named = []
+        for n in e.names:
+            for p in PAPER_BLOCK:
+                if n.startswith(p) and n[len(p):] in by_number:
+                    j = by_number[n[len(p):]]
+                    if j not in named:
+                        named.append(j)
+        frac = {j: min(r) / max(sum(r), 1) for j, r in rows.items()}
+        lfrac = {j: min(r) / max(sum(r), 1) for j, r in loads.items()}
+        thin = [j for j in self.joints_ if frac[j] < THIN_QUADRANT]
+        one_sign = [j for j in self.joints_ if lfrac[j] < THIN_QUADRANT and j not in thin]
+        show = named + [j for j in thin + one_sign if j not in named] or list(self.joints_)
+        how = ("model quadrant sign(tau_out_hat dq) of the fit" if self.quadrant == "model"
+               else "measured quadrant sign(tau dq)")
+        ev = "; ".join(f"{j}: {rows[j][0]} rows motor, {rows[j][1]} generator, load > 0 on "
+                       f"{loads[j][0]}, < 0 on {loads[j][1]}" for j in show)
+        sv = (f"scaled normal matrix singular values {e.lo:.3g} .. {e.hi:.3g}" if not e.zero
+              else f"largest singular value {e.hi:.3g}, zero columns")
+        fixes = []
+        if thin:
+            fixes.append(f"a trajectory on which the load of {', '.join(thin)} changes sign "
+                         "against its velocity (rows in both quadrants), e.g. through the "
+                         "configurations where its gravity torque changes sign, or a payload "
+                         "that makes its load exceed its dry friction")
+        if one_sign:
+            fixes.append(f"a trajectory on which the load of {', '.join(one_sign)} changes "
+                         "sign (c_m, c_g and the offset are not separable otherwise)")
+        if any(n.startswith(("a_m", "a_g", "b_m", "b_g")) for n in e.names) or not fixes:
+            fixes.append("experiments with different payloads (they fix the scale of the "
+                         "base parameters against a_m, a_g)")
+        if self.quadrant == "measured":
+            fixes.append("quadrant='model'")
+        return (f"paper model: {e} -- evidence ({how}): {ev}; {sv}. Fix: "
+                + "; or ".join(fixes))
+
     # ------------------------------------------------------------------ public
     def fit(self, signals: RobotSignals | Sequence[RobotSignals]) -> RobotModel:
         """Identify the parameters on one or several :class:`RobotSignals` (all experiments
@@ -588,13 +786,15 @@ class RobotModel:
                                       "payload (mass > 0), so the ratio M_ae / M_aw (eq. 35) "
                                       "cannot be identified")
         paper = self.model == "paper"
-        # quadrant="model": the start (usual fit, paper fit with the measured quadrants) only
-        # needs a first theta; on large data it is taken on every stride-th row, and the full
-        # pass with the model quadrants follows (module constant START_ROWS)
+        model_q = paper and self.quadrant == "model"
+        # quadrant="model": the start (the usual fit) only needs a first theta; on large data
+        # it is taken on every stride-th row, and the full pass with the model quadrants
+        # follows (module constant START_ROWS)
         stride = 1
-        if paper and self.quadrant == "model" and int(self.max_passes) > 0:
+        if model_q:
             stride = max(1, self._n_samples(signals) // int(START_ROWS))
-        moms, _, _, _ = self._pass(signals, None, 3 if paper else 1, stride=stride)
+        moms, _, _, _ = self._pass(signals, None, 3 if paper and not model_q else 1,
+                                   stride=stride)
         passes = 1
         self.start_stride_ = stride
         # usual model (also the paper model's starting point)
@@ -620,20 +820,36 @@ class RobotModel:
         x[:pb] = xu[:pb]
         for j in range(k):
             x[pb + nb * j: pb + nb * (j + 1)] = paper_start(xu[pb + nbu * j: pb + nbu * (j + 1)])
-        free = np.ones(x.size, dtype=bool)
-        pay = sum(float(m.vv[:, 0, m.nv - N_EXTRA + IP, m.nv - N_EXTRA + IP].sum())
-                  for m in moms)
-        if pay == 0.0:
-            free[pb] = False  # a_m of the first joint: scale of theta (paper module doc)
-            self.fixed_ = {self.names_[pb]: 1.0}
-        x, w, it = self._fit_on(moms, paper_coefficients, x, free, linear=False)
-        if self.quadrant == "model" and int(self.max_passes) > 0:
-            cap = self._store_capacity(signals)
-            theta_q = x[:pb].copy()  # the theta that decided the moments' quadrants
-            moms, rows, _, stores = self._pass(signals, theta_q, 3, capacity=cap,
-                                               gram_from=moms)
+        scale_fixed = self._payload_fixes_scale(moms)
+        stores = None
+        rows = 0
+        cap = self._store_capacity(signals)
+        # the theta that decides the moments' quadrants
+        given = self.quadrant_theta_ is not None
+        theta_q = self.quadrant_theta_.copy() if given else xu[:pb].copy()
+        self.band_ = np.zeros(k)
+        if model_q and float(self.quadrant_band) > 0:
+            self.band_ = float(self.quadrant_band) * self._rms_load(moms, theta_q)
+        self._band_h = self.band_
+        if model_q:
+            # the model quadrant sign(tau_out_hat dq) of the usual fit, never the measured
+            # torque's: on a joint whose dry friction exceeds its load, sign(tau dq) is
+            # "motor" on every row whatever the load does
+            moms, rows, _, stores = self._pass(signals, theta_q, 3,
+                                               capacity=0 if given else cap, gram_from=moms)
             passes += 1
-            x, w, it = self._fit_on(moms, paper_coefficients, x, free, linear=False)
+        free = np.ones(x.size, dtype=bool)
+        if not scale_fixed:
+            # no payload torque outside the span of the base columns (no payload, or one
+            # and the same payload in every experiment): theta * a only (paper module doc)
+            i = self._gauge(moms)
+            free[i] = False
+            x[i] = 1.0
+            self.fixed_ = {self.names_[i]: 1.0}
+        self.quadrant_rows_ = self._quadrant_rows(moms)
+        loop = model_q and not given
+        x, w, it, pending = self._fit_paper(moms, x, free, damped_ok=loop)
+        if loop:
             for _ in range(int(self.max_passes) - 1):
                 theta = x[:pb].copy()
                 if stores is not None and all(
@@ -647,10 +863,13 @@ class RobotModel:
                                                              capacity=cap, gram_from=moms)
                     passes += 1
                 theta_q = theta
-                x, w, it = self._fit_on(moms, paper_coefficients, x, free, linear=False)
+                self.quadrant_rows_ = self._quadrant_rows(moms)
+                x, w, it, pending = self._fit_paper(moms, x, free, damped_ok=True)
                 self.quadrant_changes_.append(changed)
                 if changed <= QUADRANT_TOL * rows:
                     break
+        if pending is not None:  # the last quadrants still leave a direction unexcited
+            raise pending
         self._statistics(moms, paper_coefficients, x, free, w)
         self.weights_ = w
         self.n_passes_, self.n_iter_ = passes, it
@@ -685,6 +904,8 @@ class RobotModel:
         out = np.full(signals.tau.shape, np.nan)
         coeffs = usual_coefficients if self.model == "usual" else paper_coefficients
         theta = self.coef_[:self.n_theta_]
+        if self.quadrant_theta_ is not None:
+            theta = self.quadrant_theta_
         for r, j, cols, WjT, pj, dqj, tauj, sg in passes:
             idx = self._local(j)
             nt = len(cols)

@@ -109,15 +109,20 @@ class JointMoments:
                         self._add(s, e, ab, azb, wb * eb**e)
 
     def move(self, VT: np.ndarray, dplus: np.ndarray, E: np.ndarray,
-             VzT: np.ndarray | None = None) -> None:
+             VzT: np.ndarray | None = None, dminus: np.ndarray | None = None) -> None:
         """Move rows between the quadrants: P+ of the rows VT (nv, m) changed by ``dplus``
         (m,) (new - old), so their terms are added to s = 0 with weight dplus and to s = 1
-        with -dplus (the row count does not change)."""
+        with -dplus (the row count does not change). ``dminus``: the change of P- when it is
+        not -dplus (rows entering or leaving the fit: P+ = P- = 0 while left out)."""
         if VT.shape[1] == 0:
             return
         if self.iv and VzT is None:
             raise RobotIdentError("JointMoments.move: instrument rows missing for IDIM-IV")
-        for s, w in ((0, dplus), (1, -dplus)):
+        if dminus is None:
+            dminus = -dplus
+        else:
+            self.n += int(round(float(np.sum(dplus + dminus))))
+        for s, w in ((0, dplus), (1, dminus)):
             self._add(s, 0, VT, VzT, w)
             if self.powers > 1:
                 big = E > E_TINY

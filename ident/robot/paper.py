@@ -25,13 +25,15 @@ fixed, every Gauss-Newton step is a quadratic form in the moments
 never touch the samples again.
 
 Quadrants: ``quadrant="measured"`` uses the paper's proxy sign(P) = sign(tau dq) (eq. 26);
-``quadrant="model"`` (default) decides sign(P_out) = sign(tau_out_hat dq) with the current
-estimate of theta and repeats the pass until the assignment is stable (what the simulator and
-the physics use; the proxy is wrong in the stiction band of Fig. 2.b).
+``quadrant="model"`` (default) decides sign(P_out) = sign(tau_out_hat dq), first with the usual
+fit's theta, then with the current estimate, and repeats the pass until the assignment is
+stable (what the simulator and the physics use; the proxy is wrong in the stiction band of
+Fig. 2.b and "motor" everywhere on a joint whose friction exceeds its load).
 
 The scale of theta against (a, b) is fixed by the known payload torques (p_j enters with the
-coefficient a, not a free ratio): without any payload torque only products are identifiable and
-the estimator fixes a_m of the first joint to 1 (reported in ``fixed_``).
+coefficient a, not a free ratio) when they are not in the span of the base columns: without a
+payload, or with one and the same payload in every experiment, only products are identifiable
+and the estimator fixes a_m of the first joint to 1 (reported in ``fixed_``).
 """
 
 from __future__ import annotations

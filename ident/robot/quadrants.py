@@ -58,8 +58,9 @@ class QuadrantStore:
     """
 
     def __init__(self, theta0: np.ndarray, capacity: int,
-                 gram: np.ndarray | None = None) -> None:
+                 gram: np.ndarray | None = None, band: float = 0.0) -> None:
         self.theta0 = np.array(theta0, dtype=float)
+        self.band = float(band)
         nt = self.theta0.size
         self.L = np.eye(nt)
         if gram is not None and nt:
@@ -79,16 +80,21 @@ class QuadrantStore:
         self.VzT: np.ndarray | None = None
         self.E = np.empty(0)
         self.pplus = np.empty(0)
+        self.pminus = np.empty(0)
         self.nt = self.theta0.size
 
     def offer(self, VT: np.ndarray, VzT: np.ndarray | None, E: np.ndarray,
-              pplus: np.ndarray, tau_out: np.ndarray) -> None:
+              pplus: np.ndarray, tau_out: np.ndarray, pminus: np.ndarray | None = None) -> None:
         """Offer the rows of one chunk (VT (nv, m), tau_out = W theta_0 + p (m,)); keeps the
-        ``capacity`` rows of smallest r over everything offered so far."""
+        ``capacity`` rows of smallest r over everything offered so far. ``pminus``: P- when
+        it is not 1 - P+ (rows left out, |tau_out| < ``band``: both 0); the distance is then
+        to |tau_out| = band, where a row enters or leaves the fit (and beyond which it flips)."""
         nt = self.nt
+        if pminus is None:
+            pminus = 1.0 - pplus
         U = self.Linv @ VT[:nt]
         wn = np.sqrt(np.einsum("im,im->m", U, U))
-        a = np.abs(tau_out)
+        a = np.abs(np.abs(tau_out) - self.band)
         # ||W|| = 0: tau_out = p does not depend on theta, the row never changes quadrant
         r = np.divide(a, wn, out=np.full(a.shape, np.inf), where=wn > 0)
         cand = r < self.radius
@@ -106,6 +112,7 @@ class QuadrantStore:
                       else np.concatenate([self.VzT, VzT[:, idx]], 1))
         E_all = np.concatenate([self.E, E[idx]])
         p_all = np.concatenate([self.pplus, pplus[idx]])
+        m_all = np.concatenate([self.pminus, pminus[idx]])
         if r_all.size > self.capacity:
             keep = np.argpartition(r_all, self.capacity)[:self.capacity] if self.capacity \
                 else np.empty(0, dtype=int)
@@ -113,9 +120,11 @@ class QuadrantStore:
             mask[keep] = False
             self.radius = min(self.radius, float(r_all[mask].min()))
             r_all, V_all, E_all, p_all = r_all[keep], V_all[:, keep], E_all[keep], p_all[keep]
+            m_all = m_all[keep]
             if Vz_all is not None:
                 Vz_all = Vz_all[:, keep]
         self.r, self.VT, self.VzT, self.E, self.pplus = r_all, V_all, Vz_all, E_all, p_all
+        self.pminus = m_all
 
     def covers(self, theta: np.ndarray) -> bool:
         """True when no row outside the store can be in another quadrant at ``theta``."""
@@ -131,10 +140,19 @@ class QuadrantStore:
         VT = self.VT
         tau_out = theta @ VT[:nt] + VT[nt + IP]
         pnew = quadrant_weights(tau_out * VT[nt + IDQ])
-        changed = pnew != self.pplus
-        n = int(np.count_nonzero(changed))
-        if n:
+        mnew = 1.0 - pnew
+        if self.band > 0:
+            out = np.abs(tau_out) < self.band
+            pnew[out] = 0.0
+            mnew[out] = 0.0
+        changed = (pnew != self.pplus) | (mnew != self.pminus)
+        # rows that changed quadrant (entering or leaving the band is no change)
+        flipped = changed if self.band <= 0 else changed & (
+            (pnew + mnew > 0) & (self.pplus + self.pminus > 0))
+        n = int(np.count_nonzero(flipped))
+        if np.any(changed):
             Vz = None if self.VzT is None else self.VzT[:, changed]
-            mom.move(VT[:, changed], pnew[changed] - self.pplus[changed], self.E[changed], Vz)
-            self.pplus = pnew
+            mom.move(VT[:, changed], pnew[changed] - self.pplus[changed], self.E[changed], Vz,
+                     None if self.band <= 0 else mnew[changed] - self.pminus[changed])
+            self.pplus, self.pminus = pnew, mnew
         return n
