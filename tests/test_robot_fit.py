@@ -138,7 +138,9 @@ def test_paper_beats_usual_at_low_velocity_on_every_joint(arm3, ur10, name):
     params, reg, base, runs = arm3 if name == "arm3" else ur10
     sigs = _signals(params, reg, runs, 5)
     usual = RobotModel(reg, "usual", base=base).fit(sigs)
-    paper = RobotModel(reg, "paper", base=base).fit(sigs)
+    # every row (no quadrant band), so that the error and sigma / rms(tau) below are on the
+    # same rows: the band leaves out the rows of smallest load, which lowers ||rho||/||tau||
+    paper = RobotModel(reg, "paper", base=base, quadrant_band=0.0).fit(sigs)
     tab = table_iii({"usual": usual, "paper": paper}, sigs)
     text = format_table_iii(tab)
     for row in tab.values():
