@@ -9,12 +9,14 @@ base parameters and friction) must be recovered within their standard deviations
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 
 import numpy as np
 import pinocchio as pin
 import pytest
 import scipy.stats
+from test_robot_cli import ARM3, api_signals, run_cli
 from test_robot_fit import PAYLOADS, ROOT, _check_recovery, _signals, _simulate
 
 from ident.robot import RobotIdentError
@@ -23,7 +25,7 @@ from ident.robot.estimate import RobotModel
 from ident.robot.payload import format_misfit, payload_misfit
 from ident.robot.regressor import RobotRegressor
 from ident.robot.signals import RobotPayloadData
-from sim_drivers.arm import ArmParams
+from sim_drivers.arm import ArmGains, ArmParams, Payload, model_reference, simulate_arm
 from trajectories.robot import load_robot
 
 SEEDS = (0, 1, 2)
@@ -135,3 +137,50 @@ def test_payload_params_errors_name_the_problem(arm3_usual):
     m = RobotModel(reg, base=base, payload_params=True).fit(sigs[:2])
     with pytest.raises(RobotIdentError, match="not one of the fitted payloads"):
         m.predict(sigs[2])
+
+
+def test_cli_payload_mass(tmp_path, capfd):
+    """``jointid fit --robot --payload mass`` on CSV files that give only the payload's mass:
+    the columns chain, the same estimate as the Python estimator on the same files, the
+    payload's CoM recovered, its combinations and per-joint check printed and recorded."""
+    robot = load_robot(ARM3)
+    c = ArmParams.from_robot(robot).friction.c_m
+    params = ArmParams.from_robot(robot, dict(a_m=1.0, b_m=0.0, a_g=1.0, b_g=0.0, d_m=0.0,
+                                              d_g=0.0, c_g=c))
+    ref = model_reference(params.model, center=[0.0, -1.9, 0.6], fraction=0.9,
+                          duration_s=10.0, seed=1)
+    pay = Payload(10.0, [0.02, 0.0, 0.1], [0.02, 0.0, 0.0, 0.02, 0.0, 0.03])
+    files = []
+    for i, p in enumerate((None, pay)):
+        run = simulate_arm(params, ref, ArmGains.for_params(params, payload=p), payload=p,
+                           seed=20 + i)
+        cols = run.columns()
+        cols["payload_mass_kg"] = np.full(run.t.size, 0.0 if p is None else p.mass)
+        files.append(tmp_path / f"p{i}.csv")
+        np.savetxt(files[-1], np.column_stack(list(cols.values())), delimiter=",",
+                   header=",".join(cols), comments="", fmt="%.17g")
+    out_json = tmp_path / "fit.json"
+    code, out, err = run_cli(capfd, "--robot", ARM3, *files, "--model", "usual", "--method",
+                             "ls", "--payload", "mass", "--json", out_json)
+    assert code == 0, err
+    assert "payload check" in out, out
+    rec = json.loads(out_json.read_text())
+    assert rec["payload"] == "mass"
+    usual = rec["models"]["usual"]
+    assert set(usual["payload_misfit"]) == set(robot.moving)
+    assert len(usual["payload_expressions"]) == 9
+    reg = RobotRegressor(robot)
+    sig, _ = api_signals(files, robot, rec, reg, "ls")
+    assert [p.mass for p in sig.payloads] == [0.0, 10.0]
+    assert not np.any(sig.payloads[1].com)  # the files give no CoM
+    est = RobotModel(reg, "usual", "ls", payload_params=True).fit(sig)
+    pars = usual["parameters"]
+    assert list(pars) == list(est.names_)
+    np.testing.assert_allclose([v["value"] for v in pars.values()], est.coef_, rtol=1e-6,
+                               atol=1e-9)
+    truth = dict(zip(est.payload_base_.names, est.payload_base_.values(
+        reg, RobotPayloadData(pay.mass, pay.com, pay.inertia)), strict=True))
+    for name in ("MXpay", "MYpay", "MZpay"):  # m c [kg m]
+        v, s = pars[name]["value"], pars[name]["std"]
+        assert abs(v - truth[name]) < max(4 * s, 0.01 * abs(truth[name])), (name, v, s,
+                                                                              truth[name])
