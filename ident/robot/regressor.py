@@ -1,7 +1,8 @@
 """Vectorised Newton-Euler regressor of the standard parameters (paper eq. 9), n samples.
 
-(Just past 600 lines: one class -- the vectorised Newton-Euler recursion and the column
-bookkeeping it needs to stay fast belong together.)
+(Past 600 lines: one class -- the vectorised Newton-Euler recursion, the column
+bookkeeping it needs to stay fast and the payload's columns read from the last link's belong
+together.)
 
 For the k moving joints of a :class:`trajectories.robot.Robot`, the joint-side torque is
 linear in the standard parameters of every moving link (Khalil's convention, frame j of the
