@@ -261,8 +261,10 @@ def fit_robot(
         if expressions:
             rec["base_expressions"] = list(expressions)
         if payload == "mass":  # the payload's identifiable combinations, the per-joint check
-            rec["payload_expressions"] = list(est.payload_base_.expressions)
-            rec["payload_misfit"] = payload_misfit(est, out["_signals"][0])
+            rec["payload_merged"] = bool(est.payload_merged_)
+            if not est.payload_merged_:
+                rec["payload_expressions"] = list(est.payload_base_.expressions)
+                rec["payload_misfit"] = payload_misfit(est, out["_signals"][0])
         if val is not None:
             rec["validation_rel_error"] = {k: float(v) for k, v in est.rel_error(val).items()}
         cons = check_consistency(est, feasibility=feasibility)
@@ -327,6 +329,9 @@ def format_report(out: dict[str, Any]) -> str:
         if rec.get("base_expressions"):
             lines.append("base parameters (standard parameters regrouped, ROBOT_FORMAT names):")
             lines.extend(f"  {e}" for e in rec["base_expressions"])
+        if rec.get("payload_merged"):
+            lines.append("payload: in every run, its first moments and inertia merged into the "
+                         "last link's base parameters (its mass at the flange subtracted)")
         if rec.get("payload_misfit"):
             lines.append("payload (flange frame, about its origin; mass known): "
                          + "; ".join(rec["payload_expressions"]))

@@ -44,6 +44,8 @@ def _truth(params, reg, model: RobotModel) -> dict[str, float]:
     truth = params.truth(None)
     for j in reg.numbers:
         truth[f"FC{j}"] = truth[f"c_m{j}"]
+    if model.payload_merged_:
+        return truth
     pb = model.payload_base_
     g = len(model.payload_masses_)
     for i, mass in enumerate(model.payload_masses_):
@@ -129,7 +131,7 @@ def test_payload_params_errors_name_the_problem(arm3_usual):
     params, reg, base, runs = arm3_usual
     sigs = _signals(params, reg, runs, 0)
     with pytest.raises(RobotIdentError, match="every experiment carries a payload"):
-        RobotModel(reg, base=base, payload_params=True).fit(sigs[1:])
+        RobotModel(reg, base=base, payload_params=True).fit(sigs[1:])  # 5 and 10 kg
     with pytest.raises(RobotIdentError, match="no experiment carries a payload"):
         RobotModel(reg, base=base, payload_params=True).fit(sigs[:1])
     with pytest.raises(RobotIdentError, match="exclude each other"):
@@ -184,3 +186,25 @@ def test_cli_payload_mass(tmp_path, capfd):
         v, s = pars[name]["value"], pars[name]["std"]
         assert abs(v - truth[name]) < max(4 * s, 0.01 * abs(truth[name])), (name, v, s,
                                                                               truth[name])
+
+
+def test_one_payload_in_every_run_merges_into_the_last_link(arm3_usual):
+    """Only the 10 kg runs: the payload's columns are the last link's own, so its first
+    moments and inertia merge into the last link's standard parameters (its mass at the
+    flange origin subtracted): recovered within sigma against that merged truth."""
+    params, reg, base, runs = arm3_usual
+    fits = [RobotModel(reg, "usual", base=base, payload_params=True).fit(
+        _signals(params, reg, runs, s)[2:]) for s in SEEDS]
+    m = fits[0]
+    assert m.payload_merged_ and m.n_theta_ == m.n_base_
+    assert not any("pay" in n for n in m.names_)
+    p = PAYLOADS[2]
+    phi = reg.flange_parameters(RobotPayloadData(p.mass, p.com, p.inertia))
+    phi[9] = 0.0  # the mass is known: subtracted, not merged
+    merged = reg.flange_transform() @ phi
+    truth = _truth(params, reg, m)
+    k = reg.numbers[-1]
+    for name, v in zip(("XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M"), merged,
+                       strict=True):
+        truth[f"{name}{k}"] = truth.get(f"{name}{k}", 0.0) + float(v)
+    _check_recovery(fits, truth)

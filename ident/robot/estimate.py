@@ -42,7 +42,8 @@ moments m c and inertia about the flange origin, flange frame, ``PAYLOAD_NAMES``
 link's columns (``RobotRegressor.payload_columns``) on the rows of the experiments carrying
 that payload, zero elsewhere. One set per distinct payload mass (suffix 1, 2, ... when there
 are several); separable from the last link's own parameters only with experiments without a
-payload.
+payload; with one and the same payload in every experiment (``payload_merged_``) they merge
+into the last link's base parameters instead (only the mass at the flange origin subtracted).
 """
 
 from __future__ import annotations
@@ -166,7 +167,11 @@ class RobotModel:
         payload torque as known; needs an experiment with a payload.
     payload_params : bool
         The payload's mass known, its first moments and inertia identified (module doc;
-        ``payload_base_``, ``payload_masses_``); needs experiments with and without a payload.
+        ``payload_base_``, ``payload_masses_``); needs experiments without a payload to
+        separate them from the last link's parameters. When every experiment carries one
+        and the same payload (``payload_merged_``), only its mass at the flange origin is
+        subtracted and its first moments and inertia merge into the last link's base
+        parameters (no payload columns).
 
     Attributes (after :meth:`fit`)
     ------------------------------
@@ -329,7 +334,8 @@ class RobotModel:
                                   f"{type(reg).__name__} has no payload_columns")
         self.payload_base_ = payload_base(reg)
         masses = tuple(getattr(self, "payload_masses_", ()))
-        r, g = len(self.payload_base_.names), len(masses)
+        r = len(self.payload_base_.names)
+        g = 0 if getattr(self, "payload_merged_", False) else len(masses)
         self.n_theta_ = self.n_base_ + g * r
         # rows of the regressor block _rows appends: after the standard (or base) columns
         width = len(reg.standard_names) if self._kpn else self.n_base_
@@ -358,7 +364,8 @@ class RobotModel:
                                       f"payloads {list(self.payload_masses_)} kg")
             r = len(pbase.names)
             g = self.payload_masses_.index(mass)
-            block[:, g * r:(g + 1) * r, :] = Y[:, pbase.columns, :]
+            if block.shape[1]:  # (none when the payload is merged into the last link)
+                block[:, g * r:(g + 1) * r, :] = Y[:, pbase.columns, :]
         return np.concatenate([W, block], axis=1), p
 
     def _structure(self) -> list[np.ndarray]:
@@ -963,11 +970,15 @@ class RobotModel:
         if not masses:
             raise RobotIdentError("RobotModel.payload_params: no experiment carries a payload "
                                   "(mass > 0): nothing to identify")
-        if not empty:
-            raise RobotIdentError("RobotModel.payload_params: every experiment carries a "
-                                  "payload, so its parameters are not separable from the last "
-                                  "link's (its columns are that link's); add an experiment "
-                                  "without payload")
+        if not empty and len(masses) > 1:
+            raise RobotIdentError(f"RobotModel.payload_params: every experiment carries a "
+                                  f"payload ({masses} kg), so their parameters are not "
+                                  "separable from the last link's (their columns are that "
+                                  "link's); add an experiment without payload")
+        # one payload in every experiment: its columns are the last link's own, so its
+        # first moments and inertia merge into the last link's base parameters (only its
+        # mass at the flange origin is subtracted)
+        self.payload_merged_ = not empty
         self.payload_masses_ = tuple(masses)
 
     def _check_fitted(self) -> None:
