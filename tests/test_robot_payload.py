@@ -15,6 +15,7 @@ from dataclasses import replace
 import numpy as np
 import pinocchio as pin
 import pytest
+import scipy.io
 import scipy.stats
 from test_robot_cli import ARM3, api_signals, run_cli
 from test_robot_fit import PAYLOADS, ROOT, _check_recovery, _signals, _simulate
@@ -22,6 +23,7 @@ from test_robot_fit import PAYLOADS, ROOT, _check_recovery, _signals, _simulate
 from ident.robot import RobotIdentError
 from ident.robot.base import PAYLOAD_NAMES, payload_base
 from ident.robot.estimate import RobotModel
+from ident.robot.loaders import load_robot_runs, parse_robot_mapping
 from ident.robot.payload import format_misfit, payload_misfit
 from ident.robot.regressor import RobotRegressor
 from ident.robot.signals import RobotPayloadData
@@ -208,3 +210,25 @@ def test_one_payload_in_every_run_merges_into_the_last_link(arm3_usual):
                        strict=True):
         truth[f"{name}{k}"] = truth.get(f"{name}{k}", 0.0) + float(v)
     _check_recovery(fits, truth)
+
+
+def test_mat_payload_mass_from_map(tmp_path):
+    """MAT files: ``--map payload_kg=`` gives the file's payload mass (a number or a path to
+    a scalar); a negative mass or a non-scalar path is refused naming the file and key."""
+    k = 3
+    t = np.arange(0.0, 1.0, 0.01)
+    f = tmp_path / "run.mat"
+    scipy.io.savemat(f, {"t": t, "q": np.zeros((t.size, k)), "tau": np.zeros((t.size, k)),
+                         "rec": {"load": 12.5}})
+    joints = load_robot(ARM3).moving
+    base = {"t": "t", "q": "q", "tau": "tau"}
+    assert load_robot_runs(f, joints, mapping=base)[0].payload.mass == 0.0
+    assert load_robot_runs(f, joints, mapping={**base, "payload_kg": "7.5"})[0].payload.mass \
+        == 7.5
+    run = load_robot_runs(f, joints, mapping=parse_robot_mapping(
+        "t=t,q=q,tau=tau,payload_kg=rec.load"))[0]
+    assert run.payload.mass == 12.5 and not np.any(run.payload.com)
+    with pytest.raises(RobotIdentError, match=r"run.mat: payload_kg '-3'"):
+        load_robot_runs(f, joints, mapping={**base, "payload_kg": "-3"})
+    with pytest.raises(RobotIdentError, match=r"run.mat: payload_kg 't' has shape"):
+        load_robot_runs(f, joints, mapping={**base, "payload_kg": "t"})
