@@ -86,7 +86,7 @@ def test_payload_base_rule():
     assert set(pb.unidentifiable) == {"XXpay", "XYpay", "XZpay", "YYpay", "YZpay", "MZpay"}
 
 
-@pytest.mark.parametrize("method", ["ls", "wls"])
+@pytest.mark.parametrize("method", ["ls", "wls", "iv"])
 def test_unknown_com_payload_recovered_within_sigma(arm3_usual, method):
     params, reg, base, runs = arm3_usual
     fits = [RobotModel(reg, "usual", method, base=base, payload_params=True).fit(
