@@ -111,6 +111,19 @@ def test_unknown_com_payload_recovered_within_sigma(arm3_usual, method):
     assert m.coef_[i] / m.std_[i] > 20
 
 
+@pytest.mark.slow
+def test_unknown_com_payload_recovered_on_ur10():
+    """The same on the 6-axis UR10 (usual friction, 0 / 5 / 10 kg runs, 3 seeds)."""
+    robot = load_robot(ROOT / "examples" / "robots" / "ur10.toml")
+    c = ArmParams.from_robot(robot).friction.c_m
+    params, reg, base, runs = _simulate("ur10", dict(a_m=1.0, b_m=0.0, a_g=1.0, b_g=0.0,
+                                                     d_m=0.0, d_g=0.0, c_g=c),
+                                        duration_s=12.0, seed=3)
+    fits = [RobotModel(reg, "usual", base=base, payload_params=True).fit(
+        _signals(params, reg, runs, s)) for s in SEEDS]
+    _check_recovery(fits, _truth(params, reg, fits[0]))
+
+
 def test_misfit_flags_guessed_com_not_identified_one(arm3_usual):
     """A guessed CoM (the payloads taken as point masses at the flange, --payload known)
     leaves a payload-run residual the check flags; the identified payload leaves none."""
