@@ -100,10 +100,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--payload",
-        choices=("known", "ratio"),
+        choices=("known", "ratio", "mass"),
         help="--robot only: the logged payload's torque is known, or scaled by an identified "
-        "ratio M_ae/M_aw (eq. 35); default ratio for single-joint logs (payload lever arm), "
-        "else known",
+        "ratio M_ae/M_aw (eq. 35), or only its mass is known and its first moments and "
+        "inertia are identified (needs runs without payload); default ratio for single-joint "
+        "logs (payload lever arm), else known",
     )
     p.add_argument(
         "--joint",

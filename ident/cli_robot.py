@@ -37,6 +37,7 @@ from .robot.loaders import (
     preprocess_runs,
     resolved_settings,
 )
+from .robot.payload import format_misfit, payload_misfit
 from .robot.plots import write_robot_report
 from .robot.regressor import RobotRegressor
 from .robot.signals import RobotSignals
@@ -48,7 +49,7 @@ FORMAT = "jointid-robot-fit/1"
 #: Preprocessing chains (``fit_robot(chain=...)``, ``--chain``).
 CHAINS = ("columns", "states")
 #: Payload treatments (``fit_robot(payload=...)``, ``--payload``).
-PAYLOADS = ("known", "ratio")
+PAYLOADS = ("known", "ratio", "mass")
 #: Options of the single-joint ``jointid fit`` that have no meaning with ``--robot``.
 _SINGLE_ONLY = (("joint", "--joint", "the robot file gives the joint types"),
                 ("gain", "--gain", "use drive_gain in the robot file's [joints.drive]"),
@@ -129,10 +130,13 @@ def fit_robot(
         ``"columns"``: the single-joint chain, regressor columns filtered and decimated in
         parallel with the torque (:mod:`ident.robot.design`); ``"states"``: the states
         decimated and the regressor built on them (:func:`preprocess_runs`).
-    payload : {"known", "ratio"} or None
+    payload : {"known", "ratio", "mass"} or None
         The payload torque known, or scaled by an identified ratio M_ae/M_aw (eq. 35,
-        ``RobotModel(payload_ratio=True)``); None: "ratio" when some run gives its payload
-        as a single-joint lever arm (``arm_m``), as the single-joint fit does, else "known".
+        ``RobotModel(payload_ratio=True)``), or only its mass known and its first moments
+        and inertia at the flange identified (``RobotModel(payload_params=True)``; needs
+        runs without payload; ``payload_misfit`` in each model's record); None: "ratio"
+        when some run gives its payload as a single-joint lever arm (``arm_m``), as the
+        single-joint fit does, else "known".
     sign_check : bool
         Columns chain with the paper model: leave out, for both models, the rows where
         sign(tau_j) != sign(tau_out_j) of a first usual fit (the single-joint ``sign_check``
@@ -180,7 +184,8 @@ def fit_robot(
             # as the single-joint fit: a first usual fit estimates tau_out; rows where
             # sign(tau) != sign(tau_out) are left out of both models (and the validation)
             first = RobotModel(reg, model="usual", method=method,
-                               payload_ratio=payload == "ratio").fit(sig)
+                               payload_ratio=payload == "ratio",
+                               payload_params=payload == "mass").fit(sig)
             sig, kept = sign_checked(sig, runs, design, first.load_torque,
                                      SIGN_CHECK_MIN_KEPT)
             if val is not None:
@@ -232,6 +237,7 @@ def fit_robot(
             # check plays its part there)
             est = RobotModel(reg, model=name, method=method, qs=qs, dq_min=est_dq_min,
                              payload_ratio=payload == "ratio",
+                             payload_params=payload == "mass",
                              quadrant_band=0.0 if len(robot.moving) == 1 else 0.03).fit(sig)
         except IdentError as exc:
             if len(models) == 1:
@@ -254,6 +260,11 @@ def fit_robot(
         expressions = getattr(est.base_, "expressions", None)
         if expressions:
             rec["base_expressions"] = list(expressions)
+        if payload == "mass":  # the payload's identifiable combinations, the per-joint check
+            rec["payload_merged"] = bool(est.payload_merged_)
+            if not est.payload_merged_:
+                rec["payload_expressions"] = list(est.payload_base_.expressions)
+                rec["payload_misfit"] = payload_misfit(est, out["_signals"][0])
         if val is not None:
             rec["validation_rel_error"] = {k: float(v) for k, v in est.rel_error(val).items()}
         cons = check_consistency(est, feasibility=feasibility)
@@ -318,6 +329,14 @@ def format_report(out: dict[str, Any]) -> str:
         if rec.get("base_expressions"):
             lines.append("base parameters (standard parameters regrouped, ROBOT_FORMAT names):")
             lines.extend(f"  {e}" for e in rec["base_expressions"])
+        if rec.get("payload_merged"):
+            lines.append("payload: in every run, its first moments and inertia merged into the "
+                         "last link's base parameters (its mass at the flange subtracted)")
+        if rec.get("payload_misfit"):
+            lines.append("payload (flange frame, about its origin; mass known): "
+                         + "; ".join(rec["payload_expressions"]))
+            lines.append("payload check, residual RMS on the payload vs no-payload runs:")
+            lines.extend(f"  {ln}" for ln in format_misfit(rec["payload_misfit"]).splitlines())
     lines.append("")
     lines.append("relative error ||rho_j|| / ||tau_j|| [%]")
     w = max(8, *(len(j) + 2 for j in r["moving"]))

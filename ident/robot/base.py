@@ -35,8 +35,9 @@ from . import RobotIdentError
 from .regressor import RobotRegressor
 from .signals import RobotPayloadData
 
-__all__ = ["BaseParameters", "base_parameters", "SingleJointMap", "single_joint_map",
-           "lever_arm_payload", "placed_payload",
+__all__ = ["BaseParameters", "base_parameters", "qr_rule", "SingleJointMap", "single_joint_map",
+           "lever_arm_payload", "placed_payload", "PayloadBase", "payload_base",
+           "PAYLOAD_NAMES",
            "DEFAULT_RTOL"]
 
 #: Relative rank tolerance on |R_ii| of the unit-norm columns.
@@ -147,6 +148,57 @@ def _format(coef: float) -> str:
     return f"{coef:.6g}"
 
 
+def qr_rule(W: np.ndarray, names: tuple[str, ...], rtol: float = DEFAULT_RTOL,  # noqa: N803
+            ) -> tuple[np.ndarray, np.ndarray, list[str], list[str], np.ndarray]:
+    """The base-parameter rule (module doc) on the rows ``W`` (r, p) of the columns ``names``.
+
+    Returns
+    -------
+    kept : ndarray of int
+        Indices of the kept columns.
+    beta : ndarray (len(kept), p)
+        Regrouping matrix (chi_b = beta chi).
+    base_names, expressions : list of str
+        ``names[kept]`` with suffix ``R`` where others are regrouped, and ``"XXR = XX - YY"``.
+    zero : ndarray of bool (p,)
+        Columns with no effect at all.
+    """
+    p = len(names)
+    norms = np.linalg.norm(W, axis=0)
+    scale = norms.max() if norms.size else 1.0
+    zero = norms <= 1e-12 * scale
+    Ws = W[:, ~zero] / norms[~zero]
+    idx = np.flatnonzero(~zero)
+    r = scipy.linalg.qr(Ws, mode="r")[0]
+    diag = np.abs(np.diag(r))
+    keep_mask = diag > rtol * diag.max()
+    kept = idx[keep_mask]
+    dep = idx[~keep_mask]
+    beta = np.zeros((kept.size, p))
+    beta[np.arange(kept.size), kept] = 1.0
+    if dep.size:
+        b2 = np.linalg.lstsq(W[:, kept], W[:, dep], rcond=None)[0]  # W2 = W1 b2
+        b2[np.abs(b2) < _ZERO_COEF * max(1.0, float(np.abs(b2).max()))] = 0.0
+        beta[:, dep] = b2
+    base_names, exprs = [], []
+    for row, c in enumerate(kept):
+        others = [(names[j], beta[row, j]) for j in range(p) if j != c and beta[row, j] != 0]
+        nm = names[c] + ("R" if others else "")
+        base_names.append(nm)
+        terms = [names[c]]
+        for on, coef in others:
+            if abs(coef - 1.0) < 1e-9:
+                terms.append(f"+ {on}")
+            elif abs(coef + 1.0) < 1e-9:
+                terms.append(f"- {on}")
+            elif coef < 0:
+                terms.append(f"- {_format(-coef)}*{on}")
+            else:
+                terms.append(f"+ {_format(coef)}*{on}")
+        exprs.append(f"{nm} = " + " ".join(terms))
+    return kept, beta, base_names, exprs, zero
+
+
 def base_parameters(
     regressor: RobotRegressor,
     limits: object = None,
@@ -190,42 +242,64 @@ def base_parameters(
     W = regressor.rigid(q, dq, ddq)
     if friction:
         W = np.concatenate([W, regressor.friction(dq)], axis=-1)
-    W = W.reshape(-1, p)
-    norms = np.linalg.norm(W, axis=0)
-    scale = norms.max() if norms.size else 1.0
-    zero = norms <= 1e-12 * scale
-    Ws = W[:, ~zero] / norms[~zero]
-    idx = np.flatnonzero(~zero)
-    r = scipy.linalg.qr(Ws, mode="r")[0]
-    diag = np.abs(np.diag(r))
-    keep_mask = diag > rtol * diag.max()
-    kept = idx[keep_mask]
-    dep = idx[~keep_mask]
-    beta = np.zeros((kept.size, p))
-    beta[np.arange(kept.size), kept] = 1.0
-    if dep.size:
-        b2 = np.linalg.lstsq(W[:, kept], W[:, dep], rcond=None)[0]  # W2 = W1 b2
-        b2[np.abs(b2) < _ZERO_COEF * max(1.0, float(np.abs(b2).max()))] = 0.0
-        beta[:, dep] = b2
-    base_names, exprs = [], []
-    for row, c in enumerate(kept):
-        others = [(names[j], beta[row, j]) for j in range(p) if j != c and beta[row, j] != 0]
-        nm = names[c] + ("R" if others else "")
-        base_names.append(nm)
-        terms = [names[c]]
-        for on, coef in others:
-            if abs(coef - 1.0) < 1e-9:
-                terms.append(f"+ {on}")
-            elif abs(coef + 1.0) < 1e-9:
-                terms.append(f"- {on}")
-            elif coef < 0:
-                terms.append(f"- {_format(-coef)}*{on}")
-            else:
-                terms.append(f"+ {_format(coef)}*{on}")
-        exprs.append(f"{nm} = " + " ".join(terms))
+    kept, beta, base_names, exprs, zero = qr_rule(W.reshape(-1, p), names, rtol)
     return BaseParameters(tuple(names), tuple(base_names), kept, beta, tuple(exprs),
                           tuple(names[j] for j in np.flatnonzero(zero)), float(rtol),
                           int(seed), n)
+
+
+# --------------------------------------------------------------------------- unknown payload
+#: Names of a payload's parameters with its mass known: first moments m c and inertia about the
+#: flange origin, flange frame (``RobotRegressor.flange_parameters`` without its mass).
+PAYLOAD_NAMES = ("XXpay", "XYpay", "XZpay", "YYpay", "YZpay", "ZZpay",
+                 "MXpay", "MYpay", "MZpay")
+
+
+@dataclass(frozen=True, eq=False)
+class PayloadBase:
+    """The identifiable combinations of a payload's nine parameters (``PAYLOAD_NAMES``, mass
+    known) by the base-parameter rule on its columns (``RobotRegressor.payload_columns``).
+
+    Attributes
+    ----------
+    names : tuple of str
+        Base names (``XXpayR`` when others regroup into it), r <= 9.
+    columns : ndarray of int (r,)
+        Kept columns, indices into ``PAYLOAD_NAMES``.
+    beta : ndarray (r, 9)
+        theta_pay = beta @ phi (phi: the nine parameters).
+    expressions : tuple of str
+        ``"XXpayR = XXpay - YYpay"``, one per base name.
+    unidentifiable : tuple of str
+        Parameters with no effect on any joint.
+    """
+
+    names: tuple[str, ...]
+    columns: np.ndarray
+    beta: np.ndarray
+    expressions: tuple[str, ...]
+    unidentifiable: tuple[str, ...]
+
+    def values(self, regressor: RobotRegressor, payload: RobotPayloadData) -> np.ndarray:
+        """theta_pay (r,) of a payload given in full (mass, CoM, inertia about the CoM)."""
+        return self.beta @ regressor.flange_parameters(payload)[:9]
+
+
+def payload_base(regressor: RobotRegressor, limits: object = None, seed: int = 0, *,
+                 n_samples: int = 120, rtol: float = DEFAULT_RTOL) -> PayloadBase:
+    """The base-parameter rule on a payload's nine columns (mass known) at random states
+    (as :func:`base_parameters`). They are separable from the last link's own parameters only
+    on data with runs without that payload: its columns are the last link's columns times an
+    indicator of the runs carrying it."""
+    if not hasattr(regressor, "payload_columns"):
+        raise RobotIdentError(f"payload_base: expected a RobotRegressor, got "
+                              f"{type(regressor).__name__}")
+    q, dq, ddq = _states(regressor, limits, int(n_samples), seed)
+    Y = regressor.payload_columns(q, dq, ddq)[:, :9, :]  # (k, 9, n)
+    kept, beta, names, exprs, zero = qr_rule(Y.transpose(2, 0, 1).reshape(-1, 9),
+                                             PAYLOAD_NAMES, rtol)
+    return PayloadBase(tuple(names), kept, beta, tuple(exprs),
+                       tuple(n for n, z in zip(PAYLOAD_NAMES, zero, strict=True) if z))
 
 
 # --------------------------------------------------------------------------- 1-dof mapping

@@ -34,6 +34,16 @@ and the rows their ``keep`` mask rejects are left out too.
 
 ``payload_ratio=True``: p_j is one more column of every joint's row, its parameter
 ``Ma_ratio`` = M_ae / M_aw (eq. 35) identified after the base parameters.
+
+``payload_params=True`` (mass known, CoM and inertia unknown): p_j is the torque of the
+payload's mass alone at the flange origin, and the payload's other nine parameters (first
+moments m c and inertia about the flange origin, flange frame, ``PAYLOAD_NAMES``) reduced by
+:func:`ident.robot.base.payload_base` are more columns after the base parameters: the last
+link's columns (``RobotRegressor.payload_columns``) on the rows of the experiments carrying
+that payload, zero elsewhere. One set per distinct payload mass (suffix 1, 2, ... when there
+are several); separable from the last link's own parameters only with experiments without a
+payload; with one and the same payload in every experiment (``payload_merged_``) they merge
+into the last link's base parameters instead (only the mass at the flange origin subtracted).
 """
 
 from __future__ import annotations
@@ -45,7 +55,7 @@ import numpy as np
 import scipy.linalg
 
 from . import RobotIdentError
-from .base import base_parameters, placed_payload
+from .base import base_parameters, payload_base, placed_payload
 from .moments import IDQ, IP, ISG, N_EXTRA, ONE, JointMoments, quadrant_weights
 from .paper import (
     PAPER_BLOCK,
@@ -155,6 +165,13 @@ class RobotModel:
     payload_ratio : bool
         Identify the payload ratio M_ae / M_aw (``Ma_ratio``, eq. 35) instead of taking the
         payload torque as known; needs an experiment with a payload.
+    payload_params : bool
+        The payload's mass known, its first moments and inertia identified (module doc;
+        ``payload_base_``, ``payload_masses_``); needs experiments without a payload to
+        separate them from the last link's parameters. When every experiment carries one
+        and the same payload (``payload_merged_``), only its mass at the flange origin is
+        subtracted and its first moments and inertia merge into the last link's base
+        parameters (no payload columns).
 
     Attributes (after :meth:`fit`)
     ------------------------------
@@ -207,6 +224,7 @@ class RobotModel:
         payload_ratio: bool = False,
         quadrant_theta: Any = None,
         quadrant_band: float = 0.03,
+        payload_params: bool = False,
     ) -> None:
         self.regressor = regressor
         self.model = model
@@ -222,13 +240,14 @@ class RobotModel:
         self.payload_ratio = payload_ratio
         self.quadrant_theta = quadrant_theta
         self.quadrant_band = quadrant_band
+        self.payload_params = payload_params
 
     def get_params(self, deep: bool = False) -> dict[str, Any]:
         """Hyper-parameters (scikit-learn convention)."""
         return {n: getattr(self, n) for n in (
             "regressor", "model", "method", "qs", "base", "quadrant", "dq_min", "chunk_size",
             "max_iter", "tol", "max_passes", "payload_ratio", "quadrant_theta",
-            "quadrant_band")}
+            "quadrant_band", "payload_params")}
 
     def __repr__(self) -> str:
         return f"RobotModel(model={self.model!r}, method={self.method!r}, qs={self.qs!r})"
@@ -270,6 +289,7 @@ class RobotModel:
         self.qs_ = qs_arr
         self.joints_ = joints
         self.numbers_ = tuple(int(n) for n in reg.numbers)
+        self._pay_cols = None
         self.cols_ = self._structure()
         self._placed: dict[tuple[float, float], Any] = {}  # lever-arm payloads, placed
         self.n_base_ = len(tuple(base.names))
@@ -279,9 +299,12 @@ class RobotModel:
         self.n_theta_ = self.n_base_ + int(ratio)
         if ratio:
             self.cols_ = [np.append(c, self.n_base_) for c in self.cols_]
+        pay_names: tuple[str, ...] = ()
+        if self.payload_params:
+            pay_names = self._setup_payload(reg)
         block = USUAL_BLOCK if self.model == "usual" else PAPER_BLOCK
         self.block_ = block
-        self.names_ = tuple(base.names) + (RATIO,) * ratio + tuple(
+        self.names_ = tuple(base.names) + (RATIO,) * ratio + pay_names + tuple(
             f"{p}{n}" for n in self.numbers_ for p in block)
         self._damp = 0.0
         self._band_h = np.zeros(k)
@@ -298,6 +321,52 @@ class RobotModel:
             if self.quadrant != "model":
                 raise RobotIdentError("RobotModel.quadrant_theta: needs quadrant='model'")
             self.quadrant_theta_ = qt
+
+    def _setup_payload(self, reg: Any) -> tuple[str, ...]:
+        """``payload_params``: the payload's base columns after the base parameters, one set
+        per distinct mass of ``payload_masses_`` (set by :meth:`fit`); returns their names."""
+        if self.payload_ratio:
+            raise RobotIdentError("RobotModel: payload_ratio and payload_params exclude each "
+                                  "other (a ratio of a known payload torque, or its unknown "
+                                  "CoM and inertia)")
+        if not hasattr(reg, "payload_columns"):
+            raise RobotIdentError(f"RobotModel.payload_params: the regressor "
+                                  f"{type(reg).__name__} has no payload_columns")
+        self.payload_base_ = payload_base(reg)
+        masses = tuple(getattr(self, "payload_masses_", ()))
+        r = len(self.payload_base_.names)
+        g = 0 if getattr(self, "payload_merged_", False) else len(masses)
+        self.n_theta_ = self.n_base_ + g * r
+        # rows of the regressor block _rows appends: after the standard (or base) columns
+        width = len(reg.standard_names) if self._kpn else self.n_base_
+        self._pay_cols = width + np.arange(g * r)
+        extra = self.n_base_ + np.arange(g * r)
+        self.cols_ = [np.append(c, extra) for c in self.cols_]
+        self.std_cols_ = [np.append(c, self._pay_cols) for c in self.std_cols_]
+        return tuple(f"{n}{i + 1 if g > 1 else ''}" for i in range(g)
+                     for n in self.payload_base_.names)
+
+    def _payload_block(self, W: np.ndarray, q, dq, ddq, pay, std: np.ndarray | None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """``payload_params``: W (k, P, m) with the payload's base columns of the chunk's
+        payload group appended (zero for the other groups), and the known torque of its
+        mass alone (m, k). ``std``: the standard regressor (k, p, m) when at hand."""
+        reg, pbase = self.regressor_, self.payload_base_
+        mass = float(getattr(pay, "mass", 0.0)) if pay is not None else 0.0
+        m = W.shape[2]
+        block = np.zeros((W.shape[0], self._pay_cols.size, m))
+        p = np.zeros((m, W.shape[0]))
+        if mass > 0:
+            Y = reg.payload_columns(q, dq, ddq, W=std)  # (k, 10, m)
+            p = mass * Y[:, 9, :].T
+            if mass not in self.payload_masses_:
+                raise RobotIdentError(f"payload of {mass} kg: not one of the fitted "
+                                      f"payloads {list(self.payload_masses_)} kg")
+            r = len(pbase.names)
+            g = self.payload_masses_.index(mass)
+            if block.shape[1]:  # (none when the payload is merged into the last link)
+                block[:, g * r:(g + 1) * r, :] = Y[:, pbase.columns, :]
+        return np.concatenate([W, block], axis=1), p
 
     def _structure(self) -> list[np.ndarray]:
         """Base columns that are not structurally zero in each joint's row (probed at random
@@ -349,7 +418,8 @@ class RobotModel:
                     zr = _ref_acceleration(sig.t[rows], sig.q_ref[rows])[::stride]
                 rows = rows[::stride]
                 pay = sig.payloads[int(e)]
-                if given is None:  # (columns carry the payload torque already)
+                if given is None and not self.payload_params:
+                    # (columns carry the payload torque already)
                     pay = placed_payload(pay, self.regressor_, self.base_,
                                          sig.source or "RobotSignals", self._placed)
                 contiguous = rows.size and rows[-1] - rows[0] + 1 == rows.size
@@ -374,13 +444,16 @@ class RobotModel:
         ``given``: the standard regressor (k, p, m) and payload torque (m, k) already built
         (``RobotSignals.columns``) instead of evaluated on (q, dq, ddq)."""
         reg = self.regressor_
+        std = None
         if given is not None:
             W, p = given
+            std = W
             if not self._kpn:
                 W = np.asarray(self.base_.reduce(np.transpose(W, (2, 0, 1))), dtype=float)
                 W = np.ascontiguousarray(W.transpose(1, 2, 0))
         elif self._kpn:  # standard columns, (k, p, m): joint j reads W[j, self.std_cols_[j]]
             W = np.asarray(reg.rigid_kpn(q, dq, ddq))
+            std = W
         else:
             W = np.asarray(self.base_.reduce(reg.rigid(q, dq, ddq)), dtype=float)
             W = np.ascontiguousarray(W.transpose(1, 2, 0))
@@ -390,6 +463,8 @@ class RobotModel:
             p = np.asarray(reg.payload_torque(q, dq, ddq, pay), dtype=float)
         else:
             p = np.zeros(q.shape)
+        if self._pay_cols is not None:  # payload_params: its mass known, the rest columns
+            W, p = self._payload_block(W, q, dq, ddq, pay, std)
         known = getattr(reg, "known_Ia", None)
         kn = None
         if known is not None and np.any(known):  # known rotor inertias (RobotRegressor)
@@ -776,6 +851,8 @@ class RobotModel:
         -------
         self
         """
+        if self.payload_params:
+            self._payload_groups(signals)
         self._setup()
         k, pb = len(self.joints_), self.n_theta_
         if self.payload_ratio:
@@ -874,6 +951,35 @@ class RobotModel:
         self.weights_ = w
         self.n_passes_, self.n_iter_ = passes, it
         return self
+
+    def _payload_groups(self, signals: Any) -> None:
+        """``payload_params``: the distinct payload masses of the experiments
+        (``payload_masses_`` [kg]); errors when no experiment carries a payload or every one
+        does (then its columns are the last link's: not separable)."""
+        items = [signals] if isinstance(signals, RobotSignals) else list(signals)
+        masses: list[float] = []
+        empty = False
+        for sig in items:
+            if not isinstance(sig, RobotSignals):
+                continue
+            for e in np.unique(sig.experiment):
+                m = float(sig.payloads[int(e)].mass)
+                if m > 0 and m not in masses:
+                    masses.append(m)
+                empty |= not m > 0
+        if not masses:
+            raise RobotIdentError("RobotModel.payload_params: no experiment carries a payload "
+                                  "(mass > 0): nothing to identify")
+        if not empty and len(masses) > 1:
+            raise RobotIdentError(f"RobotModel.payload_params: every experiment carries a "
+                                  f"payload ({masses} kg), so their parameters are not "
+                                  "separable from the last link's (their columns are that "
+                                  "link's); add an experiment without payload")
+        # one payload in every experiment: its columns are the last link's own, so its
+        # first moments and inertia merge into the last link's base parameters (only its
+        # mass at the flange origin is subtracted)
+        self.payload_merged_ = not empty
+        self.payload_masses_ = tuple(masses)
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "coef_"):

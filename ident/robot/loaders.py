@@ -33,7 +33,8 @@ MAT (v5/v7, and v7.3 through h5py)
     one row (or column) per axis: ``t=rec.time_cont, q=rec.act_pos_mot_deg,
     tau=rec.act_torque_abs_nm, q_ref=rec.ref_pos_deg``; or per-axis keys ``q1=...``.
     ``q_unit="deg"`` converts q and q_ref, the drive gains convert the torque (motor-side
-    torque x gear ratio for the KUKA recordings).
+    torque x gear ratio for the KUKA recordings). ``payload_kg=`` (a number or a path to a
+    scalar) gives the file's payload mass (no CoM: ``--payload mass`` identifies the rest).
 
 Preprocessing (the "states" chain)
 ----------------------------------
@@ -87,7 +88,7 @@ __all__ = [
     "parse_robot_mapping",
 ]
 
-_SIGNALS = ("t", "q", "tau", "q_ref", "dq", "ddq")
+_SIGNALS = ("t", "q", "tau", "q_ref", "dq", "ddq", "payload_kg")
 _PAYLOAD_COLS = ("payload_mass_kg", "payload_com_x_m", "payload_com_y_m", "payload_com_z_m",
                  *(f"payload_i{a}_kgm2" for a in ("xx", "xy", "xz", "yy", "yz", "zz")))
 _KEY_RE = re.compile(r"^(?P<sig>q_ref|ddq|dq|q|tau)(?P<idx>\d+)$")
@@ -463,6 +464,26 @@ def _load_mat(path: Path, joints: Sequence[str], gains: np.ndarray, q_scale: flo
     q = signal("q", True)
     tau = signal("tau", True)
     q_ref = signal("q_ref", False)
+    payload = None
+    if "payload_kg" in mapping:  # the payload's mass: a number or a path to a scalar
+        spec = mapping["payload_kg"]
+        try:
+            mass = float(spec)
+        except ValueError:
+            mass = None
+        if mass is None:
+            try:
+                a = np.asarray(resolve_path(table, spec, str(path)), dtype=float)
+            except ValueError as exc:
+                raise RobotIdentError(str(exc)) from None
+            if a.size != 1:
+                raise RobotIdentError(f"{path}: payload_kg {spec!r} has shape {a.shape}, "
+                                      "expected one value [kg]")
+            mass = float(a.ravel()[0])
+        if not (np.isfinite(mass) and mass >= 0):
+            raise RobotIdentError(f"{path}: payload_kg {spec!r}: expected a mass >= 0 [kg], "
+                                  f"got {mass}")
+        payload = RobotPayloadData(mass)
     dq, ddq = signal("dq", False), signal("ddq", False)
     both = dq is not None and ddq is not None
     return _make_run(
@@ -470,7 +491,7 @@ def _load_mat(path: Path, joints: Sequence[str], gains: np.ndarray, q_scale: flo
         q_ref=None if q_ref is None else q_scale * q_ref,
         dq=q_scale * dq if both else None,  # type: ignore[operator]
         ddq=q_scale * ddq if both else None,  # type: ignore[operator]
-        joints=joints,
+        joints=joints, payload=payload,
     )
 
 

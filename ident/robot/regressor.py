@@ -1,7 +1,8 @@
 """Vectorised Newton-Euler regressor of the standard parameters (paper eq. 9), n samples.
 
-(Just past 600 lines: one class -- the vectorised Newton-Euler recursion and the column
-bookkeeping it needs to stay fast belong together.)
+(Past 600 lines: one class -- the vectorised Newton-Euler recursion, the column
+bookkeeping it needs to stay fast and the payload's columns read from the last link's belong
+together.)
 
 For the k moving joints of a :class:`trajectories.robot.Robot`, the joint-side torque is
 linear in the standard parameters of every moving link (Khalil's convention, frame j of the
@@ -394,6 +395,60 @@ class RobotRegressor:
             return np.zeros(10)
         inert = pl.act(pin.Inertia(payload.mass, np.asarray(payload.com, dtype=float), i_c))
         return from_pinocchio_order(inert.toDynamicParameters())
+
+    @property
+    def last_link_columns(self) -> np.ndarray:
+        """Indices into :attr:`standard_names` of the last moving link's XX..M (10,): the
+        columns a payload fixed to the flange multiplies."""
+        return _P * (self.k - 1) + np.arange(10)
+
+    def flange_transform(self) -> np.ndarray:
+        """T (10, 10): standard parameters of a body in the last moving link's frame about its
+        origin from the same body's in the flange frame about the flange origin,
+        ``phi_link = T phi_flange`` (ROBOT_FORMAT order; linear: rotation and parallel axes,
+        first moments included). Identity without a flange placement."""
+        R = np.asarray(self.flange_placement.rotation, dtype=float)
+        t = np.asarray(self.flange_placement.translation, dtype=float)
+        kt = pin.skew(t)
+        out = np.empty((10, 10))
+        for c in range(10):
+            e = np.zeros(10)
+            e[c] = 1.0
+            xx, xy, xz, yy, yz, zz, mx, my, mz, m = e
+            i_f = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+            h = R @ np.array([mx, my, mz])  # first moment, link axes, about the flange origin
+            kh = pin.skew(h)
+            # I_link = R I_F R^T - ([h]x [t]x + [t]x [h]x) - m [t]x^2 ; h_link = h + m t
+            i_l = R @ i_f @ R.T - (kh @ kt + kt @ kh) - m * kt @ kt
+            h_l = h + m * t
+            out[:, c] = [i_l[0, 0], i_l[0, 1], i_l[0, 2], i_l[1, 1], i_l[1, 2], i_l[2, 2],
+                         *h_l, m]
+        return out
+
+    def flange_parameters(self, payload: RobotPayloadData) -> np.ndarray:
+        """Standard parameters (XX..M, (10,)) of a payload in the flange frame about the flange
+        origin (first moments m c, inertia by the parallel axes from the one about the CoM):
+        the unknowns of ``RobotModel(payload_params=True)``."""
+        xx, xy, xz, yy, yz, zz = payload.inertia
+        c = np.asarray(payload.com, dtype=float)
+        i_o = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]) - payload.mass * (
+            pin.skew(c) @ pin.skew(c))
+        return np.array([i_o[0, 0], i_o[0, 1], i_o[0, 2], i_o[1, 1], i_o[1, 2], i_o[2, 2],
+                         *(payload.mass * c), payload.mass])
+
+    def payload_columns(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray,
+                        W: np.ndarray | None = None) -> np.ndarray:
+        """Regressor columns (k, 10, n) of a payload's flange-frame parameters
+        (:meth:`flange_parameters`): the last link's columns times :meth:`flange_transform`;
+        ``payload_torque = payload_columns @ flange_parameters``.
+
+        ``W``: the standard regressor (k, p, n) already evaluated (``rigid_kpn``) to read the
+        last link's columns from instead of evaluating them on (q, dq, ddq)."""
+        if W is None:
+            W = self.rigid_kpn(q, dq, ddq, columns=self.last_link_columns)
+        else:
+            W = np.asarray(W)[:, self.last_link_columns, :]
+        return np.einsum("jan,ac->jcn", W, self.flange_transform())
 
     def payload_torque(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray,
                        payload: RobotPayloadData) -> np.ndarray:
