@@ -12,6 +12,7 @@ import argparse
 import os
 import signal
 import sys
+import warnings
 
 from threadpoolctl import threadpool_limits
 
@@ -75,11 +76,22 @@ def limit_blas_threads() -> None:
     os.environ["OPENBLAS_NUM_THREADS"] = "1"
 
 
+def _one_line_warnings(command: str) -> None:
+    """Warnings (resampling, a cut-off at its bound...) as one line each,
+    ``jointid CMD: warning: ...``, without Python's file, line and source echo."""
+
+    def show(message, category, filename, lineno, file=None, line=None) -> None:
+        print(f"jointid {command}: warning: {message}", file=file or sys.stderr)
+
+    warnings.showwarning = show
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``jointid`` console script."""
     limit_blas_threads()
     parser = build_parser()
     args = parser.parse_args(argv)
+    _one_line_warnings(getattr(args, "command", None) or "")
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
