@@ -603,7 +603,9 @@ def fit_models(
         kept = len(checked) / len(full)
         if kept >= SIGN_CHECK_MIN_KEPT:
             pre["load_model"] = (inner, chi)
-            full = checked
+            # rebuilt with the load model: the same rows as ``checked``, and the new model's
+            # P+/P- columns from the model quadrant sign(tau_out_hat dq), not from tau
+            full = combined(s, has_payload, ref)
         else:
             notes.append(
                 f"sign check skipped: it would keep only {100 * kept:.0f} % of the samples "

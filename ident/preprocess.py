@@ -586,10 +586,14 @@ def _selection(
     if tau_min is not None:
         bad |= np.abs(full.tau) < tau_min
     if load_model is not None:
-        term, chi = load_model
-        tau_out = term.columns(full) @ np.asarray(chi, dtype=float)
-        bad |= np.sign(full.tau) != np.sign(tau_out)
+        bad |= np.sign(full.tau) != np.sign(_load_torque(full, load_model))
     return guarded_keep(bad, guard, index)
+
+
+def _load_torque(full: Signals, load_model: tuple[Term, np.ndarray]) -> np.ndarray:
+    """τ̂_out = W_out χ_out of a load model [N m], shape (n,)."""
+    term, chi = load_model
+    return term.columns(full) @ np.asarray(chi, dtype=float)
 
 
 def build_design(
@@ -716,6 +720,10 @@ def build_design(
         keep = slice(trim, n - trim if trim else n)
         sub = signals.take(np.arange(sl.start, sl.stop)[keep])
         full = replace(sub, q=qf[keep], dq=dq[keep], ddq=ddq[keep], tau=tauf[keep])
+        if load_model is not None:
+            # the quadrant of eq. 27-28 from the model of the load, not from the measured
+            # torque: the columns read no output (equal to eq. 26's proxy on the kept rows)
+            full = replace(full, quadrant=np.sign(_load_torque(full, load_model) * full.dq))
         zfull = None
         if reference is not None:
             qr = lowpass(shift(reference[sl], torque_delay), cutoff_hz, fs)

@@ -69,6 +69,10 @@ class Signals:
         They follow every row selection (:meth:`take`, :func:`ident.preprocess.build_design`)
         and the refinement's library search may build a term in them
         (:class:`ident.library_search.LibraryTerm`, docs/refinement.md "Cross-joint effects").
+    quadrant : ndarray or None
+        sign(P_out) decided by a model of the load, sign(τ̂_out q̇) (set by
+        :func:`ident.preprocess.build_design` when it is given a ``load_model``); None: the
+        paper's proxy sign(τ q̇) of eq. 26 (:attr:`sign_power`).
     """
 
     t: np.ndarray
@@ -82,6 +86,7 @@ class Signals:
     revolute: bool = True
     dtau: np.ndarray | None = field(default=None)
     extra: dict[str, np.ndarray] | None = field(default=None)
+    quadrant: np.ndarray | None = field(default=None)
 
     def __len__(self) -> int:
         return int(self.q.shape[0])
@@ -113,5 +118,8 @@ class Signals:
 
     @property
     def sign_power(self) -> np.ndarray:
-        """sign(P) = sign(tau * dq), the paper's proxy for sign(P_out) (eq. 26)."""
+        """sign(P): the model quadrant :attr:`quadrant` when a load model decided it, else
+        sign(tau * dq), the paper's proxy for sign(P_out) (eq. 26)."""
+        if self.quadrant is not None:
+            return self.quadrant
         return np.sign(self.tau * self.dq)
