@@ -12,7 +12,6 @@ import re
 import signal
 import sys
 import threading
-import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -322,6 +321,8 @@ def run_campaign(
             sim = start_sim(cfg, simulate, campaign, fault_injectors or {})
         bus = open_buses(cfg, simulated=sim is not None)
         io = CycleIO([d.node_id for d in cfg.drives])
+        if sim is not None and cfg.clock == "lockstep":  # heartbeats paced by SYNC (simrig)
+            io.use_sync_clock(campaign.cycle_s)
         network = canopen.Network(bus)
         network.NOTIFIER_CYCLE = 0.05
         network.listeners.append(io)
@@ -384,7 +385,7 @@ def run_campaign(
                 status, reason = "interrupted", "interrupted by the operator (SIGINT)"
                 break
             io.emcy.clear()
-            io.hb_time = [time.monotonic()] * len(drives)
+            io.hb_time = [io.clock()] * len(drives)
             for d in drives:
                 d.nmt_start()
             drive_cycle0 = sim.drives[0].cycle if sim is not None else -1

@@ -4,7 +4,6 @@ for where they act in a cycle)."""
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 from daq.protocol.cia402 import State, state_from_statusword
@@ -50,8 +49,10 @@ class Supervisor:
 
     def _check_heartbeats(self, cycle: int, t: float, log: RunLog) -> None:
         """Fault on the first drive whose heartbeat has been silent for more than
-        ``daq.heartbeat_timeout_s`` (the engine calls this every 16 cycles)."""
-        now = time.monotonic()
+        ``daq.heartbeat_timeout_s`` (the engine calls this every 16 cycles) on the heartbeat
+        clock of :class:`~daq.runtime.cycle_io.CycleIO`: wall time, or simulated time with
+        simulated drives in lockstep."""
+        now = self.io.clock()
         for dd in range(len(self.drives)):
             if self.drives[dd].cfg.heartbeat_ms and (
                     now - self.io.hb_time[dd] > self.cfg.heartbeat_timeout_s):
