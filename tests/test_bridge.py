@@ -108,6 +108,7 @@ def test_each_bridge_has_its_own_token():
         c.close()
 
 
+@pytest.mark.slow  # a serve subprocess
 def test_serve_prints_the_url_with_its_token_and_only_that_url_opens_the_bus():
     with ServeProcess((), channel="bridge_cli") as served:
         assert re.fullmatch(r"ws://127\.0\.0\.1:\d+/[A-Za-z0-9_-]{22}", served.url)
