@@ -4,7 +4,10 @@ The drive is a :class:`sim_drivers.drive.SimulatedDrive` the test starts itself 
 campaign's virtual channel (the hardware path of the runner: the campaign's own scaling, the
 drive object reachable from the test while the runner drives it). The master "dies" inside
 the progress callback, which runs on the runner's main thread: sleeping there is a hung
-main loop (no SYNC), stopping the heartbeat task as well is a dead process.
+main loop (no SYNC), stopping the heartbeat task as well is a dead process. Those two tests
+watch the drive's wall-clock watchdogs (a drive on its own bus, as hardware); the other
+lockstep runs use a drive on simulated time (``Rig(clocked=True)``: a clocked SimNetwork, the
+drive's ``clock="sync"``), so that a loaded host is no lost heartbeat.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from sim_drivers.drive import SYNC_LOSS_FLOOR_S, SimulatedDrive
 from sim_drivers.faults import HEARTBEAT_LOST, SYNC_LOST
 from sim_drivers.plant import JointPlant
 from sim_drivers.plant_config import default_plant
+from sim_drivers.simbus import SimNetwork
 from tests.conftest import shared_path
 from trajectories.campaign import Campaign
 
@@ -54,16 +58,27 @@ def campaign(daq=None, periods=1, scaling=None, clock="lockstep"):
 
 
 class Rig:
-    """A simulated drive on the campaign's channel, started before and stopped after."""
+    """A simulated drive on the campaign's channel, started before and stopped after: on its
+    own virtual bus on the wall clock, or ``clocked`` on a SimNetwork whose channel is clocked
+    by the master's SYNCs (heartbeats and watchdogs on simulated time)."""
 
-    def __init__(self, c: Campaign) -> None:
+    def __init__(self, c: Campaign, clocked: bool = False) -> None:
         plant = JointPlant(default_plant(), 0.001, seed=3)
         plant.reset(0.0)
-        self.bus = can.Bus(interface="virtual", channel=c.daq["channel"])
-        self.drive = SimulatedDrive(self.bus, NODE, plant, cycle_s=0.001)
-        self.drive.start()
+        self.bus = self.sim = None
+        if clocked:
+            self.sim = SimNetwork(c.daq["channel"], dispatch="inline", sync_cycle_s=0.001)
+            self.drive = self.sim.add(SimulatedDrive(self.sim.network, NODE, plant,
+                                                     cycle_s=0.001, clock="sync"))
+        else:
+            self.bus = can.Bus(interface="virtual", channel=c.daq["channel"])
+            self.drive = SimulatedDrive(self.bus, NODE, plant, cycle_s=0.001)
+            self.drive.start()
 
     def close(self) -> None:
+        if self.sim is not None:
+            self.sim.close()
+            return
         self.drive.stop()
         self.bus.shutdown()
 
@@ -78,7 +93,7 @@ def _wait_for(pred, timeout: float) -> bool:
 
 
 def _run(c, **kw):
-    rig = Rig(c)
+    rig = Rig(c, clocked=True)
     try:
         return run_campaign(c, out_dir=kw.pop("out_dir"), yes=True, **kw), rig.drive
     finally:
@@ -87,12 +102,13 @@ def _run(c, **kw):
 
 def test_lockstep_run_configures_the_watchdogs_and_a_pause_is_not_a_fault(tmp_path):
     c = campaign()
-    rig = Rig(c)
+    rig = Rig(c, clocked=True)
     seen = {}
 
     def progress(p):
         if p.phase == "run" and "hb" not in seen:
-            time.sleep(3 * SYNC_LOSS_FLOOR_S)  # a slow lockstep cycle, not a fault
+            # a slow lockstep cycle, longer than the consumer time: no SYNC, no time
+            time.sleep(3 * SYNC_LOSS_FLOOR_S + 0.4)
             # monitoring starts at the first heartbeat after 0x1016 was written (CiA 301)
             seen["hb"] = rig.drive.heartbeat_consumers
             seen["sync"] = rig.drive.sync_timeout_s

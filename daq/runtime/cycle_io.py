@@ -1,10 +1,11 @@
 """Bus I/O of one control cycle: the listener that sorts TPDOs, heartbeats, EMCY and
 records every frame of the cycle for the log (``/can/raw``).
 
-Heartbeats are stamped with :attr:`CycleIO.clock`: ``time.monotonic()``, or with simulated
-drives in lockstep (:meth:`CycleIO.use_sync_clock`) the SYNCs sent so far times the cycle --
-the time the simulated drives' heartbeats are produced on (:mod:`daq.runtime.simrig`), so the
-master's heartbeat watchdog does not depend on the host's speed either."""
+Heartbeats are stamped with :attr:`CycleIO.clock`: ``time.monotonic()``, or in lockstep on a
+channel clocked by simulated drives (:meth:`CycleIO.use_sync_clock`,
+:func:`daq.runtime.buses.sync_clocked`) the SYNCs sent so far times the cycle -- the time the
+simulated drives' heartbeats are produced on (:mod:`daq.runtime.simrig`), so the master's
+heartbeat watchdog does not depend on the host's speed either."""
 
 from __future__ import annotations
 

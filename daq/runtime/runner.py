@@ -26,7 +26,7 @@ from trajectories.plan import plan_campaign
 from trajectories.robot_campaign import RobotCampaign
 from trajectories.robot_model import prepare_robot_campaign, robot_file_path
 
-from .buses import open_buses
+from .buses import open_buses, sync_clocked
 from .busload import bus_loads, check_loads
 from .config import DaqConfig, Scaling, parse_daq, with_scaling
 from .cycle_io import BUS_ERRORS, CycleIO
@@ -321,7 +321,7 @@ def run_campaign(
             sim = start_sim(cfg, simulate, campaign, fault_injectors or {})
         bus = open_buses(cfg, simulated=sim is not None)
         io = CycleIO([d.node_id for d in cfg.drives])
-        if sim is not None and cfg.clock == "lockstep":  # heartbeats paced by SYNC (simrig)
+        if cfg.clock == "lockstep" and sync_clocked(bus):  # heartbeats paced by SYNC
             io.use_sync_clock(campaign.cycle_s)
         network = canopen.Network(bus)
         network.NOTIFIER_CYCLE = 0.05
