@@ -150,6 +150,12 @@ class NmtMixin:
         heartbeats received)."""
         return {c.node: (c.time_s, c.active, c.received) for c in self._consumers.values()}
 
+    @property
+    def heartbeat_last(self) -> dict[int, float]:
+        """Watched nodes from 0x1016: node id -> when its last heartbeat was received [s] on
+        the drive's clock (``time.monotonic()``, or simulated time; 0: none yet)."""
+        return {c.node: c.last for c in self._consumers.values()}
+
     def _set_sync_period(self, period_us: int) -> None:
         period = int(period_us) * 1e-6
         self._sync_timeout_s = (max(SYNC_LOSS_PERIODS * period, self.sync_loss_floor_s)

@@ -32,7 +32,7 @@ An ``"inline"`` SimBus built with ``sync_cycle_s`` makes its channel *clocked*: 
 advances by ``sync_cycle_s`` with each SYNC (COB-ID 0x080) it receives, and nothing else makes
 it pass. Every ``send_periodic`` of a SimBus on a clocked channel -- the drives' heartbeat
 producers (canopen's ``LocalNode``) and the master's own heartbeat when the master's end is a
-SimBus (``daq.runtime.buses.open_buses`` with ``--simulate``) -- is then a
+SimBus (``daq.runtime.buses.open_buses`` on the virtual interface) -- is then a
 :class:`SyncPeriodicTask`: one frame when it starts (as python-can's thread task does), then
 one every ``max(1, round(period / sync_cycle_s))`` SYNCs, sent right after the drives handled
 that SYNC, from the SYNC sender's thread. So in lockstep the heartbeats are as deterministic

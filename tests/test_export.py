@@ -17,6 +17,7 @@ from test_daq_run import small_campaign
 from daq.protocol.export import ExportError, export_can
 from daq.protocol.reader import read_frames
 from daq.runtime.runner import run_campaign
+from sim_drivers.bridge import Bridge
 from sim_drivers.plant_config import default_plant
 
 # (extension, relative-time tolerance [s], absolute-time tolerance [s]) — the formats'
@@ -76,8 +77,6 @@ def test_asc_absolute_start_within_a_millisecond(run_log, tmp_path):
 def test_player_replays_the_export_in_another_process(run_log, tmp_path):
     """``python -m can.player`` (a subprocess) replays the BLF export through a
     python-can-remote bridge on 127.0.0.1 into a virtual bus of this process."""
-    from sim_drivers.bridge import Bridge
-
     res = export_can(run_log, tmp_path / "trace.blf")
     want = [m for m in can.LogReader(res.path)]
     channel = "export_replay"
