@@ -145,8 +145,13 @@ def test_dead_master_drive_faults_with_8130_within_the_consumer_time(tmp_path, m
             beats.append(self)
 
     monkeypatch.setattr(daq.runtime.runner, "MasterHeartbeat", Recorded)
-    c = campaign(periods=2)
-    rig = Rig(c)  # the drive's wall-clock consumer is what this test watches
+    # the drive's wall-clock consumer is what this test watches; a 250 ms master heartbeat
+    # (consumer time 3 x 250 + 100 ms) and a 2 s watchdog on the drive's heartbeat: a
+    # heartbeat thread of this process starved for a few 100 ms on a loaded host before the
+    # death is not what is tested
+    consumer = 0.85
+    c = campaign({"master_heartbeat_ms": 250, "heartbeat_timeout_s": 2.0}, periods=2)
+    rig = Rig(c)
     t = {}
 
     def progress(p):
@@ -155,7 +160,7 @@ def test_dead_master_drive_faults_with_8130_within_the_consumer_time(tmp_path, m
             beats[0].stop()  # the process dies: heartbeat and SYNC stop together
             t["stop"] = time.monotonic()
             t["last_hb"] = rig.drive.heartbeat_last[127]
-            _wait_for(lambda: rig.drive.state is State.FAULT, 0.4 + SLACK_S)
+            _wait_for(lambda: rig.drive.state is State.FAULT, consumer + SLACK_S)
 
     try:
         r = run_campaign(c, out_dir=tmp_path, yes=True, progress=progress)
@@ -163,9 +168,12 @@ def test_dead_master_drive_faults_with_8130_within_the_consumer_time(tmp_path, m
         rig.close()
     assert r.status == "stopped"
     assert r.reason.startswith(f"node {NODE}: EMCY 0x{HEARTBEAT_LOST:04X}")
-    # consumer time 400 ms after the last heartbeat (wall), never before
-    assert 0.4 <= rig.drive.fault_time - t["last_hb"] <= 0.4 + MARGIN_S
-    assert rig.drive.fault_time - t["stop"] <= 0.4 + MARGIN_S
+    assert rig.drive.heartbeat_timeouts == 1
+    # the consumer time after the last heartbeat (wall), never before
+    assert consumer <= rig.drive.fault_time - t["last_hb"] <= consumer + MARGIN_S
+    assert rig.drive.fault_time - t["stop"] <= consumer + MARGIN_S
+    a = read_run(r.runs[0].path)
+    assert a.metadata["safety"]["heartbeat_consumer_ms"] == "850"
     rec = rig.drive.record
     states = [state_from_statusword(int(s)) for s in rec["statusword"]]
     # p.cycle is the next cycle to run; the drive's cycle counter is the runner's here
