@@ -1,6 +1,6 @@
 """A passive third process on the bus: record every SYNC (COB-ID 0x80) until SIGTERM.
 
-Usage: ``python benchmarks/sync_listener.py ws://127.0.0.1:PORT/ OUT.npy`` (used by
+Usage: ``python benchmarks/sync_listener.py ws://127.0.0.1:PORT/TOKEN OUT.npy`` (used by
 ``bench_daq.py --cross-process``). Connects to a python-can-remote bridge (loopback), prints
 ``listening`` once connected, and on SIGTERM/SIGINT writes an (n, 2) float64 array: column 0
 the bus timestamp python-can gave the frame in the bridge process [s, epoch], column 1 this

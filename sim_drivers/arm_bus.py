@@ -147,6 +147,10 @@ class ArmOnBus:
         Start position [rad] (default zeros).
     dispatch : {"inline", "thread"}
         :class:`SimNetwork` delivery ("inline" for lockstep).
+    clock : {"wall", "sync"} or None
+        The drives' clock (:mod:`sim_drivers.drive`, "Clock"); ``"sync"`` also clocks each
+        channel by its SYNCs (``SimNetwork(sync_cycle_s=cycle_s)``: heartbeats paced by
+        SYNC), and needs ``"inline"``. None: ``"sync"`` with ``"inline"``, else ``"wall"``.
     payload : Payload, optional
     drive_kwargs
         Passed to every :class:`SimulatedDrive` (``fault_injector`` per drive is not).
@@ -163,7 +167,8 @@ class ArmOnBus:
     def __init__(self, params: ArmParams, channel: str, node_ids: Any, *, cycle_s: float,
                  eds: Any = None, substeps: int = 10, seed: int = 0, q0: Any = None,
                  dispatch: str = "inline", payload: Payload | None = None,
-                 channels: Any = None, **drive_kwargs: Any) -> None:
+                 channels: Any = None, clock: str | None = None,
+                 **drive_kwargs: Any) -> None:
         node_ids = [int(n) for n in node_ids]
         if len(node_ids) != params.k:
             raise SimError(f"ArmOnBus: expected {params.k} node ids (one per moving joint), "
@@ -172,6 +177,10 @@ class ArmOnBus:
         if len(chans) != params.k:
             raise SimError(f"ArmOnBus: expected {params.k} channels (one per moving joint), "
                            f"got {len(chans)}")
+        if clock is None:
+            clock = "sync" if dispatch == "inline" else "wall"
+        if clock == "sync" and dispatch != "inline":
+            raise SimError(f"ArmOnBus: clock='sync' needs dispatch='inline', got {dispatch!r}")
         self.params = params
         self.cycle_s = float(cycle_s)
         self.substeps = int(substeps)
@@ -191,7 +200,8 @@ class ArmOnBus:
         self.drives: list[SimulatedDrive] = []
         try:
             for ch in dict.fromkeys(chans):
-                sim = self.sims[ch] = SimNetwork(ch, dispatch=dispatch)
+                sim = self.sims[ch] = SimNetwork(
+                    ch, dispatch=dispatch, sync_cycle_s=cycle_s if clock == "sync" else None)
                 counter = [0]
 
                 def on_sync(can_id: int, data: bytes, timestamp: float,
@@ -207,7 +217,8 @@ class ArmOnBus:
             for j, (nid, ch) in enumerate(zip(node_ids, chans, strict=True)):
                 joint = ArmJoint(self, j, m_diag[j])
                 net = self.sims[ch].network
-                drive = SimulatedDrive(net, nid, joint, eds, cycle_s=cycle_s, **drive_kwargs)
+                drive = SimulatedDrive(net, nid, joint, eds, cycle_s=cycle_s, clock=clock,
+                                       **drive_kwargs)
                 self.sims[ch].add(drive)
                 self.drives.append(drive)
         except Exception:

@@ -96,7 +96,7 @@ class Device402Mixin:
         if enabled is not self._was_enabled:
             self._was_enabled = enabled
             if enabled:
-                self._enabled_at = time.monotonic()
+                self._enabled_at = self._now()
                 if self._sync_timeout_s:
                     self._wd_wake.set()
         self.statusword = statusword(

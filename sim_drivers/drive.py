@@ -91,6 +91,22 @@ Losing the master
   (about one wake-up per timeout, none while nothing is armed); on the hot path a SYNC
   costs one ``time.monotonic()`` and an uncontended lock, an RPDO one ``time.monotonic()``.
 
+Clock
+-----
+``clock="wall"`` (the default, a drive in its own right: paced runs, ``sim_drivers.serve``,
+the cross-process tests) judges the three watchdogs above on ``time.monotonic()`` in the
+watchdog thread. ``clock="sync"`` (the lockstep rigs: ``daq.runtime.simrig``,
+:class:`~sim_drivers.arm_bus.ArmOnBus` with inline dispatch) runs them on simulated time
+instead: the drive's time is the number of SYNCs it received times ``cycle_s``, nothing else
+makes it pass, and they are checked when a SYNC arrives (no watchdog thread). So a host
+stall between two lockstep cycles is no lost heartbeat, and a heartbeat loss is detected at
+a reproducible cycle: a consumer times out at the first SYNC more than its consumer time
+after the last heartbeat, in simulated time. The SYNC watchdog cannot fire on that clock
+(time only passes with SYNCs). The heartbeats must then be sent on the same clock: on a
+clocked :class:`~sim_drivers.simbus.SimNetwork` (``sync_cycle_s``) every periodic send of the
+channel -- this drive's heartbeat producer and the master's heartbeat -- is paced by SYNC
+(:mod:`sim_drivers.simbus`, "Simulated time").
+
 Code layout: this module holds :class:`SimulatedDrive` (construction, object dictionary,
 life cycle, SDO server, SYNC entry, record); the protocol parts are mixins in
 :mod:`sim_drivers.nmt` (NMT slave, heartbeat consumer, SYNC watchdog, RPDO deadlines),
@@ -123,6 +139,7 @@ from sim_drivers import SimError
 from sim_drivers.device402 import Device402Mixin
 from sim_drivers.faults import FaultInjector
 from sim_drivers.nmt import (
+    CLOCKS,
     NMT_INITIALISING,
     NMT_OPERATIONAL,
     NMT_STATE_NAMES,
@@ -137,7 +154,7 @@ from sim_drivers.pdo import PdoMixin, RxPdo, TxPdo
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["DriveError", "SimulatedDrive", "open_virtual_bus", "NMT_STATE_NAMES",
+__all__ = ["CLOCKS", "DriveError", "SimulatedDrive", "open_virtual_bus", "NMT_STATE_NAMES",
            "SYNC_LOSS_FLOOR_S", "SYNC_LOSS_PERIODS"]
 
 # Objects the drive keeps as attributes: served live over SDO, written by SDO or RPDO,
@@ -241,6 +258,9 @@ class SimulatedDrive(NmtMixin, PdoMixin, Device402Mixin):
         Rows the per-cycle record grows by (preallocated numpy arrays).
     sync_loss_floor_s : float
         Shortest SYNC-loss timeout [s] (module docstring, "Losing the master").
+    clock : {"wall", "sync"}
+        What the watchdogs run on (module docstring, "Clock"): ``time.monotonic()`` in a
+        watchdog thread, or simulated time (SYNCs received x ``cycle_s``) checked on SYNC.
 
     Attributes
     ----------
@@ -248,6 +268,8 @@ class SimulatedDrive(NmtMixin, PdoMixin, Device402Mixin):
         Heartbeat-consumer timeouts, SYNC losses and RPDO timeouts detected so far.
     fault_time : float
         ``time.monotonic()`` when the drive last entered FAULT [s] (0: never).
+    syncs : int
+        SYNC frames received since :meth:`start` (the ``"sync"`` clock's time in cycles).
     """
 
     def __init__(
@@ -262,7 +284,10 @@ class SimulatedDrive(NmtMixin, PdoMixin, Device402Mixin):
         csp_gains: tuple[float, float] | None = None,
         record_chunk: int = _RECORD_CHUNK,
         sync_loss_floor_s: float = SYNC_LOSS_FLOOR_S,
+        clock: str = "wall",
     ) -> None:
+        if clock not in CLOCKS:
+            raise DriveError(f"SimulatedDrive: clock: expected one of {CLOCKS}, got {clock!r}")
         self.dod = eds if isinstance(eds, DriveOD) else load_drive_od(eds, node_id)
         self.plant = plant
         self.injector = fault_injector
@@ -337,11 +362,17 @@ class SimulatedDrive(NmtMixin, PdoMixin, Device402Mixin):
         self._send = self.network.send_message  # frames of the cycle (see start)
         # master-loss watchdogs (heartbeat consumer 0x1016, SYNC loss per 0x1006)
         self._lock = threading.RLock()
+        self.clock = clock
+        self.syncs = 0
+        # the watchdogs' time [s]: wall, or simulated (SYNCs received x cycle)
+        self._now: Callable[[], float] = (time.monotonic if clock == "wall"
+                                          else self._sync_time)
+        self._wd_due = 0.0  # "sync" clock: simulated time of the next watchdog check [s]
         self._consumers: dict[int, HbConsumer] = {}
         self.sync_loss_floor_s = float(sync_loss_floor_s)
         self._sync_timeout_s = 0.0
-        self._last_sync = 0.0  # time.monotonic() of the last SYNC received [s]
-        self._enabled_at = 0.0  # time.monotonic() when OPERATION ENABLED was entered [s]
+        self._last_sync = 0.0  # clock time of the last SYNC received [s]
+        self._enabled_at = 0.0  # clock time when OPERATION ENABLED was entered [s]
         self._was_enabled = False
         self._wd_wake = threading.Event()
         self._wd_thread: threading.Thread | None = None
@@ -451,10 +482,11 @@ class SimulatedDrive(NmtMixin, PdoMixin, Device402Mixin):
         self._send = getattr(net.bus, "send_frame", None) or net.send_message
         self._reset_state_machine()
         self._boot()
-        self._wd_run = True
-        self._wd_thread = threading.Thread(target=self._watchdog_loop, daemon=True,
-                                           name=f"sim-drive-{self.node_id}-watchdog")
-        self._wd_thread.start()
+        if self.clock == "wall":  # (the "sync" clock checks them on SYNC)
+            self._wd_run = True
+            self._wd_thread = threading.Thread(target=self._watchdog_loop, daemon=True,
+                                               name=f"sim-drive-{self.node_id}-watchdog")
+            self._wd_thread.start()
 
     def stop(self) -> None:
         """Stop heartbeat and PDO traffic and detach from the bus (the bus stays open)."""
@@ -550,8 +582,19 @@ class SimulatedDrive(NmtMixin, PdoMixin, Device402Mixin):
             raise SdoAbortedError(0x06010002)  # computed by the drive: read only
 
     # ------------------------------------------------------------------ cycle
+    def _sync_time(self) -> float:
+        """The ``"sync"`` clock: SYNCs received x ``cycle_s`` [s]."""
+        return self.syncs * self.cycle_s
+
     def _on_sync(self, can_id: int, data: bytes, timestamp: float) -> None:
-        self._last_sync = time.monotonic()
+        self.syncs += 1
+        if self.clock == "wall":
+            self._last_sync = time.monotonic()
+        else:  # simulated time passed: the watchdogs' turn when due or re-armed
+            self._last_sync = now = self._sync_time()
+            if now >= self._wd_due or self._wd_wake.is_set():
+                self._wd_wake.clear()
+                self._wd_due = now + self._check_watchdogs()
         if self.nmt != NMT_OPERATIONAL:
             return
         with self._lock:

@@ -12,7 +12,6 @@
 from __future__ import annotations
 
 import logging
-import time
 from collections.abc import Callable
 
 from canopen.sdo.exceptions import SdoAbortedError
@@ -36,6 +35,9 @@ NMT_STATE_NAMES = {
 SYNC_LOSS_PERIODS = 3  # SYNC watchdog: timeout in periods of 0x1006
 SYNC_LOSS_FLOOR_S = 0.1  # SYNC watchdog: shortest timeout [s] (host stalls, see docstring)
 _WD_IDLE_S = 0.5  # watchdog thread: re-check period while nothing is armed [s]
+#: what a drive's watchdogs run on: ``time.monotonic()``, or SYNCs received x cycle
+#: (:mod:`sim_drivers.drive`, "Clock")
+CLOCKS = ("wall", "sync")
 #: the cyclic modes (CSP, CSV, CST) as 0x6061 values: the SYNC watchdog is armed only in them
 CYCLIC_MODE_INTS = frozenset(int(m) for m in CYCLIC_MODES)
 
@@ -49,7 +51,7 @@ class HbConsumer:
         self.sub = sub
         self.node = node
         self.time_s = time_s
-        self.last = 0.0  # time.monotonic() of the last heartbeat [s]
+        self.last = 0.0  # drive clock time of the last heartbeat [s]
         self.active = False  # a heartbeat was received since the entry was set
         self.timed_out = False
         self.received = 0
@@ -127,7 +129,8 @@ class NmtMixin:
 
     @property
     def last_sync_time(self) -> float:
-        """``time.monotonic()`` when the last SYNC was received [s] (0: none yet)."""
+        """When the last SYNC was received [s] (0: none yet): ``time.monotonic()``, or the
+        simulated time with the ``"sync"`` clock."""
         return self._last_sync
 
     @property
@@ -137,8 +140,8 @@ class NmtMixin:
 
     @property
     def rpdo_timers(self) -> dict[int, tuple[float, float]]:
-        """RPDOs under deadline monitoring: number -> (event timer [s], ``time.monotonic()``
-        of the last reception [s], 0 when none yet)."""
+        """RPDOs under deadline monitoring: number -> (event timer [s], drive clock time of
+        the last reception [s], 0 when none yet)."""
         return {rx.number: (rx.timer_s, rx.last) for rx in self._rx_timed}
 
     @property
@@ -146,6 +149,12 @@ class NmtMixin:
         """Watched nodes from 0x1016: node id -> (consumer time [s], monitoring started,
         heartbeats received)."""
         return {c.node: (c.time_s, c.active, c.received) for c in self._consumers.values()}
+
+    @property
+    def heartbeat_last(self) -> dict[int, float]:
+        """Watched nodes from 0x1016: node id -> when its last heartbeat was received [s] on
+        the drive's clock (``time.monotonic()``, or simulated time; 0: none yet)."""
+        return {c.node: c.last for c in self._consumers.values()}
 
     def _set_sync_period(self, period_us: int) -> None:
         period = int(period_us) * 1e-6
@@ -191,9 +200,10 @@ class NmtMixin:
 
     def _make_consumer_handler(self, c: HbConsumer) -> Callable:
         wake = self._wd_wake
+        now = self._now
 
         def handler(can_id: int, data: bytes, timestamp: float) -> None:
-            c.last = time.monotonic()
+            c.last = now()
             c.received += 1
             if not c.active or c.timed_out:
                 c.active = True
@@ -218,7 +228,7 @@ class NmtMixin:
         """Fire what timed out; return the time to the next deadline [s]."""
         wait = _WD_IDLE_S
         with self._lock:
-            now = time.monotonic()
+            now = self._now()
             for c in list(self._consumers.values()):
                 if not c.active or c.timed_out:
                     continue

@@ -13,7 +13,6 @@ from __future__ import annotations
 import logging
 import operator
 import struct
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -53,7 +52,7 @@ class RxPdo:
         self.latched: bytes | None = None
         self.handler: Callable | None = None
         self.timer_s = timer_s  # event timer 0x1400+n sub 5 [s] (0: no deadline monitoring)
-        self.last = 0.0  # time.monotonic() of the last reception [s] (0: none yet)
+        self.last = 0.0  # drive clock time of the last reception [s] (0: none yet)
 
 
 class TxPdo:
@@ -254,7 +253,7 @@ class PdoMixin:
         return (st, names) if st.size else None
 
     def _make_rx_handler(self, rx: RxPdo) -> Callable:
-        now = time.monotonic
+        now = self._now
         if rx.sync:
 
             def handler(can_id: int, data: bytes, timestamp: float) -> None:

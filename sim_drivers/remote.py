@@ -1,9 +1,10 @@
 """Simulated drives in another process, reachable over a loopback python-can-remote bridge.
 
 :class:`ServeProcess` starts ``python -m sim_drivers.serve --interface virtual --bridge-port 0``
-(drives on a virtual bus inside that process, the bridge on ``ws://127.0.0.1:<port>/``), waits
-(bounded) for the bridge line, keeps the process's output (stdout and stderr: the drives'
-warnings, e.g. "heartbeat of node 127 lost") and stops it on :meth:`close`. Used by the
+(drives on a virtual bus inside that process, the bridge on
+``ws://127.0.0.1:<port>/<token>``), waits (bounded) for the bridge line, keeps the process's
+output (stdout and stderr: the drives' warnings, e.g. "heartbeat of node 127 lost") and stops
+it on :meth:`close`. Used by the
 cross-process tests and ``benchmarks/bench_daq.py``; a master in the calling process (or in a
 third one) opens ``can.Bus(interface="remote", channel=serve.url)``.
 """
@@ -23,7 +24,7 @@ from sim_drivers import SimError
 
 __all__ = ["ServeProcess"]
 
-_BRIDGE_LINE = re.compile(r"bridge (ws://127\.0\.0\.1:\d+/)")
+_BRIDGE_LINE = re.compile(r"bridge (ws://127\.0\.0\.1:\d+/[A-Za-z0-9_-]+)")
 _SERVING_LINE = re.compile(r"serving node\(s\) .* on \w+:(\S+);")
 
 
@@ -54,8 +55,8 @@ class ServeProcess:
     Attributes
     ----------
     url : str
-        ``ws://127.0.0.1:<port>/`` once started (its bridge; without a bridge: the channel
-        it serves on).
+        ``ws://127.0.0.1:<port>/<token>`` once started (its bridge, token included; without a
+        bridge: the channel it serves on).
     proc : subprocess.Popen
     """
 

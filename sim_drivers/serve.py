@@ -8,11 +8,13 @@ puts one simulated joint per node ID on the bus (generic EDS and default plant u
 Without a kernel CAN device (no vcan), ``--bridge-port`` makes the bus reachable from other
 processes: ``python -m sim_drivers.serve --interface virtual --channel sim --bridge-port 0``
 serves the drives on an in-process virtual bus and a python-can-remote bridge (WebSocket over
-TCP, bound to 127.0.0.1 only) on it; it prints ``bridge ws://127.0.0.1:<port>/`` once
-listening, and a master opens ``can.Bus(interface="remote", channel="ws://127.0.0.1:<port>/")``
-(campaign: ``[daq] interface = "remote"``, ``channel = "ws://127.0.0.1:<port>/"``). Each
-client gets its own bus object on the channel, so clients see each other's frames and the
-drives'. The drives' warnings (heartbeat lost, SYNC lost, faults) go to stderr.
+TCP, bound to 127.0.0.1 only, :mod:`sim_drivers.bridge`) on it; it prints
+``bridge ws://127.0.0.1:<port>/<token>`` once listening, ``token`` random for each start, and
+a master opens ``can.Bus(interface="remote", channel="ws://127.0.0.1:<port>/<token>")``
+(campaign: ``[daq] interface = "remote"``, ``channel = "ws://127.0.0.1:<port>/<token>"``).
+Without the token, from a browser page (``Origin`` header) or as plain HTTP, a connection is
+refused. Each client gets its own bus object on the channel, so clients see each other's
+frames and the drives'. The drives' warnings (heartbeat lost, SYNC lost, faults) go to stderr.
 """
 
 from __future__ import annotations
@@ -27,8 +29,8 @@ from pathlib import Path
 from typing import Any
 
 import can
-from can_remote.server import RemoteServer
 
+from sim_drivers.bridge import Bridge
 from sim_drivers.drive import SimulatedDrive
 from sim_drivers.plant import JointPlant
 from sim_drivers.plant_config import load_plant
@@ -140,7 +142,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="shortest SYNC-loss timeout of the drives [s] (default 0.1)")
     ap.add_argument("--bridge-port", type=int, metavar="PORT",
                     help="also serve the bus to other processes over python-can-remote on "
-                         "ws://127.0.0.1:PORT/ (0: any free port, printed)")
+                         "ws://127.0.0.1:PORT/TOKEN (0: any free port; the URL with its "
+                         "random token is printed)")
     args = ap.parse_args(argv)
     if not args.node_id and args.bridge_port is None:
         ap.error("nothing to serve: give --node-id and/or --bridge-port")
@@ -160,36 +163,34 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.bridge_port is not None:
             bridge = start_bridge(args.interface, args.channel, args.bridge_port,
                                   bitrate=args.bitrate)
-            print(f"bridge ws://127.0.0.1:{bridge.server_port}/", flush=True)
+            print(f"bridge {bridge.url}", flush=True)
         try:
             done.wait()
         finally:
             if bridge is not None:
-                bridge.shutdown()
-                bridge.server_close()
+                bridge.close()
     return 0
 
 
 def start_bridge(interface: str, channel: str, port: int, *,
-                 bitrate: int | None = None) -> RemoteServer:
-    """A python-can-remote server on 127.0.0.1:``port`` bridging ``interface``/``channel``.
+                 bitrate: int | None = None, token: str | None = None) -> Bridge:
+    """A python-can-remote bridge on 127.0.0.1:``port`` to ``interface``/``channel``
+    (:class:`sim_drivers.bridge.Bridge`: token in the URL, no browser, no files).
 
     Each WebSocket client gets its own python-can bus on the channel (opened in this
     process), so on the virtual interface the clients and the drives share one bus. Runs
-    in a daemon thread; stop it with ``shutdown()`` then ``server_close()``.
+    in a daemon thread; stop it with ``close()``.
 
     Returns
     -------
-    can_remote.server.RemoteServer
-        ``server_port`` is the port listened on (useful with ``port=0``).
+    sim_drivers.bridge.Bridge
+        ``url`` is what clients open (``ws://127.0.0.1:<port>/<token>``); ``server_port``
+        the port listened on (useful with ``port=0``).
     """
     config: dict[str, Any] = {"interface": interface, "channel": channel}
     if bitrate is not None:
         config["bitrate"] = bitrate
-    server = RemoteServer("127.0.0.1", port, **config)
-    threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.1},
-                     name="can-remote-bridge", daemon=True).start()
-    return server
+    return Bridge(port, token=token, **config).start()
 
 
 if __name__ == "__main__":

@@ -26,6 +26,21 @@ Frames the drives send are delivered to every other bus object on the channel as
 :class:`can.Message` (timestamp, ``is_rx``, channel set like ``VirtualBus`` does), built
 directly instead of by ``copy.deepcopy``.
 
+Simulated time (the lockstep clock)
+-----------------------------------
+An ``"inline"`` SimBus built with ``sync_cycle_s`` makes its channel *clocked*: simulated time
+advances by ``sync_cycle_s`` with each SYNC (COB-ID 0x080) it receives, and nothing else makes
+it pass. Every ``send_periodic`` of a SimBus on a clocked channel -- the drives' heartbeat
+producers (canopen's ``LocalNode``) and the master's own heartbeat when the master's end is a
+SimBus (``daq.runtime.buses.open_buses`` on the virtual interface) -- is then a
+:class:`SyncPeriodicTask`: one frame when it starts (as python-can's thread task does), then
+one every ``max(1, round(period / sync_cycle_s))`` SYNCs, sent right after the drives handled
+that SYNC, from the SYNC sender's thread. So in lockstep the heartbeats are as deterministic
+as the PDOs: a host stall stops SYNC and heartbeats together, and a run faster than real time
+does not spread them out. Without ``sync_cycle_s`` (and for the paced clock) periodic sends
+are python-can's wall-clock thread tasks. :attr:`SimBus.sync_count` is the number of SYNCs the
+channel's clock has seen.
+
 This relies on the layout of python-can's virtual interface (a module-level ``channels``
 dict of lists of per-bus queues with ``put(msg, block, timeout)``), checked when the bus is
 built: :class:`~sim_drivers.SimError` if it is not there. At most one ``"inline"`` SimBus per
@@ -49,13 +64,14 @@ from typing import Any
 
 import can
 import canopen
+from can.broadcastmanager import ModifiableCyclicTaskABC, RestartableCyclicTaskABC
 from can.interfaces import virtual as _virtual
 
 from sim_drivers import SimError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["SimBus", "SimNetwork"]
+__all__ = ["SimBus", "SimNetwork", "SyncPeriodicTask"]
 
 DISPATCH = ("inline", "thread")
 
@@ -70,6 +86,9 @@ class SimBus(can.BusABC):
         on the same name, before or after).
     dispatch : {"inline", "thread"}
         How received frames reach the listeners (module docstring).
+    sync_cycle_s : float or None
+        ``"inline"`` only: make the channel clocked, one SYNC = ``sync_cycle_s`` [s] of
+        simulated time (module docstring); None: periodic sends on the wall clock.
     **kwargs
         Passed to :class:`can.BusABC` (``can_filters``).
 
@@ -80,9 +99,13 @@ class SimBus(can.BusABC):
     then never returns a frame.
     """
 
-    def __init__(self, channel: str, *, dispatch: str = "thread", **kwargs: Any) -> None:
+    def __init__(self, channel: str, *, dispatch: str = "thread",
+                 sync_cycle_s: float | None = None, **kwargs: Any) -> None:
         if dispatch not in DISPATCH:
             raise SimError(f"SimBus: dispatch: expected one of {DISPATCH}, got {dispatch!r}")
+        if sync_cycle_s is not None and (dispatch != "inline" or not sync_cycle_s > 0):
+            raise SimError(f"SimBus: sync_cycle_s: expected a period > 0 [s] with "
+                           f"dispatch='inline', got {sync_cycle_s!r} with {dispatch!r}")
         channels = getattr(_virtual, "channels", None)
         lock = getattr(_virtual, "channels_lock", None)
         if not isinstance(channels, dict) or lock is None:
@@ -103,6 +126,9 @@ class SimBus(can.BusABC):
         self._listeners: list[can.Listener] = []
         self._lock = threading.RLock()
         self._open = True
+        self.sync_cycle_s = sync_cycle_s
+        self.sync_count = 0  # SYNCs received (clocked channel)
+        self._sync_tasks: list[SyncPeriodicTask] = []
         with lock:
             self._peers: list[Any] = channels.setdefault(channel, [])
             self._peers.append(self)
@@ -125,6 +151,40 @@ class SimBus(can.BusABC):
                 except Exception:  # a receiver's bug must not break the sender's send()
                     logger.exception("SimBus %s: listener %r failed", self.channel_id,
                                      listener)
+            if (self.sync_cycle_s is not None and msg.arbitration_id == 0x80
+                    and not msg.is_extended_id and not msg.is_remote_frame
+                    and not msg.is_error_frame):
+                self._tick()
+
+    # -- simulated time ----------------------------------------------------------------------
+    def _tick(self) -> None:
+        """One SYNC of a clocked channel: time advances, due periodic frames go out."""
+        self.sync_count = n = self.sync_count + 1
+        for task in tuple(self._sync_tasks):
+            try:
+                task._on_sync(n)
+            except Exception:
+                logger.exception("SimBus %s: periodic task 0x%03X failed", self.channel_id,
+                                 task.arbitration_id)
+
+    def channel_clock(self) -> SimBus | None:
+        """The SimBus that keeps this channel's simulated time (None: not clocked)."""
+        for peer in tuple(self._peers):
+            if isinstance(peer, SimBus) and peer.sync_cycle_s is not None and peer._open:
+                return peer
+        return None
+
+    def _send_periodic_internal(self, msgs, period, duration=None, autostart=True,
+                                modifier_callback=None):  # noqa: ANN001 - python-can's API
+        """python-can's thread task, or on a clocked channel a :class:`SyncPeriodicTask`."""
+        clock = self.channel_clock()
+        if clock is None or modifier_callback is not None:
+            return super()._send_periodic_internal(msgs, period, duration, autostart,
+                                                   modifier_callback)
+        task = SyncPeriodicTask(self, clock, msgs, period, duration)
+        if autostart:
+            task.start()
+        return task
 
     # -- BusABC ------------------------------------------------------------------------------
     def add_listener(self, listener: can.Listener) -> None:
@@ -206,6 +266,75 @@ class SimBus(can.BusABC):
                     del _virtual.channels[self.channel_id]
             with self._lock:
                 self._listeners.clear()
+                self._sync_tasks.clear()
+
+
+class SyncPeriodicTask(ModifiableCyclicTaskABC, RestartableCyclicTaskABC):
+    """A periodic send paced by the SYNCs of a clocked channel (:class:`SimBus`, module
+    docstring): one frame at :meth:`start`, then one every ``max(1, round(period /
+    sync_cycle_s))`` SYNCs, in turn when several messages are given; ``duration`` [s] of
+    simulated time, when given, ends it.
+
+    Parameters
+    ----------
+    bus : SimBus
+        The bus the frames are sent on (the task's owner).
+    clock : SimBus
+        The channel's clocked SimBus (:meth:`SimBus.channel_clock`).
+    messages, period, duration
+        As python-can's ``send_periodic`` ([s]).
+    """
+
+    def __init__(self, bus: SimBus, clock: SimBus, messages: Any, period: float,
+                 duration: float | None = None) -> None:
+        super().__init__(messages, period)
+        self.bus = bus
+        self.clock = clock
+        cycle = float(clock.sync_cycle_s or period)
+        self.every = max(1, round(period / cycle))  # SYNCs per frame
+        self.end = None if duration is None else max(1, round(duration / cycle))
+        self._started_at = 0
+        self._index = 0
+        self._running = False
+
+    def start(self) -> None:
+        """Send the first frame now, then one every ``every`` SYNCs (idempotent)."""
+        if self._running:
+            return
+        self._running = True
+        self._started_at = self.clock.sync_count
+        with self.clock._lock:
+            self.clock._sync_tasks.append(self)
+        self._send()
+
+    def stop(self) -> None:
+        """No more frames (idempotent)."""
+        self._running = False
+        with self.clock._lock:
+            if self in self.clock._sync_tasks:
+                self.clock._sync_tasks.remove(self)
+
+    def modify_data(self, messages: Any) -> None:
+        """Send ``messages`` from the next frame on (same arbitration id), keeping the pace."""
+        messages = self._check_and_convert_messages(messages)
+        self._check_modified_messages(messages)
+        self.messages = messages
+        self._index = 0
+
+    def _on_sync(self, n: int) -> None:
+        k = n - self._started_at
+        if self.end is not None and k >= self.end:
+            self.stop()
+            return
+        if k % self.every == 0:
+            self._send()
+
+    def _send(self) -> None:
+        if not self._running or not self.bus._open:
+            return
+        msg = self.messages[self._index]
+        self._index = (self._index + 1) % len(self.messages)
+        self.bus.send(msg)
 
 
 class _Dispatch(can.Listener):
@@ -240,6 +369,9 @@ class SimNetwork:
     dispatch : {"inline", "thread"}
         :class:`SimBus` delivery: ``"inline"`` for the lockstep clock, ``"thread"`` (one
         notifier thread for all the drives) for the paced clock.
+    sync_cycle_s : float or None
+        ``"inline"`` only: the channel's simulated time per SYNC [s] (module docstring,
+        "Simulated time"); give it with drives built with ``clock="sync"``.
 
     Attributes
     ----------
@@ -250,8 +382,9 @@ class SimNetwork:
         Started drives, in the order added.
     """
 
-    def __init__(self, channel: str, *, dispatch: str = "inline") -> None:
-        self.bus = SimBus(channel, dispatch=dispatch)
+    def __init__(self, channel: str, *, dispatch: str = "inline",
+                 sync_cycle_s: float | None = None) -> None:
+        self.bus = SimBus(channel, dispatch=dispatch, sync_cycle_s=sync_cycle_s)
         self.network = canopen.Network(self.bus)
         self.network.NOTIFIER_CYCLE = 0.05  # notifier poll period [s]: quick close()
         if dispatch == "inline":

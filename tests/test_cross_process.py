@@ -1,7 +1,7 @@
 """The master and the simulated drives in different processes, over a loopback bridge.
 
 ``python -m sim_drivers.serve --bridge-port 0`` (a subprocess, :class:`ServeProcess`) serves a
-drive on a virtual bus and a python-can-remote bridge on ``ws://127.0.0.1:<port>/``; the
+drive on a virtual bus and a python-can-remote bridge on ``ws://127.0.0.1:<port>/<token>``; the
 test process runs the real master (``daq.runner.run_campaign``, ``[daq] interface =
 "remote"``) against it and reads the log back. Every subprocess is bounded in time and
 stopped in ``finally``.
@@ -25,6 +25,7 @@ from sim_drivers.remote import ServeProcess
 from trajectories.campaign import Campaign
 
 _chan = itertools.count()
+pytestmark = pytest.mark.slow  # subprocesses and paced (real-time) runs
 
 
 def remote_campaign(url: str, node_id: int = 1, *, sync_source: str = "runner",

@@ -77,6 +77,7 @@ def test_campaign_without_bus_keys_runs_on_the_configured_bus(tmp_path, monkeypa
     from sim_drivers.drive import SimulatedDrive
     from sim_drivers.plant import JointPlant
     from sim_drivers.plant_config import default_plant
+    from sim_drivers.simbus import SimNetwork
 
     channel = f"fallback_{next(_chan)}"
     monkeypatch.setenv("CAN_INTERFACE", "virtual")
@@ -97,14 +98,14 @@ def test_campaign_without_bus_keys_runs_on_the_configured_bus(tmp_path, monkeypa
     campaign = Campaign.from_dict(raw, "fallback.toml")
     plant = JointPlant(default_plant(), 0.001)
     plant.reset(0.0)
-    bus = can.Bus(interface="virtual", channel=channel)
-    drive = SimulatedDrive(bus, 5, plant, cycle_s=0.001)
-    drive.start()
+    # the drive on simulated time, its channel clocked by the master's SYNCs (heartbeats
+    # paced by SYNC: a loaded host is no lost heartbeat)
+    sim = SimNetwork(channel, dispatch="inline", sync_cycle_s=0.001)
+    drive = sim.add(SimulatedDrive(sim.network, 5, plant, cycle_s=0.001, clock="sync"))
     try:
         r = run_campaign(campaign, out_dir=tmp_path, prompt=lambda *a: True)
     finally:
-        drive.stop()
-        bus.shutdown()
+        sim.close()
     assert r.ok, r.reason
     a = read_run(r.runs[0].path)
     assert a.metadata["campaign"]["interface"] == "virtual"

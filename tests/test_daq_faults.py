@@ -104,6 +104,7 @@ def test_limit_violation(tmp_path):
     assert np.max(np.abs(a.dq[: run.fault_cycle])) <= 0.5  # the first violation is the stop
 
 
+@pytest.mark.slow  # a jointid subprocess
 def test_limit_violation_cli_exit_code(tmp_path):
     toml = _write_campaign(tmp_path, periods=2, extra="[daq.limits]\nmax_velocity = 0.5\n")
     p = subprocess.run(_cli(toml, tmp_path / "out"), capture_output=True, text=True,
@@ -180,6 +181,7 @@ def _start_and_wait_for_log(tmp_path, min_bytes):
     pytest.fail(f"runner did not write {min_bytes} bytes: {proc.communicate()[1][-2000:]}")
 
 
+@pytest.mark.slow  # a jointid subprocess
 def test_sigint_stops_and_keeps_a_complete_log(tmp_path):
     proc, log, out = _start_and_wait_for_log(tmp_path, 100_000)
     proc.send_signal(signal.SIGINT)
@@ -194,6 +196,7 @@ def test_sigint_stops_and_keeps_a_complete_log(tmp_path):
     assert not (out / "long_payload1.mcap").exists()
 
 
+@pytest.mark.slow  # a jointid subprocess
 def test_sigkill_leaves_a_readable_log_up_to_the_last_chunk(tmp_path):
     proc, log, out = _start_and_wait_for_log(tmp_path, 300_000)
     proc.send_signal(signal.SIGKILL)

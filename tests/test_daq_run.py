@@ -202,9 +202,12 @@ def test_hardware_path_with_python_can_configuration(tmp_path, monkeypatch):
     drive = SimulatedDrive(bus, 4, plant, cycle_s=0.001)
     drive.start()
     try:
+        # no heartbeats: a drive in its own right (wall clock) in this process, watched by a
+        # lockstep master, could time out on a loaded host; the watchdogs are tested in
+        # test_safety_drive.py, test_safety_run.py and test_sim_clock.py
         c = small_campaign(n_payloads=2, periods=1, freq=1.0, amplitude=0.1, daq={
-            "interface": "config", "clock": "lockstep",
-            "drives": [{"node_id": 4, "scaling": {
+            "interface": "config", "clock": "lockstep", "master_heartbeat_ms": 0,
+            "drives": [{"node_id": 4, "heartbeat_ms": 0, "scaling": {
                 "rated_torque_Nm": 5.0, "gear_ratio": 100.0,
                 "encoder_counts_per_rev": 4096}}]})
         asked = []

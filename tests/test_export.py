@@ -7,7 +7,6 @@ from __future__ import annotations
 import gzip
 import subprocess
 import sys
-import threading
 import time
 
 import can
@@ -18,6 +17,7 @@ from test_daq_run import small_campaign
 from daq.protocol.export import ExportError, export_can
 from daq.protocol.reader import read_frames
 from daq.runtime.runner import run_campaign
+from sim_drivers.bridge import Bridge
 from sim_drivers.plant_config import default_plant
 
 # (extension, relative-time tolerance [s], absolute-time tolerance [s]) — the formats'
@@ -77,22 +77,16 @@ def test_asc_absolute_start_within_a_millisecond(run_log, tmp_path):
 def test_player_replays_the_export_in_another_process(run_log, tmp_path):
     """``python -m can.player`` (a subprocess) replays the BLF export through a
     python-can-remote bridge on 127.0.0.1 into a virtual bus of this process."""
-    from can_remote.server import RemoteServer
-
     res = export_can(run_log, tmp_path / "trace.blf")
     want = [m for m in can.LogReader(res.path)]
     channel = "export_replay"
-    server = RemoteServer("127.0.0.1", 0, channel=channel, interface="virtual")
-    port = server.server_port
-    th = threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.05},
-                          daemon=True)
-    th.start()
+    server = Bridge(0, channel=channel, interface="virtual").start()
     bus = can.Bus(interface="virtual", channel=channel)
     got: list[can.Message] = []
     try:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "can.player", "-i", "remote", "-c",
-             f"ws://127.0.0.1:{port}/", str(res.path)],
+            [sys.executable, "-m", "can.player", "-i", "remote", "-c", server.url,
+             str(res.path)],
             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         try:
             end = time.monotonic() + 60.0
@@ -107,8 +101,7 @@ def test_player_replays_the_export_in_another_process(run_log, tmp_path):
                 proc.wait(5)
     finally:
         bus.shutdown()
-        server.shutdown()
-        server.server_close()
+        server.close()
     assert proc.returncode == 0, err
     assert [(m.arbitration_id, bytes(m.data)) for m in got] == [
         (m.arbitration_id, bytes(m.data)) for m in want]

@@ -150,6 +150,7 @@ def test_bus_budget_refuses_before_anything_moves(tmp_path):
     assert bus not in virtual.channels  # no bus was opened
 
 
+@pytest.mark.slow  # a jointid subprocess
 def test_bus_budget_refusal_at_the_cli_is_one_line(tmp_path):
     raw = arm3_raw(buses=("can0", "can0", "can0"), cycle_s=0.001)
     path = tmp_path / "c.toml"
@@ -188,6 +189,7 @@ def test_daq_drives_entries_are_matched_by_node_id(tmp_path):
         robot_daq_config(c, use_can_config=False)
 
 
+@pytest.mark.slow  # a jointid subprocess
 def test_single_joint_campaign_needs_a_plant_file(tmp_path):
     r = subprocess.run([sys.executable, "-m", "daq.app.cli", "run",
                         str(ROOT / "examples" / "campaign.toml"), "--simulate", "--out",

@@ -21,9 +21,12 @@ Node ids are unique over all buses (``daq.runtime.config`` refuses a repeated on
 COB-ID names one bus. Pure bus code: no CANopen state, no threads of its own.
 
 :func:`open_buses` opens the master's bus(es) of a ``[daq]`` configuration: one python-can
-bus per channel (``interface``, ``bitrate``), or with ``--simulate`` the master's end of the
-simulated channel (:class:`sim_drivers.simbus.SimBus`, queued: the master code reads it like
-any python-can bus); a :class:`MultiBus` over them when there are several.
+bus per channel (``interface``, ``bitrate``), or with ``--simulate`` or python-can's
+``virtual`` interface the master's end of the virtual channel (:class:`sim_drivers.simbus.SimBus`,
+queued: the master code reads it like any python-can bus); a :class:`MultiBus` over them when
+there are several. On a channel clocked by simulated drives in lockstep (``SimNetwork`` with
+``sync_cycle_s``) the master's periodic sends (its heartbeat) then follow the SYNCs like the
+drives' (:func:`sync_clocked`).
 """
 
 from __future__ import annotations
@@ -174,8 +177,9 @@ def open_buses(cfg: Any, *, simulated: bool = False) -> can.BusABC:
 
     One bus per channel of ``cfg.channels``: ``can.Bus(interface, channel, bitrate)``
     (``interface = "config"``: python-can's own configuration, one bus), or with
-    ``simulated`` a queued :class:`~sim_drivers.simbus.SimBus` on the virtual channel of the
-    simulated drives. Several channels: a :class:`MultiBus` routing by node id.
+    ``simulated`` or ``interface = "virtual"`` a queued :class:`~sim_drivers.simbus.SimBus`
+    on the virtual channel (the same frames as python-can's ``VirtualBus``, without its deep
+    copies). Several channels: a :class:`MultiBus` routing by node id.
 
     Raises
     ------
@@ -185,7 +189,7 @@ def open_buses(cfg: Any, *, simulated: bool = False) -> can.BusABC:
     opened: dict[str, can.BusABC] = {}
     try:
         for ch in cfg.channels:
-            if simulated:
+            if simulated or cfg.interface == "virtual":
                 opened[ch] = SimBus(ch, dispatch="thread")
                 continue
             kwargs: dict[str, Any] = {"interface": cfg.interface, "channel": ch}
@@ -206,3 +210,11 @@ def open_buses(cfg: Any, *, simulated: bool = False) -> can.BusABC:
     if len(opened) == 1:
         return next(iter(opened.values()))
     return MultiBus(opened, {d.node_id: d.channel or cfg.channel for d in cfg.drives})
+
+
+def sync_clocked(bus: can.BusABC) -> bool:
+    """True when every channel of the master's ``bus`` is clocked by its SYNCs (simulated
+    drives in lockstep, :mod:`sim_drivers.simbus` "Simulated time"): the drives' heartbeats
+    are then paced by SYNC and the master judges them on its SYNC count."""
+    members = bus.members if isinstance(bus, MultiBus) else [bus]
+    return all(isinstance(b, SimBus) and b.channel_clock() is not None for b in members)

@@ -5,7 +5,7 @@ project's generic EDS, cyclic synchronous torque)::
 
     [daq]
     interface = "socketcan"       # any python-can interface: virtual, socketcan, pcan, kvaser,
-                                  # remote (python-can-remote, channel "ws://127.0.0.1:54701/")
+                                  # remote (python-can-remote: the URL serve prints, token included)
                                   # or "config": python-can's own configuration opens the bus
     channel = "can0"
     bitrate = 1000000             # [bit/s]

@@ -1,12 +1,18 @@
 """Bus I/O of one control cycle: the listener that sorts TPDOs, heartbeats, EMCY and
-records every frame of the cycle for the log (``/can/raw``)."""
+records every frame of the cycle for the log (``/can/raw``).
+
+Heartbeats are stamped with :attr:`CycleIO.clock`: ``time.monotonic()``, or in lockstep on a
+channel clocked by simulated drives (:meth:`CycleIO.use_sync_clock`,
+:func:`daq.runtime.buses.sync_clocked`) the SYNCs sent so far times the cycle -- the time the
+simulated drives' heartbeats are produced on (:mod:`daq.runtime.simrig`), so the master's
+heartbeat watchdog does not depend on the host's speed either."""
 
 from __future__ import annotations
 
 import queue
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import can
 from can_remote.websocket import WebsocketClosed
@@ -37,7 +43,9 @@ class CycleIO(can.Listener):
         self.lock = threading.Lock()
         self.frames = bytearray()
         self.n_frames = 0
-        now = time.monotonic()
+        self.syncs = 0  # SYNCs sent (sent() with COB-ID 0x080)
+        self.clock: Callable[[], float] = time.monotonic  # heartbeat times [s]
+        now = self.clock()
         self.hb_time = [now] * self.n
         self.hb_state = [-1] * self.n
         self.emcy: list[tuple[int, int, int]] = []  # (drive, code, register)
@@ -67,7 +75,7 @@ class CycleIO(can.Listener):
             return
         d = self.hb_index.get(cid)
         if d is not None:
-            self.hb_time[d] = time.monotonic()
+            self.hb_time[d] = self.clock()
             self.hb_state[d] = data[0] & 0x7F if data else -1
             return
         d = self.emcy_index.get(cid)
@@ -76,7 +84,14 @@ class CycleIO(can.Listener):
             if code:  # 0 = error reset / no error
                 self.emcy.append((d, code, data[2]))
 
+    def use_sync_clock(self, cycle_s: float) -> None:
+        """Stamp heartbeats with simulated time: SYNCs sent x ``cycle_s`` [s]."""
+        self.clock = lambda: self.syncs * cycle_s
+        self.hb_time = [self.clock()] * self.n
+
     def sent(self, ts: float, cid: int, data: bytes) -> None:
+        if cid == 0x80:
+            self.syncs += 1
         rec = FRAME.pack(ts, cid, len(data), data)
         if self.direct:  # no notifier thread: nobody else appends
             self.frames += rec

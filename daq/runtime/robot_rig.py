@@ -117,7 +117,8 @@ class ArmRig(SimRig):
 def start_arm_sim(cfg: DaqConfig, params: ArmParams, campaign: RobotCampaign,
                   fault_injectors: dict, *, seed: int = 0) -> ArmRig:
     """One :class:`ArmOnBus` behind the drives of ``cfg`` (one per joint, each on its
-    channel), at the campaign's start pose; ``"inline"`` dispatch for the lockstep clock."""
+    channel), at the campaign's start pose; ``"inline"`` dispatch and simulated time (drives
+    and heartbeats paced by SYNC, :mod:`daq.runtime.simrig`) for the lockstep clock."""
     if params.k != len(cfg.drives):
         raise ConfigError(f"{campaign.source}: --simulate: the arm has {params.k} moving "
                           f"joints, the campaign {len(cfg.drives)} drives")

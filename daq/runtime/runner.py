@@ -11,7 +11,6 @@ import os
 import re
 import signal
 import sys
-import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -26,7 +25,7 @@ from trajectories.plan import plan_campaign
 from trajectories.robot_campaign import RobotCampaign
 from trajectories.robot_model import prepare_robot_campaign, robot_file_path
 
-from .buses import open_buses
+from .buses import open_buses, sync_clocked
 from .busload import bus_loads, check_loads
 from .config import DaqConfig, Scaling, parse_daq, with_scaling
 from .cycle_io import BUS_ERRORS, CycleIO
@@ -355,6 +354,8 @@ def _run_locked(campaign: Any, cfg: DaqConfig, plan: Any, load: Any, out: Path, 
             sim = start_sim(cfg, simulate, campaign, fault_injectors or {})
         bus = open_buses(cfg, simulated=sim is not None)
         io = CycleIO([d.node_id for d in cfg.drives])
+        if cfg.clock == "lockstep" and sync_clocked(bus):  # heartbeats paced by SYNC
+            io.use_sync_clock(campaign.cycle_s)
         network = canopen.Network(bus)
         network.NOTIFIER_CYCLE = 0.05
         network.listeners.append(io)
@@ -417,7 +418,7 @@ def _run_locked(campaign: Any, cfg: DaqConfig, plan: Any, load: Any, out: Path, 
                 completed.discard(i)
                 write_state(state_file, campaign.name, completed)
             io.emcy.clear()
-            io.hb_time = [time.monotonic()] * len(drives)
+            io.hb_time = [io.clock()] * len(drives)
             for d in drives:
                 d.nmt_start()
             drive_cycle0 = sim.drives[0].cycle if sim is not None else -1

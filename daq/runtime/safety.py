@@ -18,7 +18,6 @@ from __future__ import annotations
 import inspect
 import signal
 import threading
-import time
 from types import TracebackType
 from typing import Any
 
@@ -206,14 +205,16 @@ class Supervisor:
 
     def _check_heartbeats(self, cycle: int, t: float, log: RunLog) -> None:
         """Fault on the first drive whose heartbeat has been silent for more than
-        ``daq.heartbeat_timeout_s`` (the engine calls this every 16 cycles). Before blaming
-        a drive, the frames waiting in the receive queue are taken (:meth:`_drain`): a
-        master that stalled has not read the heartbeats that came meanwhile."""
-        now = time.monotonic()
+        ``daq.heartbeat_timeout_s`` (the engine calls this every 16 cycles) on the heartbeat
+        clock of :class:`~daq.runtime.cycle_io.CycleIO`: wall time, or simulated time with
+        simulated drives in lockstep. Before blaming a drive, the frames waiting in the
+        receive queue are taken (:meth:`_drain`): a master that stalled has not read the
+        heartbeats that came meanwhile."""
+        now = self.io.clock()
         if any(self.drives[dd].cfg.heartbeat_ms and now - self.io.hb_time[dd]
                > self.cfg.heartbeat_timeout_s for dd in range(len(self.drives))):
             self._drain()
-            now = time.monotonic()
+            now = self.io.clock()
         for dd in range(len(self.drives)):
             if self.drives[dd].cfg.heartbeat_ms and (
                     now - self.io.hb_time[dd] > self.cfg.heartbeat_timeout_s):

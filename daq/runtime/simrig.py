@@ -8,6 +8,12 @@ lockstep clock the drives run inline in the master's ``send`` (no thread hand-of
 the paced clock one notifier thread serves all the drives of a channel, like real drives
 answering in parallel with the master. The master's side (``daq.runtime.buses.open_buses``) is
 its ordinary code on a queued bus of the same channel.
+
+With the lockstep clock the rig runs on simulated time (:mod:`sim_drivers.simbus`, "Simulated
+time"): each channel is clocked by the master's SYNCs (``sync_cycle_s`` = the campaign's
+cycle), the drives' watchdogs run on that time (``clock="sync"``) and every heartbeat on the
+channel -- the drives' and the master's -- is sent every so many SYNCs, so a loaded host
+cannot make a heartbeat late and the run does not depend on the machine's speed.
 """
 
 from __future__ import annotations
@@ -38,13 +44,15 @@ class SimRig:
 def start_sim(cfg: DaqConfig, plant_params: Any, campaign: Any, fault_injectors: dict) -> SimRig:
     """Start one simulated drive per ``cfg.drives`` entry, each with its own
     :class:`~sim_drivers.plant.JointPlant` (seed ``plant.drive.seed + k``) at the campaign's
-    start position, on the :class:`SimNetwork` of its channel (``"inline"`` dispatch for the
-    lockstep clock, one notifier thread per channel for the paced clock)."""
-    dispatch = "inline" if cfg.clock == "lockstep" else "thread"
+    start position, on the :class:`SimNetwork` of its channel (lockstep clock: ``"inline"``
+    dispatch, the channel clocked by SYNC and the drives on the ``"sync"`` clock; paced clock:
+    one notifier thread per channel, wall-clock drives)."""
+    lockstep = cfg.clock == "lockstep"
     sim = SimRig()
     try:
         for ch in cfg.channels:
-            sim.networks[ch] = SimNetwork(ch, dispatch=dispatch)
+            sim.networks[ch] = (SimNetwork(ch, dispatch="inline", sync_cycle_s=campaign.cycle_s)
+                                if lockstep else SimNetwork(ch, dispatch="thread"))
         for k, dcfg in enumerate(cfg.drives):
             plant = JointPlant(plant_params, campaign.cycle_s,
                                seed=int(plant_params.drive.seed) + k)
@@ -52,7 +60,8 @@ def start_sim(cfg: DaqConfig, plant_params: Any, campaign: Any, fault_injectors:
             net = sim.networks[dcfg.channel or cfg.channel]
             drive = SimulatedDrive(net.network, dcfg.node_id, plant, dcfg.eds,
                                    fault_injector=fault_injectors.get(dcfg.node_id),
-                                   cycle_s=campaign.cycle_s)
+                                   cycle_s=campaign.cycle_s,
+                                   clock="sync" if lockstep else "wall")
             sim.drives.append(net.add(drive))
     except Exception:
         sim.close()
