@@ -157,6 +157,22 @@ def test_consistent_usual_ls_is_the_constrained_least_squares(arm3):
     assert fit_free.cost_ratio == pytest.approx(grow / s_free, rel=1e-3, abs=1e-12)
 
 
+def test_consistency_check_lmi_is_the_global_minimum(arm3):
+    """check_consistency's convex program finds a d^2 no larger than the Cholesky-factor
+    local search, with the same verdicts, on a realisable fit and on one made unrealisable."""
+    params, reg, base, runs = arm3
+    m = RobotModel(reg, "paper", "ls", base=base).fit(_signals(params, reg, runs, 2))
+    good = check_consistency(m)
+    assert good.method == "lmi" and good.feasible, good.format()
+    m.coef_ = m.coef_.copy()
+    m.coef_[m.names_.index("Ia3")] = -1.0
+    lmi, chol = check_consistency(m), check_consistency(m, method="cholesky")
+    assert (lmi.method, chol.method) == ("lmi", "cholesky")
+    assert lmi.feasible is False and chol.feasible is False
+    assert lmi.d2 <= chol.d2 * (1 + 1e-6), (lmi.d2, chol.d2)
+    assert "export-model" in lmi.format()
+
+
 def test_export_model_cli(tmp_path, capfd):
     """jointid fit --robot (CSV payload runs) then jointid export-model: URDF, friction file
     and consistent.json; pinocchio loads the URDF; the friction file holds the consistent
