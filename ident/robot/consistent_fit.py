@@ -45,7 +45,6 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-import cvxpy as cp
 import numpy as np
 import scipy.linalg
 import scipy.stats
@@ -203,6 +202,10 @@ def fit_consistent(model: Any, signals: Any = None, *, friction: str | None = No
     -------
     ConsistentFit
     """
+    # cvxpy takes seconds to import: only when a consistent estimate is asked for, not with
+    # every `jointid` command (the rule against imports in functions is for our packages)
+    import cvxpy as cp
+
     if not hasattr(model, "coef_"):
         raise RobotIdentError("fit_consistent: the RobotModel is not fitted")
     if friction is None:
