@@ -8,13 +8,14 @@ module finds the standard parameters chi_St that
 * make every moving link physically consistent: pseudo-inertia (Wensing, Kim & Slotine 2017)
   ``J_j = [[tr(I_j)/2 1_3 - I_j, h_j], [h_j^T, m_j]] >= MARGIN 1_4`` (I_j inertia about the
   joint-frame origin, h_j = m_j c_j the first moments, m_j the mass: mass > 0, inertia about the
-  centre of mass positive definite and the triangle inequalities) and rotor inertia Ia_j >= 0
-  (fixed at the robot file's value when the rotor inertias are known);
+  centre of mass positive definite and the triangle inequalities) and rotor inertia
+  Ia_j >= MARGIN (fixed at the robot file's value when the rotor inertias are known);
 * are closest to the free fit in the metric of its uncertainty: minimise the Mahalanobis
   distance ``d^2 = (beta chi - theta_hat)^T M (beta chi - theta_hat)``;
 * among those, are closest to the robot file's (CAD) values ``chi_0`` in the directions the data
-  do not see (a term ``PRIOR_WEIGHT ||(chi - chi_0) / s||^2``, s = max(|chi_0|, 1e-2):
-  the completion of the unidentifiable standard parameters).
+  do not see: the term ``PRIOR_WEIGHT ||(chi - chi_0) / s||^2`` (s = max(|chi_0|, median
+  |theta_hat|); the completion of the unidentifiable standard parameters; minimum norm when the
+  robot file has no inertias).
 
 The problem is a semidefinite program (one 4x4 LMI per link), convex, solved to its global
 optimum by Clarabel through cvxpy (no starts, no local minima, unlike the Cholesky-factor
@@ -57,8 +58,9 @@ __all__ = ["ConsistentFit", "fit_consistent", "consistent_model", "link_validity
 #: Pseudo-inertia lower bound J >= MARGIN 1_4 [kg, kg m^2]: strict physical consistency
 #: (mass > 0, inertia about the CoM positive definite) without changing any fit visibly.
 MARGIN = 1e-6
-#: Weight of the pull towards the robot file's standard values (relative to d^2, which is in
-#: units of the free fit's variances): small enough to leave the identified directions alone.
+#: Weight of the pull towards the robot file's standard values, relative to d^2 (in units of
+#: the free fit's variances): it raises d^2 by at most PRIOR_WEIGHT ||(chi_d - chi_0) / s||^2
+#: (chi_d: the distance-optimal set), far below one variance.
 PRIOR_WEIGHT = 1e-6
 _LINK = 11  # XX XY XZ YY YZ ZZ MX MY MZ M Ia
 
@@ -249,30 +251,35 @@ def fit_consistent(model: Any, signals: Any = None, *, friction: str | None = No
                               f"{prior.shape}")
     known = np.asarray(getattr(reg, "known_Ia", np.zeros(k)), dtype=float)
 
-    chi = cp.Variable(p)
+    # variables scaled by the typical size of the base parameters (a 1 t robot and a 1 kg arm
+    # alike give the conic solver numbers near 1)
+    scale = max(float(np.median(np.abs(x_hat[:nb]))), 1e-2)
+    z = cp.Variable(p)
+    chi = scale * z
     extra = cp.Variable(nt - nb) if nt > nb else None
     theta_b = beta @ chi
     theta = theta_b if extra is None else cp.hstack([theta_b, extra])
     r = cp.multiply(theta[theta_idx] - x_hat[theta_idx], 1.0 / sd)
-    ps = np.maximum(np.abs(prior), 1e-2)
-    objective = cp.sum_squares(root @ r) + PRIOR_WEIGHT * cp.sum_squares(
-        cp.multiply(chi - prior, 1.0 / ps))
+    d2_expr = cp.sum_squares(root @ r)
     cons = []
     for j in range(k):
         J = cp.bmat(_pseudo_inertia(chi[_LINK * j:_LINK * j + 10]))
-        cons.append(0.5 * (J + J.T) >> MARGIN * np.eye(4))
-        ia = chi[_LINK * j + 10]
-        cons.append(ia == known[j] if known[j] > 0 else ia >= 0)
-    prob = cp.Problem(cp.Minimize(objective), cons)
+        cons.append(0.5 * (J + J.T) / scale >> (MARGIN / scale) * np.eye(4))
+        ia = z[_LINK * j + 10]
+        cons.append(ia == known[j] / scale if known[j] > 0 else ia >= MARGIN / scale)
+    # the completion: a pull towards the robot file's values, PRIOR_WEIGHT relative to d^2
+    ps = np.maximum(np.abs(prior), scale)
+    objective = d2_expr + PRIOR_WEIGHT * cp.sum_squares(cp.multiply(chi - prior, 1.0 / ps))
     t0 = time.perf_counter()
-    try:
-        prob.solve(solver=solver)
-    except cp.error.SolverError as e:
-        raise RobotIdentError(f"fit_consistent: solver {solver} failed ({e})") from None
+    prob = cp.Problem(cp.Minimize(objective), cons)
+    _solve(cp, prob, solver, "consistent fit")
+    status = str(prob.status)
+    if status != "optimal" and not all(lk["valid"] for lk in link_validity(
+            scale * np.asarray(z.value, dtype=float), k)):
+        raise RobotIdentError(f"fit_consistent: solver {solver}: status {status}, and the "
+                              "links it gives are not all physically valid")
     solve_s = time.perf_counter() - t0
-    if chi.value is None or prob.status not in ("optimal", "optimal_inaccurate"):
-        raise RobotIdentError(f"fit_consistent: solver {solver} status {prob.status}")
-    chi_v = np.asarray(chi.value, dtype=float)
+    chi_v = scale * np.asarray(z.value, dtype=float)
     coef = x_hat.copy()
     coef[:nb] = beta @ chi_v
     if extra is not None:
@@ -288,11 +295,22 @@ def fit_consistent(model: Any, signals: Any = None, *, friction: str | None = No
         standard=dict(zip(std_names, chi_v.tolist(), strict=True)), friction=friction,
         d2=d2, d2_limit=float(scipy.stats.chi2.ppf(0.99, theta_idx.size)),
         cost_ratio=d2 / dof, links=link_validity(chi_v, k), solve_s=solve_s, solver=solver,
-        status=str(prob.status))
+        status=status)
     if signals is not None:
         out.rel_error_before = model.rel_error(signals)
         out.rel_error_after = consistent_model(model, out).rel_error(signals)
     return out
+
+
+def _solve(cp: Any, prob: Any, solver: str, what: str) -> None:
+    try:
+        prob.solve(solver=solver)
+    except cp.error.SolverError as e:
+        raise RobotIdentError(f"fit_consistent: solver {solver} failed on the {what} "
+                              f"({e})") from None
+    if prob.status not in ("optimal", "optimal_inaccurate") or prob.value is None:
+        raise RobotIdentError(f"fit_consistent: solver {solver}: status {prob.status} on the "
+                              f"{what}")
 
 
 def consistent_model(model: Any, fit: ConsistentFit) -> Any:
