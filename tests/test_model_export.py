@@ -171,6 +171,12 @@ def test_consistency_check_lmi_is_the_global_minimum(arm3):
     assert lmi.feasible is False and chol.feasible is False
     assert lmi.d2 <= chol.d2 * (1 + 1e-6), (lmi.d2, chol.d2)
     assert "export-model" in lmi.format()
+    # the paper model's consistent estimate: rigid body constrained, friction the free fit's
+    fit = fit_consistent(m)
+    assert fit.friction == "fixed" and fit.valid and fit.d2 > fit.d2_limit
+    assert fit.standard["Ia3"] >= 0
+    nb = m.n_base_
+    np.testing.assert_array_equal(fit.coef[nb:], m.coef_[nb:])
 
 
 def test_export_model_cli(tmp_path, capfd):
