@@ -20,6 +20,7 @@ import daq.protocol.cli_export
 import daq.runtime.cli
 import daq.runtime.cli_recover
 import ident.cli
+import ident.cli_export_model
 import ident.cli_report
 import trajectories.cli
 from daq import DaqError, __version__
@@ -38,6 +39,7 @@ SUBCOMMANDS = (
     ident.cli_report,  # jointid report
     daq.protocol.cli_export,  # jointid export
     daq.runtime.cli_recover,  # jointid recover
+    ident.cli_export_model,  # jointid export-model
 )
 
 #: errors raised on purpose by our packages (their exception roots) and I/O errors

@@ -14,10 +14,15 @@ to them one by one. This module does two things:
    J = [[tr(I)/2 1_3 - I, h], [h^T, m]] with I the inertia about the link origin, h the first
    moments, m the mass; J >= 0 is mass >= 0, inertia PSD and the triangle inequalities)
    and Ia >= 0, with beta chi_St within the identified uncertainty of the base estimate
-   (Mahalanobis distance d^2 = r^T C^-1 r below the 99 % chi-square quantile)? Solved by
-   least squares over Cholesky factors of the pseudo-inertias (J = L L^T, Ia = s^2), a few
-   seeded starts. Standard parameters that do not enter any base parameter are free in that
-   search: nothing can be said about them (listed as ``unchecked``).
+   (Mahalanobis distance d^2 = r^T C^-1 r below the 99 % chi-square quantile)? The smallest
+   d^2 is the semidefinite program of :func:`~ident.robot.consistent_fit.fit_consistent`
+   (one LMI per link, convex: its global minimum, well under a second for 6 axes); should the
+   conic solver fail, least squares over Cholesky factors of the pseudo-inertias (J = L L^T,
+   Ia = s^2, a few seeded starts: a local minimum, an upper bound of d^2). Standard
+   parameters that do not enter any base parameter are free in that search: nothing can be
+   said about them (listed as ``unchecked``). When the set is not realisable,
+   ``fit_consistent`` (``jointid export-model``, docs/model-export.md) gives the nearest
+   consistent estimate and its cost.
 """
 
 from __future__ import annotations
@@ -29,6 +34,9 @@ import numpy as np
 import scipy.linalg
 import scipy.optimize
 import scipy.stats
+
+from . import RobotIdentError
+from .consistent_fit import fit_consistent
 
 __all__ = ["ConsistencyReport", "check_consistency"]
 
@@ -75,6 +83,7 @@ class ConsistencyReport:
     d2_limit: float = float("nan")
     standard: dict[str, float] = field(default_factory=dict)
     unchecked: tuple[str, ...] = ()
+    method: str = ""
 
     @property
     def ok(self) -> bool:
@@ -90,6 +99,9 @@ class ConsistencyReport:
             verdict = "yes" if self.feasible else "NO"
             lines.append(f"  regrouped base set realisable by physical links: {verdict} "
                          f"(d^2 = {self.d2:.3g}, 99 % limit {self.d2_limit:.3g})")
+            if not self.feasible:
+                lines.append("  nearest consistent estimate and its cost: jointid export-model "
+                             "(ident.robot.consistent_fit, docs/model-export.md)")
         if self.unchecked:
             lines.append("  cannot be checked (in no base parameter): "
                          + ", ".join(self.unchecked))
@@ -145,13 +157,19 @@ def _standard_jacobian(z: np.ndarray, k: int) -> np.ndarray:
 
 
 def check_consistency(model: Any, *, feasibility: bool = True, starts: int = 3,
-                      seed: int = 0) -> ConsistencyReport:
+                      seed: int = 0, method: str = "lmi") -> ConsistencyReport:
     """Physical consistency of a fitted :class:`~ident.robot.estimate.RobotModel` (module doc).
+
+    ``method``: "lmi" (the convex program; the Cholesky search if its solver fails) or
+    "cholesky" (the local search only, ``starts`` seeded starts).
 
     Returns
     -------
     ConsistencyReport
     """
+    if method not in ("lmi", "cholesky"):
+        raise RobotIdentError(f"check_consistency: method {method!r}: expected 'lmi' or "
+                              "'cholesky'")
     rep = ConsistencyReport()
     base = model.base_
     pb = len(base.names)
@@ -193,6 +211,18 @@ def check_consistency(model: Any, *, feasibility: bool = True, starts: int = 3,
     k = len(std_names) // 11
     if len(std_names) != 11 * k:  # friction columns decomposed too: not handled
         return rep
+    rep.d2_limit = float(scipy.stats.chi2.ppf(0.99, pb))
+    cf = None
+    if method == "lmi":
+        try:  # the convex program: global minimum of d^2 (profile metric C_bb^-1, module doc)
+            cf = fit_consistent(model, friction="profile")
+        except (RobotIdentError, np.linalg.LinAlgError, ValueError):
+            cf = None
+    if cf is not None:
+        rep.d2, rep.method = cf.d2, "lmi"
+        rep.feasible = bool(rep.d2 <= rep.d2_limit)
+        rep.standard = dict(cf.standard)
+        return rep
     cov = np.asarray(model.cov_)[:pb, :pb]
     try:
         Lc = scipy.linalg.cholesky(cov + 1e-18 * np.eye(pb) * max(np.trace(cov), 1e-300),
@@ -221,8 +251,7 @@ def check_consistency(model: Any, *, feasibility: bool = True, starts: int = 3,
             best = sol
         if 2.0 * best.cost <= scipy.stats.chi2.ppf(0.99, pb):
             break  # a consistent set is found: no need for other starts
-    rep.d2 = float(2.0 * best.cost)
-    rep.d2_limit = float(scipy.stats.chi2.ppf(0.99, pb))
+    rep.d2, rep.method = float(2.0 * best.cost), "cholesky"
     rep.feasible = bool(rep.d2 <= rep.d2_limit)
     rep.standard = dict(zip(std_names, _standard_from_factors(best.x, k).tolist(),
                             strict=True))

@@ -1,0 +1,145 @@
+"""``jointid export-model FIT.json [--robot ROBOT] [--model usual|paper] -o OUTDIR``: the
+identified robot model as a URDF (physically consistent inertials) and a friction file
+(docs/model-export.md).
+
+FIT.json is the record of ``jointid fit --robot ... --json``. When its model carries a
+``consistent`` block (:func:`ident.robot.consistent_fit.add_consistent`), that estimate is
+exported as it is; otherwise the fit is made again from the record's inputs and settings
+(the record has no covariance, which the consistent estimate needs), checked to give the
+record's parameters, and the consistent estimate is computed. Everything is computed before a
+file is written: a bad input leaves nothing behind.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from trajectories.robot import Robot, load_robot
+
+from . import DataError
+from .cli_robot import FORMAT, fit_robot
+from .report import write_json
+from .robot.consistent_fit import consistent_record, fit_consistent
+from .robot.export_model import export_model
+from .robot.loaders import RobotPreprocessing, load_robot_runs, parse_robot_mapping
+
+__all__ = ["register", "run", "consistent_from_record"]
+
+#: Relative agreement asked of a refit with the record's parameters.
+REFIT_RTOL = 1e-6
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``export-model`` subcommand to the ``jointid`` parser."""
+    p = sub.add_parser(
+        "export-model", help="write the identified robot as a URDF and a friction file",
+        description="Write the identified robot model of FIT.json (jointid fit --robot ... "
+        "--json) as OUTDIR/<robot>.urdf (physically consistent inertials), "
+        "OUTDIR/friction.json (friction, rotor inertias, gravity) and OUTDIR/consistent.json "
+        "(the consistent estimate and its cost); format: docs/model-export.md.")
+    p.add_argument("fit", type=Path, metavar="FIT.json", help="record of jointid fit --robot")
+    p.add_argument("--robot", help="robot file (default: the one FIT.json names)")
+    p.add_argument("--model", choices=("usual", "paper"),
+                   help="model to export (default: paper when identified, else usual)")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="OUTDIR",
+                   help="folder to write into (created)")
+    p.add_argument("--map", action="append", metavar="KEY=PATH[,...]",
+                   help="as jointid fit --map, when the inputs must be read again (CSV/MAT)")
+    p.add_argument("--q-unit", choices=("rad", "deg", "m", "mm"),
+                   help="as jointid fit --q-unit, when the inputs must be read again")
+    p.set_defaults(func=run)
+
+
+def _read(path: Path) -> dict[str, Any]:
+    try:
+        rec = json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as e:
+        raise DataError(f"{path}: not JSON ({e.msg}, line {e.lineno})") from None
+    if not isinstance(rec, dict) or rec.get("format") != FORMAT:
+        got = rec.get("format") if isinstance(rec, dict) else type(rec).__name__
+        raise DataError(f"{path}: format {got!r}: expected {FORMAT!r} (jointid fit --robot "
+                        "... --json)")
+    return rec
+
+
+def _gains(robot: Robot) -> list[float]:
+    """Joint-side torque per unit of logged torque (as ``jointid fit --robot``)."""
+    out = []
+    for n in robot.moving:
+        d = robot.drives.get(n)
+        g = None if d is None else (d.drive_gain or d.torque_constant)
+        out.append(1.0 if g is None else float(g))
+    return out
+
+
+def consistent_from_record(path: Path, rec: dict[str, Any], robot: Robot, name: str,
+                           mapping: Any = None, q_unit: str | None = None
+                           ) -> tuple[dict[str, Any], dict[str, float]]:
+    """The consistent estimate of model ``name`` of the record: its ``consistent`` block, or
+    a refit of its inputs (checked against its parameters) and :func:`fit_consistent`.
+    Returns (consistent record, parameters held fixed by the fit)."""
+    mrec = rec["models"][name]
+    if "consistent" in mrec:
+        return mrec["consistent"], {}
+    pre = rec.get("preprocessing", {})
+    try:
+        runs = load_robot_runs(rec["inputs"], robot.moving, gains=_gains(robot),
+                               mapping=mapping, q_unit=q_unit)
+        settings = RobotPreprocessing(pre.get("cutoff_hz"), pre.get("decimation"),
+                                      pre.get("trim"))
+        fitted = tuple(n for n, r in rec["models"].items() if "error" not in r)
+        out = fit_robot(robot, runs, None, models=fitted, method=rec["method"], qs=rec["qs"],
+                        dq_min=pre.get("dq_min"), preprocessing=settings,
+                        known_rotor_inertia=bool(rec.get("known_rotor_inertia", False)),
+                        chain=pre.get("chain", "columns"), payload=rec.get("payload"),
+                        feasibility=False)
+    except KeyError as e:
+        raise DataError(f"{path}: key {e.args[0]!r} missing (a record of jointid fit "
+                        "--robot)") from None
+    est = out["_estimators"].get(name)
+    if est is None:
+        raise DataError(f"{path}: the {name} model is not identified again from its inputs")
+    want = np.array([v["value"] for v in mrec["parameters"].values()], dtype=float)
+    if tuple(mrec["parameters"]) != tuple(est.names_) or not np.allclose(
+            est.coef_, want, rtol=REFIT_RTOL, atol=REFIT_RTOL * np.abs(want).max()):
+        raise DataError(f"{path}: the {name} model fitted again from its inputs "
+                        f"{rec['inputs']} does not give its parameters (inputs changed, or "
+                        "other --map/--q-unit)")
+    cf = fit_consistent(est, out["_signals"][0])
+    return consistent_record(est, cf), dict(est.fixed_)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``jointid export-model``; returns the exit code."""
+    rec = _read(args.fit)
+    fitted = [n for n, r in rec.get("models", {}).items() if "error" not in r]
+    name = args.model or ("paper" if "paper" in fitted else "usual")
+    if name not in fitted:
+        raise DataError(f"{args.fit}: models.{name}: not identified in this record (it has "
+                        f"{fitted or 'none'})")
+    robot = load_robot(args.robot or rec["robot"]["source"])
+    if list(robot.moving) != list(rec["robot"]["moving"]):
+        raise DataError(f"{args.robot or rec['robot']['source']}: moving joints "
+                        f"{list(robot.moving)}, the record's are {rec['robot']['moving']}")
+    mapping = parse_robot_mapping(args.map) if args.map else None
+    cons, fixed = consistent_from_record(args.fit, rec, robot, name, mapping, args.q_unit)
+    if not cons.get("valid", False):
+        raise DataError(f"{args.fit}: models.{name}.consistent: a link is not physically "
+                        "valid; nothing exported")
+    files = export_model(robot, cons, args.output, fixed)
+    files.append(write_json(args.output / "consistent.json", cons))
+    before, after = cons.get("rel_error_before", {}), cons.get("rel_error_after", {})
+    print(f"{name} model, consistent estimate (LMI, {cons['solver']}, {cons['solve_s']:.3g} s): "
+          f"d^2 = {cons['d2']:.4g} (99 % limit {cons['d2_limit']:.4g}), weighted residual "
+          f"sum of squares +{100 * cons['cost_ratio']:.3g} %")
+    if before and after:
+        print(f"relative error ||rho|| / ||tau|| on the fit data: free {100 * before['all']:.4f}"
+              f" %, consistent {100 * after['all']:.4f} %")
+    for f in files:
+        print(f"wrote {f}")
+    return 0

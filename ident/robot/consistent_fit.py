@@ -1,0 +1,362 @@
+"""Physically consistent estimate of a fitted n-dof model (a convex LMI fit, cvxpy + Clarabel).
+
+The free fit (:class:`~ident.robot.estimate.RobotModel`) gives base parameters theta_hat with
+covariance C; nothing forces them to be the regrouping ``beta chi_St`` of physical links
+(:mod:`ident.robot.consistency` only says whether some are within the uncertainty). This
+module finds the standard parameters chi_St that
+
+* make every moving link physically consistent: pseudo-inertia (Wensing, Kim & Slotine 2017)
+  ``J_j = [[tr(I_j)/2 1_3 - I_j, h_j], [h_j^T, m_j]] >= MARGIN 1_4`` (I_j inertia about the
+  joint-frame origin, h_j = m_j c_j the first moments, m_j the mass: mass > 0, inertia about the
+  centre of mass positive definite and the triangle inequalities) and rotor inertia
+  Ia_j >= MARGIN (fixed at the robot file's value when the rotor inertias are known);
+* are closest to the free fit in the metric of its uncertainty: minimise the Mahalanobis
+  distance ``d^2 = (beta chi - theta_hat)^T M (beta chi - theta_hat)``;
+* among those, are closest to the robot file's (CAD) values ``chi_0`` in the directions the data
+  do not see: the term ``PRIOR_WEIGHT ||(chi - chi_0) / s||^2`` (s = max(|chi_0|, median
+  |theta_hat|); the completion of the unidentifiable standard parameters; minimum norm when the
+  robot file has no inertias).
+
+The problem is a semidefinite program (one 4x4 LMI per link), convex, solved to its global
+optimum by Clarabel through cvxpy (no starts, no local minima, unlike the Cholesky-factor
+search of :func:`~ident.robot.consistency.check_consistency`).
+
+Friction (``friction=``):
+
+* ``"profile"`` (default for the usual model, where the fit is linear): the friction and offset
+  parameters follow theta by their regression on it,
+  ``x_F = x_F_hat + C_F,theta C_theta,theta^-1 (theta - theta_hat)``, and ``M = C_theta,theta^-1``:
+  this is exactly the least-squares fit constrained to consistent links (the sum of the weighted
+  squared residuals grows by sigma^2 d^2).
+* ``"fixed"`` (default for the paper model, bilinear in theta and friction): the friction is the
+  free fit's and ``M = (C^-1)_theta,theta`` (the curvature in theta at fixed friction); the model
+  is linear in theta at fixed friction, so sigma^2 d^2 is again exactly the growth of the weighted
+  sum of squares.
+
+The cost of consistency is reported as ``d2`` against the 99 % chi-square quantile (the estimate
+"stays within the data's uncertainty" when below), as the predicted relative growth of the
+weighted residual sum of squares ``d2 / dof``, and, when signals are given, as the measured
+relative errors ||rho|| / ||tau|| before and after.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+import scipy.stats
+
+from . import RobotIdentError
+
+__all__ = ["ConsistentFit", "fit_consistent", "consistent_model", "link_validity",
+           "consistent_record", "add_consistent", "MARGIN", "PRIOR_WEIGHT"]
+
+#: Pseudo-inertia lower bound J >= MARGIN 1_4 [kg, kg m^2]: strict physical consistency
+#: (mass > 0, inertia about the CoM positive definite) without changing any fit visibly.
+MARGIN = 1e-6
+#: Weight of the pull towards the robot file's standard values, relative to d^2 (in units of
+#: the free fit's variances): it raises d^2 by at most PRIOR_WEIGHT ||(chi_d - chi_0) / s||^2
+#: (chi_d: the distance-optimal set), far below one variance.
+PRIOR_WEIGHT = 1e-6
+_LINK = 11  # XX XY XZ YY YZ ZZ MX MY MZ M Ia
+
+
+@dataclass
+class ConsistentFit:
+    """Result of :func:`fit_consistent`.
+
+    Attributes
+    ----------
+    names : tuple of str
+        The free fit's parameter names (``RobotModel.names_``).
+    coef : ndarray
+        The consistent estimate in ``names`` order (base parameters = beta chi_St).
+    standard : dict
+        Standard parameters name -> value (``XX{j}`` ... ``M{j}``, ``Ia{j}``; about the joint
+        frame origin, ROBOT_FORMAT), every link physically consistent.
+    friction : {"profile", "fixed"}
+        How the friction parameters were treated (module doc).
+    d2, d2_limit : float
+        Mahalanobis distance of the consistent base set from the free fit and the 99 %
+        chi-square quantile (number of free theta entries).
+    cost_ratio : float
+        Predicted relative growth of the weighted residual sum of squares, d2 / dof.
+    rel_error_before, rel_error_after : dict
+        ||rho_j|| / ||tau_j|| and "all" of the free and of the consistent model on the
+        signals given (empty when none were).
+    links : list of dict
+        :func:`link_validity` of the consistent standard set.
+    solve_s : float
+        Wall time of the convex solve [s]; ``solver`` its name and ``status`` cvxpy's status.
+    """
+
+    names: tuple[str, ...]
+    coef: np.ndarray
+    standard: dict[str, float]
+    friction: str
+    d2: float
+    d2_limit: float
+    cost_ratio: float
+    rel_error_before: dict[str, float] = field(default_factory=dict)
+    rel_error_after: dict[str, float] = field(default_factory=dict)
+    links: list[dict[str, Any]] = field(default_factory=list)
+    solve_s: float = float("nan")
+    solver: str = ""
+    status: str = ""
+
+    @property
+    def within_uncertainty(self) -> bool:
+        """d2 below the 99 % chi-square quantile."""
+        return bool(self.d2 <= self.d2_limit)
+
+    @property
+    def valid(self) -> bool:
+        """Every link physically consistent (:func:`link_validity`)."""
+        return all(lk["valid"] for lk in self.links)
+
+    def format(self) -> str:
+        """Plain-text summary."""
+        lines = [f"Consistent estimate (LMI fit, {self.solver}, {self.solve_s:.3g} s, friction "
+                 f"{self.friction}): every link physically valid: "
+                 f"{'yes' if self.valid else 'NO'}",
+                 f"  distance from the free fit d^2 = {self.d2:.4g} (99 % limit "
+                 f"{self.d2_limit:.4g}: {'within' if self.within_uncertainty else 'OUTSIDE'} "
+                 f"its uncertainty); weighted residual sum of squares +{100 * self.cost_ratio:.3g}"
+                 " %"]
+        if self.rel_error_before:
+            b, a = self.rel_error_before["all"], self.rel_error_after["all"]
+            lines.append(f"  relative error ||rho|| / ||tau||: free {100 * b:.4f} %, consistent "
+                         f"{100 * a:.4f} % (x {a / b:.4f})")
+        return "\n".join(lines)
+
+
+def _pseudo_inertia(p: Any) -> list[list[Any]]:
+    """4x4 pseudo-inertia of a link from its 10 standard parameters (XX XY XZ YY YZ ZZ MX MY
+    MZ M, about the origin): Sigma = tr(I)/2 1 - I, linear in the parameters (numpy or cvxpy)."""
+    xx, xy, xz, yy, yz, zz, mx, my, mz, m = (p[i] for i in range(10))
+    half = 0.5 * (xx + yy + zz)
+    return [[half - xx, -xy, -xz, mx],
+            [-xy, half - yy, -yz, my],
+            [-xz, -yz, half - zz, mz],
+            [mx, my, mz, m]]
+
+
+def link_validity(standard: np.ndarray, k: int, tol: float = 0.0) -> list[dict[str, Any]]:
+    """Physical checks of k links' standard parameters (11 per link, ROBOT_FORMAT order).
+
+    Returns, per link: ``mass`` [kg], ``min_eig_J`` (pseudo-inertia), ``min_eig_Ic`` (inertia
+    about the CoM) [kg m^2], ``triangle`` (smallest of I1 + I2 - I3 over the principal moments
+    about the CoM) [kg m^2], ``Ia`` and ``valid`` (mass > tol, both eigenvalues > -tol,
+    triangle >= -tol, Ia >= -tol)."""
+    out = []
+    chi = np.asarray(standard, dtype=float)
+    for j in range(k):
+        p = chi[_LINK * j:_LINK * (j + 1)]
+        J = np.array(_pseudo_inertia(p), dtype=float)
+        m = float(p[9])
+        i_o = np.array([[p[0], p[1], p[2]], [p[1], p[3], p[4]], [p[2], p[4], p[5]]])
+        if m > 0:
+            c = p[6:9] / m
+            i_c = i_o - m * (float(c @ c) * np.eye(3) - np.outer(c, c))
+        else:
+            i_c = i_o
+        ev = np.sort(np.linalg.eigvalsh(i_c))
+        tri = float(ev[0] + ev[1] - ev[2])
+        eig_j = float(np.linalg.eigvalsh(J).min())
+        out.append({"mass": m, "min_eig_J": eig_j, "min_eig_Ic": float(ev[0]),
+                    "triangle": tri, "Ia": float(p[10]),
+                    "valid": bool(m > tol and eig_j > -tol and ev[0] > -tol and tri >= -tol
+                                  and p[10] >= -tol)})
+    return out
+
+
+def _inv_spd(a: np.ndarray) -> np.ndarray:
+    d = np.sqrt(np.diag(a))
+    s = a / d[:, None] / d[None, :]
+    return scipy.linalg.inv(s, check_finite=True) / d[:, None] / d[None, :]
+
+
+def fit_consistent(model: Any, signals: Any = None, *, friction: str | None = None,
+                   prior: np.ndarray | None = None, solver: str = "CLARABEL") -> ConsistentFit:
+    """Physically consistent estimate of a fitted :class:`~ident.robot.estimate.RobotModel`
+    (module doc).
+
+    Parameters
+    ----------
+    model : RobotModel
+        Fitted (usual or paper model).
+    signals : RobotSignals or sequence, optional
+        Data to measure the relative errors of the free and the consistent model on (the fit
+        data: ``rel_error_before`` / ``rel_error_after``).
+    friction : {"profile", "fixed"} or None
+        None: "profile" for the usual model, "fixed" for the paper model.
+    prior : ndarray (11 k,), optional
+        Standard values the unidentifiable directions are pulled to; default the robot file's
+        (``RobotRegressor.standard_values()``).
+    solver : str
+        cvxpy solver name ("CLARABEL", or "SCS").
+
+    Returns
+    -------
+    ConsistentFit
+    """
+    # cvxpy takes seconds to import: only when a consistent estimate is asked for, not with
+    # every `jointid` command (the rule against imports in functions is for our packages)
+    import cvxpy as cp
+
+    if not hasattr(model, "coef_"):
+        raise RobotIdentError("fit_consistent: the RobotModel is not fitted")
+    if friction is None:
+        friction = "profile" if model.model == "usual" else "fixed"
+    if friction not in ("profile", "fixed"):
+        raise RobotIdentError(f"fit_consistent: friction {friction!r}: expected 'profile' or "
+                              "'fixed'")
+    base = model.base_
+    beta = np.asarray(base.beta, dtype=float)
+    std_names = tuple(base.standard_names)
+    p = len(std_names)
+    k = p // _LINK
+    if p != _LINK * k:
+        raise RobotIdentError("fit_consistent: the base parameters decompose friction columns "
+                              "too; expected 11 standard parameters per link")
+    nb, nt = int(model.n_base_), int(model.n_theta_)
+    x_hat = np.asarray(model.coef_, dtype=float)
+    cov = np.asarray(model.cov_, dtype=float)
+    free = np.diag(cov) > 0
+    theta_idx = np.flatnonzero(free[:nt])
+    other = np.flatnonzero(free & (np.arange(x_hat.size) >= nt))
+    allf = np.flatnonzero(free)
+    if friction == "profile":
+        metric = _inv_spd(cov[np.ix_(theta_idx, theta_idx)])
+    else:
+        prec = _inv_spd(cov[np.ix_(allf, allf)])
+        pos = np.searchsorted(allf, theta_idx)
+        metric = prec[np.ix_(pos, pos)]
+    metric = 0.5 * (metric + metric.T)
+    sd = np.sqrt(np.diag(cov)[theta_idx])
+    ms = metric * sd[:, None] * sd[None, :]  # metric on theta / std
+    w, v = np.linalg.eigh(ms)
+    root = (v * np.sqrt(np.clip(w, 0.0, None))).T  # root^T root = ms
+
+    reg = model.regressor_
+    if prior is None:
+        prior = np.asarray(reg.standard_values(), dtype=float)
+    prior = np.asarray(prior, dtype=float).reshape(-1)
+    if prior.shape != (p,):
+        raise RobotIdentError(f"fit_consistent: prior: expected {p} standard values, got "
+                              f"{prior.shape}")
+    known = np.asarray(getattr(reg, "known_Ia", np.zeros(k)), dtype=float)
+
+    # variables scaled by the typical size of the base parameters (a 1 t robot and a 1 kg arm
+    # alike give the conic solver numbers near 1)
+    scale = max(float(np.median(np.abs(x_hat[:nb]))), 1e-2)
+    z = cp.Variable(p)
+    chi = scale * z
+    extra = cp.Variable(nt - nb) if nt > nb else None
+    theta_b = beta @ chi
+    theta = theta_b if extra is None else cp.hstack([theta_b, extra])
+    r = cp.multiply(theta[theta_idx] - x_hat[theta_idx], 1.0 / sd)
+    d2_expr = cp.sum_squares(root @ r)
+    cons = []
+    for j in range(k):
+        J = cp.bmat(_pseudo_inertia(chi[_LINK * j:_LINK * j + 10]))
+        cons.append(0.5 * (J + J.T) / scale >> (MARGIN / scale) * np.eye(4))
+        ia = z[_LINK * j + 10]
+        cons.append(ia == known[j] / scale if known[j] > 0 else ia >= MARGIN / scale)
+    # the completion: a pull towards the robot file's values, PRIOR_WEIGHT relative to d^2
+    ps = np.maximum(np.abs(prior), scale)
+    objective = d2_expr + PRIOR_WEIGHT * cp.sum_squares(cp.multiply(chi - prior, 1.0 / ps))
+    t0 = time.perf_counter()
+    prob = cp.Problem(cp.Minimize(objective), cons)
+    _solve(cp, prob, solver, "consistent fit")
+    status = str(prob.status)
+    if status != "optimal" and not all(lk["valid"] for lk in link_validity(
+            scale * np.asarray(z.value, dtype=float), k)):
+        raise RobotIdentError(f"fit_consistent: solver {solver}: status {status}, and the "
+                              "links it gives are not all physically valid")
+    solve_s = time.perf_counter() - t0
+    chi_v = scale * np.asarray(z.value, dtype=float)
+    coef = x_hat.copy()
+    coef[:nb] = beta @ chi_v
+    if extra is not None:
+        coef[nb:nt] = np.asarray(extra.value, dtype=float)
+    dth = coef[theta_idx] - x_hat[theta_idx]
+    d2 = float(dth @ metric @ dth)
+    if friction == "profile" and other.size:
+        gain = cov[np.ix_(other, theta_idx)] @ _inv_spd(cov[np.ix_(theta_idx, theta_idx)])
+        coef[other] = x_hat[other] + gain @ dth
+    dof = max(int(np.sum(model.n_samples_)) - int(free.sum()), 1)
+    out = ConsistentFit(
+        names=tuple(model.names_), coef=coef,
+        standard=dict(zip(std_names, chi_v.tolist(), strict=True)), friction=friction,
+        d2=d2, d2_limit=float(scipy.stats.chi2.ppf(0.99, theta_idx.size)),
+        cost_ratio=d2 / dof, links=link_validity(chi_v, k), solve_s=solve_s, solver=solver,
+        status=status)
+    if signals is not None:
+        out.rel_error_before = model.rel_error(signals)
+        out.rel_error_after = consistent_model(model, out).rel_error(signals)
+    return out
+
+
+def _solve(cp: Any, prob: Any, solver: str, what: str) -> None:
+    try:
+        prob.solve(solver=solver)
+    except cp.error.SolverError as e:
+        raise RobotIdentError(f"fit_consistent: solver {solver} failed on the {what} "
+                              f"({e})") from None
+    if prob.status not in ("optimal", "optimal_inaccurate") or prob.value is None:
+        raise RobotIdentError(f"fit_consistent: solver {solver}: status {prob.status} on the "
+                              f"{what}")
+
+
+def consistent_model(model: Any, fit: ConsistentFit) -> Any:
+    """A copy of the fitted ``model`` whose coefficients are the consistent ones (``predict``,
+    ``rel_error`` ... then evaluate the consistent model; ``cov_``/``std_`` stay the free
+    fit's)."""
+    if tuple(model.names_) != tuple(fit.names):
+        raise RobotIdentError("consistent_model: the ConsistentFit is of another model "
+                              f"({len(fit.names)} parameters, the model has "
+                              f"{len(model.names_)})")
+    out = copy.copy(model)
+    out.coef_ = np.asarray(fit.coef, dtype=float).copy()
+    out.params_ = dict(zip(out.names_, out.coef_.tolist(), strict=True))
+    return out
+
+
+def consistent_record(model: Any, fit: ConsistentFit) -> dict[str, Any]:
+    """The JSON record of a consistent estimate (``models[name]["consistent"]`` of
+    ``jointid fit --robot --json``, read by ``jointid export-model``; docs/model-export.md)."""
+    return {
+        "method": "lmi",
+        "solver": fit.solver,
+        "solve_s": fit.solve_s,
+        "friction": fit.friction,
+        "d2": fit.d2,
+        "d2_limit": fit.d2_limit,
+        "within_uncertainty": fit.within_uncertainty,
+        "cost_ratio": fit.cost_ratio,
+        "rel_error_before": fit.rel_error_before,
+        "rel_error_after": fit.rel_error_after,
+        "parameters": {n: float(v) for n, v in zip(fit.names, fit.coef, strict=True)},
+        "standard": {n: float(v) for n, v in fit.standard.items()},
+        "links": fit.links,
+        "valid": fit.valid,
+        "qs": [float(q) for q in model.qs_],
+        "model": model.model,
+        "known_rotor_inertia": {j: float(v) for j, v in zip(
+            model.joints_, getattr(model.regressor_, "known_Ia", np.zeros(len(model.joints_))),
+            strict=True)},
+    }
+
+
+def add_consistent(out: dict[str, Any]) -> None:
+    """Hook for the record of ``ident.cli_robot.fit_robot``: add ``models[name]["consistent"]``
+    (:func:`consistent_record`, measured on the fit's selected signals) for every fitted model,
+    so that ``jointid export-model`` exports without fitting again."""
+    sig = out["_signals"][0]
+    for name, est in out["_estimators"].items():
+        out["models"][name]["consistent"] = consistent_record(est, fit_consistent(est, sig))
