@@ -17,7 +17,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -316,6 +316,7 @@ def refine_robot(
     *,
     max_steps: int = 2,
     model: str | None = None,
+    joints: Sequence[str] | None = None,
     progress: Callable[[str], None] | None = None,
     **kwargs: Any,
 ) -> dict[str, Any]:
@@ -337,6 +338,8 @@ def refine_robot(
     model : {"usual", "paper"} or None
         The fitted n-dof model whose prediction is refined; None: the usual model when it was
         fitted, else the paper model.
+    joints : sequence of str, optional
+        The moving joints to refine (default every one).
     progress : callable, optional
         Receives one line per step.
     **kwargs
@@ -364,9 +367,16 @@ def refine_robot(
                           float(out["preprocessing"]["dq_min"]))
     types = dict(zip(out["robot"]["moving"], _revolute(out), strict=True))
     say = progress or (lambda _m: None)
-    joints: dict[str, Any] = {}
+    if joints is not None:
+        unknown = sorted(set(joints) - set(sig.joints))
+        if unknown:
+            raise DataError(f"refine: joints {unknown} are not moving joints "
+                            f"({', '.join(sig.joints)})")
+    done: dict[str, Any] = {}
     refs = {}
     for j, joint in enumerate(sig.joints):
+        if joints is not None and joint not in joints:
+            continue
         rows = keep[:, j]
         say(f"joint {joint}: refining on {int(rows.sum())} of {sig.n} rows")
         vmax = float(np.abs(sig.dq[rows, j]).max(initial=0.0)) or None
@@ -380,11 +390,11 @@ def refine_robot(
                                progress=lambda m, joint=joint: say(f"joint {joint}: {m}"),
                                **kwargs)
         except IdentError as exc:  # e.g. too few rows kept for this joint
-            joints[joint] = {"error": str(exc)}
+            done[joint] = {"error": str(exc)}
             continue
         refs[joint] = ref
         js = ref.to_json()
-        joints[joint] = {
+        done[joint] = {
             "rows": int(rows.sum()),
             "rows_left_out": float(1.0 - rows.mean()) if sig.n else 0.0,
             "ndof_rel_error": out["models"][model]["rel_error"].get(joint),
@@ -403,7 +413,7 @@ def refine_robot(
         }
     rec = {"model": model, "max_steps": int(max_steps), "cycle_s": out["_cycle_s"],
            "rows": "the fit's rows (decimated samples, stiction area, guard and sign check "
-                   "left out as in the fit)", "joints": joints}
+                   "left out as in the fit)", "joints": done}
     out["refinement"] = rec
     out["_refinements"] = refs
     return rec

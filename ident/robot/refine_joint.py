@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from .. import DataError
+from ..describe import CrossJointPeriodic, CrossJointPolynomial
 from ..loaders import concat, make_experiment
 from ..models import Coulomb, IdentModel, Offset, Viscous
 from ..preprocess import Design, _assemble, _Block, build_design
@@ -170,10 +171,16 @@ def refine_joint(
             val = fit_rows_design(lib, vs, _joint_keep(vkeep, vsig, j, "validation keep"))
         else:
             val = build_design(lib, vs, decimation=1, dq_min=dq_min)
-    return refine(design, IdentModel(lib, "ndof" if torque == "measured" else "residual"),
-                  max_steps=max_steps, vmax=vmax, others=names, validation=val,
-                  reference=None if coulomb is None else {"F_C": float(coulomb)},
-                  cycle_s=cycle_s, **kwargs)
+    ref = refine(design, IdentModel(lib, "ndof" if torque == "measured" else "residual"),
+                 max_steps=max_steps, vmax=vmax, others=names, validation=val,
+                 reference=None if coulomb is None else {"F_C": float(coulomb)},
+                 cycle_s=cycle_s, **kwargs)
+    for st in ref.steps:
+        if isinstance(st.term, CrossJointPeriodic | CrossJointPolynomial):
+            # a pair the search selected, named by a one-variable form: the term's variables
+            st.variables = (st.term.var,) + (() if st.term.modifier == "none"
+                                             else (st.term.modifier,))
+    return ref
 
 
 def _joint_keep(keep: np.ndarray, sig: RobotSignals, j: int, what: str) -> np.ndarray:
