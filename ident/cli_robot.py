@@ -1,5 +1,9 @@
 """``jointid fit --robot ROBOT DATA... [--model usual|paper|both] [--method ls|wls|iv]
-[--validate DATA...] [--json FILE] [--report DIR]``: identify an n-dof robot.
+[--validate DATA...] [--refine [--max-steps N]] [--json FILE] [--report DIR]``: identify an
+n-dof robot.
+
+(Past 600 lines: the fit, its all-rows figures, the per-joint refinement on the fit's rows and
+the report are one record built in one place; the printing follows the record.)
 
 Every input file is one multi-axis experiment of the robot's moving joints
 (:mod:`ident.robot.loaders`: MCAP logs of ``jointid run``, CSV ``t, q1..qk, tau1..tauk``,
@@ -7,9 +11,10 @@ MATLAB structs with one row per axis); all are preprocessed per axis like a sing
 identified together (:class:`ident.robot.estimate.RobotModel`: base parameters of the rigid
 body and rotor inertias, plus the usual or the paper friction on every joint). Prints the
 base parameters with their standard deviations (eq. 15-16), the per-joint and global relative
-errors on the fit data and on the ``--validate`` files, and writes the JSON record
-(``docs/robot-data.md``). Outputs are written only once everything has been computed, so a bad
-input leaves nothing behind.
+errors on the fit data and on the ``--validate`` files -- on the fit's rows and on all rows,
+with the share each leaves out -- optionally refines every joint on the fit's rows
+(:func:`refine_robot`), and writes the JSON record (``docs/robot-data.md``). Outputs are
+written only once everything has been computed, so a bad input leaves nothing behind.
 """
 
 from __future__ import annotations
@@ -300,13 +305,14 @@ def fit_robot(
     # velocity bands
     vmax = _vmax(fit_sel)
     out["table_iii"] = {"fit": table_iii(out["_estimators"], fit_sel, vmax=vmax),
-                        "fit_all_rows": table_iii(out["_estimators"], sig, vmax=vmax)}
+                        "fit_all_rows": table_iii(out["_estimators"], sig, vmax=vmax,
+                                                  clip=True)}
     out["rows_left_out"] = {"fit": band_left_out(fit_sel, sig, vmax)}
     if val is not None and val_all is not None:
         vv = _vmax(val)
         out["table_iii"]["validation"] = table_iii(out["_estimators"], val, vmax=vv)
         out["table_iii"]["validation_all_rows"] = table_iii(out["_estimators"], val_all,
-                                                            vmax=vv)
+                                                            vmax=vv, clip=True)
         out["rows_left_out"]["validation"] = band_left_out(val, val_all, vv)
     return out
 
@@ -501,7 +507,9 @@ def band_left_out(sel: RobotSignals, every: RobotSignals,
     where left out) leaves out."""
     out: dict[str, dict[str, float]] = {}
     for j, joint in enumerate(every.joints):
-        a = np.abs(every.dq[:, j]) / vmax[j] if vmax[j] > 0 else np.zeros(every.n)
+        # rows faster than the selected rows' vmax count as at vmax (table_iii(clip=True))
+        a = (np.minimum(np.abs(every.dq[:, j]) / vmax[j], 1.0) if vmax[j] > 0
+             else np.zeros(every.n))
         ok = np.isfinite(sel.tau[:, j])
         row = {}
         for band, (lo, hi) in DEFAULT_BANDS.items():

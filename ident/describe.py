@@ -1,5 +1,8 @@
 """Name or describe what a library search selected.
 
+(Past 600 lines: the named forms, their cross-joint terms and the words fallback share the
+fitting helpers and the matching rule; split, each would import the others.)
+
 A selected group (:mod:`ident.library_search`) is a piecewise-linear function of one or two
 variables times a modifier. This module
 

@@ -167,8 +167,13 @@ def test_cli_refine_and_all_rows_figures(coupled_files, tmp_path, capfd):
         t3 = rec["table_iii"]
         assert set(t3["fit_all_rows"]) == set(robot.moving)
         for joint in robot.moving:
+            # Table III's "all" band on every row is the model's all-rows error
+            assert t3["fit_all_rows"][joint][name]["all"] == pytest.approx(
+                m["rel_error_all_rows"][joint])
             left = rec["rows_left_out"]["fit"][joint]
             assert left["high"] < left["low"]  # the stiction area is at low velocity
+            if name == "usual":  # the selected Table III leaves out the usual fit's rows
+                assert left["all"] == pytest.approx(m["rows_left_out"][joint])
     # the paper model's parameters above the threshold are flagged, the others not
     paper = rec["models"]["paper"]
     for p, v in paper["parameters"].items():

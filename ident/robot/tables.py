@@ -32,6 +32,7 @@ def table_iii(
     *,
     vmax: Sequence[float] | Mapping[str, float] | None = None,
     bands: Mapping[str, tuple[float, float]] = DEFAULT_BANDS,
+    clip: bool = False,
 ) -> dict[str, dict[str, dict[str, float]]]:
     """Table III per joint.
 
@@ -46,6 +47,9 @@ def table_iii(
         Maximum velocity of each joint; default max |dq_j| over the evaluated samples.
     bands : mapping
         Band name -> (low, high) fractions of vmax (default the paper's all/low/high).
+    clip : bool
+        Rows faster than vmax count as at vmax (in "all" and "high"), instead of in no band:
+        the table of every row with the bands of the selected rows' vmax.
 
     Returns
     -------
@@ -71,8 +75,9 @@ def table_iii(
             vm = float(np.asarray(vmax, dtype=float)[j])
         else:
             vm = float(np.abs(dqs[ok, j]).max(initial=0.0))
-        out[joint] = {name: band_errors(taus[ok, j], taus[ok, j] - p[ok, j], dqs[ok, j], vm,
-                                        bands) for name, p in preds.items()}
+        dq = np.clip(dqs[ok, j], -vm, vm) if clip else dqs[ok, j]
+        out[joint] = {name: band_errors(taus[ok, j], taus[ok, j] - p[ok, j], dq, vm, bands)
+                      for name, p in preds.items()}
     return out
 
 
