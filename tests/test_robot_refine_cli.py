@@ -33,6 +33,7 @@ import numpy as np
 import pytest
 
 from daq.app.cli import main
+from ident import DataError
 from ident.cli_robot import fit_robot, kept_rows, refine_robot
 from ident.estimate import DEFAULT_THRESHOLD_PCT
 from ident.loaders import concat, make_experiment
@@ -238,3 +239,22 @@ def test_zero_order_hold_named_against_the_raw_cycle(cycle_s, name):
     lags = [st for st in ref.steps if st.effect == "torque_lag"]
     assert lags, [(x.effect, x.reason) for x in ref.rejected]
     assert lags[0].named_effect == name, lags[0].structure
+
+
+def test_refinement_judged_on_validation_files_too(coupled_files):
+    """With validation files, joint 1's step lowers their error too (rows selected alike),
+    and the record gives it before and after; a joint that is not moving is refused."""
+    robot, files = coupled_files
+    runs = load_robot_runs(files[:2], robot.moving)
+    val = load_robot_runs(files[2:], robot.moving)
+    out = fit_robot(robot, runs, val, models=("usual",), method="ls", feasibility=False)
+    rec = refine_robot(out, max_steps=1, joints=["j1"])
+    j1 = rec["joints"]["j1"]
+    assert j1["added"][0]["named_effect"] == "periodic_q2_direction", j1["added"]
+    v = j1["validation"]
+    assert v is not None and v["after"] < 0.5 * v["before"], v
+    ref = out["_refinements"]["j1"]
+    vkeep = out["_validation_all"].columns.keep[:, 0]
+    assert len(ref.final_validation_design) == int(vkeep.sum())
+    with pytest.raises(DataError, match=r"joints \['j9'\] are not moving joints"):
+        refine_robot(out, joints=["j9"])
