@@ -258,3 +258,18 @@ def test_refinement_judged_on_validation_files_too(coupled_files):
     assert len(ref.final_validation_design) == int(vkeep.sum())
     with pytest.raises(DataError, match=r"joints \['j9'\] are not moving joints"):
         refine_robot(out, joints=["j9"])
+
+
+def test_states_chain_refines_on_its_own_rows(coupled_files):
+    """On the states chain the fit's rows are |dq_j| > dq_min of the decimated states: the
+    refinement uses exactly those, and finds the same named coupling."""
+    robot, files = coupled_files
+    out = fit_robot(robot, load_robot_runs(files, robot.moving), models=("usual",),
+                    method="ls", feasibility=False, chain="states")
+    rec = refine_robot(out, max_steps=1, joints=["j1"])
+    est, sig = out["_estimators"]["usual"], out["_identification"]
+    assert sig.columns is None
+    dq_min = out["preprocessing"]["dq_min"]
+    assert rec["joints"]["j1"]["rows"] == int(est.n_samples_[0]) == int(
+        (np.abs(sig.dq[:, 0]) > dq_min).sum())
+    assert rec["joints"]["j1"]["added"][0]["named_effect"] == "periodic_q2_direction"
