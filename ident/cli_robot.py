@@ -367,10 +367,11 @@ def refine_robot(
     keep = out["_keep"]
     pred = est.predict(sig)
     val_all: RobotSignals | None = out.get("_validation_all")
-    vkeep = None
+    validation = None
     if val_all is not None:
         vkeep = kept_rows(val_all, 0.0 if val_all.columns is not None else
                           float(out["preprocessing"]["dq_min"]))
+        validation = (val_all, est.predict(val_all), vkeep)
     types = dict(zip(out["robot"]["moving"], _revolute(out), strict=True))
     say = progress or (lambda _m: None)
     if joints is not None:
@@ -386,9 +387,6 @@ def refine_robot(
         rows = keep[:, j]
         say(f"joint {joint}: refining on {int(rows.sum())} of {sig.n} rows")
         vmax = float(np.abs(sig.dq[rows, j]).max(initial=0.0)) or None
-        validation = None
-        if val_all is not None and vkeep is not None:
-            validation = (val_all, est.predict(val_all), vkeep)
         try:
             ref = refine_joint(sig, pred, j, revolute=types.get(joint, True), vmax=vmax,
                                max_steps=max_steps, coulomb=joint_coulomb(est, j), keep=keep,
