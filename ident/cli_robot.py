@@ -281,8 +281,9 @@ def fit_robot(
         expressions = getattr(est.base_, "expressions", None)
         if expressions:
             rec["base_expressions"] = list(expressions)
-        if val is not None and val_all is not None:
+        if val is not None:
             rec["validation_rel_error"] = {k: float(v) for k, v in est.rel_error(val).items()}
+        if val is not None and val_all is not None:
             rec["validation_rel_error_all_rows"] = {
                 k: float(v) for k, v in est.rel_error(val_all).items()}
             rec["validation_rows_left_out"] = _left_out(np.isfinite(val.tau).sum(0),
