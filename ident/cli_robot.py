@@ -1,5 +1,9 @@
 """``jointid fit --robot ROBOT DATA... [--model usual|paper|both] [--method ls|wls|iv]
-[--validate DATA...] [--json FILE] [--report DIR]``: identify an n-dof robot.
+[--validate DATA...] [--refine [--max-steps N]] [--json FILE] [--report DIR]``: identify an
+n-dof robot.
+
+(Past 600 lines: the fit, its all-rows figures, the per-joint refinement on the fit's rows and
+the report are one record built in one place; the printing follows the record.)
 
 Every input file is one multi-axis experiment of the robot's moving joints
 (:mod:`ident.robot.loaders`: MCAP logs of ``jointid run``, CSV ``t, q1..qk, tau1..tauk``,
@@ -7,15 +11,18 @@ MATLAB structs with one row per axis); all are preprocessed per axis like a sing
 identified together (:class:`ident.robot.estimate.RobotModel`: base parameters of the rigid
 body and rotor inertias, plus the usual or the paper friction on every joint). Prints the
 base parameters with their standard deviations (eq. 15-16), the per-joint and global relative
-errors on the fit data and on the ``--validate`` files, and writes the JSON record
-(``docs/robot-data.md``). Outputs are written only once everything has been computed, so a bad
-input leaves nothing behind.
+errors on the fit data and on the ``--validate`` files -- on the fit's rows and on all rows,
+with the share each leaves out -- optionally refines every joint on the fit's rows
+(:func:`refine_robot`), and writes the JSON record (``docs/robot-data.md``). Outputs are
+written only once everything has been computed, so a bad input leaves nothing behind.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import sys
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -24,8 +31,10 @@ import numpy as np
 from trajectories.robot import Robot, load_robot
 
 from . import DataError, IdentError
+from .estimate import DEFAULT_THRESHOLD_PCT
 from .fitting import DQ_MIN_FRACTION, SIGN_CHECK_MIN_KEPT
 from .report import write_json
+from .results import DEFAULT_BANDS
 from .robot.consistency import check_consistency
 from .robot.design import design_runs, resolve_design, sign_checked
 from .robot.estimate import RobotModel
@@ -39,11 +48,12 @@ from .robot.loaders import (
 )
 from .robot.payload import format_misfit, payload_misfit
 from .robot.plots import write_robot_report
+from .robot.refine_joint import joint_coulomb, refine_joint
 from .robot.regressor import RobotRegressor
 from .robot.signals import RobotSignals
 from .robot.tables import format_table_iii, table_iii
 
-__all__ = ["run", "fit_robot", "format_report", "FORMAT"]
+__all__ = ["run", "fit_robot", "refine_robot", "format_report", "format_refinement", "FORMAT"]
 
 FORMAT = "jointid-robot-fit/1"
 #: Preprocessing chains (``fit_robot(chain=...)``, ``--chain``).
@@ -53,7 +63,6 @@ PAYLOADS = ("known", "ratio", "mass")
 #: Options of the single-joint ``jointid fit`` that have no meaning with ``--robot``.
 _SINGLE_ONLY = (("joint", "--joint", "the robot file gives the joint types"),
                 ("gain", "--gain", "use drive_gain in the robot file's [joints.drive]"),
-                ("refine", "--refine", "single-joint only"),
                 ("tau_min", "--tau-min", "single-joint only"),
                 ("threshold", "--threshold", "single-joint only"))
 
@@ -208,10 +217,13 @@ def fit_robot(
         if dq_min is None:
             dq_min = DQ_MIN_FRACTION * float(np.max(np.abs(sig.dq)))
         est_dq_min = dq_min
+    val_all = val
     if val is not None:
         # the validation error is taken on the samples the fit would use (as the single-joint
         # validation design): joint j's torque in its stiction area is left out (NaN)
         val = selected(val, dq_min)
+    raw_n = sum(r.t.size for r in runs)
+    trimmed = max(raw_n - _raw_rows(sig, settings), 0)
     out: dict[str, Any] = {
         "format": FORMAT,
         "robot": {"name": robot.name, "source": robot.source, "moving": list(joints),
@@ -219,7 +231,9 @@ def fit_robot(
         "inputs": [r.source for r in runs],
         "validation_inputs": [r.source for r in validation or []],
         "preprocessing": {**settings, "chain": chain, "dq_min": dq_min, "samples": sig.n,
-                          "validation_samples": 0 if val is None else val.n},
+                          "validation_samples": 0 if val is None else val.n,
+                          # file edges where the filters are undefined: out of every figure
+                          "edge_share": trimmed / raw_n if raw_n else 0.0},
         "method": method,
         "known_rotor_inertia": bool(known_rotor_inertia),
         "payload": payload,
@@ -230,6 +244,9 @@ def fit_robot(
         "_consistency": {},
         "_signals": (selected(sig, dq_min), val),
         "_identification": sig,
+        "_validation_all": val_all,
+        "_cycle_s": float(np.median(np.diff(runs[0].t))),
+        "_keep": kept_rows(sig, est_dq_min),
     }
     for name in models:
         try:
@@ -254,9 +271,19 @@ def fit_robot(
             },
             "n_base": int(est.n_base_),
             "rel_error": {k: float(v) for k, v in est.rel_error_.items()},
+            # every decimated row (stiction area, guard, sign check, quadrant band included)
+            "rel_error_all_rows": {k: float(v) for k, v in est.rel_error(sig).items()},
+            "rows_left_out": _left_out(est.n_samples_, sig.n, joints),
             "sigma_joint": {j: float(s) for j, s in zip(joints, est.sigma_joint_, strict=True)},
             "samples": {j: int(n) for j, n in zip(joints, est.n_samples_, strict=True)},
         }
+        if name == "paper":
+            flag_unidentified(rec)
+            if rec["unidentified"]:
+                notes.append(f"paper model: {', '.join(rec['unidentified'])} unidentified "
+                             f"(relative std above {DEFAULT_THRESHOLD_PCT:g} %, eq. 14-16): "
+                             "kept in the fit, their values (and the prediction where they "
+                             "act, e.g. the Stribeck terms below q_s) are not identified")
         expressions = getattr(est.base_, "expressions", None)
         if expressions:
             rec["base_expressions"] = list(expressions)
@@ -267,6 +294,11 @@ def fit_robot(
                 rec["payload_misfit"] = payload_misfit(est, out["_signals"][0])
         if val is not None:
             rec["validation_rel_error"] = {k: float(v) for k, v in est.rel_error(val).items()}
+        if val is not None and val_all is not None:
+            rec["validation_rel_error_all_rows"] = {
+                k: float(v) for k, v in est.rel_error(val_all).items()}
+            rec["validation_rows_left_out"] = _left_out(np.isfinite(val.tau).sum(0),
+                                                        val_all.n, joints)
         cons = check_consistency(est, feasibility=feasibility)
         rec["consistency"] = {
             "ok": cons.ok,
@@ -281,9 +313,219 @@ def fit_robot(
     if not out["_estimators"]:
         raise DataError("; ".join(f"{n} model: {r['error']}" for n, r in out["models"].items()))
     fit_sel = out["_signals"][0]
-    out["table_iii"] = {"fit": table_iii(out["_estimators"], fit_sel)}
-    if val is not None:
-        out["table_iii"]["validation"] = table_iii(out["_estimators"], val)
+    # the selected rows' vmax (table_iii's default) for the all-rows table too: the same
+    # velocity bands
+    vmax = _vmax(fit_sel)
+    out["table_iii"] = {"fit": table_iii(out["_estimators"], fit_sel, vmax=vmax),
+                        "fit_all_rows": table_iii(out["_estimators"], sig, vmax=vmax,
+                                                  clip=True)}
+    out["rows_left_out"] = {"fit": band_left_out(fit_sel, sig, vmax)}
+    if val is not None and val_all is not None:
+        vv = _vmax(val)
+        out["table_iii"]["validation"] = table_iii(out["_estimators"], val, vmax=vv)
+        out["table_iii"]["validation_all_rows"] = table_iii(out["_estimators"], val_all,
+                                                            vmax=vv, clip=True)
+        out["rows_left_out"]["validation"] = band_left_out(val, val_all, vv)
+    return out
+
+
+def refine_robot(
+    out: dict[str, Any],
+    *,
+    max_steps: int = 2,
+    model: str | None = None,
+    joints: Sequence[str] | None = None,
+    progress: Callable[[str], None] | None = None,
+    **kwargs: Any,
+) -> dict[str, Any]:
+    """Refine every moving joint of a :func:`fit_robot` result on the fit's own samples.
+
+    Joint j's design is the identification data as the fit has them (every decimated row,
+    the torque as Y, the fitted n-dof prediction as the declared column ``k_ndof``,
+    :class:`~ident.robot.refine_joint.NdofPrediction`), selected by the rows the fit used
+    (:func:`kept_rows`), the other joints' q and dq offered as variables, a zero-order hold
+    named against the raw log's period (:func:`ident.robot.refine_joint.refine_joint`).
+    With validation files, a step must lower their error too (their rows selected alike).
+
+    Parameters
+    ----------
+    out : dict
+        :func:`fit_robot`'s result (with its private ``_`` entries).
+    max_steps : int
+        Refinement steps per joint at most.
+    model : {"usual", "paper"} or None
+        The fitted n-dof model whose prediction is refined; None: the usual model when it was
+        fitted, else the paper model.
+    joints : sequence of str, optional
+        The moving joints to refine (default every one).
+    progress : callable, optional
+        Receives one line per step.
+    **kwargs
+        Passed to :func:`refine_joint` (``alpha``, ``min_gain``, ...).
+
+    Returns
+    -------
+    dict
+        The ``refinement`` record of docs/robot-data.md; the Refinement objects under
+        ``"_refinements"`` (not serialised). Also stored in ``out["refinement"]``.
+    """
+    ests = out["_estimators"]
+    if model is None:
+        model = "usual" if "usual" in ests else next(iter(ests))
+    if model not in ests:
+        raise DataError(f"refine: model {model!r} was not fitted ({', '.join(ests) or 'none'})")
+    est = ests[model]
+    sig: RobotSignals = out["_identification"]
+    keep = out["_keep"]
+    pred = est.predict(sig)
+    val_all: RobotSignals | None = out.get("_validation_all")
+    validation = None
+    if val_all is not None:
+        vkeep = kept_rows(val_all, 0.0 if val_all.columns is not None else
+                          float(out["preprocessing"]["dq_min"]))
+        validation = (val_all, est.predict(val_all), vkeep)
+    types = dict(zip(out["robot"]["moving"], _revolute(out), strict=True))
+    say = progress or (lambda _m: None)
+    if joints is not None:
+        unknown = sorted(set(joints) - set(sig.joints))
+        if unknown:
+            raise DataError(f"refine: joints {unknown} are not moving joints "
+                            f"({', '.join(sig.joints)})")
+    done: dict[str, Any] = {}
+    refs = {}
+    for j, joint in enumerate(sig.joints):
+        if joints is not None and joint not in joints:
+            continue
+        rows = keep[:, j]
+        say(f"joint {joint}: refining on {int(rows.sum())} of {sig.n} rows")
+        vmax = float(np.abs(sig.dq[rows, j]).max(initial=0.0)) or None
+        try:
+            ref = refine_joint(sig, pred, j, revolute=types.get(joint, True), vmax=vmax,
+                               max_steps=max_steps, coulomb=joint_coulomb(est, j), keep=keep,
+                               cycle_s=out["_cycle_s"], validation=validation,
+                               progress=lambda m, joint=joint: say(f"joint {joint}: {m}"),
+                               **kwargs)
+        except IdentError as exc:  # e.g. too few rows kept for this joint
+            done[joint] = {"error": str(exc)}
+            continue
+        refs[joint] = ref
+        js = ref.to_json()
+        done[joint] = {
+            "rows": int(rows.sum()),
+            "rows_left_out": float(1.0 - rows.mean()) if sig.n else 0.0,
+            "ndof_rel_error": out["models"][model]["rel_error"].get(joint),
+            "fit": {"before": js["rel_error_initial"], "after": js["rel_error_final"]},
+            "heldout": {"kind": js["heldout_kind"], "before": js["heldout_rel_error_initial"],
+                        "after": js["heldout_rel_error_final"]},
+            "noise_floor": {"before": js["noise_floor_initial"], "after": js["noise_floor"]},
+            "validation": None if js["validation_rel_error_initial"] is None else {
+                "before": js["validation_rel_error_initial"],
+                "after": js["validation_rel_error_final"]},
+            "added": [{"named_effect": st["named_effect"], "structure": st["structure"],
+                       "variables": st["variables"], "generic": st["generic"]}
+                      for st in js["steps"]],
+            "stop_reason": js["stop_reason"],
+            "refinement": js,
+        }
+    rec = {"model": model, "max_steps": int(max_steps), "cycle_s": out["_cycle_s"],
+           "rows": "the fit's rows (decimated samples, stiction area, guard and sign check "
+                   "left out as in the fit)", "joints": done}
+    out["refinement"] = rec
+    out["_refinements"] = refs
+    return rec
+
+
+def _revolute(out: dict[str, Any]) -> list[bool]:
+    """Per moving joint, whether it is revolute (the fitted regressor's robot)."""
+    est = next(iter(out["_estimators"].values()))
+    robot = getattr(getattr(est, "regressor_", None), "robot", None)
+    if robot is None:
+        return [True] * len(out["robot"]["moving"])
+    kind = dict(zip(robot.joint_names, robot.types, strict=True))
+    return [kind.get(n, "revolute") == "revolute" for n in out["robot"]["moving"]]
+
+
+def format_refinement(rec: dict[str, Any]) -> str:
+    """The per-joint refinement table ``jointid fit --robot --refine`` prints."""
+    lines = [f"refinement of the {rec['model']} model, joint by joint, on the fit's rows "
+             f"(raw cycle {1e3 * rec['cycle_s']:.3g} ms; errors ||rho_j||/||tau_j|| [%])"]
+    w = max(8, *(len(j) + 2 for j in rec["joints"]))
+    lines.append(f"{'joint':<{w}}{'fit':>16}{'held-out':>18}{'noise floor':>18}  added")
+    for joint, r in rec["joints"].items():
+        if "error" in r:
+            lines.append(f"{joint:<{w}}not refined: {r['error']}")
+            continue
+
+        def ba(d: dict[str, Any]) -> str:
+            return f"{_pct(d['before']).strip()} -> {_pct(d['after']).strip()}"
+
+        added = ", ".join(a["named_effect"] or a["structure"] for a in r["added"]) or "none"
+        lines.append(f"{joint:<{w}}{ba(r['fit']):>16}{ba(r['heldout']):>18}"
+                     f"{ba(r['noise_floor']):>18}  {added}")
+        if r["validation"] is not None:
+            lines.append(f"{'':<{w}}validation {ba(r['validation'])}")
+    return "\n".join(lines)
+
+
+def _vmax(sel: RobotSignals) -> np.ndarray:
+    """Per joint, max |dq| over the rows with a finite torque [rad/s]."""
+    return np.array([float(np.abs(sel.dq[np.isfinite(sel.tau[:, j]), j]).max(initial=0.0))
+                     for j in range(sel.k)])
+
+
+def _raw_rows(sig: RobotSignals, settings: dict[str, Any]) -> int:
+    """Full-rate samples the decimated rows of ``sig`` stand for (trimmed edges excluded)."""
+    r = int(settings.get("decimation") or 1)
+    return int(sig.n * r)
+
+
+def _left_out(used: Any, n: int, joints: tuple[str, ...]) -> dict[str, float]:
+    """Share of the n rows each joint's figure leaves out."""
+    used = np.asarray(used, dtype=float)
+    out = {j: float(1.0 - used[i] / n) if n else 0.0 for i, j in enumerate(joints)}
+    out["all"] = float(1.0 - used.sum() / (n * len(joints))) if n else 0.0
+    return out
+
+
+def kept_rows(sig: RobotSignals, dq_min: float) -> np.ndarray:
+    """The rows (n, k) the fit uses: the columns' keep mask (stiction area, guard, sign
+    check), else |dq_j| > dq_min (the states chain)."""
+    if sig.columns is not None:
+        return np.asarray(sig.columns.keep, dtype=bool)
+    return np.abs(sig.dq) > dq_min
+
+
+def flag_unidentified(rec: dict[str, Any],
+                      threshold_pct: float = DEFAULT_THRESHOLD_PCT) -> list[str]:
+    """Mark the parameters of a model record whose relative std exceeds the pruning
+    threshold (eq. 14-16, :data:`ident.estimate.DEFAULT_THRESHOLD_PCT`) or is undefined
+    (value 0) as ``"unidentified": true``; their names in ``rec["unidentified"]``."""
+    bad = []
+    for p, v in rec["parameters"].items():
+        rs = v["rel_std_pct"]
+        v["unidentified"] = bool(rs is None or not math.isfinite(rs) or rs > threshold_pct)
+        if v["unidentified"]:
+            bad.append(p)
+    rec["unidentified"] = bad
+    rec["unidentified_threshold_pct"] = float(threshold_pct)
+    return bad
+
+
+def band_left_out(sel: RobotSignals, every: RobotSignals,
+                  vmax: np.ndarray) -> dict[str, dict[str, float]]:
+    """Per joint and Table III band, the share of ``every``'s rows that ``sel`` (torque NaN
+    where left out) leaves out."""
+    out: dict[str, dict[str, float]] = {}
+    for j, joint in enumerate(every.joints):
+        # rows faster than the selected rows' vmax count as at vmax (table_iii(clip=True))
+        a = (np.minimum(np.abs(every.dq[:, j]) / vmax[j], 1.0) if vmax[j] > 0
+             else np.zeros(every.n))
+        ok = np.isfinite(sel.tau[:, j])
+        row = {}
+        for band, (lo, hi) in DEFAULT_BANDS.items():
+            m = (a >= lo) & (a <= hi)
+            row[band] = float(1.0 - ok[m].sum() / m.sum()) if m.any() else math.nan
+        out[joint] = row
     return out
 
 
@@ -325,7 +567,12 @@ def format_report(out: dict[str, Any]) -> str:
         for p, v in rec["parameters"].items():
             rs = v["rel_std_pct"]
             rs_s = "inf" if rs is None or not math.isfinite(rs) else f"{rs:.1f}"
-            lines.append(f"{p:<14}{v['value']:>14.6g}{v['std']:>12.3g}{rs_s:>9}")
+            flag = "  unidentified" if v.get("unidentified") else ""
+            lines.append(f"{p:<14}{v['value']:>14.6g}{v['std']:>12.3g}{rs_s:>9}{flag}")
+        if rec.get("unidentified"):
+            lines.append(f"unidentified: relative std above {rec['unidentified_threshold_pct']:g}"
+                         " % (eq. 14-16): values and the prediction where they act are not "
+                         "identified")
         if rec.get("base_expressions"):
             lines.append("base parameters (standard parameters regrouped, ROBOT_FORMAT names):")
             lines.extend(f"  {e}" for e in rec["base_expressions"])
@@ -338,27 +585,44 @@ def format_report(out: dict[str, Any]) -> str:
             lines.append("payload check, residual RMS on the payload vs no-payload runs:")
             lines.extend(f"  {ln}" for ln in format_misfit(rec["payload_misfit"]).splitlines())
     lines.append("")
-    lines.append("relative error ||rho_j|| / ||tau_j|| [%]")
+    lines.append("relative error ||rho_j|| / ||tau_j|| [%]: on the fit's rows (out: share of "
+                 "the rows left out) and on all rows (stiction area, guard, sign check "
+                 f"included; file edges, {100 * pre.get('edge_share', 0.0):.1f} % of the "
+                 "samples, out of both)")
     w = max(8, *(len(j) + 2 for j in r["moving"]))
+    cv = bool(out["validation_inputs"])
     head = f"{'joint':<{w}}"
     for name in fitted:
-        head += f"{name + ' fit':>14}"
-        if out["validation_inputs"]:
-            head += f"{name + ' CV':>14}"
+        head += f"{name + ' fit':>12}{'out':>7}{name + ' all':>12}"
+        if cv:
+            head += f"{name + ' CV':>12}{'out':>7}{name + ' CV all':>14}"
     lines.append(head)
     for j in [*r["moving"], "all"]:
         row = f"{j:<{w}}"
         for rec in fitted.values():
-            row += f"{_pct(rec['rel_error'].get(j)):>14}"
-            if out["validation_inputs"]:
-                row += f"{_pct(rec['validation_rel_error'].get(j)):>14}"
+            row += (f"{_pct(rec['rel_error'].get(j)):>12}"
+                    f"{_pct(rec.get('rows_left_out', {}).get(j)):>7}"
+                    f"{_pct(rec.get('rel_error_all_rows', {}).get(j)):>12}")
+            if cv:
+                row += (f"{_pct(rec['validation_rel_error'].get(j)):>12}"
+                        f"{_pct(rec.get('validation_rows_left_out', {}).get(j)):>7}"
+                        f"{_pct(rec.get('validation_rel_error_all_rows', {}).get(j)):>14}")
         lines.append(row)
-    for part, table in out.get("table_iii", {}).items():
+    tables = out.get("table_iii", {})
+    left = out.get("rows_left_out", {})
+    for part in ("fit", "validation"):
+        if part not in tables:
+            continue
         lines.append("")
         what = "identification data" if part == "fit" else "validation files"
         lines.append(f"Table III per joint, ||rho|| / ||tau|| on the {what} "
-                     "(low: |dq| <= 10 % of the joint's max, high: 35-100 %)")
-        lines.append(format_table_iii(table))
+                     "(low: |dq| <= 10 % of the joint's max, high: 35-100 %): the fit's rows, "
+                     "all rows, and the share of the band's rows the first leaves out")
+        lines.append(format_table_iii(tables[part], all_rows=tables.get(part + "_all_rows"),
+                                      left_out=left.get(part)))
+    if out.get("refinement"):
+        lines.append("")
+        lines.append(format_refinement(out["refinement"]))
     for name, text in out.get("_consistency", {}).items():
         lines.append("")
         lines.append(f"{name} model: " + text)
@@ -386,6 +650,9 @@ def run(args: argparse.Namespace) -> int:
                     known_rotor_inertia=args.known_rotor_inertia,
                     chain=args.chain or "columns", payload=args.payload,
                     feasibility=not getattr(args, "no_consistency", False))
+    if getattr(args, "refine", False):
+        refine_robot(out, max_steps=args.max_steps,
+                     progress=lambda m: print(m, file=sys.stderr))
     text = format_report(out)
     public = _public(out)
     # everything computed: only now write files (a bad input leaves nothing behind)

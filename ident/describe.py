@@ -1,5 +1,8 @@
 """Name or describe what a library search selected.
 
+(Past 600 lines: the named forms, their cross-joint terms and the words fallback share the
+fitting helpers and the matching rule; split, each would import the others.)
+
 A selected group (:mod:`ident.library_search`) is a piecewise-linear function of one or two
 variables times a modifier. This module
 
@@ -12,6 +15,8 @@ variables times a modifier. This module
   ``position_periodic_dry_friction``  position x direction  [sin, cos](2π q/P) sign(q̇)
   (eccentric or worn transmission)
   ``periodic_<variable>[_<mod>]``     x [x modifier]        [sin, cos](2π x/P) [m]
+  ``linear_q<m>[_<mod>]``             another joint's q/dq  (x - x̄) [m]
+  ``polynomial_q<m>[_<mod>]``         (``q<m>``, ``dq<m>``) (x - x̄)^k, k = 1..2 (or 3) [m]
   ``reversal_hysteresis``             reversal x direction  exp(-s/L) sign(q̇), s the distance
   (Dahl-like pre-sliding)                                   since the last reversal
   ``load_dependent_viscous``          velocity x load_quad. |τ̂_out| q̇
@@ -39,7 +44,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import optimize
 
-from .effects import Effect, Prediction, amplitude_phase
+from . import DataError
+from .effects import Effect, Prediction, amplitude_phase, variable_values
 from .interaction_effects import (
     LoadVelocityDryFriction,
     LoadViscous,
@@ -47,6 +53,7 @@ from .interaction_effects import (
     ReversalHysteresis,
 )
 from .library_search import FoldGram, Group
+from .signals import Signals
 
 #: A named form must remove this share of what the library group removes.
 MATCH_SHARE = 0.9
@@ -62,6 +69,119 @@ def _unit(var: str) -> str:
     if var in _UNITS:
         return _UNITS[var]
     return next((u for pat, u in _OTHER_UNITS if pat.fullmatch(var)), "")
+
+
+def _is_other(var: str) -> bool:
+    """``q<m>`` or ``dq<m>``: another joint's state (:mod:`ident.robot.refine_joint`)."""
+    return var not in _UNITS and any(p.fullmatch(var) for p, _ in _OTHER_UNITS)
+
+
+#: Modifiers a cross-joint term can carry (read from the states: no load prediction).
+_TERM_MODIFIERS = ("none", "direction")
+
+
+class _CrossJoint(Effect):
+    """A named form in another joint's state ``var`` (``Signals.extra[var]``) times the
+    modifier (``"none"`` or ``"direction"``: sign(q̇) of the joint)."""
+
+    def __init__(self, var: str, modifier: str, tag: str = "") -> None:
+        super().__init__(tag)
+        if modifier not in _TERM_MODIFIERS:
+            raise ValueError(f"{type(self).__name__}: modifier {modifier!r} not in "
+                             f"{_TERM_MODIFIERS}")
+        self.var, self.modifier = var, modifier
+        self.variable = var
+
+    def _x_m(self, s: Signals) -> tuple[np.ndarray, np.ndarray]:
+        if s.extra is None or self.var not in s.extra:
+            raise DataError(f"{self.effect}: the signals have no extra[{self.var!r}] (the "
+                            f"other joint's {'position' if self.var[0] == 'q' else 'velocity'})")
+        x = np.asarray(s.extra[self.var], dtype=float)
+        m = (np.ones_like(x) if self.modifier == "none"
+             else variable_values(self.modifier, s))
+        return x, m
+
+    def _suffix(self) -> str:
+        return "" if self.modifier == "none" else f"_{self.modifier}"
+
+
+class CrossJointPeriodic(_CrossJoint):
+    """``periodic_<var>[_direction]``: A sin(2π x/P + φ) [sign(q̇)], x another joint's state
+    (a cable or a bearing load following that joint; ``sim_drivers.arm_effects`` "dry
+    coupling")."""
+
+    hyper_names = ("period",)
+
+    def __init__(self, var: str, modifier: str, period: float, tag: str = "") -> None:
+        super().__init__(var, modifier, tag)
+        if not period > 0:
+            raise ValueError(f"CrossJointPeriodic: period must be > 0, got {period}")
+        self.period = float(period)
+        self.effect = f"periodic_{var}{self._suffix()}"
+
+    def with_hyper(self, **values: float) -> CrossJointPeriodic:
+        return CrossJointPeriodic(self.var, self.modifier, values.get("period", self.period),
+                                  self.tag)
+
+    def names(self) -> tuple[str, ...]:
+        return (self._n(f"{self.var}_sin"), self._n(f"{self.var}_cos"))
+
+    def columns(self, s: Signals) -> np.ndarray:
+        x, m = self._x_m(s)
+        th = (2 * np.pi / self.period) * x
+        return np.column_stack((np.sin(th) * m, np.cos(th) * m))
+
+    def parameters(self, coef, cov):
+        amp, amp2, phase, phase2 = amplitude_phase(coef, cov)
+        sdp = math.sqrt(max(float(cov[2, 2]), 0.0)) if len(coef) > 2 else 0.0
+        return {self._n(f"{self.var}_amplitude"): (amp, amp2),
+                self._n(f"{self.var}_phase"): (phase, phase2),
+                self._n(f"{self.var}_period"): (self.period, 2 * sdp)}
+
+    def describe(self) -> str:
+        m = "" if self.modifier == "none" else " sign(dq)"
+        return f"A sin(2π {self.var}/{self.period:.6g} + φ){m} ({self.var}: another joint)"
+
+
+class CrossJointPolynomial(_CrossJoint):
+    """``linear_<var>[_direction]`` (degree 1) or ``polynomial_<var>[_direction]`` (2, 3):
+    sum_k c_k ((x - x̄)^k - mean) [sign(q̇)], x another joint's state, x̄ and the means fixed
+    on the identification samples."""
+
+    def __init__(self, var: str, modifier: str, degree: int, centre: float,
+                 offsets: tuple[float, ...], tag: str = "") -> None:
+        super().__init__(var, modifier, tag)
+        if degree not in (1, 2, 3) or len(offsets) != degree:
+            raise ValueError(f"CrossJointPolynomial: degree {degree} with {len(offsets)} "
+                             "offsets")
+        self.degree, self.centre, self.offsets = int(degree), float(centre), tuple(offsets)
+        kind = "linear" if degree == 1 else "polynomial"
+        self.effect = f"{kind}_{var}{self._suffix()}"
+
+    def names(self) -> tuple[str, ...]:
+        return tuple(self._n(f"{self.var}_c{k}") for k in range(1, self.degree + 1))
+
+    def columns(self, s: Signals) -> np.ndarray:
+        x, m = self._x_m(s)
+        xc = x - self.centre
+        return np.column_stack([(xc**k - o) * m
+                                for k, o in zip(range(1, self.degree + 1), self.offsets,
+                                                strict=True)])
+
+    def describe(self) -> str:
+        m = "" if self.modifier == "none" else " sign(dq)"
+        return (f"polynomial of degree {self.degree} in {self.var} - {self.centre:.4g}{m} "
+                f"({self.var}: another joint)")
+
+
+def _poly_columns(x: np.ndarray, m: np.ndarray, degree: int) -> tuple[np.ndarray, float,
+                                                                        tuple[float, ...]]:
+    centre = float(np.mean(x))
+    xc = x - centre
+    offsets = tuple(float(np.mean(xc**k)) for k in range(1, degree + 1))
+    C = np.column_stack([(xc**k - o) * m
+                         for k, o in zip(range(1, degree + 1), offsets, strict=True)])
+    return C, centre, offsets
 
 
 _WHAT = {
@@ -317,7 +437,9 @@ def describe_group(
                 pars["relative_amplitude"] = _p(amp / abs(F_C), amp2 / abs(F_C))
             sent = (f"{what} varies periodically with {var}: period {P:.4g} ± {2 * sd[2]:.2g} "
                     f"{unit}, amplitude {amp:.3g} ± {amp2:.2g} N m{rel(amp)}")
-            term = PositionDryFriction(P) if name == "position_periodic_dry_friction" else None
+            term = PositionDryFriction(P) if name == "position_periodic_dry_friction" else (
+                CrossJointPeriodic(var, mod, P)
+                if _is_other(var) and mod in _TERM_MODIFIERS else None)
             tried.append((name, share(rss, make_sin(P)), {"p": pars, "s": sent, "t": term}))
     if group.variables == ("reversal",) and mod == "direction" and sgn is not None:
         s_rev = values["reversal"]
@@ -373,22 +495,24 @@ def describe_group(
     if len(group.variables) == 1 and var not in _UNITS:
         # another joint's state (q<m>, dq<m>): a linear dependence, one column, is preferred
         # to the periodic form (which a long period can bend into a line) when it matches
-        x = values[var]
-        m = np.ones_like(x) if mod == "none" else (
-            values["load"] * values["quadrant"] if mod == "load_quadrant" else values[mod])
-        C = ((x - float(np.mean(x))) * m)[:, None]
-        rss, _h, c, cov = _fit_form(y, W, Q, lambda _h, C=C: C, None, None)
-        sd = _sd(cov)
-        name = f"linear_{var}" + ("" if mod == "none" else f"_{mod}")
-        pars = {"slope": _p(c[0], 2 * sd[0])}
-        if mod == "direction" and F_C:
-            pars["relative_slope"] = _p(c[0] / abs(F_C), 2 * sd[0] / abs(F_C))
-        half = 0.5 * abs(c[0]) * float(np.ptp(x))
-        sent = (f"{what} varies linearly with {var}: slope {c[0]:.3g} ± {2 * sd[0]:.2g} "
-                f"N m/{unit or 'unit'}, ±{half:.3g} N m over [{float(np.min(x)):.3g}, "
-                f"{float(np.max(x)):.3g}] {unit}{rel(half)}")
-        linear = (name, share(rss, C), {"p": pars, "s": sent, "t": None})
+        linear = _linear(var, values, mod, y, W, Q, share, what, rel, F_C)
         tried.append(linear)
+        if linear[1] < MATCH_SHARE:
+            tried.append(_polynomial(var, values, mod, y, W, Q, share, what, rel))
+    elif len(group.variables) == 2 and mod in _TERM_MODIFIERS:
+        # a pair in another joint's state: its one-variable named forms (the search's pair
+        # holds each variable's own basis; a sinusoid of the other joint's position that does
+        # as well on held-out data is what the pair found)
+        for v in group.variables:
+            if not _is_other(v):
+                continue
+            tried.append(_periodic(v, values, mod, y, W, Q, share, what, rel, F_C))
+            lin = _linear(v, values, mod, y, W, Q, share, what, rel, F_C)
+            tried.append(lin)
+            if lin[1] >= MATCH_SHARE and (linear is None or lin[1] > linear[1]):
+                linear = lin
+            if lin[1] < MATCH_SHARE:
+                tried.append(_polynomial(v, values, mod, y, W, Q, share, what, rel))
     if linear is not None and linear[1] >= MATCH_SHARE:
         name, share, info = linear
         return Description(name, info["s"], info["p"], share, grids, f, group.key, info["t"])
@@ -431,6 +555,100 @@ def describe_group(
     if math.isfinite(best_share):
         sent += f" (no named form fits: best explains {100 * best_share:.0f} % of it)"
     return Description(None, sent, {}, best_share, grids, f, group.key)
+
+
+def _modifier(values: Mapping[str, np.ndarray], mod: str, x: np.ndarray) -> np.ndarray:
+    if mod == "none":
+        return np.ones_like(x)
+    if mod == "load_quadrant":
+        return values["load"] * values["quadrant"]
+    return values[mod]
+
+
+def _term_or_none(var: str, mod: str, make: Callable[[], Effect]) -> Effect | None:
+    return make() if _is_other(var) and mod in _TERM_MODIFIERS else None
+
+
+def _periodic(var: str, values: Mapping[str, np.ndarray], mod: str, y: np.ndarray,
+              W: np.ndarray, Q: np.ndarray, share: Callable[[float, np.ndarray], float],
+              what: str, rel: Callable[[float], str], F_C: float | None,
+              ) -> tuple[str, float, dict]:
+    """``periodic_<var>[_<mod>]``: [sin, cos](2π x/P) times the modifier, P scanned."""
+    x = values[var]
+    m = _modifier(values, mod, x)
+    span = float(np.ptp(x))
+    name = f"periodic_{var}" + ("" if mod == "none" else f"_{mod}")
+    if span <= 0:
+        return (name, -math.inf, {})
+
+    def make_sin(P, x=x, m=m):
+        th = 2 * np.pi * x / P
+        return np.column_stack((np.sin(th) * m, np.cos(th) * m))
+
+    rss, P, c, cov = _fit_form(y, W, Q, make_sin, span / 40, 2 * span)
+    amp, amp2, ph, ph2 = amplitude_phase(c, cov)
+    sd = _sd(cov)
+    pars = {"amplitude": _p(amp, amp2), "period": _p(P, 2 * sd[2]), "phase": _p(ph, ph2)}
+    if mod == "direction" and F_C:
+        pars["relative_amplitude"] = _p(amp / abs(F_C), amp2 / abs(F_C))
+    unit = _unit(var)
+    sent = (f"{what} varies periodically with {var}: period {P:.4g} ± {2 * sd[2]:.2g} "
+            f"{unit}, amplitude {amp:.3g} ± {amp2:.2g} N m{rel(amp)}")
+    term = _term_or_none(var, mod, lambda: CrossJointPeriodic(var, mod, P))
+    return (name, share(rss, make_sin(P)), {"p": pars, "s": sent, "t": term})
+
+
+def _linear(var: str, values: Mapping[str, np.ndarray], mod: str, y: np.ndarray,
+            W: np.ndarray, Q: np.ndarray, share: Callable[[float, np.ndarray], float],
+            what: str, rel: Callable[[float], str], F_C: float | None,
+            ) -> tuple[str, float, dict]:
+    """``linear_<var>[_<mod>]``: (x - x̄) times the modifier."""
+    x = values[var]
+    m = _modifier(values, mod, x)
+    C, centre, offsets = _poly_columns(x, m, 1)
+    rss, _h, c, cov = _fit_form(y, W, Q, lambda _h, C=C: C, None, None)
+    sd = _sd(cov)
+    name = f"linear_{var}" + ("" if mod == "none" else f"_{mod}")
+    pars = {"slope": _p(c[0], 2 * sd[0])}
+    if mod == "direction" and F_C:
+        pars["relative_slope"] = _p(c[0] / abs(F_C), 2 * sd[0] / abs(F_C))
+    half = 0.5 * abs(c[0]) * float(np.ptp(x))
+    unit = _unit(var)
+    sent = (f"{what} varies linearly with {var}: slope {c[0]:.3g} ± {2 * sd[0]:.2g} "
+            f"N m/{unit or 'unit'}, ±{half:.3g} N m over [{float(np.min(x)):.3g}, "
+            f"{float(np.max(x)):.3g}] {unit}{rel(half)}")
+    term = _term_or_none(var, mod, lambda: CrossJointPolynomial(var, mod, 1, centre, offsets))
+    return (name, share(rss, C), {"p": pars, "s": sent, "t": term})
+
+
+def _polynomial(var: str, values: Mapping[str, np.ndarray], mod: str, y: np.ndarray,
+                W: np.ndarray, Q: np.ndarray, share: Callable[[float, np.ndarray], float],
+                what: str, rel: Callable[[float], str]) -> tuple[str, float, dict]:
+    """``polynomial_<var>[_<mod>]``: another joint's state in a polynomial of degree 2, or 3
+    when the quadratic does not match (:data:`MATCH_SHARE`), centred on its mean, times the
+    modifier (a cable or bearing load that bends over the other joint's range)."""
+    x = values[var]
+    m = _modifier(values, mod, x)
+    unit = _unit(var)
+    best: tuple[str, float, dict] = ("", -math.inf, {})
+    for deg in (2, 3):
+        C, centre, offsets = _poly_columns(x, m, deg)
+        rss, _h, c, cov = _fit_form(y, W, Q, lambda _h, C=C: C, None, None)
+        sd = _sd(cov)
+        half = 0.5 * float(np.ptp(_poly_columns(x, np.ones_like(x), deg)[0] @ c))
+        pars = {f"c{k}": _p(c[k - 1], 2 * sd[k - 1]) for k in range(1, deg + 1)}
+        pars["centre"] = _p(centre, 0.0)
+        pars["degree"] = _p(deg, 0.0)
+        sent = (f"{what} varies with {var} as a polynomial of degree {deg} about "
+                f"{centre:.3g} {unit}: ±{half:.3g} N m over "
+                f"[{float(np.min(x)):.3g}, {float(np.max(x)):.3g}] {unit}{rel(half)}")
+        term = _term_or_none(var, mod, lambda deg=deg, centre=centre, offsets=offsets:
+                             CrossJointPolynomial(var, mod, deg, centre, offsets))
+        best = (f"polynomial_{var}" + ("" if mod == "none" else f"_{mod}"), share(rss, C),
+                {"p": pars, "s": sent, "t": term})
+        if best[1] >= MATCH_SHARE:
+            break
+    return best
 
 
 def name_torque_lag(T_lag: float, std2: float, cycle_s: float | None) -> tuple[str, str]:

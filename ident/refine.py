@@ -219,8 +219,9 @@ def _cycle(design: Design) -> float | None:
     return float(np.median(np.diff(t))) if t.shape[0] > 1 else None
 
 
-def _setting(design: Design) -> Setting:
-    """Sampling period, longest run and excitation time scale of the design's data."""
+def _setting(design: Design, cycle_s: float | None = None) -> Setting:
+    """Sampling period (``cycle_s`` when given, else :func:`_cycle`), longest run and
+    excitation time scale of the design's data."""
     s = design.signals
     run_s = 0.0
     gaps = []
@@ -234,7 +235,7 @@ def _setting(design: Design) -> Setting:
         if flips.size >= 2:
             gaps.append(np.diff(flips))
     exc = float(np.median(np.concatenate(gaps))) if gaps else 0.0
-    return Setting(_cycle(design), run_s, exc)
+    return Setting(cycle_s or _cycle(design), run_s, exc)
 
 
 def _naming(
@@ -243,11 +244,12 @@ def _naming(
     lstep: LibraryStep | None,
     parameters: dict[str, dict[str, float]],
     design: Design,
+    cycle_s: float | None = None,
 ) -> tuple[str | None, str, str | None]:
     """Named effect, one-line structure and the physical-range verdict (None: in range) of
     an accepted candidate. A named effect whose parameters leave the range where its physics
     holds is reported as the generic structure of its variables, with the reason."""
-    out_of_range = e.physical_range(parameters, _setting(design))
+    out_of_range = e.physical_range(parameters, _setting(design, cycle_s))
     if out_of_range is not None:
         kind = "time-derivative of the model" if isinstance(e, TorqueLag) else e.variable
         return (None, f"a term in {kind} ({e.describe()}), not named {e.effect}: "
@@ -260,7 +262,7 @@ def _naming(
         key = next((k for k in parameters if k.startswith("T_lag")), None)
         if key is not None:
             return (*name_torque_lag(parameters[key]["value"], parameters[key]["std2"],
-                                     _cycle(design)), None)
+                                     cycle_s or _cycle(design)), None)
     return (None if c.generic else e.effect), e.describe(), None
 
 
@@ -284,6 +286,7 @@ def refine(
     library: bool = True,
     others: Sequence[str] | None = None,
     reference: Mapping[str, float] | None = None,
+    cycle_s: float | None = None,
 ) -> Refinement:
     """Refine a declared model by adding the effects its residual points to.
 
@@ -325,6 +328,10 @@ def refine(
         Coefficients that scale the descriptions of the library search (``F_C``: "±x % of
         F_C") in place of the current fit's, when those are not the physical ones (a joint
         of an n-dof fit, whose F_C is in the n-dof model: :mod:`ident.robot.refine_joint`).
+    cycle_s : float, optional
+        Sampling period of the raw log [s], for the zero-order hold's half cycle and the
+        physical ranges, when the design's first run is not the raw log (a design built on
+        decimated samples, :mod:`ident.robot.refine_joint`); default: that run's period.
 
     Returns
     -------
@@ -558,7 +565,8 @@ def refine(
             dep = None
         after_bands = _bands(m1, d1, vmax)
         parameters = _effect_parameters(e, m1, d1, m1.coef_)
-        named_effect, structure, out_of_range = _naming(e, c, lstep, parameters, cur_design)
+        named_effect, structure, out_of_range = _naming(e, c, lstep, parameters, cur_design,
+                                                         cycle_s)
         step = Step(
             variable=e.variable,
             strength=1.0 - float(m1.residual_ @ m1.residual_) / rss0 if rss0 > 0 else 0.0,

@@ -20,6 +20,15 @@ interaction diagnosis and the library search expand them, and a selected group i
 becomes a term of joint j (a cross-joint effect: a cable or a bearing load following another
 joint, ``sim_drivers.arm_effects`` "dry coupling").
 
+The fit's own rows (``keep``): given the rows joint j's n-dof fit used (the columns chain's
+:attr:`RobotColumns.keep <ident.robot.signals.RobotColumns.keep>`, stiction area, guard and
+sign check applied), the design is the fit's samples as they are -- the decimated torque as Y,
+the filtered and decimated states, no second filter, trim or decimation -- and its selection
+is those rows (:func:`fit_rows_design`). Without ``keep`` the samples are filtered and
+differentiated again by :func:`ident.preprocess.build_design` with decimation 1 (the states
+chain). A zero-order hold is named against the raw log's period ``cycle_s`` (the design's own
+period is the decimated one).
+
 Pure numerics (no file access).
 """
 
@@ -31,17 +40,18 @@ from typing import Any
 import numpy as np
 
 from .. import DataError
+from ..describe import CrossJointPeriodic, CrossJointPolynomial
 from ..loaders import concat, make_experiment
 from ..models import Coulomb, IdentModel, Offset, Viscous
-from ..preprocess import build_design
+from ..preprocess import Design, _assemble, _Block, build_design
 from ..refine import refine
 from ..refine_result import Refinement
 from ..signals import Signals
 from ..terms import Library, Term
 from .signals import RobotSignals
 
-__all__ = ["NDOF_PREDICTION", "NdofPrediction", "joint_coulomb", "other_joint_names",
-           "refine_joint"]
+__all__ = ["NDOF_PREDICTION", "NdofPrediction", "fit_rows_design", "joint_coulomb",
+           "other_joint_names", "refine_joint"]
 
 #: Key of the n-dof prediction in ``Signals.extra`` (not searched as an "other" variable).
 NDOF_PREDICTION = "tau_hat"
@@ -85,6 +95,9 @@ def refine_joint(
     others: bool = True,
     torque: str = "measured",
     coulomb: float | None = None,
+    keep: np.ndarray | None = None,
+    cycle_s: float | None = None,
+    validation: tuple[RobotSignals, np.ndarray, np.ndarray | None] | None = None,
     **kwargs,
 ) -> Refinement:
     """:func:`ident.refine.refine` on joint j of an n-dof fit (module docstring).
@@ -117,6 +130,17 @@ def refine_joint(
     coulomb : float, optional
         Joint j's Coulomb friction of the n-dof fit [N m] (:func:`joint_coulomb`): the scale
         of "±x % of F_C" in the descriptions (the design's own F_C is a correction ~0).
+    keep : ndarray of bool, shape (n, k), optional
+        The rows the n-dof fit used (``RobotColumns.keep``, or |dq| > dq_min): the design is
+        then the fit's samples as they are, selected by ``keep[:, j]``
+        (:func:`fit_rows_design`; ``dq_min`` unused). None: the samples are filtered and
+        differentiated again (module docstring).
+    cycle_s : float, optional
+        The raw log's sampling period [s], for the zero-order hold and the physical ranges
+        (:func:`ident.refine.refine`); default the design's own (decimated) period.
+    validation : (RobotSignals, ndarray, ndarray or None), optional
+        Validation samples, the n-dof prediction on them and their kept rows (as ``sig``,
+        ``prediction``, ``keep``): a step must lower their error too.
     **kwargs
         Passed to :func:`ident.refine.refine` (``alpha``, ``min_gain``, ``progress``, ...).
 
@@ -131,6 +155,53 @@ def refine_joint(
     DataError
         Bad shapes or joint index, non-finite samples, too few samples.
     """
+    y_lib = _joint_signals(sig, prediction, j, revolute=revolute, others=others,
+                           torque=torque)
+    s, names, lib = y_lib
+    if keep is not None:
+        design = fit_rows_design(lib, s, _joint_keep(keep, sig, j, "keep"))
+    else:
+        design = build_design(lib, s, decimation=1, dq_min=dq_min)
+    val = None
+    if validation is not None:
+        vsig, vpred, vkeep = validation
+        vs, _, _ = _joint_signals(vsig, vpred, j, revolute=revolute, others=others,
+                                  torque=torque)
+        if vkeep is not None:
+            val = fit_rows_design(lib, vs, _joint_keep(vkeep, vsig, j, "validation keep"))
+        else:
+            val = build_design(lib, vs, decimation=1, dq_min=dq_min)
+    ref = refine(design, IdentModel(lib, "ndof" if torque == "measured" else "residual"),
+                 max_steps=max_steps, vmax=vmax, others=names, validation=val,
+                 reference=None if coulomb is None else {"F_C": float(coulomb)},
+                 cycle_s=cycle_s, **kwargs)
+    for st in ref.steps:
+        if isinstance(st.term, CrossJointPeriodic | CrossJointPolynomial):
+            # a pair the search selected, named by a one-variable form: the term's variables
+            st.variables = (st.term.var,) + (() if st.term.modifier == "none"
+                                             else (st.term.modifier,))
+    return ref
+
+
+def _joint_keep(keep: np.ndarray, sig: RobotSignals, j: int, what: str) -> np.ndarray:
+    keep = np.asarray(keep, dtype=bool)
+    if keep.shape != sig.tau.shape:
+        raise DataError(f"refine_joint: {what} has shape {keep.shape}, expected "
+                        f"{sig.tau.shape} (samples, joints of {sig.source or 'the signals'})")
+    return keep[:, j]
+
+
+def _joint_signals(
+    sig: RobotSignals,
+    prediction: np.ndarray,
+    j: int,
+    *,
+    revolute: bool,
+    others: bool,
+    torque: str,
+) -> tuple[Signals, list[str], Library]:
+    """Joint j's single-joint signals (experiments in order, the prediction and the other
+    joints' states in ``extra``), the names of the other joints' variables, the library."""
     prediction = np.asarray(prediction, dtype=float)
     if prediction.shape != sig.tau.shape:
         raise DataError(f"refine_joint: prediction has shape {prediction.shape}, expected "
@@ -163,14 +234,46 @@ def refine_joint(
             extra[qn] = sig.q[order, m]
             extra[dqn] = sig.dq[order, m]
             names += [qn, dqn]
-    s = replace(concat(exps), extra=extra)
+    # the states as the fit has them (concat leaves dq, ddq at zero: build_design recomputes
+    # them; fit_rows_design reads them)
+    s = replace(concat(exps), dq=sig.dq[order, j], ddq=sig.ddq[order, j], extra=extra)
     lib = Library(Coulomb(), Viscous(), Offset())
     if torque == "measured":
         lib = Library(NdofPrediction(), *lib.terms())
-    design = build_design(lib, s, decimation=1, dq_min=dq_min)
-    return refine(design, IdentModel(lib, "ndof" if torque == "measured" else "residual"),
-                  max_steps=max_steps, vmax=vmax, others=names,
-                  reference=None if coulomb is None else {"F_C": float(coulomb)}, **kwargs)
+    return s, names, lib
+
+
+def fit_rows_design(lib: Library, s: Signals, keep: np.ndarray) -> Design:
+    """The design of the samples ``s`` as they are (already filtered, differentiated and
+    decimated: a fit's rows), selected by ``keep`` (n,).
+
+    Every column, those added by the refinement too (:meth:`Design.with_term`), is evaluated
+    on these samples with no further filtering or decimation (decimation 1, no trim, no
+    guard): the states and torque are the n-dof fit's, so are the rows.
+
+    Raises
+    ------
+    DataError
+        ``keep`` of the wrong length, or too few rows kept for the library.
+    """
+    keep = np.asarray(keep, dtype=bool)
+    if keep.shape != s.q.shape:
+        raise DataError(f"fit_rows_design: keep has {keep.size} entries, expected {s.q.size}")
+    b = len(lib.names())
+    blocks = []
+    for e in np.unique(s.experiment):
+        idx = np.flatnonzero(s.experiment == e)
+        sub = s.take(idx)
+        stack = np.empty((4 + b, idx.size))
+        stack[0], stack[1], stack[2], stack[3] = sub.tau, sub.q, sub.dq, sub.ddq
+        for term, sl in lib.slices():
+            stack[4 + sl.start:4 + sl.stop] = term.columns(sub).T
+        blocks.append(_Block(sub=sub, full=sub, index=np.arange(idx.size), dec=stack,
+                             mask=keep[idx]))
+    Y, W, dsig, _ = _assemble(blocks, b, s.revolute)
+    return Design(Y=Y, W=W, names=tuple(lib.names()), library=lib, signals=dsig,
+                  cutoff_hz=float("nan"), decimation=1, trim=0, dq_min=None, tau_min=None,
+                  guard=0, torque_delay=0.0, _blocks=blocks)
 
 
 def joint_coulomb(model: Any, j: int) -> float | None:

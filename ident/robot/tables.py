@@ -1,6 +1,11 @@
 """The paper's Table III per joint: relative error norms ||rho|| / ||tau|| of the usual and the
 paper model over all samples, low velocities (0-10 % of the joint's maximum velocity) and high
 velocities (35-100 %), as :func:`ident.results.band_errors` does for one joint.
+
+:func:`format_table_iii` can set each figure on the fit's rows beside the same figure on all
+rows (``jointid fit --robot``: stiction area, guard and sign check included) and the share of
+the band's rows the first leaves out: a figure that leaves out the rows a model predicts worst
+(the stiction area) is not the model's error on the data.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ def table_iii(
     *,
     vmax: Sequence[float] | Mapping[str, float] | None = None,
     bands: Mapping[str, tuple[float, float]] = DEFAULT_BANDS,
+    clip: bool = False,
 ) -> dict[str, dict[str, dict[str, float]]]:
     """Table III per joint.
 
@@ -41,6 +47,9 @@ def table_iii(
         Maximum velocity of each joint; default max |dq_j| over the evaluated samples.
     bands : mapping
         Band name -> (low, high) fractions of vmax (default the paper's all/low/high).
+    clip : bool
+        Rows faster than vmax count as at vmax (in "all" and "high"), instead of in no band:
+        the table of every row with the bands of the selected rows' vmax.
 
     Returns
     -------
@@ -66,23 +75,52 @@ def table_iii(
             vm = float(np.asarray(vmax, dtype=float)[j])
         else:
             vm = float(np.abs(dqs[ok, j]).max(initial=0.0))
-        out[joint] = {name: band_errors(taus[ok, j], taus[ok, j] - p[ok, j], dqs[ok, j], vm,
-                                        bands) for name, p in preds.items()}
+        dq = np.clip(dqs[ok, j], -vm, vm) if clip else dqs[ok, j]
+        out[joint] = {name: band_errors(taus[ok, j], taus[ok, j] - p[ok, j], dq, vm, bands)
+                      for name, p in preds.items()}
     return out
 
 
 def format_table_iii(table: Mapping[str, Mapping[str, Mapping[str, float]]],
-                     digits: int = 4) -> str:
-    """Plain-text Table III per joint: one row per (joint, band), one column per model."""
+                     digits: int = 4, *,
+                     all_rows: Mapping[str, Mapping[str, Mapping[str, float]]] | None = None,
+                     left_out: Mapping[str, Mapping[str, float]] | None = None) -> str:
+    """Plain-text Table III per joint: one row per (joint, band), one column per model.
+
+    Parameters
+    ----------
+    table : mapping
+        :func:`table_iii` on the rows a figure uses.
+    digits : int
+        Decimals of the relative errors.
+    all_rows : mapping, optional
+        :func:`table_iii` of the same models on every row: a column ``<model> all`` beside
+        each model's.
+    left_out : mapping, optional
+        ``left_out[joint][band]``: share of the band's rows ``table`` leaves out (column
+        ``out %``).
+    """
     joints = list(table)
     if not joints:
         return ""
     models = list(table[joints[0]])
     bands = list(table[joints[0]][models[0]])
-    rows = [("joint", "samples", *models)]
+    head = ["joint", "samples"]
+    for m in models:
+        head += [m] + ([f"{m} all"] if all_rows is not None else [])
+    if left_out is not None:
+        head.append("out %")
+    rows = [tuple(head)]
     for j in joints:
         for b in bands:
-            rows.append((j, b, *(f"{table[j][m][b]:.{digits}f}" for m in models)))
+            row = [j, b]
+            for m in models:
+                row.append(f"{table[j][m][b]:.{digits}f}")
+                if all_rows is not None:
+                    row.append(f"{all_rows[j][m][b]:.{digits}f}")
+            if left_out is not None:
+                row.append(f"{100 * left_out[j][b]:.1f}")
+            rows.append(tuple(row))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
     lines.insert(1, "  ".join("-" * w for w in widths))
