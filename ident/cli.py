@@ -99,6 +99,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "(the slow part of the consistency report; the sign checks are kept)",
     )
     p.add_argument(
+        "--consistent",
+        action="store_true",
+        help="--robot only: also compute the physically consistent estimate of every model "
+        "(LMI fit, docs/model-export.md) and store it in the JSON for `jointid export-model`",
+    )
+    p.add_argument(
         "--payload",
         choices=("known", "ratio", "mass"),
         help="--robot only: the logged payload's torque is known, or scaled by an identified "
@@ -217,6 +223,7 @@ _ROBOT_ONLY = (
     ("chain", "--chain", ""),
     ("payload", "--payload", ""),
     ("no_consistency", "--no-consistency", ""),
+    ("consistent", "--consistent", ""),
 )
 
 

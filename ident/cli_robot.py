@@ -36,6 +36,7 @@ from .fitting import DQ_MIN_FRACTION, SIGN_CHECK_MIN_KEPT
 from .report import write_json
 from .results import DEFAULT_BANDS
 from .robot.consistency import check_consistency
+from .robot.consistent_fit import add_consistent
 from .robot.design import design_runs, resolve_design, sign_checked
 from .robot.estimate import RobotModel
 from .robot.loaders import (
@@ -650,6 +651,8 @@ def run(args: argparse.Namespace) -> int:
                     known_rotor_inertia=args.known_rotor_inertia,
                     chain=args.chain or "columns", payload=args.payload,
                     feasibility=not getattr(args, "no_consistency", False))
+    if getattr(args, "consistent", False):
+        add_consistent(out)
     if getattr(args, "refine", False):
         refine_robot(out, max_steps=args.max_steps,
                      progress=lambda m: print(m, file=sys.stderr))

@@ -245,6 +245,15 @@ def test_export_model_cli(tmp_path, capfd):
     capfd.readouterr()
     for f in ("arm3.urdf", "friction.json"):
         assert (tmp_path / "again" / f).read_text() == (tmp_path / "paper" / f).read_text()
+    # `jointid fit --robot --consistent` stores the block itself: exported with no refit
+    j4 = tmp_path / "fit4.json"
+    assert main(["fit", "--robot", str(ARM3), *map(str, files), "--model", "usual",
+                 "--json", str(j4), "--no-consistency", "--consistent"]) == 0
+    rec4 = json.loads(j4.read_text())
+    assert rec4["models"]["usual"]["consistent"]["valid"]
+    j4.write_text(json.dumps(dict(rec4, inputs=[str(tmp_path / "gone.csv")])))
+    assert main(["export-model", str(j4), "-o", str(tmp_path / "from_fit")]) == 0
+    capfd.readouterr()
     # bad inputs
     bad = tmp_path / "bad.json"
     bad.write_text('{"format": "something/1"}')
