@@ -401,18 +401,28 @@ class FoldGram:
         m = tot.shape[0] - 1
         d = np.sqrt(np.maximum(np.diag(tot)[:m], 1e-300))
         sse = np.empty(self.k)
+        # every fold's training system at once (one batched solve; the same LAPACK solve
+        # per fold as one call each)
+        A = (tot[None, :m, :m] - G[:, :m, :m]) / np.outer(d, d)
+        b = (tot[None, :m, m] - G[:, :m, m]) / d
+        A[:, np.arange(m), np.arange(m)] += self.ridge
+        try:
+            betas = np.linalg.solve(A, b[:, :, None])[:, :, 0] / d
+        except np.linalg.LinAlgError:  # pragma: no cover - one fold at a time, least squares
+            betas = np.stack([self._solve(A[f], b[f]) for f in range(self.k)]) / d
         for f in range(self.k):
-            A = (tot[:m, :m] - G[f, :m, :m]) / np.outer(d, d)
-            b = (tot[:m, m] - G[f, :m, m]) / d
-            A[np.diag_indices(m)] += self.ridge
-            try:
-                beta = np.linalg.solve(A, b) / d
-            except np.linalg.LinAlgError:  # pragma: no cover
-                beta = np.linalg.lstsq(A, b, rcond=None)[0] / d
+            beta = betas[f]
             Gf = G[f]
             sse[f] = Gf[m, m] - 2 * beta @ Gf[:m, m] + beta @ Gf[:m, :m] @ beta
         sse = np.maximum(sse, 0.0)
         return math.sqrt(float(sse.sum()) / max(self.yy, 1e-300)), sse
+
+    @staticmethod
+    def _solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:  # pragma: no cover - singular
+        try:
+            return np.linalg.solve(A, b)
+        except np.linalg.LinAlgError:
+            return np.linalg.lstsq(A, b, rcond=None)[0]
 
 
 # ----------------------------------------------------------------------------- search
