@@ -109,6 +109,109 @@ def with_qs(design: Design, library: Library, qs: float) -> tuple[Library, Desig
     return Library(*terms), sub
 
 
+def _e_columns(term: Term) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """Column indices of a q_s-dependent term that do not / do depend on q_s: the columns of
+    :class:`~ident.models.LoadDependent` and :class:`~ident.models.QuadrantCoulomb` come in
+    pairs (x, x E), E = exp(-|dq|/q_s) (eq. 29-30), so the odd ones carry E."""
+    n = len(term.names())
+    return tuple(range(0, n, 2)), tuple(range(1, n, 2))
+
+
+class _Some(Term):
+    """Columns ``index`` of ``term`` (its names and columns, in that order), the term's
+    columns computed once per signals object (``Design.with_term`` asks twice for the
+    regressor's columns when the design has instruments)."""
+
+    def __init__(self, term: Term, index: Sequence[int]) -> None:
+        self.term = term
+        self.index = list(index)
+        self._memo: dict[int, tuple[Signals, np.ndarray]] = {}
+
+    def names(self) -> tuple[str, ...]:
+        names = self.term.names()
+        return tuple(names[i] for i in self.index)
+
+    def columns(self, s: Signals) -> np.ndarray:
+        hit = self._memo.get(id(s))
+        if hit is None or hit[0] is not s:
+            hit = self._memo[id(s)] = (s, self.term.columns(s))
+        return hit[1][:, self.index]
+
+
+class _QsDesigns:
+    """:func:`with_qs` for many q_s on one design, the same arrays bit for bit, faster: the
+    design without the q_s-dependent terms and their columns that do not carry
+    E = exp(-|dq|/q_s) are built once; each q_s filters and decimates only the columns with E
+    (half of them), then the columns are put in :func:`with_qs`'s order. Filtering and
+    decimation act on each column alone (``scipy.signal.sosfiltfilt`` row by row), so a
+    column comes out the same whatever columns are built with it
+    (``tests/test_qs_rescan.py`` checks the equality)."""
+
+    def __init__(self, design: Design, library: Library) -> None:
+        quad = [t for t in library.terms() if isinstance(t, LoadDependent | QuadrantCoulomb)]
+        if not quad:
+            raise DataError("model has no q_s-dependent term (load-dependent or quadrant "
+                            "friction)")
+        self.library = library
+        self.quad = quad
+        base = design.without([n for t in quad for n in t.names() if n in design.names])
+        self.base_terms = base.library.terms()
+        self.n_base = len(base.names)
+        fixed = base
+        for t in quad:
+            fixed = fixed.with_term(_Some(t, _e_columns(t)[0]))
+        self.fixed = fixed
+
+    def __call__(self, qs: float) -> tuple[Library, Design]:
+        terms: list[Term] = []
+        new: list[Term] = []
+        for t in self.library.terms():
+            if isinstance(t, LoadDependent):
+                t = LoadDependent(t.inner, qs, t.load)
+                new.append(t)
+            elif isinstance(t, QuadrantCoulomb):
+                t = QuadrantCoulomb(qs, t.load)
+                new.append(t)
+            terms.append(t)
+        d = self.fixed
+        for t in new:
+            d = d.with_term(_Some(t, _e_columns(t)[1]))
+        # columns now: base, the E-free columns of each term, then their E columns; with_qs
+        # has base, then each term's columns in its own order
+        nb = self.n_base
+        starts_fixed, starts_e, at_f = [], [], nb
+        for t in new:
+            starts_fixed.append(at_f)
+            at_f += len(_e_columns(t)[0])
+        at_e = at_f
+        for t in new:
+            starts_e.append(at_e)
+            at_e += len(_e_columns(t)[1])
+        perm = list(range(nb))
+        for t, f0, e0 in zip(new, starts_fixed, starts_e, strict=True):
+            even, odd = _e_columns(t)
+            col = [0] * (len(even) + len(odd))
+            for k, i in enumerate(even):
+                col[i] = f0 + k
+            for k, i in enumerate(odd):
+                col[i] = e0 + k
+            perm += col
+        rows = [0, 1, 2, 3] + [4 + i for i in perm]
+        # the blocks' decimated rows (4 signal rows, then one per column) follow the columns,
+        # as Design.without keeps them
+        blocks = [replace(b, dec=b.dec[rows], zdec=None if b.zdec is None else b.zdec[perm])
+                  for b in d._blocks]
+        out = replace(
+            d,
+            W=np.ascontiguousarray(d.W[:, perm]),  # C order, as with_term's concatenation
+            Z=None if d.Z is None else np.ascontiguousarray(d.Z[:, perm]),
+            names=tuple(d.names[i] for i in perm),
+            library=Library(*self.base_terms, *new),
+            _blocks=blocks,
+        )
+        return Library(*terms), out
+
+
 @dataclass
 class QsScan:
     """Result of :func:`rescan_qs`.
@@ -188,9 +291,10 @@ def rescan_qs(
     lib = model.library
     found: dict[float, tuple[IdentModel, Design]] = {}
     scan: list[tuple[float, float]] = []
+    designs = _QsDesigns(design, lib)  # = with_qs(design, lib, q), faster
 
     def err(q: float) -> float:
-        lq, dq_ = with_qs(design, lib, q)
+        lq, dq_ = designs(q)
         m = IdentModel(lq, model.name).fit(dq_, eliminate=False)
         found[q] = (m, dq_)
         scan.append((q, m.rel_error_))
