@@ -34,7 +34,9 @@ from .models import (
     Payload,
     QuadrantCoulomb,
     RigidBody,
+    exp_velocity,
     new_model,
+    power_split,
     usual_model,
 )
 from .preprocess import Design, build_design, default_torque_delay
@@ -138,6 +140,39 @@ class _Some(Term):
         return hit[1][:, self.index]
 
 
+class _EColumns(Term):
+    """The E columns of a q_s term (:func:`_e_columns`), by the expressions of
+    :class:`~ident.models.LoadDependent` and :class:`~ident.models.QuadrantCoulomb` (so the
+    same floats; ``tests/test_qs_rescan.py`` checks it), with what does not depend on q_s
+    (P+, P-, the inner columns or sign(dq)) kept in ``memo`` per signals object, for every
+    q_s of a scan."""
+
+    def __init__(self, term: LoadDependent | QuadrantCoulomb, memo: dict) -> None:
+        self.term = term
+        self.memo = memo
+
+    def names(self) -> tuple[str, ...]:
+        names = self.term.names()
+        return tuple(names[i] for i in _e_columns(self.term)[1])
+
+    def columns(self, s: Signals) -> np.ndarray:
+        t = self.term
+        hit = self.memo.get(id(s))
+        if hit is None or hit[0] is not s:
+            pp, pm = power_split(s, t.load)
+            x = t.inner.columns(s) if isinstance(t, LoadDependent) else np.sign(s.dq)
+            hit = self.memo[id(s)] = (s, pp, pm, x)
+        _, pp, pm, x = hit
+        e = exp_velocity(s, t.qs)
+        if isinstance(t, QuadrantCoulomb):
+            return np.column_stack([pp * e * x, pm * e * x])
+        n, k = x.shape
+        out = np.empty((n, 2 * k))
+        out[:, :k] = (pp * e)[:, None] * x
+        out[:, k:] = -(pm * e)[:, None] * x
+        return out
+
+
 class _QsDesigns:
     """:func:`with_qs` for many q_s on one design, the same arrays bit for bit, faster: the
     design without the q_s-dependent terms and their columns that do not carry
@@ -161,6 +196,7 @@ class _QsDesigns:
         for t in quad:
             fixed = fixed.with_term(_Some(t, _e_columns(t)[0]))
         self.fixed = fixed
+        self.memo: list[dict] = [{} for _ in quad]
 
     def __call__(self, qs: float) -> tuple[Library, Design]:
         terms: list[Term] = []
@@ -174,8 +210,8 @@ class _QsDesigns:
                 new.append(t)
             terms.append(t)
         d = self.fixed
-        for t in new:
-            d = d.with_term(_Some(t, _e_columns(t)[1]))
+        for t, memo in zip(new, self.memo, strict=True):
+            d = d.with_term(_EColumns(t, memo))
         # columns now: base, the E-free columns of each term, then their E columns; with_qs
         # has base, then each term's columns in its own order
         nb = self.n_base
