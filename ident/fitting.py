@@ -12,9 +12,11 @@ optionally scans q_s, evaluates Table III bands, Table IV and cross-validation f
 returns a :class:`FitReport` (``.to_json()``, ``.format_tables()``).
 Pure numerics: loading belongs to :mod:`ident.loaders`.
 
-Length (~680 lines): one pipeline whose steps share their settled preprocessing (sign
+Length (~830 lines): one pipeline whose steps share their settled preprocessing (sign
 check, q_s scan, Table IV without payload, validation systems) and the report built from
-it; splitting it would pass that state around between files.
+it; splitting it would pass that state around between files. The q_s rescan's fast designs
+(:class:`_QsDesigns`, ~150 lines) rebuild part of a design and stay next to
+:func:`with_qs`, whose result they must equal.
 """
 
 from __future__ import annotations
