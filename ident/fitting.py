@@ -12,9 +12,11 @@ optionally scans q_s, evaluates Table III bands, Table IV and cross-validation f
 returns a :class:`FitReport` (``.to_json()``, ``.format_tables()``).
 Pure numerics: loading belongs to :mod:`ident.loaders`.
 
-Length (~680 lines): one pipeline whose steps share their settled preprocessing (sign
+Length (~830 lines): one pipeline whose steps share their settled preprocessing (sign
 check, q_s scan, Table IV without payload, validation systems) and the report built from
-it; splitting it would pass that state around between files.
+it; splitting it would pass that state around between files. The q_s rescan's fast designs
+(:class:`_QsDesigns`, ~150 lines) rebuild part of a design and stay next to
+:func:`with_qs`, whose result they must equal.
 """
 
 from __future__ import annotations
@@ -34,7 +36,9 @@ from .models import (
     Payload,
     QuadrantCoulomb,
     RigidBody,
+    exp_velocity,
     new_model,
+    power_split,
     usual_model,
 )
 from .preprocess import Design, build_design, default_torque_delay
@@ -107,6 +111,143 @@ def with_qs(design: Design, library: Library, qs: float) -> tuple[Library, Desig
             sub = sub.with_term(t)
         terms.append(t)
     return Library(*terms), sub
+
+
+def _e_columns(term: Term) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """Column indices of a q_s-dependent term that do not / do depend on q_s: the columns of
+    :class:`~ident.models.LoadDependent` and :class:`~ident.models.QuadrantCoulomb` come in
+    pairs (x, x E), E = exp(-|dq|/q_s) (eq. 29-30), so the odd ones carry E."""
+    n = len(term.names())
+    return tuple(range(0, n, 2)), tuple(range(1, n, 2))
+
+
+class _Some(Term):
+    """Columns ``index`` of ``term`` (its names and columns, in that order), the term's
+    columns computed once per signals object (``Design.with_term`` asks twice for the
+    regressor's columns when the design has instruments)."""
+
+    def __init__(self, term: Term, index: Sequence[int]) -> None:
+        self.term = term
+        self.index = list(index)
+        self._memo: dict[int, tuple[Signals, np.ndarray]] = {}
+
+    def names(self) -> tuple[str, ...]:
+        names = self.term.names()
+        return tuple(names[i] for i in self.index)
+
+    def columns(self, s: Signals) -> np.ndarray:
+        hit = self._memo.get(id(s))
+        if hit is None or hit[0] is not s:
+            hit = self._memo[id(s)] = (s, self.term.columns(s))
+        return hit[1][:, self.index]
+
+
+class _EColumns(Term):
+    """The E columns of a q_s term (:func:`_e_columns`), by the expressions of
+    :class:`~ident.models.LoadDependent` and :class:`~ident.models.QuadrantCoulomb` (so the
+    same floats; ``tests/test_qs_rescan.py`` checks it), with what does not depend on q_s
+    (P+, P-, the inner columns or sign(dq)) kept in ``memo`` per signals object, for every
+    q_s of a scan."""
+
+    def __init__(self, term: LoadDependent | QuadrantCoulomb, memo: dict) -> None:
+        self.term = term
+        self.memo = memo
+
+    def names(self) -> tuple[str, ...]:
+        names = self.term.names()
+        return tuple(names[i] for i in _e_columns(self.term)[1])
+
+    def columns(self, s: Signals) -> np.ndarray:
+        t = self.term
+        hit = self.memo.get(id(s))
+        if hit is None or hit[0] is not s:
+            pp, pm = power_split(s, t.load)
+            x = t.inner.columns(s) if isinstance(t, LoadDependent) else np.sign(s.dq)
+            hit = self.memo[id(s)] = (s, pp, pm, x)
+        _, pp, pm, x = hit
+        e = exp_velocity(s, t.qs)
+        if isinstance(t, QuadrantCoulomb):
+            return np.column_stack([pp * e * x, pm * e * x])
+        n, k = x.shape
+        out = np.empty((n, 2 * k))
+        out[:, :k] = (pp * e)[:, None] * x
+        out[:, k:] = -(pm * e)[:, None] * x
+        return out
+
+
+class _QsDesigns:
+    """:func:`with_qs` for many q_s on one design, the same arrays bit for bit, faster: the
+    design without the q_s-dependent terms and their columns that do not carry
+    E = exp(-|dq|/q_s) are built once; each q_s filters and decimates only the columns with E
+    (half of them), then the columns are put in :func:`with_qs`'s order. Filtering and
+    decimation act on each column alone (``scipy.signal.sosfiltfilt`` row by row), so a
+    column comes out the same whatever columns are built with it
+    (``tests/test_qs_rescan.py`` checks the equality)."""
+
+    def __init__(self, design: Design, library: Library) -> None:
+        quad = [t for t in library.terms() if isinstance(t, LoadDependent | QuadrantCoulomb)]
+        if not quad:
+            raise DataError("model has no q_s-dependent term (load-dependent or quadrant "
+                            "friction)")
+        self.library = library
+        self.quad = quad
+        base = design.without([n for t in quad for n in t.names() if n in design.names])
+        self.base_terms = base.library.terms()
+        self.n_base = len(base.names)
+        fixed = base
+        for t in quad:
+            fixed = fixed.with_term(_Some(t, _e_columns(t)[0]))
+        self.fixed = fixed
+        self.memo: list[dict] = [{} for _ in quad]
+
+    def __call__(self, qs: float) -> tuple[Library, Design]:
+        terms: list[Term] = []
+        new: list[Term] = []
+        for t in self.library.terms():
+            if isinstance(t, LoadDependent):
+                t = LoadDependent(t.inner, qs, t.load)
+                new.append(t)
+            elif isinstance(t, QuadrantCoulomb):
+                t = QuadrantCoulomb(qs, t.load)
+                new.append(t)
+            terms.append(t)
+        d = self.fixed
+        for t, memo in zip(new, self.memo, strict=True):
+            d = d.with_term(_EColumns(t, memo))
+        # columns now: base, the E-free columns of each term, then their E columns; with_qs
+        # has base, then each term's columns in its own order
+        nb = self.n_base
+        starts_fixed, starts_e, at_f = [], [], nb
+        for t in new:
+            starts_fixed.append(at_f)
+            at_f += len(_e_columns(t)[0])
+        at_e = at_f
+        for t in new:
+            starts_e.append(at_e)
+            at_e += len(_e_columns(t)[1])
+        perm = list(range(nb))
+        for t, f0, e0 in zip(new, starts_fixed, starts_e, strict=True):
+            even, odd = _e_columns(t)
+            col = [0] * (len(even) + len(odd))
+            for k, i in enumerate(even):
+                col[i] = f0 + k
+            for k, i in enumerate(odd):
+                col[i] = e0 + k
+            perm += col
+        rows = [0, 1, 2, 3] + [4 + i for i in perm]
+        # the blocks' decimated rows (4 signal rows, then one per column) follow the columns,
+        # as Design.without keeps them
+        blocks = [replace(b, dec=b.dec[rows], zdec=None if b.zdec is None else b.zdec[perm])
+                  for b in d._blocks]
+        out = replace(
+            d,
+            W=np.ascontiguousarray(d.W[:, perm]),  # C order, as with_term's concatenation
+            Z=None if d.Z is None else np.ascontiguousarray(d.Z[:, perm]),
+            names=tuple(d.names[i] for i in perm),
+            library=Library(*self.base_terms, *new),
+            _blocks=blocks,
+        )
+        return Library(*terms), out
 
 
 @dataclass
@@ -188,9 +329,10 @@ def rescan_qs(
     lib = model.library
     found: dict[float, tuple[IdentModel, Design]] = {}
     scan: list[tuple[float, float]] = []
+    designs = _QsDesigns(design, lib)  # = with_qs(design, lib, q), faster
 
     def err(q: float) -> float:
-        lq, dq_ = with_qs(design, lib, q)
+        lq, dq_ = designs(q)
         m = IdentModel(lq, model.name).fit(dq_, eliminate=False)
         found[q] = (m, dq_)
         scan.append((q, m.rel_error_))

@@ -155,22 +155,40 @@ class Group:
     def knots(self) -> tuple[int, ...]:
         return tuple(b.knots for b in self.bases)
 
-    def raw(self, values: Mapping[str, np.ndarray]) -> np.ndarray:
-        """All columns of the basis times the modifier, shape (n, prod(knots))."""
-        B = self.bases[0](values[self.variables[0]])
+    def raw(self, values: Mapping[str, np.ndarray], cache: dict | None = None) -> np.ndarray:
+        """All columns of the basis times the modifier, shape (n, prod(knots)).
+
+        ``cache``: a dict that keeps the hat columns of each (variable, basis) between calls
+        on the same ``values`` (the groups of a library share their bases across modifiers).
+        """
+        B = _hats(self.bases[0], self.variables[0], values, cache)
         if len(self.bases) == 2:
-            B2 = self.bases[1](values[self.variables[1]])
+            B2 = _hats(self.bases[1], self.variables[1], values, cache)
             B = (B[:, :, None] * B2[:, None, :]).reshape(B.shape[0], -1)
         m = modifier_values(self.modifier, values)
         return B if m is None else B * m[:, None]
 
-    def columns(self, values: Mapping[str, np.ndarray]) -> np.ndarray:
-        C = self.raw(values)
+    def columns(self, values: Mapping[str, np.ndarray], cache: dict | None = None
+                ) -> np.ndarray:
+        """The kept columns (:meth:`raw`, ``cache`` as there)."""
+        C = self.raw(values, cache)
         return C if self.keep is None else C[:, list(self.keep)]
 
     @property
     def size(self) -> int:
         return len(self.keep) if self.keep is not None else int(np.prod(self.knots))
+
+
+def _hats(basis: Basis, variable: str, values: Mapping[str, np.ndarray],
+          cache: dict | None) -> np.ndarray:
+    """``basis(values[variable])``, kept in ``cache`` (None: not kept) by (variable, basis)."""
+    if cache is None:
+        return basis(values[variable])
+    key = (variable, basis)
+    B = cache.get(key)
+    if B is None:
+        B = cache[key] = basis(values[variable])
+    return B
 
 
 def modifier_values(modifier: str, values: Mapping[str, np.ndarray]) -> np.ndarray | None:
@@ -197,7 +215,8 @@ def signal_values(
     return out
 
 
-def prune(group: Group, values: Mapping[str, np.ndarray], Q: np.ndarray | None) -> Group | None:
+def prune(group: Group, values: Mapping[str, np.ndarray], Q: np.ndarray | None,
+          cache: dict | None = None) -> Group | None:
     """Drop raw columns of ``group`` until [Q | group] has full rank.
 
     Empty columns go first; then, while the columns projected off span(Q) have a (nearly)
@@ -208,8 +227,14 @@ def prune(group: Group, values: Mapping[str, np.ndarray], Q: np.ndarray | None) 
     ----------
     Q : ndarray, shape (n, p) or None
         Orthonormal basis of the current regressor on the same samples.
+    cache : dict, optional
+        Hat columns shared between calls on the same ``values`` (:meth:`Group.raw`).
+
+    The rank test is the SVD's; the Gram matrix of the columns only skips the SVD when its
+    smallest eigenvalue shows a full rank with a wide margin (:data:`GRAM_MARGIN`), so that
+    the columns dropped are the same.
     """
-    C = group.raw(values)
+    C = group.raw(values, cache)
     norms = np.linalg.norm(C, axis=0)
     keep = [j for j in range(C.shape[1]) if norms[j] > 1e-9 * max(float(norms.max()), 1e-300)]
     if not keep:
@@ -217,16 +242,35 @@ def prune(group: Group, values: Mapping[str, np.ndarray], Q: np.ndarray | None) 
     Cn = C[:, keep] / norms[keep]
     if Q is not None and Q.size:
         Cn = Cn - Q @ (Q.T @ Cn)
+    G = Cn.T @ Cn
     while keep:
+        if _surely_full_rank(G):
+            break
         _, sv, Vt = np.linalg.svd(Cn, full_matrices=False)
         if sv[-1] > PRUNE_TOL * max(float(sv[0]), 1e-300):
             break
         j = int(np.argmax(np.abs(Vt[-1])))
         del keep[j]
         Cn = np.delete(Cn, j, axis=1)
+        G = np.delete(np.delete(G, j, axis=0), j, axis=1)
     if not keep:
         return None
     return Group(group.variables, group.modifier, group.bases, tuple(keep))
+
+
+#: :func:`prune` skips the SVD when the Gram matrix's smallest eigenvalue exceeds
+#: GRAM_MARGIN x PRUNE_TOL² x its largest: the smallest singular value is then 10x above the
+#: rank threshold (the eigenvalues' rounding, ~1e-16 of the largest, is far below either).
+GRAM_MARGIN = 100.0
+
+
+def _surely_full_rank(G: np.ndarray) -> bool:
+    """True when the columns of Gram matrix ``G`` certainly pass the rank test of
+    :func:`prune` (False: let the SVD decide)."""
+    if G.shape[0] == 0:
+        return False
+    w = np.linalg.eigvalsh(G)
+    return bool(w[0] > GRAM_MARGIN * PRUNE_TOL**2 * max(float(w[-1]), 1e-300))
 
 
 def build_library(
@@ -262,6 +306,14 @@ def build_library(
                                      else set())
     continuous = [v for v in continuous if v in values]
     modifiers = [m for m in modifiers if m in have]
+    cache: dict = {}
+    bases: dict[tuple[str, int], Basis | None] = {}
+
+    def basis(v: str, k: int) -> Basis | None:
+        if (v, k) not in bases:
+            bases[v, k] = make_basis(v, values[v], k)
+        return bases[v, k]
+
     for v in continuous:
         for m in modifiers:
             # sign(q̇) is a function of q̇; |τ_out| sign(q̇) of τ_out and q̇: same span
@@ -271,20 +323,20 @@ def build_library(
             for k in knots:
                 if v == "time" and k > min(knots):
                     continue  # see TIME_KNOTS
-                b = make_basis(v, values[v], k)
+                b = basis(v, k)
                 if b is None:
                     continue
-                g = prune(Group((v,), m, (b,)), values, Q)
+                g = prune(Group((v,), m, (b,)), values, Q, cache)
                 if g is not None:
                     out.append(g)
     if pairs is None:
         pairs = [(a, b) for i, a in enumerate(continuous) for b in continuous[i + 1:]]
     for a, b in pairs:
-        ba, bb = make_basis(a, values[a], KNOTS_2D), make_basis(b, values[b], KNOTS_2D)
+        ba, bb = basis(a, KNOTS_2D), basis(b, KNOTS_2D)
         if ba is None or bb is None:
             continue
         for m in PAIR_MODIFIERS:
-            g = prune(Group((a, b), m, (ba, bb)), values, Q)
+            g = prune(Group((a, b), m, (ba, bb)), values, Q, cache)
             if g is not None:
                 out.append(g)
     return out
@@ -319,6 +371,9 @@ class FoldGram:
         self.idx = [np.flatnonzero(folds == f) for f in range(self.k)]
         X = np.column_stack((W, y))
         self.X = X
+        self._Xf = [X[i] for i in self.idx]  # each fold's rows, taken once
+        # X[i].T @ X[i] on two copies (a general product, as before the rows were kept: the
+        # same array twice would take the symmetric product, rounded differently)
         self.G = np.stack([X[i].T @ X[i] for i in self.idx])  # (k, p+1, p+1)
         self.p = W.shape[1]
         self.ridge = ridge
@@ -337,7 +392,7 @@ class FoldGram:
             G[:, :p, -1] = G[:, -1, :p] = self.G[:, :p, p]
             for f, i in enumerate(self.idx):
                 Ci = C[i]
-                cx = Ci.T @ self.X[i]  # (k, p+1)
+                cx = Ci.T @ self._Xf[f]  # (k, p+1)
                 G[f, p:p + k, :p] = cx[:, :p]
                 G[f, :p, p:p + k] = cx[:, :p].T
                 G[f, p:p + k, -1] = G[f, -1, p:p + k] = cx[:, p]
@@ -346,18 +401,28 @@ class FoldGram:
         m = tot.shape[0] - 1
         d = np.sqrt(np.maximum(np.diag(tot)[:m], 1e-300))
         sse = np.empty(self.k)
+        # every fold's training system at once (one batched solve; the same LAPACK solve
+        # per fold as one call each)
+        A = (tot[None, :m, :m] - G[:, :m, :m]) / np.outer(d, d)
+        b = (tot[None, :m, m] - G[:, :m, m]) / d
+        A[:, np.arange(m), np.arange(m)] += self.ridge
+        try:
+            betas = np.linalg.solve(A, b[:, :, None])[:, :, 0] / d
+        except np.linalg.LinAlgError:  # pragma: no cover - one fold at a time, least squares
+            betas = np.stack([self._solve(A[f], b[f]) for f in range(self.k)]) / d
         for f in range(self.k):
-            A = (tot[:m, :m] - G[f, :m, :m]) / np.outer(d, d)
-            b = (tot[:m, m] - G[f, :m, m]) / d
-            A[np.diag_indices(m)] += self.ridge
-            try:
-                beta = np.linalg.solve(A, b) / d
-            except np.linalg.LinAlgError:  # pragma: no cover
-                beta = np.linalg.lstsq(A, b, rcond=None)[0] / d
+            beta = betas[f]
             Gf = G[f]
             sse[f] = Gf[m, m] - 2 * beta @ Gf[:m, m] + beta @ Gf[:m, :m] @ beta
         sse = np.maximum(sse, 0.0)
         return math.sqrt(float(sse.sum()) / max(self.yy, 1e-300)), sse
+
+    @staticmethod
+    def _solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:  # pragma: no cover - singular
+        try:
+            return np.linalg.solve(A, b)
+        except np.linalg.LinAlgError:
+            return np.linalg.lstsq(A, b, rcond=None)[0]
 
 
 # ----------------------------------------------------------------------------- search
@@ -467,7 +532,8 @@ def search(
     stride = max(1, math.ceil(n / max_samples))
     sl = slice(None, None, stride)
     vals = {k: np.asarray(v)[sl] for k, v in values.items()}
-    cols = {id(g): g.columns(vals) for g in groups}
+    cache: dict = {}
+    cols = {id(g): g.columns(vals, cache) for g in groups}
     base_W = W[sl]
     fg = FoldGram(base_W, y[sl], folds[sl])
     cv0, _ = fg.cv()

@@ -18,7 +18,7 @@ from typing import Any, TextIO
 import matplotlib
 
 from daq import DaqError, __version__, examples
-from daq.runtime.progress import ProgressLine
+from daq.runtime.progress import Heartbeat, ProgressLine
 from ident.fitting import fit_models, rescan_qs
 from ident.loaders import load_experiments
 from ident.plots import write_plots
@@ -78,8 +78,17 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, max_steps: int = 3,
     DaqError
         When the campaign stops before its end (the message names the cause).
     """
+    with Heartbeat(stream if stream is not None else sys.stderr) as hb:
+        return _run_demo(hb, out_dir, quick=quick, max_steps=max_steps,
+                         campaign_path=campaign_path, plant_path=plant_path)
+
+
+def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int,
+              campaign_path: Path | None, plant_path: Path | None) -> DemoResult:
+    """:func:`run_demo`'s body; ``hb.stream`` is the progress stream, ``hb.status`` names the
+    step running (a line at least every few seconds on a silent step)."""
     matplotlib.use("Agg")
-    stream = stream if stream is not None else sys.stderr
+    stream = hb.stream
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
@@ -91,13 +100,15 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, max_steps: int = 3,
     plant = load_plant(ppath)
 
     # 1. plan (checked against the limits before anything moves)
+    hb.status("planning the campaign")
     plan = plan_campaign(campaign)
     summary = plan.summary()
     plot_plan(plan, out / "campaign_plan.png")
     _say(stream, f"[1/4] planned {campaign.name}: {len(campaign.payloads)} payloads x "
                  f"{plan.run_duration_s:.1f} s at {1 / campaign.cycle_s:.0f} Hz")
 
-    # 2. run on the simulated drive over the virtual CAN bus
+    # 2. run on the simulated drive over the virtual CAN bus (its own progress bar)
+    hb.status(None)
     result, run_wall = run_with_bar(campaign, out / "logs", plant, stream)
     if result.status != "done":
         raise DaqError(f"demo campaign {result.status}: {result.reason} "
@@ -113,6 +124,7 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, max_steps: int = 3,
     # takes about 3 q_s, about 10 % of the nominal velocity — and adjusted once the model
     # is complete (after refinement), to the value that minimises the residual.
     t0 = time.perf_counter()
+    hb.status("loading the logs and fitting the usual and the new model")
     exps = load_experiments(list(logs), joint=campaign.joint.kind)
     qs0 = round(campaign.joint.limits.max_velocity / 30.0, 6)
     report = fit_models(exps, ("usual", "new"), qs=qs0)
@@ -123,18 +135,25 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, max_steps: int = 3,
     # 4. close the loop: refine the new model from its residual, then adjust q_s
     t0 = time.perf_counter()
 
+    def step_line(m: str) -> None:
+        hb.status(f"refining the new model, {m}", restart=False)
+        _say(stream, "      " + m)
+
     def refine_new(rep: Any) -> Any:
+        hb.status("refining the new model, step 1: scoring the candidate effects")
         return refine(rep.designs["new"], rep.models["new"], max_steps=max_steps,
-                      vmax=rep.vmax, progress=lambda m: _say(stream, "      " + m))
+                      vmax=rep.vmax, progress=step_line)
 
     ref = refine_new(report)
     bar = ProgressLine(stream)
 
     def scan_progress(done: int, expected: int, q: float, err: float) -> None:
+        hb.status(f"adjusting q_s with the refined model: fit {done + 1}", restart=False)
         bar.update(done / max(done, expected),
                    f"adjusting q_s with the refined model: fit {done}, q_s = {q:.4g} rad/s, "
                    f"error {100 * err:.3f} %")
 
+    hb.status("adjusting q_s with the refined model: fit 1")
     try:
         rs = rescan_qs(ref.final_design, ref.final_model, vmax=report.vmax,
                        progress=scan_progress)
@@ -142,6 +161,7 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, max_steps: int = 3,
         bar.close()
     if abs(rs.qs - qs0) > 0.01 * qs0:
         _say(stream, f"      q_s adjusted with the refined model: {qs0:g} -> {rs.qs:.4g} rad/s")
+        hb.status(f"fitting both models again with q_s = {rs.qs:.4g} rad/s")
         report = fit_models(exps, ("usual", "new"), qs=rs.qs)
         ref = refine_new(report)
     fit = report.to_json()
@@ -154,6 +174,7 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, max_steps: int = 3,
                  f"{report.qs:.4g} rad/s ({time.perf_counter() - t0:.1f} s)")
 
     # figures (captions and grouping: report_build.discover_figures)
+    hb.status("drawing the figures and writing the report")
     written = [out / "campaign_plan.png", *write_plots(report, out),
                *plot_refinement(ref, out)]
     figures = discover_figures(out, only=written)

@@ -36,6 +36,7 @@ import scipy.signal
 
 from daq import DaqError, __version__, examples
 from daq.protocol.reader import read_run
+from daq.runtime.progress import Heartbeat
 from daq.runtime.robot_rig import arm_truth
 from ident import IdentError
 from ident.cli_robot import fit_robot, format_report
@@ -111,13 +112,15 @@ def logged_condition_number(paths: list[Path], dyn: RobotDynamics, predicted: Qu
 
 
 def _refine_joint(sig: Any, residual: np.ndarray, j: int, revolute: bool, vmax: float,
-                  dq_min: float, max_steps: int, coulomb: float | None = None) -> Any:
+                  dq_min: float, max_steps: int, coulomb: float | None = None,
+                  progress: Any = None) -> Any:
     """ident.refine on joint j of the n-dof fit whose residual is ``residual`` (module
     docstring), the other joints' q and dq given as ``q<m>``, ``dq<m>``
     (:func:`ident.robot.refine_joint.refine_joint`); the samples the n-dof fit used
     (|dq_j| > dq_min) only."""
     return refine_joint(sig, sig.tau - residual, j, revolute=revolute, vmax=vmax,
-                        dq_min=dq_min, max_steps=max_steps, coulomb=coulomb)
+                        dq_min=dq_min, max_steps=max_steps, coulomb=coulomb,
+                        progress=progress)
 
 
 def run_robot_demo(out_dir: str | Path, *, robot: str = "3", max_steps: int = 2,
@@ -142,8 +145,17 @@ def run_robot_demo(out_dir: str | Path, *, robot: str = "3", max_steps: int = 2,
     DaqError
         The campaign stopped before its end, or the file is not a robot campaign.
     """
+    with Heartbeat(stream if stream is not None else sys.stderr) as hb:
+        return _run_robot_demo(hb, out_dir, robot=robot, max_steps=max_steps,
+                               campaign_path=campaign_path)
+
+
+def _run_robot_demo(hb: Heartbeat, out_dir: str | Path, *, robot: str, max_steps: int,
+                    campaign_path: Path | None) -> RobotDemoResult:
+    """:func:`run_robot_demo`'s body; ``hb.stream`` is the progress stream, ``hb.status``
+    names the step running (a line at least every few seconds on a silent step)."""
     matplotlib.use("Agg")
-    stream = stream if stream is not None else sys.stderr
+    stream = hb.stream
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
@@ -159,6 +171,7 @@ def run_robot_demo(out_dir: str | Path, *, robot: str = "3", max_steps: int = 2,
 
     # 1. plan: optimise the multi-sines, predict the excitation quality
     t0 = time.perf_counter()
+    hb.status("planning: optimising the multi-sines")
     played, dyn, opt = prepare_robot_campaign(campaign, robot=rob)
     assessment = assess_robot_campaign(played, regressor=dyn.regressor,
                                        inverse_dynamics=dyn.inverse_dynamics)
@@ -172,7 +185,8 @@ def run_robot_demo(out_dir: str | Path, *, robot: str = "3", max_steps: int = 2,
                  + (f" (multi-sine optimised {opt[0].cond_start:.4g} -> {opt[0].cond_end:.4g})"
                     if opt else ""))
 
-    # 2. run on the simulated buses
+    # 2. run on the simulated buses (its own progress bar)
+    hb.status(None)
     result, run_wall = run_with_bar(campaign, out / "logs", True, stream)
     timing["run_s"] = run_wall
     if result.status != "done":
@@ -186,6 +200,7 @@ def run_robot_demo(out_dir: str | Path, *, robot: str = "3", max_steps: int = 2,
                  f"{len(logs)} MCAP logs in {out / 'logs'}")
 
     # 3. condition number of the logged data (issue 12: prediction vs what was logged)
+    hb.status("condition number of the logged data")
     logged = logged_condition_number(list(logs), dyn, pred, campaign.cycle_s)
     _say(stream, "[3/5] condition number: predicted " + f"{pred.cond:.4g}, logged "
          + ", ".join(f"{c:.4g}" for c in logged)
@@ -193,6 +208,7 @@ def run_robot_demo(out_dir: str | Path, *, robot: str = "3", max_steps: int = 2,
 
     # 4. n-dof fit of both models, Table III per joint
     t0 = time.perf_counter()
+    hb.status("loading the logs and fitting the n-dof usual and paper models")
     runs = load_robot_runs(list(logs), rob.moving)
     fit = fit_robot(rob, runs, models=("usual", "paper"))
     text = format_report(fit)
@@ -217,22 +233,37 @@ def run_robot_demo(out_dir: str | Path, *, robot: str = "3", max_steps: int = 2,
     # 5. per-joint refinement of each model's residual
     t0 = time.perf_counter()
     refinements: dict[str, dict[str, Any]] = {}
+    n_ref, i_ref = len(ests) * len(rob.moving), 0
     for model, est in ests.items():
         residual = sig.tau - est.predict(sig)
         per: dict[str, Any] = {}
         for j, name in enumerate(rob.moving):
+            i_ref += 1
+            what = f"refining the {model} model's residual of {name} ({i_ref}/{n_ref})"
+            hb.status(f"{what}, step 1")
+
+            def step(m: str, what: str = what) -> None:
+                hb.status(f"{what}, {m}", restart=False)
+
+            t_j = time.perf_counter()
             try:
                 per[name] = _refine_joint(
                     sig, residual, j, campaign.joints[j].kind == "revolute", vmax[j], dq_min,
-                    max_steps, joint_coulomb(est, j))
+                    max_steps, joint_coulomb(est, j), progress=step)
             except IdentError as exc:
                 per[name] = str(exc)
+            r = per[name]
+            _say(stream, f"      {model} {name}: " + (
+                f"not run ({r})" if isinstance(r, str) else
+                ("; ".join(f"{s.effect} ({s.variable})" for s in r.steps) or "nothing left")
+                + f" ({time.perf_counter() - t_j:.1f} s)"))
         refinements[model] = per
     timing["refine_s"] = time.perf_counter() - t0
     _say(stream, f"[5/5] refined each joint's residual of the {' and the '.join(ests)} "
                  f"model(s) ({timing['refine_s']:.1f} s)")
 
     # figures and report
+    hb.status("drawing the figures and writing the report")
     figures: dict[str, list[str]] = {}
     for name, est in ests.items():
         for j, joint in enumerate(rob.moving):

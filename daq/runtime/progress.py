@@ -1,8 +1,10 @@
-"""A single-line progress bar on stderr (no dependency), reusable by every subcommand."""
+"""A single-line progress bar on stderr (no dependency), reusable by every subcommand, and a
+heartbeat that prints a line when a long step has been silent for a while."""
 
 from __future__ import annotations
 
 import sys
+import threading
 import time
 from typing import TextIO
 
@@ -56,3 +58,101 @@ class ProgressLine:
             self.stream.write("\n")
             self.stream.flush()
         self._len = 0
+
+
+class _Tracked:
+    """A text stream proxy that records when it was last written to (for :class:`Heartbeat`)."""
+
+    def __init__(self, stream: TextIO, beat: Heartbeat) -> None:
+        self._stream = stream
+        self._beat = beat
+
+    def write(self, text: str) -> int:
+        with self._beat._lock:
+            n = self._stream.write(text)
+            if text:
+                self._beat._last = time.monotonic()
+                self._beat._open = not text.endswith("\n")
+        return n
+
+    def flush(self) -> None:
+        self._stream.flush()
+
+    def isatty(self) -> bool:
+        return bool(getattr(self._stream, "isatty", lambda: False)())
+
+    def __getattr__(self, name: str):  # encoding, fileno, ...
+        return getattr(self._stream, name)
+
+
+class Heartbeat:
+    """A line on the stream at least every ``interval_s`` while a long step runs.
+
+    Work written to :attr:`stream` (step lines, a :class:`ProgressLine`) resets the clock;
+    when nothing was written for ``interval_s`` [s], a background thread writes the current
+    :meth:`status` text with the time spent in it, so that a step that prints nothing for a
+    long time (a fit, a refinement step, a joint of the robot refinement) still shows it is
+    alive. No line is written while the status is ``None``.
+
+    Parameters
+    ----------
+    stream : text stream
+        Where to write (default ``sys.stderr``).
+    interval_s : float
+        Longest silence [s].
+    indent : str
+        Prefix of the heartbeat lines.
+
+    Examples
+    --------
+    >>> import io
+    >>> with Heartbeat(io.StringIO(), interval_s=5.0) as hb:
+    ...     hb.status("fitting")        # work here; hb.stream is the stream to print to
+    """
+
+    def __init__(self, stream: TextIO | None = None, interval_s: float = 5.0,
+                 indent: str = "      ") -> None:
+        self._raw = stream if stream is not None else sys.stderr
+        self.interval = float(interval_s)
+        self.indent = indent
+        self._lock = threading.Lock()
+        self._last = time.monotonic()
+        self._open = False
+        self._text: str | None = None
+        self._since = time.monotonic()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        #: the stream to write to (a proxy that resets the clock)
+        self.stream: TextIO = _Tracked(self._raw, self)  # type: ignore[assignment]
+
+    def status(self, text: str | None, restart: bool = True) -> None:
+        """What is running now (None: say nothing, e.g. while a progress bar runs); the time
+        shown counts from the last call with ``restart`` (a new step, not a new detail)."""
+        with self._lock:
+            if restart:
+                self._since = time.monotonic()
+            self._text = text
+
+    def _beat(self) -> None:
+        while not self._stop.wait(min(1.0, self.interval / 4)):
+            with self._lock:
+                now = time.monotonic()
+                if self._text is None or now - self._last < self.interval:
+                    continue
+                line = (f"{self.indent}... {self._text} ({now - self._since:.0f} s)\n")
+                self._raw.write(("\n" if self._open else "") + line)
+                self._raw.flush()
+                self._last, self._open = now, False
+
+    def __enter__(self) -> Heartbeat:
+        self._stop.clear()
+        self._last = time.monotonic()
+        self._thread = threading.Thread(target=self._beat, name="heartbeat", daemon=True)
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+            self._thread = None
