@@ -266,6 +266,16 @@ def _naming(
     return (None if c.generic else e.effect), e.describe(), None
 
 
+def _scored(c: Candidate, rel: float, rss0: float, floor: float) -> str:
+    """The relative error a candidate's scoring predicts, for the short-list line: an estimate
+    below the noise floor (the scoring's projection assumes a least-squares residual; an IV
+    residual is not orthogonal to the regressor) is shown as such, not as a result."""
+    est = rel * math.sqrt(max(1 - c.gain / rss0, 0)) if rss0 > 0 else rel
+    if math.isfinite(floor) and est < floor:
+        return f"(scored below the noise floor {_pct(floor)}: leak? the exact refit decides)"
+    return _pct(est)
+
+
 def _kept(design: Design, model: IdentModel) -> np.ndarray:
     return design.W[:, [design.names.index(n) for n in model.names_]]
 
@@ -452,9 +462,8 @@ def refine(
         order = generic_first + named_first if prefer_generic else named_first + generic_first
         say(
             f"step {k}: short list "
-            + ", ".join(
-                f"{c.effect.effect} {_pct(cur.rel_error_ * math.sqrt(max(1 - c.gain / rss0, 0)))}"
-                for c in order
+            + ", ".join(f"{c.effect.effect} {_scored(c, cur.rel_error_, rss0, floor)}"
+                        for c in order
             )
         )
 

@@ -4,10 +4,14 @@ Two numbers guard every refinement step (:func:`ident.refine.refine`, docs/refin
 "Noise floor and unseen data"):
 
 * the **noise floor** (:func:`noise_floor`): the relative error ||e|| / ||Y|| of the part of
-  the residual that changes from one decimated sample to the next, estimated from the second
-  differences of the residual, robustly (median absolute deviation): for white noise of
+  the residual that changes from one decimated sample to the next. Two estimates of a white
+  noise level, each inflated by a different structure, and the lower one is kept: the second
+  differences of the residual, robustly (median absolute deviation; for white noise of
   standard deviation σ, Δ²e has standard deviation √6 σ, while every effect of the states
-  varies smoothly along the trajectory and contributes little to Δ². A model error below
+  varies smoothly along the trajectory and contributes little to Δ²; a closed-loop
+  oscillation near the Nyquist frequency inflates it), and the median level of the residual's
+  spectrum above a tenth of the sampling rate (robust to lines; broadband effects inflate
+  it). A model error below
   the floor means that the model explains noise: a leak of the output into the regressor
   (a column computed from the measured torque), never a result. A step whose fit or
   held-out error falls below :data:`LEAK_RATIO` times the floor is refused and named a leak;
@@ -25,11 +29,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy import signal
 
 __all__ = ["LEAK_RATIO", "N_BLOCKS", "heldout_error", "heldout_kind", "noise_floor"]
 
 #: A fit or held-out error below this fraction of the estimated noise floor is a leak.
 LEAK_RATIO = 0.5
+
+#: Lower edge of the residual's spectrum the floor's second estimate reads [cycles/sample].
+SPECTRUM_BAND = 0.1
 
 #: Contiguous folds of a single run (blocked cross-validation).
 N_BLOCKS = 5
@@ -49,25 +57,32 @@ def noise_floor(residual: np.ndarray, y: np.ndarray, experiment: np.ndarray) -> 
     y : ndarray, shape (m,)
         Measured torque of those samples [N m].
     experiment : ndarray of int, shape (m,)
-        Run of each sample; differences are taken within runs only.
+        Run of each sample; differences and spectra are taken within runs only.
 
     Returns
     -------
     float
-        sqrt(m) σ̂ / ||Y|| with σ̂ = MAD(Δ²ρ) / √6; NaN with fewer than 10 samples.
+        sqrt(m) σ̂ / ||Y|| with σ̂ the lower of MAD(Δ²ρ) / √6 and the square root of half the
+        median one-sided spectral density of ρ over [0.1, 0.5] cycles per sample
+        (:data:`SPECTRUM_BAND`); NaN with fewer than 10 samples.
     """
     r = np.asarray(residual, dtype=float)
     exp = np.asarray(experiment)
-    parts = []
+    parts, psd = [], []
     for e in np.unique(exp):
         x = r[exp == e]
         if x.size >= 3:
             parts.append(np.diff(x, 2))
+        if x.size >= 32:
+            f, p = signal.welch(x - x.mean(), fs=1.0, nperseg=min(256, x.size))
+            psd.append(p[f >= SPECTRUM_BAND])
     d2 = np.concatenate(parts) if parts else np.empty(0)
     ny = float(np.linalg.norm(y))
     if d2.size < 10 or ny <= 0:
         return math.nan
     sigma = _mad(d2) / math.sqrt(6.0)
+    if psd:
+        sigma = min(sigma, math.sqrt(0.5 * float(np.median(np.concatenate(psd)))))
     return sigma * math.sqrt(r.size) / ny
 
 
