@@ -22,7 +22,7 @@ import numpy as np
 from trajectories.robot import Robot, load_robot
 
 from . import DataError
-from .cli_robot import FORMAT, fit_robot
+from .cli_robot import FORMAT, fit_robot, robot_gains
 from .report import write_json
 from .robot.consistent_fit import consistent_record, fit_consistent
 from .robot.export_model import export_model
@@ -67,16 +67,6 @@ def _read(path: Path) -> dict[str, Any]:
     return rec
 
 
-def _gains(robot: Robot) -> list[float]:
-    """Joint-side torque per unit of logged torque (as ``jointid fit --robot``)."""
-    out = []
-    for n in robot.moving:
-        d = robot.drives.get(n)
-        g = None if d is None else (d.drive_gain or d.torque_constant)
-        out.append(1.0 if g is None else float(g))
-    return out
-
-
 def consistent_from_record(path: Path, rec: dict[str, Any], robot: Robot, name: str,
                            mapping: Any = None, q_unit: str | None = None
                            ) -> tuple[dict[str, Any], dict[str, float]]:
@@ -88,7 +78,7 @@ def consistent_from_record(path: Path, rec: dict[str, Any], robot: Robot, name: 
         return mrec["consistent"], {}
     pre = rec.get("preprocessing", {})
     try:
-        runs = load_robot_runs(rec["inputs"], robot.moving, gains=_gains(robot),
+        runs = load_robot_runs(rec["inputs"], robot.moving, gains=robot_gains(robot),
                                mapping=mapping, q_unit=q_unit)
         settings = RobotPreprocessing(pre.get("cutoff_hz"), pre.get("decimation"),
                                       pre.get("trim"))

@@ -68,7 +68,7 @@ _SINGLE_ONLY = (("joint", "--joint", "the robot file gives the joint types"),
                 ("threshold", "--threshold", "single-joint only"))
 
 
-def _gains(robot: Robot) -> list[float]:
+def robot_gains(robot: Robot) -> list[float]:
     """Joint-side torque per unit of logged torque of each moving joint (robot file drives)."""
     out = []
     for n in robot.moving:
@@ -642,7 +642,7 @@ def run(args: argparse.Namespace) -> int:
               "both": ("usual", "paper")}[args.model]
     qs = _qs(args.qs)
     mapping = parse_robot_mapping(args.map)
-    kw: dict[str, Any] = dict(gains=_gains(robot), mapping=mapping, q_unit=args.q_unit)
+    kw: dict[str, Any] = dict(gains=robot_gains(robot), mapping=mapping, q_unit=args.q_unit)
     runs = load_robot_runs(args.inputs, robot.moving, **kw)
     val = load_robot_runs(args.validate, robot.moving, **kw) if args.validate else None
     pre = RobotPreprocessing(args.cutoff, args.decimation, args.trim)
