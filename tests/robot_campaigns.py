@@ -8,6 +8,8 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from sim_drivers.testing import unique_channel
 from trajectories.robot_campaign import RobotCampaign
 
@@ -95,3 +97,21 @@ def to_toml(raw: dict) -> str:
     text = "\n".join(lines) + "\n"
     assert tomllib.loads(text)["name"] == raw["name"]
     return text
+
+
+def write_arm_csv(run: Any, path: Path) -> Path:
+    """A simulated arm run (``sim_drivers.arm_offline.ArmRun``) as a robot CSV: its columns,
+    plus the constant payload columns of docs/robot-data.md when the run carries a payload
+    (mass, CoM in the flange frame, inertia about the CoM)."""
+    cols = run.columns()
+    pay = run.payload
+    if pay is not None:
+        n = run.t.size
+        cols["payload_mass_kg"] = np.full(n, pay.mass)
+        for a, v in zip("xyz", pay.com, strict=True):
+            cols[f"payload_com_{a}_m"] = np.full(n, v)
+        for a, v in zip(("xx", "xy", "xz", "yy", "yz", "zz"), pay.inertia, strict=True):
+            cols[f"payload_i{a}_kgm2"] = np.full(n, v)
+    np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",",
+               header=",".join(cols), comments="", fmt="%.17g")
+    return path

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
+from robot_campaigns import write_arm_csv
 from test_robot_fit import _signals, _simulate
 
 from daq.app.cli import main
@@ -194,17 +195,7 @@ def test_export_model_cli(tmp_path, capfd):
     for i, pay in enumerate(pays):
         run = simulate_arm(params, ref, ArmGains.for_params(params, payload=pay),
                            payload=pay, seed=10 + i)
-        cols = run.columns()
-        if pay is not None:
-            n = run.t.size
-            cols["payload_mass_kg"] = np.full(n, pay.mass)
-            for a, v in zip("xyz", pay.com, strict=True):
-                cols[f"payload_com_{a}_m"] = np.full(n, v)
-            for a, v in zip(("xx", "xy", "xz", "yy", "yz", "zz"), pay.inertia, strict=True):
-                cols[f"payload_i{a}_kgm2"] = np.full(n, v)
-        files.append(tmp_path / f"p{i}.csv")
-        np.savetxt(files[-1], np.column_stack(list(cols.values())), delimiter=",",
-                   header=",".join(cols), comments="", fmt="%.17g")
+        files.append(write_arm_csv(run, tmp_path / f"p{i}.csv"))
     fit_json = tmp_path / "fit.json"
     assert main(["fit", "--robot", str(ARM3), *map(str, files), "--model", "both",
                  "--json", str(fit_json), "--no-consistency"]) == 0

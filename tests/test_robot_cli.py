@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.io
+from robot_campaigns import write_arm_csv
 
 from daq.app.cli import main
 from daq.runtime.mcaplog import RunLog
@@ -255,17 +256,7 @@ def test_cli_paper_model_on_payload_runs(tmp_path, capfd):
     for i, pay in enumerate(pays):
         run = simulate_arm(params, ref, ArmGains.for_params(params, payload=pay), payload=pay,
                            seed=10 + i)
-        cols = run.columns()
-        if pay is not None:
-            n = run.t.size
-            cols["payload_mass_kg"] = np.full(n, pay.mass)
-            for a, v in zip("xyz", pay.com, strict=True):
-                cols[f"payload_com_{a}_m"] = np.full(n, v)
-            for a, v in zip(("xx", "xy", "xz", "yy", "yz", "zz"), pay.inertia, strict=True):
-                cols[f"payload_i{a}_kgm2"] = np.full(n, v)
-        files.append(tmp_path / f"p{i}.csv")
-        np.savetxt(files[-1], np.column_stack(list(cols.values())), delimiter=",",
-                   header=",".join(cols), comments="", fmt="%.17g")
+        files.append(write_arm_csv(run, tmp_path / f"p{i}.csv"))
     out_json = tmp_path / "fit.json"
     code, out, err = run_cli(capfd, "--robot", ARM3, *files, "--model", "both", "--method",
                              "ls", "--json", out_json)

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from robot_campaigns import write_arm_csv
 
 from daq.app.cli import main
 from ident import DataError
@@ -84,17 +85,7 @@ def coupled_files(tmp_path_factory):
     for i, pay in enumerate(PAYLOADS):
         run = simulate_arm(params, ref, ArmGains.for_params(params, payload=pay), payload=pay,
                            seed=30 + i)
-        cols = run.columns()
-        if pay is not None:
-            n = run.t.size
-            cols["payload_mass_kg"] = np.full(n, pay.mass)
-            for a, v in zip("xyz", pay.com, strict=True):
-                cols[f"payload_com_{a}_m"] = np.full(n, v)
-            for a, v in zip(("xx", "xy", "xz", "yy", "yz", "zz"), pay.inertia, strict=True):
-                cols[f"payload_i{a}_kgm2"] = np.full(n, v)
-        files.append(d / f"p{i}.csv")
-        np.savetxt(files[-1], np.column_stack(list(cols.values())), delimiter=",",
-                   header=",".join(cols), comments="", fmt="%.17g")
+        files.append(write_arm_csv(run, d / f"p{i}.csv"))
     return robot, files
 
 
