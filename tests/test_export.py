@@ -12,6 +12,7 @@ import time
 import can
 import numpy as np
 import pytest
+from mcap.reader import make_reader
 from test_daq_run import small_campaign
 
 from daq.protocol.export import ExportError, export_can
@@ -112,7 +113,7 @@ def test_truncated_log_exports_what_was_written(run_log, tmp_path):
     raw = run_log.read_bytes()
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(raw[: len(raw) * 2 // 3])
-    with pytest.warns(RuntimeWarning, match="cut.mcap: log cut short"):
+    with pytest.warns(RuntimeWarning, match="cut.mcap: log cut short or damaged"):
         res = export_can(cut, tmp_path / "cut.log")
     full = read_frames(run_log)
     assert 0 < res.frames < full.shape[0]
@@ -121,6 +122,30 @@ def test_truncated_log_exports_what_was_written(run_log, tmp_path):
     # the frames of the complete chunks are the first ones of the full log
     want = np.sort(full["timestamp"][: res.frames])
     assert np.allclose([m.timestamp for m in back], want, rtol=0, atol=1.01e-6)
+
+
+def test_damaged_middle_chunk_exports_every_other_chunk(run_log, tmp_path):
+    """A damaged chunk costs its own frames only: the chunks after it are exported too."""
+    with open(run_log, "rb") as f:
+        chunks = sorted(make_reader(f).get_summary().chunk_indexes,
+                        key=lambda c: c.chunk_start_offset)
+    assert len(chunks) >= 3
+    mid = chunks[len(chunks) // 2]
+    data = bytearray(run_log.read_bytes())
+    at = mid.chunk_start_offset + mid.chunk_length // 2
+    data[at : at + 32] = bytes(32)
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    with pytest.warns(RuntimeWarning, match="damaged"):
+        kept = read_frames(bad)
+    with pytest.warns(RuntimeWarning, match="bad.mcap: log cut short or damaged"):
+        res = export_can(bad, tmp_path / "bad.log")
+    full = read_frames(run_log)
+    assert res.frames == kept.shape[0] < full.shape[0]
+    back = list(can.LogReader(res.path))
+    assert len(back) == res.frames
+    # frames logged after the damaged chunk are in the export
+    assert max(m.timestamp for m in back) >= np.max(full["timestamp"]) - 1.01e-6
 
 
 @pytest.mark.parametrize(("name", "match"), [

@@ -62,11 +62,10 @@ from pathlib import Path
 
 import can
 import numpy as np
-from mcap.records import Channel, Message, Metadata
-from mcap.stream_reader import StreamReader
 
 from daq import DaqError
 from daq.protocol.logformat import FRAME_DTYPE
+from daq.protocol.reader import LogReadError, read_raw
 
 __all__ = ["EXPORT_FORMATS", "ExportError", "ExportResult", "export_can"]
 
@@ -155,38 +154,30 @@ def _format_of(out: Path) -> str:
 
 
 def read_log(path: Path) -> tuple[np.ndarray, dict[str, dict[str, str]], bool]:
-    """The ``/can/raw`` frames and the metadata of a run log, in one streamed pass.
+    """The ``/can/raw`` frames and the metadata of a run log.
 
-    Streams the records (no summary needed), so a log cut short by a killed process gives
-    every frame of its complete chunks.
+    Read with the run-log reader (:mod:`daq.protocol.reader`): a closed log through its chunk
+    index, a log cut short by a killed process record by record. A damaged chunk is skipped
+    with a warning naming the cycles it held, and the frames of every other chunk (before
+    and after it) are kept.
 
     Returns
     -------
     (ndarray, dict, bool)
         Frames (structured: ``timestamp`` [s], ``id``, ``dlc``, ``data`` uint8 x 8), in log
-        order; metadata name -> map; True when the file ended in a damaged tail.
+        order; metadata name -> map; True when the file ended in a truncated tail or held
+        damaged chunks.
+
+    Raises
+    ------
+    LogReadError
+        The file cannot be opened or is not an MCAP file.
     """
-    meta: dict[str, dict[str, str]] = {}
-    parts: list[np.ndarray] = []
-    can_channels: set[int] = set()
-    damaged = False
-    with open(path, "rb") as f:
-        try:
-            for rec in StreamReader(f, skip_magic=False).records:
-                if isinstance(rec, Channel):
-                    if rec.topic == "/can/raw":
-                        can_channels.add(rec.id)
-                elif isinstance(rec, Message):
-                    if rec.channel_id in can_channels:
-                        n = _CYCLE_N.unpack_from(rec.data, 4)[1]
-                        parts.append(np.frombuffer(rec.data, FRAME_DTYPE, count=n,
-                                                   offset=20))
-                elif isinstance(rec, Metadata):
-                    meta[rec.name] = dict(rec.metadata)
-        except Exception:  # the mcap library raises bare errors on a cut file
-            damaged = True
+    raw, metadata, damaged = read_raw(path, "/can/raw")
+    parts = [np.frombuffer(msg, FRAME_DTYPE, count=_CYCLE_N.unpack_from(msg, 4)[1], offset=20)
+             for msg in raw]
     frames = np.concatenate(parts) if parts else np.zeros(0, FRAME_DTYPE)
-    return frames, meta, damaged
+    return frames, metadata, damaged
 
 
 def master_ids(metadata: dict[str, dict[str, str]]) -> frozenset[int]:
@@ -261,14 +252,15 @@ def export_can(mcap_path: str | Path, out_path: str | Path, *, channel: int = 1)
         raise ExportError(f"{src}: expected a jointid run log (.mcap), file not found")
     try:
         frames, meta, damaged = read_log(src)
-    except OSError as exc:
-        raise ExportError(f"{src}: cannot read ({exc.strerror or exc})") from None
+    except LogReadError as exc:
+        why = str(exc).removeprefix(f"{src}: ")
+        raise ExportError(f"{src}: expected a jointid run log ({why})") from None
     if not frames.shape[0] and "campaign" not in meta:
         raise ExportError(f"{src}: expected a jointid run log (MCAP with a /can/raw channel "
                           f"and campaign metadata), found neither")
     if damaged:
-        warnings.warn(f"{src}: log cut short (killed run?): exporting the {frames.shape[0]} "
-                      f"frames of its complete chunks", RuntimeWarning, stacklevel=2)
+        warnings.warn(f"{src}: log cut short or damaged: exporting the {frames.shape[0]} "
+                      f"frames of its readable chunks", RuntimeWarning, stacklevel=2)
     order = np.argsort(frames["timestamp"], kind="stable")
     frames = frames[order]
     tx_ids = master_ids(meta)

@@ -547,6 +547,21 @@ def read_attachments(path: str | Path) -> dict[str, bytes]:
     return _scan(Path(path), set(), attachments=True).attachments
 
 
+def read_raw(path: str | Path, topic: str) -> tuple[list[bytes], dict[str, dict[str, str]], bool]:
+    """The raw messages of one topic and every metadata record of a run log.
+
+    Damaged chunks and a truncated tail are skipped with a warning, as by :func:`read_run`.
+
+    Returns
+    -------
+    (list of bytes, dict, bool)
+        Message data in log order; metadata name -> map; True when chunks were damaged or
+        the tail truncated.
+    """
+    scan = _scan(Path(path), set(), {topic})
+    return scan.raw.get(topic, []), scan.metadata, bool(scan.truncated or scan.damaged)
+
+
 def read_frames(path: str | Path) -> np.ndarray:
     """Every logged CAN frame, as a structured array with fields ``cycle``, ``timestamp``,
     ``id``, ``dlc``, ``data`` (uint8 x 8), in cycle order. Damaged chunks and a truncated
