@@ -161,7 +161,25 @@ def _metadata(campaign: Any, cfg: DaqConfig, plan: Any, index: int, payload: Any
                        "simulated": "true"}
         with contextlib.suppress(Exception):
             md["plant"]["truth"] = json.dumps(plant_params.truth())
+    for rec in md.values():
+        for key in ("channel", "bus"):
+            if key in rec:
+                rec[key] = redact_url_secret(rec[key])
     return md
+
+
+_URL_SECRET = re.compile(r"\b(wss?://[^/\s]+)/[^\s:+]+")
+
+
+def redact_url_secret(text: str) -> str:
+    """``text`` with the path of every ``ws://``/``wss://`` URL replaced by ``<token>``.
+
+    A python-can-remote bridge's URL carries its access token as its path
+    (``ws://127.0.0.1:<port>/<token>``, :mod:`sim_drivers.bridge`); the log keeps host and
+    port, never the token. The same URL always gives the same text, so the bus mapping of
+    ``jointid export`` is unchanged.
+    """
+    return _URL_SECRET.sub(r"\1/<token>", text)
 
 
 def _sync_period_us(cfg: DaqConfig, cycle_s: float) -> int:
