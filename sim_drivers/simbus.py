@@ -118,7 +118,7 @@ class SimBus(can.BusABC):
                                f"(one per channel)")
         super().__init__(channel=channel, **kwargs)
         self.channel_id = channel
-        self.channel_info = f"simulated drives on virtual channel {channel}"
+        self.channel_info = f"virtual channel {channel} (jointid SimBus, {dispatch} dispatch)"
         self.dispatch = dispatch
         self.frames_in = 0
         self.frames_out = 0
