@@ -648,15 +648,29 @@ def _finite_or_zero(x: float | None) -> float:
     return v if np.isfinite(v) else 0.0
 
 
-def _longest_true_run(mask: np.ndarray) -> slice:
-    """Slice of the longest contiguous stretch of True in a boolean array (empty if none)."""
-    m = np.concatenate(([False], np.asarray(mask, dtype=bool), [False]))
-    edges = np.flatnonzero(np.diff(m.astype(np.int8)))
-    if edges.size == 0:
+def _longest_true_run(mask: np.ndarray, breaks: np.ndarray | None = None) -> slice:
+    """Slice of the longest contiguous stretch of True in a boolean array (empty if none).
+
+    ``breaks`` (n - 1 booleans): True where sample i + 1 does not follow sample i (cycles
+    lost between them, e.g. a damaged log chunk); a stretch never spans a break.
+    """
+    m = np.asarray(mask, dtype=bool)
+    if m.size == 0 or not m.any():
         return slice(0, 0)
-    starts, stops = edges[0::2], edges[1::2]
-    k = int(np.argmax(stops - starts))
-    return slice(int(starts[k]), int(stops[k]))
+    prev = np.concatenate(([False], m[:-1]))
+    start = m & ~prev
+    if breaks is not None:
+        start[1:] |= m[1:] & np.asarray(breaks, dtype=bool)
+    starts = np.flatnonzero(start)
+    label = np.cumsum(start)  # stretch number of every sample (0 before the first)
+    lengths = np.bincount(label[m], minlength=starts.size + 1)[1:]
+    k = int(np.argmax(lengths))
+    return slice(int(starts[k]), int(starts[k] + lengths[k]))
+
+
+def lost_cycle_breaks(cycle: np.ndarray) -> np.ndarray:
+    """n - 1 booleans: True where the logged cycle numbers jump (cycles lost in between)."""
+    return np.diff(np.asarray(cycle, dtype=np.int64)) != 1
 
 
 def _load_mcap(path: Path, revolute: bool | None, axis: int) -> Experiment:
@@ -664,13 +678,14 @@ def _load_mcap(path: Path, revolute: bool | None, axis: int) -> Experiment:
     OPERATION ENABLED with its TPDOs received (:attr:`daq.protocol.reader.RunArrays.valid`);
     during enable, quick stop and shutdown the drive ignores the torque reference."""
     run = read_run(path, axis=axis)
-    keep = _longest_true_run(run.valid)
+    keep = _longest_true_run(run.valid, lost_cycle_breaks(run.cycle))
     inner_dropped = int(np.count_nonzero(run.valid)) - (keep.stop - keep.start)
     if inner_dropped > 0:
         warnings.warn(
             f"{path}: kept the longest stretch of cycles with the drive enabled "
             f"({keep.stop - keep.start} cycles); {inner_dropped} other enabled cycles "
-            "are separated from it by a stop or missing TPDOs",
+            "are separated from it by a stop, missing TPDOs or lost cycles (never "
+            "interpolated across)",
             stacklevel=2,
         )
     if keep.stop - keep.start == 0:

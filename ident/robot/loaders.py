@@ -71,6 +71,7 @@ from ..loaders import (
     _longest_true_run,
     _read_csv,
     _read_mat,
+    lost_cycle_breaks,
     resolve_path,
 )
 from ..preprocess import choose_cutoff, decimate, diffcent, lowpass
@@ -247,12 +248,13 @@ def _load_mcap(path: Path, joints: Sequence[str]) -> RawRobotRun:
             raise RobotIdentError(f"{path}: /joint/{i}/state does not cover the cycles of "
                                   "/joint/0/state (one state per drive and cycle expected)")
     valid = np.logical_and.reduce([r.valid for r in runs])
-    keep = _longest_true_run(valid)
+    keep = _longest_true_run(valid, lost_cycle_breaks(cycles))
     if keep.stop == keep.start:
         raise RobotIdentError(f"{path}: no cycle with every drive in OPERATION ENABLED")
     if np.count_nonzero(valid) > keep.stop - keep.start:
         warnings.warn(f"{path}: kept the longest stretch of cycles with every drive enabled "
-                      f"({keep.stop - keep.start} cycles)", stacklevel=3)
+                      f"({keep.stop - keep.start} cycles; a stop, missing TPDOs or lost "
+                      "cycles separate the others, never interpolated across)", stacklevel=3)
     runs = [r.select(keep) for r in runs]
     q_ref = None
     if k == 1 and np.all(np.isfinite(runs[0].q_ref)):
