@@ -27,11 +27,14 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import json
 from pathlib import Path
 
 import numpy as np
 import pytest
+from robot_campaigns import write_arm_csv
 
+from daq.app.cli import main
 from ident import OutputLeakError
 from ident.robot import RobotIdentError
 from ident.robot.base import base_parameters
@@ -225,3 +228,47 @@ def test_refit_refuses_the_measured_torque_and_bad_input():
     iv.method = "iv"
     with pytest.raises(RobotIdentError, match="method 'iv' is not supported"):
         refit_robot(iv, sig, [])
+
+
+def test_cli_refine_refits_inside_the_ndof_model(tmp_path, capfd):
+    """``jointid fit --robot ... --refine``: the found terms refitted in the n-dof model,
+    before/after per joint and for the robot in the JSON record and on stdout."""
+    robot = load_robot(ROOT / "examples" / "robots" / "arm3.toml")
+    c = ArmParams.from_robot(robot).friction.c_m
+    usual = dict(a_m=1.0, b_m=0.0, a_g=1.0, b_g=0.0, d_m=0.0, d_g=0.0, c_g=c)
+    params = dataclasses.replace(ArmParams.from_robot(robot, usual), effects=ArmEffects.make(
+        3, dry_coupling={(0, 2): COUPLING}))
+    ref = model_reference(params.model, center=CENTRE, fraction=0.9, duration_s=10.0, seed=11)
+    files = []
+    for i, pay in enumerate(PAYLOADS):
+        run = simulate_arm(params, ref, ArmGains.for_params(params, payload=pay), payload=pay,
+                           seed=110 + i)
+        files.append(write_arm_csv(run, tmp_path / f"p{i}.csv"))
+    js = tmp_path / "fit.json"
+    code = main(["fit", "--robot", str(ROOT / "examples" / "robots" / "arm3.toml"),
+                 *map(str, files), "--model", "usual", "--method", "ls", "--no-consistency",
+                 "--refine", "--max-steps", "1", "--json", str(js)])
+    text, err = capfd.readouterr()
+    assert code == 0, err
+    rec = json.loads(js.read_text())
+    fit = rec["refinement"]["refit"]
+    assert "error" not in fit, fit
+    joints = [*robot.moving, "all"]
+    for key in ("rel_error", "heldout_rel_error", "noise_floor"):
+        for when in ("before", "after"):
+            assert list(fit[key][when]) == joints
+            assert all(v is not None and v > 0 for v in fit[key][when].values())
+    # the n-dof fit's own figures before, the refit's lower or equal after
+    for j in robot.moving:
+        assert fit["rel_error"]["before"][j] == pytest.approx(
+            rec["models"]["usual"]["rel_error"][j], rel=1e-6)
+        assert fit["rows"][j] == rec["models"]["usual"]["samples"][j]
+        assert fit["rel_error"]["after"][j] <= fit["rel_error"]["before"][j] + 1e-12
+    added = [(x["joint"], x["effect"]) for x in fit["extras"]]
+    assert ("j1", "linear_q3_direction") in added, added
+    # every n-dof parameter and the extra ones, with standard deviations
+    names = list(fit["parameters"])
+    assert names[:len(rec["models"]["usual"]["parameters"])] == list(
+        rec["models"]["usual"]["parameters"])
+    assert "j1:q3_c1" in names and fit["parameters"]["j1:q3_c1"]["std"] > 0
+    assert "n-dof refit of the usual model" in text and "linear_q3_direction" in text
