@@ -12,9 +12,10 @@ identified together (:class:`ident.robot.estimate.RobotModel`: base parameters o
 body and rotor inertias, plus the usual or the paper friction on every joint). Prints the
 base parameters with their standard deviations (eq. 15-16), the per-joint and global relative
 errors on the fit data and on the ``--validate`` files -- on the fit's rows and on all rows,
-with the share each leaves out -- optionally refines every joint on the fit's rows
-(:func:`refine_robot`), and writes the JSON record (``docs/robot-data.md``). Outputs are
-written only once everything has been computed, so a bad input leaves nothing behind.
+with the share each leaves out -- optionally refines every joint on the fit's rows and refits
+the found terms inside the n-dof model (:func:`refine_robot`), and writes the JSON record
+(``docs/robot-data.md``). Outputs are written only once everything has been computed, so a
+bad input leaves nothing behind.
 """
 
 from __future__ import annotations
@@ -349,6 +350,9 @@ def refine_robot(
     (:func:`kept_rows`), the other joints' q and dq offered as variables, a zero-order hold
     named against the raw log's period (:func:`ident.robot.refine_joint.refine_joint`).
     With validation files, a step must lower their error too (their rows selected alike).
+    Then every term found is refitted inside the n-dof model, every joint together
+    (:func:`ident.robot.refit.refit_robot`: before/after per joint and for the robot, under
+    ``"refit"``; ``{"error": ...}`` when it cannot be done, e.g. IDIM-IV).
 
     Parameters
     ----------

@@ -29,6 +29,11 @@ differentiated again by :func:`ident.preprocess.build_design` with decimation 1 
 chain). A zero-order hold is named against the raw log's period ``cycle_s`` (the design's own
 period is the decimated one).
 
+The found term is fitted here on the n-dof fit's residual (two stages: the n-dof parameters
+have already absorbed the part of its column in their span); :func:`joint_term_columns`
+gives its columns on the robot's samples, from the states only, for the n-dof refit
+(:mod:`ident.robot.refit`) that fits it together with every n-dof parameter.
+
 Pure numerics (no file access).
 """
 
