@@ -20,7 +20,9 @@ Asserted, per excitation/noise seed:
   that of the TRUE structure (the declared n-dof model plus the true columns, refitted by the
   same function on the same data), and not above the n-dof fit's;
 * without extra terms the refit reproduces the n-dof fit (usual and paper models), and a
-  term reading the measured torque is refused (columns from the states only).
+  term reading the measured torque is refused (columns from the states only);
+* its held-out error is leave-one-run-out on the explicit stacked regressor;
+* through ``jointid fit --robot --refine``: the refit's record and table (coupling alone).
 """
 
 from __future__ import annotations
@@ -39,12 +41,14 @@ from ident import OutputLeakError
 from ident.robot import RobotIdentError
 from ident.robot.base import base_parameters
 from ident.robot.estimate import RobotModel
+from ident.robot.paper import usual_coefficients
 from ident.robot.refine_joint import joint_coulomb, refine_joint
-from ident.robot.refit import extra_name, refit_robot
+from ident.robot.refit import _rows, _System, extra_name, refit_robot
 from ident.robot.regressor import RobotRegressor
 from ident.robot.signals import RobotPayloadData, RobotSignals
 from ident.signals import Signals
 from ident.terms import Term
+from ident.unseen import heldout_error
 from sim_drivers.arm import ArmEffects, ArmGains, ArmParams, Payload, model_reference, simulate_arm
 from trajectories.robot import load_robot
 
@@ -272,3 +276,33 @@ def test_cli_refine_refits_inside_the_ndof_model(tmp_path, capfd):
         rec["models"]["usual"]["parameters"])
     assert "j1:q3_c1" in names and fit["parameters"]["j1:q3_c1"]["std"] > 0
     assert "n-dof refit of the usual model" in text and "linear_q3_direction" in text
+
+
+def test_heldout_is_leave_one_run_out_of_the_stacked_system():
+    """The refit's held-out error (folds subtracted from the normal equations) equals
+    :func:`ident.unseen.heldout_error` on the explicit stacked regressor of the usual model
+    (every joint's rows, theta shared, the extra column on joint 3's rows), and validation
+    samples are evaluated with the refitted parameters."""
+    sig, fit, _ = _arm(2, duration_s=6.0, effects=False)
+    rf = refit_robot(fit, sig, [(2, _TrueDrag())], validation=(sig, None, None))
+    rows = _rows(fit, sig, [np.zeros((sig.n, 0)), np.zeros((sig.n, 0)),
+                            (sig.dq[:, 2] * np.abs(sig.dq[:, 2]))[:, None]], None)
+    system = _System(fit, rows, [[], [], [len(rf.names_) - 1]], usual_coefficients,
+                     len(rf.names_), rf.names_)
+    W, y, exp = [], [], []
+    for j, rw in enumerate(rows):
+        r, J = system.joint(j, np.zeros(len(rf.names_)))  # r = tau - p at x = 0
+        full = np.zeros((J.shape[0], len(rf.names_)))
+        full[:, system.local(j)] = J
+        W.append(full)
+        y.append(r)
+        exp.append(rw.experiment)
+    W, y, exp = np.concatenate(W), np.concatenate(y), np.concatenate(exp)
+    tau2 = sum(float(rw.tau @ rw.tau) for rw in rows)
+    want = heldout_error(W, y, exp) * float(np.linalg.norm(y))
+    assert rf.heldout["after"]["all"] * np.sqrt(tau2) == pytest.approx(want, rel=1e-6)
+    assert rf.heldout_kind == "leave one run out"
+    for j in fit.joints_:
+        assert rf.validation["after"][j] == pytest.approx(rf.rel_error["after"][j], rel=1e-9)
+        assert rf.validation["before"][j] == pytest.approx(rf.rel_error["before"][j], rel=1e-9)
+
