@@ -12,9 +12,10 @@ identified together (:class:`ident.robot.estimate.RobotModel`: base parameters o
 body and rotor inertias, plus the usual or the paper friction on every joint). Prints the
 base parameters with their standard deviations (eq. 15-16), the per-joint and global relative
 errors on the fit data and on the ``--validate`` files -- on the fit's rows and on all rows,
-with the share each leaves out -- optionally refines every joint on the fit's rows
-(:func:`refine_robot`), and writes the JSON record (``docs/robot-data.md``). Outputs are
-written only once everything has been computed, so a bad input leaves nothing behind.
+with the share each leaves out -- optionally refines every joint on the fit's rows and refits
+the found terms inside the n-dof model (:func:`refine_robot`), and writes the JSON record
+(``docs/robot-data.md``). Outputs are written only once everything has been computed, so a
+bad input leaves nothing behind.
 """
 
 from __future__ import annotations
@@ -50,11 +51,13 @@ from .robot.loaders import (
 from .robot.payload import format_misfit, payload_misfit
 from .robot.plots import write_robot_report
 from .robot.refine_joint import joint_coulomb, refine_joint
+from .robot.refit import refit_robot
 from .robot.regressor import RobotRegressor
 from .robot.signals import RobotSignals
 from .robot.tables import format_table_iii, table_iii
 
-__all__ = ["run", "fit_robot", "refine_robot", "format_report", "format_refinement", "FORMAT"]
+__all__ = ["run", "fit_robot", "refine_robot", "format_report", "format_refinement",
+           "format_refit", "FORMAT"]
 
 FORMAT = "jointid-robot-fit/1"
 #: Preprocessing chains (``fit_robot(chain=...)``, ``--chain``).
@@ -347,6 +350,9 @@ def refine_robot(
     (:func:`kept_rows`), the other joints' q and dq offered as variables, a zero-order hold
     named against the raw log's period (:func:`ident.robot.refine_joint.refine_joint`).
     With validation files, a step must lower their error too (their rows selected alike).
+    Then every term found is refitted inside the n-dof model, every joint together
+    (:func:`ident.robot.refit.refit_robot`: before/after per joint and for the robot, under
+    ``"refit"``; ``{"error": ...}`` when it cannot be done, e.g. IDIM-IV).
 
     Parameters
     ----------
@@ -431,6 +437,19 @@ def refine_robot(
     rec = {"model": model, "max_steps": int(max_steps), "cycle_s": out["_cycle_s"],
            "rows": "the fit's rows (decimated samples, stiction area, guard and sign check "
                    "left out as in the fit)", "joints": done}
+    # the found terms refitted inside the n-dof model, all joints together
+    # (ident.robot.refit): before / after per joint and for the whole robot
+    terms = [(sig.joints.index(joint), st.term) for joint, ref in refs.items()
+             for st in ref.steps]
+    say(f"n-dof refit with {len(terms)} found term(s)")
+    try:
+        fitted = refit_robot(est, sig, terms, prediction=pred, keep=keep,
+                             revolute=[types.get(jn, True) for jn in sig.joints],
+                             validation=validation)
+        rec["refit"] = fitted.to_json()
+        out["_refit"] = fitted
+    except IdentError as exc:
+        rec["refit"] = {"error": str(exc)}
     out["refinement"] = rec
     out["_refinements"] = refs
     return rec
@@ -465,7 +484,43 @@ def format_refinement(rec: dict[str, Any]) -> str:
                      f"{ba(r['noise_floor']):>18}  {added}")
         if r["validation"] is not None:
             lines.append(f"{'':<{w}}validation {ba(r['validation'])}")
+    if rec.get("refit"):
+        lines.append("")
+        lines += format_refit(rec["refit"], rec["model"])
     return "\n".join(lines)
+
+
+def format_refit(fit: dict[str, Any], model: str) -> list[str]:
+    """The n-dof refit table of ``jointid fit --robot --refine`` (the found terms inside the
+    n-dof model, :func:`ident.robot.refit.refit_robot`)."""
+    if "error" in fit:
+        return [f"n-dof refit with the found terms: not done: {fit['error']}"]
+    lines = [f"n-dof refit of the {model} model with the found terms, every joint together "
+             "(errors ||rho_j||/||tau_j|| [%], the n-dof fit -> the refit)"]
+    joints = list(fit["rel_error"]["before"])
+    w = max(8, *(len(j) + 2 for j in joints))
+
+    def ba(d: dict[str, Any] | None, j: str) -> str:
+        if d is None:
+            return ""
+        return f"{_pct(d['before'].get(j)).strip()} -> {_pct(d['after'].get(j)).strip()}"
+
+    val = fit.get("validation_rel_error")
+    lines.append(f"{'joint':<{w}}{'fit':>18}{'held-out':>18}{'noise floor':>18}"
+                 + (f"{'validation':>18}" if val else ""))
+    for j in joints:
+        lines.append(f"{j:<{w}}{ba(fit['rel_error'], j):>18}"
+                     f"{ba(fit['heldout_rel_error'], j):>18}{ba(fit['noise_floor'], j):>18}"
+                     + (f"{ba(val, j):>18}" if val else ""))
+    for x in fit["extras"]:
+        pars = fit["parameters"]
+        vals = ", ".join(
+            f"{n} = {pars[x['joint'] + ':' + n]['value']:.4g} ± "
+            f"{2 * (pars[x['joint'] + ':' + n]['std'] or math.nan):.2g}" for n in x["names"])
+        lines.append(f"  {x['joint']}: {x['effect']}: {vals} (± 2σ)")
+    if not fit["extras"]:
+        lines.append("  (no term found: the refit is the n-dof fit)")
+    return lines
 
 
 def _vmax(sel: RobotSignals) -> np.ndarray:

@@ -20,8 +20,24 @@ depends on another joint's state (n-dof only, no single-joint plant table):
   position of joint m (sinusoidal and linear forms; the factor is clipped at 0 so the dry
   friction never changes sign). It multiplies the warm-up factor.
 
+The effects are those of the plant-effect registry shared with the single joint
+(:mod:`sim_drivers.effects`, one module per effect, docs/refinement.md "Adding an effect"):
+the tables and keys of :meth:`ArmEffects.make` and :meth:`ArmEffects.from_plant_effects` are
+the registry's (a native table's keys are checked against its registered schema at import).
+The six above have a native vectorised form here; any other registered effect (a new module
+in ``sim_drivers/effects/``) is carried per joint as its registered parameters
+(:attr:`ArmEffects.registered`, values validated by its schema) and applied through its
+registration: its ``torque`` in the inverse model (:meth:`ArmEffects.registered_torque`) and
+its forward-dynamics ``extra`` knob (a static torque f(q_j, dq_j, t)) in
+:class:`~sim_drivers.arm_plant.ArmPlant`, per joint, as :class:`sim_drivers.plant.JointPlant`
+does. Such an effect sees joint j alone: ``Inputs.q, dq, t, tau_out`` of the joint and
+``Inputs.params`` with the joint's ``friction`` (the eq. 30 coefficients as scalars) and
+``joint.q_s``; an effect that sets another forward knob is refused with one line (the arm
+reads those knobs only for its native effects). So a new friction effect is one plant file
+for both simulators.
+
 The effect code of the arm simulator lives in this file (parameters, vectorised formulas used
-by the inverse model), so that it can be switched to a shared effects registry in one place.
+by the inverse model).
 One exception, for speed: :meth:`sim_drivers.arm_plant.ArmPlant._accel` inlines the scalar
 per-joint form of the same formulas, as ``sim_drivers.plant.JointPlant`` does; the test
 ``test_one_joint_with_every_effect_is_the_joint_plant`` pins both to the single-joint plant.
@@ -31,11 +47,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields, replace
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 
+from trajectories import SchemaError
+
 from . import SimError
+from .effects import Inputs, Knobs, PlantEffect, registry
 
 _TWO_PI = 2.0 * math.pi
 
@@ -50,6 +70,21 @@ _TABLES: dict[str, dict[str, str]] = {
     "quadratic_viscous": {"F_VV": "F_VV"},
     "torque_lag": {"time_constant_s": "lag_time_constant_s"},
 }
+
+
+def _check_native() -> None:
+    """The native tables are registered plant effects with exactly these keys."""
+    specs = {e.name: e for e in registry()}
+    for table, keys in _TABLES.items():
+        if table not in specs or set(specs[table].schema) != set(keys):
+            raise SimError(f"ArmEffects: native table {table!r} does not match the plant-effect "
+                           f"registry ({sorted(keys)} against "
+                           f"{sorted(specs[table].schema) if table in specs else 'absent'})")
+
+
+_check_native()
+#: Field of :class:`ArmEffects` holding the registered (non-native) effects, per joint.
+_REGISTERED = "registered"
 _DEFAULTS = {"ripple_period_rad": _TWO_PI / 16.0, "warm_up_time_constant_s": 60.0,
              "coupling_period_rad": _TWO_PI}
 #: ``make(dry_coupling={(j, m): {...}})`` key -> ArmEffects field (shape (k, k), row j, col m).
@@ -83,6 +118,9 @@ class ArmEffects:
         (the joint whose position drives it): c_jm [-], P_jm [rad], phi_jm [rad].
     coupling_slope_per_rad, coupling_rest_rad : ndarray, shape (k, k)
         Dry coupling, linear form: a_jm [1/rad] and q0_jm [rad].
+    registered : tuple of dict
+        Per joint, the other registered plant effects on it: effect name -> its parameters
+        (the registry's dataclass, ``enabled`` True); module docstring.
     """
 
     ripple_amplitude_Nm: np.ndarray
@@ -102,10 +140,18 @@ class ArmEffects:
     coupling_phase_rad: np.ndarray | None = None
     coupling_slope_per_rad: np.ndarray | None = None
     coupling_rest_rad: np.ndarray | None = None
+    registered: tuple[dict[str, Any], ...] | None = None
 
     def __post_init__(self) -> None:
         k = int(np.size(self.lag_time_constant_s))
+        reg = tuple({} for _ in range(k)) if self.registered is None else tuple(
+            dict(d) for d in self.registered)
+        if len(reg) != k:
+            raise SimError(f"ArmEffects.registered: expected {k} joints, got {len(reg)}")
+        object.__setattr__(self, _REGISTERED, reg)
         for f in fields(self):
+            if f.name == _REGISTERED:
+                continue
             dtype = bool if f.name == "asymmetric" else float
             pair = f.name.startswith("coupling_")
             v = getattr(self, f.name)
@@ -133,7 +179,8 @@ class ArmEffects:
     def none(cls, k: int) -> ArmEffects:
         """No effect on any of ``k`` joints."""
         kw: dict[str, Any] = {f.name: np.full(k, _DEFAULTS.get(f.name, 0.0))
-                              for f in fields(cls) if not f.name.startswith("coupling_")}
+                              for f in fields(cls)
+                              if not f.name.startswith("coupling_") and f.name != _REGISTERED}
         kw["asymmetric"] = np.zeros(k, dtype=bool)
         return cls(**kw)
 
@@ -149,7 +196,10 @@ class ArmEffects:
         "period_rad": 2.0, "phase_rad": 0.5}}`` (joint 0's dry friction follows q of joint 1;
         keys of :data:`_COUPLING`).
         """
-        arrays = {f.name: np.array(getattr(cls.none(k), f.name)) for f in fields(cls)}
+        arrays: dict[str, Any] = {f.name: np.array(getattr(cls.none(k), f.name))
+                                  for f in fields(cls) if f.name != _REGISTERED}
+        registered: list[dict[str, Any]] = [{} for _ in range(k)]
+        specs = {e.name: e for e in registry()}
         for (j, m), values in tables.pop("dry_coupling", {}).items():
             if not (0 <= int(j) < k and 0 <= int(m) < k) or int(j) == int(m):
                 raise SimError(f"ArmEffects.dry_coupling: joint pair {(j, m)!r}: expected two "
@@ -160,9 +210,16 @@ class ArmEffects:
                                    f"of {sorted(_COUPLING)}")
                 arrays[_COUPLING[key]][int(j), int(m)] = float(v)
         for table, per_joint in tables.items():
+            if table not in _TABLES and table in specs:
+                for j, values in per_joint.items():
+                    if not 0 <= int(j) < k:
+                        raise SimError(f"ArmEffects.{table}: joint index {j!r} not in "
+                                       f"0..{k - 1}")
+                    registered[int(j)][table] = _registered_params(specs[table], values)
+                continue
             if table not in _TABLES:
                 raise SimError(f"ArmEffects: unknown effect {table!r}; expected one of "
-                               f"{sorted([*_TABLES, 'dry_coupling'])}")
+                               f"{sorted([*specs, 'dry_coupling'])}")
             for j, values in per_joint.items():
                 if not 0 <= int(j) < k:
                     raise SimError(f"ArmEffects.{table}: joint index {j!r} not in 0..{k - 1}")
@@ -175,7 +232,7 @@ class ArmEffects:
                         raise SimError(f"ArmEffects.{table}.{key}: unknown key; expected one "
                                        f"of {sorted(_TABLES[table])}")
                     arrays[_TABLES[table][key]][j] = float(v)
-        return cls(**arrays)
+        return cls(**arrays, registered=tuple(registered))
 
     @classmethod
     def from_plant_effects(cls, per_joint: Any) -> ArmEffects:
@@ -187,10 +244,11 @@ class ArmEffects:
         for j, eff in enumerate(per_joint):
             if eff is None:
                 continue
-            for table, keys in _TABLES.items():
-                e = getattr(eff, table, None)
+            for spec in registry():
+                e = getattr(eff, spec.name, None)
                 if e is not None and getattr(e, "enabled", False):
-                    tables.setdefault(table, {})[j] = {key: getattr(e, key) for key in keys}
+                    tables.setdefault(spec.name, {})[j] = {key: getattr(e, key)
+                                                           for key in spec.schema}
         return cls.make(len(per_joint), **tables)
 
     def replace(self, **changes: Any) -> ArmEffects:
@@ -202,7 +260,12 @@ class ArmEffects:
         return int(self.F_VV.shape[0])
 
     def enabled(self) -> dict[str, np.ndarray]:
-        """Effect name -> boolean mask (k,) of the joints where it is on."""
+        """Effect name -> boolean mask (k,) of the joints where it is on (the registered
+        effects of :attr:`registered` after the native ones)."""
+        extra = {}
+        for j, d in enumerate(self.registered):
+            for name in d:
+                extra.setdefault(name, np.zeros(self.k, dtype=bool))[j] = True
         return {
             "position_ripple": self.ripple_amplitude_Nm != 0,
             "spring": self.spring_stiffness_Nm_per_rad != 0,
@@ -211,6 +274,7 @@ class ArmEffects:
             "quadratic_viscous": self.F_VV != 0,
             "torque_lag": self.lag_time_constant_s > 0,
             "dry_coupling": self.coupled(),
+            **extra,
         }
 
     def coupled(self) -> np.ndarray:
@@ -265,3 +329,71 @@ class ArmEffects:
         tl = self.lag_time_constant_s
         with np.errstate(divide="ignore"):
             return np.where(tl > 0, np.exp(-h / np.where(tl > 0, tl, 1.0)), 0.0)
+
+    # ------------------------------------------------------------------ registered effects
+    def registered_torque(self, friction: Any, q: Any, dq: Any, t: Any,
+                          tau_out: Any) -> np.ndarray:
+        """Sum of the registered effects' torques (their ``PlantEffect.torque``) [N m], joint
+        by joint, shape of ``q`` (..., k); t [s] since the run start, shape (...,) or scalar;
+        ``friction``: the arm's :class:`~sim_drivers.arm_params.ArmFriction`."""
+        q = np.asarray(q, dtype=float)
+        dq = np.asarray(dq, dtype=float)
+        tau_out = np.asarray(tau_out, dtype=float)
+        out = np.zeros(np.broadcast_shapes(q.shape, dq.shape))
+        specs = {e.name: e for e in registry()}
+        for j, d in enumerate(self.registered):
+            for name, p in d.items():
+                spec = specs[name]
+                if spec.torque is None:
+                    continue
+                tj = tau_out[..., j]
+                x = Inputs(_joint_params(friction, j), q[..., j], dq[..., j], 0.0, 0.0, 0.0, t,
+                           lambda *_a, tj=tj: tj)
+                out[..., j] += np.asarray(spec.torque(p, x), dtype=float)
+        return out
+
+    def forward_extra(self, friction: Any) -> list[tuple]:
+        """Per joint, the registered effects' static torques ``f(q_j, dq_j, t)`` [N m] of the
+        forward dynamics (their ``extra`` knob; t since the run start)."""
+        specs = {e.name: e for e in registry()}
+        out = []
+        default = Knobs()
+        for j, d in enumerate(self.registered):
+            fs: list = []
+            for name, p in d.items():
+                kn = Knobs()
+                specs[name].configure(p, kn, _joint_params(friction, j))
+                other = [f.name for f in fields(kn) if f.name != "extra"
+                         and getattr(kn, f.name) != getattr(default, f.name)]
+                if other:
+                    raise SimError(f"ArmEffects: effect {name!r} sets the forward-dynamics "
+                                   f"knob(s) {other}, which the arm reads for its native "
+                                   "effects only (use Knobs.extra)")
+                fs += kn.extra
+            out.append(tuple(fs))
+        return out
+
+
+def _registered_params(spec: PlantEffect, values: dict[str, Any]) -> Any:
+    """The registered effect's parameters from a plant-file-like table, validated by its
+    schema (one-line :class:`SimError`)."""
+    kw: dict[str, Any] = {}
+    for key, v in values.items():
+        if key == "enabled":
+            continue
+        if key not in spec.schema:
+            raise SimError(f"ArmEffects.{spec.name}.{key}: unknown key; expected one of "
+                           f"{sorted(spec.schema)}")
+        try:
+            kw[key] = spec.schema[key].validate(v, f"{spec.name}.{key}", "ArmEffects")
+        except SchemaError as exc:
+            raise SimError(str(exc)) from None
+    return spec.params(enabled=True, **kw)
+
+
+def _joint_params(friction: Any, j: int) -> SimpleNamespace:
+    """What a registered effect may read of joint j: ``friction`` (eq. 30 coefficients,
+    scalars) and ``joint.q_s``, as the single-joint ``PlantParams``."""
+    f = {fl.name: float(np.asarray(getattr(friction, fl.name))[j]) for fl in fields(friction)}
+    return SimpleNamespace(friction=SimpleNamespace(**f),
+                           joint=SimpleNamespace(q_s=f.get("q_s", 0.0)))

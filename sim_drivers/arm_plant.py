@@ -18,6 +18,9 @@ Friction of joint j, eq. 30 with E_j = exp(-|dq_j| / q_s,j), P_j = sign(tau_out,
           + P+ (c_m + d_m E) sign(dq_j) + P- (c_g + d_g E) sign(dq_j) + F_V dq_j + tau_off
           + effects_j(q_j, dq_j, t)                          (sim_drivers.arm_effects)
 
+(effects_j: the native effects of the arm and any other effect of the plant-effect registry,
+:mod:`sim_drivers.effects`, on that joint.)
+
 The dry terms (c, d) of joint j are multiplied by the warm-up factor and by the dry-coupling
 factor of :meth:`~sim_drivers.arm_effects.ArmEffects.coupling_scale` (the position of other
 joints: the arm's one cross-joint effect), in the inverse model, the sliding friction and the
@@ -159,7 +162,10 @@ def friction_torque(
     if np.ndim(t) == 0:
         scale = scale[0]
     scale = scale * e.coupling_scale(q)
-    return tau + scale * dry * s + e.viscous_torque(f.F_V, dq) + e.position_torque(q)
+    tau = tau + scale * dry * s + e.viscous_torque(f.F_V, dq) + e.position_torque(q)
+    if any(e.registered):  # the registry's other effects (sim_drivers.arm_effects)
+        tau = tau + e.registered_torque(f, q, dq, t, tau_out)
+    return tau
 
 
 def inverse_arm_torque(
@@ -274,6 +280,9 @@ class ArmPlant:
         self._cpl = pairs if any(pairs) else None
         keep = e.lag_keep(self._h)
         self._keep = keep.tolist() if np.any(keep) else None
+        # the registry's other effects: static torques f(q_j, dq_j, t) per joint
+        xf = e.forward_extra(f)
+        self._xf = xf if any(xf) else None
         self._max_events = 2 * k + 2
         self._il = np.tril_indices(k, -1)
         self.reset()
@@ -331,6 +340,9 @@ class ArmPlant:
                 r -= rip_a * math.sin(rip_k * q[j] + rip_ph)
             if spr_k:
                 r -= spr_k * (q[j] - spr_q0)
+            if self._xf is not None:
+                for fx in self._xf[j]:
+                    r -= fx(q[j], vj, t - self.t0)
             wf = 1.0 + wu_w * exp(-(t - self.t0) * wu_tinv) if wu_w else 1.0
             if cpl is not None and cpl[j]:
                 cf = 1.0

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -52,9 +53,11 @@ from ..preprocess import (
 from . import RobotIdentError
 from .base import placed_payload
 from .loaders import RawRobotRun, check_periods
+from .refine_joint import joint_term_columns
 from .signals import RobotColumns, RobotSignals
 
-__all__ = ["DesignSettings", "design_runs", "resolve_design", "sign_checked", "MAX_BYTES"]
+__all__ = ["DesignSettings", "design_runs", "joint_columns", "resolve_design", "sign_checked",
+           "MAX_BYTES"]
 
 #: Largest full-rate regressor of one experiment the columns chain builds [bytes].
 MAX_BYTES = 4 * 2**30
@@ -362,3 +365,42 @@ def sign_checked(
     skip = kept < np.broadcast_to(np.asarray(min_kept, dtype=float), kept.shape)
     keep[:, skip] = cols.keep[:, skip]
     return replace(signals, columns=replace(cols, keep=keep)), kept
+
+
+def joint_columns(
+    signals: RobotSignals,
+    prediction: np.ndarray,
+    terms: Sequence[tuple[int, Any]],
+    revolute: Sequence[bool] | None = None,
+) -> list[np.ndarray]:
+    """Extra columns of each joint's rows of the stacked n-dof system (the hook of the
+    n-dof refit, :mod:`ident.robot.refit`).
+
+    Parameters
+    ----------
+    signals : RobotSignals
+        The samples of the stacked system (n samples, k joints).
+    prediction : ndarray, shape (n, k)
+        The n-dof model's prediction tau_hat [N m] on them: the load variable of the terms
+        (never the measured torque).
+    terms : sequence of (int, Term)
+        (joint index, single-joint ``ident.terms.Term``), e.g. the steps of
+        :func:`ident.robot.refine_joint.refine_joint`.
+    revolute : sequence of bool, optional
+        Per joint, whether it is revolute (default all).
+
+    Returns
+    -------
+    list of ndarray
+        Per joint j, shape (n, c_j): the columns of its terms side by side, in the order
+        given (c_j = 0 without a term), computed from the states only
+        (:func:`~ident.robot.refine_joint.joint_term_columns`).
+    """
+    k = signals.k
+    out = [[] for _ in range(k)]
+    for j, term in terms:
+        if not 0 <= int(j) < k:
+            raise RobotIdentError(f"joint_columns: joint index {j} not in 0..{k - 1}")
+        rev = True if revolute is None else bool(revolute[int(j)])
+        out[int(j)].append(joint_term_columns(signals, prediction, int(j), term, revolute=rev))
+    return [np.concatenate(c, axis=1) if c else np.zeros((signals.n, 0)) for c in out]

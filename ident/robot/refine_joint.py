@@ -29,6 +29,11 @@ differentiated again by :func:`ident.preprocess.build_design` with decimation 1 
 chain). A zero-order hold is named against the raw log's period ``cycle_s`` (the design's own
 period is the decimated one).
 
+The found term is fitted here on the n-dof fit's residual (two stages: the n-dof parameters
+have already absorbed the part of its column in their span); :func:`joint_term_columns`
+gives its columns on the robot's samples, from the states only, for the n-dof refit
+(:mod:`ident.robot.refit`) that fits it together with every n-dof parameter.
+
 Pure numerics (no file access).
 """
 
@@ -51,7 +56,7 @@ from ..terms import Library, Term
 from .signals import RobotSignals
 
 __all__ = ["NDOF_PREDICTION", "NdofPrediction", "fit_rows_design", "joint_coulomb",
-           "other_joint_names", "refine_joint"]
+           "joint_term_columns", "other_joint_names", "refine_joint"]
 
 #: Key of the n-dof prediction in ``Signals.extra`` (not searched as an "other" variable).
 NDOF_PREDICTION = "tau_hat"
@@ -241,6 +246,42 @@ def _joint_signals(
     if torque == "measured":
         lib = Library(NdofPrediction(), *lib.terms())
     return s, names, lib
+
+
+def joint_term_columns(sig: RobotSignals, prediction: np.ndarray, j: int, term: Term, *,
+                       revolute: bool = True) -> np.ndarray:
+    """Joint j's columns of a single-joint ``term`` (e.g. a step of :func:`refine_joint`) on
+    every sample of ``sig``, in ``sig``'s row order, shape (n, c).
+
+    The term sees what it saw in the refinement: joint j's signals of :func:`refine_joint`
+    (``prediction[:, j]`` as ``extra["tau_hat"]``, the other joints' ``q<m>``, ``dq<m>``),
+    experiment by experiment (as :func:`fit_rows_design`'s blocks), through
+    :meth:`Signals.states <ident.signals.Signals.states>`: the columns are functions of the
+    states and the n-dof model's prediction only, never of the measured torque
+    (:class:`~ident.OutputLeakError` if the term tries).
+
+    Raises
+    ------
+    DataError
+        Bad shapes or joint index, non-finite samples, a term whose columns have another
+        shape or non-finite values.
+    """
+    s, _, _ = _joint_signals(sig, prediction, j, revolute=revolute, others=True,
+                             torque="measured")
+    order = np.concatenate([np.flatnonzero(sig.experiment == e)
+                            for e in np.unique(sig.experiment)])
+    c = len(term.names())
+    out = np.empty((sig.n, c))
+    for e in np.unique(s.experiment):
+        idx = np.flatnonzero(s.experiment == e)
+        cols = np.asarray(term.columns(s.take(idx).states()), dtype=float)
+        if cols.shape != (idx.size, c):
+            raise DataError(f"{term.effect}: columns of shape {cols.shape} on joint "
+                            f"{sig.joints[j]}, expected {(idx.size, c)}")
+        out[order[idx]] = cols
+    if not np.all(np.isfinite(out)):
+        raise DataError(f"{term.effect}: non-finite columns on joint {sig.joints[j]}")
+    return out
 
 
 def fit_rows_design(lib: Library, s: Signals, keep: np.ndarray) -> Design:

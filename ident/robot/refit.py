@@ -1,0 +1,507 @@
+"""The n-dof refit: the terms a refinement found, refitted inside the n-dof model.
+
+:func:`ident.robot.refine_joint.refine_joint` looks for an effect in one joint's residual
+after the n-dof fit; on its own the found term is fitted on that residual (two stages), so
+the n-dof parameters have already absorbed the part of its column that lies in their span
+and its coefficients are biased towards zero (docs/refinement.md, section 8.7).
+:func:`refit_robot` removes that bias: every found term becomes extra columns of its
+joint's rows of the stacked n-dof system, and the whole model -- base parameters, every
+joint's friction, the extra coefficients -- is fitted again in one estimation::
+
+    tau_j = (the n-dof model of joint j: usual eq. 5/8 or paper eq. 30) + X_j e_j
+
+X_j (:func:`ident.robot.design.joint_columns`) is computed from the states only: the term
+sees joint j's signals of the refinement through :meth:`ident.signals.Signals.states` (the
+other joints' ``q<m>``, ``dq<m>``, and the first n-dof fit's prediction as the load
+variable ``tau_hat``), never the measured torque. The extra terms enter additively with
+their own coefficients (not scaled by the paper model's a, b).
+
+Estimation: the rows of each joint are those the n-dof fit used (|dq_j| > ``dq_min``, finite,
+``RobotColumns.keep`` or the given ``keep``, the paper model's quadrant band); the quadrants
+of the paper model are those of the first fit's prediction (its ``predict``), held fixed;
+Gauss-Newton from the first fit (one step for the usual model, which is linear), LS or WLS as
+the model (WLS: per-joint weights 1/sigma_j^2 of an LS refit); the parameters the first fit
+held fixed stay fixed. IDIM-IV is refused (no instruments for the extra columns).
+
+Reported before (the n-dof fit as it is) and after (the refit), per joint and for the whole
+robot: the relative error ||rho_j|| / ||tau_j|| on the rows used, the error on unseen data
+(:func:`ident.unseen.heldout_error`'s folds: leave one run out with two runs or more, else
+five blocks; the refit linearised at the solution), the noise floor
+(:func:`ident.unseen.noise_floor` of each joint's residual), and the validation error when
+validation samples are given.
+
+Memory: the rows of every joint (their base columns, friction and extra columns) are held
+while iterating: ~8 (p_j + 10 + c_j) bytes per row; meant for the decimated rows of a fit.
+Pure numerics (no file access).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+
+from ..terms import Term
+from ..unseen import N_BLOCKS, heldout_kind, noise_floor
+from . import RobotIdentError
+from .design import joint_columns
+from .moments import quadrant_weights
+from .paper import paper_coefficients, usual_coefficients
+from .signals import RobotSignals
+
+__all__ = ["RobotRefit", "refit_robot", "extra_name"]
+
+#: Gauss-Newton iterations at most (paper model) and relative step tolerance.
+MAX_ITER = 50
+TOL = 1e-10
+
+
+def extra_name(joint: str, name: str) -> str:
+    """Name of an extra parameter in the refitted n-dof model: ``<joint>:<term name>``."""
+    return f"{joint}:{name}"
+
+
+@dataclass
+class _Rows:
+    """Joint j's rows of the stacked system (the rows the n-dof fit used)."""
+
+    idx: np.ndarray  # row indices in the signals
+    V: np.ndarray  # (m, nv): base columns, p, sign, dq, 1, 0 (ident.robot.moments)
+    pp: np.ndarray  # P+ (model quadrant, fixed)
+    E: np.ndarray  # exp(-|dq| / q_s)
+    X: np.ndarray  # (m, c) extra columns
+    tau: np.ndarray  # measured torque [N m]
+    experiment: np.ndarray
+
+
+@dataclass
+class RobotRefit:
+    """The n-dof model refitted with extra per-joint terms (module doc).
+
+    Attributes
+    ----------
+    model : RobotModel
+        The first n-dof fit (unchanged).
+    terms : list of (int, Term)
+        The extra terms, (joint index, term).
+    names_ : tuple of str
+        The model's ``names_`` then the extra parameters (:func:`extra_name`).
+    coef_, std_ : ndarray
+        Estimates and standard deviations (eq. 15, sigma^2 (J^T J)^-1 at the solution).
+    cov_ : ndarray
+    params_ : dict
+        name -> value.
+    extras : list of dict
+        Per extra term: ``joint``, ``effect``, ``names`` (the term's), ``values``, ``std``,
+        ``parameters`` (the term's derived values ``{name: (value, 2 sigma)}`` when it has a
+        ``parameters`` method, e.g. amplitude and phase).
+    rel_error, heldout, noise_floor, validation : dict
+        ``{"before": {joint: value, ..., "all": value}, "after": {...}}`` (validation: None
+        without validation samples).
+    heldout_kind : str
+    n_rows : dict
+        Rows used per joint.
+    n_iter : int
+    """
+
+    model: Any
+    terms: list[tuple[int, Term]]
+    names_: tuple[str, ...] = ()
+    coef_: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    std_: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    cov_: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    params_: dict[str, float] = field(default_factory=dict)
+    extras: list[dict[str, Any]] = field(default_factory=list)
+    rel_error: dict[str, dict[str, float]] = field(default_factory=dict)
+    heldout: dict[str, dict[str, float]] = field(default_factory=dict)
+    noise_floor: dict[str, dict[str, float]] = field(default_factory=dict)
+    validation: dict[str, dict[str, float]] | None = None
+    heldout_kind: str = ""
+    n_rows: dict[str, int] = field(default_factory=dict)
+    n_iter: int = 0
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``refit`` record of docs/fit-json.md (plain floats; NaN as None)."""
+        def num(v: float) -> float | None:
+            return float(v) if np.isfinite(v) else None
+
+        def ba(d: dict[str, dict[str, float]] | None) -> dict | None:
+            if d is None:
+                return None
+            return {w: {j: num(v) for j, v in d[w].items()} for w in ("before", "after")}
+
+        return {
+            "parameters": {n: {"value": num(v), "std": num(s)} for n, v, s in
+                           zip(self.names_, self.coef_, self.std_, strict=True)},
+            "extras": [{**{k: v for k, v in x.items() if k != "parameters"},
+                        "parameters": {n: {"value": num(a), "two_sigma": num(b)}
+                                       for n, (a, b) in x["parameters"].items()}}
+                       for x in self.extras],
+            "rel_error": ba(self.rel_error),
+            "heldout_kind": self.heldout_kind,
+            "heldout_rel_error": ba(self.heldout),
+            "noise_floor": ba(self.noise_floor),
+            "validation_rel_error": ba(self.validation),
+            "rows": dict(self.n_rows),
+            "iterations": int(self.n_iter),
+        }
+
+
+def refit_robot(
+    model: Any,
+    signals: RobotSignals,
+    terms: Sequence[tuple[int, Term]],
+    *,
+    prediction: np.ndarray | None = None,
+    keep: np.ndarray | None = None,
+    revolute: Sequence[bool] | None = None,
+    validation: tuple[RobotSignals, np.ndarray | None, np.ndarray | None] | None = None,
+) -> RobotRefit:
+    """Refit the n-dof ``model`` with the extra per-joint ``terms`` (module doc).
+
+    Parameters
+    ----------
+    model : RobotModel
+        A fitted n-dof model (method ``"ls"`` or ``"wls"``).
+    signals : RobotSignals
+        The samples it was fitted on (or any with the same joints).
+    terms : sequence of (int, Term)
+        (joint index, single-joint term), e.g. every step of
+        :func:`~ident.robot.refine_joint.refine_joint` on each joint. Empty: the refit is
+        the first fit (before = after, up to the iterations of the paper model).
+    prediction : ndarray, shape (n, k), optional
+        ``model.predict(signals)`` when already computed: the terms' load variable.
+    keep : ndarray of bool, shape (n, k), optional
+        Rows the fit used (``RobotColumns.keep`` by default when the signals carry columns);
+        |dq_j| > ``model.dq_min`` and finite samples are required too.
+    revolute : sequence of bool, optional
+        Per joint, whether it is revolute (default all).
+    validation : (RobotSignals, ndarray or None, ndarray or None), optional
+        Validation samples, the first fit's prediction on them (None: computed) and their
+        kept rows (None: as ``keep``'s default).
+
+    Returns
+    -------
+    RobotRefit
+
+    Raises
+    ------
+    RobotIdentError
+        An unfitted model, IDIM-IV, bad shapes, parameters not identifiable with the terms.
+    """
+    model._check_fitted()
+    if model.method not in ("ls", "wls"):
+        raise RobotIdentError(f"refit_robot: method {model.method!r} is not supported (the "
+                              "extra columns have no instruments); refit with 'ls' or 'wls'")
+    if tuple(signals.joints) != tuple(model.joints_):
+        raise RobotIdentError(f"refit_robot: joints {signals.joints}, expected the model's "
+                              f"{model.joints_}")
+    terms = [(int(j), t) for j, t in terms]
+    k = len(model.joints_)
+    pred = model.predict(signals) if prediction is None else np.asarray(prediction, float)
+    if pred.shape != signals.tau.shape:
+        raise RobotIdentError(f"refit_robot: prediction of shape {pred.shape}, expected "
+                              f"{signals.tau.shape}")
+    X = joint_columns(signals, pred, terms, revolute)
+    nx0 = len(model.coef_)
+    # extra parameters after the model's, joint by joint in the order given
+    names = list(model.names_)
+    ext_idx: list[list[int]] = [[] for _ in range(k)]
+    extras: list[dict[str, Any]] = []
+    for j, t in terms:
+        own = [extra_name(model.joints_[j], n) for n in t.names()]
+        clash = set(own) & set(names)
+        if clash:
+            raise RobotIdentError(f"refit_robot: parameters {sorted(clash)} appear twice")
+        extras.append({"joint": model.joints_[j], "effect": t.effect, "names": list(t.names()),
+                       "index": list(range(len(names), len(names) + len(own)))})
+        ext_idx[j] += extras[-1]["index"]
+        names += own
+    # X[j]'s columns are in the order of the terms on joint j, as ext_idx[j]
+    rows = _rows(model, signals, X, keep)
+    free = np.array([n not in model.fixed_ for n in names])
+    x0 = np.concatenate([model.coef_, np.zeros(len(names) - nx0)])
+    coeffs = usual_coefficients if model.model == "usual" else paper_coefficients
+    linear = model.model == "usual"
+    sys = _System(model, rows, ext_idx, coeffs, len(names), names)
+    w = np.ones(k)
+    x, it = sys.solve(x0, free, w, linear)
+    if model.method == "wls":
+        rr, _, _ = sys.residuals(x)
+        nfree = [int(free[sys.local(j)].sum()) for j in range(k)]
+        sj = np.array([math.sqrt(float(r @ r) / max(rw.V.shape[0] - b, 1))
+                       for r, rw, b in zip(rr, rows, nfree, strict=True)])
+        if np.any(sj <= 0):
+            raise RobotIdentError("refit_robot: a joint has zero residual; WLS weights "
+                                  "undefined (use method='ls')")
+        w = 1.0 / sj**2
+        x, it = sys.solve(x, free, w, linear)
+    out = RobotRefit(model=model, terms=terms, names_=tuple(names), n_iter=it)
+    A, _ = sys.normal(x, free, w)
+    rr, _, _ = sys.residuals(x)
+    n_rows = sum(rw.V.shape[0] for rw in rows)
+    dof = n_rows - int(free.sum())
+    if dof <= 0:
+        raise RobotIdentError(f"refit_robot: {n_rows} rows for {int(free.sum())} parameters")
+    sigma2 = float(sum(wj * float(r @ r) for wj, r in zip(w, rr, strict=True))) / dof
+    cov = np.zeros((len(names), len(names)))
+    cov[np.ix_(free, free)] = sigma2 * np.linalg.inv(A)
+    out.coef_, out.cov_ = x, cov
+    out.std_ = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    out.params_ = dict(zip(names, x.tolist(), strict=True))
+    for ex, (_, t) in zip(extras, terms, strict=True):
+        i = np.array(ex.pop("index"))
+        ex["values"] = x[i].tolist()
+        ex["std"] = out.std_[i].tolist()
+        ex["parameters"] = {}
+        if hasattr(t, "parameters"):
+            try:
+                got = t.parameters(x[i], cov[np.ix_(i, i)])
+            except (ValueError, TypeError, IndexError):
+                got = {}
+            ex["parameters"] = {n: (float(v[0]), float(v[1])) for n, v in got.items()}
+    out.extras = extras
+    out.n_rows = {model.joints_[j]: int(rw.V.shape[0]) for j, rw in enumerate(rows)}
+    # before: the n-dof fit as it is, on the same rows, without the extra columns
+    base = np.array([i < nx0 for i in range(len(names))])
+    r0, _, _ = sys.residuals(x0)
+    out.rel_error = {"before": _rel(model.joints_, r0, rows), "after": _rel(model.joints_, rr,
+                                                                            rows)}
+    out.noise_floor = {"before": _floors(model.joints_, r0, rows),
+                       "after": _floors(model.joints_, rr, rows)}
+    exp_all = np.concatenate([rw.experiment for rw in rows])
+    out.heldout_kind = heldout_kind(exp_all)
+    out.heldout = {"before": sys.heldout(x0, free & base, w),
+                   "after": sys.heldout(x, free, w)}
+    if validation is not None:
+        vsig, vpred, vkeep = validation
+        if vpred is None:
+            vpred = model.predict(vsig)
+        vX = joint_columns(vsig, vpred, terms, revolute)
+        vrows = _rows(model, vsig, vX, vkeep)
+        vsys = _System(model, vrows, ext_idx, coeffs, len(names), names)
+        out.validation = {"before": _rel(model.joints_, vsys.residuals(x0)[0], vrows),
+                          "after": _rel(model.joints_, vsys.residuals(x)[0], vrows)}
+    return out
+
+
+def _rel(joints: Sequence[str], rr: list[np.ndarray], rows: list[_Rows]) -> dict[str, float]:
+    out = {}
+    r2 = y2 = 0.0
+    for joint, r, rw in zip(joints, rr, rows, strict=True):
+        a, b = float(r @ r), float(rw.tau @ rw.tau)
+        out[joint] = math.sqrt(a / b) if b > 0 else math.nan
+        r2, y2 = r2 + a, y2 + b
+    out["all"] = math.sqrt(r2 / y2) if y2 > 0 else math.nan
+    return out
+
+
+def _floors(joints: Sequence[str], rr: list[np.ndarray], rows: list[_Rows]) -> dict[str, float]:
+    """Per joint :func:`ident.unseen.noise_floor`; ``all``: their quadratic mean weighted by
+    ||tau_j||^2 (the floor of the stacked residual)."""
+    out = {}
+    num = den = 0.0
+    for joint, r, rw in zip(joints, rr, rows, strict=True):
+        f = noise_floor(r, rw.tau, rw.experiment)
+        out[joint] = f
+        y2 = float(rw.tau @ rw.tau)
+        if np.isfinite(f):
+            num, den = num + f * f * y2, den + y2
+    out["all"] = math.sqrt(num / den) if den > 0 else math.nan
+    return out
+
+
+def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
+          keep: np.ndarray | None) -> list[_Rows]:
+    """Every joint's rows of the stacked system, as the model's own pass selects them."""
+    k = len(model.joints_)
+    if keep is None and signals.columns is not None:
+        keep = signals.columns.keep
+    if keep is not None:
+        keep = np.asarray(keep, dtype=bool)
+        if keep.shape != signals.tau.shape:
+            raise RobotIdentError(f"refit_robot: keep of shape {keep.shape}, expected "
+                                  f"{signals.tau.shape}")
+    theta_q = model.coef_[:model.n_theta_]
+    if model.quadrant_theta_ is not None:
+        theta_q = model.quadrant_theta_
+    band = np.asarray(getattr(model, "band_", np.zeros(k)), dtype=float)
+    parts: list[dict[str, list[np.ndarray]]] = [
+        {n: [] for n in ("idx", "V", "pp", "E", "tau")} for _ in range(k)]
+    for r, j, cols, WjT, pj, dqj, tauj, sg in model._fitted_rows(signals, "refit_robot"):
+        idx = np.arange(signals.n)[r]
+        ok = (np.abs(dqj) > model.dq_min) & np.isfinite(tauj) & np.all(np.isfinite(WjT), axis=0)
+        if keep is not None:
+            ok &= keep[idx, j]
+        V = model._v(WjT, pj, dqj, np.zeros(dqj.size), sg).T
+        if model.model == "paper" and (model.quadrant == "model"):
+            tout = theta_q[cols] @ WjT + pj
+            sp = tout * dqj
+            if band[j] > 0:
+                ok &= np.abs(tout) >= band[j]
+        elif model.model == "paper":
+            sp = tauj * dqj
+        else:
+            sp = np.ones(dqj.size)
+        p = parts[j]
+        p["idx"].append(idx[ok])
+        p["V"].append(V[ok])
+        p["pp"].append(quadrant_weights(sp[ok]))
+        p["E"].append(np.exp(-np.abs(dqj[ok]) / model.qs_[j]))
+        p["tau"].append(tauj[ok])
+    out = []
+    for j in range(k):
+        p = parts[j]
+        idx = np.concatenate(p["idx"]) if p["idx"] else np.zeros(0, dtype=int)
+        nv = len(model.cols_[j]) + 5
+        out.append(_Rows(idx=idx,
+                         V=np.concatenate(p["V"]) if p["V"] else np.zeros((0, nv)),
+                         pp=np.concatenate(p["pp"]) if p["pp"] else np.zeros(0),
+                         E=np.concatenate(p["E"]) if p["E"] else np.zeros(0),
+                         X=X[j][idx], tau=np.concatenate(p["tau"]) if p["tau"] else
+                         np.zeros(0), experiment=signals.experiment[idx]))
+    return out
+
+
+class _System:
+    """The stacked system: per joint the model's prediction and Jacobian plus X_j e_j."""
+
+    def __init__(self, model: Any, rows: list[_Rows], ext_idx: list[list[int]], coeffs: Any,
+                 nx: int, names: Sequence[str]) -> None:
+        self.model, self.rows, self.ext_idx, self.coeffs = model, rows, ext_idx, coeffs
+        self.nx, self.names = nx, list(names)
+
+    def local(self, j: int) -> np.ndarray:
+        return np.concatenate([self.model._local(j), np.asarray(self.ext_idx[j], dtype=int)])
+
+    def joint(self, j: int, x: np.ndarray, jac: bool = True):
+        """Residual (m,) and Jacobian (m, n_local) of joint j at x."""
+        m, rw = self.model, self.rows[j]
+        li = m._local(j)
+        nt = len(m.cols_[j])
+        th, blk = x[li[:nt]], x[li[nt:]]
+        e = x[np.asarray(self.ext_idx[j], dtype=int)]
+        pred = rw.X @ e
+        J = None
+        parts = []
+        for s, ws in ((0, rw.pp), (1, 1.0 - rw.pp)):
+            c0, c1, D0, D1 = self.coeffs(th, blk, s)
+            pred = pred + ws * (rw.V @ c0 + rw.E * (rw.V @ c1))
+            if jac:
+                parts.append(ws[:, None] * (rw.V @ D0 + rw.E[:, None] * (rw.V @ D1)))
+        if jac:
+            J = np.concatenate([parts[0] + parts[1], rw.X], axis=1)
+        return rw.tau - pred, J
+
+    def residuals(self, x: np.ndarray):
+        rr = [self.joint(j, x, jac=False)[0] for j in range(len(self.rows))]
+        return rr, None, None
+
+    def normal(self, x: np.ndarray, free: np.ndarray, w: np.ndarray):
+        A = np.zeros((self.nx, self.nx))
+        g = np.zeros(self.nx)
+        for j in range(len(self.rows)):
+            r, J = self.joint(j, x)
+            li = self.local(j)
+            A[np.ix_(li, li)] += w[j] * (J.T @ J)
+            g[li] += w[j] * (J.T @ r)
+        return A[np.ix_(free, free)], g[free]
+
+    def _step(self, A: np.ndarray, g: np.ndarray, free: np.ndarray) -> np.ndarray:
+        d = np.sqrt(np.abs(np.diag(A)))
+        zero = d == 0
+        if zero.any():
+            bad = [self.names[i] for i in np.flatnonzero(free)[zero]]
+            raise RobotIdentError(f"refit_robot: parameters {bad} have no excitation on the "
+                                  "rows used (zero columns)")
+        As = A / d[:, None] / d[None, :]
+        ev, evec = np.linalg.eigh(As)
+        if not ev[-1] > 0 or ev[0] <= 1e-12 * ev[-1]:
+            worst = np.argsort(-np.abs(evec[:, 0]))[:4]
+            bad = [self.names[i] for i in np.flatnonzero(free)[worst]]
+            raise RobotIdentError(f"refit_robot: parameters not identifiable with the extra "
+                                  f"terms (cond {ev[-1] / max(ev[0], 1e-300):.2g}); the weakest "
+                                  f"direction involves {bad}")
+        step = np.zeros(free.size)
+        step[free] = scipy.linalg.solve(As, g / d, assume_a="sym") / d
+        return step
+
+    def cost(self, x: np.ndarray, w: np.ndarray) -> float:
+        rr, _, _ = self.residuals(x)
+        return float(sum(wj * float(r @ r) for wj, r in zip(w, rr, strict=True)))
+
+    def solve(self, x0: np.ndarray, free: np.ndarray, w: np.ndarray,
+              linear: bool) -> tuple[np.ndarray, int]:
+        x = x0.copy()
+        cost = self.cost(x, w)
+        it = 0
+        while it < MAX_ITER:
+            it += 1
+            A, g = self.normal(x, free, w)
+            step = self._step(A, g, free)
+            lam = 1.0
+            while True:
+                xn = x + lam * step
+                cn = self.cost(xn, w)
+                if linear or cn <= cost * (1 + 1e-12) or lam < 1e-6:
+                    break
+                lam *= 0.5
+            x, cost = xn, cn
+            scale = np.sqrt(np.abs(np.diag(A)))
+            if linear or np.linalg.norm(lam * step[free] * scale) <= TOL * max(
+                    np.linalg.norm(x[free] * scale), 1e-300):
+                break
+        return x, it
+
+    def heldout(self, x: np.ndarray, free: np.ndarray, w: np.ndarray) -> dict[str, float]:
+        """Relative error per joint (and ``all``) of each fold predicted by the fit on the
+        others (linearised at x; exact for the usual model at its LS solution), folds as
+        :func:`ident.unseen.heldout_error`'s."""
+        k = len(self.rows)
+        exp_all = np.concatenate([rw.experiment for rw in self.rows])
+        runs = np.unique(exp_all)
+        per_run = runs.size >= 2
+        folds = []
+        for rw in self.rows:
+            if per_run:
+                folds.append(np.searchsorted(runs, rw.experiment))
+            else:  # contiguous blocks of the single run, by sample index
+                n = 1 + max(int(r.idx.max(initial=0)) for r in self.rows)
+                folds.append(np.minimum(rw.idx * N_BLOCKS // n, N_BLOCKS - 1))
+        fvals = np.unique(np.concatenate(folds))
+        res, jacs = [], []
+        A = np.zeros((self.nx, self.nx))
+        g = np.zeros(self.nx)
+        Af = {f: np.zeros((self.nx, self.nx)) for f in fvals}
+        gf = {f: np.zeros(self.nx) for f in fvals}
+        for j in range(k):
+            r, J = self.joint(j, x)
+            li = self.local(j)
+            keep_cols = free[li]
+            J = np.where(keep_cols[None, :], J, 0.0)
+            res.append(r)
+            jacs.append((li, J))
+            A[np.ix_(li, li)] += w[j] * (J.T @ J)
+            g[li] += w[j] * (J.T @ r)
+            for f in fvals:
+                m = folds[j] == f
+                if m.any():
+                    Jm = J[m]
+                    Af[f][np.ix_(li, li)] += w[j] * (Jm.T @ Jm)
+                    gf[f][li] += w[j] * (Jm.T @ r[m])
+        d = np.sqrt(np.abs(np.diag(A)))
+        d[d == 0] = 1.0
+        out_r = [np.array(r, copy=True) for r in res]
+        for f in fvals:
+            G = (A - Af[f]) / d[:, None] / d[None, :]
+            step = np.linalg.lstsq(G, (g - gf[f]) / d, rcond=1e-10)[0] / d
+            for j in range(k):
+                m = folds[j] == f
+                if m.any():
+                    li, J = jacs[j]
+                    out_r[j][m] = res[j][m] - J[m] @ step[li]
+        return _rel(self.model.joints_, out_r, self.rows)
