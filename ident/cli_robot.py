@@ -15,6 +15,8 @@ errors on the fit data and on the ``--validate`` files -- on the fit's rows and 
 with the share each leaves out -- optionally refines every joint on the fit's rows
 (:func:`refine_robot`), and writes the JSON record (``docs/robot-data.md``). Outputs are
 written only once everything has been computed, so a bad input leaves nothing behind.
+:func:`fit_files` is the command without the printing: the Python API
+(:class:`ident.api.RobotFit`) calls it too, so both give the same numbers.
 """
 
 from __future__ import annotations

@@ -32,9 +32,10 @@ Irregular time stamps are put on a uniform grid by :func:`uniform_grid` (shared 
 robot loader, :mod:`ident.robot.loaders`), with a :class:`ResamplingWarning` saying which
 reading of the stamps it took and why.
 
-Length (~830 lines): the path language of ``--map``/``--gain`` (struct fields, row and
+Length (~940 lines): the path language of ``--map``/``--gain`` (struct fields, row and
 column indices) and its one-line error messages are most of it; it serves CSV, MAT and
-MCAP inputs alike; the MATLAB v7.3 (HDF5) reader that feeds the same paths is the rest.
+MCAP inputs alike; the MATLAB v7.3 (HDF5) reader that feeds the same paths and the one
+resampling of irregular stamps (:func:`uniform_grid`, also the robot loader's) are the rest.
 """
 
 from __future__ import annotations
