@@ -19,6 +19,9 @@ scikit-learn's ``clone`` and grid search work on it); ``fit`` returns the estima
 attributes end in ``_``; ``coef_`` is an array aligned with ``coef_names_``. ``jointid fit``
 is this estimator plus printing and files (:mod:`ident.cli`). Everything here is numerics on
 loaded data, except :func:`load`, which wraps :func:`ident.loaders.load_experiments`.
+
+:class:`RobotFit` (:mod:`ident.api_robot`) is ``jointid fit --robot`` as an estimator: the
+same function reads the files and fits, so its record is the command line's JSON.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from . import DataError
+from .api_robot import RobotFit
 from .fitting import DEFAULT_QS, FitReport, fit_models
 from .loaders import Experiment, load_experiments
 from .models import IdentModel
@@ -39,7 +43,7 @@ from .preprocess import Design
 from .refine import Refinement, refine
 from .signals import Signals
 
-__all__ = ["JointModel", "load"]
+__all__ = ["JointModel", "RobotFit", "load"]
 
 #: What :meth:`JointModel.fit`, :meth:`~JointModel.predict` and :meth:`~JointModel.score`
 #: accept: experiments, file paths, or already concatenated signals.

@@ -15,7 +15,8 @@ errors on the fit data and on the ``--validate`` files -- on the fit's rows and 
 with the share each leaves out -- optionally refines every joint on the fit's rows and refits
 the found terms inside the n-dof model (:func:`refine_robot`), and writes the JSON record
 (``docs/robot-data.md``). Outputs are written only once everything has been computed, so a
-bad input leaves nothing behind.
+bad input leaves nothing behind. :func:`fit_files` is the command without the printing: the
+Python API (:class:`ident.api.RobotFit`) calls it too, so both give the same numbers.
 """
 
 from __future__ import annotations
@@ -23,8 +24,9 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -56,14 +58,17 @@ from .robot.regressor import RobotRegressor
 from .robot.signals import RobotSignals
 from .robot.tables import format_table_iii, table_iii
 
-__all__ = ["run", "fit_robot", "refine_robot", "format_report", "format_refinement",
-           "format_refit", "FORMAT"]
+__all__ = ["run", "fit_robot", "fit_files", "load_runs", "public_record", "refine_robot",
+           "format_report", "format_refinement", "format_refit", "FORMAT", "MODELS"]
 
 FORMAT = "jointid-robot-fit/1"
 #: Preprocessing chains (``fit_robot(chain=...)``, ``--chain``).
 CHAINS = ("columns", "states")
 #: Payload treatments (``fit_robot(payload=...)``, ``--payload``).
 PAYLOADS = ("known", "ratio", "mass")
+#: ``--model`` -> the models fitted (``jointid fit --robot``, :class:`ident.api.RobotFit`).
+MODELS = {"usual": ("usual",), "new": ("paper",), "paper": ("paper",),
+          "both": ("usual", "paper")}
 #: Options of the single-joint ``jointid fit`` that have no meaning with ``--robot``.
 _SINGLE_ONLY = (("joint", "--joint", "the robot file gives the joint types"),
                 ("gain", "--gain", "use drive_gain in the robot file's [joints.drive]"),
@@ -78,6 +83,67 @@ def robot_gains(robot: Robot) -> list[float]:
         d = robot.drives.get(n)
         g = None if d is None else (d.drive_gain or d.torque_constant)
         out.append(1.0 if g is None else float(g))
+    return out
+
+
+def load_runs(robot: Robot, data: Sequence[str | Path] | str | Path | Sequence[RawRobotRun],
+              *, mapping: Mapping[str, str] | None = None,
+              q_unit: str | None = None) -> list[RawRobotRun]:
+    """The robot's experiment files read as ``jointid fit --robot`` reads them: the robot
+    file's drive gains (:func:`robot_gains`), the ``--map`` entries and ``--q-unit``
+    (:func:`~ident.robot.loaders.load_robot_runs`). Runs already read are returned as given."""
+    items = [data] if isinstance(data, str | Path | RawRobotRun) else list(data)
+    if items and all(isinstance(r, RawRobotRun) for r in items):
+        return items  # type: ignore[return-value]
+    if any(isinstance(r, RawRobotRun) for r in items):
+        raise DataError("robot data: expected file paths or RawRobotRun objects, not a mix")
+    return load_robot_runs(items, robot.moving, gains=robot_gains(robot),  # type: ignore[arg-type]
+                           mapping=mapping, q_unit=q_unit)
+
+
+def fit_files(
+    robot: Robot,
+    inputs: Sequence[str | Path] | str | Path | Sequence[RawRobotRun],
+    validate: Sequence[str | Path] | str | Path | Sequence[RawRobotRun] | None = None,
+    *,
+    model: str = "both",
+    mapping: Mapping[str, str] | None = None,
+    q_unit: str | None = None,
+    cutoff: float | None = None,
+    decimation: int | None = None,
+    trim: int | None = None,
+    consistent: bool = False,
+    **options: Any,
+) -> dict[str, Any]:
+    """``jointid fit --robot`` without the printing: :func:`load_runs` then :func:`fit_robot`
+    (and ``add_consistent`` with ``consistent``). The one chain the command line and the
+    Python API (:class:`ident.api.RobotFit`) run, so their numbers are the same.
+
+    Parameters
+    ----------
+    robot : Robot
+    inputs, validate : paths or RawRobotRun objects
+        Identification and cross-validation experiments (``validate`` may be None).
+    model : {"usual", "new", "paper", "both"}
+        ``--model`` (:data:`MODELS`).
+    mapping, q_unit
+        ``--map`` entries (:func:`~ident.robot.loaders.parse_robot_mapping`), ``--q-unit``.
+    cutoff, decimation, trim
+        ``--cutoff`` [Hz], ``--decimation``, ``--trim`` (None: chosen from the data).
+    consistent : bool
+        ``--consistent``: also the physically consistent estimate of every model.
+    **options
+        The other keywords of :func:`fit_robot` (``method``, ``qs``, ``dq_min``, ``chain``,
+        ``payload``, ``known_rotor_inertia``, ``sign_check``, ``feasibility``).
+    """
+    if model not in MODELS:
+        raise DataError(f"model {model!r}: expected one of {', '.join(MODELS)}")
+    runs = load_runs(robot, inputs, mapping=mapping, q_unit=q_unit)
+    val = load_runs(robot, validate, mapping=mapping, q_unit=q_unit) if validate else None
+    out = fit_robot(robot, runs, val, models=MODELS[model],
+                    preprocessing=RobotPreprocessing(cutoff, decimation, trim), **options)
+    if consistent:
+        add_consistent(out)
     return out
 
 
@@ -685,7 +751,8 @@ def format_report(out: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _public(out: dict[str, Any]) -> dict[str, Any]:
+def public_record(out: dict[str, Any]) -> dict[str, Any]:
+    """The JSON record of a :func:`fit_robot` result (its private ``_`` entries left out)."""
     return {k: v for k, v in out.items() if not k.startswith("_")}
 
 
@@ -693,26 +760,19 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``jointid fit --robot``; returns the exit code."""
     _check_args(args)
     robot = load_robot(args.robot)
-    models = {"usual": ("usual",), "new": ("paper",), "paper": ("paper",),
-              "both": ("usual", "paper")}[args.model]
-    qs = _qs(args.qs)
-    mapping = parse_robot_mapping(args.map)
-    kw: dict[str, Any] = dict(gains=robot_gains(robot), mapping=mapping, q_unit=args.q_unit)
-    runs = load_robot_runs(args.inputs, robot.moving, **kw)
-    val = load_robot_runs(args.validate, robot.moving, **kw) if args.validate else None
-    pre = RobotPreprocessing(args.cutoff, args.decimation, args.trim)
-    out = fit_robot(robot, runs, val, models=models, method=args.method, qs=qs,
-                    dq_min=args.dq_min, preprocessing=pre,
+    out = fit_files(robot, args.inputs, args.validate, model=args.model,
+                    mapping=parse_robot_mapping(args.map), q_unit=args.q_unit,
+                    cutoff=args.cutoff, decimation=args.decimation, trim=args.trim,
+                    method=args.method, qs=_qs(args.qs), dq_min=args.dq_min,
                     known_rotor_inertia=args.known_rotor_inertia,
                     chain=args.chain or "columns", payload=args.payload,
-                    feasibility=not getattr(args, "no_consistency", False))
-    if getattr(args, "consistent", False):
-        add_consistent(out)
+                    feasibility=not getattr(args, "no_consistency", False),
+                    consistent=getattr(args, "consistent", False))
     if getattr(args, "refine", False):
         refine_robot(out, max_steps=args.max_steps,
                      progress=lambda m: print(m, file=sys.stderr))
     text = format_report(out)
-    public = _public(out)
+    public = public_record(out)
     # everything computed: only now write files (a bad input leaves nothing behind)
     print(text)
     if args.report is not None:
@@ -726,4 +786,3 @@ def run(args: argparse.Namespace) -> int:
         write_json(args.json, public)
         print(f"json: {args.json}")
     return 0
-

@@ -28,12 +28,14 @@ positions in degrees. A mapping value is then a *path* (see :func:`resolve_path`
 A name that exists as such in the file (e.g. a CSV header ``q.motor``) is always taken
 verbatim. The gain may be a number, a path to a scalar (``para.u[2]``) or a product of them
 (``para.u[2]*0.5``). ``q_unit`` converts q and q_ref to SI (degrees to radians, mm to m).
-Irregular sampling is resampled onto a uniform grid (linear interpolation) with a
-:class:`ResamplingWarning`.
+Irregular time stamps are put on a uniform grid by :func:`uniform_grid` (shared with the
+robot loader, :mod:`ident.robot.loaders`), with a :class:`ResamplingWarning` saying which
+reading of the stamps it took and why.
 
-Length (~830 lines): the path language of ``--map``/``--gain`` (struct fields, row and
+Length (~940 lines): the path language of ``--map``/``--gain`` (struct fields, row and
 column indices) and its one-line error messages are most of it; it serves CSV, MAT and
-MCAP inputs alike; the MATLAB v7.3 (HDF5) reader that feeds the same paths is the rest.
+MCAP inputs alike; the MATLAB v7.3 (HDF5) reader that feeds the same paths and the one
+resampling of irregular stamps (:func:`uniform_grid`, also the robot loader's) are the rest.
 """
 
 from __future__ import annotations
@@ -62,6 +64,7 @@ __all__ = [
     "concat",
     "parse_mapping",
     "resolve_path",
+    "uniform_grid",
     "Q_UNITS",
     "MIN_SAMPLES",
     "GAP_PERIODS",
@@ -537,6 +540,128 @@ def _from_table(
     )
 
 
+def _hf_noise(x: np.ndarray, dt: float) -> float:
+    """Noise of positions ``x`` (shape (n,) or (n, k)) in the complement of the excitation
+    band: per axis, the median power of the Hann-windowed position spectrum above f_s/4
+    (where the motion of an identification trajectory has no content), summed in log over
+    the axes (a ratio between two gridings of the same axes is a product of per-axis ratios).
+    """
+    a = np.asarray(x, dtype=float).reshape(len(x), -1)
+    n = a.shape[0]
+    f = np.fft.rfftfreq(n, dt)
+    upper = f > 0.25 / dt
+    win = np.hanning(n)
+    out = 0.0
+    for col in a.T:
+        c = col - np.polyval(np.polyfit(np.arange(n), col, 1), np.arange(n))
+        p = np.abs(np.fft.rfft(c * win)) ** 2
+        out += float(np.log(max(float(np.median(p[upper])), 1e-300)))
+    return out
+
+
+def uniform_grid(
+    t: np.ndarray,
+    arrays: Mapping[str, np.ndarray | None],
+    *,
+    source: str = "",
+    judge: str = "q",
+    warn: bool = True,
+    stacklevel: int = 2,
+) -> tuple[np.ndarray, dict[str, np.ndarray | None], str | None]:
+    """Put samples with irregular time stamps on a uniform grid (the one resampling of the
+    single-joint and the robot loaders, and of :func:`ident.preprocess.choose_cutoff`).
+
+    Stamps whose steps stay within :data:`IRREGULAR_TOL` of their median are regular:
+    returned as given. Otherwise two readings of the stamps are possible, and the data say
+    which holds:
+
+    * the values were taken at their stamps (irregular sampling instants): linear
+      interpolation onto the grid of the median period;
+    * the values were sampled uniformly and only the stamps jitter (a host clock stamping a
+      drive's cycles): the values as they are, on the least-squares line through the stamps
+      (t ≈ a + b k). Possible only when every stamp is within half a period of its slot
+      (no sample lost).
+
+    The reading whose positions (``arrays[judge]``) have less noise in the complement of the
+    excitation band (:func:`_hf_noise`: position spectrum above f_s/4) is taken: interpolating
+    values at the wrong instants adds q̇ × (stamp error) there, broadband noise that no
+    cut-off chosen from the data survives. A :class:`ResamplingWarning` names the reading
+    and the noise ratio that chose it.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Strictly increasing time stamps [s] (gaps refused by the callers beforehand).
+    arrays : mapping of str to ndarray (shape (n,) or (n, k)) or None
+        The signals sampled at ``t``; None entries are passed through.
+    source : str
+        Names the data in the warning.
+    judge : str
+        The key of the positions the readings are compared on.
+    warn : bool
+        Warn when the stamps are irregular.
+    stacklevel : int
+        Of the warning.
+
+    Returns
+    -------
+    t : ndarray, shape (m,)
+        Uniform time [s] (m = n for regular stamps and for the jitter reading).
+    arrays : dict
+        The signals on ``t``.
+    note : str or None
+        What was done (the warning's text), None for regular stamps.
+    """
+    t = np.asarray(t, dtype=float).reshape(-1)
+    out: dict[str, np.ndarray | None] = dict(arrays)
+    d = np.diff(t)
+    med = float(np.median(d))
+    if d.size == 0 or np.max(np.abs(d - med)) <= IRREGULAR_TOL * med:
+        return t, out, None
+    where = f"{source}: " if source else ""
+    span = f"period {d.min():.3g}..{d.max():.3g} s"
+    n = int(round((t[-1] - t[0]) / med)) + 1
+    tu = t[0] + med * np.arange(n)
+    tu = tu[tu <= t[-1] + 1e-12 * abs(t[-1])]
+
+    def at_stamps(a: np.ndarray) -> np.ndarray:
+        a = np.asarray(a, dtype=float)
+        if a.ndim == 1:
+            return np.interp(tu, t, a)
+        return np.column_stack([np.interp(tu, t, a[:, j]) for j in range(a.shape[1])])
+
+    k = np.arange(t.size, dtype=float)
+    b, a0 = np.polyfit(k, t, 1)
+    ti = a0 + b * k
+    jitter_ok = b > 0 and float(np.max(np.abs(t - ti))) < 0.5 * b
+    pos = arrays.get(judge)
+    if jitter_ok and pos is not None and t.size >= 16:
+        noise_stamps = _hf_noise(at_stamps(pos), med)
+        noise_index = _hf_noise(np.asarray(pos, dtype=float), b)
+        n_axes = int(np.asarray(pos).reshape(t.size, -1).shape[1])
+        ratio = float(np.exp((noise_stamps - noise_index) / n_axes))  # per axis, geometric
+        if ratio > 1.0:
+            note = (f"{where}irregular time stamps ({span}) taken as jitter of uniformly "
+                    f"sampled values, on a uniform grid of {t.size} samples at {b:.6g} s: "
+                    f"resampled at the stamps, the positions' noise above f_s/4 is "
+                    f"{ratio:.3g}x higher")
+            if warn:
+                warnings.warn(note, ResamplingWarning, stacklevel=stacklevel)
+            return ti, out, note
+        why = (f" (values taken at their stamps: their noise above f_s/4 is {1 / ratio:.3g}x "
+               "lower than taken as uniformly sampled)")
+    else:
+        why = ("" if pos is None or t.size < 16 else
+               " (values taken at their stamps: some stamp is more than half a period off "
+               "a uniform grid)")
+    for name, a in arrays.items():
+        out[name] = None if a is None else at_stamps(a)
+    note = f"{where}irregular sampling ({span}), resampled to {tu.size} samples at {med:.6g} s{why}"
+    if warn:
+        warnings.warn(note, ResamplingWarning, stacklevel=stacklevel)
+    return tu, out, note
+
+
 def make_experiment(
     source: str,
     t: np.ndarray,
@@ -612,21 +737,9 @@ def make_experiment(
             f"later, {d[k] / med:.0f} periods of {med:.6g} s; {n_gaps} gap(s) over "
             f"{GAP_PERIODS:g} periods): split the file at the gap into separate experiments"
         )
-    if np.max(np.abs(d - med)) > IRREGULAR_TOL * med:
-        n = int(round((t[-1] - t[0]) / med)) + 1
-        tu = t[0] + med * np.arange(n)
-        tu = tu[tu <= t[-1] + 1e-12 * abs(t[-1])]
-        warnings.warn(
-            f"{source}: irregular sampling (period {d.min():.3g}..{d.max():.3g} s), "
-            f"resampled to {tu.size} samples at {med:.6g} s",
-            ResamplingWarning,
-            stacklevel=3,
-        )
-        q = np.interp(tu, t, q)
-        tau = np.interp(tu, t, tau)
-        if q_ref is not None:
-            q_ref = np.interp(tu, t, q_ref)
-        t = tu
+    t, grid, _ = uniform_grid(t, {"q": q, "tau": tau, "q_ref": q_ref}, source=source,
+                              stacklevel=4)
+    q, tau, q_ref = grid["q"], grid["tau"], grid["q_ref"]
     return Experiment(
         source=source,
         t=t - t[0],

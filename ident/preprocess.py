@@ -45,7 +45,7 @@ import numpy as np
 import scipy.signal
 
 from . import DataError
-from .loaders import IRREGULAR_TOL
+from .loaders import uniform_grid
 from .signals import Signals
 from .terms import Library, Term
 
@@ -255,9 +255,10 @@ def choose_cutoff(q: np.ndarray, dt: float, min_fraction: float = 0.05,
     explicitly). At most 0.4 f_s. ``min_fraction`` is that lower bound as a fraction of f_s
     (:func:`build_design` raises it to :data:`CUTOFF_FLOOR_IV` with instruments).
 
-    ``t`` (the samples' time stamps [s], optional): irregular stamps (jitter above
-    ``IRREGULAR_TOL`` of the median period ``dt``) are first resampled to the uniform grid
-    of period ``dt`` (linear interpolation): differences of q over jittered instants taken
+    ``t`` (the samples' time stamps [s], optional): irregular stamps are first put on a
+    uniform grid by :func:`ident.loaders.uniform_grid` (the loaders' one resampling: values
+    interpolated at their stamps, or taken as uniformly sampled under jittered stamps,
+    whichever leaves less noise above f_s/4): differences of q over jittered instants taken
     as uniform are broadband noise. When the rule above reaches 0.4 f_s (its floor, a
     median over the upper half of the band, is below the top of a noise spectrum that rises
     with f, as differenced white position noise does), the floor is taken again in the
@@ -268,11 +269,10 @@ def choose_cutoff(q: np.ndarray, dt: float, min_fraction: float = 0.05,
     fs = 1.0 / dt
     q = np.asarray(q, dtype=float)
     if t is not None and q.size >= 2:
-        t = np.asarray(t, dtype=float)
-        d = np.diff(t)
-        if d.size and np.max(np.abs(d - dt)) > IRREGULAR_TOL * dt:
-            tu = t[0] + dt * np.arange(int(np.floor((t[-1] - t[0]) / dt)) + 1)
-            q = np.interp(tu, t, q)
+        tu, grid, note = uniform_grid(t, {"q": q}, warn=False)
+        if note is not None:
+            q = grid["q"]
+            dt = float((tu[-1] - tu[0]) / (tu.size - 1))
     lo, hi = min_fraction * fs, max(min_fraction, 0.4) * fs
     v = np.diff(q) / dt
     v = v - v.mean()

@@ -73,6 +73,7 @@ from ..loaders import (
     _read_mat,
     lost_cycle_breaks,
     resolve_path,
+    uniform_grid,
 )
 from ..preprocess import choose_cutoff, decimate, diffcent, lowpass
 from . import RobotIdentError
@@ -506,7 +507,7 @@ def _make_run(source: str, t: np.ndarray, q: np.ndarray, tau: np.ndarray, *,
               first_row: int | None = None) -> RawRobotRun:
     """Validate the arrays of one file (lengths, finite values within
     :data:`~ident.loaders.MAX_ABS_SIGNAL`, increasing time without gaps) and resample an
-    irregular grid (like :func:`ident.loaders.make_experiment`).
+    irregular grid (:func:`ident.loaders.uniform_grid`, as :func:`ident.loaders.make_experiment`).
 
     ``joints`` and ``columns`` (signal -> column name of each axis) name the culprit of a bad
     value; ``first_row`` is the file line of sample 0 (CSV: 2, after the header), if any."""
@@ -555,16 +556,7 @@ def _make_run(source: str, t: np.ndarray, q: np.ndarray, tau: np.ndarray, *,
             f"{source}: gap in the recording at t={t[i]:.6g} s (next sample {d[i]:.6g} s later, "
             f"{d[i] / med:.0f} periods of {med:.6g} s): split the file at the gap into separate "
             "experiments")
-    if np.max(np.abs(d - med)) > IRREGULAR_TOL * med:
-        tu = t[0] + med * np.arange(int(round((t[-1] - t[0]) / med)) + 1)
-        tu = tu[tu <= t[-1] + 1e-12 * abs(t[-1])]
-        warnings.warn(f"{source}: irregular sampling, resampled to {tu.size} samples at "
-                      f"{med:.6g} s", stacklevel=3)
-        for name, a in arrays.items():
-            if a is not None:
-                arrays[name] = np.column_stack([np.interp(tu, t, a[:, j])
-                                                for j in range(a.shape[1])])
-        t = tu
+    t, arrays, _ = uniform_grid(t, arrays, source=source, stacklevel=4)
     return RawRobotRun(source=source, t=t - t[0], payload=payload or RobotPayloadData(),
                        **arrays)  # type: ignore[arg-type]
 

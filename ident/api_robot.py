@@ -1,0 +1,249 @@
+"""Python API of the n-dof fit: :class:`RobotFit`, ``jointid fit --robot`` as an estimator.
+
+Re-exported by :mod:`ident.api`::
+
+    from ident.api import RobotFit
+
+    fit = RobotFit("examples/robots/arm3.toml").fit(["p0.csv", "p1.csv"], validation=["p2.csv"])
+    fit.rel_error_["paper"]["j1"], fit.params_["paper"]["FV1"]
+    print(fit.format_report())                  # the tables `jointid fit --robot` prints
+
+:meth:`RobotFit.fit` calls :func:`ident.cli_robot.fit_files`, the function the command line
+calls: the same reading (the robot file's drive gains, ``mapping`` and ``q_unit``), the same
+chain (regressor columns filtered and decimated in parallel with the torque), cut-off,
+decimation, guard, sign check and estimator (WLS by default), so ``record_`` is the JSON
+record ``jointid fit --robot ... --json`` writes, number for number (tests/test_api_robot.py).
+The lower-level pieces (:func:`ident.robot.loaders.load_robot_signals`, the "states" chain, and
+:class:`ident.robot.estimate.RobotModel` on any RobotSignals) stay available for other chains;
+their defaults are not the command line's.
+"""
+
+from __future__ import annotations
+
+import inspect
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from trajectories.robot import Robot, load_robot
+
+from . import DataError
+from .cli_robot import (
+    fit_files,
+    format_report,
+    parse_robot_mapping,
+    public_record,
+    refine_robot,
+)
+from .robot.estimate import RobotModel
+from .robot.loaders import RawRobotRun
+from .robot.signals import RobotSignals
+
+__all__ = ["RobotFit"]
+
+#: What :meth:`RobotFit.fit` accepts: file paths or runs read by
+#: :func:`ident.cli_robot.load_runs`.
+RobotData = Sequence[str | Path] | str | Path | Sequence[RawRobotRun]
+
+
+class RobotFit:
+    """n-dof identification of a robot's moving joints, as ``jointid fit --robot``.
+
+    Every hyper-parameter is the option of the same name of ``jointid fit --robot``
+    (docs/robot-data.md), with the same default.
+
+    Parameters
+    ----------
+    robot : str, Path or Robot
+        Robot file (.toml MDH table or .urdf) or a loaded :class:`trajectories.robot.Robot`.
+    model : {"both", "usual", "paper", "new"}
+        Models fitted (``--model``; "new" is "paper").
+    method : {"ls", "wls", "iv"} or None
+        Estimator (``--method``; None: "wls").
+    qs : float
+        q_s of the paper model [rad/s] (``--qs``).
+    cutoff : float or None
+        Butterworth cut-off on q [Hz] (``--cutoff``; None: chosen from the data).
+    decimation, trim : int or None
+        ``--decimation``, ``--trim`` (None: from the cut-off).
+    dq_min : float or None
+        Stiction area [rad/s] (``--dq-min``; None: 1 % of the largest |dq|).
+    mapping : mapping, sequence of "KEY=PATH" or None
+        Where the signals are in CSV/MAT files (``--map``).
+    q_unit : {"rad", "deg", "m", "mm"} or None
+        Unit of q in CSV/MAT files (``--q-unit``).
+    chain : {"columns", "states"}
+        ``--chain``.
+    payload : {"known", "ratio", "mass"} or None
+        ``--payload``.
+    known_rotor_inertia : bool
+        ``--known-rotor-inertia``.
+    consistency : bool
+        Search a physically consistent standard set for the report (False:
+        ``--no-consistency``).
+    consistent : bool
+        ``--consistent``: the physically consistent estimate of every model in the record.
+
+    Attributes
+    ----------
+    record_ : dict
+        The JSON record ``jointid fit --robot --json`` writes (docs/robot-data.md).
+    models_ : dict[str, RobotModel]
+        The fitted estimators by model name ("usual", "paper").
+    params_, params_std_ : dict[str, dict[str, float]]
+        Per model, the parameters and their standard deviations by name (eq. 15).
+    coef_, std_ : dict[str, ndarray]
+        Per model, the same as arrays aligned with ``coef_names_[model]``.
+    coef_names_ : dict[str, ndarray of str]
+    rel_error_ : dict[str, dict[str, float]]
+        Per model, ||rho_j||/||tau_j|| per joint and ``"all"`` on the fit's rows.
+    validation_rel_error_ : dict[str, dict[str, float]] or None
+        The same on the validation files.
+    settings_ : dict
+        The preprocessing used (cut-off [Hz], decimation, trim, guard, dq_min [rad/s], ...).
+    signals_ : RobotSignals
+        The identification signals as the fit has them (every decimated row, with their
+        regressor columns): the input of :class:`~ident.robot.estimate.RobotModel`.
+    """
+
+    def __init__(
+        self,
+        robot: str | Path | Robot,
+        model: str = "both",
+        *,
+        method: str | None = None,
+        qs: float = 0.03,
+        cutoff: float | None = None,
+        decimation: int | None = None,
+        trim: int | None = None,
+        dq_min: float | None = None,
+        mapping: Mapping[str, str] | Sequence[str] | None = None,
+        q_unit: str | None = None,
+        chain: str = "columns",
+        payload: str | None = None,
+        known_rotor_inertia: bool = False,
+        consistency: bool = True,
+        consistent: bool = False,
+    ) -> None:
+        self.robot = robot
+        self.model = model
+        self.method = method
+        self.qs = qs
+        self.cutoff = cutoff
+        self.decimation = decimation
+        self.trim = trim
+        self.dq_min = dq_min
+        self.mapping = mapping
+        self.q_unit = q_unit
+        self.chain = chain
+        self.payload = payload
+        self.known_rotor_inertia = known_rotor_inertia
+        self.consistency = consistency
+        self.consistent = consistent
+
+    # -- scikit-learn protocol (as ident.api.JointModel) ------------------------------------
+    @classmethod
+    def _get_param_names(cls) -> list[str]:
+        sig = inspect.signature(cls.__init__)
+        return [n for n in sig.parameters if n != "self"]
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """The hyper-parameters as given (``deep`` changes nothing: none is an estimator)."""
+        del deep
+        return {k: getattr(self, k) for k in self._get_param_names()}
+
+    def set_params(self, **params: Any) -> RobotFit:
+        """Set hyper-parameters by name; returns ``self`` (an unknown name: DataError)."""
+        valid = self._get_param_names()
+        for k, v in params.items():
+            if k not in valid:
+                raise DataError(f"RobotFit.set_params: unknown hyper-parameter {k!r} "
+                                f"(expected one of {', '.join(valid)})")
+            setattr(self, k, v)
+        return self
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
+        return f"RobotFit({args})"
+
+    # -- fit --------------------------------------------------------------------------------
+    def _robot(self) -> Robot:
+        if isinstance(self.robot, Robot):
+            return self.robot
+        return load_robot(self.robot)
+
+    def _mapping(self) -> dict[str, str]:
+        m = self.mapping
+        if isinstance(m, Mapping):
+            m = [f"{k}={v}" for k, v in m.items()]
+        return parse_robot_mapping(m)  # checks the keys as --map does
+
+    def fit(self, data: RobotData, validation: RobotData | None = None) -> RobotFit:
+        """Identify the robot on ``data`` (one multi-axis experiment per file or run).
+
+        Parameters
+        ----------
+        data : path, sequence of paths, or sequence of RawRobotRun
+            Identification experiments (``.mcap``, ``.csv``, ``.mat``).
+        validation : same kinds, optional
+            Cross-validation experiments (``--validate``).
+
+        Returns
+        -------
+        RobotFit
+            ``self``, fitted.
+        """
+        out = fit_files(
+            self._robot(), data, validation, model=self.model, mapping=self._mapping(),
+            q_unit=self.q_unit, cutoff=self.cutoff, decimation=self.decimation, trim=self.trim,
+            consistent=self.consistent, method=self.method, qs=self.qs, dq_min=self.dq_min,
+            known_rotor_inertia=self.known_rotor_inertia, chain=self.chain,
+            payload=self.payload, feasibility=self.consistency)
+        self._set(out)
+        return self
+
+    def _set(self, out: dict[str, Any]) -> None:
+        self._out = out
+        self.record_ = public_record(out)
+        self.models_: dict[str, RobotModel] = dict(out["_estimators"])
+        fitted = {n: r for n, r in self.record_["models"].items() if "error" not in r}
+        self.params_ = {n: {p: v["value"] for p, v in r["parameters"].items()}
+                        for n, r in fitted.items()}
+        self.params_std_ = {n: {p: v["std"] for p, v in r["parameters"].items()}
+                            for n, r in fitted.items()}
+        self.coef_names_ = {n: np.array(list(p), dtype=object) for n, p in self.params_.items()}
+        self.coef_ = {n: np.array(list(p.values()), dtype=float)
+                      for n, p in self.params_.items()}
+        self.std_ = {n: np.array(list(p.values()), dtype=float)
+                     for n, p in self.params_std_.items()}
+        self.rel_error_ = {n: dict(r["rel_error"]) for n, r in fitted.items()}
+        self.validation_rel_error_ = (
+            {n: dict(r["validation_rel_error"]) for n, r in fitted.items()}
+            if self.record_["validation_inputs"] else None)
+        self.settings_ = dict(self.record_["preprocessing"])
+        self.signals_: RobotSignals = out["_identification"]
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "_out"):
+            raise DataError("this RobotFit is not fitted; call fit(files) first")
+
+    # -- use --------------------------------------------------------------------------------
+    def format_report(self) -> str:
+        """The tables ``jointid fit --robot`` prints for this fit."""
+        self._check_fitted()
+        return format_report(self._out)
+
+    def refine(self, *, max_steps: int = 2, model: str | None = None,
+               joints: Sequence[str] | None = None,
+               progress: Callable[[str], None] | None = None,
+               **options: Any) -> dict[str, Any]:
+        """Refine every moving joint on the fit's rows (``--refine``,
+        :func:`ident.cli_robot.refine_robot`); returns the ``refinement`` record, also in
+        ``record_["refinement"]`` and in :meth:`format_report`."""
+        self._check_fitted()
+        rec = refine_robot(self._out, max_steps=max_steps, model=model, joints=joints,
+                           progress=progress, **options)
+        self.record_ = public_record(self._out)
+        return rec
