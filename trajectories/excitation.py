@@ -61,7 +61,7 @@ from .multi import (
     plan_robot_campaign,
 )
 from .multi import InverseDynamics as PayloadDynamics
-from .robot.base import DEFAULT_RTOL, independent_columns
+from .robot.base import DEFAULT_RTOL, independent_columns, uniform_states
 from .robot_campaign import MultisineSegment, RobotCampaign
 
 __all__ = [
@@ -103,16 +103,11 @@ def random_states(limits: Sequence[JointLimits], n: int, seed: int = 0
 
     q in the position range, dq in +/- max_velocity, ddq in +/- max_acceleration.
     """
-    rng = np.random.default_rng(seed)
     lo = np.array([lim.position[0] for lim in limits])
     hi = np.array([lim.position[1] for lim in limits])
     v = np.array([lim.max_velocity for lim in limits])
     a = np.array([lim.max_acceleration for lim in limits])
-    k = len(limits)
-    q = lo + (hi - lo) * rng.random((n, k))
-    dq = v * rng.uniform(-1.0, 1.0, (n, k))
-    ddq = a * rng.uniform(-1.0, 1.0, (n, k))
-    return q, dq, ddq
+    return uniform_states(lo, hi, v, a, n, seed)
 
 
 def base_columns(regressor: Regressor, limits: Sequence[JointLimits], *, n_samples: int = 200,

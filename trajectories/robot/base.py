@@ -41,7 +41,8 @@ from .payload import RobotPayloadData
 from .regressor import RobotRegressor
 
 __all__ = ["BaseParameters", "base_parameters", "qr_rule", "independent_columns",
-           "random_states", "PayloadBase", "payload_base", "PAYLOAD_NAMES", "DEFAULT_RTOL"]
+           "random_states", "uniform_states", "PayloadBase", "payload_base", "PAYLOAD_NAMES",
+           "DEFAULT_RTOL"]
 
 #: Relative rank tolerance on |R_ii| of the unit-norm columns.
 DEFAULT_RTOL = 1e-8
@@ -119,7 +120,6 @@ def random_states(reg: RobotRegressor, limits: object, n: int, seed: int
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``n`` uniform random states (q, dq, ddq), each (n, k), within ``limits`` (see
     :func:`base_parameters`)."""
-    rng = np.random.default_rng(seed)
     k = reg.k
     lo, hi, vmax, amax = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
     for i, name in enumerate(reg.joints):
@@ -143,6 +143,15 @@ def random_states(reg: RobotRegressor, limits: object, n: int, seed: int
         hi[i] = q1 if math.isfinite(q1) else span
         vmax[i] = v if math.isfinite(v) else 2.0
         amax[i] = a if math.isfinite(a) else 5.0
+    return uniform_states(lo, hi, vmax, amax, n, seed)
+
+
+def uniform_states(lo: np.ndarray, hi: np.ndarray, vmax: np.ndarray, amax: np.ndarray, n: int,
+                   seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``n`` uniform random states, each (n, k): q in [lo, hi] [rad or m], dq in +/- vmax,
+    ddq in +/- amax (finite bounds, (k,) each); the states of the base rule."""
+    rng = np.random.default_rng(seed)
+    k = len(lo)
     q = lo + (hi - lo) * rng.random((n, k))
     dq = vmax * rng.uniform(-1.0, 1.0, (n, k))
     ddq = amax * rng.uniform(-1.0, 1.0, (n, k))
