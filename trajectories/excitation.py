@@ -360,8 +360,8 @@ def optimise_multisine(regressor: Regressor, limits: Sequence[JointLimits],
     samples_per_period : int, optional
         Default ``max(100, 20 L)``.
     base : ndarray of int, optional
-        Base columns (default :func:`base_columns` with its default seed, as
-        :func:`quality`: the condition number depends on which base columns are chosen).
+        Base columns (default :func:`base_columns`, as :func:`quality`: the base
+        columns of the robot model's rule, the ones the fit estimates).
     periods : int
         Periods the plan plays (weight of the multi-sine against ``background``).
     background : (ndarray, float), optional
@@ -461,7 +461,8 @@ def optimise_campaign(campaign: RobotCampaign, regressor: Regressor, *,
     :func:`quality` with ``max_samples``; segments are optimised in order, each against the
     plan with the previous ones already optimised). Neither objective is better everywhere
     (UR10 3-dof standing in for examples/campaign_robot3.toml, 1500 evaluations, whole-plan
-    condition number: full example 232 -> 117 with the multi-sine alone, -> 124 with the
+    condition number, measured on the base columns of a pivoted QR before the one base rule:
+    full example 232 -> 117 with the multi-sine alone, -> 124 with the
     whole plan; base-yaw trapezoids + multi-sine 202 -> 89 and -> 72); the multi-sine alone
     is the default because it does not depend on the other segments.
 
