@@ -31,7 +31,7 @@ import pinocchio as pin
 
 from .excitation import OptimisedMultisine, optimise_campaign
 from .multi import MOVING_FRACTION
-from .robot import Robot, RobotError, RobotRegressor, load_robot
+from .robot import Robot, RobotError, RobotPayloadData, RobotRegressor, load_robot
 from .robot_campaign import MultisineSegment, RobotCampaign
 
 __all__ = ["RobotDynamics", "prepare_robot_campaign", "robot_for_campaign",
@@ -137,19 +137,16 @@ class RobotDynamics:
                          payload: Any = None) -> np.ndarray:
         """Rigid-body + rotor torque ``tau_out + Ia ddq`` (n, k) [N m] of the robot file's
         inertial parameters, with a payload (``mass_kg``, ``com`` [m], ``inertia`` about the
-        CoM [kg m^2]) fixed in the frame of the last moving joint; friction not included."""
-        model = self.model
-        if payload is not None and float(payload.mass_kg) > 0:
-            model = pin.Model(model)
-            xx, xy, xz, yy, yz, zz = payload.inertia
-            extra = pin.Inertia(float(payload.mass_kg), np.asarray(payload.com, dtype=float),
-                                np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]))
-            last = model.njoints - 1
-            model.inertias[last] = model.inertias[last] + extra
-        data = model.createData()
+        CoM [kg m^2]) fixed in the frame of the last moving joint (the robot model's payload
+        torque, ``RobotRegressor.payload_torque``); friction not included."""
+        data = self.model.createData()
         q, dq, ddq = (np.ascontiguousarray(x, dtype=float) for x in (q, dq, ddq))
-        tau = np.array([pin.rnea(model, data, q[i], dq[i], ddq[i]) for i in range(len(q))])
-        return tau.reshape(q.shape) + self.Ia * ddq
+        tau = np.array([pin.rnea(self.model, data, q[i], dq[i], ddq[i])
+                        for i in range(len(q))]).reshape(q.shape) + self.Ia * ddq
+        if payload is not None and float(payload.mass_kg) > 0:
+            tau += self.robot_regressor.payload_torque(q, dq, ddq, RobotPayloadData(
+                float(payload.mass_kg), payload.com, payload.inertia))
+        return tau
 
 
 def prepare_robot_campaign(campaign: RobotCampaign, *, robot: Robot | None = None,
