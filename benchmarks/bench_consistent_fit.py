@@ -22,14 +22,12 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from ident.robot.base import base_parameters  # noqa: E402
 from ident.robot.consistency import check_consistency  # noqa: E402
 from ident.robot.consistent_fit import fit_consistent  # noqa: E402
 from ident.robot.estimate import RobotModel  # noqa: E402
-from ident.robot.regressor import RobotRegressor  # noqa: E402
 from ident.robot.signals import RobotPayloadData, RobotSignals  # noqa: E402
 from sim_drivers.arm import ArmGains, ArmParams, Payload, model_reference, simulate_arm  # noqa: E402
-from trajectories.robot import load_robot  # noqa: E402
+from trajectories.robot import RobotRegressor, base_parameters, load_robot  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PAYLOADS = (None, Payload(5.0, [0.0, 0.0, 0.05]),

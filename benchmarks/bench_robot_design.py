@@ -27,8 +27,7 @@ import numpy as np  # noqa: E402
 
 from ident.robot.design import design_runs, resolve_design  # noqa: E402
 from ident.robot.loaders import RawRobotRun, RobotPreprocessing, preprocess_runs  # noqa: E402
-from ident.robot.regressor import RobotRegressor  # noqa: E402
-from trajectories.robot import load_robot  # noqa: E402
+from trajectories.robot import RobotRegressor, load_robot  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 

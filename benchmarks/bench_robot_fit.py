@@ -4,8 +4,8 @@
 
 Synthetic data: a sum-of-sines motion of the six joints at 1 kHz, three payload experiments,
 torques from the paper's friction (eq. 30) on every joint through the vectorised regressor
-(ident.robot.regressor) plus white noise. Timed: ``RobotModel.fit`` (regressor evaluation in
-chunks, moments, Gauss-Newton) for the usual model, the paper model with the paper's quadrant
+(trajectories.robot.regressor) plus white noise. Timed: ``RobotModel.fit`` (regressor evaluation
+in chunks, moments, Gauss-Newton) for the usual model, the paper model with the paper's quadrant
 proxy (eq. 26, one data pass) and with model-decided quadrants: with the near-boundary rows
 stored (ident.robot.quadrants; "passes" counts data passes, the start pass on every
 stride-th row above 1e5 samples counted as one; "upd" store updates) and, for comparison in
@@ -29,11 +29,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from ident.robot import estimate  # noqa: E402
-from ident.robot.base import base_parameters  # noqa: E402
 from ident.robot.estimate import RobotModel  # noqa: E402
-from ident.robot.regressor import RobotRegressor  # noqa: E402
 from ident.robot.signals import RobotPayloadData, RobotSignals  # noqa: E402
-from trajectories.robot import load_robot  # noqa: E402
+from trajectories.robot import RobotRegressor, base_parameters, load_robot  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PAYLOADS = (RobotPayloadData(), RobotPayloadData(5.0, [0, 0, 0.05]),

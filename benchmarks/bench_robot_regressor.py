@@ -1,4 +1,5 @@
-"""Time of the n-dof regressor (ident.robot.regressor) against pinocchio's, UR10 (6 joints).
+"""Time of the n-dof regressor (trajectories.robot.regressor) against pinocchio's, UR10 (6
+joints).
 
 Usage: ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_robot_regressor.py [--reps 3]``
 
@@ -20,9 +21,7 @@ import time
 import numpy as np
 import pinocchio as pin
 
-from ident.robot.base import base_parameters
-from ident.robot.regressor import RobotRegressor
-from trajectories.robot import load_robot
+from trajectories.robot import RobotRegressor, base_parameters, load_robot
 
 
 def _states(n: int, k: int, seed: int = 0):

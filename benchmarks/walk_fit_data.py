@@ -40,11 +40,30 @@ def _project_file(filename: str) -> str | None:
     return str(rel) if rel.parts and rel.parts[0] in PACKAGES else None
 
 
+MIN_SAMPLES = 1000
+
+
+def _holds_samples(frame) -> bool:  # noqa: ANN001 - a frame
+    code = frame.f_code
+    names = code.co_varnames[: code.co_argcount + code.co_kwonlyargcount]
+    for n in names:
+        v = frame.f_locals.get(n)
+        if isinstance(v, np.ndarray) and v.size >= MIN_SAMPLES:
+            return True
+        if isinstance(v, (list, tuple)) and v and isinstance(v[0], np.ndarray) and \
+                v[0].size >= MIN_SAMPLES:
+            return True
+    return False
+
+
 class Walk:
     """A ``sys.setprofile`` hook recording the sequence of project files the code is in."""
 
-    def __init__(self) -> None:
+    def __init__(self, samples_only: bool = True) -> None:
         self.seq: list[str] = []
+        #: follow only the functions handed the samples (an array argument of at least
+        #: MIN_SAMPLES values), i.e. the walk of the data rather than of every helper call
+        self.samples_only = samples_only
 
     def _enter(self, f: str | None) -> None:
         if f is not None and (not self.seq or self.seq[-1] != f):
@@ -52,7 +71,10 @@ class Walk:
 
     def hook(self, frame, event, arg) -> None:  # noqa: ANN001 - sys.setprofile signature
         if event == "call":
-            self._enter(_project_file(frame.f_code.co_filename))
+            f = _project_file(frame.f_code.co_filename)
+            if f is not None and self.samples_only and not _holds_samples(frame):
+                return
+            self._enter(f)
         elif event == "return":
             back = frame.f_back
             while back is not None:  # library frames count as their project caller
@@ -154,6 +176,7 @@ def main() -> None:
         }
         for name, argv in cases.items():
             s = walk(argv)
+            sys.stdout.flush()
             print(f"{name}: {s['stays']} stays in {s['files']} files, {s['returns']} returns")
             for (a, b), k in s["hops"]:
                 print(f"    {k:4d}  {a} -> {b}")

@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from trajectories.robot import Robot, load_robot
+from trajectories.robot import Robot, RobotRegressor, load_robot
 
 from . import DataError, IdentError
 from .estimate import DEFAULT_THRESHOLD_PCT
@@ -54,7 +54,6 @@ from .robot.payload import format_misfit, payload_misfit
 from .robot.plots import write_robot_report
 from .robot.refine_joint import joint_coulomb, refine_joint
 from .robot.refit import refit_robot
-from .robot.regressor import RobotRegressor
 from .robot.signals import RobotSignals
 from .robot.tables import format_table_iii, table_iii
 

@@ -16,14 +16,14 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from trajectories.robot import LINK_NAMES, from_pinocchio_order
+
 from . import SimError
 from .arm_effects import ArmEffects
 
 _INT16_MIN, _INT16_MAX = -32768, 32767
-#: Khalil names of pinocchio's Inertia.toDynamicParameters() order.
-_DYN_NAMES = ("M", "MX", "MY", "MZ", "XX", "XY", "YY", "XZ", "YZ", "ZZ")
-#: Names of the standard parameters of a link, in ROBOT_FORMAT order.
-STANDARD_NAMES = ("XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M")
+#: Names of the standard parameters of a link, in ROBOT_FORMAT order (the robot model's).
+STANDARD_NAMES = LINK_NAMES
 #: Friction coefficient attribute -> parameter name prefix (ROBOT_FORMAT).
 FRICTION_NAMES = {"a_m": "a_m", "b_m": "b_m", "a_g": "a_g", "b_g": "b_g", "c_m": "c_m",
                   "d_m": "d_m", "c_g": "c_g", "d_g": "d_g", "F_V": "FV", "tau_off": "OFF",
@@ -363,10 +363,9 @@ class ArmParams:
         model = self.dynamics_model(payload)
         out: dict[str, float] = {}
         for i, j in enumerate(self.joint_numbers):
-            dyn = dict(zip(_DYN_NAMES, model.inertias[i + 1].toDynamicParameters(),
-                           strict=True))
-            for n in STANDARD_NAMES:
-                out[f"{n}{j}"] = float(dyn[n])
+            phi = from_pinocchio_order(model.inertias[i + 1].toDynamicParameters())
+            for n, v in zip(STANDARD_NAMES, phi, strict=True):
+                out[f"{n}{j}"] = float(v)
             out[f"Ia{j}"] = float(self.Ia[i])
             for attr, prefix in FRICTION_NAMES.items():
                 out[f"{prefix}{j}"] = float(getattr(self.friction, attr)[i])

@@ -1,5 +1,5 @@
-"""The n-dof standard-parameter regressor (ident.robot.regressor) against pinocchio, the known
-payload torque (eq. 34-35 generalised), and the base parameters (ident.robot.base)."""
+"""The n-dof standard-parameter regressor (trajectories.robot.regressor) against pinocchio, the
+known payload torque (eq. 34-35 generalised), and the base parameters (trajectories.robot.base)."""
 
 from __future__ import annotations
 
@@ -12,11 +12,18 @@ import pytest
 
 from ident.models import RigidBody
 from ident.robot import RobotIdentError
-from ident.robot.base import base_parameters, single_joint_map
-from ident.robot.regressor import LINK_NAMES, RobotRegressor, from_pinocchio_order
-from ident.robot.signals import RobotPayloadData
+from ident.robot.base import single_joint_map
 from ident.signals import Signals
-from trajectories.robot import Robot, load_robot
+from trajectories.robot import (
+    LINK_NAMES,
+    Robot,
+    RobotError,
+    RobotPayloadData,
+    RobotRegressor,
+    base_parameters,
+    from_pinocchio_order,
+    load_robot,
+)
 
 ROBOTS = Path(__file__).resolve().parents[1] / "examples" / "robots"
 
@@ -154,7 +161,7 @@ def test_blocks_and_layout_do_not_change_the_result():
     base = base_parameters(reg)
     np.testing.assert_array_equal(reg.rigid(q[:10], dq[:10], ddq[:10], columns=base.columns),
                                   base.reduce(W[:10]))
-    with pytest.raises(RobotIdentError, match="out: expected"):
+    with pytest.raises(RobotError, match="out: expected"):
         reg.rigid_kpn(q[:10], dq[:10], ddq[:10], out=np.zeros((3, 33, 11)))
 
 
@@ -182,9 +189,9 @@ def test_gravity_comes_from_the_robot_file(tmp_path):
 
 def test_bad_shapes_are_named():
     reg = RobotRegressor(load_robot(ROBOTS / "arm3.toml"))
-    with pytest.raises(RobotIdentError, match=r"dq: expected shape \(n, 3\)"):
+    with pytest.raises(RobotError, match=r"dq: expected shape \(n, 3\)"):
         reg.rigid(np.zeros((5, 3)), np.zeros((5, 2)), np.zeros((5, 3)))
-    with pytest.raises(RobotIdentError, match="flange 'nope'"):
+    with pytest.raises(RobotError, match="flange 'nope'"):
         RobotRegressor(load_robot(ROBOTS / "arm3.toml"), flange="nope")
 
 
@@ -275,9 +282,9 @@ def test_values_by_name_and_missing_names():
     by_name = dict(zip(reg.standard_names, chi, strict=True))
     np.testing.assert_allclose(base.values(by_name), base.values(chi))
     del by_name["YY3"]
-    with pytest.raises(RobotIdentError, match="missing standard parameters.*YY3"):
+    with pytest.raises(RobotError, match="missing standard parameters.*YY3"):
         base.values(by_name)
-    with pytest.raises(RobotIdentError, match="expected 33 columns"):
+    with pytest.raises(RobotError, match="expected 33 columns"):
         base.reduce(np.zeros((4, 3, 30)))
 
 

@@ -1,12 +1,13 @@
 """Excitation planning with Ruckig: pure functions and immutable sampled plans.
 
 Nothing in this package touches clocks or buses; files only in :mod:`trajectories.campaign_file`
-(reads the campaign TOML), :mod:`trajectories.robot` (reads robot files) and
+(reads the campaign TOML), :mod:`trajectories.robot.formats` (reads robot files) and
 :mod:`trajectories.cli` (``jointid plan``, writes the plot).
 Single joint: ``campaign`` (schema), ``plan`` (Ruckig plans). Robots: ``robot_campaign``
 (``[robot]`` schema), ``multi`` (multi-DoF plans), ``excitation`` (regressor condition number,
-band and quadrant shares, multi-sine optimisation). Robot files: ``robot`` (MDH TOML or URDF ->
-``Robot``, docs/robot-format.md).
+band and quadrant shares, multi-sine optimisation). The robot model, the ground floor below
+every other module (docs/architecture.md): ``robot`` (robot files behind a suffix table ->
+``Robot``, the n-dof regressor, the base-parameter rule, payloads; docs/robot-format.md).
 Exception tree: every error raised on purpose derives from :class:`TrajectoryError`.
 """
 
@@ -29,5 +30,5 @@ class LimitError(TrajectoryError):
 
 
 class RobotError(TrajectoryError, ValueError):
-    """A robot file or description is unusable (:mod:`trajectories.robot`); the message names
-    the file and the element."""
+    """A robot file, description or robot-model input is unusable (:mod:`trajectories.robot`);
+    the message names the file, object or element."""

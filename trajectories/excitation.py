@@ -7,9 +7,10 @@ Before anything moves, ``jointid plan`` predicts whether a plan will identify th
 parameters:
 
 - the condition number of the regressor over the plan, restricted to the base columns
-  (Gautier 1991: the columns of a regressor built at random states that QR with column
-  pivoting finds independent, see :func:`base_columns`); a large condition number means
-  some base parameters will have large standard deviations;
+  (Gautier 1991: the columns of a regressor built at random states that the robot model's one
+  base-parameter rule keeps, :func:`trajectories.robot.base.independent_columns`, see
+  :func:`base_columns`: the columns the fit estimates); a large condition number means some
+  base parameters will have large standard deviations;
 - per joint, the share of moving samples in each velocity band (0-10 %, 10-35 %, 35-100 %
   of max velocity; the paper's dry friction changes in the lowest band) and in each
   quadrant of the (dq, tau_out) plane (paper section III.B, Fig. 2: quadrants 1 and 3 motor,
@@ -19,12 +20,15 @@ parameters:
 a multi-sine (as FloBaRoID, BIRDy and FIGAROH do), within every joint's position, velocity,
 acceleration and jerk limits, with scipy.optimize.
 
-The regressor and the inverse dynamics are callables owned by :mod:`ident` (or built from
-pinocchio in tests): this module is numerics only and imports nothing from ident.
+The regressor and the inverse dynamics are callables (:class:`trajectories.robot_model.
+RobotDynamics` builds them from the robot model, :mod:`trajectories.robot`; tests pass their
+own): this module is numerics only.
 
 Regressor convention: ``regressor(q, dq, ddq) -> W`` with q, dq, ddq of shape (n, k) and
 W of shape (n * k, p), rows sample-major (row ``i * k + j`` is joint j at sample i) --
-the row order does not change the condition number or the base columns.
+the row order does not change the condition number or the base columns; the columns in the
+robot model's standard order (``RobotRegressor.standard_names`` then ``friction_names``), so
+that the base rule keeps the lower link's parameters as the fit does.
 """
 
 from __future__ import annotations
@@ -35,7 +39,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
-import scipy.linalg
 import scipy.optimize
 
 from . import TrajectoryError
@@ -58,6 +61,7 @@ from .multi import (
     plan_robot_campaign,
 )
 from .multi import InverseDynamics as PayloadDynamics
+from .robot.base import DEFAULT_RTOL, independent_columns, uniform_states
 from .robot_campaign import MultisineSegment, RobotCampaign
 
 __all__ = [
@@ -82,10 +86,9 @@ Regressor = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 #: (n, k) x 3 -> tau_out (n, k) [N m]
 InverseDynamics = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
-#: a column is a base column when its |R_ii| (QR with column pivoting of the random-state
-#: regressor) exceeds BASE_RTOL * |R_00|. Structurally dependent columns give |R_ii| at
-#: rounding level (~1e-15 |R_00| and below); 1e-8 leaves seven decades on either side.
-BASE_RTOL = 1e-8
+#: the robot model's one rank tolerance of the base-parameter rule
+#: (:data:`trajectories.robot.base.DEFAULT_RTOL`)
+BASE_RTOL = DEFAULT_RTOL
 #: relative torque below which a sample counts in no quadrant (see quadrant_shares)
 TAU_RTOL = 1e-6
 #: quadrants of the (dq, tau_out) plane (paper Fig. 2.a): 1 motor (dq > 0, tau > 0),
@@ -100,45 +103,33 @@ def random_states(limits: Sequence[JointLimits], n: int, seed: int = 0
 
     q in the position range, dq in +/- max_velocity, ddq in +/- max_acceleration.
     """
-    rng = np.random.default_rng(seed)
     lo = np.array([lim.position[0] for lim in limits])
     hi = np.array([lim.position[1] for lim in limits])
     v = np.array([lim.max_velocity for lim in limits])
     a = np.array([lim.max_acceleration for lim in limits])
-    k = len(limits)
-    q = lo + (hi - lo) * rng.random((n, k))
-    dq = v * rng.uniform(-1.0, 1.0, (n, k))
-    ddq = a * rng.uniform(-1.0, 1.0, (n, k))
-    return q, dq, ddq
+    return uniform_states(lo, hi, v, a, n, seed)
 
 
 def base_columns(regressor: Regressor, limits: Sequence[JointLimits], *, n_samples: int = 200,
                  seed: int = 0, rtol: float = BASE_RTOL) -> np.ndarray:
-    """Indices of a set of base (independent) regressor columns (Gautier 1991).
+    """Indices of the base (independent) regressor columns (Gautier 1991), by the robot
+    model's one base-parameter rule (:func:`trajectories.robot.base.independent_columns`).
 
-    The regressor is built at ``n_samples`` random states (:func:`random_states`) and
-    factorised by QR with column pivoting, ``W P = Q R``; the first ``r`` pivots with
-    ``|R_ii| > rtol * |R_00|`` are the base columns (r = numerical rank).
+    The regressor is built at ``n_samples`` random states (:func:`random_states`); its
+    unit-norm columns are decomposed by QR in their order and a column is kept when its
+    ``|R_ii| > rtol * max |R_jj|``. With the columns in the robot model's standard order
+    the kept set is structural (the seed only chooses the states) and is the set
+    :func:`trajectories.robot.base.base_parameters` gives the fit.
 
     Returns
     -------
     ndarray of int, shape (r,), increasing
-
-    Notes
-    -----
-    Where several columns are linearly dependent, which of them the pivoting keeps depends
-    on the random states (the seed), and so does the condition number of the base
-    regressor: compare condition numbers (predicted, optimised, logged) on the SAME base
-    columns, e.g. ``Quality.base_columns``.
     """
     q, dq, ddq = random_states(limits, n_samples, seed)
     w = _call(regressor, q, dq, ddq)
-    _, r, piv = scipy.linalg.qr(w, mode="economic", pivoting=True)
-    d = np.abs(np.diag(r))
-    if d.size == 0 or d[0] == 0.0:
+    if not np.any(w):
         raise TrajectoryError("base_columns: the regressor is zero at random states")
-    rank = int(np.sum(d > rtol * d[0]))
-    return np.sort(piv[:rank])
+    return independent_columns(w, rtol)[0]
 
 
 def condition_number(w: np.ndarray, columns: np.ndarray) -> float:
@@ -369,8 +360,8 @@ def optimise_multisine(regressor: Regressor, limits: Sequence[JointLimits],
     samples_per_period : int, optional
         Default ``max(100, 20 L)``.
     base : ndarray of int, optional
-        Base columns (default :func:`base_columns` with its default seed, as
-        :func:`quality`: the condition number depends on which base columns are chosen).
+        Base columns (default :func:`base_columns`, as :func:`quality`: the base
+        columns of the robot model's rule, the ones the fit estimates).
     periods : int
         Periods the plan plays (weight of the multi-sine against ``background``).
     background : (ndarray, float), optional
@@ -470,7 +461,8 @@ def optimise_campaign(campaign: RobotCampaign, regressor: Regressor, *,
     :func:`quality` with ``max_samples``; segments are optimised in order, each against the
     plan with the previous ones already optimised). Neither objective is better everywhere
     (UR10 3-dof standing in for examples/campaign_robot3.toml, 1500 evaluations, whole-plan
-    condition number: full example 232 -> 117 with the multi-sine alone, -> 124 with the
+    condition number, measured on the base columns of a pivoted QR before the one base rule:
+    full example 232 -> 117 with the multi-sine alone, -> 124 with the
     whole plan; base-yaw trapezoids + multi-sine 202 -> 89 and -> 72); the multi-sine alone
     is the default because it does not depend on the other segments.
 

@@ -2,10 +2,9 @@
 
 ``jointid plan`` and ``jointid run`` predict the excitation quality, check torques and optimise
 multi-sines before anything moves; they need the robot model's regressor and inverse dynamics.
-:mod:`ident` owns the identification model (``ident.robot.regressor``), but trajectories is
-below ident in the package graph, so this module builds the same model from the robot's
-pinocchio model (:func:`pinocchio.computeJointTorqueRegressor`, one sample at a time: ~10 µs
-per sample, enough for the 4000-sample predictions and the multi-sine optimiser):
+The regressor is the robot model's one n-dof regressor
+(:class:`trajectories.robot.regressor.RobotRegressor`, vectorised, the one identification
+fits with), so the planner predicts the condition number of the fit's base columns:
 
     tau = W_rigid(q, dq, ddq) chi_St + Ia ddq + FC sign(dq) + FV dq + OFF   (paper eq. 9, 5-6)
 
@@ -32,7 +31,7 @@ import pinocchio as pin
 
 from .excitation import OptimisedMultisine, optimise_campaign
 from .multi import MOVING_FRACTION
-from .robot import Robot, RobotError, load_robot
+from .robot import Robot, RobotError, RobotPayloadData, RobotRegressor, load_robot
 from .robot_campaign import MultisineSegment, RobotCampaign
 
 __all__ = ["RobotDynamics", "prepare_robot_campaign", "robot_for_campaign",
@@ -41,10 +40,6 @@ __all__ = ["RobotDynamics", "prepare_robot_campaign", "robot_for_campaign",
 #: objective evaluations of the multi-sine optimisation in ``jointid plan`` / ``jointid run``
 #: (deterministic for a given seed: both play the same coefficients)
 OPTIMISE_EVALUATIONS = 600
-
-_LINK = ("XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M")
-# index in pinocchio's [m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz] of each _LINK entry
-_PIN_ORDER = (4, 5, 7, 6, 8, 9, 1, 2, 3, 0)
 
 
 def robot_file_path(campaign: RobotCampaign) -> str:
@@ -89,13 +84,22 @@ class RobotDynamics:
     robot : trajectories.robot.Robot
     friction : bool
         Add the usual friction columns ``FC FV OFF`` per joint.
+
+    Attributes
+    ----------
+    robot_regressor : trajectories.robot.RobotRegressor
+        The robot model's regressor of ``robot`` (the one identification uses).
+    deadband : ndarray, shape (k,)
+        ``MOVING_FRACTION`` of each joint's max velocity [rad/s] (Coulomb column).
     """
 
     robot: Robot
     friction: bool = True
 
     def __post_init__(self) -> None:
-        model = self.robot.reduced()
+        reg = RobotRegressor(self.robot)
+        object.__setattr__(self, "robot_regressor", reg)
+        model = pin.Model(reg.model)
         model.gravity = pin.Motion(np.concatenate([np.asarray(self.robot.gravity, float),
                                                    np.zeros(3)]))
         object.__setattr__(self, "model", model)
@@ -113,63 +117,36 @@ class RobotDynamics:
 
     @property
     def names(self) -> tuple[str, ...]:
-        """Column names, ROBOT_FORMAT (per joint: link parameters, Ia, [FC FV OFF])."""
-        out = []
-        nums = self.robot.numbers
-        for j in nums:
-            out += [f"{p}{j}" for p in _LINK] + [f"Ia{j}"]
-        if self.friction:
-            for j in nums:
-                out += [f"FC{j}", f"FV{j}", f"OFF{j}"]
-        return tuple(out)
+        """Column names, ROBOT_FORMAT (per joint: link parameters, Ia; then [FC FV OFF] per
+        joint): ``RobotRegressor.standard_names`` [+ ``friction_names``]."""
+        reg = self.robot_regressor
+        return reg.standard_names + (reg.friction_names if self.friction else ())
 
     def regressor(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
-        """``W`` of shape (n * k, p), rows sample-major (``trajectories.excitation``).
+        """``W`` of shape (n * k, p), rows sample-major (``trajectories.excitation``):
+        ``RobotRegressor.rows`` with the Coulomb deadband.
 
         Parameters
         ----------
         q, dq, ddq : ndarray, shape (n, k)
             Joint-side position [rad], velocity [rad/s], acceleration [rad/s^2].
         """
-        q, dq, ddq = (np.ascontiguousarray(x, dtype=float) for x in (q, dq, ddq))
-        n, k = q.shape
-        model = self.model
-        data = model.createData()
-        p_rigid = 11 * k
-        p = p_rigid + (3 * k if self.friction else 0)
-        w = np.zeros((n, k, p))
-        order = list(_PIN_ORDER)
-        reg = pin.computeJointTorqueRegressor
-        rigid = np.empty((n, k, 10 * k))
-        for i in range(n):
-            rigid[i] = reg(model, data, q[i], dq[i], ddq[i])
-        for j in range(k):
-            w[:, :, 11 * j:11 * j + 10] = rigid[:, :, 10 * j:10 * j + 10][:, :, order]
-            w[:, j, 11 * j + 10] = ddq[:, j]
-            if self.friction:
-                moving = np.abs(dq[:, j]) > self.deadband[j]
-                w[:, j, p_rigid + 3 * j] = np.sign(dq[:, j]) * moving
-                w[:, j, p_rigid + 3 * j + 1] = dq[:, j]
-                w[:, j, p_rigid + 3 * j + 2] = 1.0
-        return w.reshape(n * k, p)
+        return self.robot_regressor.rows(q, dq, ddq, friction=self.friction, deadband=self.deadband)
 
     def inverse_dynamics(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray,
                          payload: Any = None) -> np.ndarray:
         """Rigid-body + rotor torque ``tau_out + Ia ddq`` (n, k) [N m] of the robot file's
         inertial parameters, with a payload (``mass_kg``, ``com`` [m], ``inertia`` about the
-        CoM [kg m^2]) fixed in the frame of the last moving joint; friction not included."""
-        model = self.model
-        if payload is not None and float(payload.mass_kg) > 0:
-            model = pin.Model(model)
-            xx, xy, xz, yy, yz, zz = payload.inertia
-            extra = pin.Inertia(float(payload.mass_kg), np.asarray(payload.com, dtype=float),
-                                np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]))
-            last = model.njoints - 1
-            model.inertias[last] = model.inertias[last] + extra
-        data = model.createData()
+        CoM [kg m^2]) fixed in the frame of the last moving joint (the robot model's payload
+        torque, ``RobotRegressor.payload_torque``); friction not included."""
+        data = self.model.createData()
         q, dq, ddq = (np.ascontiguousarray(x, dtype=float) for x in (q, dq, ddq))
-        tau = np.array([pin.rnea(model, data, q[i], dq[i], ddq[i]) for i in range(len(q))])
-        return tau.reshape(q.shape) + self.Ia * ddq
+        tau = np.array([pin.rnea(self.model, data, q[i], dq[i], ddq[i])
+                        for i in range(len(q))]).reshape(q.shape) + self.Ia * ddq
+        if payload is not None and float(payload.mass_kg) > 0:
+            tau += self.robot_regressor.payload_torque(q, dq, ddq, RobotPayloadData(
+                float(payload.mass_kg), payload.com, payload.inertia))
+        return tau
 
 
 def prepare_robot_campaign(campaign: RobotCampaign, *, robot: Robot | None = None,
