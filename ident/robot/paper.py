@@ -51,11 +51,13 @@ PAPER_BLOCK = ("a_m", "b_m", "a_g", "b_g", "c_m", "d_m", "c_g", "d_g", "FV", "OF
 USUAL_BLOCK = ("FC", "FV", "OFF")
 
 
-def usual_coefficients(theta: np.ndarray, blk: np.ndarray, s: int) -> tuple[np.ndarray, ...]:
+def usual_coefficients(theta: np.ndarray, blk: np.ndarray, s: int,
+                       jacobian: bool = True) -> tuple[np.ndarray, ...]:
     """(c0, c1, D0, D1) of the usual model tau = W theta + p + FC sign + FV dq + OFF (eq. 8).
 
     ``theta``: the joint's base parameters (its non-zero columns), ``blk``: (FC, FV, OFF);
-    quadrant ``s`` is irrelevant (same coefficients in both)."""
+    quadrant ``s`` is irrelevant (same coefficients in both). ``jacobian=False``: (c0, c1)
+    only (a cost evaluation)."""
     nt = theta.shape[0]
     nv = nt + N_EXTRA
     nx = nt + 3
@@ -63,17 +65,21 @@ def usual_coefficients(theta: np.ndarray, blk: np.ndarray, s: int) -> tuple[np.n
     c0[:nt] = theta
     c0[nt + IP] = 1.0
     c0[nt + ISG], c0[nt + IDQ], c0[nt + ONE] = blk
+    if not jacobian:
+        return c0, np.zeros(nv)
     D0 = np.zeros((nv, nx))
-    D0[:nt, :nt] = np.eye(nt)
+    D0[_diag(nt)] = 1.0
     D0[nt + ISG, nt] = D0[nt + IDQ, nt + 1] = D0[nt + ONE, nt + 2] = 1.0
     return c0, np.zeros(nv), D0, np.zeros((nv, nx))
 
 
-def paper_coefficients(theta: np.ndarray, blk: np.ndarray, s: int) -> tuple[np.ndarray, ...]:
+def paper_coefficients(theta: np.ndarray, blk: np.ndarray, s: int,
+                       jacobian: bool = True) -> tuple[np.ndarray, ...]:
     """(c0, c1, D0, D1) of eq. 30 in quadrant ``s`` (0: motor P+, 1: generator P-).
 
     ``blk`` = (a_m, b_m, a_g, b_g, c_m, d_m, c_g, d_g, FV, OFF). Prediction
-    ``(c0 + E c1)^T v``; Jacobian row ``(D0 + E D1)^T v`` over (theta, blk)."""
+    ``(c0 + E c1)^T v``; Jacobian row ``(D0 + E D1)^T v`` over (theta, blk).
+    ``jacobian=False``: (c0, c1) only (a cost evaluation)."""
     nt = theta.shape[0]
     nv = nt + N_EXTRA
     nx = nt + len(PAPER_BLOCK)
@@ -90,10 +96,13 @@ def paper_coefficients(theta: np.ndarray, blk: np.ndarray, s: int) -> tuple[np.n
     c1[:nt] = sb * b * theta
     c1[nt + IP] = sb * b
     c1[nt + ISG] = blk[idd]
+    if not jacobian:
+        return c0, c1
     D0 = np.zeros((nv, nx))
     D1 = np.zeros((nv, nx))
-    D0[:nt, :nt] = a * np.eye(nt)
-    D1[:nt, :nt] = sb * b * np.eye(nt)
+    diag = _diag(nt)
+    D0[diag] = a
+    D1[diag] = sb * b
     D0[:nt, nt + ia] = theta
     D0[nt + IP, nt + ia] = 1.0
     D1[:nt, nt + ib] = sb * theta
@@ -103,6 +112,12 @@ def paper_coefficients(theta: np.ndarray, blk: np.ndarray, s: int) -> tuple[np.n
     D0[nt + IDQ, nt + 8] = 1.0
     D0[nt + ONE, nt + 9] = 1.0
     return c0, c1, D0, D1
+
+
+def _diag(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Indices of the diagonal of the leading n x n block."""
+    r = np.arange(n)
+    return r, r
 
 
 def paper_start(usual_blk: np.ndarray) -> np.ndarray:
