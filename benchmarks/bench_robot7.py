@@ -2,7 +2,11 @@
 7-axis fit with the consistency report <= 10 s on 2 cores").
 
     python benchmarks/bench_robot7.py [--duration 10] [--repeat 1] [--models both usual]
-                                      [--args "--cutoff 20"]
+                                      [--args "--cutoff 20"] [--before DIR]
+
+``--before DIR``: the same fits also with the code of another checkout (e.g.
+``git archive <commit> | tar -x -C DIR``), alternating with this one in the same run, so
+both see the same machine load.
 
 Data: the Franka Panda of example-robot-data (its seven arm joints moving, the fingers
 locked) simulated by ``sim_drivers.arm_offline.simulate_arm`` (``ArmParams.from_robot``: the
@@ -175,6 +179,8 @@ def main() -> None:
     ap.add_argument("--models", nargs="+", default=["both", "usual"],
                     help="--model values to time (the command line's default is both)")
     ap.add_argument("--args", default="", help="more options of jointid fit --robot")
+    ap.add_argument("--before", type=Path, default=None,
+                    help="a checkout of the code before, timed in the same run")
     ap.add_argument("--child", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.child is not None:
@@ -186,41 +192,48 @@ def main() -> None:
         toml, csv = write_log(folder, a.duration)
         print(f"simulated {a.duration:g} s of the 7-axis panda at 1 kHz, stamps jittered "
               f"+-{1e3 * JITTER_S:g} ms ({time.perf_counter() - t0:.1f} s)")
-        env = dict(os.environ, PYTHONPATH=str(ROOT))
-        results = {}
+        codes = {"": ROOT} if a.before is None else {"before ": a.before.resolve(),
+                                                         "after ": ROOT}
+        results: dict[str, list[dict]] = {}
         for model in a.models:
             argv = ["fit", "--robot", str(toml), str(csv), "--model", model,
                     "--json", str(folder / f"{model}.json"), *shlex.split(a.args)]
-            runs = []
             for _ in range(a.repeat):
-                p = subprocess.run([sys.executable, __file__, "--child", *argv], env=env,
-                                   capture_output=True, text=True, check=False)
-                if p.returncode != 0:
-                    raise SystemExit(p.stderr.strip().splitlines()[-1])
-                runs.append(json.loads(p.stdout.strip().splitlines()[-1]))
-            results[model] = runs
+                for tag, code in codes.items():  # alternating: the same load for both
+                    env = dict(os.environ, PYTHONPATH=str(code))
+                    p = subprocess.run([sys.executable, __file__, "--child", *argv], env=env,
+                                       capture_output=True, text=True, check=False)
+                    if p.returncode != 0:
+                        raise SystemExit((p.stderr.strip().splitlines() or ["failed"])[-1])
+                    results.setdefault(f"{tag}{model}", []).append(
+                        json.loads(p.stdout.strip().splitlines()[-1]))
     load = os.getloadavg()[0]
     first = next(iter(results.values()))[0]
     print(f"jointid fit --robot {' '.join(shlex.split(a.args))}: {first['samples']} decimated "
           f"samples (cut-off {first['cutoff_hz']:.4g} Hz, decimation {first['decimation']}); "
-          f"{os.cpu_count()} cores, load average {load:.1f}; median of {a.repeat}")
-    head = f"{'stage':>12}" + "".join(f" {m + ' wall':>11} {m + ' cpu':>10}" for m in results)
-    print(head)
-    for st in (*STAGES, "total"):
-        line = f"{st:>12}"
-        for runs in results.values():
-            if st == "total":
-                w = statistics.median(r["total_wall"] for r in runs)
-                c = statistics.median(r["total_cpu"] for r in runs)
-            else:
-                w = statistics.median(r["wall"][st] for r in runs)
-                c = statistics.median(r["cpu"][st] for r in runs)
-            line += f" {w:>11.2f} {c:>10.2f}"
-        print(line)
-    for model, runs in results.items():
-        errs = ", ".join(f"{m} {100 * e:.2f} %" for m, e in runs[0]["rel_error"].items()
+          f"{os.cpu_count()} cores, load average {load:.1f}; median of {a.repeat}; times [s]")
+    for model in a.models:
+        keys = [f"{tag}{model}" for tag in codes]
+        print(f"--model {model}" + ("" if a.before is None else ": before / after"))
+        print(f"{'stage':>12}" + "".join(f" {(t or 'time').strip() + ' wall':>11} "
+                                         f"{(t or 'time').strip() + ' cpu':>11}"
+                                         for t in codes))
+        for st in (*STAGES, "total"):
+            line = f"{st:>12}"
+            for key in keys:
+                runs = results[key]
+                if st == "total":
+                    w = statistics.median(r["total_wall"] for r in runs)
+                    c = statistics.median(r["total_cpu"] for r in runs)
+                else:
+                    w = statistics.median(r["wall"][st] for r in runs)
+                    c = statistics.median(r["cpu"][st] for r in runs)
+                line += f" {w:>11.2f} {c:>11.2f}"
+            print(line)
+    for key, runs in results.items():
+        errs = ", ".join(f"{m} {100 * e:.4f} %" for m, e in runs[0]["rel_error"].items()
                          if e is not None)
-        print(f"--model {model}: relative error {errs}")
+        print(f"{key}: relative error (fit rows) {errs}")
 
 
 if __name__ == "__main__":
