@@ -49,6 +49,7 @@ into the last link's base parameters instead (only the mass at the flange origin
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -60,6 +61,7 @@ from .moments import IDQ, IP, ISG, N_EXTRA, ONE, JointMoments, quadrant_weights
 from .paper import (
     PAPER_BLOCK,
     USUAL_BLOCK,
+    batch_coefficients,
     paper_coefficients,
     paper_start,
     usual_coefficients,
@@ -122,6 +124,80 @@ def _ref_acceleration(t: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
         return np.zeros_like(q_ref)
     return np.gradient(np.gradient(q_ref, t, axis=0), t, axis=0)
 
+
+
+@dataclass
+class _Packed:
+    """The Gauss-Newton sums of every joint at once (``RobotModel._gauss_newton``): joint j's
+    moments padded to m base columns, stacked as Mz[j, s] = [[M0, M1], [M1, M2]] (rows of v
+    and of E v, quadrant s); the Jacobian's theta block is gam_e times the identity and its
+    friction block B (:func:`~ident.robot.paper.batch_coefficients`), so D^T Mz D needs dense
+    products with B only. ``tidx``, ``bidx``: global indices of the padded theta entries (nx:
+    a zero slot for the padding) and of the per-joint block; ``gidx`` both."""
+
+    model: str
+    Mz: np.ndarray
+    tidx: np.ndarray
+    bidx: np.ndarray
+    gidx: np.ndarray
+    m: int
+    nx: int
+
+    def _coeffs(self, x: np.ndarray, s: int, jacobian: bool = True):
+        xe = np.append(x, 0.0)
+        return batch_coefficients(self.model, xe[self.tidx], x[self.bidx], s, jacobian)
+
+    def normal(self, x: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(J^T W J, J^T W r) over all joints and both quadrants."""
+        m, nv = self.m, self.m + N_EXTRA
+        k = self.tidx.shape[0]
+        nloc = self.gidx.shape[1]
+        A_loc = np.zeros((k, nloc, nloc))
+        g_loc = np.zeros((k, nloc))
+        ey = np.zeros(nv)
+        ey[-1] = 1.0
+        for s in (0, 1):
+            c0, c1, g0, g1, B = self._coeffs(x, s)
+            Mz = self.Mz[:, s]
+            dz = np.concatenate([ey - c0, -c1], axis=1)
+            MD = np.empty((k, 2 * nv, nloc))
+            a0, a1 = g0[:, None, None], g1[:, None, None]
+            MD[:, :, :m] = a0 * Mz[:, :, :m] + a1 * Mz[:, :, nv:nv + m]
+            MD[:, :, m:] = Mz @ B
+            A_loc[:, :m] += a0 * MD[:, :m] + a1 * MD[:, nv:nv + m]
+            A_loc[:, m:] += np.swapaxes(B, 1, 2) @ MD
+            w = (Mz @ dz[:, :, None])[:, :, 0]
+            g_loc[:, :m] += g0[:, None] * w[:, :m] + g1[:, None] * w[:, nv:nv + m]
+            g_loc[:, m:] += (np.swapaxes(B, 1, 2) @ w[:, :, None])[:, :, 0]
+        A_loc *= weights[:, None, None]
+        g_loc *= weights[:, None]
+        n1 = self.nx + 1
+        lin = self.gidx[:, :, None] * n1 + self.gidx[:, None, :]
+        A = np.bincount(lin.ravel(), A_loc.ravel(), n1 * n1).reshape(n1, n1)[:-1, :-1]
+        g = np.bincount(self.gidx.ravel(), g_loc.ravel(), n1)[:-1]
+        return A, g
+
+    def line_cost(self, x: np.ndarray, step: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        """Weighted ||r||^2 at x + lam step as polynomial coefficients in lam (lowest first),
+        as ``RobotModel._line_cost``, every joint at once."""
+        nv = self.m + N_EXTRA
+        ey = np.zeros(nv)
+        ey[-1] = 1.0
+        out = np.zeros(5)
+        for s in (0, 1):
+            mid, plus, minus = (self._coeffs(v, s, jacobian=False)
+                                for v in (x, x + step, x - step))
+            d = []
+            for e in (0, 1):
+                first = 0.5 * (plus[e] - minus[e])
+                second = 0.5 * (plus[e] + minus[e]) - mid[e]
+                d.append(np.stack([(ey if e == 0 else 0.0) - mid[e], -first, -second], axis=1))
+            Dp = np.concatenate(d, axis=2)  # (k, 3, 2 nv): lam^0, lam^1, lam^2
+            P = Dp @ self.Mz[:, s] @ np.swapaxes(Dp, 1, 2)  # (k, 3, 3)
+            P = np.tensordot(weights, P, axes=1)
+            for i in range(3):
+                out[i:i + 3] += P[i]
+        return out
 
 class RobotModel:
     """Identification of an n-dof robot with the usual or the paper friction (module doc).
@@ -646,6 +722,27 @@ class RobotModel:
             out += weights[j] * mom.cost_polynomial(dpoly)
         return out
 
+    def _packed(self, moms, coeffs: Coeffs) -> _Packed | None:
+        """The joints' moments padded to one size for the Gauss-Newton sums of all joints at
+        once (:class:`_Packed`); None for IDIM-IV or another coefficient function."""
+        model = {paper_coefficients: "paper", usual_coefficients: "usual"}.get(coeffs)
+        if model is None or self.method == "iv":
+            return None
+        k, nb, nx = len(moms), len(self.block_), self.n_theta_ + len(self.block_) * len(moms)
+        m = max(len(c) for c in self.cols_)
+        nv = m + N_EXTRA
+        Mz = np.zeros((k, 2, 2 * nv, 2 * nv))
+        tidx = np.full((k, m), nx)  # padding: the slot nx, a zero
+        for j, (mom, cols) in enumerate(zip(moms, self.cols_, strict=True)):
+            nt = len(cols)
+            pos = np.r_[np.arange(nt), m + np.arange(N_EXTRA)]
+            for s in (0, 1):
+                for e, f in ((0, 0), (0, 1), (1, 0), (1, 1)):
+                    Mz[j, s][np.ix_(e * nv + pos, f * nv + pos)] = mom.vv[s, e + f]
+            tidx[j, :nt] = cols
+        bidx = self.n_theta_ + nb * np.arange(k)[:, None] + np.arange(nb)[None, :]
+        return _Packed(model, Mz, tidx, bidx, np.concatenate([tidx, bidx], axis=1), m, nx)
+
     def _solve_step(self, A: np.ndarray, g: np.ndarray, free: np.ndarray) -> np.ndarray:
         Af = A[np.ix_(free, free)]
         d = np.sqrt(np.abs(np.diag(Af)))
@@ -689,11 +786,17 @@ class RobotModel:
                       weights: np.ndarray, linear: bool) -> tuple[np.ndarray, int]:
         x = x0.copy()
         cost = float(weights @ self._cost(moms, coeffs, x))
+        packed = self._packed(moms, coeffs)
         it = 0
         for it in range(1, int(self.max_iter) + 1):
-            A, g, _, _, _ = self._normal(moms, coeffs, x, weights)
-            step = self._solve_step(A, g, free)
-            poly = self._line_cost(moms, coeffs, x, step, weights)[::-1]
+            if packed is not None:  # every joint at once
+                A, g = packed.normal(x, weights)
+                step = self._solve_step(A, g, free)
+                poly = packed.line_cost(x, step, weights)[::-1]
+            else:
+                A, g, _, _, _ = self._normal(moms, coeffs, x, weights)
+                step = self._solve_step(A, g, free)
+                poly = self._line_cost(moms, coeffs, x, step, weights)[::-1]
             lam = 1.0
             while True:  # step halving; the trial costs from the polynomial in lam
                 cn = max(float(np.polyval(poly, lam)), 0.0)

@@ -43,7 +43,7 @@ import numpy as np
 from .moments import IDQ, IP, ISG, N_EXTRA, ONE
 
 __all__ = ["PAPER_BLOCK", "USUAL_BLOCK", "paper_coefficients", "usual_coefficients",
-           "paper_start"]
+           "paper_start", "batch_coefficients"]
 
 #: Per-joint parameter prefixes of the paper model (ROBOT_FORMAT order).
 PAPER_BLOCK = ("a_m", "b_m", "a_g", "b_g", "c_m", "d_m", "c_g", "d_g", "FV", "OFF")
@@ -124,3 +124,52 @@ def paper_start(usual_blk: np.ndarray) -> np.ndarray:
     """Paper block from a usual fit (FC, FV, OFF): a = 1, b = 0, c = FC, d = 0."""
     fc, fv, off = usual_blk
     return np.array([1.0, 0.0, 1.0, 0.0, fc, 0.0, fc, 0.0, fv, off])
+
+
+def batch_coefficients(model: str, theta: np.ndarray, blk: np.ndarray, s: int,
+                       jacobian: bool = True) -> tuple[np.ndarray, ...]:
+    """:func:`paper_coefficients` / :func:`usual_coefficients` of k joints at once, their
+    rows padded to a common length: ``theta`` (k, m) (joint j's base parameters in its first
+    entries, zeros after), ``blk`` (k, nb). Entry layout of v: the m padded base columns, then
+    p, sign(dq), dq, 1, tau (nv = m + 5).
+
+    Returns (c0, c1) (k, nv) and, with ``jacobian``, (gam0, gam1) (k,) and B (k, 2 nv, nb):
+    the Jacobian of joint j on (theta, blk) is D = [gam0 I; 0; gam1 I; 0] on the theta
+    columns (rows of v and of E v, ``JointMoments.normal``'s D0 over D1) and B on the block's.
+    """
+    k, m = theta.shape
+    nv = m + N_EXTRA
+    c0 = np.zeros((k, nv))
+    c1 = np.zeros((k, nv))
+    if model == "usual":
+        c0[:, :m] = theta
+        c0[:, m + IP] = 1.0
+        c0[:, m + ISG], c0[:, m + IDQ], c0[:, m + ONE] = blk[:, 0], blk[:, 1], blk[:, 2]
+        if not jacobian:
+            return c0, c1
+        B = np.zeros((k, 2 * nv, len(USUAL_BLOCK)))
+        B[:, m + ISG, 0] = B[:, m + IDQ, 1] = B[:, m + ONE, 2] = 1.0
+        return c0, c1, np.ones(k), np.zeros(k), B
+    ia, ib, ic, idd = (0, 1, 4, 5) if s == 0 else (2, 3, 6, 7)
+    a, b = blk[:, ia], blk[:, ib]
+    sb = 1.0 if s == 0 else -1.0
+    c0[:, :m] = a[:, None] * theta
+    c0[:, m + IP] = a
+    c0[:, m + ISG] = blk[:, ic]
+    c0[:, m + IDQ] = blk[:, 8]
+    c0[:, m + ONE] = blk[:, 9]
+    c1[:, :m] = (sb * b)[:, None] * theta
+    c1[:, m + IP] = sb * b
+    c1[:, m + ISG] = blk[:, idd]
+    if not jacobian:
+        return c0, c1
+    B = np.zeros((k, 2 * nv, len(PAPER_BLOCK)))
+    B[:, :m, ia] = theta
+    B[:, m + IP, ia] = 1.0
+    B[:, nv:nv + m, ib] = sb * theta
+    B[:, nv + m + IP, ib] = sb
+    B[:, m + ISG, ic] = 1.0
+    B[:, nv + m + ISG, idd] = 1.0
+    B[:, m + IDQ, 8] = 1.0
+    B[:, m + ONE, 9] = 1.0
+    return c0, c1, a.copy(), sb * b, B
