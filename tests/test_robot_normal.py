@@ -2,7 +2,8 @@
 alone equals the normal equations' residual to the last bit, and the structured normal
 equations (the theta block of the Jacobian a scaled identity) equal the dense products of
 the module doc, for least squares and IDIM-IV, in both quadrants; the sums of all joints at
-once (estimate._Packed) equal the per-joint ones, and the fit is the same with either."""
+once (ident.robot.packed.PackedMoments) equal the per-joint ones, and the fit is the same
+with either."""
 
 from __future__ import annotations
 
