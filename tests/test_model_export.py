@@ -18,6 +18,7 @@ from daq.app.cli import main
 from ident.robot.consistency import check_consistency
 from ident.robot.consistent_fit import (
     MARGIN,
+    PRIOR_WEIGHT,
     add_consistent,
     consistent_model,
     consistent_record,
@@ -307,3 +308,33 @@ def test_ur10_consistent_estimate_and_round_trip(ur10, model, tmp_path):
     worst, ties = _round_trip(est, fit, reg.robot, sigs, tmp_path)
     assert worst <= 1e-6, worst
     assert ties <= 1e-3 * sum(s.n for s in sigs) * len(reg.joints)
+
+
+@pytest.mark.parametrize("model", ["usual", "paper"])
+def test_direct_clarabel_program_is_cvxpys(arm3, model):
+    """The program handed to Clarabel directly (the default) is the one cvxpy builds: the
+    same optimum -- d^2 and the objective (d^2 + the prior term) equal to the solvers'
+    tolerance or lower, every link valid -- on a realisable fit and on one made
+    unrealisable (Ia3 = -1)."""
+    params, reg, base, runs = arm3
+    m = RobotModel(reg, model, "ls", base=base).fit(_signals(params, reg, runs, 2))
+    prior = np.asarray(reg.standard_values(), dtype=float)
+    scale = max(float(np.median(np.abs(m.coef_[:m.n_base_]))), 1e-2)
+    ps = np.maximum(np.abs(prior), scale)
+
+    def objective(fit):
+        chi = np.array([fit.standard[n] for n in base.standard_names])
+        return fit.d2 + PRIOR_WEIGHT * float(np.sum(((chi - prior) / ps) ** 2))
+
+    for bad in (False, True):
+        if bad:
+            m.coef_ = m.coef_.copy()
+            m.coef_[m.names_.index("Ia3")] = -1.0
+        direct = fit_consistent(m)
+        ref = fit_consistent(m, solver="cvxpy-clarabel")
+        assert direct.valid and ref.valid, (direct.links, ref.links)
+        assert direct.status == "optimal" and direct.solver == "CLARABEL"
+        assert direct.d2 == pytest.approx(ref.d2, rel=1e-4, abs=1e-6)
+        assert objective(direct) <= objective(ref) * (1 + 1e-5) + 1e-8
+        np.testing.assert_allclose(direct.coef[:m.n_base_], ref.coef[:m.n_base_], rtol=1e-3,
+                                   atol=1e-4 * np.abs(ref.coef[:m.n_base_]).max())

@@ -57,6 +57,7 @@ import scipy.linalg
 from . import RobotIdentError
 from .base import base_parameters, payload_base, placed_payload
 from .moments import IDQ, IP, ISG, N_EXTRA, ONE, JointMoments, quadrant_weights
+from .packed import PackedMoments
 from .paper import (
     PAPER_BLOCK,
     USUAL_BLOCK,
@@ -103,7 +104,7 @@ THIN_QUADRANT = 0.02
 #: while the model quadrants are still being decided and leave a direction unexcited.
 DAMPING = 1e-6
 
-Coeffs = Callable[[np.ndarray, np.ndarray, int], tuple[np.ndarray, ...]]
+Coeffs = Callable[..., tuple[np.ndarray, ...]]  # (theta, blk, s, jacobian=True)
 
 
 class _Unidentifiable(RobotIdentError):
@@ -121,6 +122,7 @@ def _ref_acceleration(t: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
     if t.size < 3:
         return np.zeros_like(q_ref)
     return np.gradient(np.gradient(q_ref, t, axis=0), t, axis=0)
+
 
 
 class RobotModel:
@@ -608,6 +610,66 @@ class RobotModel:
             rr[j], yy[j] = rrj, yyj
         return A, g, rr, C, yy
 
+    def _cost(self, moms, coeffs: Coeffs, x: np.ndarray) -> np.ndarray:
+        """Per-joint ||r||^2 at ``x`` (the ``rr`` of :meth:`_normal`, to the last bit) without
+        the Jacobian: the line search's and the reweighting's evaluations."""
+        rr = np.zeros(len(moms))
+        for j, mom in enumerate(moms):
+            idx = self._local(j)
+            nt = len(self.cols_[j])
+            th, blk = x[idx[:nt]], x[idx[nt:]]
+            rr[j] = mom.cost([coeffs(th, blk, 0, jacobian=False),
+                              coeffs(th, blk, 1, jacobian=False)])
+        return rr
+
+    def _line_cost(self, moms, coeffs: Coeffs, x: np.ndarray, step: np.ndarray,
+                   weights: np.ndarray) -> np.ndarray:
+        """Weighted ||r||^2 at x + lam step as polynomial coefficients in lam (lowest
+        first): the prediction coefficients are quadratic in lam (the models are bilinear),
+        so those at x and x +- step give them exactly, and the line search's trial points
+        cost nothing more (:meth:`JointMoments.cost_polynomial`)."""
+        out = np.zeros(5)
+        for j, mom in enumerate(moms):
+            idx = self._local(j)
+            nt = len(self.cols_[j])
+            xs = (x[idx], x[idx] + step[idx], x[idx] - step[idx])
+            ey = np.zeros(mom.nv)
+            ey[-1] = 1.0
+            dpoly = []
+            for s in (0, 1):
+                c = [coeffs(v[:nt], v[nt:], s, jacobian=False) for v in xs]
+                d = []
+                for e in (0, 1):
+                    mid, plus, minus = (ci[e] for ci in c)
+                    first = 0.5 * (plus - minus)
+                    second = 0.5 * (plus + minus) - mid
+                    d.append(np.stack([(ey if e == 0 else 0.0) - mid, -first, -second]))
+                dpoly.append(tuple(d))
+            out += weights[j] * mom.cost_polynomial(dpoly)
+        return out
+
+    def _packed(self, moms, coeffs: Coeffs) -> PackedMoments | None:
+        """The joints' moments padded to one size for the Gauss-Newton sums of all joints at
+        once (:class:`~ident.robot.packed.PackedMoments`); None for IDIM-IV or another
+        coefficient function."""
+        model = {paper_coefficients: "paper", usual_coefficients: "usual"}.get(coeffs)
+        if model is None or self.method == "iv":
+            return None
+        k, nb, nx = len(moms), len(self.block_), self.n_theta_ + len(self.block_) * len(moms)
+        m = max(len(c) for c in self.cols_)
+        nv = m + N_EXTRA
+        Mz = np.zeros((k, 2, 2 * nv, 2 * nv))
+        tidx = np.full((k, m), nx)  # padding: the slot nx, a zero
+        for j, (mom, cols) in enumerate(zip(moms, self.cols_, strict=True)):
+            nt = len(cols)
+            pos = np.r_[np.arange(nt), m + np.arange(N_EXTRA)]
+            for s in (0, 1):
+                for e, f in ((0, 0), (0, 1), (1, 0), (1, 1)):
+                    Mz[j, s][np.ix_(e * nv + pos, f * nv + pos)] = mom.vv[s, e + f]
+            tidx[j, :nt] = cols
+        bidx = self.n_theta_ + nb * np.arange(k)[:, None] + np.arange(nb)[None, :]
+        return PackedMoments(model, Mz, tidx, bidx, np.concatenate([tidx, bidx], axis=1), m, nx)
+
     def _solve_step(self, A: np.ndarray, g: np.ndarray, free: np.ndarray) -> np.ndarray:
         Af = A[np.ix_(free, free)]
         d = np.sqrt(np.abs(np.diag(Af)))
@@ -628,13 +690,16 @@ class RobotModel:
                                   float(sv[0]) if sv.size else 0.0, zero=True)
         As = Af / d[:, None] / d[None, :]
         if self.method != "iv":
-            ev, evec = np.linalg.eigh(As)
-            lo, hi, weak = ev[0], ev[-1], evec[:, 0]
+            ev = np.linalg.eigvalsh(As)  # the eigenvectors only when the check fails
+            lo, hi, weak = ev[0], ev[-1], None
         else:
             # IDIM-IV: A = Z^T W is not symmetric; its smallest singular value decides
             _, sv, vt = np.linalg.svd(As)
             lo, hi, weak = sv[-1], sv[0], vt[-1]
         if not np.isfinite(hi) or lo <= RANK_TOL * hi:
+            if weak is None:
+                ev, evec = np.linalg.eigh(As)
+                lo, hi, weak = ev[0], ev[-1], evec[:, 0]
             worst = np.argsort(-np.abs(weak))[:4]
             names = [self.names_[i] for i in np.flatnonzero(free)[worst]]
             raise _Unidentifiable(f"parameters not identifiable on these data (cond "
@@ -647,21 +712,25 @@ class RobotModel:
     def _gauss_newton(self, moms, coeffs: Coeffs, x0: np.ndarray, free: np.ndarray,
                       weights: np.ndarray, linear: bool) -> tuple[np.ndarray, int]:
         x = x0.copy()
-        _, _, rr, _, _ = self._normal(moms, coeffs, x, weights)
-        cost = float(weights @ rr)
+        cost = float(weights @ self._cost(moms, coeffs, x))
+        packed = self._packed(moms, coeffs)
         it = 0
         for it in range(1, int(self.max_iter) + 1):
-            A, g, _, _, _ = self._normal(moms, coeffs, x, weights)
-            step = self._solve_step(A, g, free)
+            if packed is not None:  # every joint at once
+                A, g = packed.normal(x, weights)
+                step = self._solve_step(A, g, free)
+                poly = packed.line_cost(x, step, weights)[::-1]
+            else:
+                A, g, _, _, _ = self._normal(moms, coeffs, x, weights)
+                step = self._solve_step(A, g, free)
+                poly = self._line_cost(moms, coeffs, x, step, weights)[::-1]
             lam = 1.0
-            while True:
-                xn = x + lam * step
-                _, _, rrn, _, _ = self._normal(moms, coeffs, xn, weights)
-                cn = float(weights @ rrn)
+            while True:  # step halving; the trial costs from the polynomial in lam
+                cn = max(float(np.polyval(poly, lam)), 0.0)
                 if linear or self.method == "iv" or cn <= cost * (1 + 1e-12) or lam < 1e-6:
                     break
                 lam *= 0.5
-            x, cost = xn, cn
+            x, cost = x + lam * step, cn
             if linear and it >= 2:
                 break
             scale = np.sqrt(np.abs(np.diag(A)))
@@ -713,8 +782,7 @@ class RobotModel:
         w = np.ones(k)
         x, it = self._gauss_newton(moms, coeffs, x0, free, w, linear)
         if self.method == "wls":
-            _, _, rr, _, _ = self._normal(moms, coeffs, x, w)
-            sj = self._joint_sigma(moms, rr, free)
+            sj = self._joint_sigma(moms, self._cost(moms, coeffs, x), free)
             if np.any(sj <= 0):
                 raise RobotIdentError("RobotModel: a joint has zero residual; WLS weights "
                                       "undefined (use method='ls')")

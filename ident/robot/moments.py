@@ -174,19 +174,120 @@ class JointMoments:
         C = np.zeros((nx, nx)) if self.iv else None
         rr = 0.0
         mz = self.zv if self.iv else self.vv
+        nt = len(self.cols)
         for s in (0, 1):
             c0, c1, D0, D1 = coeffs[s]
             d = (ey - c0, -c1)
             D = (D0, D1)
             lin = not (np.any(c1) or np.any(D1))
             terms = ((0, 0),) if lin else ((0, 0), (0, 1), (1, 0), (1, 1))
-            for e, f in terms:
-                M = mz[s, e + f]
-                MD = M @ D[f]
-                A += D[e].T @ MD
-                g += D[e].T @ (M @ d[f])
+            for e, f in terms:  # the residual: the sums of cost(), in its order
                 rr += float(d[e] @ self.vv[s, e + f] @ d[f])
-                if C is not None:
-                    C += D[e].T @ self.zz[s, e + f] @ D[f]
+            gam = _scaled_identity(D0, D1, nt, lin)
+            if gam is None:  # general Jacobian coefficients: the dense products
+                for e, f in terms:
+                    M = mz[s, e + f]
+                    A += D[e].T @ (M @ D[f])
+                    g += D[e].T @ (M @ d[f])
+                    if C is not None:
+                        C += D[e].T @ self.zz[s, e + f] @ D[f]
+                continue
+            # every model here: the theta block of D_e is gam_e times the identity (theta
+            # enters as (a + b E) W theta), so D^T M D needs dense products with the
+            # per-joint block's columns only
+            Dz, dz = _stack(D, lin), np.concatenate(d[:1] if lin else d)
+            A += _sandwich(_stack_moments(mz[s], lin), Dz, gam, nt, nv)
+            g += _apply_t(Dz, gam, nt, nv, _stack_moments(mz[s], lin) @ dz)
+            if C is not None:
+                C += _sandwich(_stack_moments(self.zz[s], lin), Dz, gam, nt, nv)
         yy = float(self.vv[0, 0, -1, -1] + self.vv[1, 0, -1, -1])
         return A, g, max(rr, 0.0), C, yy  # rr: quadratic form, clip rounding below 0
+
+    def cost_polynomial(self, dpoly: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+        """||r||^2 along a line as a polynomial in its step length lam: the residual
+        coefficients d_e(lam) = sum_i lam^i dpoly[s][e][i] (d_0 = e_tau - c0, d_1 = -c1 of
+        :meth:`normal`; arrays (m, nv)) give ||r(lam)||^2 = sum_k lam^k out[k], out of
+        shape (2 m - 1,). Every model here is bilinear in its parameters, so m = 3 (c
+        quadratic in lam) gives the exact cost at every lam from one evaluation."""
+        m = dpoly[0][0].shape[0]
+        out = np.zeros(2 * m - 1)
+        for s in (0, 1):
+            d = dpoly[s]
+            lin = not np.any(d[1])
+            terms = ((0, 0),) if lin else ((0, 0), (0, 1), (1, 0), (1, 1))
+            for e, f in terms:
+                P = d[e] @ self.vv[s, e + f] @ d[f].T
+                for i in range(m):
+                    out[i:i + m] += P[i]
+        return out
+
+    def cost(self, coeffs: list[tuple[np.ndarray, np.ndarray]]) -> float:
+        """||r||^2 of :meth:`normal` alone, from the prediction coefficients (c0, c1) per
+        quadrant (the Jacobian not needed: a line search's trial points). The same sums in
+        the same order as :meth:`normal` (terms with c1 = 0 add exact zeros there), so the
+        two agree to the last bit."""
+        nv = self.nv
+        ey = np.zeros(nv)
+        ey[nv - N_EXTRA + IY] = 1.0
+        rr = 0.0
+        for s in (0, 1):
+            c0, c1 = coeffs[s][0], coeffs[s][1]
+            d = (ey - c0, -c1)
+            terms = ((0, 0),) if not np.any(c1) else ((0, 0), (0, 1), (1, 0), (1, 1))
+            for e, f in terms:
+                rr += float(d[e] @ self.vv[s, e + f] @ d[f])
+        return max(rr, 0.0)
+
+
+def _scaled_identity(D0: np.ndarray, D1: np.ndarray, nt: int,
+                     lin: bool) -> tuple[float, float] | None:
+    """(gam0, gam1) when the leading nt x nt blocks of D0, D1 are gam_e times the identity
+    and the rest of their first nt columns is zero; else None."""
+    out = []
+    for De in (D0,) if lin else (D0, D1):
+        lead = De[:, :nt]
+        gam = float(lead[0, 0]) if nt else 0.0
+        if np.count_nonzero(lead) > (nt if gam else 0) or np.any(np.diagonal(lead) != gam):
+            return None
+        out.append(gam)
+    return (out[0], 0.0 if lin else out[1])
+
+
+def _stack(D: tuple[np.ndarray, np.ndarray], lin: bool) -> np.ndarray:
+    """[D0; D1] (2 nv, nx), or D0 alone for a linear model."""
+    return D[0] if lin else np.vstack(D)
+
+
+def _stack_moments(m: np.ndarray, lin: bool) -> np.ndarray:
+    """[[M0, M1], [M1, M2]] of the moments m (3, nv, nv) of one quadrant, or M0 (linear)."""
+    if lin:
+        return m[0]
+    nv = m.shape[1]
+    out = np.empty((2 * nv, 2 * nv))
+    out[:nv, :nv], out[:nv, nv:], out[nv:, :nv], out[nv:, nv:] = m[0], m[1], m[1], m[2]
+    return out
+
+
+def _apply_t(Dz: np.ndarray, gam: tuple[float, float], nt: int, nv: int,
+             w: np.ndarray) -> np.ndarray:
+    """Dz^T w with Dz's theta block gam_e I (rows e nv .. e nv + nt)."""
+    out = np.empty((Dz.shape[1],) + w.shape[1:])
+    top = gam[0] * w[:nt]
+    if Dz.shape[0] > nv and gam[1]:
+        top = top + gam[1] * w[nv:nv + nt]
+    out[:nt] = top
+    out[nt:] = Dz[:, nt:].T @ w
+    return out
+
+
+def _sandwich(Mz: np.ndarray, Dz: np.ndarray, gam: tuple[float, float], nt: int,
+              nv: int) -> np.ndarray:
+    """Dz^T Mz Dz with Dz's theta block gam_e I: the dense products only on its other
+    columns."""
+    MD = np.empty((Mz.shape[0], Dz.shape[1]))
+    left = gam[0] * Mz[:, :nt]
+    if Dz.shape[0] > nv and gam[1]:
+        left = left + gam[1] * Mz[:, nv:nv + nt]
+    MD[:, :nt] = left
+    MD[:, nt:] = Mz @ Dz[:, nt:]
+    return _apply_t(Dz, gam, nt, nv, MD)

@@ -43,7 +43,7 @@ import numpy as np
 from .moments import IDQ, IP, ISG, N_EXTRA, ONE
 
 __all__ = ["PAPER_BLOCK", "USUAL_BLOCK", "paper_coefficients", "usual_coefficients",
-           "paper_start"]
+           "paper_start", "batch_coefficients"]
 
 #: Per-joint parameter prefixes of the paper model (ROBOT_FORMAT order).
 PAPER_BLOCK = ("a_m", "b_m", "a_g", "b_g", "c_m", "d_m", "c_g", "d_g", "FV", "OFF")
@@ -51,11 +51,13 @@ PAPER_BLOCK = ("a_m", "b_m", "a_g", "b_g", "c_m", "d_m", "c_g", "d_g", "FV", "OF
 USUAL_BLOCK = ("FC", "FV", "OFF")
 
 
-def usual_coefficients(theta: np.ndarray, blk: np.ndarray, s: int) -> tuple[np.ndarray, ...]:
+def usual_coefficients(theta: np.ndarray, blk: np.ndarray, s: int,
+                       jacobian: bool = True) -> tuple[np.ndarray, ...]:
     """(c0, c1, D0, D1) of the usual model tau = W theta + p + FC sign + FV dq + OFF (eq. 8).
 
     ``theta``: the joint's base parameters (its non-zero columns), ``blk``: (FC, FV, OFF);
-    quadrant ``s`` is irrelevant (same coefficients in both)."""
+    quadrant ``s`` is irrelevant (same coefficients in both). ``jacobian=False``: (c0, c1)
+    only (a cost evaluation)."""
     nt = theta.shape[0]
     nv = nt + N_EXTRA
     nx = nt + 3
@@ -63,17 +65,21 @@ def usual_coefficients(theta: np.ndarray, blk: np.ndarray, s: int) -> tuple[np.n
     c0[:nt] = theta
     c0[nt + IP] = 1.0
     c0[nt + ISG], c0[nt + IDQ], c0[nt + ONE] = blk
+    if not jacobian:
+        return c0, np.zeros(nv)
     D0 = np.zeros((nv, nx))
-    D0[:nt, :nt] = np.eye(nt)
+    D0[_diag(nt)] = 1.0
     D0[nt + ISG, nt] = D0[nt + IDQ, nt + 1] = D0[nt + ONE, nt + 2] = 1.0
     return c0, np.zeros(nv), D0, np.zeros((nv, nx))
 
 
-def paper_coefficients(theta: np.ndarray, blk: np.ndarray, s: int) -> tuple[np.ndarray, ...]:
+def paper_coefficients(theta: np.ndarray, blk: np.ndarray, s: int,
+                       jacobian: bool = True) -> tuple[np.ndarray, ...]:
     """(c0, c1, D0, D1) of eq. 30 in quadrant ``s`` (0: motor P+, 1: generator P-).
 
     ``blk`` = (a_m, b_m, a_g, b_g, c_m, d_m, c_g, d_g, FV, OFF). Prediction
-    ``(c0 + E c1)^T v``; Jacobian row ``(D0 + E D1)^T v`` over (theta, blk)."""
+    ``(c0 + E c1)^T v``; Jacobian row ``(D0 + E D1)^T v`` over (theta, blk).
+    ``jacobian=False``: (c0, c1) only (a cost evaluation)."""
     nt = theta.shape[0]
     nv = nt + N_EXTRA
     nx = nt + len(PAPER_BLOCK)
@@ -90,10 +96,13 @@ def paper_coefficients(theta: np.ndarray, blk: np.ndarray, s: int) -> tuple[np.n
     c1[:nt] = sb * b * theta
     c1[nt + IP] = sb * b
     c1[nt + ISG] = blk[idd]
+    if not jacobian:
+        return c0, c1
     D0 = np.zeros((nv, nx))
     D1 = np.zeros((nv, nx))
-    D0[:nt, :nt] = a * np.eye(nt)
-    D1[:nt, :nt] = sb * b * np.eye(nt)
+    diag = _diag(nt)
+    D0[diag] = a
+    D1[diag] = sb * b
     D0[:nt, nt + ia] = theta
     D0[nt + IP, nt + ia] = 1.0
     D1[:nt, nt + ib] = sb * theta
@@ -105,7 +114,62 @@ def paper_coefficients(theta: np.ndarray, blk: np.ndarray, s: int) -> tuple[np.n
     return c0, c1, D0, D1
 
 
+def _diag(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Indices of the diagonal of the leading n x n block."""
+    r = np.arange(n)
+    return r, r
+
+
 def paper_start(usual_blk: np.ndarray) -> np.ndarray:
     """Paper block from a usual fit (FC, FV, OFF): a = 1, b = 0, c = FC, d = 0."""
     fc, fv, off = usual_blk
     return np.array([1.0, 0.0, 1.0, 0.0, fc, 0.0, fc, 0.0, fv, off])
+
+
+def batch_coefficients(model: str, theta: np.ndarray, blk: np.ndarray, s: int,
+                       jacobian: bool = True) -> tuple[np.ndarray, ...]:
+    """:func:`paper_coefficients` / :func:`usual_coefficients` of k joints at once, their
+    rows padded to a common length: ``theta`` (k, m) (joint j's base parameters in its first
+    entries, zeros after), ``blk`` (k, nb). Entry layout of v: the m padded base columns, then
+    p, sign(dq), dq, 1, tau (nv = m + 5).
+
+    Returns (c0, c1) (k, nv) and, with ``jacobian``, (gam0, gam1) (k,) and B (k, 2 nv, nb):
+    the Jacobian of joint j on (theta, blk) is D = [gam0 I; 0; gam1 I; 0] on the theta
+    columns (rows of v and of E v, ``JointMoments.normal``'s D0 over D1) and B on the block's.
+    """
+    k, m = theta.shape
+    nv = m + N_EXTRA
+    c0 = np.zeros((k, nv))
+    c1 = np.zeros((k, nv))
+    if model == "usual":
+        c0[:, :m] = theta
+        c0[:, m + IP] = 1.0
+        c0[:, m + ISG], c0[:, m + IDQ], c0[:, m + ONE] = blk[:, 0], blk[:, 1], blk[:, 2]
+        if not jacobian:
+            return c0, c1
+        B = np.zeros((k, 2 * nv, len(USUAL_BLOCK)))
+        B[:, m + ISG, 0] = B[:, m + IDQ, 1] = B[:, m + ONE, 2] = 1.0
+        return c0, c1, np.ones(k), np.zeros(k), B
+    ia, ib, ic, idd = (0, 1, 4, 5) if s == 0 else (2, 3, 6, 7)
+    a, b = blk[:, ia], blk[:, ib]
+    sb = 1.0 if s == 0 else -1.0
+    c0[:, :m] = a[:, None] * theta
+    c0[:, m + IP] = a
+    c0[:, m + ISG] = blk[:, ic]
+    c0[:, m + IDQ] = blk[:, 8]
+    c0[:, m + ONE] = blk[:, 9]
+    c1[:, :m] = (sb * b)[:, None] * theta
+    c1[:, m + IP] = sb * b
+    c1[:, m + ISG] = blk[:, idd]
+    if not jacobian:
+        return c0, c1
+    B = np.zeros((k, 2 * nv, len(PAPER_BLOCK)))
+    B[:, :m, ia] = theta
+    B[:, m + IP, ia] = 1.0
+    B[:, nv:nv + m, ib] = sb * theta
+    B[:, nv + m + IP, ib] = sb
+    B[:, m + ISG, ic] = 1.0
+    B[:, nv + m + ISG, idd] = 1.0
+    B[:, m + IDQ, 8] = 1.0
+    B[:, m + ONE, 9] = 1.0
+    return c0, c1, a.copy(), sb * b, B
