@@ -1,0 +1,454 @@
+"""Honest standard deviations of a fitted :class:`~ident.robot.estimate.RobotModel`: a block
+jackknife beside the analytic sigma of eq. 14-15, the IDIM-IV estimate as a check of errors in
+variables, and the paper's pruning of parameters whose relative deviation (eq. 16) exceeds the
+threshold.
+
+Why
+---
+Eq. 13-15 assume a deterministic W and white errors. On filtered, decimated logs the errors are
+correlated, and in closed loop the measured motion carries the response to the drive's torque
+noise, which then enters the regressor and -- through sign(tau_out dq) -- the friction's
+quadrant decision (errors in variables). The analytic sigma then understates the spread of the
+estimate; a joint whose friction is larger than its load is the extreme case.
+
+Jackknife over blocks
+---------------------
+The rows are cut into units: each experiment (run) is one unit when there are at least
+``n_blocks`` experiments; otherwise each experiment is cut into ``ceil(n_blocks /
+experiments)`` contiguous blocks (at least 2). Each unit's moments (:mod:`ident.robot.moments`)
+are accumulated once, with the quadrants the fit ended on (``RobotModel.quadrant_from_``); the
+replicate u leaves unit u out (delete-one-block jackknife: a jackknife that draws blocks with
+replacement loses, on a friction-dominated joint, the few blocks where it visits the generator
+quadrant, and the replicate is then not identifiable) and re-runs the same estimator (LS, WLS
+with its weights re-estimated, or IV; the same fixed parameters), started at the fit::
+
+    sigma_jack^2 = (U - 1) / U  sum_u (chi_(u) - mean_u chi_(u))^2
+
+over the U replicates that could be fitted (``n_failed`` could not: singular normal
+equations). Correlated errors within a block and errors in variables that vary along the data
+widen it; a bias common to every block does not (the IV check is for that).
+
+IV check
+--------
+When the data carry instruments (``q_ref``, or the instrument columns) and the fit is not
+itself IDIM-IV, the same model is refitted by IDIM-IV on the same quadrants; per parameter
+``z_iv = (chi_fit - chi_iv) / sqrt(sigma_iv^2 + sigma^2)`` (sigma: the larger of the analytic
+and the jackknife one). Instruments built on the reference trajectory are not correlated with
+the torque noise, so a large |z_iv| says the fit is biased by errors in variables.
+
+Honest sigma and the flag
+-------------------------
+``std = max(std_analytic, std_jackknife)`` per parameter, and ``|chi_fit - chi_iv|`` where
+|z_iv| > ``Z_IV`` (a bias of that size is then within one sigma). A joint is flagged
+``errors_in_variables`` when one of its parameters has a jackknife sigma above
+``RATIO_FLAG`` times the analytic one, or |z_iv| > ``Z_IV``; the flag gives the numbers.
+
+Pruning (eq. 14-16)
+-------------------
+Paper model: the friction parameter with the largest relative honest sigma above the threshold
+(:data:`ident.estimate.DEFAULT_THRESHOLD_PCT`) is removed -- held at 0, so the prediction does
+not use it -- and the model refitted on the same moments; repeated until every remaining one is
+below the threshold (the honest sigma of a refit is its analytic sigma times the ratio
+honest / analytic of the first fit), then the jackknife is re-run on the pruned model.
+Removable: b_m, b_g, c_m, d_m, c_g, d_g, F_V, tau_off of every joint. a_m, a_g (the load's
+gain: 0 would delete the load torque) and the base parameters above the threshold are
+reported ``unidentified`` only.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from ..estimate import DEFAULT_THRESHOLD_PCT
+from . import RobotIdentError
+from .moments import JointMoments
+from .paper import PAPER_BLOCK, paper_coefficients, usual_coefficients
+from .signals import RobotColumns, RobotSignals
+
+__all__ = ["Uncertainty", "assess", "jackknife_units", "N_BLOCKS", "Z_IV", "RATIO_FLAG",
+           "PRUNABLE"]
+
+#: Default number of jackknife units (experiments, or blocks of them).
+N_BLOCKS = 20
+#: |z_iv| above which the fit and the IV estimate disagree (a two-sided 0.1 % level over a
+#: few tens of parameters).
+Z_IV = 4.0
+#: Jackknife sigma above this multiple of the analytic one: the analytic sigma understates
+#: (on white errors the largest ratio of a joint reaches about 2.3 with 20 blocks).
+RATIO_FLAG = 3.0
+#: Per-joint parameters of the paper model that pruning may remove (held at 0).
+PRUNABLE = ("b_m", "b_g", "c_m", "d_m", "c_g", "d_g", "FV", "OFF")
+#: Progress lines only once the assessment has run this long [s], then at most this often.
+PROGRESS_AFTER_S = 10.0
+
+
+@dataclass
+class Uncertainty:
+    """Honest standard deviations of a fitted model (module doc).
+
+    Attributes
+    ----------
+    names : tuple of str
+        The model's parameter names (``RobotModel.names_``).
+    std_analytic, std_jackknife, std : ndarray (b,)
+        Eq. 15, the jackknife spread (NaN when not run) and the honest sigma.
+    coef_iv, std_iv, z_iv : ndarray (b,) or None
+        The IDIM-IV check (None when not made: no instruments, or the fit is IV).
+    n_replicates, n_failed : int
+        Jackknife replicates made and left out (singular normal equations).
+    units : str
+        What was resampled, e.g. ``"20 blocks of 1 experiment"``.
+    flags : dict
+        Per joint: ``{"errors_in_variables": bool, "sigma_ratio": max jackknife/analytic,
+        "sigma_ratio_parameter": name, "z_iv": max |z_iv| or None, "z_iv_parameter": name,
+        "reason": text}``.
+    pruned : list of str
+        Parameters removed by the pruning (held at 0).
+    unidentified : list of str
+        Remaining parameters whose relative honest sigma exceeds ``threshold_pct``.
+    threshold_pct : float
+        Pruning threshold on 100 sigma / |value| [%] (eq. 16).
+    iv_note : str
+        Why the IV check was not made (empty when it was).
+    """
+
+    names: tuple[str, ...]
+    std_analytic: np.ndarray
+    std_jackknife: np.ndarray
+    std: np.ndarray
+    coef_iv: np.ndarray | None = None
+    std_iv: np.ndarray | None = None
+    z_iv: np.ndarray | None = None
+    n_replicates: int = 0
+    n_failed: int = 0
+    units: str = ""
+    flags: dict[str, dict[str, Any]] = field(default_factory=dict)
+    pruned: list[str] = field(default_factory=list)
+    unidentified: list[str] = field(default_factory=list)
+    threshold_pct: float = DEFAULT_THRESHOLD_PCT
+    iv_note: str = ""
+
+    def to_json(self) -> dict[str, Any]:
+        """The JSON block ``"uncertainty"`` of docs/fit-json.md."""
+        def arr(a):
+            return None if a is None else [_num(v) for v in a]
+        return {
+            "method": "max(analytic eq. 15, block jackknife)"
+                      + (", IDIM-IV check" if self.z_iv is not None else ""),
+            "n_replicates": int(self.n_replicates), "n_failed": int(self.n_failed),
+            "units": self.units,
+            "std_analytic": dict(zip(self.names, arr(self.std_analytic), strict=True)),
+            "std_jackknife": dict(zip(self.names, arr(self.std_jackknife), strict=True)),
+            "iv": None if self.z_iv is None else {
+                n: {"value": _num(v), "std": _num(s), "z": _num(z)}
+                for n, v, s, z in zip(self.names, self.coef_iv, self.std_iv, self.z_iv,
+                                      strict=True)},
+            "iv_note": self.iv_note,
+            "joints": self.flags,
+            "pruned": list(self.pruned),
+            "unidentified": list(self.unidentified),
+            "threshold_pct": float(self.threshold_pct),
+        }
+
+
+def _num(v: float) -> float | None:
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+# ------------------------------------------------------------------------------ units
+def _take(sig: RobotSignals, rows: np.ndarray) -> RobotSignals:
+    """The samples ``rows`` of ``sig`` (contiguous rows of one experiment)."""
+    c = sig.columns
+    cols = None if c is None else RobotColumns(
+        W=c.W[:, :, rows], p=c.p[rows], sign=c.sign[rows], keep=c.keep[rows],
+        Wz=None if c.Wz is None else c.Wz[:, :, rows], pz=None if c.pz is None else c.pz[rows])
+    return replace(sig, t=sig.t[rows], q=sig.q[rows], dq=sig.dq[rows], ddq=sig.ddq[rows],
+                   tau=sig.tau[rows], experiment=sig.experiment[rows],
+                   q_ref=None if sig.q_ref is None else sig.q_ref[rows], columns=cols)
+
+
+def jackknife_units(signals: RobotSignals | Sequence[RobotSignals],
+                    n_blocks: int = N_BLOCKS) -> tuple[list[RobotSignals], str]:
+    """Cut the data into the jackknife's units (module doc); (units, what they are)."""
+    items = [signals] if isinstance(signals, RobotSignals) else list(signals)
+    exps = [(s, np.flatnonzero(s.experiment == e)) for s in items
+            for e in np.unique(s.experiment)]
+    if not exps:
+        raise RobotIdentError("uncertainty: no samples")
+    if len(exps) >= n_blocks:
+        return [_take(s, r) for s, r in exps], f"{len(exps)} experiments"
+    per = max(2, math.ceil(n_blocks / len(exps)))
+    units = [_take(s, part) for s, rows in exps for part in np.array_split(rows, per)
+             if part.size]
+    return units, (f"{per} contiguous blocks of each of {len(exps)} experiment"
+                   + ("s" if len(exps) > 1 else ""))
+
+
+def _sum(moms: list[list[JointMoments]], counts: np.ndarray) -> list[JointMoments]:
+    """sum_u counts[u] moms[u] per joint."""
+    out = []
+    for j, m0 in enumerate(moms[0]):
+        m = JointMoments(m0.cols, iv=m0.iv, powers=m0.powers)
+        for c, mu in zip(counts, moms, strict=True):
+            if c == 0:
+                continue
+            mj = mu[j]
+            m.vv += c * mj.vv
+            if m.iv:
+                m.zv += c * mj.zv
+                m.zz += c * mj.zz
+            m.n += int(c) * mj.n
+        out.append(m)
+    return out
+
+
+# ------------------------------------------------------------------------------ model hooks
+def _coeffs(model: Any):
+    return usual_coefficients if model.model == "usual" else paper_coefficients
+
+
+def _free(model: Any, pruned: Sequence[str] = ()) -> np.ndarray:
+    held = set(model.fixed_) | set(pruned)
+    return np.array([n not in held for n in model.names_])
+
+
+def _unit_moments(model: Any, units: list[RobotSignals]) -> list[list[JointMoments]]:
+    """Each unit's moments with the quadrants the fit ended on."""
+    powers = 1 if model.model == "usual" else 3
+    theta = getattr(model, "quadrant_from_", None)
+    return [model._pass(u, theta, powers)[0] for u in units]
+
+
+def _refit(model: Any, moms: list[JointMoments], free: np.ndarray) -> np.ndarray:
+    x0 = np.where(free, model.coef_, np.where(np.isin(model.names_, list(model.fixed_)),
+                                              model.coef_, 0.0))
+    x, _, _ = model._fit_on(moms, _coeffs(model), x0, free, linear=model.model == "usual")
+    return x
+
+
+def _replicates(model: Any, moms: list[list[JointMoments]], free: np.ndarray,
+                say: Callable[[str], None]) -> tuple[np.ndarray, int]:
+    """Delete-one-unit jackknife: sigma^2 = (U - 1) / U sum_u (x_(u) - mean)^2 over the
+    replicates that could be fitted; (sigma, replicates left out)."""
+    n = len(moms)
+    xs, failed = [], 0
+    for u in range(n):
+        counts = np.ones(n, dtype=int)
+        counts[u] = 0
+        try:
+            x = _refit(model, _sum(moms, counts), free)
+        except RobotIdentError:
+            failed += 1
+            continue
+        if np.all(np.isfinite(x)):
+            xs.append(x)
+        else:
+            failed += 1
+        say(f"sigma: jackknife replicate {u + 1} of {n}")
+    m = len(xs)
+    if m < 2:
+        return np.full(model.coef_.size, np.nan), failed
+    X = np.asarray(xs)
+    return np.sqrt((m - 1) / m * ((X - X.mean(axis=0)) ** 2).sum(axis=0)), failed
+
+
+def _iv_check(model: Any, signals: Any) -> tuple[Any, str]:
+    """The IDIM-IV refit on the fit's quadrants, or (None, why not)."""
+    if model.method == "iv":
+        return None, "the fit is IDIM-IV"
+    items = [signals] if isinstance(signals, RobotSignals) else list(signals)
+    if not all((s.columns.Wz is not None) if s.columns is not None else s.q_ref is not None
+               for s in items):
+        return None, "no reference trajectory q_ref (instruments)"
+    params = model.get_params()
+    params["method"] = "iv"
+    theta = getattr(model, "quadrant_from_", None)
+    if model.model == "paper" and model.quadrant == "model" and theta is not None:
+        params["quadrant_theta"] = theta
+    iv = type(model)(**params)
+    try:
+        iv.fit(signals)
+    except RobotIdentError as exc:
+        return None, f"IDIM-IV not identifiable on these data ({exc})"
+    return iv, ""
+
+
+def _joint_of(model: Any) -> list[int | None]:
+    """Joint index of each parameter (None for the shared base parameters)."""
+    nb, pb = len(model.block_), model.n_theta_
+    return [None if i < pb else (i - pb) // nb for i in range(len(model.names_))]
+
+
+def _flags(model: Any, std_a: np.ndarray, std_b: np.ndarray,
+           z_iv: np.ndarray | None) -> dict[str, dict[str, Any]]:
+    owner = _joint_of(model)
+    out = {}
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(std_a > 0, std_b / std_a, np.nan)
+    for j, joint in enumerate(model.joints_):
+        idx = [i for i, o in enumerate(owner) if o == j]
+        r = ratio[idx]
+        ir = idx[int(np.nanargmax(r))] if np.any(np.isfinite(r)) else None
+        rmax = float(ratio[ir]) if ir is not None else math.nan
+        zi = zmax = None
+        if z_iv is not None and np.any(np.isfinite(z_iv[idx])):
+            zi = idx[int(np.nanargmax(np.abs(z_iv[idx])))]
+            zmax = float(abs(z_iv[zi]))
+        reasons = []
+        if ir is not None and rmax > RATIO_FLAG:
+            reasons.append(f"jackknife sigma of {model.names_[ir]} is {rmax:.3g} x the "
+                           f"analytic one")
+        if zmax is not None and zmax > Z_IV:
+            reasons.append(f"{model.names_[zi]}: fit and IDIM-IV differ by {zmax:.3g} sigma")
+        out[joint] = {
+            "errors_in_variables": bool(reasons),
+            "sigma_ratio": _num(rmax), "sigma_ratio_parameter": (
+                None if ir is None else model.names_[ir]),
+            "z_iv": zmax, "z_iv_parameter": None if zi is None else model.names_[zi],
+            "reason": ("errors-in-variables: the fit and IV/jackknife disagree: "
+                       + "; ".join(reasons)) if reasons else ""}
+    return out
+
+
+def _rel(x: np.ndarray, s: np.ndarray) -> np.ndarray:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(x != 0, 100.0 * s / np.abs(x), np.inf)
+
+
+def _prunable(model: Any, free: np.ndarray) -> np.ndarray:
+    owner = _joint_of(model)
+    ok = np.zeros(len(model.names_), dtype=bool)
+    if model.model != "paper":
+        return ok
+    for i, o in enumerate(owner):
+        if o is not None and free[i] and PAPER_BLOCK[(i - model.n_theta_) % len(PAPER_BLOCK)] \
+                in PRUNABLE:
+            ok[i] = True
+    return ok
+
+
+# ------------------------------------------------------------------------------ entry point
+def assess(model: Any, signals: RobotSignals | Sequence[RobotSignals], *,
+           n_blocks: int = N_BLOCKS,
+           iv: bool = True, prune: bool = True,
+           threshold_pct: float = DEFAULT_THRESHOLD_PCT,
+           progress: Callable[[str], None] | None = None) -> Uncertainty:
+    """Honest sigma, the errors-in-variables flags and the pruning of a fitted model (module
+    doc). With pruning the model is refitted in place (``coef_``, ``std_``, ``cov_``, ... of
+    the pruned model; ``pruned_`` names what was removed).
+
+    Parameters
+    ----------
+    model : RobotModel
+        Fitted on ``signals``.
+    signals : RobotSignals or sequence
+        The data of the fit.
+    n_blocks : int
+        Units of the jackknife wanted (module doc); 0: no jackknife (the honest sigma is the
+        analytic one and the IV check's), else at least 2.
+    iv : bool
+        Make the IDIM-IV check when the data carry instruments.
+    prune : bool
+        Paper model: prune (module doc); otherwise only report ``unidentified``.
+    threshold_pct : float
+        Pruning threshold [%] (eq. 16).
+    progress : callable or None
+        Called with a progress line, only once the assessment has run for
+        ``PROGRESS_AFTER_S`` and then at most that often.
+
+    Returns
+    -------
+    Uncertainty
+        Also set as ``model.uncertainty_``; ``model.std_honest_`` and ``model.pruned_``.
+    """
+    if not hasattr(model, "coef_"):
+        raise RobotIdentError("uncertainty: the model is not fitted")
+    n_blocks = int(n_blocks)
+    if n_blocks < 0 or n_blocks == 1:
+        raise RobotIdentError(f"uncertainty: n_blocks: expected 0 (no jackknife) or >= 2, got "
+                              f"{n_blocks!r}")
+    t0 = time.monotonic()
+    last = [t0]
+
+    def say(msg: str) -> None:
+        now = time.monotonic()
+        if progress is not None and now - t0 > PROGRESS_AFTER_S and \
+                now - last[0] > PROGRESS_AFTER_S:
+            last[0] = now
+            progress(f"{msg} ({now - t0:.0f} s)")
+
+    units, text = jackknife_units(signals, max(n_blocks, 2))
+    moms = _unit_moments(model, units) if n_blocks or prune else []
+    say("sigma: unit moments done")
+    ivm, note = _iv_check(model, signals) if iv else (None, "not asked")
+    say("sigma: IDIM-IV check done")
+    pruned: list[str] = []
+    while True:
+        free = _free(model, pruned)
+        std_a = model.std_.copy()
+        std_b, failed = (np.full(std_a.size, np.nan), 0)
+        if n_blocks:
+            std_b, failed = _replicates(model, moms, free, say)
+        std = np.fmax(std_a, std_b)
+        z = None
+        if ivm is not None:
+            d = model.coef_ - ivm.coef_
+            with np.errstate(divide="ignore", invalid="ignore"):
+                z = np.where(free, d / np.sqrt(ivm.std_**2 + std**2), np.nan)
+            big = np.abs(np.nan_to_num(z)) > Z_IV
+            std = np.where(big, np.fmax(std, np.abs(d)), std)
+        std = np.where(free, std, 0.0)
+        if not prune or model.model != "paper" or not moms:
+            break
+        victims = _prune(model, moms, free, std / np.where(std_a > 0, std_a, 1.0),
+                         threshold_pct, pruned)
+        if not victims:
+            break
+        pruned += victims
+        say(f"sigma: pruned {', '.join(victims)}; jackknife of the pruned model")
+    rel = _rel(model.coef_, std)
+    unid = [n for n, r, f in zip(model.names_, rel, free, strict=True)
+            if f and not r <= threshold_pct]
+    out = Uncertainty(names=tuple(model.names_), std_analytic=std_a, std_jackknife=std_b,
+                      std=std, coef_iv=None if ivm is None else ivm.coef_.copy(),
+                      std_iv=None if ivm is None else ivm.std_.copy(), z_iv=z,
+                      n_replicates=len(units) if n_blocks else 0, n_failed=failed,
+                      units=text if n_blocks else "",
+                      flags=_flags(model, std_a, std_b, z), pruned=pruned, unidentified=unid,
+                      threshold_pct=float(threshold_pct), iv_note=note)
+    model.uncertainty_ = out
+    model.std_honest_ = std
+    model.pruned_ = list(pruned)
+    return out
+
+
+def _prune(model: Any, moms: list[list[JointMoments]], free: np.ndarray, inflate: np.ndarray,
+           threshold_pct: float, already: list[str]) -> list[str]:
+    """Remove the worst prunable parameter above the threshold and refit, repeatedly, with the
+    honest sigma estimated as the refit's analytic sigma times ``inflate``; the model is left
+    refitted without them. Returns the names removed (empty: nothing above the threshold)."""
+    full = _sum(moms, np.ones(len(moms), dtype=int))
+    out: list[str] = []
+    free = free.copy()
+    can = _prunable(model, free)
+    while True:
+        rel = _rel(model.coef_, model.std_ * inflate)
+        cand = np.where(can & free, rel, -np.inf)
+        i = int(np.argmax(cand))
+        if not cand[i] > threshold_pct:
+            return out
+        free[i] = False
+        out.append(model.names_[i])
+        x = model.coef_.copy()
+        x[i] = 0.0
+        x, w, _ = model._fit_on(full, _coeffs(model), x, free, linear=model.model == "usual")
+        model._statistics(full, _coeffs(model), x, free, w)
+        model.weights_ = w
+        model.fixed_pruned_ = [*already, *out]
