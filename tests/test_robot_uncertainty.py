@@ -21,7 +21,7 @@ from ident.robot.base import base_parameters
 from ident.robot.estimate import RobotModel
 from ident.robot.regressor import RobotRegressor
 from ident.robot.signals import RobotSignals
-from ident.robot.uncertainty import RATIO_FLAG, Z_IV, assess, jackknife_units
+from ident.robot.uncertainty import PRUNABLE, RATIO_FLAG, Z_IV, assess, jackknife_units
 from sim_drivers.arm import ArmGains, ArmParams, model_reference, simulate_arm
 from trajectories.robot import load_robot
 
@@ -116,3 +116,43 @@ def test_bad_blocks_one_line(arm3_usual):
         assess(m, sig, n_blocks=1)
     with pytest.raises(RobotIdentError, match="not fitted"):
         assess(RobotModel(reg), sig)
+
+
+def test_paper_model_pruned_terms_left_out_of_the_prediction(arm3_usual):
+    """Truth b = d = 0 (no Stribeck, no load-dependent Stribeck): the paper model's b, d have
+    a relative sigma far above the threshold; they are pruned (held at 0, the model refitted),
+    the prediction no longer depends on q_s on the joints whose b, d are all pruned, and the
+    error on held-out rows (another noise draw) is not worse than the unpruned fit's."""
+    params, reg, base, run = arm3_usual
+    sig = _signals(params, reg, run, 1, stride=8)
+    held = _signals(params, reg, run, 7, stride=8)
+    full = RobotModel(reg, "paper", "wls", base=base).fit(sig)
+    m = RobotModel(reg, "paper", "wls", base=base).fit(sig)
+    np.testing.assert_array_equal(m.coef_, full.coef_)
+    u = assess(m, sig, n_blocks=10, iv=False)
+    names = list(m.names_)
+    stribeck = [n for n in names if n.rstrip("0123456789") in ("b_m", "b_g", "d_m", "d_g")]
+    assert len(set(u.pruned) & set(stribeck)) >= 0.75 * len(stribeck), u.pruned
+    assert all(n.rstrip("0123456789") in PRUNABLE for n in u.pruned), u.pruned
+    for n in u.pruned:
+        i = names.index(n)
+        assert m.coef_[i] == 0.0 and m.std_[i] == 0.0 and u.std[i] == 0.0, n
+        assert n not in u.unidentified
+    assert u.to_json()["pruned"] == u.pruned and m.pruned_ == u.pruned
+    # every prunable parameter left is within the threshold (honest sigma)
+    rel = 100 * u.std / np.abs(np.where(m.coef_ != 0, m.coef_, np.nan))
+    for i, n in enumerate(names):
+        if n.rstrip("0123456789") in PRUNABLE and n not in u.pruned:
+            assert rel[i] <= u.threshold_pct, (n, rel[i])
+    # joints with every b, d pruned: E = exp(-|dq|/q_s) no longer acts
+    gone = [j for j, num in zip(range(len(reg.joints)), m.numbers_, strict=True)
+            if all(f"{p}{num}" in u.pruned for p in ("b_m", "b_g", "d_m", "d_g"))]
+    assert gone
+    before = m.predict(held)
+    m.qs_ = m.qs_ * 3.0
+    after = m.predict(held)
+    m.qs_ = m.qs_ / 3.0
+    np.testing.assert_allclose(after[:, gone], before[:, gone], rtol=1e-12, atol=1e-12)
+    e_full, e_pruned = full.rel_error(held), m.rel_error(held)
+    for j in reg.joints:
+        assert e_pruned[j] <= e_full[j] * 1.002, (j, e_pruned[j], e_full[j])

@@ -84,6 +84,8 @@ Z_IV = 4.0
 RATIO_FLAG = 3.0
 #: Per-joint parameters of the paper model that pruning may remove (held at 0).
 PRUNABLE = ("b_m", "b_g", "c_m", "d_m", "c_g", "d_g", "FV", "OFF")
+#: Relative step tolerance of the jackknife's Gauss-Newton refits (the fit's: ``tol``).
+REPLICATE_TOL = 1e-7
 #: Progress lines only once the assessment has run this long [s], then at most this often.
 PROGRESS_AFTER_S = 10.0
 
@@ -226,24 +228,34 @@ def _unit_moments(model: Any, units: list[RobotSignals]) -> list[list[JointMomen
     return [model._pass(u, theta, powers)[0] for u in units]
 
 
-def _refit(model: Any, moms: list[JointMoments], free: np.ndarray) -> np.ndarray:
-    x0 = np.where(free, model.coef_, np.where(np.isin(model.names_, list(model.fixed_)),
-                                              model.coef_, 0.0))
-    x, _, _ = model._fit_on(moms, _coeffs(model), x0, free, linear=model.model == "usual")
+def _refit(model: Any, moms: list[JointMoments], free: np.ndarray,
+           tol: float | None = None) -> np.ndarray:
+    """The model's Gauss-Newton on ``moms`` from its estimate (held parameters at their value,
+    pruned ones at 0), with the fit's weights (WLS: not re-estimated), to ``tol``."""
+    held = np.isin(model.names_, list(model.fixed_))
+    x0 = np.where(free | held, model.coef_, 0.0)
+    w = getattr(model, "weights_", None)
+    w = np.ones(len(moms)) if w is None else np.asarray(w, dtype=float)
+    saved = model.tol
+    model.tol = saved if tol is None else tol
+    try:
+        x, _ = model._gauss_newton(moms, _coeffs(model), x0, free, w,
+                                   linear=model.model == "usual")
+    finally:
+        model.tol = saved
     return x
 
 
 def _replicates(model: Any, moms: list[list[JointMoments]], free: np.ndarray,
                 say: Callable[[str], None]) -> tuple[np.ndarray, int]:
-    """Delete-one-unit jackknife: sigma^2 = (U - 1) / U sum_u (x_(u) - mean)^2 over the
-    replicates that could be fitted; (sigma, replicates left out)."""
+    """Delete-one-unit jackknife (module doc); (sigma, replicates left out)."""
     n = len(moms)
     xs, failed = [], 0
     for u in range(n):
         counts = np.ones(n, dtype=int)
         counts[u] = 0
         try:
-            x = _refit(model, _sum(moms, counts), free)
+            x = _refit(model, _sum(moms, counts), free, REPLICATE_TOL)
         except RobotIdentError:
             failed += 1
             continue
@@ -253,10 +265,13 @@ def _replicates(model: Any, moms: list[list[JointMoments]], free: np.ndarray,
             failed += 1
         say(f"sigma: jackknife replicate {u + 1} of {n}")
     m = len(xs)
-    if m < 2:
+    if m < 3:
         return np.full(model.coef_.size, np.nan), failed
     X = np.asarray(xs)
-    return np.sqrt((m - 1) / m * ((X - X.mean(axis=0)) ** 2).sum(axis=0)), failed
+    # robust spread: (U - 1) mean (x_u - mean)^2 with 1.4826 MAD for the deviation, so one
+    # replicate that ends elsewhere (a weak direction) does not decide the sigma
+    mad = 1.4826 * np.median(np.abs(X - np.median(X, axis=0)), axis=0)
+    return np.sqrt(m - 1) * mad, failed
 
 
 def _iv_check(model: Any, signals: Any) -> tuple[Any, str]:
@@ -389,30 +404,16 @@ def assess(model: Any, signals: RobotSignals | Sequence[RobotSignals], *,
     say("sigma: unit moments done")
     ivm, note = _iv_check(model, signals) if iv else (None, "not asked")
     say("sigma: IDIM-IV check done")
+    std_a, std_b, std, z, failed = _honest(model, moms, ivm, _free(model), n_blocks, say)
     pruned: list[str] = []
-    while True:
-        free = _free(model, pruned)
-        std_a = model.std_.copy()
-        std_b, failed = (np.full(std_a.size, np.nan), 0)
-        if n_blocks:
-            std_b, failed = _replicates(model, moms, free, say)
-        std = np.fmax(std_a, std_b)
-        z = None
-        if ivm is not None:
-            d = model.coef_ - ivm.coef_
-            with np.errstate(divide="ignore", invalid="ignore"):
-                z = np.where(free, d / np.sqrt(ivm.std_**2 + std**2), np.nan)
-            big = np.abs(np.nan_to_num(z)) > Z_IV
-            std = np.where(big, np.fmax(std, np.abs(d)), std)
-        std = np.where(free, std, 0.0)
-        if not prune or model.model != "paper" or not moms:
-            break
-        victims = _prune(model, moms, free, std / np.where(std_a > 0, std_a, 1.0),
-                         threshold_pct, pruned)
-        if not victims:
-            break
-        pruned += victims
-        say(f"sigma: pruned {', '.join(victims)}; jackknife of the pruned model")
+    if prune and model.model == "paper" and moms:
+        inflate = std / np.where(std_a > 0, std_a, 1.0)
+        pruned = _prune(model, moms, _free(model), inflate, threshold_pct)
+        if pruned:
+            say(f"sigma: pruned {', '.join(pruned)}; jackknife of the pruned model")
+            std_a, std_b, std, z, failed = _honest(model, moms, ivm, _free(model, pruned),
+                                                   n_blocks, say)
+    free = _free(model, pruned)
     rel = _rel(model.coef_, std)
     unid = [n for n, r, f in zip(model.names_, rel, free, strict=True)
             if f and not r <= threshold_pct]
@@ -429,15 +430,36 @@ def assess(model: Any, signals: RobotSignals | Sequence[RobotSignals], *,
     return out
 
 
+def _honest(model: Any, moms: list[list[JointMoments]], ivm: Any, free: np.ndarray,
+            n_blocks: int, say: Callable[[str], None]) -> tuple:
+    """(analytic, jackknife, honest sigma, z_iv or None, replicates left out) at the model's
+    current estimate (module doc)."""
+    std_a = model.std_.copy()
+    std_b, failed = np.full(std_a.size, np.nan), 0
+    if n_blocks:
+        std_b, failed = _replicates(model, moms, free, say)
+    std = np.fmax(std_a, std_b)
+    z = None
+    if ivm is not None:
+        d = model.coef_ - ivm.coef_
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = np.where(free, d / np.sqrt(ivm.std_**2 + std**2), np.nan)
+        big = np.abs(np.nan_to_num(z)) > Z_IV
+        std = np.where(big, np.fmax(std, np.abs(d)), std)
+    return std_a, std_b, np.where(free, std, 0.0), z, failed
+
+
 def _prune(model: Any, moms: list[list[JointMoments]], free: np.ndarray, inflate: np.ndarray,
-           threshold_pct: float, already: list[str]) -> list[str]:
-    """Remove the worst prunable parameter above the threshold and refit, repeatedly, with the
-    honest sigma estimated as the refit's analytic sigma times ``inflate``; the model is left
-    refitted without them. Returns the names removed (empty: nothing above the threshold)."""
+           threshold_pct: float) -> list[str]:
+    """Remove the worst prunable parameter above the threshold and refit (the fit's
+    quadrants and weights), repeatedly, with the honest sigma estimated as the refit's
+    analytic sigma times ``inflate``; the model is left refitted without them. Returns the
+    names removed, in order."""
     full = _sum(moms, np.ones(len(moms), dtype=int))
     out: list[str] = []
     free = free.copy()
     can = _prunable(model, free)
+    w = np.asarray(model.weights_, dtype=float)
     while True:
         rel = _rel(model.coef_, model.std_ * inflate)
         cand = np.where(can & free, rel, -np.inf)
@@ -446,9 +468,5 @@ def _prune(model: Any, moms: list[list[JointMoments]], free: np.ndarray, inflate
             return out
         free[i] = False
         out.append(model.names_[i])
-        x = model.coef_.copy()
-        x[i] = 0.0
-        x, w, _ = model._fit_on(full, _coeffs(model), x, free, linear=model.model == "usual")
+        x = _refit(model, full, free)
         model._statistics(full, _coeffs(model), x, free, w)
-        model.weights_ = w
-        model.fixed_pruned_ = [*already, *out]
