@@ -112,7 +112,7 @@ def test_bad_blocks_one_line(arm3_usual):
     params, reg, base, run = arm3_usual
     sig = _signals(params, reg, run, 1, stride=20)
     m = RobotModel(reg, "usual", "ls", base=base).fit(sig)
-    with pytest.raises(RobotIdentError, match="n_blocks: expected 0"):
+    with pytest.raises(RobotIdentError, match="expected 0 .no jackknife"):
         assess(m, sig, n_blocks=1)
     with pytest.raises(RobotIdentError, match="not fitted"):
         assess(RobotModel(reg), sig)

@@ -71,11 +71,11 @@ from .moments import JointMoments
 from .paper import PAPER_BLOCK, paper_coefficients, usual_coefficients
 from .signals import RobotColumns, RobotSignals
 
-__all__ = ["Uncertainty", "assess", "jackknife_units", "N_BLOCKS", "Z_IV", "RATIO_FLAG",
-           "PRUNABLE"]
+__all__ = ["Uncertainty", "assess", "jackknife_units", "parameter_records", "N_BLOCKS", "Z_IV",
+           "RATIO_FLAG", "PRUNABLE"]
 
 #: Default number of jackknife units (experiments, or blocks of them).
-N_BLOCKS = 20
+N_BLOCKS = 10
 #: |z_iv| above which the fit and the IV estimate disagree (a two-sided 0.1 % level over a
 #: few tens of parameters).
 Z_IV = 4.0
@@ -137,16 +137,13 @@ class Uncertainty:
     iv_note: str = ""
 
     def to_json(self) -> dict[str, Any]:
-        """The JSON block ``"uncertainty"`` of docs/fit-json.md."""
-        def arr(a):
-            return None if a is None else [_num(v) for v in a]
+        """The JSON block ``models.<m>.uncertainty`` of docs/robot-data.md (the per-parameter
+        sigmas are in :func:`parameter_records`)."""
         return {
             "method": "max(analytic eq. 15, block jackknife)"
                       + (", IDIM-IV check" if self.z_iv is not None else ""),
             "n_replicates": int(self.n_replicates), "n_failed": int(self.n_failed),
             "units": self.units,
-            "std_analytic": dict(zip(self.names, arr(self.std_analytic), strict=True)),
-            "std_jackknife": dict(zip(self.names, arr(self.std_jackknife), strict=True)),
             "iv": None if self.z_iv is None else {
                 n: {"value": _num(v), "std": _num(s), "z": _num(z)}
                 for n, v, s, z in zip(self.names, self.coef_iv, self.std_iv, self.z_iv,
@@ -279,9 +276,16 @@ def _iv_check(model: Any, signals: Any) -> tuple[Any, str]:
     if model.method == "iv":
         return None, "the fit is IDIM-IV"
     items = [signals] if isinstance(signals, RobotSignals) else list(signals)
-    if not all((s.columns.Wz is not None) if s.columns is not None else s.q_ref is not None
+    if not all(s.q_ref is not None or (s.columns is not None and s.columns.Wz is not None)
                for s in items):
         return None, "no reference trajectory q_ref (instruments)"
+    if not all(s.columns is None or s.columns.Wz is not None for s in items):
+        return None, "the columns were built without the instruments' columns"
+    known = getattr(model.regressor_, "known_Ia", None)
+    if known is not None and np.any(known) and any(s.columns is not None for s in items):
+        # RobotModel's IDIM-IV pass has no reference acceleration for the known rotors'
+        # torque on the columns chain
+        return None, "known rotor inertias on the columns chain"
     params = model.get_params()
     params["method"] = "iv"
     theta = getattr(model, "quadrant_from_", None)
@@ -387,8 +391,8 @@ def assess(model: Any, signals: RobotSignals | Sequence[RobotSignals], *,
         raise RobotIdentError("uncertainty: the model is not fitted")
     n_blocks = int(n_blocks)
     if n_blocks < 0 or n_blocks == 1:
-        raise RobotIdentError(f"uncertainty: n_blocks: expected 0 (no jackknife) or >= 2, got "
-                              f"{n_blocks!r}")
+        raise RobotIdentError(f"uncertainty: n_blocks (--sigma-blocks): expected 0 (no "
+                              f"jackknife) or >= 2, got {n_blocks!r}")
     t0 = time.monotonic()
     last = [t0]
 
@@ -470,3 +474,18 @@ def _prune(model: Any, moms: list[list[JointMoments]], free: np.ndarray, inflate
         out.append(model.names_[i])
         x = _refit(model, full, free)
         model._statistics(full, _coeffs(model), x, free, w)
+
+
+def parameter_records(model: Any) -> dict[str, dict[str, Any]]:
+    """``{name: {"value", "std", "rel_std_pct", "std_analytic", "std_jackknife", "pruned"}}``
+    of a fitted model: ``std`` the honest sigma when :func:`assess` ran (else eq. 15),
+    ``rel_std_pct`` 100 std / |value| (None when the value is 0)."""
+    u = getattr(model, "uncertainty_", None)
+    std = model.std_ if u is None else u.std
+    jack = np.full(std.size, np.nan) if u is None else u.std_jackknife
+    pruned = set(getattr(model, "pruned_", ()))
+    return {p: {"value": float(v), "std": float(s),
+                "rel_std_pct": float(100.0 * s / abs(v)) if v != 0 else None,
+                "std_analytic": float(sa), "std_jackknife": _num(sj), "pruned": p in pruned}
+            for p, v, s, sa, sj in zip(model.names_, model.coef_, std, model.std_, jack,
+                                       strict=True)}
