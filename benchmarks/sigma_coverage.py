@@ -15,43 +15,12 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-import numpy as np  # noqa: E402
-from sigma_cases import friction_mask, gauged_truth, wrist_arm, wrist_signals  # noqa: E402
-
-from ident.robot.estimate import RobotModel  # noqa: E402
-from ident.robot.uncertainty import assess  # noqa: E402
-
-
-def coverage(seeds, duration_s: float, blocks: int, iv: bool, say=print) -> dict:
-    """Per seed (seed, hits analytic, hits honest, count, wrist hits a, h, count)."""
-    params, reg, base = wrist_arm()
-    rows = []
-    for seed in seeds:
-        t0 = time.monotonic()
-        sig = wrist_signals(params, reg, seed, duration_s)
-        m = RobotModel(reg, "paper", "wls", base=base).fit(sig)
-        u = assess(m, sig, n_blocks=blocks, iv=iv, prune=False)
-        tv = gauged_truth(m, params)
-        mask = friction_mask(m)
-        wrist = mask & np.array([n[-1] in "456" for n in m.names_])
-        err = np.abs(m.coef_ - tv)
-        ha, hh = err <= 2 * u.std_analytic, err <= 2 * u.std
-        row = (seed, int(ha[mask].sum()), int(hh[mask].sum()), int(mask.sum()),
-               int(ha[wrist].sum()), int(hh[wrist].sum()), int(wrist.sum()),
-               sorted(j for j, f in u.flags.items() if f["errors_in_variables"]))
-        rows.append(row)
-        say(f"seed {seed}: analytic {row[1]}/{row[3]}, honest {row[2]}/{row[3]} "
-            f"(wrists {row[4]}/{row[6]}, {row[5]}/{row[6]}); flagged {row[7]} "
-            f"[{time.monotonic() - t0:.0f} s]")
-    tot = np.array([r[1:7] for r in rows]).sum(axis=0)
-    return {"rows": rows, "analytic": tot[0] / tot[2], "honest": tot[1] / tot[2],
-            "wrist_analytic": tot[3] / tot[5], "wrist_honest": tot[4] / tot[5]}
+from sigma_cases import coverage  # noqa: E402
 
 
 def main() -> None:

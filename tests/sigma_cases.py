@@ -16,6 +16,7 @@ of every joint are divided by the true a_m1 (theta multiplied by it).
 
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -26,6 +27,7 @@ from ident.robot.estimate import RobotModel
 from ident.robot.paper import PAPER_BLOCK
 from ident.robot.regressor import RobotRegressor
 from ident.robot.signals import RobotPayloadData, RobotSignals
+from ident.robot.uncertainty import assess
 from sim_drivers.arm import ArmGains, ArmParams, Payload, model_reference, simulate_arm
 from trajectories.robot import load_robot
 
@@ -94,3 +96,33 @@ def friction_mask(model: RobotModel) -> np.ndarray:
     return np.array([i >= model.n_theta_ and n not in held
                      and n.rstrip("0123456789") in PAPER_BLOCK
                      for i, n in enumerate(model.names_)])
+
+
+def coverage(seeds, duration_s: float = 10.0, blocks: int = 10, iv: bool = True,
+             say=print) -> dict:
+    """Share of the free friction parameters within 2 sigma of the gauged truth, analytic
+    (eq. 15) and honest sigma, over the noise ``seeds``: all joints and wrists only; ``rows``
+    per seed (seed, hits analytic, hits honest, count, wrist hits analytic, honest, count,
+    joints flagged)."""
+    params, reg, base = wrist_arm()
+    rows = []
+    for seed in seeds:
+        t0 = time.monotonic()
+        sig = wrist_signals(params, reg, seed, duration_s)
+        m = RobotModel(reg, "paper", "wls", base=base).fit(sig)
+        u = assess(m, sig, n_blocks=blocks, iv=iv, prune=False)
+        tv = gauged_truth(m, params)
+        mask = friction_mask(m)
+        wrist = mask & np.array([n[-1] in "456" for n in m.names_])
+        err = np.abs(m.coef_ - tv)
+        ha, hh = err <= 2 * u.std_analytic, err <= 2 * u.std
+        row = (seed, int(ha[mask].sum()), int(hh[mask].sum()), int(mask.sum()),
+               int(ha[wrist].sum()), int(hh[wrist].sum()), int(wrist.sum()),
+               sorted(j for j, f in u.flags.items() if f["errors_in_variables"]))
+        rows.append(row)
+        say(f"seed {seed}: analytic {row[1]}/{row[3]}, honest {row[2]}/{row[3]} "
+            f"(wrists {row[4]}/{row[6]}, {row[5]}/{row[6]}); flagged {row[7]} "
+            f"[{time.monotonic() - t0:.0f} s]")
+    tot = np.array([r[1:7] for r in rows]).sum(axis=0)
+    return {"rows": rows, "analytic": tot[0] / tot[2], "honest": tot[1] / tot[2],
+            "wrist_analytic": tot[3] / tot[5], "wrist_honest": tot[4] / tot[5]}
