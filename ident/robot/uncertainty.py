@@ -17,15 +17,17 @@ The rows are cut into units: each experiment (run) is one unit when there are at
 ``n_blocks`` experiments; otherwise each experiment is cut into ``ceil(n_blocks /
 experiments)`` contiguous blocks (at least 2). Each unit's moments (:mod:`ident.robot.moments`)
 are accumulated once, with the quadrants the fit ended on (``RobotModel.quadrant_from_``); the
-replicate u leaves unit u out (delete-one-block jackknife: a jackknife that draws blocks with
+replicate u leaves unit u out (delete-one-block jackknife: a bootstrap that draws blocks with
 replacement loses, on a friction-dominated joint, the few blocks where it visits the generator
-quadrant, and the replicate is then not identifiable) and re-runs the same estimator (LS, WLS
-with its weights re-estimated, or IV; the same fixed parameters), started at the fit::
+quadrant, and the replicate is then not identifiable) and re-runs the same Gauss-Newton (LS,
+WLS with the fit's weights, or IV; the same fixed parameters), started at the fit::
 
-    sigma_jack^2 = (U - 1) / U  sum_u (chi_(u) - mean_u chi_(u))^2
+    sigma_jack = sqrt(U - 1) * 1.4826 MAD_u(chi_(u))
 
 over the U replicates that could be fitted (``n_failed`` could not: singular normal
-equations). Correlated errors within a block and errors in variables that vary along the data
+equations): the delete-one jackknife's sqrt((U - 1) / U sum_u (chi_(u) - mean)^2) with a
+robust deviation, so that one replicate that ends elsewhere on a weak direction does not
+decide it. Correlated errors within a block and errors in variables that vary along the data
 widen it; a bias common to every block does not (the IV check is for that).
 
 IV check
@@ -45,9 +47,10 @@ Honest sigma and the flag
 
 Pruning (eq. 14-16)
 -------------------
-Paper model: the friction parameter with the largest relative honest sigma above the threshold
+Paper model: the prunable parameter with the largest relative honest sigma above the threshold
 (:data:`ident.estimate.DEFAULT_THRESHOLD_PCT`) is removed -- held at 0, so the prediction does
-not use it -- and the model refitted on the same moments; repeated until every remaining one is
+not use it -- and the model refitted on the same moments (the fit's quadrants and weights);
+repeated until every remaining one is
 below the threshold (the honest sigma of a refit is its analytic sigma times the ratio
 honest / analytic of the first fit), then the jackknife is re-run on the pruned model.
 Removable: b_m, b_g, c_m, d_m, c_g, d_g, F_V, tau_off of every joint. a_m, a_g (the load's
