@@ -164,7 +164,8 @@ def fit_robot(
     sigma_blocks : int
         Units of the jackknife of the honest sigma (:func:`ident.robot.uncertainty.assess`:
         jackknife over experiments or blocks, IDIM-IV check when the runs carry q_ref,
-        per-joint errors-in-variables flag); 0 (``--sigma-blocks 0``): eq. 15 alone.
+        per-joint errors-in-variables flag); 0 (``--sigma-blocks 0``): eq. 15 alone, no
+        IV check (the pruning then judged on eq. 15).
     prune : bool
         Paper model: prune the friction parameters above the threshold (eq. 14-16) and refit;
         False (``--no-prune``): only flag them ``unidentified``.
@@ -280,8 +281,8 @@ def fit_robot(
             out["models"][name] = {"error": str(exc)}
             continue
         # honest sigma, errors-in-variables flags, the paper model pruned (refitted in place)
-        unc = assess(est, sig, n_blocks=sigma_blocks, prune=prune and name == "paper",
-                     progress=progress)
+        unc = assess(est, sig, n_blocks=sigma_blocks, iv=sigma_blocks > 0,
+                     prune=prune and name == "paper", progress=progress)
         rec: dict[str, Any] = {
             "parameters": parameter_records(est),
             "uncertainty": unc.to_json(),

@@ -11,11 +11,13 @@ the flag must fire and name the numbers).
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from daq.app.cli import main
 from ident.robot import RobotIdentError
 from ident.robot.base import base_parameters
 from ident.robot.estimate import RobotModel
@@ -156,3 +158,44 @@ def test_paper_model_pruned_terms_left_out_of_the_prediction(arm3_usual):
     e_full, e_pruned = full.rel_error(held), m.rel_error(held)
     for j in reg.joints:
         assert e_pruned[j] <= e_full[j] * 1.002, (j, e_pruned[j], e_full[j])
+
+
+def test_cli_sigma_options(arm3_usual, tmp_path, capfd):
+    """``jointid fit --robot``: the honest sigma with its block in the JSON and the table;
+    ``--sigma-blocks 0`` is eq. 15 alone; a bad count or the options without --robot: one
+    line, non-zero exit, nothing written."""
+    params, reg, base, run = arm3_usual
+    f = tmp_path / "run.csv"
+    run.to_csv(f)
+    robot = ROOT / "examples" / "robots" / "arm3.toml"
+
+    def cli(*argv):
+        code = main(["fit", *map(str, argv)])
+        out, err = capfd.readouterr()
+        return code, out, err
+
+    js = tmp_path / "fit.json"
+    code, out, err = cli("--robot", robot, f, "--model", "usual", "--no-consistency",
+                         "--json", js)
+    assert code == 0, err
+    rec = json.loads(js.read_text())["models"]["usual"]
+    block = rec["uncertainty"]
+    assert block["n_replicates"] == 10 and block["iv"] is not None  # the CSV has q_ref
+    assert set(block["joints"]) == set(reg.joints)
+    for v in rec["parameters"].values():
+        assert v["std"] >= v["std_analytic"] and v["pruned"] is False
+    assert "std eq15" in out and "jackknife replicates" in out
+    code, out, err = cli("--robot", robot, f, "--model", "usual", "--no-consistency",
+                         "--sigma-blocks", "0", "--json", js)
+    assert code == 0, err
+    rec = json.loads(js.read_text())["models"]["usual"]
+    assert rec["uncertainty"]["n_replicates"] == 0 and rec["uncertainty"]["iv"] is None
+    assert all(v["std"] == v["std_analytic"] for v in rec["parameters"].values())
+    for bad, what in ((["--sigma-blocks", "-1"], "--sigma-blocks"),
+                      (["--sigma-blocks", "1"], "--sigma-blocks")):
+        js2 = tmp_path / "bad.json"
+        code, out, err = cli("--robot", robot, f, "--model", "usual", *bad, "--json", js2)
+        assert code != 0 and what in err and len(err.strip().splitlines()) == 1, err
+        assert not js2.exists()
+    code, out, err = cli(f, "--no-prune")
+    assert code != 0 and "--no-prune" in err and len(err.strip().splitlines()) == 1, err
