@@ -42,8 +42,9 @@ STRIDE = 5
 GAUGED = ("a_m", "b_m", "a_g", "b_g")
 
 
-def wrist_arm(noise: float = WRIST_NOISE):
-    """(params, regressor, base) of the simulated arm."""
+def wrist_arm(noise: float = WRIST_NOISE, stribeck: bool = True):
+    """(params, regressor, base) of the simulated arm; ``stribeck=False``: the wrists'
+    b_m, b_g, d_m, d_g are 0 (no Stribeck terms to identify there)."""
     robot = load_robot(ROOT / "examples" / "robots" / "ur10.toml")
     f0 = ArmParams.from_robot(robot).friction
     friction = {}
@@ -51,6 +52,11 @@ def wrist_arm(noise: float = WRIST_NOISE):
         v = getattr(f0, name).copy()
         v[3:] = fac * WRIST_C
         friction[name] = v
+    if not stribeck:
+        for name in ("b_m", "b_g", "d_m", "d_g"):
+            v = friction.get(name, getattr(f0, name)).copy()
+            v[3:] = 0.0
+            friction[name] = v
     params = ArmParams.from_robot(robot, friction)
     ns = params.drive.torque_noise_std_Nm.copy()
     ns[3:] = noise

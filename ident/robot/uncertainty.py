@@ -47,12 +47,13 @@ Honest sigma and the flag
 
 Pruning (eq. 14-16)
 -------------------
-Paper model: the prunable parameter with the largest relative honest sigma above the threshold
-(:data:`ident.estimate.DEFAULT_THRESHOLD_PCT`) is removed -- held at 0, so the prediction does
-not use it -- and the model refitted on the same moments (the fit's quadrants and weights);
-repeated until every remaining one is
-below the threshold (the honest sigma of a refit is its analytic sigma times the ratio
-honest / analytic of the first fit), then the jackknife is re-run on the pruned model.
+Paper model: the prunable parameter with the largest relative sigma max(eq. 15, jackknife)
+above the threshold (:data:`ident.estimate.DEFAULT_THRESHOLD_PCT`) is removed -- held at 0, so
+the prediction does not use it -- and the model refitted on the same moments (the fit's
+quadrants and weights); repeated until every remaining one is below the threshold (the sigma
+of a refit: its analytic sigma times the first fit's ratio max(eq. 15, jackknife) / eq. 15),
+then the jackknife is re-run on the pruned model. The IV check does not prune: it suggests a
+bias, not a spread, and on a friction-dominated joint the IV estimate itself can be far off.
 Removable: b_m, b_g, c_m, d_m, c_g, d_g, F_V, tau_off of every joint. a_m, a_g (the load's
 gain: 0 would delete the load torque) and the base parameters above the threshold are
 reported ``unidentified`` only.
@@ -414,7 +415,9 @@ def assess(model: Any, signals: RobotSignals | Sequence[RobotSignals], *,
     std_a, std_b, std, z, failed = _honest(model, moms, ivm, _free(model), n_blocks, say)
     pruned: list[str] = []
     if prune and model.model == "paper" and moms:
-        inflate = std / np.where(std_a > 0, std_a, 1.0)
+        # the spread decides (eq. 16 with the jackknife), not a bias the IV check suggests:
+        # on a friction-dominated joint the IV estimate itself can be far off
+        inflate = np.fmax(std_a, np.nan_to_num(std_b)) / np.where(std_a > 0, std_a, 1.0)
         pruned = _prune(model, moms, _free(model), inflate, threshold_pct)
         if pruned:
             say(f"sigma: pruned {', '.join(pruned)}; jackknife of the pruned model")
