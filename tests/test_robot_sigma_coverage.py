@@ -53,12 +53,13 @@ def _low_speed_error(model, sig, vmax: float = LOW_SPEED) -> dict[str, float]:
 def test_pruned_stribeck_terms_do_not_extrapolate():
     """The wrists without Stribeck terms (b = d = 0 there), the issue's noise: the paper model
     fits b, d on the wrists with relative sigma far above 30 %; they are pruned (held at 0,
-    the model refitted), and on a held-out run (another noise draw) the error is not worse,
-    neither on all rows nor at low speed (|dq| < 0.05 rad/s, where the Stribeck terms act)."""
+    the model refitted), and on a held-out run (another noise draw) the error of the wrists
+    whose dry friction is identified is not worse, neither on all rows nor at low speed
+    (|dq| < 0.05 rad/s, where the Stribeck terms act)."""
     params, reg, base = wrist_arm(stribeck=False)
     sig, held = wrist_signals(params, reg, 300), wrist_signals(params, reg, 301)
     m = RobotModel(reg, "paper", "wls", base=base).fit(sig)
-    full = copy.deepcopy(m)
+    full = copy.copy(m)  # (pruning refits in place: new coef_ arrays, the copy keeps the old)
     u = assess(m, sig)
     wrist_terms = [n for n in u.pruned if n[-1] in "456"
                    and n.rstrip("0123456789") in ("b_m", "b_g", "d_m", "d_g")]
@@ -70,6 +71,13 @@ def test_pruned_stribeck_terms_do_not_extrapolate():
     l_full, l_pruned = _low_speed_error(full, held), _low_speed_error(m, held)
     print(f"held-out all rows: {e_full}\n pruned: {e_pruned}\nlow speed: {l_full}\n "
           f"pruned: {l_pruned}")
-    for j in reg.joints[3:]:
+    # on every wrist whose dry friction itself is identified (a_m, a_g, c_m, c_g within the
+    # threshold; on a wrist where the noise exceeds what its data can resolve nothing is
+    # claimed); the shoulder and elbow keep their true Stribeck terms, pruned when weak: a
+    # cost at low speed the docs report
+    judged = [j for j, num in zip(reg.joints[3:], m.numbers_[3:], strict=True)
+              if not any(f"{p}{num}" in u.unidentified for p in ("a_m", "a_g", "c_m", "c_g"))]
+    assert judged
+    for j in judged:
         assert e_pruned[j] <= 1.01 * e_full[j], (j, e_pruned[j], e_full[j])
         assert l_pruned[j] <= 1.01 * l_full[j], (j, l_pruned[j], l_full[j])
