@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import ident.robot.uncertainty as unc
 from daq.app.cli import main
 from ident.robot import RobotIdentError
 from ident.robot.base import base_parameters
@@ -199,3 +200,18 @@ def test_cli_sigma_options(arm3_usual, tmp_path, capfd):
         assert not js2.exists()
     code, out, err = cli(f, "--no-prune")
     assert code != 0 and "--no-prune" in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_progress_lines_once_slow(arm3_usual, monkeypatch):
+    """Progress lines go to the callback only once the assessment has run for
+    PROGRESS_AFTER_S (here 0: every step); none when it is fast."""
+    params, reg, base, run = arm3_usual
+    sig = _signals(params, reg, run, 1, stride=8)
+    m = RobotModel(reg, "usual", "ls", base=base).fit(sig)
+    lines: list[str] = []
+    assess(m, sig, n_blocks=4, progress=lines.append)
+    assert lines == []
+    monkeypatch.setattr(unc, "PROGRESS_AFTER_S", 0.0)
+    assess(m, sig, n_blocks=4, progress=lines.append)
+    assert any(ln.startswith("sigma: jackknife replicate") and ln.endswith(" s)")
+               for ln in lines), lines
