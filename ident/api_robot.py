@@ -40,6 +40,7 @@ from .cli_robot import (
 from .robot.estimate import RobotModel
 from .robot.loaders import RawRobotRun
 from .robot.signals import RobotSignals
+from .robot.uncertainty import N_BLOCKS
 
 __all__ = ["RobotFit"]
 
@@ -85,6 +86,12 @@ class RobotFit:
         ``--no-consistency``).
     consistent : bool
         ``--consistent``: the physically consistent estimate of every model in the record.
+    sigma_blocks : int
+        ``--sigma-blocks``: jackknife units of the honest σ (0: eq. 15 only, no IV check;
+        :mod:`ident.robot.uncertainty`).
+    prune : bool
+        Prune the paper model's friction parameters above the relative-σ threshold (False:
+        ``--no-prune``).
 
     Attributes
     ----------
@@ -126,6 +133,8 @@ class RobotFit:
         known_rotor_inertia: bool = False,
         consistency: bool = True,
         consistent: bool = False,
+        sigma_blocks: int = N_BLOCKS,
+        prune: bool = True,
     ) -> None:
         self.robot = robot
         self.model = model
@@ -142,6 +151,8 @@ class RobotFit:
         self.known_rotor_inertia = known_rotor_inertia
         self.consistency = consistency
         self.consistent = consistent
+        self.sigma_blocks = sigma_blocks
+        self.prune = prune
 
     # -- scikit-learn protocol (as ident.api.JointModel) ------------------------------------
     @classmethod
@@ -200,7 +211,8 @@ class RobotFit:
             q_unit=self.q_unit, cutoff=self.cutoff, decimation=self.decimation, trim=self.trim,
             consistent=self.consistent, method=self.method, qs=self.qs, dq_min=self.dq_min,
             known_rotor_inertia=self.known_rotor_inertia, chain=self.chain,
-            payload=self.payload, feasibility=self.consistency)
+            payload=self.payload, feasibility=self.consistency,
+            sigma_blocks=self.sigma_blocks, prune=self.prune)
         self._set(out)
         return self
 

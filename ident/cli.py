@@ -99,6 +99,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "(the slow part of the consistency report; the sign checks are kept)",
     )
     p.add_argument(
+        "--sigma-blocks",
+        type=int,
+        metavar="N",
+        help="--robot only: units of the jackknife behind the honest standard deviations "
+        "(experiments, or contiguous blocks of them; default 10) and the IDIM-IV check; 0: eq. 15 "
+        "alone (faster)",
+    )
+    p.add_argument(
+        "--no-prune",
+        action="store_true",
+        help="--robot only: keep the paper model's friction parameters whose relative std "
+        "exceeds 30 %% (flagged unidentified) instead of pruning them and refitting",
+    )
+    p.add_argument(
         "--consistent",
         action="store_true",
         help="--robot only: also compute the physically consistent estimate of every model "
@@ -224,6 +238,8 @@ _ROBOT_ONLY = (
     ("payload", "--payload", ""),
     ("no_consistency", "--no-consistency", ""),
     ("consistent", "--consistent", ""),
+    ("sigma_blocks", "--sigma-blocks", ""),
+    ("no_prune", "--no-prune", ""),
 )
 
 
@@ -237,6 +253,7 @@ _NUMBERS = (
     ("trim", "--trim", 0, True, "a number of samples >= 0"),
     ("threshold", "--threshold", 0.0, False, "a percentage > 0"),
     ("max_steps", "--max-steps", 0, True, "a number of steps >= 0"),
+    ("sigma_blocks", "--sigma-blocks", 0, True, "a number of jackknife units >= 0"),
     ("axis", "--axis", 0, True, "an axis index >= 0"),
 )
 

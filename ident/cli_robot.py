@@ -55,7 +55,8 @@ from .robot.plots import write_robot_report
 from .robot.refine_joint import joint_coulomb, refine_joint
 from .robot.refit import refit_robot
 from .robot.signals import RobotSignals
-from .robot.tables import format_table_iii, table_iii
+from .robot.tables import format_table_iii, format_uncertainty, table_iii
+from .robot.uncertainty import N_BLOCKS, assess, parameter_records
 
 __all__ = ["run", "fit_robot", "fit_files", "load_runs", "public_record", "refine_robot",
            "format_report", "format_refinement", "format_refit", "FORMAT", "MODELS"]
@@ -133,7 +134,8 @@ def fit_files(
         ``--consistent``: also the physically consistent estimate of every model.
     **options
         The other keywords of :func:`fit_robot` (``method``, ``qs``, ``dq_min``, ``chain``,
-        ``payload``, ``known_rotor_inertia``, ``sign_check``, ``feasibility``).
+        ``payload``, ``known_rotor_inertia``, ``sign_check``, ``feasibility``,
+        ``sigma_blocks``, ``prune``, ``progress``).
     """
     if model not in MODELS:
         raise DataError(f"model {model!r}: expected one of {', '.join(MODELS)}")
@@ -180,6 +182,9 @@ def fit_robot(
     payload: str | None = None,
     sign_check: bool = True,
     feasibility: bool = True,
+    sigma_blocks: int = N_BLOCKS,
+    prune: bool = True,
+    progress: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Preprocess, fit each model, cross-validate; the JSON record (no file written).
 
@@ -225,6 +230,16 @@ def fit_robot(
         (:func:`~ident.robot.consistency.check_consistency`, the slow part of the report:
         most of a 7-axis fit's time); False (``--no-consistency``): the sign checks only,
         ``feasible`` null.
+    sigma_blocks : int
+        Units of the jackknife of the honest sigma (:func:`ident.robot.uncertainty.assess`:
+        jackknife over experiments or blocks, IDIM-IV check when the runs carry q_ref,
+        per-joint errors-in-variables flag); 0 (``--sigma-blocks 0``): eq. 15 alone, no
+        IV check (the pruning then judged on eq. 15).
+    prune : bool
+        Paper model: prune the friction parameters above the threshold (eq. 14-16) and refit;
+        False (``--no-prune``): only flag them ``unidentified``.
+    progress : callable or None
+        Receives progress lines of the uncertainty assessment when it runs over 10 s.
 
     Returns
     -------
@@ -253,7 +268,9 @@ def fit_robot(
     if chain == "columns":
         design = resolve_design(runs, instruments=method == "iv", cutoff_hz=pre.cutoff_hz,
                                 decimation=pre.decimation, trim=pre.trim, dq_min=dq_min)
-        sig, dq_min = design_runs(runs, reg, design, instruments=method == "iv")
+        # the instruments' columns also for the IDIM-IV check of the honest sigma
+        iv_cols = method == "iv" or (sigma_blocks > 0 and all(r.q_ref is not None for r in runs))
+        sig, dq_min = design_runs(runs, reg, design, instruments=iv_cols)
         design = replace(design, dq_min=dq_min)
         val = design_runs(validation, reg, design)[0] if validation else None
         settings: dict[str, Any] = design.as_dict()
@@ -332,12 +349,12 @@ def fit_robot(
             # others (the data are not bad, they do not excite that model)
             out["models"][name] = {"error": str(exc)}
             continue
+        # honest sigma, errors-in-variables flags, the paper model pruned (refitted in place)
+        unc = assess(est, sig, n_blocks=sigma_blocks, iv=sigma_blocks > 0,
+                     prune=prune and name == "paper", progress=progress)
         rec: dict[str, Any] = {
-            "parameters": {
-                p: {"value": float(v), "std": float(s),
-                    "rel_std_pct": float(100.0 * s / abs(v)) if v != 0 else None}
-                for p, v, s in zip(est.names_, est.coef_, est.std_, strict=True)
-            },
+            "parameters": parameter_records(est),
+            "uncertainty": unc.to_json(),
             "n_base": int(est.n_base_),
             "rel_error": {k: float(v) for k, v in est.rel_error_.items()},
             # every decimated row (stiction area, guard, sign check, quadrant band included)
@@ -348,11 +365,16 @@ def fit_robot(
         }
         if name == "paper":
             flag_unidentified(rec)
+            if unc.pruned:
+                notes.append(f"paper model: {', '.join(unc.pruned)} pruned (relative std "
+                             f"above {DEFAULT_THRESHOLD_PCT:g} %, eq. 14-16): held at 0 and the "
+                             "model refitted without them (not used to predict)")
             if rec["unidentified"]:
                 notes.append(f"paper model: {', '.join(rec['unidentified'])} unidentified "
-                             f"(relative std above {DEFAULT_THRESHOLD_PCT:g} %, eq. 14-16): "
-                             "kept in the fit, their values (and the prediction where they "
-                             "act, e.g. the Stribeck terms below q_s) are not identified")
+                             f"(relative std above {DEFAULT_THRESHOLD_PCT:g} %, eq. 14-16; "
+                             "not prunable: base parameters, a_m, a_g" + (
+                                 "" if prune else ", or --no-prune") + "): kept in the fit, "
+                             "their values are not identified")
         expressions = getattr(est.base_, "expressions", None)
         if expressions:
             rec["base_expressions"] = list(expressions)
@@ -620,11 +642,14 @@ def flag_unidentified(rec: dict[str, Any],
                       threshold_pct: float = DEFAULT_THRESHOLD_PCT) -> list[str]:
     """Mark the parameters of a model record whose relative std exceeds the pruning
     threshold (eq. 14-16, :data:`ident.estimate.DEFAULT_THRESHOLD_PCT`) or is undefined
-    (value 0) as ``"unidentified": true``; their names in ``rec["unidentified"]``."""
+    (value 0) as ``"unidentified": true`` (pruned ones excepted); their names in
+    ``rec["unidentified"]``."""
     bad = []
     for p, v in rec["parameters"].items():
         rs = v["rel_std_pct"]
-        v["unidentified"] = bool(rs is None or not math.isfinite(rs) or rs > threshold_pct)
+        # a pruned parameter (held at 0) is removed from the model, not unidentified
+        v["unidentified"] = bool(not v.get("pruned") and (
+            rs is None or not math.isfinite(rs) or rs > threshold_pct))
         if v["unidentified"]:
             bad.append(p)
     rec["unidentified"] = bad
@@ -684,12 +709,17 @@ def format_report(out: dict[str, Any]) -> str:
             continue
         lines.append(f"== {name} model: {len(rec['parameters'])} parameters "
                      f"({rec['n_base']} base) ==")
-        lines.append(f"{'parameter':<14}{'value':>14}{'std':>12}{'%std':>9}")
+        lines.append(f"{'parameter':<14}{'value':>14}{'std':>12}{'%std':>9}{'std eq15':>12}")
         for p, v in rec["parameters"].items():
             rs = v["rel_std_pct"]
             rs_s = "inf" if rs is None or not math.isfinite(rs) else f"{rs:.1f}"
-            flag = "  unidentified" if v.get("unidentified") else ""
-            lines.append(f"{p:<14}{v['value']:>14.6g}{v['std']:>12.3g}{rs_s:>9}{flag}")
+            if v.get("pruned"):
+                rs_s = "-"
+            flag = ("  unidentified" if v.get("unidentified") else
+                    "  pruned" if v.get("pruned") else "")
+            lines.append(f"{p:<14}{v['value']:>14.6g}{v['std']:>12.3g}{rs_s:>9}"
+                         f"{v.get('std_analytic', v['std']):>12.3g}{flag}")
+        lines.extend(format_uncertainty(rec.get("uncertainty")))
         if rec.get("unidentified"):
             lines.append(f"unidentified: relative std above {rec['unidentified_threshold_pct']:g}"
                          " % (eq. 14-16): values and the prediction where they act are not "
@@ -766,7 +796,10 @@ def run(args: argparse.Namespace) -> int:
                     known_rotor_inertia=args.known_rotor_inertia,
                     chain=args.chain or "columns", payload=args.payload,
                     feasibility=not getattr(args, "no_consistency", False),
-                    consistent=getattr(args, "consistent", False))
+                    consistent=getattr(args, "consistent", False),
+                    sigma_blocks=N_BLOCKS if getattr(args, "sigma_blocks", None) is None
+                    else args.sigma_blocks, prune=not getattr(args, "no_prune", False),
+                    progress=lambda m: print(m, file=sys.stderr))
     if getattr(args, "refine", False):
         refine_robot(out, max_steps=args.max_steps,
                      progress=lambda m: print(m, file=sys.stderr))

@@ -17,7 +17,7 @@ Asserted:
 * through the CLI: per-joint before/after figures (fit, held-out, noise floor) in the JSON and
   on stdout; every error also on all rows with the share of rows it leaves out (the all-rows
   figures equal the estimator's error on every decimated row); paper-model parameters above
-  the pruning threshold flagged as unidentified;
+  the pruning threshold pruned (or flagged as unidentified when not prunable);
 * a torque lag of half the raw cycle is named a zero-order hold against the raw period given
   (``cycle_s``), not against the design's (decimated) period.
 """
@@ -166,10 +166,15 @@ def test_cli_refine_and_all_rows_figures(coupled_files, tmp_path, capfd):
             assert left["high"] < left["low"]  # the stiction area is at low velocity
             if name == "usual":  # the selected Table III leaves out the usual fit's rows
                 assert left["all"] == pytest.approx(m["rows_left_out"][joint])
-    # the paper model's parameters above the threshold are flagged, the others not
+    # the paper model's parameters above the threshold are pruned (held at 0) or, when not
+    # prunable, flagged; the others not
     paper = rec["models"]["paper"]
     for p, v in paper["parameters"].items():
         rs = v["rel_std_pct"]
+        if v["pruned"]:
+            assert v["value"] == 0.0 and not v["unidentified"], (p, v)
+            assert p in paper["uncertainty"]["pruned"]
+            continue
         assert v["unidentified"] == (rs is None or rs > DEFAULT_THRESHOLD_PCT), (p, v)
     assert paper["unidentified"] == [p for p, v in paper["parameters"].items()
                                      if v["unidentified"]]

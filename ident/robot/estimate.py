@@ -207,6 +207,10 @@ class RobotModel:
         (:mod:`ident.robot.quadrants`).
     quadrant_changes_ : list of int
         Samples whose quadrant changed at each re-decision (``quadrant="model"``).
+    quadrant_from_ : ndarray or None
+        The theta whose sign(tau_out_hat dq) decided the final quadrants (``quadrant="model"``
+        of the paper model), else None: :mod:`ident.robot.uncertainty` rebuilds the moments of
+        parts of the data on the same quadrants.
     """
 
     def __init__(
@@ -955,6 +959,8 @@ class RobotModel:
         self.fixed_: dict[str, float] = {}
         self.quadrant_changes_: list[int] = []
         self.n_store_updates_ = 0
+        # the theta that decided the final moments' quadrants (ident.robot.uncertainty)
+        self.quadrant_from_ = None
         if not paper:
             self._statistics(moms, usual_coefficients, xu, free_u, wu)
             self.weights_ = wu
@@ -1015,6 +1021,7 @@ class RobotModel:
                     break
         if pending is not None:  # the last quadrants still leave a direction unexcited
             raise pending
+        self.quadrant_from_ = theta_q if model_q else None
         self._statistics(moms, paper_coefficients, x, free, w)
         self.weights_ = w
         self.n_passes_, self.n_iter_ = passes, it

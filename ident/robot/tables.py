@@ -6,6 +6,10 @@ velocities (35-100 %), as :func:`ident.results.band_errors` does for one joint.
 rows (``jointid fit --robot``: stiction area, guard and sign check included) and the share of
 the band's rows the first leaves out: a figure that leaves out the rows a model predicts worst
 (the stiction area) is not the model's error on the data.
+
+:func:`format_uncertainty` prints what :mod:`ident.robot.uncertainty` adds to a model's record:
+how the honest sigma was obtained, the pruned parameters and the joints flagged for errors in
+variables.
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ from ..results import DEFAULT_BANDS, band_errors
 from . import RobotIdentError
 from .signals import RobotSignals
 
-__all__ = ["table_iii", "format_table_iii"]
+__all__ = ["table_iii", "format_table_iii", "format_uncertainty"]
 
 
 def _stack(signals: RobotSignals | Sequence[RobotSignals]) -> list[RobotSignals]:
@@ -125,3 +129,25 @@ def format_table_iii(table: Mapping[str, Mapping[str, Mapping[str, float]]],
     lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
     lines.insert(1, "  ".join("-" * w for w in widths))
     return "\n".join(lines)
+
+
+def format_uncertainty(block: Mapping[str, Any] | None) -> list[str]:
+    """Lines for a model record's ``uncertainty`` block (:meth:`Uncertainty.to_json
+    <ident.robot.uncertainty.Uncertainty.to_json>`): the method, the pruned parameters and,
+    per flagged joint, the errors-in-variables reason with its numbers."""
+    if not block:
+        return []
+    reps = (f"{block['n_replicates']} jackknife replicates over {block['units']}"
+            + (f", {block['n_failed']} not identifiable" if block["n_failed"] else "")
+            if block["n_replicates"] else "no jackknife")
+    iv = "IDIM-IV check made" if block["iv"] is not None else (
+        f"no IDIM-IV check ({block['iv_note']})")
+    lines = [f"std: honest sigma = {block['method']} ({reps}; {iv}); 'std eq15': eq. 15 alone"]
+    if block["pruned"]:
+        lines.append(f"pruned (relative std above {block['threshold_pct']:g} %, eq. 14-16; "
+                     f"held at 0, the model refitted without them, not used to predict): "
+                     f"{', '.join(block['pruned'])}")
+    for joint, f in block["joints"].items():
+        if f["errors_in_variables"]:
+            lines.append(f"joint {joint}: {f['reason']}")
+    return lines

@@ -1,0 +1,497 @@
+"""Honest standard deviations of a fitted :class:`~ident.robot.estimate.RobotModel`: a block
+jackknife beside the analytic sigma of eq. 14-15, the IDIM-IV estimate as a check of errors in
+variables, and the paper's pruning of parameters whose relative deviation (eq. 16) exceeds the
+threshold.
+
+Why
+---
+Eq. 13-15 assume a deterministic W and white errors. On filtered, decimated logs the errors are
+correlated, and in closed loop the measured motion carries the response to the drive's torque
+noise, which then enters the regressor and -- through sign(tau_out dq) -- the friction's
+quadrant decision (errors in variables). The analytic sigma then understates the spread of the
+estimate; a joint whose friction is larger than its load is the extreme case.
+
+Jackknife over blocks
+---------------------
+The rows are cut into units: each experiment (run) is one unit when there are at least
+``n_blocks`` experiments; otherwise each experiment is cut into ``ceil(n_blocks /
+experiments)`` contiguous blocks (at least 2). Each unit's moments (:mod:`ident.robot.moments`)
+are accumulated once, with the quadrants the fit ended on (``RobotModel.quadrant_from_``); the
+replicate u leaves unit u out (delete-one-block jackknife: a bootstrap that draws blocks with
+replacement loses, on a friction-dominated joint, the few blocks where it visits the generator
+quadrant, and the replicate is then not identifiable) and re-runs the same Gauss-Newton (LS,
+WLS with the fit's weights, or IV; the same fixed parameters), started at the fit::
+
+    sigma_jack = sqrt(U - 1) * 1.4826 MAD_u(chi_(u))
+
+over the U replicates that could be fitted (``n_failed`` could not: singular normal
+equations): the delete-one jackknife's sqrt((U - 1) / U sum_u (chi_(u) - mean)^2) with a
+robust deviation, so that one replicate that ends elsewhere on a weak direction does not
+decide it. Correlated errors within a block and errors in variables that vary along the data
+widen it; a bias common to every block does not (the IV check is for that).
+
+IV check
+--------
+When the data carry instruments (``q_ref``, or the instrument columns) and the fit is not
+itself IDIM-IV, the same model is refitted by IDIM-IV on the same quadrants; per parameter
+``z_iv = (chi_fit - chi_iv) / sqrt(sigma_iv^2 + sigma^2)`` (sigma: the larger of the analytic
+and the jackknife one). Instruments built on the reference trajectory are not correlated with
+the torque noise, so a large |z_iv| says the fit is biased by errors in variables.
+
+Honest sigma and the flag
+-------------------------
+``std = max(std_analytic, std_jackknife)`` per parameter, and ``|chi_fit - chi_iv|`` where
+|z_iv| > ``Z_IV`` (a bias of that size is then within one sigma). A joint is flagged
+``errors_in_variables`` when one of its parameters has a jackknife sigma above
+``RATIO_FLAG`` times the analytic one, or |z_iv| > ``Z_IV``; the flag gives the numbers.
+
+Pruning (eq. 14-16)
+-------------------
+Paper model: the prunable parameter with the largest relative sigma max(eq. 15, jackknife)
+above the threshold (:data:`ident.estimate.DEFAULT_THRESHOLD_PCT`) is removed -- held at 0, so
+the prediction does not use it -- and the model refitted on the same moments (the fit's
+quadrants and weights); repeated until every remaining one is below the threshold (the sigma
+of a refit: its analytic sigma times the first fit's ratio max(eq. 15, jackknife) / eq. 15),
+then the jackknife is re-run on the pruned model. The IV check does not prune: it suggests a
+bias, not a spread, and on a friction-dominated joint the IV estimate itself can be far off.
+Removable: b_m, b_g, c_m, d_m, c_g, d_g, F_V, tau_off of every joint. a_m, a_g (the load's
+gain: 0 would delete the load torque) and the base parameters above the threshold are
+reported ``unidentified`` only.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from ..estimate import DEFAULT_THRESHOLD_PCT
+from . import RobotIdentError
+from .moments import JointMoments
+from .paper import PAPER_BLOCK, paper_coefficients, usual_coefficients
+from .signals import RobotColumns, RobotSignals
+
+__all__ = ["Uncertainty", "assess", "jackknife_units", "parameter_records", "N_BLOCKS", "Z_IV",
+           "RATIO_FLAG", "PRUNABLE"]
+
+#: Default number of jackknife units (experiments, or blocks of them).
+N_BLOCKS = 10
+#: |z_iv| above which the fit and the IV estimate disagree (a two-sided 0.1 % level over a
+#: few tens of parameters).
+Z_IV = 4.0
+#: Jackknife sigma above this multiple of the analytic one: the analytic sigma understates
+#: (on white errors the largest ratio of a joint reaches about 2.3 with 20 blocks).
+RATIO_FLAG = 3.0
+#: Per-joint parameters of the paper model that pruning may remove (held at 0).
+PRUNABLE = ("b_m", "b_g", "c_m", "d_m", "c_g", "d_g", "FV", "OFF")
+#: Relative step tolerance of the jackknife's Gauss-Newton refits (the fit's: ``tol``).
+REPLICATE_TOL = 1e-7
+#: Progress lines only once the assessment has run this long [s], then at most this often.
+PROGRESS_AFTER_S = 10.0
+
+
+@dataclass
+class Uncertainty:
+    """Honest standard deviations of a fitted model (module doc).
+
+    Attributes
+    ----------
+    names : tuple of str
+        The model's parameter names (``RobotModel.names_``).
+    std_analytic, std_jackknife, std : ndarray (b,)
+        Eq. 15, the jackknife spread (NaN when not run) and the honest sigma.
+    coef_iv, std_iv, z_iv : ndarray (b,) or None
+        The IDIM-IV check (None when not made: no instruments, or the fit is IV).
+    n_replicates, n_failed : int
+        Jackknife replicates made and left out (singular normal equations).
+    units : str
+        What was resampled, e.g. ``"20 blocks of 1 experiment"``.
+    flags : dict
+        Per joint: ``{"errors_in_variables": bool, "sigma_ratio": max jackknife/analytic,
+        "sigma_ratio_parameter": name, "z_iv": max |z_iv| or None, "z_iv_parameter": name,
+        "reason": text}``.
+    pruned : list of str
+        Parameters removed by the pruning (held at 0).
+    unidentified : list of str
+        Remaining parameters whose relative honest sigma exceeds ``threshold_pct``.
+    threshold_pct : float
+        Pruning threshold on 100 sigma / |value| [%] (eq. 16).
+    iv_note : str
+        Why the IV check was not made (empty when it was).
+    """
+
+    names: tuple[str, ...]
+    std_analytic: np.ndarray
+    std_jackknife: np.ndarray
+    std: np.ndarray
+    coef_iv: np.ndarray | None = None
+    std_iv: np.ndarray | None = None
+    z_iv: np.ndarray | None = None
+    n_replicates: int = 0
+    n_failed: int = 0
+    units: str = ""
+    flags: dict[str, dict[str, Any]] = field(default_factory=dict)
+    pruned: list[str] = field(default_factory=list)
+    unidentified: list[str] = field(default_factory=list)
+    threshold_pct: float = DEFAULT_THRESHOLD_PCT
+    iv_note: str = ""
+
+    def to_json(self) -> dict[str, Any]:
+        """The JSON block ``models.<m>.uncertainty`` of docs/robot-data.md (the per-parameter
+        sigmas are in :func:`parameter_records`)."""
+        return {
+            "method": "max(analytic eq. 15, block jackknife)"
+                      + (", IDIM-IV check" if self.z_iv is not None else ""),
+            "n_replicates": int(self.n_replicates), "n_failed": int(self.n_failed),
+            "units": self.units,
+            "iv": None if self.z_iv is None else {
+                n: {"value": _num(v), "std": _num(s), "z": _num(z)}
+                for n, v, s, z in zip(self.names, self.coef_iv, self.std_iv, self.z_iv,
+                                      strict=True)},
+            "iv_note": self.iv_note,
+            "joints": self.flags,
+            "pruned": list(self.pruned),
+            "unidentified": list(self.unidentified),
+            "threshold_pct": float(self.threshold_pct),
+        }
+
+
+def _num(v: float) -> float | None:
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+# ------------------------------------------------------------------------------ units
+def _take(sig: RobotSignals, rows: np.ndarray) -> RobotSignals:
+    """The samples ``rows`` of ``sig`` (contiguous rows of one experiment)."""
+    c = sig.columns
+    cols = None if c is None else RobotColumns(
+        W=c.W[:, :, rows], p=c.p[rows], sign=c.sign[rows], keep=c.keep[rows],
+        Wz=None if c.Wz is None else c.Wz[:, :, rows], pz=None if c.pz is None else c.pz[rows])
+    return replace(sig, t=sig.t[rows], q=sig.q[rows], dq=sig.dq[rows], ddq=sig.ddq[rows],
+                   tau=sig.tau[rows], experiment=sig.experiment[rows],
+                   q_ref=None if sig.q_ref is None else sig.q_ref[rows], columns=cols)
+
+
+def jackknife_units(signals: RobotSignals | Sequence[RobotSignals],
+                    n_blocks: int = N_BLOCKS) -> tuple[list[RobotSignals], str]:
+    """Cut the data into the jackknife's units (module doc); (units, what they are)."""
+    items = [signals] if isinstance(signals, RobotSignals) else list(signals)
+    exps = [(s, np.flatnonzero(s.experiment == e)) for s in items
+            for e in np.unique(s.experiment)]
+    if not exps:
+        raise RobotIdentError("uncertainty: no samples")
+    if len(exps) >= n_blocks:
+        return [_take(s, r) for s, r in exps], f"{len(exps)} experiments"
+    per = max(2, math.ceil(n_blocks / len(exps)))
+    units = [_take(s, part) for s, rows in exps for part in np.array_split(rows, per)
+             if part.size]
+    return units, (f"{per} contiguous blocks of each of {len(exps)} experiment"
+                   + ("s" if len(exps) > 1 else ""))
+
+
+def _sum(moms: list[list[JointMoments]], counts: np.ndarray) -> list[JointMoments]:
+    """sum_u counts[u] moms[u] per joint."""
+    out = []
+    for j, m0 in enumerate(moms[0]):
+        m = JointMoments(m0.cols, iv=m0.iv, powers=m0.powers)
+        for c, mu in zip(counts, moms, strict=True):
+            if c == 0:
+                continue
+            mj = mu[j]
+            m.vv += c * mj.vv
+            if m.iv:
+                m.zv += c * mj.zv
+                m.zz += c * mj.zz
+            m.n += int(c) * mj.n
+        out.append(m)
+    return out
+
+
+# ------------------------------------------------------------------------------ model hooks
+def _coeffs(model: Any):
+    return usual_coefficients if model.model == "usual" else paper_coefficients
+
+
+def _free(model: Any, pruned: Sequence[str] = ()) -> np.ndarray:
+    held = set(model.fixed_) | set(pruned)
+    return np.array([n not in held for n in model.names_])
+
+
+def _unit_moments(model: Any, units: list[RobotSignals]) -> list[list[JointMoments]]:
+    """Each unit's moments with the quadrants the fit ended on."""
+    powers = 1 if model.model == "usual" else 3
+    theta = getattr(model, "quadrant_from_", None)
+    return [model._pass(u, theta, powers)[0] for u in units]
+
+
+def _refit(model: Any, moms: list[JointMoments], free: np.ndarray,
+           tol: float | None = None) -> np.ndarray:
+    """The model's Gauss-Newton on ``moms`` from its estimate (held parameters at their value,
+    pruned ones at 0), with the fit's weights (WLS: not re-estimated), to ``tol``."""
+    held = np.isin(model.names_, list(model.fixed_))
+    x0 = np.where(free | held, model.coef_, 0.0)
+    w = getattr(model, "weights_", None)
+    w = np.ones(len(moms)) if w is None else np.asarray(w, dtype=float)
+    saved = model.tol
+    model.tol = saved if tol is None else tol
+    try:
+        x, _ = model._gauss_newton(moms, _coeffs(model), x0, free, w,
+                                   linear=model.model == "usual")
+    finally:
+        model.tol = saved
+    return x
+
+
+def _replicates(model: Any, moms: list[list[JointMoments]], free: np.ndarray,
+                say: Callable[[str], None]) -> tuple[np.ndarray, int]:
+    """Delete-one-unit jackknife (module doc); (sigma, replicates left out)."""
+    n = len(moms)
+    xs, failed = [], 0
+    for u in range(n):
+        counts = np.ones(n, dtype=int)
+        counts[u] = 0
+        try:
+            x = _refit(model, _sum(moms, counts), free, REPLICATE_TOL)
+        except RobotIdentError:
+            failed += 1
+            continue
+        if np.all(np.isfinite(x)):
+            xs.append(x)
+        else:
+            failed += 1
+        say(f"sigma: jackknife replicate {u + 1} of {n}")
+    m = len(xs)
+    if m < 3:
+        return np.full(model.coef_.size, np.nan), failed
+    X = np.asarray(xs)
+    # robust spread: (U - 1) mean (x_u - mean)^2 with 1.4826 MAD for the deviation, so one
+    # replicate that ends elsewhere (a weak direction) does not decide the sigma
+    mad = 1.4826 * np.median(np.abs(X - np.median(X, axis=0)), axis=0)
+    return np.sqrt(m - 1) * mad, failed
+
+
+def _iv_check(model: Any, signals: Any) -> tuple[Any, str]:
+    """The IDIM-IV refit on the fit's quadrants, or (None, why not)."""
+    if model.method == "iv":
+        return None, "the fit is IDIM-IV"
+    items = [signals] if isinstance(signals, RobotSignals) else list(signals)
+    if not all(s.q_ref is not None or (s.columns is not None and s.columns.Wz is not None)
+               for s in items):
+        return None, "no reference trajectory q_ref (instruments)"
+    if not all(s.columns is None or s.columns.Wz is not None for s in items):
+        return None, "the columns were built without the instruments' columns"
+    known = getattr(model.regressor_, "known_Ia", None)
+    if known is not None and np.any(known) and any(s.columns is not None for s in items):
+        # RobotModel's IDIM-IV pass has no reference acceleration for the known rotors'
+        # torque on the columns chain
+        return None, "known rotor inertias on the columns chain"
+    params = model.get_params()
+    params["method"] = "iv"
+    theta = getattr(model, "quadrant_from_", None)
+    if model.model == "paper" and model.quadrant == "model" and theta is not None:
+        params["quadrant_theta"] = theta
+    iv = type(model)(**params)
+    try:
+        iv.fit(signals)
+    except RobotIdentError as exc:
+        return None, f"IDIM-IV not identifiable on these data ({exc})"
+    return iv, ""
+
+
+def _joint_of(model: Any) -> list[int | None]:
+    """Joint index of each parameter (None for the shared base parameters)."""
+    nb, pb = len(model.block_), model.n_theta_
+    return [None if i < pb else (i - pb) // nb for i in range(len(model.names_))]
+
+
+def _flags(model: Any, std_a: np.ndarray, std_b: np.ndarray,
+           z_iv: np.ndarray | None) -> dict[str, dict[str, Any]]:
+    owner = _joint_of(model)
+    out = {}
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(std_a > 0, std_b / std_a, np.nan)
+    for j, joint in enumerate(model.joints_):
+        idx = [i for i, o in enumerate(owner) if o == j]
+        r = ratio[idx]
+        ir = idx[int(np.nanargmax(r))] if np.any(np.isfinite(r)) else None
+        rmax = float(ratio[ir]) if ir is not None else math.nan
+        zi = zmax = None
+        if z_iv is not None and np.any(np.isfinite(z_iv[idx])):
+            zi = idx[int(np.nanargmax(np.abs(z_iv[idx])))]
+            zmax = float(abs(z_iv[zi]))
+        reasons = []
+        if ir is not None and rmax > RATIO_FLAG:
+            reasons.append(f"jackknife sigma of {model.names_[ir]} is {rmax:.3g} x the "
+                           f"analytic one")
+        if zmax is not None and zmax > Z_IV:
+            reasons.append(f"{model.names_[zi]}: fit and IDIM-IV differ by {zmax:.3g} sigma")
+        out[joint] = {
+            "errors_in_variables": bool(reasons),
+            "sigma_ratio": _num(rmax), "sigma_ratio_parameter": (
+                None if ir is None else model.names_[ir]),
+            "z_iv": zmax, "z_iv_parameter": None if zi is None else model.names_[zi],
+            "reason": ("errors-in-variables: the fit and IV/jackknife disagree: "
+                       + "; ".join(reasons)) if reasons else ""}
+    return out
+
+
+def _rel(x: np.ndarray, s: np.ndarray) -> np.ndarray:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(x != 0, 100.0 * s / np.abs(x), np.inf)
+
+
+def _prunable(model: Any, free: np.ndarray) -> np.ndarray:
+    owner = _joint_of(model)
+    ok = np.zeros(len(model.names_), dtype=bool)
+    if model.model != "paper":
+        return ok
+    for i, o in enumerate(owner):
+        if o is not None and free[i] and PAPER_BLOCK[(i - model.n_theta_) % len(PAPER_BLOCK)] \
+                in PRUNABLE:
+            ok[i] = True
+    return ok
+
+
+# ------------------------------------------------------------------------------ entry point
+def assess(model: Any, signals: RobotSignals | Sequence[RobotSignals], *,
+           n_blocks: int = N_BLOCKS,
+           iv: bool = True, prune: bool = True,
+           threshold_pct: float = DEFAULT_THRESHOLD_PCT,
+           progress: Callable[[str], None] | None = None) -> Uncertainty:
+    """Honest sigma, the errors-in-variables flags and the pruning of a fitted model (module
+    doc). With pruning the model is refitted in place (``coef_``, ``std_``, ``cov_``, ... of
+    the pruned model; ``pruned_`` names what was removed).
+
+    Parameters
+    ----------
+    model : RobotModel
+        Fitted on ``signals``.
+    signals : RobotSignals or sequence
+        The data of the fit.
+    n_blocks : int
+        Units of the jackknife wanted (module doc); 0: no jackknife (the honest sigma is the
+        analytic one and the IV check's), else at least 2.
+    iv : bool
+        Make the IDIM-IV check when the data carry instruments.
+    prune : bool
+        Paper model: prune (module doc); otherwise only report ``unidentified``.
+    threshold_pct : float
+        Pruning threshold [%] (eq. 16).
+    progress : callable or None
+        Called with a progress line, only once the assessment has run for
+        ``PROGRESS_AFTER_S`` and then at most that often.
+
+    Returns
+    -------
+    Uncertainty
+        Also set as ``model.uncertainty_``; ``model.std_honest_`` and ``model.pruned_``.
+    """
+    if not hasattr(model, "coef_"):
+        raise RobotIdentError("uncertainty: the model is not fitted")
+    n_blocks = int(n_blocks)
+    if n_blocks < 0 or n_blocks == 1:
+        raise RobotIdentError(f"uncertainty: n_blocks (--sigma-blocks): expected 0 (no "
+                              f"jackknife) or >= 2, got {n_blocks!r}")
+    t0 = time.monotonic()
+    last = [t0]
+
+    def say(msg: str) -> None:
+        now = time.monotonic()
+        if progress is not None and now - t0 > PROGRESS_AFTER_S and \
+                now - last[0] > PROGRESS_AFTER_S:
+            last[0] = now
+            progress(f"{msg} ({now - t0:.0f} s)")
+
+    units, text = jackknife_units(signals, max(n_blocks, 2))
+    moms = _unit_moments(model, units) if n_blocks or prune else []
+    say("sigma: unit moments done")
+    ivm, note = _iv_check(model, signals) if iv else (None, "not asked")
+    say("sigma: IDIM-IV check done")
+    std_a, std_b, std, z, failed = _honest(model, moms, ivm, _free(model), n_blocks, say)
+    pruned: list[str] = []
+    if prune and model.model == "paper" and moms:
+        # the spread decides (eq. 16 with the jackknife), not a bias the IV check suggests:
+        # on a friction-dominated joint the IV estimate itself can be far off
+        inflate = np.fmax(std_a, np.nan_to_num(std_b)) / np.where(std_a > 0, std_a, 1.0)
+        pruned = _prune(model, moms, _free(model), inflate, threshold_pct)
+        if pruned:
+            say(f"sigma: pruned {', '.join(pruned)}; jackknife of the pruned model")
+            std_a, std_b, std, z, failed = _honest(model, moms, ivm, _free(model, pruned),
+                                                   n_blocks, say)
+    free = _free(model, pruned)
+    rel = _rel(model.coef_, std)
+    unid = [n for n, r, f in zip(model.names_, rel, free, strict=True)
+            if f and not r <= threshold_pct]
+    out = Uncertainty(names=tuple(model.names_), std_analytic=std_a, std_jackknife=std_b,
+                      std=std, coef_iv=None if ivm is None else ivm.coef_.copy(),
+                      std_iv=None if ivm is None else ivm.std_.copy(), z_iv=z,
+                      n_replicates=len(units) if n_blocks else 0, n_failed=failed,
+                      units=text if n_blocks else "",
+                      flags=_flags(model, std_a, std_b, z), pruned=pruned, unidentified=unid,
+                      threshold_pct=float(threshold_pct), iv_note=note)
+    model.uncertainty_ = out
+    model.std_honest_ = std
+    model.pruned_ = list(pruned)
+    return out
+
+
+def _honest(model: Any, moms: list[list[JointMoments]], ivm: Any, free: np.ndarray,
+            n_blocks: int, say: Callable[[str], None]) -> tuple:
+    """(analytic, jackknife, honest sigma, z_iv or None, replicates left out) at the model's
+    current estimate (module doc)."""
+    std_a = model.std_.copy()
+    std_b, failed = np.full(std_a.size, np.nan), 0
+    if n_blocks:
+        std_b, failed = _replicates(model, moms, free, say)
+    std = np.fmax(std_a, std_b)
+    z = None
+    if ivm is not None:
+        d = model.coef_ - ivm.coef_
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = np.where(free, d / np.sqrt(ivm.std_**2 + std**2), np.nan)
+        big = np.abs(np.nan_to_num(z)) > Z_IV
+        std = np.where(big, np.fmax(std, np.abs(d)), std)
+    return std_a, std_b, np.where(free, std, 0.0), z, failed
+
+
+def _prune(model: Any, moms: list[list[JointMoments]], free: np.ndarray, inflate: np.ndarray,
+           threshold_pct: float) -> list[str]:
+    """Remove the worst prunable parameter above the threshold and refit (the fit's
+    quadrants and weights), repeatedly, with the honest sigma estimated as the refit's
+    analytic sigma times ``inflate``; the model is left refitted without them. Returns the
+    names removed, in order."""
+    full = _sum(moms, np.ones(len(moms), dtype=int))
+    out: list[str] = []
+    free = free.copy()
+    can = _prunable(model, free)
+    w = np.asarray(model.weights_, dtype=float)
+    while True:
+        rel = _rel(model.coef_, model.std_ * inflate)
+        cand = np.where(can & free, rel, -np.inf)
+        i = int(np.argmax(cand))
+        if not cand[i] > threshold_pct:
+            return out
+        free[i] = False
+        out.append(model.names_[i])
+        x = _refit(model, full, free)
+        model._statistics(full, _coeffs(model), x, free, w)
+
+
+def parameter_records(model: Any) -> dict[str, dict[str, Any]]:
+    """``{name: {"value", "std", "rel_std_pct", "std_analytic", "std_jackknife", "pruned"}}``
+    of a fitted model: ``std`` the honest sigma when :func:`assess` ran (else eq. 15),
+    ``rel_std_pct`` 100 std / |value| (None when the value is 0)."""
+    u = getattr(model, "uncertainty_", None)
+    std = model.std_ if u is None else u.std
+    jack = np.full(std.size, np.nan) if u is None else u.std_jackknife
+    pruned = set(getattr(model, "pruned_", ()))
+    return {p: {"value": float(v), "std": float(s),
+                "rel_std_pct": float(100.0 * s / abs(v)) if v != 0 else None,
+                "std_analytic": float(sa), "std_jackknife": _num(sj), "pruned": p in pruned}
+            for p, v, s, sa, sj in zip(model.names_, model.coef_, std, model.std_, jack,
+                                       strict=True)}
