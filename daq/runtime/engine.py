@@ -215,6 +215,8 @@ class Engine(Supervisor):
         self._resync = False
         self.notes: list[str] = []  # start-up warnings, logged at cycle 0 of every run
         self.bus_lost = False  # a bus error ended a run: no more frames can be sent
+        #: per-cycle torque monitor (daq.runtime.monitor.TorqueMonitor), None: none
+        self.monitor: Any = None
 
     # -- one cycle ------------------------------------------------------------------------
     def _exchange(self, cycle: int, deadline: float) -> int:
@@ -307,6 +309,10 @@ class Engine(Supervisor):
         next_deadline = t_wall0 + cycle_s
         hb_check = 0
         ch_timing = None
+        monitor = self.monitor
+        if monitor is not None:
+            monitor.begin(index, payload, log)
+        mq, mdq, mtau = [0.0] * n_dr, [0.0] * n_dr, [0.0] * n_dr
         if self.paced:
             w = log._w
             sid = w.register_schema("jointid_msgs/msg/CycleTiming", "ros2msg",
@@ -434,6 +440,7 @@ class Engine(Supervisor):
                 io_sent(time.time(), m.arbitration_id, payload_bytes)
                 log_state(d, cycle, t, q, dq, x * tpu[d] if not csp[d] else math.nan, tau_act,
                           counts[d], vel[d], x, tq[d], s, flags)
+                mq[d], mdq[d], mtau[d] = q, dq, tau_act
                 # state change events (decode only when the statusword changed)
                 if flags & FLAG_TPDO_MISSING:
                     st_now = None
@@ -469,6 +476,10 @@ class Engine(Supervisor):
                         self._fault(f"{self.drives[d].name}: {why}", cycle, t, log, d)
             if tpdo_fault and not stopping:
                 self._fault(tpdo_fault, cycle, t, log, -1)
+            if monitor is not None and mode == "run" and not self._stop_reason:
+                why, axis = monitor.step(cycle, t, mq, mdq, mtau, log)
+                if why:  # a collision with stop configured: the stop sequence
+                    self._fault(why, cycle, t, log, axis, kind="collision")
             if robot:
                 for d in range(n_dr):
                     log_sp_axis(d, cycle, t, q_refs[d], dq_refs[d], ddq_refs[d], seg,
