@@ -11,13 +11,13 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from mcap.reader import make_reader
+from robot_campaigns import ARM3, arm3_raw, to_toml
 
 from daq.app.cli import main
 from daq.runtime.monitor import SVFilter, read_monitor
 from ident import DataError
 from ident.monitor import ExportedModel, Thresholds, thresholds_from_residual
 from ident.robot.export_model import exported_torque, friction_record, urdf_text
-from robot_campaigns import ARM3, arm3_raw, to_toml
 from sim_drivers.arm import ArmParams, ArmPlant, Push, push_torque, staged_push
 from trajectories.robot import load_robot
 

@@ -40,7 +40,7 @@ from trajectories.robot_model import robot_for_campaign
 
 from .running import run_with_bar
 
-__all__ = ["analyse", "parse_push", "register", "run_monitor"]
+__all__ = ["analyse", "load_campaign", "parse_push", "register", "run_monitor"]
 
 #: defaults of --k-sigma and --peak-margin
 DEFAULT_K_SIGMA, DEFAULT_PEAK_MARGIN = 6.0, 1.5
@@ -148,7 +148,8 @@ def analyse(monitor: TorqueMonitor, cycle_s: float) -> list[dict[str, Any]]:
     return out
 
 
-def _load_campaign(path: Path, paced: bool) -> RobotCampaign:
+def load_campaign(path: Path, paced: bool = False) -> RobotCampaign:
+    """The robot campaign of ``path``; ``paced``: on the real-time clock."""
     campaign = load_any_campaign(path)
     if not isinstance(campaign, RobotCampaign):
         raise ConfigError(f"{path}: expected a robot campaign ([robot] table)")
@@ -173,7 +174,7 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
         Bad input (one line), before the bus is opened.
     """
     stream = stream if stream is not None else sys.stderr
-    campaign = _load_campaign(campaign_path, paced)
+    campaign = load_campaign(campaign_path, paced)
     joints = list(campaign.moving)
     specs = [parse_push(p, joints) for p in pushes or []]
     if specs and not simulate:

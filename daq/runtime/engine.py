@@ -45,7 +45,9 @@ Position, velocity, torque limits (``[daq.limits]``, else the campaign's joint l
 at the torque limit), following error, TPDO missing for ``tpdo_timeout_cycles`` consecutive
 cycles, heartbeat silent for ``heartbeat_timeout_s`` (the frames waiting in the receive queue
 are taken first: a stalled master has not read them), EMCY, a drive leaving OPERATION ENABLED,
-SIGINT/SIGTERM/SIGHUP, the master's own stall (paced: a cycle later than the RPDO deadline
+SIGINT/SIGTERM/SIGHUP, a torque-monitor crossing with ``stop`` (``jointid monitor``,
+:mod:`daq.runtime.monitor`: checked each cycle of the run phase, event kind ``collision``),
+the master's own stall (paced: a cycle later than the RPDO deadline
 the drives were given, 3 cycles + 100 ms: "master stalled for X s"; a shorter stall of more
 than a cycle is named in the reason of an EMCY read right after it; with periodic SYNC the
 TPDOs queued meanwhile are taken at once, not logged as cycles), the run log's file failing
