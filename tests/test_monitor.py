@@ -11,14 +11,24 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from mcap.reader import make_reader
-from robot_campaigns import ARM3, arm3_raw, to_toml
+from robot_campaigns import ARM3, arm3_raw, to_toml, write_arm_csv
 
 from daq.app.cli import main
 from daq.runtime.monitor import SVFilter, read_monitor
 from ident import DataError
-from ident.monitor import ExportedModel, Thresholds, thresholds_from_residual
+from ident.monitor import ExportedModel, Thresholds, load_model, thresholds_from_residual
 from ident.robot.export_model import exported_torque, friction_record, urdf_text
-from sim_drivers.arm import ArmParams, ArmPlant, Push, push_torque, staged_push
+from sim_drivers.arm import (
+    ArmGains,
+    ArmParams,
+    ArmPlant,
+    Payload,
+    Push,
+    model_reference,
+    push_torque,
+    simulate_arm,
+    staged_push,
+)
 from trajectories.robot import load_robot
 
 
@@ -256,3 +266,26 @@ def test_monitor_bad_inputs_one_line(tmp_path, arm3, capfd):
         err = capfd.readouterr().err.strip()
         assert code == 2 and len(err.splitlines()) == 1 and what in err, (argv, err)
         assert not out.exists()
+
+
+def test_model_from_a_fit_record_is_its_export(tmp_path, arm3, capfd):
+    """MODEL given as a fit record (with its consistent block) predicts what its
+    export-model folder predicts: same URDF text and friction file."""
+    robot, params = arm3
+    ref = model_reference(params.model, center=[0.0, -1.2, 1.2], fraction=0.9,
+                          duration_s=4.0, seed=1)
+    files = []
+    for i, pay in enumerate((None, Payload(5.0, [0.0, 0.0, 0.05]))):
+        run = simulate_arm(params, ref, ArmGains.for_params(params, payload=pay),
+                           payload=pay, seed=10 + i)
+        files.append(write_arm_csv(run, tmp_path / f"p{i}.csv"))
+    fit = tmp_path / "fit.json"
+    assert main(["fit", "--robot", str(ARM3), *map(str, files), "--model", "paper",
+                 "--json", str(fit), "--no-consistency", "--consistent"]) == 0
+    assert main(["export-model", str(fit), "-o", str(tmp_path / "model")]) == 0
+    capfd.readouterr()
+    a = load_model(fit, robot)
+    b = load_model(tmp_path / "model", None)
+    assert a.urdf == b.urdf and a.friction == b.friction
+    with pytest.raises(DataError, match="robot"):
+        load_model(fit, None)
