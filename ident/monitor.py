@@ -91,6 +91,8 @@ class TorquePredictor:
         except KeyError as e:
             raise DataError(f"{source}: friction.joints: key {e.args[0]!r} missing") from None
         self.source = source
+        #: Stribeck velocity q_s of each joint [rad/s] (the friction file's ``qs``)
+        self.qs = [float(j.get("qs", 0.0)) for j in joints]
 
     def _friction(self, j: int, t_out: float, v: float, s: float, e: float) -> float:
         """Joint j's torque for output torque ``t_out``, velocity ``v``, sign ``s``, Stribeck
@@ -130,17 +132,19 @@ class TorquePredictor:
         return out
 
     def band(self, q: Sequence[float], dq: Sequence[float], ddq: Sequence[float],
-             v_rest: float = 0.0) -> tuple[list[float], list[float]]:
+             v_rest: float | Sequence[float] = 0.0) -> tuple[list[float], list[float]]:
         """The torque interval [N m] the model allows: the prediction (both bounds equal)
-        where ``|dq_j| >= v_rest`` [rad/s]; below it, where sign(dq) is not known, the range
-        of the static friction (Stribeck factor E = 1, either sign of dq: the stiction band
-        of the paper's section III.B at the joint's load) plus the viscous and offset terms.
+        where ``|dq_j| >= v_rest`` [rad/s] (one value, or one per joint); below it, where
+        sign(dq) is not known, the range of the static friction (Stribeck factor E = 1,
+        either sign of dq: the stiction band of the paper's section III.B at the joint's
+        load) plus the viscous and offset terms.
         """
         lo, hi = [], []
         exp = math.exp
+        vr = [float(v_rest)] * self.k if np.ndim(v_rest) == 0 else list(v_rest)
         for j, t_out in enumerate(self._rigid(q, dq, ddq)):
             v = float(dq[j])
-            if abs(v) >= v_rest and v != 0.0:
+            if abs(v) >= vr[j] and v != 0.0:
                 e = exp(-abs(v) / self._coef[j][1]) if self.paper else 1.0
                 x = self._friction(j, t_out, v, 1.0 if v > 0 else -1.0, e)
                 lo.append(x)

@@ -42,6 +42,8 @@ from .running import run_with_bar
 
 __all__ = ["analyse", "load_campaign", "parse_push", "register", "run_monitor"]
 
+#: default --rest-velocity: this many times each joint's Stribeck velocity q_s (E < 5 %)
+REST_QS = 3.0
 #: defaults of --k-sigma and --peak-margin
 DEFAULT_K_SIGMA, DEFAULT_PEAK_MARGIN = 6.0, 1.5
 #: a crossing up to this long [s] after a push ended still counts as its detection
@@ -81,9 +83,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "deviation (default 1.5, 0: k-sigma alone; with --thresholds: the file's)")
     p.add_argument("--cutoff-hz", type=float, default=20.0,
                    help="cut-off of the residual filter [Hz] (default 20)")
-    p.add_argument("--rest-velocity", type=float, default=0.02,
+    p.add_argument("--rest-velocity", type=float, default=None,
                    help="below this |dq| [rad/s] the friction is the static band "
-                   "(default 0.02)")
+                   f"(default: {REST_QS:g} q_s of each joint, the Stribeck region)")
     p.add_argument("--push", action="append", default=[], metavar="JOINT:FORCE:T0[:DT]",
                    help="simulated arm: push the link of JOINT with FORCE [N] from T0 [s] "
                    "after the run starts for DT [s] (default 0.2); repeatable")
@@ -163,7 +165,7 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
                 calibrate: bool = False, thresholds: Path | None = None,
                 k_sigma: float | None = None, peak_margin: float | None = None,
                 cutoff_hz: float = 20.0,
-                rest_velocity: float = 0.02, pushes: list[str] | None = None,
+                rest_velocity: float | None = None, pushes: list[str] | None = None,
                 stop: bool = False, paced: bool = False,
                 stream: TextIO | None = None) -> dict[str, Any]:
     """``jointid monitor`` (module docstring); returns the content of ``monitor.json``.
@@ -182,7 +184,7 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
                           "arm)")
     if calibrate and (specs or stop):
         raise ConfigError("--calibrate: a validation run takes no --push and no --stop")
-    if not rest_velocity >= 0:
+    if rest_velocity is not None and not rest_velocity >= 0:
         raise ConfigError(f"--rest-velocity: expected a number >= 0, got {rest_velocity}")
     if k_sigma is not None and not k_sigma > 0:
         raise ConfigError(f"--k-sigma: expected a number > 0, got {k_sigma}")
@@ -193,6 +195,10 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
     pred0 = exported.predictor(None)
     if pred0.names != joints:
         raise ConfigError(f"{model}: joints {pred0.names}, the campaign's are {joints}")
+    v_rest = ([REST_QS * q for q in pred0.qs] if rest_velocity is None
+              else [rest_velocity] * len(joints))
+    if not all(v >= 0 for v in v_rest):
+        raise ConfigError(f"{model}: friction qs: expected numbers >= 0")
     th = None
     if thresholds is not None:
         th = Thresholds.read(thresholds)
@@ -202,7 +208,7 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
         th = th.with_k(k_sigma, peak_margin)
 
     def predictor_for(payload: Any) -> Any:
-        return functools.partial(exported.predictor(payload).band, v_rest=rest_velocity)
+        return functools.partial(exported.predictor(payload).band, v_rest=v_rest)
 
     mon = TorqueMonitor(predictor_for, joints, campaign.cycle_s,
                         lower=None if th is None else th.lower,
@@ -216,7 +222,7 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
         "campaign": str(campaign_path), "model": exported.source, "joints": joints,
         "cycle_s": campaign.cycle_s, "clock": campaign.daq.get("clock", "default"),
         "cutoff_hz": cutoff_hz,
-        "rest_velocity": rest_velocity, "status": result.status, "reason": result.reason,
+        "rest_velocity": v_rest, "status": result.status, "reason": result.reason,
         "wall_s": wall, "missed_cycles": [r.missed for r in result.runs],
         "logs": [str(p.relative_to(out)) for p in logs]}
     if calibrate:
@@ -267,7 +273,8 @@ def _report(out: Path, logs: list[Path], summary: dict[str, Any], mon: TorqueMon
     intro = Section("What was run").para(
         f"Campaign {summary['campaign']}, model {summary['model']}; residual = measured "
         f"torque minus the model's, both low-passed at {summary['cutoff_hz']:g} Hz "
-        f"(static friction band below |dq| = {summary['rest_velocity']:g} rad/s). Status: "
+        f"(static friction band below |dq| = "
+        f"{', '.join(f'{v:.3g}' for v in summary['rest_velocity'])} rad/s). Status: "
         f"{summary['status']} {summary['reason']}; missed cycles per run: "
         f"{summary['missed_cycles']}.")
     sections = [intro]
