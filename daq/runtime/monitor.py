@@ -47,9 +47,9 @@ from typing import Any
 
 import numpy as np
 import scipy.linalg
-from mcap.reader import make_reader
 
 from daq import ConfigError
+from daq.protocol.reader import _scan
 from sim_drivers.arm_push import staged_push
 
 __all__ = ["MONITOR_SCHEMA", "MonitorRecord", "PushSpec", "SVFilter", "TorqueMonitor",
@@ -68,6 +68,10 @@ float64 tau_predicted # [N m] the model's torque at the filtered state (nearest 
 uint8 armed           # 1 when crossings count (after the warm-up)
 """
 _SAMPLE = struct.Struct("<4sqddddddB")
+_SAMPLE_DTYPE = np.dtype([("head", "V4"), ("cycle", "<i8"), ("t", "<f8"), ("residual", "<f8"),
+                          ("lower", "<f8"), ("upper", "<f8"), ("tau_filtered", "<f8"),
+                          ("tau_predicted", "<f8"), ("armed", "u1")])
+_MAX_AXES = 64
 _CDR_HEADER = b"\x00\x01\x00\x00"
 
 
@@ -298,37 +302,32 @@ class MonitorLog:
 
 
 def read_monitor(path: str | Path) -> MonitorLog:
-    """Read the monitor channels, the events and the ``monitor`` metadata of a run log.
+    """Read the monitor channels, the events and the ``monitor`` metadata of a run log
+    (with the fast chunk scanner of :mod:`daq.protocol.reader`; the reference reader gives
+    the same messages, tests/test_monitor.py).
 
     Raises
     ------
     ConfigError
         The log has no ``/monitor`` channel (not a monitored run).
+    daq.protocol.reader.LogReadError
+        Not a readable MCAP file.
     """
-    cols: dict[int, list[tuple]] = {}
-    events: list[dict[str, Any]] = []
-    with open(path, "rb") as f:
-        reader = make_reader(f)
-        for _, ch, msg in reader.iter_messages():
-            topic = ch.topic
-            if topic.startswith("/monitor/"):
-                j = int(topic.split("/")[2])
-                cols.setdefault(j, []).append(_SAMPLE.unpack(msg.data)[1:])
-            elif topic == "/events":
-                events.append(json.loads(msg.data))
-        f.seek(0)
-        meta = {}
-        for m in make_reader(f).iter_metadata():
-            if m.name == "monitor":
-                meta = dict(m.metadata)
+    topics = {f"/monitor/{j}/residual": j for j in range(_MAX_AXES)}
+    scan = _scan(Path(path), set(), set(topics))
+    cols = {topics[t]: np.frombuffer(b"".join(v), _SAMPLE_DTYPE) for t, v in scan.raw.items()}
     if not cols:
         raise ConfigError(f"{path}: no /monitor channel (not a jointid monitor run)")
     k = max(cols) + 1
-    arrs = [np.array(sorted(cols[j])) for j in range(k)]
-    n = min(len(a) for a in arrs)
-    arrs = [a[:n] for a in arrs]
-    stack = np.stack(arrs, axis=1)  # (n, k, 8)
-    return MonitorLog(stack[:, 0, 0].astype(np.int64), stack[:, 0, 1], stack[:, :, 2],
-                      stack[:, :, 3], stack[:, :, 4], stack[:, :, 5], stack[:, :, 6],
-                      stack[:, 0, 7].astype(bool), sorted(events, key=lambda e: e["cycle"]),
-                      meta)
+    n = min(len(cols.get(j, ())) for j in range(k))
+    rec = [np.sort(cols[j], order="cycle")[:n] for j in range(k)]
+
+    def stack(name: str) -> np.ndarray:
+        return np.stack([r[name] for r in rec], axis=1).astype(float)
+
+    return MonitorLog(rec[0]["cycle"].astype(np.int64), rec[0]["t"].astype(float),
+                      stack("residual"), stack("lower"), stack("upper"),
+                      stack("tau_filtered"), stack("tau_predicted"),
+                      rec[0]["armed"].astype(bool),
+                      sorted(scan.events, key=lambda e: e["cycle"]),
+                      dict(scan.metadata.get("monitor", {})))
