@@ -22,8 +22,9 @@ clock unless said, i.e. simulated time):
     the residual, so counting them on the log is what the live check would count).
 ``detect``
     Pushes of 20 N and 40 N on each link (default point and direction of
-    ``sim_drivers.arm_push.staged_push``) for 0.2 s, every 1.5 s, during a multi-sine of all
-    joints (seed 5, 4 periods of 8 s), with the calibration's thresholds: detection and delay
+    ``sim_drivers.arm_push.staged_push``) for 0.2 s, every 1.5 s (3 per link and force),
+    during a multi-sine of all joints (seed 5, 4 periods of 8 s; the pushes fall at whatever
+    speed the joints have then), with the calibration's thresholds: detection and delay
     per pushed link (from the cycle the push is staged to the first crossing on any joint),
     crossings outside the push windows.
 ``paced``
@@ -96,14 +97,14 @@ def stage_calibrate(work: Path) -> dict:
             "missed": s["missed_cycles"]}
 
 
-def crossings(path: Path, th: Thresholds) -> tuple[int, float, list]:
-    """Rising edges out of the thresholds' band on the armed samples of a log; armed
-    seconds; the largest |r - mean| / half-width per joint."""
+def crossings(path: Path, th: Thresholds) -> tuple[list, float, list]:
+    """Rising edges out of the thresholds' band on the armed samples of a log, per joint;
+    armed seconds; the largest |r - mean| / half-width per joint."""
     ml = read_monitor(path)
     r = ml.residual[ml.armed]
     lo, hi = np.array(th.lower), np.array(th.upper)
     out = (r < lo) | (r > hi)
-    edges = int((out[1:] & ~out[:-1]).sum() + out[0].sum())
+    edges = ((out[1:] & ~out[:-1]).sum(axis=0) + out[0]).astype(int).tolist()
     cycle_s = float(np.median(np.diff(ml.t)))
     worst = (np.abs(r - np.array(th.mean)) / np.array(th.half_width)).max(axis=0)
     return edges, r.shape[0] * cycle_s, worst.tolist()
@@ -120,7 +121,7 @@ def stage_detect(work: Path) -> dict:
     pushes = []
     t = 1.0
     for force in (20, 40):
-        for _ in range(2):
+        for _ in range(3):
             for j in JOINTS:
                 pushes.append(f"{j}:{force}:{t:g}:0.2")
                 t += 1.5
@@ -163,16 +164,18 @@ def report(work: Path, res: dict) -> None:
                   f"validation peak {pk:.1f} sigma")
         if (work / "false" / "monitor.json").is_file():
             logs = json.loads((work / "false" / "monitor.json").read_text())["logs"]
-            total, secs, worst = 0, 0.0, np.zeros(3)
+            total, secs, worst = np.zeros(3, int), 0.0, np.zeros(3)
             for lg in logs:
                 n, sec, w = crossings(work / "false" / lg, th)
                 total += n
                 secs += sec
                 worst = np.maximum(worst, w)
-            res["false_alarms"] = {"count": total, "monitored_s": secs,
+            res["false_alarms"] = {"per_joint": total.tolist(), "monitored_s": secs,
                                    "worst_fraction_of_band": worst.tolist()}
-            print(f"false alarms: {total} in {secs / 60:.1f} min of monitored excitation "
-                  "without pushes; largest |r - mean| / half-width per joint: "
+            print(f"false alarms: {int(total.sum())} ("
+                  + ", ".join(f"{j} {n}" for j, n in zip(JOINTS, total, strict=True))
+                  + f") in {secs / 60:.1f} min of monitored excitation without pushes; "
+                  "largest |r - mean| / half-width per joint: "
                   + ", ".join(f"{j} {w:.2f}" for j, w in zip(JOINTS, worst, strict=True)))
     det = res.get("detect")
     if det:
