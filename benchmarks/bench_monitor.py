@@ -141,7 +141,7 @@ def stage_paced(work: Path, seconds: float) -> dict:
             res, wall = run_with_bar(c, work / "paced_none", True, sys.stderr)
             out[tag] = {"missed": [r.missed for r in res.runs],
                         "cycles": [r.cycles for r in res.runs], "wall_s": wall,
-                        "lateness_p99_us": [float(np.percentile(r.lateness, 99) * 1e6)
+                        "lateness_p99_us": [float(np.percentile(r.lateness_s, 99) * 1e6)
                                             for r in res.runs]}
             continue
         s = run_monitor(work / "model", camp, work / "paced_monitor", simulate=True,
