@@ -289,3 +289,26 @@ def test_model_from_a_fit_record_is_its_export(tmp_path, arm3, capfd):
     assert a.urdf == b.urdf and a.friction == b.friction
     with pytest.raises(DataError, match="robot"):
         load_model(fit, None)
+
+
+@pytest.mark.slow
+def test_no_false_alarm_without_push_under_another_payload(tmp_path, arm3, capfd):
+    """Thresholds from a validation run without payload; the same motion with the 5 kg
+    payload (the model gets it) and no push: no crossing (the long figure, 11 min:
+    benchmarks/bench_monitor.py)."""
+    model = _model_dir(tmp_path, arm3)
+    raw = arm3_raw(cycle_s=0.002, buses=tuple(f"mon-fa-{i}-{tmp_path.name}" for i in range(3)),
+                   segments=[{"kind": "multisine", "period_s": 4.0, "periods": 3,
+                              "harmonics": 4, "fill": 0.6, "seed": 2}])
+    camp = tmp_path / "c.toml"
+    camp.write_text(to_toml(raw))
+    cal = tmp_path / "cal"
+    assert main(["monitor", str(model), str(camp), "--simulate", "--calibrate", "--payload",
+                 "0", "-o", str(cal)]) == 0
+    out = tmp_path / "run"
+    assert main(["monitor", str(model), str(camp), "--simulate", "--thresholds",
+                 str(cal / "thresholds.json"), "--payload", "1", "-o", str(out)]) == 0
+    capfd.readouterr()
+    (run,) = json.loads((out / "monitor.json").read_text())["runs"]
+    assert run["payload"] == 1 and run["armed_s"] > 11.0
+    assert run["false_alarms"] == []
