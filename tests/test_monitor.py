@@ -14,7 +14,7 @@ from mcap.reader import make_reader
 from robot_campaigns import ARM3, arm3_raw, to_toml, write_arm_csv
 
 from daq.app.cli import main
-from daq.runtime.monitor import SVFilter, read_monitor
+from daq.runtime.monitor import SVFilter, TorqueMonitor, read_monitor
 from ident import DataError
 from ident.monitor import ExportedModel, Thresholds, load_model, thresholds_from_residual
 from ident.robot.export_model import exported_torque, friction_record, urdf_text
@@ -312,3 +312,35 @@ def test_no_false_alarm_without_push_under_another_payload(tmp_path, arm3, capfd
     (run,) = json.loads((out / "monitor.json").read_text())["runs"]
     assert run["payload"] == 1 and run["armed_s"] > 11.0
     assert run["false_alarms"] == []
+
+
+class _Log:
+    start_ns, cycle_ns = 0, 1_000_000
+
+    def __init__(self) -> None:
+        self.events = []
+
+    def event(self, cycle, t, kind, message, axis=-1) -> None:
+        self.events.append((cycle, kind, axis))
+
+
+def test_monitor_counts_crossings_once_armed_and_not_on_stale_data():
+    """A torque step of 5 N m against a model predicting 0 (band +-1): one collision event
+    per excursion, after the warm-up; a cycle with a missing TPDO disarms the check for
+    another warm-up; with stop, the first crossing is the returned reason."""
+    zero = lambda q, dq, ddq: ([0.0, 0.0], [0.0, 0.0])  # noqa: E731
+    mon = TorqueMonitor(lambda p: zero, ["a", "b"], 0.001, lower=[-1, -1], upper=[1, 1],
+                        warmup_s=0.05, stop=True)
+    log = _Log()
+    mon.begin(0, None, log)
+    tau = lambda c: [5.0 if 20 <= c < 300 or c >= 400 else 0.0, 0.0]  # noqa: E731
+    reasons = []
+    for c in range(600):
+        why, axis = mon.step(c, c * 0.001, [0, 0], [0, 0], tau(c), log, valid=c != 380)
+        if why:
+            reasons.append((c, axis))
+    cyc = [c for c, kind, axis in log.events if kind == "collision"]
+    assert all(axis == 0 for _, _, axis in log.events)
+    assert len(cyc) == 2 and 50 <= cyc[0] < 60  # armed at 50: the filter is there by then
+    assert 380 + 50 <= cyc[1] < 440  # step at 400 while disarmed until 430
+    assert reasons == [(cyc[0], 0), (cyc[1], 0)]

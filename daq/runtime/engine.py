@@ -365,6 +365,7 @@ class Engine(Supervisor):
                 t_sync = late = 0.0
                 mask = self._exchange(cycle, 0.0)
             stopping = mode != "run" and mode != "enable"
+            m_ok = True  # every drive answered this cycle (the monitor's data are fresh)
             tpdo_fault = ""
             if io.emcy:  # before the state checks: the first one names the cause
                 for dd, code, reg in io.emcy:  # every one is an event, also while stopping
@@ -443,6 +444,7 @@ class Engine(Supervisor):
                 log_state(d, cycle, t, q, dq, x * tpu[d] if not csp[d] else math.nan, tau_act,
                           counts[d], vel[d], x, tq[d], s, flags)
                 mq[d], mdq[d], mtau[d] = q, dq, tau_act
+                m_ok = m_ok and not flags & FLAG_TPDO_MISSING
                 # state change events (decode only when the statusword changed)
                 if flags & FLAG_TPDO_MISSING:
                     st_now = None
@@ -479,7 +481,7 @@ class Engine(Supervisor):
             if tpdo_fault and not stopping:
                 self._fault(tpdo_fault, cycle, t, log, -1)
             if monitor is not None and mode == "run" and not self._stop_reason:
-                why, axis = monitor.step(cycle, t, mq, mdq, mtau, log)
+                why, axis = monitor.step(cycle, t, mq, mdq, mtau, log, valid=m_ok)
                 if why:  # a collision with stop configured: the stop sequence
                     self._fault(why, cycle, t, log, axis, kind="collision")
             if robot:

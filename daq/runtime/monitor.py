@@ -192,6 +192,7 @@ class TorqueMonitor:
         self._channels: list[int] = []
         self._predict: Callable[..., Sequence[float]] | None = None
         self._n = 0
+        self._disarmed_until = 0
         self._next_push = 0
         self._out = [False] * k
 
@@ -212,14 +213,16 @@ class TorqueMonitor:
                 "warmup_cycles": str(self.warmup_cycles), "stop": str(self.stop).lower(),
                 "pushes": json.dumps([p.__dict__ for p in self.pushes])})
         self._n = 0
+        self._disarmed_until = 0
         self._next_push = 0
         self._out = [False] * self.k
         self.records.append(MonitorRecord(index))
 
     def step(self, cycle: int, t: float, q: Sequence[float], dq: Sequence[float],
-             tau: Sequence[float], log: Any) -> tuple[str, int]:
+             tau: Sequence[float], log: Any, valid: bool = True) -> tuple[str, int]:
         """One run-phase cycle; returns (reason, joint) of a crossing that stops the run,
-        else ("", -1)."""
+        else ("", -1). ``valid`` False: a drive's TPDO was missing (its values are the
+        last ones): crossings are not counted from this cycle for another warm-up."""
         t_in = time.perf_counter()
         rec = self.records[-1]
         if self._n == 0:
@@ -232,6 +235,8 @@ class TorqueMonitor:
             self._ftau.update(tau)
         n = self._n
         self._n += 1
+        if not valid:  # stale values in the filters: disarm for a warm-up
+            self._disarmed_until = n + self.warmup_cycles
         rec.cycles += 1
         if self._next_push < len(self.pushes) and n * self.cycle_s >= self.pushes[
                 self._next_push].t0_s:
@@ -239,7 +244,7 @@ class TorqueMonitor:
         p_lo, p_hi = self._predict(self._fq.y, self._fdq.y,  # type: ignore[misc]
                                    self._fdq.dy)
         tau_f = self._ftau.y
-        armed = n >= self.warmup_cycles
+        armed = n >= self.warmup_cycles and n >= self._disarmed_until
         rec.armed_cycles += armed
         lo, hi, out = self.lower, self.upper, self._out
         chans = self._channels
