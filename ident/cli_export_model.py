@@ -55,7 +55,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _read(path: Path) -> dict[str, Any]:
+def read_fit_record(path: Path) -> dict[str, Any]:
+    """A `jointid fit --robot --json` record (one line naming the file when it is not one)."""
     try:
         rec = json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as e:
@@ -106,7 +107,7 @@ def consistent_from_record(path: Path, rec: dict[str, Any], robot: Robot, name: 
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``jointid export-model``; returns the exit code."""
-    rec = _read(args.fit)
+    rec = read_fit_record(args.fit)
     fitted = [n for n, r in rec.get("models", {}).items() if "error" not in r]
     name = args.model or ("paper" if "paper" in fitted else "usual")
     if name not in fitted:

@@ -15,6 +15,7 @@ quantisation and noise, and a PD + feed-forward closed loop. The pieces:
 * :mod:`sim_drivers.arm_offline`   -- :func:`simulate_arm` -> :class:`ArmRun`, :class:`ArmGains`,
   :func:`simulate_arm_payloads`
 * :mod:`sim_drivers.arm_reference` -- smooth multi-joint test references
+* :mod:`sim_drivers.arm_push`      -- :class:`Push`: an external force on a link for a time
 * :mod:`sim_drivers.robots`        -- packaged robot models (UR10 from example-robot-data)
 
 Example::
@@ -56,12 +57,13 @@ from .arm_plant import (
     inverse_arm_torque,
     output_arm_torque,
 )
+from .arm_push import Push, push_torque, staged_push
 from .arm_reference import ArmReference, model_reference, sine_reference
 
 __all__ = [
     "FRICTION_NAMES", "REGIME_REST", "REGIME_SLIDING", "REGIME_ZERO_LOAD", "STANDARD_NAMES",
     "ArmDrive", "ArmEffects", "ArmFriction", "ArmGains", "ArmParams", "ArmParamsError",
-    "ArmPlant", "ArmReference", "ArmRun", "Payload", "feedforward_torque", "friction_torque",
-    "inverse_arm_torque", "model_reference", "output_arm_torque", "simulate_arm",
-    "simulate_arm_payloads", "sine_reference",
+    "ArmPlant", "ArmReference", "ArmRun", "Payload", "Push", "feedforward_torque",
+    "friction_torque", "inverse_arm_torque", "model_reference", "output_arm_torque",
+    "push_torque", "simulate_arm", "simulate_arm_payloads", "sine_reference", "staged_push",
 ]

@@ -38,6 +38,7 @@ import pinocchio as pin
 
 from sim_drivers import SimError
 from sim_drivers.arm import ArmParams, ArmPlant, Payload
+from sim_drivers.arm_push import Push
 from sim_drivers.drive import SimulatedDrive
 from sim_drivers.faults import PLANT_FAULT
 from sim_drivers.simbus import SimNetwork
@@ -277,7 +278,14 @@ class ArmOnBus:
         plant.t = old.t
         plant.tau_applied = old.tau_applied.copy()
         plant._rng = old._rng  # one noise sequence over the campaign
+        plant.pushes = list(old.pushes)
         self.plant, self.payload = plant, payload
+
+    def push(self, push: Push) -> None:
+        """Apply an external force (:mod:`sim_drivers.arm_push`; its ``t0_s`` on the arm's
+        simulated time ``plant.t``) from the next arm step that reaches it."""
+        with self._lock:
+            self.plant.pushes.append(push)
 
     @property
     def node_ids(self) -> list[int]:

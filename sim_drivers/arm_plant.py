@@ -32,7 +32,9 @@ Friction is per joint: tau_out,j depends only on joint j's own applied torque an
 So for a sliding joint (dq_j != 0) tau_out,j comes first, by the quadrant choice of
 ``sim_drivers.plant`` (motor candidate ``(r - s D_m)/A_m`` if consistent with sign(P_out) > 0,
 else generator ``(r - s D_g)/A_g``, else zero load, ties kept in the previous quadrant), and
-then ``ddq = ABA(q, dq, tau_out)``.
+then ``ddq = ABA(q, dq, tau_out)``. An external force (:mod:`sim_drivers.arm_push`, the
+plant's ``pushes``) adds its ``J^T F`` to tau_out there (and in the stiction step below): it
+acts on the links, not through the drive chains and their friction.
 
 Stiction: joints with dq_j = 0 form the stuck set S. With ddq_S = 0 and the free joints' tau_out
 known, ``M_FF ddq_F = tau_out,F - h_F`` (h = C dq + Q), and the torque needed to hold joint j
@@ -76,6 +78,7 @@ import numpy as np
 import pinocchio as pin
 
 from .arm_params import ArmParams, Payload
+from .arm_push import Push, push_torque
 
 _TWO_PI = 2.0 * math.pi
 
@@ -228,6 +231,10 @@ class ArmPlant:
         Torque acting on the joints at time ``t`` (lagged command + noise) [N m].
     tau_noise : ndarray, shape (k,)
         Ripple-noise sample of the last cycle [N m].
+    pushes : list of sim_drivers.arm_push.Push
+        External forces to apply (each while active; dropped once over).
+    tau_ext : ndarray, shape (k,)
+        Joint torques of the pushes acting over the last cycle [N m] (``J^T F`` at its start).
     regime : ndarray of int8, shape (k,)
         ``REGIME_*`` of each joint at time ``t``.
     q_start, dq_start, ddq_start, tau_applied_start, regime_start
@@ -285,6 +292,9 @@ class ArmPlant:
         self._xf = xf if any(xf) else None
         self._max_events = 2 * k + 2
         self._il = np.tril_indices(k, -1)
+        #: external forces (sim_drivers.arm_push): their J^T F enters the rigid-body dynamics
+        self.pushes: list[Push] = []
+        self._push_data = self.model.createData()
         self.reset()
 
     # ----------------------------------------------------------------- state
@@ -300,6 +310,8 @@ class ArmPlant:
         self.tau_cmd = np.zeros(k)
         self.tau_applied = np.zeros(k)
         self.tau_noise = np.zeros(k)
+        self.tau_ext = np.zeros(k)
+        self._ext: list | None = None
         self._lag = [0.0] * k
         self._quad = [0] * k
         self.regime = np.full(k, REGIME_REST, dtype=np.int8)
@@ -378,6 +390,9 @@ class ArmPlant:
                     out[j] = xg
                 else:
                     reg[j] = REGIME_ZERO_LOAD
+        ext = self._ext
+        if ext is not None:  # a push: on the rigid body, not through the drive chain
+            out = [o + e for o, e in zip(out, ext, strict=True)]
         qa, va = np.array(q), np.array(v)
         if not r_rest:
             return pin.aba(self.model, self.data, qa, va, np.array(out)).tolist(), reg
@@ -491,6 +506,7 @@ class ArmPlant:
             noise = self._rng.standard_normal(k) * self._noise_std
         noise = np.asarray(noise, dtype=float).reshape(k)
         self.tau_cmd, self.tau_noise = cmd, noise
+        self._update_pushes()
         cmd_l, noise_l = cmd.tolist(), noise.tolist()
         h = self._h
         keep = self._keep
@@ -557,6 +573,23 @@ class ArmPlant:
         a, regime = accel(tau, q, v, t)
         self.ddq = np.array(a)
         self.regime = np.array(regime, dtype=np.int8)
+
+    def _update_pushes(self) -> None:
+        """``tau_ext`` [N m] of the pushes acting at the cycle's start (held over the cycle);
+        pushes that ended are dropped."""
+        if not self.pushes:
+            if self._ext is not None:
+                self.tau_ext = np.zeros(self.k)
+                self._ext = None
+            return
+        t = self.t
+        self.pushes = [p for p in self.pushes if t < p.t0_s + p.duration_s]
+        ext = np.zeros(self.k)
+        for p in self.pushes:
+            if p.active(t):
+                ext += push_torque(self.model, self._push_data, self.q, p)
+        self.tau_ext = ext
+        self._ext = ext.tolist() if np.any(ext) else None
 
     # ----------------------------------------------------------------- drive chain
     def encoder_counts(self) -> np.ndarray:

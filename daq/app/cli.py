@@ -28,7 +28,7 @@ from ident import IdentError
 from sim_drivers import SimError
 from trajectories import TrajectoryError
 
-from . import demo
+from . import demo, monitor
 
 # subcommand modules, in the order of `jointid --help`; each sits with the package it drives
 SUBCOMMANDS = (
@@ -40,6 +40,7 @@ SUBCOMMANDS = (
     daq.protocol.cli_export,  # jointid export
     daq.runtime.cli_recover,  # jointid recover
     ident.cli_export_model,  # jointid export-model
+    monitor,  # jointid monitor
 )
 
 #: errors raised on purpose by our packages (their exception roots) and I/O errors

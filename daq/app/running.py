@@ -11,12 +11,13 @@ from daq.runtime.runner import Progress, run_campaign
 
 
 def run_with_bar(campaign: Any, logs_dir: Path, simulate: Any,
-                 stream: TextIO) -> tuple[Any, float]:
+                 stream: TextIO, **kwargs: Any) -> tuple[Any, float]:
     """``run_campaign(campaign, simulate=...)`` into ``logs_dir`` without prompts, showing
     progress over all payloads on ``stream``; returns (result, wall time [s]).
 
     The demos regenerate their folder: the logs of an earlier demo in ``logs_dir`` are
-    replaced (``overwrite=True``); the folder is still locked against a second run."""
+    replaced (``overwrite=True``); the folder is still locked against a second run.
+    ``kwargs`` go to ``run_campaign`` (``payloads``, ``monitor``)."""
     bar = ProgressLine(stream)
 
     def show(p: Progress) -> None:
@@ -26,7 +27,7 @@ def run_with_bar(campaign: Any, logs_dir: Path, simulate: Any,
     t0 = time.perf_counter()
     try:
         result = run_campaign(campaign, out_dir=logs_dir, simulate=simulate, yes=True,
-                              progress=show, overwrite=True)
+                              progress=show, overwrite=True, **kwargs)
     finally:
         bar.close()
     return result, time.perf_counter() - t0

@@ -547,6 +547,13 @@ def read_attachments(path: str | Path) -> dict[str, bytes]:
     return _scan(Path(path), set(), attachments=True).attachments
 
 
+def read_topics(path: str | Path, topics: set[str]) -> dict[str, list[bytes]]:
+    """The raw message data of the given topics (topic -> data in log order; topics not in
+    the log are absent). Damaged chunks and a truncated tail are skipped with a warning, as
+    by :func:`read_run`."""
+    return _scan(Path(path), set(), set(topics)).raw
+
+
 def read_raw(path: str | Path, topic: str) -> tuple[list[bytes], dict[str, dict[str, str]], bool]:
     """The raw messages of one topic and every metadata record of a run log.
 

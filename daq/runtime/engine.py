@@ -45,7 +45,9 @@ Position, velocity, torque limits (``[daq.limits]``, else the campaign's joint l
 at the torque limit), following error, TPDO missing for ``tpdo_timeout_cycles`` consecutive
 cycles, heartbeat silent for ``heartbeat_timeout_s`` (the frames waiting in the receive queue
 are taken first: a stalled master has not read them), EMCY, a drive leaving OPERATION ENABLED,
-SIGINT/SIGTERM/SIGHUP, the master's own stall (paced: a cycle later than the RPDO deadline
+SIGINT/SIGTERM/SIGHUP, a torque-monitor crossing with ``stop`` (``jointid monitor``,
+:mod:`daq.runtime.monitor`: checked each cycle of the run phase, event kind ``collision``),
+the master's own stall (paced: a cycle later than the RPDO deadline
 the drives were given, 3 cycles + 100 ms: "master stalled for X s"; a shorter stall of more
 than a cycle is named in the reason of an EMCY read right after it; with periodic SYNC the
 TPDOs queued meanwhile are taken at once, not logged as cycles), the run log's file failing
@@ -215,6 +217,8 @@ class Engine(Supervisor):
         self._resync = False
         self.notes: list[str] = []  # start-up warnings, logged at cycle 0 of every run
         self.bus_lost = False  # a bus error ended a run: no more frames can be sent
+        #: per-cycle torque monitor (daq.runtime.monitor.TorqueMonitor), None: none
+        self.monitor: Any = None
 
     # -- one cycle ------------------------------------------------------------------------
     def _exchange(self, cycle: int, deadline: float) -> int:
@@ -307,6 +311,10 @@ class Engine(Supervisor):
         next_deadline = t_wall0 + cycle_s
         hb_check = 0
         ch_timing = None
+        monitor = self.monitor
+        if monitor is not None:
+            monitor.begin(index, payload, log)
+        mq, mdq, mtau = [0.0] * n_dr, [0.0] * n_dr, [0.0] * n_dr
         if self.paced:
             w = log._w
             sid = w.register_schema("jointid_msgs/msg/CycleTiming", "ros2msg",
@@ -357,6 +365,7 @@ class Engine(Supervisor):
                 t_sync = late = 0.0
                 mask = self._exchange(cycle, 0.0)
             stopping = mode != "run" and mode != "enable"
+            m_ok = True  # every drive answered this cycle (the monitor's data are fresh)
             tpdo_fault = ""
             if io.emcy:  # before the state checks: the first one names the cause
                 for dd, code, reg in io.emcy:  # every one is an event, also while stopping
@@ -434,6 +443,8 @@ class Engine(Supervisor):
                 io_sent(time.time(), m.arbitration_id, payload_bytes)
                 log_state(d, cycle, t, q, dq, x * tpu[d] if not csp[d] else math.nan, tau_act,
                           counts[d], vel[d], x, tq[d], s, flags)
+                mq[d], mdq[d], mtau[d] = q, dq, tau_act
+                m_ok = m_ok and not flags & FLAG_TPDO_MISSING
                 # state change events (decode only when the statusword changed)
                 if flags & FLAG_TPDO_MISSING:
                     st_now = None
@@ -469,6 +480,10 @@ class Engine(Supervisor):
                         self._fault(f"{self.drives[d].name}: {why}", cycle, t, log, d)
             if tpdo_fault and not stopping:
                 self._fault(tpdo_fault, cycle, t, log, -1)
+            if monitor is not None and mode == "run" and not self._stop_reason:
+                why, axis = monitor.step(cycle, t, mq, mdq, mtau, log, valid=m_ok)
+                if why:  # a collision with stop configured: the stop sequence
+                    self._fault(why, cycle, t, log, axis, kind="collision")
             if robot:
                 for d in range(n_dr):
                     log_sp_axis(d, cycle, t, q_refs[d], dq_refs[d], ddq_refs[d], seg,

@@ -235,6 +235,7 @@ def run_campaign(
     fault_injectors: dict[int, Any] | None = None,
     prompt: Callable[[int, Any, int], bool] | None = None,
     overwrite: bool = False,
+    monitor: Any = None,
 ) -> CampaignResult:
     """Run a campaign: one MCAP file per payload run in ``out_dir``.
 
@@ -268,6 +269,9 @@ def run_campaign(
     overwrite : bool
         Replace the logs of the payloads run (the state file forgets a payload whose
         completed log is replaced, until it completes again).
+    monitor : daq.runtime.monitor.TorqueMonitor, optional
+        Checks every cycle of the run phase (``jointid monitor``); with a simulated arm it
+        gets the arm (``monitor.arm``) to stage its pushes on.
 
     Returns
     -------
@@ -325,7 +329,7 @@ def run_campaign(
     lock = FolderLock(out)  # one run per folder, from here to the end
     try:
         return _run_locked(campaign, cfg, plan, load, out, stem, todo, simulate, robot, yes,
-                           progress, resume, overwrite, fault_injectors, prompt)
+                           progress, resume, overwrite, fault_injectors, prompt, monitor)
     finally:
         lock.release()
 
@@ -334,7 +338,8 @@ def _run_locked(campaign: Any, cfg: DaqConfig, plan: Any, load: Any, out: Path, 
                 todo: list[int], simulate: Any, robot: bool, yes: bool,
                 progress: Callable[[Progress], None] | None, resume: bool, overwrite: bool,
                 fault_injectors: dict[int, Any] | None,
-                prompt: Callable[[int, Any, int], bool] | None) -> CampaignResult:
+                prompt: Callable[[int, Any, int], bool] | None,
+                monitor: Any = None) -> CampaignResult:
     """:func:`run_campaign` once the refusals passed and the folder is locked."""
     n_pay = len(campaign.payloads)
     state_file = _state_path(out, campaign.name)
@@ -405,6 +410,9 @@ def _run_locked(campaign: Any, cfg: DaqConfig, plan: Any, load: Any, out: Path, 
             logger.warning("%s", note)
         engine = Engine(campaign, cfg, network, io, drives, scalings, load, progress)
         engine.notes = notes
+        if monitor is not None:
+            engine.monitor = monitor
+            monitor.arm = getattr(sim, "arm", None)
         engine.check_drive_limits(tuple(j.name for j in campaign.joints) if robot else ())
         ask = prompt or prompt_payload
         for n_done, i in enumerate(todo):

@@ -1,0 +1,233 @@
+"""Torque monitoring on the simulated 3-dof arm at 1 kHz (docs/monitoring.md, issue 25).
+
+Usage::
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_monitor.py --work DIR STAGE [STAGE ...]
+
+Stages (each a ``jointid monitor`` run through the whole stack: campaign -> runner ->
+canopen master -> virtual buses -> simulated CiA 402 drives + simulated arm -> MCAP; lockstep
+clock unless said, i.e. simulated time):
+
+``model``
+    The identified model: ``jointid run`` of examples/campaign_robot3_demo.toml on the
+    simulated arm (2 payloads, 174 s), ``jointid fit --robot`` (both models, consistent
+    estimate), ``jointid export-model`` (paper model) -> DIR/model.
+``calibrate``
+    The validation run: the demo campaign again with the monitor in calibration mode ->
+    DIR/calibrate/thresholds.json (k = 6 sigma, at least 1.5 x the validation peak).
+``false``
+    About 10 min of excitation without pushes: the demo campaign with another multi-sine
+    (seed 7, 33 periods of 8 s), both payloads; the monitor logs its residual, and the
+    crossings of the calibration's thresholds are counted on it (the thresholds do not change
+    the residual, so counting them on the log is what the live check would count).
+``detect``
+    Pushes of 20 N and 40 N on each link (default point and direction of
+    ``sim_drivers.arm_push.staged_push``) for 0.2 s, every 1.5 s (3 per link and force),
+    during a multi-sine of all joints (seed 5, 4 periods of 8 s; the pushes fall at whatever
+    speed the joints have then), with the calibration's thresholds: detection and delay
+    per pushed link (from the cycle the push is staged to the first crossing on any joint),
+    crossings outside the push windows.
+``paced``
+    ``--paced-seconds`` of the demo's multi-sine on the real-time clock (daq.clock = paced,
+    1 kHz) with the monitor checking every cycle: missed cycles (SYNC more than half a period
+    late) and the monitor's time per cycle; the same run without the monitor for reference.
+``report``
+    Prints the figures of the stages run so far (also written to DIR/bench_monitor.json).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from daq.app.monitor import load_campaign, run_monitor
+from daq.app.running import run_with_bar
+from daq.runtime.monitor import read_monitor
+from ident.monitor import Thresholds
+
+ROOT = Path(__file__).resolve().parents[1]
+DEMO = ROOT / "examples" / "campaign_robot3_demo.toml"
+JOINTS = ("j1", "j2", "j3")
+
+
+def _campaign(work: Path, name: str, *, seed: int, periods: int, multisine_only: bool,
+              payloads: int = 2) -> Path:
+    """A variant of the demo campaign (its robot, drives, gains, limits)."""
+    text = DEMO.read_text()
+    text = text.replace('file = "robots/arm3.toml"',
+                        f'file = "{(ROOT / "examples" / "robots" / "arm3.toml").as_posix()}"')
+    text = text.replace('name = "arm3-demo"', f'name = "{name}"')
+    text = re.sub(r"\nseed = 1\b", f"\nseed = {seed}", text)
+    text = re.sub(r"\nperiods = 1\b", f"\nperiods = {periods}", text)
+    head, _, rest = text.partition("[[segments]]")
+    segs = ["[[segments]]" + s for s in rest.split("[[segments]]")]
+    if multisine_only:
+        segs = [s for s in segs if 'kind = "multisine"' in s]
+    if payloads == 1:
+        head = head.split("[[payloads]]")[0] + "[[payloads]]\nmass_kg = 0.0\n\n"
+    p = work / f"{name}.toml"
+    p.write_text(head + "".join(segs))
+    return p
+
+
+def stage_model(work: Path) -> None:
+    logs, fit, model = work / "model_logs", work / "fit.json", work / "model"
+    jid = [sys.executable, "-m", "daq.app.cli"]
+    subprocess.run([*jid, "run", str(DEMO), "--simulate", "--out", str(logs), "--yes",
+                    "--overwrite"], check=True)
+    subprocess.run([*jid, "fit", "--robot", str(ROOT / "examples/robots/arm3.toml"),
+                    *map(str, sorted(logs.glob("*.mcap"))), "--model", "both", "--json",
+                    str(fit), "--no-consistency", "--consistent"], check=True,
+                   stdout=subprocess.DEVNULL)
+    subprocess.run([*jid, "export-model", str(fit), "--model", "paper", "-o", str(model)],
+                   check=True)
+
+
+def stage_calibrate(work: Path) -> dict:
+    s = run_monitor(work / "model", DEMO, work / "calibrate", simulate=True, calibrate=True)
+    return {"thresholds": s["thresholds"], "wall_s": s["wall_s"],
+            "missed": s["missed_cycles"]}
+
+
+def crossings(path: Path, th: Thresholds) -> tuple[list, float, list]:
+    """Rising edges out of the thresholds' band on the armed samples of a log, per joint;
+    armed seconds; the largest |r - mean| / half-width per joint."""
+    ml = read_monitor(path)
+    r = ml.residual[ml.armed]
+    lo, hi = np.array(th.lower), np.array(th.upper)
+    out = (r < lo) | (r > hi)
+    edges = ((out[1:] & ~out[:-1]).sum(axis=0) + out[0]).astype(int).tolist()
+    cycle_s = float(np.median(np.diff(ml.t)))
+    worst = (np.abs(r - np.array(th.mean)) / np.array(th.half_width)).max(axis=0)
+    return edges, r.shape[0] * cycle_s, worst.tolist()
+
+
+def stage_false(work: Path) -> dict:
+    camp = _campaign(work, "arm3-false", seed=7, periods=33, multisine_only=False)
+    s = run_monitor(work / "model", camp, work / "false", simulate=True, calibrate=True)
+    return {"logs": s["logs"], "wall_s": s["wall_s"], "missed": s["missed_cycles"]}
+
+
+def stage_detect(work: Path) -> dict:
+    camp = _campaign(work, "arm3-detect", seed=5, periods=4, multisine_only=True, payloads=1)
+    pushes = []
+    t = 1.0
+    for force in (20, 40):
+        for _ in range(3):
+            for j in JOINTS:
+                pushes.append(f"{j}:{force}:{t:g}:0.2")
+                t += 1.5
+    s = run_monitor(work / "model", camp, work / "detect", simulate=True,
+                    thresholds=work / "calibrate" / "thresholds.json", pushes=pushes)
+    return {"runs": s["runs"], "wall_s": s["wall_s"], "missed": s["missed_cycles"]}
+
+
+def stage_paced(work: Path, seconds: float) -> dict:
+    periods = max(1, int(round(seconds / 8.0)))
+    camp = _campaign(work, "arm3-paced", seed=1, periods=periods, multisine_only=True,
+                     payloads=1)
+    out = {}
+    for tag, th in (("monitor", work / "calibrate" / "thresholds.json"), ("none", None)):
+        if th is None:  # the same run without the monitor: run_campaign alone
+            c = load_campaign(camp, True)
+            res, wall = run_with_bar(c, work / "paced_none", True, sys.stderr)
+            out[tag] = {"missed": [r.missed for r in res.runs],
+                        "cycles": [r.cycles for r in res.runs], "wall_s": wall,
+                        "lateness_p99_us": [float(np.percentile(r.lateness_s, 99) * 1e6)
+                                            for r in res.runs]}
+            continue
+        s = run_monitor(work / "model", camp, work / "paced_monitor", simulate=True,
+                        thresholds=th, paced=True)
+        run = s["runs"][0]
+        out[tag] = {"missed": s["missed_cycles"], "cycles": run["cycles"],
+                    "wall_s": s["wall_s"], "false_alarms": len(run["false_alarms"]),
+                    "check_us_mean": run["step_us_mean"], "check_us_max": run["step_us_max"]}
+    return out
+
+
+def report(work: Path, res: dict) -> None:
+    th_path = work / "calibrate" / "thresholds.json"
+    if th_path.is_file():
+        th = Thresholds.read(th_path)
+        print("thresholds (validation: the demo campaign, 2 payloads):")
+        for j, s, lo, hi, pk in zip(th.joints, th.sigma, th.lower, th.upper,
+                                       th.peak, strict=True):
+            print(f"  {j}: sigma {s:.4f} N m, band [{lo:+.3f}, {hi:+.3f}] N m, "
+                  f"validation peak {pk:.1f} sigma")
+        if (work / "false" / "monitor.json").is_file():
+            logs = json.loads((work / "false" / "monitor.json").read_text())["logs"]
+            total, secs, worst = np.zeros(3, int), 0.0, np.zeros(3)
+            for lg in logs:
+                n, sec, w = crossings(work / "false" / lg, th)
+                total += n
+                secs += sec
+                worst = np.maximum(worst, w)
+            res["false_alarms"] = {"per_joint": total.tolist(), "monitored_s": secs,
+                                   "worst_fraction_of_band": worst.tolist()}
+            print(f"false alarms: {int(total.sum())} ("
+                  + ", ".join(f"{j} {n}" for j, n in zip(JOINTS, total, strict=True))
+                  + f") in {secs / 60:.1f} min of monitored excitation without pushes; "
+                  "largest |r - mean| / half-width per joint: "
+                  + ", ".join(f"{j} {w:.2f}" for j, w in zip(JOINTS, worst, strict=True)))
+    det = res.get("detect")
+    if det:
+        for run in det["runs"]:
+            by: dict = {}
+            for p in run["pushes"]:
+                by.setdefault((p["joint"], p["force_N"]), []).append(p)
+            print("detection (pushes during the multi-sine, 0.2 s each):")
+            for (j, f), ps in sorted(by.items()):
+                d = [1000 * p["delay_s"] for p in ps if p["detected"]]
+                print(f"  link of {j}, {f:g} N: {len(d)}/{len(ps)} detected, delay "
+                      + (f"{min(d):.0f}..{max(d):.0f} ms (median "
+                         f"{statistics.median(d):.0f})" if d else "-")
+                      + "; joints crossed: "
+                      + ", ".join(sorted({x for p in ps for x in p["joints_crossed"]})))
+            print(f"  crossings outside the push windows: {len(run['false_alarms'])}")
+    pc = res.get("paced")
+    if pc:
+        m, n = pc["monitor"], pc["none"]
+        print(f"paced 1 kHz: with the monitor {m['missed']} missed of {m['cycles']} cycles "
+              f"(check {m['check_us_mean']:.0f} us mean, {m['check_us_max']:.0f} us max); "
+              f"without: {n['missed']} missed of {n['cycles']}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--work", type=Path, required=True)
+    ap.add_argument("--paced-seconds", type=float, default=30.0)
+    ap.add_argument("stages", nargs="+", choices=("model", "calibrate", "false", "detect",
+                                                  "paced", "report"))
+    a = ap.parse_args()
+    a.work.mkdir(parents=True, exist_ok=True)
+    store = a.work / "bench_monitor.json"
+    res = json.loads(store.read_text()) if store.is_file() else {}
+    for st in a.stages:
+        t0 = time.perf_counter()
+        if st == "model":
+            stage_model(a.work)
+        elif st == "calibrate":
+            res["calibrate"] = stage_calibrate(a.work)
+        elif st == "false":
+            res["false"] = stage_false(a.work)
+        elif st == "detect":
+            res["detect"] = stage_detect(a.work)
+        elif st == "paced":
+            res["paced"] = stage_paced(a.work, a.paced_seconds)
+        if st != "report":
+            res.setdefault("stage_wall_s", {})[st] = time.perf_counter() - t0
+            store.write_text(json.dumps(res, indent=1, default=str))
+    report(a.work, res)
+    store.write_text(json.dumps(res, indent=1, default=str))
+
+
+if __name__ == "__main__":
+    main()

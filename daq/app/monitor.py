@@ -1,0 +1,355 @@
+"""``jointid monitor``: run a robot campaign with torque monitoring (docs/monitoring.md).
+
+MODEL (an ``export-model`` folder, or a fit record whose consistent estimate is taken) gives
+the predicted torque (:mod:`ident.monitor`); the campaign runs on its buses (``--simulate``:
+the simulated arm) with :class:`daq.runtime.monitor.TorqueMonitor` checking every cycle.
+
+* ``--calibrate``: a validation run without collision; the residual's mean and standard
+  deviation per joint give ``OUT/thresholds.json`` (band ``mean +- k sigma``).
+* otherwise ``--thresholds FILE``: crossings are ``collision`` events in the run log, and
+  with ``--stop`` they stop the run (quick stop, disable). ``--push`` stages pushes on the
+  simulated arm; the detection delay of each and the crossings outside every push (false
+  alarms) are measured.
+
+``OUT`` receives ``logs/*.mcap``, ``monitor.json`` (figures), ``residual_<run>_<joint>.png``
+and ``report.html``. Everything is checked before the bus is opened: a bad input is one line
+naming the file, option or key.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import functools
+import html
+import json
+import sys
+from pathlib import Path
+from typing import Any, TextIO
+
+import matplotlib
+import numpy as np
+
+from daq import ConfigError, __version__
+from daq.runtime.monitor import PushSpec, TorqueMonitor, read_monitor
+from ident.monitor import Thresholds, load_model, thresholds_from_residual
+from ident.report import Section, write_html, write_json
+from trajectories.campaign_file import load_any_campaign
+from trajectories.robot_campaign import RobotCampaign
+from trajectories.robot_model import robot_for_campaign
+
+from .running import run_with_bar
+
+__all__ = ["analyse", "load_campaign", "parse_push", "register", "run_monitor"]
+
+#: default --rest-velocity: this many times each joint's Stribeck velocity q_s (E < 5 %)
+REST_QS = 3.0
+#: defaults of --k-sigma and --peak-margin
+DEFAULT_K_SIGMA, DEFAULT_PEAK_MARGIN = 6.0, 1.5
+#: a crossing up to this long [s] after a push ended still counts as its detection
+AFTER_PUSH_S = 0.5
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``monitor`` subcommand to the ``jointid`` parser."""
+    p = sub.add_parser(
+        "monitor", help="run a robot campaign with torque monitoring (collision detection)",
+        description="Run a robot campaign and compare every cycle's measured torque with the "
+        "identified model's (filtered residual); thresholds from a validation run "
+        "(--calibrate); crossings are collision events in the log, a stop with --stop. "
+        "docs/monitoring.md.")
+    p.add_argument("model", type=Path, metavar="MODEL",
+                   help="folder written by jointid export-model, or a fit record "
+                   "(jointid fit --robot --json)")
+    p.add_argument("campaign", type=Path, help="robot campaign file (TOML)")
+    p.add_argument("-o", "--out", type=Path, required=True, metavar="OUT",
+                   help="output folder (logs/, monitor.json, report.html)")
+    p.add_argument("--simulate", action="store_true",
+                   help="run on the simulated arm of the campaign's robot file")
+    p.add_argument("--model", dest="model_name", choices=("usual", "paper"),
+                   help="model of a fit record (default: paper when identified)")
+    p.add_argument("--payload", type=int, action="append", metavar="K",
+                   help="run only payload K (0-based; repeatable)")
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--calibrate", action="store_true",
+                   help="validation run without collision: write OUT/thresholds.json")
+    g.add_argument("--thresholds", type=Path, metavar="FILE",
+                   help="thresholds of a --calibrate run")
+    p.add_argument("--k-sigma", type=float, default=None,
+                   help="band half-width in standard deviations of the validation residual "
+                   "(default 6; with --thresholds: the file's)")
+    p.add_argument("--peak-margin", type=float, default=None,
+                   help="the band is at least this times the validation residual's largest "
+                   "deviation (default 1.5, 0: k-sigma alone; with --thresholds: the file's)")
+    p.add_argument("--cutoff-hz", type=float, default=20.0,
+                   help="cut-off of the residual filter [Hz] (default 20)")
+    p.add_argument("--rest-velocity", type=float, default=None,
+                   help="below this |dq| [rad/s] the friction is the static band "
+                   f"(default: {REST_QS:g} q_s of each joint, the Stribeck region)")
+    p.add_argument("--push", action="append", default=[], metavar="JOINT:FORCE:T0[:DT]",
+                   help="simulated arm: push the link of JOINT with FORCE [N] from T0 [s] "
+                   "after the run starts for DT [s] (default 0.2); repeatable")
+    p.add_argument("--stop", action="store_true",
+                   help="a crossing stops the run (quick stop, disable)")
+    p.add_argument("--paced", action="store_true",
+                   help="real-time clock (daq.clock = 'paced'): cycles on the wall clock")
+    p.set_defaults(func=_run)
+
+
+def parse_push(text: str, joints: list[str]) -> PushSpec:
+    """``JOINT:FORCE:T0[:DT]`` -> :class:`PushSpec` (JOINT a moving joint's name).
+
+    Raises
+    ------
+    ConfigError
+        Not of that form, an unknown joint, a force or duration not > 0, T0 < 0.
+    """
+    parts = text.split(":")
+    try:
+        if len(parts) not in (3, 4):
+            raise ValueError
+        force, t0 = float(parts[1]), float(parts[2])
+        dt = float(parts[3]) if len(parts) == 4 else 0.2
+    except ValueError:
+        raise ConfigError(f"--push {text!r}: expected JOINT:FORCE_N:T0_S[:DURATION_S]"
+                          ) from None
+    if parts[0] not in joints:
+        raise ConfigError(f"--push {text!r}: joint {parts[0]!r}: expected one of "
+                          f"{', '.join(joints)}")
+    if not (force > 0 and dt > 0 and t0 >= 0):
+        raise ConfigError(f"--push {text!r}: expected FORCE > 0, T0 >= 0, DURATION > 0")
+    return PushSpec(joints.index(parts[0]), force, t0, dt)
+
+
+def analyse(monitor: TorqueMonitor, cycle_s: float) -> list[dict[str, Any]]:
+    """Per run: each push's detection (first crossing from its staging to
+    :data:`AFTER_PUSH_S` after its end: delay [s], joint) and the crossings outside every
+    push window (false alarms)."""
+    out = []
+    for rec in monitor.records:
+        windows = [(c, c + int(round((s.duration_s + AFTER_PUSH_S) / cycle_s)), s)
+                   for c, s in rec.staged]
+        pushes, used = [], set()
+        for c0, c1, spec in windows:
+            hits = [(c, j, r) for c, j, r in rec.detections if c0 <= c <= c1]
+            first = min(hits, default=None)
+            used.update(hits)
+            pushes.append({
+                "joint": monitor.joints[spec.joint], "force_N": spec.force_N,
+                "t0_s": spec.t0_s, "duration_s": spec.duration_s, "cycle": c0,
+                "detected": first is not None,
+                "delay_s": None if first is None else (first[0] - c0) * cycle_s,
+                "by_joint": None if first is None else monitor.joints[first[1]],
+                "joints_crossed": sorted({monitor.joints[j] for _, j, _ in hits})})
+        false = [{"cycle": c, "joint": monitor.joints[j], "residual": r}
+                 for c, j, r in rec.detections if (c, j, r) not in used]
+        out.append({"payload": rec.index, "cycles": rec.cycles,
+                    "armed_s": rec.armed_cycles * cycle_s, "pushes": pushes,
+                    "false_alarms": false, "step_us_mean": 1e6 * rec.step_s_total
+                    / max(rec.cycles, 1), "step_us_max": 1e6 * rec.step_s_max})
+    return out
+
+
+def load_campaign(path: Path, paced: bool = False) -> RobotCampaign:
+    """The robot campaign of ``path``; ``paced``: on the real-time clock."""
+    campaign = load_any_campaign(path)
+    if not isinstance(campaign, RobotCampaign):
+        raise ConfigError(f"{path}: expected a robot campaign ([robot] table)")
+    if paced:
+        campaign = dataclasses.replace(campaign, daq={**dict(campaign.daq), "clock": "paced"})
+    return campaign
+
+
+def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool = False,
+                model_name: str | None = None, payloads: list[int] | None = None,
+                calibrate: bool = False, thresholds: Path | None = None,
+                k_sigma: float | None = None, peak_margin: float | None = None,
+                cutoff_hz: float = 20.0,
+                rest_velocity: float | None = None, pushes: list[str] | None = None,
+                stop: bool = False, paced: bool = False,
+                stream: TextIO | None = None) -> dict[str, Any]:
+    """``jointid monitor`` (module docstring); returns the content of ``monitor.json``.
+
+    Raises
+    ------
+    daq.ConfigError, ident.IdentError, trajectories.TrajectoryError
+        Bad input (one line), before the bus is opened.
+    """
+    stream = stream if stream is not None else sys.stderr
+    campaign = load_campaign(campaign_path, paced)
+    joints = list(campaign.moving)
+    specs = [parse_push(p, joints) for p in pushes or []]
+    if specs and not simulate:
+        raise ConfigError("--push: expected --simulate (pushes are staged on the simulated "
+                          "arm)")
+    if calibrate and (specs or stop):
+        raise ConfigError("--calibrate: a validation run takes no --push and no --stop")
+    if rest_velocity is not None and not rest_velocity >= 0:
+        raise ConfigError(f"--rest-velocity: expected a number >= 0, got {rest_velocity}")
+    if k_sigma is not None and not k_sigma > 0:
+        raise ConfigError(f"--k-sigma: expected a number > 0, got {k_sigma}")
+    if peak_margin is not None and not peak_margin >= 0:
+        raise ConfigError(f"--peak-margin: expected a number >= 0, got {peak_margin}")
+    robot = robot_for_campaign(campaign)
+    exported = load_model(model, robot, model_name)
+    pred0 = exported.predictor(None)
+    if pred0.names != joints:
+        raise ConfigError(f"{model}: joints {pred0.names}, the campaign's are {joints}")
+    v_rest = ([REST_QS * q for q in pred0.qs] if rest_velocity is None
+              else [rest_velocity] * len(joints))
+    if not all(v >= 0 for v in v_rest):
+        raise ConfigError(f"{model}: friction qs: expected numbers >= 0")
+    th = None
+    if thresholds is not None:
+        th = Thresholds.read(thresholds)
+        if list(th.joints) != joints:
+            raise ConfigError(f"{thresholds}: joints {list(th.joints)}, the campaign's are "
+                              f"{joints}")
+        th = th.with_k(k_sigma, peak_margin)
+
+    def predictor_for(payload: Any) -> Any:
+        return functools.partial(exported.predictor(payload).band, v_rest=v_rest)
+
+    mon = TorqueMonitor(predictor_for, joints, campaign.cycle_s,
+                        lower=None if th is None else th.lower,
+                        upper=None if th is None else th.upper, cutoff_hz=cutoff_hz,
+                        stop=stop, pushes=specs)
+    out.mkdir(parents=True, exist_ok=True)
+    result, wall = run_with_bar(campaign, out / "logs", True if simulate else None, stream,
+                                payloads=payloads, monitor=mon)
+    logs = [r.path for r in result.runs]
+    summary: dict[str, Any] = {
+        "campaign": str(campaign_path), "model": exported.source, "joints": joints,
+        "cycle_s": campaign.cycle_s, "clock": campaign.daq.get("clock", "default"),
+        "cutoff_hz": cutoff_hz,
+        "rest_velocity": v_rest, "status": result.status, "reason": result.reason,
+        "wall_s": wall, "missed_cycles": [r.missed for r in result.runs],
+        "logs": [str(p.relative_to(out)) for p in logs]}
+    if calibrate:
+        res = []
+        for p in logs:
+            ml = read_monitor(p)
+            res.append(ml.residual[ml.armed])
+        th = thresholds_from_residual(np.concatenate(res), joints,
+                                      DEFAULT_K_SIGMA if k_sigma is None else k_sigma,
+                                      ", ".join(summary["logs"]),
+                                      DEFAULT_PEAK_MARGIN if peak_margin is None
+                                      else peak_margin)
+        write_json(out / "thresholds.json", th.to_json())
+        summary["thresholds"] = th.to_json()
+    else:
+        summary["thresholds"] = th.to_json() if th is not None else None
+        summary["runs"] = analyse(mon, campaign.cycle_s)
+    summary["report"] = str(_report(out, logs, summary, mon).relative_to(out))
+    write_json(out / "monitor.json", summary)
+    return summary
+
+
+def _plot(ml: Any, joints: list[str], path: Path, j: int, stage: list) -> None:
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(10, 3.2))
+    ax.plot(ml.t, ml.residual[:, j], lw=0.7, label="residual")
+    if np.isfinite(ml.upper[:, j]).any():
+        ax.plot(ml.t, ml.upper[:, j], "r--", lw=0.8, label="thresholds")
+        ax.plot(ml.t, ml.lower[:, j], "r--", lw=0.8)
+    for t0, dt in stage:
+        ax.axvspan(t0, t0 + dt, color="orange", alpha=0.3)
+    hits = [e["t"] for e in ml.events if e["kind"] == "collision" and e["axis"] == j]
+    if hits:
+        ax.plot(hits, np.interp(hits, ml.t, ml.residual[:, j]), "kv", label="crossing")
+    ax.set_xlabel("campaign time [s]")
+    ax.set_ylabel(f"{joints[j]} residual [N m]")
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+def _report(out: Path, logs: list[Path], summary: dict[str, Any], mon: TorqueMonitor
+            ) -> Path:
+    matplotlib.use("Agg")
+    joints = summary["joints"]
+    intro = Section("What was run").para(
+        f"Campaign {summary['campaign']}, model {summary['model']}; residual = measured "
+        f"torque minus the model's, both low-passed at {summary['cutoff_hz']:g} Hz "
+        f"(static friction band below |dq| = "
+        f"{', '.join(f'{v:.3g}' for v in summary['rest_velocity'])} rad/s). Status: "
+        f"{summary['status']} {summary['reason']}; missed cycles per run: "
+        f"{summary['missed_cycles']}.")
+    sections = [intro]
+    th = summary.get("thresholds")
+    if th:
+        sections.append(Section("Thresholds").table(
+            ["joint", "mean [N m]", "sigma [N m]", "k", "lower", "upper", "peak/sigma"],
+            [[j, f"{m:.4g}", f"{s:.4g}", f"{th['k_sigma']:g}", f"{lo:.4g}", f"{hi:.4g}",
+              f"{pk:.3g}"] for j, m, s, lo, hi, pk in zip(
+                joints, th["mean"], th["sigma"], th["lower"], th["upper"],
+                th["peak_sigmas"], strict=True)]))
+    rows = []
+    for run in summary.get("runs", []):
+        for p in run["pushes"]:
+            rows.append([run["payload"], p["joint"], f"{p['force_N']:g}", f"{p['t0_s']:g}",
+                         "yes" if p["detected"] else "NO",
+                         "—" if p["delay_s"] is None else f"{1000 * p['delay_s']:.0f}",
+                         ", ".join(p["joints_crossed"]) or "—"])
+    if rows:
+        sections.append(Section("Pushes").para(
+            "Delay: from the cycle the push was staged to the first crossing (any joint).")
+            .table(["payload", "pushed link", "force [N]", "t0 [s]", "detected",
+                    "delay [ms]", "joints crossed"], rows))
+    if "runs" in summary:
+        fa = [[run["payload"], f"{run['armed_s']:.1f}", len(run["false_alarms"]),
+               f"{run['step_us_mean']:.0f}", f"{run['step_us_max']:.0f}"]
+              for run in summary["runs"]]
+        sections.append(Section("False alarms and cost").table(
+            ["payload", "monitored [s]", "false alarms", "check mean [us]",
+             "check max [us]"], fa))
+    for i, p in enumerate(logs):
+        ml = read_monitor(p)
+        rec = mon.records[i] if i < len(mon.records) else None
+        stage = [(c * summary["cycle_s"], s.duration_s) for c, s in rec.staged] if rec else []
+        sec = Section(f"Run {p.name}")
+        for j, name in enumerate(joints):
+            fig = out / f"residual_{i}_{name}.png"
+            _plot(ml, joints, fig, j, stage)
+            sec.figure(fig, f"{name}: residual, thresholds, pushes (orange), crossings")
+        sections.append(sec)
+    sections.append(Section("Summary").raw(
+        f"<pre>{html.escape(json.dumps(summary, indent=1, default=str)[:20000])}</pre>"))
+    return write_html(out / "report.html", "jointid monitor",
+                      f"jointid {__version__} — torque monitoring", sections)
+
+
+def _run(args: argparse.Namespace) -> int:
+    s = run_monitor(args.model, args.campaign, args.out, simulate=args.simulate,
+                    model_name=args.model_name, payloads=args.payload,
+                    calibrate=args.calibrate, thresholds=args.thresholds,
+                    k_sigma=args.k_sigma, peak_margin=args.peak_margin,
+                    cutoff_hz=args.cutoff_hz,
+                    rest_velocity=args.rest_velocity, pushes=args.push, stop=args.stop,
+                    paced=args.paced)
+    print(format_summary(s))
+    return 0 if s["status"] == "done" or args.stop else 1
+
+
+def format_summary(s: dict[str, Any]) -> str:
+    """Lines for the terminal."""
+    lines = [f"monitor: {s['status']} {s['reason']}".rstrip() + f"; missed cycles "
+             f"{s['missed_cycles']}"]
+    th = s.get("thresholds")
+    if th:
+        lines.append("thresholds [N m]: " + ", ".join(
+            f"{j} {lo:+.3g}..{hi:+.3g}" for j, lo, hi in zip(
+                s["joints"], th["lower"], th["upper"], strict=True)))
+    for run in s.get("runs", []):
+        for p in run["pushes"]:
+            lines.append(f"payload {run['payload']}: push {p['force_N']:g} N on {p['joint']}"
+                         f" at {p['t0_s']:g} s: " + (
+                             f"detected after {1000 * p['delay_s']:.0f} ms ({p['by_joint']})"
+                             if p["detected"] else "NOT detected"))
+        lines.append(f"payload {run['payload']}: {len(run['false_alarms'])} false alarm(s) "
+                     f"in {run['armed_s']:.1f} s monitored; check {run['step_us_mean']:.0f} "
+                     f"us mean, {run['step_us_max']:.0f} us max")
+    lines.append(f"report: {s['report']}")
+    return "\n".join(lines)

@@ -1,0 +1,338 @@
+"""Torque monitoring in the cycle loop: the filtered residual of an identified model, its
+thresholds, collision events, an optional safe stop, and staged pushes on a simulated arm.
+
+Every cycle of a run's ``run`` phase (approach, plan, settle) the engine
+(:mod:`daq.runtime.engine`) hands :meth:`TorqueMonitor.step` the measured joint positions q
+[rad], velocities dq [rad/s] (0x606C) and torques tau [N m] (torque actual 0x6077). The same
+causal low-pass -- a second-order state-variable filter, natural frequency ``2 pi
+cutoff_hz``, damping 1/sqrt(2) (Butterworth), discretised exactly (zero-order hold) -- gives
+the filtered q, dq, its derivative ddq and the filtered tau; the residual is::
+
+    r_j = tau_f,j - clip(tau_f,j, lo_j, hi_j),   (lo, hi) = predict(q_f, dq_f, ddq_f)
+
+with ``predict`` the identified model (``ident.monitor.TorquePredictor.band``, built by the
+application layer; this module only calls it): the predicted torque (lo = hi) while the joint
+moves, the interval of its static friction near rest, where the sign of the velocity -- and
+so the friction -- is not known (then r_j = 0 inside the interval). Filtering the measured
+torque with the same filter keeps both sides delayed alike. A collision (an external force
+on a link) moves the arm without passing through the drives' torque: r_j is then about
+``-(J^T F)_j``.
+
+A joint's residual outside ``[lower_j, upper_j]`` (``mean +- k sigma`` of a validation run,
+``ident.monitor.Thresholds``) after the first ``warmup_s`` of the phase is a ``collision``
+event on ``/events`` (one per crossing: the joint must come back inside before it counts
+again), and with ``stop=True`` the run stops through the engine's stop sequence (quick stop,
+disable: the same path as a limit). Without thresholds (``calibrate``) the residual is only
+logged.
+
+Every monitored cycle writes one ``/monitor/<k>/residual`` message per joint
+(``jointid_msgs/msg/MonitorSample``, CDR, docs/log-format.md); :func:`read_monitor` reads
+them back with the reference MCAP reader.
+
+Staged pushes (simulated arm only): a :class:`PushSpec` ``t0_s`` after the start of the run
+phase stages :func:`sim_drivers.arm_push.staged_push` on the arm (``push`` event, axis = the
+pushed joint); the arm applies it from its next step.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+
+from daq import ConfigError
+from daq.protocol.reader import read_topics
+from sim_drivers.arm_push import staged_push
+
+__all__ = ["MONITOR_SCHEMA", "MonitorRecord", "PushSpec", "SVFilter", "TorqueMonitor",
+           "read_monitor"]
+
+MONITOR_SCHEMA_NAME = "jointid_msgs/msg/MonitorSample"
+MONITOR_SCHEMA = """\
+int64 cycle
+float64 t             # [s] campaign time of the cycle
+float64 residual      # [N m] filtered measured torque minus the model's prediction
+float64 lower         # [N m] lower threshold (-inf: none)
+float64 upper         # [N m] upper threshold (+inf: none)
+float64 tau_filtered  # [N m] measured torque (0x6077), low-passed
+float64 tau_predicted # [N m] the model's torque at the filtered state (nearest in its
+                      # interval near rest)
+uint8 armed           # 1 when crossings count (after the warm-up)
+"""
+_SAMPLE = struct.Struct("<4sqddddddB")
+_SAMPLE_DTYPE = np.dtype([("head", "V4"), ("cycle", "<i8"), ("t", "<f8"), ("residual", "<f8"),
+                          ("lower", "<f8"), ("upper", "<f8"), ("tau_filtered", "<f8"),
+                          ("tau_predicted", "<f8"), ("armed", "u1")])
+_MAX_AXES = 64
+_CDR_HEADER = b"\x00\x01\x00\x00"
+
+
+class SVFilter:
+    """Second-order state-variable low-pass of k signals: y'' = wn^2 (u - y) - 2 zeta wn y',
+    discretised exactly for a input held over each cycle. State: y (filtered) and y'
+    (its derivative)."""
+
+    def __init__(self, cutoff_hz: float, cycle_s: float, k: int, zeta: float = 2 ** -0.5
+                 ) -> None:
+        if not 0 < cutoff_hz < 0.5 / cycle_s:
+            raise ConfigError(f"monitor cutoff: expected 0 < cutoff_hz < {0.5 / cycle_s:g} "
+                              f"(Nyquist), got {cutoff_hz}")
+        wn = 2.0 * math.pi * cutoff_hz
+        a = np.array([[0.0, 1.0, 0.0], [-wn * wn, -2.0 * zeta * wn, wn * wn],
+                      [0.0, 0.0, 0.0]])
+        e = scipy.linalg.expm(a * cycle_s)
+        (self.a11, self.a12, self.b1), (self.a21, self.a22, self.b2) = (
+            e[0].tolist(), e[1].tolist())
+        self.k = k
+        self.y = [0.0] * k
+        self.dy = [0.0] * k
+
+    def reset(self, u: Sequence[float]) -> None:
+        """At rest on ``u`` (y = u, y' = 0)."""
+        self.y = [float(x) for x in u]
+        self.dy = [0.0] * self.k
+
+    def update(self, u: Sequence[float]) -> None:
+        """One cycle with input ``u`` (k values)."""
+        a11, a12, b1, a21, a22, b2 = self.a11, self.a12, self.b1, self.a21, self.a22, self.b2
+        y, dy = self.y, self.dy
+        self.y = [a11 * y0 + a12 * d0 + b1 * x for y0, d0, x in zip(y, dy, u, strict=True)]
+        self.dy = [a21 * y0 + a22 * d0 + b2 * x for y0, d0, x in zip(y, dy, u, strict=True)]
+
+
+@dataclass(frozen=True)
+class PushSpec:
+    """A push to stage on the simulated arm: ``force_N`` [N] on the link of moving joint
+    ``joint`` (0-based) from ``t0_s`` [s] after the run phase starts, for ``duration_s``
+    [s]; ``point`` (joint frame [m]) and ``direction`` (world) default as
+    :func:`sim_drivers.arm_push.staged_push`."""
+
+    joint: int
+    force_N: float
+    t0_s: float
+    duration_s: float = 0.2
+    point: tuple[float, float, float] | None = None
+    direction: tuple[float, float, float] | None = None
+
+
+@dataclass
+class MonitorRecord:
+    """What a monitored run did (one per payload run)."""
+
+    index: int
+    staged: list[tuple[int, PushSpec]] = field(default_factory=list)  # (cycle, push)
+    detections: list[tuple[int, int, float]] = field(default_factory=list)  # cycle, joint, r
+    cycles: int = 0
+    armed_cycles: int = 0
+    step_s_max: float = 0.0  # [s] longest step() (wall time)
+    step_s_total: float = 0.0
+
+
+class TorqueMonitor:
+    """The per-cycle check (module docstring).
+
+    Parameters
+    ----------
+    predictor_for : callable
+        ``payload -> predict``, ``predict(q, dq, ddq) -> (lo, hi)`` (k values each) [N m]:
+        the torque interval of the identified model for a run with that payload.
+    joints : sequence of str
+        Joint names (k), the drives' order.
+    cycle_s : float
+        Control cycle [s].
+    lower, upper : sequence of float, optional
+        Thresholds per joint [N m]; None: calibration (log only).
+    cutoff_hz : float
+        Cut-off of the filter [Hz].
+    warmup_s : float
+        Crossings are not counted during the first ``warmup_s`` [s] of the run phase (the
+        filter's start transient).
+    stop : bool
+        A crossing stops the run (quick stop, disable).
+    pushes : sequence of PushSpec
+        Pushes to stage on the simulated arm (needs :attr:`arm`).
+    """
+
+    def __init__(self, predictor_for: Callable[[Any], Callable[..., Sequence[float]]],
+                 joints: Sequence[str], cycle_s: float, *,
+                 lower: Sequence[float] | None = None, upper: Sequence[float] | None = None,
+                 cutoff_hz: float = 20.0, warmup_s: float = 0.25, stop: bool = False,
+                 pushes: Sequence[PushSpec] = ()) -> None:
+        self.predictor_for = predictor_for
+        self.joints = list(joints)
+        k = self.k = len(self.joints)
+        self.cycle_s = float(cycle_s)
+        if (lower is None) != (upper is None):
+            raise ConfigError("monitor: give both thresholds (lower and upper) or neither")
+        self.lower = [-math.inf] * k if lower is None else [float(x) for x in lower]
+        self.upper = [math.inf] * k if upper is None else [float(x) for x in upper]
+        if len(self.lower) != k or len(self.upper) != k:
+            raise ConfigError(f"monitor: expected {k} thresholds (one per joint)")
+        self.cutoff_hz = float(cutoff_hz)
+        self.warmup_cycles = int(round(warmup_s / self.cycle_s))
+        self.stop = bool(stop)
+        self.pushes = sorted(pushes, key=lambda p: p.t0_s)
+        for p in self.pushes:
+            if not 0 <= p.joint < k:
+                raise ConfigError(f"push on joint index {p.joint}: expected 0..{k - 1}")
+        self.arm: Any = None  # sim_drivers.arm_bus.ArmOnBus when simulated
+        self.records: list[MonitorRecord] = []
+        self._fq = SVFilter(self.cutoff_hz, self.cycle_s, k)
+        self._fdq = SVFilter(self.cutoff_hz, self.cycle_s, k)
+        self._ftau = SVFilter(self.cutoff_hz, self.cycle_s, k)
+        self._log: Any = None
+        self._channels: list[int] = []
+        self._predict: Callable[..., Sequence[float]] | None = None
+        self._n = 0
+        self._disarmed_until = 0
+        self._next_push = 0
+        self._out = [False] * k
+
+    # -- per run ---------------------------------------------------------------------------
+    def begin(self, index: int, payload: Any, log: Any) -> None:
+        """A payload run starts: the model for its payload, the log's channels."""
+        self._predict = self.predictor_for(payload)
+        self._log = log
+        self._channels = []
+        w = getattr(log, "_w", None)
+        if w is not None:
+            sid = w.register_schema(MONITOR_SCHEMA_NAME, "ros2msg", MONITOR_SCHEMA.encode())
+            self._channels = [w.register_channel(f"/monitor/{j}/residual", "cdr", sid)
+                              for j in range(self.k)]
+            w.add_metadata("monitor", {
+                "joints": json.dumps(self.joints), "cutoff_hz": repr(self.cutoff_hz),
+                "lower": json.dumps(self.lower), "upper": json.dumps(self.upper),
+                "warmup_cycles": str(self.warmup_cycles), "stop": str(self.stop).lower(),
+                "pushes": json.dumps([p.__dict__ for p in self.pushes])})
+        self._n = 0
+        self._disarmed_until = 0
+        self._next_push = 0
+        self._out = [False] * self.k
+        self.records.append(MonitorRecord(index))
+
+    def step(self, cycle: int, t: float, q: Sequence[float], dq: Sequence[float],
+             tau: Sequence[float], log: Any, valid: bool = True) -> tuple[str, int]:
+        """One run-phase cycle; returns (reason, joint) of a crossing that stops the run,
+        else ("", -1). ``valid`` False: a drive's TPDO was missing (its values are the
+        last ones): crossings are not counted from this cycle for another warm-up."""
+        t_in = time.perf_counter()
+        rec = self.records[-1]
+        if self._n == 0:
+            self._fq.reset(q)
+            self._fdq.reset(dq)
+            self._ftau.reset(tau)
+        else:
+            self._fq.update(q)
+            self._fdq.update(dq)
+            self._ftau.update(tau)
+        n = self._n
+        self._n += 1
+        if not valid:  # stale values in the filters: disarm for a warm-up
+            self._disarmed_until = n + self.warmup_cycles
+        rec.cycles += 1
+        if self._next_push < len(self.pushes) and n * self.cycle_s >= self.pushes[
+                self._next_push].t0_s:
+            self._stage(cycle, t, log, rec)
+        p_lo, p_hi = self._predict(self._fq.y, self._fdq.y,  # type: ignore[misc]
+                                   self._fdq.dy)
+        tau_f = self._ftau.y
+        armed = n >= self.warmup_cycles and n >= self._disarmed_until
+        rec.armed_cycles += armed
+        lo, hi, out = self.lower, self.upper, self._out
+        chans = self._channels
+        add = getattr(log, "_add", None) if chans else None
+        ts = log.start_ns + cycle * log.cycle_ns if add is not None else 0
+        now_ns = time.time_ns()
+        stop_why, stop_joint = "", -1
+        for j in range(self.k):
+            x = tau_f[j]
+            pred = p_lo[j] if x < p_lo[j] else p_hi[j] if x > p_hi[j] else x
+            r = x - pred
+            if add is not None:
+                add(chans[j], ts, _SAMPLE.pack(_CDR_HEADER, cycle, t, r, lo[j], hi[j], x, pred,
+                                               armed), now_ns, cycle)
+            if not armed:
+                continue
+            crossed = r < lo[j] or r > hi[j]
+            if crossed and not out[j]:
+                rec.detections.append((cycle, j, r))
+                why = (f"{self.joints[j]}: torque residual {r:+.3f} N m outside "
+                       f"[{lo[j]:.3f}, {hi[j]:.3f}] (collision?)")
+                log.event(cycle, t, "collision", why, j)
+                if self.stop and not stop_why:
+                    stop_why, stop_joint = why, j
+            out[j] = crossed
+        dt = time.perf_counter() - t_in
+        rec.step_s_total += dt
+        rec.step_s_max = max(rec.step_s_max, dt)
+        return stop_why, stop_joint
+
+    def _stage(self, cycle: int, t: float, log: Any, rec: MonitorRecord) -> None:
+        spec = self.pushes[self._next_push]
+        self._next_push += 1
+        arm = self.arm
+        plant = arm.plant
+        p = staged_push(plant.model, plant.q, spec.joint, spec.force_N, plant.t,
+                        spec.duration_s, point=spec.point, direction=spec.direction)
+        arm.push(p)
+        rec.staged.append((cycle, spec))
+        log.event(cycle, t, "push", f"{self.joints[spec.joint]}: {spec.force_N:g} N for "
+                  f"{spec.duration_s:g} s at {list(p.point)} m (joint frame), force "
+                  f"{[round(f, 3) for f in p.force]} N (world)", spec.joint)
+
+
+# --------------------------------------------------------------------------- reading back
+@dataclass(frozen=True)
+class MonitorLog:
+    """``/monitor/<k>/residual`` of one run log, one column per joint (cycles aligned)."""
+
+    cycle: np.ndarray
+    t: np.ndarray
+    residual: np.ndarray  # (n, k) [N m]
+    lower: np.ndarray
+    upper: np.ndarray
+    tau_filtered: np.ndarray
+    tau_predicted: np.ndarray
+    armed: np.ndarray  # (n,) bool
+    events: list[dict[str, Any]]
+    metadata: dict[str, str]
+
+
+def read_monitor(path: str | Path) -> MonitorLog:
+    """Read the monitor channels, the events and the ``monitor`` metadata of a run log
+    (with the fast chunk scanner of :mod:`daq.protocol.reader`; the reference reader gives
+    the same messages, tests/test_monitor.py).
+
+    Raises
+    ------
+    ConfigError
+        The log has no ``/monitor`` channel (not a monitored run).
+    daq.protocol.reader.LogReadError
+        Not a readable MCAP file.
+    """
+    topics = {f"/monitor/{j}/residual": j for j in range(_MAX_AXES)}
+    raw = read_topics(path, set(topics))
+    cols = {topics[t]: np.frombuffer(b"".join(v), _SAMPLE_DTYPE) for t, v in raw.items()}
+    if not cols:
+        raise ConfigError(f"{path}: no /monitor channel (not a jointid monitor run)")
+    k = max(cols) + 1
+    n = min(len(cols.get(j, ())) for j in range(k))
+    rec = [np.sort(cols[j], order="cycle")[:n] for j in range(k)]
+
+    def stack(name: str) -> np.ndarray:
+        return np.stack([r[name] for r in rec], axis=1).astype(float)
+
+    return MonitorLog(rec[0]["cycle"].astype(np.int64), rec[0]["t"].astype(float),
+                      stack("residual"), stack("lower"), stack("upper"),
+                      stack("tau_filtered"), stack("tau_predicted"),
+                      rec[0]["armed"].astype(bool),
+                      sorted(scan.events, key=lambda e: e["cycle"]),
+                      dict(scan.metadata.get("monitor", {})))

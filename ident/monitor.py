@@ -1,0 +1,370 @@
+"""The identified model as a torque predictor for monitoring, and the thresholds' statistics.
+
+:class:`TorquePredictor` evaluates an exported model (docs/model-export.md: a URDF with the
+consistent inertials, ``friction.json``) one sample at a time, fast enough for a 1 kHz loop:
+pinocchio's RNEA on the URDF (gravity of the friction file, the run's payload attached to the
+last moving link, scaled by ``payload_ratio`` when given), then eq. 30 (paper) or
+``FC sign + FV dq + OFF`` (usual) per joint -- :func:`ident.robot.export_model.exported_torque`
+on one row, written with scalars. It is built from an ``export-model`` folder
+(:func:`load_exported`) or from a fit record (:func:`exported_from_fit`: its consistent
+estimate, as ``jointid export-model`` computes it, kept in memory).
+
+:class:`Thresholds` holds, per joint, the mean and standard deviation of a residual recorded
+without collision (a validation run) and the band ``mean +- k_sigma sigma`` a monitored
+residual must stay in, widened to ``peak_margin`` times the largest deviation of the
+validation residual when that is larger (docs/monitoring.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from trajectories.robot import Robot
+
+from . import DataError
+from .cli_export_model import consistent_from_record, read_fit_record
+from .robot.export_model import FRICTION_FORMAT, friction_record, urdf_text
+
+__all__ = ["THRESHOLDS_FORMAT", "Thresholds", "TorquePredictor", "exported_from_fit",
+           "load_exported", "load_model", "thresholds_from_residual"]
+
+THRESHOLDS_FORMAT = "jointid-monitor-thresholds/1"
+
+
+class TorquePredictor:
+    """Joint torques [N m] the exported model predicts for one sample (module docstring).
+
+    Parameters
+    ----------
+    urdf : str
+        URDF text of the exported model (its moving joints in the robot's order).
+    friction : mapping
+        The friction file's content (``jointid-friction/1``).
+    payload : object, optional
+        ``mass_kg`` (or ``mass``) [kg], ``com`` (3,) [m] in the last moving joint's frame,
+        ``inertia`` (XX XY XZ YY YZ ZZ about the CoM) [kg m^2]; None or 0 kg: none.
+    source : str
+        Where the model came from (for messages and the log).
+    """
+
+    def __init__(self, urdf: str, friction: Mapping[str, Any], payload: Any = None,
+                 source: str = "") -> None:
+        if friction.get("format") != FRICTION_FORMAT:
+            raise DataError(f"{source or 'friction'}: format {friction.get('format')!r}: "
+                            f"expected {FRICTION_FORMAT!r}")
+        try:
+            model = pin.buildModelFromXML(urdf)
+        except Exception as exc:  # noqa: BLE001 - pinocchio raises plain exceptions
+            raise DataError(f"{source or 'urdf'}: not a URDF pinocchio reads ({exc})"
+                            ) from None
+        self.k = k = model.njoints - 1
+        joints = list(friction.get("joints", []))
+        if len(joints) != k:
+            raise DataError(f"{source}: friction.joints: expected {k} joints (the URDF's), "
+                            f"got {len(joints)}")
+        model.gravity = pin.Motion(np.r_[np.asarray(friction["gravity"], float), 0.0, 0.0,
+                                        0.0])
+        mass = float(getattr(payload, "mass_kg", getattr(payload, "mass", 0.0)) or 0.0)
+        if mass > 0:
+            ratio = float(friction.get("payload_ratio", 1.0))
+            xx, xy, xz, yy, yz, zz = (ratio * float(v) for v in payload.inertia)
+            ic = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+            model.inertias[k] = model.inertias[k] + pin.Inertia(
+                ratio * mass, np.asarray(payload.com, float), ic)
+        self.model, self.data = model, model.createData()
+        self.names = [str(j["name"]) for j in joints]
+        self.paper = friction["model"] == "paper"
+        keys = (("rotor_inertia", "qs", "a_m", "b_m", "a_g", "b_g", "c_m", "d_m", "c_g",
+                 "d_g", "FV", "OFF") if self.paper else ("rotor_inertia", "FC", "FV", "OFF"))
+        try:
+            self._coef = [tuple(float(j[key]) for key in keys) for j in joints]
+        except KeyError as e:
+            raise DataError(f"{source}: friction.joints: key {e.args[0]!r} missing") from None
+        self.source = source
+        #: Stribeck velocity q_s of each joint [rad/s] (the friction file's ``qs``)
+        self.qs = [float(j.get("qs", 0.0)) for j in joints]
+
+    def _friction(self, j: int, t_out: float, v: float, s: float, e: float) -> float:
+        """Joint j's torque for output torque ``t_out``, velocity ``v``, sign ``s``, Stribeck
+        factor ``e`` (the exported model's formula)."""
+        c = self._coef[j]
+        if not self.paper:
+            return t_out + c[1] * s + c[2] * v + c[3]
+        _, _, am, bm, ag, bg, cm, dm, cg, dg, fv, off = c
+        p = t_out * s
+        if p > 0:
+            tau = (am + bm * e) * t_out + (cm + dm * e) * s
+        elif p < 0:
+            tau = (ag - bg * e) * t_out + (cg + dg * e) * s
+        else:  # P+ = P- = 1/2 (sign 0), as exported_torque
+            tau = 0.5 * ((am + bm * e) * t_out + (cm + dm * e) * s
+                         + (ag - bg * e) * t_out + (cg + dg * e) * s)
+        return tau + fv * v + off
+
+    def _rigid(self, q: Sequence[float], dq: Sequence[float], ddq: Sequence[float]
+               ) -> list[float]:
+        """tau_out = RNEA + Ia ddq per joint [N m]."""
+        tr = pin.rnea(self.model, self.data, np.asarray(q, float), np.asarray(dq, float),
+                      np.asarray(ddq, float)).tolist()
+        return [t + c[0] * float(a) for t, c, a in zip(tr, self._coef, ddq, strict=True)]
+
+    def __call__(self, q: Sequence[float], dq: Sequence[float],
+                 ddq: Sequence[float]) -> list[float]:
+        """Predicted joint torques [N m] at q [rad], dq [rad/s], ddq [rad/s^2] (k each):
+        :func:`~ident.robot.export_model.exported_torque` of one sample."""
+        out = []
+        exp = math.exp
+        for j, t_out in enumerate(self._rigid(q, dq, ddq)):
+            v = float(dq[j])
+            s = 1.0 if v > 0 else -1.0 if v < 0 else 0.0
+            e = exp(-abs(v) / self._coef[j][1]) if self.paper else 1.0
+            out.append(self._friction(j, t_out, v, s, e))
+        return out
+
+    def band(self, q: Sequence[float], dq: Sequence[float], ddq: Sequence[float],
+             v_rest: float | Sequence[float] = 0.0) -> tuple[list[float], list[float]]:
+        """The torque interval [N m] the model allows: the prediction (both bounds equal)
+        where ``|dq_j| >= v_rest`` [rad/s] (one value, or one per joint); below it, where
+        sign(dq) is not known, the range of the static friction (Stribeck factor E = 1,
+        either sign of dq: the stiction band of the paper's section III.B at the joint's
+        load) plus the viscous and offset terms.
+        """
+        lo, hi = [], []
+        exp = math.exp
+        vr = [float(v_rest)] * self.k if np.ndim(v_rest) == 0 else list(v_rest)
+        for j, t_out in enumerate(self._rigid(q, dq, ddq)):
+            v = float(dq[j])
+            if abs(v) >= vr[j] and v != 0.0:
+                e = exp(-abs(v) / self._coef[j][1]) if self.paper else 1.0
+                x = self._friction(j, t_out, v, 1.0 if v > 0 else -1.0, e)
+                lo.append(x)
+                hi.append(x)
+                continue
+            a = self._friction(j, t_out, v, 1.0, 1.0)
+            b = self._friction(j, t_out, v, -1.0, 1.0)
+            lo.append(min(a, b))
+            hi.append(max(a, b))
+        return lo, hi
+
+
+@dataclass(frozen=True)
+class ExportedModel:
+    """An exported model in memory: URDF text and friction record (docs/model-export.md)."""
+
+    urdf: str
+    friction: dict[str, Any]
+    source: str
+
+    def predictor(self, payload: Any = None) -> TorquePredictor:
+        """A :class:`TorquePredictor` for a run with ``payload``."""
+        return TorquePredictor(self.urdf, self.friction, payload, self.source)
+
+
+def load_exported(folder: str | Path) -> ExportedModel:
+    """The model ``jointid export-model`` wrote into ``folder`` (one ``*.urdf`` and
+    ``friction.json``).
+
+    Raises
+    ------
+    DataError
+        No or several URDF files, no friction.json, not JSON.
+    """
+    d = Path(folder)
+    urdfs = sorted(d.glob("*.urdf"))
+    if len(urdfs) != 1:
+        raise DataError(f"{d}: expected one .urdf file (jointid export-model), found "
+                        f"{len(urdfs)}")
+    fpath = d / "friction.json"
+    try:
+        fr = json.loads(fpath.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise DataError(f"{fpath}: missing (jointid export-model writes it)") from None
+    except json.JSONDecodeError as e:
+        raise DataError(f"{fpath}: not JSON ({e.msg}, line {e.lineno})") from None
+    if not isinstance(fr, dict):
+        raise DataError(f"{fpath}: expected a JSON object")
+    return ExportedModel(urdfs[0].read_text(encoding="utf-8"), fr, str(d))
+
+
+def exported_from_fit(path: str | Path, robot: Robot, model: str | None = None
+                      ) -> ExportedModel:
+    """The consistent estimate of a fit record (``jointid fit --robot --json``) as an
+    exported model, in memory (what ``jointid export-model`` would write).
+
+    Raises
+    ------
+    DataError
+        Not a fit record, the model not identified, its consistent estimate not valid, or
+        the record's inputs do not give its parameters again.
+    """
+    path = Path(path)
+    rec = read_fit_record(path)
+    fitted = [n for n, r in rec.get("models", {}).items() if "error" not in r]
+    name = model or ("paper" if "paper" in fitted else "usual")
+    if name not in fitted:
+        raise DataError(f"{path}: models.{name}: not identified in this record (it has "
+                        f"{fitted or 'none'})")
+    if list(robot.moving) != list(rec["robot"]["moving"]):
+        raise DataError(f"{path}: moving joints {rec['robot']['moving']}, the robot's are "
+                        f"{list(robot.moving)}")
+    cons, fixed = consistent_from_record(path, rec, robot, name)
+    if not cons.get("valid", False):
+        raise DataError(f"{path}: models.{name}.consistent: a link is not physically valid")
+    text = urdf_text(robot.reduced(), cons["standard"], robot.numbers, robot.name or "robot")
+    fr = friction_record(cons["model"], tuple(robot.moving), robot.numbers,
+                         cons["parameters"], cons["standard"], cons["qs"], robot.gravity,
+                         cons.get("known_rotor_inertia"), fixed)
+    return ExportedModel(text, fr, f"{path} ({name} model, consistent estimate)")
+
+
+def load_model(path: str | Path, robot: Robot | None, model: str | None = None
+               ) -> ExportedModel:
+    """An ``export-model`` folder, or a fit record (then ``robot`` is needed)."""
+    p = Path(path)
+    if p.is_dir():
+        return load_exported(p)
+    if robot is None:
+        raise DataError(f"{p}: a fit record needs the robot (the campaign's)")
+    return exported_from_fit(p, robot, model)
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """Per joint: the band ``mean +- max(k_sigma, peak_margin peak) sigma`` of the monitored
+    residual [N m].
+
+    Attributes
+    ----------
+    joints : tuple of str
+    k_sigma : float
+    peak_margin : float
+        The band is at least ``peak_margin`` times the validation's largest deviation
+        (0: k_sigma alone).
+    mean, sigma : tuple of float
+        Mean and standard deviation of the validation residual [N m].
+    peak : tuple of float
+        Largest ``|r - mean| / sigma`` seen in the validation residual (the margin k_sigma
+        leaves: k_sigma / peak).
+    samples : int
+    source : str
+    """
+
+    joints: tuple[str, ...]
+    k_sigma: float
+    mean: tuple[float, ...]
+    sigma: tuple[float, ...]
+    peak: tuple[float, ...]
+    samples: int
+    source: str = ""
+    peak_margin: float = 0.0
+
+    @property
+    def half_width(self) -> list[float]:
+        """Half-width of the band per joint [N m]: ``max(k_sigma sigma, peak_margin peak
+        sigma)``."""
+        return [s * max(self.k_sigma, self.peak_margin * p)
+                for s, p in zip(self.sigma, self.peak, strict=True)]
+
+    @property
+    def lower(self) -> list[float]:
+        """Lower bound per joint [N m]."""
+        return [m - h for m, h in zip(self.mean, self.half_width, strict=True)]
+
+    @property
+    def upper(self) -> list[float]:
+        """Upper bound per joint [N m]."""
+        return [m + h for m, h in zip(self.mean, self.half_width, strict=True)]
+
+    def with_k(self, k_sigma: float | None = None, peak_margin: float | None = None
+               ) -> Thresholds:
+        """The same statistics with another ``k_sigma`` or ``peak_margin``."""
+        return dataclasses.replace(
+            self, k_sigma=self.k_sigma if k_sigma is None else float(k_sigma),
+            peak_margin=self.peak_margin if peak_margin is None else float(peak_margin))
+
+    def to_json(self) -> dict[str, Any]:
+        return {"format": THRESHOLDS_FORMAT, "joints": list(self.joints),
+                "k_sigma": self.k_sigma, "peak_margin": self.peak_margin,
+                "mean": list(self.mean), "sigma": list(self.sigma),
+                "peak_sigmas": list(self.peak), "lower": self.lower, "upper": self.upper,
+                "samples": self.samples, "source": self.source}
+
+    @classmethod
+    def read(cls, path: str | Path) -> Thresholds:
+        """Read a thresholds file (:meth:`to_json`).
+
+        Raises
+        ------
+        DataError
+            Not JSON, another format, a key missing or of the wrong length.
+        """
+        p = Path(path)
+        try:
+            d = json.loads(p.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise DataError(f"{p}: no such thresholds file") from None
+        except json.JSONDecodeError as e:
+            raise DataError(f"{p}: not JSON ({e.msg}, line {e.lineno})") from None
+        if not isinstance(d, dict) or d.get("format") != THRESHOLDS_FORMAT:
+            raise DataError(f"{p}: format: expected {THRESHOLDS_FORMAT!r} (jointid monitor "
+                            "--calibrate)")
+        try:
+            joints = tuple(str(j) for j in d["joints"])
+            vals = [tuple(float(x) for x in d[key]) for key in ("mean", "sigma",
+                                                               "peak_sigmas")]
+            k = float(d["k_sigma"])
+            margin = float(d.get("peak_margin", 0.0))
+            n = int(d["samples"])
+        except (KeyError, TypeError, ValueError) as e:
+            raise DataError(f"{p}: key {e.args[0] if e.args else '?'!r} missing or not a "
+                            "number") from None
+        for key, v in zip(("mean", "sigma", "peak_sigmas"), vals, strict=True):
+            if len(v) != len(joints):
+                raise DataError(f"{p}: {key}: expected {len(joints)} values (one per joint)")
+        if not all(s > 0 for s in vals[1]) or not k > 0:
+            raise DataError(f"{p}: sigma and k_sigma: expected numbers > 0")
+        if not margin >= 0:
+            raise DataError(f"{p}: peak_margin: expected a number >= 0")
+        return cls(joints, k, vals[0], vals[1], vals[2], n, str(d.get("source", "")),
+                   margin)
+
+
+def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: float,
+                             source: str = "", peak_margin: float = 0.0) -> Thresholds:
+    """Thresholds from a residual (n, k) [N m] recorded without collision: per joint the
+    mean, standard deviation and peak of its samples off the static band (residual not
+    exactly 0; near rest the model predicts an interval, :meth:`TorquePredictor.band`).
+
+    Raises
+    ------
+    DataError
+        Fewer than 100 samples, a joint whose residual is constant, k_sigma not > 0.
+    """
+    r = np.asarray(residual, dtype=float)
+    if r.ndim != 2 or r.shape[1] != len(joints):
+        raise DataError(f"{source}: residual: expected (n, {len(joints)}) samples")
+    if r.shape[0] < 100:
+        raise DataError(f"{source}: {r.shape[0]} residual samples: expected at least 100 "
+                        "(a validation run without collision)")
+    if not k_sigma > 0:
+        raise DataError(f"k_sigma: expected a number > 0, got {k_sigma}")
+    mean, sigma, peak = [], [], []
+    for j, name in enumerate(joints):
+        x = r[:, j][r[:, j] != 0.0]  # 0 exactly: inside the static band (no prediction)
+        if x.size < 100 or not x.std() > 0:
+            raise DataError(f"{source}: residual of {name}: {x.size} samples off its static "
+                            "band, expected at least 100 that vary (did the joint move?)")
+        mean.append(float(x.mean()))
+        sigma.append(float(x.std()))
+        peak.append(float(np.abs(x - x.mean()).max() / x.std()))
+    return Thresholds(tuple(joints), float(k_sigma), tuple(mean), tuple(sigma), tuple(peak),
+                      int(r.shape[0]), source, float(peak_margin))
