@@ -547,11 +547,23 @@ def read_attachments(path: str | Path) -> dict[str, bytes]:
     return _scan(Path(path), set(), attachments=True).attachments
 
 
-def read_topics(path: str | Path, topics: set[str]) -> dict[str, list[bytes]]:
-    """The raw message data of the given topics (topic -> data in log order; topics not in
-    the log are absent). Damaged chunks and a truncated tail are skipped with a warning, as
-    by :func:`read_run`."""
-    return _scan(Path(path), set(), set(topics)).raw
+@dataclass(frozen=True)
+class TopicData:
+    """Raw messages of some topics of a run log, with the log's events and metadata."""
+
+    #: topic -> message data in log order (topics not in the log are absent)
+    raw: dict[str, list[bytes]]
+    #: the ``/events`` records (dicts with ``cycle``, ``kind``...)
+    events: list[dict[str, Any]]
+    #: metadata name -> map
+    metadata: dict[str, dict[str, str]]
+
+
+def read_topics(path: str | Path, topics: set[str]) -> TopicData:
+    """The raw message data of the given topics, the events and the metadata of a run log.
+    Damaged chunks and a truncated tail are skipped with a warning, as by :func:`read_run`."""
+    scan = _scan(Path(path), set(), set(topics))
+    return TopicData(scan.raw, scan.events, scan.metadata)
 
 
 def read_raw(path: str | Path, topic: str) -> tuple[list[bytes], dict[str, dict[str, str]], bool]:

@@ -319,8 +319,8 @@ def read_monitor(path: str | Path) -> MonitorLog:
         Not a readable MCAP file.
     """
     topics = {f"/monitor/{j}/residual": j for j in range(_MAX_AXES)}
-    raw = read_topics(path, set(topics))
-    cols = {topics[t]: np.frombuffer(b"".join(v), _SAMPLE_DTYPE) for t, v in raw.items()}
+    scan = read_topics(path, set(topics))
+    cols = {topics[t]: np.frombuffer(b"".join(v), _SAMPLE_DTYPE) for t, v in scan.raw.items()}
     if not cols:
         raise ConfigError(f"{path}: no /monitor channel (not a jointid monitor run)")
     k = max(cols) + 1
