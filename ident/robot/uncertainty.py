@@ -52,7 +52,14 @@ above the threshold (:data:`ident.estimate.DEFAULT_THRESHOLD_PCT`) is removed --
 the prediction does not use it -- and the model refitted on the same moments (the fit's
 quadrants and weights); repeated until every remaining one is below the threshold (the sigma
 of a refit: its analytic sigma times the first fit's ratio max(eq. 15, jackknife) / eq. 15),
-then the jackknife is re-run on the pruned model. The IV check does not prune: it suggests a
+then the jackknife is re-run on the pruned model. A removal after which the joint's residual
+sum of squares exceeds the unpruned fit's by more than the chi-square(k) quantile at 99 %
+times the joint's residual variance (k parameters removed on that joint: :data:`PRUNE_ALPHA`)
+or the whole robot's weighted one by more than the chi-square(K) quantile times the fit's
+residual variance (K removed in all; the base parameters are shared), is undone: the
+parameter is not negligible, only poorly separated from another (e.g. b_m and b_g of a joint
+that stays in one quadrant), and is reported ``unidentified``.
+The IV check does not prune: it suggests a
 bias, not a spread, and on a friction-dominated joint the IV estimate itself can be far off.
 Removable: b_m, b_g, c_m, d_m, c_g, d_g, F_V, tau_off of every joint. a_m, a_g (the load's
 gain: 0 would delete the load torque) and the base parameters above the threshold are
@@ -68,6 +75,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from scipy.stats import chi2
 
 from ..estimate import DEFAULT_THRESHOLD_PCT
 from . import RobotIdentError
@@ -459,27 +467,54 @@ def _honest(model: Any, moms: list[list[JointMoments]], ivm: Any, free: np.ndarr
     return std_a, std_b, np.where(free, std, 0.0), z, failed
 
 
+#: significance level of the partial test that keeps a parameter whose removal raises its
+#: joint's residual: the cumulative rise of a joint's residual sum of squares over the
+#: unpruned fit must stay below the chi-square(k) quantile at 1 - PRUNE_ALPHA times the
+#: joint's residual variance, k the parameters removed on that joint
+PRUNE_ALPHA = 0.01
+
+
 def _prune(model: Any, moms: list[list[JointMoments]], free: np.ndarray, inflate: np.ndarray,
            threshold_pct: float) -> list[str]:
     """Remove the worst prunable parameter above the threshold and refit (the fit's
     quadrants and weights), repeatedly, with the honest sigma estimated as the refit's
-    analytic sigma times ``inflate``; the model is left refitted without them. Returns the
-    names removed, in order."""
+    analytic sigma times ``inflate``; the model is left refitted without them. A removal
+    after which the joint's (or the whole robot's weighted) residual sum of squares exceeds
+    the unpruned fit's by a significant amount (:data:`PRUNE_ALPHA`: the removed parameters
+    are large relative sigma but not negligible, e.g. one of two correlated Coulomb terms) is
+    undone and the parameter kept (reported ``unidentified``). Returns the names removed, in
+    order."""
     full = _sum(moms, np.ones(len(moms), dtype=int))
     out: list[str] = []
     free = free.copy()
     can = _prunable(model, free)
+    owner = _joint_of(model)
     w = np.asarray(model.weights_, dtype=float)
+    coeffs = _coeffs(model)
+    rr0 = model._cost(full, coeffs, model.coef_)
+    var0 = np.asarray(model.sigma_joint_, dtype=float) ** 2
+    s2 = float(model.sigma_) ** 2  # weighted residual variance of the unpruned fit
+    removed = np.zeros(len(rr0), dtype=int)
     while True:
         rel = _rel(model.coef_, model.std_ * inflate)
         cand = np.where(can & free, rel, -np.inf)
         i = int(np.argmax(cand))
         if not cand[i] > threshold_pct:
             return out
+        j = owner[i]
+        x_before = model.coef_.copy()
         free[i] = False
-        out.append(model.names_[i])
         x = _refit(model, full, free)
-        model._statistics(full, _coeffs(model), x, free, w)
+        rise = model._cost(full, coeffs, x) - rr0
+        if (rise[j] > chi2.ppf(1.0 - PRUNE_ALPHA, removed[j] + 1) * var0[j]
+                or float(w @ rise) > chi2.ppf(1.0 - PRUNE_ALPHA, len(out) + 1) * s2):
+            free[i] = True  # not negligible: kept, reported unidentified
+            can[i] = False
+            model._statistics(full, coeffs, x_before, free, w)
+            continue
+        removed[j] += 1
+        out.append(model.names_[i])
+        model._statistics(full, coeffs, x, free, w)
 
 
 def parameter_records(model: Any) -> dict[str, dict[str, Any]]:
