@@ -22,6 +22,8 @@ import argparse
 import collections
 import contextlib
 import io
+import json
+import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -159,6 +161,18 @@ def walk(argv: list[str]) -> dict:
     return w.summary()
 
 
+def _walk_in_child(argv: list[str], out: Path) -> dict:
+    """:func:`walk` in a fresh interpreter (each fit starts from the same imports; the
+    summary comes back through ``out`` as JSON)."""
+    here, where = str(Path(__file__).parent), str(out)
+    code = (f"import json, sys; sys.path.insert(0, {here!r}); import walk_fit_data as w; "
+            f"s = w.walk({argv!r}); s['hops'] = [[a, b, k] for (a, b), k in s['hops']]; "
+            f"open({where!r}, 'w').write(json.dumps(s))")
+    subprocess.run([sys.executable, "-c", code], check=True, stdout=subprocess.DEVNULL,
+                   stderr=subprocess.DEVNULL)
+    return json.loads(out.read_text())
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--keep", type=Path, help="write the simulated files here (kept)")
@@ -174,12 +188,12 @@ def main() -> None:
             "3-dof robot (jointid fit --robot)": ["fit", "--robot", str(robot),
                                                   *map(str, arm), "--json", str(d / "r.json")],
         }
-        for name, argv in cases.items():
-            s = walk(argv)
-            sys.stdout.flush()
-            print(f"{name}: {s['stays']} stays in {s['files']} files, {s['returns']} returns")
-            for (a, b), k in s["hops"]:
-                print(f"    {k:4d}  {a} -> {b}")
+        for k, (name, argv) in enumerate(cases.items()):
+            s = _walk_in_child(argv, d / f"walk{k}.json")
+            print(f"{name}: {s['stays']} stays in {s['files']} files, {s['returns']} returns",
+                  flush=True)
+            for a, b, n in s["hops"]:
+                print(f"    {n:4d}  {a} -> {b}", flush=True)
 
 
 if __name__ == "__main__":
