@@ -4,13 +4,14 @@ the rescan builds only the columns that carry E = exp(-|dq|/q_s) for each q_s)."
 from __future__ import annotations
 
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from daq.protocol.control import ControllerGains
-from ident.fitting import _e_columns, _QsDesigns, fit_models, rescan_qs, with_qs
+from ident.fitting import _e_columns, _QsDesigns, _QsErrors, fit_models, rescan_qs, with_qs
 from ident.loaders import make_experiment
 from ident.models import IdentModel, LoadDependent, QuadrantCoulomb
 from sim_drivers.offline import simulate
@@ -87,3 +88,16 @@ def test_rescan_keeps_its_result_and_refits_with_the_chosen_qs(fitted):
     ref = IdentModel(lq, m.name).fit(dq_, eliminate=False)
     assert rs.model.rel_error_ == ref.rel_error_ == min(e for _, e in rs.scan)
     assert [q for q, _ in rs.scan] == sorted(q for q, _ in rs.scan)
+
+
+def test_scan_errors_equal_the_fits_bit_for_bit(fitted):
+    """The scan's error of each q_s (:class:`ident.fitting._QsErrors`, without the design
+    nor the statistics) is the full-model fit's float, with and without instruments."""
+    d, lib = fitted.designs["new"], fitted.models["new"].library
+    for des in (d, replace(d, Z=None)):
+        fast = _QsDesigns(des, lib)
+        errors = _QsErrors(fast, lib.names())
+        for q in (0.004, 0.03, 0.25):
+            l1, d1 = fast(q)
+            m = IdentModel(l1, "new").fit(d1, eliminate=False)
+            assert errors(q) == m.rel_error_, (q, des.Z is None)
