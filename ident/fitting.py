@@ -691,6 +691,7 @@ def fit_models(
     references: Sequence[Any] | np.ndarray | str | None = "auto",
     torque_delay: float | str = "auto",
     payload: bool | None = None,
+    like: FitReport | None = None,
 ) -> FitReport:
     """Identify the usual and/or the new model on all experiments in one LS (eq. 36, 40).
 
@@ -744,6 +745,12 @@ def fit_models(
     payload : bool or None
         Include the payload term (eq. 35, 42). None (default): when some run carries a
         payload (M_aw != 0).
+    like : FitReport, optional
+        A report of an earlier call on the same data with the same options but ``qs`` (the
+        demo's refit once q_s is adjusted): its settled preprocessing (cut-off, decimation,
+        trim, guard, dq_min) and its sign check's load model are taken as they are instead
+        of being found again (neither depends on q_s: the same values, one design build and
+        one fit fewer). Its ``sources`` must be this call's.
 
     Returns
     -------
@@ -803,17 +810,26 @@ def fit_models(
         m = IdentModel(lib, name).fit(sub, eliminate=elim, threshold_pct=threshold_pct)
         return m, sub
 
-    # settle the preprocessing once (cut-off, decimation, stiction threshold from the data)
-    full = combined(s, has_payload, ref)
-    pre.update(
-        cutoff_hz=full.cutoff_hz,
-        decimation=full.decimation,
-        trim=full.trim,
-        guard=full.guard,
-        dq_min=full.dq_min,
-        dq_min_rel=None,
-    )
-    if sign_check and "new" in models:
+    if like is not None:
+        if list(like.sources) != sources or like.revolute != s.revolute:
+            raise DataError("fit_models: like= is a report on other data "
+                            f"({', '.join(like.sources) or 'signals'})")
+        # the settled preprocessing and the sign check's load model (independent of q_s)
+        pre.update({k: v for k, v in like.settings.items() if k in pre or k == "load_model"})
+        notes += [n for n in like.notes if n.startswith("sign check skipped")]
+        full = combined(s, has_payload, ref)
+    else:
+        # settle the preprocessing once (cut-off, decimation, stiction threshold from the data)
+        full = combined(s, has_payload, ref)
+        pre.update(
+            cutoff_hz=full.cutoff_hz,
+            decimation=full.decimation,
+            trim=full.trim,
+            guard=full.guard,
+            dq_min=full.dq_min,
+            dq_min_rel=None,
+        )
+    if like is None and sign_check and "new" in models:
         # a first usual fit estimates tau_out; drop samples where sign(tau) != sign(tau_out)
         lib0 = usual_model(s.revolute, payload=has_payload)
         d0 = full

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from daq.protocol.control import ControllerGains
+from ident import DataError
 from ident.fitting import _e_columns, _QsDesigns, _QsErrors, fit_models, rescan_qs, with_qs
 from ident.loaders import make_experiment
 from ident.models import IdentModel, LoadDependent, QuadrantCoulomb
@@ -23,9 +24,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
-def fitted():
-    """The new model (with its ripple-free library) fitted with instruments on two payloads
-    of the quick example campaign, simulated offline."""
+def runs():
+    """Two payload runs of the quick example campaign, simulated offline, and their
+    reference positions."""
     with open(ROOT / "examples" / "campaign.toml", "rb") as f:
         campaign = Campaign.from_dict(tomllib.load(f), "examples/campaign.toml").quick()
     plan = plan_campaign(campaign)
@@ -37,9 +38,33 @@ def fitted():
                      payload_arm=p.arm_m, seed=3 + i)
         exps.append(make_experiment(f"payload{i}", r.t, r.q, r.tau_ref,
                                     payload_mass=p.mass_kg, payload_arm=p.arm_m))
-    rep = fit_models(exps, ("new",), qs=0.04, references=[plan.reference.q] * 2,
-                     table_iv=False, torque_delay=0.5)
-    return rep
+    return exps, [plan.reference.q] * 2
+
+
+@pytest.fixture(scope="module")
+def fitted(runs):
+    """The new model (with its ripple-free library) fitted with instruments on the runs."""
+    exps, refs = runs
+    return fit_models(exps, ("new",), qs=0.04, references=refs, table_iv=False,
+                      torque_delay=0.5)
+
+
+def test_refit_like_an_earlier_report_is_the_same_fit(runs, fitted):
+    """fit_models(like=report) (the demo's refit with the adjusted q_s) takes the settled
+    preprocessing and the sign check's load model from the report: the same fit as from
+    scratch; a report on other data is refused."""
+    exps, refs = runs
+    kw = dict(references=refs, table_iv=False, torque_delay=0.5)
+    a = fit_models(exps, ("usual", "new"), qs=0.031, **kw)
+    b = fit_models(exps, ("usual", "new"), qs=0.031, like=fitted, **kw)
+    assert "load_model" in fitted.settings  # the sign check ran
+    for name in ("usual", "new"):
+        assert a.models[name].coef_ == b.models[name].coef_
+        assert np.array_equal(a.designs[name].W, b.designs[name].W)
+        assert np.array_equal(a.designs[name].Z, b.designs[name].Z)
+    assert a.notes == b.notes and a.vmax == b.vmax
+    with pytest.raises(DataError, match="like="):
+        fit_models(exps[:1], ("new",), qs=0.031, like=fitted, **{**kw, "references": refs[:1]})
 
 
 def test_the_e_columns_are_the_odd_ones(fitted):
