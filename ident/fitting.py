@@ -22,6 +22,7 @@ it; splitting it would pass that state around between files. The q_s rescan's fa
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -350,6 +351,8 @@ class QsScan:
 
 #: Typical number of evaluations of the bounded search after the grid (for progress bars).
 QS_SEARCH_EVALS = 10
+#: Threads scoring the q_s grid of :func:`rescan_qs` (the VM has two cores).
+QS_WORKERS = 2
 
 
 def _scan(err: Any, grid: np.ndarray) -> None:
@@ -412,8 +415,12 @@ def rescan_qs(
         lq, dq_ = designs(q)
         return IdentModel(lq, model.name).fit(dq_, eliminate=False), dq_
 
+    grid = qs_grid(vmax, n_grid)
+    ahead: dict[float, Future] = {}
+
     def err(q: float) -> float:
-        e = quick(q)
+        f = ahead.pop(q, None)
+        e = f.result() if f is not None else quick(q)
         if e is None:  # a column would be dropped: the fit decides which
             found[q] = fit(q)
             e = found[q][0].rel_error_
@@ -422,7 +429,15 @@ def rescan_qs(
             progress(len(scan), n_grid + QS_SEARCH_EVALS, q, e)
         return e
 
-    _scan(err, qs_grid(vmax, n_grid))
+    # the grid's errors are independent: two at a time (the filters and the factorisations
+    # release the GIL), taken in grid order; the same floats as one at a time
+    with ThreadPoolExecutor(max_workers=QS_WORKERS) as pool:
+        ahead.update({float(q): pool.submit(quick, float(q)) for q in grid})
+        try:
+            _scan(err, grid)
+        finally:
+            for f in ahead.values():
+                f.cancel()
     scan.sort()
     best = min(scan, key=lambda x: x[1])[0]
     m, d = found[best] if best in found else fit(best)
