@@ -7,18 +7,17 @@ model (:mod:`ident.robot`) -> Table III per joint -> per-joint refinement of eac
 residual -> ``report.html``.
 
 The per-joint refinement is ident's single-joint refinement (:func:`ident.refine.refine`)
-applied to each joint of each n-dof fit (usual and paper),
-:func:`ident.robot.refine_joint.refine_joint`: joint j's measured torque on the fit's own
-rows (one experiment per payload run; as ``jointid fit --robot --refine``,
-:func:`ident.cli_robot.refine_robot`) is the torque of a single-joint design whose declared
-model is the n-dof prediction (times a gain ~1, taken as the load tau_out) plus the usual
-friction (F_C, F_V, tau_off, ~0), so its residual is the n-dof residual and sign(P), the
-load are not read from the residual itself; the refinement then looks for effects left in it
-(quadrant and load-dependent friction, Stribeck, position ripple, torque lag, generic bases,
-...). The other joints' positions and velocities are given to it as ``q<m>``, ``dq<m>`` (m:
-1-based index in the moving chain), so that an effect of another joint's state (a cable, a
-coupled bearing load) is found and named by that variable. Relative errors are ||rho_j|| /
-||tau_j||. No n-dof refinement exists yet.
+applied to each joint of each n-dof fit (usual and paper), :func:`ident.robot.refine_joint.
+refine_joint`: joint j's measured torque (one experiment per payload run, the samples the fit
+used) is the torque of a single-joint design whose declared model is the n-dof prediction
+(times a gain ~1, taken as the load tau_out) plus the usual friction (F_C, F_V, tau_off, ~0),
+so its residual is the n-dof residual and sign(P), the load are not read from the residual
+itself; the refinement then looks for effects left in it (quadrant and load-dependent
+friction, Stribeck, position ripple, torque lag, generic bases, ...). The other joints'
+positions and velocities are given to it as ``q<m>``, ``dq<m>`` (m: 1-based index in the
+moving chain), so that an effect of another joint's state (a cable, a coupled bearing load)
+is found and named by that variable. Relative errors are ||rho_j|| / ||tau_j||. No n-dof
+refinement exists yet.
 """
 
 from __future__ import annotations
@@ -112,20 +111,16 @@ def logged_condition_number(paths: list[Path], dyn: RobotDynamics, predicted: Qu
     return out
 
 
-def _refine_joint(fit: dict, est: Any, prediction: np.ndarray, j: int, revolute: bool,
-                  max_steps: int, progress: Any = None) -> Any:
-    """ident.refine on joint j of the n-dof fit ``est`` (module docstring) as
-    ``jointid fit --robot --refine`` does it (:func:`ident.cli_robot.refine_robot`): on the
-    fit's own rows (``keep``: the identification samples as the fit has them, stiction area,
-    guard and sign check left out as in the fit), ``prediction`` = ``est.predict`` on them,
-    the velocity bands from the kept rows' max |dq_j|, the raw log's cycle for the
-    zero-order hold; the other joints' q and dq given as ``q<m>``, ``dq<m>``
-    (:func:`ident.robot.refine_joint.refine_joint`)."""
-    sig, keep = fit["_identification"], fit["_keep"]
-    vmax = float(np.abs(sig.dq[keep[:, j], j]).max(initial=0.0)) or None
-    return refine_joint(sig, prediction, j, revolute=revolute, vmax=vmax,
-                        max_steps=max_steps, coulomb=joint_coulomb(est, j), keep=keep,
-                        cycle_s=fit["_cycle_s"], progress=progress)
+def _refine_joint(sig: Any, residual: np.ndarray, j: int, revolute: bool, vmax: float,
+                  dq_min: float, max_steps: int, coulomb: float | None = None,
+                  progress: Any = None) -> Any:
+    """ident.refine on joint j of the n-dof fit whose residual is ``residual`` (module
+    docstring), the other joints' q and dq given as ``q<m>``, ``dq<m>``
+    (:func:`ident.robot.refine_joint.refine_joint`); the samples the n-dof fit used
+    (|dq_j| > dq_min) only."""
+    return refine_joint(sig, sig.tau - residual, j, revolute=revolute, vmax=vmax,
+                        dq_min=dq_min, max_steps=max_steps, coulomb=coulomb,
+                        progress=progress)
 
 
 def run_robot_demo(out_dir: str | Path, *, robot: str = "3", max_steps: int = 2,
@@ -217,14 +212,17 @@ def _run_robot_demo(hb: Heartbeat, out_dir: str | Path, *, robot: str, max_steps
     runs = load_robot_runs(list(logs), rob.moving)
     fit = fit_robot(rob, runs, models=("usual", "paper"))
     text = format_report(fit)
-    # the figures read the states chain's samples (decimated by floor(0.4 f_s / cut-off));
-    # the refinement reads the fit's own rows, as jointid fit --robot --refine does
+    # the refinement and the figures read the states chain's samples (decimated by
+    # floor(0.4 f_s / cut-off)): on the fit's own rows (the single-joint chain, decimated by
+    # round(f_s / cut-off)) the usual model's j3 refinement of the test campaign takes a slow
+    # drift for a q2 dependence (tests/test_demo_robot.py)
     settings = resolved_settings(runs, None)
     pre = RobotPreprocessing(settings["cutoff_hz"], int(settings["decimation"]),
                              int(settings["trim"]))
     sig = preprocess_runs(runs, rob.moving, pre)
     ests = fit["_estimators"]
     vmax = [j.limits.max_velocity for j in campaign.joints]
+    dq_min = float(fit["preprocessing"]["dq_min"])
     # Table III on the samples the fit used (joint j's torque at |dq_j| <= dq_min left out)
     t3 = table_iii(ests, fit["_signals"][0], vmax=vmax)
     timing["fit_s"] = time.perf_counter() - t0
@@ -237,7 +235,7 @@ def _run_robot_demo(hb: Heartbeat, out_dir: str | Path, *, robot: str, max_steps
     refinements: dict[str, dict[str, Any]] = {}
     n_ref, i_ref = len(ests) * len(rob.moving), 0
     for model, est in ests.items():
-        prediction = est.predict(fit["_identification"])
+        residual = sig.tau - est.predict(sig)
         per: dict[str, Any] = {}
         for j, name in enumerate(rob.moving):
             i_ref += 1
@@ -249,9 +247,9 @@ def _run_robot_demo(hb: Heartbeat, out_dir: str | Path, *, robot: str, max_steps
 
             t_j = time.perf_counter()
             try:
-                per[name] = _refine_joint(fit, est, prediction, j,
-                                          campaign.joints[j].kind == "revolute", max_steps,
-                                          progress=step)
+                per[name] = _refine_joint(
+                    sig, residual, j, campaign.joints[j].kind == "revolute", vmax[j], dq_min,
+                    max_steps, joint_coulomb(est, j), progress=step)
             except IdentError as exc:
                 per[name] = str(exc)
             r = per[name]
@@ -363,9 +361,8 @@ def _write_report(out: Path, campaign: RobotCampaign, rob: Any, assessment: Any,
         sections.append(sec)
     ref = Section("Refinement of each joint's residual").para(
         "ident's single-joint refinement (ident.refine) on each joint of each n-dof fit "
-        "(the fit's own rows, as jointid fit --robot --refine): the declared model is the "
-        "n-dof prediction (times a gain ~1, also the load prediction) plus the usual "
-        "friction (F_C, F_V, tau_off) refitted "
+        "(the samples the fit used): the declared model is the n-dof prediction (times a gain "
+        "~1, also the load prediction) plus the usual friction (F_C, F_V, tau_off) refitted "
         "on the joint's measured torque, so the residual is the n-dof residual; an accepted "
         "step names an effect still in it. Relative errors are ||rho_j|| / ||tau_j||. The "
         "other joints' positions and velocities (q<m>, dq<m>, m = joint number in the moving "
