@@ -13,7 +13,8 @@ single-joint demo). ``--before DIR``: DIR holds an older tree of the code (e.g.
 ``git archive d4a25f9 | tar -x -C DIR``); each demo is also run with ``PYTHONPATH=DIR``, the
 old run just before the new one, and a last table gives both and the ratios old / new of the
 wall time, the CPU time and the refinement stage's time (the ``[4/4] refinement`` or
-``[5/5] refined`` line), from the same run.
+``[5/5] refined`` line: its wall time as printed, and the CPU time the process spent between
+the previous stage line and it, read from ``/proc``), from the same run.
 """
 
 from __future__ import annotations
@@ -61,19 +62,35 @@ def run_demo(args: list[str], out: Path, pythonpath: Path | None = None) -> dict
     err_lines: list[str] = []
     last = t0
     longest = 0.0
+    cpu_at = 0.0
+    stage_cpu: dict[str, float] = {}
     assert proc.stderr is not None
     for line in proc.stderr:  # stderr is line-buffered progress: time the gaps
         now = time.perf_counter()
         longest = max(longest, now - last)
         last = now
         err_lines.append(line.rstrip("\n"))
+        if STAGE.match(err_lines[-1]):  # the CPU the process spent since the previous stage
+            c = _proc_cpu_s(proc.pid)
+            stage_cpu[err_lines[-1]] = c - cpu_at
+            cpu_at = c
     stdout = proc.stdout.read() if proc.stdout is not None else ""
     rc = proc.wait()
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     return {"rc": rc, "wall_s": wall, "cpu_s": cpu, "stdout": stdout, "stderr": err_lines,
+            "stage_cpu_s": stage_cpu,
             "load_before": load0, "load_after": os.getloadavg(), "longest_silence_s": longest}
+
+
+def _proc_cpu_s(pid: int) -> float:
+    """User + system CPU time [s] of a running process so far (Linux /proc; NaN elsewhere)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return float("nan")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -115,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
             for line in r["stderr"]:
                 m = STAGE.match(line)
                 if m:
-                    print(f"  {line}")
+                    print(f"  {line}  [{r['stage_cpu_s'].get(line, float('nan')):.1f} s CPU]")
             if r["rc"] != 0:
                 failed += 1
                 print("\n".join(r["stderr"][-20:]))
@@ -124,24 +141,27 @@ def main(argv: list[str] | None = None) -> int:
         if pairs:
             print(f"\nbefore ({a.before}) / now, each pair run one after the other")
             print(f"{'demo':<8} {'wall before':>11} {'now':>7} {'ratio':>6}   {'CPU before':>10} "
-                  f"{'now':>7} {'ratio':>6}   {'refinement before':>17} {'now':>7} {'ratio':>6}")
+                  f"{'now':>7} {'ratio':>6}   {'refinement before':>17} {'now':>7} {'ratio':>6}"
+                  f"   {'its CPU before':>14} {'now':>7} {'ratio':>6}")
             for name, b, n in pairs:
-                rb, rn = _refine_s(b), _refine_s(n)
+                (rb, cb), (rn, cn) = _refine_s(b), _refine_s(n)
                 print(f"{name:<8} {b['wall_s']:>10.1f}s {n['wall_s']:>6.1f}s "
                       f"{b['wall_s'] / n['wall_s']:>6.2f}   {b['cpu_s']:>9.1f}s "
                       f"{n['cpu_s']:>6.1f}s "
                       f"{b['cpu_s'] / n['cpu_s']:>6.2f}   {rb:>16.1f}s {rn:>6.1f}s "
-                      f"{rb / rn if rn > 0 else float('nan'):>6.2f}")
+                      f"{rb / rn if rn > 0 else float('nan'):>6.2f}   {cb:>13.1f}s {cn:>6.1f}s "
+                      f"{cb / cn if cn > 0 else float('nan'):>6.2f}")
     return 1 if failed else 0
 
 
-def _refine_s(r: dict) -> float:
-    """The refinement stage's time [s] a demo printed (NaN if none)."""
+def _refine_s(r: dict) -> tuple[float, float]:
+    """The refinement stage's wall time [s] the demo printed and the CPU time [s] the
+    process spent on it (NaN if none)."""
     for line in r["stderr"]:
         m = REFINE_STAGE.match(line)
         if m:
-            return float(m.group(1))
-    return float("nan")
+            return float(m.group(1)), r["stage_cpu_s"].get(line, float("nan"))
+    return float("nan"), float("nan")
 
 
 if __name__ == "__main__":
