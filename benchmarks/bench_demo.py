@@ -29,6 +29,8 @@ import tempfile
 import time
 from pathlib import Path
 
+#: this tree
+ROOT = Path(__file__).resolve().parents[1]
 #: name -> jointid demo arguments
 DEMOS = {
     "quick": ["demo", "--quick"],
@@ -54,11 +56,13 @@ def run_demo(args: list[str], out: Path, pythonpath: Path | None = None) -> dict
     env = dict(os.environ)
     if pythonpath is not None:
         env["PYTHONPATH"] = str(pythonpath)
+    # python -c puts the working directory first on sys.path: run in the tree being timed
+    cwd = pythonpath if pythonpath is not None else ROOT
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     load0 = os.getloadavg()
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=env)
+                            env=env, cwd=cwd)
     err_lines: list[str] = []
     last = t0
     longest = 0.0
