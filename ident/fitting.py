@@ -22,6 +22,7 @@ it; splitting it would pass that state around between files. The q_s rescan's fa
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -41,7 +42,8 @@ from .models import (
     power_split,
     usual_model,
 )
-from .preprocess import Design, build_design, default_torque_delay
+from .preprocess import Design, _decimate_rows, build_design, default_torque_delay
+from .refine_lsq import quick_residual
 from .results import (
     band_errors,
     format_error_table,
@@ -250,6 +252,81 @@ class _QsDesigns:
         return Library(*terms), out
 
 
+class _QsErrors:
+    """The relative error of the full-model fit (no elimination) for one q_s, the same float
+    as ``IdentModel(lq).fit(designs(q_s), eliminate=False).rel_error_`` of a
+    :class:`_QsDesigns` (``tests/test_qs_rescan.py`` checks it), without building the
+    design nor the fit's statistics: each block's E columns are filtered and decimated as
+    :meth:`~ident.preprocess.Design.with_term` does (an instrument row only where it
+    differs from the regressor's), put beside the fixed columns in the model's order, and
+    :func:`ident.refine_lsq.quick_residual` gives the residual. None when that fit would
+    drop a column (the caller then fits as usual)."""
+
+    def __init__(self, designs: _QsDesigns, names: Sequence[str]) -> None:
+        self.designs = designs
+        fixed = designs.fixed
+        self.Y = fixed.Y
+        self.names = list(names)
+        # where each model column comes from: a fixed column, or (term, E column)
+        e_names = {}
+        for i, t in enumerate(designs.quad):
+            odd = _e_columns(t)[1]
+            tn = t.names()
+            for k, j in enumerate(odd):
+                e_names[tn[j]] = (i, k)
+        self.source = []
+        for n in self.names:
+            if n in e_names:
+                self.source.append(("e", *e_names[n]))
+            elif n in fixed.names:
+                self.source.append(("f", fixed.names.index(n), 0))
+            else:
+                raise DataError(f"rescan_qs: no column for parameter {n}")
+        self.zmemo: list[dict] = [{} for _ in designs.quad]
+
+    def __call__(self, qs: float) -> float | None:
+        d = self.designs
+        fixed = d.fixed
+        new = [LoadDependent(t.inner, qs, t.load) if isinstance(t, LoadDependent)
+               else QuadrantCoulomb(qs, t.load) for t in d.quad]
+        wcols: list[list[np.ndarray]] = [[] for _ in new]
+        zcols: list[list[np.ndarray]] = [[] for _ in new]
+        with_z = fixed.Z is not None
+        for b in fixed._blocks:
+            for i, t in enumerate(new):
+                term = _EColumns(t, d.memo[i])
+                wc = term.columns(b.full)
+                rows, _ = _decimate_rows(np.ascontiguousarray(wc.T), fixed.decimation)
+                wcols[i].append(rows[:, b.mask].T)
+                if with_z and b.zfull is not None and b.zdec is not None:
+                    zc = _EColumns(t, self.zmemo[i]).columns(b.zfull)
+                    zrows = rows.copy()
+                    diff = [(k, np.ascontiguousarray(zc[:, k])) for k in range(zc.shape[1])
+                            if not np.array_equal(zc[:, k], wc[:, k])]
+                    if diff:
+                        zd, _ = _decimate_rows(np.stack([r for _, r in diff]),
+                                               fixed.decimation)
+                        for j, (k, _) in enumerate(diff):
+                            zrows[k] = zd[j]
+                    zcols[i].append(zrows[:, b.mask].T)
+        E = [np.concatenate(c, axis=0) for c in wcols]
+        EZ = [np.concatenate(c, axis=0) for c in zcols] if with_z else None
+        n, p = self.Y.shape[0], len(self.names)
+        W = np.empty((n, p))
+        Z = np.empty((n, p)) if with_z else None
+        for j, (kind, a, k) in enumerate(self.source):
+            if kind == "f":
+                W[:, j] = fixed.W[:, a]
+                if Z is not None:
+                    Z[:, j] = fixed.Z[:, a]
+            else:
+                W[:, j] = E[a][:, k]
+                if Z is not None and EZ is not None:
+                    Z[:, j] = EZ[a][:, k]
+        out = quick_residual(W, self.Y, Z)
+        return None if out is None else out[2]
+
+
 @dataclass
 class QsScan:
     """Result of :func:`rescan_qs`.
@@ -274,6 +351,8 @@ class QsScan:
 
 #: Typical number of evaluations of the bounded search after the grid (for progress bars).
 QS_SEARCH_EVALS = 10
+#: Threads scoring the q_s grid of :func:`rescan_qs` (the VM has two cores).
+QS_WORKERS = 2
 
 
 def _scan(err: Any, grid: np.ndarray) -> None:
@@ -330,20 +409,38 @@ def rescan_qs(
     found: dict[float, tuple[IdentModel, Design]] = {}
     scan: list[tuple[float, float]] = []
     designs = _QsDesigns(design, lib)  # = with_qs(design, lib, q), faster
+    quick = _QsErrors(designs, lib.names())  # the fit's error only, the same float
+
+    def fit(q: float) -> tuple[IdentModel, Design]:
+        lq, dq_ = designs(q)
+        return IdentModel(lq, model.name).fit(dq_, eliminate=False), dq_
+
+    grid = qs_grid(vmax, n_grid)
+    ahead: dict[float, Future] = {}
 
     def err(q: float) -> float:
-        lq, dq_ = designs(q)
-        m = IdentModel(lq, model.name).fit(dq_, eliminate=False)
-        found[q] = (m, dq_)
-        scan.append((q, m.rel_error_))
+        f = ahead.pop(q, None)
+        e = f.result() if f is not None else quick(q)
+        if e is None:  # a column would be dropped: the fit decides which
+            found[q] = fit(q)
+            e = found[q][0].rel_error_
+        scan.append((q, e))
         if progress is not None:
-            progress(len(scan), n_grid + QS_SEARCH_EVALS, q, m.rel_error_)
-        return m.rel_error_
+            progress(len(scan), n_grid + QS_SEARCH_EVALS, q, e)
+        return e
 
-    _scan(err, qs_grid(vmax, n_grid))
+    # the grid's errors are independent: two at a time (the filters and the factorisations
+    # release the GIL), taken in grid order; the same floats as one at a time
+    with ThreadPoolExecutor(max_workers=QS_WORKERS) as pool:
+        ahead.update({float(q): pool.submit(quick, float(q)) for q in grid})
+        try:
+            _scan(err, grid)
+        finally:
+            for f in ahead.values():
+                f.cancel()
     scan.sort()
     best = min(scan, key=lambda x: x[1])[0]
-    m, d = found[best]
+    m, d = found[best] if best in found else fit(best)
     return QsScan(qs=best, model=m, design=d, scan=scan)
 
 
@@ -609,6 +706,7 @@ def fit_models(
     references: Sequence[Any] | np.ndarray | str | None = "auto",
     torque_delay: float | str = "auto",
     payload: bool | None = None,
+    like: FitReport | None = None,
 ) -> FitReport:
     """Identify the usual and/or the new model on all experiments in one LS (eq. 36, 40).
 
@@ -662,6 +760,12 @@ def fit_models(
     payload : bool or None
         Include the payload term (eq. 35, 42). None (default): when some run carries a
         payload (M_aw != 0).
+    like : FitReport, optional
+        A report of an earlier call on the same data with the same options but ``qs`` (the
+        demo's refit once q_s is adjusted): its settled preprocessing (cut-off, decimation,
+        trim, guard, dq_min) and its sign check's load model are taken as they are instead
+        of being found again (neither depends on q_s: the same values, one design build and
+        one fit fewer). Its ``sources`` must be this call's.
 
     Returns
     -------
@@ -721,17 +825,26 @@ def fit_models(
         m = IdentModel(lib, name).fit(sub, eliminate=elim, threshold_pct=threshold_pct)
         return m, sub
 
-    # settle the preprocessing once (cut-off, decimation, stiction threshold from the data)
-    full = combined(s, has_payload, ref)
-    pre.update(
-        cutoff_hz=full.cutoff_hz,
-        decimation=full.decimation,
-        trim=full.trim,
-        guard=full.guard,
-        dq_min=full.dq_min,
-        dq_min_rel=None,
-    )
-    if sign_check and "new" in models:
+    if like is not None:
+        if list(like.sources) != sources or like.revolute != s.revolute:
+            raise DataError("fit_models: like= is a report on other data "
+                            f"({', '.join(like.sources) or 'signals'})")
+        # the settled preprocessing and the sign check's load model (independent of q_s)
+        pre.update({k: v for k, v in like.settings.items() if k in pre or k == "load_model"})
+        notes += [n for n in like.notes if n.startswith("sign check skipped")]
+        full = combined(s, has_payload, ref)
+    else:
+        # settle the preprocessing once (cut-off, decimation, stiction threshold from the data)
+        full = combined(s, has_payload, ref)
+        pre.update(
+            cutoff_hz=full.cutoff_hz,
+            decimation=full.decimation,
+            trim=full.trim,
+            guard=full.guard,
+            dq_min=full.dq_min,
+            dq_min_rel=None,
+        )
+    if like is None and sign_check and "new" in models:
         # a first usual fit estimates tau_out; drop samples where sign(tau) != sign(tau_out)
         lib0 = usual_model(s.revolute, payload=has_payload)
         d0 = full

@@ -237,9 +237,31 @@ def _decimate_rows(x: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
     for f in _factors(r):
         sos = _antialias(f).copy()
         padlen = min(3 * 2 * len(sos), y.shape[-1] - 1)
-        y = scipy.signal.sosfiltfilt(sos, y, axis=-1, padlen=padlen)
+        y = _sosfiltfilt(sos, _antialias_zi(f), y, padlen)
         y = np.ascontiguousarray(y[:, (y.shape[-1] - 1) % f::f])
     return y, index
+
+
+@functools.lru_cache(maxsize=32)
+def _antialias_zi(f: int) -> np.ndarray:
+    """``scipy.signal.sosfilt_zi`` of :func:`_antialias` (f), shape (sections, 2)."""
+    zi = scipy.signal.sosfilt_zi(_antialias(f))
+    zi.flags.writeable = False
+    return zi
+
+
+def _sosfiltfilt(sos: np.ndarray, zi: np.ndarray, x: np.ndarray, padlen: int) -> np.ndarray:
+    """``scipy.signal.sosfiltfilt(sos, x, axis=-1, padlen=padlen)`` (odd padding) of a 2-D
+    ``x`` with the steady-state ``zi = sosfilt_zi(sos)`` given: the same operations, so the
+    same floats, without computing ``zi`` again at every call (a fifth of the time on the
+    columns of one q_s of a scan)."""
+    n = sos.shape[0]
+    ext = scipy.signal._arraytools.odd_ext(x, padlen, axis=-1) if padlen > 0 else x
+    z = zi.reshape(n, 1, 2)
+    y, _ = scipy.signal.sosfilt(sos, ext, axis=-1, zi=z * ext[:, :1])
+    y, _ = scipy.signal.sosfilt(sos, y[:, ::-1], axis=-1, zi=z * y[:, -1:])
+    y = y[:, ::-1]
+    return y[:, padlen:-padlen] if padlen > 0 else y
 
 
 def choose_cutoff(q: np.ndarray, dt: float, min_fraction: float = 0.05,

@@ -62,6 +62,7 @@ from .effects import (
 )
 from .models import IdentModel
 from .refine_library import LibraryStep, library_step
+from .refine_lsq import quick_residual
 from .refine_result import Refinement, Rejected, Step, _pct
 from .signals import Signals
 from .terms import Library, Term
@@ -202,6 +203,36 @@ def _bands(model: IdentModel, design: Design, vmax: float | None) -> dict[str, f
 
 def _fit(lib: Library, design: Design, name: str) -> IdentModel:
     return IdentModel(lib, name).fit(design, eliminate=False, drop_unidentifiable=True)
+
+
+class _Refit:
+    """The exact refit of a candidate (:func:`_fit` of ``lib`` on ``design``), its residual
+    first: ``residual_``, ``rel_error_`` and ``names_`` from
+    :func:`ident.refine_lsq.quick_residual` (the same floats as the fit's), the fitted
+    :class:`~ident.models.IdentModel` by :meth:`model` when a test needs more (most
+    rejected candidates fail the F test on the residual alone). When the fit would drop a
+    column, the model is fitted at once."""
+
+    def __init__(self, lib: Library, design: Design, name: str) -> None:
+        self.lib, self.design, self.name = lib, design, name
+        self._model: IdentModel | None = None
+        names = lib.names()
+        missing = [n for n in names if n not in design.names]
+        quick = None
+        if not missing:
+            idx = [design.names.index(n) for n in names]
+            quick = quick_residual(design.W[:, idx], design.Y,
+                                   None if design.Z is None else design.Z[:, idx])
+        if quick is None:
+            m = self.model()
+            self.residual_, self.rel_error_, self.names_ = m.residual_, m.rel_error_, m.names_
+        else:
+            self.residual_, self.rel_error_, self.names_ = quick[1], quick[2], tuple(names)
+
+    def model(self) -> IdentModel:
+        if self._model is None:
+            self._model = _fit(self.lib, self.design, self.name)
+        return self._model
 
 
 def _library_variables(lstep: LibraryStep) -> tuple[str, ...]:
@@ -468,12 +499,13 @@ def refine(
         )
 
         def exact_refits(order=order, lib=lib, cur_design=cur_design, k=k):
-            """Exact refits (columns filtered and decimated like the others), on demand."""
+            """Exact refits (columns filtered and decimated like the others), on demand: the
+            residual first (:class:`_Refit`), the fit's statistics when a test needs them."""
             for c in order:
                 e = c.effect
                 try:
                     d1 = cur_design.with_term(e, states_only=True)
-                    m1 = _fit(Library(*lib.terms(), e), d1, name)
+                    m1 = _Refit(Library(*lib.terms(), e), d1, name)
                 except DataError as exc:
                     rejected.append(Rejected(k, e.effect, e.variable, f"not fitted: {exc}",
                                              math.nan))
@@ -488,7 +520,7 @@ def refine(
             e = c.effect
             if pending and not c.generic:
                 break
-            kk = sum(1 for n in e.names() if n in m1.coef_) + c.n_hyper
+            kk = sum(1 for n in e.names() if n in m1.names_) + c.n_hyper
             F, pval = _f_test(
                 rss0,
                 float(m1.residual_ @ m1.residual_),
@@ -501,6 +533,12 @@ def refine(
             if pval >= alpha / n_cand:
                 reason = f"F test not significant (F={F:.3g}, p={pval:.2e})"
             else:
+                try:
+                    m1 = m1.model()
+                except DataError as exc:  # pragma: no cover - the residual's fit succeeded
+                    rejected.append(Rejected(k, e.effect, e.variable, f"not fitted: {exc}",
+                                             math.nan))
+                    continue
                 after_try = _bands(m1, d1, vmax)
                 overall = 1.0 - m1.rel_error_ / cur.rel_error_ if cur.rel_error_ > 0 else 0.0
                 best = _best_band_gain(before_bands, after_try, cur.rel_error_, m1.rel_error_)

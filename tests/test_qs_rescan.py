@@ -4,13 +4,15 @@ the rescan builds only the columns that carry E = exp(-|dq|/q_s) for each q_s)."
 from __future__ import annotations
 
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from daq.protocol.control import ControllerGains
-from ident.fitting import _e_columns, _QsDesigns, fit_models, rescan_qs, with_qs
+from ident import DataError
+from ident.fitting import _e_columns, _QsDesigns, _QsErrors, fit_models, rescan_qs, with_qs
 from ident.loaders import make_experiment
 from ident.models import IdentModel, LoadDependent, QuadrantCoulomb
 from sim_drivers.offline import simulate
@@ -22,9 +24,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
-def fitted():
-    """The new model (with its ripple-free library) fitted with instruments on two payloads
-    of the quick example campaign, simulated offline."""
+def runs():
+    """Two payload runs of the quick example campaign, simulated offline, and their
+    reference positions."""
     with open(ROOT / "examples" / "campaign.toml", "rb") as f:
         campaign = Campaign.from_dict(tomllib.load(f), "examples/campaign.toml").quick()
     plan = plan_campaign(campaign)
@@ -36,9 +38,33 @@ def fitted():
                      payload_arm=p.arm_m, seed=3 + i)
         exps.append(make_experiment(f"payload{i}", r.t, r.q, r.tau_ref,
                                     payload_mass=p.mass_kg, payload_arm=p.arm_m))
-    rep = fit_models(exps, ("new",), qs=0.04, references=[plan.reference.q] * 2,
-                     table_iv=False, torque_delay=0.5)
-    return rep
+    return exps, [plan.reference.q] * 2
+
+
+@pytest.fixture(scope="module")
+def fitted(runs):
+    """The new model (with its ripple-free library) fitted with instruments on the runs."""
+    exps, refs = runs
+    return fit_models(exps, ("new",), qs=0.04, references=refs, table_iv=False,
+                      torque_delay=0.5)
+
+
+def test_refit_like_an_earlier_report_is_the_same_fit(runs, fitted):
+    """fit_models(like=report) (the demo's refit with the adjusted q_s) takes the settled
+    preprocessing and the sign check's load model from the report: the same fit as from
+    scratch; a report on other data is refused."""
+    exps, refs = runs
+    kw = dict(references=refs, table_iv=False, torque_delay=0.5)
+    a = fit_models(exps, ("usual", "new"), qs=0.031, **kw)
+    b = fit_models(exps, ("usual", "new"), qs=0.031, like=fitted, **kw)
+    assert "load_model" in fitted.settings  # the sign check ran
+    for name in ("usual", "new"):
+        assert a.models[name].coef_ == b.models[name].coef_
+        assert np.array_equal(a.designs[name].W, b.designs[name].W)
+        assert np.array_equal(a.designs[name].Z, b.designs[name].Z)
+    assert a.notes == b.notes and a.vmax == b.vmax
+    with pytest.raises(DataError, match="like="):
+        fit_models(exps[:1], ("new",), qs=0.031, like=fitted, **{**kw, "references": refs[:1]})
 
 
 def test_the_e_columns_are_the_odd_ones(fitted):
@@ -87,3 +113,16 @@ def test_rescan_keeps_its_result_and_refits_with_the_chosen_qs(fitted):
     ref = IdentModel(lq, m.name).fit(dq_, eliminate=False)
     assert rs.model.rel_error_ == ref.rel_error_ == min(e for _, e in rs.scan)
     assert [q for q, _ in rs.scan] == sorted(q for q, _ in rs.scan)
+
+
+def test_scan_errors_equal_the_fits_bit_for_bit(fitted):
+    """The scan's error of each q_s (:class:`ident.fitting._QsErrors`, without the design
+    nor the statistics) is the full-model fit's float, with and without instruments."""
+    d, lib = fitted.designs["new"], fitted.models["new"].library
+    for des in (d, replace(d, Z=None)):
+        fast = _QsDesigns(des, lib)
+        errors = _QsErrors(fast, lib.names())
+        for q in (0.004, 0.03, 0.25):
+            l1, d1 = fast(q)
+            m = IdentModel(l1, "new").fit(d1, eliminate=False)
+            assert errors(q) == m.rel_error_, (q, des.Z is None)

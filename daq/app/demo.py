@@ -162,7 +162,7 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
     if abs(rs.qs - qs0) > 0.01 * qs0:
         _say(stream, f"      q_s adjusted with the refined model: {qs0:g} -> {rs.qs:.4g} rad/s")
         hb.status(f"fitting both models again with q_s = {rs.qs:.4g} rad/s")
-        report = fit_models(exps, ("usual", "new"), qs=rs.qs)
+        report = fit_models(exps, ("usual", "new"), qs=rs.qs, like=report)
         ref = refine_new(report)
     fit = report.to_json()
     fit["qs_a_priori"] = qs0
