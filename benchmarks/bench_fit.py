@@ -2,7 +2,7 @@
 
     python benchmarks/bench_fit.py [--sizes 1e4 1e5 1e6] [--repeat 3]
 
-Synthetic data: three payload runs of a revolute joint whose torque follows the new model
+Synthetic data: three payload runs of a revolute joint whose torque follows the paper model
 (eq. 30/34) exactly, plus noise, at 1 kHz. Each size is timed ``--repeat`` times in this
 process (median reported); the peak memory is tracemalloc's peak of numpy allocations
 during one fit. The growth must be linear: the table prints time and memory per sample.
@@ -58,7 +58,7 @@ def synthetic(n_total: int, seed: int = 0, dt: float = 1e-3, qs: float = 0.03) -
 
 def one_fit(exps: list[Experiment]) -> float:
     t0 = time.perf_counter()
-    fit_models(exps, ("usual", "new"), qs=0.03, table_iv=False)
+    fit_models(exps, ("usual", "paper"), qs=0.03, table_iv=False)
     return time.perf_counter() - t0
 
 

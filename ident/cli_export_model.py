@@ -22,11 +22,12 @@ import numpy as np
 from trajectories.robot import Robot, load_robot
 
 from . import DataError
-from .cli_robot import FORMAT, fit_robot, robot_gains
+from .cli_robot import FORMAT, OLD_FORMATS, fit_robot, robot_gains
 from .report import write_json
 from .robot.consistent_fit import consistent_record, fit_consistent
 from .robot.export_model import export_model
 from .robot.loaders import RobotPreprocessing, load_robot_runs, parse_robot_mapping
+from .vocab import upgrade_record
 
 __all__ = ["register", "run", "consistent_from_record"]
 
@@ -60,7 +61,9 @@ def _read(path: Path) -> dict[str, Any]:
         rec = json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as e:
         raise DataError(f"{path}: not JSON ({e.msg}, line {e.lineno})") from None
-    if not isinstance(rec, dict) or rec.get("format") != FORMAT:
+    if isinstance(rec, dict) and rec.get("format") in OLD_FORMATS:
+        rec = upgrade_record(rec)  # older spellings ("qs", "new", "ols"): ident.vocab
+    elif not isinstance(rec, dict) or rec.get("format") != FORMAT:
         got = rec.get("format") if isinstance(rec, dict) else type(rec).__name__
         raise DataError(f"{path}: format {got!r}: expected {FORMAT!r} (jointid fit --robot "
                         "... --json)")
@@ -83,7 +86,7 @@ def consistent_from_record(path: Path, rec: dict[str, Any], robot: Robot, name: 
         settings = RobotPreprocessing(pre.get("cutoff_hz"), pre.get("decimation"),
                                       pre.get("trim"))
         fitted = tuple(n for n, r in rec["models"].items() if "error" not in r)
-        out = fit_robot(robot, runs, None, models=fitted, method=rec["method"], qs=rec["qs"],
+        out = fit_robot(robot, runs, None, models=fitted, method=rec["method"], qs=rec["q_s"],
                         dq_min=pre.get("dq_min"), preprocessing=settings,
                         known_rotor_inertia=bool(rec.get("known_rotor_inertia", False)),
                         chain=pre.get("chain", "columns"), payload=rec.get("payload"),

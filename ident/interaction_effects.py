@@ -24,6 +24,8 @@ import math
 
 import numpy as np
 
+from trajectories.friction import stribeck_exp
+
 from .effects import Effect, Prediction, amplitude_phase, model_quadrant
 from .interactions import reversal_distance
 from .signals import Signals
@@ -172,7 +174,7 @@ class LoadVelocityDryFriction(Effect):
 
     def columns(self, s: Signals) -> np.ndarray:
         c = model_quadrant(s, self.tau_out) * self.tau_out(s)
-        return np.column_stack((c, c * np.exp(-np.abs(s.dq) / self.qs)))
+        return np.column_stack((c, c * stribeck_exp(s.dq, self.qs)))
 
     def describe(self) -> str:
         return (f"load- and velocity-dependent dry friction (alpha_P + beta_P "

@@ -75,6 +75,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from trajectories.friction import stribeck_exp
+
 from .arm_params import ArmParams, Payload
 
 _TWO_PI = 2.0 * math.pi
@@ -150,7 +152,7 @@ def friction_torque(
     q = np.asarray(q, dtype=float)
     dq = np.asarray(dq, dtype=float)
     tau_out = np.asarray(tau_out, dtype=float)
-    ex = np.exp(-np.abs(dq) / f.q_s)
+    ex = stribeck_exp(dq, f.q_s)
     p = np.sign(tau_out * dq)
     pp, pm = 0.5 * (1.0 + p), 0.5 * (1.0 - p)
     s = np.sign(dq)

@@ -75,6 +75,8 @@ from typing import Any
 
 import numpy as np
 
+from trajectories.friction import stribeck_exp
+
 from .effects import Inputs, Knobs
 from .effects import registry as effect_registry
 from .plant_config import G, PlantParams
@@ -191,7 +193,7 @@ def inverse_torque(
     q = np.asarray(q, dtype=float)
     dq = np.asarray(dq, dtype=float)
     tau_out = output_torque(params, q, ddq, payload_mass, payload_arm)
-    ex = np.exp(-np.abs(dq) / params.joint.q_s)
+    ex = stribeck_exp(dq, params.joint.q_s)
     p = np.sign(tau_out * dq)
     pp = 0.5 * (1.0 + p)
     pm = 0.5 * (1.0 - p)

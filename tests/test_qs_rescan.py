@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="module")
 def fitted():
-    """The new model (with its ripple-free library) fitted with instruments on two payloads
+    """The paper model (with its ripple-free library) fitted with instruments on two payloads
     of the quick example campaign, simulated offline."""
     with open(ROOT / "examples" / "campaign.toml", "rb") as f:
         campaign = Campaign.from_dict(tomllib.load(f), "examples/campaign.toml").quick()
@@ -36,15 +36,15 @@ def fitted():
                      payload_arm=p.arm_m, seed=3 + i)
         exps.append(make_experiment(f"payload{i}", r.t, r.q, r.tau_ref,
                                     payload_mass=p.mass_kg, payload_arm=p.arm_m))
-    rep = fit_models(exps, ("new",), qs=0.04, references=[plan.reference.q] * 2,
+    rep = fit_models(exps, ("paper",), qs=0.04, references=[plan.reference.q] * 2,
                      table_iv=False, torque_delay=0.5)
     return rep
 
 
 def test_the_e_columns_are_the_odd_ones(fitted):
-    d = fitted.designs["new"]
+    d = fitted.designs["paper"]
     s = d._blocks[0].full
-    quad = [t for t in fitted.models["new"].library.terms()
+    quad = [t for t in fitted.models["paper"].library.terms()
             if isinstance(t, LoadDependent | QuadrantCoulomb)]
     assert len(quad) == 2
     for t in quad:
@@ -63,7 +63,7 @@ def test_the_e_columns_are_the_odd_ones(fitted):
 
 
 def test_fast_designs_equal_with_qs_bit_for_bit(fitted):
-    d, lib = fitted.designs["new"], fitted.models["new"].library
+    d, lib = fitted.designs["paper"], fitted.models["paper"].library
     assert d.Z is not None  # instruments: their rows are rebuilt too
     fast = _QsDesigns(d, lib)
     for q in (0.004, 0.03, 0.25):
@@ -81,7 +81,7 @@ def test_fast_designs_equal_with_qs_bit_for_bit(fitted):
 
 
 def test_rescan_keeps_its_result_and_refits_with_the_chosen_qs(fitted):
-    d, m = fitted.designs["new"], fitted.models["new"]
+    d, m = fitted.designs["paper"], fitted.models["paper"]
     rs = rescan_qs(d, m, vmax=fitted.vmax)
     lq, dq_ = with_qs(d, m.library, rs.qs)
     ref = IdentModel(lq, m.name).fit(dq_, eliminate=False)

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from trajectories.friction import stribeck_exp
+
 from ..signals import Signals
 from ._base import Candidate, Context, Effect, Prediction, model_quadrant, register
 from ._scan import scan_log
@@ -39,7 +41,7 @@ class QuadrantLoadStribeck(Effect):
         return (self._n("beta_P"),)
 
     def columns(self, s: Signals) -> np.ndarray:
-        e = np.exp(-np.abs(s.dq) / self.qs)
+        e = stribeck_exp(s.dq, self.qs)
         return (model_quadrant(s, self.tau_out) * self.tau_out(s) * e)[:, None]
 
     def describe(self) -> str:

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from trajectories.friction import stribeck_exp
+
 from ..signals import Signals
 from ._base import Candidate, Context, Effect, _sign, register
 from ._scan import scan_log
@@ -36,7 +38,7 @@ class Stribeck(Effect):
         return (self._n("F_S"),)
 
     def columns(self, s: Signals) -> np.ndarray:
-        return (np.exp(-np.abs(s.dq) / self.qs) * _sign(s.dq))[:, None]
+        return (stribeck_exp(s.dq, self.qs) * _sign(s.dq))[:, None]
 
     def describe(self) -> str:
         return f"Stribeck F_S exp(-|dq|/{self.qs:.4g}) sign(dq)"
@@ -45,7 +47,7 @@ class Stribeck(Effect):
 @register("stribeck", order=60)
 def propose(ctx: Context) -> list[Candidate]:
     """F_S exp(-|q̇|/q_s) sign(q̇), q_s over vmax/1000..vmax/2; not when the model already
-    has an exponential dry friction (a Stribeck term or the new model's quadrant terms)."""
+    has an exponential dry friction (a Stribeck term or the paper model's quadrant terms)."""
     if ctx.vmax > 0 and not ctx.has("stribeck", "quadrant_coulomb"):
         e, g = scan_log(ctx.cols, Stribeck, ctx.vmax / 1000, ctx.vmax / 2)
         return [Candidate(e, g, 1)]
