@@ -197,13 +197,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--no-sign-check",
         action="store_true",
         help="keep the samples where sign(tau) differs from the sign of tau_out estimated by "
-        "a first usual fit (dropped by default when the new model is fitted: eq. 26 fails there)",
+        "a first usual fit (dropped by default when the paper model is fitted: eq. 26 fails there)",
     )
     g3 = p.add_argument_group("refinement")
     g3.add_argument(
         "--refine",
         action="store_true",
-        help="add the effects the residual points to (ident.refine), on the new model "
+        help="add the effects the residual points to (ident.refine), on the paper model "
         "(or the only model fitted)",
     )
     g3.add_argument("--max-steps", type=int, default=5, metavar="N", help="refinement steps")

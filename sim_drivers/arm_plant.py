@@ -353,7 +353,7 @@ class ArmPlant:
                 wf *= cf if cf > 0.0 else 0.0
             if vj > 0.0:
                 s = wf
-                ex = exp(-vj * qsi)
+                ex = exp(-vj * qsi)  # stribeck_exp inlined (scalar, per step)
                 r -= fvp * vj + fvv * vj * vj
             elif vj < 0.0:
                 s = -wf

@@ -284,7 +284,7 @@ class JointPlant:
         self._rng = random.Random(params.drive.seed if seed is None else seed)
         self._noise_std = params.drive.torque_noise_std_Nm
         f, d = params.friction, params.drive
-        self._qs_inv = 1.0 / params.joint.q_s
+        self._qs_inv = 1.0 / params.joint.q_s  # stribeck_exp inlined in the per-step loop
         self._am, self._bm, self._cm, self._dm = f.a_m, f.b_m, f.c_m, f.d_m
         self._ag, self._bg, self._cg, self._dg = f.a_g, f.b_g, f.c_g, f.d_g
         self._fv, self._off = f.F_V, f.tau_off
