@@ -469,6 +469,7 @@ def refine_robot(
     ests = out["_estimators"]
     if model is None:
         model = "usual" if "usual" in ests else next(iter(ests))
+    model = model_name(model)  # "new": deprecated "paper" (ident.vocab)
     if model not in ests:
         raise DataError(f"refine: model {model!r} was not fitted ({', '.join(ests) or 'none'})")
     est = ests[model]
