@@ -27,7 +27,7 @@ from .report import write_json
 from .robot.consistent_fit import consistent_record, fit_consistent
 from .robot.export_model import export_model
 from .robot.loaders import RobotPreprocessing, load_robot_runs, parse_robot_mapping
-from .vocab import upgrade_record
+from .vocab import model_name, upgrade_record
 
 __all__ = ["register", "run", "consistent_from_record"]
 
@@ -45,8 +45,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "(the consistent estimate and its cost); format: docs/model-export.md.")
     p.add_argument("fit", type=Path, metavar="FIT.json", help="record of jointid fit --robot")
     p.add_argument("--robot", help="robot file (default: the one FIT.json names)")
-    p.add_argument("--model", choices=("usual", "paper"),
-                   help="model to export (default: paper when identified, else usual)")
+    p.add_argument("--model", choices=("usual", "paper", "new"),
+                   help="model to export (default: paper when identified, else usual); 'new' "
+                   "is a deprecated alias of 'paper'")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="OUTDIR",
                    help="folder to write into (created)")
     p.add_argument("--map", action="append", metavar="KEY=PATH[,...]",
@@ -111,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``jointid export-model``; returns the exit code."""
     rec = _read(args.fit)
     fitted = [n for n, r in rec.get("models", {}).items() if "error" not in r]
-    name = args.model or ("paper" if "paper" in fitted else "usual")
+    name = model_name(args.model) if args.model else ("paper" if "paper" in fitted else "usual")
     if name not in fitted:
         raise DataError(f"{args.fit}: models.{name}: not identified in this record (it has "
                         f"{fitted or 'none'})")

@@ -242,7 +242,7 @@ def test_export_model_cli(tmp_path, capfd):
     assert old["models"].keys() == {"usual", "new"}
     j_old = tmp_path / "fit_old.json"
     j_old.write_text(json.dumps(dict(old, format="jointid-robot-fit/1")))
-    assert main(["export-model", str(j_old), "-o", str(tmp_path / "old")]) == 0
+    assert main(["export-model", str(j_old), "--model", "new", "-o", str(tmp_path / "old")]) == 0
     capfd.readouterr()
     for f in ("arm3.urdf", "friction.json"):
         assert (tmp_path / "old" / f).read_text() == (tmp_path / "paper" / f).read_text()
