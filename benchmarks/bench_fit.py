@@ -2,7 +2,7 @@
 
     python benchmarks/bench_fit.py [--sizes 1e4 1e5 1e6] [--repeat 3]
 
-Synthetic data: three payload runs of a revolute joint whose torque follows the new model
+Synthetic data: three payload runs of a revolute joint whose torque follows the paper model
 (eq. 30/34) exactly, plus noise, at 1 kHz. Each size is timed ``--repeat`` times in this
 process (median reported); the peak memory is tracemalloc's peak of numpy allocations
 during one fit. The growth must be linear: the table prints time and memory per sample.
@@ -23,12 +23,15 @@ import numpy as np  # noqa: E402
 from ident.fitting import fit_models  # noqa: E402
 from ident.loaders import Experiment  # noqa: E402
 from ident.signals import G  # noqa: E402
+from trajectories.friction import DEFAULT_Q_S, stribeck_exp  # noqa: E402
 
 TRUTH = dict(J=31.0, MX=21.1, MY=-0.8, a_m=1.06, b_m=0.2, c_m=21.0, d_m=8.0, a_g=0.93,
              b_g=0.2, c_g=16.0, d_g=6.0, F_V=40.0, tau_off=10.0)  # fmt: skip
 
 
-def synthetic(n_total: int, seed: int = 0, dt: float = 1e-3, qs: float = 0.03) -> list[Experiment]:
+def synthetic(
+    n_total: int, seed: int = 0, dt: float = 1e-3, qs: float = DEFAULT_Q_S
+) -> list[Experiment]:
     """Three runs (0, 3.4584, 6.97 kg at 1.277 m) totalling ``n_total`` samples."""
     rng = np.random.default_rng(seed)
     out = []
@@ -44,7 +47,7 @@ def synthetic(n_total: int, seed: int = 0, dt: float = 1e-3, qs: float = 0.03) -
         la = 1.277
         tau_out = (p["J"] * ddq + p["MX"] * G * np.cos(q) + p["MY"] * G * np.sin(q)
                    + m * la * (la * ddq + G * np.cos(q)))  # fmt: skip
-        e = np.exp(-np.abs(dq) / qs)
+        e = stribeck_exp(dq, qs)
         s = np.sign(tau_out * dq)
         pp, pm = 0.5 * (1 + s), 0.5 * (1 - s)
         tau = (pp * (p["a_m"] + p["b_m"] * e) * tau_out + pm * (p["a_g"] - p["b_g"] * e) * tau_out
@@ -58,7 +61,7 @@ def synthetic(n_total: int, seed: int = 0, dt: float = 1e-3, qs: float = 0.03) -
 
 def one_fit(exps: list[Experiment]) -> float:
     t0 = time.perf_counter()
-    fit_models(exps, ("usual", "new"), qs=0.03, table_iv=False)
+    fit_models(exps, ("usual", "paper"), qs=DEFAULT_Q_S, table_iv=False)
     return time.perf_counter() - t0
 
 

@@ -31,6 +31,7 @@ import numpy as np  # noqa: E402
 from ident.robot import estimate  # noqa: E402
 from ident.robot.estimate import RobotModel  # noqa: E402
 from ident.robot.signals import RobotPayloadData, RobotSignals  # noqa: E402
+from trajectories.friction import DEFAULT_Q_S, stribeck_exp  # noqa: E402
 from trajectories.robot import RobotRegressor, base_parameters, load_robot  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,7 +40,8 @@ PAYLOADS = (RobotPayloadData(), RobotPayloadData(5.0, [0, 0, 0.05]),
 FRICTION = dict(a_m=1.05, b_m=0.25, a_g=0.92, b_g=0.27)
 
 
-def synthetic(reg, base, n_total: int, seed: int = 0, qs: float = 0.03) -> list[RobotSignals]:
+def synthetic(reg, base, n_total: int, seed: int = 0,
+              qs: float = DEFAULT_Q_S) -> list[RobotSignals]:
     rng = np.random.default_rng(seed)
     k = len(reg.joints)
     chi = base.values(reg.standard_values(Ia=np.full(k, 0.5)))
@@ -61,7 +63,7 @@ def synthetic(reg, base, n_total: int, seed: int = 0, qs: float = 0.03) -> list[
             tau_out = base.reduce(reg.rigid(q[sl], dq[sl], ddq[sl])) @ chi
             if pay.mass:
                 tau_out += reg.payload_torque(q[sl], dq[sl], ddq[sl], pay)
-            ex = np.exp(-np.abs(dq[sl]) / qs)
+            ex = stribeck_exp(dq[sl], qs)
             p = np.sign(tau_out * dq[sl])
             f = FRICTION
             load = 0.03 * np.abs(tau_out).mean(0)  # friction ~ a few % of the load

@@ -7,7 +7,7 @@ residual points to (docs/refinement.md)::
     from ident.api import JointModel, load
 
     runs = load(["runs/rx130l_payload0.mcap", "runs/rx130l_payload1.mcap"])
-    est = JointModel(model="new", qs=0.03).fit(runs)
+    est = JointModel(model="paper", qs=0.03).fit(runs)
     est.params_["a_m"], est.params_std_["a_m"], est.rel_error_   # or coef_ / coef_names_
     tau_hat = est.predict(other_runs)          # W χ̂ on the preprocessed samples
     est.score(other_runs)                      # 1 - ||ρ|| / ||Y||, higher is better
@@ -36,12 +36,13 @@ import numpy as np
 
 from . import DataError
 from .api_robot import RobotFit
-from .fitting import DEFAULT_QS, FitReport, fit_models
+from .fitting import DEFAULT_Q_S, FitReport, fit_models
 from .loaders import Experiment, load_experiments
 from .models import IdentModel
 from .preprocess import Design
 from .refine import Refinement, refine
 from .signals import Signals
+from .vocab import method_name, model_name
 
 __all__ = ["JointModel", "RobotFit", "load"]
 
@@ -114,14 +115,14 @@ class JointModel:
 
     Parameters
     ----------
-    model : {"new", "usual", "both"}
+    model : {"paper", "usual", "both"}
         ``"usual"``: rigid body + payload + Coulomb + viscous + offset (eq. 38-39);
-        ``"new"``: load- and velocity-dependent dry friction (eq. 42-43); ``"both"``: fit
+        ``"paper"``: load- and velocity-dependent dry friction (eq. 42-43); ``"both"``: fit
         both on the same samples (Tables III-IV compare them), the fitted attributes then
-        describe the new model.
+        describe the paper model.
     qs : float or "scan"
         q_s of E_xp = exp(-|q̇|/q_s) (eq. 29) [rad/s or m/s], or ``"scan"`` to take the one
-        minimising the new model's residual (section III.D).
+        minimising the paper model's residual (section III.D).
     joint : {"revolute", "prismatic"} or None
         Joint kind; None: the data's.
     payload : bool or None
@@ -136,10 +137,14 @@ class JointModel:
         Samples with |τ| below it [N m] are left out.
     trim : int or None
         Samples cut at both ends of each experiment.
-    estimator : {"auto", "ols", "iv"}
+    estimator : {"auto", "ls", "wls", "iv"}
+        The names of ``RobotFit(method=...)`` and ``--method`` (:mod:`ident.vocab`).
         ``"iv"``: IDIM-IV with instruments from the reference trajectory (every experiment
-        must carry ``q_ref``); ``"ols"``: least squares (eq. 12); ``"auto"``: IV when every
-        experiment carries a reference, else OLS.
+        must carry ``q_ref``); ``"ls"``: least squares (eq. 12); ``"wls"``: the same as
+        ``"ls"`` for one joint (weighting each joint's rows by one constant changes neither
+        the estimate nor its eq. 15 deviations), reported as ``"ls"``; ``"auto"``: IV when
+        every experiment carries a reference, else LS. ``"ols"`` is a deprecated alias of
+        ``"ls"``.
     eliminate : bool
         Remove non-significant parameters (relative deviation above ``threshold``, eq. 16).
     threshold : float or None
@@ -178,7 +183,7 @@ class JointModel:
         q_s used [rad/s].
     vmax_ : float
         max |q̇| of the identification samples [rad/s].
-    estimator_ : {"ols", "iv"}
+    estimator_ : {"ls", "iv"}
         The estimator used.
     model_ : IdentModel
         The fitted model (library of terms, covariance ``cov_``, ...).
@@ -194,9 +199,9 @@ class JointModel:
 
     def __init__(
         self,
-        model: str = "new",
+        model: str = "paper",
         *,
-        qs: float | str = DEFAULT_QS,
+        qs: float | str = DEFAULT_Q_S,
         joint: str | None = None,
         payload: bool | None = None,
         cutoff: float | None = None,
@@ -278,18 +283,13 @@ class JointModel:
         return f"JointModel({args})"
 
     def _models(self) -> tuple[str, ...]:
-        if self.model == "both":
-            return ("usual", "new")
-        if self.model in ("usual", "new"):
-            return (self.model,)
-        raise DataError(f"model {self.model!r}: expected 'usual', 'new' or 'both'")
+        name = model_name(self.model, extra=("both",))  # "new": deprecated "paper"
+        return ("usual", "paper") if name == "both" else (name,)
 
     def _references(self) -> str | None:
-        if self.estimator in ("auto", "iv"):
-            return "auto"
-        if self.estimator == "ols":
-            return None
-        raise DataError(f"estimator {self.estimator!r}: expected 'auto', 'ols' or 'iv'")
+        # "ols": deprecated "ls"; "wls" of one joint is "ls" (one constant weight)
+        method = method_name(self.estimator, extra=("auto",), what="estimator")
+        return "auto" if method in ("auto", "iv") else None
 
     def fit(self, data: Data, validation: Data | None = None) -> JointModel:
         """Identify the model on all experiments in one least-squares system (eq. 36, 40).
@@ -327,11 +327,11 @@ class JointModel:
             references=self._references(),
             payload=self.payload,
         )
-        name = "new" if "new" in report.models else next(iter(report.models))
+        name = "paper" if "paper" in report.models else next(iter(report.models))
         if self.estimator == "iv" and report.models[name].estimator_ != "iv":
             raise DataError(
                 "estimator='iv' needs the reference trajectory q_ref of every experiment "
-                "(MCAP logs of jointid run, or a q_ref column); use 'auto' or 'ols'"
+                "(MCAP logs of jointid run, or a q_ref column); use 'auto' or 'ls'"
             )
         self.report_: FitReport = report
         self.models_ = dict(report.models)

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from trajectories.friction import DEFAULT_Q_S
 from trajectories.robot import Robot, load_robot
 
 from . import DataError
@@ -59,8 +60,8 @@ class RobotFit:
     ----------
     robot : str, Path or Robot
         Robot file (.toml MDH table or .urdf) or a loaded :class:`trajectories.robot.Robot`.
-    model : {"both", "usual", "paper", "new"}
-        Models fitted (``--model``; "new" is "paper").
+    model : {"both", "usual", "paper"}
+        Models fitted (``--model``; "new" is accepted as a deprecated alias of "paper").
     method : {"ls", "wls", "iv"} or None
         Estimator (``--method``; None: "wls").
     qs : float
@@ -121,7 +122,7 @@ class RobotFit:
         model: str = "both",
         *,
         method: str | None = None,
-        qs: float = 0.03,
+        qs: float = DEFAULT_Q_S,
         cutoff: float | None = None,
         decimation: int | None = None,
         trim: int | None = None,

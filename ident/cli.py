@@ -1,5 +1,6 @@
-"""``jointid fit INPUTS... [--model usual|new|both] [--joint revolute|prismatic] [--qs VALUE|scan]
-[--validate FILES...] [--report DIR] [--json FILE]``: identify the usual and the new model.
+"""``jointid fit INPUTS... [--model usual|paper|both] [--method ls|wls|iv]
+[--joint revolute|prismatic] [--qs VALUE|scan] [--validate FILES...] [--report DIR]
+[--json FILE]``: identify the usual and the paper model (names: :mod:`ident.vocab`).
 With ``--robot ROBOT`` the inputs are multi-axis runs of a robot (``ident.cli_robot``).
 
 Every input file (MCAP log of ``jointid run``, CSV or MATLAB ``.mat``) is one experiment;
@@ -16,6 +17,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from trajectories.friction import DEFAULT_Q_S
+
 from . import DataError, cli_robot
 from .api import JointModel, load
 from .loaders import parse_mapping
@@ -23,6 +26,7 @@ from .plots import write_plots
 from .refine_plots import plot_refinement
 from .report import write_json
 from .report_build import build_report
+from .vocab import method_name, model_name
 
 __all__ = ["register", "run"]
 
@@ -69,15 +73,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--model",
-        choices=("usual", "new", "paper", "both"),
+        choices=("usual", "paper", "both", "new"),
         default="both",
-        help="model(s) to fit (default both); 'paper' is the new model (eq. 30)",
+        help="model(s) to fit (default both): 'usual' (eq. 38-39), 'paper' (load- and "
+        "velocity-dependent dry friction, eq. 42-43); 'new' is a deprecated alias of 'paper'",
     )
     p.add_argument(
         "--method",
-        choices=("ls", "wls", "iv"),
-        help="--robot only: estimator, least squares, weighted per joint, or instrumental "
-        "variables on the reference q_ref (default wls)",
+        choices=("ls", "wls", "iv", "ols"),
+        help="estimator: least squares, weighted per joint, or instrumental variables on the "
+        "reference q_ref (default: wls with --robot; one joint: iv when every input carries "
+        "q_ref, else ls, and wls is ls); 'ols' is a deprecated alias of 'ls'",
     )
     p.add_argument(
         "--known-rotor-inertia",
@@ -133,9 +139,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--qs",
-        default="0.03",
+        default=f"{DEFAULT_Q_S:g}",
         metavar="VALUE|scan",
-        help="q_s of the new model [rad/s], or 'scan' to minimise the residual (default 0.03)",
+        help="q_s of the paper model [rad/s], or 'scan' to minimise the residual (default "
+        f"{DEFAULT_Q_S:g})",
     )
     p.add_argument(
         "--validate",
@@ -190,13 +197,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--no-sign-check",
         action="store_true",
         help="keep the samples where sign(tau) differs from the sign of tau_out estimated by "
-        "a first usual fit (dropped by default when the new model is fitted: eq. 26 fails there)",
+        "a first usual fit (dropped by default when the paper model is fitted: eq. 26 fails there)",
     )
     g3 = p.add_argument_group("refinement")
     g3.add_argument(
         "--refine",
         action="store_true",
-        help="add the effects the residual points to (ident.refine), on the new model "
+        help="add the effects the residual points to (ident.refine), on the paper model "
         "(or the only model fitted)",
     )
     g3.add_argument("--max-steps", type=int, default=5, metavar="N", help="refinement steps")
@@ -226,13 +233,12 @@ def estimator_from_args(args: argparse.Namespace) -> JointModel:
         sign_check=not args.no_sign_check,
         eliminate=not args.no_eliminate,
         threshold=args.threshold,
+        estimator="auto" if args.method is None else args.method,
     )
 
 
 #: Options of ``jointid fit --robot`` refused without it: (attribute, flag, hint).
 _ROBOT_ONLY = (
-    ("method", "--method",
-     " (one joint: IDIM-IV when the inputs carry q_ref, else least squares)"),
     ("known_rotor_inertia", "--known-rotor-inertia", " (one joint: J includes the rotor)"),
     ("chain", "--chain", ""),
     ("payload", "--payload", ""),
@@ -278,13 +284,15 @@ def check_numbers(args: argparse.Namespace) -> None:
 def run(args: argparse.Namespace) -> int:
     """Execute ``jointid fit``; returns the exit code."""
     check_numbers(args)
+    # the one vocabulary (ident.vocab): "new" is a deprecated "paper", "ols" a deprecated "ls"
+    args.model = model_name(args.model, extra=("both",))
+    if args.method is not None:
+        args.method = method_name(args.method, what="--method")
     if args.robot is not None:
         return cli_robot.run(args)
     for attr, flag, hint in _ROBOT_ONLY:
         if getattr(args, attr, None) not in (None, False):
             raise DataError(f"{flag}: applies to --robot fits only{hint}")
-    if args.model == "paper":
-        args.model = "new"
     mapping = parse_mapping(args.map)
     gain: float | str | None = args.gain
     load_kw: dict[str, Any] = dict(

@@ -22,11 +22,12 @@ import numpy as np
 from trajectories.robot import Robot, load_robot
 
 from . import DataError
-from .cli_robot import FORMAT, fit_robot, robot_gains
+from .cli_robot import FORMAT, OLD_FORMATS, fit_robot, robot_gains
 from .report import write_json
 from .robot.consistent_fit import consistent_record, fit_consistent
 from .robot.export_model import export_model
 from .robot.loaders import RobotPreprocessing, load_robot_runs, parse_robot_mapping
+from .vocab import model_name, upgrade_record
 
 __all__ = ["register", "run", "consistent_from_record"]
 
@@ -44,8 +45,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "(the consistent estimate and its cost); format: docs/model-export.md.")
     p.add_argument("fit", type=Path, metavar="FIT.json", help="record of jointid fit --robot")
     p.add_argument("--robot", help="robot file (default: the one FIT.json names)")
-    p.add_argument("--model", choices=("usual", "paper"),
-                   help="model to export (default: paper when identified, else usual)")
+    p.add_argument("--model", choices=("usual", "paper", "new"),
+                   help="model to export (default: paper when identified, else usual); 'new' "
+                   "is a deprecated alias of 'paper'")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="OUTDIR",
                    help="folder to write into (created)")
     p.add_argument("--map", action="append", metavar="KEY=PATH[,...]",
@@ -61,7 +63,9 @@ def read_fit_record(path: Path) -> dict[str, Any]:
         rec = json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as e:
         raise DataError(f"{path}: not JSON ({e.msg}, line {e.lineno})") from None
-    if not isinstance(rec, dict) or rec.get("format") != FORMAT:
+    if isinstance(rec, dict) and rec.get("format") in OLD_FORMATS:
+        rec = upgrade_record(rec)  # older spellings ("qs", "new", "ols"): ident.vocab
+    elif not isinstance(rec, dict) or rec.get("format") != FORMAT:
         got = rec.get("format") if isinstance(rec, dict) else type(rec).__name__
         raise DataError(f"{path}: format {got!r}: expected {FORMAT!r} (jointid fit --robot "
                         "... --json)")
@@ -84,7 +88,7 @@ def consistent_from_record(path: Path, rec: dict[str, Any], robot: Robot, name: 
         settings = RobotPreprocessing(pre.get("cutoff_hz"), pre.get("decimation"),
                                       pre.get("trim"))
         fitted = tuple(n for n, r in rec["models"].items() if "error" not in r)
-        out = fit_robot(robot, runs, None, models=fitted, method=rec["method"], qs=rec["qs"],
+        out = fit_robot(robot, runs, None, models=fitted, method=rec["method"], qs=rec["q_s"],
                         dq_min=pre.get("dq_min"), preprocessing=settings,
                         known_rotor_inertia=bool(rec.get("known_rotor_inertia", False)),
                         chain=pre.get("chain", "columns"), payload=rec.get("payload"),
@@ -109,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``jointid export-model``; returns the exit code."""
     rec = read_fit_record(args.fit)
     fitted = [n for n, r in rec.get("models", {}).items() if "error" not in r]
-    name = args.model or ("paper" if "paper" in fitted else "usual")
+    name = model_name(args.model) if args.model else ("paper" if "paper" in fitted else "usual")
     if name not in fitted:
         raise DataError(f"{args.fit}: models.{name}: not identified in this record (it has "
                         f"{fitted or 'none'})")

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from trajectories.friction import DEFAULT_Q_S
 from trajectories.robot import Robot, RobotRegressor, load_robot
 
 from . import DataError, IdentError
@@ -57,18 +58,22 @@ from .robot.refit import refit_robot
 from .robot.signals import RobotSignals
 from .robot.tables import format_table_iii, format_uncertainty, table_iii
 from .robot.uncertainty import N_BLOCKS, assess, parameter_records
+from .vocab import method_name, model_name
 
 __all__ = ["run", "fit_robot", "fit_files", "load_runs", "public_record", "refine_robot",
-           "format_report", "format_refinement", "format_refit", "FORMAT", "MODELS"]
+           "format_report", "format_refinement", "format_refit", "FORMAT", "OLD_FORMATS",
+           "MODELS"]
 
-FORMAT = "jointid-robot-fit/1"
+FORMAT = "jointid-robot-fit/2"
+#: Older robot-fit formats still read (:func:`ident.vocab.upgrade_record`): /1 spelled ``qs``
+#: where /2 has ``q_s``.
+OLD_FORMATS = ("jointid-robot-fit/1",)
 #: Preprocessing chains (``fit_robot(chain=...)``, ``--chain``).
 CHAINS = ("columns", "states")
 #: Payload treatments (``fit_robot(payload=...)``, ``--payload``).
 PAYLOADS = ("known", "ratio", "mass")
 #: ``--model`` -> the models fitted (``jointid fit --robot``, :class:`ident.api.RobotFit`).
-MODELS = {"usual": ("usual",), "new": ("paper",), "paper": ("paper",),
-          "both": ("usual", "paper")}
+MODELS = {"usual": ("usual",), "paper": ("paper",), "both": ("usual", "paper")}
 #: Options of the single-joint ``jointid fit`` that have no meaning with ``--robot``.
 _SINGLE_ONLY = (("joint", "--joint", "the robot file gives the joint types"),
                 ("gain", "--gain", "use drive_gain in the robot file's [joints.drive]"),
@@ -124,7 +129,7 @@ def fit_files(
     robot : Robot
     inputs, validate : paths or RawRobotRun objects
         Identification and cross-validation experiments (``validate`` may be None).
-    model : {"usual", "new", "paper", "both"}
+    model : {"usual", "paper", "both"}
         ``--model`` (:data:`MODELS`).
     mapping, q_unit
         ``--map`` entries (:func:`~ident.robot.loaders.parse_robot_mapping`), ``--q-unit``.
@@ -137,8 +142,7 @@ def fit_files(
         ``payload``, ``known_rotor_inertia``, ``sign_check``, ``feasibility``,
         ``sigma_blocks``, ``prune``, ``progress``).
     """
-    if model not in MODELS:
-        raise DataError(f"model {model!r}: expected one of {', '.join(MODELS)}")
+    model = model_name(model, extra=("both",))  # "new": deprecated "paper" (ident.vocab)
     runs = load_runs(robot, inputs, mapping=mapping, q_unit=q_unit)
     val = load_runs(robot, validate, mapping=mapping, q_unit=q_unit) if validate else None
     out = fit_robot(robot, runs, val, models=MODELS[model],
@@ -174,7 +178,7 @@ def fit_robot(
     *,
     models: tuple[str, ...] = ("usual", "paper"),
     method: str | None = None,
-    qs: float = 0.03,
+    qs: float = DEFAULT_Q_S,
     dq_min: float | None = None,
     preprocessing: RobotPreprocessing | None = None,
     known_rotor_inertia: bool = False,
@@ -251,8 +255,7 @@ def fit_robot(
     """
     joints = robot.moving
     reg = RobotRegressor(robot, known_rotor_inertia=known_rotor_inertia)
-    if method is None:
-        method = "wls"
+    method = "wls" if method is None else method_name(method)  # "ols": deprecated "ls"
     if method == "iv" and any(r.q_ref is None for r in runs):
         raise DataError("--method iv: the inputs carry no reference trajectory q_ref (map one "
                         "with --map q_ref=PATH, or CSV columns q_ref1..q_refk)")
@@ -323,7 +326,7 @@ def fit_robot(
         "method": method,
         "known_rotor_inertia": bool(known_rotor_inertia),
         "payload": payload,
-        "qs": qs,
+        "q_s": qs,
         "notes": notes,
         "models": {},
         "_estimators": {},
@@ -466,6 +469,7 @@ def refine_robot(
     ests = out["_estimators"]
     if model is None:
         model = "usual" if "usual" in ests else next(iter(ests))
+    model = model_name(model)  # "new": deprecated "paper" (ident.vocab)
     if model not in ests:
         raise DataError(f"refine: model {model!r} was not fitted ({', '.join(ests) or 'none'})")
     est = ests[model]

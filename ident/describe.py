@@ -44,6 +44,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import optimize
 
+from trajectories.friction import stribeck_exp
+
 from . import DataError
 from .effects import Effect, Prediction, amplitude_phase, variable_values
 from .interaction_effects import (
@@ -477,13 +479,13 @@ def describe_group(
         vmax = float(np.max(adq))
 
         def make_lv(qs, lq=lq, adq=adq):
-            return np.column_stack((lq, lq * np.exp(-adq / qs)))
+            return np.column_stack((lq, lq * stribeck_exp(adq, qs)))
 
         if vmax > 0:
             rss, qs, c, cov = _fit_form(y, W, Q, make_lv, vmax / 1000, vmax / 2)
             sd = _sd(cov)
             pars = {"alpha_P": _p(c[0], 2 * sd[0]), "beta_P": _p(c[1], 2 * sd[1]),
-                    "qs": _p(qs, 2 * sd[2])}
+                    "q_s": _p(qs, 2 * sd[2])}
             sent = (f"the load-dependent dry friction coefficient depends on the velocity "
                     f"(eq. 24): {c[0]:.3g} ± {2 * sd[0]:.2g} at speed, "
                     f"{c[0] + c[1]:.3g} near rest, transition q_s = {qs:.3g} ± {2 * sd[2]:.2g}"

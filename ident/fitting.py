@@ -7,7 +7,7 @@ that state between modules.)
 :func:`fit_models` takes experiments (or concatenated signals), builds the decimated system
 once per model with the same preprocessing and the same samples ("the two models are
 compared using exactly the same identification method with the same measurements",
-section IV.C), fits the usual model (eq. 38-39) and/or the new model (eq. 42-43),
+section IV.C), fits the usual model (eq. 38-39) and/or the paper model (eq. 42-43),
 optionally scans q_s, evaluates Table III bands, Table IV and cross-validation files, and
 returns a :class:`FitReport` (``.to_json()``, ``.format_tables()``).
 Pure numerics: loading belongs to :mod:`ident.loaders`.
@@ -28,6 +28,8 @@ from typing import Any
 
 import numpy as np
 import scipy.optimize
+
+from trajectories.friction import DEFAULT_Q_S
 
 from . import DataError
 from .loaders import Experiment, concat
@@ -55,6 +57,7 @@ from .results import (
 )
 from .signals import Signals
 from .terms import Library, Term
+from .vocab import MODEL_NAMES, model_name
 
 __all__ = [
     "FitReport",
@@ -65,12 +68,16 @@ __all__ = [
     "with_qs",
     "FORMAT",
     "DEFAULT_QS",
+    "DEFAULT_Q_S",
 ]
 
-FORMAT = "jointid-fit/1"
-#: The paper's final a-priori velocity constant [rad/s] (section III.D).
-DEFAULT_QS = 0.03
-MODEL_NAMES = ("usual", "new")
+FORMAT = "jointid-fit/2"
+#: Older fit formats still read (:func:`ident.vocab.upgrade_record`): /1 spelled ``new``,
+#: ``qs``, ``ols`` where /2 has ``paper``, ``q_s``, ``ls``.
+OLD_FORMATS = ("jointid-fit/1",)
+#: The paper's final a-priori velocity constant [rad/s] (section III.D); defined once, in
+#: :mod:`trajectories.friction` (``DEFAULT_QS`` is the older spelling, kept for callers).
+DEFAULT_QS = DEFAULT_Q_S
 #: Default stiction-area threshold: samples with |dq| below this fraction of the maximum
 #: velocity (and their neighbours, see ``guard``) are left out (section III.D, eq. 26).
 DQ_MIN_FRACTION = 0.01
@@ -463,9 +470,9 @@ def _as_signals(data: Sequence[Experiment] | Signals, joint: str | bool | None) 
 def _library(name: str, qs: float, revolute: bool, payload: bool) -> Library:
     if name == "usual":
         return usual_model(revolute, payload=payload)
-    if name == "new":
+    if name == "paper":
         return new_model(qs, revolute, payload=payload)
-    raise DataError(f"model {name!r}: expected 'usual' or 'new'")
+    raise DataError(f"model {name!r}: expected 'usual' or 'paper'")
 
 
 def _combined(
@@ -492,7 +499,7 @@ def _part(d: Design, name: str, payload: bool, q: float, qs0: float) -> tuple[Li
     lib = _library(name, q, d.signals.revolute, payload)
     keep = set(lib.names())
     sub = d.without([n for n in d.names if n not in keep])
-    if name == "new" and q != qs0:
+    if name == "paper" and q != qs0:
         quad = [t for t in sub.library.terms() if isinstance(t, LoadDependent | QuadrantCoulomb)]
         sub = sub.without([n for t in quad for n in t.names()])
         for t in lib.terms():
@@ -508,7 +515,7 @@ class FitReport:
     Attributes
     ----------
     models : dict[str, IdentModel]
-        Fitted models by name (``"usual"``, ``"new"``).
+        Fitted models by name (``"usual"``, ``"paper"``).
     designs : dict[str, Design]
         The identification system of each model.
     validation_designs : dict[str, Design]
@@ -516,7 +523,7 @@ class FitReport:
     vmax : float
         Maximum |dq| of the identification samples [rad/s] (Table III bands).
     qs : float
-        q_s used by the new model [rad/s].
+        q_s used by the paper model [rad/s].
     qs_scan : list of (q_s, rel_error)
         The scan, when q_s was scanned.
     table_iv : dict or None
@@ -591,15 +598,15 @@ class FitReport:
                 "sigma_rho": json_float(m.sigma_rho_),
                 "cond": json_float(m.cond_),
                 "cond_raw": json_float(m.result_.cond_raw),
-                "estimator": getattr(m, "estimator_", "ols"),
+                "estimator": getattr(m, "estimator_", "ls"),
                 "samples": int(m.result_.m),
                 "parameters": parameters_json(m),
                 "removed": removed_json(m),
             }
             if e["validation"] is not None:
                 rec["validation_rel_error"] = json_float(e["validation"])
-            if name == "new":
-                rec["qs"] = self.qs
+            if name == "paper":
+                rec["q_s"] = self.qs
             models[name] = rec
         out: dict[str, Any] = {
             "format": FORMAT,
@@ -609,12 +616,12 @@ class FitReport:
             "preprocessing": any_design.settings(),
             "vmax": json_float(self.vmax),
             "bands": {"low": [0.0, 0.10], "high": [0.35, 1.0]},
-            "qs": self.qs,
+            "q_s": self.qs,
             "models": models,
             "notes": list(self.notes),
         }
         if self.qs_scan:
-            out["qs_scan"] = [{"qs": q, "rel_error": json_float(e)} for q, e in self.qs_scan]
+            out["q_s_scan"] = [{"q_s": q, "rel_error": json_float(e)} for q, e in self.qs_scan]
         if self.table_iv is not None:
             out["table_iv"] = {
                 k: {m: json_float(v) for m, v in d.items()} for k, d in self.table_iv.items()
@@ -626,7 +633,7 @@ class FitReport:
         parts = []
         for name, m in self.models.items():
             title = f"Identified values with the {name} model"
-            if name == "new":
+            if name == "paper":
                 title += f" (q_s = {self.qs:g})"
             parts.append(format_parameter_table(m, title))
         parts.append(format_error_table({n: self.errors(n) for n in self.models}))
@@ -634,7 +641,7 @@ class FitReport:
             parts.append(format_table_iv(self.table_iv))
         if self.qs_scan:
             parts.append(
-                "q_s scan (new model): " + ", ".join(f"{q:.4g}: {e:.4g}" for q, e in self.qs_scan)
+                "q_s scan (paper model): " + ", ".join(f"{q:.4g}: {e:.4g}" for q, e in self.qs_scan)
             )
         parts.extend(f"note: {n}" for n in self.notes)
         return "\n\n".join(parts)
@@ -708,16 +715,16 @@ def fit_models(
     payload: bool | None = None,
     like: FitReport | None = None,
 ) -> FitReport:
-    """Identify the usual and/or the new model on all experiments in one LS (eq. 36, 40).
+    """Identify the usual and/or the paper model on all experiments in one LS (eq. 36, 40).
 
     Parameters
     ----------
     data : list of Experiment or Signals
         Identification experiments (one per payload run).
-    models : sequence of {"usual", "new"}
+    models : sequence of {"usual", "paper"}
         Models to fit.
     qs : float or "scan"
-        q_s [rad/s] of the new model, or ``"scan"`` to pick the one that minimises the new
+        q_s [rad/s] of the paper model, or ``"scan"`` to pick the one that minimises the new
         model's residual norm (section III.D): the best of :func:`qs_grid`, then a bounded
         1-D search between its neighbours (every evaluated q_s is in ``qs_scan``).
     joint : {"revolute", "prismatic"} or None
@@ -730,7 +737,7 @@ def fit_models(
         ``dq_min`` defaults to :data:`DQ_MIN_FRACTION` of the maximum velocity; pass 0 to
         keep every sample.
     sign_check : bool
-        When the new model is fitted, estimate tau_out with a first fit of the usual model
+        When the paper model is fitted, estimate tau_out with a first fit of the usual model
         and leave out the samples where sign(tau) differs from sign(tau_out), where eq. 26's
         sign(P) is wrong (see ``load_model`` of :func:`ident.preprocess.build_design`).
         Both models then use these same samples. Needed when the runs cross zero load at
@@ -771,10 +778,7 @@ def fit_models(
     -------
     FitReport
     """
-    models = list(dict.fromkeys(models))
-    for name in models:
-        if name not in MODEL_NAMES:
-            raise DataError(f"model {name!r}: expected 'usual' or 'new'")
+    models = list(dict.fromkeys(model_name(n) for n in models))  # "new": deprecated "paper"
     if not models:
         raise DataError("no model to fit")
     s = _as_signals(data, joint)
@@ -844,7 +848,7 @@ def fit_models(
             dq_min=full.dq_min,
             dq_min_rel=None,
         )
-    if like is None and sign_check and "new" in models:
+    if like is None and sign_check and "paper" in models:
         # a first usual fit estimates tau_out; drop samples where sign(tau) != sign(tau_out)
         lib0 = usual_model(s.revolute, payload=has_payload)
         d0 = full
@@ -858,7 +862,7 @@ def fit_models(
         kept = len(checked) / len(full)
         if kept >= SIGN_CHECK_MIN_KEPT:
             pre["load_model"] = (inner, chi)
-            # rebuilt with the load model: the same rows as ``checked``, and the new model's
+            # rebuilt with the load model: the same rows as ``checked``, and the paper model's
             # P+/P- columns from the model quadrant sign(tau_out_hat dq), not from tau
             full = combined(s, has_payload, ref)
         else:
@@ -873,11 +877,11 @@ def fit_models(
     if isinstance(qs, str):
         if qs != "scan":
             raise DataError(f"qs {qs!r}: expected a number [rad/s] or 'scan'")
-        if "new" in models:
+        if "paper" in models:
 
             def err(q: float) -> float:
                 # full model (no elimination): the residual as a function of q_s alone
-                m, _ = fit_part(full, "new", has_payload, float(q), False)
+                m, _ = fit_part(full, "paper", has_payload, float(q), False)
                 scan.append((float(q), m.rel_error_))
                 return m.rel_error_
 

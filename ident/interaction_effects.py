@@ -24,6 +24,8 @@ import math
 
 import numpy as np
 
+from trajectories.friction import stribeck_exp
+
 from .effects import Effect, Prediction, amplitude_phase, model_quadrant
 from .interactions import reversal_distance
 from .signals import Signals
@@ -150,30 +152,30 @@ class LoadVelocityDryFriction(Effect):
     ----------
     tau_out : Prediction
         Load-torque predictor τ̂_out [N m].
-    qs : float
+    q_s : float
         Stribeck velocity q_s [rad/s or m/s] (eq. 29); a hyper-parameter.
     """
 
     effect = "quadrant_load_velocity"
     variable = "quadrant"
-    hyper_names = ("qs",)
+    hyper_names = ("q_s",)
 
-    def __init__(self, tau_out: Prediction, qs: float, tag: str = "") -> None:
+    def __init__(self, tau_out: Prediction, q_s: float, tag: str = "") -> None:
         super().__init__(tag)
-        if not qs > 0:
-            raise ValueError(f"LoadVelocityDryFriction: qs must be > 0, got {qs}")
-        self.tau_out, self.qs = tau_out, float(qs)
+        if not q_s > 0:
+            raise ValueError(f"LoadVelocityDryFriction: q_s must be > 0, got {q_s}")
+        self.tau_out, self.q_s = tau_out, float(q_s)
 
     def with_hyper(self, **values: float) -> LoadVelocityDryFriction:
-        return LoadVelocityDryFriction(self.tau_out, values.get("qs", self.qs), self.tag)
+        return LoadVelocityDryFriction(self.tau_out, values.get("q_s", self.q_s), self.tag)
 
     def names(self) -> tuple[str, ...]:
         return (self._n("alpha_P"), self._n("beta_P"))
 
     def columns(self, s: Signals) -> np.ndarray:
         c = model_quadrant(s, self.tau_out) * self.tau_out(s)
-        return np.column_stack((c, c * np.exp(-np.abs(s.dq) / self.qs)))
+        return np.column_stack((c, c * stribeck_exp(s.dq, self.q_s)))
 
     def describe(self) -> str:
         return (f"load- and velocity-dependent dry friction (alpha_P + beta_P "
-                f"exp(-|dq|/{self.qs:.4g})) sign(P) tau_out")
+                f"exp(-|dq|/{self.q_s:.4g})) sign(P) tau_out")

@@ -16,6 +16,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from trajectories.friction import DEFAULT_Q_S, stribeck_exp
+
 from . import DataError
 from .estimate import DEFAULT_THRESHOLD_PCT, LSResult, fit_least_squares
 from .results import DEFAULT_BANDS, band_errors
@@ -64,7 +66,7 @@ def power_split(s: Signals, load: Term | None = None) -> tuple[np.ndarray, np.nd
 
 def exp_velocity(s: Signals, qs: float) -> np.ndarray:
     """E_xp = exp(-|dq| / q_s) (eq. 29, 44), shape (n,); q_s in [rad/s] or [m/s]."""
-    return np.exp(-np.abs(s.dq) / qs)
+    return stribeck_exp(s.dq, qs)
 
 
 def _check_qs(qs: float) -> float:
@@ -294,8 +296,10 @@ def usual_model(revolute: bool | None = None, *, payload: bool = True) -> Librar
     return Library(*inner, Coulomb(), Viscous(), Offset())
 
 
-def new_model(qs: float = 0.03, revolute: bool | None = None, *, payload: bool = True) -> Library:
-    """The new model, eq. 42-43, with q_s [rad/s] (the paper's 0.03 rad/s by default)."""
+def new_model(
+    qs: float = DEFAULT_Q_S, revolute: bool | None = None, *, payload: bool = True
+) -> Library:
+    """The paper model, eq. 42-43, with q_s [rad/s] (the paper's 0.03 rad/s by default)."""
     inner: list[Term] = [RigidBody(revolute)]
     if payload:
         inner.append(Payload())
@@ -310,7 +314,7 @@ class IdentModel:
     library : Term
         The regressor terms.
     name : str
-        Label used in tables and JSON (``"usual"``, ``"new"``).
+        Label used in tables and JSON (``"usual"``, ``"paper"``).
 
     Attributes (after :meth:`fit`)
     ------------------------------
@@ -334,7 +338,7 @@ class IdentModel:
         Eliminated parameter names and why (unidentifiable, zero column, not significant).
     result_ : LSResult
         The final estimator result.
-    estimator_ : {"ols", "iv"}
+    estimator_ : {"ls", "iv"}
         Least squares (eq. 12) or IDIM-IV (when the design has instruments).
     """
 
@@ -387,7 +391,7 @@ class IdentModel:
             drop_unidentifiable=drop_unidentifiable,
             Z=None if Z is None else Z[:, idx],
         )
-        self.estimator_ = "ols" if Z is None else "iv"
+        self.estimator_ = "ls" if Z is None else "iv"
         self._set(res)
         return self
 

@@ -22,13 +22,14 @@ from typing import Any
 
 from . import IdentError
 from .report import Section, fmt, load_json, write_html
+from .vocab import upgrade_record
 
 PAPER = (
     "Hamon, Gautier & Garrec, dynamic identification with a load- and velocity-dependent "
     "dry friction model"
 )
 
-# Paper Table II ordering of the new model's parameters (eq. 43).
+# Paper Table II ordering of the paper model's parameters (eq. 43).
 _ORDER = [
     "J", "MX", "MY", "Ma_ratio", "F_C",
     "a_m_J", "b_m_J", "a_m_MX", "b_m_MX", "a_m_MY", "b_m_MY", "a_m", "b_m",
@@ -100,8 +101,8 @@ def _describe_removed(removed: Any) -> str:
 def errors_section(fit: dict) -> Section:
     """Paper Table III (and Table IV when present)."""
     models = fit.get("models", {})
-    names = [n for n in ("usual", "new") if n in models] + [
-        n for n in models if n not in ("usual", "new")
+    names = [n for n in ("usual", "paper") if n in models] + [
+        n for n in models if n not in ("usual", "paper")
     ]
     s = Section("Table III: relative norm of errors ‖ρ‖/‖Y‖")
     rows = [
@@ -123,11 +124,11 @@ def errors_section(fit: dict) -> Section:
             if key in t4:
                 rows4.append([label] + [t4[key].get(n) for n in names])
         s.table(["Identification carried out"] + [f"{n} model" for n in names], rows4)
-    if "usual" in models and "new" in models:
-        u, n = models["usual"], models["new"]
+    if "usual" in models and "paper" in models:
+        u, n = models["usual"], models["paper"]
         try:
             s.para(
-                f"The new model lowers the error on all samples by "
+                f"The paper model lowers the error on all samples by "
                 f"{100 * (1 - n['rel_error'] / u['rel_error']):.0f} % and at low velocities by "
                 f"{100 * (1 - n['rel_error_low_velocity'] / u['rel_error_low_velocity']):.0f} % "
                 f"(the paper: 34 % and 46 %)."
@@ -214,7 +215,7 @@ def truth_comparison_section(ref: dict, truth: dict, demo: dict) -> Section | No
     if not final or not truth:
         return None
     s = Section("Identified after refinement against the plant's truth")
-    s.para("The refined model (the new model plus the effects the residual pointed to) is "
+    s.para("The refined model (the paper model plus the effects the residual pointed to) is "
            "the one to compare with the simulated joint: it is the only model whose structure "
            "contains everything the plant does. Green: within 3σ of the truth (or 1 %).")
     rows, classes = [], []
@@ -248,9 +249,9 @@ _CAPTIONS = {
                                       "acceleration (one payload run; repeated per payload)"),
     "direct_validation_usual.png": ("usual", "Direct validation with the usual model (Fig. 4)"),
     "cross_validation_usual.png": ("usual", "Cross validation on the validation files"),
-    "direct_validation_new.png": ("new", "Direct validation with the new model (Fig. 5)"),
-    "cross_validation_new.png": ("new", "Cross validation on the validation files"),
-    "error_vs_velocity.png": ("new", "Residual against velocity for the fitted models"),
+    "direct_validation_paper.png": ("paper", "Direct validation with the paper model (Fig. 5)"),
+    "cross_validation_paper.png": ("paper", "Cross validation on the validation files"),
+    "error_vs_velocity.png": ("paper", "Residual against velocity for the fitted models"),
 }
 
 
@@ -269,7 +270,7 @@ def discover_figures(d: Path, only: list[Path] | None = None) -> dict[str, list[
     and the campaign plot, grouped by report section with their captions.
 
     ``only`` restricts them to the files just written (a folder may hold older figures)."""
-    out: dict[str, list[dict[str, str]]] = {"campaign": [], "usual": [], "new": [],
+    out: dict[str, list[dict[str, str]]] = {"campaign": [], "usual": [], "paper": [],
                                             "refinement": []}
     names = None if only is None else {Path(f).name for f in only}
     order = list(_CAPTIONS)
@@ -331,8 +332,8 @@ def build_report(directory: Path | str, *, title: str = "jointid report") -> Pat
     d = Path(directory)
     if not d.is_dir():
         raise IdentError(f"{d}: not a directory (expected the output folder of jointid demo/fit)")
-    fit = load_json(d / "fit.json")
-    demo = load_json(d / "demo.json") if (d / "demo.json").exists() else {}
+    fit = upgrade_record(load_json(d / "fit.json"))  # older records: "new", "qs", "ols"
+    demo = upgrade_record(load_json(d / "demo.json")) if (d / "demo.json").exists() else {}
     if "figures" not in demo:
         demo["figures"] = discover_figures(d)
     truth = demo.get("truth")
@@ -361,15 +362,15 @@ def build_report(directory: Path | str, *, title: str = "jointid report") -> Pat
 
     sections.append(errors_section(fit))
     models = fit.get("models", {})
-    for name, table_no in (("usual", "Table I"), ("new", "Table II")):
+    for name, table_no in (("usual", "Table I"), ("paper", "Table II")):
         if name in models:
-            sec = parameter_section(name, models[name], truth if name == "new" else None,
+            sec = parameter_section(name, models[name], truth if name == "paper" else None,
                                     table_no)
             for path, caption in _figures(d, demo, name):
                 sec.figure(path, caption)
             sections.append(sec)
     if "usual" in models and truth:
-        sections[-1 if "new" not in models else -2].para(
+        sections[-1 if "paper" not in models else -2].para(
             "The usual model has no exact counterpart in the plant (its friction is the paper's "
             "load- and velocity-dependent one), so no truth column is shown for it.", "muted")
 

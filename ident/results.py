@@ -147,7 +147,7 @@ def format_error_table(errors: Mapping[str, Mapping[str, float | None]]) -> str:
 def format_table_iv(table_iv: Mapping[str, Mapping[str, float | None]]) -> str:
     """Table IV: errors of the identification with and without payload runs."""
     found = {m for v in table_iv.values() for m in v}
-    names = [n for n in ("usual", "new") if n in found] + sorted(found - {"usual", "new"})
+    names = [n for n in ("usual", "paper") if n in found] + sorted(found - {"usual", "paper"})
     rows = [("Identification carried out", *[f"{n} model" for n in names])]
     for key, label in (
         ("with_payloads", "With payload variations"),

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from trajectories.friction import DEFAULT_Q_S
 from trajectories.robot import LINK_NAMES, from_pinocchio_order
 
 from . import SimError
@@ -382,7 +383,7 @@ class ArmParams:
         drive: ArmDrive | None = None,
         effects: ArmEffects | None = None,
         gravity: Any = None,
-        q_s: float = 0.03,
+        q_s: float = DEFAULT_Q_S,
         gear_ratio: Any = 100.0,
         acceleration_scale: float = 3.0,
         joint_numbers: Any = None,

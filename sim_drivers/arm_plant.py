@@ -77,6 +77,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from trajectories.friction import stribeck_exp
+
 from .arm_params import ArmParams, Payload
 from .arm_push import Push, push_torque
 
@@ -153,7 +155,7 @@ def friction_torque(
     q = np.asarray(q, dtype=float)
     dq = np.asarray(dq, dtype=float)
     tau_out = np.asarray(tau_out, dtype=float)
-    ex = np.exp(-np.abs(dq) / f.q_s)
+    ex = stribeck_exp(dq, f.q_s)
     p = np.sign(tau_out * dq)
     pp, pm = 0.5 * (1.0 + p), 0.5 * (1.0 - p)
     s = np.sign(dq)
@@ -363,7 +365,7 @@ class ArmPlant:
                 wf *= cf if cf > 0.0 else 0.0
             if vj > 0.0:
                 s = wf
-                ex = exp(-vj * qsi)
+                ex = exp(-vj * qsi)  # stribeck_exp inlined (scalar, per step)
                 r -= fvp * vj + fvv * vj * vj
             elif vj < 0.0:
                 s = -wf

@@ -75,6 +75,8 @@ from typing import Any
 
 import numpy as np
 
+from trajectories.friction import stribeck_exp
+
 from .effects import Inputs, Knobs
 from .effects import registry as effect_registry
 from .plant_config import G, PlantParams
@@ -191,7 +193,7 @@ def inverse_torque(
     q = np.asarray(q, dtype=float)
     dq = np.asarray(dq, dtype=float)
     tau_out = output_torque(params, q, ddq, payload_mass, payload_arm)
-    ex = np.exp(-np.abs(dq) / params.joint.q_s)
+    ex = stribeck_exp(dq, params.joint.q_s)
     p = np.sign(tau_out * dq)
     pp = 0.5 * (1.0 + p)
     pm = 0.5 * (1.0 - p)
@@ -282,7 +284,7 @@ class JointPlant:
         self._rng = random.Random(params.drive.seed if seed is None else seed)
         self._noise_std = params.drive.torque_noise_std_Nm
         f, d = params.friction, params.drive
-        self._qs_inv = 1.0 / params.joint.q_s
+        self._qs_inv = 1.0 / params.joint.q_s  # stribeck_exp inlined in the per-step loop
         self._am, self._bm, self._cm, self._dm = f.a_m, f.b_m, f.c_m, f.d_m
         self._ag, self._bg, self._cg, self._dg = f.a_g, f.b_g, f.c_g, f.d_g
         self._fv, self._off = f.F_V, f.tau_off

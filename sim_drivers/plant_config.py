@@ -67,6 +67,7 @@ from pathlib import Path
 from typing import Any
 
 from trajectories import SchemaError
+from trajectories.friction import DEFAULT_Q_S
 from trajectories.schema import Field, Table, fail
 
 from . import PlantConfigError
@@ -97,7 +98,7 @@ class JointSpec:
     """
 
     kind: str = "revolute"
-    q_s: float = 0.03
+    q_s: float = DEFAULT_Q_S
 
     @property
     def revolute(self) -> bool:

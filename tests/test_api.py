@@ -61,8 +61,8 @@ def test_fitted_attributes_equal_the_cli_json(fitted, csv_runs, tmp_path):
     js = tmp_path / "fit.json"
     assert main(["fit", *map(str, csv_runs[:3]), "--validate", str(csv_runs[3]),
                  "--json", str(js)]) == 0
-    rec = json.loads(js.read_text())["models"]["new"]
-    assert est.name_ == "new" and set(est.models_) == {"usual", "new"}
+    rec = json.loads(js.read_text())["models"]["paper"]
+    assert est.name_ == "paper" and set(est.models_) == {"usual", "paper"}
     assert list(est.coef_names_) == list(rec["parameters"])
     assert list(est.params_) == list(rec["parameters"])
     for k, n in enumerate(est.coef_names_):
@@ -75,8 +75,8 @@ def test_fitted_attributes_equal_the_cli_json(fitted, csv_runs, tmp_path):
     assert est.validation_rel_error_ == rec["validation_rel_error"]
     assert est.rel_error_bands_["low"] == rec["rel_error_low_velocity"]
     assert est.n_samples_ == rec["samples"] == est.residual_.shape[0] == est.design_.Y.shape[0]
-    assert est.estimator_ == rec["estimator"] == "ols" and est.qs_ == 0.03
-    assert est.report_.to_json()["models"]["new"] == rec
+    assert est.estimator_ == rec["estimator"] == "ls" and est.qs_ == 0.03
+    assert est.report_.to_json()["models"]["paper"] == rec
 
 
 def test_predict_and_score_agree_with_the_fit(fitted):
@@ -112,7 +112,7 @@ def test_refine_returns_a_new_estimator_with_the_ripple(fitted):
     assert refined.score(val) == pytest.approx(1.0 - refined.validation_rel_error_, rel=1e-12)
     assert refined.predict(train).shape == (refined.n_samples_,)
     rec = refined.refinement_json()
-    assert rec["model"] == "new" and rec["steps"][0]["effect"] == "position_ripple"
+    assert rec["model"] == "paper" and rec["steps"][0]["effect"] == "position_ripple"
 
 
 def test_paths_and_signals_are_accepted(fitted, csv_runs):
@@ -136,12 +136,12 @@ def test_bad_use_is_one_line_error(fitted):
         est.refinement_json()
     with pytest.raises(DataError, match="expected Experiment objects"):
         JointModel().fit([1, 2])
-    assert "model='new'" in repr(JointModel())
+    assert "model='paper'" in repr(JointModel())
 
 
 # ---------------------------------------------------------------- scikit-learn conventions
 _GIVEN = dict(model="usual", qs="scan", joint="revolute", cutoff=12.5, decimation=7,
-              dq_min=0.0, trim=3, estimator="ols", eliminate=False, threshold=25.0)
+              dq_min=0.0, trim=3, estimator="ls", eliminate=False, threshold=25.0)
 
 
 def test_get_set_params_and_clone_semantics():
@@ -174,7 +174,7 @@ def test_sklearn_clone_and_grid_search(fitted):
     assert est.std_.shape == est.rel_std_pct_.shape == est.coef_.shape
     assert dict(zip(est.coef_names_, est.coef_, strict=True)) == est.params_
     # grid search over q_s, leaving one payload run out per fold (score: 1 - ||rho||/||Y||)
-    grid = GridSearchCV(JointModel(model="new"), {"qs": [0.01, 0.2]}, cv=3, error_score="raise")
+    grid = GridSearchCV(JointModel(model="paper"), {"qs": [0.01, 0.2]}, cv=3, error_score="raise")
     grid.fit(train)
     assert grid.best_params_["qs"] in (0.01, 0.2)
     scores = grid.cv_results_["mean_test_score"]

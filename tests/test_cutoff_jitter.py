@@ -111,7 +111,7 @@ def _files(d, runs, plant, kind, seed):
 def _fit(files, cutoff=None):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the cut-off's bound and the resampling, checked apart
-        est = JointModel(model="new", cutoff=cutoff).fit(load(files[:3]),
+        est = JointModel(model="paper", cutoff=cutoff).fit(load(files[:3]),
                                                           validation=load(files[3]))
     return est.report_.settings["cutoff_hz"], est.rel_error_, est.validation_rel_error_
 

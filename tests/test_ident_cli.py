@@ -51,8 +51,8 @@ def test_fit_json_report_and_tables(csv_runs, tmp_path, capsys):
     assert "Identified values with the usual model" in out and "a_m_MX" in out
     assert "Relative norm of errors for 2 identifications" in out  # Table IV
     fit = json.loads(js.read_text())
-    assert fit["format"] == "jointid-fit/1" and fit["joint"] == "revolute"
-    for name in ("usual", "new"):
+    assert fit["format"] == "jointid-fit/2" and fit["joint"] == "revolute"
+    for name in ("usual", "paper"):
         m = fit["models"][name]
         for key in ("rel_error", "rel_error_low_velocity", "rel_error_high_velocity",
                     "validation_rel_error"):  # fmt: skip
@@ -60,14 +60,14 @@ def test_fit_json_report_and_tables(csv_runs, tmp_path, capsys):
         for p in m["parameters"].values():
             assert set(p) >= {"value", "std2", "rel_std_pct"}
         assert isinstance(m["removed"], list)
-    assert fit["models"]["new"]["rel_error"] < fit["models"]["usual"]["rel_error"]
+    assert fit["models"]["paper"]["rel_error"] < fit["models"]["usual"]["rel_error"]
     assert set(fit["table_iv"]) == {"with_payloads", "without_payload"}
     assert "Ma_ratio" in fit["models"]["usual"]["parameters"]
-    assert (rep / "direct_validation_new.png").stat().st_size > 10_000
+    assert (rep / "direct_validation_paper.png").stat().st_size > 10_000
     assert (rep / "cross_validation_usual.png").exists()
     # the report folder is complete: fit.json and a self-contained HTML report embedding
     # every figure, which `jointid report DIR` can rebuild
-    assert json.loads((rep / "fit.json").read_text())["models"].keys() == {"usual", "new"}
+    assert json.loads((rep / "fit.json").read_text())["models"].keys() == {"usual", "paper"}
     html = (rep / "report.html").read_text()
     assert html.count("data:image/png;base64,") == len(list(rep.glob("*.png")))
     assert (rep / "tables.txt").read_text().startswith("Identified values")
@@ -78,11 +78,11 @@ def test_single_model_and_qs_scan(csv_runs, tmp_path):
     assert main(["fit", *map(str, csv_runs[:3]), "--model", "new", "--qs", "scan",
                  "--json", str(js)]) == 0  # fmt: skip
     fit = json.loads(js.read_text())
-    assert list(fit["models"]) == ["new"]
-    scan = fit["qs_scan"]
+    assert list(fit["models"]) == ["paper"]
+    scan = fit["q_s_scan"]
     assert len(scan) >= 5
     best = min(scan, key=lambda s: s["rel_error"])
-    assert fit["qs"] == best["qs"] == fit["models"]["new"]["qs"]
+    assert fit["q_s"] == best["q_s"] == fit["models"]["paper"]["q_s"]
 
 
 def test_missing_column_is_one_line_error(tmp_path, capsys):
@@ -100,3 +100,20 @@ def test_refine_flag_writes_refinement(csv_runs, tmp_path):
                  "--json", str(js)]) == 0  # fmt: skip
     ref = json.loads(js.read_text())["refinement"]
     assert "steps" in ref and "rel_error_final" in ref
+
+
+def test_method_names_are_the_robot_ones(csv_runs, tmp_path, capsys):
+    """--method ls|wls|iv on one joint (issue 24): 'ols' (deprecated) is 'ls', 'wls' of one
+    joint is 'ls' (one constant weight), the same numbers; iv without q_ref is one line."""
+    recs = {}
+    for method in ("ls", "ols", "wls"):
+        js = tmp_path / f"{method}.json"
+        assert main(["fit", *map(str, csv_runs[:3]), "--model", "usual", "--method", method,
+                     "--json", str(js)]) == 0  # fmt: skip
+        recs[method] = json.loads(js.read_text())["models"]["usual"]
+    assert recs["ls"]["estimator"] == "ls"
+    assert recs["ls"] == recs["ols"] == recs["wls"]
+    capsys.readouterr()
+    assert main(["fit", *map(str, csv_runs[:3]), "--method", "iv"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "q_ref" in err, err

@@ -46,7 +46,7 @@ def test_usual_model_matches_published_reference(emps_json):
 
 def test_new_model_reports_instead_of_crashing(emps_json):
     fit, out = emps_json
-    n = fit["models"]["new"]
+    n = fit["models"]["paper"]
     assert n["rel_error"] <= fit["models"]["usual"]["rel_error"]
     assert "validation_rel_error" in n
     # no payload, no gravity: the payload columns are left out and said so
@@ -55,7 +55,7 @@ def test_new_model_reports_instead_of_crashing(emps_json):
     assert {"d_m"} <= {r["name"] for r in n["removed"]}
     assert all(r["reason"] for r in n["removed"])
     pngs = sorted(p.name for p in (out / "report").glob("*.png"))
-    assert "direct_validation_usual.png" in pngs and "cross_validation_new.png" in pngs
+    assert "direct_validation_usual.png" in pngs and "cross_validation_paper.png" in pngs
 
 
 def test_default_settings_run_and_stay_close(tmp_path):

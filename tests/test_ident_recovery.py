@@ -48,7 +48,7 @@ def report(sim):
 @pytest.fixture(scope="module")
 def report_ols(sim):
     plant, exps, _ = sim
-    return fit_models(exps, ("new",), qs=plant.joint.q_s, eliminate=False, references=None,
+    return fit_models(exps, ("paper",), qs=plant.joint.q_s, eliminate=False, references=None,
                       table_iv=False, **SIM)  # fmt: skip
 
 
@@ -63,8 +63,8 @@ def _z(model, truth):
 def test_new_model_parameters_within_3_sigma_or_1_percent(sim, report):
     """Issue 5's acceptance, every parameter of eq. 43 included (the E_xp ddq ones too)."""
     plant, _, _ = sim
-    m = report.models["new"]
-    assert m.estimator_ == "iv" and report.designs["new"].settings()["instruments"] == "reference"
+    m = report.models["paper"]
+    assert m.estimator_ == "iv" and report.designs["paper"].settings()["instruments"] == "reference"
     truth = plant.truth()
     assert set(m.names_) == set(truth), "every parameter of eq. 43 is identifiable"
     z = _z(m, truth)
@@ -79,8 +79,8 @@ def test_ordinary_least_squares_is_biased_on_exp_inertia_terms(sim, report_ols):
     applied-torque noise, the logged torque reference does not (errors in variables). OLS
     puts b_m_J and b_g_J hundreds of percent (tens of sigma) off; the others stay close."""
     plant, _, _ = sim
-    m = report_ols.models["new"]
-    assert m.estimator_ == "ols"
+    m = report_ols.models["paper"]
+    assert m.estimator_ == "ls"
     z = _z(m, plant.truth())
     assert abs(z["b_m_J"][0]) > 10 and z["b_m_J"][1] > 1.0
     assert abs(z["b_g_J"][0]) > 10 and z["b_g_J"][1] > 1.0
@@ -89,31 +89,31 @@ def test_ordinary_least_squares_is_biased_on_exp_inertia_terms(sim, report_ols):
 
 
 def test_new_model_halves_low_velocity_error(report):
-    eu, en = report.errors("usual"), report.errors("new")
+    eu, en = report.errors("usual"), report.errors("paper")
     assert en["low"] <= 0.5 * eu["low"]
     assert en["all"] < eu["all"]
     # Table IV is computed: the runs without payload alone
     assert report.table_iv is not None
-    assert set(report.table_iv["without_payload"]) == {"usual", "new"}
+    assert set(report.table_iv["without_payload"]) == {"usual", "paper"}
 
 
 def test_usual_model_payload_ratio_and_json_record(report):
     u = report.models["usual"]
     assert u.coef_["Ma_ratio"] == pytest.approx(1.0, abs=0.02)
     js = report.to_json()
-    for name in ("usual", "new"):
+    for name in ("usual", "paper"):
         rec = js["models"][name]
         for key in ("rel_error", "rel_error_low_velocity", "rel_error_high_velocity"):
             assert 0 < rec[key] < 0.1
         p = rec["parameters"]["F_V"]
         assert p["std2"] == pytest.approx(2 * p["std"]) and p["rel_std_pct"] > 0
-    assert js["models"]["new"]["qs"] == 0.03
+    assert js["models"]["paper"]["q_s"] == 0.03
 
 
 def test_default_elimination_keeps_parameters_significant(sim):
     plant, exps, refs = sim
-    rep = fit_models(exps[:2], models=("new",), qs=plant.joint.q_s, references=refs[:2], **SIM)
-    m = rep.models["new"]
+    rep = fit_models(exps[:2], models=("paper",), qs=plant.joint.q_s, references=refs[:2], **SIM)
+    m = rep.models["paper"]
     assert all(v <= 30 for v in m.rel_std_pct_.values())
     assert all("relative deviation" in why for _, why in m.removed_)
     assert np.isfinite(m.rel_error_)
@@ -147,9 +147,9 @@ def test_qs_rescanned_after_refinement_recovers_the_plant():
                      payload_arm=p.arm_m, seed=11 + i)  # fmt: skip
         exps.append(make_experiment(f"payload{i}", r.t, r.q, r.tau_ref,
                                     payload_mass=p.mass_kg, payload_arm=p.arm_m))  # fmt: skip
-    rep = fit_models(exps, ("new",), qs="scan", references=[plan.reference.q] * 3,
+    rep = fit_models(exps, ("paper",), qs="scan", references=[plan.reference.q] * 3,
                      table_iv=False, **SIM)  # fmt: skip
-    ref = refine(rep.designs["new"], rep.models["new"], vmax=rep.vmax)
+    ref = refine(rep.designs["paper"], rep.models["paper"], vmax=rep.vmax)
     assert "position_ripple" in [s.term.effect for s in ref.steps]
     rs = rescan_qs(ref.final_design, ref.final_model, vmax=rep.vmax)
     q_s = plant.joint.q_s

@@ -237,6 +237,15 @@ def test_export_model_cli(tmp_path, capfd):
     capfd.readouterr()
     for f in ("arm3.urdf", "friction.json"):
         assert (tmp_path / "again" / f).read_text() == (tmp_path / "paper" / f).read_text()
+    # the same record in the older spelling (jointid-robot-fit/1: "qs", model "new"; ident.vocab)
+    old = json.loads(json.dumps(rec2).replace('"q_s"', '"qs"').replace('"paper"', '"new"'))
+    assert old["models"].keys() == {"usual", "new"}
+    j_old = tmp_path / "fit_old.json"
+    j_old.write_text(json.dumps(dict(old, format="jointid-robot-fit/1")))
+    assert main(["export-model", str(j_old), "--model", "new", "-o", str(tmp_path / "old")]) == 0
+    capfd.readouterr()
+    for f in ("arm3.urdf", "friction.json"):
+        assert (tmp_path / "old" / f).read_text() == (tmp_path / "paper" / f).read_text()
     # `jointid fit --robot --consistent` stores the block itself: exported with no refit
     j4 = tmp_path / "fit4.json"
     assert main(["fit", "--robot", str(ARM3), *map(str, files), "--model", "usual",

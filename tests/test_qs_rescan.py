@@ -43,9 +43,9 @@ def runs():
 
 @pytest.fixture(scope="module")
 def fitted(runs):
-    """The new model (with its ripple-free library) fitted with instruments on the runs."""
+    """The paper model (with its ripple-free library) fitted with instruments on the runs."""
     exps, refs = runs
-    return fit_models(exps, ("new",), qs=0.04, references=refs, table_iv=False,
+    return fit_models(exps, ("paper",), qs=0.04, references=refs, table_iv=False,
                       torque_delay=0.5)
 
 
@@ -55,22 +55,22 @@ def test_refit_like_an_earlier_report_is_the_same_fit(runs, fitted):
     scratch; a report on other data is refused."""
     exps, refs = runs
     kw = dict(references=refs, table_iv=False, torque_delay=0.5)
-    a = fit_models(exps, ("usual", "new"), qs=0.031, **kw)
-    b = fit_models(exps, ("usual", "new"), qs=0.031, like=fitted, **kw)
+    a = fit_models(exps, ("usual", "paper"), qs=0.031, **kw)
+    b = fit_models(exps, ("usual", "paper"), qs=0.031, like=fitted, **kw)
     assert "load_model" in fitted.settings  # the sign check ran
-    for name in ("usual", "new"):
+    for name in ("usual", "paper"):
         assert a.models[name].coef_ == b.models[name].coef_
         assert np.array_equal(a.designs[name].W, b.designs[name].W)
         assert np.array_equal(a.designs[name].Z, b.designs[name].Z)
     assert a.notes == b.notes and a.vmax == b.vmax
     with pytest.raises(DataError, match="like="):
-        fit_models(exps[:1], ("new",), qs=0.031, like=fitted, **{**kw, "references": refs[:1]})
+        fit_models(exps[:1], ("paper",), qs=0.031, like=fitted, **{**kw, "references": refs[:1]})
 
 
 def test_the_e_columns_are_the_odd_ones(fitted):
-    d = fitted.designs["new"]
+    d = fitted.designs["paper"]
     s = d._blocks[0].full
-    quad = [t for t in fitted.models["new"].library.terms()
+    quad = [t for t in fitted.models["paper"].library.terms()
             if isinstance(t, LoadDependent | QuadrantCoulomb)]
     assert len(quad) == 2
     for t in quad:
@@ -89,7 +89,7 @@ def test_the_e_columns_are_the_odd_ones(fitted):
 
 
 def test_fast_designs_equal_with_qs_bit_for_bit(fitted):
-    d, lib = fitted.designs["new"], fitted.models["new"].library
+    d, lib = fitted.designs["paper"], fitted.models["paper"].library
     assert d.Z is not None  # instruments: their rows are rebuilt too
     fast = _QsDesigns(d, lib)
     for q in (0.004, 0.03, 0.25):
@@ -101,13 +101,13 @@ def test_fast_designs_equal_with_qs_bit_for_bit(fitted):
             assert np.array_equal(a, b) and b.flags.c_contiguous
         for b1, b2 in zip(d1._blocks, d2._blocks, strict=True):
             assert np.array_equal(b1.dec, b2.dec) and np.array_equal(b1.zdec, b2.zdec)
-        m1 = IdentModel(l1, "new").fit(d1, eliminate=False)
-        m2 = IdentModel(l2, "new").fit(d2, eliminate=False)
+        m1 = IdentModel(l1, "paper").fit(d1, eliminate=False)
+        m2 = IdentModel(l2, "paper").fit(d2, eliminate=False)
         assert m1.rel_error_ == m2.rel_error_ and m1.coef_ == m2.coef_
 
 
 def test_rescan_keeps_its_result_and_refits_with_the_chosen_qs(fitted):
-    d, m = fitted.designs["new"], fitted.models["new"]
+    d, m = fitted.designs["paper"], fitted.models["paper"]
     rs = rescan_qs(d, m, vmax=fitted.vmax)
     lq, dq_ = with_qs(d, m.library, rs.qs)
     ref = IdentModel(lq, m.name).fit(dq_, eliminate=False)
@@ -118,11 +118,11 @@ def test_rescan_keeps_its_result_and_refits_with_the_chosen_qs(fitted):
 def test_scan_errors_equal_the_fits_bit_for_bit(fitted):
     """The scan's error of each q_s (:class:`ident.fitting._QsErrors`, without the design
     nor the statistics) is the full-model fit's float, with and without instruments."""
-    d, lib = fitted.designs["new"], fitted.models["new"].library
+    d, lib = fitted.designs["paper"], fitted.models["paper"].library
     for des in (d, replace(d, Z=None)):
         fast = _QsDesigns(des, lib)
         errors = _QsErrors(fast, lib.names())
         for q in (0.004, 0.03, 0.25):
             l1, d1 = fast(q)
-            m = IdentModel(l1, "new").fit(d1, eliminate=False)
+            m = IdentModel(l1, "paper").fit(d1, eliminate=False)
             assert errors(q) == m.rel_error_, (q, des.Z is None)

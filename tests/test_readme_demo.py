@@ -67,7 +67,7 @@ def test_table_iii(demo):
     for label, key in rows.items():
         usual, new = _find(rf"\| {label}[^|]*\| {NUM} \| {NUM} \|", text)
         assert _same(usual, m["usual"][key]), (label, "usual", usual, m["usual"][key])
-        assert _same(new, m["new"][key]), (label, "new", new, m["new"][key])
+        assert _same(new, m["paper"][key]), (label, "new", new, m["paper"][key])
         # the README's table is the one the demo prints
         assert re.search(rf"{usual}\s+{new}\s*$", stdout, re.M), (label, stdout)
 
@@ -104,7 +104,7 @@ def test_qs_and_distance_to_the_truth(demo):
     prior, adjusted, true_qs = _find(
         rf"a priori \({NUM} rad/s.*?adjusted with the refined model to {NUM} rad/s "
         rf"\(truth {NUM}\)", text)
-    assert _same(prior, fit["qs_a_priori"]) and _same(adjusted, fit["qs"])
+    assert _same(prior, fit["q_s_a_priori"]) and _same(adjusted, fit["q_s"])
     plant_toml = Path(examples.path("plant_rx130l.toml")).read_text()
     assert re.search(rf"^q_s = {re.escape(true_qs)}\s", plant_toml, re.M)
     count, worst_name, worst, others = _find(

@@ -56,6 +56,8 @@ def test_report_embeds_figures_and_flags_truth(tmp_path):
     assert "Table III" in text and "0.0484" in text and "position_ripple" in text
     rows = re.findall(r'<tr class="(good|bad)"><td>([^<]+)</td>', text)
     assert ("good", "a_m_J") in rows and ("bad", "c_m") in rows
+    # this record and demo.json are spelled as older ones ("new"): reported as "paper"
+    assert "paper model" in text and "new model" not in text
 
 
 def test_report_refuses_missing_fit(tmp_path):

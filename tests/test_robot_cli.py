@@ -195,7 +195,7 @@ def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capfd,
         f"direct_validation_usual_{j}.png" for j in robot.moving]
     assert all(Path(f).stat().st_size > 1000 for f in figures)
     assert "direct_validation_usual_j2.png" in (report / "report.html").read_text()
-    assert rec["format"] == "jointid-robot-fit/1"
+    assert rec["format"] == "jointid-robot-fit/2"
     assert rec["robot"]["moving"] == list(robot.moving)
     usual = rec["models"]["usual"]
     # the same chain and estimator, called directly on the same files and settings
@@ -362,8 +362,8 @@ def test_single_joint_fit_options_are_refused_with_robot(tmp_path, arm_runs, cap
     run.to_csv(p)
     code, _, err = run_cli(capfd, "--robot", ARM3, p, "--gain", "2")
     assert code != 0 and "--gain: not used with --robot" in err
-    code, _, err = run_cli(capfd, p, "--method", "wls")  # single joint
-    assert code != 0 and "--method: applies to --robot fits only" in err
+    code, _, err = run_cli(capfd, p, "--chain", "states")  # single joint
+    assert code != 0 and "--chain: applies to --robot fits only" in err
 
 
 # -- KUKA KR300 recordings (Weigand et al.) ---------------------------------------------------

@@ -58,7 +58,7 @@ def _single_joint_values(est: RobotModel) -> dict[str, float]:
 @pytest.mark.slow
 def test_columns_chain_gives_the_single_joint_fit(campaign_runs):
     exps, runs, robot = campaign_runs
-    single = fit_models(exps, models=["usual", "new"])
+    single = fit_models(exps, models=["usual", "paper"])
     rec = fit_robot(robot, runs, models=("usual", "paper"), method="ls")
     assert rec["payload"] == "ratio"  # lever-arm payloads: the ratio is identified (eq. 35)
     d = single.designs["usual"]

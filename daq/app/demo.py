@@ -124,24 +124,24 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
     # takes about 3 q_s, about 10 % of the nominal velocity — and adjusted once the model
     # is complete (after refinement), to the value that minimises the residual.
     t0 = time.perf_counter()
-    hb.status("loading the logs and fitting the usual and the new model")
+    hb.status("loading the logs and fitting the usual and the paper model")
     exps = load_experiments(list(logs), joint=campaign.joint.kind)
     qs0 = round(campaign.joint.limits.max_velocity / 30.0, 6)
-    report = fit_models(exps, ("usual", "new"), qs=qs0)
-    est = report.models["new"].estimator_.upper()
-    _say(stream, f"[3/4] fitted the usual and the new model on {len(exps)} runs "
+    report = fit_models(exps, ("usual", "paper"), qs=qs0)
+    est = report.models["paper"].estimator_.upper()
+    _say(stream, f"[3/4] fitted the usual and the paper model on {len(exps)} runs "
                  f"({est}, q_s = {qs0:g} rad/s a priori; {time.perf_counter() - t0:.1f} s)")
 
-    # 4. close the loop: refine the new model from its residual, then adjust q_s
+    # 4. close the loop: refine the paper model from its residual, then adjust q_s
     t0 = time.perf_counter()
 
     def step_line(m: str) -> None:
-        hb.status(f"refining the new model, {m}", restart=False)
+        hb.status(f"refining the paper model, {m}", restart=False)
         _say(stream, "      " + m)
 
     def refine_new(rep: Any) -> Any:
-        hb.status("refining the new model, step 1: scoring the candidate effects")
-        return refine(rep.designs["new"], rep.models["new"], max_steps=max_steps,
+        hb.status("refining the paper model, step 1: scoring the candidate effects")
+        return refine(rep.designs["paper"], rep.models["paper"], max_steps=max_steps,
                       vmax=rep.vmax, progress=step_line)
 
     ref = refine_new(report)
@@ -162,13 +162,13 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
     if abs(rs.qs - qs0) > 0.01 * qs0:
         _say(stream, f"      q_s adjusted with the refined model: {qs0:g} -> {rs.qs:.4g} rad/s")
         hb.status(f"fitting both models again with q_s = {rs.qs:.4g} rad/s")
-        report = fit_models(exps, ("usual", "new"), qs=rs.qs, like=report)
+        report = fit_models(exps, ("usual", "paper"), qs=rs.qs, like=report)
         ref = refine_new(report)
     fit = report.to_json()
-    fit["qs_a_priori"] = qs0
-    fit["qs_rescan"] = [{"qs": q, "rel_error": e} for q, e in rs.scan]
+    fit["q_s_a_priori"] = qs0
+    fit["q_s_rescan"] = [{"q_s": q, "rel_error": e} for q, e in rs.scan]
     fit["refinement"] = ref.to_json()
-    fit["refinement"]["model"] = "new"
+    fit["refinement"]["model"] = "paper"
     _say(stream, f"[4/4] refinement: {len(ref.steps)} step(s), relative error "
                  f"{ref.rel_error_initial:.4f} -> {ref.rel_error_final:.4f}, q_s = "
                  f"{report.qs:.4g} rad/s ({time.perf_counter() - t0:.1f} s)")
@@ -216,11 +216,11 @@ def _summary(fit: dict, ref: Any, wall_s: float) -> str:
     lines = ["", "Table III — relative norm of errors ||rho||/||Y||",
              f"{'Measurements used':<36}{'Usual model':>13}{'New model':>13}"]
     for label, key in rows:
-        u, n = m["usual"].get(key), m["new"].get(key)
+        u, n = m["usual"].get(key), m["paper"].get(key)
         lines.append(f"{label:<36}{_f(u):>13}{_f(n):>13}")
     lines.append("")
     leak = leak_note(min(ref.rel_error_final, ref.heldout_rel_error_final), ref.noise_floor)
-    lines.append(f"Refinement of the new model: {_f(ref.rel_error_initial)} -> "
+    lines.append(f"Refinement of the paper model: {_f(ref.rel_error_initial)} -> "
                  f"{_f(ref.rel_error_final)} ({ref.heldout_kind} "
                  f"{_f(ref.heldout_rel_error_initial)} -> {_f(ref.heldout_rel_error_final)}; "
                  f"noise floor {_f(ref.noise_floor)}"
@@ -245,7 +245,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "demo",
         help="run the whole campaign on the simulated joint and write a report",
         description="Plan the example campaign, run it on the simulated CiA 402 drive over a "
-        "virtual CAN bus, log to MCAP, fit the usual and the new model, refine from the "
+        "virtual CAN bus, log to MCAP, fit the usual and the paper model, refine from the "
         "residual, and write DIR/report.html.",
     )
     p.add_argument("--out", type=Path, default=Path("jointid-demo"),

@@ -305,7 +305,7 @@ def unique_tag(names: tuple[str, ...], existing: set[str]) -> str:
 
 def rigid_prediction(lib: Library, coef: dict[str, float]) -> Prediction | None:
     """τ̂_out, the model's own load prediction: the declared rigid-body and payload terms of
-    ``lib`` with their current coefficients (eq. 31, 34), or, in the new model, the inner
+    ``lib`` with their current coefficients (eq. 31, 34), or, in the paper model, the inner
     terms of its load-dependent friction (eq. 42) with the mean of their motor and generator
     products, (a_m χ + a_g χ) / 2 ≈ χ; None when there are none (or all are zero).
 
@@ -334,7 +334,7 @@ def rigid_prediction(lib: Library, coef: dict[str, float]) -> Prediction | None:
 
 def model_prediction(lib: Library, coef: dict[str, float]) -> Prediction:
     """τ̂ of the whole current model, a function of the states only: terms whose quadrant is
-    the paper's proxy sign(τ q̇) (eq. 26: the declared new model) decide it with the model's
+    the paper's proxy sign(τ q̇) (eq. 26: the declared paper model) decide it with the model's
     load prediction instead (:func:`rigid_prediction`)."""
     load = rigid_prediction(lib, coef)
     terms = []

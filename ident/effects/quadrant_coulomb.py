@@ -39,7 +39,7 @@ class QuadrantCoulomb(Effect):
 
 @register("quadrant_coulomb", order=90)
 def propose(ctx: Context) -> list[Candidate]:
-    """sign(P) sign(q̇)/2, when the model has no quadrant dry friction (the new model has)."""
+    """sign(P) sign(q̇)/2, when the model has no quadrant dry friction (the paper model has)."""
     if ctx.tau_out is not None and "quadrant_coulomb" not in ctx.effects:
         return [ctx.candidate(QuadrantCoulomb(ctx.tau_out))]
     return []

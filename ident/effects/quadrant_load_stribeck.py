@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from trajectories.friction import stribeck_exp
+
 from ..signals import Signals
 from ._base import Candidate, Context, Effect, Prediction, model_quadrant, register
 from ._scan import scan_log
@@ -18,33 +20,33 @@ class QuadrantLoadStribeck(Effect):
     ----------
     tau_out : Prediction
         Load-torque predictor τ̂_out [N m].
-    qs : float
+    q_s : float
         Stribeck velocity q_s [rad/s or m/s]; a hyper-parameter scanned on the residual.
     """
 
     effect = "quadrant_load_stribeck"
     variable = "quadrant"
-    hyper_names = ("qs",)
+    hyper_names = ("q_s",)
 
-    def __init__(self, tau_out: Prediction, qs: float, tag: str = "") -> None:
+    def __init__(self, tau_out: Prediction, q_s: float, tag: str = "") -> None:
         super().__init__(tag)
-        if not qs > 0:
-            raise ValueError(f"QuadrantLoadStribeck: qs must be > 0, got {qs}")
-        self.tau_out, self.qs = tau_out, float(qs)
+        if not q_s > 0:
+            raise ValueError(f"QuadrantLoadStribeck: q_s must be > 0, got {q_s}")
+        self.tau_out, self.q_s = tau_out, float(q_s)
 
     def with_hyper(self, **values: float) -> QuadrantLoadStribeck:
-        return QuadrantLoadStribeck(self.tau_out, values.get("qs", self.qs), self.tag)
+        return QuadrantLoadStribeck(self.tau_out, values.get("q_s", self.q_s), self.tag)
 
     def names(self) -> tuple[str, ...]:
         return (self._n("beta_P"),)
 
     def columns(self, s: Signals) -> np.ndarray:
-        e = np.exp(-np.abs(s.dq) / self.qs)
+        e = stribeck_exp(s.dq, self.q_s)
         return (model_quadrant(s, self.tau_out) * self.tau_out(s) * e)[:, None]
 
     def describe(self) -> str:
         return (
-            f"low-velocity load-dependent friction beta_P sign(P) tau_out exp(-|dq|/{self.qs:.4g})"
+            f"low-velocity load-dependent friction beta_P sign(P) tau_out exp(-|dq|/{self.q_s:.4g})"
         )
 
 

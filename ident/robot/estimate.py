@@ -54,6 +54,8 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
+from trajectories.friction import DEFAULT_Q_S, stribeck_exp
+
 from . import RobotIdentError
 from .base import base_parameters, payload_base, placed_payload
 from .moments import IDQ, IP, ISG, N_EXTRA, ONE, JointMoments, quadrant_weights
@@ -219,7 +221,7 @@ class RobotModel:
         model: str = "usual",
         method: str = "ls",
         *,
-        qs: float | Sequence[float] | Mapping[str, float] = 0.03,
+        qs: float | Sequence[float] | Mapping[str, float] = DEFAULT_Q_S,
         base: Any = None,
         quadrant: str = "model",
         dq_min: float = 0.0,
@@ -560,7 +562,7 @@ class RobotModel:
                     # rows that changed quadrant (entering or leaving the band is no change)
                     changed += int(np.count_nonzero(
                         (np.sign(sp) != np.sign(spp)) & ((sp != 0) & (spp != 0) | (h == 0))))
-                E = np.exp(-np.abs(dqo) / self.qs_[j])
+                E = stribeck_exp(dqo, self.qs_[j])
                 pminus = None
                 if h > 0:  # rows in the band around the quadrant boundary are left out
                     inb = np.abs(tout) < h
@@ -1097,7 +1099,7 @@ class RobotModel:
             else:
                 sp = tauj * dqj
             pp = quadrant_weights(sp)
-            E = np.exp(-np.abs(dqj) / self.qs_[j])
+            E = stribeck_exp(dqj, self.qs_[j])
             pred = np.zeros(dqj.size)
             for s, ws in ((0, pp), (1, 1.0 - pp)):
                 c0, c1, _, _ = coeffs(th, blk, s)

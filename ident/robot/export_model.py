@@ -8,7 +8,7 @@ Format and reference function: docs/model-export.md. In short, ``export_model`` 
   (mass, centre of mass, inertia about the CoM in the link axes); the other frames of the model
   (``tool0``, ``ee_link`` ...) as massless links on fixed joints. URDF has no gravity and no
   rotor inertia: both are in the friction file.
-* ``friction.json`` (``"format": "jointid-friction/1"``): the friction model (``usual`` or
+* ``friction.json`` (``"format": "jointid-friction/2"``): the friction model (``usual`` or
   ``paper``), gravity, and per joint its rotor inertia Ia (identified or known), q_s and the
   coefficients (usual: FC, FV, OFF; paper: a_m, b_m, a_g, b_g, c_m, d_m, c_g, d_g, FV, OFF).
 
@@ -29,13 +29,15 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 import pinocchio as pin
 
+from trajectories.friction import stribeck_exp
+
 from . import RobotIdentError
 from .paper import PAPER_BLOCK, USUAL_BLOCK
 
 __all__ = ["FRICTION_FORMAT", "urdf_text", "friction_record", "exported_torque",
            "export_model", "inertial_from_standard"]
 
-FRICTION_FORMAT = "jointid-friction/1"
+FRICTION_FORMAT = "jointid-friction/2"  # /1 spelled q_s "qs" (still read)
 _KINDS = ("XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M")
 _AXES = {"X": (1.0, 0.0, 0.0), "Y": (0.0, 1.0, 0.0), "Z": (0.0, 0.0, 1.0)}
 
@@ -180,7 +182,7 @@ def friction_record(model_name: str, joints: Sequence[str], numbers: Sequence[in
         kn = float(known.get(j, 0.0))
         ia = kn if kn > 0 else float(standard.get(f"Ia{n}", 0.0))
         out_joints.append({"name": j, "number": int(n), "rotor_inertia": ia,
-                           "rotor_inertia_known": kn > 0, "qs": float(q), **coef})
+                           "rotor_inertia_known": kn > 0, "q_s": float(q), **coef})
     rec: dict[str, Any] = {"format": FRICTION_FORMAT, "model": model_name,
                            "gravity": [float(g) for g in gravity], "joints": out_joints}
     if "Ma_ratio" in values:
@@ -223,7 +225,7 @@ def exported_torque(friction: Mapping[str, Any], tau_rigid: np.ndarray, dq: np.n
         if not paper:
             out[:, j] = t_out + jr["FC"] * s + jr["FV"] * v + jr["OFF"]
             continue
-        e = np.exp(-np.abs(v) / jr["qs"])
+        e = stribeck_exp(v, jr["q_s"] if "q_s" in jr else jr["qs"])  # "qs": jointid-friction/1
         pp = 0.5 * (1.0 + np.sign(t_out * v))
         motor = (jr["a_m"] + jr["b_m"] * e) * t_out + (jr["c_m"] + jr["d_m"] * e) * s
         gen = (jr["a_g"] - jr["b_g"] * e) * t_out + (jr["c_g"] + jr["d_g"] * e) * s
@@ -241,7 +243,7 @@ def export_model(robot: Any, consistent: Mapping[str, Any], outdir: str | Path,
         The identified robot (its reduced model gives the kinematics).
     consistent : mapping
         A consistent estimate's record (:func:`~ident.robot.consistent_fit.consistent_record`:
-        ``model``, ``parameters``, ``standard``, ``qs``, ``known_rotor_inertia``).
+        ``model``, ``parameters``, ``standard``, ``q_s``, ``known_rotor_inertia``).
     fixed : mapping, optional
         Parameters the fit held fixed (``RobotModel.fixed_``).
 
@@ -256,7 +258,7 @@ def export_model(robot: Any, consistent: Mapping[str, Any], outdir: str | Path,
     name = robot.name or "robot"
     text = urdf_text(model, consistent["standard"], numbers, name)
     fr = friction_record(consistent["model"], joints, numbers, consistent["parameters"],
-                         consistent["standard"], consistent["qs"], robot.gravity,
+                         consistent["standard"], consistent["q_s"], robot.gravity,
                          consistent.get("known_rotor_inertia"), fixed)
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)

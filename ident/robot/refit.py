@@ -45,6 +45,8 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
+from trajectories.friction import stribeck_exp
+
 from ..terms import Term
 from ..unseen import N_BLOCKS, heldout_kind, noise_floor
 from . import RobotIdentError
@@ -351,7 +353,7 @@ def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
         p["idx"].append(idx[ok])
         p["V"].append(V[ok])
         p["pp"].append(quadrant_weights(sp[ok]))
-        p["E"].append(np.exp(-np.abs(dqj[ok]) / model.qs_[j]))
+        p["E"].append(stribeck_exp(dqj[ok], model.qs_[j]))
         p["tau"].append(tauj[ok])
     out = []
     for j in range(k):

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trajectories.friction import stribeck_exp
 from trajectories.schema import Field
 
 from ._base import Inputs, Knobs, PlantEffect, register
@@ -31,7 +32,7 @@ def torque(p: WarmUp, x: Inputs) -> np.ndarray:
     f = x.params.friction
     dq = x.dq
     pw = np.sign(x.tau_out * dq)
-    ex = np.exp(-np.abs(dq) / x.params.joint.q_s)
+    ex = stribeck_exp(dq, x.params.joint.q_s)
     dry = (0.5 * (1.0 + pw) * (f.c_m + f.d_m * ex)
            + 0.5 * (1.0 - pw) * (f.c_g + f.d_g * ex)) * np.sign(dq)
     w = p.fraction * np.exp(-np.asarray(x.t, dtype=float) / p.time_constant_s)

@@ -1,0 +1,89 @@
+"""One vocabulary for the single-joint and the n-dof fits (issue 24): the model and estimator
+names, and the deprecated spellings still accepted on input, in this one table.
+
+Outputs (CLI text, JSON, API attributes, reports) use the canonical names only; the entry
+points (``jointid fit``, :class:`ident.api.JointModel`, :class:`ident.api_robot.RobotFit`,
+``jointid report`` / ``export-model`` reading an old JSON record) map the aliases here.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from . import DataError
+
+#: Friction models: ``usual`` (eq. 38-39) and ``paper`` (load- and velocity-dependent dry
+#: friction, eq. 42-43).
+MODEL_NAMES = ("usual", "paper")
+
+#: Deprecated model names accepted on input -> canonical name.
+MODEL_ALIASES = {"new": "paper"}
+
+#: Estimators: least squares (eq. 12), weighted per joint, instrumental variables (IDIM-IV).
+METHOD_NAMES = ("ls", "wls", "iv")
+
+#: Deprecated estimator names accepted on input -> canonical name.
+METHOD_ALIASES = {"ols": "ls"}
+
+#: Deprecated JSON keys of a fit record -> canonical key (read by :func:`upgrade_record`).
+KEY_ALIASES = {"qs": "q_s", "qs_scan": "q_s_scan"}
+
+
+def model_name(name: str, *, extra: tuple[str, ...] = ()) -> str:
+    """The canonical model name of ``name`` (``"new"`` -> ``"paper"``).
+
+    Parameters
+    ----------
+    name : str
+        A model name or a deprecated alias.
+    extra : tuple of str
+        Further accepted values (e.g. ``"both"``), returned unchanged.
+
+    Raises
+    ------
+    DataError
+        ``name`` is neither a model, an alias nor one of ``extra``.
+    """
+    name = MODEL_ALIASES.get(name, name)
+    if name not in MODEL_NAMES + extra:
+        expected = ", ".join(repr(n) for n in MODEL_NAMES + extra)
+        raise DataError(f"model {name!r}: expected one of {expected}")
+    return name
+
+
+def method_name(name: str, *, extra: tuple[str, ...] = (), what: str = "method") -> str:
+    """The canonical estimator name of ``name`` (``"ols"`` -> ``"ls"``); see :func:`model_name`.
+
+    ``what`` names the option in the error (``"method"``, ``"estimator"``, ``"--method"``).
+    """
+    name = METHOD_ALIASES.get(name, name)
+    if name not in METHOD_NAMES + extra:
+        expected = ", ".join(repr(n) for n in METHOD_NAMES + extra)
+        raise DataError(f"{what} {name!r}: expected one of {expected}")
+    return name
+
+
+def upgrade_record(rec: dict[str, Any]) -> dict[str, Any]:
+    """A fit JSON record with the deprecated spellings of older records renamed.
+
+    ``models.new`` -> ``models.paper``, ``"new"`` as a model value -> ``"paper"``, ``qs`` ->
+    ``q_s``, ``estimator``/``method`` ``"ols"`` -> ``"ls"``, at any depth; a record already
+    in the current spelling comes back equal. The input is not modified.
+    """
+
+    def walk(x: Any, key: str = "") -> Any:
+        if isinstance(x, list):
+            return [walk(v, key) for v in x]
+        if isinstance(x, str) and key in ("model", "models"):
+            return MODEL_ALIASES.get(x, x)
+        if isinstance(x, str) and key in ("estimator", "method"):
+            return METHOD_ALIASES.get(x, x)
+        if not isinstance(x, dict):
+            return x
+        out: dict[str, Any] = {}
+        for k, v in x.items():
+            k2 = MODEL_ALIASES.get(k, KEY_ALIASES.get(k, k))
+            out[k2 if k2 == k or k2 not in x else k] = walk(v, k2)
+        return out
+
+    return walk(rec)

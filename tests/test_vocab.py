@@ -1,0 +1,59 @@
+"""One vocabulary (issue 24): model ``paper`` (``new`` deprecated), estimators ``ls|wls|iv``
+(``ols`` deprecated), ``q_s`` in JSON; the deprecated spellings are mapped in ident.vocab and
+older JSON records read as current ones; E = exp(-|dq|/q_s) is one function."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ident import DataError
+from ident.vocab import method_name, model_name, upgrade_record
+from trajectories.friction import DEFAULT_Q_S, stribeck_exp
+
+
+def test_aliases_map_to_the_one_name_and_unknown_names_are_refused():
+    assert model_name("new") == model_name("paper") == "paper"
+    assert model_name("usual") == "usual"
+    assert model_name("both", extra=("both",)) == "both"
+    assert method_name("ols") == method_name("ls") == "ls"
+    assert [method_name(m) for m in ("wls", "iv")] == ["wls", "iv"]
+    with pytest.raises(DataError, match=r"^model 'old': expected one of 'usual', 'paper'$"):
+        model_name("old")
+    with pytest.raises(DataError, match=r"^--method 'gls': expected one of 'ls', 'wls', 'iv'$"):
+        method_name("gls", what="--method")
+    with pytest.raises(DataError):
+        model_name("both")  # only where the caller allows it
+
+
+def test_an_old_fit_record_reads_as_a_current_one():
+    old = {
+        "format": "jointid-fit/1", "qs": 0.03,
+        "qs_scan": [{"qs": 0.02, "rel_error": 0.1}],
+        "models": {"usual": {"estimator": "ols", "rel_error": 0.2},
+                   "new": {"estimator": "iv", "qs": 0.03, "parameters": {"a_m_J": 1.0}}},
+        "table_iv": {"with_payloads": {"usual": 0.2, "new": 0.1}},
+        "refinement": {"model": "new", "steps": []},
+        "figures": {"new": [{"file": "a.png"}]},
+    }
+    new = upgrade_record(old)
+    assert new == {
+        "format": "jointid-fit/1", "q_s": 0.03,
+        "q_s_scan": [{"q_s": 0.02, "rel_error": 0.1}],
+        "models": {"usual": {"estimator": "ls", "rel_error": 0.2},
+                   "paper": {"estimator": "iv", "q_s": 0.03, "parameters": {"a_m_J": 1.0}}},
+        "table_iv": {"with_payloads": {"usual": 0.2, "paper": 0.1}},
+        "refinement": {"model": "paper", "steps": []},
+        "figures": {"paper": [{"file": "a.png"}]},
+    }
+    assert old["models"].keys() == {"usual", "new"}  # the input is left as it was
+    assert upgrade_record(new) == new  # a current record is unchanged
+
+
+def test_stribeck_exp_is_the_expression_it_replaced():
+    rng = np.random.default_rng(3)
+    dq = rng.normal(0.0, 0.5, 1000)
+    assert np.array_equal(stribeck_exp(dq, DEFAULT_Q_S), np.exp(-np.abs(dq) / 0.03))
+    qs = np.array([0.02, 0.05])
+    assert np.array_equal(stribeck_exp(dq[:, None][:10], qs), np.exp(-np.abs(dq[:10, None]) / qs))
+    assert stribeck_exp(0.0, 0.03) == 1.0
