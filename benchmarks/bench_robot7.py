@@ -28,6 +28,8 @@ Stages (exclusive times: a stage's time excludes the stages called inside it):
 - usual fit / paper fit: ``RobotModel.fit`` (the sign check's first usual fit counted under
   usual);
 - consistency: ``check_consistency`` (the LMI program, cvxpy's import on its first call);
+- uncertainty: ``ident.robot.uncertainty.assess`` (the honest sigma: block jackknife, IV
+  check, pruning of the paper model);
 - other: the rest of ``fit_robot`` and the report (Table III, errors on all rows, text).
 
 Columns "wall" (perf_counter) and "cpu" (process_time, this process's CPU time: on a loaded
@@ -151,6 +153,7 @@ def child(argv: list[str]) -> dict:
             clock.wrap(mod, "base_parameters", "base")
     clock.wrap(estimate.RobotModel, "fit", lambda self, *a, **k: f"{self.model} fit")
     clock.wrap(cr, "check_consistency", "consistency")
+    clock.wrap(cr, "assess", "uncertainty")
     devnull = open(os.devnull, "w")  # noqa: SIM115 -- the report text is not timed output
     keep, sys.stdout = sys.stdout, devnull
     try:
@@ -178,7 +181,10 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--models", nargs="+", default=["both", "usual"],
                     help="--model values to time (the command line's default is both)")
-    ap.add_argument("--args", default="", help="more options of jointid fit --robot")
+    ap.add_argument("--args", default="--cutoff 20",
+                    help="more options of jointid fit --robot (default --cutoff 20: on this "
+                         "log the automatic cut-off stops at its 0.4 f_s bound, with a "
+                         "warning, and the paper model is then refused as not identifiable)")
     ap.add_argument("--before", type=Path, default=None,
                     help="a checkout of the code before, timed in the same run")
     ap.add_argument("--child", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)

@@ -238,20 +238,21 @@ def _unit_moments(model: Any, units: list[RobotSignals]) -> list[list[JointMomen
 
 
 def _refit(model: Any, moms: list[JointMoments], free: np.ndarray,
-           tol: float | None = None) -> np.ndarray:
+           tol: float | None = None, max_iter: int | None = None) -> np.ndarray:
     """The model's Gauss-Newton on ``moms`` from its estimate (held parameters at their value,
     pruned ones at 0), with the fit's weights (WLS: not re-estimated), to ``tol``."""
     held = np.isin(model.names_, list(model.fixed_))
     x0 = np.where(free | held, model.coef_, 0.0)
     w = getattr(model, "weights_", None)
     w = np.ones(len(moms)) if w is None else np.asarray(w, dtype=float)
-    saved = model.tol
-    model.tol = saved if tol is None else tol
+    saved = model.tol, model.max_iter
+    model.tol = saved[0] if tol is None else tol
+    model.max_iter = saved[1] if max_iter is None else min(int(saved[1]), max_iter)
     try:
         x, _ = model._gauss_newton(moms, _coeffs(model), x0, free, w,
                                    linear=model.model == "usual")
     finally:
-        model.tol = saved
+        model.tol, model.max_iter = saved
     return x
 
 
@@ -473,6 +474,12 @@ def _honest(model: Any, moms: list[list[JointMoments]], ivm: Any, free: np.ndarr
 #: joint's residual variance, k the parameters removed on that joint
 PRUNE_ALPHA = 0.01
 
+#: Gauss-Newton tolerance of the candidate refits of the pruning (relative step; the cost is
+#: then within ~1e-12 relative of its minimum); the pruned model is refitted to the fit's own
+PRUNE_TOL = 1e-6
+#: and at most this many steps (from the current estimate, one parameter less)
+PRUNE_MAX_ITER = 10
+
 
 def _prune(model: Any, moms: list[list[JointMoments]], free: np.ndarray, inflate: np.ndarray,
            threshold_pct: float) -> list[str]:
@@ -500,11 +507,13 @@ def _prune(model: Any, moms: list[list[JointMoments]], free: np.ndarray, inflate
         cand = np.where(can & free, rel, -np.inf)
         i = int(np.argmax(cand))
         if not cand[i] > threshold_pct:
+            if out:  # the candidates were refitted to PRUNE_TOL: the last one to the fit's
+                model._statistics(full, coeffs, _refit(model, full, free), free, w)
             return out
         j = owner[i]
         x_before = model.coef_.copy()
         free[i] = False
-        x = _refit(model, full, free)
+        x = _refit(model, full, free, tol=max(model.tol, PRUNE_TOL), max_iter=PRUNE_MAX_ITER)
         rise = model._cost(full, coeffs, x) - rr0
         if (rise[j] > chi2.ppf(1.0 - PRUNE_ALPHA, removed[j] + 1) * var0[j]
                 or float(w @ rise) > chi2.ppf(1.0 - PRUNE_ALPHA, len(out) + 1) * s2):
