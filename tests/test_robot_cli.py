@@ -260,8 +260,9 @@ def test_cli_paper_model_on_payload_runs(tmp_path, capfd):
                            seed=10 + i)
         files.append(write_arm_csv(run, tmp_path / f"p{i}.csv"))
     out_json = tmp_path / "fit.json"
+    # --no-prune: the record's paper parameters are compared with a plain RobotModel fit
     code, out, err = run_cli(capfd, "--robot", ARM3, *files, "--model", "both", "--method",
-                             "ls", "--json", out_json)
+                             "ls", "--no-prune", "--json", out_json)
     assert code == 0, err
     rec = json.loads(out_json.read_text())
     assert "error" not in rec["models"]["paper"], rec["models"]["paper"]
