@@ -33,6 +33,7 @@ from trajectories.robot import Robot
 from . import DataError
 from .cli_export_model import consistent_from_record, read_fit_record
 from .robot.export_model import FRICTION_FORMAT, friction_record, urdf_text
+from .vocab import upgrade_record
 
 __all__ = ["THRESHOLDS_FORMAT", "Thresholds", "TorquePredictor", "exported_from_fit",
            "load_exported", "load_model", "thresholds_from_residual"]
@@ -48,7 +49,7 @@ class TorquePredictor:
     urdf : str
         URDF text of the exported model (its moving joints in the robot's order).
     friction : mapping
-        The friction file's content (``jointid-friction/1``).
+        The friction file's content (``jointid-friction/2``; ``/1`` read too).
     payload : object, optional
         ``mass_kg`` (or ``mass``) [kg], ``com`` (3,) [m] in the last moving joint's frame,
         ``inertia`` (XX XY XZ YY YZ ZZ about the CoM) [kg m^2]; None or 0 kg: none.
@@ -58,9 +59,10 @@ class TorquePredictor:
 
     def __init__(self, urdf: str, friction: Mapping[str, Any], payload: Any = None,
                  source: str = "") -> None:
-        if friction.get("format") != FRICTION_FORMAT:
+        if friction.get("format") not in (FRICTION_FORMAT, "jointid-friction/1"):
             raise DataError(f"{source or 'friction'}: format {friction.get('format')!r}: "
                             f"expected {FRICTION_FORMAT!r}")
+        friction = upgrade_record(dict(friction))  # jointid-friction/1: "qs" for q_s
         try:
             model = pin.buildModelFromXML(urdf)
         except Exception as exc:  # noqa: BLE001 - pinocchio raises plain exceptions
@@ -83,15 +85,15 @@ class TorquePredictor:
         self.model, self.data = model, model.createData()
         self.names = [str(j["name"]) for j in joints]
         self.paper = friction["model"] == "paper"
-        keys = (("rotor_inertia", "qs", "a_m", "b_m", "a_g", "b_g", "c_m", "d_m", "c_g",
+        keys = (("rotor_inertia", "q_s", "a_m", "b_m", "a_g", "b_g", "c_m", "d_m", "c_g",
                  "d_g", "FV", "OFF") if self.paper else ("rotor_inertia", "FC", "FV", "OFF"))
         try:
             self._coef = [tuple(float(j[key]) for key in keys) for j in joints]
         except KeyError as e:
             raise DataError(f"{source}: friction.joints: key {e.args[0]!r} missing") from None
         self.source = source
-        #: Stribeck velocity q_s of each joint [rad/s] (the friction file's ``qs``)
-        self.qs = [float(j.get("qs", 0.0)) for j in joints]
+        #: Stribeck velocity q_s of each joint [rad/s] (the friction file's ``q_s``)
+        self.qs = [float(j.get("q_s", 0.0)) for j in joints]
 
     def _friction(self, j: int, t_out: float, v: float, s: float, e: float) -> float:
         """Joint j's torque for output torque ``t_out``, velocity ``v``, sign ``s``, Stribeck
@@ -221,7 +223,7 @@ def exported_from_fit(path: str | Path, robot: Robot, model: str | None = None
         raise DataError(f"{path}: models.{name}.consistent: a link is not physically valid")
     text = urdf_text(robot.reduced(), cons["standard"], robot.numbers, robot.name or "robot")
     fr = friction_record(cons["model"], tuple(robot.moving), robot.numbers,
-                         cons["parameters"], cons["standard"], cons["qs"], robot.gravity,
+                         cons["parameters"], cons["standard"], cons["q_s"], robot.gravity,
                          cons.get("known_rotor_inertia"), fixed)
     return ExportedModel(text, fr, f"{path} ({name} model, consistent estimate)")
 
