@@ -18,6 +18,7 @@ from typing import Any
 
 from . import DataError, cli_robot
 from .api import JointModel, load
+from .estimators import ESTIMATORS
 from .loaders import parse_mapping
 from .plots import write_plots
 from .refine_plots import plot_refinement
@@ -75,7 +76,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--method",
-        choices=("ls", "wls", "iv"),
+        choices=tuple(ESTIMATORS),
         help="--robot only: estimator, least squares, weighted per joint, or instrumental "
         "variables on the reference q_ref (default wls)",
     )
