@@ -1,9 +1,12 @@
 """Ordinary least squares through QR with the paper's statistics (eq. 12-16), and its
 instrumental-variable variant (IDIM-IV).
 
-Pure numerics. The regressor columns are scaled to unit norm before the factorisation
-(the estimate is unchanged, the conditioning is not squared); a column-pivoted QR detects
-zero and linearly dependent columns and says which parameters cannot be separated.
+Pure numerics. The solve itself is the estimator objects' (:mod:`ident.estimators`, ``"ls"``
+and ``"iv"``, shared with the n-dof fit); this module adds the statistics of eq. 14-16 and the
+removal of unidentifiable and non-significant parameters. The regressor columns are scaled to
+unit norm before the factorisation (the estimate is unchanged, the conditioning is not
+squared); a column-pivoted QR detects zero and linearly dependent columns (the one rank rule,
+:data:`ident.estimators.RCOND`) and says which parameters cannot be separated.
 
 IDIM-IV (Janot, Vandanjon & Gautier, "A generic instrumental variable approach for
 industrial robot identification", IEEE TCST 2014): with instruments Z (m x b) correlated

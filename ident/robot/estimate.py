@@ -15,7 +15,10 @@ reduced by ``BaseParameters.reduce``), p_j the known payload torque of the sampl
 (subtracted as the paper's eq. 34 does with the weighed mass).
 
 Estimators (the sums are accumulated per chunk, :mod:`ident.robot.moments`, so memory does not
-grow with the number of samples; iterations reuse the moments):
+grow with the number of samples; iterations reuse the moments). They are the objects of
+:mod:`ident.estimators` (``METHODS`` is its table): each Gauss-Newton step is the estimator's
+``solve_normal`` (its rank rule), the covariance its ``normal_covariance``, the WLS weights its
+``weights``:
 
 * ``"ls"``  IDIM-LS, eq. 12; sigma^2 = ||rho||^2 / (r - b) (eq. 14), C = sigma^2 (W^T W)^-1
   (eq. 15; for the paper model W is the Jacobian at the solution).
