@@ -32,8 +32,11 @@ from .. import DataError, IdentifiabilityError
 __all__ = ["RCOND", "Estimator", "Solution", "RankDeficientError", "scaled", "dependent_columns"]
 
 #: Relative singular-value tolerance of the column-scaled regressor (module doc). On normal
-#: equations the threshold is RCOND**2 (their eigenvalues are squared singular values).
-RCOND = 1e-7
+#: equations the threshold is RCOND**2 = 1e-12 (their eigenvalues are squared singular values;
+#: summed moments hold ~1e-16 relative rounding, so a smaller one accepts noise: on the KUKA
+#: file 1e-14 let the IDIM-IV check "identify" directions with sigma 1e8 times the value).
+#: It was 1e-7 for the single-joint rows and 1e-12 for the n-dof normal matrix before.
+RCOND = 1e-6
 
 
 class RankDeficientError(IdentifiabilityError):
