@@ -21,12 +21,13 @@ from trajectories.friction import DEFAULT_Q_S
 
 from . import DataError, cli_robot
 from .api import JointModel, load
+from .estimators import ESTIMATORS
 from .loaders import parse_mapping
 from .plots import write_plots
 from .refine_plots import plot_refinement
 from .report import write_json
 from .report_build import build_report
-from .vocab import method_name, model_name
+from .vocab import METHOD_ALIASES, method_name, model_name
 
 __all__ = ["register", "run"]
 
@@ -80,7 +81,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--method",
-        choices=("ls", "wls", "iv", "ols"),
+        choices=(*ESTIMATORS, *METHOD_ALIASES),
         help="estimator: least squares, weighted per joint, or instrumental variables on the "
         "reference q_ref (default: wls with --robot; one joint: iv when every input carries "
         "q_ref, else ls, and wls is ls); 'ols' is a deprecated alias of 'ls'",

@@ -1,9 +1,12 @@
 """Ordinary least squares through QR with the paper's statistics (eq. 12-16), and its
 instrumental-variable variant (IDIM-IV).
 
-Pure numerics. The regressor columns are scaled to unit norm before the factorisation
-(the estimate is unchanged, the conditioning is not squared); a column-pivoted QR detects
-zero and linearly dependent columns and says which parameters cannot be separated.
+Pure numerics. The solve itself is the estimator objects' (:mod:`ident.estimators`, ``"ls"``
+and ``"iv"``, shared with the n-dof fit); this module adds the statistics of eq. 14-16 and the
+removal of unidentifiable and non-significant parameters. The regressor columns are scaled to
+unit norm before the factorisation (the estimate is unchanged, the conditioning is not
+squared); a column-pivoted QR detects zero and linearly dependent columns (the one rank rule,
+:data:`ident.estimators.RCOND`) and says which parameters cannot be separated.
 
 IDIM-IV (Janot, Vandanjon & Gautier, "A generic instrumental variable approach for
 industrial robot identification", IEEE TCST 2014): with instruments Z (m x b) correlated
@@ -21,9 +24,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
 
 from . import DataError, IdentifiabilityError
+from .estimators import RCOND, get_estimator
+from .estimators.base import dependency_message as _dependency_message
+from .estimators.base import dependent_columns
 
 __all__ = [
     "DEFAULT_THRESHOLD_PCT",
@@ -42,9 +47,9 @@ __all__ = [
 #: but real exponential terms (d_m, d_g ~ 10-20 % on the simulated campaign) whose removal
 #: would bias the others, and drops values compatible with zero.
 DEFAULT_THRESHOLD_PCT = 30.0
-#: Relative tolerance on the diagonal of R of the column-scaled, pivoted QR: a column whose
-#: |R_ii| / |R_00| falls below it is treated as a linear combination of the previous ones.
-RANK_TOL = 1e-7
+#: The one rank rule of every estimator (:data:`ident.estimators.RCOND`): a column whose
+#: |R_ii| / |R_00| (column-scaled, pivoted QR) falls below it is a combination of the others.
+RANK_TOL = RCOND
 
 
 @dataclass
@@ -105,47 +110,13 @@ class LSResult:
         }
 
 
-def _scaled(W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    norms = np.linalg.norm(W, axis=0)
-    safe = np.where(norms > 0, norms, 1.0)
-    return W / safe, safe
-
-
-def dependent_columns(
-    W: np.ndarray, names: Sequence[str], tol: float = RANK_TOL
-) -> list[tuple[str, list[str]]]:
-    """Columns that are (numerically) linear combinations of the others.
-
-    Uses a column-pivoted QR of the unit-norm-scaled W. For each dependent column returns
-    its name and the names of the kept columns it is a combination of.
-
-    Returns
-    -------
-    list of (name, partners)
-        Empty when W has full column rank.
-    """
-    Ws, _ = _scaled(W)
-    _, R, piv = scipy.linalg.qr(Ws, mode="economic", pivoting=True)
-    d = np.abs(np.diag(R))
-    if d.size == 0 or d[0] == 0:
-        return [(n, []) for n in names]
-    rank = int(np.sum(d > tol * d[0]))
-    out = []
-    if rank == W.shape[1]:
-        return out
-    R11 = R[:rank, :rank]
-    for k in range(rank, W.shape[1]):
-        coef = scipy.linalg.solve_triangular(R11, R[:rank, k])
-        big = np.abs(coef) > 1e-3 * max(np.abs(coef).max(), 1e-300)
-        partners = [names[piv[i]] for i in np.flatnonzero(big)]
-        out.append((names[piv[k]], partners))
-    return out
-
-
 def solve_ls(
     W: np.ndarray, Y: np.ndarray, names: Sequence[str], Z: np.ndarray | None = None
 ) -> LSResult:
     """One least-squares solve with statistics (eq. 12-16), W of full column rank.
+
+    The solve is the registered estimator's (:mod:`ident.estimators`): ``"ls"``, or ``"iv"``
+    when instruments are given.
 
     Parameters
     ----------
@@ -163,35 +134,13 @@ def solve_ls(
     IdentifiabilityError
         When W (or Z) is rank deficient (use :func:`fit_least_squares` to drop such columns).
     """
-    m, b = W.shape
-    if m <= b:
-        raise DataError(f"{m} samples for {b} parameters: need more samples than parameters")
-    Ws, norms = _scaled(W)
-    Q, R, piv = scipy.linalg.qr(Ws, mode="economic", pivoting=True)
-    d = np.abs(np.diag(R))
-    if b and (d[0] == 0 or d[-1] <= RANK_TOL * d[0]):
-        deps = dependent_columns(W, names)
-        raise IdentifiabilityError(_dependency_message(deps))
-    if Z is None:
-        qty = Q.T @ Y
-        z = scipy.linalg.solve_triangular(R, qty)
-        chi_s = np.empty(b)
-        chi_s[piv] = z
-        Rinv = scipy.linalg.solve_triangular(R, np.eye(b))
-        cov_p = Rinv @ Rinv.T  # (Ws[:, piv]^T Ws[:, piv])^-1
-        cov_s = np.empty_like(cov_p)
-        cov_s[np.ix_(piv, piv)] = cov_p
-    else:
-        chi_s, cov_s = _solve_iv(Ws, Y, np.asarray(Z, dtype=float), names)
-    chi = chi_s / norms
-    rho = Y - W @ chi
-    sigma2 = float(rho @ rho) / (m - b)
-    cov = sigma2 * cov_s / np.outer(norms, norms)
-    std = np.sqrt(np.clip(np.diag(cov), 0, None))
+    est = get_estimator("ls" if Z is None else "iv")
+    sol = est.solve(W, Y, instruments=Z, names=names)
+    chi, cov = sol.theta, sol.cov
+    std = sol.std
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.where(chi != 0, 100.0 * std / np.abs(chi), np.inf)
-    sv = np.linalg.svd(R, compute_uv=False)
-    sv_raw = np.linalg.svd(R * norms[piv][None, :], compute_uv=False)
+    rho = sol.residual
     ny = float(np.linalg.norm(Y))
     return LSResult(
         names=tuple(names),
@@ -199,63 +148,13 @@ def solve_ls(
         std=std,
         rel_std_pct=rel,
         cov=cov,
-        sigma_rho=float(np.sqrt(sigma2)),
+        sigma_rho=float(np.sqrt(sol.sigma2)),
         residual=rho,
         rel_error=float(np.linalg.norm(rho) / ny) if ny > 0 else float("nan"),
-        cond=float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf"),
-        cond_raw=float(sv_raw[0] / sv_raw[-1]) if sv_raw[-1] > 0 else float("inf"),
-        m=m,
+        cond=sol.cond,
+        cond_raw=sol.cond_raw,
+        m=W.shape[0],
     )
-
-
-def _solve_iv(
-    Ws: np.ndarray, Y: np.ndarray, Z: np.ndarray, names: Sequence[str]
-) -> tuple[np.ndarray, np.ndarray]:
-    """IV estimate for the unit-norm columns ``Ws`` and ``(Z^T W)^-1 Z^T Z (W^T Z)^-1``.
-
-    Z enters only through its column space: with Z = Q_z R_z (thin QR), Z^T W = R_z^T A and
-    the estimate is A^-1 Q_z^T Y with A = Q_z^T W, the covariance factor A^-1 A^-T.
-    """
-    m, b = Ws.shape
-    if Z.shape != (m, b):
-        raise DataError(f"instruments have shape {Z.shape}, expected {(m, b)} like W")
-    if not np.all(np.isfinite(Z)):
-        raise DataError("instruments Z hold NaN or infinite values")
-    Zs, _ = _scaled(Z)
-    Qz, Rz = scipy.linalg.qr(Zs, mode="economic")
-    dz = np.abs(np.diag(Rz))
-    if b and (dz.max() == 0 or dz.min() <= RANK_TOL * dz.max()):
-        deps = dependent_columns(Z, names)
-        raise IdentifiabilityError("instruments: " + _dependency_message(deps))
-    A = Qz.T @ Ws
-    try:
-        lu = scipy.linalg.lu_factor(A, check_finite=False)
-    except (np.linalg.LinAlgError, ValueError) as exc:  # pragma: no cover
-        raise IdentifiabilityError(f"instruments uncorrelated with the regressor ({exc})") from None
-    sv = np.linalg.svd(A, compute_uv=False)
-    if sv[-1] <= RANK_TOL * sv[0]:
-        raise IdentifiabilityError(
-            "instruments: Z^T W is singular (some column's instrument is uncorrelated with it)"
-        )
-    chi_s = scipy.linalg.lu_solve(lu, Qz.T @ Y)
-    Ainv = scipy.linalg.lu_solve(lu, np.eye(b))
-    return chi_s, Ainv @ Ainv.T
-
-
-def _dependency_message(deps: list[tuple[str, list[str]]]) -> str:
-    parts = []
-    for name, partners in deps:
-        if partners:
-            parts.append(f"{name} is a linear combination of {', '.join(partners)}")
-        else:
-            parts.append(f"{name} has a zero column")
-    hint = ""
-    if any(n.startswith(("a_", "b_", "c_", "d_")) for n, _ in deps):
-        hint = (
-            " (quadrant terms need load variation: gravity or payload runs change the sign of "
-            "tau_out at a given velocity; without them P+/P- follow the direction only)"
-        )
-    return "regressor is rank deficient: " + "; ".join(parts) + hint
 
 
 def fit_least_squares(

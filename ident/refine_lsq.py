@@ -26,7 +26,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from .estimate import RANK_TOL, _scaled
+from .estimate import RANK_TOL
+from .estimators.base import scaled as _scaled
 
 __all__ = ["MARGIN", "quick_residual"]
 

@@ -15,7 +15,10 @@ reduced by ``BaseParameters.reduce``), p_j the known payload torque of the sampl
 (subtracted as the paper's eq. 34 does with the weighed mass).
 
 Estimators (the sums are accumulated per chunk, :mod:`ident.robot.moments`, so memory does not
-grow with the number of samples; iterations reuse the moments):
+grow with the number of samples; iterations reuse the moments). They are the objects of
+:mod:`ident.estimators` (``METHODS`` is its table): each Gauss-Newton step is the estimator's
+``solve_normal`` (its rank rule), the covariance its ``normal_covariance``, the WLS weights its
+``weights``:
 
 * ``"ls"``  IDIM-LS, eq. 12; sigma^2 = ||rho||^2 / (r - b) (eq. 14), C = sigma^2 (W^T W)^-1
   (eq. 15; for the paper model W is the Jacobian at the solution).
@@ -56,6 +59,8 @@ import scipy.linalg
 
 from trajectories.friction import DEFAULT_Q_S, stribeck_exp
 
+from .. import DataError
+from ..estimators import ESTIMATORS, RCOND, Estimator, RankDeficientError
 from . import RobotIdentError
 from .base import base_parameters, payload_base, placed_payload
 from .moments import IDQ, IP, ISG, N_EXTRA, ONE, JointMoments, quadrant_weights
@@ -76,10 +81,12 @@ __all__ = ["RobotModel", "MODELS", "METHODS"]
 MODELS = ("usual", "paper")
 #: Name of the identified payload ratio M_ae / M_aw (eq. 35; ``payload_ratio=True``).
 RATIO = "Ma_ratio"
-METHODS = ("ls", "wls", "iv")
+#: The estimators (:data:`ident.estimators.ESTIMATORS`: "ls", "wls", "iv").
+METHODS = tuple(ESTIMATORS)
 #: Smallest eigenvalue / largest of the column-scaled normal matrix below which the
-#: parameters are not identifiable on the data.
-RANK_TOL = 1e-12
+#: parameters are not identifiable on the data: the one rank rule of every estimator,
+#: RCOND on the singular values of the scaled regressor, squared on its normal matrix.
+RANK_TOL = RCOND**2
 
 #: Fraction of the rows whose quadrant may still change when the passes stop
 #: (``quadrant="model"``); such rows have tau_out ~ 0, where the quadrant hardly matters.
@@ -595,11 +602,16 @@ class RobotModel:
         pb, nb = self.n_theta_, len(self.block_)
         return np.concatenate([self.cols_[j], pb + j * nb + np.arange(nb)])
 
+    @property
+    def _estimator(self) -> Estimator:
+        """The estimator object of ``method`` (:mod:`ident.estimators`)."""
+        return ESTIMATORS[self.method]()
+
     def _normal(self, moms, coeffs: Coeffs, x: np.ndarray, weights: np.ndarray):
         nx = x.size
         A = np.zeros((nx, nx))
         g = np.zeros(nx)
-        C = np.zeros((nx, nx)) if self.method == "iv" else None
+        C = np.zeros((nx, nx)) if self._estimator.needs_instruments else None
         rr = np.zeros(len(moms))
         yy = np.zeros(len(moms))
         for j, mom in enumerate(moms):
@@ -659,7 +671,7 @@ class RobotModel:
         once (:class:`~ident.robot.packed.PackedMoments`); None for IDIM-IV or another
         coefficient function."""
         model = {paper_coefficients: "paper", usual_coefficients: "usual"}.get(coeffs)
-        if model is None or self.method == "iv":
+        if model is None or self._estimator.needs_instruments:
             return None
         k, nb, nx = len(moms), len(self.block_), self.n_theta_ + len(self.block_) * len(moms)
         m = max(len(c) for c in self.cols_)
@@ -695,24 +707,14 @@ class RobotModel:
                                   "no excitation (their columns are zero)", names, 0.0,
                                   float(sv[0]) if sv.size else 0.0, zero=True)
         As = Af / d[:, None] / d[None, :]
-        if self.method != "iv":
-            ev = np.linalg.eigvalsh(As)  # the eigenvectors only when the check fails
-            lo, hi, weak = ev[0], ev[-1], None
-        else:
-            # IDIM-IV: A = Z^T W is not symmetric; its smallest singular value decides
-            _, sv, vt = np.linalg.svd(As)
-            lo, hi, weak = sv[-1], sv[0], vt[-1]
-        if not np.isfinite(hi) or lo <= RANK_TOL * hi:
-            if weak is None:
-                ev, evec = np.linalg.eigh(As)
-                lo, hi, weak = ev[0], ev[-1], evec[:, 0]
-            worst = np.argsort(-np.abs(weak))[:4]
-            names = [self.names_[i] for i in np.flatnonzero(free)[worst]]
-            raise _Unidentifiable(f"parameters not identifiable on these data (cond "
-                                  f"{hi / max(lo, 1e-300):.2g}); the weakest "
-                                  f"direction involves {names}", names, float(lo), float(hi))
+        # the estimator's rank rule and solve (IDIM-IV: A = Z^T W is not symmetric)
+        try:
+            sol = self._estimator.solve_normal(
+                As, g[free] / d, [self.names_[i] for i in np.flatnonzero(free)])
+        except RankDeficientError as e:
+            raise _Unidentifiable(str(e), e.names, e.lo, e.hi) from None
         step = np.zeros_like(g)
-        step[free] = scipy.linalg.solve(As, g[free] / d) / d
+        step[free] = sol / d
         return step
 
     def _gauss_newton(self, moms, coeffs: Coeffs, x0: np.ndarray, free: np.ndarray,
@@ -720,6 +722,7 @@ class RobotModel:
         x = x0.copy()
         cost = float(weights @ self._cost(moms, coeffs, x))
         packed = self._packed(moms, coeffs)
+        no_search = not self._estimator.symmetric  # IV minimises no cost: full steps
         it = 0
         for it in range(1, int(self.max_iter) + 1):
             if packed is not None:  # every joint at once
@@ -733,7 +736,7 @@ class RobotModel:
             lam = 1.0
             while True:  # step halving; the trial costs from the polynomial in lam
                 cn = max(float(np.polyval(poly, lam)), 0.0)
-                if linear or self.method == "iv" or cn <= cost * (1 + 1e-12) or lam < 1e-6:
+                if linear or no_search or cn <= cost * (1 + 1e-12) or lam < 1e-6:
                     break
                 lam *= 0.5
             x, cost = x + lam * step, cn
@@ -755,9 +758,8 @@ class RobotModel:
             raise RobotIdentError(f"RobotModel.fit: {int(n_rows.sum())} rows for {nfree} "
                                   f"parameters")
         sigma2 = float(weights @ rr) / dof
-        Af = A[np.ix_(free, free)]
-        Ainv = np.linalg.inv(Af)
-        cov_f = sigma2 * Ainv if C is None else sigma2 * Ainv @ C[np.ix_(free, free)] @ Ainv.T
+        cov_f = self._estimator.normal_covariance(
+            A[np.ix_(free, free)], None if C is None else C[np.ix_(free, free)], sigma2)
         cov = np.zeros((x.size, x.size))
         cov[np.ix_(free, free)] = cov_f
         self.coef_ = x
@@ -787,12 +789,13 @@ class RobotModel:
         k = len(moms)
         w = np.ones(k)
         x, it = self._gauss_newton(moms, coeffs, x0, free, w, linear)
-        if self.method == "wls":
+        est = self._estimator
+        if est.reweights:  # WLS: the joints' weights from the first fit's residuals
             sj = self._joint_sigma(moms, self._cost(moms, coeffs, x), free)
-            if np.any(sj <= 0):
-                raise RobotIdentError("RobotModel: a joint has zero residual; WLS weights "
-                                      "undefined (use method='ls')")
-            w = 1.0 / sj**2
+            try:
+                w = est.weights(sj)
+            except DataError as e:
+                raise RobotIdentError(f"RobotModel: {e}") from None
             x, it = self._gauss_newton(moms, coeffs, x, free, w, linear)
         return x, w, it
 

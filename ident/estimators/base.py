@@ -1,0 +1,303 @@
+"""The estimator contract: :class:`Estimator`, its :class:`Solution`, and the one rank rule.
+
+Every model's linear solve goes through an :class:`Estimator` (the single-joint fit,
+:mod:`ident.estimate`; the n-dof fit, :mod:`ident.robot.estimate`, whose Gauss-Newton steps
+are linear solves on its normal equations). An estimator answers two questions:
+
+* :meth:`Estimator.solve` -- ``W theta = y`` from the rows (W, y), with optional instruments Z
+  (column for column with W) and row groups (one label per row, e.g. the joint of the row);
+* :meth:`Estimator.solve_normal` / :meth:`Estimator.normal_covariance` -- the same on normal
+  equations already summed (A = W^T W or Z^T W, g = W^T y or Z^T y), for models that never
+  hold W (the n-dof moments, :mod:`ident.robot.moments`).
+
+Rank rule (one for every model): the columns are scaled to unit norm; a direction of the
+scaled regressor whose singular value is at most ``RCOND`` times the largest is not
+identifiable. On rows this is the diagonal of the column-pivoted QR (|R_kk| <= RCOND |R_00|);
+on a symmetric normal matrix A = W^T W (scaled to unit diagonal), whose eigenvalues are the
+squared singular values, it reads lambda_min <= RCOND^2 lambda_max; on an IV normal matrix
+Z^T W (not symmetric) its singular values are compared with RCOND^2 too.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+import scipy.linalg
+
+from .. import DataError, IdentifiabilityError
+
+__all__ = ["RCOND", "Estimator", "Solution", "RankDeficientError", "scaled", "dependent_columns"]
+
+#: Relative singular-value tolerance of the column-scaled regressor (module doc). On normal
+#: equations the threshold is RCOND**2 = 1e-12 (their eigenvalues are squared singular values;
+#: summed moments hold ~1e-16 relative rounding, so a smaller one accepts noise: on the KUKA
+#: file 1e-14 let the IDIM-IV check "identify" directions with sigma 1e8 times the value).
+#: It was 1e-7 for the single-joint rows and 1e-12 for the n-dof normal matrix before.
+RCOND = 1e-6
+
+
+class RankDeficientError(IdentifiabilityError):
+    """The regressor (or the instruments) is rank deficient on the data.
+
+    Attributes
+    ----------
+    names : list of str
+        The parameters involved: the dependent columns (rows given) or the largest entries of
+        the weakest direction (normal equations).
+    lo, hi : float
+        Smallest and largest singular value (eigenvalue for a symmetric normal matrix) of the
+        column-scaled matrix.
+    zero : bool
+        Some columns are exactly zero.
+    """
+
+    def __init__(self, msg: str, names: Sequence[str] = (), lo: float = 0.0,
+                 hi: float = 0.0, zero: bool = False) -> None:
+        super().__init__(msg)
+        self.names, self.lo, self.hi, self.zero = list(names), lo, hi, zero
+
+
+@dataclass
+class Solution:
+    """What every estimator returns.
+
+    Attributes
+    ----------
+    theta : ndarray, shape (b,)
+        The estimate.
+    cov : ndarray, shape (b, b)
+        Its covariance (symmetric).
+    sigma2 : float
+        Residual variance ||rho||^2 / (m - b) of the (weighted) rows (paper eq. 14).
+    rank : int
+        Numerical rank of the column-scaled regressor (``b`` when a solution is returned).
+    residual : ndarray, shape (m,)
+        rho = y - W theta (unweighted); empty for :meth:`Estimator.solve_normal`.
+    dof : int
+        m - b.
+    cond : float
+        Condition number of the column-scaled regressor.
+    cond_raw : float
+        Condition number of the unscaled regressor (MATLAB's ``cond(W)``).
+    weights : ndarray or None
+        Per-group weights 1/sigma_g^2 (WLS), None otherwise.
+    """
+
+    theta: np.ndarray
+    cov: np.ndarray
+    sigma2: float
+    rank: int
+    residual: np.ndarray = field(default_factory=lambda: np.empty(0))
+    dof: int = 0
+    cond: float = float("nan")
+    cond_raw: float = float("nan")
+    weights: np.ndarray | None = None
+
+    @property
+    def std(self) -> np.ndarray:
+        """sqrt(diag(cov)) (paper eq. 15)."""
+        return np.sqrt(np.clip(np.diag(self.cov), 0, None))
+
+
+def scaled(W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """W with unit-norm columns and the norms (zero columns left as they are)."""
+    norms = np.linalg.norm(W, axis=0)
+    safe = np.where(norms > 0, norms, 1.0)
+    return W / safe, safe
+
+
+def dependent_columns(
+    W: np.ndarray, names: Sequence[str], tol: float = RCOND
+) -> list[tuple[str, list[str]]]:
+    """Columns that are (numerically) linear combinations of the others (the rank rule).
+
+    Uses a column-pivoted QR of the unit-norm-scaled W. For each dependent column returns
+    its name and the names of the kept columns it is a combination of.
+
+    Returns
+    -------
+    list of (name, partners)
+        Empty when W has full column rank.
+    """
+    Ws, _ = scaled(W)
+    _, R, piv = scipy.linalg.qr(Ws, mode="economic", pivoting=True)
+    d = np.abs(np.diag(R))
+    if d.size == 0 or d[0] == 0:
+        return [(n, []) for n in names]
+    rank = int(np.sum(d > tol * d[0]))
+    out: list[tuple[str, list[str]]] = []
+    if rank == W.shape[1]:
+        return out
+    R11 = R[:rank, :rank]
+    for k in range(rank, W.shape[1]):
+        coef = scipy.linalg.solve_triangular(R11, R[:rank, k])
+        big = np.abs(coef) > 1e-3 * max(np.abs(coef).max(), 1e-300)
+        partners = [names[piv[i]] for i in np.flatnonzero(big)]
+        out.append((names[piv[k]], partners))
+    return out
+
+
+def dependency_message(deps: list[tuple[str, list[str]]]) -> str:
+    """One line naming every dependent column and its partners."""
+    parts = []
+    for name, partners in deps:
+        if partners:
+            parts.append(f"{name} is a linear combination of {', '.join(partners)}")
+        else:
+            parts.append(f"{name} has a zero column")
+    hint = ""
+    if any(n.startswith(("a_", "b_", "c_", "d_")) for n, _ in deps):
+        hint = (
+            " (quadrant terms need load variation: gravity or payload runs change the sign of "
+            "tau_out at a given velocity; without them P+/P- follow the direction only)"
+        )
+    return "regressor is rank deficient: " + "; ".join(parts) + hint
+
+
+class Estimator:
+    """Base class of the estimators (module doc). Subclasses set ``name`` and implement
+    :meth:`_solve_scaled`; one module each, registered in :data:`ident.estimators.ESTIMATORS`.
+
+    Class attributes
+    ----------------
+    name : str
+        Registry key (the CLI choice).
+    needs_instruments : bool
+        ``solve`` requires ``instruments``.
+    reweights : bool
+        The estimate is refitted with per-group weights from a first fit (:meth:`weights`).
+    symmetric : bool
+        Its normal matrix is symmetric (W^T W); False for Z^T W.
+    """
+
+    name: ClassVar[str] = ""
+    needs_instruments: ClassVar[bool] = False
+    reweights: ClassVar[bool] = False
+    symmetric: ClassVar[bool] = True
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"
+
+    # ------------------------------------------------------------------ rows
+    def solve(self, W: np.ndarray, y: np.ndarray, *, instruments: np.ndarray | None = None,
+              groups: np.ndarray | None = None,
+              names: Sequence[str] | None = None) -> Solution:
+        """Estimate theta of ``y = W theta + rho``.
+
+        Parameters
+        ----------
+        W : ndarray, shape (m, b)
+            Regressor (observation matrix).
+        y : ndarray, shape (m,)
+            Measurements.
+        instruments : ndarray, shape (m, b), or None
+            Instruments Z, column for column with W (IV only).
+        groups : ndarray, shape (m,), or None
+            A label per row (WLS: one variance per label; ignored by the others).
+        names : sequence of str or None
+            Column names for the error messages (default ``theta_0 ...``).
+
+        Raises
+        ------
+        DataError
+            Shapes, non-finite values, not more rows than columns, missing instruments.
+        RankDeficientError
+            W (or Z) is rank deficient by the rank rule; the message names the columns.
+        """
+        W = np.asarray(W, dtype=float)
+        y = np.asarray(y, dtype=float).ravel()
+        if W.ndim != 2 or W.shape[0] != y.shape[0]:
+            raise DataError(f"{self.name}: W has shape {W.shape}, expected ({y.shape[0]}, b)")
+        m, b = W.shape
+        names = [f"theta_{i}" for i in range(b)] if names is None else list(names)
+        if len(names) != b:
+            raise DataError(f"{self.name}: {len(names)} names for {b} columns")
+        if not (np.all(np.isfinite(W)) and np.all(np.isfinite(y))):
+            raise DataError(f"{self.name}: W or y holds NaN or infinite values")
+        if m <= b:
+            raise DataError(f"{m} samples for {b} parameters: need more samples than parameters")
+        if self.needs_instruments and instruments is None:
+            raise DataError(f"estimator {self.name!r} needs instruments (shape {W.shape})")
+        Z = None if instruments is None else np.asarray(instruments, dtype=float)
+        return self._solve(W, y, Z, groups, names)
+
+    def _solve(self, W: np.ndarray, y: np.ndarray, Z: np.ndarray | None,
+               groups: np.ndarray | None, names: list[str]) -> Solution:
+        Ws, norms = scaled(W)
+        Q, R, piv = scipy.linalg.qr(Ws, mode="economic", pivoting=True)
+        m, b = W.shape
+        d = np.abs(np.diag(R))
+        if b and (d[0] == 0 or d[-1] <= RCOND * d[0]):
+            deps = dependent_columns(W, names)
+            raise RankDeficientError(dependency_message(deps), [n for n, _ in deps])
+        theta_s, cov_s = self._solve_scaled(Ws, y, Q, R, piv, Z, names)
+        theta = theta_s / norms
+        rho = y - W @ theta
+        sigma2 = float(rho @ rho) / (m - b)
+        cov = sigma2 * cov_s / np.outer(norms, norms)
+        sv = np.linalg.svd(R, compute_uv=False)
+        sv_raw = np.linalg.svd(R * norms[piv][None, :], compute_uv=False)
+        return Solution(
+            theta=theta, cov=cov, sigma2=sigma2, rank=b, residual=rho, dof=m - b,
+            cond=float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf"),
+            cond_raw=float(sv_raw[0] / sv_raw[-1]) if sv_raw[-1] > 0 else float("inf"),
+        )
+
+    def _solve_scaled(self, Ws: np.ndarray, y: np.ndarray, Q: np.ndarray, R: np.ndarray,
+                      piv: np.ndarray, Z: np.ndarray | None,
+                      names: list[str]) -> tuple[np.ndarray, np.ndarray]:
+        """(theta_s, cov_s) for the unit-norm columns Ws = Q R P^T (full rank): the estimate
+        and the covariance factor, sigma^2 excluded."""
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------ normal equations
+    def solve_normal(self, As: np.ndarray, gs: np.ndarray,
+                     names: Sequence[str] | None = None) -> np.ndarray:
+        """Solve the column-scaled normal equations ``As x = gs`` after the rank rule.
+
+        Parameters
+        ----------
+        As : ndarray, shape (b, b)
+            D^-1 A D^-1 with D = sqrt(diag(A)) (unit diagonal): W^T W for LS/WLS, Z^T W for IV.
+        gs : ndarray, shape (b,)
+            D^-1 g.
+        names : sequence of str or None
+            Column names for the error.
+
+        Raises
+        ------
+        RankDeficientError
+            lambda_min <= RCOND^2 lambda_max (singular values for IV); ``names`` are the four
+            largest entries of the weakest direction.
+        """
+        if self.symmetric:
+            ev = np.linalg.eigvalsh(As)  # the eigenvectors only when the check fails
+            lo, hi, weak = ev[0], ev[-1], None
+        else:
+            _, sv, vt = np.linalg.svd(As)
+            lo, hi, weak = sv[-1], sv[0], vt[-1]
+        if not np.isfinite(hi) or lo <= RCOND**2 * hi:
+            if weak is None:
+                ev, evec = np.linalg.eigh(As)
+                lo, hi, weak = ev[0], ev[-1], evec[:, 0]
+            worst = np.argsort(-np.abs(weak))[:4]
+            label = [f"theta_{i}" for i in range(len(gs))] if names is None else list(names)
+            involved = [label[i] for i in worst]
+            raise RankDeficientError(
+                f"parameters not identifiable on these data (cond {hi / max(lo, 1e-300):.2g}); "
+                f"the weakest direction involves {involved}", involved, float(lo), float(hi))
+        return scipy.linalg.solve(As, gs)
+
+    def normal_covariance(self, A: np.ndarray, C: np.ndarray | None,
+                          sigma2: float) -> np.ndarray:
+        """Covariance sigma^2 A^-1 (LS, WLS with A = sum_g W_g^T W_g / sigma_g^2) or the IV
+        sandwich sigma^2 A^-1 C A^-T (A = Z^T W, C = Z^T Z)."""
+        Ainv = np.linalg.inv(A)
+        return sigma2 * Ainv if C is None else sigma2 * Ainv @ C @ Ainv.T
+
+    def weights(self, sigma_groups: np.ndarray) -> np.ndarray:
+        """Per-group weights for the refit (``reweights``); ones otherwise."""
+        return np.ones(len(sigma_groups))
