@@ -59,7 +59,7 @@ JOINTS = ("j1", "j2", "j3")
 
 
 def _campaign(work: Path, name: str, *, seed: int, periods: int, multisine_only: bool,
-              payloads: int = 2) -> Path:
+              payloads: int = 2, daq: str = "") -> Path:
     """A variant of the demo campaign (its robot, drives, gains, limits)."""
     text = DEMO.read_text()
     text = text.replace('file = "robots/arm3.toml"',
@@ -74,6 +74,9 @@ def _campaign(work: Path, name: str, *, seed: int, periods: int, multisine_only:
     if payloads == 1:
         head = head.split("[[payloads]]")[0] + "[[payloads]]\nmass_kg = 0.0\n\n"
     p = work / f"{name}.toml"
+    if daq:  # e.g. the paced run's SCHED_FIFO priority and CPU (docs/campaign-robot.md)
+        head = head.replace("\n[daq]\n", "\n[daq]\n" + daq + "\n") if "\n[daq]\n" in head \
+            else head + "\n[daq]\n" + daq + "\n\n"
     p.write_text(head + "".join(segs))
     return p
 
@@ -130,10 +133,11 @@ def stage_detect(work: Path) -> dict:
     return {"runs": s["runs"], "wall_s": s["wall_s"], "missed": s["missed_cycles"]}
 
 
-def stage_paced(work: Path, seconds: float) -> dict:
+def stage_paced(work: Path, seconds: float, realtime: int = 0) -> dict:
     periods = max(1, int(round(seconds / 8.0)))
+    daq = f"realtime_priority = {realtime}\ncpu = -1" if realtime else ""
     camp = _campaign(work, "arm3-paced", seed=1, periods=periods, multisine_only=True,
-                     payloads=1)
+                     payloads=1, daq=daq)
     out = {}
     for tag, th in (("monitor", work / "calibrate" / "thresholds.json"), ("none", None)):
         if th is None:  # the same run without the monitor: run_campaign alone
@@ -204,6 +208,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--work", type=Path, required=True)
     ap.add_argument("--paced-seconds", type=float, default=30.0)
+    ap.add_argument("--realtime", type=int, default=0,
+                    help="paced stage: SCHED_FIFO priority of the cycle loop (daq."
+                         "realtime_priority, pinned to the last CPU; needs CAP_SYS_NICE)")
     ap.add_argument("stages", nargs="+", choices=("model", "calibrate", "false", "detect",
                                                   "paced", "report"))
     a = ap.parse_args()
@@ -221,7 +228,7 @@ def main() -> None:
         elif st == "detect":
             res["detect"] = stage_detect(a.work)
         elif st == "paced":
-            res["paced"] = stage_paced(a.work, a.paced_seconds)
+            res["paced"] = stage_paced(a.work, a.paced_seconds, a.realtime)
         if st != "report":
             res.setdefault("stage_wall_s", {})[st] = time.perf_counter() - t0
             store.write_text(json.dumps(res, indent=1, default=str))
