@@ -21,7 +21,6 @@ import scipy.stats
 from ident import DataError, IdentifiabilityError
 from ident.cli import register
 from ident.estimators import (
-from ident.vocab import METHOD_ALIASES
     ESTIMATORS,
     RCOND,
     Estimator,
@@ -30,6 +29,7 @@ from ident.vocab import METHOD_ALIASES
     get_estimator,
 )
 from ident.robot.estimate import METHODS, RANK_TOL
+from ident.vocab import METHOD_ALIASES
 
 NAMES = ["J", "FV", "FC", "OFF", "M"]
 THETA = np.array([0.02, 0.3, 1.5, -0.4, 12.0])
