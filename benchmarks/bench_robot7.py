@@ -51,7 +51,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 STAGES = ("import", "load", "preprocess", "regressor", "base", "usual fit", "paper fit",
-          "consistency", "other")
+          "consistency", "uncertainty", "other")
 PANDA_TOML = """[robot]
 name = "panda7"
 gravity = [0.0, 0.0, -9.81]            # [m/s^2]
