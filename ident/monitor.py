@@ -41,6 +41,17 @@ __all__ = ["THRESHOLDS_FORMAT", "Thresholds", "TorquePredictor", "exported_from_
 THRESHOLDS_FORMAT = "jointid-monitor-thresholds/1"
 
 
+
+def _read_json(path: Path, missing: str) -> Any:
+    """The JSON content of ``path``; one-line :class:`DataError` naming the file when it is
+    missing (``missing`` says why) or not JSON."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise DataError(f"{path}: {missing}") from None
+    except json.JSONDecodeError as e:
+        raise DataError(f"{path}: not JSON ({e.msg}, line {e.lineno})") from None
+
 class TorquePredictor:
     """Joint torques [N m] the exported model predicts for one sample (module docstring).
 
@@ -186,12 +197,7 @@ def load_exported(folder: str | Path) -> ExportedModel:
         raise DataError(f"{d}: expected one .urdf file (jointid export-model), found "
                         f"{len(urdfs)}")
     fpath = d / "friction.json"
-    try:
-        fr = json.loads(fpath.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise DataError(f"{fpath}: missing (jointid export-model writes it)") from None
-    except json.JSONDecodeError as e:
-        raise DataError(f"{fpath}: not JSON ({e.msg}, line {e.lineno})") from None
+    fr = _read_json(fpath, "missing (jointid export-model writes it)")
     if not isinstance(fr, dict):
         raise DataError(f"{fpath}: expected a JSON object")
     return ExportedModel(urdfs[0].read_text(encoding="utf-8"), fr, str(d))
@@ -310,12 +316,7 @@ class Thresholds:
             Not JSON, another format, a key missing or of the wrong length.
         """
         p = Path(path)
-        try:
-            d = json.loads(p.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise DataError(f"{p}: no such thresholds file") from None
-        except json.JSONDecodeError as e:
-            raise DataError(f"{p}: not JSON ({e.msg}, line {e.lineno})") from None
+        d = _read_json(p, "no such thresholds file")
         if not isinstance(d, dict) or d.get("format") != THRESHOLDS_FORMAT:
             raise DataError(f"{p}: format: expected {THRESHOLDS_FORMAT!r} (jointid monitor "
                             "--calibrate)")

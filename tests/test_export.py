@@ -12,7 +12,7 @@ import time
 import can
 import numpy as np
 import pytest
-from mcap.reader import make_reader
+from damaged_logs import damage_chunk
 from test_daq_run import small_campaign
 
 from daq.protocol.export import ExportError, export_can
@@ -126,16 +126,7 @@ def test_truncated_log_exports_what_was_written(run_log, tmp_path):
 
 def test_damaged_middle_chunk_exports_every_other_chunk(run_log, tmp_path):
     """A damaged chunk costs its own frames only: the chunks after it are exported too."""
-    with open(run_log, "rb") as f:
-        chunks = sorted(make_reader(f).get_summary().chunk_indexes,
-                        key=lambda c: c.chunk_start_offset)
-    assert len(chunks) >= 3
-    mid = chunks[len(chunks) // 2]
-    data = bytearray(run_log.read_bytes())
-    at = mid.chunk_start_offset + mid.chunk_length // 2
-    data[at : at + 32] = bytes(32)
-    bad = tmp_path / "bad.mcap"
-    bad.write_bytes(bytes(data))
+    bad = damage_chunk(run_log, tmp_path / "bad.mcap")
     with pytest.warns(RuntimeWarning, match="damaged"):
         kept = read_frames(bad)
     with pytest.warns(RuntimeWarning, match="bad.mcap: log cut short or damaged"):

@@ -7,7 +7,7 @@ import warnings
 
 import numpy as np
 import pytest
-from mcap.reader import make_reader
+from damaged_logs import damage_chunk
 from test_daq_run import small_campaign
 
 from daq.protocol.reader import read_run
@@ -34,17 +34,7 @@ def damaged_log(tmp_path_factory):
     r = run_campaign(c, out_dir=out, simulate=default_plant(), yes=True)
     assert r.ok, r.reason
     path = r.runs[0].path
-    with open(path, "rb") as f:
-        chunks = sorted(make_reader(f).get_summary().chunk_indexes,
-                        key=lambda c: c.chunk_start_offset)
-    assert len(chunks) >= 4
-    mid = chunks[len(chunks) // 3]
-    data = bytearray(path.read_bytes())
-    at = mid.chunk_start_offset + mid.chunk_length // 2
-    data[at : at + 32] = bytes(32)
-    bad = out / "bad_payload0.mcap"
-    bad.write_bytes(bytes(data))
-    return path, bad
+    return path, damage_chunk(path, out / "bad_payload0.mcap", at=1 / 3, min_chunks=4)
 
 
 def test_fit_loader_keeps_consecutive_cycles_only(damaged_log):
