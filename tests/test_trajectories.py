@@ -157,7 +157,12 @@ def test_mixed_campaigns_are_continuous_and_return_to_start(lim, dt, data):
     assert ref.q[-1] == pytest.approx(start, abs=1e-9)
     assert np.all(np.diff(ref.segment) >= 0)
     s = plan.summary()
-    assert sum(s.band_share) == pytest.approx(1.0) and all(0 <= c <= 1 for c in s.band_coverage)
+    # the shares are of the moving samples (faster than MOVING_FRACTION of the velocity
+    # limit); a plan that never exceeds it (e.g. a trapezoid at 0.001 of the limit, found by
+    # hypothesis) has none, and its shares are all 0
+    moving = s.moving_time_s > 0
+    assert sum(s.band_share) == pytest.approx(1.0 if moving else 0.0)
+    assert all(0 <= c <= 1 for c in s.band_coverage)
 
 
 def test_cubic_evaluation_matches_ruckig_at_time():
