@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import tomllib
 from pathlib import Path
@@ -10,7 +11,11 @@ from typing import Any
 
 import numpy as np
 
+from ident.robot.regressor import RobotRegressor
+from ident.robot.signals import RobotPayloadData, RobotSignals
+from sim_drivers.arm import ArmGains, ArmParams, Payload, model_reference, simulate_arm
 from sim_drivers.testing import unique_channel
+from trajectories.robot import load_robot
 from trajectories.robot_campaign import RobotCampaign
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -115,3 +120,45 @@ def write_arm_csv(run: Any, path: Path) -> Path:
     np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",",
                header=",".join(cols), comments="", fmt="%.17g")
     return path
+
+
+#: The simulated-arm cases of the cross-joint refinement tests (test_refine_crossjoint.py,
+#: test_robot_refit.py): three payload runs, the arm about a pose where the gravity loads
+#: change sign, the usual friction on every joint.
+ARM3_PAYLOADS = (None, Payload(5.0, [0.0, 0.0, 0.05]),
+                 Payload(10.0, [0.02, 0.0, 0.1], [0.02, 0.0, 0.0, 0.02, 0.0, 0.03]))
+ARM3_CENTRE = [0.0, -1.9, 0.6]  # as tests/test_robot_fit.py
+
+
+def arm3_true_state_signals(effects: Any, seed: int, duration_s: float, *,
+                            noise: float = 0.01, stride: int = 5) -> tuple[Any, Any, Any]:
+    """The 3-dof arm with the usual friction (and ``effects``: an ``ArmEffects`` or None)
+    simulated on a model multi-sine for each of :data:`ARM3_PAYLOADS`; its true states every
+    ``stride``-th cycle with the applied torque plus white noise of ``noise`` times each
+    joint's load. Returns (regressor, signals, arm parameters)."""
+    robot = load_robot(ARM3)
+    c = ArmParams.from_robot(robot).friction.c_m
+    usual = dict(a_m=1.0, b_m=0.0, a_g=1.0, b_g=0.0, d_m=0.0, d_g=0.0, c_g=c)
+    params = ArmParams.from_robot(robot, usual)
+    if effects is not None:
+        params = dataclasses.replace(params, effects=effects)
+    pays = ARM3_PAYLOADS
+    ref = model_reference(params.model, center=ARM3_CENTRE, fraction=0.9,
+                          duration_s=duration_s, seed=seed)
+    runs = [simulate_arm(params, ref, ArmGains.for_params(params, payload=p), payload=p,
+                         seed=10 * seed + i) for i, p in enumerate(pays)]
+    reg = RobotRegressor(robot)
+    rng = np.random.default_rng(seed)
+    sd = noise * params.drive.torque_noise_std_Nm / 0.01  # noise of `noise` x the load L_j
+    parts: dict[str, list] = {k: [] for k in ("t", "q", "dq", "ddq", "tau", "experiment")}
+    for i, r in enumerate(runs):
+        tau = r.tau_applied + rng.standard_normal(r.tau_applied.shape) * sd
+        sl = slice(None, None, stride)
+        for k, v in (("t", r.t), ("q", r.q_true), ("dq", r.dq_true), ("ddq", r.ddq_true),
+                     ("tau", tau), ("experiment", np.full(r.t.size, i))):
+            parts[k].append(v[sl])
+    payloads = tuple(RobotPayloadData() if p is None else
+                     RobotPayloadData(p.mass, p.com, p.inertia) for p in pays)
+    sig = RobotSignals(**{k: np.concatenate(v) for k, v in parts.items()}, joints=reg.joints,
+                       payloads=payloads, source=f"arm3 seed {seed}")
+    return reg, sig, params

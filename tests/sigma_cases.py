@@ -42,9 +42,10 @@ STRIDE = 5
 GAUGED = ("a_m", "b_m", "a_g", "b_g")
 
 
-def wrist_arm(noise: float = WRIST_NOISE, stribeck: bool = True):
-    """(params, regressor, base) of the simulated arm; ``stribeck=False``: the wrists'
-    b_m, b_g, d_m, d_g are 0 (no Stribeck terms to identify there)."""
+def wrist_arm(noise: float | None = WRIST_NOISE, stribeck: bool = True):
+    """(params, regressor, base) of the simulated arm; ``noise`` [N m] the wrists' drive
+    torque noise (None: the arm's own); ``stribeck=False``: the wrists' b_m, b_g, d_m, d_g
+    are 0 (no Stribeck terms to identify there)."""
     robot = load_robot(ROOT / "examples" / "robots" / "ur10.toml")
     f0 = ArmParams.from_robot(robot).friction
     friction = {}
@@ -58,9 +59,10 @@ def wrist_arm(noise: float = WRIST_NOISE, stribeck: bool = True):
             v[3:] = 0.0
             friction[name] = v
     params = ArmParams.from_robot(robot, friction)
-    ns = params.drive.torque_noise_std_Nm.copy()
-    ns[3:] = noise
-    params = replace(params, drive=replace(params.drive, torque_noise_std_Nm=ns))
+    if noise is not None:
+        ns = params.drive.torque_noise_std_Nm.copy()
+        ns[3:] = noise
+        params = replace(params, drive=replace(params.drive, torque_noise_std_Nm=ns))
     reg = RobotRegressor(robot)
     return params, reg, base_parameters(reg)
 

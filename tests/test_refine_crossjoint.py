@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from robot_campaigns import arm3_true_state_signals
 
 from ident import DataError
 from ident.loaders import concat, make_experiment
@@ -40,17 +41,11 @@ from ident.refine import refine
 from ident.robot.base import base_parameters
 from ident.robot.estimate import RobotModel
 from ident.robot.refine_joint import joint_coulomb, refine_joint
-from ident.robot.regressor import RobotRegressor
-from ident.robot.signals import RobotPayloadData, RobotSignals
 from ident.signals import Signals
 from ident.terms import Library, Term
-from sim_drivers.arm import ArmEffects, ArmGains, ArmParams, Payload, model_reference, simulate_arm
-from trajectories.robot import load_robot
+from sim_drivers.arm import ArmEffects
 
 ROOT = Path(__file__).resolve().parents[1]
-PAYLOADS = (None, Payload(5.0, [0.0, 0.0, 0.05]),
-            Payload(10.0, [0.02, 0.0, 0.1], [0.02, 0.0, 0.0, 0.02, 0.0, 0.03]))
-CENTRE = [0.0, -1.9, 0.6]  # as tests/test_robot_fit.py (gravity loads change sign)
 NOISE = 0.01  # measurement noise, fraction of each joint's load
 STRIDE = 5  # samples kept: 5 ms
 DQ_MIN = 0.02  # [rad/s] samples of a joint at (near) rest are out of its rows
@@ -80,30 +75,8 @@ class _TrueCoupling(Term):
 
 
 def _arm(coupling: dict | None, seed: int, duration_s: float):
-    robot = load_robot(ROOT / "examples" / "robots" / "arm3.toml")
-    c = ArmParams.from_robot(robot).friction.c_m
-    usual = dict(a_m=1.0, b_m=0.0, a_g=1.0, b_g=0.0, d_m=0.0, d_g=0.0, c_g=c)
-    params = ArmParams.from_robot(robot, usual)
-    if coupling:
-        params = dataclasses.replace(params, effects=ArmEffects.make(3, dry_coupling=coupling))
-    ref = model_reference(params.model, center=CENTRE, fraction=0.9, duration_s=duration_s,
-                          seed=seed)
-    runs = [simulate_arm(params, ref, ArmGains.for_params(params, payload=p), payload=p,
-                         seed=10 * seed + i) for i, p in enumerate(PAYLOADS)]
-    reg = RobotRegressor(robot)
-    rng = np.random.default_rng(seed)
-    noise = NOISE * params.drive.torque_noise_std_Nm / 0.01  # 1 % of the load L_j
-    parts = {k: [] for k in ("t", "q", "dq", "ddq", "tau", "experiment")}
-    for i, r in enumerate(runs):
-        tau = r.tau_applied + rng.standard_normal(r.tau_applied.shape) * noise
-        sl = slice(None, None, STRIDE)
-        for k, v in (("t", r.t), ("q", r.q_true), ("dq", r.dq_true), ("ddq", r.ddq_true),
-                     ("tau", tau), ("experiment", np.full(r.t.size, i))):
-            parts[k].append(v[sl])
-    pays = tuple(RobotPayloadData() if p is None else RobotPayloadData(p.mass, p.com, p.inertia)
-                 for p in PAYLOADS)
-    sig = RobotSignals(**{k: np.concatenate(v) for k, v in parts.items()}, joints=reg.joints,
-                       payloads=pays, source=f"arm3 seed {seed}")
+    effects = ArmEffects.make(3, dry_coupling=coupling) if coupling else None
+    reg, sig, _ = arm3_true_state_signals(effects, seed, duration_s, noise=NOISE, stride=STRIDE)
     fit = RobotModel(reg, "usual", base=base_parameters(reg), dq_min=DQ_MIN).fit(sig)
     return sig, fit
 

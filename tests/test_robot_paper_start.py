@@ -20,37 +20,23 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_robot_fit import ROOT, _signals
+from sigma_cases import PAYLOAD, wrist_arm
+from test_robot_fit import _signals
 
 from ident.robot import RobotIdentError
-from ident.robot.base import base_parameters
 from ident.robot.estimate import RobotModel
-from ident.robot.regressor import RobotRegressor
-from sim_drivers.arm import ArmGains, ArmParams, Payload, model_reference, simulate_arm
-from trajectories.robot import load_robot
+from sim_drivers.arm import ArmGains, model_reference, simulate_arm
 
-PAYLOAD = Payload(5.0, [0.0, 0.0, 0.05])
-#: Wrist dry friction [N m] (c_m; c_g = 0.8 c_m, d = 0.4 / 0.3 c): above the wrists' loads.
-WRIST_C = np.array([12.0, 1.2, 4.0])
 WITHIN = 1.05
 
 
 @pytest.fixture(scope="module")
 def ur10_wrists():
-    robot = load_robot(ROOT / "examples" / "robots" / "ur10.toml")
-    f0 = ArmParams.from_robot(robot).friction
-    friction = {}
-    for name, fac in (("c_m", 1.0), ("d_m", 0.4), ("c_g", 0.8), ("d_g", 0.3)):
-        v = getattr(f0, name).copy()
-        v[3:] = fac * WRIST_C
-        friction[name] = v
-    params = ArmParams.from_robot(robot, friction)
+    params, reg, base = wrist_arm(noise=None)  # the wrists' friction above their loads
     ref = model_reference(params.model, center=[0.0, -1.9, 0.6, -1.0, 0.5, 0.0],
                           fraction=0.9, duration_s=20.0, seed=1)
     run = simulate_arm(params, ref, ArmGains.for_params(params, payload=PAYLOAD),
                        payload=PAYLOAD, seed=10)
-    reg = RobotRegressor(robot)
-    base = base_parameters(reg)
     import test_robot_fit
     saved = test_robot_fit.PAYLOADS
     test_robot_fit.PAYLOADS = (PAYLOAD,)

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from robot_campaigns import write_arm_csv
+from robot_campaigns import ARM3_CENTRE, ARM3_PAYLOADS, arm3_true_state_signals, write_arm_csv
 
 from daq.app.cli import main
 from ident import OutputLeakError
@@ -44,18 +44,13 @@ from ident.robot.estimate import RobotModel
 from ident.robot.paper import usual_coefficients
 from ident.robot.refine_joint import joint_coulomb, refine_joint
 from ident.robot.refit import _rows, _System, extra_name, refit_robot
-from ident.robot.regressor import RobotRegressor
-from ident.robot.signals import RobotPayloadData, RobotSignals
 from ident.signals import Signals
 from ident.terms import Term
 from ident.unseen import heldout_error
-from sim_drivers.arm import ArmEffects, ArmGains, ArmParams, Payload, model_reference, simulate_arm
+from sim_drivers.arm import ArmEffects, ArmGains, ArmParams, model_reference, simulate_arm
 from trajectories.robot import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
-PAYLOADS = (None, Payload(5.0, [0.0, 0.0, 0.05]),
-            Payload(10.0, [0.02, 0.0, 0.1], [0.02, 0.0, 0.0, 0.02, 0.0, 0.03]))
-CENTRE = [0.0, -1.9, 0.6]
 NOISE = 0.01  # fraction of each joint's load
 STRIDE = 5
 DQ_MIN = 0.02  # [rad/s]
@@ -104,33 +99,12 @@ class _Leak(Term):
 
 
 def _arm(seed: int, duration_s: float = 12.0, model: str = "usual", effects: bool = True):
-    robot = load_robot(ROOT / "examples" / "robots" / "arm3.toml")
-    c = ArmParams.from_robot(robot).friction.c_m
-    usual = dict(a_m=1.0, b_m=0.0, a_g=1.0, b_g=0.0, d_m=0.0, d_g=0.0, c_g=c)
-    params = ArmParams.from_robot(robot, usual)
-    if effects:
-        params = dataclasses.replace(params, effects=ArmEffects.make(
-            3, dry_coupling={(0, 2): COUPLING}, quadratic_viscous={2: {"F_VV": F_VV}}))
-    ref = model_reference(params.model, center=CENTRE, fraction=0.9, duration_s=duration_s,
-                          seed=seed)
-    runs = [simulate_arm(params, ref, ArmGains.for_params(params, payload=p), payload=p,
-                         seed=10 * seed + i) for i, p in enumerate(PAYLOADS)]
-    reg = RobotRegressor(robot)
-    rng = np.random.default_rng(seed)
-    noise = NOISE * params.drive.torque_noise_std_Nm / 0.01
-    parts: dict[str, list] = {k: [] for k in ("t", "q", "dq", "ddq", "tau", "experiment")}
-    for i, r in enumerate(runs):
-        tau = r.tau_applied + rng.standard_normal(r.tau_applied.shape) * noise
-        sl = slice(None, None, STRIDE)
-        for k, v in (("t", r.t), ("q", r.q_true), ("dq", r.dq_true), ("ddq", r.ddq_true),
-                     ("tau", tau), ("experiment", np.full(r.t.size, i))):
-            parts[k].append(v[sl])
-    pays = tuple(RobotPayloadData() if p is None else RobotPayloadData(p.mass, p.com, p.inertia)
-                 for p in PAYLOADS)
-    sig = RobotSignals(**{k: np.concatenate(v) for k, v in parts.items()}, joints=reg.joints,
-                       payloads=pays, source=f"arm3 seed {seed}")
+    eff = (ArmEffects.make(3, dry_coupling={(0, 2): COUPLING},
+                           quadratic_viscous={2: {"F_VV": F_VV}}) if effects else None)
+    reg, sig, params = arm3_true_state_signals(eff, seed, duration_s, noise=NOISE,
+                                               stride=STRIDE)
     fit = RobotModel(reg, model, base=base_parameters(reg), dq_min=DQ_MIN).fit(sig)
-    return sig, fit, float(c[0])
+    return sig, fit, float(params.friction.c_m[0])
 
 
 def _refine(sig, fit, pred, j):
@@ -242,9 +216,9 @@ def test_cli_refine_refits_inside_the_ndof_model(tmp_path, capfd):
     usual = dict(a_m=1.0, b_m=0.0, a_g=1.0, b_g=0.0, d_m=0.0, d_g=0.0, c_g=c)
     params = dataclasses.replace(ArmParams.from_robot(robot, usual), effects=ArmEffects.make(
         3, dry_coupling={(0, 2): COUPLING}))
-    ref = model_reference(params.model, center=CENTRE, fraction=0.9, duration_s=10.0, seed=11)
+    ref = model_reference(params.model, center=ARM3_CENTRE, fraction=0.9, duration_s=10.0, seed=11)
     files = []
-    for i, pay in enumerate(PAYLOADS):
+    for i, pay in enumerate(ARM3_PAYLOADS):
         run = simulate_arm(params, ref, ArmGains.for_params(params, payload=pay), payload=pay,
                            seed=110 + i)
         files.append(write_arm_csv(run, tmp_path / f"p{i}.csv"))
