@@ -65,7 +65,7 @@ import numpy as np
 
 from daq import DaqError
 from daq.protocol.logformat import FRAME_DTYPE
-from daq.protocol.reader import LogReadError, read_raw
+from daq.protocol.reader import LogReadError, read_topics
 
 __all__ = ["EXPORT_FORMATS", "ExportError", "ExportResult", "export_can"]
 
@@ -173,11 +173,11 @@ def read_log(path: Path) -> tuple[np.ndarray, dict[str, dict[str, str]], bool]:
     LogReadError
         The file cannot be opened or is not an MCAP file.
     """
-    raw, metadata, damaged = read_raw(path, "/can/raw")
+    log = read_topics(path, {"/can/raw"})
     parts = [np.frombuffer(msg, FRAME_DTYPE, count=_CYCLE_N.unpack_from(msg, 4)[1], offset=20)
-             for msg in raw]
+             for msg in log.raw.get("/can/raw", [])]
     frames = np.concatenate(parts) if parts else np.zeros(0, FRAME_DTYPE)
-    return frames, metadata, damaged
+    return frames, log.metadata, log.damaged
 
 
 def master_ids(metadata: dict[str, dict[str, str]]) -> frozenset[int]:

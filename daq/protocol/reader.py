@@ -557,28 +557,16 @@ class TopicData:
     events: list[dict[str, Any]]
     #: metadata name -> map
     metadata: dict[str, dict[str, str]]
+    #: True when chunks were damaged or the tail truncated (their messages are missing)
+    damaged: bool
 
 
 def read_topics(path: str | Path, topics: set[str]) -> TopicData:
     """The raw message data of the given topics, the events and the metadata of a run log.
     Damaged chunks and a truncated tail are skipped with a warning, as by :func:`read_run`."""
     scan = _scan(Path(path), set(), set(topics))
-    return TopicData(scan.raw, scan.events, scan.metadata)
-
-
-def read_raw(path: str | Path, topic: str) -> tuple[list[bytes], dict[str, dict[str, str]], bool]:
-    """The raw messages of one topic and every metadata record of a run log.
-
-    Damaged chunks and a truncated tail are skipped with a warning, as by :func:`read_run`.
-
-    Returns
-    -------
-    (list of bytes, dict, bool)
-        Message data in log order; metadata name -> map; True when chunks were damaged or
-        the tail truncated.
-    """
-    scan = _scan(Path(path), set(), {topic})
-    return scan.raw.get(topic, []), scan.metadata, bool(scan.truncated or scan.damaged)
+    return TopicData(scan.raw, scan.events, scan.metadata,
+                     bool(scan.truncated or scan.damaged))
 
 
 def read_frames(path: str | Path) -> np.ndarray:
