@@ -30,7 +30,7 @@ TRUTH = dict(J=31.0, MX=21.1, MY=-0.8, a_m=1.06, b_m=0.2, c_m=21.0, d_m=8.0, a_g
 
 
 def synthetic(
-    n_total: int, seed: int = 0, dt: float = 1e-3, qs: float = DEFAULT_Q_S
+    n_total: int, seed: int = 0, dt: float = 1e-3, q_s: float = DEFAULT_Q_S
 ) -> list[Experiment]:
     """Three runs (0, 3.4584, 6.97 kg at 1.277 m) totalling ``n_total`` samples."""
     rng = np.random.default_rng(seed)
@@ -47,7 +47,7 @@ def synthetic(
         la = 1.277
         tau_out = (p["J"] * ddq + p["MX"] * G * np.cos(q) + p["MY"] * G * np.sin(q)
                    + m * la * (la * ddq + G * np.cos(q)))  # fmt: skip
-        e = stribeck_exp(dq, qs)
+        e = stribeck_exp(dq, q_s)
         s = np.sign(tau_out * dq)
         pp, pm = 0.5 * (1 + s), 0.5 * (1 - s)
         tau = (pp * (p["a_m"] + p["b_m"] * e) * tau_out + pm * (p["a_g"] - p["b_g"] * e) * tau_out
@@ -61,7 +61,7 @@ def synthetic(
 
 def one_fit(exps: list[Experiment]) -> float:
     t0 = time.perf_counter()
-    fit_models(exps, ("usual", "paper"), qs=DEFAULT_Q_S, table_iv=False)
+    fit_models(exps, ("usual", "paper"), q_s=DEFAULT_Q_S, table_iv=False)
     return time.perf_counter() - t0
 
 

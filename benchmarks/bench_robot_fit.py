@@ -41,7 +41,7 @@ FRICTION = dict(a_m=1.05, b_m=0.25, a_g=0.92, b_g=0.27)
 
 
 def synthetic(reg, base, n_total: int, seed: int = 0,
-              qs: float = DEFAULT_Q_S) -> list[RobotSignals]:
+              q_s: float = DEFAULT_Q_S) -> list[RobotSignals]:
     rng = np.random.default_rng(seed)
     k = len(reg.joints)
     chi = base.values(reg.standard_values(Ia=np.full(k, 0.5)))
@@ -63,7 +63,7 @@ def synthetic(reg, base, n_total: int, seed: int = 0,
             tau_out = base.reduce(reg.rigid(q[sl], dq[sl], ddq[sl])) @ chi
             if pay.mass:
                 tau_out += reg.payload_torque(q[sl], dq[sl], ddq[sl], pay)
-            ex = stribeck_exp(dq[sl], qs)
+            ex = stribeck_exp(dq[sl], q_s)
             p = np.sign(tau_out * dq[sl])
             f = FRICTION
             load = 0.03 * np.abs(tau_out).mean(0)  # friction ~ a few % of the load

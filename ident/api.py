@@ -7,7 +7,7 @@ residual points to (docs/refinement.md)::
     from ident.api import JointModel, load
 
     runs = load(["runs/rx130l_payload0.mcap", "runs/rx130l_payload1.mcap"])
-    est = JointModel(model="paper", qs=0.03).fit(runs)
+    est = JointModel(model="paper", q_s=0.03).fit(runs)
     est.params_["a_m"], est.params_std_["a_m"], est.rel_error_   # or coef_ / coef_names_
     tau_hat = est.predict(other_runs)          # W χ̂ on the preprocessed samples
     est.score(other_runs)                      # 1 - ||ρ|| / ||Y||, higher is better
@@ -42,7 +42,7 @@ from .models import IdentModel
 from .preprocess import Design
 from .refine import Refinement, refine
 from .signals import Signals
-from .vocab import method_name, model_name
+from .vocab import method_name, model_name, renamed_keywords
 
 __all__ = ["JointModel", "RobotFit", "load"]
 
@@ -120,7 +120,7 @@ class JointModel:
         ``"paper"``: load- and velocity-dependent dry friction (eq. 42-43); ``"both"``: fit
         both on the same samples (Tables III-IV compare them), the fitted attributes then
         describe the paper model.
-    qs : float or "scan"
+    q_s : float or "scan"
         q_s of E_xp = exp(-|q̇|/q_s) (eq. 29) [rad/s or m/s], or ``"scan"`` to take the one
         minimising the paper model's residual (section III.D).
     joint : {"revolute", "prismatic"} or None
@@ -152,6 +152,9 @@ class JointModel:
     sign_check : bool
         Leave out the samples where sign(τ) differs from sign(τ̂_out) (eq. 26) when the new
         model is fitted.
+    **deprecated
+        ``qs=``: the older spelling of ``q_s`` (accepted with a DeprecationWarning,
+        :mod:`ident.vocab`).
 
     Attributes
     ----------
@@ -179,7 +182,7 @@ class JointModel:
         ‖ρ‖/‖Y‖ on the ``validation`` data given to :meth:`fit`.
     n_samples_ : int
         Number of equations m (decimated, selected samples).
-    qs_ : float
+    q_s_ : float
         q_s used [rad/s].
     vmax_ : float
         max |q̇| of the identification samples [rad/s].
@@ -201,7 +204,7 @@ class JointModel:
         self,
         model: str = "paper",
         *,
-        qs: float | str = DEFAULT_Q_S,
+        q_s: float | str = DEFAULT_Q_S,
         joint: str | None = None,
         payload: bool | None = None,
         cutoff: float | None = None,
@@ -213,9 +216,10 @@ class JointModel:
         eliminate: bool = True,
         threshold: float | None = None,
         sign_check: bool = True,
+        **deprecated: Any,
     ) -> None:
         self.model = model
-        self.qs = qs
+        self.q_s = renamed_keywords("JointModel", deprecated).get("q_s", q_s)
         self.joint = joint
         self.payload = payload
         self.cutoff = cutoff
@@ -259,6 +263,7 @@ class JointModel:
             A name that is not a hyper-parameter (the message lists them).
         """
         valid = self._get_param_names()
+        params = renamed_keywords("JointModel.set_params", params, strict=False)
         for k, v in params.items():
             if k not in valid:
                 raise DataError(
@@ -313,7 +318,7 @@ class JointModel:
         report = fit_models(
             exps,
             self._models(),
-            qs=self.qs,
+            q_s=self.q_s,
             joint=self.joint,
             validation=val,
             cutoff_hz=self.cutoff,
@@ -367,7 +372,7 @@ class JointModel:
             model.rel_error_on(validation) if validation is not None else None
         )
         self.n_samples_ = int(design.Y.shape[0])
-        self.qs_ = float(self.report_.qs)
+        self.q_s_ = float(self.report_.q_s)
         self.estimator_ = model.estimator_
 
     def _check_fitted(self) -> None:

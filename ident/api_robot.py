@@ -42,6 +42,7 @@ from .robot.estimate import RobotModel
 from .robot.loaders import RawRobotRun
 from .robot.signals import RobotSignals
 from .robot.uncertainty import N_BLOCKS
+from .vocab import renamed_keywords
 
 __all__ = ["RobotFit"]
 
@@ -64,8 +65,8 @@ class RobotFit:
         Models fitted (``--model``; "new" is accepted as a deprecated alias of "paper").
     method : {"ls", "wls", "iv"} or None
         Estimator (``--method``; None: "wls").
-    qs : float
-        q_s of the paper model [rad/s] (``--qs``).
+    q_s : float
+        q_s of the paper model [rad/s] (``--q-s``).
     cutoff : float or None
         Butterworth cut-off on q [Hz] (``--cutoff``; None: chosen from the data).
     decimation, trim : int or None
@@ -93,6 +94,9 @@ class RobotFit:
     prune : bool
         Prune the paper model's friction parameters above the relative-σ threshold (False:
         ``--no-prune``).
+    **deprecated
+        ``qs=``: the older spelling of ``q_s`` (accepted with a DeprecationWarning,
+        :mod:`ident.vocab`).
 
     Attributes
     ----------
@@ -122,7 +126,7 @@ class RobotFit:
         model: str = "both",
         *,
         method: str | None = None,
-        qs: float = DEFAULT_Q_S,
+        q_s: float = DEFAULT_Q_S,
         cutoff: float | None = None,
         decimation: int | None = None,
         trim: int | None = None,
@@ -136,11 +140,13 @@ class RobotFit:
         consistent: bool = False,
         sigma_blocks: int = N_BLOCKS,
         prune: bool = True,
+        **deprecated: Any,
     ) -> None:
+        q_s = renamed_keywords("RobotFit", deprecated).get("q_s", q_s)
         self.robot = robot
         self.model = model
         self.method = method
-        self.qs = qs
+        self.q_s = q_s
         self.cutoff = cutoff
         self.decimation = decimation
         self.trim = trim
@@ -159,7 +165,7 @@ class RobotFit:
     @classmethod
     def _get_param_names(cls) -> list[str]:
         sig = inspect.signature(cls.__init__)
-        return [n for n in sig.parameters if n != "self"]
+        return [n for n, p in sig.parameters.items() if n != "self" and p.kind != p.VAR_KEYWORD]
 
     def get_params(self, deep: bool = True) -> dict[str, Any]:
         """The hyper-parameters as given (``deep`` changes nothing: none is an estimator)."""
@@ -169,6 +175,7 @@ class RobotFit:
     def set_params(self, **params: Any) -> RobotFit:
         """Set hyper-parameters by name; returns ``self`` (an unknown name: DataError)."""
         valid = self._get_param_names()
+        params = renamed_keywords("RobotFit.set_params", params, strict=False)
         for k, v in params.items():
             if k not in valid:
                 raise DataError(f"RobotFit.set_params: unknown hyper-parameter {k!r} "
@@ -210,7 +217,7 @@ class RobotFit:
         out = fit_files(
             self._robot(), data, validation, model=self.model, mapping=self._mapping(),
             q_unit=self.q_unit, cutoff=self.cutoff, decimation=self.decimation, trim=self.trim,
-            consistent=self.consistent, method=self.method, qs=self.qs, dq_min=self.dq_min,
+            consistent=self.consistent, method=self.method, q_s=self.q_s, dq_min=self.dq_min,
             known_rotor_inertia=self.known_rotor_inertia, chain=self.chain,
             payload=self.payload, feasibility=self.consistency,
             sigma_blocks=self.sigma_blocks, prune=self.prune)

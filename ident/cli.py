@@ -1,5 +1,5 @@
 """``jointid fit INPUTS... [--model usual|paper|both] [--method ls|wls|iv]
-[--joint revolute|prismatic] [--qs VALUE|scan] [--validate FILES...] [--report DIR]
+[--joint revolute|prismatic] [--q-s VALUE|scan] [--validate FILES...] [--report DIR]
 [--json FILE]``: identify the usual and the paper model (names: :mod:`ident.vocab`).
 With ``--robot ROBOT`` the inputs are multi-axis runs of a robot (``ident.cli_robot``).
 
@@ -139,7 +139,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="joint kind (default: MCAP metadata; revolute for CSV/MAT)",
     )
     p.add_argument(
-        "--qs",
+        "--q-s",
+        "--qs",  # the older spelling, still accepted
         default=f"{DEFAULT_Q_S:g}",
         metavar="VALUE|scan",
         help="q_s of the paper model [rad/s], or 'scan' to minimise the residual (default "
@@ -217,14 +218,14 @@ def _qs(value: str) -> float | str:
     try:
         return float(value)
     except ValueError:
-        raise DataError(f"--qs {value!r}: expected a number [rad/s] or 'scan'") from None
+        raise DataError(f"--q-s {value!r}: expected a number [rad/s] or 'scan'") from None
 
 
 def estimator_from_args(args: argparse.Namespace) -> JointModel:
     """The :class:`~ident.api.JointModel` ``jointid fit`` runs for these arguments."""
     return JointModel(
         model=args.model,
-        qs=_qs(args.qs),
+        q_s=_qs(args.q_s),
         joint=args.joint,
         cutoff=args.cutoff,
         decimation=args.decimation,

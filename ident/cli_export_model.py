@@ -88,7 +88,7 @@ def consistent_from_record(path: Path, rec: dict[str, Any], robot: Robot, name: 
         settings = RobotPreprocessing(pre.get("cutoff_hz"), pre.get("decimation"),
                                       pre.get("trim"))
         fitted = tuple(n for n, r in rec["models"].items() if "error" not in r)
-        out = fit_robot(robot, runs, None, models=fitted, method=rec["method"], qs=rec["q_s"],
+        out = fit_robot(robot, runs, None, models=fitted, method=rec["method"], q_s=rec["q_s"],
                         dq_min=pre.get("dq_min"), preprocessing=settings,
                         known_rotor_inertia=bool(rec.get("known_rotor_inertia", False)),
                         chain=pre.get("chain", "columns"), payload=rec.get("payload"),

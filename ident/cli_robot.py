@@ -138,7 +138,7 @@ def fit_files(
     consistent : bool
         ``--consistent``: also the physically consistent estimate of every model.
     **options
-        The other keywords of :func:`fit_robot` (``method``, ``qs``, ``dq_min``, ``chain``,
+        The other keywords of :func:`fit_robot` (``method``, ``q_s``, ``dq_min``, ``chain``,
         ``payload``, ``known_rotor_inertia``, ``sign_check``, ``feasibility``,
         ``sigma_blocks``, ``prune``, ``progress``).
     """
@@ -154,13 +154,13 @@ def fit_files(
 
 def _qs(value: str) -> float:
     try:
-        qs = float(value)
+        q_s = float(value)
     except ValueError:
-        raise DataError(f"--qs {value!r}: expected a number [rad/s] (the scan is single-joint "
+        raise DataError(f"--q-s {value!r}: expected a number [rad/s] (the scan is single-joint "
                         "only)") from None
-    if not qs > 0 or not math.isfinite(qs):
-        raise DataError(f"--qs {value!r}: expected a number > 0 [rad/s]")
-    return qs
+    if not q_s > 0 or not math.isfinite(q_s):
+        raise DataError(f"--q-s {value!r}: expected a number > 0 [rad/s]")
+    return q_s
 
 
 def _check_args(args: argparse.Namespace) -> None:
@@ -178,7 +178,7 @@ def fit_robot(
     *,
     models: tuple[str, ...] = ("usual", "paper"),
     method: str | None = None,
-    qs: float = DEFAULT_Q_S,
+    q_s: float = DEFAULT_Q_S,
     dq_min: float | None = None,
     preprocessing: RobotPreprocessing | None = None,
     known_rotor_inertia: bool = False,
@@ -203,7 +203,7 @@ def fit_robot(
         its residual deviation). On the KUKA recordings it cross-validates better than IV,
         whose instruments (the planned trajectory) are poor under the robot's own position
         loop and feed-forward (docs/robot-data.md).
-    qs : float
+    q_s : float
         q_s of the paper model [rad/s].
     dq_min : float or None
         Stiction area |dq_j| < dq_min left out of joint j's rows [rad/s]; None: 1 % of the
@@ -326,7 +326,7 @@ def fit_robot(
         "method": method,
         "known_rotor_inertia": bool(known_rotor_inertia),
         "payload": payload,
-        "q_s": qs,
+        "q_s": q_s,
         "notes": notes,
         "models": {},
         "_estimators": {},
@@ -341,7 +341,7 @@ def fit_robot(
         try:
             # one joint: exactly the single-joint fit's rows (no quadrant band; the sign
             # check plays its part there)
-            est = RobotModel(reg, model=name, method=method, qs=qs, dq_min=est_dq_min,
+            est = RobotModel(reg, model=name, method=method, q_s=q_s, dq_min=est_dq_min,
                              payload_ratio=payload == "ratio",
                              payload_params=payload == "mass",
                              quadrant_band=0.0 if len(robot.moving) == 1 else 0.03).fit(sig)
@@ -796,7 +796,7 @@ def run(args: argparse.Namespace) -> int:
     out = fit_files(robot, args.inputs, args.validate, model=args.model,
                     mapping=parse_robot_mapping(args.map), q_unit=args.q_unit,
                     cutoff=args.cutoff, decimation=args.decimation, trim=args.trim,
-                    method=args.method, qs=_qs(args.qs), dq_min=args.dq_min,
+                    method=args.method, q_s=_qs(args.q_s), dq_min=args.dq_min,
                     known_rotor_inertia=args.known_rotor_inertia,
                     chain=args.chain or "columns", payload=args.payload,
                     feasibility=not getattr(args, "no_consistency", False),

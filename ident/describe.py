@@ -478,20 +478,20 @@ def describe_group(
         adq = np.abs(values["velocity"])
         vmax = float(np.max(adq))
 
-        def make_lv(qs, lq=lq, adq=adq):
-            return np.column_stack((lq, lq * stribeck_exp(adq, qs)))
+        def make_lv(q_s, lq=lq, adq=adq):
+            return np.column_stack((lq, lq * stribeck_exp(adq, q_s)))
 
         if vmax > 0:
-            rss, qs, c, cov = _fit_form(y, W, Q, make_lv, vmax / 1000, vmax / 2)
+            rss, q_s, c, cov = _fit_form(y, W, Q, make_lv, vmax / 1000, vmax / 2)
             sd = _sd(cov)
             pars = {"alpha_P": _p(c[0], 2 * sd[0]), "beta_P": _p(c[1], 2 * sd[1]),
-                    "q_s": _p(qs, 2 * sd[2])}
+                    "q_s": _p(q_s, 2 * sd[2])}
             sent = (f"the load-dependent dry friction coefficient depends on the velocity "
                     f"(eq. 24): {c[0]:.3g} ± {2 * sd[0]:.2g} at speed, "
-                    f"{c[0] + c[1]:.3g} near rest, transition q_s = {qs:.3g} ± {2 * sd[2]:.2g}"
+                    f"{c[0] + c[1]:.3g} near rest, transition q_s = {q_s:.3g} ± {2 * sd[2]:.2g}"
                     f" {unit}")
-            term = LoadVelocityDryFriction(tau_out, qs) if tau_out is not None else None
-            tried.append(("quadrant_load_velocity", share(rss, make_lv(qs)),
+            term = LoadVelocityDryFriction(tau_out, q_s) if tau_out is not None else None
+            tried.append(("quadrant_load_velocity", share(rss, make_lv(q_s)),
                           {"p": pars, "s": sent, "t": term}))
     linear = None
     if len(group.variables) == 1 and var not in _UNITS:

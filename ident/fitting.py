@@ -57,7 +57,7 @@ from .results import (
 )
 from .signals import Signals
 from .terms import Library, Term
-from .vocab import MODEL_NAMES, model_name
+from .vocab import MODEL_NAMES, model_name, renamed_keywords
 
 __all__ = [
     "FitReport",
@@ -96,9 +96,9 @@ def qs_grid(vmax: float, n: int = 13) -> np.ndarray:
     return vmax * np.geomspace(0.005, 0.2, n)
 
 
-def with_qs(design: Design, library: Library, qs: float) -> tuple[Library, Design]:
+def with_qs(design: Design, library: Library, q_s: float) -> tuple[Library, Design]:
     """The library and design with every q_s-dependent term (eq. 29: the load-dependent
-    and quadrant dry-friction terms) rebuilt for velocity constant ``qs`` [rad/s]; the other
+    and quadrant dry-friction terms) rebuilt for velocity constant ``q_s`` [rad/s]; the other
     columns (rigid body, payload, refinement effects...) are kept as they are.
 
     Raises
@@ -113,10 +113,10 @@ def with_qs(design: Design, library: Library, qs: float) -> tuple[Library, Desig
     terms: list[Term] = []
     for t in library.terms():
         if isinstance(t, LoadDependent):
-            t = LoadDependent(t.inner, qs, t.load)
+            t = LoadDependent(t.inner, q_s, t.load)
             sub = sub.with_term(t)
         elif isinstance(t, QuadrantCoulomb):
-            t = QuadrantCoulomb(qs, t.load)
+            t = QuadrantCoulomb(q_s, t.load)
             sub = sub.with_term(t)
         terms.append(t)
     return Library(*terms), sub
@@ -174,7 +174,7 @@ class _EColumns(Term):
             x = t.inner.columns(s) if isinstance(t, LoadDependent) else np.sign(s.dq)
             hit = self.memo[id(s)] = (s, pp, pm, x)
         _, pp, pm, x = hit
-        e = exp_velocity(s, t.qs)
+        e = exp_velocity(s, t.q_s)
         if isinstance(t, QuadrantCoulomb):
             return np.column_stack([pp * e * x, pm * e * x])
         n, k = x.shape
@@ -209,15 +209,15 @@ class _QsDesigns:
         self.fixed = fixed
         self.memo: list[dict] = [{} for _ in quad]
 
-    def __call__(self, qs: float) -> tuple[Library, Design]:
+    def __call__(self, q_s: float) -> tuple[Library, Design]:
         terms: list[Term] = []
         new: list[Term] = []
         for t in self.library.terms():
             if isinstance(t, LoadDependent):
-                t = LoadDependent(t.inner, qs, t.load)
+                t = LoadDependent(t.inner, q_s, t.load)
                 new.append(t)
             elif isinstance(t, QuadrantCoulomb):
-                t = QuadrantCoulomb(qs, t.load)
+                t = QuadrantCoulomb(q_s, t.load)
                 new.append(t)
             terms.append(t)
         d = self.fixed
@@ -291,11 +291,11 @@ class _QsErrors:
                 raise DataError(f"rescan_qs: no column for parameter {n}")
         self.zmemo: list[dict] = [{} for _ in designs.quad]
 
-    def __call__(self, qs: float) -> float | None:
+    def __call__(self, q_s: float) -> float | None:
         d = self.designs
         fixed = d.fixed
-        new = [LoadDependent(t.inner, qs, t.load) if isinstance(t, LoadDependent)
-               else QuadrantCoulomb(qs, t.load) for t in d.quad]
+        new = [LoadDependent(t.inner, q_s, t.load) if isinstance(t, LoadDependent)
+               else QuadrantCoulomb(q_s, t.load) for t in d.quad]
         wcols: list[list[np.ndarray]] = [[] for _ in new]
         zcols: list[list[np.ndarray]] = [[] for _ in new]
         with_z = fixed.Z is not None
@@ -340,17 +340,17 @@ class QsScan:
 
     Attributes
     ----------
-    qs : float
+    q_s : float
         Velocity constant with the smallest residual [rad/s].
     model : IdentModel
         The model refitted with it (same estimator: IV when the design has instruments).
     design : Design
-        The design with the q_s-dependent columns for ``qs``.
+        The design with the q_s-dependent columns for ``q_s``.
     scan : list of (q_s, rel_error)
         Every evaluated q_s, sorted.
     """
 
-    qs: float
+    q_s: float
     model: IdentModel
     design: Design
     scan: list[tuple[float, float]]
@@ -386,7 +386,7 @@ def rescan_qs(
 ) -> QsScan:
     """Choose q_s again for a fitted model, e.g. after refinement added undeclared effects.
 
-    :func:`fit_models` scans q_s (``qs="scan"``) with the declared model only; an undeclared
+    :func:`fit_models` scans q_s (``q_s="scan"``) with the declared model only; an undeclared
     effect left in the residual then shifts the minimum (the quick demo's position ripple:
     q_s 0.038 instead of 0.030, the b terms of eq. 42 40-50 % off; with the ripple
     modelled the minimum is at 0.031). This repeats the scan (grid of :func:`qs_grid`, then a
@@ -448,7 +448,7 @@ def rescan_qs(
     scan.sort()
     best = min(scan, key=lambda x: x[1])[0]
     m, d = found[best] if best in found else fit(best)
-    return QsScan(qs=best, model=m, design=d, scan=scan)
+    return QsScan(q_s=best, model=m, design=d, scan=scan)
 
 
 def _as_signals(data: Sequence[Experiment] | Signals, joint: str | bool | None) -> Signals:
@@ -467,11 +467,11 @@ def _as_signals(data: Sequence[Experiment] | Signals, joint: str | bool | None) 
     return s
 
 
-def _library(name: str, qs: float, revolute: bool, payload: bool) -> Library:
+def _library(name: str, q_s: float, revolute: bool, payload: bool) -> Library:
     if name == "usual":
         return usual_model(revolute, payload=payload)
     if name == "paper":
-        return new_model(qs, revolute, payload=payload)
+        return new_model(q_s, revolute, payload=payload)
     raise DataError(f"model {name!r}: expected 'usual' or 'paper'")
 
 
@@ -522,7 +522,7 @@ class FitReport:
         The cross-validation system of each model (empty without validation data).
     vmax : float
         Maximum |dq| of the identification samples [rad/s] (Table III bands).
-    qs : float
+    q_s : float
         q_s used by the paper model [rad/s].
     qs_scan : list of (q_s, rel_error)
         The scan, when q_s was scanned.
@@ -539,14 +539,14 @@ class FitReport:
         :func:`ident.preprocess.build_design`), reused for validation data.
     qs_design : float
         q_s the combined design was built with (the q_s-dependent columns are rebuilt
-        when ``qs`` differs).
+        when ``q_s`` differs).
     """
 
     models: dict[str, IdentModel]
     designs: dict[str, Design]
     validation_designs: dict[str, Design]
     vmax: float
-    qs: float
+    q_s: float
     revolute: bool
     qs_scan: list[tuple[float, float]] = field(default_factory=list)
     table_iv: dict[str, dict[str, float | None]] | None = None
@@ -570,7 +570,7 @@ class FitReport:
         sig = _as_signals(data, self.revolute)
         full = _combined(list(self.models), self.qs_design, sig, self.has_payload, self.settings)
         return {
-            name: _part(full, name, self.has_payload, self.qs, self.qs_design)[1]
+            name: _part(full, name, self.has_payload, self.q_s, self.qs_design)[1]
             for name in self.models
         }
 
@@ -606,7 +606,7 @@ class FitReport:
             if e["validation"] is not None:
                 rec["validation_rel_error"] = json_float(e["validation"])
             if name == "paper":
-                rec["q_s"] = self.qs
+                rec["q_s"] = self.q_s
             models[name] = rec
         out: dict[str, Any] = {
             "format": FORMAT,
@@ -616,7 +616,7 @@ class FitReport:
             "preprocessing": any_design.settings(),
             "vmax": json_float(self.vmax),
             "bands": {"low": [0.0, 0.10], "high": [0.35, 1.0]},
-            "q_s": self.qs,
+            "q_s": self.q_s,
             "models": models,
             "notes": list(self.notes),
         }
@@ -634,7 +634,7 @@ class FitReport:
         for name, m in self.models.items():
             title = f"Identified values with the {name} model"
             if name == "paper":
-                title += f" (q_s = {self.qs:g})"
+                title += f" (q_s = {self.q_s:g})"
             parts.append(format_parameter_table(m, title))
         parts.append(format_error_table({n: self.errors(n) for n in self.models}))
         if self.table_iv is not None:
@@ -697,7 +697,7 @@ def fit_models(
     data: Sequence[Experiment] | Signals,
     models: Sequence[str] = MODEL_NAMES,
     *,
-    qs: float | str = DEFAULT_QS,
+    q_s: float | str = DEFAULT_QS,
     joint: str | bool | None = None,
     validation: Sequence[Experiment] | Signals | None = None,
     cutoff_hz: float | None = None,
@@ -714,6 +714,7 @@ def fit_models(
     torque_delay: float | str = "auto",
     payload: bool | None = None,
     like: FitReport | None = None,
+    **deprecated: Any,
 ) -> FitReport:
     """Identify the usual and/or the paper model on all experiments in one LS (eq. 36, 40).
 
@@ -723,7 +724,7 @@ def fit_models(
         Identification experiments (one per payload run).
     models : sequence of {"usual", "paper"}
         Models to fit.
-    qs : float or "scan"
+    q_s : float or "scan"
         q_s [rad/s] of the paper model, or ``"scan"`` to pick the one that minimises the new
         model's residual norm (section III.D): the best of :func:`qs_grid`, then a bounded
         1-D search between its neighbours (every evaluated q_s is in ``qs_scan``).
@@ -768,16 +769,19 @@ def fit_models(
         Include the payload term (eq. 35, 42). None (default): when some run carries a
         payload (M_aw != 0).
     like : FitReport, optional
-        A report of an earlier call on the same data with the same options but ``qs`` (the
+        A report of an earlier call on the same data with the same options but ``q_s`` (the
         demo's refit once q_s is adjusted): its settled preprocessing (cut-off, decimation,
         trim, guard, dq_min) and its sign check's load model are taken as they are instead
         of being found again (neither depends on q_s: the same values, one design build and
         one fit fewer). Its ``sources`` must be this call's.
+    **deprecated
+        ``qs``: the older spelling of ``q_s`` (:mod:`ident.vocab`, with a DeprecationWarning).
 
     Returns
     -------
     FitReport
     """
+    q_s = renamed_keywords("fit_models", deprecated).get("q_s", q_s)
     models = list(dict.fromkeys(model_name(n) for n in models))  # "new": deprecated "paper"
     if not models:
         raise DataError("no model to fit")
@@ -812,9 +816,9 @@ def fit_models(
         dq_min_rel=DQ_MIN_FRACTION if dq_min is None else None,
         torque_delay=torque_delay,
     )
-    qs0 = DEFAULT_QS if isinstance(qs, str) else float(qs)
+    qs0 = DEFAULT_QS if isinstance(q_s, str) else float(q_s)
     if not qs0 > 0:
-        raise DataError(f"qs must be positive [rad/s], got {qs0}")
+        raise DataError(f"q_s must be positive [rad/s], got {qs0}")
 
     def combined(sig: Signals, payload: bool, reference: np.ndarray | None = None) -> Design:
         return _combined(models, qs0, sig, payload, pre, reference)
@@ -874,9 +878,9 @@ def fit_models(
     vmax = float(np.max(np.abs(full.signals.dq)))
 
     scan: list[tuple[float, float]] = []
-    if isinstance(qs, str):
-        if qs != "scan":
-            raise DataError(f"qs {qs!r}: expected a number [rad/s] or 'scan'")
+    if isinstance(q_s, str):
+        if q_s != "scan":
+            raise DataError(f"q_s {q_s!r}: expected a number [rad/s] or 'scan'")
         if "paper" in models:
 
             def err(q: float) -> float:
@@ -936,7 +940,7 @@ def fit_models(
         designs=designs,
         validation_designs=vdesigns,
         vmax=vmax,
-        qs=qs_val,
+        q_s=qs_val,
         revolute=s.revolute,
         qs_scan=scan,
         table_iv=t4,

@@ -5,7 +5,7 @@ model (eq. 38-39) and the new load- and velocity-dependent model (eq. 42-44) are
 compositions of the same terms::
 
     usual = RigidBody() + Payload() + Coulomb() + Viscous() + Offset()
-    new = LoadDependent(RigidBody() + Payload(), qs) + QuadrantCoulomb(qs) + Viscous() + Offset()
+    new = LoadDependent(RigidBody() + Payload(), q_s) + QuadrantCoulomb(q_s) + Viscous() + Offset()
 
 Parameter names follow ``docs/architecture.md``. Pure numerics: no file access.
 """
@@ -64,16 +64,16 @@ def power_split(s: Signals, load: Term | None = None) -> tuple[np.ndarray, np.nd
     return 0.5 * (1.0 + sp), 0.5 * (1.0 - sp)
 
 
-def exp_velocity(s: Signals, qs: float) -> np.ndarray:
+def exp_velocity(s: Signals, q_s: float) -> np.ndarray:
     """E_xp = exp(-|dq| / q_s) (eq. 29, 44), shape (n,); q_s in [rad/s] or [m/s]."""
-    return stribeck_exp(s.dq, qs)
+    return stribeck_exp(s.dq, q_s)
 
 
-def _check_qs(qs: float) -> float:
-    qs = float(qs)
-    if not np.isfinite(qs) or qs <= 0:
-        raise DataError(f"q_s: expected a positive velocity constant [rad/s], got {qs!r}")
-    return qs
+def _check_qs(q_s: float) -> float:
+    q_s = float(q_s)
+    if not np.isfinite(q_s) or q_s <= 0:
+        raise DataError(f"q_s: expected a positive velocity constant [rad/s], got {q_s!r}")
+    return q_s
 
 
 class RigidBody(Term):
@@ -198,7 +198,7 @@ class LoadDependent(Term):
     ----------
     inner : Term
         The terms whose sum is tau_out (usually ``RigidBody() + Payload()``).
-    qs : float
+    q_s : float
         Velocity constant q_s of E_xp = exp(-|dq|/q_s) [rad/s] (eq. 29), fixed a priori.
     load : callable, optional
         Load prediction τ̂_out(s) deciding the quadrant (:func:`power_split`); default the
@@ -208,9 +208,9 @@ class LoadDependent(Term):
     effect = "load_dependent"
     variable = "quadrant"
 
-    def __init__(self, inner: Term, qs: float, load: Term | None = None) -> None:
+    def __init__(self, inner: Term, q_s: float, load: Term | None = None) -> None:
         self.inner = inner
-        self.qs = _check_qs(qs)
+        self.q_s = _check_qs(q_s)
         self.load = load
 
     def _suffixes(self) -> list[str]:
@@ -229,7 +229,7 @@ class LoadDependent(Term):
     def columns(self, s: Signals) -> np.ndarray:
         w = self.inner.columns(s)
         pp, pm = power_split(s, self.load)
-        e = exp_velocity(s, self.qs)
+        e = exp_velocity(s, self.q_s)
         n, k = w.shape
         out = np.empty((n, 4 * k))
         out[:, 0 : 2 * k : 2] = pp[:, None] * w
@@ -241,24 +241,24 @@ class LoadDependent(Term):
     def describe(self) -> str:
         return (
             f"load-dependent friction P+(a_m + b_m Exp) tau_out + P-(a_g - b_g Exp) tau_out, "
-            f"q_s={self.qs:g} (eq. 30, 42)"
+            f"q_s={self.q_s:g} (eq. 30, 42)"
         )
 
     def __repr__(self) -> str:
-        return f"LoadDependent({self.inner!r}, qs={self.qs:g})"
+        return f"LoadDependent({self.inner!r}, q_s={self.q_s:g})"
 
 
 class QuadrantCoulomb(Term):
     """Quadrant dry friction (eq. 30): ``[P+ sign, P+ Exp sign, P- sign, P- Exp sign]``.
 
-    Parameters c_m, d_m, c_g, d_g [N m]; ``qs`` and ``load`` as in :class:`LoadDependent`.
+    Parameters c_m, d_m, c_g, d_g [N m]; ``q_s`` and ``load`` as in :class:`LoadDependent`.
     """
 
     effect = "quadrant_coulomb"
     variable = "quadrant"
 
-    def __init__(self, qs: float, load: Term | None = None) -> None:
-        self.qs = _check_qs(qs)
+    def __init__(self, q_s: float, load: Term | None = None) -> None:
+        self.q_s = _check_qs(q_s)
         self.load = load
 
     def names(self) -> tuple[str, ...]:
@@ -266,18 +266,18 @@ class QuadrantCoulomb(Term):
 
     def columns(self, s: Signals) -> np.ndarray:
         pp, pm = power_split(s, self.load)
-        e = exp_velocity(s, self.qs)
+        e = exp_velocity(s, self.q_s)
         sg = np.sign(s.dq)
         return np.column_stack([pp * sg, pp * e * sg, pm * sg, pm * e * sg])
 
     def describe(self) -> str:
         return (
             "quadrant dry friction P+(c_m + d_m Exp) sign + P-(c_g + d_g Exp) sign, "
-            f"q_s={self.qs:g}"
+            f"q_s={self.q_s:g}"
         )
 
     def __repr__(self) -> str:
-        return f"QuadrantCoulomb(qs={self.qs:g})"
+        return f"QuadrantCoulomb(q_s={self.q_s:g})"
 
 
 def usual_model(revolute: bool | None = None, *, payload: bool = True) -> Library:
@@ -297,13 +297,13 @@ def usual_model(revolute: bool | None = None, *, payload: bool = True) -> Librar
 
 
 def new_model(
-    qs: float = DEFAULT_Q_S, revolute: bool | None = None, *, payload: bool = True
+    q_s: float = DEFAULT_Q_S, revolute: bool | None = None, *, payload: bool = True
 ) -> Library:
     """The paper model, eq. 42-43, with q_s [rad/s] (the paper's 0.03 rad/s by default)."""
     inner: list[Term] = [RigidBody(revolute)]
     if payload:
         inner.append(Payload())
-    return Library(LoadDependent(Library(*inner), qs), QuadrantCoulomb(qs), Viscous(), Offset())
+    return Library(LoadDependent(Library(*inner), q_s), QuadrantCoulomb(q_s), Viscous(), Offset())
 
 
 class IdentModel:

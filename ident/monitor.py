@@ -104,7 +104,7 @@ class TorquePredictor:
             raise DataError(f"{source}: friction.joints: key {e.args[0]!r} missing") from None
         self.source = source
         #: Stribeck velocity q_s of each joint [rad/s] (the friction file's ``q_s``)
-        self.qs = [float(j.get("q_s", 0.0)) for j in joints]
+        self.q_s = [float(j.get("q_s", 0.0)) for j in joints]
 
     def _friction(self, j: int, t_out: float, v: float, s: float, e: float) -> float:
         """Joint j's torque for output torque ``t_out``, velocity ``v``, sign ``s``, Stribeck

@@ -8,6 +8,8 @@ points (``jointid fit``, :class:`ident.api.JointModel`, :class:`ident.api_robot.
 
 from __future__ import annotations
 
+import warnings
+from collections.abc import Mapping
 from typing import Any
 
 from . import DataError
@@ -27,6 +29,43 @@ METHOD_ALIASES = {"ols": "ls"}
 
 #: Deprecated JSON keys of a fit record -> canonical key (read by :func:`upgrade_record`).
 KEY_ALIASES = {"qs": "q_s", "qs_scan": "q_s_scan"}
+
+#: Deprecated Python keywords -> canonical keyword (``JointModel``, ``RobotFit``,
+#: ``RobotModel``, ``fit_models``; their ``set_params`` too).
+KEYWORD_ALIASES = {"qs": "q_s"}
+
+
+def renamed_keywords(owner: str, kwargs: Mapping[str, Any], *, strict: bool = True
+                     ) -> dict[str, Any]:
+    """``kwargs`` with the deprecated keywords renamed (``qs`` -> ``q_s``), each with a
+    :class:`DeprecationWarning`.
+
+    Parameters
+    ----------
+    owner : str
+        The class or function, for the messages (``"JointModel"``).
+    kwargs : mapping
+        Keyword arguments not in the signature (``strict``), or all of them (``set_params``:
+        the others are passed through unchanged).
+
+    Raises
+    ------
+    TypeError
+        With ``strict``, a keyword that is no deprecated alias (as Python raises for an
+        unknown keyword).
+    """
+    out: dict[str, Any] = {}
+    for key, value in kwargs.items():
+        new = KEYWORD_ALIASES.get(key)
+        if new is None:
+            if strict:
+                raise TypeError(f"{owner}: unexpected keyword argument {key!r}")
+            out[key] = value
+            continue
+        warnings.warn(f"{owner}: keyword {key!r} is deprecated, use {new!r}",
+                      DeprecationWarning, stacklevel=3)
+        out[new] = value
+    return out
 
 
 def model_name(name: str, *, extra: tuple[str, ...] = ()) -> str:

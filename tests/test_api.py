@@ -75,7 +75,7 @@ def test_fitted_attributes_equal_the_cli_json(fitted, csv_runs, tmp_path):
     assert est.validation_rel_error_ == rec["validation_rel_error"]
     assert est.rel_error_bands_["low"] == rec["rel_error_low_velocity"]
     assert est.n_samples_ == rec["samples"] == est.residual_.shape[0] == est.design_.Y.shape[0]
-    assert est.estimator_ == rec["estimator"] == "ls" and est.qs_ == 0.03
+    assert est.estimator_ == rec["estimator"] == "ls" and est.q_s_ == 0.03
     assert est.report_.to_json()["models"]["paper"] == rec
 
 
@@ -140,7 +140,7 @@ def test_bad_use_is_one_line_error(fitted):
 
 
 # ---------------------------------------------------------------- scikit-learn conventions
-_GIVEN = dict(model="usual", qs="scan", joint="revolute", cutoff=12.5, decimation=7,
+_GIVEN = dict(model="usual", q_s="scan", joint="revolute", cutoff=12.5, decimation=7,
               dq_min=0.0, trim=3, estimator="ls", eliminate=False, threshold=25.0)
 
 
@@ -154,11 +154,11 @@ def test_get_set_params_and_clone_semantics():
     # a clone built from the parameters holds the very same objects, unfitted
     twin = type(est)(**est.get_params(deep=False))
     assert all(twin.get_params()[k] is v for k, v in est.get_params().items())
-    assert est.set_params(qs=0.05, model="new") is est
-    assert est.qs == 0.05 and est.model == "new" and twin.qs == "scan"
-    with pytest.raises(DataError, match=r"unknown hyper-parameter 'q_s' \(expected one of "):
-        est.set_params(q_s=0.05)
-    assert est.qs == 0.05
+    assert est.set_params(q_s=0.05, model="new") is est
+    assert est.q_s == 0.05 and est.model == "new" and twin.q_s == "scan"
+    with pytest.raises(DataError, match=r"unknown hyper-parameter 'q_ss' \(expected one of "):
+        est.set_params(q_ss=0.05)
+    assert est.q_s == 0.05
 
 
 def test_sklearn_clone_and_grid_search(fitted):
@@ -174,9 +174,9 @@ def test_sklearn_clone_and_grid_search(fitted):
     assert est.std_.shape == est.rel_std_pct_.shape == est.coef_.shape
     assert dict(zip(est.coef_names_, est.coef_, strict=True)) == est.params_
     # grid search over q_s, leaving one payload run out per fold (score: 1 - ||rho||/||Y||)
-    grid = GridSearchCV(JointModel(model="paper"), {"qs": [0.01, 0.2]}, cv=3, error_score="raise")
+    grid = GridSearchCV(JointModel(model="paper"), {"q_s": [0.01, 0.2]}, cv=3, error_score="raise")
     grid.fit(train)
-    assert grid.best_params_["qs"] in (0.01, 0.2)
+    assert grid.best_params_["q_s"] in (0.01, 0.2)
     scores = grid.cv_results_["mean_test_score"]
     assert np.all(np.isfinite(scores)) and np.all(scores > 0.5) and scores[0] != scores[1]
     assert isinstance(grid.best_estimator_, JointModel) and grid.best_estimator_.coef_.size

@@ -113,7 +113,7 @@ def test_api_hyper_parameters_and_bad_input(arm_files):
     robot, files = arm_files
     est = RobotFit(robot, model="usual")
     assert est.get_params()["robot"] is robot
-    assert est.set_params(qs=0.05).qs == 0.05
+    assert est.set_params(q_s=0.05).q_s == 0.05
     with pytest.raises(DataError, match="unknown hyper-parameter 'cutof'"):
         est.set_params(cutof=3.0)
     with pytest.raises(DataError, match="not fitted"):

@@ -75,7 +75,7 @@ def test_fit_json_report_and_tables(csv_runs, tmp_path, capsys):
 
 def test_single_model_and_qs_scan(csv_runs, tmp_path):
     js = tmp_path / "fit.json"
-    assert main(["fit", *map(str, csv_runs[:3]), "--model", "new", "--qs", "scan",
+    assert main(["fit", *map(str, csv_runs[:3]), "--model", "new", "--q-s", "scan",
                  "--json", str(js)]) == 0  # fmt: skip
     fit = json.loads(js.read_text())
     assert list(fit["models"]) == ["paper"]

@@ -42,13 +42,13 @@ def report(sim):
     plant, exps, refs = sim
     # the acceptance compares identified values with the truth: keep every identifiable
     # parameter (elimination drops weak but real terms, which then bias the others)
-    return fit_models(exps, qs=plant.joint.q_s, eliminate=False, references=refs, **SIM)
+    return fit_models(exps, q_s=plant.joint.q_s, eliminate=False, references=refs, **SIM)
 
 
 @pytest.fixture(scope="module")
 def report_ols(sim):
     plant, exps, _ = sim
-    return fit_models(exps, ("paper",), qs=plant.joint.q_s, eliminate=False, references=None,
+    return fit_models(exps, ("paper",), q_s=plant.joint.q_s, eliminate=False, references=None,
                       table_iv=False, **SIM)  # fmt: skip
 
 
@@ -112,7 +112,7 @@ def test_usual_model_payload_ratio_and_json_record(report):
 
 def test_default_elimination_keeps_parameters_significant(sim):
     plant, exps, refs = sim
-    rep = fit_models(exps[:2], models=("paper",), qs=plant.joint.q_s, references=refs[:2], **SIM)
+    rep = fit_models(exps[:2], models=("paper",), q_s=plant.joint.q_s, references=refs[:2], **SIM)
     m = rep.models["paper"]
     assert all(v <= 30 for v in m.rel_std_pct_.values())
     assert all("relative deviation" in why for _, why in m.removed_)
@@ -147,7 +147,7 @@ def test_qs_rescanned_after_refinement_recovers_the_plant():
                      payload_arm=p.arm_m, seed=11 + i)  # fmt: skip
         exps.append(make_experiment(f"payload{i}", r.t, r.q, r.tau_ref,
                                     payload_mass=p.mass_kg, payload_arm=p.arm_m))  # fmt: skip
-    rep = fit_models(exps, ("paper",), qs="scan", references=[plan.reference.q] * 3,
+    rep = fit_models(exps, ("paper",), q_s="scan", references=[plan.reference.q] * 3,
                      table_iv=False, **SIM)  # fmt: skip
     ref = refine(rep.designs["paper"], rep.models["paper"], vmax=rep.vmax)
     assert "position_ripple" in [s.term.effect for s in ref.steps]
@@ -155,7 +155,7 @@ def test_qs_rescanned_after_refinement_recovers_the_plant():
     q_s = plant.joint.q_s
     # the quick campaign has little data near q_s: without any effect its scan lands 5-10 %
     # high (0.0326 on these runs), with the ripple left in the residual 36 % high
-    assert abs(rep.qs / q_s - 1) > 0.2 and abs(rs.qs / q_s - 1) < 0.15
+    assert abs(rep.q_s / q_s - 1) > 0.2 and abs(rs.q_s / q_s - 1) < 0.15
     assert [q for q, _ in rs.scan] == sorted(q for q, _ in rs.scan)
     truth = plant.truth()
 

@@ -70,28 +70,28 @@ def test_friction_terms():
 
 
 def test_quadrant_coulomb_eq30():
-    qs = 0.03
+    q_s = 0.03
     # motor (tau dq > 0), generator (tau dq < 0), and dq = 0 (P+ = P- = 1/2)
     s = sig([0.0] * 3, [0.02, 0.05, 0.0], [0.0] * 3, [10.0, -4.0, 3.0])
-    w = QuadrantCoulomb(qs).columns(s)
-    e0, e1 = math.exp(-0.02 / qs), math.exp(-0.05 / qs)
+    w = QuadrantCoulomb(q_s).columns(s)
+    e0, e1 = math.exp(-0.02 / q_s), math.exp(-0.05 / q_s)
     np.testing.assert_allclose(w[0], [1.0, e0, 0.0, 0.0])  # P+ sign, P+ E sign, P- ...
     np.testing.assert_allclose(w[1], [0.0, 0.0, 1.0, e1])
     np.testing.assert_allclose(w[2], [0.0, 0.0, 0.0, 0.0])  # sign(0) = 0
-    assert QuadrantCoulomb(qs).names() == ("c_m", "d_m", "c_g", "d_g")
+    assert QuadrantCoulomb(q_s).names() == ("c_m", "d_m", "c_g", "d_g")
 
 
 def test_load_dependent_eq42_columns_and_names():
-    qs = 0.04
+    q_s = 0.04
     inner = RigidBody() + Payload()
-    term = LoadDependent(inner, qs)
+    term = LoadDependent(inner, q_s)
     assert term.names() == (
         "a_m_J", "b_m_J", "a_m_MX", "b_m_MX", "a_m_MY", "b_m_MY", "a_m", "b_m",
         "a_g_J", "b_g_J", "a_g_MX", "b_g_MX", "a_g_MY", "b_g_MY", "a_g", "b_g",
     )  # fmt: skip
     q, dq, ddq, m, la = 0.2, -0.03, 1.2, 6.97, 1.277
     wi = np.array([ddq, G * math.cos(q), G * math.sin(q), m * la * (la * ddq + G * math.cos(q))])
-    e = math.exp(-abs(dq) / qs)
+    e = math.exp(-abs(dq) / q_s)
     gen = term.columns(sig([q], [dq], [ddq], [5.0], mass=m, arm=la))[0]  # tau dq < 0
     np.testing.assert_allclose(gen[:8], 0.0)
     np.testing.assert_allclose(gen[8::2], wi)
@@ -125,10 +125,10 @@ finite = st.floats(allow_nan=False, allow_infinity=False)
 @settings(max_examples=40, deadline=None)
 @given(
     seed=st.integers(0, 2**31 - 1),
-    qs=st.floats(0.005, 0.2),
+    q_s=st.floats(0.005, 0.2),
     mass=st.sampled_from([0.0, 3.4584, 6.97]),
 )
-def test_w_chi_reproduces_plant_torque_exactly(seed, qs, mass):
+def test_w_chi_reproduces_plant_torque_exactly(seed, q_s, mass):
     """Noise-free samples of the plant's inverse model (eq. 30/34): W_new chi_truth = tau
     wherever sign(tau) = sign(tau_out) (eq. 26), and W_usual chi = tau for a plant whose
     friction is the usual one."""
@@ -138,7 +138,7 @@ def test_w_chi_reproduces_plant_torque_exactly(seed, qs, mass):
     from sim_drivers.plant_config import default_plant
 
     p = default_plant()
-    p = replace(p, joint=replace(p.joint, q_s=qs))
+    p = replace(p, joint=replace(p.joint, q_s=q_s))
     rng = np.random.default_rng(seed)
     n = 400
     q = rng.uniform(-2, 2, n)
@@ -148,7 +148,7 @@ def test_w_chi_reproduces_plant_torque_exactly(seed, qs, mass):
     tau = inverse_torque(p, q, dq, ddq, mass, la)
     tau_out = output_torque(p, q, ddq, mass, la)
     s = sig(q, dq, ddq, tau, mass=mass, arm=la)
-    lib = new_model(qs, revolute=True)
+    lib = new_model(q_s, revolute=True)
     truth = p.truth()
     chi = np.array([truth[n] for n in lib.names()])
     ok = np.sign(tau) == np.sign(tau_out)

@@ -112,7 +112,7 @@ def test_predictor_is_exported_torque_and_band_holds_the_static_friction(arm3):
     robot, params = arm3
     em = truth_model(robot, params)
     pr = em.predictor(None)
-    assert pr.qs == [j["q_s"] for j in em.friction["joints"]] and min(pr.qs) > 0
+    assert pr.q_s == [j["q_s"] for j in em.friction["joints"]] and min(pr.q_s) > 0
     rng = np.random.default_rng(2)
     q, dq, ddq = (rng.uniform(-1, 1, (50, 3)) for _ in range(3))
     model = pin.buildModelFromXML(em.urdf)

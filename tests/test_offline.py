@@ -56,7 +56,7 @@ def test_record_is_the_plants_truth(run_rx):
     # without torque lag the applied torque is the reference plus the ripple noise
     np.testing.assert_allclose(r.tau_applied - r.tau_noise, r.tau_ref, rtol=0, atol=1e-9)
     assert np.std(r.tau_noise) == pytest.approx(p.drive.torque_noise_std_Nm, rel=0.05)
-    # both power quadrants are visited (the new model is identifiable)
+    # both power quadrants are visited (the paper model is identifiable)
     power = np.sign(output_torque(p, r.q_true, r.ddq_true, MA, LA) * r.dq_true)
     assert (power > 0).mean() > 0.2 and (power < 0).mean() > 0.2
 
@@ -127,11 +127,11 @@ def test_bad_reference_is_refused():
         simulate(p, SimpleNamespace(t=ref.t, q=ref.q), GAINS)
 
 
-def _eq42_columns(q, dq, ddq, ma, la, power, qs):
+def _eq42_columns(q, dq, ddq, ma, la, power, q_s):
     """W_new of eq. 42, column by column, in the order of eq. 43."""
     g = 9.81
     pp, pm = (1 + power) / 2, (1 - power) / 2
-    e = np.exp(-np.abs(dq) / qs)
+    e = np.exp(-np.abs(dq) / q_s)
     pay = ma * la * (la * ddq + g * np.cos(q))
     load = [ddq, g * np.cos(q), g * np.sin(q), pay]
     cols = []

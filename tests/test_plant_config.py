@@ -18,7 +18,7 @@ from sim_drivers.plant_config import (
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "plant_rx130l.toml"
 
-# docs/architecture.md, "Parameter names": the new model (eq. 42-43)
+# docs/architecture.md, "Parameter names": the paper model (eq. 42-43)
 NEW_MODEL_NAMES = (
     "a_m_J b_m_J a_m_MX b_m_MX a_m_MY b_m_MY a_m b_m "
     "a_g_J b_g_J a_g_MX b_g_MX a_g_MY b_g_MY a_g b_g c_m d_m c_g d_g F_V tau_off"

@@ -45,7 +45,7 @@ def runs():
 def fitted(runs):
     """The paper model (with its ripple-free library) fitted with instruments on the runs."""
     exps, refs = runs
-    return fit_models(exps, ("paper",), qs=0.04, references=refs, table_iv=False,
+    return fit_models(exps, ("paper",), q_s=0.04, references=refs, table_iv=False,
                       torque_delay=0.5)
 
 
@@ -55,8 +55,8 @@ def test_refit_like_an_earlier_report_is_the_same_fit(runs, fitted):
     scratch; a report on other data is refused."""
     exps, refs = runs
     kw = dict(references=refs, table_iv=False, torque_delay=0.5)
-    a = fit_models(exps, ("usual", "paper"), qs=0.031, **kw)
-    b = fit_models(exps, ("usual", "paper"), qs=0.031, like=fitted, **kw)
+    a = fit_models(exps, ("usual", "paper"), q_s=0.031, **kw)
+    b = fit_models(exps, ("usual", "paper"), q_s=0.031, like=fitted, **kw)
     assert "load_model" in fitted.settings  # the sign check ran
     for name in ("usual", "paper"):
         assert a.models[name].coef_ == b.models[name].coef_
@@ -64,7 +64,7 @@ def test_refit_like_an_earlier_report_is_the_same_fit(runs, fitted):
         assert np.array_equal(a.designs[name].Z, b.designs[name].Z)
     assert a.notes == b.notes and a.vmax == b.vmax
     with pytest.raises(DataError, match="like="):
-        fit_models(exps[:1], ("paper",), qs=0.031, like=fitted, **{**kw, "references": refs[:1]})
+        fit_models(exps[:1], ("paper",), q_s=0.031, like=fitted, **{**kw, "references": refs[:1]})
 
 
 def test_the_e_columns_are_the_odd_ones(fitted):
@@ -109,7 +109,7 @@ def test_fast_designs_equal_with_qs_bit_for_bit(fitted):
 def test_rescan_keeps_its_result_and_refits_with_the_chosen_qs(fitted):
     d, m = fitted.designs["paper"], fitted.models["paper"]
     rs = rescan_qs(d, m, vmax=fitted.vmax)
-    lq, dq_ = with_qs(d, m.library, rs.qs)
+    lq, dq_ = with_qs(d, m.library, rs.q_s)
     ref = IdentModel(lq, m.name).fit(dq_, eliminate=False)
     assert rs.model.rel_error_ == ref.rel_error_ == min(e for _, e in rs.scan)
     assert [q for q, _ in rs.scan] == sorted(q for q, _ in rs.scan)

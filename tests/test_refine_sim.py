@@ -265,9 +265,9 @@ def test_paper_story_usual_model_finds_load_and_low_velocity_dependence():
     exp_steps = [st for st in R.steps
                  if st.effect in ("stribeck", "quadrant_load_stribeck", "quadrant_load_velocity")]
     assert exp_steps, effects
-    qs = exp_steps[0].parameters["q_s"]["value"]
-    assert 0.01 < qs < 0.1  # the plant's q_s is 0.03 rad/s
-    # the refined usual model comes close to the new model's error (the true structure,
+    q_s = exp_steps[0].parameters["q_s"]["value"]
+    assert 0.01 < q_s < 0.1  # the plant's q_s is 0.03 rad/s
+    # the refined usual model comes close to the paper model's error (the true structure,
     # 22 parameters: its quadrant split of every rigid-body parameter is not a candidate)
     nl = new_model(p.joint.q_s)
     dn = build_design(nl, s, **SETTINGS)

@@ -94,7 +94,7 @@ def test_no_candidate_changes_when_the_torque_is_replaced_by_noise(model, payloa
     m = IdentModel(lib).fit(d, eliminate=False, drop_unidentifiable=True)
     s_true, s_noise = d.signals, _noisy(d.signals, 7)
     tau_out = rigid_prediction(lib, m.coef_)
-    assert tau_out is not None  # the new model's load prediction comes from its inner terms
+    assert tau_out is not None  # the paper model's load prediction comes from its inner terms
     kept = [d.names.index(n) for n in m.names_]
     diag = diagnose(m.residual_, s_true.states(), Y=d.Y, tau_out=tau_out)
     cols = Columns(s_true.states(), Scorer(d.W[:, kept], m.residual_))

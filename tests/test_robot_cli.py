@@ -444,23 +444,24 @@ def test_single_joint_lever_arm_is_refused_on_several_joints(tmp_path, arm_runs,
     assert r.payload.arm_m is None and r.payload.com[2] == 0.1
 
 
-def test_known_rotor_inertia_through_the_cli(tmp_path, arm_runs, capfd):
+@pytest.mark.parametrize("method", ["ls", "iv"])
+def test_known_rotor_inertia_through_the_cli(tmp_path, arm_runs, capfd, method):
     """--known-rotor-inertia: no Ia among the parameters, the estimator with
-    RobotRegressor(known_rotor_inertia=True) in Python gives the same JSON; refused in one
-    line without --robot."""
+    RobotRegressor(known_rotor_inertia=True) in Python gives the same JSON (IDIM-IV too: it
+    once ended in a traceback); refused in one line without --robot."""
     robot, (run0, _) = arm_runs
     f = tmp_path / "fit.csv"
     run0.to_csv(f)
     out_json = tmp_path / "fit.json"
-    code, out, err = run_cli(capfd, "--robot", ARM3, f, "--model", "usual", "--method", "ls",
+    code, out, err = run_cli(capfd, "--robot", ARM3, f, "--model", "usual", "--method", method,
                              "--known-rotor-inertia", "--json", out_json)
     assert code == 0, err
     rec = json.loads(out_json.read_text())
     assert rec["known_rotor_inertia"] is True
     pars = rec["models"]["usual"]["parameters"]
     reg = RobotRegressor(robot, known_rotor_inertia=True)
-    sig, _ = api_signals([f], robot, rec, reg, "ls")
-    est = RobotModel(reg, model="usual", method="ls").fit(sig)
+    sig, _ = api_signals([f], robot, rec, reg, method)
+    est = RobotModel(reg, model="usual", method=method).fit(sig)
     assert list(pars) == list(est.names_)
     assert not any(n.startswith("Ia") for n in pars)
     np.testing.assert_allclose([v["value"] for v in pars.values()], est.coef_, rtol=1e-9,

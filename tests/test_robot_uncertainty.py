@@ -152,9 +152,9 @@ def test_paper_model_pruned_terms_left_out_of_the_prediction(arm3_usual):
             if all(f"{p}{num}" in u.pruned for p in ("b_m", "b_g", "d_m", "d_g"))]
     assert gone
     before = m.predict(held)
-    m.qs_ = m.qs_ * 3.0
+    m.q_s_ = m.q_s_ * 3.0
     after = m.predict(held)
-    m.qs_ = m.qs_ / 3.0
+    m.q_s_ = m.q_s_ / 3.0
     np.testing.assert_allclose(after[:, gone], before[:, gone], rtol=1e-12, atol=1e-12)
     e_full, e_pruned = full.rel_error(held), m.rel_error(held)
     for j in reg.joints:

@@ -57,3 +57,19 @@ def test_stribeck_exp_is_the_expression_it_replaced():
     qs = np.array([0.02, 0.05])
     assert np.array_equal(stribeck_exp(dq[:, None][:10], qs), np.exp(-np.abs(dq[:10, None]) / qs))
     assert stribeck_exp(0.0, 0.03) == 1.0
+
+
+def test_the_older_keyword_qs_is_renamed_with_a_warning_everywhere_and_typos_still_fail():
+    from ident.api import JointModel, RobotFit
+    from ident.robot.estimate import RobotModel
+
+    for make in (lambda **kw: JointModel("paper", **kw), lambda **kw: RobotFit("r.toml", **kw),
+                 lambda **kw: RobotModel(None, "paper", **kw)):
+        with pytest.warns(DeprecationWarning, match="'qs' is deprecated, use 'q_s'"):
+            est = make(qs=0.05)
+        assert est.q_s == 0.05 and "qs" not in est.get_params()
+        with pytest.raises(TypeError, match="unexpected keyword argument 'q_ss'"):
+            make(q_ss=0.05)
+    for est in (JointModel(), RobotFit("r.toml")):
+        with pytest.warns(DeprecationWarning):
+            assert est.set_params(qs=0.07).q_s == 0.07

@@ -127,7 +127,7 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
     hb.status("loading the logs and fitting the usual and the paper model")
     exps = load_experiments(list(logs), joint=campaign.joint.kind)
     qs0 = round(campaign.joint.limits.max_velocity / 30.0, 6)
-    report = fit_models(exps, ("usual", "paper"), qs=qs0)
+    report = fit_models(exps, ("usual", "paper"), q_s=qs0)
     est = report.models["paper"].estimator_.upper()
     _say(stream, f"[3/4] fitted the usual and the paper model on {len(exps)} runs "
                  f"({est}, q_s = {qs0:g} rad/s a priori; {time.perf_counter() - t0:.1f} s)")
@@ -159,10 +159,10 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
                        progress=scan_progress)
     finally:
         bar.close()
-    if abs(rs.qs - qs0) > 0.01 * qs0:
-        _say(stream, f"      q_s adjusted with the refined model: {qs0:g} -> {rs.qs:.4g} rad/s")
-        hb.status(f"fitting both models again with q_s = {rs.qs:.4g} rad/s")
-        report = fit_models(exps, ("usual", "paper"), qs=rs.qs, like=report)
+    if abs(rs.q_s - qs0) > 0.01 * qs0:
+        _say(stream, f"      q_s adjusted with the refined model: {qs0:g} -> {rs.q_s:.4g} rad/s")
+        hb.status(f"fitting both models again with q_s = {rs.q_s:.4g} rad/s")
+        report = fit_models(exps, ("usual", "paper"), q_s=rs.q_s, like=report)
         ref = refine_new(report)
     fit = report.to_json()
     fit["q_s_a_priori"] = qs0
@@ -171,7 +171,7 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
     fit["refinement"]["model"] = "paper"
     _say(stream, f"[4/4] refinement: {len(ref.steps)} step(s), relative error "
                  f"{ref.rel_error_initial:.4f} -> {ref.rel_error_final:.4f}, q_s = "
-                 f"{report.qs:.4g} rad/s ({time.perf_counter() - t0:.1f} s)")
+                 f"{report.q_s:.4g} rad/s ({time.perf_counter() - t0:.1f} s)")
 
     # figures (captions and grouping: report_build.discover_figures)
     hb.status("drawing the figures and writing the report")
@@ -214,7 +214,7 @@ def _summary(fit: dict, ref: Any, wall_s: float) -> str:
         ("High velocities (35-100 % of max)", "rel_error_high_velocity"),
     ]
     lines = ["", "Table III — relative norm of errors ||rho||/||Y||",
-             f"{'Measurements used':<36}{'Usual model':>13}{'New model':>13}"]
+             f"{'Measurements used':<36}{'Usual model':>13}{'Paper model':>13}"]
     for label, key in rows:
         u, n = m["usual"].get(key), m["paper"].get(key)
         lines.append(f"{label:<36}{_f(u):>13}{_f(n):>13}")

@@ -195,10 +195,10 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
     pred0 = exported.predictor(None)
     if pred0.names != joints:
         raise ConfigError(f"{model}: joints {pred0.names}, the campaign's are {joints}")
-    v_rest = ([REST_QS * q for q in pred0.qs] if rest_velocity is None
+    v_rest = ([REST_QS * q for q in pred0.q_s] if rest_velocity is None
               else [rest_velocity] * len(joints))
     if not all(v >= 0 for v in v_rest):
-        raise ConfigError(f"{model}: friction qs: expected numbers >= 0")
+        raise ConfigError(f"{model}: friction q_s: expected numbers >= 0")
     th = None
     if thresholds is not None:
         th = Thresholds.read(thresholds)

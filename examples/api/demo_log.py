@@ -42,8 +42,8 @@ def main(argv: list[str]) -> int:
     for r in runs:
         print(f"{r.source}: {len(r)} samples, payload {r.payload_mass:g} kg")
 
-    # the paper's paper model (eq. 42-43) with its a-priori q_s (section III.D)
-    est = JointModel(model="paper", qs=0.03).fit(runs)
+    # the paper's model (eq. 42-43) with its a-priori q_s (section III.D)
+    est = JointModel(model="paper", q_s=0.03).fit(runs)
     print(f"\n{est!r}\n  estimator {est.estimator_}, {est.n_samples_} equations, "
           f"relative error {est.rel_error_:.4f} (low velocity "
           f"{est.rel_error_bands_['low']:.4f}, high {est.rel_error_bands_['high']:.4f})")

@@ -61,7 +61,7 @@ def propose(ctx: Context) -> list[Candidate]:
         and "quadrant_load_stribeck" not in ctx.effects
     ):
         e, g = scan_log(
-            ctx.cols, lambda qs: QuadrantLoadStribeck(tau_out, qs), vmax / 1000, vmax / 2
+            ctx.cols, lambda q_s: QuadrantLoadStribeck(tau_out, q_s), vmax / 1000, vmax / 2
         )
         return [Candidate(e, g, 1)]
     return []

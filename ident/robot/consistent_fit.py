@@ -463,7 +463,7 @@ def consistent_record(model: Any, fit: ConsistentFit) -> dict[str, Any]:
         "standard": {n: float(v) for n, v in fit.standard.items()},
         "links": fit.links,
         "valid": fit.valid,
-        "q_s": [float(q) for q in model.qs_],
+        "q_s": [float(q) for q in model.q_s_],
         "model": model.model,
         "known_rotor_inertia": {j: float(v) for j, v in zip(
             model.joints_, getattr(model.regressor_, "known_Ia", np.zeros(len(model.joints_))),

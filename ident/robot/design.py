@@ -11,7 +11,8 @@ the n-dof regressor, per experiment, with the same functions and the same defaul
    :func:`~ident.preprocess.choose_cutoff` over the axes of the first experiment, at least
    :data:`~ident.preprocess.CUTOFF_FLOOR_IV` f_s with instruments), central differences for
    dq and ddq;
-2. the standard regressor ``RobotRegressor.rigid_kpn``, the known payload torque and
+2. the standard regressor ``RobotRegressor.rigid_kpn``, the known torque (payload, and the
+   known rotors' Ia_j ddq_j with ``known_rotor_inertia``) and
    sign(dq) at full rate (and, for IDIM-IV, the regressor and payload torque with the
    reference trajectory's acceleration);
 3. edge trimming (max(ceil(3 f_s / cut-off), 2 r) samples);
@@ -255,9 +256,13 @@ def design_runs(
         pay = placed_payload(run.payload, regressor, base, run.source, placed)
 
         def torque(acc: np.ndarray, q=q, dq=dq, pay=pay) -> np.ndarray:
-            if pay.mass > 0:
-                return np.asarray(regressor.payload_torque(q, dq, acc, pay), dtype=float)
-            return np.zeros((q.shape[0], k))
+            # the known torques: the payload's and the known rotors' Ia_j ddq_j (zero unless
+            # RobotRegressor(known_rotor_inertia=True)), filtered with the columns
+            out = (np.asarray(regressor.payload_torque(q, dq, acc, pay), dtype=float)
+                   if pay.mass > 0 else np.zeros((q.shape[0], k)))
+            if np.any(getattr(regressor, "known_Ia", 0.0)):
+                out = out + regressor.known_torque(acc)
+            return out
 
         rows = [run.tau[keep].T, q.T, dq.T, ddq.T, torque(ddq).T, np.sign(dq).T]
         W = np.asarray(regressor.rigid_kpn(q, dq, ddq)).reshape(k * p, nf)

@@ -61,6 +61,7 @@ from trajectories.friction import DEFAULT_Q_S, stribeck_exp
 
 from .. import DataError
 from ..estimators import ESTIMATORS, RCOND, Estimator, RankDeficientError
+from ..vocab import renamed_keywords
 from . import RobotIdentError
 from .base import base_parameters, payload_base, placed_payload
 from .moments import IDQ, IP, ISG, N_EXTRA, ONE, JointMoments, quadrant_weights
@@ -146,7 +147,7 @@ class RobotModel:
         Friction model on every joint (eq. 5 or eq. 30).
     method : {"ls", "wls", "iv"}
         Estimator (module doc).
-    qs : float, sequence or mapping
+    q_s : float, sequence or mapping
         q_s of E = exp(-|dq|/q_s) [rad/s] (eq. 29), one value, one per joint or by joint name.
     base : BaseParameters or None
         Base parameters (``.names``, ``.reduce``); default ``base_parameters(regressor)``.
@@ -183,6 +184,9 @@ class RobotModel:
         and the same payload (``payload_merged_``), only its mass at the flange origin is
         subtracted and its first moments and inertia merge into the last link's base
         parameters (no payload columns).
+    **deprecated
+        ``qs=``: the older spelling of ``q_s`` (accepted with a DeprecationWarning,
+        :mod:`ident.vocab`).
 
     Attributes (after :meth:`fit`)
     ------------------------------
@@ -228,7 +232,7 @@ class RobotModel:
         model: str = "usual",
         method: str = "ls",
         *,
-        qs: float | Sequence[float] | Mapping[str, float] = DEFAULT_Q_S,
+        q_s: float | Sequence[float] | Mapping[str, float] = DEFAULT_Q_S,
         base: Any = None,
         quadrant: str = "model",
         dq_min: float = 0.0,
@@ -240,11 +244,13 @@ class RobotModel:
         quadrant_theta: Any = None,
         quadrant_band: float = 0.03,
         payload_params: bool = False,
+        **deprecated: Any,
     ) -> None:
+        q_s = renamed_keywords("RobotModel", deprecated).get("q_s", q_s)
         self.regressor = regressor
         self.model = model
         self.method = method
-        self.qs = qs
+        self.q_s = q_s
         self.base = base
         self.quadrant = quadrant
         self.dq_min = dq_min
@@ -260,12 +266,12 @@ class RobotModel:
     def get_params(self, deep: bool = False) -> dict[str, Any]:
         """Hyper-parameters (scikit-learn convention)."""
         return {n: getattr(self, n) for n in (
-            "regressor", "model", "method", "qs", "base", "quadrant", "dq_min", "chunk_size",
+            "regressor", "model", "method", "q_s", "base", "quadrant", "dq_min", "chunk_size",
             "max_iter", "tol", "max_passes", "payload_ratio", "quadrant_theta",
             "quadrant_band", "payload_params")}
 
     def __repr__(self) -> str:
-        return f"RobotModel(model={self.model!r}, method={self.method!r}, qs={self.qs!r})"
+        return f"RobotModel(model={self.model!r}, method={self.method!r}, q_s={self.q_s!r})"
 
     # ------------------------------------------------------------------ setup
     def _setup(self) -> None:
@@ -291,17 +297,17 @@ class RobotModel:
         self.base_ = base
         joints = tuple(reg.joints)
         k = len(joints)
-        qs = self.qs
-        if isinstance(qs, Mapping):
-            missing = [j for j in joints if j not in qs]
+        q_s = self.q_s
+        if isinstance(q_s, Mapping):
+            missing = [j for j in joints if j not in q_s]
             if missing:
-                raise RobotIdentError(f"RobotModel.qs: no value for joint(s) {missing}")
-            qs = [qs[j] for j in joints]
-        qs_arr = np.broadcast_to(np.asarray(qs, dtype=float), (k,)).copy()
+                raise RobotIdentError(f"RobotModel.q_s: no value for joint(s) {missing}")
+            q_s = [q_s[j] for j in joints]
+        qs_arr = np.broadcast_to(np.asarray(q_s, dtype=float), (k,)).copy()
         if not np.all(np.isfinite(qs_arr) & (qs_arr > 0)):
-            raise RobotIdentError(f"RobotModel.qs: expected positive velocities [rad/s], got "
+            raise RobotIdentError(f"RobotModel.q_s: expected positive velocities [rad/s], got "
                                   f"{qs_arr}")
-        self.qs_ = qs_arr
+        self.q_s_ = qs_arr
         self.joints_ = joints
         self.numbers_ = tuple(int(n) for n in reg.numbers)
         self._pay_cols = None
@@ -482,7 +488,8 @@ class RobotModel:
             W, p = self._payload_block(W, q, dq, ddq, pay, std)
         known = getattr(reg, "known_Ia", None)
         kn = None
-        if known is not None and np.any(known):  # known rotor inertias (RobotRegressor)
+        if given is None and known is not None and np.any(known):
+            # known rotor inertias (RobotRegressor); the columns chain carries them in p
             kn = reg.known_torque(ddq)
         return W, p, kn
 
@@ -569,7 +576,7 @@ class RobotModel:
                     # rows that changed quadrant (entering or leaving the band is no change)
                     changed += int(np.count_nonzero(
                         (np.sign(sp) != np.sign(spp)) & ((sp != 0) & (spp != 0) | (h == 0))))
-                E = stribeck_exp(dqo, self.qs_[j])
+                E = stribeck_exp(dqo, self.q_s_[j])
                 pminus = None
                 if h > 0:  # rows in the band around the quadrant boundary are left out
                     inb = np.abs(tout) < h
@@ -1102,7 +1109,7 @@ class RobotModel:
             else:
                 sp = tauj * dqj
             pp = quadrant_weights(sp)
-            E = stribeck_exp(dqj, self.qs_[j])
+            E = stribeck_exp(dqj, self.q_s_[j])
             pred = np.zeros(dqj.size)
             for s, ws in ((0, pp), (1, 1.0 - pp)):
                 c0, c1, _, _ = coeffs(th, blk, s)

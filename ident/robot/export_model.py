@@ -160,7 +160,7 @@ def urdf_text(model: pin.Model, standard: Mapping[str, float], numbers: Sequence
 
 def friction_record(model_name: str, joints: Sequence[str], numbers: Sequence[int],
                     parameters: Mapping[str, float], standard: Mapping[str, float],
-                    qs: Sequence[float], gravity: Sequence[float],
+                    q_s: Sequence[float], gravity: Sequence[float],
                     known_rotor_inertia: Mapping[str, float] | None = None,
                     fixed: Mapping[str, float] | None = None) -> dict[str, Any]:
     """The friction file's content (docs/model-export.md): per joint its rotor inertia
@@ -172,7 +172,7 @@ def friction_record(model_name: str, joints: Sequence[str], numbers: Sequence[in
     known = dict(known_rotor_inertia or {})
     values = {**(fixed or {}), **parameters}
     out_joints = []
-    for j, n, q in zip(joints, numbers, qs, strict=True):
+    for j, n, q in zip(joints, numbers, q_s, strict=True):
         coef = {}
         for pfx in block:
             key = f"{pfx}{n}"

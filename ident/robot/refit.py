@@ -353,7 +353,7 @@ def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
         p["idx"].append(idx[ok])
         p["V"].append(V[ok])
         p["pp"].append(quadrant_weights(sp[ok]))
-        p["E"].append(stribeck_exp(dqj[ok], model.qs_[j]))
+        p["E"].append(stribeck_exp(dqj[ok], model.q_s_[j]))
         p["tau"].append(tauj[ok])
     out = []
     for j in range(k):

@@ -22,7 +22,9 @@ class RobotColumns:
         Standard rigid-body regressor (``RobotRegressor.rigid_kpn`` layout: joint, standard
         parameter, sample) computed at full rate on the filtered states, then decimated.
     p : ndarray, shape (n, k)
-        Known payload torque of the sample's experiment [N m], computed and decimated alike.
+        Known torque of the sample's experiment [N m]: the payload's, plus the known rotors'
+        Ia_j ddq_j with ``RobotRegressor(known_rotor_inertia=True)``; computed and decimated
+        alike.
     sign : ndarray, shape (n, k)
         sign(dq) computed at full rate, decimated (the Coulomb column, eq. 5).
     keep : ndarray of bool, shape (n, k)

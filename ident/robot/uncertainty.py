@@ -294,11 +294,6 @@ def _iv_check(model: Any, signals: Any) -> tuple[Any, str]:
         return None, "no reference trajectory q_ref (instruments)"
     if not all(s.columns is None or s.columns.Wz is not None for s in items):
         return None, "the columns were built without the instruments' columns"
-    known = getattr(model.regressor_, "known_Ia", None)
-    if known is not None and np.any(known) and any(s.columns is not None for s in items):
-        # RobotModel's IDIM-IV pass has no reference acceleration for the known rotors'
-        # torque on the columns chain
-        return None, "known rotor inertias on the columns chain"
     params = model.get_params()
     params["method"] = "iv"
     theta = getattr(model, "quadrant_from_", None)
