@@ -45,7 +45,13 @@ from sim_drivers.simbus import SimNetwork
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["ArmJoint", "ArmOnBus"]
+__all__ = ["ArmJoint", "ArmOnBus", "TORQUE_DELAY_CYCLES"]
+
+#: The timing of a log of the arm on the bus [cycles] (module docstring): the position of
+#: SYNC k is the arm's at SYNC k; the torque a master computes from it is latched by the drive
+#: at SYNC k+1 and applied by the arm's step over [k+1, k+2], whose middle is 1.5 cycles after
+#: that position -- as on a drive whose synchronous RPDO is actuated at the next SYNC.
+TORQUE_DELAY_CYCLES = 1.5
 
 _INT16_MIN, _INT16_MAX = -32768, 32767
 

@@ -155,7 +155,14 @@ from sim_drivers.pdo import PdoMixin, RxPdo, TxPdo
 logger = logging.getLogger(__name__)
 
 __all__ = ["CLOCKS", "DriveError", "SimulatedDrive", "open_virtual_bus", "NMT_STATE_NAMES",
-           "SYNC_LOSS_FLOOR_S", "SYNC_LOSS_PERIODS"]
+           "SYNC_LOSS_FLOOR_S", "SYNC_LOSS_PERIODS", "TORQUE_DELAY_CYCLES"]
+
+#: The timing of a log of this drive around a single-joint plant [cycles]: on SYNC k it applies
+#: the latched torque, steps the plant over the coming cycle at once and its TPDO reports the
+#: position at the end of that cycle; the torque a master computes from that position acts
+#: over the next cycle, whose middle is half a cycle after it (``daq.runtime.runner`` writes
+#: it in the log, ``ident`` aligns q with it).
+TORQUE_DELAY_CYCLES = 0.5
 
 # Objects the drive keeps as attributes: served live over SDO, written by SDO or RPDO,
 # packed into TPDOs. (index, subindex) -> attribute name.

@@ -46,6 +46,9 @@ def test_daq_defaults_and_errors(tmp_path):
     cfg = parse_daq({})
     assert cfg.interface == "virtual" and cfg.clock == "lockstep"
     assert len(cfg.drives) == 1 and cfg.drives[0].node_id == 1
+    assert cfg.torque_delay_cycles == 1.5  # synchronous RPDO actuated at the next SYNC
+    with pytest.raises(ConfigError, match=r"c.toml: daq.torque_delay_cycles: expected"):
+        parse_daq({"torque_delay_cycles": -1.0}, "c.toml")
     assert cfg.drives[0].eds.name == "jointid_cia402.eds" and cfg.drives[0].mode_name == "cst"
     with pytest.raises(ConfigError, match=r"c.toml: daq.drives\[0\].mode: expected one of"):
         parse_daq({"drives": [{"node_id": 1, "mode": "csv"}]}, "c.toml")
@@ -218,6 +221,8 @@ def test_paced_clock_records_timing_of_every_cycle(tmp_path, source):
     a = read_run(run.path)
     assert np.array_equal(a.cycle, np.arange(run.cycles))
     assert a.metadata["campaign"]["clock"] == "paced"
+    # the simulated single-joint drive's own timing, not the [daq] default for hardware
+    assert float(a.metadata["campaign"]["torque_delay_cycles"]) == 0.5
     with open(run.path, "rb") as f:
         timing = [m for _, _, m in make_reader(f).iter_messages(topics=["/timing"])]
     assert len(timing) == run.cycles

@@ -65,6 +65,8 @@ def test_log_metadata_names_the_robot_joints_buses_and_payload(robot_run):
     for run, pay in zip(result.runs, c.payloads, strict=True):
         md = read_run(run.path, axis=2).metadata
         assert md["campaign"]["kind"] == "robot"
+        # the arm on the bus applies a torque over the cycle after the next SYNC
+        assert float(md["campaign"]["torque_delay_cycles"]) == 1.5
         assert md["robot"]["file"] == str(ARM3)
         assert json.loads(md["robot"]["joints"]) == ["j1", "j2", "j3"]
         buses = json.loads(md["robot"]["buses"])

@@ -39,6 +39,12 @@ project's generic EDS, cyclic synchronous torque)::
     allow_beyond_drive_limits = false  # true: accept a velocity watchdog above the drive's
                                   # max motor speed 0x6080 (refused by default: it could
                                   # never fire)
+    torque_delay_cycles = 1.5     # timing written in each log for identification [cycles]:
+                                  # from the SYNC whose position the master reads to the
+                                  # middle of the cycle the torque it sends acts over. 1.5 on
+                                  # drives whose synchronous RPDO is actuated at the next
+                                  # SYNC (CiA 301) and whose TPDO samples at SYNC; with
+                                  # --simulate the simulated drives' own timing is written
     [daq.limits]                  # optional, tighter than the campaign's joint.limits;
                                   # refused beyond the sanity bounds of joint limits
                                   # (trajectories.campaign.SANE_LIMITS: 1e3 rad/s...)
@@ -197,6 +203,7 @@ class DaqConfig:
     from_can_config: tuple[str, ...] = ()  # keys taken from python-can's configuration
     gc_freeze: bool = True  # no automatic garbage collection during a payload run
     allow_beyond_drive_limits: bool = False  # supervision limits above the drive's own
+    torque_delay_cycles: float = 1.5  # [cycles] the logs' torque timing (module docstring)
 
     @property
     def heartbeat_consumer_ms(self) -> int:
@@ -286,6 +293,8 @@ _DAQ = Table(
                                      unit="ms"),
         "limits": _LIMITS,
         "allow_beyond_drive_limits": Field(bool, required=False, default=False),
+        "torque_delay_cycles": Field(float, required=False, default=1.5, ge=0, le=10,
+                                     unit="cycles"),
     }
 )
 
@@ -455,6 +464,7 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "", *,
         from_can_config=from_pc,
         gc_freeze=d["gc_freeze"],
         allow_beyond_drive_limits=d["allow_beyond_drive_limits"],
+        torque_delay_cycles=d["torque_delay_cycles"],
     )
 
 

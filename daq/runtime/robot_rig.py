@@ -24,6 +24,7 @@ from typing import Any
 
 from daq import ConfigError
 from sim_drivers.arm import ArmParams, Payload
+from sim_drivers.arm_bus import TORQUE_DELAY_CYCLES as ARM_TORQUE_DELAY
 from sim_drivers.arm_bus import ArmOnBus
 from trajectories.robot_campaign import RobotCampaign
 from trajectories.robot_model import robot_file_path, robot_for_campaign
@@ -101,7 +102,8 @@ class ArmRig(SimRig):
     """The ``--simulate`` rig of a robot campaign: one :class:`ArmOnBus`."""
 
     def __init__(self, arm: ArmOnBus) -> None:
-        super().__init__(drives=list(arm.drives), networks=dict(arm.sims))
+        super().__init__(drives=list(arm.drives), networks=dict(arm.sims),
+                         torque_delay_cycles=ARM_TORQUE_DELAY)
         self.arm = arm
 
     def set_payload(self, payload: Any) -> None:

@@ -100,7 +100,8 @@ def _state_path(out_dir: Path, name: str) -> Path:
 
 def _metadata(campaign: Any, cfg: DaqConfig, plan: Any, index: int, payload: Any,
               scalings: list[Scaling], plant_params: Any,
-              bus_info: str = "", drives: Sequence[MasterDrive] = ()
+              bus_info: str = "", drives: Sequence[MasterDrive] = (),
+              torque_delay_cycles: float | None = None,
               ) -> dict[str, dict[str, str]]:
     robot = isinstance(campaign, RobotCampaign)
     ref = plan if robot else plan.reference
@@ -129,6 +130,11 @@ def _metadata(campaign: Any, cfg: DaqConfig, plan: Any, index: int, payload: Any
             "segments": json.dumps(list(ref.segment_names)),
             "position_limits": json.dumps(pos),
             "gains": json.dumps(gains),
+            # [cycles] from a logged position's SYNC to the middle of the cycle the torque
+            # computed from it acts over (the simulated drives' or the [daq] setting)
+            "torque_delay_cycles": repr(float(cfg.torque_delay_cycles
+                                              if torque_delay_cycles is None
+                                              else torque_delay_cycles)),
         },
         "payload": pay,
         "software": {"jointid": __version__, "python-can": can.__version__,
@@ -452,7 +458,8 @@ def _run_locked(campaign: Any, cfg: DaqConfig, plan: Any, load: Any, out: Path, 
                 log = RunLog(path, n_axes=len(drives), cycle_s=campaign.cycle_s,
                              metadata=_metadata(campaign, cfg, plan, i, p, scalings, simulate,
                                                 str(getattr(bus, "channel_info", "")),
-                                                drives),
+                                                drives, None if sim is None
+                                                else sim.torque_delay_cycles),
                              attachments=attachments, chunk_seconds=cfg.chunk_seconds,
                              frames_per_cycle=1 + 3 * len(drives), axis_setpoints=robot)
             except OSError as exc:  # writing the header: nothing moved yet

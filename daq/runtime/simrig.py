@@ -21,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from sim_drivers.drive import TORQUE_DELAY_CYCLES as DRIVE_TORQUE_DELAY
 from sim_drivers.drive import SimulatedDrive
 from sim_drivers.plant import JointPlant
 from sim_drivers.simbus import SimNetwork
@@ -34,6 +35,8 @@ class SimRig:
 
     drives: list[Any] = field(default_factory=list)
     networks: dict[str, SimNetwork] = field(default_factory=dict)
+    #: the timing of the logs of these drives [cycles] (``DaqConfig.torque_delay_cycles``)
+    torque_delay_cycles: float = DRIVE_TORQUE_DELAY
 
     def close(self) -> None:
         """Stop every drive, then every network's notifier and bus (idempotent)."""
