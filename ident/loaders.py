@@ -55,6 +55,7 @@ from daq.protocol.reader import read_run
 
 from . import DataError
 from .signals import Signals
+from .timing import align_to_torque
 
 __all__ = [
     "Experiment",
@@ -805,17 +806,42 @@ def _load_mcap(path: Path, revolute: bool | None, axis: int) -> Experiment:
         raise DataError(f"{path}: no cycle with the drive in OPERATION ENABLED")
     run = run.select(keep)
     rev = bool(run.revolute) if revolute is None else revolute
+    # logs without a /setpoint channel carry NaN: no reference, plain least squares
+    q_ref = run.q_ref if np.all(np.isfinite(run.q_ref)) else None
+    t, q, tau, q_ref = align_to_torque(run.t, run.q, run.tau_ref, q_ref,
+                                       log_torque_delay(run.metadata, path), str(path))
     return make_experiment(
         str(path),
-        run.t,
-        run.q,
-        run.tau_ref,
+        t,
+        q,
+        tau,
         payload_mass=_finite_or_zero(run.payload_mass_kg),
         payload_arm=_finite_or_zero(run.payload_arm_m),
         revolute=rev,
-        # logs without a /setpoint channel carry NaN: no reference, plain least squares
-        q_ref=run.q_ref if np.all(np.isfinite(run.q_ref)) else None,
+        q_ref=q_ref,
     )
+
+
+def log_torque_delay(metadata: Mapping[str, Mapping[str, str]], path: Path | str) -> float:
+    """The log's torque timing ``campaign.torque_delay_cycles`` [cycles] (docs/log-format.md),
+    0.5 for logs written before jointid recorded it.
+
+    Raises
+    ------
+    DataError
+        A value that is not a number >= 0 (one line naming the file and the key).
+    """
+    text = metadata.get("campaign", {}).get("torque_delay_cycles")
+    if text is None:
+        return 0.5
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not np.isfinite(value) or value < 0:
+        raise DataError(f"{path}: metadata campaign.torque_delay_cycles {text!r}: expected a "
+                        "number >= 0 [cycles]")
+    return value
 
 
 def _q_unit(q_unit: str | None, rev: bool | None, source: str) -> tuple[float, bool | None]:

@@ -48,6 +48,7 @@ from . import DataError
 from .loaders import uniform_grid
 from .signals import Signals
 from .terms import Library, Term
+from .timing import shift
 
 __all__ = [
     "Design",
@@ -83,41 +84,6 @@ TORQUE_DELAY = 0.5
 #: 1.4 %, 0.52. The residual grows with the band because W then holds more of the encoder
 #: quantisation (amplified twice by differentiation), which OLS would absorb as bias.
 CUTOFF_FLOOR_IV = 0.125
-
-
-def shift(x: np.ndarray, d: float) -> np.ndarray:
-    """Samples of a smooth signal interpolated to t_k + d dt (cubic Lagrange, 4 points).
-
-    Parameters
-    ----------
-    x : ndarray, shape (n,)
-        Uniformly sampled signal (n >= 4).
-    d : float
-        Fraction of a sample, 0 <= d < 1 (0 returns ``x`` unchanged).
-
-    Returns
-    -------
-    ndarray, shape (n,)
-        x(t_k + d dt): exact for polynomials of degree <= 3; at d = 1/2 the weights are
-        (-1, 9, 9, -1)/16, gain 0.99997 at 2 % of f_s and 0.996 at 10 %. The ends are
-        extrapolated linearly (they are trimmed later).
-    """
-    x = np.asarray(x, dtype=float)
-    if d == 0:
-        return x
-    if not 0 < d < 1:
-        raise DataError(f"torque_delay must lie in [0, 1) samples, got {d}")
-    if x.size < 4:
-        raise DataError(f"{x.size} samples: too few to interpolate")
-    p = np.concatenate([[2 * x[0] - x[1]], x, [2 * x[-1] - x[-2], 3 * x[-1] - 2 * x[-2]]])
-    w = (
-        -d * (d - 1) * (d - 2) / 6,
-        (d + 1) * (d - 1) * (d - 2) / 2,
-        -(d + 1) * d * (d - 2) / 2,
-        (d + 1) * d * (d - 1) / 6,
-    )
-    n = x.size
-    return w[0] * p[0:n] + w[1] * p[1 : n + 1] + w[2] * p[2 : n + 2] + w[3] * p[3 : n + 3]
 
 
 def diffcent(y: np.ndarray, dt: float) -> np.ndarray:

@@ -62,6 +62,7 @@ import numpy as np
 
 from daq.protocol.reader import LogReadError, read_run
 
+from .. import DataError
 from ..loaders import (
     GAP_PERIODS,
     IRREGULAR_TOL,
@@ -71,11 +72,13 @@ from ..loaders import (
     _longest_true_run,
     _read_csv,
     _read_mat,
+    log_torque_delay,
     lost_cycle_breaks,
     resolve_path,
     uniform_grid,
 )
 from ..preprocess import choose_cutoff, decimate, diffcent, lowpass
+from ..timing import align_to_torque
 from . import RobotIdentError
 from .signals import RobotPayloadData, RobotSignals
 
@@ -281,15 +284,14 @@ def _load_mcap(path: Path, joints: Sequence[str]) -> RawRobotRun:
         inertia=_json_vector(meta.get("inertia_kgm2"), 6, "payload.inertia_kgm2", str(path)),
         arm_m=arm,
     )
-    return _make_run(
-        str(path),
-        runs[0].t,
-        np.column_stack([r.q for r in runs]),
-        np.column_stack([r.tau_ref for r in runs]),
-        q_ref=q_ref,
-        payload=payload,
-        joints=joints,
-    )
+    try:  # the log's torque timing (docs/log-format.md), completed by the chain's 0.5
+        t, q, tau, q_ref = align_to_torque(
+            runs[0].t, np.column_stack([r.q for r in runs]),
+            np.column_stack([r.tau_ref for r in runs]), q_ref,
+            log_torque_delay(runs[0].metadata, path), str(path))
+    except DataError as exc:
+        raise RobotIdentError(str(exc)) from None
+    return _make_run(str(path), t, q, tau, q_ref=q_ref, payload=payload, joints=joints)
 
 
 def _axis_columns(
