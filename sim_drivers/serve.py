@@ -31,7 +31,7 @@ from typing import Any
 import can
 
 from sim_drivers.bridge import Bridge
-from sim_drivers.drive import SimulatedDrive
+from sim_drivers.drive import TORQUE_DELAY_CYCLES, SimulatedDrive
 from sim_drivers.plant import JointPlant
 from sim_drivers.plant_config import load_plant
 
@@ -159,6 +159,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         ids = ", ".join(str(d.node_id) for d in served.drives) or "none"
         print(f"serving node(s) {ids} on {args.interface}:{args.channel}; Ctrl-C stops",
               flush=True)
+        # the master cannot tell simulated drives from real ones: say their log timing
+        print(f"torque timing of these drives: {TORQUE_DELAY_CYCLES} cycles (campaign: [daq] "
+              f"torque_delay_cycles = {TORQUE_DELAY_CYCLES}, docs/log-format.md)", flush=True)
         bridge = None
         if args.bridge_port is not None:
             bridge = start_bridge(args.interface, args.channel, args.bridge_port,

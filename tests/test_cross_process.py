@@ -20,6 +20,7 @@ from daq.protocol.cia402 import State, state_from_statusword
 from daq.protocol.reader import read_frames, read_run
 from daq.runtime.runner import run_campaign
 from daq.runtime.simrig import plant_scaling
+from sim_drivers.drive import TORQUE_DELAY_CYCLES
 from sim_drivers.plant_config import default_plant
 from sim_drivers.remote import ServeProcess
 from trajectories.campaign import Campaign
@@ -46,6 +47,8 @@ def remote_campaign(url: str, node_id: int = 1, *, sync_source: str = "runner",
                 # a shared 2-core host stalls for tens of ms: the TPDO watchdog of this test
                 # tolerates that, the drive's own watchdogs stay at their defaults
                 "tpdo_timeout_cycles": 200, "max_following_error": 0.5,
+                # the served drives are simulated single joints (serve prints their timing)
+                "torque_delay_cycles": TORQUE_DELAY_CYCLES,
                 "drives": [{"node_id": node_id, "scaling": {
                     "rated_torque_Nm": sc.rated_torque_Nm, "gear_ratio": sc.gear_ratio,
                     "encoder_counts_per_rev": sc.encoder_counts_per_rev}}],
@@ -71,6 +74,7 @@ def test_paced_campaign_against_drive_in_another_process(served, tmp_path, sync_
     run = r.runs[0]
     a = read_run(run.path)
     assert a.metadata["campaign"]["interface"] == "remote"
+    assert float(a.metadata["campaign"]["torque_delay_cycles"]) == TORQUE_DELAY_CYCLES == 0.5
     # the bridge's address is logged, its access token is not (anywhere in the file)
     base, token = served.url.rsplit("/", 1)
     assert f"{base}/<token>" in a.metadata["campaign"]["bus"]
