@@ -81,7 +81,7 @@ def test_example_robot_campaign_plans_within_limits_from_and_to_rest():
     assert (shares[:, 0] > 0.2).all() and (shares[:, 2] > 0.02).all()
     text = str(plan.summary())
     assert "arm3-excitation" in text and "2 payload run(s)" in text
-    assert "segments[3] (multisine)" in text and "0-10 % vmax" in text
+    assert "segments[3] (multisine)" in text and "0-10 % of vmax" in text
 
 
 def test_single_joint_campaigns_load_as_before():
@@ -284,7 +284,7 @@ def test_assessment_is_what_jointid_plan_prints():
     text = str(a)
     assert text.count("quadrants of (dq, tau_out), payload") == 2
     assert f"{a.quality.cond:.4g}" in text and "peak |tau| [N m]" in text
-    assert text.count("0-10 % vmax") == 1  # bands printed once, with the plan
+    assert text.count("0-10 % of vmax") == 1  # bands printed once, with the plan
     with pytest.raises(TrajectoryError, match="needs the robot's regressor"):
         assess_robot_campaign(c, optimise=True)
     bare = assess_robot_campaign(c)  # no dynamics: the plan summary only

@@ -243,6 +243,9 @@ class SineSegment:
         [rad] or [m].
     periods : int
         Number of full periods, >= 1.
+    joint : str
+        The moving joint that plays the sinusoid, in a robot campaign (the others hold their
+        position); ``""``: the only moving joint (a ``[joint]`` campaign).
     """
 
     amplitude: float
@@ -250,6 +253,7 @@ class SineSegment:
     center: float
     periods: int = 1
     kind: Literal["sine"] = "sine"
+    joint: str = ""
 
     @property
     def omega(self) -> float:

@@ -2,8 +2,10 @@
 
 Loads and validates the campaign, plans it with Ruckig (rejecting anything beyond the joint
 limits before anything moves), prints the summary table (durations, share of moving time
-per velocity band, position coverage, peaks against limits) and, with ``--plot``, draws
-q, dq and ddq of one payload run against time with the segments marked.
+per velocity band, position coverage, peaks against limits, peak torque estimate per
+payload) and, with ``--plot``, draws q, dq and ddq of one payload run against time with the
+segments marked. A single-joint campaign (``[joint]``) is planned as a robot with one
+moving joint, by the same planner as a robot campaign.
 
 A robot campaign (``[robot]``) is planned for all its joints at once: the multi-sines with
 ``optimise = true`` are optimised first (``--no-optimise``: as written), then the summary per
@@ -19,14 +21,13 @@ import argparse
 from dataclasses import replace
 from pathlib import Path
 
-from trajectories.plan import BANDS, CampaignPlan, plan_campaign
-
 from . import TrajectoryError
 from .campaign_file import load_any_campaign
 from .excitation import assess_robot_campaign
-from .multi import RobotPlan
+from .multi import plan_robot_campaign
 from .robot_campaign import RobotCampaign
 from .robot_model import OPTIMISE_EVALUATIONS, prepare_robot_campaign, robot_for_campaign
+from .sampled import BANDS, RobotPlan
 
 __all__ = ["plot_plan", "register", "run"]
 
@@ -57,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
         return _run_robot(campaign, args)
     if args.quick:
         campaign = campaign.quick()
-    plan = plan_campaign(campaign)
+    plan = plan_robot_campaign(campaign)  # a robot with one moving joint
     print(plan.summary().format_table())
     if args.plot is not None:
         path = plot_plan(plan, args.plot)
@@ -113,12 +114,14 @@ def plot_robot_plan(plan: RobotPlan, path: str | Path) -> Path:
     return path
 
 
-def plot_plan(plan: CampaignPlan, path: str | Path) -> Path:
-    """Draw q, dq, ddq of one run with segment boundaries and labels; save as PNG.
+def plot_plan(plan: RobotPlan, path: str | Path) -> Path:
+    """Draw q, dq, ddq of one run of a one-joint plan with segment boundaries and labels;
+    save as PNG.
 
     Parameters
     ----------
-    plan : CampaignPlan
+    plan : RobotPlan
+        A plan of one moving joint (a ``[joint]`` campaign).
     path : str or Path
         Output image file.
 
@@ -133,8 +136,8 @@ def plot_plan(plan: CampaignPlan, path: str | Path) -> Path:
     import matplotlib.pyplot as plt
 
     ref = plan.reference
-    lim = plan.campaign.limits
-    u = plan.campaign.joint.unit
+    lim = plan.limits[0]
+    u = plan.unit(0)
     path = Path(path)
     fig, axes = plt.subplots(3, 1, sharex=True, figsize=(12, 7.5), constrained_layout=True)
     series = (
@@ -164,9 +167,8 @@ def plot_plan(plan: CampaignPlan, path: str | Path) -> Path:
         axes[0].text(0.5 * (t0 + t1), 1.02, name.replace(" (", "\n("), ha="center",
                      va="bottom", fontsize=8, transform=axes[0].get_xaxis_transform())
     axes[-1].set_xlabel("t [s]")
-    c = plan.campaign
     fig.suptitle(
-        f"{c.name}: one run of {ref.duration_s:.1f} s, x {len(plan.payloads)} payload(s) "
+        f"{plan.name}: one run of {ref.duration_s:.1f} s, x {len(plan.payloads)} payload(s) "
         f"(limits dashed)", fontsize=10
     )
     fig.savefig(path, dpi=110)

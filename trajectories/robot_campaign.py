@@ -75,7 +75,16 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 # the single-joint schema's pieces: the same limits table, raw tables and name check
-from .campaign import _LIMITS, MAX_PLAN_CYCLES, Campaign, JointLimits, _nonempty, _RawTable
+from .campaign import (
+    _LIMITS,
+    MAX_PLAN_CYCLES,
+    Campaign,
+    JointLimits,
+    SineSegment,
+    TrapezoidSegment,
+    _nonempty,
+    _RawTable,
+)
 from .schema import ArrayOfTables, Field, Table, fail, unknown
 
 __all__ = [
@@ -87,8 +96,12 @@ __all__ = [
     "RobotJoint",
     "RobotPayload",
     "RobotSegment",
+    "JOINT_NAME",
+    "SineSegment",
     "TrapezoidSweep",
+    "as_robot_campaign",
     "campaign_from_dict",
+    "robot_segment",
 ]
 
 
@@ -120,24 +133,39 @@ class RobotJoint:
     kind : {"revolute", "prismatic"}
     limits : JointLimits
         Joint-side limits (position [rad] or [m], velocity, acceleration, jerk, torque).
-    drive : DriveSpec
+    drive : DriveSpec or None
+        None for the joint of a ``[joint]`` campaign (its drive is in ``[daq]``).
     kp : float
         Position-loop gain [N m/rad] or [N/m].
     kd : float
         Velocity gain [N m s/rad] or [N s/m].
+    feedforward : mapping of str to float
+        A ``[joint]`` campaign's ``[control.feedforward]`` (``J`` [kg m^2], ``MX``, ``MY``
+        [kg m], ``Fc`` [N m], ``Fv`` [N m s/rad], every key present); empty for a robot
+        file's joint (its model is the robot file).
+    table : str
+        Dotted key of the joint's table in the campaign file, used in messages: ``"joint"``
+        for a ``[joint]`` campaign; ``""``: ``robot.joints.<name>``.
     """
 
     name: str
     kind: Literal["revolute", "prismatic"]
     limits: JointLimits
-    drive: DriveSpec
+    drive: DriveSpec | None
     kp: float
     kd: float
+    feedforward: Mapping[str, float] = field(default_factory=dict)
+    table: str = ""
 
     @property
     def unit(self) -> str:
         """Position unit, ``"rad"`` or ``"m"``."""
         return "rad" if self.kind == "revolute" else "m"
+
+    @property
+    def key(self) -> str:
+        """Dotted key of the joint's table (``joint`` or ``robot.joints.<name>``)."""
+        return self.table or f"robot.joints.{self.name}"
 
 
 @dataclass(frozen=True)
@@ -168,11 +196,22 @@ class RobotPayload:
         Centre of mass in the flange frame [m].
     inertia : tuple of float, shape (6,)
         ``(XX, XY, XZ, YY, YZ, ZZ)`` about the centre of mass, flange axes [kg m^2].
+    arm_m : float or None
+        A ``[joint]`` campaign's lever arm L_a [m] (paper eq. 32-34): the point mass sits at
+        ``com = (arm_m, 0, 0)`` of the one joint's frame; None for a robot campaign.
     """
 
     mass_kg: float
     com: tuple[float, float, float] = (0.0, 0.0, 0.0)
     inertia: tuple[float, float, float, float, float, float] = (0.0,) * 6
+    arm_m: float | None = None
+
+    @property
+    def label(self) -> str:
+        """``"3.5 kg"`` or, with a lever arm, ``"3.5 kg at 1.277 m"`` (for messages)."""
+        if self.arm_m is None:
+            return f"{self.mass_kg:g} kg"
+        return f"{self.mass_kg:g} kg at {self.arm_m:g} m"
 
 
 @dataclass(frozen=True)
@@ -285,7 +324,7 @@ class MoveSegment:
     kind: Literal["move"] = "move"
 
 
-RobotSegment = TrapezoidSweep | MultisineSegment | MoveSegment
+RobotSegment = TrapezoidSweep | MultisineSegment | MoveSegment | SineSegment
 
 
 @dataclass(frozen=True)
@@ -296,7 +335,9 @@ class RobotCampaign:
     ----------
     name : str
     robot_file : str
-        The robot file as written in the campaign (resolve it relative to the campaign file).
+        The robot file as written in the campaign (resolve it relative to the campaign file);
+        ``""`` for a ``[joint]`` campaign (:meth:`from_joint_campaign`): a robot with one
+        moving joint, described by the campaign itself (limits, ``[control.feedforward]``).
     joints : tuple of RobotJoint
         The moving joints, in the order of ``robot.moving``.
     start : tuple of float
@@ -354,6 +395,71 @@ class RobotCampaign:
             One line naming the source, the dotted key and what was expected.
         """
         return _build(raw, source)
+
+    @classmethod
+    def from_joint_campaign(cls, campaign: Campaign) -> RobotCampaign:
+        """A ``[joint]`` campaign as a robot with one moving joint, without loss.
+
+        The joint is named ``"joint"`` (its table; messages name ``joint.limits...``) and
+        carries the gains and ``[control.feedforward]``; each payload's lever arm becomes
+        ``arm_m`` and ``com = (arm_m, 0, 0)``; trapezoid segments become
+        :class:`TrapezoidSweep` of that joint (no sweep), sine segments stay
+        :class:`~trajectories.campaign.SineSegment` (of that joint). No robot file:
+        ``robot_file`` is ``""``.
+
+        Parameters
+        ----------
+        campaign : Campaign
+
+        Returns
+        -------
+        RobotCampaign
+        """
+        j = campaign.joint
+        c = campaign.control
+        joint = RobotJoint(JOINT_NAME, j.kind, j.limits, None, c.kp, c.kd,
+                           feedforward=dict(c.feedforward), table="joint")
+        segments = tuple(robot_segment(seg) for seg in campaign.segments)
+        return cls(
+            name=campaign.name,
+            robot_file="",
+            joints=(joint,),
+            start=(j.start,),
+            locked={},
+            control=RobotControl(c.cycle_s, c.velocity_cutoff_hz),
+            payloads=tuple(RobotPayload(p.mass_kg, (p.arm_m, 0.0, 0.0), arm_m=p.arm_m)
+                           for p in campaign.payloads),
+            segments=segments,
+            daq=campaign.daq,
+            source=campaign.source,
+        )
+
+    @property
+    def single_joint(self) -> bool:
+        """True for a ``[joint]`` campaign read as a robot (no robot file, one joint)."""
+        return not self.robot_file
+
+
+#: name of the moving joint of a ``[joint]`` campaign read as a robot
+JOINT_NAME = "joint"
+
+
+def robot_segment(segment: TrapezoidSegment | SineSegment) -> RobotSegment:
+    """A ``[joint]`` campaign's segment as a segment of its one moving joint
+    (:data:`JOINT_NAME`): a trapezoid is a :class:`TrapezoidSweep` without sweep; a sine
+    stays itself (its ``joint`` ``""`` is the only moving joint)."""
+    if isinstance(segment, TrapezoidSegment):
+        return TrapezoidSweep(joint=JOINT_NAME, speeds=segment.speeds, range=segment.range,
+                              dwell_s=segment.dwell_s, cycles=segment.cycles)
+    return segment
+
+
+def as_robot_campaign(campaign: Campaign | RobotCampaign) -> RobotCampaign:
+    """Either campaign as a :class:`RobotCampaign` (a ``[joint]`` one:
+    :meth:`RobotCampaign.from_joint_campaign`)."""
+    if isinstance(campaign, RobotCampaign):
+        return campaign
+    return RobotCampaign.from_joint_campaign(campaign)
 
 
 def campaign_from_dict(raw: Mapping[str, Any], source: str = "") -> Campaign | RobotCampaign:
@@ -453,7 +559,7 @@ _PAYLOAD = Table(
                          unit="kg m^2"),
     }
 )
-_KIND_NAMES = ("trapezoid", "multisine", "move")
+_KIND_NAMES = ("trapezoid", "multisine", "move", "sine")
 _KIND = Field(str, choices=_KIND_NAMES)
 _TRAPEZOID = Table(
     {
@@ -493,7 +599,17 @@ _MOVE = Table(
         "dwell_s": Field(float, required=False, default=0.3, ge=0, unit="s"),
     }
 )
-_KINDS = {"trapezoid": _TRAPEZOID, "multisine": _MULTISINE, "move": _MOVE}
+_SINE = Table(
+    {
+        "kind": _KIND,
+        "joint": Field(str, check=_nonempty),
+        "amplitude": Field(float, gt=0, unit="rad or m"),
+        "frequency_hz": Field(float, gt=0, unit="Hz"),
+        "center": Field(float, unit="rad or m"),
+        "periods": Field(int, required=False, default=1, ge=1),
+    }
+)
+_KINDS = {"trapezoid": _TRAPEZOID, "multisine": _MULTISINE, "move": _MOVE, "sine": _SINE}
 
 
 class _SegmentSpec:
@@ -504,10 +620,11 @@ class _SegmentSpec:
             raise fail(source, key, "a table", value)
         if "kind" not in value:
             raise fail(source, f"{key}.kind",
-                       "a value ('trapezoid', 'multisine' or 'move'), it is missing")
+                       "a value ('trapezoid', 'multisine', 'move' or 'sine'), it is missing")
         kind = value["kind"]
         if kind not in _KINDS:
-            raise fail(source, f"{key}.kind", "one of 'trapezoid', 'multisine', 'move'", kind)
+            raise fail(source, f"{key}.kind", "one of 'trapezoid', 'multisine', 'move', 'sine'",
+                       kind)
         return _KINDS[kind].validate(value, key, source)
 
 
@@ -650,6 +767,8 @@ def _check_plan_size(segments: tuple[RobotSegment, ...], joints: tuple[RobotJoin
     for seg in segments:
         if isinstance(seg, MultisineSegment):
             durations.append(seg.periods * seg.period_s)
+        elif isinstance(seg, SineSegment):
+            durations.append(seg.periods / seg.frequency_hz)
         elif isinstance(seg, TrapezoidSweep):
             vmax = by_name[seg.joint].limits.max_velocity
             span = seg.range[1] - seg.range[0]
@@ -662,7 +781,8 @@ def _check_plan_size(segments: tuple[RobotSegment, ...], joints: tuple[RobotJoin
         return
     i = max(range(len(durations)), key=durations.__getitem__)
     seg = segments[i]
-    key, value = (("periods", seg.periods) if isinstance(seg, MultisineSegment) else
+    key, value = (("periods", seg.periods) if isinstance(seg, MultisineSegment | SineSegment)
+                  else
                   ("cycles", seg.cycles) if isinstance(seg, TrapezoidSweep) else
                   ("poses", len(seg.poses)))
     raise fail(source, f"segments[{i}].{key}",
@@ -696,6 +816,19 @@ def _segment(s: dict, key: str, source: str, joints: tuple[RobotJoint, ...],
         return TrapezoidSweep(joint=s["joint"], speeds=tuple(s["speeds"]), range=rng,
                               sweep=sweep, sweep_speed=s["sweep_speed"], dwell_s=s["dwell_s"],
                               cycles=s["cycles"])
+    if s["kind"] == "sine":
+        _joint_key(source, f"{key}.joint", s["joint"], moving)
+        j = by_name[s["joint"]]
+        c, a = s["center"], s["amplitude"]
+        lo, hi = j.limits.position
+        tol = 1e-9 * max(1.0, hi - lo)
+        rng = f"{j.key}.limits.position [{lo:g}, {hi:g}] {j.unit}"
+        if not lo - tol <= c <= hi + tol:
+            raise fail(source, f"{key}.center", f"a position of {j.name} within {rng}", c)
+        if c - a < lo - tol or c + a > hi + tol:
+            raise fail(source, f"{key}.amplitude", f"center +/- amplitude within {rng}", a)
+        return SineSegment(amplitude=a, frequency_hz=s["frequency_hz"], center=c,
+                           periods=s["periods"], joint=j.name)
     if s["kind"] == "move":
         poses = s["poses"]
         if len(poses[0]) != k:
