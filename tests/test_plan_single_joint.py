@@ -14,12 +14,15 @@ joint with several speeds, cycles, no dwell and an off-centre start.
 from __future__ import annotations
 
 import json
+import re
 import sys
 import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from trajectories import SchemaError
 
 ROOT = Path(__file__).resolve().parents[1]
 FROZEN = Path(__file__).with_name("plan_single_joint_frozen.json")
@@ -161,6 +164,117 @@ def test_single_joint_plan_is_the_frozen_one(name, frozen, campaigns):
         for s in ("sum", "abs_sum"):
             assert got[f"{k}_{s}"] == pytest.approx(want[f"{k}_{s}"], rel=RTOL,
                                                     abs=ATOL * want["n"]), f"{name}: {k}_{s}"
+
+
+# ----------------------------------------------------------------------------- one model
+def test_a_joint_campaign_is_a_robot_with_one_moving_joint_without_loss(campaigns):
+    from trajectories.robot_campaign import RobotCampaign, SineSegment, TrapezoidSweep
+
+    c = campaigns["prismatic"]
+    r = RobotCampaign.from_joint_campaign(c)
+    (j,) = r.joints
+    assert r.single_joint and r.robot_file == "" and r.moving == ("joint",)
+    assert (j.kind, j.limits, j.kp, j.kd, j.key, j.drive) == (
+        "prismatic", c.limits, c.control.kp, c.control.kd, "joint", None)
+    assert dict(j.feedforward) == dict(c.control.feedforward)
+    assert r.start == (c.joint.start,) and r.cycle_s == c.cycle_s
+    assert r.control.velocity_cutoff_hz == c.control.velocity_cutoff_hz
+    assert [(p.mass_kg, p.arm_m, p.com) for p in r.payloads] == [
+        (p.mass_kg, p.arm_m, (p.arm_m, 0.0, 0.0)) for p in c.payloads]
+    assert r.name == c.name and r.source == c.source and r.daq == c.daq
+    kinds = [type(s) for s in r.segments]
+    assert kinds == [TrapezoidSweep, SineSegment, TrapezoidSweep]
+    t0, t1 = c.segments[0], r.segments[0]
+    assert (t1.joint, t1.speeds, t1.range, t1.dwell_s, t1.cycles, dict(t1.sweep)) == (
+        "joint", t0.speeds, t0.range, t0.dwell_s, t0.cycles, {})
+    assert r.segments[1] is c.segments[1]
+
+
+def test_limit_and_torque_messages_name_the_joint_table(campaigns):
+    """A [joint] campaign's errors name ``joint.limits.*`` (its file's keys), in one line."""
+    from dataclasses import replace
+
+    from trajectories import LimitError
+    from trajectories.campaign import Payload
+    from trajectories.multi import plan_robot_campaign
+
+    c = campaigns["daq_small"]
+    heavy = replace(c, payloads=(Payload(300.0, 1.0),))
+    with pytest.raises(LimitError, match=r"^payloads\[0\] \(300 kg at 1 m\): segments\[0\] "
+                       r"\(sine\): torque [\d.-]+ N m at t = [\d.]+ s exceeds "
+                       r"joint\.limits\.max_torque 700 N m$"):
+        plan_robot_campaign(heavy)
+    slow = replace(c, joint=replace(c.joint, limits=replace(c.limits, max_velocity=0.5)))
+    with pytest.raises(LimitError, match=r"^segments\[0\] \(sine\): peak velocity 0\.9425 "
+                       r"rad/s exceeds joint\.limits\.max_velocity 0\.5 rad/s$"):
+        plan_robot_campaign(slow)
+
+
+def test_the_joint_robot_regressor_is_the_feedforward_model():
+    """The 1-dof robot built in memory for a [joint] campaign: its regressor with ZZ1 = J,
+    MX1 = MX, MY1 = -MY, FC1, FV1 and its payload torque give the feed-forward torque
+    estimate the planner checks (wherever the joint moves: the regressor's Coulomb column
+    has a deadband)."""
+    pytest.importorskip("pinocchio")
+    from trajectories.campaign import Campaign
+    from trajectories.multi import feedforward_dynamics, plan_robot_campaign
+    from trajectories.robot_campaign import RobotCampaign
+    from trajectories.robot_model import RobotDynamics, robot_for_campaign
+
+    raw = json.loads(json.dumps(_DAQ_SMALL))
+    raw["control"]["feedforward"] = {"J": 30.0, "MX": 21.0, "MY": -7.5, "Fc": 12.0, "Fv": 4.0}
+    raw["segments"].append({"kind": "trapezoid", "speeds": [0.05, 0.6], "range": [-0.8, 0.9]})
+    c = RobotCampaign.from_joint_campaign(Campaign.from_dict(raw, "ff.toml"))
+    robot = robot_for_campaign(c)
+    assert robot.moving == ("joint",) and not robot.inertial and robot.source == "ff.toml"
+    assert robot.limits["joint"].dq_max == 1.0 and robot.limits["joint"].tau_max == 700.0
+    dyn = RobotDynamics(robot)
+    plan = plan_robot_campaign(c)
+    q, dq, ddq = plan.q[::7], plan.dq[::7], plan.ddq[::7]
+    ff = c.joints[0].feedforward
+    theta = dict.fromkeys(dyn.names, 0.0)
+    theta.update(ZZ1=ff["J"], MX1=ff["MX"], MY1=-ff["MY"], FC1=ff["Fc"], FV1=ff["Fv"])
+    w = dyn.regressor(q, dq, ddq) @ np.array([theta[n] for n in dyn.names])
+    moving = np.abs(dq[:, 0]) > dyn.deadband[0]
+    assert moving.sum() > 0.8 * len(q)
+    for pay in c.payloads:
+        tau = w + dyn.inverse_dynamics(q, dq, ddq, pay)[:, 0]
+        want = feedforward_dynamics(c.joints)(q, dq, ddq, pay)[:, 0]
+        np.testing.assert_allclose(tau[moving], want[moving], rtol=1e-12, atol=1e-9)
+    # the base of the 1-dof robot: ZZ1 + Ia1, MX1, MY1 and the three friction columns
+    assert np.linalg.matrix_rank(dyn.regressor(q, dq, ddq)) == 6
+
+
+# ----------------------------------------------------------------------------- robot sine
+def test_a_robot_campaign_plays_an_exact_sine_of_one_joint():
+    """The single-joint sine is a segment kind of every campaign: j2 plays it exactly between
+    its blends while j1 and j3 hold."""
+    from robot_campaigns import arm3_raw
+
+    from trajectories.multi import plan_robot_campaign
+    from trajectories.robot_campaign import RobotCampaign
+
+    seg = {"kind": "sine", "joint": "j2", "amplitude": 0.5, "frequency_hz": 0.3,
+           "center": -1.3, "periods": 2}
+    c = RobotCampaign.from_dict(arm3_raw(segments=[seg]), "arm3-sine.toml")
+    plan = plan_robot_campaign(c)
+    (sine,) = [p for p in plan.pieces if p.kind == "sine"]
+    assert sine.joint == 1 and sine.t1 - sine.t0 == pytest.approx(2 / 0.3, rel=1e-12)
+    assert [p.kind for p in plan.pieces] == ["blend_in", "sine", "blend_out", "return"]
+    inside = (plan.t >= sine.t0) & (plan.t <= sine.t1)
+    w = 2 * np.pi * 0.3
+    tau = plan.t[inside] - sine.t0
+    np.testing.assert_allclose(plan.q[inside, 1], -1.3 - 0.5 * np.cos(w * tau), atol=1e-9)
+    np.testing.assert_allclose(plan.dq[inside, 1], 0.5 * w * np.sin(w * tau), atol=1e-9)
+    np.testing.assert_allclose(plan.q[:, [0, 2]], np.tile(c.start[::2], (len(plan), 1)),
+                               atol=1e-12)
+    assert np.all(plan.dq[:, [0, 2]] == 0.0)
+    for key, value, msg in (("joint", "j9", "segments[0].joint: expected a moving joint"),
+                            ("amplitude", 1.5, "segments[0].amplitude: expected center +/- "
+                             "amplitude within robot.joints.j2.limits.position")):
+        bad = arm3_raw(segments=[{**seg, key: value}])
+        with pytest.raises(SchemaError, match=re.escape(msg)):
+            RobotCampaign.from_dict(bad, "arm3-sine.toml")
 
 
 if __name__ == "__main__":
