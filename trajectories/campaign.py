@@ -4,7 +4,9 @@ A campaign is read from a TOML file by :func:`trajectories.campaign_file.load_ca
 validated here by :meth:`Campaign.from_dict` (pure: dictionaries in, frozen dataclasses out). Files
 with a ``[robot]`` table instead of ``[joint]`` are multi-joint campaigns
 (:mod:`trajectories.robot_campaign`; :func:`~trajectories.robot_campaign.campaign_from_dict`
-reads either format). Every
+reads either format); :meth:`~trajectories.robot_campaign.RobotCampaign.from_joint_campaign`
+reads a campaign of this format as a robot with one moving joint, which the one planner
+(:func:`trajectories.multi.plan_robot_campaign`) plans. Every
 mistake raises :class:`trajectories.SchemaError` with one line naming the source, the dotted
 key and the expected value, e.g.::
 

@@ -56,11 +56,22 @@ description in docs/campaign-robot.md)::
     seed = 0                          # default coefficients are seeded random
     optimise = true                   # `jointid plan` may optimise the coefficients
     [[segments]]
+    kind = "sine"                     # exact periods of q = center - amplitude cos(2 pi f t)
+    joint = "j2"                      # of one joint, the others hold
+    amplitude = 0.5
+    frequency_hz = 0.3
+    center = -1.3
+    periods = 2
+    [[segments]]
     kind = "move"                     # point-to-point moves between rest poses
     poses = [[0.5, -1.0, 1.0], [0.0, -1.2, 1.4]]
     speed = 0.5
     dwell_s = 0.5
     [daq]                             # optional, kept raw for daq/
+
+A ``[joint]`` campaign is read as a robot campaign with one moving joint, without loss, by
+:meth:`RobotCampaign.from_joint_campaign` (no robot file; the one planner,
+:func:`trajectories.multi.plan_robot_campaign`, takes either).
 
 The payload inertia is given about the payload's centre of mass, in the flange frame.
 The robot file itself is read by :func:`trajectories.robot.load_robot` (not here: this
