@@ -16,7 +16,7 @@ from __future__ import annotations
 import json
 import re
 import sys
-import tomllib
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -41,40 +41,6 @@ _DAQ_SMALL = {
     "segments": [{"kind": "sine", "amplitude": 0.3, "frequency_hz": 0.5,
                   "center": 0.0, "periods": 1}],
 }
-_REFINE = """
-name = "refine-sim"
-[joint]
-kind = "revolute"
-[joint.limits]
-position = [-1.0, 2.4]
-max_velocity = 1.2
-max_acceleration = 4.0
-max_jerk = 40.0
-max_torque = 700.0
-[control]
-cycle_s = 0.001
-kp = 20000.0
-kd = 1000.0
-[[payloads]]
-mass_kg = 0.0
-arm_m = 1.277
-[[segments]]
-kind = "trapezoid"
-speeds = [0.03]
-range = [1.0, 2.1]
-dwell_s = 0.5
-[[segments]]
-kind = "trapezoid"
-speeds = [0.08]
-range = [-0.9, 2.3]
-dwell_s = 0.5
-[[segments]]
-kind = "sine"
-amplitude = 1.6
-frequency_hz = 0.1
-center = 0.7
-periods = 2
-"""
 _PRISMATIC = {
     "name": "slide",
     "joint": {"kind": "prismatic", "start": 0.12, "limits": {
@@ -102,7 +68,11 @@ def _campaigns() -> dict:
         "example": example,
         "example_quick": example.quick(),
         "daq_small": Campaign.from_dict(_DAQ_SMALL, "small.toml"),
-        "refine": Campaign.from_dict(tomllib.loads(_REFINE), "refine.toml"),
+        # the campaign of tests/test_refine_sim.py: the example's slow trapezoids and sine,
+        # one payload, no feed-forward
+        "refine": replace(example, name="refine-sim", payloads=example.payloads[:1],
+                          segments=tuple(example.segments[i] for i in (0, 1, 3)),
+                          control=replace(example.control, feedforward={})),
         "prismatic": Campaign.from_dict(_PRISMATIC, "slide.toml"),
     }
 
@@ -192,8 +162,6 @@ def test_a_joint_campaign_is_a_robot_with_one_moving_joint_without_loss(campaign
 
 def test_limit_and_torque_messages_name_the_joint_table(campaigns):
     """A [joint] campaign's errors name ``joint.limits.*`` (its file's keys), in one line."""
-    from dataclasses import replace
-
     from trajectories import LimitError
     from trajectories.campaign import Payload
     from trajectories.multi import plan_robot_campaign
