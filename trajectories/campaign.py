@@ -371,7 +371,8 @@ class Campaign:
         segments: list[Segment] = []
         for i, s in enumerate(top["segments"]):
             segments.append(_segment(s, f"segments[{i}]", source, limits, rng))
-        check_plan_size(segments, limits, control.cycle_s, source)
+        check_plan_size(segments, [min_duration_s(s, limits) for s in segments],
+                        control.cycle_s, source)
         daq = top["daq"] if isinstance(top["daq"], dict) else {}
         return cls(
             name=top["name"],
@@ -384,9 +385,11 @@ class Campaign:
         )
 
 
-def min_duration_s(seg: Segment, limits: JointLimits) -> float:
-    """A lower bound of a segment's duration [s], cheap (before planning): a sine's periods,
-    a trapezoid's cruise moves (both directions at every speed) and dwells."""
+def min_duration_s(seg: Any, limits: JointLimits) -> float:
+    """A lower bound of a sine's or a trapezoid's duration [s], cheap (before planning): a
+    sine's periods, a trapezoid's cruise moves (both directions at every speed) and dwells
+    (``limits``: those of the joint that plays it). A robot campaign's trapezoid
+    (``TrapezoidSweep``) has the same fields."""
     if isinstance(seg, SineSegment):
         return seg.periods / seg.frequency_hz
     span = seg.range[1] - seg.range[0]
@@ -395,29 +398,36 @@ def min_duration_s(seg: Segment, limits: JointLimits) -> float:
     return seg.cycles * per_cycle
 
 
-def check_plan_size(segments: Sequence[Segment], limits: JointLimits, cycle_s: float,
+def check_plan_size(segments: Sequence[Any], durations: Sequence[float], cycle_s: float,
                     source: str) -> None:
     """Refuse a campaign whose plan would exceed :data:`MAX_PLAN_CYCLES` cycles per payload
-    (before anything is planned or allocated).
+    (before anything is planned or allocated), either format.
+
+    Parameters
+    ----------
+    segments : sequence of segments
+    durations : sequence of float
+        A lower bound of each segment's duration [s] (:func:`min_duration_s`).
+    cycle_s : float
+    source : str
 
     Raises
     ------
     trajectories.SchemaError
-        Naming the longest segment's ``periods`` (sine) or ``cycles`` (trapezoid) and the
-        bound.
+        Naming the longest segment's ``periods`` (sine, multi-sine), ``cycles`` (trapezoid)
+        or ``poses`` (move) and the bound.
     """
-    durations = [min_duration_s(s, limits) for s in segments]
     n = sum(durations) / cycle_s
     if n <= MAX_PLAN_CYCLES or not durations:
         return
     i = max(range(len(durations)), key=durations.__getitem__)
     seg = segments[i]
-    key, value = (("periods", seg.periods) if isinstance(seg, SineSegment)
-                  else ("cycles", seg.cycles))
+    key = next(k for k in ("periods", "cycles", "poses") if hasattr(seg, k))
+    value = getattr(seg, key)
     raise fail(source, f"segments[{i}].{key}",
                f"a plan of at most {MAX_PLAN_CYCLES} cycles per payload "
                f"({MAX_PLAN_CYCLES * cycle_s:g} s at cycle_s {cycle_s:g} s; this one: at "
-               f"least {n:.3g} cycles)", value)
+               f"least {n:.3g} cycles)", len(value) if key == "poses" else value)
 
 
 # --------------------------------------------------------------------------- schema

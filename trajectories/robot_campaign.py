@@ -85,17 +85,21 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-# the single-joint schema's pieces: the same limits table, raw tables and name check
 from .campaign import (
     _LIMITS,
-    MAX_PLAN_CYCLES,
     Campaign,
     JointLimits,
     SineSegment,
     TrapezoidSegment,
     _nonempty,
     _RawTable,
+    check_plan_size,
+    min_duration_s,
 )
+
+# the single-joint schema's pieces: the same limits table, raw tables and name check
+from .campaign import _SINE as _JOINT_SINE
+from .campaign import _TRAPEZOID as _JOINT_TRAPEZOID
 from .schema import ArrayOfTables, Field, Table, fail, unknown
 
 __all__ = [
@@ -572,18 +576,19 @@ _PAYLOAD = Table(
 )
 _KIND_NAMES = ("trapezoid", "multisine", "move", "sine")
 _KIND = Field(str, choices=_KIND_NAMES)
+# the [joint] format's trapezoid, of one named joint, with an optional sweep of others
 _TRAPEZOID = Table(
     {
         "kind": _KIND,
         "joint": Field(str, check=_nonempty),
-        "speeds": Field(float, list_of=True, gt=0, le=1, unit="fraction of max_velocity"),
-        "range": Field(float, list_of=True, min_len=2, unit="rad or m"),
+        "speeds": _JOINT_TRAPEZOID.fields["speeds"],
+        "range": _JOINT_TRAPEZOID.fields["range"],
         "sweep": _NamedTables(Field(float, list_of=True, min_len=2, unit="rad or m"),
                               required=False),
         "sweep_speed": Field(float, required=False, default=0.25, gt=0, le=1,
                              unit="fraction of max_velocity"),
-        "dwell_s": Field(float, required=False, default=0.3, ge=0, unit="s"),
-        "cycles": Field(int, required=False, default=1, ge=1),
+        "dwell_s": _JOINT_TRAPEZOID.fields["dwell_s"],
+        "cycles": _JOINT_TRAPEZOID.fields["cycles"],
     }
 )
 _MULTISINE = Table(
@@ -610,16 +615,9 @@ _MOVE = Table(
         "dwell_s": Field(float, required=False, default=0.3, ge=0, unit="s"),
     }
 )
-_SINE = Table(
-    {
-        "kind": _KIND,
-        "joint": Field(str, check=_nonempty),
-        "amplitude": Field(float, gt=0, unit="rad or m"),
-        "frequency_hz": Field(float, gt=0, unit="Hz"),
-        "center": Field(float, unit="rad or m"),
-        "periods": Field(int, required=False, default=1, ge=1),
-    }
-)
+# the [joint] format's sine, of one named joint
+_SINE = Table({"kind": _KIND, "joint": Field(str, check=_nonempty),
+               **{k: f for k, f in _JOINT_SINE.fields.items() if k != "kind"}})
 _KINDS = {"trapezoid": _TRAPEZOID, "multisine": _MULTISINE, "move": _MOVE, "sine": _SINE}
 
 
@@ -753,7 +751,7 @@ def _build(raw: Mapping[str, Any], source: str) -> RobotCampaign:
     segments = tuple(_segment(s, f"segments[{i}]", source, joints_t, start)
                      for i, s in enumerate(top["segments"]))
     c = top["control"]
-    _check_plan_size(segments, joints_t, c["cycle_s"], source)
+    check_plan_size(segments, _min_durations(segments, joints_t), c["cycle_s"], source)
     return RobotCampaign(
         name=top["name"],
         robot_file=r["file"],
@@ -768,38 +766,21 @@ def _build(raw: Mapping[str, Any], source: str) -> RobotCampaign:
     )
 
 
-def _check_plan_size(segments: tuple[RobotSegment, ...], joints: tuple[RobotJoint, ...],
-                     cycle_s: float, source: str) -> None:
-    """Refuse a plan of more than :data:`~trajectories.campaign.MAX_PLAN_CYCLES` cycles per
-    payload from a lower bound of each segment's duration (multisine: its periods;
-    trapezoid: its cruise moves and dwells; move: its dwells), before anything is planned."""
+def _min_durations(segments: tuple[RobotSegment, ...],
+                   joints: tuple[RobotJoint, ...]) -> list[float]:
+    """A lower bound of each segment's duration [s], before anything is planned (multisine:
+    its periods; sine, trapezoid: :func:`~trajectories.campaign.min_duration_s`; move: its
+    dwells)."""
     by_name = {j.name: j for j in joints}
-    durations = []
+    out = []
     for seg in segments:
         if isinstance(seg, MultisineSegment):
-            durations.append(seg.periods * seg.period_s)
-        elif isinstance(seg, SineSegment):
-            durations.append(seg.periods / seg.frequency_hz)
-        elif isinstance(seg, TrapezoidSweep):
-            vmax = by_name[seg.joint].limits.max_velocity
-            span = seg.range[1] - seg.range[0]
-            durations.append(seg.cycles * sum(2.0 * span / (v * vmax) + 2.0 * seg.dwell_s
-                                              for v in seg.speeds))
+            out.append(seg.periods * seg.period_s)
+        elif isinstance(seg, SineSegment | TrapezoidSweep):
+            out.append(min_duration_s(seg, by_name[seg.joint].limits))
         else:
-            durations.append(len(seg.poses) * seg.dwell_s)
-    n = sum(durations) / cycle_s
-    if n <= MAX_PLAN_CYCLES:
-        return
-    i = max(range(len(durations)), key=durations.__getitem__)
-    seg = segments[i]
-    key, value = (("periods", seg.periods) if isinstance(seg, MultisineSegment | SineSegment)
-                  else
-                  ("cycles", seg.cycles) if isinstance(seg, TrapezoidSweep) else
-                  ("poses", len(seg.poses)))
-    raise fail(source, f"segments[{i}].{key}",
-               f"a plan of at most {MAX_PLAN_CYCLES} cycles per payload "
-               f"({MAX_PLAN_CYCLES * cycle_s:g} s at cycle_s {cycle_s:g} s; this one: at "
-               f"least {n:.3g} cycles)", value)
+            out.append(len(seg.poses) * seg.dwell_s)
+    return out
 
 
 def _fixed(source: str, key: str, values: tuple[float, ...], n: int) -> tuple:
