@@ -296,9 +296,7 @@ class _Builder:
         total = self.t
         n = int(math.ceil(total / cycle_s - 1e-9)) + 1
         t = np.arange(n, dtype=np.float64) * cycle_s
-        q = np.empty((n, self.k))
-        dq = np.empty((n, self.k))
-        ddq = np.empty((n, self.k))
+        cols = []
         segment = np.zeros(n, dtype=np.int32)
         for j in range(self.k):
             rows = np.array(self.rows[j], dtype=np.float64).reshape(-1, 11)
@@ -308,30 +306,36 @@ class _Builder:
             idx = np.clip(np.searchsorted(start, t, side="right") - 1, 0, rows.shape[0] - 1)
             tau = np.minimum(t - start[idx], dur[idx])
             p, v, a, jk = p0[idx], v0[idx], a0[idx], j0[idx]
-            q[:, j] = p + tau * (v + tau * (a / 2.0 + tau * jk / 6.0))
-            dq[:, j] = v + tau * (a + tau * jk / 2.0)
-            ddq[:, j] = a + tau * jk
-            bsel = blk[idx]
-            for bi in np.unique(bsel[bsel >= 0]).astype(int):
-                m = bsel == bi
-                fb = self.blocks[bi]
-                fq, fdq, fddq, _ = fourier_eval(fb.q0[j:j + 1], fb.a[j:j + 1], fb.b[j:j + 1],
-                                                fb.omega, tau[m])
-                q[m, j], dq[m, j], ddq[m, j] = fq[:, 0], fdq[:, 0], fddq[:, 0]
-            is_sine = ~np.isnan(om[idx])
-            if is_sine.any():
+            q = p + tau * (v + tau * (a / 2.0 + tau * jk / 6.0))
+            dq = v + tau * (a + tau * jk / 2.0)
+            ddq = a + tau * jk
+            if (blk >= 0).any():
+                bsel = blk[idx]
+                for bi in np.unique(bsel[bsel >= 0]).astype(int):
+                    m = bsel == bi
+                    fb = self.blocks[bi]
+                    fq, fdq, fddq, _ = fourier_eval(fb.q0[j:j + 1], fb.a[j:j + 1],
+                                                    fb.b[j:j + 1], fb.omega, tau[m])
+                    q[m], dq[m], ddq[m] = fq[:, 0], fdq[:, 0], fddq[:, 0]
+            if not np.isnan(om).all():
+                is_sine = ~np.isnan(om[idx])
                 ks = idx[is_sine]
                 w = om[ks]
                 wt = w * tau[is_sine]
                 c, amp_s = cen[ks], amp[ks]
-                q[is_sine, j] = c - amp_s * np.cos(wt)
-                dq[is_sine, j] = amp_s * w * np.sin(wt)
-                ddq[is_sine, j] = amp_s * w * w * np.cos(wt)
+                q[is_sine] = c - amp_s * np.cos(wt)
+                dq[is_sine] = amp_s * w * np.sin(wt)
+                ddq[is_sine] = amp_s * w * w * np.cos(wt)
+            last = t >= total  # the run ends at rest exactly (Ruckig's end: exact to ~1e-15)
+            dq[last] = 0.0
+            ddq[last] = 0.0
+            cols.append((q, dq, ddq))
             if j == 0:
                 segment = seg[idx].astype(np.int32)
-        last = t >= total  # the run ends at rest exactly (Ruckig's end is exact to ~1e-15)
-        dq[last] = 0.0
-        ddq[last] = 0.0
+        if self.k == 1:  # (n, 1) views of the one joint's arrays, no copy
+            q, dq, ddq = (x.reshape(n, 1) for x in cols[0])
+        else:
+            q, dq, ddq = (np.stack(x, axis=1) for x in zip(*cols, strict=True))
         return t, q, dq, ddq, segment
 
 
@@ -543,19 +547,32 @@ def feedforward_dynamics(joints: Sequence[RobotJoint]) -> InverseDynamics:
     models = [(j.kind == "revolute", {k: float(j.feedforward.get(k, 0.0))
                                       for k in ("J", "MX", "MY", "Fc", "Fv")}) for j in joints]
 
+    # the payload-free part of the last (q, dq) seen: the same plan for every payload
+    last: list = [None, None, None]
+
+    def parts(q: np.ndarray, dq: np.ndarray) -> list[tuple[np.ndarray, np.ndarray | None]]:
+        if last[0] is not q or last[1] is not dq:
+            out = []
+            for j, (rev, ff) in enumerate(models):
+                qj, dqj = q[:, j], dq[:, j]
+                base = ff["Fc"] * np.sign(dqj) + ff["Fv"] * dqj
+                cq = None
+                if rev:
+                    cq, sq = np.cos(qj), np.sin(qj)
+                    base = base + G * (ff["MX"] * cq + ff["MY"] * sq)
+                out.append((base, cq))
+            last[:] = [q, dq, out]
+        return last[2]
+
     def tau(q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, payload: RobotPayload) -> np.ndarray:
         m = payload.mass_kg
         arm = payload.arm_m if payload.arm_m is not None else math.hypot(*payload.com[:2])
         out = np.empty_like(np.asarray(q, dtype=np.float64))
-        for j, (rev, ff) in enumerate(models):
-            qj, dqj, ddqj = q[:, j], dq[:, j], ddq[:, j]
-            base = ff["Fc"] * np.sign(dqj) + ff["Fv"] * dqj
+        for j, ((rev, ff), (base, cq)) in enumerate(zip(models, parts(q, dq), strict=True)):
             if rev:
-                cq, sq = np.cos(qj), np.sin(qj)
-                base = base + G * (ff["MX"] * cq + ff["MY"] * sq)
-                out[:, j] = base + (ff["J"] + m * arm**2) * ddqj + m * arm * G * cq
+                out[:, j] = base + (ff["J"] + m * arm**2) * ddq[:, j] + m * arm * G * cq
             else:
-                out[:, j] = base + (ff["J"] + m) * ddqj
+                out[:, j] = base + (ff["J"] + m) * ddq[:, j]
         return out
 
     return tau
