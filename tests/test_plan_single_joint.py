@@ -213,6 +213,26 @@ def test_the_joint_robot_regressor_is_the_feedforward_model():
     assert np.linalg.matrix_rank(dyn.regressor(q, dq, ddq)) == 6
 
 
+def test_jointid_plan_assesses_a_joint_as_a_robot(capsys):
+    """``jointid plan`` takes one path for both formats: a [joint] campaign also gets the
+    condition number of its 1-dof robot's base regressor and the quadrant shares of the
+    output torque (its feed-forward model without friction) per payload."""
+    pytest.importorskip("pinocchio")
+    from daq.app.cli import main
+
+    assert main(["plan", str(ROOT / "examples" / "campaign.toml")]) == 0
+    out = capsys.readouterr().out
+    assert "(its [joint] table, no robot file): moving joint" in out
+    m = re.search(r"excitation: condition number ([\d.]+) of the base regressor \(6 base "
+                  r"columns", out)
+    assert m and 1.0 < float(m.group(1)) < 1e3
+    quads = re.findall(r"^joint\s+([\d.]+)%\s+([\d.]+)%\s+([\d.]+)%\s+([\d.]+)%", out, re.M)
+    assert len(quads) == 3  # one row per payload
+    for row in quads:  # the example moves both ways under both signs of gravity
+        assert min(float(x) for x in row) > 10.0
+    assert out.count("at 1.277 m") == 6  # the payloads, in the torque table and quadrants
+
+
 # ----------------------------------------------------------------------------- robot sine
 def test_a_robot_campaign_plays_an_exact_sine_of_one_joint():
     """The single-joint sine is a segment kind of every campaign: j2 plays it exactly between

@@ -1,18 +1,18 @@
 """``jointid plan CAMPAIGN.toml [--plot FILE.png] [--quick]``: check and summarise a campaign.
 
 Loads and validates the campaign, plans it with Ruckig (rejecting anything beyond the joint
-limits before anything moves), prints the summary table (durations, share of moving time
-per velocity band, position coverage, peaks against limits, peak torque estimate per
-payload) and, with ``--plot``, draws q, dq and ddq of one payload run against time with the
-segments marked. A single-joint campaign (``[joint]``) is planned as a robot with one
-moving joint, by the same planner as a robot campaign.
+limits before anything moves) and prints the summary: durations, per joint its peaks against
+its limits, per velocity band its share of moving time and of its position range, the peak
+torques per payload against ``max_torque``, the predicted condition number of the robot
+model's regressor over the plan and the shares of each quadrant of (dq, tau) per payload
+(:mod:`trajectories.excitation`, :mod:`trajectories.robot_model`). With ``--plot``, draws
+one payload run against time: q, dq and ddq with the limits and segments of a single joint,
+q and dq of every joint of a robot.
 
-A robot campaign (``[robot]``) is planned for all its joints at once: the multi-sines with
-``optimise = true`` are optimised first (``--no-optimise``: as written), then the summary per
-joint, the peak torques per payload against ``max_torque`` (robot file's inertial
-parameters), the predicted condition number of the robot model's regressor over the plan
-and the shares of moving samples per velocity band and per quadrant of (dq, tau) for every
-payload (:mod:`trajectories.excitation`, :mod:`trajectories.robot_model`).
+One path for both formats: a ``[joint]`` campaign is a robot with one moving joint (its robot
+built in memory, its torques the ``[control.feedforward]`` model plus the payload); a
+``[robot]`` campaign's multi-sines with ``optimise = true`` are optimised first
+(``--no-optimise``: as written), its torques come from the robot file's inertial parameters.
 """
 
 from __future__ import annotations
@@ -24,8 +24,8 @@ from pathlib import Path
 from . import TrajectoryError
 from .campaign_file import load_any_campaign
 from .excitation import assess_robot_campaign
-from .multi import plan_robot_campaign
-from .robot_campaign import RobotCampaign
+from .multi import feedforward_dynamics
+from .robot_campaign import RobotCampaign, as_robot_campaign
 from .robot_model import OPTIMISE_EVALUATIONS, prepare_robot_campaign, robot_for_campaign
 from .sampled import BANDS, RobotPlan
 
@@ -55,29 +55,29 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``jointid plan``; returns the exit code."""
     campaign = load_any_campaign(args.campaign)
     if isinstance(campaign, RobotCampaign):
-        return _run_robot(campaign, args)
-    if args.quick:
+        if args.quick:
+            raise TrajectoryError(f"{campaign.source}: --quick: expected a single-joint "
+                                  f"campaign (robot campaigns have no shortened form)")
+    elif args.quick:
         campaign = campaign.quick()
-    plan = plan_robot_campaign(campaign)  # a robot with one moving joint
-    print(plan.summary().format_table())
-    if args.plot is not None:
-        path = plot_plan(plan, args.plot)
-        print(f"plot: {path}")
-    return 0
-
-
-def _run_robot(campaign: RobotCampaign, args: argparse.Namespace) -> int:
-    if args.quick:
-        raise TrajectoryError(f"{campaign.source}: --quick: expected a single-joint "
-                              f"campaign (robot campaigns have no shortened form)")
-    robot = robot_for_campaign(campaign)
-    played, dyn, results = prepare_robot_campaign(
-        campaign, robot=robot, optimise=not args.no_optimise)
-    a = assess_robot_campaign(played, regressor=dyn.regressor,
-                              inverse_dynamics=dyn.inverse_dynamics)
+    # one path: a [joint] campaign is a robot with one moving joint
+    rc = as_robot_campaign(campaign)
+    robot = robot_for_campaign(rc)
+    played, dyn, results = prepare_robot_campaign(rc, robot=robot,
+                                                  optimise=not args.no_optimise)
+    # a [joint] campaign's torques: its feed-forward model (its robot has no inertias),
+    # without the friction for the quadrants of (dq, tau_out)
+    if rc.single_joint:
+        a = assess_robot_campaign(played, regressor=dyn.regressor,
+                                  inverse_dynamics=feedforward_dynamics(rc.joints),
+                                  tau_out=feedforward_dynamics(rc.joints, friction=False))
+    else:
+        a = assess_robot_campaign(played, regressor=dyn.regressor,
+                                  inverse_dynamics=dyn.inverse_dynamics)
     if results:
         a = replace(a, optimised=results)
-    print(f"robot {robot.name!r} ({robot.source}): moving {', '.join(robot.moving)}; "
+    where = robot.source if not rc.single_joint else "its [joint] table, no robot file"
+    print(f"robot {robot.name!r} ({where}): moving {', '.join(robot.moving)}; "
           f"regressor: {len(dyn.names)} columns (standard parameters, Ia, FC FV OFF per "
           f"joint)")
     if results:
@@ -85,7 +85,8 @@ def _run_robot(campaign: RobotCampaign, args: argparse.Namespace) -> int:
               f"evaluations, deterministic: jointid run plays the same coefficients)")
     print(a)
     if args.plot is not None:
-        path = plot_robot_plan(a.plan, args.plot)
+        path = plot_plan(a.plan, args.plot) if a.plan.n_joints == 1 else \
+            plot_robot_plan(a.plan, args.plot)
         print(f"plot: {path}")
     return 0
 

@@ -521,7 +521,8 @@ def check_torques(plan: RobotPlan, inverse_dynamics: InverseDynamics,
     return peaks
 
 
-def feedforward_dynamics(joints: Sequence[RobotJoint]) -> InverseDynamics:
+def feedforward_dynamics(joints: Sequence[RobotJoint], *,
+                         friction: bool = True) -> InverseDynamics:
     """The torque estimate of a ``[joint]`` campaign as an inverse-dynamics callable.
 
     Per joint, its ``[control.feedforward]`` model plus a point payload of ``mass_kg`` at
@@ -538,13 +539,17 @@ def feedforward_dynamics(joints: Sequence[RobotJoint]) -> InverseDynamics:
     ----------
     joints : sequence of RobotJoint
         Their ``feedforward`` mappings (missing keys: 0).
+    friction : bool
+        False: leave ``Fc`` and ``Fv`` out (the output torque ``tau_out`` of the quadrant
+        shares, paper Fig. 2).
 
     Returns
     -------
     callable
         ``(q, dq, ddq, payload) -> tau``, arrays (n, k) [N m] or [N].
     """
-    models = [(j.kind == "revolute", {k: float(j.feedforward.get(k, 0.0))
+    keep = ("J", "MX", "MY", "Fc", "Fv") if friction else ("J", "MX", "MY")
+    models = [(j.kind == "revolute", {k: float(j.feedforward.get(k, 0.0)) if k in keep else 0.0
                                       for k in ("J", "MX", "MY", "Fc", "Fv")}) for j in joints]
 
     # the payload-free part of the last (q, dq) seen: the same plan for every payload

@@ -425,7 +425,7 @@ class RobotPlanSummary:
             lines.append(row)
         if self.peak_torque:
             tu = "N m" if u == "rad" else "N" if u == "m" else "N m or N"
-            lines += ["", f"peak |tau| per payload [{tu}] (max_torque)",
+            lines += ["", f"peak |tau| [{tu}] (max_torque), per payload run",
                       f"{'payload':<20} " + " ".join(f"{nm:>18}" for nm in self.joint_names)]
             for lab, row in zip(self.payload_labels, self.peak_torque, strict=False):
                 cells = [f"{f'{t:.4g} ({lim.max_torque:.4g})':>18}"
