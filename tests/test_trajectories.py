@@ -26,10 +26,10 @@ from trajectories.campaign_file import load_campaign
 from trajectories.plan import (
     BANDS,
     POSITIONING_SPEED,
-    _coverage,
     plan_campaign,
     plan_segment,
 )
+from trajectories.sampled import coverage
 
 EXAMPLE = example_path("campaign.toml")
 
@@ -301,5 +301,5 @@ def test_coverage_is_the_union_of_visited_intervals():
     q = np.array([0.0, 0.5, 1.0, 0.8, 3.0, 3.5, 2.0])
     mask = np.array([True, True, True, True, False, True, True])
     # pairs in mask: [0,0.5], [0.5,1], [0.8,1], [2,3.5] -> union length 1 + 1.5
-    assert _coverage(q, mask) == pytest.approx(2.5)
-    assert _coverage(q, np.zeros(7, dtype=bool)) == 0.0
+    assert coverage(q, mask) == pytest.approx(2.5)
+    assert coverage(q, np.zeros(7, dtype=bool)) == 0.0

@@ -1,5 +1,8 @@
 """The campaign description: joint, limits, control settings, payloads and excitation segments.
 
+(Past 600 lines: one file format -- its documented dataclasses, schema, size check and quick
+form; the robot format reuses its limits, segment fields and size check.)
+
 A campaign is read from a TOML file by :func:`trajectories.campaign_file.load_campaign` and
 validated here by :meth:`Campaign.from_dict` (pure: dictionaries in, frozen dataclasses out). Files
 with a ``[robot]`` table instead of ``[joint]`` are multi-joint campaigns

@@ -26,7 +26,6 @@ from .sampled import (
     RobotPlan,
     RobotPlanSummary,
 )
-from .sampled import coverage as _coverage  # noqa: F401 (tested under this name)
 
 __all__ = [
     "BANDS",

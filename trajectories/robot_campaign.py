@@ -1,7 +1,8 @@
 """The robot campaign: a multi-joint arm, its drives, limits, payloads and coordinated excitation.
 
-(Past 600 lines: one file format -- its documented dataclasses, schema and cross-checks;
-split, the format would be scattered.)
+(Past 600 lines: one file format -- its documented dataclasses, schema and cross-checks,
+and the reading of a ``[joint]`` campaign as a robot with one moving joint; split, the format
+would be scattered.)
 
 A campaign file has either a ``[joint]`` table (the single-joint format of
 :mod:`trajectories.campaign`, unchanged) or a ``[robot]`` table (this module).
