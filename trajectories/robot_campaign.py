@@ -86,6 +86,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+# the single-joint schema's pieces: the same limits table, raw tables, name check, segment
+# fields and plan-size check
 from .campaign import (
     _LIMITS,
     Campaign,
@@ -97,8 +99,6 @@ from .campaign import (
     check_plan_size,
     min_duration_s,
 )
-
-# the single-joint schema's pieces: the same limits table, raw tables and name check
 from .campaign import _SINE as _JOINT_SINE
 from .campaign import _TRAPEZOID as _JOINT_TRAPEZOID
 from .schema import ArrayOfTables, Field, Table, fail, unknown
