@@ -8,7 +8,8 @@ count, the segment boundaries, the pieces, sums of q, dq, ddq and their values a
 samples: small enough to commit, and any change of a sample beyond rounding moves a sum or a
 spread value. The cases: the example campaign (``jointid demo`` runs it), its quick form, the
 small sine campaign of the daq tests, the campaign of the refinement tests and a prismatic
-joint with several speeds, cycles, no dwell and an off-centre start.
+joint with several speeds, cycles, no dwell and an off-centre start; and two robot campaigns
+(``robot3``, ``ur10_demo``: the former robot planner's plans, kept too).
 """
 
 from __future__ import annotations
@@ -59,6 +60,11 @@ _PRISMATIC = {
 }
 
 
+# robot campaigns (multi-sines as written), frozen from the former robot planner
+_ROBOTS = {"robot3": "examples/campaign_robot3.toml",
+           "ur10_demo": "examples/campaign_ur10_demo.toml"}
+
+
 def _campaigns() -> dict:
     from trajectories.campaign import Campaign
     from trajectories.campaign_file import load_campaign
@@ -96,10 +102,17 @@ def fingerprint(ref) -> dict:
 
 
 def _freeze() -> None:
+    """Write the fingerprints with the planners of the checkout (done once, before the
+    single-joint planner was folded into the robot one)."""
+    from trajectories.campaign_file import load_any_campaign
+    from trajectories.multi import plan_robot_campaign
     from trajectories.plan import plan_campaign
 
     out = {name: fingerprint(plan_campaign(c).reference) for name, c in _campaigns().items()}
-    FROZEN.write_text(json.dumps(out, indent=1) + "\n")
+    for name, f in _ROBOTS.items():
+        out[name] = fingerprint(plan_robot_campaign(load_any_campaign(ROOT / f)))
+    FROZEN.write_text("{\n" + ",\n".join(f"{json.dumps(k)}: {json.dumps(v)}"
+                                         for k, v in out.items()) + "\n}\n")
     print(f"wrote {FROZEN} ({FROZEN.stat().st_size} bytes)")
 
 
@@ -114,12 +127,18 @@ def campaigns() -> dict:
 
 
 @pytest.mark.parametrize("name", ["example", "example_quick", "daq_small", "refine",
-                                  "prismatic"])
+                                  "prismatic", "robot3", "ur10_demo"])
 def test_single_joint_plan_is_the_frozen_one(name, frozen, campaigns):
     from trajectories.plan import plan_campaign
 
     want = frozen[name]
-    got = fingerprint(plan_campaign(campaigns[name]).reference)
+    if name in _ROBOTS:  # the robot plans of before are kept too
+        from trajectories.campaign_file import load_any_campaign
+        from trajectories.multi import plan_robot_campaign
+
+        got = fingerprint(plan_robot_campaign(load_any_campaign(ROOT / _ROBOTS[name])))
+    else:
+        got = fingerprint(plan_campaign(campaigns[name]).reference)
     assert got["n"] == want["n"] and got["cycle_s"] == want["cycle_s"]
     assert got["segment_names"] == want["segment_names"]
     assert got["segment_starts"] == want["segment_starts"]

@@ -219,9 +219,10 @@ class _Builder:
                     self.rows[j].append((tj, d, p, v, a, jk, -1.0, seg, *_NAN3))
                     tj += d
             ends.append(tj)
-        # the move ends with its slowest joint: the sum of its phases (the same float as
-        # phase after phase), not t0 + traj.duration (which may round differently)
-        end = max(ends)
+        # when the move ends, to the last bit: one joint, the sum of its phases (as the
+        # single-joint planner had it); several, Ruckig's duration (as the robot planner had
+        # it). The two differ by rounding only; either keeps the plans of before bit for bit.
+        end = ends[0] if k == 1 else t0 + traj.duration
         for j in range(k):
             if end - ends[j] > 0.0:  # a joint that finished early holds its final state
                 prof = traj.profiles[0][j]
