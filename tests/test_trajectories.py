@@ -19,7 +19,7 @@ from trajectories.campaign import (
     JointLimits,
     Payload,
     SineSegment,
-    TrapezoidSegment,
+    TrapezoidSweep,
     shorten,
 )
 from trajectories.campaign_file import load_campaign
@@ -87,7 +87,7 @@ def test_trapezoid_segments_respect_limits(lim, dt, data):
     cycles = data.draw(st.integers(1, 2), label="cycles")
     start = data.draw(st.floats(lo, hi), label="start")
     joint = Joint("revolute", lim, start)
-    seg = TrapezoidSegment(tuple(speeds), (a, b), dwell, cycles)
+    seg = TrapezoidSweep("", tuple(speeds), (a, b), dwell_s=dwell, cycles=cycles)
     ref = plan_segment(seg, joint, dt, return_to_start=True)
     assert_valid(ref, joint)
     assert ref.q[0] == pytest.approx(start, abs=1e-12)
@@ -145,7 +145,7 @@ def test_mixed_campaigns_are_continuous_and_return_to_start(lim, dt, data):
             b = data.draw(st.floats(a + 0.1 * lim.span, hi), label="range_hi")
             smin = min(1.0, (b - a) / (10.0 * lim.max_velocity))
             speed = data.draw(st.floats(smin, 1.0), label="speed")
-            segments.append(TrapezoidSegment((speed,), (a, b), 0.1, 1))
+            segments.append(TrapezoidSweep("", (speed,), (a, b), dwell_s=0.1))
     start = data.draw(st.floats(lo, hi), label="start")
     joint = Joint("revolute", lim, start)
     campaign = Campaign("prop", joint, ControlSettings(dt, 100.0, 1.0),
@@ -169,7 +169,7 @@ def test_cubic_evaluation_matches_ruckig_at_time():
     """The vectorised phase evaluation reproduces ruckig's own Trajectory.at_time."""
     lim = JointLimits((-1.0, 2.0), 1.5, 3.0, 25.0, 100.0)
     joint = Joint("revolute", lim, 0.2)
-    ref = plan_segment(TrapezoidSegment((0.7,), (-0.5, 1.7), 0.0, 1), joint, 0.001)
+    ref = plan_segment(TrapezoidSweep("", (0.7,), (-0.5, 1.7), dwell_s=0.0), joint, 0.001)
     move = ref.pieces[0]  # positioning move 0.2 -> -0.5
     inp = ruckig.InputParameter(1)
     inp.current_position, inp.target_position = [0.2], [-0.5]
@@ -199,7 +199,7 @@ JOINT = Joint("revolute", LIM, 0.1)
         (SineSegment(0.2, 0.8, 0.1, 1), "joint.limits.max_acceleration 4 rad/s^2"),
         (SineSegment(0.009, 3.2, 0.1, 1), "joint.limits.max_jerk 40 rad/s^3"),
         (SineSegment(0.5, 0.1, 1.0, 1), "joint.limits.position [-1.2, 1.4] rad"),
-        (TrapezoidSegment((0.5,), (-1.3, 0.0)), "joint.limits.position [-1.2, 1.4] rad"),
+        (TrapezoidSweep("", (0.5,), (-1.3, 0.0)), "joint.limits.position [-1.2, 1.4] rad"),
     ],
 )
 def test_plans_beyond_a_limit_are_rejected_naming_segment_and_limit(seg, limit):

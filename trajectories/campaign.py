@@ -88,7 +88,7 @@ __all__ = [
     "Payload",
     "Segment",
     "SineSegment",
-    "TrapezoidSegment",
+    "TrapezoidSweep",
     "shorten",
 ]
 
@@ -205,26 +205,42 @@ class Payload:
 
 
 @dataclass(frozen=True)
-class TrapezoidSegment:
-    """Back-and-forth jerk-limited moves across ``range`` at each speed of ``speeds``.
+class TrapezoidSweep:
+    """Jerk-limited trapezoidal-velocity moves of one joint while others sweep or hold: the
+    trapezoid of both campaign formats.
 
-    For each speed, ``cycles`` times: move to ``range[1]``, dwell, move to ``range[0]``,
-    dwell. The segment first goes to ``range[0]`` at the positioning speed.
+    The segment first goes to ``range[0]`` at the positioning speed (the sweeping joints to
+    the low end of their sweep range), dwells unless nothing moved before, then for each
+    speed, ``cycles`` times: ``joint`` moves to ``range[1]``, dwell, back to ``range[0]``,
+    dwell, each move at ``speed * max_velocity`` (its own time-optimal Ruckig profile). In
+    the same synchronised Ruckig move every joint of ``sweep`` goes to the other end of its
+    sweep range at up to ``sweep_speed * max_velocity`` (so the gravity load on ``joint``
+    changes along the move); the other joints hold their start position.
 
     Attributes
     ----------
+    joint : str
+        The joint doing the trapezoids; ``""``: the only moving joint (a ``[joint]``
+        campaign).
     speeds : tuple of float
-        Cruise speeds as fractions of ``max_velocity``, each in (0, 1].
+        Cruise speeds as fractions of the joint's ``max_velocity``, each in (0, 1].
     range : tuple of float
-        ``(low, high)`` [rad] or [m], within the joint's position limits.
+        ``(low, high)`` [rad] or [m] within the joint's position limits.
+    sweep : mapping of str to (float, float)
+        Joint name -> ``(low, high)`` sweep range (robot campaigns; empty: none).
+    sweep_speed : float
+        Fraction of each sweeping joint's max_velocity, in (0, 1].
     dwell_s : float
         Rest after each move [s], >= 0.
     cycles : int
         Back-and-forth repetitions per speed, >= 1.
     """
 
+    joint: str
     speeds: tuple[float, ...]
     range: tuple[float, float]
+    sweep: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    sweep_speed: float = 0.25
     dwell_s: float = 0.3
     cycles: int = 1
     kind: Literal["trapezoid"] = "trapezoid"
@@ -272,7 +288,7 @@ class SineSegment:
         return a * w, a * w * w, a * w**3
 
 
-Segment = TrapezoidSegment | SineSegment
+Segment = TrapezoidSweep | SineSegment
 
 
 @dataclass(frozen=True)
@@ -388,11 +404,10 @@ class Campaign:
         )
 
 
-def min_duration_s(seg: Any, limits: JointLimits) -> float:
+def min_duration_s(seg: Segment, limits: JointLimits) -> float:
     """A lower bound of a sine's or a trapezoid's duration [s], cheap (before planning): a
     sine's periods, a trapezoid's cruise moves (both directions at every speed) and dwells
-    (``limits``: those of the joint that plays it). A robot campaign's trapezoid
-    (``TrapezoidSweep``) has the same fields."""
+    (``limits``: those of the joint that plays it)."""
     if isinstance(seg, SineSegment):
         return seg.periods / seg.frequency_hz
     span = seg.range[1] - seg.range[0]
@@ -553,7 +568,8 @@ def _segment(s: dict, key: str, source: str, limits: JointLimits, rng: str) -> S
                        list(r))
         if r[0] < lo or r[1] > hi:
             raise fail(source, f"{key}.range", f"[low, high] within {rng}", list(r))
-        return TrapezoidSegment(
+        return TrapezoidSweep(
+            joint="",
             speeds=tuple(s["speeds"]),
             range=(r[0], r[1]),
             dwell_s=s["dwell_s"],
@@ -599,7 +615,7 @@ def shorten(campaign: Campaign, factor: float) -> Campaign:
     lim = campaign.joint.limits
     out: list[Segment] = []
     for seg in campaign.segments:
-        if isinstance(seg, TrapezoidSegment):
+        if isinstance(seg, TrapezoidSweep):
             mid = 0.5 * (seg.range[0] + seg.range[1])
             half = 0.5 * (seg.range[1] - seg.range[0]) * factor
             out.append(replace(seg, range=(mid - half, mid + half), speeds=(min(seg.speeds),),

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from .campaign import Campaign, Joint, Segment
 from .multi import G, plan_robot, plan_robot_campaign
-from .robot_campaign import JOINT_NAME, robot_segment
+from .robot_campaign import JOINT_NAME
 from .sampled import (
     BANDS,
     MOVING_FRACTION,
@@ -81,7 +81,8 @@ def plan_segment(
 
     Parameters
     ----------
-    segment : TrapezoidSegment or SineSegment
+    segment : TrapezoidSweep or SineSegment
+        Of the one joint (``joint`` ``""``).
     joint : Joint
         Kind and limits; ``joint.start`` is the default start position.
     cycle_s : float
@@ -106,7 +107,7 @@ def plan_segment(
         The segment would exceed a joint limit.
     """
     s0 = joint.start if start is None else float(start)
-    plan = plan_robot([robot_segment(segment)], (JOINT_NAME,), (joint.limits,), (s0,), cycle_s,
+    plan = plan_robot([segment], (JOINT_NAME,), (joint.limits,), (s0,), cycle_s,
                       units=(joint.unit,), keys=("joint",), first_index=index,
                       return_to_start=return_to_start)
     return plan.reference

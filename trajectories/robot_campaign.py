@@ -93,7 +93,7 @@ from .campaign import (
     Campaign,
     JointLimits,
     SineSegment,
-    TrapezoidSegment,
+    TrapezoidSweep,
     _nonempty,
     _RawTable,
     check_plan_size,
@@ -117,7 +117,6 @@ __all__ = [
     "TrapezoidSweep",
     "as_robot_campaign",
     "campaign_from_dict",
-    "robot_segment",
 ]
 
 
@@ -228,43 +227,6 @@ class RobotPayload:
         if self.arm_m is None:
             return f"{self.mass_kg:g} kg"
         return f"{self.mass_kg:g} kg at {self.arm_m:g} m"
-
-
-@dataclass(frozen=True)
-class TrapezoidSweep:
-    """Jerk-limited trapezoidal-velocity moves of one joint while others sweep or hold.
-
-    For each speed and cycle: ``joint`` moves to ``range[1]``, dwell, back to ``range[0]``,
-    dwell, each move at ``speed * max_velocity`` (its own time-optimal Ruckig profile). In
-    the same synchronised Ruckig move every joint of ``sweep`` goes to the other end of its
-    sweep range at up to ``sweep_speed * max_velocity`` (so the gravity load on ``joint``
-    changes along the move); the other joints hold their start position.
-
-    Attributes
-    ----------
-    joint : str
-    speeds : tuple of float
-        Fractions of the joint's max_velocity, each in (0, 1].
-    range : tuple of float
-        ``(low, high)`` [rad] or [m] within the joint's position limits.
-    sweep : mapping of str to (float, float)
-        Joint name -> ``(low, high)`` sweep range.
-    sweep_speed : float
-        Fraction of each sweeping joint's max_velocity, in (0, 1].
-    dwell_s : float
-        Rest after each move [s].
-    cycles : int
-        Back-and-forth repetitions per speed.
-    """
-
-    joint: str
-    speeds: tuple[float, ...]
-    range: tuple[float, float]
-    sweep: Mapping[str, tuple[float, float]] = field(default_factory=dict)
-    sweep_speed: float = 0.25
-    dwell_s: float = 0.3
-    cycles: int = 1
-    kind: Literal["trapezoid"] = "trapezoid"
 
 
 @dataclass(frozen=True)
@@ -418,10 +380,8 @@ class RobotCampaign:
 
         The joint is named ``"joint"`` (its table; messages name ``joint.limits...``) and
         carries the gains and ``[control.feedforward]``; each payload's lever arm becomes
-        ``arm_m`` and ``com = (arm_m, 0, 0)``; trapezoid segments become
-        :class:`TrapezoidSweep` of that joint (no sweep), sine segments stay
-        :class:`~trajectories.campaign.SineSegment` (of that joint). No robot file:
-        ``robot_file`` is ``""``.
+        ``arm_m`` and ``com = (arm_m, 0, 0)``; the segments are the same (their ``joint``
+        ``""`` is the only moving joint). No robot file: ``robot_file`` is ``""``.
 
         Parameters
         ----------
@@ -435,7 +395,6 @@ class RobotCampaign:
         c = campaign.control
         joint = RobotJoint(JOINT_NAME, j.kind, j.limits, None, c.kp, c.kd,
                            feedforward=dict(c.feedforward), table="joint")
-        segments = tuple(robot_segment(seg) for seg in campaign.segments)
         return cls(
             name=campaign.name,
             robot_file="",
@@ -445,7 +404,7 @@ class RobotCampaign:
             control=RobotControl(c.cycle_s, c.velocity_cutoff_hz),
             payloads=tuple(RobotPayload(p.mass_kg, (p.arm_m, 0.0, 0.0), arm_m=p.arm_m)
                            for p in campaign.payloads),
-            segments=segments,
+            segments=campaign.segments,
             daq=campaign.daq,
             source=campaign.source,
         )
@@ -458,16 +417,6 @@ class RobotCampaign:
 
 #: name of the moving joint of a ``[joint]`` campaign read as a robot
 JOINT_NAME = "joint"
-
-
-def robot_segment(segment: TrapezoidSegment | SineSegment) -> RobotSegment:
-    """A ``[joint]`` campaign's segment as a segment of its one moving joint
-    (:data:`JOINT_NAME`): a trapezoid is a :class:`TrapezoidSweep` without sweep; a sine
-    stays itself (its ``joint`` ``""`` is the only moving joint)."""
-    if isinstance(segment, TrapezoidSegment):
-        return TrapezoidSweep(joint=JOINT_NAME, speeds=segment.speeds, range=segment.range,
-                              dwell_s=segment.dwell_s, cycles=segment.cycles)
-    return segment
 
 
 def as_robot_campaign(campaign: Campaign | RobotCampaign) -> RobotCampaign:
