@@ -69,7 +69,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 from . import SchemaError
-from .schema import ArrayOfTables, Field, Table, fail
+from .schema import ArrayOfTables, Field, Table, TaggedTable, fail
 
 #: upper bounds of the joint limits (joint side; rad or m based): beyond them a value is a
 #: typo or turns a supervision check off; ``position`` bounds |min| and |max|
@@ -530,29 +530,13 @@ _SINE = Table(
 _KINDS = {"trapezoid": _TRAPEZOID, "sine": _SINE}
 
 
-class _SegmentSpec:
-    """A segment table: ``kind`` selects the trapezoid or sine schema."""
-
-    required = True
-
-    def validate(self, value: Any, key: str, source: str = "") -> dict:
-        if not isinstance(value, Mapping):
-            raise fail(source, key, "a table", value)
-        if "kind" not in value:
-            raise fail(source, f"{key}.kind", "a value ('trapezoid' or 'sine'), it is missing")
-        kind = value["kind"]
-        if kind not in _KINDS:
-            raise fail(source, f"{key}.kind", "one of 'trapezoid', 'sine'", kind)
-        return _KINDS[kind].validate(value, key, source)
-
-
 _CAMPAIGN = Table(
     {
         "name": Field(str, check=_nonempty),
         "joint": _JOINT,
         "control": _CONTROL,
         "payloads": ArrayOfTables(_PAYLOAD),
-        "segments": ArrayOfTables(_SegmentSpec()),  # type: ignore[arg-type]
+        "segments": ArrayOfTables(TaggedTable(_KINDS)),  # type: ignore[arg-type]
         "daq": _RawTable(),
     }
 )

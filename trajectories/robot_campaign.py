@@ -101,7 +101,7 @@ from .campaign import (
 )
 from .campaign import _SINE as _JOINT_SINE
 from .campaign import _TRAPEZOID as _JOINT_TRAPEZOID
-from .schema import ArrayOfTables, Field, Table, fail, unknown
+from .schema import ArrayOfTables, Field, Table, TaggedTable, fail, unknown
 
 __all__ = [
     "DriveSpec",
@@ -571,29 +571,13 @@ _SINE = Table({"kind": _KIND, "joint": Field(str, check=_nonempty),
 _KINDS = {"trapezoid": _TRAPEZOID, "multisine": _MULTISINE, "move": _MOVE, "sine": _SINE}
 
 
-class _SegmentSpec:
-    required = True
-
-    def validate(self, value: Any, key: str, source: str = "") -> dict:
-        if not isinstance(value, Mapping):
-            raise fail(source, key, "a table", value)
-        if "kind" not in value:
-            raise fail(source, f"{key}.kind",
-                       "a value ('trapezoid', 'multisine', 'move' or 'sine'), it is missing")
-        kind = value["kind"]
-        if kind not in _KINDS:
-            raise fail(source, f"{key}.kind", "one of 'trapezoid', 'multisine', 'move', 'sine'",
-                       kind)
-        return _KINDS[kind].validate(value, key, source)
-
-
 _CAMPAIGN = Table(
     {
         "name": Field(str, check=_nonempty),
         "robot": _ROBOT,
         "control": _CONTROL,
         "payloads": ArrayOfTables(_PAYLOAD),
-        "segments": ArrayOfTables(_SegmentSpec()),  # type: ignore[arg-type]
+        "segments": ArrayOfTables(TaggedTable(_KINDS)),  # type: ignore[arg-type]
         "daq": _RawTable(),
     }
 )
