@@ -9,7 +9,7 @@ from daq.examples import path as example_path
 
 from daq.protocol.control import ControllerGains
 from trajectories import CampaignFileError, SchemaError
-from trajectories.campaign import SineSegment, TrapezoidSegment
+from trajectories.campaign import SineSegment, TrapezoidSweep
 from trajectories.campaign_file import load_campaign
 
 EXAMPLE = example_path("campaign.toml")
@@ -26,7 +26,8 @@ def test_example_loads_with_the_paper_joint_3_figures():
     assert [(p.mass_kg, p.arm_m) for p in c.payloads] == [
         (0.0, 1.277), (3.4584, 1.277), (6.970, 1.277)]
     assert c.cycle_s == c.control.cycle_s == 0.001
-    assert [type(s) for s in c.segments] == [TrapezoidSegment] * 3 + [SineSegment]
+    assert [type(s) for s in c.segments] == [TrapezoidSweep] * 3 + [SineSegment]
+    assert {s.joint for s in c.segments} == {""}  # the only moving joint
     assert c.segments[0].speeds == (0.03,) and c.segments[0].range == (1.0, 2.1)
     assert c.segments[1].speeds == (0.08,) and c.segments[1].range == (-0.9, 2.3)
     assert c.daq == {}

@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from trajectories import LimitError, SchemaError, TrajectoryError
-from trajectories.campaign import Campaign, JointLimits
+from trajectories.campaign import MAX_PLAN_CYCLES, Campaign, JointLimits
 from trajectories.campaign_file import load_campaign
 from trajectories.excitation import assess_robot_campaign, optimise_campaign, quality
 from trajectories.multi import multisine_ratio, plan_robot_campaign
@@ -81,7 +81,7 @@ def test_example_robot_campaign_plans_within_limits_from_and_to_rest():
     assert (shares[:, 0] > 0.2).all() and (shares[:, 2] > 0.02).all()
     text = str(plan.summary())
     assert "arm3-excitation" in text and "2 payload run(s)" in text
-    assert "segments[3] (multisine)" in text and "0-10 % vmax" in text
+    assert "segments[3] (multisine)" in text and "0-10 % of vmax" in text
 
 
 def test_single_joint_campaigns_load_as_before():
@@ -284,7 +284,7 @@ def test_assessment_is_what_jointid_plan_prints():
     text = str(a)
     assert text.count("quadrants of (dq, tau_out), payload") == 2
     assert f"{a.quality.cond:.4g}" in text and "peak |tau| [N m]" in text
-    assert text.count("0-10 % vmax") == 1  # bands printed once, with the plan
+    assert text.count("0-10 % of vmax") == 1  # bands printed once, with the plan
     with pytest.raises(TrajectoryError, match="needs the robot's regressor"):
         assess_robot_campaign(c, optimise=True)
     bare = assess_robot_campaign(c)  # no dynamics: the plan summary only
@@ -306,3 +306,20 @@ def test_whole_plan_objective_predicts_the_plans_condition_number():
     assert res.cond_start == pytest.approx(before.cond, rel=0.05)
     assert res.cond_end == pytest.approx(after.cond, rel=0.05)
     assert after.cond < before.cond
+
+
+@pytest.mark.parametrize(("segment", "key", "value"), [
+    ({"kind": "multisine", "period_s": 10.0, "periods": 400}, "periods", 400),
+    ({"kind": "sine", "joint": "j2", "amplitude": 0.2, "frequency_hz": 0.5, "center": -1.3,
+      "periods": 2000}, "periods", 2000),
+    ({"kind": "trapezoid", "joint": "j1", "speeds": [0.01], "range": [-1.0, 1.0],
+      "cycles": 40}, "cycles", 40),
+    ({"kind": "move", "poses": [[0.0, -1.2, 1.4]] * 20, "dwell_s": 200.0}, "poses", 20),
+])
+def test_a_plan_beyond_max_plan_cycles_is_refused_naming_its_longest_segment(segment, key,
+                                                                             value):
+    raw = raw_robot3()
+    raw["segments"] = [raw["segments"][0], segment]
+    with pytest.raises(SchemaError, match=rf"^arm\.toml: segments\[1\]\.{key}: expected a plan "
+                       rf"of at most {MAX_PLAN_CYCLES} cycles per payload .*, got {value}$"):
+        campaign_from_dict(raw, "arm.toml")

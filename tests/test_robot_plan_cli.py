@@ -32,7 +32,7 @@ def test_robot_plan_prints_summary_condition_number_bands_and_quadrants(capsys):
     assert "robot campaign 'arm3-excitation': 2 payload run(s)" in out
     for j in ("j1", "j2", "j3"):
         assert re.search(rf"^{j}\s+-?\d", out, re.M)  # a row per joint
-    assert "share of moving samples per velocity band" in out
+    assert "0-10 % of vmax" in out and "j2 moving" in out  # shares and coverage per band
     assert out.count("quadrants of (dq, tau_out), payload") == 2  # per payload
     assert "peak |tau| [N m] (max_torque)" in out
     m = re.search(r"multi-sine optimised: condition number ([\d.]+) -> ([\d.]+)", out)

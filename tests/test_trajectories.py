@@ -19,17 +19,17 @@ from trajectories.campaign import (
     JointLimits,
     Payload,
     SineSegment,
-    TrapezoidSegment,
+    TrapezoidSweep,
     shorten,
 )
 from trajectories.campaign_file import load_campaign
 from trajectories.plan import (
     BANDS,
     POSITIONING_SPEED,
-    _coverage,
     plan_campaign,
     plan_segment,
 )
+from trajectories.sampled import coverage
 
 EXAMPLE = example_path("campaign.toml")
 
@@ -87,7 +87,7 @@ def test_trapezoid_segments_respect_limits(lim, dt, data):
     cycles = data.draw(st.integers(1, 2), label="cycles")
     start = data.draw(st.floats(lo, hi), label="start")
     joint = Joint("revolute", lim, start)
-    seg = TrapezoidSegment(tuple(speeds), (a, b), dwell, cycles)
+    seg = TrapezoidSweep("", tuple(speeds), (a, b), dwell_s=dwell, cycles=cycles)
     ref = plan_segment(seg, joint, dt, return_to_start=True)
     assert_valid(ref, joint)
     assert ref.q[0] == pytest.approx(start, abs=1e-12)
@@ -145,7 +145,7 @@ def test_mixed_campaigns_are_continuous_and_return_to_start(lim, dt, data):
             b = data.draw(st.floats(a + 0.1 * lim.span, hi), label="range_hi")
             smin = min(1.0, (b - a) / (10.0 * lim.max_velocity))
             speed = data.draw(st.floats(smin, 1.0), label="speed")
-            segments.append(TrapezoidSegment((speed,), (a, b), 0.1, 1))
+            segments.append(TrapezoidSweep("", (speed,), (a, b), dwell_s=0.1))
     start = data.draw(st.floats(lo, hi), label="start")
     joint = Joint("revolute", lim, start)
     campaign = Campaign("prop", joint, ControlSettings(dt, 100.0, 1.0),
@@ -160,16 +160,16 @@ def test_mixed_campaigns_are_continuous_and_return_to_start(lim, dt, data):
     # the shares are of the moving samples (faster than MOVING_FRACTION of the velocity
     # limit); a plan that never exceeds it (e.g. a trapezoid at 0.001 of the limit, found by
     # hypothesis) has none, and its shares are all 0
-    moving = s.moving_time_s > 0
-    assert sum(s.band_share) == pytest.approx(1.0 if moving else 0.0)
-    assert all(0 <= c <= 1 for c in s.band_coverage)
+    moving = s.moving_time_s[0] > 0
+    assert sum(s.band_share[0]) == pytest.approx(1.0 if moving else 0.0)
+    assert all(0 <= c <= 1 for c in s.band_coverage[0])
 
 
 def test_cubic_evaluation_matches_ruckig_at_time():
     """The vectorised phase evaluation reproduces ruckig's own Trajectory.at_time."""
     lim = JointLimits((-1.0, 2.0), 1.5, 3.0, 25.0, 100.0)
     joint = Joint("revolute", lim, 0.2)
-    ref = plan_segment(TrapezoidSegment((0.7,), (-0.5, 1.7), 0.0, 1), joint, 0.001)
+    ref = plan_segment(TrapezoidSweep("", (0.7,), (-0.5, 1.7), dwell_s=0.0), joint, 0.001)
     move = ref.pieces[0]  # positioning move 0.2 -> -0.5
     inp = ruckig.InputParameter(1)
     inp.current_position, inp.target_position = [0.2], [-0.5]
@@ -199,7 +199,7 @@ JOINT = Joint("revolute", LIM, 0.1)
         (SineSegment(0.2, 0.8, 0.1, 1), "joint.limits.max_acceleration 4 rad/s^2"),
         (SineSegment(0.009, 3.2, 0.1, 1), "joint.limits.max_jerk 40 rad/s^3"),
         (SineSegment(0.5, 0.1, 1.0, 1), "joint.limits.position [-1.2, 1.4] rad"),
-        (TrapezoidSegment((0.5,), (-1.3, 0.0)), "joint.limits.position [-1.2, 1.4] rad"),
+        (TrapezoidSweep("", (0.5,), (-1.3, 0.0)), "joint.limits.position [-1.2, 1.4] rad"),
     ],
 )
 def test_plans_beyond_a_limit_are_rejected_naming_segment_and_limit(seg, limit):
@@ -232,7 +232,8 @@ def example_plan():
 
 def test_example_plan_is_valid_and_starts_and_ends_at_start(example_plan):
     ref = example_plan.reference
-    joint = example_plan.campaign.joint
+    campaign = load_campaign(EXAMPLE)
+    joint = campaign.joint
     assert_valid(ref, joint)
     assert ref.q[0] == joint.start == pytest.approx(0.7)
     assert ref.q[-1] == pytest.approx(joint.start, abs=1e-9)
@@ -241,7 +242,10 @@ def test_example_plan_is_valid_and_starts_and_ends_at_start(example_plan):
         "segments[3] (sine)", "return")
     assert set(np.unique(ref.segment)) == {0, 1, 2, 3, 4}
     assert np.all(np.diff(ref.segment) >= 0)  # segments in order, contiguous
-    assert example_plan.payloads == example_plan.campaign.payloads
+    # the plan of a [joint] campaign is that of a robot with one moving joint, "joint"
+    assert example_plan.joint_names == ("joint",) and example_plan.limits == (joint.limits,)
+    assert [(p.mass_kg, p.arm_m, p.com) for p in example_plan.payloads] == [
+        (p.mass_kg, p.arm_m, (p.arm_m, 0.0, 0.0)) for p in campaign.payloads]
     with pytest.raises(ValueError):
         ref.q[0] = 1.0  # read-only
 
@@ -250,16 +254,19 @@ def test_example_meets_acceptance_figures(example_plan):
     s = example_plan.summary()
     assert 60.0 <= s.run_duration_s <= 210.0
     assert s.total_duration_s == pytest.approx(3 * s.run_duration_s)
-    assert s.band_edges == BANDS == (0.0, 0.1, 0.35, 1.0)
-    assert sum(s.band_share) == pytest.approx(1.0)
-    assert s.band_share[0] >= 0.15
-    assert min(s.band_coverage) >= 0.80
-    assert s.peak_dq <= 1.2 * (1 + REL) and s.peak_ddq <= 4.0 * (1 + REL)
-    assert s.peak_jerk <= 40.0 * (1 + 1e-6)
-    assert s.q_min >= -1.0 and s.q_max <= 2.4
+    assert BANDS == (0.0, 0.1, 0.35, 1.0)
+    (share,), (cov,), (peaks,) = s.band_share, s.band_coverage, s.peaks
+    assert sum(share) == pytest.approx(1.0)
+    assert share[0] >= 0.15
+    assert min(cov) >= 0.80
+    q_min, q_max, peak_dq, peak_ddq, peak_jerk = peaks
+    assert peak_dq <= 1.2 * (1 + REL) and peak_ddq <= 4.0 * (1 + REL)
+    assert peak_jerk <= 40.0 * (1 + 1e-6)
+    assert q_min >= -1.0 and q_max <= 2.4
     # the range crosses pi/2, where gravity changes sign (motor and generator quadrants)
-    assert s.q_min < math.pi / 2 < s.q_max
-    assert len(s.peak_torque) == 3 and s.peak_torque[0] < s.peak_torque[1] < s.peak_torque[2]
+    assert q_min < math.pi / 2 < q_max
+    tau = [row[0] for row in s.peak_torque]
+    assert len(tau) == 3 and tau[0] < tau[1] < tau[2]
     # both directions in every band (motor and generator quadrants against gravity)
     ref = example_plan.reference
     speed = ref.dq / 1.2
@@ -268,7 +275,8 @@ def test_example_meets_acceptance_figures(example_plan):
         assert (speed[band] > 0).sum() > 100 and (speed[band] < 0).sum() > 100
     table = s.format_table()
     assert "0-10 % of vmax" in table and "rx130l-joint3" in table
-    assert f"{100 * s.band_share[0]:.1f}%" in table
+    assert f"{100 * share[0]:.1f}%" in table and f"{100 * cov[0]:.1f}%" in table
+    assert "6.97 kg at 1.277 m" in table and f"{tau[2]:.4g} (700)" in table
 
 
 def test_quick_campaign_is_short_with_slow_moves_both_ways():
@@ -293,5 +301,5 @@ def test_coverage_is_the_union_of_visited_intervals():
     q = np.array([0.0, 0.5, 1.0, 0.8, 3.0, 3.5, 2.0])
     mask = np.array([True, True, True, True, False, True, True])
     # pairs in mask: [0,0.5], [0.5,1], [0.8,1], [2,3.5] -> union length 1 + 1.5
-    assert _coverage(q, mask) == pytest.approx(2.5)
-    assert _coverage(q, np.zeros(7, dtype=bool)) == 0.0
+    assert coverage(q, mask) == pytest.approx(2.5)
+    assert coverage(q, np.zeros(7, dtype=bool)) == 0.0

@@ -3,8 +3,11 @@
 Nothing in this package touches clocks or buses; files only in :mod:`trajectories.campaign_file`
 (reads the campaign TOML), :mod:`trajectories.robot.formats` (reads robot files) and
 :mod:`trajectories.cli` (``jointid plan``, writes the plot).
-Single joint: ``campaign`` (schema), ``plan`` (Ruckig plans). Robots: ``robot_campaign``
-(``[robot]`` schema), ``multi`` (multi-DoF plans), ``excitation`` (regressor condition number,
+Campaigns: ``campaign`` (the ``[joint]`` schema), ``robot_campaign`` (the ``[robot]`` schema;
+a ``[joint]`` campaign read as a robot with one moving joint). One planner for both: ``multi``
+(Ruckig trapezoids, exact sines, multi-sines, moves) and one plan type, ``sampled``
+(``RobotPlan``, its one-joint 1-D ``Reference``, the summary); ``plan`` keeps the single-joint
+names (``plan_campaign``, ``plan_segment``). ``excitation`` (regressor condition number,
 band and quadrant shares, multi-sine optimisation). The robot model, the ground floor below
 every other module (docs/architecture.md): ``robot`` (robot files behind a suffix table ->
 ``Robot``, the n-dof regressor, the base-parameter rule, payloads; docs/robot-format.md).

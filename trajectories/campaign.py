@@ -1,10 +1,15 @@
 """The campaign description: joint, limits, control settings, payloads and excitation segments.
 
+(Past 600 lines: one file format -- its documented dataclasses, schema, size check and quick
+form; the robot format reuses its limits, segment fields and size check.)
+
 A campaign is read from a TOML file by :func:`trajectories.campaign_file.load_campaign` and
 validated here by :meth:`Campaign.from_dict` (pure: dictionaries in, frozen dataclasses out). Files
 with a ``[robot]`` table instead of ``[joint]`` are multi-joint campaigns
 (:mod:`trajectories.robot_campaign`; :func:`~trajectories.robot_campaign.campaign_from_dict`
-reads either format). Every
+reads either format); :meth:`~trajectories.robot_campaign.RobotCampaign.from_joint_campaign`
+reads a campaign of this format as a robot with one moving joint, which the one planner
+(:func:`trajectories.multi.plan_robot_campaign`) plans. Every
 mistake raises :class:`trajectories.SchemaError` with one line naming the source, the dotted
 key and the expected value, e.g.::
 
@@ -64,7 +69,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 from . import SchemaError
-from .schema import ArrayOfTables, Field, Table, fail
+from .schema import ArrayOfTables, Field, Table, TaggedTable, fail
 
 #: upper bounds of the joint limits (joint side; rad or m based): beyond them a value is a
 #: typo or turns a supervision check off; ``position`` bounds |min| and |max|
@@ -83,7 +88,7 @@ __all__ = [
     "Payload",
     "Segment",
     "SineSegment",
-    "TrapezoidSegment",
+    "TrapezoidSweep",
     "shorten",
 ]
 
@@ -200,26 +205,42 @@ class Payload:
 
 
 @dataclass(frozen=True)
-class TrapezoidSegment:
-    """Back-and-forth jerk-limited moves across ``range`` at each speed of ``speeds``.
+class TrapezoidSweep:
+    """Jerk-limited trapezoidal-velocity moves of one joint while others sweep or hold: the
+    trapezoid of both campaign formats.
 
-    For each speed, ``cycles`` times: move to ``range[1]``, dwell, move to ``range[0]``,
-    dwell. The segment first goes to ``range[0]`` at the positioning speed.
+    The segment first goes to ``range[0]`` at the positioning speed (the sweeping joints to
+    the low end of their sweep range), dwells unless nothing moved before, then for each
+    speed, ``cycles`` times: ``joint`` moves to ``range[1]``, dwell, back to ``range[0]``,
+    dwell, each move at ``speed * max_velocity`` (its own time-optimal Ruckig profile). In
+    the same synchronised Ruckig move every joint of ``sweep`` goes to the other end of its
+    sweep range at up to ``sweep_speed * max_velocity`` (so the gravity load on ``joint``
+    changes along the move); the other joints hold their start position.
 
     Attributes
     ----------
+    joint : str
+        The joint doing the trapezoids; ``""``: the only moving joint (a ``[joint]``
+        campaign).
     speeds : tuple of float
-        Cruise speeds as fractions of ``max_velocity``, each in (0, 1].
+        Cruise speeds as fractions of the joint's ``max_velocity``, each in (0, 1].
     range : tuple of float
-        ``(low, high)`` [rad] or [m], within the joint's position limits.
+        ``(low, high)`` [rad] or [m] within the joint's position limits.
+    sweep : mapping of str to (float, float)
+        Joint name -> ``(low, high)`` sweep range (robot campaigns; empty: none).
+    sweep_speed : float
+        Fraction of each sweeping joint's max_velocity, in (0, 1].
     dwell_s : float
         Rest after each move [s], >= 0.
     cycles : int
         Back-and-forth repetitions per speed, >= 1.
     """
 
+    joint: str
     speeds: tuple[float, ...]
     range: tuple[float, float]
+    sweep: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    sweep_speed: float = 0.25
     dwell_s: float = 0.3
     cycles: int = 1
     kind: Literal["trapezoid"] = "trapezoid"
@@ -243,6 +264,9 @@ class SineSegment:
         [rad] or [m].
     periods : int
         Number of full periods, >= 1.
+    joint : str
+        The moving joint that plays the sinusoid, in a robot campaign (the others hold their
+        position); ``""``: the only moving joint (a ``[joint]`` campaign).
     """
 
     amplitude: float
@@ -250,6 +274,7 @@ class SineSegment:
     center: float
     periods: int = 1
     kind: Literal["sine"] = "sine"
+    joint: str = ""
 
     @property
     def omega(self) -> float:
@@ -263,7 +288,7 @@ class SineSegment:
         return a * w, a * w * w, a * w**3
 
 
-Segment = TrapezoidSegment | SineSegment
+Segment = TrapezoidSweep | SineSegment
 
 
 @dataclass(frozen=True)
@@ -365,7 +390,8 @@ class Campaign:
         segments: list[Segment] = []
         for i, s in enumerate(top["segments"]):
             segments.append(_segment(s, f"segments[{i}]", source, limits, rng))
-        check_plan_size(segments, limits, control.cycle_s, source)
+        check_plan_size(segments, [min_duration_s(s, limits) for s in segments],
+                        control.cycle_s, source)
         daq = top["daq"] if isinstance(top["daq"], dict) else {}
         return cls(
             name=top["name"],
@@ -379,8 +405,9 @@ class Campaign:
 
 
 def min_duration_s(seg: Segment, limits: JointLimits) -> float:
-    """A lower bound of a segment's duration [s], cheap (before planning): a sine's periods,
-    a trapezoid's cruise moves (both directions at every speed) and dwells."""
+    """A lower bound of a sine's or a trapezoid's duration [s], cheap (before planning): a
+    sine's periods, a trapezoid's cruise moves (both directions at every speed) and dwells
+    (``limits``: those of the joint that plays it)."""
     if isinstance(seg, SineSegment):
         return seg.periods / seg.frequency_hz
     span = seg.range[1] - seg.range[0]
@@ -389,29 +416,36 @@ def min_duration_s(seg: Segment, limits: JointLimits) -> float:
     return seg.cycles * per_cycle
 
 
-def check_plan_size(segments: Sequence[Segment], limits: JointLimits, cycle_s: float,
+def check_plan_size(segments: Sequence[Any], durations: Sequence[float], cycle_s: float,
                     source: str) -> None:
     """Refuse a campaign whose plan would exceed :data:`MAX_PLAN_CYCLES` cycles per payload
-    (before anything is planned or allocated).
+    (before anything is planned or allocated), either format.
+
+    Parameters
+    ----------
+    segments : sequence of segments
+    durations : sequence of float
+        A lower bound of each segment's duration [s] (:func:`min_duration_s`).
+    cycle_s : float
+    source : str
 
     Raises
     ------
     trajectories.SchemaError
-        Naming the longest segment's ``periods`` (sine) or ``cycles`` (trapezoid) and the
-        bound.
+        Naming the longest segment's ``periods`` (sine, multi-sine), ``cycles`` (trapezoid)
+        or ``poses`` (move) and the bound.
     """
-    durations = [min_duration_s(s, limits) for s in segments]
     n = sum(durations) / cycle_s
     if n <= MAX_PLAN_CYCLES or not durations:
         return
     i = max(range(len(durations)), key=durations.__getitem__)
     seg = segments[i]
-    key, value = (("periods", seg.periods) if isinstance(seg, SineSegment)
-                  else ("cycles", seg.cycles))
+    key = next(k for k in ("periods", "cycles", "poses") if hasattr(seg, k))
+    value = getattr(seg, key)
     raise fail(source, f"segments[{i}].{key}",
                f"a plan of at most {MAX_PLAN_CYCLES} cycles per payload "
                f"({MAX_PLAN_CYCLES * cycle_s:g} s at cycle_s {cycle_s:g} s; this one: at "
-               f"least {n:.3g} cycles)", value)
+               f"least {n:.3g} cycles)", len(value) if key == "poses" else value)
 
 
 # --------------------------------------------------------------------------- schema
@@ -496,29 +530,13 @@ _SINE = Table(
 _KINDS = {"trapezoid": _TRAPEZOID, "sine": _SINE}
 
 
-class _SegmentSpec:
-    """A segment table: ``kind`` selects the trapezoid or sine schema."""
-
-    required = True
-
-    def validate(self, value: Any, key: str, source: str = "") -> dict:
-        if not isinstance(value, Mapping):
-            raise fail(source, key, "a table", value)
-        if "kind" not in value:
-            raise fail(source, f"{key}.kind", "a value ('trapezoid' or 'sine'), it is missing")
-        kind = value["kind"]
-        if kind not in _KINDS:
-            raise fail(source, f"{key}.kind", "one of 'trapezoid', 'sine'", kind)
-        return _KINDS[kind].validate(value, key, source)
-
-
 _CAMPAIGN = Table(
     {
         "name": Field(str, check=_nonempty),
         "joint": _JOINT,
         "control": _CONTROL,
         "payloads": ArrayOfTables(_PAYLOAD),
-        "segments": ArrayOfTables(_SegmentSpec()),  # type: ignore[arg-type]
+        "segments": ArrayOfTables(TaggedTable(_KINDS)),  # type: ignore[arg-type]
         "daq": _RawTable(),
     }
 )
@@ -534,7 +552,8 @@ def _segment(s: dict, key: str, source: str, limits: JointLimits, rng: str) -> S
                        list(r))
         if r[0] < lo or r[1] > hi:
             raise fail(source, f"{key}.range", f"[low, high] within {rng}", list(r))
-        return TrapezoidSegment(
+        return TrapezoidSweep(
+            joint="",
             speeds=tuple(s["speeds"]),
             range=(r[0], r[1]),
             dwell_s=s["dwell_s"],
@@ -580,7 +599,7 @@ def shorten(campaign: Campaign, factor: float) -> Campaign:
     lim = campaign.joint.limits
     out: list[Segment] = []
     for seg in campaign.segments:
-        if isinstance(seg, TrapezoidSegment):
+        if isinstance(seg, TrapezoidSweep):
             mid = 0.5 * (seg.range[0] + seg.range[1])
             half = 0.5 * (seg.range[1] - seg.range[0]) * factor
             out.append(replace(seg, range=(mid - half, mid + half), speeds=(min(seg.speeds),),

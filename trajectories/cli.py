@@ -1,16 +1,18 @@
 """``jointid plan CAMPAIGN.toml [--plot FILE.png] [--quick]``: check and summarise a campaign.
 
 Loads and validates the campaign, plans it with Ruckig (rejecting anything beyond the joint
-limits before anything moves), prints the summary table (durations, share of moving time
-per velocity band, position coverage, peaks against limits) and, with ``--plot``, draws
-q, dq and ddq of one payload run against time with the segments marked.
+limits before anything moves) and prints the summary: durations, per joint its peaks against
+its limits, per velocity band its share of moving time and of its position range, the peak
+torques per payload against ``max_torque``, the predicted condition number of the robot
+model's regressor over the plan and the shares of each quadrant of (dq, tau) per payload
+(:mod:`trajectories.excitation`, :mod:`trajectories.robot_model`). With ``--plot``, draws
+one payload run against time: q, dq and ddq of every joint with its limits and the
+segments.
 
-A robot campaign (``[robot]``) is planned for all its joints at once: the multi-sines with
-``optimise = true`` are optimised first (``--no-optimise``: as written), then the summary per
-joint, the peak torques per payload against ``max_torque`` (robot file's inertial
-parameters), the predicted condition number of the robot model's regressor over the plan
-and the shares of moving samples per velocity band and per quadrant of (dq, tau) for every
-payload (:mod:`trajectories.excitation`, :mod:`trajectories.robot_model`).
+One path for both formats: a ``[joint]`` campaign is a robot with one moving joint (its robot
+built in memory, its torques the ``[control.feedforward]`` model plus the payload); a
+``[robot]`` campaign's multi-sines with ``optimise = true`` are optimised first
+(``--no-optimise``: as written), its torques come from the robot file's inertial parameters.
 """
 
 from __future__ import annotations
@@ -19,16 +21,15 @@ import argparse
 from dataclasses import replace
 from pathlib import Path
 
-from trajectories.plan import BANDS, CampaignPlan, plan_campaign
-
 from . import TrajectoryError
 from .campaign_file import load_any_campaign
 from .excitation import assess_robot_campaign
-from .multi import RobotPlan
-from .robot_campaign import RobotCampaign
+from .multi import feedforward_dynamics
+from .robot_campaign import RobotCampaign, as_robot_campaign
 from .robot_model import OPTIMISE_EVALUATIONS, prepare_robot_campaign, robot_for_campaign
+from .sampled import BANDS, RobotPlan
 
-__all__ = ["plot_plan", "register", "run"]
+__all__ = ["plot_plan", "plot_robot_plan", "register", "run"]
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -54,29 +55,29 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``jointid plan``; returns the exit code."""
     campaign = load_any_campaign(args.campaign)
     if isinstance(campaign, RobotCampaign):
-        return _run_robot(campaign, args)
-    if args.quick:
+        if args.quick:
+            raise TrajectoryError(f"{campaign.source}: --quick: expected a single-joint "
+                                  f"campaign (robot campaigns have no shortened form)")
+    elif args.quick:
         campaign = campaign.quick()
-    plan = plan_campaign(campaign)
-    print(plan.summary().format_table())
-    if args.plot is not None:
-        path = plot_plan(plan, args.plot)
-        print(f"plot: {path}")
-    return 0
-
-
-def _run_robot(campaign: RobotCampaign, args: argparse.Namespace) -> int:
-    if args.quick:
-        raise TrajectoryError(f"{campaign.source}: --quick: expected a single-joint "
-                              f"campaign (robot campaigns have no shortened form)")
-    robot = robot_for_campaign(campaign)
-    played, dyn, results = prepare_robot_campaign(
-        campaign, robot=robot, optimise=not args.no_optimise)
-    a = assess_robot_campaign(played, regressor=dyn.regressor,
-                              inverse_dynamics=dyn.inverse_dynamics)
+    # one path: a [joint] campaign is a robot with one moving joint
+    rc = as_robot_campaign(campaign)
+    robot = robot_for_campaign(rc)
+    played, dyn, results = prepare_robot_campaign(rc, robot=robot,
+                                                  optimise=not args.no_optimise)
+    # a [joint] campaign's torques: its feed-forward model (its robot has no inertias),
+    # without the friction for the quadrants of (dq, tau_out)
+    if rc.single_joint:
+        a = assess_robot_campaign(played, regressor=dyn.regressor,
+                                  inverse_dynamics=feedforward_dynamics(rc.joints),
+                                  tau_out=feedforward_dynamics(rc.joints, friction=False))
+    else:
+        a = assess_robot_campaign(played, regressor=dyn.regressor,
+                                  inverse_dynamics=dyn.inverse_dynamics)
     if results:
         a = replace(a, optimised=results)
-    print(f"robot {robot.name!r} ({robot.source}): moving {', '.join(robot.moving)}; "
+    where = robot.source if not rc.single_joint else "its [joint] table, no robot file"
+    print(f"robot {robot.name!r} ({where}): moving {', '.join(robot.moving)}; "
           f"regressor: {len(dyn.names)} columns (standard parameters, Ia, FC FV OFF per "
           f"joint)")
     if results:
@@ -84,41 +85,19 @@ def _run_robot(campaign: RobotCampaign, args: argparse.Namespace) -> int:
               f"evaluations, deterministic: jointid run plays the same coefficients)")
     print(a)
     if args.plot is not None:
-        path = plot_robot_plan(a.plan, args.plot)
+        path = plot_plan(a.plan, args.plot)
         print(f"plot: {path}")
     return 0
 
 
-def plot_robot_plan(plan: RobotPlan, path: str | Path) -> Path:
-    """Draw q and dq of every joint of a robot plan against time; save as PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    path = Path(path)
-    fig, axes = plt.subplots(2, 1, sharex=True, figsize=(12, 6), constrained_layout=True)
-    for j, nm in enumerate(plan.joint_names):
-        axes[0].plot(plan.t, plan.q[:, j], lw=0.9, label=nm)
-        axes[1].plot(plan.t, plan.dq[:, j], lw=0.9, label=nm)
-    axes[0].set_ylabel("q [rad]")
-    axes[1].set_ylabel("dq [rad/s]")
-    axes[1].set_xlabel("t [s]")
-    for ax in axes:
-        ax.grid(True, alpha=0.3)
-        ax.legend(loc="upper right", fontsize=8)
-    fig.suptitle(f"{plan.name}: one run of {plan.duration_s:.1f} s", fontsize=10)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
-def plot_plan(plan: CampaignPlan, path: str | Path) -> Path:
-    """Draw q, dq, ddq of one run with segment boundaries and labels; save as PNG.
+def plot_plan(plan: RobotPlan, path: str | Path) -> Path:
+    """Draw q, dq, ddq of every joint of one run with each joint's limits (dashed) and the
+    segment boundaries and labels; save as PNG. One joint: the low-velocity band shaded.
 
     Parameters
     ----------
-    plan : CampaignPlan
+    plan : RobotPlan
+        Any plan (a ``[joint]`` campaign's has one joint).
     path : str or Path
         Output image file.
 
@@ -132,43 +111,50 @@ def plot_plan(plan: CampaignPlan, path: str | Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    ref = plan.reference
-    lim = plan.campaign.limits
-    u = plan.campaign.joint.unit
     path = Path(path)
+    units = {plan.unit(j) for j in range(plan.n_joints)}
+    u = units.pop() if len(units) == 1 else "rad or m"
     fig, axes = plt.subplots(3, 1, sharex=True, figsize=(12, 7.5), constrained_layout=True)
-    series = (
-        (ref.q, f"q [{u}]", lim.position),
-        (ref.dq, f"dq [{u}/s]", (-lim.max_velocity, lim.max_velocity)),
-        (ref.ddq, f"ddq [{u}/s²]", (-lim.max_acceleration, lim.max_acceleration)),
-    )
-    for ax, (y, label, (lo, hi)) in zip(axes, series, strict=True):
-        ax.plot(ref.t, y, lw=0.9, color="C0")
-        for bound in (lo, hi):
-            ax.axhline(bound, color="C3", ls="--", lw=0.8)
+    for j, (nm, lim) in enumerate(zip(plan.joint_names, plan.limits, strict=True)):
+        color = "C0" if plan.n_joints == 1 else f"C{j % 10}"
+        series = (
+            (plan.q[:, j], lim.position),
+            (plan.dq[:, j], (-lim.max_velocity, lim.max_velocity)),
+            (plan.ddq[:, j], (-lim.max_acceleration, lim.max_acceleration)),
+        )
+        for ax, (y, (lo, hi)) in zip(axes, series, strict=True):
+            ax.plot(plan.t, y, lw=0.9, color=color, label=nm if plan.n_joints > 1 else None)
+            for bound in (lo, hi):
+                ax.axhline(bound, color="C3" if plan.n_joints == 1 else color, ls="--",
+                           lw=0.8)
+    for ax, label in zip(axes, (f"q [{u}]", f"dq [{u}/s]", f"ddq [{u}/s²]"), strict=True):
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.3)
-    low = BANDS[1] * lim.max_velocity
-    axes[1].axhspan(-low, low, color="C2", alpha=0.15, lw=0,
-                    label=f"|dq| < {100 * BANDS[1]:.0f} % of vmax")
+    if plan.n_joints == 1:
+        low = BANDS[1] * plan.limits[0].max_velocity
+        axes[1].axhspan(-low, low, color="C2", alpha=0.15, lw=0,
+                        label=f"|dq| < {100 * BANDS[1]:.0f} % of vmax")
     axes[1].legend(loc="upper right", fontsize=8)
     # segment boundaries and labels
-    seg = ref.segment
+    seg = plan.segment
     starts = [0, *(int(i) + 1 for i in (seg[1:] != seg[:-1]).nonzero()[0])]
     for k, i0 in enumerate(starts):
-        t0 = ref.t[i0]
-        t1 = ref.t[starts[k + 1]] if k + 1 < len(starts) else ref.t[-1]
+        t0 = plan.t[i0]
+        t1 = plan.t[starts[k + 1]] if k + 1 < len(starts) else plan.t[-1]
         for ax in axes:
             ax.axvline(t0, color="0.4", lw=0.8)
-        name = ref.segment_names[seg[i0]]
+        name = plan.segment_names[seg[i0]]
         axes[0].text(0.5 * (t0 + t1), 1.02, name.replace(" (", "\n("), ha="center",
                      va="bottom", fontsize=8, transform=axes[0].get_xaxis_transform())
     axes[-1].set_xlabel("t [s]")
-    c = plan.campaign
     fig.suptitle(
-        f"{c.name}: one run of {ref.duration_s:.1f} s, x {len(plan.payloads)} payload(s) "
-        f"(limits dashed)", fontsize=10
+        f"{plan.name}: one run of {plan.duration_s:.1f} s, x {max(1, len(plan.payloads))} "
+        f"payload(s) (limits dashed)", fontsize=10
     )
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+#: the robot demo's name of :func:`plot_plan` (one plot for any plan)
+plot_robot_plan = plot_plan

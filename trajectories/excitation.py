@@ -56,7 +56,6 @@ from .multi import (
     RobotPlan,
     _resolve_multisine,
     band_shares,
-    check_torques,
     plan_robot,
     plan_robot_campaign,
 )
@@ -533,25 +532,17 @@ class Assessment:
     optimised: tuple[OptimisedMultisine, ...]
 
     def format_table(self) -> str:
+        # the plan's summary: segments, peaks, bands and the peak torques per payload
         parts = [self.plan.summary().format_table()]
         names = self.plan.joint_names
         w = max(8, *(len(n) for n in names))
-        if self.peak_torque is not None:
-            lines = ["", "peak |tau| [N m] (max_torque)",
-                     f"{'payload':<12} " + " ".join(f"{n:>{w + 10}}" for n in names)]
-            for pay, row in zip(self.campaign.payloads, self.peak_torque, strict=True):
-                cells = [f"{t:.4g} ({lim.max_torque:g})" for t, lim in
-                         zip(row, self.plan.limits, strict=True)]
-                lines.append(f"{f'{pay.mass_kg:g} kg':<12} "
-                             + " ".join(f"{c:>{w + 10}}" for c in cells))
-            parts.append("\n".join(lines))
         for res in self.optimised:
             parts.append(f"\nmulti-sine optimised: condition number {res.cond_start:.4g} -> "
                          f"{res.cond_end:.4g} ({res.n_evaluations} evaluations, {res.stopped})")
         if self.quality is not None:
             parts.append("\n" + self.quality.format_table(bands=False))
         for pay, quad in zip(self.campaign.payloads, self.quadrants, strict=False):
-            lines = ["", f"quadrants of (dq, tau_out), payload {pay.mass_kg:g} kg: 1 and 3 "
+            lines = ["", f"quadrants of (dq, tau_out), payload {pay.label}: 1 and 3 "
                      "motor, 2 and 4 generator",
                      f"{'joint':<{w}} " + " ".join(f"{h:>12}" for h in QUADRANTS)
                      + f" {'tau ~ 0':>12}"]
@@ -568,8 +559,8 @@ class Assessment:
 def assess_robot_campaign(campaign: RobotCampaign, *, regressor: Regressor | None = None,
                           inverse_dynamics: PayloadDynamics | None = None,
                           optimise: bool = False, max_evaluations: int = 1500,
-                          max_time_s: float | None = None, max_samples: int = 4000
-                          ) -> Assessment:
+                          max_time_s: float | None = None, max_samples: int = 4000,
+                          tau_out: PayloadDynamics | None = None) -> Assessment:
     """Optimise (optionally), plan, check torques and predict the excitation quality.
 
     Parameters
@@ -580,6 +571,10 @@ def assess_robot_campaign(campaign: RobotCampaign, *, regressor: Regressor | Non
     inverse_dynamics : callable, optional
         ``(q, dq, ddq, payload) -> tau (n, k)`` [N m]: torque check of every payload run
         and quadrant shares per payload.
+    tau_out : callable, optional
+        The output torque for the quadrant shares when ``inverse_dynamics`` includes more
+        (a ``[joint]`` campaign's feed-forward model without its friction); default
+        ``inverse_dynamics``.
     optimise : bool
         Optimise the ``optimise = true`` multi-sine segments first (:func:`optimise_campaign`).
 
@@ -597,15 +592,18 @@ def assess_robot_campaign(campaign: RobotCampaign, *, regressor: Regressor | Non
         campaign, results = optimise_campaign(campaign, regressor,
                                               max_evaluations=max_evaluations,
                                               max_time_s=max_time_s)
-    plan = plan_robot_campaign(campaign)
+    # the torques of every payload run checked (and their peaks kept) by the planner
+    plan = plan_robot_campaign(campaign, inverse_dynamics=inverse_dynamics)
     peak = None
     quads: list[np.ndarray] = []
     stride = max(1, math.ceil(len(plan) / max_samples))
     if inverse_dynamics is not None:
-        peak = check_torques(plan, inverse_dynamics, campaign.payloads)
+        peak = np.array(plan.peak_torque, dtype=np.float64).reshape(len(campaign.payloads),
+                                                                     plan.n_joints)
         q, dq, ddq = plan.q[::stride], plan.dq[::stride], plan.ddq[::stride]
+        out = tau_out if tau_out is not None else inverse_dynamics
         for pay in campaign.payloads:
-            tau = np.asarray(inverse_dynamics(q, dq, ddq, pay), dtype=np.float64)
+            tau = np.asarray(out(q, dq, ddq, pay), dtype=np.float64)
             quads.append(quadrant_shares(dq, tau, plan.limits))
     qual = None
     if regressor is not None:

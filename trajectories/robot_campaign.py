@@ -1,7 +1,8 @@
 """The robot campaign: a multi-joint arm, its drives, limits, payloads and coordinated excitation.
 
-(Past 600 lines: one file format -- its documented dataclasses, schema and cross-checks;
-split, the format would be scattered.)
+(Past 600 lines: one file format -- its documented dataclasses, schema and cross-checks,
+and the reading of a ``[joint]`` campaign as a robot with one moving joint; split, the format
+would be scattered.)
 
 A campaign file has either a ``[joint]`` table (the single-joint format of
 :mod:`trajectories.campaign`, unchanged) or a ``[robot]`` table (this module).
@@ -56,11 +57,22 @@ description in docs/campaign-robot.md)::
     seed = 0                          # default coefficients are seeded random
     optimise = true                   # `jointid plan` may optimise the coefficients
     [[segments]]
+    kind = "sine"                     # exact periods of q = center - amplitude cos(2 pi f t)
+    joint = "j2"                      # of one joint, the others hold
+    amplitude = 0.5
+    frequency_hz = 0.3
+    center = -1.3
+    periods = 2
+    [[segments]]
     kind = "move"                     # point-to-point moves between rest poses
     poses = [[0.5, -1.0, 1.0], [0.0, -1.2, 1.4]]
     speed = 0.5
     dwell_s = 0.5
     [daq]                             # optional, kept raw for daq/
+
+A ``[joint]`` campaign is read as a robot campaign with one moving joint, without loss, by
+:meth:`RobotCampaign.from_joint_campaign` (no robot file; the one planner,
+:func:`trajectories.multi.plan_robot_campaign`, takes either).
 
 The payload inertia is given about the payload's centre of mass, in the flange frame.
 The robot file itself is read by :func:`trajectories.robot.load_robot` (not here: this
@@ -74,9 +86,22 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-# the single-joint schema's pieces: the same limits table, raw tables and name check
-from .campaign import _LIMITS, MAX_PLAN_CYCLES, Campaign, JointLimits, _nonempty, _RawTable
-from .schema import ArrayOfTables, Field, Table, fail, unknown
+# the single-joint schema's pieces: the same limits table, raw tables, name check, segment
+# fields and plan-size check
+from .campaign import (
+    _LIMITS,
+    Campaign,
+    JointLimits,
+    SineSegment,
+    TrapezoidSweep,
+    _nonempty,
+    _RawTable,
+    check_plan_size,
+    min_duration_s,
+)
+from .campaign import _SINE as _JOINT_SINE
+from .campaign import _TRAPEZOID as _JOINT_TRAPEZOID
+from .schema import ArrayOfTables, Field, Table, TaggedTable, fail, unknown
 
 __all__ = [
     "DriveSpec",
@@ -87,7 +112,10 @@ __all__ = [
     "RobotJoint",
     "RobotPayload",
     "RobotSegment",
+    "JOINT_NAME",
+    "SineSegment",
     "TrapezoidSweep",
+    "as_robot_campaign",
     "campaign_from_dict",
 ]
 
@@ -120,24 +148,39 @@ class RobotJoint:
     kind : {"revolute", "prismatic"}
     limits : JointLimits
         Joint-side limits (position [rad] or [m], velocity, acceleration, jerk, torque).
-    drive : DriveSpec
+    drive : DriveSpec or None
+        None for the joint of a ``[joint]`` campaign (its drive is in ``[daq]``).
     kp : float
         Position-loop gain [N m/rad] or [N/m].
     kd : float
         Velocity gain [N m s/rad] or [N s/m].
+    feedforward : mapping of str to float
+        A ``[joint]`` campaign's ``[control.feedforward]`` (``J`` [kg m^2], ``MX``, ``MY``
+        [kg m], ``Fc`` [N m], ``Fv`` [N m s/rad], every key present); empty for a robot
+        file's joint (its model is the robot file).
+    table : str
+        Dotted key of the joint's table in the campaign file, used in messages: ``"joint"``
+        for a ``[joint]`` campaign; ``""``: ``robot.joints.<name>``.
     """
 
     name: str
     kind: Literal["revolute", "prismatic"]
     limits: JointLimits
-    drive: DriveSpec
+    drive: DriveSpec | None
     kp: float
     kd: float
+    feedforward: Mapping[str, float] = field(default_factory=dict)
+    table: str = ""
 
     @property
     def unit(self) -> str:
         """Position unit, ``"rad"`` or ``"m"``."""
         return "rad" if self.kind == "revolute" else "m"
+
+    @property
+    def key(self) -> str:
+        """Dotted key of the joint's table (``joint`` or ``robot.joints.<name>``)."""
+        return self.table or f"robot.joints.{self.name}"
 
 
 @dataclass(frozen=True)
@@ -168,48 +211,22 @@ class RobotPayload:
         Centre of mass in the flange frame [m].
     inertia : tuple of float, shape (6,)
         ``(XX, XY, XZ, YY, YZ, ZZ)`` about the centre of mass, flange axes [kg m^2].
+    arm_m : float or None
+        A ``[joint]`` campaign's lever arm L_a [m] (paper eq. 32-34): the point mass sits at
+        ``com = (arm_m, 0, 0)`` of the one joint's frame; None for a robot campaign.
     """
 
     mass_kg: float
     com: tuple[float, float, float] = (0.0, 0.0, 0.0)
     inertia: tuple[float, float, float, float, float, float] = (0.0,) * 6
+    arm_m: float | None = None
 
-
-@dataclass(frozen=True)
-class TrapezoidSweep:
-    """Jerk-limited trapezoidal-velocity moves of one joint while others sweep or hold.
-
-    For each speed and cycle: ``joint`` moves to ``range[1]``, dwell, back to ``range[0]``,
-    dwell, each move at ``speed * max_velocity`` (its own time-optimal Ruckig profile). In
-    the same synchronised Ruckig move every joint of ``sweep`` goes to the other end of its
-    sweep range at up to ``sweep_speed * max_velocity`` (so the gravity load on ``joint``
-    changes along the move); the other joints hold their start position.
-
-    Attributes
-    ----------
-    joint : str
-    speeds : tuple of float
-        Fractions of the joint's max_velocity, each in (0, 1].
-    range : tuple of float
-        ``(low, high)`` [rad] or [m] within the joint's position limits.
-    sweep : mapping of str to (float, float)
-        Joint name -> ``(low, high)`` sweep range.
-    sweep_speed : float
-        Fraction of each sweeping joint's max_velocity, in (0, 1].
-    dwell_s : float
-        Rest after each move [s].
-    cycles : int
-        Back-and-forth repetitions per speed.
-    """
-
-    joint: str
-    speeds: tuple[float, ...]
-    range: tuple[float, float]
-    sweep: Mapping[str, tuple[float, float]] = field(default_factory=dict)
-    sweep_speed: float = 0.25
-    dwell_s: float = 0.3
-    cycles: int = 1
-    kind: Literal["trapezoid"] = "trapezoid"
+    @property
+    def label(self) -> str:
+        """``"3.5 kg"`` or, with a lever arm, ``"3.5 kg at 1.277 m"`` (for messages)."""
+        if self.arm_m is None:
+            return f"{self.mass_kg:g} kg"
+        return f"{self.mass_kg:g} kg at {self.arm_m:g} m"
 
 
 @dataclass(frozen=True)
@@ -285,7 +302,7 @@ class MoveSegment:
     kind: Literal["move"] = "move"
 
 
-RobotSegment = TrapezoidSweep | MultisineSegment | MoveSegment
+RobotSegment = TrapezoidSweep | MultisineSegment | MoveSegment | SineSegment
 
 
 @dataclass(frozen=True)
@@ -296,7 +313,9 @@ class RobotCampaign:
     ----------
     name : str
     robot_file : str
-        The robot file as written in the campaign (resolve it relative to the campaign file).
+        The robot file as written in the campaign (resolve it relative to the campaign file);
+        ``""`` for a ``[joint]`` campaign (:meth:`from_joint_campaign`): a robot with one
+        moving joint, described by the campaign itself (limits, ``[control.feedforward]``).
     joints : tuple of RobotJoint
         The moving joints, in the order of ``robot.moving``.
     start : tuple of float
@@ -354,6 +373,58 @@ class RobotCampaign:
             One line naming the source, the dotted key and what was expected.
         """
         return _build(raw, source)
+
+    @classmethod
+    def from_joint_campaign(cls, campaign: Campaign) -> RobotCampaign:
+        """A ``[joint]`` campaign as a robot with one moving joint, without loss.
+
+        The joint is named ``"joint"`` (its table; messages name ``joint.limits...``) and
+        carries the gains and ``[control.feedforward]``; each payload's lever arm becomes
+        ``arm_m`` and ``com = (arm_m, 0, 0)``; the segments are the same (their ``joint``
+        ``""`` is the only moving joint). No robot file: ``robot_file`` is ``""``.
+
+        Parameters
+        ----------
+        campaign : Campaign
+
+        Returns
+        -------
+        RobotCampaign
+        """
+        j = campaign.joint
+        c = campaign.control
+        joint = RobotJoint(JOINT_NAME, j.kind, j.limits, None, c.kp, c.kd,
+                           feedforward=dict(c.feedforward), table="joint")
+        return cls(
+            name=campaign.name,
+            robot_file="",
+            joints=(joint,),
+            start=(j.start,),
+            locked={},
+            control=RobotControl(c.cycle_s, c.velocity_cutoff_hz),
+            payloads=tuple(RobotPayload(p.mass_kg, (p.arm_m, 0.0, 0.0), arm_m=p.arm_m)
+                           for p in campaign.payloads),
+            segments=campaign.segments,
+            daq=campaign.daq,
+            source=campaign.source,
+        )
+
+    @property
+    def single_joint(self) -> bool:
+        """True for a ``[joint]`` campaign read as a robot (no robot file, one joint)."""
+        return not self.robot_file
+
+
+#: name of the moving joint of a ``[joint]`` campaign read as a robot
+JOINT_NAME = "joint"
+
+
+def as_robot_campaign(campaign: Campaign | RobotCampaign) -> RobotCampaign:
+    """Either campaign as a :class:`RobotCampaign` (a ``[joint]`` one:
+    :meth:`RobotCampaign.from_joint_campaign`)."""
+    if isinstance(campaign, RobotCampaign):
+        return campaign
+    return RobotCampaign.from_joint_campaign(campaign)
 
 
 def campaign_from_dict(raw: Mapping[str, Any], source: str = "") -> Campaign | RobotCampaign:
@@ -453,20 +524,21 @@ _PAYLOAD = Table(
                          unit="kg m^2"),
     }
 )
-_KIND_NAMES = ("trapezoid", "multisine", "move")
+_KIND_NAMES = ("trapezoid", "multisine", "move", "sine")
 _KIND = Field(str, choices=_KIND_NAMES)
+# the [joint] format's trapezoid, of one named joint, with an optional sweep of others
 _TRAPEZOID = Table(
     {
         "kind": _KIND,
         "joint": Field(str, check=_nonempty),
-        "speeds": Field(float, list_of=True, gt=0, le=1, unit="fraction of max_velocity"),
-        "range": Field(float, list_of=True, min_len=2, unit="rad or m"),
+        "speeds": _JOINT_TRAPEZOID.fields["speeds"],
+        "range": _JOINT_TRAPEZOID.fields["range"],
         "sweep": _NamedTables(Field(float, list_of=True, min_len=2, unit="rad or m"),
                               required=False),
         "sweep_speed": Field(float, required=False, default=0.25, gt=0, le=1,
                              unit="fraction of max_velocity"),
-        "dwell_s": Field(float, required=False, default=0.3, ge=0, unit="s"),
-        "cycles": Field(int, required=False, default=1, ge=1),
+        "dwell_s": _JOINT_TRAPEZOID.fields["dwell_s"],
+        "cycles": _JOINT_TRAPEZOID.fields["cycles"],
     }
 )
 _MULTISINE = Table(
@@ -493,22 +565,10 @@ _MOVE = Table(
         "dwell_s": Field(float, required=False, default=0.3, ge=0, unit="s"),
     }
 )
-_KINDS = {"trapezoid": _TRAPEZOID, "multisine": _MULTISINE, "move": _MOVE}
-
-
-class _SegmentSpec:
-    required = True
-
-    def validate(self, value: Any, key: str, source: str = "") -> dict:
-        if not isinstance(value, Mapping):
-            raise fail(source, key, "a table", value)
-        if "kind" not in value:
-            raise fail(source, f"{key}.kind",
-                       "a value ('trapezoid', 'multisine' or 'move'), it is missing")
-        kind = value["kind"]
-        if kind not in _KINDS:
-            raise fail(source, f"{key}.kind", "one of 'trapezoid', 'multisine', 'move'", kind)
-        return _KINDS[kind].validate(value, key, source)
+# the [joint] format's sine, of one named joint
+_SINE = Table({"kind": _KIND, "joint": Field(str, check=_nonempty),
+               **{k: f for k, f in _JOINT_SINE.fields.items() if k != "kind"}})
+_KINDS = {"trapezoid": _TRAPEZOID, "multisine": _MULTISINE, "move": _MOVE, "sine": _SINE}
 
 
 _CAMPAIGN = Table(
@@ -517,7 +577,7 @@ _CAMPAIGN = Table(
         "robot": _ROBOT,
         "control": _CONTROL,
         "payloads": ArrayOfTables(_PAYLOAD),
-        "segments": ArrayOfTables(_SegmentSpec()),  # type: ignore[arg-type]
+        "segments": ArrayOfTables(TaggedTable(_KINDS)),  # type: ignore[arg-type]
         "daq": _RawTable(),
     }
 )
@@ -625,7 +685,7 @@ def _build(raw: Mapping[str, Any], source: str) -> RobotCampaign:
     segments = tuple(_segment(s, f"segments[{i}]", source, joints_t, start)
                      for i, s in enumerate(top["segments"]))
     c = top["control"]
-    _check_plan_size(segments, joints_t, c["cycle_s"], source)
+    check_plan_size(segments, _min_durations(segments, joints_t), c["cycle_s"], source)
     return RobotCampaign(
         name=top["name"],
         robot_file=r["file"],
@@ -640,35 +700,21 @@ def _build(raw: Mapping[str, Any], source: str) -> RobotCampaign:
     )
 
 
-def _check_plan_size(segments: tuple[RobotSegment, ...], joints: tuple[RobotJoint, ...],
-                     cycle_s: float, source: str) -> None:
-    """Refuse a plan of more than :data:`~trajectories.campaign.MAX_PLAN_CYCLES` cycles per
-    payload from a lower bound of each segment's duration (multisine: its periods;
-    trapezoid: its cruise moves and dwells; move: its dwells), before anything is planned."""
+def _min_durations(segments: tuple[RobotSegment, ...],
+                   joints: tuple[RobotJoint, ...]) -> list[float]:
+    """A lower bound of each segment's duration [s], before anything is planned (multisine:
+    its periods; sine, trapezoid: :func:`~trajectories.campaign.min_duration_s`; move: its
+    dwells)."""
     by_name = {j.name: j for j in joints}
-    durations = []
+    out = []
     for seg in segments:
         if isinstance(seg, MultisineSegment):
-            durations.append(seg.periods * seg.period_s)
-        elif isinstance(seg, TrapezoidSweep):
-            vmax = by_name[seg.joint].limits.max_velocity
-            span = seg.range[1] - seg.range[0]
-            durations.append(seg.cycles * sum(2.0 * span / (v * vmax) + 2.0 * seg.dwell_s
-                                              for v in seg.speeds))
+            out.append(seg.periods * seg.period_s)
+        elif isinstance(seg, SineSegment | TrapezoidSweep):
+            out.append(min_duration_s(seg, by_name[seg.joint].limits))
         else:
-            durations.append(len(seg.poses) * seg.dwell_s)
-    n = sum(durations) / cycle_s
-    if n <= MAX_PLAN_CYCLES:
-        return
-    i = max(range(len(durations)), key=durations.__getitem__)
-    seg = segments[i]
-    key, value = (("periods", seg.periods) if isinstance(seg, MultisineSegment) else
-                  ("cycles", seg.cycles) if isinstance(seg, TrapezoidSweep) else
-                  ("poses", len(seg.poses)))
-    raise fail(source, f"segments[{i}].{key}",
-               f"a plan of at most {MAX_PLAN_CYCLES} cycles per payload "
-               f"({MAX_PLAN_CYCLES * cycle_s:g} s at cycle_s {cycle_s:g} s; this one: at "
-               f"least {n:.3g} cycles)", value)
+            out.append(len(seg.poses) * seg.dwell_s)
+    return out
 
 
 def _fixed(source: str, key: str, values: tuple[float, ...], n: int) -> tuple:
@@ -696,6 +742,19 @@ def _segment(s: dict, key: str, source: str, joints: tuple[RobotJoint, ...],
         return TrapezoidSweep(joint=s["joint"], speeds=tuple(s["speeds"]), range=rng,
                               sweep=sweep, sweep_speed=s["sweep_speed"], dwell_s=s["dwell_s"],
                               cycles=s["cycles"])
+    if s["kind"] == "sine":
+        _joint_key(source, f"{key}.joint", s["joint"], moving)
+        j = by_name[s["joint"]]
+        c, a = s["center"], s["amplitude"]
+        lo, hi = j.limits.position
+        tol = 1e-9 * max(1.0, hi - lo)
+        rng = f"{j.key}.limits.position [{lo:g}, {hi:g}] {j.unit}"
+        if not lo - tol <= c <= hi + tol:
+            raise fail(source, f"{key}.center", f"a position of {j.name} within {rng}", c)
+        if c - a < lo - tol or c + a > hi + tol:
+            raise fail(source, f"{key}.amplitude", f"center +/- amplitude within {rng}", a)
+        return SineSegment(amplitude=a, frequency_hz=s["frequency_hz"], center=c,
+                           periods=s["periods"], joint=j.name)
     if s["kind"] == "move":
         poses = s["poses"]
         if len(poses[0]) != k:

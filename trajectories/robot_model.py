@@ -22,7 +22,7 @@ deterministically: ``jointid plan`` and ``jointid run`` play the same plan).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -30,11 +30,11 @@ import numpy as np
 import pinocchio as pin
 
 from .excitation import OptimisedMultisine, optimise_campaign
-from .multi import MOVING_FRACTION
-from .robot import Robot, RobotError, RobotPayloadData, RobotRegressor, load_robot
+from .multi import MOVING_FRACTION, G
+from .robot import Robot, RobotError, RobotLimits, RobotPayloadData, RobotRegressor, load_robot
 from .robot_campaign import MultisineSegment, RobotCampaign
 
-__all__ = ["RobotDynamics", "prepare_robot_campaign", "robot_for_campaign",
+__all__ = ["RobotDynamics", "joint_robot", "prepare_robot_campaign", "robot_for_campaign",
            "robot_file_path", "OPTIMISE_EVALUATIONS"]
 
 #: objective evaluations of the multi-sine optimisation in ``jointid plan`` / ``jointid run``
@@ -54,12 +54,17 @@ def robot_file_path(campaign: RobotCampaign) -> str:
 def robot_for_campaign(campaign: RobotCampaign) -> Robot:
     """Load the campaign's robot file with the campaign's moving and locked joints.
 
+    A ``[joint]`` campaign read as a robot (``robot_file == ""``) has no robot file: its
+    robot is built in memory (:func:`joint_robot`).
+
     Raises
     ------
     trajectories.RobotError
         Unreadable robot file, or a campaign joint the robot file does not have (one line
         naming the campaign, the key and the robot file).
     """
+    if campaign.single_joint:
+        return joint_robot(campaign)
     path = robot_file_path(campaign)
     robot = load_robot(path)
     for i, n in enumerate(campaign.moving):
@@ -73,6 +78,43 @@ def robot_for_campaign(campaign: RobotCampaign) -> Robot:
         return robot.with_motion(campaign.moving, locked)
     except RobotError as exc:
         raise RobotError(f"{campaign.source}: robot.locked: {exc}") from None
+
+
+def joint_robot(campaign: RobotCampaign) -> Robot:
+    """The robot of a ``[joint]`` campaign, built in memory: one moving joint, no robot file.
+
+    The joint (named as in the campaign, ``"joint"``) turns about (revolute) or slides along
+    (prismatic) the z axis of the base frame; gravity is ``(0, -g, 0)``, perpendicular to
+    the axis, so the robot model's gravity torque of the revolute joint is
+    ``g (MX1 cos q - MY1 sin q)`` -- the ``[control.feedforward]`` model's
+    ``g (MX cos q + MY sin q)`` with ``MX1 = MX``, ``MY1 = -MY`` (and ``ZZ1 + Ia1 = J``) --
+    and a prismatic joint carries no gravity load, as in that model. The campaign's limits
+    are the robot's; it has no inertial parameters (``inertial = False``: the planner's
+    torque estimate is the feed-forward model, :func:`trajectories.multi.feedforward_dynamics`).
+
+    Parameters
+    ----------
+    campaign : RobotCampaign
+        With one moving joint (:meth:`RobotCampaign.from_joint_campaign`).
+
+    Returns
+    -------
+    trajectories.robot.Robot
+    """
+    if len(campaign.joints) != 1:
+        raise RobotError(f"{campaign.source or campaign.name}: a robot built from the campaign "
+                         f"needs one moving joint, got {len(campaign.joints)} (robot.file)")
+    (j,) = campaign.joints
+    model = pin.Model()
+    axis = pin.JointModelRZ() if j.kind == "revolute" else pin.JointModelPZ()
+    jid = model.addJoint(0, axis, pin.SE3.Identity(), j.name)
+    model.appendBodyToJoint(jid, pin.Inertia.Zero(), pin.SE3.Identity())
+    lim = j.limits
+    limits = {j.name: RobotLimits(lim.position[0], lim.position[1], lim.max_velocity,
+                                  lim.max_acceleration, lim.max_jerk, lim.max_torque)}
+    robot = Robot.from_pinocchio(model, name=campaign.name, limits=limits,
+                                 gravity=(0.0, -G, 0.0), source=campaign.source)
+    return replace(robot, inertial=False)
 
 
 @dataclass(frozen=True, eq=False)

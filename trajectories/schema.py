@@ -172,6 +172,27 @@ class Table:
 
 
 @dataclass(frozen=True)
+class TaggedTable:
+    """A table whose ``kind`` key selects its schema among ``kinds`` (the segments of a
+    campaign); a missing or unknown ``kind`` is an error naming the choices."""
+
+    kinds: Mapping[str, Table]
+    required: bool = True
+
+    def validate(self, value: Any, key: str, source: str = "") -> dict:
+        if not isinstance(value, Mapping):
+            raise fail(source, key, "a table", value)
+        names = [repr(k) for k in self.kinds]
+        if "kind" not in value:
+            listed = names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}"
+            raise fail(source, f"{key}.kind", f"a value ({listed}), it is missing")
+        kind = value["kind"]
+        if kind not in self.kinds:
+            raise fail(source, f"{key}.kind", f"one of {', '.join(names)}", kind)
+        return self.kinds[kind].validate(value, key, source)
+
+
+@dataclass(frozen=True)
 class ArrayOfTables:
     """A TOML array of tables (``[[segments]]``), each validated by ``item``."""
 

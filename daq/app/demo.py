@@ -30,7 +30,7 @@ from ident.report_build import build_report, discover_figures
 from sim_drivers.plant_config import load_plant
 from trajectories.campaign_file import load_campaign
 from trajectories.cli import plot_plan
-from trajectories.plan import plan_campaign
+from trajectories.multi import plan_robot_campaign
 
 from .demo_robot import ROBOT_DEMOS, run_robot_demo
 from .running import run_with_bar
@@ -101,7 +101,7 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
 
     # 1. plan (checked against the limits before anything moves)
     hb.status("planning the campaign")
-    plan = plan_campaign(campaign)
+    plan = plan_robot_campaign(campaign)
     summary = plan.summary()
     plot_plan(plan, out / "campaign_plan.png")
     _say(stream, f"[1/4] planned {campaign.name}: {len(campaign.payloads)} payloads x "

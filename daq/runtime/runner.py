@@ -21,7 +21,6 @@ import numpy as np
 
 from daq import ConfigError, DaqError, __version__
 from trajectories.multi import plan_robot_campaign
-from trajectories.plan import plan_campaign
 from trajectories.robot_campaign import RobotCampaign
 from trajectories.robot_model import prepare_robot_campaign, robot_file_path
 
@@ -324,7 +323,7 @@ def run_campaign(
     loads = bus_loads({ch: [pdo_lengths(d.mode) for d in cfg.drives_on(ch)]
                        for ch in cfg.channels}, campaign.cycle_s, cfg.bitrate)
     load = check_loads(loads, cfg.max_bus_load, str(campaign.source) or "campaign")
-    plan = plan_robot_campaign(campaign) if robot else plan_campaign(campaign)
+    plan = plan_robot_campaign(campaign)  # a [joint] campaign: a robot with one moving joint
     n_pay = len(campaign.payloads)
     todo = list(range(n_pay)) if payloads is None else list(payloads)
     for i in todo:
