@@ -498,12 +498,18 @@ class RawExperiment:
         Positions [rad or m] and torques [N m or N], sampled with the common period.
     ref : ndarray, shape (n, k), or None
         Reference (planned) positions, processed exactly as q.
+    dq, ddq : ndarray, shape (n, k), or None
+        Derivatives the file gives: when both are given, q, dq and ddq are taken as they are
+        (not shifted, filtered nor differentiated) by the states chain
+        (:func:`ident.robot.loaders.preprocess_runs`).
     """
 
     label: str
     q: np.ndarray
     tau: np.ndarray
     ref: np.ndarray | None = None
+    dq: np.ndarray | None = None
+    ddq: np.ndarray | None = None
 
 
 @dataclass
@@ -555,7 +561,8 @@ def filter_experiment(
     instruments: bool = False,
     error: type[Exception] = DataError,
 ) -> FullRate:
-    """Steps 0, 1 and 3 of the module doc on one experiment.
+    """Steps 0, 1 and 3 of the module doc on one experiment (q, dq, ddq as given when the
+    experiment carries both derivatives).
 
     Raises ``error`` when the experiment is too short for the trim and the decimation.
     """
@@ -573,9 +580,12 @@ def filter_experiment(
         return diffcent(x, dt)
 
     keep = slice(s.trim, n - s.trim if s.trim else n)
-    q = _axes(smooth, exp.q)
-    dq = _axes(diff, q)
-    ddq = _axes(diff, dq)
+    if exp.dq is not None and exp.ddq is not None:
+        q, dq, ddq = (np.asarray(x, dtype=float) for x in (exp.q, exp.dq, exp.ddq))
+    else:
+        q = _axes(smooth, exp.q)
+        dq = _axes(diff, q)
+        ddq = _axes(diff, dq)
     tau_f = _axes(lambda x: lowpass(x, s.cutoff_hz, fs), exp.tau)
     ref = ref_ddq = None
     if exp.ref is not None:

@@ -42,7 +42,7 @@ from ..chain import (
 from ..fitting import DQ_MIN_FRACTION
 from . import RobotIdentError
 from .base import placed_payload
-from .loaders import RawRobotRun, check_periods
+from .loaders import RawRobotRun, chain_period
 from .refine_joint import joint_term_columns
 from .signals import RobotColumns, RobotSignals
 
@@ -77,17 +77,10 @@ def resolve_design(
     """
     if not runs:
         raise RobotIdentError("no experiment to preprocess")
-    return resolve_settings(runs[0].q, _period(runs), instruments=instruments,
+    return resolve_settings(runs[0].q, chain_period(runs), instruments=instruments,
                             cutoff_hz=cutoff_hz, decimation=decimation, trim=trim, guard=guard,
                             torque_delay=torque_delay, dq_min=dq_min,
                             sources=[run.source for run in runs], error=RobotIdentError)
-
-
-def _period(runs: Sequence[RawRobotRun]) -> float:
-    """The sampling period [s] the chain uses for every run: the median step of the first
-    (as :func:`ident.preprocess.build_design`), after checking that all runs share it."""
-    check_periods(runs)
-    return float(np.median(np.diff(runs[0].t)))
 
 
 def _experiments(runs: Sequence[RawRobotRun], refs: bool) -> list[RawExperiment]:
@@ -141,7 +134,7 @@ def design_runs(
         missing = next(run.source for run in runs if run.q_ref is None)
         raise RobotIdentError(f"{missing}: no reference trajectory q_ref for the IDIM-IV "
                               "instruments")
-    dt = _period(runs)
+    dt = chain_period(runs)
 
     def check(_: int, exp: RawExperiment) -> None:
         if exp.q.shape[1] != k:
@@ -255,7 +248,7 @@ def sign_checked(
     if cols is None or settings.dq_min is None:
         raise RobotIdentError("sign_checked: expected design_runs signals and resolved "
                               "settings (dq_min)")
-    dt = _period(runs)
+    dt = chain_period(runs)
     keep = cols.keep.copy()
     for i, exp in enumerate(_experiments(runs, False)):
         f = filter_experiment(exp, dt, settings, error=RobotIdentError)
