@@ -62,25 +62,22 @@ def resolve_design(
     runs: Sequence[RawRobotRun],
     *,
     instruments: bool = False,
-    cutoff_hz: float | None = None,
-    decimation: int | None = None,
-    trim: int | None = None,
-    guard: int | None = None,
-    torque_delay: float | None = None,
-    dq_min: float | None = None,
+    **given: float | None,
 ) -> DesignSettings:
     """The settings :func:`design_runs` uses on ``runs``: :func:`ident.chain.resolve_settings`
-    on the first run's axes (the defaults of :func:`ident.preprocess.build_design`).
+    on the first run's axes and the common period (the defaults of
+    :func:`ident.preprocess.build_design`).
 
-    ``torque_delay`` None: :data:`~ident.preprocess.TORQUE_DELAY` when every run is a jointid
-    MCAP log (commands held over the next cycle), else 0 (files of unknown timing).
+    ``given``: ``cutoff_hz``, ``decimation``, ``trim``, ``guard``, ``torque_delay``,
+    ``dq_min`` (None: chosen from the data). ``torque_delay`` None:
+    :data:`~ident.preprocess.TORQUE_DELAY` when every run is a jointid MCAP log (commands held
+    over the next cycle), else 0 (files of unknown timing).
     """
     if not runs:
         raise RobotIdentError("no experiment to preprocess")
     return resolve_settings(runs[0].q, chain_period(runs), instruments=instruments,
-                            cutoff_hz=cutoff_hz, decimation=decimation, trim=trim, guard=guard,
-                            torque_delay=torque_delay, dq_min=dq_min,
-                            sources=[run.source for run in runs], error=RobotIdentError)
+                            sources=[run.source for run in runs], error=RobotIdentError,
+                            **given)  # type: ignore[arg-type]
 
 
 def _experiments(runs: Sequence[RawRobotRun], refs: bool) -> list[RawExperiment]:
