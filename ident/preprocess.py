@@ -476,19 +476,7 @@ def build_design(
         blocks.append(_Block(sub=sub, full=full, index=c.index, dec=dec, mask=c.keep[:, 0],
                              zfull=zfull, zdec=zdec))
     Y, W, dsig, Z = _assemble(blocks, b, signals.revolute)
-    return Design(
-        Y=Y,
-        W=W,
-        names=tuple(lib.names()),
-        library=lib,
-        signals=dsig,
-        cutoff_hz=settings.cutoff_hz,
-        decimation=settings.decimation,
-        trim=settings.trim,
-        dq_min=dq_min,
-        tau_min=tau_min,
-        guard=settings.guard,
-        torque_delay=settings.torque_delay,
-        Z=Z,
-        _blocks=blocks,
-    )
+    return Design(Y=Y, W=W, names=tuple(lib.names()), library=lib, signals=dsig, Z=Z,
+                  cutoff_hz=settings.cutoff_hz, decimation=settings.decimation,
+                  trim=settings.trim, dq_min=dq_min, tau_min=tau_min, guard=settings.guard,
+                  torque_delay=settings.torque_delay, _blocks=blocks)
