@@ -69,6 +69,7 @@ __all__ = [
     "lowpass",
     "resolve_settings",
     "run_chain",
+    "selection",
     "shift",
 ]
 
@@ -604,6 +605,17 @@ def keep_rows(bad: np.ndarray, guard: int, index: np.ndarray) -> np.ndarray:
                             for j in range(bad.shape[1])])
 
 
+def selection(dq: np.ndarray, dq_min: float | None, guard: int, index: np.ndarray,
+              bad: np.ndarray | None = None) -> np.ndarray:
+    """Step 5: the decimated rows ``index`` kept (m, k), axis by axis: not within ``guard``
+    full-rate samples of the stiction area |dq| < ``dq_min`` (none when None), of a ``bad``
+    sample (n_f, k; what the model rejects besides) or of the edges."""
+    reject = np.zeros(dq.shape, dtype=bool) if bad is None else bad
+    if dq_min is not None:
+        reject = reject | (np.abs(dq) < dq_min)
+    return keep_rows(reject, guard, index)
+
+
 @dataclass
 class ChainBlock:
     """One experiment after the chain.
@@ -708,9 +720,6 @@ def run_chain(
         del rows
         dec, index = _decimate_rows(np.ascontiguousarray(stack), settings.decimation)
         del stack
-        reject = np.zeros(full.q.shape, dtype=bool) if bad is None else bad
-        if dq_min is not None:
-            reject = reject | (np.abs(full.dq) < dq_min)
         blocks.append(ChainBlock(full=full, index=index, dec=dec, sizes=sizes,
-                                 keep=keep_rows(reject, settings.guard, index)))
+                                 keep=selection(full.dq, dq_min, settings.guard, index, bad)))
     return blocks, dq_min

@@ -45,10 +45,10 @@ from .chain import (
     default_torque_delay,
     diffcent,
     guarded_keep,
-    keep_rows,
     lowpass,
     resolve_settings,
     run_chain,
+    selection,
     shift,
 )
 from .signals import Signals
@@ -317,12 +317,10 @@ def _selection(
     load_model: tuple[Term, np.ndarray] | None,
 ) -> np.ndarray:
     """Mask over the decimated samples ``index`` of one experiment (see build_design), the
-    chain's selection (:func:`ident.chain.keep_rows`) on one axis."""
+    chain's selection (:func:`ident.chain.selection`) on one axis."""
     bad = _rejected(full, tau_min, load_model)
-    bad = np.zeros(len(full), dtype=bool) if bad is None else bad
-    if dq_min is not None:
-        bad = bad | (np.abs(full.dq) < dq_min)
-    return keep_rows(bad[:, None], guard, index)[:, 0]
+    return selection(full.dq[:, None], dq_min, guard, index,
+                     None if bad is None else bad[:, None])[:, 0]
 
 
 def _load_torque(full: Signals, load_model: tuple[Term, np.ndarray]) -> np.ndarray:

@@ -35,9 +35,9 @@ from ..chain import (
     RawExperiment,
     decimation_index,
     filter_experiment,
-    keep_rows,
     resolve_settings,
     run_chain,
+    selection,
 )
 from ..fitting import DQ_MIN_FRACTION
 from . import RobotIdentError
@@ -253,9 +253,10 @@ def sign_checked(
                             joints=signals.joints, payloads=(runs[i].payload,),
                             source=exp.label)
         tau_out = np.asarray(load_torque(full), dtype=float)
-        bad = (np.abs(f.dq) < settings.dq_min) | (np.sign(f.tau_f) != np.sign(tau_out))
         rows = np.flatnonzero(signals.experiment == i)
-        keep[rows] = keep_rows(bad, settings.guard, decimation_index(f.n, settings.decimation))
+        keep[rows] = selection(f.dq, settings.dq_min, settings.guard,
+                               decimation_index(f.n, settings.decimation),
+                               np.sign(f.tau_f) != np.sign(tau_out))
     before = cols.keep.sum(axis=0)
     kept = keep.sum(axis=0) / np.maximum(before, 1)
     skip = kept < np.broadcast_to(np.asarray(min_kept, dtype=float), kept.shape)
