@@ -1,7 +1,7 @@
 """Loading multi-axis experiments: MCAP logs, CSV and MATLAB files -> :class:`RobotSignals`.
 
 (Past 600 lines: the one module of ident.robot that reads files, by format -- MCAP, CSV,
-MAT -- and the preprocessing chain they share.)
+MAT -- and the states chain, the one chain (ident.chain) without columns.)
 
 Each input file is one experiment (one payload run) of the k moving joints of a robot. The
 axes of the file must match the moving joints of the robot file, in number and -- where the
