@@ -32,6 +32,7 @@ import scipy.optimize
 from trajectories.friction import DEFAULT_Q_S
 
 from . import DataError
+from .chain import _decimate_rows, default_torque_delay
 from .loaders import Experiment, concat
 from .models import (
     IdentModel,
@@ -44,7 +45,7 @@ from .models import (
     power_split,
     usual_model,
 )
-from .preprocess import Design, _decimate_rows, build_design, default_torque_delay
+from .preprocess import Design, build_design
 from .refine_lsq import quick_residual
 from .results import (
     band_errors,

@@ -1,26 +1,17 @@
-"""The single-joint preprocessing chain on a robot's regressor (``chain="columns"``).
+"""The robot's adapter of the one chain (``chain="columns"``, ``jointid fit --robot``).
 
-:func:`ident.preprocess.build_design` builds the regressor columns of one joint at full rate
-on the filtered signals and filters and decimates them *in parallel* with the torque
-(Gautier's parallel filtering, paper section IV.B); :func:`design_runs` does the same with
-the n-dof regressor, per experiment, with the same functions and the same default settings:
+:func:`design_runs` runs :func:`ident.chain.run_chain` -- the chain
+:func:`ident.preprocess.build_design` runs for one joint, with the same settings
+(:func:`ident.chain.resolve_settings`) -- with the n-dof regressor as its column builder:
 
-0. q interpolated to the torque's instant (``torque_delay``; half a cycle for jointid's MCAP
-   logs, :data:`ident.preprocess.TORQUE_DELAY`), every axis;
-1. zero-phase Butterworth low-pass of q (cut-off: the largest
-   :func:`~ident.preprocess.choose_cutoff` over the axes of the first experiment, at least
-   :data:`~ident.preprocess.CUTOFF_FLOOR_IV` f_s with instruments), central differences for
-   dq and ddq;
-2. the standard regressor ``RobotRegressor.rigid_kpn``, the known torque (payload, and the
-   known rotors' Ia_j ddq_j with ``known_rotor_inertia``) and
-   sign(dq) at full rate (and, for IDIM-IV, the regressor and payload torque with the
-   reference trajectory's acceleration);
-3. edge trimming (max(ceil(3 f_s / cut-off), 2 r) samples);
-4. decimation by r = round(f_s / cut-off) of the raw torque, the states and every column
-   (MATLAB ``decimate``);
-5. per joint, the stiction area |dq_j| < dq_min (1 % of the largest full-rate |dq| by
-   default) evaluated at full rate and dilated by the guard 3 r, plus the first and last
-   guard samples, leave joint j's decimated rows out (:attr:`RobotColumns.keep`).
+- the standard regressor ``RobotRegressor.rigid_kpn``, the known torque (payload, and the
+  known rotors' Ia_j ddq_j with ``known_rotor_inertia``), sign(dq) and the filtered reference
+  position are built at full rate on the filtered states (and, for IDIM-IV, the regressor
+  and the known torque with the reference trajectory's acceleration), then filtered and
+  decimated in parallel with the torque (Gautier's parallel filtering, paper section IV.B);
+- per joint, the stiction area |dq_j| < dq_min (1 % of the largest full-rate |dq| by
+  default) evaluated at full rate and dilated by the guard 3 r, plus the first and last
+  guard samples, leave joint j's decimated rows out (:attr:`RobotColumns.keep`).
 
 On a robot with one moving joint this is exactly the single-joint design (the RX130L joint 3
 of the demo gives the single-joint ``jointid fit`` numbers, ``tests/test_robot_design.py``).
@@ -33,27 +24,25 @@ of one experiment, k p (1 + IV) floats per sample, refused above :data:`MAX_BYTE
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
-from ..fitting import DQ_MIN_FRACTION
-from ..preprocess import (
-    CUTOFF_FLOOR_IV,
-    _decimate_rows,
-    choose_cutoff,
+from ..chain import (
+    ChainSettings,
+    FullRate,
+    RawExperiment,
     decimation_index,
-    default_rates,
-    default_torque_delay,
-    diffcent,
-    guarded_keep,
-    lowpass,
-    shift,
+    filter_experiment,
+    resolve_settings,
+    run_chain,
+    selection,
 )
+from ..fitting import DQ_MIN_FRACTION
 from . import RobotIdentError
 from .base import placed_payload
-from .loaders import RawRobotRun, check_periods
+from .loaders import RawRobotRun, chain_period
 from .refine_joint import joint_term_columns
 from .signals import RobotColumns, RobotSignals
 
@@ -63,128 +52,37 @@ __all__ = ["DesignSettings", "design_runs", "joint_columns", "resolve_design", "
 #: Largest full-rate regressor of one experiment the columns chain builds [bytes].
 MAX_BYTES = 4 * 2**30
 
-
-@dataclass(frozen=True)
-class DesignSettings:
-    """Resolved settings of :func:`design_runs` (``None`` in :func:`resolve_design`'s
-    arguments: chosen from the data as the module doc says).
-
-    Attributes
-    ----------
-    cutoff_hz : float
-        Butterworth cut-off on q [Hz].
-    decimation : int
-        Decimation factor r.
-    trim : int
-        Full-rate samples cut at both ends of each experiment.
-    guard : int
-        Full-rate samples around a rejected one that are rejected too.
-    torque_delay : float
-        Instant of the torque after the position sample [samples].
-    dq_min : float or None
-        Stiction threshold [rad/s]; None: :data:`ident.fitting.DQ_MIN_FRACTION` of the
-        largest full-rate |dq| of the identification experiments.
-    """
-
-    cutoff_hz: float
-    decimation: int
-    trim: int
-    guard: int
-    torque_delay: float
-    dq_min: float | None = None
-
-    def as_dict(self) -> dict[str, float | int | None]:
-        """The settings, for reports and JSON."""
-        return {"cutoff_hz": self.cutoff_hz, "decimation": self.decimation, "trim": self.trim,
-                "guard": self.guard, "torque_delay": self.torque_delay, "dq_min": self.dq_min}
+#: The resolved settings of :func:`design_runs`: the chain's (``dq_min`` None:
+#: :data:`ident.fitting.DQ_MIN_FRACTION` of the largest full-rate |dq| of the
+#: identification experiments).
+DesignSettings = ChainSettings
 
 
 def resolve_design(
     runs: Sequence[RawRobotRun],
     *,
     instruments: bool = False,
-    cutoff_hz: float | None = None,
-    decimation: int | None = None,
-    trim: int | None = None,
-    guard: int | None = None,
-    torque_delay: float | None = None,
-    dq_min: float | None = None,
+    **given: float | None,
 ) -> DesignSettings:
-    """The settings :func:`design_runs` uses on ``runs`` (module doc; the defaults of
+    """The settings :func:`design_runs` uses on ``runs``: :func:`ident.chain.resolve_settings`
+    on the first run's axes and the common period (the defaults of
     :func:`ident.preprocess.build_design`).
 
-    ``torque_delay`` None: :data:`~ident.preprocess.TORQUE_DELAY` when every run is a jointid
-    MCAP log (commands held over the next cycle), else 0 (files of unknown timing).
+    ``given``: ``cutoff_hz``, ``decimation``, ``trim``, ``guard``, ``torque_delay``,
+    ``dq_min`` (None: chosen from the data). ``torque_delay`` None:
+    :data:`~ident.preprocess.TORQUE_DELAY` when every run is a jointid MCAP log (commands held
+    over the next cycle), else 0 (files of unknown timing).
     """
     if not runs:
         raise RobotIdentError("no experiment to preprocess")
-    dt = _period(runs)
-    fs = 1.0 / dt
-    if cutoff_hz is None:
-        floor = CUTOFF_FLOOR_IV if instruments else 0.05
-        q0 = runs[0].q
-        cutoff_hz = max(choose_cutoff(q0[:, j], dt, floor) for j in range(q0.shape[1]))
-    cutoff_hz = float(cutoff_hz)
-    if not 0 < cutoff_hz < fs / 2:
-        raise RobotIdentError(f"cut-off {cutoff_hz:g} Hz: expected between 0 and the Nyquist "
-                              f"frequency {fs / 2:g} Hz")
-    r, trim, guard = default_rates(fs, cutoff_hz, decimation, trim, guard)
-    if r < 1:
-        raise RobotIdentError(f"decimation must be a positive integer, got {decimation}")
-    if trim < 0:
-        raise RobotIdentError(f"trim must be >= 0, got {trim}")
-    if guard < 0:
-        raise RobotIdentError(f"guard must be >= 0, got {guard}")
-    if torque_delay is None:
-        torque_delay = default_torque_delay(run.source for run in runs)
-    torque_delay = float(torque_delay)
-    if not 0 <= torque_delay < 1:
-        raise RobotIdentError(f"torque_delay must lie in [0, 1) samples, got {torque_delay}")
-    if dq_min is not None and not dq_min >= 0:
-        raise RobotIdentError(f"dq_min must be >= 0 [rad/s], got {dq_min}")
-    return DesignSettings(cutoff_hz, r, trim, guard, torque_delay,
-                          None if dq_min is None else float(dq_min))
+    return resolve_settings(runs[0].q, chain_period(runs), instruments=instruments,
+                            sources=[run.source for run in runs], error=RobotIdentError,
+                            **given)  # type: ignore[arg-type]
 
 
-def _period(runs: Sequence[RawRobotRun]) -> float:
-    """The sampling period [s] the chain uses for every run: the median step of the first
-    (as :func:`ident.preprocess.build_design`), after checking that all runs share it."""
-    check_periods(runs)
-    return float(np.median(np.diff(runs[0].t)))
-
-
-def _filtered(s: DesignSettings, q: np.ndarray, dt: float) -> np.ndarray:
-    """q (n, k) interpolated to the torque instant and low-pass filtered, axis by axis with
-    the single-joint calls (the same rounding: sign(dq) of a joint at rest is decided by it,
-    so is the period: the single-joint chain's, :func:`_period`)."""
-    fs = 1.0 / dt
-    return np.column_stack([lowpass(shift(q[:, j], s.torque_delay), s.cutoff_hz, fs)
-                            for j in range(q.shape[1])])
-
-
-def _diff(x: np.ndarray, dt: float) -> np.ndarray:
-    """:func:`~ident.preprocess.diffcent` axis by axis (see :func:`_filtered`)."""
-    return np.column_stack([diffcent(x[:, j], dt) for j in range(x.shape[1])])
-
-
-def _states(run: RawRobotRun, s: DesignSettings, dt: float) -> tuple:
-    """Full-rate filtered q, dq, ddq (n_f, k) of a run after edge trimming, and the trim
-    slice."""
-    n = run.t.size
-    if n - 2 * s.trim < max(4 * s.decimation, 10):
-        raise RobotIdentError(f"{run.source}: {n} samples, too few after trimming {s.trim} "
-                              f"at each end and decimating by {s.decimation}")
-    q = _filtered(s, run.q, dt)
-    dq = _diff(q, dt)
-    keep = slice(s.trim, n - s.trim if s.trim else n)
-    return q[keep], dq[keep], _diff(dq, dt)[keep], keep
-
-
-def _keep(bad: np.ndarray, guard: int, index: np.ndarray) -> np.ndarray:
-    """Rows kept (m, k) at the decimated samples ``index``, joint by joint
-    (:func:`~ident.preprocess.guarded_keep` of each column of ``bad`` (n_f, k))."""
-    return np.column_stack([guarded_keep(bad[:, j], guard, index)
-                            for j in range(bad.shape[1])])
+def _experiments(runs: Sequence[RawRobotRun], refs: bool) -> list[RawExperiment]:
+    return [RawExperiment(run.source, run.q, run.tau, run.q_ref if refs else None)
+            for run in runs]
 
 
 def design_runs(
@@ -195,7 +93,7 @@ def design_runs(
     instruments: bool = False,
     base=None,
 ) -> tuple[RobotSignals, float]:
-    """Filter, build the regressor at full rate, decimate in parallel, select (module doc).
+    """The chain with the n-dof regressor as column builder (module doc).
 
     Parameters
     ----------
@@ -227,88 +125,83 @@ def design_runs(
     if not runs:
         raise RobotIdentError("no experiment to preprocess")
     joints = tuple(regressor.joints)
-    k, p, r = len(joints), int(regressor.p), settings.decimation
+    k, p = len(joints), int(regressor.p)
     has_ref = all(run.q_ref is not None for run in runs)
     if instruments and not has_ref:
         missing = next(run.source for run in runs if run.q_ref is None)
         raise RobotIdentError(f"{missing}: no reference trajectory q_ref for the IDIM-IV "
                               "instruments")
-    states = []
-    dt = _period(runs)
-    for run in runs:
-        if run.q.shape[1] != k:
-            raise RobotIdentError(f"{run.source}: {run.q.shape[1]} axes, expected {k} "
+    dt = chain_period(runs)
+
+    def check(_: int, exp: RawExperiment) -> None:
+        if exp.q.shape[1] != k:
+            raise RobotIdentError(f"{exp.label}: {exp.q.shape[1]} axes, expected {k} "
                                   f"({', '.join(joints)})")
-        need = (run.t.size - 2 * settings.trim) * k * p * 8 * (2 if instruments else 1)
+        need = (exp.q.shape[0] - 2 * settings.trim) * k * p * 8 * (2 if instruments else 1)
         if need > MAX_BYTES:
-            raise RobotIdentError(f"{run.source}: the full-rate regressor needs {need / 2**30:.1f}"
-                                  f" GiB (more than {MAX_BYTES / 2**30:.0f}); use the states "
-                                  "chain (--chain states) or split the log")
-        states.append(_states(run, settings, dt))
-    dq_min = settings.dq_min
-    if dq_min is None:
-        dq_min = DQ_MIN_FRACTION * max(float(np.max(np.abs(s[1]))) for s in states)
+            raise RobotIdentError(f"{exp.label}: the full-rate regressor needs "
+                                  f"{need / 2**30:.1f} GiB (more than {MAX_BYTES / 2**30:.0f});"
+                                  " use the states chain (--chain states) or split the log")
+
     placed: dict = {}  # lever-arm payloads, placed (eq. 34-35)
-    parts: dict[str, list[np.ndarray]] = {n: [] for n in (
-        "t", "q", "dq", "ddq", "tau", "p", "sign", "keep", "W", "Wz", "pz", "ref", "e")}
-    for i, (run, (q, dq, ddq, keep)) in enumerate(zip(runs, states, strict=True)):
-        nf = q.shape[0]
+
+    def columns(i: int, f: FullRate) -> tuple[list[np.ndarray], None]:
+        run = runs[i]
         pay = placed_payload(run.payload, regressor, base, run.source, placed)
 
-        def torque(acc: np.ndarray, q=q, dq=dq, pay=pay) -> np.ndarray:
+        def torque(acc: np.ndarray) -> np.ndarray:
             # the known torques: the payload's and the known rotors' Ia_j ddq_j (zero unless
             # RobotRegressor(known_rotor_inertia=True)), filtered with the columns
-            out = (np.asarray(regressor.payload_torque(q, dq, acc, pay), dtype=float)
-                   if pay.mass > 0 else np.zeros((q.shape[0], k)))
+            out = (np.asarray(regressor.payload_torque(f.q, f.dq, acc, pay), dtype=float)
+                   if pay.mass > 0 else np.zeros((f.n, k)))
             if np.any(getattr(regressor, "known_Ia", 0.0)):
                 out = out + regressor.known_torque(acc)
             return out
 
-        rows = [run.tau[keep].T, q.T, dq.T, ddq.T, torque(ddq).T, np.sign(dq).T]
-        W = np.asarray(regressor.rigid_kpn(q, dq, ddq)).reshape(k * p, nf)
-        rows.append(W)
-        ref = None
+        rows = [torque(f.ddq).T, np.sign(f.dq).T,
+                np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ddq)).reshape(k * p, f.n)]
         if has_ref:
-            ref = _filtered(settings, run.q_ref, dt)  # type: ignore[arg-type]
-            rows.append(ref[keep].T)
+            rows.append(f.ref.T)  # type: ignore[union-attr]
         if instruments:
-            ddr = _diff(_diff(ref, dt), dt)[keep]  # type: ignore[arg-type]
-            rows.append(np.asarray(regressor.rigid_kpn(q, dq, ddr)).reshape(k * p, nf))
-            rows.append(torque(ddr).T)
-        stack = np.ascontiguousarray(np.concatenate(rows, axis=0))
-        del rows, W
-        dec, index = _decimate_rows(stack, r)
-        del stack
-        m = index.size
-        a = 0
-        for name, size in (("tau", k), ("q", k), ("dq", k), ("ddq", k), ("p", k),
-                           ("sign", k)):
-            parts[name].append(dec[a:a + size].T)
-            a += size
-        parts["W"].append(dec[a:a + k * p].reshape(k, p, m))
-        a += k * p
+            rows.append(np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ref_ddq)).reshape(k * p,
+                                                                                     f.n))
+            rows.append(torque(f.ref_ddq).T)  # type: ignore[arg-type]
+        return rows, None
+
+    blocks, dq_min = run_chain(_experiments(runs, has_ref), dt, settings, columns,
+                               instruments=instruments, dq_min_rel=DQ_MIN_FRACTION,
+                               check=check, error=RobotIdentError)
+    parts: dict[str, list[np.ndarray]] = {n: [] for n in (
+        "t", "q", "dq", "ddq", "tau", "p", "sign", "keep", "W", "Wz", "pz", "ref", "e")}
+    for i, (run, b) in enumerate(zip(runs, blocks, strict=True)):
+        m = b.index.size
+        for name, x in zip(("tau", "q", "dq", "ddq"), b.states(), strict=True):
+            parts[name].append(x)
+        cols = b.columns()
+        parts["p"].append(cols[0].T)
+        parts["sign"].append(cols[1].T)
+        parts["W"].append(cols[2].reshape(k, p, m))
         if has_ref:
-            parts["ref"].append(dec[a:a + k].T)
-            a += k
+            parts["ref"].append(cols[3].T)
         if instruments:
-            parts["Wz"].append(dec[a:a + k * p].reshape(k, p, m))
-            parts["pz"].append(dec[a + k * p:a + k * p + k].T)
-        parts["t"].append(run.t[keep][index])
+            parts["Wz"].append(cols[4].reshape(k, p, m))
+            parts["pz"].append(cols[5].T)
+        parts["t"].append(run.t[b.full.keep][b.index])
         parts["e"].append(np.full(m, i))
-        parts["keep"].append(_keep(np.abs(dq) < dq_min, settings.guard, index))
+        parts["keep"].append(b.keep)
 
     def cat(name: str, axis: int = 0) -> np.ndarray:
         return np.ascontiguousarray(np.concatenate(parts[name], axis=axis))
 
-    columns = RobotColumns(W=cat("W", 2), p=cat("p"), sign=cat("sign"), keep=cat("keep"),
-                           Wz=cat("Wz", 2) if instruments else None,
-                           pz=cat("pz") if instruments else None)
+    columns_ = RobotColumns(W=cat("W", 2), p=cat("p"), sign=cat("sign"), keep=cat("keep"),
+                            Wz=cat("Wz", 2) if instruments else None,
+                            pz=cat("pz") if instruments else None)
     sig = RobotSignals(t=cat("t"), q=cat("q"), dq=cat("dq"), ddq=cat("ddq"), tau=cat("tau"),
                        joints=joints, experiment=cat("e"),
                        payloads=tuple(run.payload for run in runs),
                        q_ref=cat("ref") if has_ref else None,
-                       source=", ".join(run.source for run in runs), columns=columns)
-    return sig, float(dq_min)
+                       source=", ".join(run.source for run in runs), columns=columns_)
+    return sig, float(dq_min)  # type: ignore[arg-type]
 
 
 def sign_checked(
@@ -331,7 +224,8 @@ def sign_checked(
         What built ``signals``.
     load_torque : callable
         RobotSignals -> tau_out_hat (n, k) [N m], e.g. ``RobotModel.load_torque`` of a first
-        usual fit; evaluated at full rate on the filtered states of each run.
+        usual fit; evaluated at full rate on the filtered states of each run
+        (:func:`ident.chain.filter_experiment`).
     min_kept : float or ndarray, shape (k,)
         A joint keeps its rows unchecked when the check would keep less than this fraction
         of them (tau_out near zero over much of the data: no load to compare with); per
@@ -351,20 +245,18 @@ def sign_checked(
     if cols is None or settings.dq_min is None:
         raise RobotIdentError("sign_checked: expected design_runs signals and resolved "
                               "settings (dq_min)")
-    dt = _period(runs)
+    dt = chain_period(runs)
     keep = cols.keep.copy()
-    for i, run in enumerate(runs):
-        q, dq, ddq, trim = _states(run, settings, dt)
-        tau_f = np.column_stack([lowpass(run.tau[:, j], settings.cutoff_hz, 1.0 / dt)
-                                 for j in range(run.tau.shape[1])])[trim]
-        full = RobotSignals(t=run.t[trim], q=q, dq=dq, ddq=ddq, tau=tau_f,
-                            joints=signals.joints, payloads=(run.payload,),
-                            source=run.source)
+    for i, exp in enumerate(_experiments(runs, False)):
+        f = filter_experiment(exp, dt, settings, error=RobotIdentError)
+        full = RobotSignals(t=runs[i].t[f.keep], q=f.q, dq=f.dq, ddq=f.ddq, tau=f.tau_f,
+                            joints=signals.joints, payloads=(runs[i].payload,),
+                            source=exp.label)
         tau_out = np.asarray(load_torque(full), dtype=float)
-        bad = (np.abs(dq) < settings.dq_min) | (np.sign(tau_f) != np.sign(tau_out))
         rows = np.flatnonzero(signals.experiment == i)
-        keep[rows] = _keep(bad, settings.guard, decimation_index(q.shape[0],
-                                                                 settings.decimation))
+        keep[rows] = selection(f.dq, settings.dq_min, settings.guard,
+                               decimation_index(f.n, settings.decimation),
+                               np.sign(f.tau_f) != np.sign(tau_out))
     before = cols.keep.sum(axis=0)
     kept = keep.sum(axis=0) / np.maximum(before, 1)
     skip = kept < np.broadcast_to(np.asarray(min_kept, dtype=float), kept.shape)

@@ -1,7 +1,7 @@
 """Loading multi-axis experiments: MCAP logs, CSV and MATLAB files -> :class:`RobotSignals`.
 
 (Past 600 lines: the one module of ident.robot that reads files, by format -- MCAP, CSV,
-MAT -- and the preprocessing chain they share.)
+MAT -- and the states chain, the one chain (ident.chain) without columns.)
 
 Each input file is one experiment (one payload run) of the k moving joints of a robot. The
 axes of the file must match the moving joints of the robot file, in number and -- where the
@@ -38,15 +38,19 @@ MAT (v5/v7, and v7.3 through h5py)
 
 Preprocessing (the "states" chain)
 ----------------------------------
-:func:`preprocess_runs`, per experiment and per axis, with the functions of
-:mod:`ident.preprocess`: zero-phase Butterworth low-pass of q (cut-off chosen from the
-motion bandwidth by :func:`~ident.preprocess.choose_cutoff`, the largest over the axes),
-central differences for dq and ddq, edge trimming, then decimation of every signal (the
-torque with its anti-alias filter, MATLAB ``decimate``); the estimator builds the rigid-body
-regressor from the decimated, already band-limited states, chunk by chunk (memory bounded on
-any log length). The single-joint chain itself -- the regressor columns built at full rate
-and decimated in parallel with the torque, the torque delay, the IV cut-off floor, the guard
--- is :mod:`ident.robot.design` (``jointid fit --robot``'s default).
+:func:`preprocess_runs` runs the one chain, :func:`ident.chain.run_chain` (the chain of
+:func:`ident.preprocess.build_design` and :mod:`ident.robot.design`), with no column
+builder: per experiment and per axis the zero-phase Butterworth low-pass of q (cut-off chosen
+from the motion bandwidth by :func:`~ident.chain.choose_cutoff`, the largest over the axes),
+central differences for dq and ddq, edge trimming, then decimation of the torque and the
+states (MATLAB ``decimate``); the estimator builds the rigid-body regressor afterwards from
+the decimated, already band-limited states, chunk by chunk (memory bounded on any log
+length). Its own settings: the decimation r = floor(0.4 f_s / cut-off) by default (the
+decimated states keep the motion's band, since the nonlinear columns are built after the
+decimation; the columns chain uses round(f_s / cut-off)), no torque delay, and derivatives
+given by the file taken as they are. The columns chain -- the regressor columns built at full
+rate and decimated in parallel with the torque, the torque delay, the IV cut-off floor, the
+guard -- is :mod:`ident.robot.design` (``jointid fit --robot``'s default).
 """
 
 from __future__ import annotations
@@ -63,6 +67,7 @@ import numpy as np
 from daq.protocol.reader import LogReadError, read_run
 
 from .. import DataError
+from ..chain import ChainSettings, RawExperiment, resolve_settings, run_chain
 from ..loaders import (
     GAP_PERIODS,
     IRREGULAR_TOL,
@@ -77,7 +82,6 @@ from ..loaders import (
     resolve_path,
     uniform_grid,
 )
-from ..preprocess import choose_cutoff, decimate, diffcent, lowpass
 from ..timing import align_to_torque
 from . import RobotIdentError
 from .signals import RobotPayloadData, RobotSignals
@@ -88,6 +92,7 @@ __all__ = [
     "check_periods",
     "load_robot_runs",
     "load_robot_signals",
+    "chain_period",
     "preprocess_runs",
     "resolved_settings",
     "parse_robot_mapping",
@@ -648,24 +653,27 @@ def check_periods(runs: Sequence[RawRobotRun]) -> float:
     return dt
 
 
-def _settings(runs: Sequence[RawRobotRun], pre: RobotPreprocessing) -> tuple[float, int, int]:
-    dt = check_periods(runs)
-    fs = 1.0 / dt
-    cutoff = pre.cutoff_hz
-    if cutoff is None:
-        q0 = runs[0].q
-        cutoff = max(choose_cutoff(q0[:, j], dt) for j in range(q0.shape[1]))
-    cutoff = float(cutoff)
-    if not 0 < cutoff < fs / 2:
-        raise RobotIdentError(f"cut-off {cutoff:g} Hz: expected between 0 and the Nyquist "
-                              f"frequency {fs / 2:g} Hz")
-    r = pre.decimation if pre.decimation is not None else max(1, int(0.4 * fs / cutoff))
-    if int(r) < 1:
-        raise RobotIdentError(f"decimation must be a positive integer, got {r}")
-    trim = pre.trim if pre.trim is not None else int(np.ceil(3 * fs / cutoff))
-    if int(trim) < 0:
-        raise RobotIdentError(f"trim must be >= 0, got {trim}")
-    return cutoff, int(r), int(trim)
+def chain_period(runs: Sequence[RawRobotRun]) -> float:
+    """The sampling period [s] the chain uses for every run: the median step of the first
+    (as :func:`ident.preprocess.build_design`), after :func:`check_periods`."""
+    check_periods(runs)
+    return float(np.median(np.diff(runs[0].t)))
+
+
+def _settings(runs: Sequence[RawRobotRun], pre: RobotPreprocessing) -> ChainSettings:
+    """The chain's settings (:func:`ident.chain.resolve_settings`) with the states chain's
+    decimation rule: r = floor(0.4 f_s / cut-off) when not given (the decimated states keep
+    the motion's band), no torque delay."""
+    if not runs:
+        raise RobotIdentError("no experiment to preprocess")
+    dt = chain_period(runs)
+    s = resolve_settings(runs[0].q, dt, cutoff_hz=pre.cutoff_hz, decimation=pre.decimation,
+                         trim=pre.trim, torque_delay=0.0, error=RobotIdentError)
+    if pre.decimation is None:
+        r = max(1, int(0.4 / dt / s.cutoff_hz + 1e-9))  # 1e-9: an exact ratio stays whole
+        s = resolve_settings(runs[0].q, dt, cutoff_hz=s.cutoff_hz, decimation=r,
+                             trim=pre.trim, torque_delay=0.0, error=RobotIdentError)
+    return s
 
 
 def preprocess_runs(
@@ -673,7 +681,7 @@ def preprocess_runs(
     joints: Sequence[str],
     preprocessing: RobotPreprocessing | None = None,
 ) -> RobotSignals:
-    """Filter, differentiate, trim and decimate every experiment; stack them.
+    """The states chain: :func:`ident.chain.run_chain` with no columns; the states stacked.
 
     Parameters
     ----------
@@ -695,47 +703,30 @@ def preprocess_runs(
     RobotIdentError
         Different sampling periods, bad settings, an experiment too short for them.
     """
-    if not runs:
-        raise RobotIdentError("no experiment to preprocess")
-    pre = preprocessing or RobotPreprocessing()
-    cutoff, r, trim = _settings(runs, pre)
-    parts: dict[str, list[np.ndarray]] = {s: [] for s in ("t", "q", "dq", "ddq", "tau", "e")}
-    refs: list[np.ndarray] = []
+    settings = _settings(runs, preprocessing or RobotPreprocessing())
     has_ref = all(run.q_ref is not None for run in runs)
-    for i, run in enumerate(runs):
-        n, dt = run.t.size, run.dt
-        fs = 1.0 / dt
-        if n - 2 * trim < max(4 * r, 10):
-            raise RobotIdentError(f"{run.source}: {n} samples, too few after trimming {trim} "
-                                  f"at each end and decimating by {r}")
-        if run.dq is not None and run.ddq is not None:
-            q, dq, ddq = run.q, run.dq, run.ddq
-        else:
-            q = lowpass(run.q, cutoff, fs)
-            dq = diffcent(q, dt)
-            ddq = diffcent(dq, dt)
-        keep = slice(trim, n - trim if trim else n)
-        stack = [run.t[keep, None], q[keep], dq[keep], ddq[keep], run.tau[keep]]
-        if has_ref:
-            stack.append(lowpass(run.q_ref, cutoff, fs)[keep])  # type: ignore[arg-type]
-        dec, _ = decimate(np.column_stack(stack), r)
-        k = q.shape[1]
-        parts["t"].append(dec[:, 0])
-        for j, name in enumerate(("q", "dq", "ddq", "tau")):
-            parts[name].append(dec[:, 1 + j * k : 1 + (j + 1) * k])
-        if has_ref:
-            refs.append(dec[:, 1 + 4 * k :])
-        parts["e"].append(np.full(dec.shape[0], i))
+    exps = [RawExperiment(run.source, run.q, run.tau, run.q_ref if has_ref else None,
+                          run.dq, run.ddq) for run in runs]
+    blocks, _ = run_chain(exps, chain_period(runs), settings,
+                          lambda _, f: ([f.ref.T] if has_ref else [], None),
+                          error=RobotIdentError)
+    states = [b.states() for b in blocks]
+
+    def cat(i: int) -> np.ndarray:
+        return np.ascontiguousarray(np.concatenate([s[i] for s in states]))
+
     return RobotSignals(
-        t=np.concatenate(parts["t"]),
-        q=np.concatenate(parts["q"]),
-        dq=np.concatenate(parts["dq"]),
-        ddq=np.concatenate(parts["ddq"]),
-        tau=np.concatenate(parts["tau"]),
+        t=np.concatenate([run.t[b.full.keep][b.index] for run, b in zip(runs, blocks,
+                                                                         strict=True)]),
+        q=cat(1),
+        dq=cat(2),
+        ddq=cat(3),
+        tau=cat(0),
         joints=tuple(joints),
-        experiment=np.concatenate(parts["e"]),
+        experiment=np.concatenate([np.full(b.index.size, i) for i, b in enumerate(blocks)]),
         payloads=tuple(run.payload for run in runs),
-        q_ref=np.concatenate(refs) if has_ref else None,
+        q_ref=(np.ascontiguousarray(np.concatenate([b.columns()[0].T for b in blocks]))
+               if has_ref else None),
         source=", ".join(run.source for run in runs),
     )
 
@@ -743,8 +734,8 @@ def preprocess_runs(
 def resolved_settings(runs: Sequence[RawRobotRun],
                       preprocessing: RobotPreprocessing | None = None) -> dict[str, float]:
     """The cut-off [Hz], decimation and trim :func:`preprocess_runs` uses for ``runs``."""
-    cutoff, r, trim = _settings(runs, preprocessing or RobotPreprocessing())
-    return {"cutoff_hz": cutoff, "decimation": r, "trim": trim}
+    s = _settings(runs, preprocessing or RobotPreprocessing())
+    return {"cutoff_hz": s.cutoff_hz, "decimation": s.decimation, "trim": s.trim}
 
 
 def load_robot_signals(
