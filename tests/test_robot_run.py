@@ -259,3 +259,16 @@ def test_logs_are_read_with_their_own_torque_timing(robot_run):
 
     now, old = errors(runs), errors(before)
     assert all(now[j] < old[j] for j in robot.moving), (now, old)
+
+
+def test_the_mount_prompt_names_a_robot_payloads_com(monkeypatch):
+    """A robot payload (no lever arm: arm_m None) is described by its CoM in the prompt."""
+    from daq.runtime.runner import prompt_payload
+    from trajectories.robot_campaign import RobotPayload
+
+    seen = []
+    monkeypatch.setattr("builtins.input", lambda msg: seen.append(msg) or "")
+    assert prompt_payload(0, RobotPayload(5.0, (0.0, 0.0, 0.05)), 2)
+    assert "5 kg CoM 0, 0, 0.05 m in the flange frame" in seen[0]
+    assert prompt_payload(1, RobotPayload(2.0, (1.2, 0.0, 0.0), arm_m=1.2), 2)
+    assert "2 kg at 1.2 m" in seen[1]

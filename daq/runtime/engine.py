@@ -714,7 +714,8 @@ class Engine(Supervisor):
                 })
             except OSError:  # still failing (the reason says why): the file keeps its
                 pass  # complete chunks, read back up to there with a "truncated" warning
+        arm_m = getattr(payload, "arm_m", None)  # a robot payload's is None (com_m instead)
         return PayloadResult(index, float(payload.mass_kg),
-                             float(getattr(payload, "arm_m", math.nan)), run_log.path,
+                             math.nan if arm_m is None else float(arm_m), run_log.path,
                              cycle, status, reason, fault_cycle, stop_cycle, missed, wall,
                              lateness)

@@ -218,7 +218,7 @@ def _attachments(campaign: Any, cfg: DaqConfig, plant_params: Any) -> list[tuple
 
 def prompt_payload(index: int, payload: Any, n: int) -> bool:
     """Ask the operator to mount a payload; False to abort the campaign."""
-    where = (f"at {payload.arm_m:g} m" if hasattr(payload, "arm_m") else
+    where = (f"at {payload.arm_m:g} m" if getattr(payload, "arm_m", None) is not None else
              f"CoM {', '.join(f'{x:g}' for x in payload.com)} m in the flange frame")
     try:
         answer = input(f"Mount payload {index + 1}/{n}: {payload.mass_kg:g} kg {where}, "
