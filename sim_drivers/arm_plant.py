@@ -199,13 +199,423 @@ def inverse_arm_torque(
     return friction_torque(params, q, dq, tau_out, t, effects=effects)
 
 
+# --------------------------------------------------------------------------- rigid bodies
+class RigidBody:
+    """The rigid-body part of the forward dynamics a :class:`ChainDynamics` integrates.
+
+    Subclasses: :class:`PinocchioBody` (any serial chain, through pinocchio) and
+    :class:`sim_drivers.plant.JointBody` (one joint: eq. 31/34 in closed form, exact and fast).
+
+    Attributes
+    ----------
+    k : int
+        Number of joints.
+    """
+
+    k: int
+
+    def forward(self, q: list, v: list, tau: list) -> list:
+        """Accelerations [rad/s^2] of the free chain under output torques ``tau`` [N m]
+        (lists of floats, length k)."""
+        raise NotImplementedError
+
+    def constrained(self, q: list, v: list, tau: list) -> Constrained:
+        """The same chain with some joints held (stiction step), output torques ``tau``."""
+        raise NotImplementedError
+
+
+class Constrained:
+    """Dynamics of a chain some of whose joints are held at rest (stiction, module docstring).
+
+    ``hold(stuck)`` gives ``(ddq, lam)``: the accelerations (0 at the held joints) and the
+    holding torques of the held joints (their loads) [N m]; ``release(j, x)`` adds the output
+    torque x [N m] at joint j (``release(j, -x)`` takes it back); ``free()`` the accelerations
+    with no joint held.
+    """
+
+    def hold(self, stuck: list) -> tuple[list, list]:
+        raise NotImplementedError
+
+    def release(self, j: int, x: float) -> None:
+        raise NotImplementedError
+
+    def free(self) -> list:
+        raise NotImplementedError
+
+
+class PinocchioBody(RigidBody):
+    """A serial chain through pinocchio: ABA, and ``M^-1`` for the held joints.
+
+    Parameters
+    ----------
+    model : pinocchio.Model
+        Dynamics model (armature = rotor inertias, gravity, payload).
+    """
+
+    def __init__(self, model: pin.Model) -> None:
+        self.model = model
+        self.data = model.createData()
+        self.k = int(model.nv)
+        self._il = np.tril_indices(self.k, -1)
+
+    def forward(self, q: list, v: list, tau: list) -> list:
+        return pin.aba(self.model, self.data, np.array(q), np.array(v), np.array(tau)).tolist()
+
+    def constrained(self, q: list, v: list, tau: list) -> _MinvConstrained:
+        qa = np.array(q)
+        a0 = pin.aba(self.model, self.data, qa, np.array(v), np.array(tau))
+        minv = np.array(pin.computeMinverse(self.model, self.data, qa))
+        minv[self._il] = minv.T[self._il]  # some pinocchio versions fill the upper triangle only
+        return _MinvConstrained(a0, minv)
+
+
+class _MinvConstrained(Constrained):
+    """With ``a0 = ABA(q, dq, tau_out)`` and ``Minv = M^-1``: holding S needs
+    ``lam_S = -(Minv_SS)^-1 a0_S``, then ``ddq = a0 + Minv_:S lam_S``; releasing j with x adds
+    ``Minv_:j x`` to a0."""
+
+    def __init__(self, a0: np.ndarray, minv: np.ndarray) -> None:
+        self.a0, self.minv = a0, minv
+
+    def hold(self, stuck: list) -> tuple[list, list]:
+        a0, minv = self.a0, self.minv
+        if len(stuck) == 1:
+            j = stuck[0]
+            lam = np.array([-a0[j] / minv[j, j]])
+        else:
+            lam = -np.linalg.solve(minv[np.ix_(stuck, stuck)], a0[stuck])
+        ddq = a0 + minv[:, stuck] @ lam
+        ddq[stuck] = 0.0
+        return ddq.tolist(), lam.tolist()
+
+    def release(self, j: int, x: float) -> None:
+        self.a0 = self.a0 + self.minv[:, j] * x
+
+    def free(self) -> list:
+        return self.a0.tolist()
+
+
 # --------------------------------------------------------------------------- forward model
+class ChainDynamics:
+    """Friction, stiction and integration of a chain of k joints on a :class:`RigidBody`:
+    the forward model of the module docstring, on lists of floats (the hot path).
+
+    Used by :class:`ArmPlant` (pinocchio body) and :class:`sim_drivers.plant.JointPlant`
+    (the one-joint body): one computation for one joint and for n.
+
+    Parameters
+    ----------
+    friction : ArmFriction
+    effects : ArmEffects
+    body : RigidBody
+    h : float
+        Integration sub-step [s].
+
+    Attributes
+    ----------
+    quad : list of int
+        Quadrant each joint was last in (+1 motor, -1 generator, 0 none): ties are kept in it.
+    ext : list of float or None
+        External joint torques added to the output torques (pushes) [N m].
+    t0 : float
+        Time origin of the warm-up effect [s].
+    """
+
+    def __init__(self, friction: Any, effects: Any, body: RigidBody, h: float) -> None:
+        f, e = friction, effects
+        k = body.k
+        self.k, self.body, self.h = k, body, float(h)
+        fv_pos, fv_neg = e.viscous_coefficients(f.F_V)
+        # one tuple of floats per joint (the hot loop unpacks it); effects: 0 = off
+        cols = (f.tau_off, 1.0 / f.q_s, fv_pos, fv_neg, e.F_VV,
+                f.c_m, f.d_m, f.a_m, f.b_m, f.c_g, f.d_g, f.a_g, f.b_g,
+                e.ripple_amplitude_Nm, _TWO_PI / e.ripple_period_rad, e.ripple_phase_rad,
+                e.spring_stiffness_Nm_per_rad, e.spring_rest_rad,
+                e.warm_up_fraction, 1.0 / e.warm_up_time_constant_s)
+        self._jp = list(zip(*(np.asarray(c, dtype=float).tolist() for c in cols), strict=True))
+        # static band (E = 1): (A_m1, A_g1, D_m1, D_g1) per joint
+        self._band_coef = list(zip(*(np.asarray(c, dtype=float).tolist() for c in (
+            f.a_m + f.b_m, f.a_g - f.b_g, f.c_m + f.d_m, f.c_g + f.d_g)), strict=True))
+        # dry coupling: per joint j, (m, c, 2 pi / P, phase, slope, q0) of its driving joints
+        pairs = [[(m, *(float(a[j, m]) for a in (
+            e.coupling_amplitude, _TWO_PI / e.coupling_period_rad, e.coupling_phase_rad,
+            e.coupling_slope_per_rad, e.coupling_rest_rad))) for m in range(k)
+            if e.coupling_amplitude[j, m] or e.coupling_slope_per_rad[j, m]] for j in range(k)]
+        self._cpl = pairs if any(pairs) else None
+        tl = np.asarray(e.lag_time_constant_s, dtype=float).tolist()
+        keep = [math.exp(-self.h / x) if x > 0 else 0.0 for x in tl]
+        self.keep = keep if any(keep) else None
+        # the registry's other effects: static torques f(q_j, dq_j, t) per joint
+        xf = e.forward_extra(f)
+        self._xf = xf if any(xf) else None
+        self._max_events = 2 * k + 2
+        self.quad = [0] * k
+        self._sliding = (REGIME_SLIDING,) * k  # shared regime of an all-sliding evaluation
+        self.ext: list | None = None
+        self.t0 = 0.0
+
+    def accel(self, tau: list, q: list, v: list, t: float) -> tuple[list, Any]:
+        """Forward dynamics ``(ddq, regime)`` for applied torques ``tau`` [N m] at state
+        (q [rad], dq [rad/s], t [s]), lists of floats; updates :attr:`quad` (ties). The
+        regimes are a sequence of k ints (a shared tuple when every joint slides)."""
+        k = self.k
+        out = [0.0] * k
+        reg = None  # all sliding unless a joint is at rest or at zero load
+        r_rest: list = []
+        quad = self.quad
+        exp = math.exp
+        cpl, xf, t0, jps = self._cpl, self._xf, self.t0, self._jp
+        for j in range(k):
+            (off, qsi, fvp, fvn, fvv, cm, dm, am, bm, cg, dg, ag, bg,
+             rip_a, rip_k, rip_ph, spr_k, spr_q0, wu_w, wu_tinv) = jps[j]
+            vj = v[j]
+            r = tau[j] - off
+            if vj > 0.0:
+                r -= fvp * vj
+                if fvv:
+                    r -= fvv * vj * vj
+            elif vj < 0.0:
+                r -= fvn * vj
+                if fvv:
+                    r += fvv * vj * vj
+            if rip_a:
+                r -= rip_a * math.sin(rip_k * q[j] + rip_ph)
+            if spr_k:
+                r -= spr_k * (q[j] - spr_q0)
+            if xf is not None:
+                for fx in xf[j]:
+                    r -= fx(q[j], vj, t - t0)
+            wf = 1.0 + wu_w * exp(-(t - t0) * wu_tinv) if wu_w else 1.0
+            if cpl is not None and cpl[j]:
+                cf = 1.0
+                for m, c, kp, ph, a, q0 in cpl[j]:
+                    cf += c * math.sin(kp * q[m] + ph) + a * (q[m] - q0)
+                wf *= cf if cf > 0.0 else 0.0
+            if vj > 0.0:
+                s = wf  # sign(dq) times the warm-up (and coupling) factor
+                ex = exp(-vj * qsi)  # stribeck_exp inlined (scalar, per step)
+            elif vj < 0.0:
+                s = -wf
+                ex = exp(vj * qsi)
+            else:
+                if reg is None:
+                    reg = [REGIME_SLIDING] * k
+                reg[j] = REGIME_REST
+                r_rest.append((j, r, wf))
+                continue
+            # quadrant choice: motor if consistent, ties kept in the previous quadrant
+            xm = (r - s * (cm + dm * ex)) / (am + bm * ex)
+            if xm * s > 0.0:
+                if quad[j] < 0:  # was generator: keep it if it is still consistent
+                    xg = (r - s * (cg + dg * ex)) / (ag - bg * ex)
+                    if xg * s < 0.0:
+                        out[j] = xg
+                        continue
+                quad[j] = 1
+                out[j] = xm
+            else:
+                xg = (r - s * (cg + dg * ex)) / (ag - bg * ex)
+                if xg * s < 0.0:
+                    quad[j] = -1
+                    out[j] = xg
+                else:
+                    if reg is None:
+                        reg = [REGIME_SLIDING] * k
+                    reg[j] = REGIME_ZERO_LOAD
+        if reg is None:
+            reg = self._sliding
+        ext = self.ext
+        if ext is not None:  # a push: on the rigid body, not through the drive chain
+            out = [o + e for o, e in zip(out, ext, strict=True)]
+        if not r_rest:
+            return self.body.forward(q, v, out), reg
+        return self._stiction(out, r_rest, q, v), reg
+
+    def _band(self, j: int, load: float, r: float, w: float) -> tuple[float, float, float]:
+        """Static band of joint j at holding torque ``load`` [N m] (E = 1, times the warm-up
+        factor ``w``) against its driving torque ``r`` [N m]: ``(excess, direction, load)``,
+        excess <= 0 inside the band (relative to |load| + D, so that the largest breaks
+        first), direction +1/-1 of the breakaway; a load within 1e-9 D of zero (round-off, e.g.
+        a vertical axis) counts as zero."""
+        am1, ag1, dm1, dg1 = self._band_coef[j]
+        dm1, dg1 = w * dm1, w * dg1
+        dmax = dm1 if dm1 > dg1 else dg1
+        if abs(load) <= 1e-9 * dmax:
+            load = 0.0
+        if load > 0.0:
+            upper, lower = am1 * load + dm1, ag1 * load - dg1
+        elif load < 0.0:
+            upper, lower = ag1 * load + dg1, am1 * load - dm1
+        else:
+            upper, lower = dmax, -dmax
+        ex = max(r - upper, lower - r)
+        if ex <= 0.0:
+            return ex, 0.0, load
+        return ex / (abs(load) + dmax + 1e-300), 1.0 if r > upper else -1.0, load
+
+    def _breakaway(self, j: int, load: float, r: float, w: float, s: float) -> float:
+        """Output torque [N m] of joint j leaving rest in direction s: the E = 1 quadrant
+        choice, the quadrant first taken from the continuity of tau_out with the static load
+        (stored in :attr:`quad`); NaN when it would not move in direction s (cannot happen
+        with a valid plant: the joint stays at rest)."""
+        am1, ag1, dm1, dg1 = self._band_coef[j]
+        quad = 1 if load * s > 0 else -1 if load * s < 0 else 0
+        xm = (r - s * (w * dm1)) / am1
+        xg = (r - s * (w * dg1)) / ag1
+        mot, gen = xm * s > 0.0, xg * s < 0.0
+        if mot and (not gen or quad >= 0):
+            quad, x = 1, xm
+        elif gen:
+            quad, x = -1, xg
+        else:
+            x = 0.0
+        self.quad[j] = quad
+        return x if (x - load) * s > 0.0 else math.nan
+
+    def _stiction(self, tau_out: list, r_rest: list, q: list, v: list) -> list:
+        """Accelerations with the joints at rest stuck unless they break away (module
+        docstring). ``tau_out``: output torques, 0 at the joints at rest; ``r_rest``: (joint,
+        driving torque r0 [N m], warm-up factor) per joint at rest."""
+        con = self.body.constrained(q, v, tau_out)
+        if len(r_rest) == 1:  # one joint at rest: hold it, or release it
+            j, r, w = r_rest[0]
+            ddq, lam = con.hold([j])
+            ex, s, load = self._band(j, lam[0], r, w)
+            if not s:
+                return ddq
+            x = self._breakaway(j, load, r, w, s)
+            if x != x:  # NaN: stays at rest
+                return ddq
+            con.release(j, x)
+            ddq = con.free()
+            if ddq[j] * s <= 0.0:
+                con.release(j, -x)
+                ddq = con.hold([j])[0]
+            return ddq
+        stuck = [j for j, _, _ in r_rest]
+        band = {j: (r, w) for j, r, w in r_rest}
+        blocked: set = set()
+        released: list = []  # (joint, direction, output torque)
+        for _ in range(len(stuck) + 1):
+            if not stuck:
+                ddq = con.free()
+                break
+            ddq, lam = con.hold(stuck)
+            best, best_ex = -1, 0.0
+            for i, j in enumerate(stuck):
+                if j in blocked:
+                    continue
+                ex, sj, load = self._band(j, lam[i], *band[j])
+                if ex > best_ex:
+                    best, best_ex, s, rel = i, ex, sj, load
+            if best < 0:
+                break
+            j = stuck[best]
+            r, w = band[j]
+            x = self._breakaway(j, rel, r, w, s)
+            if x != x:  # cannot happen with a valid plant: stay at rest
+                blocked.add(j)
+                continue
+            con.release(j, x)
+            stuck.pop(best)
+            released.append((j, s, x))
+        else:
+            ddq = con.hold(stuck)[0] if stuck else con.free()
+        wrong = [(j, x) for j, s, x in released if ddq[j] * s <= 0.0]
+        if wrong:  # coupled releases pulled a joint back: hold it (see docstring)
+            for j, x in wrong:
+                con.release(j, -x)
+                stuck.append(j)
+            ddq = con.hold(stuck)[0]
+        return ddq
+
+    def advance(self, q: list, v: list, t: float, lag: list, cmd: list, noise: list,
+                substeps: int) -> tuple:
+        """Integrate ``substeps`` sub-steps from (q, v, t) with the command ``cmd`` [N m] held
+        and the noise sample ``noise`` [N m] (lists of floats).
+
+        Returns
+        -------
+        tuple
+            ``(q, v, t, lag, ddq_start, tau_start, regime_start)``: the state at the end, the
+            lagged command, and the acceleration, applied torque and regime just after the
+            command was applied.
+        """
+        h = self.h
+        keep = self.keep
+        accel = self.accel
+        rng_k = range(self.k)
+        max_events = self._max_events
+        q, v = list(q), list(v)  # updated in place below
+        if keep is None:
+            tau = [c + n for c, n in zip(cmd, noise, strict=True)]
+        else:
+            lag = [lg if kp > 0.0 else c for lg, kp, c in zip(lag, keep, cmd, strict=True)]
+            tau = [0.0] * self.k
+        for i in range(substeps):
+            if keep is not None:
+                if i == 1:
+                    tau = list(tau)  # the first sub-step's torques are returned
+                for j in rng_k:
+                    tau[j] = lag[j] + noise[j]
+            rem, tt = h, t
+            for ev in range(max_events):
+                a, regime = accel(tau, q, v, tt)
+                if i == 0 and ev == 0:
+                    a0, tau0, reg0 = a, tau, regime
+                # earliest zero crossing of a velocity within the rest of the sub-step
+                th = rem
+                hit = None
+                for j in rng_k:
+                    vj = v[j]
+                    if vj != 0.0 and (vj + a[j] * rem) * vj <= 0.0:
+                        aj = a[j]
+                        tj = -vj / aj if aj != 0.0 else rem
+                        if tj > rem:
+                            tj = rem
+                        if hit is None or tj < th:
+                            th, hit = tj, [j]
+                        elif tj == th:
+                            hit.append(j)
+                if hit is None:
+                    for j in rng_k:
+                        vj = v[j]
+                        wj = vj + a[j] * rem
+                        q[j] += 0.5 * (vj + wj) * rem
+                        v[j] = wj
+                    break
+                # stop there (exactly), re-test stiction, integrate the rest of the sub-step
+                for j in rng_k:
+                    vj = v[j]
+                    wj = 0.0 if j in hit else vj + a[j] * th
+                    q[j] += 0.5 * (vj + wj) * th
+                    v[j] = wj
+                rem -= th
+                tt += th
+                if rem <= 0.0:
+                    break
+            else:  # too many events in one sub-step: finish it without detection
+                a, _ = accel(tau, q, v, tt)
+                for j in rng_k:
+                    vj = v[j]
+                    wj = vj + a[j] * rem
+                    q[j] += 0.5 * (vj + wj) * rem
+                    v[j] = wj
+            t += h
+            if keep is not None:
+                for j in rng_k:
+                    lag[j] = cmd[j] + (lag[j] - cmd[j]) * keep[j]
+        if keep is None:
+            lag = cmd
+        return q, v, t, lag, a0, tau0, reg0
+
+
 class ArmPlant:
     """The simulated arm, stepped once per control cycle.
 
-    The sliding path is plain Python over the joints (per-joint friction, like
-    ``sim_drivers.plant.JointPlant``) plus one ``pin.aba`` call: small numpy arrays cost more
-    per operation than scalar floats at k <= 6.
+    The dynamics are a :class:`ChainDynamics` on a :class:`PinocchioBody`: plain Python over
+    the joints (per-joint friction) plus one ``pin.aba`` call per evaluation (small numpy
+    arrays cost more per operation than scalar floats at k <= 6).
 
     Parameters
     ----------
@@ -262,38 +672,15 @@ class ArmPlant:
             raise ValueError(f"substeps: expected an integer >= 1, got {substeps!r}")
         self.params = params
         self.payload = payload
-        self.k = k = params.k
+        self.k = params.k
         self.cycle_s = float(cycle_s)
         self.substeps = int(substeps)
         self._h = self.cycle_s / self.substeps
-        self.model = params.dynamics_model(payload)
-        self.data = self.model.createData()
+        body = PinocchioBody(params.dynamics_model(payload))
+        self.model, self.data = body.model, body.data
+        self._dyn = ChainDynamics(params.friction, params.effects, body, self._h)
         self._rng = np.random.default_rng(seed)
         self._noise_std = np.array(params.drive.torque_noise_std_Nm)
-        f, e = params.friction, params.effects
-        fv_pos, fv_neg = e.viscous_coefficients(f.F_V)
-        # one tuple of floats per joint (the hot loop unpacks it); effects: 0 = off
-        cols = (f.tau_off, 1.0 / f.q_s, fv_pos, fv_neg, e.F_VV,
-                f.c_m, f.d_m, f.a_m, f.b_m, f.c_g, f.d_g, f.a_g, f.b_g,
-                e.ripple_amplitude_Nm, 2.0 * math.pi / e.ripple_period_rad, e.ripple_phase_rad,
-                e.spring_stiffness_Nm_per_rad, e.spring_rest_rad,
-                e.warm_up_fraction, 1.0 / e.warm_up_time_constant_s)
-        self._jp = list(zip(*(np.asarray(c, dtype=float).tolist() for c in cols), strict=True))
-        self._am1, self._ag1 = f.a_m + f.b_m, f.a_g - f.b_g
-        self._dm1, self._dg1 = f.c_m + f.d_m, f.c_g + f.d_g
-        # dry coupling: per joint j, (m, c, 2 pi / P, phase, slope, q0) of its driving joints
-        pairs = [[(m, *(float(a[j, m]) for a in (
-            e.coupling_amplitude, _TWO_PI / e.coupling_period_rad, e.coupling_phase_rad,
-            e.coupling_slope_per_rad, e.coupling_rest_rad))) for m in range(k)
-            if e.coupling_amplitude[j, m] or e.coupling_slope_per_rad[j, m]] for j in range(k)]
-        self._cpl = pairs if any(pairs) else None
-        keep = e.lag_keep(self._h)
-        self._keep = keep.tolist() if np.any(keep) else None
-        # the registry's other effects: static torques f(q_j, dq_j, t) per joint
-        xf = e.forward_extra(f)
-        self._xf = xf if any(xf) else None
-        self._max_events = 2 * k + 2
-        self._il = np.tril_indices(k, -1)
         #: external forces (sim_drivers.arm_push): their J^T F enters the rigid-body dynamics
         self.pushes: list[Push] = []
         self._push_data = self.model.createData()
@@ -308,20 +695,25 @@ class ArmPlant:
         self.dq = np.zeros(k)
         self.ddq = np.zeros(k)
         self.t = float(t0)
-        self.t0 = float(t0)
+        self._dyn.t0 = float(t0)
         self.tau_cmd = np.zeros(k)
         self.tau_applied = np.zeros(k)
         self.tau_noise = np.zeros(k)
         self.tau_ext = np.zeros(k)
-        self._ext: list | None = None
+        self._dyn.ext = None
         self._lag = [0.0] * k
-        self._quad = [0] * k
+        self._dyn.quad[:] = [0] * k
         self.regime = np.full(k, REGIME_REST, dtype=np.int8)
         self.q_start = self.q.copy()
         self.dq_start = np.zeros(k)
         self.ddq_start = np.zeros(k)
         self.tau_applied_start = np.zeros(k)
         self.regime_start = self.regime.copy()
+
+    @property
+    def t0(self) -> float:
+        """Time origin of the warm-up effect [s] (set by :meth:`reset`)."""
+        return self._dyn.t0
 
     # ----------------------------------------------------------------- dynamics
     def acceleration(self, tau: Any, q: Any, dq: Any, t: float | None = None
@@ -330,166 +722,11 @@ class ArmPlant:
         (q [rad], dq [rad/s], t [s]); see the module docstring. Does not change the state
         except the remembered quadrants used to break ties."""
         k = self.k
-        a, reg = self._accel(np.asarray(tau, dtype=float).reshape(k).tolist(),
-                             np.asarray(q, dtype=float).reshape(k).tolist(),
-                             np.asarray(dq, dtype=float).reshape(k).tolist(),
-                             self.t if t is None else float(t))
+        a, reg = self._dyn.accel(np.asarray(tau, dtype=float).reshape(k).tolist(),
+                                 np.asarray(q, dtype=float).reshape(k).tolist(),
+                                 np.asarray(dq, dtype=float).reshape(k).tolist(),
+                                 self.t if t is None else float(t))
         return np.array(a), np.array(reg, dtype=np.int8)
-
-    def _accel(self, tau: list, q: list, v: list, t: float) -> tuple[list, list]:
-        """Hot path on lists of floats: ``(ddq, regime)``."""
-        k = self.k
-        out = [0.0] * k
-        reg = [REGIME_SLIDING] * k
-        r_rest: list = []
-        quad = self._quad
-        exp = math.exp
-        cpl = self._cpl
-        for j in range(k):
-            (off, qsi, fvp, fvn, fvv, cm, dm, am, bm, cg, dg, ag, bg,
-             rip_a, rip_k, rip_ph, spr_k, spr_q0, wu_w, wu_tinv) = self._jp[j]
-            vj = v[j]
-            r = tau[j] - off
-            if rip_a:
-                r -= rip_a * math.sin(rip_k * q[j] + rip_ph)
-            if spr_k:
-                r -= spr_k * (q[j] - spr_q0)
-            if self._xf is not None:
-                for fx in self._xf[j]:
-                    r -= fx(q[j], vj, t - self.t0)
-            wf = 1.0 + wu_w * exp(-(t - self.t0) * wu_tinv) if wu_w else 1.0
-            if cpl is not None and cpl[j]:
-                cf = 1.0
-                for m, c, kp, ph, a, q0 in cpl[j]:
-                    cf += c * math.sin(kp * q[m] + ph) + a * (q[m] - q0)
-                wf *= cf if cf > 0.0 else 0.0
-            if vj > 0.0:
-                s = wf
-                ex = exp(-vj * qsi)  # stribeck_exp inlined (scalar, per step)
-                r -= fvp * vj + fvv * vj * vj
-            elif vj < 0.0:
-                s = -wf
-                ex = exp(vj * qsi)
-                r -= fvn * vj - fvv * vj * vj
-            else:
-                reg[j] = REGIME_REST
-                r_rest.append((j, r, wf))
-                continue
-            # quadrant choice of sim_drivers.plant (s carries sign(dq) times the warm-up factor)
-            xm = (r - s * (cm + dm * ex)) / (am + bm * ex)
-            if xm * s > 0.0:
-                if quad[j] < 0:  # was generator: keep it if it is still consistent
-                    xg = (r - s * (cg + dg * ex)) / (ag - bg * ex)
-                    if xg * s < 0.0:
-                        out[j] = xg
-                        continue
-                quad[j] = 1
-                out[j] = xm
-            else:
-                xg = (r - s * (cg + dg * ex)) / (ag - bg * ex)
-                if xg * s < 0.0:
-                    quad[j] = -1
-                    out[j] = xg
-                else:
-                    reg[j] = REGIME_ZERO_LOAD
-        ext = self._ext
-        if ext is not None:  # a push: on the rigid body, not through the drive chain
-            out = [o + e for o, e in zip(out, ext, strict=True)]
-        qa, va = np.array(q), np.array(v)
-        if not r_rest:
-            return pin.aba(self.model, self.data, qa, va, np.array(out)).tolist(), reg
-        return self._stiction(out, r_rest, qa, va), reg
-
-    def _stiction(self, tau_out: list, r_rest: list, q: np.ndarray, v: np.ndarray) -> list:
-        """Constrained dynamics with the joints at rest stuck unless they break away (module
-        docstring). ``tau_out``: output torques, 0 at the joints at rest; ``r_rest``: (joint,
-        driving torque r0 [N m], warm-up factor) per joint at rest.
-
-        With the unconstrained acceleration ``a0 = ABA(q, dq, tau_out)`` and ``Minv = M^-1``,
-        holding the stuck set S needs the extra torques ``lam_S = -(Minv_SS)^-1 a0_S``, which
-        are the holding (load) torques since tau_out,S = 0; then ``ddq = a0 + Minv_:S lam_S``.
-        Releasing joint j with output torque x adds ``Minv_:j x`` to a0.
-        """
-        a0 = pin.aba(self.model, self.data, q, v, np.array(tau_out))
-        minv = np.array(pin.computeMinverse(self.model, self.data, q))
-        il = self._il
-        minv[il] = minv.T[il]  # some pinocchio versions fill the upper triangle only
-        stuck = [j for j, _, _ in r_rest]
-        band = {j: (r, w) for j, r, w in r_rest}
-        blocked: set = set()
-        released: list = []  # (joint, direction)
-        quads = self._quad
-
-        def hold(stuck: list) -> tuple[np.ndarray, np.ndarray]:
-            if len(stuck) == 1:
-                j = stuck[0]
-                lam = np.array([-a0[j] / minv[j, j]])
-            else:
-                lam = -np.linalg.solve(minv[np.ix_(stuck, stuck)], a0[stuck])
-            ddq = a0 + minv[:, stuck] @ lam
-            ddq[stuck] = 0.0
-            return ddq, lam
-
-        for _ in range(len(stuck) + 1):
-            if not stuck:
-                ddq = a0.copy()
-                break
-            ddq, lam = hold(stuck)
-            best, best_ex = -1, 0.0
-            for i, j in enumerate(stuck):
-                if j in blocked:
-                    continue
-                load = float(lam[i])
-                r, w = band[j]
-                am1, ag1 = float(self._am1[j]), float(self._ag1[j])
-                dm1, dg1 = w * float(self._dm1[j]), w * float(self._dg1[j])
-                dmax = dm1 if dm1 > dg1 else dg1
-                if abs(load) <= 1e-9 * dmax:  # round-off of a zero load (e.g. vertical axis)
-                    load = 0.0
-                if load > 0.0:
-                    upper, lower = am1 * load + dm1, ag1 * load - dg1
-                elif load < 0.0:
-                    upper, lower = ag1 * load + dg1, am1 * load - dm1
-                else:
-                    upper, lower = dmax, -dmax
-                ex = max(r - upper, lower - r)
-                if ex > 0.0:
-                    ex /= abs(load) + dmax + 1e-300  # relative excess: largest breaks first
-                    if ex > best_ex:
-                        best, best_ex = i, ex
-                        s = 1.0 if r > upper else -1.0
-                        rel = (load, am1, ag1, dm1, dg1)
-            if best < 0:
-                break
-            j = stuck[best]
-            load, am1, ag1, dm1, dg1 = rel
-            r = band[j][0]
-            quad = 1 if load * s > 0 else -1 if load * s < 0 else 0
-            xm = (r - s * dm1) / am1
-            xg = (r - s * dg1) / ag1
-            mot, gen = xm * s > 0.0, xg * s < 0.0
-            if mot and (not gen or quad >= 0):
-                quad, x = 1, xm
-            elif gen:
-                quad, x = -1, xg
-            else:
-                x = 0.0
-            quads[j] = quad
-            if (x - load) * s <= 0.0:  # cannot happen with a valid plant: stay at rest
-                blocked.add(j)
-                continue
-            a0 = a0 + minv[:, j] * x
-            stuck.pop(best)
-            released.append((j, s, x))
-        else:
-            ddq, _ = hold(stuck) if stuck else (a0.copy(), None)
-        wrong = [(j, x) for j, s, x in released if ddq[j] * s <= 0.0]
-        if wrong:  # coupled releases pulled a joint back: hold it (see docstring)
-            for j, x in wrong:
-                a0 = a0 - minv[:, j] * x
-                stuck.append(j)
-            ddq, _ = hold(stuck)
-        return ddq.tolist()
 
     def step(self, tau_cmd: Any, noise: Any = None) -> None:
         """Advance one control cycle with the commanded joint-side torques ``tau_cmd`` (k,)
@@ -509,62 +746,11 @@ class ArmPlant:
         noise = np.asarray(noise, dtype=float).reshape(k)
         self.tau_cmd, self.tau_noise = cmd, noise
         self._update_pushes()
-        cmd_l, noise_l = cmd.tolist(), noise.tolist()
-        h = self._h
-        keep = self._keep
-        if keep is None:
-            lag = cmd_l
-        else:
-            lag = [lg if kp > 0.0 else c for lg, kp, c in zip(self._lag, keep, cmd_l,
-                                                               strict=True)]
+        noise_l = noise.tolist()
         self.q_start, self.dq_start = self.q, self.dq
-        q, v, t = self.q.tolist(), self.dq.tolist(), self.t
-        accel = self._accel
-        rng_k = range(k)
-        for i in range(self.substeps):
-            tau = [lg + n for lg, n in zip(lag, noise_l, strict=True)]
-            rem, tt = h, t
-            for ev in range(self._max_events):
-                a, regime = accel(tau, q, v, tt)
-                if i == 0 and ev == 0:
-                    a0, tau0, reg0 = a, tau, regime
-                # earliest zero crossing of a velocity within the rest of the sub-step
-                th = rem
-                hit: list = []
-                for j in rng_k:
-                    vj = v[j]
-                    if vj != 0.0 and (vj + a[j] * rem) * vj <= 0.0:
-                        aj = a[j]
-                        tj = -vj / aj if aj != 0.0 else rem
-                        if tj > rem:
-                            tj = rem
-                        if not hit or tj < th:
-                            th, hit = tj, [j]
-                        elif tj == th:
-                            hit.append(j)
-                if not hit:
-                    vn = [vj + aj * rem for vj, aj in zip(v, a, strict=True)]
-                    q = [qj + 0.5 * (vj + wj) * rem for qj, vj, wj in zip(q, v, vn, strict=True)]
-                    v = vn
-                    break
-                # stop there (exactly), re-test stiction, integrate the rest of the sub-step
-                vn = [vj + aj * th for vj, aj in zip(v, a, strict=True)]
-                for j in hit:
-                    vn[j] = 0.0
-                q = [qj + 0.5 * (vj + wj) * th for qj, vj, wj in zip(q, v, vn, strict=True)]
-                v = vn
-                rem -= th
-                tt += th
-                if rem <= 0.0:
-                    break
-            else:  # too many events in one sub-step: finish it without detection
-                a, _ = accel(tau, q, v, tt)
-                vn = [vj + aj * rem for vj, aj in zip(v, a, strict=True)]
-                q = [qj + 0.5 * (vj + wj) * rem for qj, vj, wj in zip(q, v, vn, strict=True)]
-                v = vn
-            t += h
-            if keep is not None:
-                lag = [c + (lg - c) * kp for c, lg, kp in zip(cmd_l, lag, keep, strict=True)]
+        q, v, t, lag, a0, tau0, reg0 = self._dyn.advance(
+            self.q.tolist(), self.dq.tolist(), self.t, self._lag, cmd.tolist(), noise_l,
+            self.substeps)
         self.ddq_start = np.array(a0)
         self.tau_applied_start = np.array(tau0)
         self.regime_start = np.array(reg0, dtype=np.int8)
@@ -572,7 +758,7 @@ class ArmPlant:
         self._lag = lag
         tau = [lg + n for lg, n in zip(lag, noise_l, strict=True)]
         self.tau_applied = np.array(tau)
-        a, regime = accel(tau, q, v, t)
+        a, regime = self._dyn.accel(tau, q, v, t)
         self.ddq = np.array(a)
         self.regime = np.array(regime, dtype=np.int8)
 
@@ -580,9 +766,9 @@ class ArmPlant:
         """``tau_ext`` [N m] of the pushes acting at the cycle's start (held over the cycle);
         pushes that ended are dropped."""
         if not self.pushes:
-            if self._ext is not None:
+            if self._dyn.ext is not None:
                 self.tau_ext = np.zeros(self.k)
-                self._ext = None
+                self._dyn.ext = None
             return
         t = self.t
         self.pushes = [p for p in self.pushes if t < p.t0_s + p.duration_s]
@@ -591,7 +777,7 @@ class ArmPlant:
             if p.active(t):
                 ext += push_torque(self.model, self._push_data, self.q, p)
         self.tau_ext = ext
-        self._ext = ext.tolist() if np.any(ext) else None
+        self._dyn.ext = ext.tolist() if np.any(ext) else None
 
     # ----------------------------------------------------------------- drive chain
     def encoder_counts(self) -> np.ndarray:
