@@ -163,11 +163,13 @@ def friction_torque(
     tau = pp * (f.a_m + f.b_m * ex) * tau_out + pm * (f.a_g - f.b_g * ex) * tau_out + f.tau_off
     if not effects:
         return tau + dry * s + f.F_V * dq
-    scale = e.dry_scale(t)
-    if np.ndim(t) == 0:
-        scale = scale[0]
-    scale = scale * e.coupling_scale(q)
-    tau = tau + scale * dry * s + e.viscous_torque(f.F_V, dq) + e.position_torque(q)
+    # effects (formulas of the plant-effect registry, sim_drivers/effects/): warm-up W and
+    # dry coupling C scale the dry terms, (1 + W) C dry = dry + W dry + (C - 1)(1 + W) dry
+    dry = dry * s
+    warm = e.warm_up_torque(f, dq, t, tau_out)
+    tau = (tau + dry + f.F_V * dq + warm + e.viscous_torque(f, dq) + e.position_torque(q, f))
+    if np.any(e.coupled()):
+        tau = tau + (e.coupling_scale(q) - 1.0) * (dry + warm)
     if any(e.registered):  # the registry's other effects (sim_drivers.arm_effects)
         tau = tau + e.registered_torque(f, q, dq, t, tau_out)
     return tau

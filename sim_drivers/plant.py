@@ -71,11 +71,10 @@ from __future__ import annotations
 
 import math
 import random
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
-
-from trajectories.friction import stribeck_exp
 
 from .arm_effects import ArmEffects
 from .arm_params import ArmFriction
@@ -86,6 +85,7 @@ from .arm_plant import (  # the regimes are re-exported: the single joint's name
     ChainDynamics,
     Constrained,
     RigidBody,
+    friction_torque,
 )
 from .effects import Inputs
 from .effects import registry as effect_registry
@@ -192,22 +192,14 @@ def inverse_torque(
         tau [N m], broadcast shape of the inputs. sign(0) = 0 as in eq. 27-28, so at dq = 0 or
         tau_out = 0 the quadrant weights are 1/2 each.
     """
-    f = params.friction
-    q = np.asarray(q, dtype=float)
-    dq = np.asarray(dq, dtype=float)
+    q, dq = np.broadcast_arrays(np.asarray(q, dtype=float), np.asarray(dq, dtype=float))
     tau_out = output_torque(params, q, ddq, payload_mass, payload_arm)
-    ex = stribeck_exp(dq, params.joint.q_s)
-    p = np.sign(tau_out * dq)
-    pp = 0.5 * (1.0 + p)
-    pm = 0.5 * (1.0 - p)
-    s = np.sign(dq)
-    tau = (pp * (f.a_m + f.b_m * ex) * tau_out + pm * (f.a_g - f.b_g * ex) * tau_out
-           + pp * (f.c_m + f.d_m * ex) * s + pm * (f.c_g + f.d_g * ex) * s
-           + f.F_V * dq + f.tau_off)
-    if effects:
-        for v in effect_torques(params, q, dq, ddq, payload_mass, payload_arm, t).values():
-            tau = tau + v
-    return tau
+    q, dq, tau_out = np.broadcast_arrays(q, dq, tau_out)
+    t = np.asarray(t, dtype=float)
+    one = SimpleNamespace(friction=arm_friction(params),
+                          effects=ArmEffects.from_plant_effects([params.effects]))
+    return friction_torque(one, q[..., None], dq[..., None], tau_out[..., None],
+                           np.broadcast_to(t, q.shape) if t.ndim else t, effects=effects)[..., 0]
 
 
 # --------------------------------------------------------------------------- forward model

@@ -18,7 +18,6 @@ model (``inverse_torque``, ``effect_torques``) on the recorded states.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 from pathlib import Path
 from types import SimpleNamespace
 
