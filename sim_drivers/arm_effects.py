@@ -1,6 +1,7 @@
 """Undeclared effects of the n-dof simulator, per joint, vectorised over joints (and samples).
 
-The formulas are those of :mod:`sim_drivers.plant` (module docstring there), one set of
+The formulas are those of the plant-effect registry (:mod:`sim_drivers.effects`, one module
+each; :mod:`sim_drivers.plant`'s docstring writes them for one joint), one set of
 coefficients per joint; a coefficient of 0 (or ``asymmetric`` False) switches the effect off
 for that joint:
 
@@ -24,23 +25,19 @@ The effects are those of the plant-effect registry shared with the single joint
 (:mod:`sim_drivers.effects`, one module per effect, docs/refinement.md "Adding an effect"):
 the tables and keys of :meth:`ArmEffects.make` and :meth:`ArmEffects.from_plant_effects` are
 the registry's (a native table's keys are checked against its registered schema at import).
-The six above have a native vectorised form here; any other registered effect (a new module
-in ``sim_drivers/effects/``) is carried per joint as its registered parameters
-(:attr:`ArmEffects.registered`, values validated by its schema) and applied through its
-registration: its ``torque`` in the inverse model (:meth:`ArmEffects.registered_torque`) and
-its forward-dynamics ``extra`` knob (a static torque f(q_j, dq_j, t)) in
-:class:`~sim_drivers.arm_plant.ArmPlant`, per joint, as :class:`sim_drivers.plant.JointPlant`
-does. Such an effect sees joint j alone: ``Inputs.q, dq, t, tau_out`` of the joint and
-``Inputs.params`` with the joint's ``friction`` (the eq. 30 coefficients as scalars) and
-``joint.q_s``; an effect that sets another forward knob is refused with one line (the arm
-reads those knobs only for its native effects). So a new friction effect is one plant file
-for both simulators.
-
-The effect code of the arm simulator lives in this file (parameters, vectorised formulas used
-by the inverse model).
-One exception, for speed: :meth:`sim_drivers.arm_plant.ArmPlant._accel` inlines the scalar
-per-joint form of the same formulas, as ``sim_drivers.plant.JointPlant`` does; the test
-``test_one_joint_with_every_effect_is_the_joint_plant`` pins both to the single-joint plant.
+The six above are native: their parameters are per-joint arrays here and their inverse-model
+torque is the registry's formula (the effect module's ``torque``) evaluated with those arrays
+(:meth:`ArmEffects.position_torque`, :meth:`ArmEffects.viscous_torque`,
+:meth:`ArmEffects.warm_up_torque`); their forward-dynamics form is the scalar per-joint code
+of :meth:`sim_drivers.arm_plant.ChainDynamics.accel` (shared by the arm and the single
+joint). Any other registered effect (a new module in ``sim_drivers/effects/``) is carried per
+joint as its registered parameters (:attr:`ArmEffects.registered`, values validated by its
+schema) and applied through its registration: its ``torque`` in the inverse model
+(:meth:`ArmEffects.registered_torque`) and its forward-dynamics ``extra`` knob (a static torque
+f(q_j, dq_j, t)) in :class:`~sim_drivers.arm_plant.ChainDynamics`, per joint. Such an effect
+sees joint j alone: ``Inputs.q, dq, t, tau_out`` of the joint and ``Inputs.params`` with the
+joint's ``friction`` (the eq. 30 coefficients as scalars) and ``joint.q_s``. So a new
+friction effect is one plant file for both simulators.
 """
 
 from __future__ import annotations
@@ -373,18 +370,12 @@ class ArmEffects:
         forward dynamics (their ``extra`` knob; t since the run start)."""
         specs = {e.name: e for e in registry()}
         out = []
-        default = Knobs()
         for j, d in enumerate(self.registered):
             fs: list = []
             for name, p in d.items():
                 kn = Knobs()
-                specs[name].configure(p, kn, _joint_params(friction, j))
-                other = [f.name for f in fields(kn) if f.name != "extra"
-                         and getattr(kn, f.name) != getattr(default, f.name)]
-                if other:
-                    raise SimError(f"ArmEffects: effect {name!r} sets the forward-dynamics "
-                                   f"knob(s) {other}, which the arm reads for its native "
-                                   "effects only (use Knobs.extra)")
+                if specs[name].configure is not None:
+                    specs[name].configure(p, kn, _joint_params(friction, j))
                 fs += kn.extra
             out.append(tuple(fs))
         return out

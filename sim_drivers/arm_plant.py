@@ -1,9 +1,12 @@
 """The simulated n-dof arm: rigid body (pinocchio) + the paper's friction on every joint.
 
 Pure numerics, no bus; joint side SI units ([rad], [rad/s], [N m]; prismatic [m], [N]), motor
-convention (a positive torque drives a positive velocity). This is the n-dof generalisation of
-:mod:`sim_drivers.plant` (read its module docstring first): same friction, same stiction
-rectangle, same integration with event detection, one set of coefficients per joint.
+convention (a positive torque drives a positive velocity). This is THE plant computation of
+jointid: :class:`ChainDynamics` (per-joint friction, stiction rectangle, integration with event
+detection) runs on a :class:`RigidBody`, either :class:`PinocchioBody` (the arm) or
+:class:`sim_drivers.plant.JointBody` (the single joint, a robot with one moving joint: eq. 31/34
+in closed form). :mod:`sim_drivers.plant` keeps the single joint's scalar interface and its
+module docstring writes the equations for one joint.
 
 Inverse model (:func:`inverse_arm_torque`)
 ------------------------------------------
@@ -18,8 +21,10 @@ Friction of joint j, eq. 30 with E_j = exp(-|dq_j| / q_s,j), P_j = sign(tau_out,
           + P+ (c_m + d_m E) sign(dq_j) + P- (c_g + d_g E) sign(dq_j) + F_V dq_j + tau_off
           + effects_j(q_j, dq_j, t)                          (sim_drivers.arm_effects)
 
-(effects_j: the native effects of the arm and any other effect of the plant-effect registry,
-:mod:`sim_drivers.effects`, on that joint.)
+(effects_j: every effect of the plant-effect registry, :mod:`sim_drivers.effects`, on that
+joint, with the registry's formulas: the native ones through
+:meth:`~sim_drivers.arm_effects.ArmEffects.position_torque`, ``viscous_torque`` and
+``warm_up_torque``, the others through ``registered_torque``.)
 
 The dry terms (c, d) of joint j are multiplied by the warm-up factor and by the dry-coupling
 factor of :meth:`~sim_drivers.arm_effects.ArmEffects.coupling_scale` (the position of other
@@ -63,7 +68,12 @@ start and held (velocity explicit, position exact for constant acceleration). Wh
 velocity would reach zero or change sign inside the sub-step, the sub-step is split at the
 earliest zero crossing (event detection): that joint stops exactly, the dynamics are
 re-evaluated (stiction test) and the rest of the sub-step is integrated, with further events
-if needed. For one joint this is exactly ``sim_drivers.plant.JointPlant``.
+if needed. ``sim_drivers.plant.JointPlant`` is this with k = 1 on a ``JointBody``.
+
+Forward-dynamics form of the effects: :meth:`ChainDynamics.accel` subtracts the native
+effects' torques (viscous slopes per direction, quadratic viscous, ripple, spring) from the
+driving torque and scales the dry terms by the warm-up and coupling factors, in scalar form
+per joint (the hot path); the torque lag filters the command in :meth:`ChainDynamics.advance`.
 
 Joint numbering: joints are numbered 1..k in the chain of MOVING joints (the pinocchio model
 given to :class:`ArmParams`), unless ``joint_numbers`` maps them to other labels (e.g. their

@@ -32,6 +32,12 @@ The undeclared effects (each off unless enabled in the plant file; one module ea
 
 Forward dynamics (what :class:`JointPlant` integrates)
 ------------------------------------------------------
+The joint is a robot with one moving joint: :class:`JointPlant` steps the n-dof plant's
+:class:`~sim_drivers.arm_plant.ChainDynamics` (the friction, stiction and integration below,
+written once for k joints) on :class:`JointBody`, the rigid body above in closed form; and
+:func:`inverse_torque` is :func:`sim_drivers.arm_plant.friction_torque` with k = 1. For one
+joint the n-dof equations read:
+
 Given the applied torque tau, q, dq and t, the balance above is piecewise linear in ddq through
 tau_out. With s = sign(dq) and ``r = tau - tau_off - viscous - ripple - spring``:
 
