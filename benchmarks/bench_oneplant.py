@@ -7,7 +7,8 @@ The baseline's source is exported (``git archive``) to a temporary directory; ea
 in a fresh subprocess, alternating baseline and this tree, so that both see the same machine
 load. Prints the median microseconds per cycle of each and their ratio (this tree / baseline).
 Cases: ``JointPlant.step`` sliding and stuck, with every effect, and the offline closed loop
-(``simulate``: controller + plant + record) with and without effects.
+(``simulate``: controller + plant + record) with and without effects; and the n-dof
+``ArmPlant.step`` on a 3-joint UR10 (the same dynamics code since issue 24).
 """
 
 from __future__ import annotations
@@ -41,7 +42,19 @@ if "effects" in case:
     p = p.with_effect("asymmetric_viscous", F_V_pos=45.0, F_V_neg=35.0)
     p = p.with_effect("quadratic_viscous", F_VV=10.0)
     p = p.with_effect("torque_lag", time_constant_s=0.002)
-if case.startswith("step"):
+if case.startswith("arm"):
+    from sim_drivers.arm import ArmParams, ArmPlant
+    from sim_drivers.robots import ur10
+    params = ArmParams.from_model(ur10(3))
+    plant = ArmPlant(params, 0.001, substeps=10, seed=1)
+    plant.reset([0.1, -1.0, 0.8])
+    g = [float(x) for x in params.friction.tau_off]
+    taus = [[g[0] + 400.0 * math.sin(k * 0.003), 900.0 * math.sin(k * 0.002) + 300.0,
+             200.0 * math.sin(k * 0.004)] for k in range(n)]
+    t0 = time.perf_counter()
+    for x in taus:
+        plant.step(x)
+elif case.startswith("step"):
     jp = JointPlant(p, 0.001, substeps=10, seed=1)
     jp.set_payload(3.4584, 1.277)
     jp.reset(0.3)
@@ -61,7 +74,8 @@ else:
 print((time.perf_counter() - t0) / n * 1e6)
 '''
 
-CASES = ("step sliding", "step stuck", "step sliding effects", "offline", "offline effects")
+CASES = ("step sliding", "step stuck", "step sliding effects", "offline", "offline effects",
+         "arm step (UR10, 3 joints)")
 
 
 def export(rev: str, dest: Path) -> None:

@@ -29,12 +29,12 @@ The six above are native: their parameters are per-joint arrays here and their i
 torque is the registry's formula (the effect module's ``torque``) evaluated with those arrays
 (:meth:`ArmEffects.position_torque`, :meth:`ArmEffects.viscous_torque`,
 :meth:`ArmEffects.warm_up_torque`); their forward-dynamics form is the scalar per-joint code
-of :meth:`sim_drivers.arm_plant.ChainDynamics.accel` (shared by the arm and the single
+of :meth:`sim_drivers.dynamics.ChainDynamics.accel` (shared by the arm and the single
 joint). Any other registered effect (a new module in ``sim_drivers/effects/``) is carried per
 joint as its registered parameters (:attr:`ArmEffects.registered`, values validated by its
 schema) and applied through its registration: its ``torque`` in the inverse model
 (:meth:`ArmEffects.registered_torque`) and its forward-dynamics ``extra`` knob (a static torque
-f(q_j, dq_j, t)) in :class:`~sim_drivers.arm_plant.ChainDynamics`, per joint. Such an effect
+f(q_j, dq_j, t)) in :class:`~sim_drivers.dynamics.ChainDynamics`, per joint. Such an effect
 sees joint j alone: ``Inputs.q, dq, t, tau_out`` of the joint and ``Inputs.params`` with the
 joint's ``friction`` (the eq. 30 coefficients as scalars) and ``joint.q_s``. So a new
 friction effect is one plant file for both simulators.

@@ -33,9 +33,9 @@ The undeclared effects (each off unless enabled in the plant file; one module ea
 Forward dynamics (what :class:`JointPlant` integrates)
 ------------------------------------------------------
 The joint is a robot with one moving joint: :class:`JointPlant` steps the n-dof plant's
-:class:`~sim_drivers.arm_plant.ChainDynamics` (the friction, stiction and integration below,
+:class:`~sim_drivers.dynamics.ChainDynamics` (the friction, stiction and integration below,
 written once for k joints) on :class:`JointBody`, the rigid body above in closed form; and
-:func:`inverse_torque` is :func:`sim_drivers.arm_plant.friction_torque` with k = 1. For one
+:func:`inverse_torque` is :func:`sim_drivers.dynamics.friction_torque` with k = 1. For one
 joint the n-dof equations read:
 
 Given the applied torque tau, q, dq and t, the balance above is piecewise linear in ddq through
@@ -84,7 +84,7 @@ import numpy as np
 
 from .arm_effects import ArmEffects
 from .arm_params import ArmFriction
-from .arm_plant import (  # the regimes are re-exported: the single joint's names
+from .dynamics import (  # the regimes are re-exported: the single joint's names
     REGIME_REST,
     REGIME_SLIDING,  # noqa: F401
     REGIME_ZERO_LOAD,  # noqa: F401
@@ -242,16 +242,29 @@ class JointBody(RigidBody):
             self.J = b.J + ma
             self.gc = 0.0
             self.gs = 0.0
+        self.forward = self._make_forward(self.J, self.gc, self.gs)
 
     def gravity(self, q: float) -> float:
         """Gravity torque (the static load) at q [rad], [N m]."""
         return self.gc * math.cos(q) + self.gs * math.sin(q)
 
-    def forward(self, q: list, v: list, tau: list) -> list:
-        grav = self.gc * math.cos(q[0])
-        if self.gs:
-            grav += self.gs * math.sin(q[0])
-        return [(tau[0] - grav) / self.J]
+
+    @staticmethod
+    def _make_forward(jtot: float, gc: float, gs: float) -> Any:
+        """:meth:`RigidBody.forward` of this body, a closure over its constants (the hot
+        path: one call per integration sub-step)."""
+        cos, sin = math.cos, math.sin
+        if gs:
+            def forward(q: list, v: list, tau: list) -> list:
+                x = q[0]
+                return [(tau[0] - (gc * cos(x) + gs * sin(x))) / jtot]
+        else:
+            def forward(q: list, v: list, tau: list) -> list:
+                return [(tau[0] - gc * cos(q[0])) / jtot]
+        return forward
+
+    def hold_one(self, q: list, v: list, tau: list, j: int) -> tuple[list, float]:
+        return [0.0], self.gc * math.cos(q[0]) + self.gs * math.sin(q[0]) - tau[0]
 
     def constrained(self, q: list, v: list, tau: list) -> _JointConstrained:
         return _JointConstrained(self, self.gravity(q[0]), tau[0])
@@ -278,7 +291,7 @@ class _JointConstrained(Constrained):
 
 class JointPlant:
     """One simulated joint, stepped once per control cycle: the n-dof plant's dynamics
-    (:class:`sim_drivers.arm_plant.ChainDynamics`) on the one-joint body :class:`JointBody`,
+    (:class:`sim_drivers.dynamics.ChainDynamics`) on the one-joint body :class:`JointBody`,
     with scalar state.
 
     Parameters

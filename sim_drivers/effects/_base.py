@@ -7,7 +7,7 @@ effect") defines the frozen dataclass of its plant-file table ``[effects.<name>]
 :class:`PlantEffect` with its schema (keys, units, validation), its vectorised torque (the
 inverse model, :func:`sim_drivers.plant.inverse_torque`, and the arm's) and, for an effect
 the plant has no native form of, its forward-dynamics static torque (:class:`Knobs`, read by
-:class:`sim_drivers.arm_plant.ChainDynamics`)::
+:class:`sim_drivers.dynamics.ChainDynamics`)::
 
     register(PlantEffect(
         name="spring", order=20, params=Spring, formula="k (q - q0)",
@@ -76,7 +76,7 @@ class Inputs:
 @dataclass
 class Knobs:
     """What a registered effect WITHOUT a native form adds to the forward dynamics of the
-    plant (:class:`sim_drivers.arm_plant.ChainDynamics`, for the single joint and the arm).
+    plant (:class:`sim_drivers.dynamics.ChainDynamics`, for the single joint and the arm).
 
     The six native effects (ripple, spring, warm-up, asymmetric and quadratic viscous, torque
     lag) have their forward form in ``ChainDynamics.accel`` and set no knob.
