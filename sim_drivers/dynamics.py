@@ -257,6 +257,10 @@ class ChainDynamics:
         tl = np.asarray(e.lag_time_constant_s, dtype=float).tolist()
         keep = [math.exp(-self.h / x) if x > 0 else 0.0 for x in tl]
         self.keep = keep if any(keep) else None
+        # whether the dynamics are time-invariant over a cycle (no lag, warm-up, extra torque):
+        # then an arm held at rest stays so for the rest of the cycle, exactly
+        self._static = self.keep is None and all(
+            x is None or (not x[5] and x[7] is None) for x in eff)
         self._max_events = 2 * k + 2
         self.quad = [0] * k
         self._sliding = (REGIME_SLIDING,) * k  # shared regime of an all-sliding evaluation
@@ -515,6 +519,7 @@ class ChainDynamics:
         keep = self.keep
         accel = self.accel
         rng_k = range(self.k)
+        static, sliding = self._static, self._sliding
         q, v = list(q), list(v)  # updated in place below
         if keep is None:
             tau = [c + n for c, n in zip(cmd, noise, strict=True)]
@@ -530,6 +535,12 @@ class ChainDynamics:
             a, regime = accel(tau, q, v, t)
             if i == 0:
                 a0, tau0, reg0 = a, tau, regime
+            if static and regime is not sliding and not any(a) and not any(v):
+                # every joint held at rest and nothing changes with time: so are the other
+                # sub-steps (same inputs, same answer)
+                for _ in range(i, substeps):
+                    t += h
+                break
             for j in rng_k:  # a velocity reaching zero within the sub-step: an event
                 vj = v[j]
                 if vj != 0.0 and (vj + a[j] * h) * vj <= 0.0:

@@ -5,9 +5,12 @@ single-joint plant as it was before it computed through the n-dof plant (issue 2
 b31155c, ``sim_drivers/plant.py`` with its own friction, stiction and integration). The test
 ``tests/test_plant_golden.py`` recomputes them with the code of today and compares.
 
-Regenerate (only when a change of the numbers is intended and explained)::
+Regenerate (only when a change of the numbers is intended and explained), here from the
+sources of b31155c::
 
-    python -m tests.plant_golden --write
+    mkdir /tmp/base && git archive b31155c | tar x -C /tmp/base
+    cp tests/plant_golden.py /tmp/base/tests/ && (cd /tmp/base && python -m tests.plant_golden
+    --write) && cp /tmp/base/tests/data/plant_golden.npz tests/data/
 
 Scenarios: every undeclared effect on, stiction at reversals, a payload, the prismatic joint,
 several noise seeds, a run started at rest inside the static band, the torque-driven
@@ -103,6 +106,8 @@ def compute() -> dict[str, np.ndarray]:
     out["step_default_20sub"] = _stepped(default_plant(), -1.0, tau, seed=4, substeps=20)
     hold = np.full(500, 250.0)  # inside the static band at q = 0.3: stays stuck
     out["step_stuck"] = _stepped(all_effects(), 0.3, hold, seed=5)
+    hold_release = np.concatenate([hold, np.full(300, 450.0), np.full(300, -100.0)])
+    out["step_stuck_plain"] = _stepped(default_plant(), 0.3, hold_release, seed=5)
     out["step_prismatic"] = _stepped(prismatic(), 0.0, 60 * np.sin(2 * np.pi * 0.7 * t),
                                      seed=6, payload=(2.0, 0.5))
     p = all_effects()
