@@ -151,7 +151,8 @@ def friction_torque(
 class RigidBody:
     """The rigid-body part of the forward dynamics a :class:`ChainDynamics` integrates.
 
-    Subclasses: :class:`PinocchioBody` (any serial chain, through pinocchio) and
+    Subclasses: :class:`sim_drivers.arm_plant.PinocchioBody` (any serial chain, through
+    pinocchio) and
     :class:`sim_drivers.plant.JointBody` (one joint: eq. 31/34 in closed form, exact and fast).
 
     Attributes

@@ -63,7 +63,10 @@ i.e. the rectangle of section III.B::
     tau_l < 0:  A_m1 tau_l - D_m1 <= r0 <= A_g1 tau_l + D_g1
 
 with A_m1 = a_m + b_m, A_g1 = a_g - b_g, D_m1 = c_m + d_m, D_g1 = c_g + d_g (times the warm-up
-factor). Above the band it breaks away in the positive direction, below in the negative one.
+factor); at a load within 1e-9 D of zero (round-off at the vertical, e.g. cos q ~ 6e-17 at
+q = pi/2) the band is ``+-max(D_m1, D_g1)``, as at an exact zero (the n-dof rule; the plant
+before issue 24 used the tau_l > 0 or < 0 band there). Above the band it breaks away in the
+positive direction, below in the negative one.
 
 Integration: ``substeps`` fixed sub-steps per control cycle; in each, the acceleration is
 evaluated at the start and held (velocity explicit, position exact for constant acceleration).

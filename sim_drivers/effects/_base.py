@@ -109,8 +109,11 @@ class PlantEffect:
     formula : str
         One line for the docs and the plant-file comment.
     torque : callable or None
-        ``torque(p, x: Inputs) -> ndarray`` [N m], the effect's term of the inverse model;
-        None for a dynamic effect (torque lag), which is not a term of the balance.
+        ``torque(p, x: Inputs) -> ndarray`` [N m], the effect's term of the inverse model
+        (the one place its formula is written: the single joint and the arm call it; numpy
+        broadcasting only, so that the arm can pass per-joint arrays (k,) as parameters and
+        states of shape (..., k)); None for a dynamic effect (torque lag), which is not a
+        term of the balance.
     configure : callable or None
         ``configure(p, knobs: Knobs, params)``: add the effect's static torque to
         ``knobs.extra`` (``params``: the joint's ``friction`` and ``joint.q_s``); None for the

@@ -30,7 +30,6 @@ def torque(p: AsymmetricViscous, x: Inputs) -> np.ndarray:
     return np.where(dq > 0, (p.F_V_pos - fv) * dq, (p.F_V_neg - fv) * dq)
 
 
-
 register(PlantEffect(
     name="asymmetric_viscous", order=40, params=AsymmetricViscous,
     formula="F_V -> F_V_pos (dq > 0), F_V_neg (dq < 0)",

@@ -23,7 +23,6 @@ def torque(p: QuadraticViscous, x: Inputs) -> np.ndarray:
     return p.F_VV * x.dq * np.abs(x.dq)
 
 
-
 register(PlantEffect(
     name="quadratic_viscous", order=50, params=QuadraticViscous, formula="F_VV dq |dq|",
     schema={"F_VV": Field(float, unit="N m s^2/rad^2", ge=0)},

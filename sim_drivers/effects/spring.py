@@ -27,7 +27,6 @@ def torque(p: Spring, x: Inputs) -> np.ndarray:
     return p.stiffness_Nm_per_rad * (x.q - p.rest_position_rad)
 
 
-
 register(PlantEffect(
     name="spring", order=20, params=Spring, formula="k (q - q0)",
     schema={

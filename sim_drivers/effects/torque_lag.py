@@ -23,7 +23,6 @@ class TorqueLag:
     time_constant_s: float = 0.002
 
 
-
 register(PlantEffect(
     name="torque_lag", order=60, params=TorqueLag,
     formula="d tau_applied / dt = (tau_cmd - tau_applied) / T_lag",

@@ -39,7 +39,6 @@ def torque(p: WarmUp, x: Inputs) -> np.ndarray:
     return w * dry
 
 
-
 register(PlantEffect(
     name="warm_up", order=30, params=WarmUp,
     formula="dry friction (c, d) x (1 + w exp(-t / T_w))",
