@@ -2,7 +2,7 @@
 
 Forward dynamics with pinocchio's ABA (rotor inertias as armature), the load- and
 velocity-dependent friction of Hamon, Gautier & Garrec (eq. 17-30) on every joint with
-stiction and event detection, the undeclared effects of the single-joint plant, per-joint drive
+stiction and event detection, the undeclared effects of the plant-effect registry, per-joint drive
 quantisation and noise, and a PD + feed-forward closed loop. The pieces:
 
 * :mod:`sim_drivers.arm_params`    -- :class:`ArmParams` (truth, ``truth()`` by parameter name;
@@ -10,8 +10,9 @@ quantisation and noise, and a PD + feed-forward closed loop. The pieces:
   :class:`ArmDrive`, :class:`Payload` (inertia about its CoM like the campaign payloads;
   ``Payload.coerce`` takes those)
 * :mod:`sim_drivers.arm_effects`   -- :class:`ArmEffects` (undeclared effects, per joint)
-* :mod:`sim_drivers.arm_plant`     -- :class:`ArmPlant` (forward model, equations in its
-  docstring), :func:`inverse_arm_torque` (inverse model)
+* :mod:`sim_drivers.arm_plant`     -- :class:`ArmPlant` (forward model: the plant computation
+  of :mod:`sim_drivers.dynamics`, shared with the single joint, on a pinocchio body),
+  :func:`inverse_arm_torque` (inverse model)
 * :mod:`sim_drivers.arm_offline`   -- :func:`simulate_arm` -> :class:`ArmRun`, :class:`ArmGains`,
   :func:`simulate_arm_payloads`
 * :mod:`sim_drivers.arm_reference` -- smooth multi-joint test references

@@ -1,6 +1,7 @@
 """Undeclared effects of the n-dof simulator, per joint, vectorised over joints (and samples).
 
-The formulas are those of :mod:`sim_drivers.plant` (module docstring there), one set of
+The formulas are those of the plant-effect registry (:mod:`sim_drivers.effects`, one module
+each; :mod:`sim_drivers.plant`'s docstring writes them for one joint), one set of
 coefficients per joint; a coefficient of 0 (or ``asymmetric`` False) switches the effect off
 for that joint:
 
@@ -24,23 +25,19 @@ The effects are those of the plant-effect registry shared with the single joint
 (:mod:`sim_drivers.effects`, one module per effect, docs/refinement.md "Adding an effect"):
 the tables and keys of :meth:`ArmEffects.make` and :meth:`ArmEffects.from_plant_effects` are
 the registry's (a native table's keys are checked against its registered schema at import).
-The six above have a native vectorised form here; any other registered effect (a new module
-in ``sim_drivers/effects/``) is carried per joint as its registered parameters
-(:attr:`ArmEffects.registered`, values validated by its schema) and applied through its
-registration: its ``torque`` in the inverse model (:meth:`ArmEffects.registered_torque`) and
-its forward-dynamics ``extra`` knob (a static torque f(q_j, dq_j, t)) in
-:class:`~sim_drivers.arm_plant.ArmPlant`, per joint, as :class:`sim_drivers.plant.JointPlant`
-does. Such an effect sees joint j alone: ``Inputs.q, dq, t, tau_out`` of the joint and
-``Inputs.params`` with the joint's ``friction`` (the eq. 30 coefficients as scalars) and
-``joint.q_s``; an effect that sets another forward knob is refused with one line (the arm
-reads those knobs only for its native effects). So a new friction effect is one plant file
-for both simulators.
-
-The effect code of the arm simulator lives in this file (parameters, vectorised formulas used
-by the inverse model).
-One exception, for speed: :meth:`sim_drivers.arm_plant.ArmPlant._accel` inlines the scalar
-per-joint form of the same formulas, as ``sim_drivers.plant.JointPlant`` does; the test
-``test_one_joint_with_every_effect_is_the_joint_plant`` pins both to the single-joint plant.
+The six above are native: their parameters are per-joint arrays here and their inverse-model
+torque is the registry's formula (the effect module's ``torque``) evaluated with those arrays
+(:meth:`ArmEffects.position_torque`, :meth:`ArmEffects.viscous_torque`,
+:meth:`ArmEffects.warm_up_torque`); their forward-dynamics form is the scalar per-joint code
+of :meth:`sim_drivers.dynamics.ChainDynamics.accel` (shared by the arm and the single
+joint). Any other registered effect (a new module in ``sim_drivers/effects/``) is carried per
+joint as its registered parameters (:attr:`ArmEffects.registered`, values validated by its
+schema) and applied through its registration: its ``torque`` in the inverse model
+(:meth:`ArmEffects.registered_torque`) and its forward-dynamics ``extra`` knob (a static torque
+f(q_j, dq_j, t)) in :class:`~sim_drivers.dynamics.ChainDynamics`, per joint. Such an effect
+sees joint j alone: ``Inputs.q, dq, t, tau_out`` of the joint and ``Inputs.params`` with the
+joint's ``friction`` (the eq. 30 coefficients as scalars) and ``joint.q_s``. So a new
+friction effect is one plant file for both simulators.
 """
 
 from __future__ import annotations
@@ -83,6 +80,8 @@ def _check_native() -> None:
 
 
 _check_native()
+#: The registered effects by name (the native ones' formulas are theirs).
+_SPECS = {e.name: e for e in registry()}
 #: Field of :class:`ArmEffects` holding the registered (non-native) effects, per joint.
 _REGISTERED = "registered"
 _DEFAULTS = {"ripple_period_rad": _TWO_PI / 16.0, "warm_up_time_constant_s": 60.0,
@@ -288,12 +287,27 @@ class ArmEffects:
         return bool(np.any(self.ripple_amplitude_Nm) or np.any(self.spring_stiffness_Nm_per_rad))
 
     # ------------------------------------------------------------------ formulas
-    def position_torque(self, q: Any) -> np.ndarray:
-        """Ripple + spring torque [N m], shape of ``q`` (..., k)."""
-        q = np.asarray(q, dtype=float)
-        return (self.ripple_amplitude_Nm
-                * np.sin(_TWO_PI * q / self.ripple_period_rad + self.ripple_phase_rad)
-                + self.spring_stiffness_Nm_per_rad * (q - self.spring_rest_rad))
+    def _native(self, name: str, friction: Any, q: Any, dq: Any, t: Any = 0.0,
+                tau_out: Any = 0.0) -> np.ndarray:
+        """Torque of native effect ``name`` on every joint [N m], shape (..., k): the
+        registered formula (``sim_drivers/effects/<name>.py``, its ``torque``) evaluated with
+        one parameter per joint (arrays (k,)); off joints give 0. t [s]: scalar or (...,)."""
+        spec = _SPECS[name]
+        values = {key: getattr(self, attr) for key, attr in _TABLES[name].items()}
+        if name == "asymmetric_viscous":  # off: F_V itself, no excess
+            pos, neg = self.viscous_coefficients(friction.F_V)
+            values = {"F_V_pos": pos, "F_V_neg": neg}
+        p = spec.params(True, **values)
+        t = np.asarray(t, dtype=float)
+        x = Inputs(SimpleNamespace(friction=friction, joint=SimpleNamespace(q_s=friction.q_s)),
+                   np.asarray(q, dtype=float), np.asarray(dq, dtype=float), 0.0, 0.0, 0.0,
+                   t[..., None] if t.ndim else t, lambda *_a: np.asarray(tau_out, dtype=float))
+        return spec.torque(p, x)
+
+    def position_torque(self, q: Any, friction: Any = None) -> np.ndarray:
+        """Ripple + spring torque [N m], shape of ``q`` (..., k) (registered formulas)."""
+        return (self._native("position_ripple", friction, q, 0.0)
+                + self._native("spring", friction, q, 0.0))
 
     def viscous_coefficients(self, F_V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Viscous coefficients for dq > 0 and dq < 0 [N m s/rad], shape (k,) each."""
@@ -301,17 +315,16 @@ class ArmEffects:
         neg = np.where(self.asymmetric, self.F_V_neg, F_V)
         return pos, neg
 
-    def viscous_torque(self, F_V: np.ndarray, dq: Any) -> np.ndarray:
-        """Whole viscous torque, F_V (or F_V_pos / F_V_neg) dq + F_VV dq |dq| [N m]."""
-        dq = np.asarray(dq, dtype=float)
-        pos, neg = self.viscous_coefficients(F_V)
-        return np.where(dq > 0, pos, neg) * dq + self.F_VV * dq * np.abs(dq)
+    def viscous_torque(self, friction: Any, dq: Any) -> np.ndarray:
+        """Viscous torque of the effects beyond eq. 30's F_V dq [N m]: asymmetric and
+        quadratic viscous (registered formulas), shape of ``dq`` (..., k)."""
+        return (self._native("asymmetric_viscous", friction, 0.0, dq)
+                + self._native("quadratic_viscous", friction, 0.0, dq))
 
-    def dry_scale(self, t: Any) -> np.ndarray:
-        """Warm-up factor of the dry terms, ``1 + w exp(-t / T_w)``; t [s] since the run
-        start, shape (...,) -> (..., k)."""
-        t = np.asarray(t, dtype=float)[..., None]
-        return 1.0 + self.warm_up_fraction * np.exp(-t / self.warm_up_time_constant_s)
+    def warm_up_torque(self, friction: Any, dq: Any, t: Any, tau_out: Any) -> np.ndarray:
+        """Warm-up torque (registered formula: the dry terms times ``w exp(-t/T_w)``) [N m],
+        shape (..., k); t [s] since the run start, scalar or (...,)."""
+        return self._native("warm_up", friction, 0.0, dq, t, tau_out)
 
     def coupling_scale(self, q: Any) -> np.ndarray:
         """Dry-coupling factor of every joint (module docstring), 1 where off; q [rad] of all
@@ -357,18 +370,12 @@ class ArmEffects:
         forward dynamics (their ``extra`` knob; t since the run start)."""
         specs = {e.name: e for e in registry()}
         out = []
-        default = Knobs()
         for j, d in enumerate(self.registered):
             fs: list = []
             for name, p in d.items():
                 kn = Knobs()
-                specs[name].configure(p, kn, _joint_params(friction, j))
-                other = [f.name for f in fields(kn) if f.name != "extra"
-                         and getattr(kn, f.name) != getattr(default, f.name)]
-                if other:
-                    raise SimError(f"ArmEffects: effect {name!r} sets the forward-dynamics "
-                                   f"knob(s) {other}, which the arm reads for its native "
-                                   "effects only (use Knobs.extra)")
+                if specs[name].configure is not None:
+                    specs[name].configure(p, kn, _joint_params(friction, j))
                 fs += kn.extra
             out.append(tuple(fs))
         return out

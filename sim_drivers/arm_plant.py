@@ -1,9 +1,10 @@
 """The simulated n-dof arm: rigid body (pinocchio) + the paper's friction on every joint.
 
 Pure numerics, no bus; joint side SI units ([rad], [rad/s], [N m]; prismatic [m], [N]), motor
-convention (a positive torque drives a positive velocity). This is the n-dof generalisation of
-:mod:`sim_drivers.plant` (read its module docstring first): same friction, same stiction
-rectangle, same integration with event detection, one set of coefficients per joint.
+convention (a positive torque drives a positive velocity). The friction, stiction, integration
+and effects are :mod:`sim_drivers.dynamics` (the one plant computation, shared with the
+single joint); this module gives them the arm's rigid body, :class:`PinocchioBody`, and the
+arm's inverse model.
 
 Inverse model (:func:`inverse_arm_torque`)
 ------------------------------------------
@@ -12,58 +13,18 @@ Output (load) torque of the drive chain of joint j (eq. 1-2, 6), by RNEA on the 
 
     tau_out = M(q) ddq + C(q, dq) dq + Q(q)        (M includes diag(Ia); payload in link k)
 
-Friction of joint j, eq. 30 with E_j = exp(-|dq_j| / q_s,j), P_j = sign(tau_out,j dq_j)::
-
-    tau_j = P+ (a_m + b_m E) tau_out,j + P- (a_g - b_g E) tau_out,j
-          + P+ (c_m + d_m E) sign(dq_j) + P- (c_g + d_g E) sign(dq_j) + F_V dq_j + tau_off
-          + effects_j(q_j, dq_j, t)                          (sim_drivers.arm_effects)
-
-(effects_j: the native effects of the arm and any other effect of the plant-effect registry,
-:mod:`sim_drivers.effects`, on that joint.)
-
-The dry terms (c, d) of joint j are multiplied by the warm-up factor and by the dry-coupling
-factor of :meth:`~sim_drivers.arm_effects.ArmEffects.coupling_scale` (the position of other
-joints: the arm's one cross-joint effect), in the inverse model, the sliding friction and the
-stiction band alike.
+then the friction of every joint, :func:`sim_drivers.dynamics.friction_torque` (eq. 30 +
+effects).
 
 Forward dynamics (:class:`ArmPlant`)
 ------------------------------------
-Friction is per joint: tau_out,j depends only on joint j's own applied torque and velocity.
-So for a sliding joint (dq_j != 0) tau_out,j comes first, by the quadrant choice of
-``sim_drivers.plant`` (motor candidate ``(r - s D_m)/A_m`` if consistent with sign(P_out) > 0,
-else generator ``(r - s D_g)/A_g``, else zero load, ties kept in the previous quadrant), and
-then ``ddq = ABA(q, dq, tau_out)``. An external force (:mod:`sim_drivers.arm_push`, the
-plant's ``pushes``) adds its ``J^T F`` to tau_out there (and in the stiction step below): it
-acts on the links, not through the drive chains and their friction.
-
-Stiction: joints with dq_j = 0 form the stuck set S. With ddq_S = 0 and the free joints' tau_out
-known, ``M_FF ddq_F = tau_out,F - h_F`` (h = C dq + Q), and the torque needed to hold joint j
-in S is ``tau_l,j = M_jF ddq_F + h_j``. Computed without factorising M_FF: with
+:class:`sim_drivers.dynamics.ChainDynamics` on a :class:`PinocchioBody`: ``ddq = ABA(q, dq,
+tau_out)`` for the sliding joints, and for the stuck set S (joints with dq_j = 0), with
 ``a0 = ABA(q, dq, tau_out)`` (tau_out,S = 0) and ``Minv = M^-1`` (``pin.computeMinverse``),
-``tau_l,S = -(Minv_SS)^-1 a0_S`` and ``ddq = a0 + Minv_:S tau_l,S`` (one division when one
-joint is stuck). A load within 1e-9 D of zero (round-off at a vertical axis) counts as zero:
-the band is then +-max(D_m1, D_g1) as in ``sim_drivers.plant``. Joint j stays stuck while its
-driving torque ``r0 = tau - tau_off - ripple - spring`` lies in the static band of section
-III.B (limit E = 1) at load tau_l,j::
-
-    tau_l > 0:  A_g1 tau_l - D_g1 <= r0 <= A_m1 tau_l + D_m1
-    tau_l < 0:  A_m1 tau_l - D_m1 <= r0 <= A_g1 tau_l + D_g1
-
-(A_m1 = a_m + b_m, A_g1 = a_g - b_g, D_m1 = c_m + d_m, D_g1 = c_g + d_g, times the warm-up
-factor). Joints outside their band break away one at a time, the largest excess (relative to
-|tau_l| + D) first, with tau_out,j from the E = 1 quadrant choice; the holding torques of the
-others are recomputed after each release. A released joint must accelerate in its breakaway
-direction (true for one release: sign(ddq_j) = sign(tau_out,j - tau_l,j) because the Schur
-complement of M is positive definite); if coupling between simultaneous releases breaks that,
-the joint is held again (an approximation of the exact complementarity problem, flagged
-nowhere: it needs two joints breaking away in the same sub-step).
-
-Integration: fixed sub-steps per control cycle; in each the acceleration is evaluated at the
-start and held (velocity explicit, position exact for constant acceleration). When a joint's
-velocity would reach zero or change sign inside the sub-step, the sub-step is split at the
-earliest zero crossing (event detection): that joint stops exactly, the dynamics are
-re-evaluated (stiction test) and the rest of the sub-step is integrated, with further events
-if needed. For one joint this is exactly ``sim_drivers.plant.JointPlant``.
+the holding torques ``tau_l,S = -(Minv_SS)^-1 a0_S`` and ``ddq = a0 + Minv_:S tau_l,S`` (one
+division when one joint is stuck): ``M_FF ddq_F = tau_out,F - h_F`` without factorising M_FF.
+An external force (:mod:`sim_drivers.arm_push`, the plant's ``pushes``) adds its ``J^T F`` to
+tau_out: it acts on the links, not through the drive chains and their friction.
 
 Joint numbering: joints are numbered 1..k in the chain of MOVING joints (the pinocchio model
 given to :class:`ArmParams`), unless ``joint_numbers`` maps them to other labels (e.g. their
@@ -71,25 +32,25 @@ index in the full chain, as ROBOT_FORMAT's parameter names use).
 """
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
-from trajectories.friction import stribeck_exp
-
 from .arm_params import ArmParams, Payload
 from .arm_push import Push, push_torque
+from .dynamics import (  # re-exported: the arm's names
+    REGIME_REST,
+    REGIME_SLIDING,
+    REGIME_ZERO_LOAD,
+    ChainDynamics,
+    Constrained,
+    RigidBody,
+    friction_torque,
+)
 
-_TWO_PI = 2.0 * math.pi
-
-#: The joint slides and eq. 30 (+ effects) holds exactly (same values as sim_drivers.plant).
-REGIME_SLIDING = 0
-#: The joint is at rest (dq == 0): stuck, or breaking away during the next sub-step.
-REGIME_REST = 1
-#: The joint slides with tau_out == 0 and the dry friction inside the quadrant band.
-REGIME_ZERO_LOAD = 2
+__all__ = ["REGIME_REST", "REGIME_SLIDING", "REGIME_ZERO_LOAD", "ArmPlant", "PinocchioBody",
+           "friction_torque", "inverse_arm_torque", "output_arm_torque"]
 
 
 # --------------------------------------------------------------------------- inverse model
@@ -125,54 +86,6 @@ def output_arm_torque(
     return out.reshape(np.shape(q))
 
 
-def friction_torque(
-    params: ArmParams,
-    q: Any,
-    dq: Any,
-    tau_out: Any,
-    t: Any = 0.0,
-    *,
-    effects: bool = True,
-) -> np.ndarray:
-    """Motor torque of eq. 30 (+ the enabled effects) for given output torques.
-
-    Parameters
-    ----------
-    params : ArmParams
-    q, dq, tau_out : array_like, shape (n, k) or (k,)
-        Positions [rad], velocities [rad/s], output torques [N m].
-    t : array_like, shape (n,) or scalar
-        Time since the run start [s] (warm-up effect only).
-    effects : bool
-        Add the undeclared effects (default) or return eq. 30 alone.
-
-    Returns
-    -------
-    ndarray
-        tau [N m]; sign(0) = 0 as in eq. 27-28.
-    """
-    f, e = params.friction, params.effects
-    q = np.asarray(q, dtype=float)
-    dq = np.asarray(dq, dtype=float)
-    tau_out = np.asarray(tau_out, dtype=float)
-    ex = stribeck_exp(dq, f.q_s)
-    p = np.sign(tau_out * dq)
-    pp, pm = 0.5 * (1.0 + p), 0.5 * (1.0 - p)
-    s = np.sign(dq)
-    dry = pp * (f.c_m + f.d_m * ex) + pm * (f.c_g + f.d_g * ex)
-    tau = pp * (f.a_m + f.b_m * ex) * tau_out + pm * (f.a_g - f.b_g * ex) * tau_out + f.tau_off
-    if not effects:
-        return tau + dry * s + f.F_V * dq
-    scale = e.dry_scale(t)
-    if np.ndim(t) == 0:
-        scale = scale[0]
-    scale = scale * e.coupling_scale(q)
-    tau = tau + scale * dry * s + e.viscous_torque(f.F_V, dq) + e.position_torque(q)
-    if any(e.registered):  # the registry's other effects (sim_drivers.arm_effects)
-        tau = tau + e.registered_torque(f, q, dq, t, tau_out)
-    return tau
-
-
 def inverse_arm_torque(
     params: ArmParams,
     q: Any,
@@ -199,13 +112,66 @@ def inverse_arm_torque(
     return friction_torque(params, q, dq, tau_out, t, effects=effects)
 
 
-# --------------------------------------------------------------------------- forward model
+# --------------------------------------------------------------------------- rigid body
+class PinocchioBody(RigidBody):
+    """A serial chain through pinocchio: ABA, and ``M^-1`` for the held joints.
+
+    Parameters
+    ----------
+    model : pinocchio.Model
+        Dynamics model (armature = rotor inertias, gravity, payload).
+    """
+
+    def __init__(self, model: pin.Model) -> None:
+        self.model = model
+        self.data = model.createData()
+        self.k = int(model.nv)
+        self._il = np.tril_indices(self.k, -1)
+
+    def forward(self, q: list, v: list, tau: list) -> list:
+        return pin.aba(self.model, self.data, np.array(q), np.array(v), np.array(tau)).tolist()
+
+    def constrained(self, q: list, v: list, tau: list) -> _MinvConstrained:
+        qa = np.array(q)
+        a0 = pin.aba(self.model, self.data, qa, np.array(v), np.array(tau))
+        minv = np.array(pin.computeMinverse(self.model, self.data, qa))
+        minv[self._il] = minv.T[self._il]  # some pinocchio versions fill the upper triangle only
+        return _MinvConstrained(a0, minv)
+
+
+class _MinvConstrained(Constrained):
+    """With ``a0 = ABA(q, dq, tau_out)`` and ``Minv = M^-1``: holding S needs
+    ``lam_S = -(Minv_SS)^-1 a0_S``, then ``ddq = a0 + Minv_:S lam_S``; releasing j with x adds
+    ``Minv_:j x`` to a0."""
+
+    def __init__(self, a0: np.ndarray, minv: np.ndarray) -> None:
+        self.a0, self.minv = a0, minv
+
+    def hold(self, stuck: list) -> tuple[list, list]:
+        a0, minv = self.a0, self.minv
+        if len(stuck) == 1:
+            j = stuck[0]
+            lam = np.array([-a0[j] / minv[j, j]])
+        else:
+            lam = -np.linalg.solve(minv[np.ix_(stuck, stuck)], a0[stuck])
+        ddq = a0 + minv[:, stuck] @ lam
+        ddq[stuck] = 0.0
+        return ddq.tolist(), lam.tolist()
+
+    def release(self, j: int, x: float) -> None:
+        self.a0 = self.a0 + self.minv[:, j] * x
+
+    def free(self) -> list:
+        return self.a0.tolist()
+
+
+
 class ArmPlant:
     """The simulated arm, stepped once per control cycle.
 
-    The sliding path is plain Python over the joints (per-joint friction, like
-    ``sim_drivers.plant.JointPlant``) plus one ``pin.aba`` call: small numpy arrays cost more
-    per operation than scalar floats at k <= 6.
+    The dynamics are a :class:`ChainDynamics` on a :class:`PinocchioBody`: plain Python over
+    the joints (per-joint friction) plus one ``pin.aba`` call per evaluation (small numpy
+    arrays cost more per operation than scalar floats at k <= 6).
 
     Parameters
     ----------
@@ -262,38 +228,15 @@ class ArmPlant:
             raise ValueError(f"substeps: expected an integer >= 1, got {substeps!r}")
         self.params = params
         self.payload = payload
-        self.k = k = params.k
+        self.k = params.k
         self.cycle_s = float(cycle_s)
         self.substeps = int(substeps)
         self._h = self.cycle_s / self.substeps
-        self.model = params.dynamics_model(payload)
-        self.data = self.model.createData()
+        body = PinocchioBody(params.dynamics_model(payload))
+        self.model, self.data = body.model, body.data
+        self._dyn = ChainDynamics(params.friction, params.effects, body, self._h)
         self._rng = np.random.default_rng(seed)
         self._noise_std = np.array(params.drive.torque_noise_std_Nm)
-        f, e = params.friction, params.effects
-        fv_pos, fv_neg = e.viscous_coefficients(f.F_V)
-        # one tuple of floats per joint (the hot loop unpacks it); effects: 0 = off
-        cols = (f.tau_off, 1.0 / f.q_s, fv_pos, fv_neg, e.F_VV,
-                f.c_m, f.d_m, f.a_m, f.b_m, f.c_g, f.d_g, f.a_g, f.b_g,
-                e.ripple_amplitude_Nm, 2.0 * math.pi / e.ripple_period_rad, e.ripple_phase_rad,
-                e.spring_stiffness_Nm_per_rad, e.spring_rest_rad,
-                e.warm_up_fraction, 1.0 / e.warm_up_time_constant_s)
-        self._jp = list(zip(*(np.asarray(c, dtype=float).tolist() for c in cols), strict=True))
-        self._am1, self._ag1 = f.a_m + f.b_m, f.a_g - f.b_g
-        self._dm1, self._dg1 = f.c_m + f.d_m, f.c_g + f.d_g
-        # dry coupling: per joint j, (m, c, 2 pi / P, phase, slope, q0) of its driving joints
-        pairs = [[(m, *(float(a[j, m]) for a in (
-            e.coupling_amplitude, _TWO_PI / e.coupling_period_rad, e.coupling_phase_rad,
-            e.coupling_slope_per_rad, e.coupling_rest_rad))) for m in range(k)
-            if e.coupling_amplitude[j, m] or e.coupling_slope_per_rad[j, m]] for j in range(k)]
-        self._cpl = pairs if any(pairs) else None
-        keep = e.lag_keep(self._h)
-        self._keep = keep.tolist() if np.any(keep) else None
-        # the registry's other effects: static torques f(q_j, dq_j, t) per joint
-        xf = e.forward_extra(f)
-        self._xf = xf if any(xf) else None
-        self._max_events = 2 * k + 2
-        self._il = np.tril_indices(k, -1)
         #: external forces (sim_drivers.arm_push): their J^T F enters the rigid-body dynamics
         self.pushes: list[Push] = []
         self._push_data = self.model.createData()
@@ -308,20 +251,25 @@ class ArmPlant:
         self.dq = np.zeros(k)
         self.ddq = np.zeros(k)
         self.t = float(t0)
-        self.t0 = float(t0)
+        self._dyn.t0 = float(t0)
         self.tau_cmd = np.zeros(k)
         self.tau_applied = np.zeros(k)
         self.tau_noise = np.zeros(k)
         self.tau_ext = np.zeros(k)
-        self._ext: list | None = None
+        self._dyn.ext = None
         self._lag = [0.0] * k
-        self._quad = [0] * k
+        self._dyn.quad[:] = [0] * k
         self.regime = np.full(k, REGIME_REST, dtype=np.int8)
         self.q_start = self.q.copy()
         self.dq_start = np.zeros(k)
         self.ddq_start = np.zeros(k)
         self.tau_applied_start = np.zeros(k)
         self.regime_start = self.regime.copy()
+
+    @property
+    def t0(self) -> float:
+        """Time origin of the warm-up effect [s] (set by :meth:`reset`)."""
+        return self._dyn.t0
 
     # ----------------------------------------------------------------- dynamics
     def acceleration(self, tau: Any, q: Any, dq: Any, t: float | None = None
@@ -330,166 +278,11 @@ class ArmPlant:
         (q [rad], dq [rad/s], t [s]); see the module docstring. Does not change the state
         except the remembered quadrants used to break ties."""
         k = self.k
-        a, reg = self._accel(np.asarray(tau, dtype=float).reshape(k).tolist(),
-                             np.asarray(q, dtype=float).reshape(k).tolist(),
-                             np.asarray(dq, dtype=float).reshape(k).tolist(),
-                             self.t if t is None else float(t))
+        a, reg = self._dyn.accel(np.asarray(tau, dtype=float).reshape(k).tolist(),
+                                 np.asarray(q, dtype=float).reshape(k).tolist(),
+                                 np.asarray(dq, dtype=float).reshape(k).tolist(),
+                                 self.t if t is None else float(t))
         return np.array(a), np.array(reg, dtype=np.int8)
-
-    def _accel(self, tau: list, q: list, v: list, t: float) -> tuple[list, list]:
-        """Hot path on lists of floats: ``(ddq, regime)``."""
-        k = self.k
-        out = [0.0] * k
-        reg = [REGIME_SLIDING] * k
-        r_rest: list = []
-        quad = self._quad
-        exp = math.exp
-        cpl = self._cpl
-        for j in range(k):
-            (off, qsi, fvp, fvn, fvv, cm, dm, am, bm, cg, dg, ag, bg,
-             rip_a, rip_k, rip_ph, spr_k, spr_q0, wu_w, wu_tinv) = self._jp[j]
-            vj = v[j]
-            r = tau[j] - off
-            if rip_a:
-                r -= rip_a * math.sin(rip_k * q[j] + rip_ph)
-            if spr_k:
-                r -= spr_k * (q[j] - spr_q0)
-            if self._xf is not None:
-                for fx in self._xf[j]:
-                    r -= fx(q[j], vj, t - self.t0)
-            wf = 1.0 + wu_w * exp(-(t - self.t0) * wu_tinv) if wu_w else 1.0
-            if cpl is not None and cpl[j]:
-                cf = 1.0
-                for m, c, kp, ph, a, q0 in cpl[j]:
-                    cf += c * math.sin(kp * q[m] + ph) + a * (q[m] - q0)
-                wf *= cf if cf > 0.0 else 0.0
-            if vj > 0.0:
-                s = wf
-                ex = exp(-vj * qsi)  # stribeck_exp inlined (scalar, per step)
-                r -= fvp * vj + fvv * vj * vj
-            elif vj < 0.0:
-                s = -wf
-                ex = exp(vj * qsi)
-                r -= fvn * vj - fvv * vj * vj
-            else:
-                reg[j] = REGIME_REST
-                r_rest.append((j, r, wf))
-                continue
-            # quadrant choice of sim_drivers.plant (s carries sign(dq) times the warm-up factor)
-            xm = (r - s * (cm + dm * ex)) / (am + bm * ex)
-            if xm * s > 0.0:
-                if quad[j] < 0:  # was generator: keep it if it is still consistent
-                    xg = (r - s * (cg + dg * ex)) / (ag - bg * ex)
-                    if xg * s < 0.0:
-                        out[j] = xg
-                        continue
-                quad[j] = 1
-                out[j] = xm
-            else:
-                xg = (r - s * (cg + dg * ex)) / (ag - bg * ex)
-                if xg * s < 0.0:
-                    quad[j] = -1
-                    out[j] = xg
-                else:
-                    reg[j] = REGIME_ZERO_LOAD
-        ext = self._ext
-        if ext is not None:  # a push: on the rigid body, not through the drive chain
-            out = [o + e for o, e in zip(out, ext, strict=True)]
-        qa, va = np.array(q), np.array(v)
-        if not r_rest:
-            return pin.aba(self.model, self.data, qa, va, np.array(out)).tolist(), reg
-        return self._stiction(out, r_rest, qa, va), reg
-
-    def _stiction(self, tau_out: list, r_rest: list, q: np.ndarray, v: np.ndarray) -> list:
-        """Constrained dynamics with the joints at rest stuck unless they break away (module
-        docstring). ``tau_out``: output torques, 0 at the joints at rest; ``r_rest``: (joint,
-        driving torque r0 [N m], warm-up factor) per joint at rest.
-
-        With the unconstrained acceleration ``a0 = ABA(q, dq, tau_out)`` and ``Minv = M^-1``,
-        holding the stuck set S needs the extra torques ``lam_S = -(Minv_SS)^-1 a0_S``, which
-        are the holding (load) torques since tau_out,S = 0; then ``ddq = a0 + Minv_:S lam_S``.
-        Releasing joint j with output torque x adds ``Minv_:j x`` to a0.
-        """
-        a0 = pin.aba(self.model, self.data, q, v, np.array(tau_out))
-        minv = np.array(pin.computeMinverse(self.model, self.data, q))
-        il = self._il
-        minv[il] = minv.T[il]  # some pinocchio versions fill the upper triangle only
-        stuck = [j for j, _, _ in r_rest]
-        band = {j: (r, w) for j, r, w in r_rest}
-        blocked: set = set()
-        released: list = []  # (joint, direction)
-        quads = self._quad
-
-        def hold(stuck: list) -> tuple[np.ndarray, np.ndarray]:
-            if len(stuck) == 1:
-                j = stuck[0]
-                lam = np.array([-a0[j] / minv[j, j]])
-            else:
-                lam = -np.linalg.solve(minv[np.ix_(stuck, stuck)], a0[stuck])
-            ddq = a0 + minv[:, stuck] @ lam
-            ddq[stuck] = 0.0
-            return ddq, lam
-
-        for _ in range(len(stuck) + 1):
-            if not stuck:
-                ddq = a0.copy()
-                break
-            ddq, lam = hold(stuck)
-            best, best_ex = -1, 0.0
-            for i, j in enumerate(stuck):
-                if j in blocked:
-                    continue
-                load = float(lam[i])
-                r, w = band[j]
-                am1, ag1 = float(self._am1[j]), float(self._ag1[j])
-                dm1, dg1 = w * float(self._dm1[j]), w * float(self._dg1[j])
-                dmax = dm1 if dm1 > dg1 else dg1
-                if abs(load) <= 1e-9 * dmax:  # round-off of a zero load (e.g. vertical axis)
-                    load = 0.0
-                if load > 0.0:
-                    upper, lower = am1 * load + dm1, ag1 * load - dg1
-                elif load < 0.0:
-                    upper, lower = ag1 * load + dg1, am1 * load - dm1
-                else:
-                    upper, lower = dmax, -dmax
-                ex = max(r - upper, lower - r)
-                if ex > 0.0:
-                    ex /= abs(load) + dmax + 1e-300  # relative excess: largest breaks first
-                    if ex > best_ex:
-                        best, best_ex = i, ex
-                        s = 1.0 if r > upper else -1.0
-                        rel = (load, am1, ag1, dm1, dg1)
-            if best < 0:
-                break
-            j = stuck[best]
-            load, am1, ag1, dm1, dg1 = rel
-            r = band[j][0]
-            quad = 1 if load * s > 0 else -1 if load * s < 0 else 0
-            xm = (r - s * dm1) / am1
-            xg = (r - s * dg1) / ag1
-            mot, gen = xm * s > 0.0, xg * s < 0.0
-            if mot and (not gen or quad >= 0):
-                quad, x = 1, xm
-            elif gen:
-                quad, x = -1, xg
-            else:
-                x = 0.0
-            quads[j] = quad
-            if (x - load) * s <= 0.0:  # cannot happen with a valid plant: stay at rest
-                blocked.add(j)
-                continue
-            a0 = a0 + minv[:, j] * x
-            stuck.pop(best)
-            released.append((j, s, x))
-        else:
-            ddq, _ = hold(stuck) if stuck else (a0.copy(), None)
-        wrong = [(j, x) for j, s, x in released if ddq[j] * s <= 0.0]
-        if wrong:  # coupled releases pulled a joint back: hold it (see docstring)
-            for j, x in wrong:
-                a0 = a0 - minv[:, j] * x
-                stuck.append(j)
-            ddq, _ = hold(stuck)
-        return ddq.tolist()
 
     def step(self, tau_cmd: Any, noise: Any = None) -> None:
         """Advance one control cycle with the commanded joint-side torques ``tau_cmd`` (k,)
@@ -509,62 +302,11 @@ class ArmPlant:
         noise = np.asarray(noise, dtype=float).reshape(k)
         self.tau_cmd, self.tau_noise = cmd, noise
         self._update_pushes()
-        cmd_l, noise_l = cmd.tolist(), noise.tolist()
-        h = self._h
-        keep = self._keep
-        if keep is None:
-            lag = cmd_l
-        else:
-            lag = [lg if kp > 0.0 else c for lg, kp, c in zip(self._lag, keep, cmd_l,
-                                                               strict=True)]
+        noise_l = noise.tolist()
         self.q_start, self.dq_start = self.q, self.dq
-        q, v, t = self.q.tolist(), self.dq.tolist(), self.t
-        accel = self._accel
-        rng_k = range(k)
-        for i in range(self.substeps):
-            tau = [lg + n for lg, n in zip(lag, noise_l, strict=True)]
-            rem, tt = h, t
-            for ev in range(self._max_events):
-                a, regime = accel(tau, q, v, tt)
-                if i == 0 and ev == 0:
-                    a0, tau0, reg0 = a, tau, regime
-                # earliest zero crossing of a velocity within the rest of the sub-step
-                th = rem
-                hit: list = []
-                for j in rng_k:
-                    vj = v[j]
-                    if vj != 0.0 and (vj + a[j] * rem) * vj <= 0.0:
-                        aj = a[j]
-                        tj = -vj / aj if aj != 0.0 else rem
-                        if tj > rem:
-                            tj = rem
-                        if not hit or tj < th:
-                            th, hit = tj, [j]
-                        elif tj == th:
-                            hit.append(j)
-                if not hit:
-                    vn = [vj + aj * rem for vj, aj in zip(v, a, strict=True)]
-                    q = [qj + 0.5 * (vj + wj) * rem for qj, vj, wj in zip(q, v, vn, strict=True)]
-                    v = vn
-                    break
-                # stop there (exactly), re-test stiction, integrate the rest of the sub-step
-                vn = [vj + aj * th for vj, aj in zip(v, a, strict=True)]
-                for j in hit:
-                    vn[j] = 0.0
-                q = [qj + 0.5 * (vj + wj) * th for qj, vj, wj in zip(q, v, vn, strict=True)]
-                v = vn
-                rem -= th
-                tt += th
-                if rem <= 0.0:
-                    break
-            else:  # too many events in one sub-step: finish it without detection
-                a, _ = accel(tau, q, v, tt)
-                vn = [vj + aj * rem for vj, aj in zip(v, a, strict=True)]
-                q = [qj + 0.5 * (vj + wj) * rem for qj, vj, wj in zip(q, v, vn, strict=True)]
-                v = vn
-            t += h
-            if keep is not None:
-                lag = [c + (lg - c) * kp for c, lg, kp in zip(cmd_l, lag, keep, strict=True)]
+        q, v, t, lag, a0, tau0, reg0 = self._dyn.advance(
+            self.q.tolist(), self.dq.tolist(), self.t, self._lag, cmd.tolist(), noise_l,
+            self.substeps)
         self.ddq_start = np.array(a0)
         self.tau_applied_start = np.array(tau0)
         self.regime_start = np.array(reg0, dtype=np.int8)
@@ -572,7 +314,7 @@ class ArmPlant:
         self._lag = lag
         tau = [lg + n for lg, n in zip(lag, noise_l, strict=True)]
         self.tau_applied = np.array(tau)
-        a, regime = accel(tau, q, v, t)
+        a, regime = self._dyn.accel(tau, q, v, t)
         self.ddq = np.array(a)
         self.regime = np.array(regime, dtype=np.int8)
 
@@ -580,9 +322,9 @@ class ArmPlant:
         """``tau_ext`` [N m] of the pushes acting at the cycle's start (held over the cycle);
         pushes that ended are dropped."""
         if not self.pushes:
-            if self._ext is not None:
+            if self._dyn.ext is not None:
                 self.tau_ext = np.zeros(self.k)
-                self._ext = None
+                self._dyn.ext = None
             return
         t = self.t
         self.pushes = [p for p in self.pushes if t < p.t0_s + p.duration_s]
@@ -591,7 +333,7 @@ class ArmPlant:
             if p.active(t):
                 ext += push_torque(self.model, self._push_data, self.q, p)
         self.tau_ext = ext
-        self._ext = ext.tolist() if np.any(ext) else None
+        self._dyn.ext = ext.tolist() if np.any(ext) else None
 
     # ----------------------------------------------------------------- drive chain
     def encoder_counts(self) -> np.ndarray:

@@ -32,6 +32,12 @@ The undeclared effects (each off unless enabled in the plant file; one module ea
 
 Forward dynamics (what :class:`JointPlant` integrates)
 ------------------------------------------------------
+The joint is a robot with one moving joint: :class:`JointPlant` steps the n-dof plant's
+:class:`~sim_drivers.dynamics.ChainDynamics` (the friction, stiction and integration below,
+written once for k joints) on :class:`JointBody`, the rigid body above in closed form; and
+:func:`inverse_torque` is :func:`sim_drivers.dynamics.friction_torque` with k = 1. For one
+joint the n-dof equations read:
+
 Given the applied torque tau, q, dq and t, the balance above is piecewise linear in ddq through
 tau_out. With s = sign(dq) and ``r = tau - tau_off - viscous - ripple - spring``:
 
@@ -57,7 +63,10 @@ i.e. the rectangle of section III.B::
     tau_l < 0:  A_m1 tau_l - D_m1 <= r0 <= A_g1 tau_l + D_g1
 
 with A_m1 = a_m + b_m, A_g1 = a_g - b_g, D_m1 = c_m + d_m, D_g1 = c_g + d_g (times the warm-up
-factor). Above the band it breaks away in the positive direction, below in the negative one.
+factor); at a load within 1e-9 D of zero (round-off at the vertical, e.g. cos q ~ 6e-17 at
+q = pi/2) the band is ``+-max(D_m1, D_g1)``, as at an exact zero (the n-dof rule; the plant
+before issue 24 used the tau_l > 0 or < 0 band there). Above the band it breaks away in the
+positive direction, below in the negative one.
 
 Integration: ``substeps`` fixed sub-steps per control cycle; in each, the acceleration is
 evaluated at the start and held (velocity explicit, position exact for constant acceleration).
@@ -71,22 +80,25 @@ from __future__ import annotations
 
 import math
 import random
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 
-from trajectories.friction import stribeck_exp
-
-from .effects import Inputs, Knobs
+from .arm_effects import ArmEffects
+from .arm_params import ArmFriction
+from .dynamics import (  # the regimes are re-exported: the single joint's names
+    REGIME_REST,
+    REGIME_SLIDING,  # noqa: F401
+    REGIME_ZERO_LOAD,  # noqa: F401
+    ChainDynamics,
+    Constrained,
+    RigidBody,
+    friction_torque,
+)
+from .effects import Inputs
 from .effects import registry as effect_registry
 from .plant_config import G, PlantParams
-
-#: The joint slides and eq. 30 (+ effects) holds exactly.
-REGIME_SLIDING = 0
-#: The joint is at rest (dq == 0): stuck, or breaking away during the next sub-step.
-REGIME_REST = 1
-#: The joint slides with tau_out == 0 and the dry friction inside the quadrant band.
-REGIME_ZERO_LOAD = 2
 
 _INT16_MIN, _INT16_MAX = -32768, 32767
 
@@ -189,37 +201,101 @@ def inverse_torque(
         tau [N m], broadcast shape of the inputs. sign(0) = 0 as in eq. 27-28, so at dq = 0 or
         tau_out = 0 the quadrant weights are 1/2 each.
     """
-    f = params.friction
-    q = np.asarray(q, dtype=float)
-    dq = np.asarray(dq, dtype=float)
+    q, dq = np.broadcast_arrays(np.asarray(q, dtype=float), np.asarray(dq, dtype=float))
     tau_out = output_torque(params, q, ddq, payload_mass, payload_arm)
-    ex = stribeck_exp(dq, params.joint.q_s)
-    p = np.sign(tau_out * dq)
-    pp = 0.5 * (1.0 + p)
-    pm = 0.5 * (1.0 - p)
-    s = np.sign(dq)
-    tau = (pp * (f.a_m + f.b_m * ex) * tau_out + pm * (f.a_g - f.b_g * ex) * tau_out
-           + pp * (f.c_m + f.d_m * ex) * s + pm * (f.c_g + f.d_g * ex) * s
-           + f.F_V * dq + f.tau_off)
-    if effects:
-        for v in effect_torques(params, q, dq, ddq, payload_mass, payload_arm, t).values():
-            tau = tau + v
-    return tau
+    q, dq, tau_out = np.broadcast_arrays(q, dq, tau_out)
+    t = np.asarray(t, dtype=float)
+    one = SimpleNamespace(friction=arm_friction(params),
+                          effects=ArmEffects.from_plant_effects([params.effects]))
+    return friction_torque(one, q[..., None], dq[..., None], tau_out[..., None],
+                           np.broadcast_to(t, q.shape) if t.ndim else t, effects=effects)[..., 0]
 
 
 # --------------------------------------------------------------------------- forward model
-def forward_knobs(params: PlantParams) -> Knobs:
-    """The forward-dynamics knobs set by the enabled effects (registry order)."""
-    k = Knobs()
-    for spec in effect_registry():
-        cfg = getattr(params.effects, spec.name)
-        if cfg.enabled:
-            spec.configure(cfg, k, params)
-    return k
+def arm_friction(params: PlantParams) -> ArmFriction:
+    """The joint's eq. 30 coefficients as the n-dof plant's per-joint friction (k = 1)."""
+    f = params.friction
+    return ArmFriction(a_m=f.a_m, b_m=f.b_m, a_g=f.a_g, b_g=f.b_g, c_m=f.c_m, d_m=f.d_m,
+                       c_g=f.c_g, d_g=f.d_g, F_V=f.F_V, tau_off=f.tau_off, q_s=params.joint.q_s)
+
+
+class JointBody(RigidBody):
+    """The joint's rigid body (eq. 31/34) as the one-joint :class:`RigidBody` of the n-dof
+    plant: ``ddq = (tau_out - gravity(q)) / (J + M_a L_a^2)`` with
+    ``gravity = (MX + M_a L_a) g cos q + MY g sin q`` (prismatic: ``J + M_a``, no gravity).
+
+    Parameters
+    ----------
+    params : PlantParams
+    payload_mass, payload_arm : float
+        M_a [kg] and L_a [m] (arm ignored for prismatic joints).
+    """
+
+    k = 1
+
+    def __init__(self, params: PlantParams, payload_mass: float = 0.0,
+                 payload_arm: float = 0.0) -> None:
+        b = params.body
+        ma, la = payload_mass, payload_arm
+        if params.revolute:
+            self.J = b.J + ma * la * la
+            self.gc = (b.MX + ma * la) * G
+            self.gs = b.MY * G
+        else:
+            self.J = b.J + ma
+            self.gc = 0.0
+            self.gs = 0.0
+        self.forward = self._make_forward(self.J, self.gc, self.gs)
+
+    def gravity(self, q: float) -> float:
+        """Gravity torque (the static load) at q [rad], [N m]."""
+        return self.gc * math.cos(q) + self.gs * math.sin(q)
+
+
+    @staticmethod
+    def _make_forward(jtot: float, gc: float, gs: float) -> Any:
+        """:meth:`RigidBody.forward` of this body, a closure over its constants (the hot
+        path: one call per integration sub-step)."""
+        cos, sin = math.cos, math.sin
+        if gs:
+            def forward(q: list, v: list, tau: list) -> list:
+                x = q[0]
+                return [(tau[0] - (gc * cos(x) + gs * sin(x))) / jtot]
+        else:
+            def forward(q: list, v: list, tau: list) -> list:
+                return [(tau[0] - gc * cos(q[0])) / jtot]
+        return forward
+
+    def hold_one(self, q: list, v: list, tau: list, j: int) -> tuple[list, float]:
+        return [0.0], self.gc * math.cos(q[0]) + self.gs * math.sin(q[0]) - tau[0]
+
+    def constrained(self, q: list, v: list, tau: list) -> _JointConstrained:
+        return _JointConstrained(self, self.gravity(q[0]), tau[0])
+
+
+class _JointConstrained(Constrained):
+    """One joint held: its load is gravity minus the output torque; released with x, it
+    accelerates with ``(tau_out + x - gravity) / J``."""
+
+    __slots__ = ("body", "grav", "tau")
+
+    def __init__(self, body: JointBody, grav: float, tau: float) -> None:
+        self.body, self.grav, self.tau = body, grav, tau
+
+    def hold(self, stuck: list) -> tuple[list, list]:
+        return [0.0], [self.grav - self.tau]
+
+    def release(self, j: int, x: float) -> None:
+        self.tau += x
+
+    def free(self) -> list:
+        return [(self.tau - self.grav) / self.body.J]
 
 
 class JointPlant:
-    """One simulated joint, stepped once per control cycle (pure Python, no numpy per step).
+    """One simulated joint, stepped once per control cycle: the n-dof plant's dynamics
+    (:class:`sim_drivers.dynamics.ChainDynamics`) on the one-joint body :class:`JointBody`,
+    with scalar state.
 
     Parameters
     ----------
@@ -255,14 +331,10 @@ class JointPlant:
     """
 
     __slots__ = (
-        "params", "cycle_s", "substeps", "_h", "_rng", "_noise_std",
-        "q", "dq", "ddq", "t", "t0", "tau_cmd", "tau_applied", "tau_noise", "regime",
+        "params", "cycle_s", "substeps", "_rng", "_noise_std", "_dyn",
+        "q", "dq", "ddq", "t", "tau_cmd", "tau_applied", "tau_noise", "regime",
         "q_start", "dq_start", "ddq_start", "tau_applied_start", "regime_start",
-        "payload_mass", "payload_arm", "_tau_lag", "_lag_keep", "_quad",
-        "_jtot", "_gc", "_gs", "_qs_inv",
-        "_am", "_bm", "_cm", "_dm", "_ag", "_bg", "_cg", "_dg", "_fv", "_off",
-        "_rip_a", "_rip_k", "_rip_ph", "_spr_k", "_spr_q0", "_wu_w", "_wu_tinv",
-        "_fv_pos", "_fv_neg", "_fvv", "_extra", "_counts_per_rad", "_per_mille",
+        "payload_mass", "payload_arm", "_tau_lag", "_counts_per_rad", "_per_mille",
     )
 
     def __init__(
@@ -280,48 +352,19 @@ class JointPlant:
         self.params = params
         self.cycle_s = float(cycle_s)
         self.substeps = int(substeps)
-        self._h = self.cycle_s / self.substeps
         self._rng = random.Random(params.drive.seed if seed is None else seed)
         self._noise_std = params.drive.torque_noise_std_Nm
-        f, d = params.friction, params.drive
-        self._qs_inv = 1.0 / params.joint.q_s  # stribeck_exp inlined in the per-step loop
-        self._am, self._bm, self._cm, self._dm = f.a_m, f.b_m, f.c_m, f.d_m
-        self._ag, self._bg, self._cg, self._dg = f.a_g, f.b_g, f.c_g, f.d_g
-        self._fv, self._off = f.F_V, f.tau_off
-        k = forward_knobs(params)
-        self._rip_a = k.ripple_amplitude
-        self._rip_k = k.ripple_wavenumber
-        self._rip_ph = k.ripple_phase
-        self._spr_k = k.spring_stiffness
-        self._spr_q0 = k.spring_rest
-        self._wu_w = k.warm_fraction
-        self._wu_tinv = k.warm_rate
-        self._fv_pos = f.F_V if k.viscous_pos is None else k.viscous_pos
-        self._fv_neg = f.F_V if k.viscous_neg is None else k.viscous_neg
-        self._fvv = k.viscous_quadratic
-        self._extra = tuple(k.extra)
-        lag = k.lag_time_constant
-        self._lag_keep = math.exp(-self._h / lag) if lag is not None else 0.0
+        self._dyn = ChainDynamics(arm_friction(params),
+                                  ArmEffects.from_plant_effects([params.effects]),
+                                  JointBody(params), self.cycle_s / self.substeps)
+        d = params.drive
         self._counts_per_rad = d.counts_per_joint_rad
         self._per_mille = d.torque_per_permille
         self.payload_mass = 0.0
         self.payload_arm = 0.0
-        self._update_body()
         self.reset()
 
     # ----------------------------------------------------------------- configuration
-    def _update_body(self) -> None:
-        b = self.params.body
-        ma, la = self.payload_mass, self.payload_arm
-        if self.params.revolute:
-            self._jtot = b.J + ma * la * la
-            self._gc = (b.MX + ma * la) * G
-            self._gs = b.MY * G
-        else:
-            self._jtot = b.J + ma
-            self._gc = 0.0
-            self._gs = 0.0
-
     def set_payload(self, mass_kg: float, arm_m: float) -> None:
         """Mount a payload M_a [kg] at lever arm L_a [m] (eq. 34; arm ignored if prismatic)."""
         if mass_kg < 0 or arm_m < 0 or not (math.isfinite(mass_kg) and math.isfinite(arm_m)):
@@ -329,27 +372,32 @@ class JointPlant:
                              f"got {mass_kg!r}, {arm_m!r}")
         self.payload_mass = float(mass_kg)
         self.payload_arm = float(arm_m)
-        self._update_body()
+        self._dyn.body = JointBody(self.params, self.payload_mass, self.payload_arm)
 
     def reset(self, q0: float = 0.0, t0: float = 0.0) -> None:
-        """Put the joint at rest at ``q0`` [rad], time ``t0`` [s] (warm-up time origin is 0),
+        """Put the joint at rest at ``q0`` [rad], time ``t0`` [s] (warm-up time origin),
         with zero applied torque. The noise generator is not reseeded (see :meth:`reseed`)."""
         self.q = float(q0)
         self.dq = 0.0
         self.ddq = 0.0
         self.t = float(t0)
-        self.t0 = float(t0)
+        self._dyn.t0 = float(t0)
+        self._dyn.quad[0] = 0
         self.tau_cmd = 0.0
         self.tau_applied = 0.0
         self.tau_noise = 0.0
         self._tau_lag = 0.0
-        self._quad = 0
         self.regime = REGIME_REST
         self.q_start = self.q
         self.dq_start = 0.0
         self.ddq_start = 0.0
         self.tau_applied_start = 0.0
         self.regime_start = REGIME_REST
+
+    @property
+    def t0(self) -> float:
+        """Time origin of the warm-up effect [s] (set by :meth:`reset`)."""
+        return self._dyn.t0
 
     def reseed(self, seed: int) -> None:
         """Restart the applied-torque noise sequence from ``seed``."""
@@ -398,110 +446,8 @@ class JointPlant:
         """Forward dynamics: ``(ddq, regime)`` for applied torque ``tau`` [N m] at state
         (q [rad], dq [rad/s], t [s]); see the module docstring. Does not change the state
         (except the remembered quadrant used to break ties)."""
-        if dq == 0.0:
-            return self._rest(tau, q, t)[0], REGIME_REST
-        return self._slide(tau, q, dq, t)
-
-    def _slide(self, tau: float, q: float, v: float, t: float) -> tuple[float, int]:
-        """Acceleration while sliding (v != 0): ``(ddq, regime)``; the hot path (the quadrant
-        choice is :meth:`_solve`, inlined)."""
-        if v > 0.0:
-            s = 1.0
-            ex = math.exp(-v * self._qs_inv)
-            r = tau - self._off - self._fv_pos * v
-            if self._fvv:
-                r -= self._fvv * v * v
-        else:
-            s = -1.0
-            ex = math.exp(v * self._qs_inv)
-            r = tau - self._off - self._fv_neg * v
-            if self._fvv:
-                r += self._fvv * v * v
-        if self._rip_a:
-            r -= self._rip_a * math.sin(self._rip_k * q + self._rip_ph)
-        if self._spr_k:
-            r -= self._spr_k * (q - self._spr_q0)
-        if self._extra:
-            for f in self._extra:
-                r -= f(q, v, t - self.t0)
-        grav = self._gc * math.cos(q)
-        if self._gs:
-            grav += self._gs * math.sin(q)
-        if self._wu_w:
-            wf = s + s * self._wu_w * math.exp(-(t - self.t0) * self._wu_tinv)
-        else:
-            wf = s
-        xm = (r - wf * (self._cm + self._dm * ex)) / (self._am + self._bm * ex)
-        if xm * s > 0.0:
-            if self._quad < 0:  # was generator: keep it if it is still consistent
-                xg = (r - wf * (self._cg + self._dg * ex)) / (self._ag - self._bg * ex)
-                if xg * s < 0.0:
-                    return (xg - grav) / self._jtot, REGIME_SLIDING
-            self._quad = 1
-            return (xm - grav) / self._jtot, REGIME_SLIDING
-        xg = (r - wf * (self._cg + self._dg * ex)) / (self._ag - self._bg * ex)
-        if xg * s < 0.0:
-            self._quad = -1
-            return (xg - grav) / self._jtot, REGIME_SLIDING
-        return -grav / self._jtot, REGIME_ZERO_LOAD
-
-    def _solve(self, r: float, ex: float, wf: float, grav: float, s: float) -> tuple[float, int]:
-        """Quadrant choice of the module docstring: ``(ddq, regime)`` for the reduced torque
-        ``r`` [N m], exponential ``ex``, warm-up factor ``wf``, gravity ``grav`` [N m] and
-        direction ``s``."""
-        dm = s * wf * (self._cm + self._dm * ex)
-        dg = s * wf * (self._cg + self._dg * ex)
-        xm = (r - dm) / (self._am + self._bm * ex)
-        xg = (r - dg) / (self._ag - self._bg * ex)
-        mot = xm * s > 0.0
-        gen = xg * s < 0.0
-        if mot and (not gen or self._quad >= 0):
-            self._quad = 1
-            tau_out = xm
-            regime = REGIME_SLIDING
-        elif gen:
-            self._quad = -1
-            tau_out = xg
-            regime = REGIME_SLIDING
-        else:
-            tau_out = 0.0
-            regime = REGIME_ZERO_LOAD
-        return (tau_out - grav) / self._jtot, regime
-
-    def _rest(self, tau: float, q: float, t: float) -> tuple[float, int]:
-        """At dq == 0: ``(ddq, direction)``, direction 0 when stuck (ddq = 0), else +1/-1."""
-        r = tau - self._off
-        if self._rip_a:
-            r -= self._rip_a * math.sin(self._rip_k * q + self._rip_ph)
-        if self._spr_k:
-            r -= self._spr_k * (q - self._spr_q0)
-        if self._extra:
-            for f in self._extra:
-                r -= f(q, 0.0, t - self.t0)
-        wf = 1.0 + self._wu_w * math.exp(-(t - self.t0) * self._wu_tinv) if self._wu_w else 1.0
-        load = self._gc * math.cos(q) + self._gs * math.sin(q)
-        am1 = self._am + self._bm
-        ag1 = self._ag - self._bg
-        dm1 = wf * (self._cm + self._dm)
-        dg1 = wf * (self._cg + self._dg)
-        if load > 0.0:
-            upper = am1 * load + dm1
-            lower = ag1 * load - dg1
-        elif load < 0.0:
-            upper = ag1 * load + dg1
-            lower = am1 * load - dm1
-        else:
-            upper = dm1 if dm1 > dg1 else dg1
-            lower = -upper
-        if lower <= r <= upper:
-            return 0.0, 0
-        s = 1.0 if r > upper else -1.0
-        # quadrant the joint leaves rest in: continuity of tau_out from the static load
-        self._quad = 1 if load * s > 0.0 else -1 if load * s < 0.0 else 0
-        ddq, _ = self._solve(r, 1.0, wf, load, s)
-        if ddq * s <= 0.0:  # cannot happen with a valid plant; stay at rest rather than flip
-            return 0.0, 0
-        return ddq, int(s)
+        a, reg = self._dyn.accel([tau], [q], [dq], t)
+        return a[0], reg[0]
 
     def step(self, tau_cmd: float) -> None:
         """Advance one control cycle with the commanded joint-side torque ``tau_cmd`` [N m]
@@ -509,51 +455,14 @@ class JointPlant:
         self.tau_cmd = tau_cmd
         noise = self._rng.gauss(0.0, self._noise_std) if self._noise_std else 0.0
         self.tau_noise = noise
-        h = self._h
-        keep = self._lag_keep
-        lag = self._tau_lag if keep else tau_cmd
-        q, v, t = self.q, self.dq, self.t
-        self.q_start, self.dq_start = q, v
-        slide, rest = self._slide, self._rest
-        for i in range(self.substeps):
-            tau = lag + noise
-            if v != 0.0:
-                a, regime = slide(tau, q, v, t)
-                vn = v + a * h
-                if (vn > 0.0) == (v > 0.0) and vn != 0.0:
-                    q += 0.5 * (v + vn) * h
-                    v = vn
-                else:
-                    # velocity reaches zero inside the sub-step: stop there, then re-test
-                    th = -v / a if a != 0.0 else h
-                    if th > h:
-                        th = h
-                    q += 0.5 * v * th
-                    v = 0.0
-                    a2, direction = rest(tau, q, t + th)
-                    rem = h - th
-                    if direction:
-                        v = a2 * rem
-                        q += 0.5 * v * rem
-            else:
-                a, direction = rest(tau, q, t)
-                regime = REGIME_REST
-                if direction:
-                    v = a * h
-                    q += 0.5 * v * h
-            if i == 0:
-                self.ddq_start = a
-                self.tau_applied_start = tau
-                self.regime_start = regime
-            t += h
-            if keep:
-                lag = tau_cmd + (lag - tau_cmd) * keep
-        self.q, self.dq, self.t = q, v, t
-        self._tau_lag = lag
+        self.q_start, self.dq_start = self.q, self.dq
+        dyn = self._dyn
+        q, v, t, lag, a0, tau0, reg0 = dyn.advance(
+            [self.q], [self.dq], self.t, [self._tau_lag], [tau_cmd], [noise], self.substeps)
+        self.ddq_start, self.tau_applied_start, self.regime_start = a0[0], tau0[0], reg0[0]
+        self.q, self.dq, self.t = q[0], v[0], t
+        self._tau_lag = lag = lag[0]
         tau = lag + noise
         self.tau_applied = tau
-        if v != 0.0:
-            self.ddq, self.regime = slide(tau, q, v, t)
-        else:
-            self.ddq, _ = rest(tau, q, t)
-            self.regime = REGIME_REST
+        a, reg = dyn.accel([tau], q, v, t)
+        self.ddq, self.regime = a[0], reg[0]

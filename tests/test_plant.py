@@ -311,7 +311,7 @@ def test_ambiguous_quadrant_keeps_the_current_one():
     tau = p.friction.tau_off + p.friction.F_V * v + 25.0  # between s D_m = 10 and s D_g = 40
     results = {}
     for quad in (1, -1):
-        plant._quad = quad
+        plant._dyn.quad[0] = quad
         ddq, regime = plant.acceleration(tau, q, v, 0.0)
         assert regime == REGIME_SLIDING
         tau_out = grav + p.body.J * ddq

@@ -5,15 +5,15 @@ An effect module (one file in ``sim_drivers/effects/``, see docs/refinement.md "
 effect") defines the frozen dataclass of its plant-file table ``[effects.<name>]`` (field
 ``enabled`` plus its parameters, with their defaults), and registers a
 :class:`PlantEffect` with its schema (keys, units, validation), its vectorised torque (the
-inverse model, :func:`sim_drivers.plant.inverse_torque`) and how it changes the forward
-dynamics (:class:`Knobs`, read by :class:`sim_drivers.plant.JointPlant`)::
+inverse model, :func:`sim_drivers.plant.inverse_torque`, and the arm's) and, for an effect
+the plant has no native form of, its forward-dynamics static torque (:class:`Knobs`, read by
+:class:`sim_drivers.dynamics.ChainDynamics`)::
 
     register(PlantEffect(
         name="spring", order=20, params=Spring, formula="k (q - q0)",
         schema={"stiffness_Nm_per_rad": Field(float, unit="N m/rad"),
                 "rest_position_rad": Field(float, unit="rad")},
         torque=lambda p, x: p.stiffness_Nm_per_rad * (x.q - p.rest_position_rad),
-        configure=_configure,
     ))
 
 Pure numerics: no file, no bus. Joint side SI units as in :mod:`sim_drivers.plant`.
@@ -75,47 +75,19 @@ class Inputs:
 
 @dataclass
 class Knobs:
-    """What the enabled effects change in :class:`~sim_drivers.plant.JointPlant`'s forward
-    dynamics (every default leaves eq. 30 as it is).
+    """What a registered effect WITHOUT a native form adds to the forward dynamics of the
+    plant (:class:`sim_drivers.dynamics.ChainDynamics`, for the single joint and the arm).
 
-    With ``r`` the torque left for the load and dry friction, ``s = sign(dq)``::
-
-        r = tau - tau_off - F_V(s) dq - F_VV dq |dq| - A sin(k q + phase) - K (q - q0)
-            - sum(f(q, dq, t) for f in extra)
-        dry friction (c + d E) -> (c + d E)(1 + w exp(-t / T_w))
-        d tau_applied / dt = (tau_cmd - tau_applied) / T_lag
+    The six native effects (ripple, spring, warm-up, asymmetric and quadratic viscous, torque
+    lag) have their forward form in ``ChainDynamics.accel`` and set no knob.
 
     Attributes
     ----------
-    viscous_pos, viscous_neg : float or None
-        F_V for dq > 0 and dq < 0 [N m s/rad] (None: the friction's F_V).
-    viscous_quadratic : float
-        F_VV [N m s^2/rad^2].
-    ripple_amplitude, ripple_wavenumber, ripple_phase : float
-        A [N m], k = 2 pi / period [1/rad], phase [rad].
-    spring_stiffness, spring_rest : float
-        K [N m/rad], q0 [rad].
-    warm_fraction, warm_rate : float
-        w [-] and 1 / T_w [1/s].
-    lag_time_constant : float or None
-        T_lag [s] (None: no lag).
     extra : list of callable
-        Any other static torque ``f(q, dq, t) -> float`` [N m] (scalars; t since the run
-        start), subtracted from ``r`` while sliding and at rest (dq = 0): the knob of a new
-        effect that none of the above expresses.
+        Static torques ``f(q, dq, t) -> float`` [N m] (scalars; t since the run start),
+        subtracted from the driving torque while sliding and at rest (dq = 0).
     """
 
-    viscous_pos: float | None = None
-    viscous_neg: float | None = None
-    viscous_quadratic: float = 0.0
-    ripple_amplitude: float = 0.0
-    ripple_wavenumber: float = 0.0
-    ripple_phase: float = 0.0
-    spring_stiffness: float = 0.0
-    spring_rest: float = 0.0
-    warm_fraction: float = 0.0
-    warm_rate: float = 0.0
-    lag_time_constant: float | None = None
     extra: list[Callable[[float, float, float], float]] = field(default_factory=list)
 
 
@@ -137,10 +109,15 @@ class PlantEffect:
     formula : str
         One line for the docs and the plant-file comment.
     torque : callable or None
-        ``torque(p, x: Inputs) -> ndarray`` [N m], the effect's term of the inverse model;
-        None for a dynamic effect (torque lag), which is not a term of the balance.
-    configure : callable
-        ``configure(p, knobs: Knobs, params: PlantParams)``: set the forward-dynamics knobs.
+        ``torque(p, x: Inputs) -> ndarray`` [N m], the effect's term of the inverse model
+        (the one place its formula is written: the single joint and the arm call it; numpy
+        broadcasting only, so that the arm can pass per-joint arrays (k,) as parameters and
+        states of shape (..., k)); None for a dynamic effect (torque lag), which is not a
+        term of the balance.
+    configure : callable or None
+        ``configure(p, knobs: Knobs, params)``: add the effect's static torque to
+        ``knobs.extra`` (``params``: the joint's ``friction`` and ``joint.q_s``); None for the
+        native effects, whose forward form is in ``ChainDynamics.accel``.
     truth : callable or None
         ``truth(p) -> dict`` of derived true values added to
         :meth:`~sim_drivers.plant_config.PlantParams.truth_effects`.
@@ -152,7 +129,7 @@ class PlantEffect:
     schema: Mapping[str, Field]
     formula: str
     torque: Callable[[Any, Inputs], np.ndarray] | None
-    configure: Callable[[Any, Knobs, Any], None]
+    configure: Callable[[Any, Knobs, Any], None] | None = None
     truth: Callable[[Any], dict[str, float]] | None = None
     module: str = ""
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from trajectories.schema import Field
 
-from ._base import Inputs, Knobs, PlantEffect, register
+from ._base import Inputs, PlantEffect, register
 
 
 @dataclass(frozen=True)
@@ -30,11 +30,6 @@ def torque(p: AsymmetricViscous, x: Inputs) -> np.ndarray:
     return np.where(dq > 0, (p.F_V_pos - fv) * dq, (p.F_V_neg - fv) * dq)
 
 
-def configure(p: AsymmetricViscous, k: Knobs, params) -> None:
-    k.viscous_pos = p.F_V_pos
-    k.viscous_neg = p.F_V_neg
-
-
 register(PlantEffect(
     name="asymmetric_viscous", order=40, params=AsymmetricViscous,
     formula="F_V -> F_V_pos (dq > 0), F_V_neg (dq < 0)",
@@ -42,5 +37,5 @@ register(PlantEffect(
         "F_V_pos": Field(float, unit="N m s/rad", ge=0),
         "F_V_neg": Field(float, unit="N m s/rad", ge=0),
     },
-    torque=torque, configure=configure, module=__name__,
+    torque=torque, module=__name__,
 ))

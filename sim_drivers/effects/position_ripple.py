@@ -9,7 +9,7 @@ import numpy as np
 
 from trajectories.schema import Field
 
-from ._base import Inputs, Knobs, PlantEffect, register
+from ._base import Inputs, PlantEffect, register
 
 _TWO_PI = 2.0 * math.pi
 
@@ -31,11 +31,6 @@ def torque(p: PositionRipple, x: Inputs) -> np.ndarray:
     return p.amplitude_Nm * np.sin(_TWO_PI * x.q / p.period_rad + p.phase_rad)
 
 
-def configure(p: PositionRipple, k: Knobs, params) -> None:
-    k.ripple_amplitude = p.amplitude_Nm
-    k.ripple_wavenumber = _TWO_PI / p.period_rad
-    k.ripple_phase = p.phase_rad
-
 
 def truth(p: PositionRipple) -> dict[str, float]:
     """Linear coefficients: A sin(x + phase) = sin_Nm sin x + cos_Nm cos x."""
@@ -51,5 +46,5 @@ register(PlantEffect(
         "period_rad": Field(float, unit="rad", gt=0),
         "phase_rad": Field(float, unit="rad"),
     },
-    torque=torque, configure=configure, truth=truth, module=__name__,
+    torque=torque, truth=truth, module=__name__,
 ))

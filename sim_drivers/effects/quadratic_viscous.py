@@ -8,7 +8,7 @@ import numpy as np
 
 from trajectories.schema import Field
 
-from ._base import Inputs, Knobs, PlantEffect, register
+from ._base import Inputs, PlantEffect, register
 
 
 @dataclass(frozen=True)
@@ -23,12 +23,8 @@ def torque(p: QuadraticViscous, x: Inputs) -> np.ndarray:
     return p.F_VV * x.dq * np.abs(x.dq)
 
 
-def configure(p: QuadraticViscous, k: Knobs, params) -> None:
-    k.viscous_quadratic = p.F_VV
-
-
 register(PlantEffect(
     name="quadratic_viscous", order=50, params=QuadraticViscous, formula="F_VV dq |dq|",
     schema={"F_VV": Field(float, unit="N m s^2/rad^2", ge=0)},
-    torque=torque, configure=configure, module=__name__,
+    torque=torque, module=__name__,
 ))

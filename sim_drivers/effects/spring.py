@@ -8,7 +8,7 @@ import numpy as np
 
 from trajectories.schema import Field
 
-from ._base import Inputs, Knobs, PlantEffect, register
+from ._base import Inputs, PlantEffect, register
 
 
 @dataclass(frozen=True)
@@ -27,16 +27,11 @@ def torque(p: Spring, x: Inputs) -> np.ndarray:
     return p.stiffness_Nm_per_rad * (x.q - p.rest_position_rad)
 
 
-def configure(p: Spring, k: Knobs, params) -> None:
-    k.spring_stiffness = p.stiffness_Nm_per_rad
-    k.spring_rest = p.rest_position_rad
-
-
 register(PlantEffect(
     name="spring", order=20, params=Spring, formula="k (q - q0)",
     schema={
         "stiffness_Nm_per_rad": Field(float, unit="N m/rad"),
         "rest_position_rad": Field(float, unit="rad"),
     },
-    torque=torque, configure=configure, module=__name__,
+    torque=torque, module=__name__,
 ))

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 from trajectories.schema import Field
 
-from ._base import Knobs, PlantEffect, register
+from ._base import PlantEffect, register
 
 
 @dataclass(frozen=True)
@@ -23,13 +23,9 @@ class TorqueLag:
     time_constant_s: float = 0.002
 
 
-def configure(p: TorqueLag, k: Knobs, params) -> None:
-    k.lag_time_constant = p.time_constant_s
-
-
 register(PlantEffect(
     name="torque_lag", order=60, params=TorqueLag,
     formula="d tau_applied / dt = (tau_cmd - tau_applied) / T_lag",
     schema={"time_constant_s": Field(float, unit="s", gt=0)},
-    torque=None, configure=configure, module=__name__,
+    torque=None, module=__name__,
 ))

@@ -9,7 +9,7 @@ import numpy as np
 from trajectories.friction import stribeck_exp
 from trajectories.schema import Field
 
-from ._base import Inputs, Knobs, PlantEffect, register
+from ._base import Inputs, PlantEffect, register
 
 
 @dataclass(frozen=True)
@@ -39,11 +39,6 @@ def torque(p: WarmUp, x: Inputs) -> np.ndarray:
     return w * dry
 
 
-def configure(p: WarmUp, k: Knobs, params) -> None:
-    k.warm_fraction = p.fraction
-    k.warm_rate = 1.0 / p.time_constant_s
-
-
 register(PlantEffect(
     name="warm_up", order=30, params=WarmUp,
     formula="dry friction (c, d) x (1 + w exp(-t / T_w))",
@@ -51,5 +46,5 @@ register(PlantEffect(
         "fraction": Field(float, gt=-1),
         "time_constant_s": Field(float, unit="s", gt=0),
     },
-    torque=torque, configure=configure, module=__name__,
+    torque=torque, module=__name__,
 ))
