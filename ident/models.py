@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from trajectories import RobotError
 from trajectories.friction import DEFAULT_Q_S, stribeck_exp
 from trajectories.robot import (
     BaseParameters,
@@ -30,6 +31,7 @@ from trajectories.robot import (
 from . import DataError
 from .estimate import DEFAULT_THRESHOLD_PCT, LSResult, fit_least_squares
 from .results import DEFAULT_BANDS, band_errors
+from .robot import RobotIdentError
 from .robot.base import SingleJointMap, lever_arm_payload, single_joint_map
 from .signals import G, Signals
 from .terms import Library, Term
@@ -144,15 +146,18 @@ class _OneJoint:
                                              self._placed(float(mass), float(arm)))[:, 0]
 
     def _placed(self, mass: float, arm: float) -> RobotPayloadData:
-        if not self.regressor.revolute[0]:
-            return RobotPayloadData(mass)  # at the flange, on the axis: M_aw ddq
         key = (mass, arm)
         if key not in self.payloads:
-            if not np.isfinite(arm):
+            if self.regressor.revolute[0] and not np.isfinite(arm):
                 raise DataError(f"payload_arm: expected a finite lever arm [m] for the "
                                 f"payload of {mass} kg, got {arm}")
-            self.payloads[key] = lever_arm_payload(RobotPayloadData(mass, arm_m=arm),
-                                                   self.regressor, self.base, self.smap)
+            try:
+                self.payloads[key] = (  # prismatic: at the flange, on the axis: M_aw ddq
+                    lever_arm_payload(RobotPayloadData(mass, arm_m=arm), self.regressor,
+                                      self.base, self.smap)
+                    if self.regressor.revolute[0] else RobotPayloadData(mass))
+            except (RobotError, RobotIdentError) as err:
+                raise DataError(f"payload_mass: {err}") from None
         return self.payloads[key]
 
 

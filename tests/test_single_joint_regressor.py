@@ -112,3 +112,13 @@ def test_payload_without_a_finite_arm_is_one_line():
     bad = Signals(**{**s.__dict__, "payload_arm": np.full(50, np.nan)})
     with pytest.raises(DataError, match=r"payload_arm: expected a finite lever arm \[m\]"):
         Payload().columns(bad)
+
+
+@pytest.mark.parametrize("revolute", [True, False])
+def test_negative_payload_mass_is_one_line(revolute):
+    rng = np.random.default_rng(4)
+    s = _signals(rng, 50, revolute, True)
+    bad = Signals(**{**s.__dict__, "payload_mass": np.full(50, -2.0)})
+    with pytest.raises(DataError, match=r"payload_mass: payload.mass: expected >= 0 \[kg\], "
+                                        r"got -2.0"):
+        Payload().columns(bad)
