@@ -12,15 +12,27 @@ Parameter names follow ``docs/architecture.md``. Pure numerics: no file access.
 
 from __future__ import annotations
 
+import functools
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from trajectories import RobotError
 from trajectories.friction import DEFAULT_Q_S, stribeck_exp
+from trajectories.robot import (
+    BaseParameters,
+    RobotPayloadData,
+    RobotRegressor,
+    base_parameters,
+    one_joint_robot,
+)
 
 from . import DataError
 from .estimate import DEFAULT_THRESHOLD_PCT, LSResult, fit_least_squares
 from .results import DEFAULT_BANDS, band_errors
+from .robot import RobotIdentError
+from .robot.base import SingleJointMap, lever_arm_payload, single_joint_map
 from .signals import G, Signals
 from .terms import Library, Term
 
@@ -76,8 +88,109 @@ def _check_qs(q_s: float) -> float:
     return q_s
 
 
+_MAX_RUNS = 64  # payload runs evaluated as slices; more (interleaved rows): one gather each
+
+
+@dataclass(frozen=True, eq=False)
+class _OneJoint:
+    """The joint of a single-joint log as a 1-dof robot (:func:`one_joint_robot`): the robot
+    model's regressor, its base parameters and the constant map of those to the single-joint
+    parameters (:func:`ident.robot.base.single_joint_map`), ``chi_single = T chi_b``."""
+
+    regressor: RobotRegressor
+    base: BaseParameters
+    smap: SingleJointMap
+    to_single: np.ndarray  # (p_b, len(smap.names)): W_single = W_b to_single (T inverse)
+    pick: list[tuple[int, float]] | None  # to_single as (base column, +-1) per column
+    payloads: dict[tuple[float, float], RobotPayloadData]
+
+    def rigid(self, s: Signals) -> np.ndarray:
+        """Columns ``smap.names`` (J[, MX, MY]) of eq. 31 on ``s``, shape (n, 1 or 3)."""
+        w = self.regressor.rigid_kpn(s.q, s.dq, s.ddq, columns=self.base.columns)[0]
+        if self.pick is None:
+            return w.T @ self.to_single
+        out = np.empty((w.shape[1], len(self.pick)))
+        for c, (b, sign) in enumerate(self.pick):  # each column one base column times +-1
+            np.multiply(w[b], sign, out=out[:, c])
+        return out
+
+    def payload(self, s: Signals) -> np.ndarray:
+        """Torque (n,) of each sample's known payload (eq. 34-35): the regressor's payload
+        torque of the lever-arm payload placed on the 1-dof robot (revolute), of the mass at
+        the flange (prismatic: no arm). Runs of one payload are evaluated as slices."""
+        n = len(s)
+        out = np.zeros(n)
+        mass = np.asarray(s.payload_mass, dtype=float)
+        if not mass.any():
+            return out
+        arm = (np.asarray(s.payload_arm, dtype=float) if self.regressor.revolute[0]
+               else np.zeros(n))  # a prismatic joint's payload has no arm
+        cut = np.flatnonzero((mass[1:] != mass[:-1]) | (arm[1:] != arm[:-1])) + 1
+        if len(cut) < _MAX_RUNS:
+            runs = zip(np.concatenate([[0], cut]), np.concatenate([cut, [n]]), strict=True)
+            for a, b in runs:
+                if mass[a] != 0.0:
+                    out[a:b] = self._torque(s, slice(a, b), mass[a], arm[a])
+            return out
+        loaded = np.flatnonzero(mass != 0.0)  # interleaved payloads: one gather per payload
+        keys, inverse = np.unique(np.column_stack([mass[loaded], arm[loaded]]), axis=0,
+                                  return_inverse=True)
+        for i, (m, la) in enumerate(keys):
+            rows = loaded[inverse.reshape(-1) == i]
+            out[rows] = self._torque(s, rows, m, la)
+        return out
+
+    def _torque(self, s: Signals, rows: slice | np.ndarray, mass: float, arm: float
+                ) -> np.ndarray:
+        return self.regressor.payload_torque(s.q[rows], s.dq[rows], s.ddq[rows],
+                                             self._placed(float(mass), float(arm)))[:, 0]
+
+    def _placed(self, mass: float, arm: float) -> RobotPayloadData:
+        key = (mass, arm)
+        if key not in self.payloads:
+            if self.regressor.revolute[0] and not np.isfinite(arm):
+                raise DataError(f"payload_arm: expected a finite lever arm [m] for the "
+                                f"payload of {mass} kg, got {arm}")
+            try:
+                self.payloads[key] = (  # prismatic: at the flange, on the axis: M_aw ddq
+                    lever_arm_payload(RobotPayloadData(mass, arm_m=arm), self.regressor,
+                                      self.base, self.smap)
+                    if self.regressor.revolute[0] else RobotPayloadData(mass))
+            except (RobotError, RobotIdentError) as err:
+                raise DataError(f"payload_mass: {err}") from None
+        return self.payloads[key]
+
+
+def _signed_selection(m: np.ndarray, tol: float = 1e-9) -> list[tuple[int, float]] | None:
+    """(row, sign) per column of ``m`` when each column is one entry +-1 (within ``tol``: the
+    map is a least-squares fit, exact up to rounding) and zeros, else None."""
+    out = []
+    for col in m.T:
+        nz = np.flatnonzero(np.abs(col) > tol)
+        if len(nz) != 1 or abs(abs(col[nz[0]]) - 1.0) > tol:
+            return None
+        out.append((int(nz[0]), float(np.sign(col[nz[0]]))))
+    return out
+
+
+@functools.cache
+def _one_joint(kind: str) -> _OneJoint:
+    """The 1-dof robot of a joint kind, its base parameters and map (computed once)."""
+    reg = RobotRegressor(one_joint_robot(kind, gravity=G))
+    base = base_parameters(reg)
+    smap = single_joint_map(base, reg)
+    to_single = np.linalg.inv(smap.matrix)
+    return _OneJoint(reg, base, smap, to_single, _signed_selection(to_single), {})
+
+
 class RigidBody(Term):
     """Rigid-body regressor of one joint (eq. 31): ``[ddq, g cos q, g sin q]`` -> J, MX, MY.
+
+    The columns are the robot model's regressor
+    (:class:`trajectories.robot.RobotRegressor`) of the joint as a 1-dof robot
+    (:func:`trajectories.robot.one_joint_robot`), reduced to its base parameters and mapped
+    to J, MX, MY by the constant map of :func:`ident.robot.base.single_joint_map`
+    (``J = ZZ1R``, ``MX = MX1``, ``MY = -MY1``; prismatic ``J = M1R``).
 
     Parameters
     ----------
@@ -97,14 +210,12 @@ class RigidBody(Term):
         return ("J",) if self.revolute is False else ("J", "MX", "MY")
 
     def columns(self, s: Signals) -> np.ndarray:
-        n = len(s)
-        if self.revolute is False:
-            return s.ddq.reshape(n, 1).astype(float, copy=True)
-        out = np.zeros((n, 3))
-        out[:, 0] = s.ddq
-        if s.revolute:
-            out[:, 1] = G * np.cos(s.q)
-            out[:, 2] = G * np.sin(s.q)
+        w = _one_joint("revolute" if s.revolute else "prismatic").rigid(s)
+        k = len(self.names())
+        if w.shape[1] >= k:
+            return np.ascontiguousarray(w[:, :k])
+        out = np.zeros((len(s), k))  # J, MX, MY named on prismatic data: no gravity
+        out[:, : w.shape[1]] = w
         return out
 
     def describe(self) -> str:
@@ -118,6 +229,10 @@ class Payload(Term):
 
     The parameter is M_ae/M_aw, the identified over the weighed mass (1 for an exact
     weighing). On prismatic data the column is ``M_aw ddq`` (no lever arm, no gravity).
+    The column is the robot model's payload torque
+    (:meth:`trajectories.robot.RobotRegressor.payload_torque`) of the joint as a 1-dof robot
+    carrying a point mass M_aw placed so that it adds M_aw L_a^2 to J and M_aw L_a to MX
+    (:func:`ident.robot.base.lever_arm_payload`; prismatic: the mass at the flange).
     """
 
     effect = "payload"
@@ -127,11 +242,8 @@ class Payload(Term):
         return ("Ma_ratio",)
 
     def columns(self, s: Signals) -> np.ndarray:
-        if s.revolute:
-            col = s.payload_mass * s.payload_arm * (s.payload_arm * s.ddq + G * np.cos(s.q))
-        else:
-            col = s.payload_mass * s.ddq
-        return col.reshape(-1, 1).astype(float, copy=False)
+        one = _one_joint("revolute" if s.revolute else "prismatic")
+        return one.payload(s).reshape(-1, 1)
 
     def describe(self) -> str:
         return "payload (M_ae/M_aw) M_aw L_a (L_a ddq + g cos q) (eq. 35)"

@@ -2,7 +2,8 @@
 (:mod:`sim_drivers`) and identification (:mod:`ident`) share about a serial robot.
 
 - :mod:`.description`: :class:`Robot` (pinocchio model of the full chain, moving and locked
-  joints, drives, limits), :class:`JointDrive`, :class:`RobotLimits`, :class:`MDHJoint`;
+  joints, drives, limits), :class:`JointDrive`, :class:`RobotLimits`, :class:`MDHJoint`,
+  :func:`one_joint_robot` (a single joint as a 1-dof robot, built in memory);
 - :mod:`.formats`: robot files behind a suffix table (:data:`FORMATS`, :func:`load_robot`:
   MDH TOML, URDF, MJCF; a new format is one module and one row, docs/robot-format.md);
 - :mod:`.regressor`: the one n-dof regressor (:class:`RobotRegressor`, vectorised Newton-Euler,
@@ -27,7 +28,15 @@ from .base import (
     qr_rule,
     random_states,
 )
-from .description import JointDrive, MDHJoint, Robot, RobotLimits, mdh_placement
+from .description import (
+    STANDARD_GRAVITY,
+    JointDrive,
+    MDHJoint,
+    Robot,
+    RobotLimits,
+    mdh_placement,
+    one_joint_robot,
+)
 from .formats import FORMATS, load_robot
 from .formats.mdh_toml import robot_from_dict
 from .formats.urdf import EXAMPLE_ROBOTS, example_robot_names, example_robot_urdf
@@ -41,6 +50,8 @@ __all__ = [
     "MDHJoint",
     "Robot",
     "mdh_placement",
+    "one_joint_robot",
+    "STANDARD_GRAVITY",
     "FORMATS",
     "load_robot",
     "robot_from_dict",

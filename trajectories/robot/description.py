@@ -35,7 +35,12 @@ __all__ = [
     "MDHJoint",
     "Robot",
     "mdh_placement",
+    "one_joint_robot",
+    "STANDARD_GRAVITY",
 ]
+
+#: [m/s^2] gravity of :func:`one_joint_robot`, the paper's g (section IV.A).
+STANDARD_GRAVITY = 9.81
 
 _REVOLUTE = {"JointModelRX": (1, 0, 0), "JointModelRY": (0, 1, 0), "JointModelRZ": (0, 0, 1)}
 _PRISMATIC = {"JointModelPX": (1, 0, 0), "JointModelPY": (0, 1, 0), "JointModelPZ": (0, 0, 1)}
@@ -266,6 +271,51 @@ class Robot:
         mv, lk = _motion(where, names, moving, locked, "motion")
         dr = {n: (drives or {}).get(n) or JointDrive() for n in mv}
         return cls(name, model, names, mv, lk, dr, lim, g, types, source)
+
+
+def one_joint_robot(kind: str, name: str = "joint", *,
+                    limits: RobotLimits | None = None, gravity: float = STANDARD_GRAVITY,
+                    source: str = "") -> Robot:
+    """A robot of one joint, built in memory: the single joint of jointid as a 1-dof robot.
+
+    The joint ``name`` turns about (``"revolute"``) or slides along (``"prismatic"``) the z
+    axis of the base frame; gravity is ``(0, -gravity, 0)``, perpendicular to the axis, so the
+    regressor's gravity torque of the revolute joint is ``g (MX1 cos q - MY1 sin q)`` and
+    ``(ZZ1 + Ia1) ddq`` its inertial torque -- the single-joint model's ``J ddq + g (MX cos q
+    + MY sin q)`` (paper eq. 31) with ``J = ZZ1 + Ia1``, ``MX = MX1``, ``MY = -MY1`` -- and a
+    prismatic joint carries ``(M1 + Ia1) ddq`` and no gravity load. The link has no
+    inertial parameters (``inertial = False``).
+
+    Parameters
+    ----------
+    kind : {"revolute", "prismatic"}
+    name : str
+        Joint name (parameter names use its chain number, 1).
+    limits : RobotLimits, optional
+        The joint's limits; default none.
+    gravity : float
+        Magnitude of gravity [m/s^2].
+    source : str
+        Where the joint comes from (error messages).
+
+    Raises
+    ------
+    RobotError
+        ``kind`` is neither revolute nor prismatic.
+    """
+    if kind not in ("revolute", "prismatic"):
+        raise RobotError(f"{source + ': ' if source else ''}kind: expected 'revolute' or "
+                         f"'prismatic', got {kind!r}")
+    model = pin.Model()
+    axis = pin.JointModelRZ() if kind == "revolute" else pin.JointModelPZ()
+    jid = model.addJoint(0, axis, pin.SE3.Identity(), name)
+    model.appendBodyToJoint(jid, pin.Inertia.Zero(), pin.SE3.Identity())
+    robot = Robot.from_pinocchio(model, name=name, limits=None if limits is None else
+                                 {name: limits}, gravity=(0.0, -float(gravity), 0.0),
+                                 source=source)
+    return Robot(robot.name, robot.model, robot.joint_names, robot.moving, robot.locked,
+                 robot.drives, robot.limits, robot.gravity, robot.types, robot.source,
+                 robot.mdh, inertial=False)
 
 
 # --------------------------------------------------------------------------- shared checks
