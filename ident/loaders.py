@@ -704,6 +704,11 @@ def make_experiment(
             raise DataError(f"{source}: q_ref has {q_ref.size} samples, t has {t.size}")
     if t.size < MIN_SAMPLES:
         raise DataError(f"{source}: {t.size} samples, need at least {MIN_SAMPLES}")
+    if not (np.isfinite(payload_mass) and payload_mass >= 0):
+        raise DataError(f"{source}: payload_kg {payload_mass!r}: expected a mass >= 0 [kg]")
+    if not np.isfinite(payload_arm):
+        raise DataError(f"{source}: payload_arm_m {payload_arm!r}: expected a finite lever "
+                        "arm [m]")
     for name, a in (("t", t), ("q", q), ("tau", tau), ("q_ref", q_ref)):
         if a is None:
             continue

@@ -92,6 +92,14 @@ def test_absurd_values_refused_naming_file_and_column(tmp_path):
     _one_line(rc, err, "huge.csv", "'current'", "beyond")
 
 
+def test_negative_payload_mass_refused_naming_the_file(tmp_path):
+    t, q, tau = _signals()
+    (tmp_path / "neg.csv").write_text(_csv_text("t,q,tau,payload_kg,payload_arm_m",
+                                                [t, q, tau, -2.0 + 0 * t, 1.0 + 0 * t]))
+    rc, err = _jointid("fit", "neg.csv", cwd=tmp_path)
+    _one_line(rc, err, "neg.csv", "payload_kg -2.0", "expected a mass >= 0 [kg]")
+
+
 def test_time_gap_refused_with_its_time(tmp_path):
     t, q, tau = _signals()
     t = np.where(t > 1.0, t + 0.5, t)  # 0.5 s lost after t = 1 s

@@ -31,7 +31,15 @@ import pinocchio as pin
 
 from .excitation import OptimisedMultisine, optimise_campaign
 from .multi import MOVING_FRACTION, G
-from .robot import Robot, RobotError, RobotLimits, RobotPayloadData, RobotRegressor, load_robot
+from .robot import (
+    Robot,
+    RobotError,
+    RobotLimits,
+    RobotPayloadData,
+    RobotRegressor,
+    load_robot,
+    one_joint_robot,
+)
 from .robot_campaign import MultisineSegment, RobotCampaign
 
 __all__ = ["RobotDynamics", "joint_robot", "prepare_robot_campaign", "robot_for_campaign",
@@ -105,16 +113,11 @@ def joint_robot(campaign: RobotCampaign) -> Robot:
         raise RobotError(f"{campaign.source or campaign.name}: a robot built from the campaign "
                          f"needs one moving joint, got {len(campaign.joints)} (robot.file)")
     (j,) = campaign.joints
-    model = pin.Model()
-    axis = pin.JointModelRZ() if j.kind == "revolute" else pin.JointModelPZ()
-    jid = model.addJoint(0, axis, pin.SE3.Identity(), j.name)
-    model.appendBodyToJoint(jid, pin.Inertia.Zero(), pin.SE3.Identity())
     lim = j.limits
-    limits = {j.name: RobotLimits(lim.position[0], lim.position[1], lim.max_velocity,
-                                  lim.max_acceleration, lim.max_jerk, lim.max_torque)}
-    robot = Robot.from_pinocchio(model, name=campaign.name, limits=limits,
-                                 gravity=(0.0, -G, 0.0), source=campaign.source)
-    return replace(robot, inertial=False)
+    limits = RobotLimits(lim.position[0], lim.position[1], lim.max_velocity,
+                         lim.max_acceleration, lim.max_jerk, lim.max_torque)
+    robot = one_joint_robot(j.kind, j.name, limits=limits, gravity=G, source=campaign.source)
+    return replace(robot, name=campaign.name)
 
 
 @dataclass(frozen=True, eq=False)
