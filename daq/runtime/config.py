@@ -25,8 +25,9 @@ project's generic EDS, cyclic synchronous torque)::
     quick_stop_cycles = 2         # cycles of quick stop before disable voltage
     lockstep_wait_s = 0.5         # lockstep: wall time to wait for the TPDOs of one cycle [s]
     chunk_seconds = 0.1           # MCAP chunk length [s of data] (lost at most on SIGKILL);
-                                  # each chunk is compressed inside the cycle loop: 1 s chunks
-                                  # cost ~1.5 ms once a second, a missed cycle (bench_daq.py)
+                                  # lockstep: each chunk is compressed inside the cycle loop
+                                  # (1 s chunks cost ~1.5 ms once a second, bench_daq.py);
+                                  # paced: by a worker thread, outside the cycle
     gc_freeze = true              # paced and lockstep: gc.collect() + gc.freeze() before each
                                   # payload run, no automatic collection during it (a full
                                   # collection stalls 10-50 ms); collections resume after it
