@@ -1,9 +1,11 @@
-"""MCAP chunks compressed and written by a worker thread (the paced clock's run logs).
+"""What a paced run changes for its duration to keep the cycle loop on time.
 
-``FastWriter.start_background`` / ``RunLog.background_chunks``: the log is the same as one
-written in the cycle loop, a write error of the worker reaches the thread that logs (and is
-recognised as the log's, not the bus's), the worker runs one real-time priority below the
-cycle loop, and a paced run uses it. Nothing here depends on how fast the machine is.
+MCAP chunks compressed and written by a worker thread (``FastWriter.start_background`` /
+``RunLog.background_chunks``): the log is the same as one written in the cycle loop, a write
+error of the worker reaches the thread that logs (and is recognised as the log's, not the
+bus's), the worker runs one real-time priority below the cycle loop, and a paced run uses
+it. Python's GIL switch interval (``daq.switch_interval_s``): set during a paced run,
+restored after it. Nothing here depends on how fast the machine is.
 """
 
 from __future__ import annotations
@@ -22,8 +24,10 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
+from daq import ConfigError
 from daq.protocol.logformat import FRAME
 from daq.protocol.reader import read_run
+from daq.runtime.config import parse_daq
 from daq.runtime.mcaplog import FastWriter, RunLog
 from daq.runtime.runner import run_campaign
 from daq.runtime.safety import log_failed
@@ -140,7 +144,7 @@ def test_worker_runs_one_realtime_priority_below_the_loop():
 _chan = itertools.count()
 
 
-def _campaign(clock: str) -> Campaign:
+def _campaign(clock: str, **daq) -> Campaign:
     raw = {
         "name": "paced-bg",
         "joint": {"kind": "revolute", "limits": {
@@ -153,34 +157,58 @@ def _campaign(clock: str) -> Campaign:
                       "periods": 1}],
         "daq": {"channel": f"test_paced_bg_{next(_chan)}", "clock": clock,
                 "tpdo_timeout_cycles": 50, "heartbeat_timeout_s": 2.0,
-                "max_following_error": 1.0, "chunk_seconds": 0.02},
+                "max_following_error": 1.0, "chunk_seconds": 0.02, **daq},
     }
     return Campaign.from_dict(raw, f"{clock}.toml")
 
 
-def test_paced_run_writes_its_chunks_in_the_background(tmp_path):
-    seen: list[set[str]] = []
+def _run(tmp_path, c: Campaign) -> tuple[object, list[tuple[set[str], float]]]:
+    """Run ``c`` on the simulated drive; what the cycle loop's progress calls saw: the
+    threads and the GIL switch interval."""
+    seen: list[tuple[set[str], float]] = []
 
     def progress(p) -> None:  # noqa: ANN001 - called from the cycle loop
-        seen.append({t.name for t in threading.enumerate()})
+        seen.append(({t.name for t in threading.enumerate()}, sys.getswitchinterval()))
 
-    r = run_campaign(_campaign("paced"), out_dir=tmp_path, simulate=default_plant(), yes=True,
+    r = run_campaign(c, out_dir=tmp_path, simulate=default_plant(), yes=True,
                      progress=progress)
     assert r.status == "done", r.reason
-    assert seen and all(WORKER in names for names in seen)
+    assert seen
+    return r, seen
+
+
+def test_paced_run_writes_its_chunks_in_the_background(tmp_path):
+    before = sys.getswitchinterval()
+    r, seen = _run(tmp_path, _campaign("paced", switch_interval_s=0.0003))
+    assert all(WORKER in names for names, _ in seen)
     assert not any(t.name == WORKER for t in threading.enumerate())
     run = r.runs[0]
     a = read_run(run.path)
     assert not a.truncated and np.array_equal(a.cycle, np.arange(run.cycles))
     assert _chunks(run.path) > 5
+    # the switch interval of the run, and Python's again after it
+    assert all(sw == pytest.approx(0.0003) for _, sw in seen)
+    assert sys.getswitchinterval() == before
 
 
-def test_lockstep_run_writes_its_chunks_in_the_loop(tmp_path):
-    seen: list[set[str]] = []
-    r = run_campaign(_campaign("lockstep"), out_dir=tmp_path, simulate=default_plant(), yes=True,
-                     progress=lambda p: seen.append({t.name for t in threading.enumerate()}))
-    assert r.status == "done", r.reason
-    assert seen and not any(WORKER in names for names in seen)
+def test_switch_interval_zero_keeps_pythons(tmp_path):
+    before = sys.getswitchinterval()
+    _, seen = _run(tmp_path, _campaign("paced", switch_interval_s=0.0))
+    assert all(sw == before for _, sw in seen)
+
+
+def test_lockstep_run_changes_neither(tmp_path):
+    before = sys.getswitchinterval()
+    _, seen = _run(tmp_path, _campaign("lockstep", switch_interval_s=0.0003))
+    assert not any(WORKER in names for names, _ in seen)
+    assert all(sw == before for _, sw in seen)
+
+
+def test_switch_interval_config():
+    assert parse_daq({}).switch_interval_s == pytest.approx(0.0002)
+    assert parse_daq({"switch_interval_s": 0}).switch_interval_s == 0
+    with pytest.raises(ConfigError, match=r"c.toml: daq.switch_interval_s: .*>= 0"):
+        parse_daq({"switch_interval_s": -0.001}, "c.toml")
 
 
 PACED_FSIZE_SCRIPT = """
