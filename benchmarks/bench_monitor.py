@@ -248,8 +248,9 @@ def report(work: Path, res: dict) -> None:
                          " max" if "check_us_mean" in r else "")
                 print(f"  {tag:7s} {r['missed']} missed of {r['cycles']} ({r['status']}"
                       f"{': ' + r['reason'] if r['reason'] else ''}), lateness p50 "
-                      f"{r['lateness_p50_us']:.0f} / p99 {r['lateness_p99_us']:.0f} / max "
-                      f"{r['lateness_max_us']:.0f} us, busy p99 {r['busy_p99_us']:.0f} us, "
+                      f"{r['lateness_p50_us']:.1f} / p99 {r['lateness_p99_us']:.1f} / p99.9 "
+                      f"{r['lateness_p999_us']:.0f} / max {r['lateness_max_us']:.0f} us, "
+                      f"busy p50 {r['busy_p50_us']:.0f} / p99 {r['busy_p99_us']:.0f} us, "
                       f"{r['missed_after_long_cycle']} after a cycle > 1 ms{check}; load "
                       f"{r['load_1min'][0]:.1f}")
 

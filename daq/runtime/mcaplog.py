@@ -581,7 +581,7 @@ class RunLog:
         finally:
             try:
                 self._w.stop_background()  # (after a failure: the worker ends all the same)
-            except BaseException:  # noqa: BLE001, S110 - the error was raised above already
+            except Exception:  # noqa: BLE001, S110 - the error was raised above already
                 pass
             self._file.close()
 
