@@ -566,11 +566,6 @@ class Engine(Supervisor):
                      np.asarray(ref.dq, dtype=float).reshape(ref_q.shape).T.tolist(),
                      np.asarray(ref.ddq, dtype=float).reshape(ref_q.shape).T.tolist(),
                      np.asarray(ref.segment).astype(int).tolist())
-        switch_was = sys.getswitchinterval()
-        if self.paced and cfg.switch_interval_s > 0:
-            # the loop, waking from its sleep, waits for the GIL at most about this long when
-            # another thread holds it (simulated drives, the chunk writer), not 5 ms
-            sys.setswitchinterval(cfg.switch_interval_s)
         gc_was = gc.isenabled()
         if cfg.gc_freeze:  # no 10-50 ms full collection inside the run (bench_daq.py)
             gc.collect()
@@ -613,7 +608,12 @@ class Engine(Supervisor):
                       "stop" if status != "done" else "info", msg)
             return cycle - 1 if off else -1
 
+        switch_was = sys.getswitchinterval()
         try:
+            if self.paced and cfg.switch_interval_s > 0:
+                # the loop, waking from its sleep, waits for the GIL at most about this long
+                # when another thread holds it (simulated drives, the chunk writer), not 5 ms
+                sys.setswitchinterval(cfg.switch_interval_s)
             try:
                 # 1. enable, holding the position measured at the first answer
                 z0 = [0.0] * n_dr
