@@ -34,7 +34,8 @@ clock unless said, i.e. simulated time):
     to the last CPU): missed cycles (SYNC more than half a period late), the lateness
     percentiles and busy times from each log's ``/timing``, how many misses followed a
     cycle longer than the period (the loop's own work; else the loop woke late: the host),
-    the 1-min load average of each run, the monitor's time per cycle.
+    the 1-min load average of each run and the time the hypervisor stole from each CPU
+    during it (/proc/stat), the monitor's time per cycle.
 ``report``
     Prints the figures of the stages run so far (also written to DIR/bench_monitor.json).
 """
@@ -163,6 +164,18 @@ def _paced_timing(path: Path) -> dict:
             "missed_late_us": (late[miss] * 1e6).round().astype(int).tolist()}
 
 
+def _steal_ms() -> list[float]:
+    """Time stolen from each CPU by the hypervisor so far [ms] (/proc/stat; [] elsewhere):
+    on a VM a loop's wake-up is late while its vCPU is not running."""
+    try:
+        lines = Path("/proc/stat").read_text().splitlines()
+    except OSError:
+        return []
+    tck = os.sysconf("SC_CLK_TCK")
+    return [1000.0 * int(ln.split()[8]) / tck for ln in lines
+            if ln.startswith("cpu") and ln[3:4].isdigit()]
+
+
 def stage_paced(work: Path, seconds: float, realtime: int = 0, repeat: int = 1) -> dict:
     """``repeat`` pairs of runs, interleaved (the host's load changes by the minute): with
     the monitor, then the same campaign without it; each with its load average [1 min]."""
@@ -174,6 +187,7 @@ def stage_paced(work: Path, seconds: float, realtime: int = 0, repeat: int = 1) 
     for _ in range(repeat):
         for tag, th in (("monitor", work / "calibrate" / "thresholds.json"), ("none", None)):
             load0 = os.getloadavg()[0]
+            steal0 = _steal_ms()
             if th is None:  # the same run without the monitor: run_campaign alone
                 c = load_campaign(camp, True)
                 res, wall = run_with_bar(c, work / "paced_none", True, sys.stderr)
@@ -190,6 +204,7 @@ def stage_paced(work: Path, seconds: float, realtime: int = 0, repeat: int = 1) 
                        "check_us_mean": m["step_us_mean"], "check_us_max": m["step_us_max"],
                        **_paced_timing(work / "paced_monitor" / s["logs"][0])}
             run["load_1min"] = [load0, os.getloadavg()[0]]
+            run["steal_ms_per_cpu"] = [b - a for a, b in zip(steal0, _steal_ms(), strict=False)]
             out[tag]["runs"].append(run)
     for tag in ("monitor", "none"):
         runs = out[tag]["runs"]
@@ -252,7 +267,8 @@ def report(work: Path, res: dict) -> None:
                       f"{r['lateness_p999_us']:.0f} / max {r['lateness_max_us']:.0f} us, "
                       f"busy p50 {r['busy_p50_us']:.0f} / p99 {r['busy_p99_us']:.0f} us, "
                       f"{r['missed_after_long_cycle']} after a cycle > 1 ms{check}; load "
-                      f"{r['load_1min'][0]:.1f}")
+                      f"{r['load_1min'][0]:.1f}; stolen by the hypervisor "
+                      f"{r.get('steal_ms_per_cpu', [])} ms per CPU")
 
 
 def main() -> None:
