@@ -29,8 +29,13 @@ clock unless said, i.e. simulated time):
     crossings outside the push windows.
 ``paced``
     ``--paced-seconds`` of the demo's multi-sine on the real-time clock (daq.clock = paced,
-    1 kHz) with the monitor checking every cycle: missed cycles (SYNC more than half a period
-    late) and the monitor's time per cycle; the same run without the monitor for reference.
+    1 kHz) with the monitor checking every cycle, then the same run without the monitor,
+    ``--paced-repeat`` pairs interleaved (``--realtime P``: daq.realtime_priority = P, pinned
+    to the last CPU): missed cycles (SYNC more than half a period late), the lateness
+    percentiles and busy times from each log's ``/timing``, how many misses followed a
+    cycle longer than the period (the loop's own work; else the loop woke late: the host),
+    the 1-min load average of each run and the time the hypervisor stole from each CPU
+    during it (/proc/stat), the monitor's time per cycle.
 ``report``
     Prints the figures of the stages run so far (also written to DIR/bench_monitor.json).
 """
@@ -39,8 +44,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import re
 import statistics
+import struct
 import subprocess
 import sys
 import time
@@ -50,6 +57,7 @@ import numpy as np
 
 from daq.app.monitor import load_campaign, run_monitor
 from daq.app.running import run_with_bar
+from daq.protocol.reader import read_topics
 from daq.runtime.monitor import read_monitor
 from ident.monitor import Thresholds
 
@@ -133,27 +141,75 @@ def stage_detect(work: Path) -> dict:
     return {"runs": s["runs"], "wall_s": s["wall_s"], "missed": s["missed_cycles"]}
 
 
-def stage_paced(work: Path, seconds: float, realtime: int = 0) -> dict:
+def _paced_timing(path: Path) -> dict:
+    """Lateness of every SYNC and the cycle's busy time from a paced log's ``/timing``
+    channel (engine.TIMING_SCHEMA): percentiles [us], missed cycles (> half a period late)
+    and how many of them followed a cycle that was itself longer than the period (the
+    loop's own work) rather than a late wake-up from its sleep (the host)."""
+    raw = read_topics(path, {"/timing"}).raw.get("/timing", [])
+    rows = np.array([struct.unpack_from("<qddd", m, 4) for m in raw])
+    rows = rows[np.argsort(rows[:, 0])]
+    late, busy = rows[:, 2], rows[:, 3]
+    cycle_s = 1e-3
+    miss = np.flatnonzero(late > 0.5 * cycle_s)
+    after_long = int(np.sum(busy[miss[miss > 0] - 1] > cycle_s))
+    pct = {f"lateness_{k}_us": float(np.percentile(late, q) * 1e6)
+           for k, q in (("p50", 50), ("p99", 99), ("p999", 99.9))}
+    return {"cycles_timed": int(len(rows)), "missed_timed": int(len(miss)), **pct,
+            "lateness_max_us": float(late.max() * 1e6),
+            "busy_p50_us": float(np.percentile(busy, 50) * 1e6),
+            "busy_p99_us": float(np.percentile(busy, 99) * 1e6),
+            "busy_max_us": float(busy.max() * 1e6),
+            "missed_after_long_cycle": after_long,
+            "missed_late_us": (late[miss] * 1e6).round().astype(int).tolist()}
+
+
+def _steal_ms() -> list[float]:
+    """Time stolen from each CPU by the hypervisor so far [ms] (/proc/stat; [] elsewhere):
+    on a VM a loop's wake-up is late while its vCPU is not running."""
+    try:
+        lines = Path("/proc/stat").read_text().splitlines()
+    except OSError:
+        return []
+    tck = os.sysconf("SC_CLK_TCK")
+    return [1000.0 * int(ln.split()[8]) / tck for ln in lines
+            if ln.startswith("cpu") and ln[3:4].isdigit()]
+
+
+def stage_paced(work: Path, seconds: float, realtime: int = 0, repeat: int = 1) -> dict:
+    """``repeat`` pairs of runs, interleaved (the host's load changes by the minute): with
+    the monitor, then the same campaign without it; each with its load average [1 min]."""
     periods = max(1, int(round(seconds / 8.0)))
     daq = f"realtime_priority = {realtime}\ncpu = -1" if realtime else ""
     camp = _campaign(work, "arm3-paced", seed=1, periods=periods, multisine_only=True,
                      payloads=1, daq=daq)
-    out = {}
-    for tag, th in (("monitor", work / "calibrate" / "thresholds.json"), ("none", None)):
-        if th is None:  # the same run without the monitor: run_campaign alone
-            c = load_campaign(camp, True)
-            res, wall = run_with_bar(c, work / "paced_none", True, sys.stderr)
-            out[tag] = {"missed": [r.missed for r in res.runs],
-                        "cycles": [r.cycles for r in res.runs], "wall_s": wall,
-                        "lateness_p99_us": [float(np.percentile(r.lateness_s, 99) * 1e6)
-                                            for r in res.runs]}
-            continue
-        s = run_monitor(work / "model", camp, work / "paced_monitor", simulate=True,
-                        thresholds=th, paced=True)
-        run = s["runs"][0]
-        out[tag] = {"missed": s["missed_cycles"], "cycles": run["cycles"],
-                    "wall_s": s["wall_s"], "false_alarms": len(run["false_alarms"]),
-                    "check_us_mean": run["step_us_mean"], "check_us_max": run["step_us_max"]}
+    out: dict = {"monitor": {"runs": []}, "none": {"runs": []}, "realtime_priority": realtime}
+    for _ in range(repeat):
+        for tag, th in (("monitor", work / "calibrate" / "thresholds.json"), ("none", None)):
+            load0 = os.getloadavg()[0]
+            steal0 = _steal_ms()
+            if th is None:  # the same run without the monitor: run_campaign alone
+                c = load_campaign(camp, True)
+                res, wall = run_with_bar(c, work / "paced_none", True, sys.stderr)
+                r = res.runs[0]
+                run = {"status": res.status, "reason": res.reason, "missed": r.missed,
+                       "cycles": r.cycles, "wall_s": wall, **_paced_timing(r.path)}
+            else:
+                s = run_monitor(work / "model", camp, work / "paced_monitor", simulate=True,
+                                thresholds=th, paced=True)
+                m = s["runs"][0]
+                run = {"status": s["status"], "reason": s["reason"],
+                       "missed": s["missed_cycles"][0], "cycles": m["cycles"],
+                       "wall_s": s["wall_s"], "false_alarms": len(m["false_alarms"]),
+                       "check_us_mean": m["step_us_mean"], "check_us_max": m["step_us_max"],
+                       **_paced_timing(work / "paced_monitor" / s["logs"][0])}
+            run["load_1min"] = [load0, os.getloadavg()[0]]
+            run["steal_ms_per_cpu"] = [b - a for a, b in zip(steal0, _steal_ms(), strict=False)]
+            out[tag]["runs"].append(run)
+    for tag in ("monitor", "none"):
+        runs = out[tag]["runs"]
+        out[tag]["missed"] = [r["missed"] for r in runs]
+        out[tag]["cycles"] = [r["cycles"] for r in runs]
     return out
 
 
@@ -197,11 +253,22 @@ def report(work: Path, res: dict) -> None:
                       + ", ".join(sorted({x for p in ps for x in p["joints_crossed"]})))
             print(f"  crossings outside the push windows: {len(run['false_alarms'])}")
     pc = res.get("paced")
-    if pc:
-        m, n = pc["monitor"], pc["none"]
-        print(f"paced 1 kHz: with the monitor {m['missed']} missed of {m['cycles']} cycles "
-              f"(check {m['check_us_mean']:.0f} us mean, {m['check_us_max']:.0f} us max); "
-              f"without: {n['missed']} missed of {n['cycles']}")
+    if pc and "runs" in pc.get("monitor", {}):
+        print(f"paced 1 kHz (realtime_priority {pc.get('realtime_priority', 0)}), in run "
+              "order:")
+        for k in range(len(pc["monitor"]["runs"])):
+            for tag in ("monitor", "none"):
+                r = pc[tag]["runs"][k]
+                check = (f", check {r['check_us_mean']:.0f} us mean / {r['check_us_max']:.0f}"
+                         " max" if "check_us_mean" in r else "")
+                print(f"  {tag:7s} {r['missed']} missed of {r['cycles']} ({r['status']}"
+                      f"{': ' + r['reason'] if r['reason'] else ''}), lateness p50 "
+                      f"{r['lateness_p50_us']:.1f} / p99 {r['lateness_p99_us']:.1f} / p99.9 "
+                      f"{r['lateness_p999_us']:.0f} / max {r['lateness_max_us']:.0f} us, "
+                      f"busy p50 {r['busy_p50_us']:.0f} / p99 {r['busy_p99_us']:.0f} us, "
+                      f"{r['missed_after_long_cycle']} after a cycle > 1 ms{check}; load "
+                      f"{r['load_1min'][0]:.1f}; stolen by the hypervisor "
+                      f"{r.get('steal_ms_per_cpu', [])} ms per CPU")
 
 
 def main() -> None:
@@ -211,6 +278,8 @@ def main() -> None:
     ap.add_argument("--realtime", type=int, default=0,
                     help="paced stage: SCHED_FIFO priority of the cycle loop (daq."
                          "realtime_priority, pinned to the last CPU; needs CAP_SYS_NICE)")
+    ap.add_argument("--paced-repeat", type=int, default=1,
+                    help="paced stage: pairs of runs (with, without the monitor), interleaved")
     ap.add_argument("stages", nargs="+", choices=("model", "calibrate", "false", "detect",
                                                   "paced", "report"))
     a = ap.parse_args()
@@ -228,7 +297,7 @@ def main() -> None:
         elif st == "detect":
             res["detect"] = stage_detect(a.work)
         elif st == "paced":
-            res["paced"] = stage_paced(a.work, a.paced_seconds, a.realtime)
+            res["paced"] = stage_paced(a.work, a.paced_seconds, a.realtime, a.paced_repeat)
         if st != "report":
             res.setdefault("stage_wall_s", {})[st] = time.perf_counter() - t0
             store.write_text(json.dumps(res, indent=1, default=str))

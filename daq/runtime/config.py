@@ -19,14 +19,20 @@ project's generic EDS, cyclic synchronous torque)::
                                   # or "periodic" (python-can send_periodic: the kernel's
                                   # broadcast manager on socketcan, a thread elsewhere)
     realtime_priority = 0         # paced: SCHED_FIFO priority 1-99 (needs CAP_SYS_NICE); 0 off
+    switch_interval_s = 0.0002    # paced: Python's GIL switch interval during a payload run
+                                  # [s] (sys.setswitchinterval; restored after it); 0: keep
+                                  # Python's (5 ms). The loop waking from its sleep waits at
+                                  # most about this long for the GIL held by another thread
+                                  # (the simulated drives, the log's chunk writer)
     tpdo_timeout_cycles = 3       # watchdog: TPDOs missing for k consecutive cycles -> stop
     heartbeat_timeout_s = 0.5     # watchdog: no heartbeat for this long [s] -> stop
     max_following_error = 0.2     # watchdog: |q_ref - q| above this [rad] or [m] -> stop
     quick_stop_cycles = 2         # cycles of quick stop before disable voltage
     lockstep_wait_s = 0.5         # lockstep: wall time to wait for the TPDOs of one cycle [s]
     chunk_seconds = 0.1           # MCAP chunk length [s of data] (lost at most on SIGKILL);
-                                  # each chunk is compressed inside the cycle loop: 1 s chunks
-                                  # cost ~1.5 ms once a second, a missed cycle (bench_daq.py)
+                                  # lockstep: each chunk is compressed inside the cycle loop
+                                  # (1 s chunks cost ~1.5 ms once a second, bench_daq.py);
+                                  # paced: by a worker thread, outside the cycle
     gc_freeze = true              # paced and lockstep: gc.collect() + gc.freeze() before each
                                   # payload run, no automatic collection during it (a full
                                   # collection stalls 10-50 ms); collections resume after it
@@ -202,6 +208,7 @@ class DaqConfig:
     master_heartbeat_ms: int = 100
     from_can_config: tuple[str, ...] = ()  # keys taken from python-can's configuration
     gc_freeze: bool = True  # no automatic garbage collection during a payload run
+    switch_interval_s: float = 0.0002  # [s] GIL switch interval of a paced run (0: Python's)
     allow_beyond_drive_limits: bool = False  # supervision limits above the drive's own
     torque_delay_cycles: float = 1.5  # [cycles] the logs' torque timing (module docstring)
 
@@ -287,6 +294,8 @@ _DAQ = Table(
         "lockstep_wait_s": Field(float, required=False, default=0.5, gt=0, unit="s"),
         "chunk_seconds": Field(float, required=False, default=0.1, gt=0, unit="s"),
         "gc_freeze": Field(bool, required=False, default=True),
+        "switch_interval_s": Field(float, required=False, default=0.0002, ge=0, le=0.1,
+                                   unit="s"),
         "cpu": Field(int, required=False, default=-1, ge=-2),
         "master_node_id": Field(int, required=False, default=127, ge=1, le=127),
         "master_heartbeat_ms": Field(int, required=False, default=100, ge=0, le=20000,
@@ -463,6 +472,7 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "", *,
         master_heartbeat_ms=d["master_heartbeat_ms"],
         from_can_config=from_pc,
         gc_freeze=d["gc_freeze"],
+        switch_interval_s=d["switch_interval_s"],
         allow_beyond_drive_limits=d["allow_beyond_drive_limits"],
         torque_delay_cycles=d["torque_delay_cycles"],
     )

@@ -24,13 +24,18 @@ close, ``result``; attachments: the campaign file, every EDS, the plant file.
 Log times are integer nanoseconds: ``start_ns + cycle * cycle_ns`` (the nominal sample time
 of the cycle, ``start_ns`` the wall-clock start of the run); publish times are the wall
 clock when the record was written. The writer's chunk size is chosen so that a chunk holds
-about ``chunk_seconds`` of data: a killed process loses at most that much.
+about ``chunk_seconds`` of data: a killed process loses at most that much (with chunks written
+in the background, :meth:`RunLog.background_chunks`, also the chunks still queued: the paced
+clock's engine uses it, so that compressing a chunk -- 0.3-1.5 ms -- is no part of a cycle).
 """
 
 from __future__ import annotations
 
 import json
+import os
+import queue
 import struct
+import threading
 import time
 import zlib
 from collections.abc import Mapping, Sequence
@@ -143,8 +148,72 @@ class FastWriter:
         self._att_indexes: list[AttachmentIndex] = []
         self._msg_start = -1
         self._msg_end = 0
+        self._queue: queue.Queue[tuple[bytes, list[int]] | None] | None = None
+        self._worker: threading.Thread | None = None
+        self._error: BaseException | None = None
+
+    # -- background chunks ------------------------------------------------------------------
+    def start_background(self) -> None:
+        """From now on a full chunk is handed to a worker thread, which compresses and writes
+        the chunks in order (zstd releases the GIL while it compresses); the thread adding
+        messages only copies the buffer. A write error of the worker is raised by the next
+        :meth:`add_message` that fills a chunk, or by :meth:`drain`; no chunk is written after
+        it. Under SCHED_FIFO/RR the worker runs one priority below the thread that started
+        it (a cycle loop at that priority preempts it, other processes do not). Every other
+        write (records, metadata, :meth:`finish`) first waits for the queue (:meth:`drain`).
+        Idempotent."""
+        if self._worker is not None:
+            return
+        policy, prio = _sched_of_thread()
+        self._queue = queue.Queue()
+        self._worker = threading.Thread(target=self._work, args=(policy, prio), daemon=True,
+                                        name="mcap-chunk-writer")
+        self._worker.start()
+
+    def _work(self, policy: int, prio: int) -> None:
+        if prio > 1:  # one below the cycle loop's real-time priority
+            try:
+                os.sched_setscheduler(0, policy, os.sched_param(prio - 1))
+            except (AttributeError, OSError):  # pragma: no cover - kept at the loop's priority
+                pass
+        q = self._queue
+        assert q is not None
+        while True:
+            item = q.get()
+            try:
+                if item is None:
+                    return
+                if self._error is None:  # after a failure nothing more is written
+                    raw, offs = item
+                    self.write_chunk(raw, np.asarray(offs, np.int64))
+                    self._f.flush()
+            except BaseException as exc:  # noqa: BLE001 - raised in the writing thread
+                self._error = exc
+            finally:
+                q.task_done()
+
+    def drain(self) -> None:
+        """Wait until the worker wrote every queued chunk; raise its error if it had one."""
+        if self._queue is not None:
+            self._queue.join()
+        if self._error is not None:
+            raise self._error
+
+    def stop_background(self) -> None:
+        """Write the queued chunks, end the worker (idempotent); raise its error if any."""
+        if self._worker is None:
+            return
+        try:
+            self.drain()
+        finally:
+            assert self._queue is not None
+            self._queue.put(None)
+            self._worker.join()
+            self._worker = None
+            self._queue = None
 
     def _record(self, rec: Any) -> tuple[int, int]:
+        self.drain()
         b = RecordBuilder()
         rec.write(b)
         data = b.end()
@@ -186,14 +255,20 @@ class FastWriter:
             self.flush_chunk()
 
     def flush_chunk(self) -> None:
-        """Compress and write the chunk being filled (if any), then flush the file."""
+        """Compress and write the chunk being filled (if any), then flush the file; with
+        :meth:`start_background`, hand it to the worker instead."""
+        if self._error is not None:
+            raise self._error
         if not self._buf:
             return
         raw = bytes(self._buf)
-        offs = np.asarray(self._offs, np.int64)
+        offs = self._offs
         self._buf = bytearray()
         self._offs = []
-        self.write_chunk(raw, offs)
+        if self._queue is not None:
+            self._queue.put((raw, offs))
+            return
+        self.write_chunk(raw, np.asarray(offs, np.int64))
         self._f.flush()
 
     def write_chunk(self, raw: bytes, offsets: np.ndarray) -> None:
@@ -264,6 +339,7 @@ class FastWriter:
     def finish(self) -> None:
         """Last chunk, data end, summary (with offsets), footer, closing magic."""
         self.flush_chunk()
+        self.stop_background()
         self._record(DataEnd(data_section_crc=0))
         summary_start = self._f.tell()
         b = RecordBuilder()
@@ -297,6 +373,17 @@ class FastWriter:
         self._record(Footer(summary_start=summary_start, summary_offset_start=offset_start,
                             summary_crc=0))
         self._f.write(MAGIC)
+
+
+def _sched_of_thread() -> tuple[int, int]:
+    """(scheduling policy, real-time priority) of the calling thread ((0, 0): not known)."""
+    try:
+        policy = os.sched_getscheduler(0)
+        if policy in (os.SCHED_FIFO, os.SCHED_RR):
+            return policy, os.sched_getparam(0).sched_priority
+        return policy, 0
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        return 0, 0
 
 
 def chunk_size_for(n_axes: int, frames_per_cycle: int, cycle_s: float, seconds: float) -> int:
@@ -476,6 +563,12 @@ class RunLog:
         )
         self.n_messages += 1
 
+    def background_chunks(self) -> None:
+        """Compress and write full chunks in a worker thread from now on
+        (:meth:`FastWriter.start_background`): the paced cycle loop then only copies a full
+        chunk's buffer. A write error surfaces at the next full chunk or at :meth:`close`."""
+        self._w.start_background()
+
     def close(self, result: Mapping[str, str] | None = None) -> None:
         """Write the ``result`` metadata record, the summary and close the file (idempotent)."""
         if self.closed:
@@ -486,6 +579,10 @@ class RunLog:
                 self._w.add_metadata("result", {str(k): str(v) for k, v in result.items()})
             self._w.finish()
         finally:
+            try:
+                self._w.stop_background()  # (after a failure: the worker ends all the same)
+            except Exception:  # noqa: BLE001, S110 - the error was raised above already
+                pass
             self._file.close()
 
     def __enter__(self) -> RunLog:
