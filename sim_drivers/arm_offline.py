@@ -1,13 +1,13 @@
 """Offline closed-loop simulation of the n-dof arm: position controller + drives + plant.
 
-Each control cycle does, per joint, what :mod:`sim_drivers.offline` does for one joint: the
-measured position comes from the encoder counts, the torque reference of a PD position loop
-(the control law of ``daq.protocol.control.PositionController``, vectorised over the joints:
-velocity from the backward difference of the measured position, low-passed at
-``velocity_cutoff_hz``)
-plus a model feed-forward is quantised to the int16 per-mille target torque of object 0x6071,
-and the plant (:class:`sim_drivers.arm_plant.ArmPlant`) is stepped one cycle with the joint-side
-torque of that target.
+The loop is :func:`sim_drivers.closed_loop.run_closed_loop`, the same as the single joint's
+(:mod:`sim_drivers.offline`); only the plant (:class:`sim_drivers.arm_plant.ArmPlant`) and the
+control law differ. Each control cycle, per joint: the measured position comes from the encoder
+counts, the torque reference of :class:`ArmPDLaw` (the PD law of
+``daq.protocol.control.PositionController``, vectorised over the joints: velocity from the
+backward difference of the measured position, low-passed at ``velocity_cutoff_hz``, plus a
+model feed-forward) is quantised to the int16 per-mille target torque of object 0x6071, and the
+plant is stepped one cycle with the joint-side torque of that target.
 
 Feed-forward (computed torque at the reference, computed once for the whole run): by default
 RNEA of the TRUE rigid body with rotor inertias and payload, no friction; or RNEA of a nominal
@@ -27,6 +27,7 @@ import pinocchio as pin
 from . import SimError
 from .arm_params import ArmParams, Payload, _vec
 from .arm_plant import REGIME_REST, REGIME_SLIDING, ArmPlant
+from .closed_loop import cycle_period, per_payload, reference_arrays, run_closed_loop
 
 
 @dataclass(frozen=True, eq=False)
@@ -93,6 +94,46 @@ class ArmGains:
         return cls(kp=j * w * w, kd=2.0 * damping * j * w,
                    Fc_ff=f.c_m if friction_ff else 0.0, Fv_ff=f.F_V if friction_ff else 0.0,
                    velocity_cutoff_hz=velocity_cutoff_hz)
+
+
+class ArmPDLaw:
+    """The arm's control law (a strategy of :func:`sim_drivers.closed_loop.run_closed_loop`):
+    per joint the PD position loop of ``daq.protocol.control.PositionController``, vectorised,
+    plus a feed-forward computed for the whole run.
+
+    ``tau_k = ff_k + kp (q_ref,k - q_m) + kd (dq_ref,k - dq_est)`` [N m], with ``dq_est`` the
+    backward difference of the measured position low-passed at ``gains.velocity_cutoff_hz``
+    (first-order, ``alpha = wc / (1 + wc)``, ``wc = 2 pi f_c cycle_s``; 0 at the first cycle).
+
+    Parameters
+    ----------
+    gains : ArmGains
+    cycle_s : float
+        Control cycle [s].
+    ff : ndarray (n, k)
+        Feed-forward torque per cycle [N m].
+    q_ref, dq_ref : ndarray (n, k)
+        Reference [rad, rad/s].
+    """
+
+    def __init__(self, gains: ArmGains, cycle_s: float, ff: np.ndarray, q_ref: np.ndarray,
+                 dq_ref: np.ndarray) -> None:
+        self._kp, self._kd = gains.kp, gains.kd
+        wc = 2.0 * math.pi * gains.velocity_cutoff_hz * cycle_s
+        self._alpha = wc / (1.0 + wc)
+        self._cycle_s = cycle_s
+        self._ff, self._q_ref, self._dq_ref = ff, q_ref, dq_ref
+        self._dq_est = np.zeros(q_ref.shape[1])
+        self._q_prev: np.ndarray | None = None
+
+    def __call__(self, k: int, q_measured: np.ndarray) -> np.ndarray:
+        """Torque reference of cycle k (k,) [N m] from the measured positions [rad]."""
+        if self._q_prev is not None:
+            self._dq_est += self._alpha * ((q_measured - self._q_prev) / self._cycle_s
+                                           - self._dq_est)
+        self._q_prev = q_measured
+        return (self._ff[k] + self._kp * (self._q_ref[k] - q_measured)
+                + self._kd * (self._dq_ref[k] - self._dq_est))
 
 
 @dataclass(frozen=True, eq=False)
@@ -207,34 +248,6 @@ class ArmRun:
                    header=",".join(cols), comments="", fmt="%.17g")
 
 
-def _reference_arrays(reference: Any, k: int) -> tuple[np.ndarray, ...]:
-    try:
-        arrays = [np.asarray(getattr(reference, n), dtype=float) for n in ("q", "dq", "ddq")]
-    except AttributeError as exc:
-        raise SimError(f"reference: expected arrays q, dq, ddq of shape (n, {k}) ({exc})"
-                       ) from None
-    arrays = [a.reshape(-1, 1) if a.ndim == 1 and k == 1 else a for a in arrays]
-    n = arrays[0].shape[0]
-    for name, a in zip(("q", "dq", "ddq"), arrays, strict=True):
-        if a.shape != (n, k) or not np.all(np.isfinite(a)):
-            raise SimError(f"reference.{name}: expected finite values of shape ({n}, {k}), "
-                           f"got shape {a.shape}")
-    if n < 1:
-        raise SimError("reference: expected at least one sample")
-    return tuple(arrays)
-
-
-def _cycle_from_reference(t: np.ndarray) -> float:
-    if t.ndim != 1 or t.shape[0] < 2:
-        raise SimError("reference.t: expected at least 2 samples to infer the cycle")
-    dt = np.diff(t)
-    c = float(np.median(dt))
-    if not c > 0 or np.max(np.abs(dt - c)) > 1e-6 * c + 1e-12:
-        raise SimError(f"reference.t: expected uniform sampling, got steps from "
-                       f"{float(dt.min())!r} to {float(dt.max())!r} s")
-    return c
-
-
 def feedforward_torque(
     params: ArmParams,
     q: np.ndarray,
@@ -324,13 +337,11 @@ def simulate_arm(
     """
     k = params.k
     payload = Payload.coerce(payload)
-    ref_q, ref_dq, ref_ddq = _reference_arrays(reference, k)
+    ref_q, ref_dq, ref_ddq = reference_arrays(reference, k)
     n = ref_q.shape[0]
     if gains.k != k:
         raise SimError(f"gains: expected {k} joints, got {gains.k}")
-    if cycle_s is None:
-        t = getattr(reference, "t", None)
-        cycle_s = 0.001 if t is None else _cycle_from_reference(np.asarray(t, dtype=float))
+    cycle_s = cycle_period(reference, cycle_s, default=0.001)
     ff = feedforward_torque(params, ref_q, ref_dq, ref_ddq, feedforward, payload)
     ff = ff + gains.Fc_ff * np.sign(ref_dq) + gains.Fv_ff * ref_dq
 
@@ -339,47 +350,21 @@ def simulate_arm(
     rng = np.random.default_rng(seed)
     noise = rng.standard_normal((n, k)) * params.drive.torque_noise_std_Nm
 
-    counts = np.empty((n, k), dtype=np.int64)
-    xs = np.empty((n, k), dtype=np.int16)
-    tau_applied = np.empty((n, k))
-    q_true = np.empty((n, k))
-    dq_true = np.empty((n, k))
-    ddq_true = np.empty((n, k))
-    regime = np.empty((n, k), dtype=np.int8)
-
     drive = params.drive
     cpr = drive.counts_per_rad
     per_mille = drive.torque_per_permille
-    kp, kd = gains.kp, gains.kd
-    wc = 2.0 * math.pi * gains.velocity_cutoff_hz * cycle_s
-    alpha = wc / (1.0 + wc)
-    dq_est = np.zeros(k)
-    q_prev: np.ndarray | None = None
-    step, quantise = plant.step, drive.quantise
-    for i in range(n):
-        c = np.rint(plant.q * cpr)
-        counts[i] = c
-        q_true[i] = plant.q
-        dq_true[i] = plant.dq
-        qm = c / cpr
-        if q_prev is not None:
-            dq_est += alpha * ((qm - q_prev) / cycle_s - dq_est)
-        q_prev = qm
-        tau = ff[i] + kp * (ref_q[i] - qm) + kd * (ref_dq[i] - dq_est)
-        x = quantise(tau)
-        xs[i] = x
-        step(x * per_mille, noise[i])
-        ddq_true[i] = plant.ddq_start
-        tau_applied[i] = plant.tau_applied_start
-        regime[i] = plant.regime_start
+    law = ArmPDLaw(gains, cycle_s, ff, ref_q, ref_dq)
+    rec = run_closed_loop(plant, law, drive.quantise, n, joints=k, counts_per_rad=cpr,
+                          torque_per_permille=per_mille, rnd=np.rint, noise=noise)
 
     cycle = np.arange(n, dtype=np.int64)
     return ArmRun(
-        t=cycle * cycle_s, cycle=cycle, counts=counts, q=counts / cpr, x=xs,
-        tau_ref=xs.astype(float) * per_mille, tau_applied=tau_applied, tau_noise=noise,
-        q_true=q_true, dq_true=dq_true, ddq_true=ddq_true, regime=regime,
-        q_ref=ref_q, dq_ref=ref_dq, ddq_ref=ref_ddq, payload=payload,
-        cycle_s=float(cycle_s), joint_numbers=params.joint_numbers)
+        t=cycle * cycle_s, cycle=cycle, counts=rec.counts, q=rec.counts / cpr, x=rec.x,
+        tau_ref=rec.x.astype(float) * per_mille, tau_applied=rec.tau_applied,
+        tau_noise=rec.tau_noise, q_true=rec.q_true, dq_true=rec.dq_true,
+        ddq_true=rec.ddq_true, regime=rec.regime, q_ref=ref_q, dq_ref=ref_dq,
+        ddq_ref=ref_ddq, payload=payload, cycle_s=float(cycle_s),
+        joint_numbers=params.joint_numbers)
 
 
 def simulate_arm_payloads(
@@ -407,5 +392,6 @@ def simulate_arm_payloads(
     list of ArmRun
         In the order of ``payloads``; each run starts at rest with a fresh plant.
     """
-    return [simulate_arm(params, reference, gains, payload=pay, seed=seed + i, **kw)
-            for i, pay in enumerate(payloads)]
+    return per_payload(
+        lambda pay, seed_i: simulate_arm(params, reference, gains, payload=pay, seed=seed_i,
+                                         **kw), payloads, seed)

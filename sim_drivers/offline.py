@@ -1,11 +1,12 @@
 """Offline closed-loop simulation: the position controller driving the plant, without a bus.
 
-Each control cycle does exactly what the bus path does (``daq`` runner + simulated drive),
-minus CANopen: the measured position comes from the encoder counts, the torque reference of
-:class:`daq.protocol.control.PositionController` is quantised to the per-mille target torque (int16)
-that object 0x6071 would carry, and the plant is stepped one cycle with the joint-side torque
-of that target, ``tau_ref = N rated_torque x / 1000``. It is the fast path for identification
-tests: a 60 s run at 1 kHz takes well under a second.
+The loop is :func:`sim_drivers.closed_loop.run_closed_loop`, the same as the arm's: each
+control cycle does exactly what the bus path does (``daq`` runner + simulated drive), minus
+CANopen: the measured position comes from the encoder counts, the torque reference of
+:class:`daq.protocol.control.PositionController` (this joint's control law) is quantised to the
+per-mille target torque (int16) that object 0x6071 would carry, and the plant is stepped one
+cycle with the joint-side torque of that target, ``tau_ref = N rated_torque x / 1000``. It is
+the fast path for identification tests: a 60 s run at 1 kHz takes well under a second.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import numpy as np
 
 from daq.protocol.control import ControllerGains, PositionController
 
-from . import SimError
+from .closed_loop import cycle_period, per_payload, reference_arrays, run_closed_loop
 from .plant import REGIME_REST, JointPlant
 from .plant_config import PlantParams
 
@@ -89,17 +90,6 @@ class SimRun:
         return self.regime == REGIME_REST
 
 
-def _cycle_from_reference(t: np.ndarray) -> float:
-    if t.shape[0] < 2:
-        raise SimError("reference.t: expected at least 2 samples to infer the cycle")
-    dt = np.diff(t)
-    c = float(np.median(dt))
-    if not c > 0 or np.max(np.abs(dt - c)) > 1e-6 * c + 1e-12:
-        raise SimError(f"reference.t: expected uniform sampling, got steps from "
-                       f"{float(dt.min())!r} to {float(dt.max())!r} s")
-    return c
-
-
 def simulate(
     params: PlantParams,
     reference: Any,
@@ -142,52 +132,27 @@ def simulate(
     Raises
     ------
     SimError
-        The reference arrays are missing, of unequal length or non-uniformly sampled.
+        The reference arrays are missing, of unequal length, not finite or non-uniformly
+        sampled, or ``reference.t`` is missing and ``cycle_s`` not given.
     """
-    try:
-        ref_q = np.asarray(reference.q, dtype=float)
-        ref_dq = np.asarray(reference.dq, dtype=float)
-        ref_ddq = np.asarray(reference.ddq, dtype=float)
-    except AttributeError as exc:
-        raise SimError(f"reference: expected arrays q, dq, ddq ({exc})") from None
+    ref_q, ref_dq, ref_ddq = reference_arrays(reference)
     n = ref_q.shape[0]
-    if ref_dq.shape != (n,) or ref_ddq.shape != (n,) or ref_q.ndim != 1:
-        raise SimError(f"reference: expected 1-D q, dq, ddq of equal length, got shapes "
-                       f"{ref_q.shape}, {ref_dq.shape}, {ref_ddq.shape}")
-    if cycle_s is None:
-        cycle_s = _cycle_from_reference(np.asarray(reference.t, dtype=float))
+    cycle_s = cycle_period(reference, cycle_s)
 
     plant = JointPlant(params, cycle_s, substeps=substeps, seed=seed)
     plant.set_payload(payload_mass, payload_arm)
     plant.reset(float(ref_q[0]) if q0 is None else float(q0))
-    ctrl = PositionController(gains, cycle_s, revolute=params.revolute)
+    update = PositionController(gains, cycle_s, revolute=params.revolute).update
+    rq, rdq, rddq = ref_q.tolist(), ref_dq.tolist(), ref_ddq.tolist()
 
-    counts = np.empty(n, dtype=np.int64)
-    xs = np.empty(n, dtype=np.int16)
-    tau_applied = np.empty(n)
-    tau_noise = np.empty(n)
-    q_true = np.empty(n)
-    dq_true = np.empty(n)
-    ddq_true = np.empty(n)
-    regime = np.empty(n, dtype=np.int8)
+    def law(k: int, q_measured: float) -> float:
+        return update(rq[k], rdq[k], rddq[k], q_measured)
 
     cpr = params.drive.counts_per_joint_rad
     per_mille = params.drive.torque_per_permille
-    update, step = ctrl.update, plant.step
-    permille = plant.permille_from_torque
-    rq, rdq, rddq = ref_q.tolist(), ref_dq.tolist(), ref_ddq.tolist()
-    for k in range(n):
-        c = round(plant.q * cpr)
-        counts[k] = c
-        q_true[k] = plant.q
-        dq_true[k] = plant.dq
-        x = permille(update(rq[k], rdq[k], rddq[k], c / cpr))
-        xs[k] = x
-        step(x * per_mille)
-        ddq_true[k] = plant.ddq_start
-        tau_applied[k] = plant.tau_applied_start
-        tau_noise[k] = plant.tau_noise
-        regime[k] = plant.regime_start
+    rec = run_closed_loop(plant, law, plant.permille_from_torque, n, joints=None,
+                          counts_per_rad=cpr, torque_per_permille=per_mille)
+    counts, xs = rec.counts, rec.x
 
     cycle = np.arange(n, dtype=np.int64)
     return SimRun(
@@ -197,12 +162,12 @@ def simulate(
         q=counts / cpr,
         x=xs,
         tau_ref=xs.astype(float) * per_mille,
-        tau_applied=tau_applied,
-        tau_noise=tau_noise,
-        q_true=q_true,
-        dq_true=dq_true,
-        ddq_true=ddq_true,
-        regime=regime,
+        tau_applied=rec.tau_applied,
+        tau_noise=rec.tau_noise,
+        q_true=rec.q_true,
+        dq_true=rec.dq_true,
+        ddq_true=rec.ddq_true,
+        regime=rec.regime,
         payload_mass_kg=float(payload_mass),
         payload_arm_m=float(payload_arm),
         revolute=params.revolute,
@@ -239,13 +204,10 @@ def simulate_payloads(
         In the order of ``payloads``; each run starts at rest with a fresh plant (warm-up
         clock at 0).
     """
-    runs = []
-    for i, pay in enumerate(payloads):
-        if hasattr(pay, "mass_kg"):
-            mass, arm = pay.mass_kg, pay.arm_m
-        else:
-            mass, arm = pay
-        runs.append(simulate(params, reference, gains, payload_mass=float(mass),
-                             payload_arm=float(arm), cycle_s=cycle_s, seed=seed + i, q0=q0,
-                             substeps=substeps))
-    return runs
+    def run_one(pay: Any, seed_i: int) -> SimRun:
+        mass, arm = (pay.mass_kg, pay.arm_m) if hasattr(pay, "mass_kg") else pay
+        return simulate(params, reference, gains, payload_mass=float(mass),
+                        payload_arm=float(arm), cycle_s=cycle_s, seed=seed_i, q0=q0,
+                        substeps=substeps)
+
+    return per_payload(run_one, payloads, seed)

@@ -121,10 +121,18 @@ def test_bad_reference_is_refused():
     ref.t[5] += 0.0004
     with pytest.raises(SimError, match=r"reference\.t: expected uniform sampling"):
         simulate(p, ref, GAINS)
-    with pytest.raises(SimError, match=r"reference: expected 1-D q, dq, ddq"):
+    with pytest.raises(SimError, match=r"reference\.dq: expected finite values of shape \(100,\)"):
         simulate(p, SimpleNamespace(t=ref.t, q=ref.q, dq=ref.dq[:-1], ddq=ref.ddq), GAINS)
     with pytest.raises(SimError, match=r"reference: expected arrays"):
         simulate(p, SimpleNamespace(t=ref.t, q=ref.q), GAINS)
+    nan = ref.ddq.copy()
+    nan[3] = np.nan
+    with pytest.raises(SimError, match=r"reference\.ddq: expected finite values"):
+        simulate(p, SimpleNamespace(t=ref.t, q=ref.q, dq=ref.dq, ddq=nan), GAINS)
+    with pytest.raises(SimError, match=r"reference\.t: expected the sample times"):
+        simulate(p, SimpleNamespace(q=ref.q, dq=ref.dq, ddq=ref.ddq), GAINS)
+    with pytest.raises(SimError, match=r"cycle_s: expected a number > 0"):
+        simulate(p, ref, GAINS, cycle_s=0.0)
 
 
 def _eq42_columns(q, dq, ddq, ma, la, power, q_s):
