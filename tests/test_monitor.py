@@ -29,6 +29,7 @@ from sim_drivers.arm import (
     simulate_arm,
     staged_push,
 )
+from sim_drivers.arm_push import DEFAULT_OFFSET_M
 from trajectories.robot import load_robot
 
 
@@ -105,6 +106,31 @@ def test_push_accelerates_the_arm_by_minv_jt_f_during_its_window(arm3):
         else:
             assert np.all(ext == 0.0) and np.allclose(d, 0.0)
     assert plants[1].pushes == []  # dropped once over
+
+
+@pytest.mark.parametrize("axis", ["x", "y", "z", "unaligned"])
+def test_default_push_point_is_off_the_joint_axis_whatever_its_axis(axis):
+    """One link whose centre of mass is on its joint's axis: the default push point is
+    DEFAULT_OFFSET_M off that axis and the tangential push makes F * DEFAULT_OFFSET_M about
+    it, for a joint turning about its frame's x, y, z or another axis (an offset along x
+    alone would put the point on an x axis: no torque)."""
+    jm = {"x": pin.JointModelRX(), "y": pin.JointModelRY(), "z": pin.JointModelRZ(),
+          "unaligned": pin.JointModelRevoluteUnaligned(np.array([1.0, 1.0, 0.0])
+                                                       / np.sqrt(2.0))}[axis]
+    a = {"x": [1, 0, 0], "y": [0, 1, 0], "z": [0, 0, 1],
+         "unaligned": [2 ** -0.5, 2 ** -0.5, 0]}[axis]
+    model = pin.Model()
+    jid = model.addJoint(0, jm, pin.SE3.Identity(), "j1")
+    com = 0.3 * np.asarray(a, float)  # on the axis
+    model.appendBodyToJoint(jid, pin.Inertia(2.0, com, np.eye(3) * 0.01), pin.SE3.Identity())
+    push = staged_push(model, [0.4], 0, 20.0, 0.0, 0.2)
+    r = np.asarray(push.point) - com
+    assert np.linalg.norm(r) == pytest.approx(DEFAULT_OFFSET_M)
+    assert abs(r @ a) < 1e-12  # perpendicular to the axis
+    tau = push_torque(model, model.createData(), [0.4], push)
+    assert abs(tau[0]) == pytest.approx(20.0 * DEFAULT_OFFSET_M, rel=1e-9)
+    if axis in ("y", "z"):  # the frame's x axis is perpendicular: the documented point
+        np.testing.assert_allclose(push.point, com + [DEFAULT_OFFSET_M, 0, 0])
 
 
 # --------------------------------------------------------------------------- predictor
