@@ -37,6 +37,11 @@ clock unless said, i.e. simulated time):
     first crossing on any joint), crossings outside the push windows; per push, the joint
     torques J^T F of the push (at the logged q) and the largest |r - mean| / half-width per
     joint in its window.
+``oracle``
+    The logs of calibrate, false and detect re-evaluated offline with the simulator's own
+    parameters as the model (the best an identification could give; the replay gives the
+    logged residual exactly with the logged model): thresholds, false alarms, detection.
+    Separates what the identified model costs from what the monitor itself can do.
 ``paced``
     ``--paced-seconds`` of the demo's multi-sine on the real-time clock (daq.clock = paced,
     1 kHz) with the monitor checking every cycle: missed cycles (SYNC more than half a period
@@ -59,11 +64,19 @@ from pathlib import Path
 
 import numpy as np
 
-from daq.app.monitor import AFTER_PUSH_S, load_campaign, run_monitor
+from daq.app.monitor import (
+    AFTER_PUSH_S,
+    DEFAULT_K_SIGMA,
+    DEFAULT_PEAK_MARGIN,
+    REST_QS,
+    load_campaign,
+    run_monitor,
+)
 from daq.app.running import run_with_bar
 from daq.protocol.reader import read_run
-from daq.runtime.monitor import read_monitor
-from ident.monitor import Thresholds
+from daq.runtime.monitor import SVFilter, read_monitor
+from ident.monitor import ExportedModel, Thresholds, thresholds_from_residual
+from ident.robot.export_model import friction_record, urdf_text
 from sim_drivers.arm import ArmParams
 from sim_drivers.arm_push import push_torque, staged_push
 from trajectories.multi import plan_robot_campaign
@@ -253,6 +266,93 @@ def _push_figures(log: Path, run: dict, th: Thresholds, campaign: object) -> Non
                            for a in axes]
 
 
+def truth_model(campaign: object) -> ExportedModel:
+    """The simulator's own parameters (``ArmParams.truth``) as an exported paper model: the
+    best an identification could give."""
+    robot = robot_for_campaign(campaign)
+    tr = ArmParams.from_robot(robot).truth()
+    fr = friction_record("paper", tuple(robot.moving), robot.numbers, tr, tr,
+                         [tr[f"qs{n}"] for n in robot.numbers], robot.gravity)
+    return ExportedModel(urdf_text(robot.reduced(), tr, robot.numbers, "truth"), fr,
+                         "simulator truth")
+
+
+def replay(log: Path, campaign: object, model: ExportedModel, cutoff_hz: float = 20.0
+           ) -> tuple[object, np.ndarray]:
+    """The monitor's residual (n, k) [N m] of a monitored run log recomputed offline with
+    another model: the logged q, dq, torque actual of the monitored cycles through the same
+    filters, band (rest velocity 3 q_s) and clip as :class:`daq.runtime.monitor.TorqueMonitor`
+    (with the log's own model it gives the logged residual exactly). Returns (the log's
+    :class:`MonitorLog`, residual)."""
+    ml = read_monitor(log)
+    k = len(campaign.moving)
+    axes = [read_run(log, axis=j) for j in range(k)]
+    idx = np.searchsorted(axes[0].cycle, ml.cycle)
+    q, dq, tau = (np.stack([getattr(a, f)[idx] for a in axes], axis=1).tolist()
+                  for f in ("q", "dq", "tau_actual"))
+    m = re.search(r"_payload(\d+)\.mcap$", log.name)
+    payload = campaign.payloads[int(m.group(1))] if m else None
+    pred = model.predictor(payload)
+    v_rest = [REST_QS * x for x in pred.qs]
+    fq, fdq, ft = (SVFilter(cutoff_hz, campaign.cycle_s, k) for _ in range(3))
+    r = np.zeros((len(idx), k))
+    for i in range(len(idx)):
+        for f, u in ((fq, q[i]), (fdq, dq[i]), (ft, tau[i])):
+            f.reset(u) if i == 0 else f.update(u)
+        lo, hi = pred.band(fq.y, fdq.y, fdq.dy, v_rest)
+        r[i] = [x - min(max(x, a), b) for x, a, b in zip(ft.y, lo, hi, strict=True)]
+    return ml, r
+
+
+def _rising(r: np.ndarray, armed: np.ndarray, th: Thresholds) -> np.ndarray:
+    """(n, k) bool: the armed samples where r leaves the band (first sample out)."""
+    out = ((r < np.array(th.lower)) | (r > np.array(th.upper))) & armed[:, None]
+    prev = np.vstack([np.zeros((1, r.shape[1]), bool), out[:-1]])
+    return out & ~prev
+
+
+def stage_oracle(work: Path) -> dict:
+    """The logs of the calibrate, false and detect stages re-evaluated offline with the
+    simulator's own parameters as the model (:func:`truth_model`, :func:`replay`):
+    thresholds from the calibrate logs (the same rule), crossings on the false logs,
+    detection of the detect stage's pushes. What the monitor does with a perfect
+    identification: the difference to the stages' figures is the identified model's."""
+    _, c = _source()
+    model = truth_model(c)
+    joints = list(c.moving)
+    logs = sorted((work / "calibrate" / "logs").glob("*.mcap"))
+    res = [replay(p, c, model) for p in logs]
+    th = thresholds_from_residual(np.concatenate([r[ml.armed] for ml, r in res]), joints,
+                                  DEFAULT_K_SIGMA, "oracle", DEFAULT_PEAK_MARGIN)
+    out: dict = {"thresholds": th.to_json()}
+    false_n, secs = np.zeros(len(joints), int), 0.0
+    for p in sorted((work / "false" / "logs").glob("*.mcap")):
+        ml, r = replay(p, c, model)
+        false_n += _rising(r, ml.armed, th).sum(axis=0)
+        secs += float(ml.armed.sum()) * c.cycle_s
+    out["false_alarms"] = {"per_joint": false_n.tolist(), "monitored_s": secs}
+    pushes, outside = [], 0
+    for p in sorted((work / "detect" / "logs").glob("*.mcap")):
+        ml, r = replay(p, c, model)
+        hits = _rising(r, ml.armed, th)
+        used = np.zeros(len(ml.cycle), bool)
+        span = int(round((PUSH_S + AFTER_PUSH_S) / c.cycle_s))
+        for e in (e for e in ml.events if e["kind"] == "push"):
+            force = float(e["message"].split(":")[1].split("N")[0])
+            win = (ml.cycle >= e["cycle"]) & (ml.cycle <= e["cycle"] + span)
+            used |= win
+            rows = np.flatnonzero(win & hits.any(axis=1))
+            pushes.append({"joint": joints[e["axis"]], "force_N": force,
+                           "detected": bool(rows.size),
+                           "delay_s": float((ml.cycle[rows[0]] - e["cycle"]) * c.cycle_s)
+                           if rows.size else None,
+                           "joints_crossed": sorted({joints[j] for j in
+                                                     np.flatnonzero(hits[win].any(axis=0))})})
+        outside += int(hits[~used].sum())
+    out["detect"] = {"pushes": pushes, "crossings_outside": outside}
+    return out
+
+
 def stage_paced(work: Path, seconds: float, realtime: int = 0) -> dict:
     periods = max(1, int(round(seconds / 8.0)))
     daq = f"realtime_priority = {realtime}\ncpu = -1" if realtime else ""
@@ -322,6 +422,24 @@ def report(work: Path, res: dict) -> None:
                               f"{p['joint_torques_Nm']} N m, peak |r - mean| / half-width "
                               f"{p['peak_fraction_of_band']}, dq {p['dq_at_push']} rad/s")
             print(f"  crossings outside the push windows: {len(run['false_alarms'])}")
+    orc = res.get("oracle")
+    if orc:
+        t = orc["thresholds"]
+        print("oracle (the simulator's own parameters as the model, same logs): bands +-"
+              + ", ".join(f"{j} {(hi - lo) / 2:.3f}" for j, lo, hi in
+                          zip(t["joints"], t["lower"], t["upper"], strict=True)) + " N m")
+        fa = orc["false_alarms"]
+        print(f"  false alarms: {sum(fa['per_joint'])} {fa['per_joint']} in "
+              f"{fa['monitored_s'] / 60:.1f} min")
+        by = {}
+        for p in orc["detect"]["pushes"]:
+            by.setdefault((p["force_N"], p["joint"]), []).append(p)
+        for (f, j), ps in sorted(by.items()):
+            d = [1000 * p["delay_s"] for p in ps if p["detected"]]
+            print(f"  link of {j}, {f:g} N: {len(d)}/{len(ps)} detected, delay "
+                  + (f"{min(d):.0f}..{max(d):.0f} ms" if d else "-") + "; joints crossed: "
+                  + ", ".join(sorted({x for p in ps for x in p["joints_crossed"]})))
+        print(f"  crossings outside the push windows: {orc['detect']['crossings_outside']}")
     pc = res.get("paced")
     if pc:
         m, n = pc["monitor"], pc["none"]
@@ -346,7 +464,7 @@ def main() -> None:
                     help="paced stage: SCHED_FIFO priority of the cycle loop (daq."
                          "realtime_priority, pinned to the last CPU; needs CAP_SYS_NICE)")
     ap.add_argument("stages", nargs="+", choices=("model", "calibrate", "false", "detect",
-                                                  "paced", "report"))
+                                                  "oracle", "paced", "report"))
     a = ap.parse_args()
     SOURCE["campaign"] = a.campaign.resolve()
     a.work.mkdir(parents=True, exist_ok=True)
@@ -362,6 +480,8 @@ def main() -> None:
             res["false"] = stage_false(a.work, a.false_minutes, a.false_periods)
         elif st == "detect":
             res["detect"] = stage_detect(a.work)
+        elif st == "oracle":
+            res["oracle"] = stage_oracle(a.work)
         elif st == "paced":
             res["paced"] = stage_paced(a.work, a.paced_seconds, a.realtime)
         if st != "report":
