@@ -162,6 +162,34 @@ def test_predictor_is_exported_torque_and_band_holds_the_static_friction(arm3):
     assert not np.allclose(em.predictor(pay)(q[0], dq[0], ddq[0]), got[0])
 
 
+def test_rest_band_holds_the_models_own_friction_below_the_rest_velocity(arm3):
+    """Below v_rest the band holds the model's prediction at every speed below v_rest, also
+    for an identified model whose Stribeck terms are negative (static friction below the
+    Coulomb level, as a fit may give); for physical terms it is the stiction band (E = 1)."""
+    robot, params = arm3
+    em = truth_model(robot, params)
+    fr = json.loads(json.dumps(em.friction))
+    for key in ("d_m", "d_g"):  # c + d < 0 on joint 1: breakaway below Coulomb
+        fr["joints"][0][key] = -2.0 * fr["joints"][0]["c_m"]
+    fr["joints"][0]["b_m"] = -0.2
+    odd = ExportedModel(em.urdf, fr, "negative Stribeck terms")
+    rng = np.random.default_rng(5)
+    for model in (em, odd):
+        pr = model.predictor(None)
+        v_rest = [3.0 * x for x in pr.qs]
+        for _ in range(40):
+            q, ddq = rng.uniform(-1, 1, 3), rng.uniform(-2, 2, 3)
+            dq = rng.uniform(0.3, 1.0, 3) * np.array(v_rest) * rng.choice([-1, 1], 3)
+            lo, hi = pr.band(q, dq, ddq, v_rest)
+            x = pr(q, dq, ddq)
+            assert np.all(np.array(lo) - 1e-9 <= x) and np.all(x <= np.array(hi) + 1e-9)
+            if model is em:  # physical terms: the E = 1 range of either sign
+                t_out = pr._rigid(q, dq, ddq)
+                for j in range(3):
+                    e1 = [pr._friction(j, t_out[j], dq[j], s, 1.0) for s in (1.0, -1.0)]
+                    assert (lo[j], hi[j]) == pytest.approx((min(e1), max(e1)), abs=1e-9)
+
+
 # --------------------------------------------------------------------------- thresholds
 def test_thresholds_statistics_file_and_bad_files(tmp_path):
     rng = np.random.default_rng(0)
