@@ -1,32 +1,47 @@
-"""Torque monitoring on the simulated 3-dof arm at 1 kHz (docs/monitoring.md, issue 25).
+"""Torque monitoring on a simulated robot (docs/monitoring.md, issue 25).
 
 Usage::
 
-    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_monitor.py --work DIR STAGE [STAGE ...]
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_monitor.py --work DIR \
+        [--campaign examples/campaign_ur10_demo.toml] STAGE [STAGE ...]
+
+``--campaign`` is the robot campaign the stages derive theirs from (default the 3-dof demo,
+examples/campaign_robot3_demo.toml; e.g. the UR10's, examples/campaign_ur10_demo.toml): its
+robot, drives, gains, limits, payloads and segments; the derived campaigns change only the
+multi-sine's seed and number of periods, keep the multi-sine alone (detect, paced) and the
+first payload alone (detect, paced). Use one DIR per campaign.
 
 Stages (each a ``jointid monitor`` run through the whole stack: campaign -> runner ->
 canopen master -> virtual buses -> simulated CiA 402 drives + simulated arm -> MCAP; lockstep
 clock unless said, i.e. simulated time):
 
 ``model``
-    The identified model: ``jointid run`` of examples/campaign_robot3_demo.toml on the
-    simulated arm (2 payloads, 174 s), ``jointid fit --robot`` (both models, consistent
-    estimate), ``jointid export-model`` (paper model) -> DIR/model.
+    The identified model: ``jointid run`` of the campaign on the simulated arm (all its
+    payloads), ``jointid fit --robot`` (its robot file; both models, consistent estimate),
+    ``jointid export-model`` (paper model) -> DIR/model.
 ``calibrate``
-    The validation run: the demo campaign again with the monitor in calibration mode ->
+    The validation run: the campaign again with the monitor in calibration mode ->
     DIR/calibrate/thresholds.json (k = 6 sigma, at least 1.5 x the validation peak).
 ``false``
-    About 10 min of excitation without pushes: the demo campaign with another multi-sine
-    (seed 7, 33 periods of 8 s), both payloads; the monitor logs its residual, and the
-    crossings of the calibration's thresholds are counted on it (the thresholds do not change
-    the residual, so counting them on the log is what the live check would count).
+    At least ``--false-minutes`` (default 10) of excitation without pushes: the campaign
+    with another multi-sine (seed 7) of as many periods as that takes over all payloads
+    (``--false-periods`` to set them); the monitor logs its residual, and the crossings of
+    the calibration's thresholds are counted on it (the thresholds do not change the
+    residual, so counting them on the log is what the live check would count).
 ``detect``
-    Pushes of 20 N and 40 N on each link (default point and direction of
-    ``sim_drivers.arm_push.staged_push``) for 0.2 s, every 1.5 s (3 per link and force),
-    during a multi-sine of all joints (seed 5, 4 periods of 8 s; the pushes fall at whatever
-    speed the joints have then), with the calibration's thresholds: detection and delay
-    per pushed link (from the cycle the push is staged to the first crossing on any joint),
-    crossings outside the push windows.
+    Pushes of 20 N and 40 N on the link of every moving joint (default point and direction
+    of ``sim_drivers.arm_push.staged_push``) for 0.2 s, every 1.5 s (3 per link and force,
+    links in turn), during a multi-sine of all joints (seed 5, as many periods as the pushes
+    take; the pushes fall at whatever speed the joints have then), with the calibration's
+    thresholds: detection and delay per pushed link (from the cycle the push is staged to the
+    first crossing on any joint), crossings outside the push windows; per push, the joint
+    torques J^T F of the push (at the logged q) and the largest |r - mean| / half-width per
+    joint in its window.
+``oracle``
+    The logs of calibrate, false and detect re-evaluated offline with the simulator's own
+    parameters as the model (the best an identification could give; the replay gives the
+    logged residual exactly with the logged model): thresholds, false alarms, detection.
+    Separates what the identified model costs from what the monitor itself can do.
 ``paced``
     ``--paced-seconds`` of the demo's multi-sine on the real-time clock (daq.clock = paced,
     1 kHz) with the monitor checking every cycle, then the same run without the monitor,
@@ -44,6 +59,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import re
 import statistics
@@ -55,32 +71,93 @@ from pathlib import Path
 
 import numpy as np
 
-from daq.app.monitor import load_campaign, run_monitor
+from daq.app.monitor import (
+    AFTER_PUSH_S,
+    DEFAULT_K_SIGMA,
+    DEFAULT_PEAK_MARGIN,
+    REST_QS,
+    load_campaign,
+    run_monitor,
+)
 from daq.app.running import run_with_bar
-from daq.protocol.reader import read_topics
-from daq.runtime.monitor import read_monitor
-from ident.monitor import Thresholds
+from daq.protocol.reader import read_run, read_topics
+from daq.runtime.monitor import SVFilter, read_monitor
+from ident.monitor import ExportedModel, Thresholds, thresholds_from_residual
+from ident.robot.export_model import friction_record, urdf_text
+from sim_drivers.arm import ArmParams
+from sim_drivers.arm_push import push_torque, staged_push
+from trajectories.multi import plan_robot_campaign
+from trajectories.robot_model import robot_for_campaign
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "examples" / "campaign_robot3_demo.toml"
-JOINTS = ("j1", "j2", "j3")
+#: the campaign the stages derive theirs from (``--campaign``; set by :func:`main`)
+SOURCE = {"campaign": DEMO}
+#: push schedule of the detect stage: first push [s], spacing [s], duration [s], forces [N]
+PUSH_T0_S, PUSH_EVERY_S, PUSH_S, PUSH_FORCES_N, PUSHES_PER_FORCE = 1.0, 1.5, 0.2, (20, 40), 3
+
+
+def _source() -> tuple[Path, object]:
+    """The source campaign file and its :class:`RobotCampaign`."""
+    path = SOURCE["campaign"]
+    return path, load_campaign(path)
+
+
+def _robot_file(path: Path) -> str:
+    """The robot file of campaign ``path`` as written there, made absolute (a relative path
+    is relative to the campaign file; ``example-robot-data:...`` kept)."""
+    m = re.search(r'^file = "([^"]+)"', path.read_text(), re.M)
+    if m is None:
+        raise SystemExit(f"{path}: robot.file: not found")
+    f = m.group(1)
+    if ":" in f and not Path(f).is_absolute() and not Path(f).exists():
+        return f  # example-robot-data:NAME
+    return (path.parent / f).resolve().as_posix()
+
+
+def _multisine_periods(segments_s: float, total_s: float) -> int:
+    """Periods of the multi-sine(s) (``segments_s`` [s] per period, all of them) for a run
+    of at least ``total_s`` [s] besides the rest of the plan."""
+    return max(1, math.ceil(total_s / segments_s))
+
+
+def _plan_parts() -> tuple[float, float]:
+    """(the source campaign's plan duration without its multi-sines [s], one period of all
+    its multi-sines [s]); the plan is the one ``jointid run`` plays (no optimisation needed:
+    the coefficients change the motion, not the durations)."""
+    _, c = _source()
+    plan = plan_robot_campaign(c)
+    ms = [s for s in c.segments if type(s).__name__ == "MultisineSegment"]
+    if not ms:
+        raise SystemExit(f"{SOURCE['campaign']}: no multi-sine segment to derive the "
+                         "stages' campaigns from")
+    one = sum(s.period_s for s in ms)
+    return plan.duration_s - sum(s.period_s * s.periods for s in ms), one
 
 
 def _campaign(work: Path, name: str, *, seed: int, periods: int, multisine_only: bool,
               payloads: int = 2, daq: str = "") -> Path:
-    """A variant of the demo campaign (its robot, drives, gains, limits)."""
-    text = DEMO.read_text()
-    text = text.replace('file = "robots/arm3.toml"',
-                        f'file = "{(ROOT / "examples" / "robots" / "arm3.toml").as_posix()}"')
-    text = text.replace('name = "arm3-demo"', f'name = "{name}"')
-    text = re.sub(r"\nseed = 1\b", f"\nseed = {seed}", text)
-    text = re.sub(r"\nperiods = 1\b", f"\nperiods = {periods}", text)
+    """A variant of the source campaign (its robot, drives, gains, limits): every
+    multi-sine with ``seed`` and ``periods``; ``multisine_only``: no other segment;
+    ``payloads`` 1: the first payload only (else all of the campaign's)."""
+    src = SOURCE["campaign"]
+    text = src.read_text()
+    base = load_campaign(src).name
+    text = re.sub(r'^file = "[^"]+"', f'file = "{_robot_file(src)}"', text, count=1,
+                  flags=re.M)
+    text = re.sub(r'^name = "[^"]+"', f'name = "{base}-{name.rsplit("-", 1)[-1]}"', text,
+                  count=1, flags=re.M)
     head, _, rest = text.partition("[[segments]]")
     segs = ["[[segments]]" + s for s in rest.split("[[segments]]")]
+    ms = [bool(re.search(r'^kind = "multisine"', s, re.M)) for s in segs]
+    segs = [re.sub(r"^periods = \d+\b", f"periods = {periods}",
+                   re.sub(r"^seed = \d+\b", f"seed = {seed}", s, flags=re.M), flags=re.M)
+            if m else s for s, m in zip(segs, ms, strict=True)]
     if multisine_only:
-        segs = [s for s in segs if 'kind = "multisine"' in s]
+        segs = [s for s, m in zip(segs, ms, strict=True) if m]
     if payloads == 1:
-        head = head.split("[[payloads]]")[0] + "[[payloads]]\nmass_kg = 0.0\n\n"
+        first = head.split("[[payloads]]")
+        head = first[0] + "[[payloads]]" + first[1].rstrip() + "\n\n"
     p = work / f"{name}.toml"
     if daq:  # e.g. the paced run's SCHED_FIFO priority and CPU (docs/campaign-robot.md)
         head = head.replace("\n[daq]\n", "\n[daq]\n" + daq + "\n") if "\n[daq]\n" in head \
@@ -92,9 +169,10 @@ def _campaign(work: Path, name: str, *, seed: int, periods: int, multisine_only:
 def stage_model(work: Path) -> None:
     logs, fit, model = work / "model_logs", work / "fit.json", work / "model"
     jid = [sys.executable, "-m", "daq.app.cli"]
-    subprocess.run([*jid, "run", str(DEMO), "--simulate", "--out", str(logs), "--yes",
+    src = SOURCE["campaign"]
+    subprocess.run([*jid, "run", str(src), "--simulate", "--out", str(logs), "--yes",
                     "--overwrite"], check=True)
-    subprocess.run([*jid, "fit", "--robot", str(ROOT / "examples/robots/arm3.toml"),
+    subprocess.run([*jid, "fit", "--robot", _robot_file(src),
                     *map(str, sorted(logs.glob("*.mcap"))), "--model", "both", "--json",
                     str(fit), "--no-consistency", "--consistent"], check=True,
                    stdout=subprocess.DEVNULL)
@@ -103,7 +181,8 @@ def stage_model(work: Path) -> None:
 
 
 def stage_calibrate(work: Path) -> dict:
-    s = run_monitor(work / "model", DEMO, work / "calibrate", simulate=True, calibrate=True)
+    s = run_monitor(work / "model", SOURCE["campaign"], work / "calibrate", simulate=True,
+                    calibrate=True)
     return {"thresholds": s["thresholds"], "wall_s": s["wall_s"],
             "missed": s["missed_cycles"]}
 
@@ -121,24 +200,164 @@ def crossings(path: Path, th: Thresholds) -> tuple[list, float, list]:
     return edges, r.shape[0] * cycle_s, worst.tolist()
 
 
-def stage_false(work: Path) -> dict:
-    camp = _campaign(work, "arm3-false", seed=7, periods=33, multisine_only=False)
+def stage_false(work: Path, minutes: float, periods: int | None = None) -> dict:
+    _, c = _source()
+    other_s, period_s = _plan_parts()
+    if periods is None:  # at least `minutes` of plan over all payloads
+        periods = _multisine_periods(period_s, 60.0 * minutes / len(c.payloads) - other_s)
+    camp = _campaign(work, "false", seed=_other_seed(7), periods=periods,
+                     multisine_only=False, payloads=len(c.payloads))
     s = run_monitor(work / "model", camp, work / "false", simulate=True, calibrate=True)
-    return {"logs": s["logs"], "wall_s": s["wall_s"], "missed": s["missed_cycles"]}
+    return {"logs": s["logs"], "wall_s": s["wall_s"], "missed": s["missed_cycles"],
+            "periods": periods, "period_s": period_s}
+
+
+def _other_seed(seed: int) -> int:
+    """``seed``, or another one when the source campaign's multi-sine uses it (the stages'
+    multi-sines differ from the validation's)."""
+    seeds = {s.seed for s in _source()[1].segments if hasattr(s, "seed")}
+    while seed in seeds:
+        seed += 10
+    return seed
+
+
+def push_schedule(joints: list[str]) -> list[str]:
+    """``--push`` arguments of the detect stage: each force, PUSHES_PER_FORCE rounds of
+    every link in turn, one push every PUSH_EVERY_S."""
+    out, t = [], PUSH_T0_S
+    for force in PUSH_FORCES_N:
+        for _ in range(PUSHES_PER_FORCE):
+            for j in joints:
+                out.append(f"{j}:{force}:{t:g}:{PUSH_S:g}")
+                t += PUSH_EVERY_S
+    return out
 
 
 def stage_detect(work: Path) -> dict:
-    camp = _campaign(work, "arm3-detect", seed=5, periods=4, multisine_only=True, payloads=1)
-    pushes = []
-    t = 1.0
-    for force in (20, 40):
-        for _ in range(3):
-            for j in JOINTS:
-                pushes.append(f"{j}:{force}:{t:g}:0.2")
-                t += 1.5
+    _, c = _source()
+    pushes = push_schedule(list(c.moving))
+    end_s = float(pushes[-1].split(":")[2]) + PUSH_S + AFTER_PUSH_S + 1.0
+    _, period_s = _plan_parts()
+    camp = _campaign(work, "detect", seed=_other_seed(5),
+                     periods=_multisine_periods(period_s, end_s), multisine_only=True,
+                     payloads=1)
     s = run_monitor(work / "model", camp, work / "detect", simulate=True,
                     thresholds=work / "calibrate" / "thresholds.json", pushes=pushes)
+    th = Thresholds.read(work / "calibrate" / "thresholds.json")
+    for run, log in zip(s["runs"], s["logs"], strict=True):
+        _push_figures(work / "detect" / log, run, th, c)
     return {"runs": s["runs"], "wall_s": s["wall_s"], "missed": s["missed_cycles"]}
+
+
+def _push_figures(log: Path, run: dict, th: Thresholds, campaign: object) -> None:
+    """Per push of ``run`` (detect stage): its joint torques J^T F [N m] at the logged q of
+    its staging cycle (default point and direction, as staged) and the largest
+    |r - mean| / half-width per joint over its window (> 1: crossed)."""
+    ml = read_monitor(log)
+    axes = [read_run(log, axis=j) for j in range(len(th.joints))]
+    model = ArmParams.from_robot(robot_for_campaign(campaign)).model
+    data = model.createData()
+    cycle_s = float(np.median(np.diff(ml.t)))
+    mean, half = np.array(th.mean), np.array(th.half_width)
+    for p in run["pushes"]:
+        j = th.joints.index(p["joint"])
+        q = [float(np.interp(p["cycle"], a.cycle, a.q)) for a in axes]
+        push = staged_push(model, q, j, p["force_N"], 0.0, p["duration_s"])
+        p["joint_torques_Nm"] = push_torque(model, data, q, push).round(3).tolist()
+        c1 = p["cycle"] + int(round((p["duration_s"] + AFTER_PUSH_S) / cycle_s))
+        sel = (ml.cycle >= p["cycle"]) & (ml.cycle <= c1) & ml.armed
+        p["peak_fraction_of_band"] = (
+            (np.abs(ml.residual[sel] - mean) / half).max(axis=0).round(3).tolist()
+            if sel.any() else None)
+        p["dq_at_push"] = [round(float(np.interp(p["cycle"], a.cycle, a.dq)), 3)
+                           for a in axes]
+
+
+def truth_model(campaign: object) -> ExportedModel:
+    """The simulator's own parameters (``ArmParams.truth``) as an exported paper model: the
+    best an identification could give."""
+    robot = robot_for_campaign(campaign)
+    tr = ArmParams.from_robot(robot).truth()
+    fr = friction_record("paper", tuple(robot.moving), robot.numbers, tr, tr,
+                         [tr[f"qs{n}"] for n in robot.numbers], robot.gravity)
+    return ExportedModel(urdf_text(robot.reduced(), tr, robot.numbers, "truth"), fr,
+                         "simulator truth")
+
+
+def replay(log: Path, campaign: object, model: ExportedModel, cutoff_hz: float = 20.0
+           ) -> tuple[object, np.ndarray]:
+    """The monitor's residual (n, k) [N m] of a monitored run log recomputed offline with
+    another model: the logged q, dq, torque actual of the monitored cycles through the same
+    filters, band (rest velocity 3 q_s) and clip as :class:`daq.runtime.monitor.TorqueMonitor`
+    (with the log's own model it gives the logged residual exactly). Returns (the log's
+    :class:`MonitorLog`, residual)."""
+    ml = read_monitor(log)
+    k = len(campaign.moving)
+    axes = [read_run(log, axis=j) for j in range(k)]
+    idx = np.searchsorted(axes[0].cycle, ml.cycle)
+    q, dq, tau = (np.stack([getattr(a, f)[idx] for a in axes], axis=1).tolist()
+                  for f in ("q", "dq", "tau_actual"))
+    m = re.search(r"_payload(\d+)\.mcap$", log.name)
+    payload = campaign.payloads[int(m.group(1))] if m else None
+    pred = model.predictor(payload)
+    v_rest = [REST_QS * x for x in pred.qs]
+    fq, fdq, ft = (SVFilter(cutoff_hz, campaign.cycle_s, k) for _ in range(3))
+    r = np.zeros((len(idx), k))
+    for i in range(len(idx)):
+        for f, u in ((fq, q[i]), (fdq, dq[i]), (ft, tau[i])):
+            f.reset(u) if i == 0 else f.update(u)
+        lo, hi = pred.band(fq.y, fdq.y, fdq.dy, v_rest)
+        r[i] = [x - min(max(x, a), b) for x, a, b in zip(ft.y, lo, hi, strict=True)]
+    return ml, r
+
+
+def _rising(r: np.ndarray, armed: np.ndarray, th: Thresholds) -> np.ndarray:
+    """(n, k) bool: the armed samples where r leaves the band (first sample out)."""
+    out = ((r < np.array(th.lower)) | (r > np.array(th.upper))) & armed[:, None]
+    prev = np.vstack([np.zeros((1, r.shape[1]), bool), out[:-1]])
+    return out & ~prev
+
+
+def stage_oracle(work: Path) -> dict:
+    """The logs of the calibrate, false and detect stages re-evaluated offline with the
+    simulator's own parameters as the model (:func:`truth_model`, :func:`replay`):
+    thresholds from the calibrate logs (the same rule), crossings on the false logs,
+    detection of the detect stage's pushes. What the monitor does with a perfect
+    identification: the difference to the stages' figures is the identified model's."""
+    _, c = _source()
+    model = truth_model(c)
+    joints = list(c.moving)
+    logs = sorted((work / "calibrate" / "logs").glob("*.mcap"))
+    res = [replay(p, c, model) for p in logs]
+    th = thresholds_from_residual(np.concatenate([r[ml.armed] for ml, r in res]), joints,
+                                  DEFAULT_K_SIGMA, "oracle", DEFAULT_PEAK_MARGIN)
+    out: dict = {"thresholds": th.to_json()}
+    false_n, secs = np.zeros(len(joints), int), 0.0
+    for p in sorted((work / "false" / "logs").glob("*.mcap")):
+        ml, r = replay(p, c, model)
+        false_n += _rising(r, ml.armed, th).sum(axis=0)
+        secs += float(ml.armed.sum()) * c.cycle_s
+    out["false_alarms"] = {"per_joint": false_n.tolist(), "monitored_s": secs}
+    pushes, outside = [], 0
+    for p in sorted((work / "detect" / "logs").glob("*.mcap")):
+        ml, r = replay(p, c, model)
+        hits = _rising(r, ml.armed, th)
+        used = np.zeros(len(ml.cycle), bool)
+        span = int(round((PUSH_S + AFTER_PUSH_S) / c.cycle_s))
+        for e in (e for e in ml.events if e["kind"] == "push"):
+            force = float(e["message"].split(":")[1].split("N")[0])
+            win = (ml.cycle >= e["cycle"]) & (ml.cycle <= e["cycle"] + span)
+            used |= win
+            rows = np.flatnonzero(win & hits.any(axis=1))
+            pushes.append({"joint": joints[e["axis"]], "force_N": force,
+                           "detected": bool(rows.size),
+                           "delay_s": float((ml.cycle[rows[0]] - e["cycle"]) * c.cycle_s)
+                           if rows.size else None,
+                           "joints_crossed": sorted({joints[j] for j in
+                                                     np.flatnonzero(hits[win].any(axis=0))})})
+        outside += int(hits[~used].sum())
+    out["detect"] = {"pushes": pushes, "crossings_outside": outside}
+    return out
 
 
 def _paced_timing(path: Path) -> dict:
@@ -217,14 +436,15 @@ def report(work: Path, res: dict) -> None:
     th_path = work / "calibrate" / "thresholds.json"
     if th_path.is_file():
         th = Thresholds.read(th_path)
-        print("thresholds (validation: the demo campaign, 2 payloads):")
+        joints, k = list(th.joints), len(th.joints)
+        print(f"thresholds (validation: {SOURCE['campaign'].name}, all payloads):")
         for j, s, lo, hi, pk in zip(th.joints, th.sigma, th.lower, th.upper,
                                        th.peak, strict=True):
             print(f"  {j}: sigma {s:.4f} N m, band [{lo:+.3f}, {hi:+.3f}] N m, "
                   f"validation peak {pk:.1f} sigma")
         if (work / "false" / "monitor.json").is_file():
             logs = json.loads((work / "false" / "monitor.json").read_text())["logs"]
-            total, secs, worst = np.zeros(3, int), 0.0, np.zeros(3)
+            total, secs, worst = np.zeros(k, int), 0.0, np.zeros(k)
             for lg in logs:
                 n, sec, w = crossings(work / "false" / lg, th)
                 total += n
@@ -233,10 +453,10 @@ def report(work: Path, res: dict) -> None:
             res["false_alarms"] = {"per_joint": total.tolist(), "monitored_s": secs,
                                    "worst_fraction_of_band": worst.tolist()}
             print(f"false alarms: {int(total.sum())} ("
-                  + ", ".join(f"{j} {n}" for j, n in zip(JOINTS, total, strict=True))
+                  + ", ".join(f"{j} {n}" for j, n in zip(joints, total, strict=True))
                   + f") in {secs / 60:.1f} min of monitored excitation without pushes; "
                   "largest |r - mean| / half-width per joint: "
-                  + ", ".join(f"{j} {w:.2f}" for j, w in zip(JOINTS, worst, strict=True)))
+                  + ", ".join(f"{j} {w:.2f}" for j, w in zip(joints, worst, strict=True)))
     det = res.get("detect")
     if det:
         for run in det["runs"]:
@@ -244,14 +464,37 @@ def report(work: Path, res: dict) -> None:
             for p in run["pushes"]:
                 by.setdefault((p["joint"], p["force_N"]), []).append(p)
             print("detection (pushes during the multi-sine, 0.2 s each):")
-            for (j, f), ps in sorted(by.items()):
+            for (j, f), ps in sorted(by.items(), key=lambda x: (x[0][1], x[0][0])):
                 d = [1000 * p["delay_s"] for p in ps if p["detected"]]
                 print(f"  link of {j}, {f:g} N: {len(d)}/{len(ps)} detected, delay "
                       + (f"{min(d):.0f}..{max(d):.0f} ms (median "
                          f"{statistics.median(d):.0f})" if d else "-")
                       + "; joints crossed: "
                       + ", ".join(sorted({x for p in ps for x in p["joints_crossed"]})))
+                for p in ps:
+                    if "joint_torques_Nm" in p:
+                        print(f"    t0 {p['t0_s']:g} s: J^T F "
+                              f"{p['joint_torques_Nm']} N m, peak |r - mean| / half-width "
+                              f"{p['peak_fraction_of_band']}, dq {p['dq_at_push']} rad/s")
             print(f"  crossings outside the push windows: {len(run['false_alarms'])}")
+    orc = res.get("oracle")
+    if orc:
+        t = orc["thresholds"]
+        print("oracle (the simulator's own parameters as the model, same logs): bands +-"
+              + ", ".join(f"{j} {(hi - lo) / 2:.3f}" for j, lo, hi in
+                          zip(t["joints"], t["lower"], t["upper"], strict=True)) + " N m")
+        fa = orc["false_alarms"]
+        print(f"  false alarms: {sum(fa['per_joint'])} {fa['per_joint']} in "
+              f"{fa['monitored_s'] / 60:.1f} min")
+        by = {}
+        for p in orc["detect"]["pushes"]:
+            by.setdefault((p["force_N"], p["joint"]), []).append(p)
+        for (f, j), ps in sorted(by.items()):
+            d = [1000 * p["delay_s"] for p in ps if p["detected"]]
+            print(f"  link of {j}, {f:g} N: {len(d)}/{len(ps)} detected, delay "
+                  + (f"{min(d):.0f}..{max(d):.0f} ms" if d else "-") + "; joints crossed: "
+                  + ", ".join(sorted({x for p in ps for x in p["joints_crossed"]})))
+        print(f"  crossings outside the push windows: {orc['detect']['crossings_outside']}")
     pc = res.get("paced")
     if pc and "runs" in pc.get("monitor", {}):
         print(f"paced 1 kHz (realtime_priority {pc.get('realtime_priority', 0)}), in run "
@@ -274,6 +517,14 @@ def report(work: Path, res: dict) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--work", type=Path, required=True)
+    ap.add_argument("--campaign", type=Path, default=DEMO,
+                    help="robot campaign the stages derive theirs from (default: "
+                    "examples/campaign_robot3_demo.toml)")
+    ap.add_argument("--false-minutes", type=float, default=10.0,
+                    help="false stage: at least this long [min] over all payloads")
+    ap.add_argument("--false-periods", type=int, default=None,
+                    help="false stage: periods of the multi-sine (instead of "
+                    "--false-minutes)")
     ap.add_argument("--paced-seconds", type=float, default=30.0)
     ap.add_argument("--realtime", type=int, default=0,
                     help="paced stage: SCHED_FIFO priority of the cycle loop (daq."
@@ -281,8 +532,9 @@ def main() -> None:
     ap.add_argument("--paced-repeat", type=int, default=1,
                     help="paced stage: pairs of runs (with, without the monitor), interleaved")
     ap.add_argument("stages", nargs="+", choices=("model", "calibrate", "false", "detect",
-                                                  "paced", "report"))
+                                                  "oracle", "paced", "report"))
     a = ap.parse_args()
+    SOURCE["campaign"] = a.campaign.resolve()
     a.work.mkdir(parents=True, exist_ok=True)
     store = a.work / "bench_monitor.json"
     res = json.loads(store.read_text()) if store.is_file() else {}
@@ -293,9 +545,11 @@ def main() -> None:
         elif st == "calibrate":
             res["calibrate"] = stage_calibrate(a.work)
         elif st == "false":
-            res["false"] = stage_false(a.work)
+            res["false"] = stage_false(a.work, a.false_minutes, a.false_periods)
         elif st == "detect":
             res["detect"] = stage_detect(a.work)
+        elif st == "oracle":
+            res["oracle"] = stage_oracle(a.work)
         elif st == "paced":
             res["paced"] = stage_paced(a.work, a.paced_seconds, a.realtime, a.paced_repeat)
         if st != "report":

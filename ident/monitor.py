@@ -147,9 +147,13 @@ class TorquePredictor:
              v_rest: float | Sequence[float] = 0.0) -> tuple[list[float], list[float]]:
         """The torque interval [N m] the model allows: the prediction (both bounds equal)
         where ``|dq_j| >= v_rest`` [rad/s] (one value, or one per joint); below it, where
-        sign(dq) is not known, the range of the static friction (Stribeck factor E = 1,
-        either sign of dq: the stiction band of the paper's section III.B at the joint's
-        load) plus the viscous and offset terms.
+        sign(dq) is not known, the range of the friction the model gives at any speed below
+        ``v_rest``: either sign of dq, Stribeck factor E from ``exp(-v_rest / q_s)`` to 1
+        (the friction is linear in E, so the four corners bound it), plus the viscous and
+        offset terms. With physical Stribeck terms (b, d >= 0) E = 1 bounds it: the
+        stiction band of the paper's section III.B at the joint's load; an identified model
+        may have them negative (static friction below the Coulomb level), and then E = 1
+        alone would leave out the model's own prediction just below ``v_rest``.
         """
         lo, hi = [], []
         exp = math.exp
@@ -162,10 +166,10 @@ class TorquePredictor:
                 lo.append(x)
                 hi.append(x)
                 continue
-            a = self._friction(j, t_out, v, 1.0, 1.0)
-            b = self._friction(j, t_out, v, -1.0, 1.0)
-            lo.append(min(a, b))
-            hi.append(max(a, b))
+            e0 = exp(-vr[j] / self._coef[j][1]) if self.paper else 1.0
+            x = [self._friction(j, t_out, v, s, e) for s in (1.0, -1.0) for e in (1.0, e0)]
+            lo.append(min(x))
+            hi.append(max(x))
         return lo, hi
 
 

@@ -14,7 +14,10 @@ control cycle and held over it.
 of mass moved 0.1 m along the x axis of the joint frame (a point on the link's surface, off
 the joint axis), in the direction the point moves when joint ``joint`` turns (a tangential
 hit, the largest torque on the link's own joint); if that joint does not move the point, the
-direction of the largest joint-torque norm.
+direction of the largest joint-torque norm. The offset is the part of the frame's x axis
+perpendicular to the joint axis, the y axis's for a joint turning about (nearly) x
+(:func:`offset_direction`): it moves the point off the joint axis whatever axis convention
+the robot file uses (an offset along x would put it on an x axis: no torque on that joint).
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ import pinocchio as pin
 
 from sim_drivers import SimError
 
-__all__ = ["Push", "push_torque", "staged_push", "DEFAULT_OFFSET_M"]
+__all__ = ["Push", "push_torque", "staged_push", "offset_direction", "DEFAULT_OFFSET_M"]
 
 #: Default offset of the push point from the link's CoM along the joint frame's x axis [m].
 DEFAULT_OFFSET_M = 0.1
@@ -66,10 +69,34 @@ def _point_jacobian(model: pin.Model, data: pin.Data, q: np.ndarray, joint: int,
     jid = joint + 1
     pin.computeJointJacobians(model, data, q)
     pin.updateFramePlacements(model, data)
-    jac = pin.getJointJacobian(model, data, jid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+    jac = np.asarray(pin.getJointJacobian(model, data, jid,
+                                          pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+                     ).reshape(6, model.nv)  # (6,) for a 1-dof model
     r = data.oMi[jid].rotation @ point  # joint origin -> point, world axes
     # v_p = v_o + w x r = J_lin dq - [r]x J_ang dq
     return jac[:3] - pin.skew(r) @ jac[3:]
+
+
+def offset_direction(model: pin.Model, joint: int) -> np.ndarray:
+    """Unit vector (joint frame) along which the default push point is moved from the link's
+    centre of mass: the frame's x axis, or its y axis when x is within about 25 degrees of
+    the joint's rotation axis, made perpendicular to that axis (x for a joint that does not
+    rotate, e.g. prismatic)."""
+    data = model.createData()
+    q = pin.neutral(model)
+    pin.computeJointJacobians(model, data, q)
+    jid = joint + 1
+    jac = np.asarray(pin.getJointJacobian(model, data, jid, pin.ReferenceFrame.LOCAL)
+                     ).reshape(6, model.nv)  # (6,) for a 1-dof model
+    w = jac[3:, model.joints[jid].idx_v]  # the rotation axis in the joint's own frame
+    n = float(np.linalg.norm(w))
+    ex, ey = np.eye(3)[0], np.eye(3)[1]
+    if n < 1e-9:
+        return ex
+    a = w / n
+    d = ex if abs(float(ex @ a)) < 0.9 else ey
+    d = d - float(d @ a) * a
+    return d / float(np.linalg.norm(d))
 
 
 def push_torque(model: pin.Model, data: pin.Data, q: Any, push: Push) -> np.ndarray:
@@ -96,8 +123,8 @@ def staged_push(model: pin.Model, q: Any, joint: int, force_N: float, t0_s: floa
         raise SimError(f"push: force {force_N} N and duration {duration_s} s: expected > 0")
     data = model.createData()
     if point is None:
-        p = np.array(model.inertias[joint + 1].lever, dtype=float)
-        p[0] += DEFAULT_OFFSET_M
+        p = (np.array(model.inertias[joint + 1].lever, dtype=float)
+             + DEFAULT_OFFSET_M * offset_direction(model, joint))
     else:
         p = np.asarray(point, dtype=float).reshape(3)
     if direction is None:

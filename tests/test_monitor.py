@@ -29,6 +29,7 @@ from sim_drivers.arm import (
     simulate_arm,
     staged_push,
 )
+from sim_drivers.arm_push import DEFAULT_OFFSET_M
 from trajectories.robot import load_robot
 
 
@@ -107,6 +108,31 @@ def test_push_accelerates_the_arm_by_minv_jt_f_during_its_window(arm3):
     assert plants[1].pushes == []  # dropped once over
 
 
+@pytest.mark.parametrize("axis", ["x", "y", "z", "unaligned"])
+def test_default_push_point_is_off_the_joint_axis_whatever_its_axis(axis):
+    """One link whose centre of mass is on its joint's axis: the default push point is
+    DEFAULT_OFFSET_M off that axis and the tangential push makes F * DEFAULT_OFFSET_M about
+    it, for a joint turning about its frame's x, y, z or another axis (an offset along x
+    alone would put the point on an x axis: no torque)."""
+    jm = {"x": pin.JointModelRX(), "y": pin.JointModelRY(), "z": pin.JointModelRZ(),
+          "unaligned": pin.JointModelRevoluteUnaligned(np.array([1.0, 1.0, 0.0])
+                                                       / np.sqrt(2.0))}[axis]
+    a = {"x": [1, 0, 0], "y": [0, 1, 0], "z": [0, 0, 1],
+         "unaligned": [2 ** -0.5, 2 ** -0.5, 0]}[axis]
+    model = pin.Model()
+    jid = model.addJoint(0, jm, pin.SE3.Identity(), "j1")
+    com = 0.3 * np.asarray(a, float)  # on the axis
+    model.appendBodyToJoint(jid, pin.Inertia(2.0, com, np.eye(3) * 0.01), pin.SE3.Identity())
+    push = staged_push(model, [0.4], 0, 20.0, 0.0, 0.2)
+    r = np.asarray(push.point) - com
+    assert np.linalg.norm(r) == pytest.approx(DEFAULT_OFFSET_M)
+    assert abs(r @ a) < 1e-12  # perpendicular to the axis
+    tau = push_torque(model, model.createData(), [0.4], push)
+    assert abs(tau[0]) == pytest.approx(20.0 * DEFAULT_OFFSET_M, rel=1e-9)
+    if axis in ("y", "z"):  # the frame's x axis is perpendicular: the documented point
+        np.testing.assert_allclose(push.point, com + [DEFAULT_OFFSET_M, 0, 0])
+
+
 # --------------------------------------------------------------------------- predictor
 def test_predictor_is_exported_torque_and_band_holds_the_static_friction(arm3):
     robot, params = arm3
@@ -134,6 +160,34 @@ def test_predictor_is_exported_torque_and_band_holds_the_static_friction(arm3):
     # the payload enters the rigid-body torque
     pay = type("P", (), {"mass_kg": 5.0, "com": [0.1, 0, 0], "inertia": [0.01] * 3 + [0] * 3})
     assert not np.allclose(em.predictor(pay)(q[0], dq[0], ddq[0]), got[0])
+
+
+def test_rest_band_holds_the_models_own_friction_below_the_rest_velocity(arm3):
+    """Below v_rest the band holds the model's prediction at every speed below v_rest, also
+    for an identified model whose Stribeck terms are negative (static friction below the
+    Coulomb level, as a fit may give); for physical terms it is the stiction band (E = 1)."""
+    robot, params = arm3
+    em = truth_model(robot, params)
+    fr = json.loads(json.dumps(em.friction))
+    for key in ("d_m", "d_g"):  # c + d < 0 on joint 1: breakaway below Coulomb
+        fr["joints"][0][key] = -2.0 * fr["joints"][0]["c_m"]
+    fr["joints"][0]["b_m"] = -0.2
+    odd = ExportedModel(em.urdf, fr, "negative Stribeck terms")
+    rng = np.random.default_rng(5)
+    for model in (em, odd):
+        pr = model.predictor(None)
+        v_rest = [3.0 * x for x in pr.qs]
+        for _ in range(40):
+            q, ddq = rng.uniform(-1, 1, 3), rng.uniform(-2, 2, 3)
+            dq = rng.uniform(0.3, 1.0, 3) * np.array(v_rest) * rng.choice([-1, 1], 3)
+            lo, hi = pr.band(q, dq, ddq, v_rest)
+            x = pr(q, dq, ddq)
+            assert np.all(np.array(lo) - 1e-9 <= x) and np.all(x <= np.array(hi) + 1e-9)
+            if model is em:  # physical terms: the E = 1 range of either sign
+                t_out = pr._rigid(q, dq, ddq)
+                for j in range(3):
+                    e1 = [pr._friction(j, t_out[j], dq[j], s, 1.0) for s in (1.0, -1.0)]
+                    assert (lo[j], hi[j]) == pytest.approx((min(e1), max(e1)), abs=1e-9)
 
 
 # --------------------------------------------------------------------------- thresholds
