@@ -300,7 +300,7 @@ def replay(log: Path, campaign: object, model: ExportedModel, cutoff_hz: float =
     m = re.search(r"_payload(\d+)\.mcap$", log.name)
     payload = campaign.payloads[int(m.group(1))] if m else None
     pred = model.predictor(payload)
-    v_rest = [REST_QS * x for x in pred.qs]
+    v_rest = [REST_QS * x for x in pred.q_s]
     fq, fdq, ft = (SVFilter(cutoff_hz, campaign.cycle_s, k) for _ in range(3))
     r = np.zeros((len(idx), k))
     for i in range(len(idx)):

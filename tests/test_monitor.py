@@ -176,7 +176,7 @@ def test_rest_band_holds_the_models_own_friction_below_the_rest_velocity(arm3):
     rng = np.random.default_rng(5)
     for model in (em, odd):
         pr = model.predictor(None)
-        v_rest = [3.0 * x for x in pr.qs]
+        v_rest = [3.0 * x for x in pr.q_s]
         for _ in range(40):
             q, ddq = rng.uniform(-1, 1, 3), rng.uniform(-2, 2, 3)
             dq = rng.uniform(0.3, 1.0, 3) * np.array(v_rest) * rng.choice([-1, 1], 3)
