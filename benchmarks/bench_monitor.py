@@ -17,7 +17,8 @@ clock unless said, i.e. simulated time):
 
 ``model``
     The identified model: ``jointid run`` of the campaign on the simulated arm (all its
-    payloads), ``jointid fit --robot`` (its robot file; both models, consistent estimate),
+    payloads), ``jointid fit --robot`` (its robot file; both models, consistent estimate,
+    ``--no-prune``: a monitor wants the best predictor, docs/monitoring.md),
     ``jointid export-model`` (paper model) -> DIR/model.
 ``calibrate``
     The validation run: the campaign again with the monitor in calibration mode ->
@@ -174,7 +175,7 @@ def stage_model(work: Path) -> None:
                     "--overwrite"], check=True)
     subprocess.run([*jid, "fit", "--robot", _robot_file(src),
                     *map(str, sorted(logs.glob("*.mcap"))), "--model", "both", "--json",
-                    str(fit), "--no-consistency", "--consistent"], check=True,
+                    str(fit), "--no-consistency", "--consistent", "--no-prune"], check=True,
                    stdout=subprocess.DEVNULL)
     subprocess.run([*jid, "export-model", str(fit), "--model", "paper", "-o", str(model)],
                    check=True)
