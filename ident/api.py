@@ -27,7 +27,6 @@ same function reads the files and fits, so its record is the command line's JSON
 from __future__ import annotations
 
 import copy
-import inspect
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -37,6 +36,7 @@ import numpy as np
 from . import DataError
 from .api_robot import RobotFit
 from .fitting import DEFAULT_Q_S, FitReport, fit_models
+from .hyperparams import HyperParameters
 from .loaders import Experiment, load_experiments
 from .models import IdentModel
 from .preprocess import Design
@@ -110,7 +110,7 @@ def _experiments(data: Data, joint: str | None) -> list[Experiment] | Signals:
     )
 
 
-class JointModel:
+class JointModel(HyperParameters):
     """Identification of one joint, scikit-learn style (paper section II-IV).
 
     Parameters
@@ -231,47 +231,6 @@ class JointModel:
         self.eliminate = eliminate
         self.threshold = threshold
         self.sign_check = sign_check
-
-    # ------------------------------------------------------------------ sklearn protocol
-    @classmethod
-    def _get_param_names(cls) -> list[str]:
-        """The hyper-parameters: the keyword parameters of ``__init__``."""
-        sig = inspect.signature(cls.__init__)
-        return [n for n, p in sig.parameters.items() if n != "self" and p.kind != p.VAR_KEYWORD]
-
-    def get_params(self, deep: bool = True) -> dict[str, Any]:
-        """The hyper-parameters, as given to ``__init__`` (scikit-learn convention).
-
-        Parameters
-        ----------
-        deep : bool
-            Accepted for scikit-learn; no hyper-parameter is itself an estimator, so
-            ``deep`` changes nothing.
-        """
-        del deep
-        return {k: getattr(self, k) for k in self._get_param_names()}
-
-    def set_params(self, **params: Any) -> JointModel:
-        """Set hyper-parameters by name (scikit-learn convention); returns ``self``.
-
-        Values are stored as given and checked by :meth:`fit`, like the constructor's.
-        A fitted estimator keeps its fitted attributes until the next :meth:`fit`.
-
-        Raises
-        ------
-        DataError
-            A name that is not a hyper-parameter (the message lists them).
-        """
-        valid = self._get_param_names()
-        params = renamed_keywords("JointModel.set_params", params, strict=False)
-        for k, v in params.items():
-            if k not in valid:
-                raise DataError(
-                    f"JointModel.set_params: unknown hyper-parameter {k!r} "
-                    f"(expected one of {', '.join(valid)})"
-                )
-            setattr(self, k, v)
-        return self
 
     def __sklearn_tags__(self) -> Any:
         """Estimator tags for scikit-learn >= 1.6 (its grid search asks for them): a

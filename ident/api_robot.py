@@ -20,7 +20,6 @@ their defaults are not the command line's.
 
 from __future__ import annotations
 
-import inspect
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -38,6 +37,7 @@ from .cli_robot import (
     public_record,
     refine_robot,
 )
+from .hyperparams import HyperParameters
 from .robot.estimate import RobotModel
 from .robot.loaders import RawRobotRun
 from .robot.signals import RobotSignals
@@ -51,7 +51,7 @@ __all__ = ["RobotFit"]
 RobotData = Sequence[str | Path] | str | Path | Sequence[RawRobotRun]
 
 
-class RobotFit:
+class RobotFit(HyperParameters):
     """n-dof identification of a robot's moving joints, as ``jointid fit --robot``.
 
     Every hyper-parameter is the option of the same name of ``jointid fit --robot``
@@ -160,28 +160,6 @@ class RobotFit:
         self.consistent = consistent
         self.sigma_blocks = sigma_blocks
         self.prune = prune
-
-    # -- scikit-learn protocol (as ident.api.JointModel) ------------------------------------
-    @classmethod
-    def _get_param_names(cls) -> list[str]:
-        sig = inspect.signature(cls.__init__)
-        return [n for n, p in sig.parameters.items() if n != "self" and p.kind != p.VAR_KEYWORD]
-
-    def get_params(self, deep: bool = True) -> dict[str, Any]:
-        """The hyper-parameters as given (``deep`` changes nothing: none is an estimator)."""
-        del deep
-        return {k: getattr(self, k) for k in self._get_param_names()}
-
-    def set_params(self, **params: Any) -> RobotFit:
-        """Set hyper-parameters by name; returns ``self`` (an unknown name: DataError)."""
-        valid = self._get_param_names()
-        params = renamed_keywords("RobotFit.set_params", params, strict=False)
-        for k, v in params.items():
-            if k not in valid:
-                raise DataError(f"RobotFit.set_params: unknown hyper-parameter {k!r} "
-                                f"(expected one of {', '.join(valid)})")
-            setattr(self, k, v)
-        return self
 
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
