@@ -108,6 +108,8 @@ def _f_test(rss0: float, rss1: float, k: int, p: int, n: int, n_eff: float) -> t
     d2 = max(min(n_eff, n) - p - k, 1.0)
     if rss1 <= 0 or k < 1:
         return float("inf"), 0.0
+    if rss1 >= rss0:  # the larger model fits no better (its rows or q_s differ): no evidence,
+        return 0.0, 1.0  # and an F statistic is never negative
     F = ((rss0 - rss1) / k) / (rss1 / max(n - p - k, 1)) * (min(n_eff, n) / n)
     return float(F), float(stats.f.sf(F, k, d2))
 

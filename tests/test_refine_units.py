@@ -221,3 +221,15 @@ def test_plots_are_written_for_every_step_and_the_final_residual(tmp_path):
     for p in paths:
         data = p.read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 5000
+
+
+def test_f_test_of_a_larger_model_that_fits_worse_is_zero_not_negative():
+    """A candidate whose exact refit leaves more residual than the current model (its rows or
+    q_s differ) gives no evidence: F = 0, p = 1, never a negative F in the report."""
+    from ident.refine import _f_test
+
+    F, p = _f_test(10.0, 10.5, 2, 5, 1000, 800.0)
+    assert (F, p) == (0.0, 1.0)
+    F, p = _f_test(10.0, 9.0, 2, 5, 1000, 1000.0)
+    assert F > 0 and 0.0 < p < 1.0
+    assert F == pytest.approx((1.0 / 2) / (9.0 / 993))
