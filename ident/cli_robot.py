@@ -608,7 +608,10 @@ def format_refit(fit: dict[str, Any], model: str) -> list[str]:
         vals = ", ".join(
             f"{n} = {pars[x['joint'] + ':' + n]['value']:.4g} ± "
             f"{2 * (pars[x['joint'] + ':' + n]['std'] or math.nan):.2g}" for n in x["names"])
-        lines.append(f"  {x['joint']}: {x['effect']}: {vals} (± 2σ)")
+        flag = ("" if x.get("significant", True) else
+                "  [not significant inside the n-dof model: Wald "
+                f"{x['wald'] if x.get('wald') is None else format(x['wald'], '.3g')}]")
+        lines.append(f"  {x['joint']}: {x['effect']}: {vals} (± 2σ){flag}")
     if not fit["extras"]:
         lines.append("  (no term found: the refit is the n-dof fit)")
     return lines

@@ -38,6 +38,7 @@ from robot_campaigns import ARM3_CENTRE, ARM3_PAYLOADS, arm3_true_state_signals,
 
 from daq.app.cli import main
 from ident import OutputLeakError
+from ident.cli_robot import format_refit
 from ident.robot import RobotIdentError
 from ident.robot.base import base_parameters
 from ident.robot.estimate import RobotModel
@@ -155,6 +156,9 @@ def _check(seed: int) -> None:
     js = rf.to_json()
     assert js["rel_error"]["after"]["all"] == pytest.approx(rf.rel_error["after"]["all"])
     assert {x["effect"] for x in js["extras"]} >= {"linear_q3_direction", "quadratic_viscous"}
+    for x in js["extras"]:  # both true effects stay significant inside the n-dof model
+        if x["effect"] in ("linear_q3_direction", "quadratic_viscous"):
+            assert x["significant"] and x["wald"] > 20, x
 
 
 def test_coupling_and_drag_recovered_inside_the_ndof_model():
@@ -192,6 +196,19 @@ def test_refit_without_terms_is_the_ndof_fit(model):
     # before: the n-dof fit as it is, on the refit's rows
     assert rf.rel_error["before"]["all"] == pytest.approx(rf.rel_error["after"]["all"],
                                                           rel=1e-2)
+
+
+def test_a_term_without_effect_is_flagged_not_significant():
+    """A quadratic drag on joint 3 of an arm that has none: refitted, its coefficient is
+    within noise of 0, and the record and the table say it is not significant."""
+    sig, fit, _ = _arm(2, duration_s=6.0, effects=False)
+    rf = refit_robot(fit, sig, [(2, _TrueDrag())])
+    (x,) = rf.to_json()["extras"]
+    v, sd = _value(rf, "j3", _TrueDrag().names()[0])
+    assert abs(v) < 3 * sd
+    assert x["significant"] is False and x["wald"] == pytest.approx((v / sd) ** 2, rel=1e-6)
+    text = "\n".join(format_refit(rf.to_json(), "usual"))
+    assert "not significant inside the n-dof model" in text
 
 
 def test_refit_refuses_the_measured_torque_and_bad_input():

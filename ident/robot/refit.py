@@ -44,6 +44,7 @@ from typing import Any
 
 import numpy as np
 import scipy.linalg
+import scipy.stats
 
 from trajectories.friction import stribeck_exp
 
@@ -60,6 +61,8 @@ __all__ = ["RobotRefit", "refit_robot", "extra_name"]
 #: Gauss-Newton iterations at most (paper model) and relative step tolerance.
 MAX_ITER = 50
 TOL = 1e-10
+#: Level of the Wald test that tells whether a found term stays significant in the refit.
+WALD_ALPHA = 0.05
 
 
 def extra_name(joint: str, name: str) -> str:
@@ -100,7 +103,8 @@ class RobotRefit:
     extras : list of dict
         Per extra term: ``joint``, ``effect``, ``names`` (the term's), ``values``, ``std``,
         ``parameters`` (the term's derived values ``{name: (value, 2 sigma)}`` when it has a
-        ``parameters`` method, e.g. amplitude and phase).
+        ``parameters`` method, e.g. amplitude and phase), ``wald`` (x^T C^-1 x of its
+        coefficients) and ``significant`` (the Wald test at ``WALD_ALPHA`` passes).
     rel_error, heldout, noise_floor, validation : dict
         ``{"before": {joint: value, ..., "all": value}, "after": {...}}`` (validation: None
         without validation samples).
@@ -259,6 +263,7 @@ def refit_robot(
         i = np.array(ex.pop("index"))
         ex["values"] = x[i].tolist()
         ex["std"] = out.std_[i].tolist()
+        ex["wald"], ex["significant"] = _wald(x[i], cov[np.ix_(i, i)])
         ex["parameters"] = {}
         if hasattr(t, "parameters"):
             try:
@@ -289,6 +294,21 @@ def refit_robot(
         out.validation = {"before": _rel(model.joints_, vsys.residuals(x0)[0], vrows),
                           "after": _rel(model.joints_, vsys.residuals(x)[0], vrows)}
     return out
+
+
+def _wald(x: np.ndarray, cov: np.ndarray) -> tuple[float | None, bool]:
+    """Wald test of a found term's coefficients against 0 inside the refit (eq. 15's
+    covariance): ``W = x^T C^-1 x`` and whether it passes the chi^2(len(x)) quantile at
+    ``1 - WALD_ALPHA``. A term the per-joint refinement accepted can lose its significance
+    once the whole model is refitted around it; the report says so rather than keep it
+    silently. ``(None, False)`` when the covariance is singular (held parameters)."""
+    try:
+        w = float(x @ np.linalg.solve(cov, x))
+    except np.linalg.LinAlgError:
+        return None, False
+    if not math.isfinite(w):
+        return None, False
+    return w, bool(w > scipy.stats.chi2.ppf(1.0 - WALD_ALPHA, len(x)))
 
 
 def _rel(joints: Sequence[str], rr: list[np.ndarray], rows: list[_Rows]) -> dict[str, float]:
