@@ -48,6 +48,7 @@ import scipy.stats
 
 from trajectories.friction import stribeck_exp
 
+from ..estimators import LS, RankDeficientError
 from ..terms import Term
 from ..unseen import N_BLOCKS, heldout_kind, noise_floor
 from . import RobotIdentError
@@ -434,22 +435,22 @@ class _System:
         return A[np.ix_(free, free)], g[free]
 
     def _step(self, A: np.ndarray, g: np.ndarray, free: np.ndarray) -> np.ndarray:
+        """Gauss-Newton step on the column-scaled normal equations, through the LS estimator's
+        ``solve_normal`` (the one rank rule, :data:`ident.estimators.RCOND`; the weights are
+        already in A and g)."""
         d = np.sqrt(np.abs(np.diag(A)))
         zero = d == 0
         if zero.any():
             bad = [self.names[i] for i in np.flatnonzero(free)[zero]]
             raise RobotIdentError(f"refit_robot: parameters {bad} have no excitation on the "
                                   "rows used (zero columns)")
-        As = A / d[:, None] / d[None, :]
-        ev, evec = np.linalg.eigh(As)
-        if not ev[-1] > 0 or ev[0] <= 1e-12 * ev[-1]:
-            worst = np.argsort(-np.abs(evec[:, 0]))[:4]
-            bad = [self.names[i] for i in np.flatnonzero(free)[worst]]
-            raise RobotIdentError(f"refit_robot: parameters not identifiable with the extra "
-                                  f"terms (cond {ev[-1] / max(ev[0], 1e-300):.2g}); the weakest "
-                                  f"direction involves {bad}")
+        names = [self.names[i] for i in np.flatnonzero(free)]
+        try:
+            sol = LS().solve_normal(A / d[:, None] / d[None, :], g / d, names)
+        except RankDeficientError as e:
+            raise RobotIdentError(f"refit_robot: with the extra terms, {e}") from None
         step = np.zeros(free.size)
-        step[free] = scipy.linalg.solve(As, g / d, assume_a="sym") / d
+        step[free] = sol / d
         return step
 
     def cost(self, x: np.ndarray, w: np.ndarray) -> float:
