@@ -90,6 +90,7 @@ __all__ = [
     "SineSegment",
     "TrapezoidSweep",
     "shorten",
+    "shorten_segments",
 ]
 
 #: feed-forward keys of ``[control.feedforward]`` and the matching ControllerGains fields
@@ -594,20 +595,37 @@ def shorten(campaign: Campaign, factor: float) -> Campaign:
     Campaign
         A new campaign, same joint, control and payloads.
     """
+    return replace(campaign, segments=shorten_segments(campaign.segments, campaign.joint.limits,
+                                                       factor),
+                   name=f"{campaign.name} (quick)")
+
+
+def shorten_segments(segments: Sequence[Segment], limits: JointLimits,
+                     factor: float) -> tuple[Segment, ...]:
+    """The segments of :func:`shorten`, of one joint with ``limits``.
+
+    Raises
+    ------
+    trajectories.SchemaError
+        ``factor`` outside (0, 1], or a segment that is neither a trapezoid nor a sine.
+    """
     if not 0.0 < factor <= 1.0:
         raise SchemaError(f"shorten: factor: expected a number in (0, 1], got {factor!r}")
-    lim = campaign.joint.limits
+    lim = limits
     out: list[Segment] = []
-    for seg in campaign.segments:
+    for seg in segments:
         if isinstance(seg, TrapezoidSweep):
             mid = 0.5 * (seg.range[0] + seg.range[1])
             half = 0.5 * (seg.range[1] - seg.range[0]) * factor
             out.append(replace(seg, range=(mid - half, mid + half), speeds=(min(seg.speeds),),
                                cycles=1, dwell_s=seg.dwell_s * factor))
-        else:
+        elif isinstance(seg, SineSegment):
             a = seg.amplitude
             w = min(0.9 * lim.max_velocity / a, math.sqrt(0.9 * lim.max_acceleration / a),
                     (0.9 * lim.max_jerk / a) ** (1.0 / 3.0))
             w = max(w, seg.omega)  # never slower than the original (its peaks fit already)
             out.append(replace(seg, frequency_hz=w / (2.0 * math.pi), periods=1))
-    return replace(campaign, segments=tuple(out), name=f"{campaign.name} (quick)")
+        else:
+            raise SchemaError(f"shorten: {getattr(seg, 'kind', type(seg).__name__)} segment: "
+                              f"expected trapezoid and sine segments only")
+    return tuple(out)

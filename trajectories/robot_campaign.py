@@ -83,13 +83,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 # the single-joint schema's pieces: the same limits table, raw tables, name check, segment
 # fields and plan-size check
 from .campaign import (
     _LIMITS,
+    FEEDFORWARD_KEYS,
+    QUICK_FACTOR,
     Campaign,
     JointLimits,
     SineSegment,
@@ -98,6 +100,7 @@ from .campaign import (
     _RawTable,
     check_plan_size,
     min_duration_s,
+    shorten_segments,
 )
 from .campaign import _SINE as _JOINT_SINE
 from .campaign import _TRAPEZOID as _JOINT_TRAPEZOID
@@ -181,6 +184,18 @@ class RobotJoint:
     def key(self) -> str:
         """Dotted key of the joint's table (``joint`` or ``robot.joints.<name>``)."""
         return self.table or f"robot.joints.{self.name}"
+
+    @property
+    def revolute(self) -> bool:
+        return self.kind == "revolute"
+
+    def gains_kwargs(self, velocity_cutoff_hz: float) -> dict[str, float]:
+        """Keyword arguments for ``daq.protocol.control.ControllerGains(**kwargs)``: the
+        joint's gains, the cut-off [Hz] and its feed-forward model (0 where not given)."""
+        out = {"kp": self.kp, "kd": self.kd, "velocity_cutoff_hz": velocity_cutoff_hz}
+        for key, name in FEEDFORWARD_KEYS.items():
+            out[name] = float(self.feedforward.get(key, 0.0))
+        return out
 
 
 @dataclass(frozen=True)
@@ -358,7 +373,8 @@ class RobotCampaign:
 
     @classmethod
     def from_dict(cls, raw: Mapping[str, Any], source: str = "") -> RobotCampaign:
-        """Validate a parsed TOML mapping with a ``[robot]`` table.
+        """Validate a parsed TOML mapping of either format: a ``[robot]`` table, or a
+        ``[joint]`` table read as a robot with one moving joint (:meth:`from_joint_campaign`).
 
         Parameters
         ----------
@@ -370,9 +386,10 @@ class RobotCampaign:
         Raises
         ------
         trajectories.SchemaError
-            One line naming the source, the dotted key and what was expected.
+            One line naming the source, the dotted key and what was expected; neither or
+            both of ``[joint]`` and ``[robot]``.
         """
-        return _build(raw, source)
+        return campaign_from_dict(raw, source)
 
     @classmethod
     def from_joint_campaign(cls, campaign: Campaign) -> RobotCampaign:
@@ -414,6 +431,37 @@ class RobotCampaign:
         """True for a ``[joint]`` campaign read as a robot (no robot file, one joint)."""
         return not self.robot_file
 
+    @property
+    def plant(self) -> Literal["arm", "joint"]:
+        """The simulated plant this campaign asks for (``jointid run --simulate``).
+
+        ``"arm"``: one simulated arm of the robot file behind all the drives
+        (``--simulate`` alone); ``"joint"``: no robot file -- the campaign describes its one
+        joint itself, and each drive runs its own simulated joint plant of a plant file
+        (``--simulate PLANT.toml``).
+        """
+        return "arm" if self.robot_file else "joint"
+
+    def quick(self) -> RobotCampaign:
+        """A short version for smoke runs and demos (about 25 s per payload run of the
+        example), same joints, control and payloads (:func:`trajectories.campaign.shorten`).
+
+        Raises
+        ------
+        trajectories.SchemaError
+            More than one moving joint, or a multi-sine or move segment: such campaigns
+            have no shortened form.
+        """
+        if len(self.joints) != 1:
+            raise fail(self.source, "robot.moving", "one moving joint for a shortened "
+                       "campaign (--quick)", list(self.moving))
+        for i, seg in enumerate(self.segments):
+            if not isinstance(seg, TrapezoidSweep | SineSegment):
+                raise fail(self.source, f"segments[{i}].kind", "'trapezoid' or 'sine' in a "
+                           "shortened campaign (--quick)", seg.kind)
+        segs = shorten_segments(self.segments, self.joints[0].limits, QUICK_FACTOR)
+        return replace(self, segments=segs, name=f"{self.name} (quick)")
+
 
 #: name of the moving joint of a ``[joint]`` campaign read as a robot
 JOINT_NAME = "joint"
@@ -427,8 +475,9 @@ def as_robot_campaign(campaign: Campaign | RobotCampaign) -> RobotCampaign:
     return RobotCampaign.from_joint_campaign(campaign)
 
 
-def campaign_from_dict(raw: Mapping[str, Any], source: str = "") -> Campaign | RobotCampaign:
-    """Validate either campaign format: ``[joint]`` -> Campaign, ``[robot]`` -> RobotCampaign.
+def campaign_from_dict(raw: Mapping[str, Any], source: str = "") -> RobotCampaign:
+    """Validate either campaign format into a :class:`RobotCampaign`: a ``[robot]`` table, or
+    a ``[joint]`` table read as a robot with one moving joint (:meth:`from_joint_campaign`).
 
     Raises
     ------
@@ -441,8 +490,8 @@ def campaign_from_dict(raw: Mapping[str, Any], source: str = "") -> Campaign | R
     if has_joint and has_robot:
         raise fail(source, "robot", "either a [joint] or a [robot] table, not both")
     if has_robot:
-        return RobotCampaign.from_dict(raw, source)
-    return Campaign.from_dict(raw, source)
+        return _build(raw, source)
+    return RobotCampaign.from_joint_campaign(Campaign.from_dict(raw, source))
 
 
 # --------------------------------------------------------------------------- schema pieces
