@@ -431,6 +431,11 @@ class RobotCampaign:
         """True for a ``[joint]`` campaign read as a robot (no robot file, one joint)."""
         return not self.robot_file
 
+    def gains_kwargs(self, k: int = 0) -> dict[str, float]:
+        """Keyword arguments for ``daq.protocol.control.ControllerGains(**kwargs)`` of moving
+        joint ``k``: its gains and feed-forward model, the campaign's velocity cut-off."""
+        return self.joints[k].gains_kwargs(self.control.velocity_cutoff_hz)
+
     @property
     def plant(self) -> Literal["arm", "joint"]:
         """The simulated plant this campaign asks for (``jointid run --simulate``).
