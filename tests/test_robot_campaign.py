@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from trajectories import LimitError, SchemaError, TrajectoryError
-from trajectories.campaign import MAX_PLAN_CYCLES, Campaign, JointLimits
+from trajectories.campaign import MAX_PLAN_CYCLES, JointLimits
 from trajectories.campaign_file import load_campaign
 from trajectories.excitation import assess_robot_campaign, optimise_campaign, quality
 from trajectories.multi import multisine_ratio, plan_robot_campaign
@@ -90,7 +90,6 @@ def test_single_joint_campaigns_load_as_a_robot_with_one_moving_joint():
     c = campaign_from_dict(raw, str(SINGLE))
     assert isinstance(c, RobotCampaign)
     assert c == load_campaign(SINGLE) == RobotCampaign.from_dict(raw, str(SINGLE))
-    assert c == RobotCampaign.from_joint_campaign(Campaign.from_dict(raw, str(SINGLE)))
     assert c.plant == "joint" and c.moving == ("joint",) and c.joints[0].drive is None
     robot = campaign_from_dict(raw_robot3(), "arm.toml")
     assert robot.plant == "arm" and all(j.drive is not None for j in robot.joints)
@@ -112,12 +111,6 @@ def test_quick_is_for_one_moving_joint_of_trapezoids_and_sines():
                        r"'trapezoid' or 'sine' in a shortened campaign \(--quick\), "
                        r"got 'multisine'$"):
         one.quick()
-
-
-def test_robot_campaigns_are_refused_by_the_single_joint_reader():
-    with pytest.raises(SchemaError, match=r"^arm\.toml: robot: expected a single-joint "
-                       r"campaign \(\[joint\]\) here; .*campaign_from_dict$"):
-        Campaign.from_dict(raw_robot3(), "arm.toml")
 
 
 def test_joint_and_robot_together_are_refused():

@@ -14,11 +14,8 @@ from hypothesis import strategies as st
 
 from trajectories import LimitError, SchemaError
 from trajectories.campaign import (
-    Campaign,
-    ControlSettings,
     Joint,
     JointLimits,
-    Payload,
     SineSegment,
     TrapezoidSweep,
     shorten_segments,
@@ -30,7 +27,7 @@ from trajectories.plan import (
     plan_campaign,
     plan_segment,
 )
-from trajectories.robot_campaign import RobotPayload
+from trajectories.robot_campaign import RobotCampaign, RobotControl, RobotJoint, RobotPayload
 from trajectories.sampled import coverage
 
 EXAMPLE = example_path("campaign.toml")
@@ -149,9 +146,9 @@ def test_mixed_campaigns_are_continuous_and_return_to_start(lim, dt, data):
             speed = data.draw(st.floats(smin, 1.0), label="speed")
             segments.append(TrapezoidSweep("", (speed,), (a, b), dwell_s=0.1))
     start = data.draw(st.floats(lo, hi), label="start")
-    joint = Joint("revolute", lim, start)
-    campaign = Campaign("prop", joint, ControlSettings(dt, 100.0, 1.0),
-                        (Payload(0.0, 1.0),), tuple(segments))
+    joint = RobotJoint("joint", "revolute", lim, None, 100.0, 1.0, table="joint")
+    campaign = RobotCampaign("prop", "", (joint,), (start,), {}, RobotControl(dt),
+                             (RobotPayload(0.0, (1.0, 0.0, 0.0), arm_m=1.0),), tuple(segments))
     plan = plan_campaign(campaign)
     ref = plan.reference
     assert_valid(ref, joint)

@@ -70,9 +70,13 @@ description in docs/campaign-robot.md)::
     dwell_s = 0.5
     [daq]                             # optional, kept raw for daq/
 
-A ``[joint]`` campaign is read as a robot campaign with one moving joint, without loss, by
-:meth:`RobotCampaign.from_joint_campaign` (no robot file; the one planner,
-:func:`trajectories.multi.plan_robot_campaign`, takes either).
+There is one campaign type: a ``[joint]`` file is read by :func:`campaign_from_dict` (and
+:meth:`RobotCampaign.from_dict`) into a :class:`RobotCampaign` with one moving joint, without
+loss -- the joint named ``joint``, without a drive of its own (its drives are those of
+``[daq]``), carrying the gains and ``[control.feedforward]``; payloads with their lever arm
+``arm_m``; no robot file (:attr:`RobotCampaign.plant` ``"joint"``). The one planner,
+:func:`trajectories.multi.plan_robot_campaign`, and the runtime (:mod:`daq.runtime`) take
+only this type.
 
 The payload inertia is given about the payload's centre of mass, in the flange frame.
 The robot file itself is read by :func:`trajectories.robot.load_robot` (not here: this
@@ -92,10 +96,10 @@ from .campaign import (
     _LIMITS,
     FEEDFORWARD_KEYS,
     QUICK_FACTOR,
-    Campaign,
     JointLimits,
     SineSegment,
     TrapezoidSweep,
+    _JointCampaign,
     _nonempty,
     _RawTable,
     check_plan_size,
@@ -118,7 +122,6 @@ __all__ = [
     "JOINT_NAME",
     "SineSegment",
     "TrapezoidSweep",
-    "as_robot_campaign",
     "campaign_from_dict",
 ]
 
@@ -329,7 +332,7 @@ class RobotCampaign:
     name : str
     robot_file : str
         The robot file as written in the campaign (resolve it relative to the campaign file);
-        ``""`` for a ``[joint]`` campaign (:meth:`from_joint_campaign`): a robot with one
+        ``""`` for a ``[joint]`` campaign (no robot file): a robot with one
         moving joint, described by the campaign itself (limits, ``[control.feedforward]``).
     joints : tuple of RobotJoint
         The moving joints, in the order of ``robot.moving``.
@@ -374,7 +377,7 @@ class RobotCampaign:
     @classmethod
     def from_dict(cls, raw: Mapping[str, Any], source: str = "") -> RobotCampaign:
         """Validate a parsed TOML mapping of either format: a ``[robot]`` table, or a
-        ``[joint]`` table read as a robot with one moving joint (:meth:`from_joint_campaign`).
+        ``[joint]`` table read as a robot with one moving joint (no robot file).
 
         Parameters
         ----------
@@ -390,41 +393,6 @@ class RobotCampaign:
             both of ``[joint]`` and ``[robot]``.
         """
         return campaign_from_dict(raw, source)
-
-    @classmethod
-    def from_joint_campaign(cls, campaign: Campaign) -> RobotCampaign:
-        """A ``[joint]`` campaign as a robot with one moving joint, without loss.
-
-        The joint is named ``"joint"`` (its table; messages name ``joint.limits...``) and
-        carries the gains and ``[control.feedforward]``; each payload's lever arm becomes
-        ``arm_m`` and ``com = (arm_m, 0, 0)``; the segments are the same (their ``joint``
-        ``""`` is the only moving joint). No robot file: ``robot_file`` is ``""``.
-
-        Parameters
-        ----------
-        campaign : Campaign
-
-        Returns
-        -------
-        RobotCampaign
-        """
-        j = campaign.joint
-        c = campaign.control
-        joint = RobotJoint(JOINT_NAME, j.kind, j.limits, None, c.kp, c.kd,
-                           feedforward=dict(c.feedforward), table="joint")
-        return cls(
-            name=campaign.name,
-            robot_file="",
-            joints=(joint,),
-            start=(j.start,),
-            locked={},
-            control=RobotControl(c.cycle_s, c.velocity_cutoff_hz),
-            payloads=tuple(RobotPayload(p.mass_kg, (p.arm_m, 0.0, 0.0), arm_m=p.arm_m)
-                           for p in campaign.payloads),
-            segments=campaign.segments,
-            daq=campaign.daq,
-            source=campaign.source,
-        )
 
     @property
     def single_joint(self) -> bool:
@@ -449,7 +417,8 @@ class RobotCampaign:
 
     def quick(self) -> RobotCampaign:
         """A short version for smoke runs and demos (about 25 s per payload run of the
-        example), same joints, control and payloads (:func:`trajectories.campaign.shorten`).
+        example), same joints, control and payloads
+        (:func:`trajectories.campaign.shorten_segments`).
 
         Raises
         ------
@@ -472,17 +441,37 @@ class RobotCampaign:
 JOINT_NAME = "joint"
 
 
-def as_robot_campaign(campaign: Campaign | RobotCampaign) -> RobotCampaign:
-    """Either campaign as a :class:`RobotCampaign` (a ``[joint]`` one:
-    :meth:`RobotCampaign.from_joint_campaign`)."""
-    if isinstance(campaign, RobotCampaign):
-        return campaign
-    return RobotCampaign.from_joint_campaign(campaign)
+def _from_joint_file(campaign: _JointCampaign) -> RobotCampaign:
+    """A ``[joint]`` file as a robot with one moving joint, without loss.
+
+    The joint is named ``"joint"`` (its table; messages name ``joint.limits...``), has no
+    drive of its own (its drives are those of ``[daq]``) and carries the gains and
+    ``[control.feedforward]``; each payload's lever arm becomes ``arm_m`` and
+    ``com = (arm_m, 0, 0)``; the segments are the same (their ``joint`` ``""`` is the only
+    moving joint). No robot file: ``robot_file`` is ``""``.
+    """
+    j = campaign.joint
+    c = campaign.control
+    joint = RobotJoint(JOINT_NAME, j.kind, j.limits, None, c.kp, c.kd,
+                       feedforward=dict(c.feedforward), table="joint")
+    return RobotCampaign(
+        name=campaign.name,
+        robot_file="",
+        joints=(joint,),
+        start=(j.start,),
+        locked={},
+        control=RobotControl(c.cycle_s, c.velocity_cutoff_hz),
+        payloads=tuple(RobotPayload(p.mass_kg, (p.arm_m, 0.0, 0.0), arm_m=p.arm_m)
+                       for p in campaign.payloads),
+        segments=campaign.segments,
+        daq=campaign.daq,
+        source=campaign.source,
+    )
 
 
 def campaign_from_dict(raw: Mapping[str, Any], source: str = "") -> RobotCampaign:
     """Validate either campaign format into a :class:`RobotCampaign`: a ``[robot]`` table, or
-    a ``[joint]`` table read as a robot with one moving joint (:meth:`from_joint_campaign`).
+    a ``[joint]`` table read as a robot with one moving joint (no robot file).
 
     Raises
     ------
@@ -496,7 +485,7 @@ def campaign_from_dict(raw: Mapping[str, Any], source: str = "") -> RobotCampaig
         raise fail(source, "robot", "either a [joint] or a [robot] table, not both")
     if has_robot:
         return _build(raw, source)
-    return RobotCampaign.from_joint_campaign(Campaign.from_dict(raw, source))
+    return _from_joint_file(_JointCampaign.from_dict(raw, source))
 
 
 # --------------------------------------------------------------------------- schema pieces
