@@ -192,8 +192,8 @@ def _sync_period_us(cfg: DaqConfig, cycle_s: float) -> int:
     return int(round(cycle_s * 1e6)) if cfg.clock == "paced" else 0
 
 
-def _attachments(campaign: RobotCampaign, cfg: DaqConfig, plant_params: Any) -> list[tuple[str, str,
-                                                                                    bytes]]:
+def _attachments(campaign: RobotCampaign, cfg: DaqConfig,
+                 plant_params: Any) -> list[tuple[str, str, bytes]]:
     out = []
     src = Path(str(campaign.source)) if campaign.source else None
     if src is not None and src.is_file():
@@ -304,10 +304,9 @@ def run_campaign(
     cfg = robot_daq_config(campaign, use_can_config=simulate is None)
     # the multi-sines as jointid plan optimised them (deterministic)
     campaign, _dyn, _opt = prepare_robot_campaign(campaign)
-    if simulate is not None:
+    if simulate is not None:  # the plant the campaign asks for (campaign.plant)
         simulate = sim_params(campaign, simulate)
         cfg = with_scalings(cfg, sim_scalings(campaign, simulate, len(cfg.drives)))
-    if simulate is not None:
         if cfg.interface != "virtual":
             raise ConfigError(f"{campaign.source}: daq.interface: expected 'virtual' with "
                               f"--simulate, got {cfg.interface!r}")
