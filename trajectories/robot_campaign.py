@@ -1,13 +1,13 @@
-"""The robot campaign: a multi-joint arm, its drives, limits, payloads and coordinated excitation.
+"""The one campaign type: a robot -- its moving joints, drives, limits, payloads and excitation.
 
 (Past 600 lines: one file format -- its documented dataclasses, schema and cross-checks,
 and the reading of a ``[joint]`` campaign as a robot with one moving joint; split, the format
 would be scattered.)
 
-A campaign file has either a ``[joint]`` table (the single-joint format of
-:mod:`trajectories.campaign`, unchanged) or a ``[robot]`` table (this module).
-:func:`campaign_from_dict` dispatches on which one is present; :meth:`RobotCampaign.from_dict`
-validates a robot campaign (pure: dictionaries in, frozen dataclasses out). Every mistake
+A campaign file has either a ``[joint]`` table (the single-joint format, validated by
+:mod:`trajectories.campaign`) or a ``[robot]`` table (this module); both are read into a
+:class:`RobotCampaign`. :func:`campaign_from_dict` (:meth:`RobotCampaign.from_dict`)
+dispatches on which one is present (pure: dictionaries in, frozen dataclasses out). Every mistake
 raises :class:`trajectories.SchemaError` with one line naming the source and the dotted key::
 
     arm.toml: robot.joints.j2.limits.max_velocity: expected a number > 0 <= 1000 [rad/s or m/s],
