@@ -62,7 +62,7 @@ from daq.protocol.logformat import FRAME  # noqa: E402
 from daq.runtime.mcaplog import RunLog  # noqa: E402
 from daq.runtime.runner import run_campaign  # noqa: E402
 from sim_drivers.plant_config import default_plant  # noqa: E402
-from trajectories.campaign import Campaign  # noqa: E402
+from trajectories.robot_campaign import RobotCampaign  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 _chan = itertools.count()
@@ -70,7 +70,7 @@ _chan = itertools.count()
 
 def campaign(seconds: float, cycle_s: float = 0.001, drives: int = 1,
              clock: str = "lockstep", buses: int = 1, drive_tables: list | None = None,
-             **daq: object) -> Campaign:
+             **daq: object) -> RobotCampaign:
     periods = max(1, int(round(seconds * 0.25)))
     chan = f"bench_{next(_chan)}"
     raw = {
@@ -90,7 +90,7 @@ def campaign(seconds: float, cycle_s: float = 0.001, drives: int = 1,
                 "heartbeat_timeout_s": 2.0, "tpdo_timeout_cycles": 1000,
                 "max_following_error": 1.0, **daq},
     }
-    return Campaign.from_dict(raw, "bench.toml")
+    return RobotCampaign.from_dict(raw, "bench.toml")
 
 
 def lockstep(drives: int, cycles: int, repeat: int, out: Path, buses: int = 1
@@ -447,13 +447,19 @@ def before_rig():
     import can
 
     from daq.runtime import runner
-    from sim_drivers.drive import SimulatedDrive
+    from sim_drivers.drive import TORQUE_DELAY_CYCLES, SimulatedDrive
     from sim_drivers.plant import JointPlant
 
     class Rig:
+        torque_delay_cycles = TORQUE_DELAY_CYCLES
+
         def __init__(self) -> None:
             self.drives: list = []
             self.buses: list = []
+
+        def set_payload(self, payload) -> None:
+            for d in self.drives:
+                d.set_payload(payload.mass_kg, payload.arm_m)
 
         def close(self) -> None:
             for d in self.drives:
@@ -468,7 +474,7 @@ def before_rig():
             rig.buses.append(bus)
             plant = JointPlant(plant_params, campaign.cycle_s,
                                seed=int(plant_params.drive.seed) + k)
-            plant.reset(campaign.joint.start)
+            plant.reset(campaign.start[0])
             drive = SimulatedDrive(bus, dcfg.node_id, plant, dcfg.eds, cycle_s=campaign.cycle_s)
             drive.start()
             rig.drives.append(drive)

@@ -33,22 +33,22 @@ from ident.refine_library import library_step  # noqa: E402
 from ident.signals import Signals  # noqa: E402
 from sim_drivers.offline import simulate  # noqa: E402
 from sim_drivers.plant_config import default_plant  # noqa: E402
-from trajectories.campaign import Campaign  # noqa: E402
 from trajectories.plan import plan_campaign  # noqa: E402
+from trajectories.robot_campaign import RobotCampaign  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def one_run():
     raw = tomllib.loads((ROOT / "examples" / "campaign.toml").read_text())
-    camp = Campaign.from_dict(raw, "examples/campaign.toml")
+    camp = RobotCampaign.from_dict(raw, "examples/campaign.toml")
     plan = plan_campaign(camp)
     p = default_plant()
     f = replace(p.friction, a_m=1, a_g=1, b_m=0, b_g=0, c_m=18, c_g=18, d_m=0, d_g=0)
     p = replace(p, friction=f)
     p = p.with_effect("position_ripple", amplitude_Nm=5.0, period_rad=0.0628, phase_rad=0.4)
     p = p.with_effect("spring", stiffness_Nm_per_rad=30.0, rest_position_rad=0.2)
-    gains = ControllerGains(**camp.control.gains_kwargs())
+    gains = ControllerGains(**camp.gains_kwargs())
     run = simulate(p, plan.reference, gains, seed=0)
     # position-dependent dry friction (test-side injection in the logged torque)
     extra = 0.38 * 18.0 * np.sin(2 * np.pi * run.q_true / 1.57 + 0.3) * np.sign(run.dq_true)

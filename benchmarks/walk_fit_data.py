@@ -105,14 +105,14 @@ def _single_joint_csvs(d: Path) -> list[Path]:
     from daq.protocol.control import ControllerGains
     from sim_drivers.offline import simulate
     from sim_drivers.plant_config import load_plant
-    from trajectories.campaign import Campaign
     from trajectories.plan import plan_campaign
+    from trajectories.robot_campaign import RobotCampaign
 
     with open(ROOT / "examples" / "campaign.toml", "rb") as f:
-        campaign = Campaign.from_dict(tomllib.load(f), "campaign.toml").quick()
+        campaign = RobotCampaign.from_dict(tomllib.load(f), "campaign.toml").quick()
     plan = plan_campaign(campaign)
     plant = load_plant(ROOT / "sim_drivers" / "data" / "plant_default.toml")
-    gains = ControllerGains(**campaign.control.gains_kwargs())
+    gains = ControllerGains(**campaign.gains_kwargs())
     files = []
     for i, p in enumerate(plan.payloads):
         r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,

@@ -9,8 +9,8 @@ from pathlib import Path
 from daq.protocol.control import ControllerGains
 from sim_drivers.offline import SimRun, simulate
 from sim_drivers.plant_config import PlantParams, load_plant
-from trajectories.campaign import Campaign
 from trajectories.plan import CampaignPlan, plan_campaign
+from trajectories.robot_campaign import RobotCampaign
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -19,10 +19,10 @@ def simulate_example_campaign(seed0: int = 11) -> tuple[PlantParams, CampaignPla
     """The default plant, the planned example campaign and one simulated run per payload
     (noise seeds seed0, seed0 + 1, ...)."""
     with open(ROOT / "examples" / "campaign.toml", "rb") as fh:
-        campaign = Campaign.from_dict(tomllib.load(fh), "examples/campaign.toml")
+        campaign = RobotCampaign.from_dict(tomllib.load(fh), "examples/campaign.toml")
     plan = plan_campaign(campaign)
     plant = load_plant(ROOT / "sim_drivers" / "data" / "plant_default.toml")
-    gains = ControllerGains(**campaign.control.gains_kwargs())
+    gains = ControllerGains(**campaign.gains_kwargs())
     runs = [simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
                      payload_arm=p.arm_m, seed=seed0 + i) for i, p in enumerate(plan.payloads)]
     return plant, plan, runs

@@ -61,7 +61,7 @@ def case_design(case: str, seed: int):
     for e in plant_effects:
         p = p.with_effect(e, **EFFECTS[e])
     plan = _plan()
-    gains = ControllerGains(**_campaign().control.gains_kwargs())
+    gains = ControllerGains(**_campaign().gains_kwargs())
     parts = []
     for i, pl in enumerate(plan.payloads[:payloads]):
         r = simulate(p, plan.reference, gains, payload_mass=pl.mass_kg, payload_arm=pl.arm_m,

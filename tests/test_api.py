@@ -18,8 +18,8 @@ from ident.api import JointModel, load
 from ident.loaders import Experiment
 from sim_drivers.offline import simulate
 from sim_drivers.plant_config import load_plant
-from trajectories.campaign import Campaign
 from trajectories.plan import plan_campaign
+from trajectories.robot_campaign import RobotCampaign
 
 ROOT = Path(__file__).resolve().parents[1]
 RIPPLE = dict(amplitude_Nm=4.0, period_rad=2 * np.pi / 16, phase_rad=0.3)  # undeclared
@@ -30,11 +30,11 @@ def csv_runs(tmp_path_factory):
     """Three payload runs and a validation run of the quick example campaign on the default
     plant plus a position ripple, as CSV files (t, q, tau, payload_kg, payload_arm_m)."""
     with open(ROOT / "examples" / "campaign.toml", "rb") as f:
-        campaign = Campaign.from_dict(tomllib.load(f), "campaign.toml").quick()
+        campaign = RobotCampaign.from_dict(tomllib.load(f), "campaign.toml").quick()
     plan = plan_campaign(campaign)
     plant = load_plant(ROOT / "sim_drivers" / "data" / "plant_default.toml").with_effect(
         "position_ripple", **RIPPLE)
-    gains = ControllerGains(**campaign.control.gains_kwargs())
+    gains = ControllerGains(**campaign.gains_kwargs())
     d = tmp_path_factory.mktemp("api")
     files = []
     for i, p in enumerate([*plan.payloads, plan.payloads[1]]):

@@ -19,12 +19,17 @@ TEXT = EXAMPLE.read_text()
 def test_example_loads_with_the_paper_joint_3_figures():
     c = load_campaign(EXAMPLE)
     assert c.name == "rx130l-joint3" and c.source == str(EXAMPLE)
-    assert c.joint.kind == "revolute" and c.joint.revolute and c.joint.unit == "rad"
-    assert c.joint.limits.max_velocity == 1.2
-    assert c.joint.limits.position == (-1.0, 2.4)
-    assert c.joint.start == pytest.approx(0.7)  # default: centre of the position range
-    assert [(p.mass_kg, p.arm_m) for p in c.payloads] == [
-        (0.0, 1.277), (3.4584, 1.277), (6.970, 1.277)]
+    # a [joint] file: a robot with one moving joint, no robot file, its plant a joint's
+    assert c.robot_file == "" and c.plant == "joint" and c.moving == ("joint",)
+    (j,) = c.joints
+    assert j.kind == "revolute" and j.revolute and j.unit == "rad" and j.key == "joint"
+    assert j.drive is None  # its drives are those of [daq]
+    assert j.limits.max_velocity == 1.2
+    assert j.limits.position == (-1.0, 2.4)
+    assert c.start == (pytest.approx(0.7),)  # default: centre of the position range
+    assert [(p.mass_kg, p.arm_m, p.com) for p in c.payloads] == [
+        (0.0, 1.277, (1.277, 0.0, 0.0)), (3.4584, 1.277, (1.277, 0.0, 0.0)),
+        (6.970, 1.277, (1.277, 0.0, 0.0))]
     assert c.cycle_s == c.control.cycle_s == 0.001
     assert [type(s) for s in c.segments] == [TrapezoidSweep] * 3 + [SineSegment]
     assert {s.joint for s in c.segments} == {""}  # the only moving joint
@@ -37,7 +42,7 @@ def test_example_loads_with_the_paper_joint_3_figures():
 
 def test_control_settings_convert_to_controller_gains():
     c = load_campaign(EXAMPLE)
-    g = ControllerGains(**c.control.gains_kwargs())
+    g = ControllerGains(**c.joints[0].gains_kwargs(c.control.velocity_cutoff_hz))
     assert (g.kp, g.kd, g.J_ff, g.MX_ff, g.MY_ff, g.Fc_ff, g.Fv_ff) == (
         20000.0, 1000.0, 31.0, 21.1, 0.0, 25.0, 40.0)
     assert g.velocity_cutoff_hz == 100.0
@@ -51,9 +56,10 @@ def test_optional_keys_start_daq_and_feedforward(tmp_path):
     f = tmp_path / "c.toml"
     f.write_text(text)
     c = load_campaign(f)
-    assert c.joint.start == -0.5
+    assert c.start == (-0.5,)
     assert c.daq == {"bus": {"interface": "virtual"}}
-    assert c.control.feedforward == {"J": 0.0, "MX": 21.1, "MY": -0.8, "Fc": 12.5, "Fv": 40.0}
+    assert c.joints[0].feedforward == {"J": 0.0, "MX": 21.1, "MY": -0.8, "Fc": 12.5,
+                                       "Fv": 40.0}
 
 
 # (what to replace in the example, replacement, key named in the message, expected text)

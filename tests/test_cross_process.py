@@ -23,7 +23,7 @@ from daq.runtime.simrig import plant_scaling
 from sim_drivers.drive import TORQUE_DELAY_CYCLES
 from sim_drivers.plant_config import default_plant
 from sim_drivers.remote import ServeProcess
-from trajectories.campaign import Campaign
+from trajectories.robot_campaign import RobotCampaign
 
 _chan = itertools.count()
 pytestmark = pytest.mark.slow  # subprocesses and paced (real-time) runs
@@ -31,7 +31,7 @@ pytestmark = pytest.mark.slow  # subprocesses and paced (real-time) runs
 
 def remote_campaign(url: str, node_id: int = 1, *, sync_source: str = "runner",
                     periods: int = 1, name: str = "xproc", cycle_s: float = 0.001,
-                    **daq) -> Campaign:
+                    **daq) -> RobotCampaign:
     sc = plant_scaling(default_plant())
     raw = {
         "name": name,
@@ -55,7 +55,7 @@ def remote_campaign(url: str, node_id: int = 1, *, sync_source: str = "runner",
                     "encoder_counts_per_rev": sc.encoder_counts_per_rev}}],
                 **daq},
     }
-    return Campaign.from_dict(raw, f"{name}.toml")
+    return RobotCampaign.from_dict(raw, f"{name}.toml")
 
 
 #: control cycle of this file's paced runs [s]: 4 ms, so that a drive served in another

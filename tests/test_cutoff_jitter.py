@@ -24,8 +24,8 @@ from ident.preprocess import choose_cutoff
 from ident.robot.loaders import load_robot_runs
 from sim_drivers.offline import simulate
 from sim_drivers.plant_config import load_plant
-from trajectories.campaign import Campaign
 from trajectories.plan import plan_campaign
+from trajectories.robot_campaign import RobotCampaign
 
 FS = 1000.0
 
@@ -68,10 +68,10 @@ def quick_runs():
     """The quick example campaign on the default plant: three payload runs and a validation
     run (closed loop, encoder-quantised q, the logged torque reference)."""
     with open(ROOT / "examples" / "campaign.toml", "rb") as f:
-        campaign = Campaign.from_dict(tomllib.load(f), "campaign.toml").quick()
+        campaign = RobotCampaign.from_dict(tomllib.load(f), "campaign.toml").quick()
     plan = plan_campaign(campaign)
     plant = load_plant(ROOT / "sim_drivers" / "data" / "plant_default.toml")
-    gains = ControllerGains(**campaign.control.gains_kwargs())
+    gains = ControllerGains(**campaign.gains_kwargs())
     runs = []
     for i, p in enumerate([*plan.payloads, plan.payloads[1]]):
         r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,

@@ -32,7 +32,7 @@ from daq.runtime.mcaplog import FastWriter, RunLog
 from daq.runtime.runner import run_campaign
 from daq.runtime.safety import log_failed
 from sim_drivers.plant_config import default_plant
-from trajectories.campaign import Campaign
+from trajectories.robot_campaign import RobotCampaign
 
 WORKER = "mcap-chunk-writer"
 
@@ -144,7 +144,7 @@ def test_worker_runs_one_realtime_priority_below_the_loop():
 _chan = itertools.count()
 
 
-def _campaign(clock: str, **daq) -> Campaign:
+def _campaign(clock: str, **daq) -> RobotCampaign:
     raw = {
         "name": "paced-bg",
         "joint": {"kind": "revolute", "limits": {
@@ -159,10 +159,10 @@ def _campaign(clock: str, **daq) -> Campaign:
                 "tpdo_timeout_cycles": 50, "heartbeat_timeout_s": 2.0,
                 "max_following_error": 1.0, "chunk_seconds": 0.02, **daq},
     }
-    return Campaign.from_dict(raw, f"{clock}.toml")
+    return RobotCampaign.from_dict(raw, f"{clock}.toml")
 
 
-def _run(tmp_path, c: Campaign) -> tuple[object, list[tuple[set[str], float]]]:
+def _run(tmp_path, c: RobotCampaign) -> tuple[object, list[tuple[set[str], float]]]:
     """Run ``c`` on the simulated drive; what the cycle loop's progress calls saw: the
     threads and the GIL switch interval."""
     seen: list[tuple[set[str], float]] = []

@@ -14,7 +14,7 @@ from daq import ConfigError
 from daq.protocol.reader import read_frames, read_run
 from daq.runtime.runner import run_campaign
 from sim_drivers.plant_config import default_plant
-from trajectories.campaign import Campaign
+from trajectories.robot_campaign import RobotCampaign
 
 _chan = itertools.count()
 
@@ -33,7 +33,7 @@ def campaign(drives, cycle_s=0.002, clock="lockstep", channel=None, **daq):
         "daq": {"channel": channel or f"multi_{next(_chan)}", "clock": clock,
                 "drives": drives, **daq},
     }
-    return Campaign.from_dict(raw, "multi.toml")
+    return RobotCampaign.from_dict(raw, "multi.toml")
 
 
 def check_axes_equal_records(r, n):

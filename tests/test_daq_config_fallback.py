@@ -13,7 +13,7 @@ from daq import ConfigError
 from daq.protocol.reader import read_run
 from daq.runtime.config import parse_daq
 from daq.runtime.runner import run_campaign
-from trajectories.campaign import Campaign
+from trajectories.robot_campaign import RobotCampaign
 
 _chan = itertools.count()
 
@@ -95,7 +95,7 @@ def test_campaign_without_bus_keys_runs_on_the_configured_bus(tmp_path, monkeypa
         "daq": {"drives": [{"node_id": 5, "scaling": {
             "rated_torque_Nm": 5.0, "gear_ratio": 100.0, "encoder_counts_per_rev": 4096}}]},
     }
-    campaign = Campaign.from_dict(raw, "fallback.toml")
+    campaign = RobotCampaign.from_dict(raw, "fallback.toml")
     plant = JointPlant(default_plant(), 0.001)
     plant.reset(0.0)
     # the drive on simulated time, its channel clocked by the master's SYNCs (heartbeats
@@ -135,7 +135,7 @@ def test_simulated_run_ignores_python_can_configuration(tmp_path, monkeypatch):
                       "periods": 1}],
         "daq": {"channel": f"simcfg_{next(_chan)}"},
     }
-    r = run_campaign(Campaign.from_dict(raw, "simcfg.toml"), out_dir=tmp_path,
+    r = run_campaign(RobotCampaign.from_dict(raw, "simcfg.toml"), out_dir=tmp_path,
                      simulate=default_plant(), yes=True)
     assert r.ok, r.reason
     assert read_run(r.runs[0].path).metadata["campaign"]["interface"] == "virtual"

@@ -19,7 +19,7 @@ from daq.protocol.reader import read_run
 from daq.runtime.runner import run_campaign
 from sim_drivers.faults import FaultInjector
 from sim_drivers.plant_config import default_plant
-from trajectories.campaign import Campaign
+from trajectories.robot_campaign import RobotCampaign
 
 ROOT = Path(__file__).resolve().parents[1]
 _chan = itertools.count()
@@ -40,7 +40,7 @@ def campaign(daq=None, periods=2):
         "daq": {"channel": f"test_faults_{next(_chan)}", "quick_stop_cycles": QS,
                 **(daq or {})},
     }
-    return Campaign.from_dict(raw, "faulty.toml")
+    return RobotCampaign.from_dict(raw, "faulty.toml")
 
 
 def check_stopped(result, reason_part):

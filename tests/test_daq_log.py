@@ -195,7 +195,7 @@ _chan = itertools.count()
 def test_paced_clock_records_timing_of_every_cycle(tmp_path, source):
     from daq.runtime.runner import run_campaign
     from sim_drivers.plant_config import default_plant
-    from trajectories.campaign import Campaign
+    from trajectories.robot_campaign import RobotCampaign
 
     raw = {
         "name": "paced",
@@ -211,7 +211,7 @@ def test_paced_clock_records_timing_of_every_cycle(tmp_path, source):
                 "tpdo_timeout_cycles": 50, "heartbeat_timeout_s": 2.0,
                 "max_following_error": 1.0},
     }
-    c = Campaign.from_dict(raw, "paced.toml")
+    c = RobotCampaign.from_dict(raw, "paced.toml")
     r = run_campaign(c, out_dir=tmp_path, simulate=default_plant(), yes=True)
     assert r.status == "done", r.reason
     run = r.runs[0]

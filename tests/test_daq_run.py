@@ -15,8 +15,8 @@ from daq.protocol.reader import list_runs, read_attachments, read_frames, read_r
 from daq.runtime.runner import run_campaign
 from sim_drivers.plant_config import default_plant
 from tests.conftest import VENDOR_EDS, shared_path
-from trajectories.campaign import Campaign
 from trajectories.plan import plan_campaign
+from trajectories.robot_campaign import RobotCampaign
 
 _chan = itertools.count()
 
@@ -35,7 +35,7 @@ def small_campaign(n_payloads=3, daq=None, periods=1, freq=0.5, amplitude=0.3, n
                       "center": 0.0, "periods": periods}],
         "daq": {"channel": f"test_run_{next(_chan)}", **(daq or {})},
     }
-    return Campaign.from_dict(raw, "small.toml")
+    return RobotCampaign.from_dict(raw, "small.toml")
 
 
 def drive_cycles(result, run):

@@ -92,11 +92,11 @@ from ident.loaders import Experiment
 from ident.api import JointModel
 from sim_drivers.offline import simulate
 from sim_drivers.plant_config import default_plant, plant_from_dict, PlantConfigError
-from trajectories.campaign import Campaign
+from trajectories.robot_campaign import RobotCampaign
 from trajectories.plan import plan_campaign
 
 with open(sys.argv[1], "rb") as f:
-    campaign = Campaign.from_dict(tomllib.load(f), "campaign.toml").quick()
+    campaign = RobotCampaign.from_dict(tomllib.load(f), "campaign.toml").quick()
 plan = plan_campaign(campaign)
 p = default_plant()
 # the usual friction (eq. 38): the new effect is the only undeclared one
@@ -110,7 +110,7 @@ try:
     error = None
 except PlantConfigError as exc:
     error = str(exc)
-gains = ControllerGains(**campaign.control.gains_kwargs())
+gains = ControllerGains(**campaign.gains_kwargs())
 runs = []
 for i, pl in enumerate(plan.payloads):
     r = simulate(p, plan.reference, gains, payload_mass=pl.mass_kg, payload_arm=pl.arm_m,

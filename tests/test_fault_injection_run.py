@@ -37,8 +37,9 @@ from sim_drivers.plant import JointPlant
 from sim_drivers.plant_config import default_plant
 from tests.conftest import shared_path
 from trajectories import SchemaError
-from trajectories.campaign import MAX_PLAN_CYCLES, Campaign
+from trajectories.campaign import MAX_PLAN_CYCLES
 from trajectories.campaign_file import load_campaign
+from trajectories.robot_campaign import RobotCampaign
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANT = ROOT / "sim_drivers" / "data" / "plant_default.toml"
@@ -60,7 +61,7 @@ def campaign(daq=None, periods=1, n_payloads=2, name="inj"):
         "daq": {"channel": f"test_inj_{os.getpid()}_{next(_chan)}", "quick_stop_cycles": QS,
                 **(daq or {})},
     }
-    return Campaign.from_dict(raw, "inj.toml")
+    return RobotCampaign.from_dict(raw, "inj.toml")
 
 
 def write_campaign(path: Path, periods: int, extra: str = "") -> Path:
@@ -411,8 +412,8 @@ def test_velocity_watchdog_beyond_the_drives_max_motor_speed_is_refused(tmp_path
         daq["limits"] = {"max_velocity": daq_limit}
     c = campaign(daq, n_payloads=1)
     if daq_limit is None:  # the joint's own limit: 30 rad/s, watchdog 1.2 x that
-        c = replace(c, joint=replace(c.joint, limits=replace(c.joint.limits,
-                                                             max_velocity=30.0)))
+        (j,) = c.joints
+        c = replace(c, joints=(replace(j, limits=replace(j.limits, max_velocity=30.0)),))
     with pytest.raises(ConfigError) as e:
         run_campaign(c, out_dir=tmp_path, simulate=default_plant(), yes=True)
     msg = str(e.value)
@@ -460,7 +461,7 @@ def test_emcy_during_the_stop_sequence_is_logged(tmp_path):
 class Rig:
     """A simulated drive on the campaign's channel with its own clock (paced runs)."""
 
-    def __init__(self, c: Campaign, node: int = 1) -> None:
+    def __init__(self, c: RobotCampaign, node: int = 1) -> None:
         plant = JointPlant(default_plant(), 0.001, seed=3)
         plant.reset(0.0)
         self.bus = can.Bus(interface="virtual", channel=c.daq["channel"])

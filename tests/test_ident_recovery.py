@@ -132,15 +132,15 @@ def test_qs_rescanned_after_refinement_recovers_the_plant():
     from ident.refine import refine
     from sim_drivers.offline import simulate
     from sim_drivers.plant_config import load_plant
-    from trajectories.campaign import Campaign
     from trajectories.plan import plan_campaign
+    from trajectories.robot_campaign import RobotCampaign
 
     with open(ROOT / "examples" / "campaign.toml", "rb") as f:
-        campaign = Campaign.from_dict(tomllib.load(f), "examples/campaign.toml").quick()
+        campaign = RobotCampaign.from_dict(tomllib.load(f), "examples/campaign.toml").quick()
     plan = plan_campaign(campaign)
     plant = load_plant(ROOT / "examples" / "plant_rx130l.toml")
     assert plant.effects.position_ripple.enabled
-    gains = ControllerGains(**campaign.control.gains_kwargs())
+    gains = ControllerGains(**campaign.gains_kwargs())
     exps = []
     for i, p in enumerate(plan.payloads):
         r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,

@@ -33,7 +33,7 @@ from daq.runtime.mcaplog import RunLog
 from daq.runtime.mcaprecover import recover_log
 from daq.runtime.runner import run_campaign
 from sim_drivers.plant_config import default_plant
-from trajectories.campaign import Campaign
+from trajectories.robot_campaign import RobotCampaign
 
 NODE_DIR = Path.home() / ".cache" / "jointid-mcap-node"
 NODE_PACKAGES = ("@mcap/core@2", "@mcap/support@1")
@@ -93,7 +93,7 @@ def real_log(tmp_path_factory) -> Path:
                 "heartbeat_timeout_s": 2.0, "max_following_error": 1.0,
                 "chunk_seconds": 0.05},
     }
-    c = Campaign.from_dict(raw, "compat.toml")
+    c = RobotCampaign.from_dict(raw, "compat.toml")
     out = tmp_path_factory.mktemp("compat")
     r = run_campaign(c, out_dir=out, simulate=default_plant(), yes=True)
     assert r.status == "done", r.reason

@@ -66,20 +66,21 @@ _ROBOTS = {"robot3": "examples/campaign_robot3.toml",
 
 
 def _campaigns() -> dict:
-    from trajectories.campaign import Campaign
+    """The single-joint cases, each a [joint] file read as a robot with one moving joint."""
     from trajectories.campaign_file import load_campaign
+    from trajectories.robot_campaign import RobotCampaign
 
     example = load_campaign(ROOT / "examples" / "campaign.toml")
     return {
         "example": example,
         "example_quick": example.quick(),
-        "daq_small": Campaign.from_dict(_DAQ_SMALL, "small.toml"),
+        "daq_small": RobotCampaign.from_dict(_DAQ_SMALL, "small.toml"),
         # the campaign of tests/test_refine_sim.py: the example's slow trapezoids and sine,
         # one payload, no feed-forward
         "refine": replace(example, name="refine-sim", payloads=example.payloads[:1],
                           segments=tuple(example.segments[i] for i in (0, 1, 3)),
-                          control=replace(example.control, feedforward={})),
-        "prismatic": Campaign.from_dict(_PRISMATIC, "slide.toml"),
+                          joints=(replace(example.joints[0], feedforward={}),)),
+        "prismatic": RobotCampaign.from_dict(_PRISMATIC, "slide.toml"),
     }
 
 
@@ -109,6 +110,7 @@ def _freeze() -> None:
     from trajectories.plan import plan_campaign
 
     out = {name: fingerprint(plan_campaign(c).reference) for name, c in _campaigns().items()}
+    # (the cases were Campaign objects of the [joint] format then)
     for name, f in _ROBOTS.items():
         out[name] = fingerprint(plan_robot_campaign(load_any_campaign(ROOT / f)))
     FROZEN.write_text("{\n" + ",\n".join(f"{json.dumps(k)}: {json.dumps(v)}"
@@ -157,40 +159,42 @@ def test_single_joint_plan_is_the_frozen_one(name, frozen, campaigns):
 
 # ----------------------------------------------------------------------------- one model
 def test_a_joint_campaign_is_a_robot_with_one_moving_joint_without_loss(campaigns):
-    from trajectories.robot_campaign import RobotCampaign, SineSegment, TrapezoidSweep
+    from trajectories.robot_campaign import SineSegment, TrapezoidSweep
 
-    c = campaigns["prismatic"]
-    r = RobotCampaign.from_joint_campaign(c)
+    r = campaigns["prismatic"]  # _PRISMATIC, read as a robot with one moving joint
     (j,) = r.joints
     assert r.single_joint and r.robot_file == "" and r.moving == ("joint",)
-    assert (j.kind, j.limits, j.kp, j.kd, j.key, j.drive) == (
-        "prismatic", c.limits, c.control.kp, c.control.kd, "joint", None)
-    assert dict(j.feedforward) == dict(c.control.feedforward)
-    assert r.start == (c.joint.start,) and r.cycle_s == c.cycle_s
-    assert r.control.velocity_cutoff_hz == c.control.velocity_cutoff_hz
+    assert r.plant == "joint"
+    assert (j.kind, j.limits.position, j.limits.max_velocity, j.limits.max_torque, j.kp, j.kd,
+            j.key, j.drive) == ("prismatic", (-0.2, 0.3), 0.4, 900.0, 5000.0, 100.0,
+                                "joint", None)
+    assert dict(j.feedforward) == {"J": 4.0, "MX": 0.0, "MY": 0.0, "Fc": 10.0, "Fv": 3.0}
+    assert r.start == (0.12,) and r.cycle_s == 0.002
+    assert r.control.velocity_cutoff_hz == 100.0
     assert [(p.mass_kg, p.arm_m, p.com) for p in r.payloads] == [
-        (p.mass_kg, p.arm_m, (p.arm_m, 0.0, 0.0)) for p in c.payloads]
-    assert r.name == c.name and r.source == c.source and r.daq == c.daq
+        (0.0, 0.0, (0.0, 0.0, 0.0)), (2.5, 0.0, (0.0, 0.0, 0.0))]
+    assert r.name == "slide" and r.source == "slide.toml" and r.daq == {}
     # the same segments: one trapezoid and one sine kind for both formats, of the only
     # moving joint ("")
-    assert r.segments is c.segments
     assert [type(s) for s in r.segments] == [TrapezoidSweep, SineSegment, TrapezoidSweep]
     assert {s.joint for s in r.segments} == {""} and not r.segments[0].sweep
+    assert r.segments[0].speeds == (0.2, 0.6, 1.0) and r.segments[0].cycles == 2
 
 
 def test_limit_and_torque_messages_name_the_joint_table(campaigns):
     """A [joint] campaign's errors name ``joint.limits.*`` (its file's keys), in one line."""
     from trajectories import LimitError
-    from trajectories.campaign import Payload
     from trajectories.multi import plan_robot_campaign
+    from trajectories.robot_campaign import RobotPayload
 
     c = campaigns["daq_small"]
-    heavy = replace(c, payloads=(Payload(300.0, 1.0),))
+    heavy = replace(c, payloads=(RobotPayload(300.0, (1.0, 0.0, 0.0), arm_m=1.0),))
     with pytest.raises(LimitError, match=r"^payloads\[0\] \(300 kg at 1 m\): segments\[0\] "
                        r"\(sine\): torque [\d.-]+ N m at t = [\d.]+ s exceeds "
                        r"joint\.limits\.max_torque 700 N m$"):
         plan_robot_campaign(heavy)
-    slow = replace(c, joint=replace(c.joint, limits=replace(c.limits, max_velocity=0.5)))
+    (j,) = c.joints
+    slow = replace(c, joints=(replace(j, limits=replace(j.limits, max_velocity=0.5)),))
     with pytest.raises(LimitError, match=r"^segments\[0\] \(sine\): peak velocity 0\.9425 "
                        r"rad/s exceeds joint\.limits\.max_velocity 0\.5 rad/s$"):
         plan_robot_campaign(slow)
@@ -202,7 +206,6 @@ def test_the_joint_robot_regressor_is_the_feedforward_model():
     estimate the planner checks (wherever the joint moves: the regressor's Coulomb column
     has a deadband)."""
     pytest.importorskip("pinocchio")
-    from trajectories.campaign import Campaign
     from trajectories.multi import feedforward_dynamics, plan_robot_campaign
     from trajectories.robot_campaign import RobotCampaign
     from trajectories.robot_model import RobotDynamics, robot_for_campaign
@@ -210,7 +213,7 @@ def test_the_joint_robot_regressor_is_the_feedforward_model():
     raw = json.loads(json.dumps(_DAQ_SMALL))
     raw["control"]["feedforward"] = {"J": 30.0, "MX": 21.0, "MY": -7.5, "Fc": 12.0, "Fv": 4.0}
     raw["segments"].append({"kind": "trapezoid", "speeds": [0.05, 0.6], "range": [-0.8, 0.9]})
-    c = RobotCampaign.from_joint_campaign(Campaign.from_dict(raw, "ff.toml"))
+    c = RobotCampaign.from_dict(raw, "ff.toml")
     robot = robot_for_campaign(c)
     assert robot.moving == ("joint",) and not robot.inertial and robot.source == "ff.toml"
     assert robot.limits["joint"].dq_max == 1.0 and robot.limits["joint"].tau_max == 700.0

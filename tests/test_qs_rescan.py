@@ -17,8 +17,8 @@ from ident.loaders import make_experiment
 from ident.models import IdentModel, LoadDependent, QuadrantCoulomb
 from sim_drivers.offline import simulate
 from sim_drivers.plant_config import load_plant
-from trajectories.campaign import Campaign
 from trajectories.plan import plan_campaign
+from trajectories.robot_campaign import RobotCampaign
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -28,10 +28,10 @@ def runs():
     """Two payload runs of the quick example campaign, simulated offline, and their
     reference positions."""
     with open(ROOT / "examples" / "campaign.toml", "rb") as f:
-        campaign = Campaign.from_dict(tomllib.load(f), "examples/campaign.toml").quick()
+        campaign = RobotCampaign.from_dict(tomllib.load(f), "examples/campaign.toml").quick()
     plan = plan_campaign(campaign)
     plant = load_plant(ROOT / "examples" / "plant_rx130l.toml")
-    gains = ControllerGains(**campaign.control.gains_kwargs())
+    gains = ControllerGains(**campaign.gains_kwargs())
     exps = []
     for i, p in enumerate(plan.payloads[:2]):
         r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,

@@ -75,7 +75,7 @@ def _effect_torque(kind: str, run, plant, **kw) -> np.ndarray:
 @functools.cache
 def _run(seed: int, payload: int):
     plan = _plan()
-    gains = ControllerGains(**_campaign().control.gains_kwargs())
+    gains = ControllerGains(**_campaign().gains_kwargs())
     pl = plan.payloads[payload]
     p = _usual_plant()
     return p, simulate(p, plan.reference, gains, payload_mass=pl.mass_kg,

@@ -31,8 +31,8 @@ from ident.refine import refine
 from ident.signals import Signals
 from sim_drivers.offline import simulate
 from sim_drivers.plant_config import default_plant
-from trajectories.campaign import Campaign
 from trajectories.plan import plan_campaign
+from trajectories.robot_campaign import RobotCampaign
 
 SETTINGS = dict(cutoff_hz=25.0, decimation=20, dq_min=0.02)
 
@@ -107,8 +107,8 @@ periods = 2
 
 
 @functools.lru_cache(maxsize=1)
-def _campaign() -> Campaign:
-    return Campaign.from_dict(tomllib.loads(CAMPAIGN), "tests/test_refine_sim.py")
+def _campaign() -> RobotCampaign:
+    return RobotCampaign.from_dict(tomllib.loads(CAMPAIGN), "tests/test_refine_sim.py")
 
 
 @functools.lru_cache(maxsize=1)
@@ -126,7 +126,7 @@ def _usual_plant():
 
 def _signals(params, payloads) -> Signals:
     plan = _plan()
-    gains = ControllerGains(**_campaign().control.gains_kwargs())
+    gains = ControllerGains(**_campaign().gains_kwargs())
     parts = []
     for i, pl in enumerate(payloads):
         r = simulate(params, plan.reference, gains, payload_mass=pl.mass_kg,

@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from trajectories import LimitError, SchemaError, TrajectoryError
-from trajectories.campaign import MAX_PLAN_CYCLES, Campaign, JointLimits
+from trajectories.campaign import MAX_PLAN_CYCLES, JointLimits
 from trajectories.campaign_file import load_campaign
 from trajectories.excitation import assess_robot_campaign, optimise_campaign, quality
 from trajectories.multi import multisine_ratio, plan_robot_campaign
@@ -84,18 +84,33 @@ def test_example_robot_campaign_plans_within_limits_from_and_to_rest():
     assert "segments[3] (multisine)" in text and "0-10 % of vmax" in text
 
 
-def test_single_joint_campaigns_load_as_before():
+def test_single_joint_campaigns_load_as_a_robot_with_one_moving_joint():
     with SINGLE.open("rb") as f:
         raw = tomllib.load(f)
     c = campaign_from_dict(raw, str(SINGLE))
-    assert isinstance(c, Campaign)
-    assert c == load_campaign(SINGLE) == Campaign.from_dict(raw, str(SINGLE))
+    assert isinstance(c, RobotCampaign)
+    assert c == load_campaign(SINGLE) == RobotCampaign.from_dict(raw, str(SINGLE))
+    assert c.plant == "joint" and c.moving == ("joint",) and c.joints[0].drive is None
+    robot = campaign_from_dict(raw_robot3(), "arm.toml")
+    assert robot.plant == "arm" and all(j.drive is not None for j in robot.joints)
 
 
-def test_robot_campaigns_are_refused_by_the_single_joint_reader():
-    with pytest.raises(SchemaError, match=r"^arm\.toml: robot: expected a single-joint "
-                       r"campaign \(\[joint\]\) here; .*campaign_from_dict$"):
-        Campaign.from_dict(raw_robot3(), "arm.toml")
+def test_quick_is_for_one_moving_joint_of_trapezoids_and_sines():
+    c = load_campaign(SINGLE)
+    q = c.quick()
+    assert q.name == f"{c.name} (quick)" and q.joints == c.joints and q.payloads == c.payloads
+    assert [type(s) for s in q.segments] == [type(s) for s in c.segments]
+    assert all(s.cycles == 1 and len(s.speeds) == 1 for s in q.segments
+               if isinstance(s, TrapezoidSweep))
+    assert plan_robot_campaign(q).run_duration_s < 0.3 * plan_robot_campaign(c).run_duration_s
+    with pytest.raises(SchemaError, match=r"^arm\.toml: robot\.moving: expected one moving "
+                       r"joint for a shortened campaign \(--quick\), got \['j1', 'j2', 'j3'\]$"):
+        campaign_from_dict(raw_robot3(), "arm.toml").quick()
+    one = replace(campaign_from_dict(raw_robot3(), "arm.toml"), joints=c.joints)
+    with pytest.raises(SchemaError, match=r"^arm\.toml: segments\[3\]\.kind: expected "
+                       r"'trapezoid' or 'sine' in a shortened campaign \(--quick\), "
+                       r"got 'multisine'$"):
+        one.quick()
 
 
 def test_joint_and_robot_together_are_refused():

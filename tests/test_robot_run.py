@@ -207,6 +207,25 @@ def test_single_joint_campaign_needs_a_plant_file(tmp_path):
     assert "expected a plant file" in r.stderr and len(r.stderr.strip().splitlines()) == 1
 
 
+def test_the_simulated_plant_is_the_one_the_campaign_asks_for(tmp_path):
+    """One campaign type, two simulated plants chosen by the data: a [joint] file's campaign
+    (no robot file) asks for a joint plant per drive from a plant file, a robot file's for
+    its arm; the other is refused in one line before anything is created."""
+    from sim_drivers.plant_config import default_plant
+    from trajectories.campaign_file import load_campaign
+
+    joint = load_campaign(ROOT / "examples" / "campaign.toml")
+    arm = arm3_campaign()
+    assert (joint.plant, arm.plant) == ("joint", "arm")
+    with pytest.raises(ConfigError, match=r"campaign\.toml: --simulate: expected a plant "
+                       r"file for a single-joint campaign$"):
+        run_campaign(joint, out_dir=tmp_path / "a", simulate=True, yes=True)
+    with pytest.raises(ConfigError, match=r"^arm3-test\.toml: --simulate: a robot campaign is "
+                       r"simulated from its robot file \(ArmParams\), got a plant file$"):
+        run_campaign(arm, out_dir=tmp_path / "b", simulate=default_plant(), yes=True)
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
 def test_example_robot_campaign_is_within_the_bus_budget():
     """examples/campaign_robot3.toml runs at 1 kHz: its drives are spread over buses that
     fit."""

@@ -30,7 +30,7 @@ from sim_drivers.plant import JointPlant
 from sim_drivers.plant_config import default_plant
 from sim_drivers.simbus import SimNetwork
 from tests.conftest import shared_path
-from trajectories.campaign import Campaign
+from trajectories.robot_campaign import RobotCampaign
 
 _chan = itertools.count()
 NODE = 3
@@ -54,7 +54,7 @@ def campaign(daq=None, periods=1, scaling=None, clock="lockstep"):
                 "drives": [{"node_id": NODE, "scaling": scaling or SCALING}],
                 **(daq or {})},
     }
-    return Campaign.from_dict(raw, "safety.toml")
+    return RobotCampaign.from_dict(raw, "safety.toml")
 
 
 class Rig:
@@ -63,7 +63,7 @@ class Rig:
     by the master's SYNCs (heartbeats paced by SYNC, the drive's watchdogs on simulated
     time)."""
 
-    def __init__(self, c: Campaign, clocked: bool = False) -> None:
+    def __init__(self, c: RobotCampaign, clocked: bool = False) -> None:
         plant = JointPlant(default_plant(), 0.001, seed=3)
         plant.reset(0.0)
         self.bus = self.sim = None

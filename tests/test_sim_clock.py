@@ -28,7 +28,7 @@ from sim_drivers.plant import JointPlant
 from sim_drivers.plant_config import default_plant
 from sim_drivers.simbus import SimBus, SimNetwork, SyncPeriodicTask
 from sim_drivers.testing import unique_channel
-from trajectories.campaign import Campaign
+from trajectories.robot_campaign import RobotCampaign
 
 NODE = 5
 MASTER = 127
@@ -170,7 +170,7 @@ def campaign(daq=None, periods=2):
         "daq": {"channel": f"test_clock_{next(_chan)}", "quick_stop_cycles": 2,
                 **(daq or {})},
     }
-    return Campaign.from_dict(raw, "clocked.toml")
+    return RobotCampaign.from_dict(raw, "clocked.toml")
 
 
 def test_simulated_lockstep_run_paces_heartbeats_by_sync_and_a_stall_is_nothing(tmp_path):

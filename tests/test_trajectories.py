@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -13,14 +14,11 @@ from hypothesis import strategies as st
 
 from trajectories import LimitError, SchemaError
 from trajectories.campaign import (
-    Campaign,
-    ControlSettings,
     Joint,
     JointLimits,
-    Payload,
     SineSegment,
     TrapezoidSweep,
-    shorten,
+    shorten_segments,
 )
 from trajectories.campaign_file import load_campaign
 from trajectories.plan import (
@@ -29,6 +27,7 @@ from trajectories.plan import (
     plan_campaign,
     plan_segment,
 )
+from trajectories.robot_campaign import RobotCampaign, RobotControl, RobotJoint, RobotPayload
 from trajectories.sampled import coverage
 
 EXAMPLE = example_path("campaign.toml")
@@ -147,9 +146,9 @@ def test_mixed_campaigns_are_continuous_and_return_to_start(lim, dt, data):
             speed = data.draw(st.floats(smin, 1.0), label="speed")
             segments.append(TrapezoidSweep("", (speed,), (a, b), dwell_s=0.1))
     start = data.draw(st.floats(lo, hi), label="start")
-    joint = Joint("revolute", lim, start)
-    campaign = Campaign("prop", joint, ControlSettings(dt, 100.0, 1.0),
-                        (Payload(0.0, 1.0),), tuple(segments))
+    joint = RobotJoint("joint", "revolute", lim, None, 100.0, 1.0, table="joint")
+    campaign = RobotCampaign("prop", "", (joint,), (start,), {}, RobotControl(dt),
+                             (RobotPayload(0.0, (1.0, 0.0, 0.0), arm_m=1.0),), tuple(segments))
     plan = plan_campaign(campaign)
     ref = plan.reference
     assert_valid(ref, joint)
@@ -218,8 +217,8 @@ def test_sine_peak_velocity_message():
 
 def test_torque_estimate_beyond_max_torque_is_rejected():
     c = load_campaign(EXAMPLE)
-    payloads = (c.payloads[0], Payload(80.0, 1.277))
-    heavy = Campaign(c.name, c.joint, c.control, payloads, c.segments, c.daq)
+    payloads = (c.payloads[0], RobotPayload(80.0, (1.277, 0.0, 0.0), arm_m=1.277))
+    heavy = replace(c, payloads=payloads)
     with pytest.raises(LimitError, match=r"^payloads\[1\] \(80 kg at 1.277 m\).*max_torque 700"):
         plan_campaign(heavy)
 
@@ -233,10 +232,10 @@ def example_plan():
 def test_example_plan_is_valid_and_starts_and_ends_at_start(example_plan):
     ref = example_plan.reference
     campaign = load_campaign(EXAMPLE)
-    joint = campaign.joint
+    (joint,), (start,) = campaign.joints, campaign.start
     assert_valid(ref, joint)
-    assert ref.q[0] == joint.start == pytest.approx(0.7)
-    assert ref.q[-1] == pytest.approx(joint.start, abs=1e-9)
+    assert ref.q[0] == start == pytest.approx(0.7)
+    assert ref.q[-1] == pytest.approx(start, abs=1e-9)
     assert ref.segment_names == ref.segments == (
         "segments[0] (trapezoid)", "segments[1] (trapezoid)", "segments[2] (trapezoid)",
         "segments[3] (sine)", "return")
@@ -284,17 +283,17 @@ def test_quick_campaign_is_short_with_slow_moves_both_ways():
     q = c.quick()
     plan = plan_campaign(q)
     ref = plan.reference
-    assert_valid(ref, q.joint)
+    assert_valid(ref, q.joints[0])
     assert ref.duration_s <= 0.3 * plan_campaign(c).reference.duration_s
     # the sine keeps the whole range covered (gravity and position effects stay visible)
-    lo, hi = c.joint.limits.position
+    lo, hi = c.joints[0].limits.position
     assert ref.q.max() - ref.q.min() >= 0.8 * (hi - lo)
     slow = (np.abs(ref.dq) > 0.01 * 1.2) & (np.abs(ref.dq) < 0.1 * 1.2)
     assert (slow & (ref.dq > 0)).sum() * ref.cycle_s > 1.0
     assert (slow & (ref.dq < 0)).sum() * ref.cycle_s > 1.0
     assert q.payloads == c.payloads and q.control == c.control
     with pytest.raises(SchemaError, match="factor"):
-        shorten(c, 0.0)
+        shorten_segments(c.segments, c.joints[0].limits, 0.0)
 
 
 def test_coverage_is_the_union_of_visited_intervals():

@@ -1,15 +1,16 @@
-"""The campaign description: joint, limits, control settings, payloads and excitation segments.
+"""The single-joint campaign format (``[joint]``): its schema, limits and excitation segments.
 
 (Past 600 lines: one file format -- its documented dataclasses, schema, size check and quick
 form; the robot format reuses its limits, segment fields and size check.)
 
-A campaign is read from a TOML file by :func:`trajectories.campaign_file.load_campaign` and
-validated here by :meth:`Campaign.from_dict` (pure: dictionaries in, frozen dataclasses out). Files
-with a ``[robot]`` table instead of ``[joint]`` are multi-joint campaigns
-(:mod:`trajectories.robot_campaign`; :func:`~trajectories.robot_campaign.campaign_from_dict`
-reads either format); :meth:`~trajectories.robot_campaign.RobotCampaign.from_joint_campaign`
-reads a campaign of this format as a robot with one moving joint, which the one planner
-(:func:`trajectories.multi.plan_robot_campaign`) plans. Every
+There is one campaign type, :class:`~trajectories.robot_campaign.RobotCampaign`: a file of
+this format is read by :func:`trajectories.campaign_file.load_campaign`
+(:func:`~trajectories.robot_campaign.campaign_from_dict`) into a robot campaign with one
+moving joint named ``joint``, without loss. This module validates the format (pure:
+dictionaries in, frozen dataclasses out; the validated file, ``_JointCampaign``, is private
+to :mod:`trajectories`) and holds what both formats share: :class:`JointLimits`, the
+``trapezoid`` and ``sine`` segments, the sanity bounds, the plan-size check and the
+shortening of quick runs (:func:`shorten_segments`). Every
 mistake raises :class:`trajectories.SchemaError` with one line naming the source, the dotted
 key and the expected value, e.g.::
 
@@ -80,16 +81,13 @@ SANE_LIMITS = {"position": 1e4, "max_velocity": 1e3, "max_acceleration": 1e5,
 MAX_PLAN_CYCLES = 3_600_000
 
 __all__ = [
-    "Campaign",
-    "ControlSettings",
     "FEEDFORWARD_KEYS",
     "Joint",
     "JointLimits",
-    "Payload",
     "Segment",
     "SineSegment",
     "TrapezoidSweep",
-    "shorten",
+    "shorten_segments",
 ]
 
 #: feed-forward keys of ``[control.feedforward]`` and the matching ControllerGains fields
@@ -155,9 +153,9 @@ class Joint:
 
 
 @dataclass(frozen=True)
-class ControlSettings:
-    """Control cycle and position-loop gains (converted to
-    ``daq.protocol.control.ControllerGains`` by daq).
+class _ControlSettings:
+    """``[control]`` of a ``[joint]`` file (the robot campaign's joint carries the gains and
+    feed-forward, :class:`~trajectories.robot_campaign.RobotJoint`).
 
     Attributes
     ----------
@@ -180,17 +178,11 @@ class ControlSettings:
     feedforward: Mapping[str, float] = field(default_factory=dict)
     velocity_cutoff_hz: float = 100.0
 
-    def gains_kwargs(self) -> dict[str, float]:
-        """Keyword arguments for ``daq.protocol.control.ControllerGains(**kwargs)``."""
-        out = {"kp": self.kp, "kd": self.kd, "velocity_cutoff_hz": self.velocity_cutoff_hz}
-        for key, name in FEEDFORWARD_KEYS.items():
-            out[name] = float(self.feedforward.get(key, 0.0))
-        return out
-
 
 @dataclass(frozen=True)
-class Payload:
-    """An additional mass fixed on the arm (paper IV.C, eq. 32-34).
+class _Payload:
+    """``[[payloads]]`` of a ``[joint]`` file: an additional mass fixed on the arm (paper
+    IV.C, eq. 32-34; a :class:`~trajectories.robot_campaign.RobotPayload` with ``arm_m``).
 
     Attributes
     ----------
@@ -292,15 +284,17 @@ Segment = TrapezoidSweep | SineSegment
 
 
 @dataclass(frozen=True)
-class Campaign:
-    """A validated campaign (immutable).
+class _JointCampaign:
+    """A validated ``[joint]`` file (immutable), private: read into the one campaign type,
+    a :class:`~trajectories.robot_campaign.RobotCampaign` with one moving joint, by
+    :func:`~trajectories.robot_campaign.campaign_from_dict`.
 
     Attributes
     ----------
     name : str
     joint : Joint
-    control : ControlSettings
-    payloads : tuple of Payload
+    control : _ControlSettings
+    payloads : tuple of _Payload
         One run per payload, in file order.
     segments : tuple of Segment
         The excitation, repeated identically in every run.
@@ -312,8 +306,8 @@ class Campaign:
 
     name: str
     joint: Joint
-    control: ControlSettings
-    payloads: tuple[Payload, ...]
+    control: _ControlSettings
+    payloads: tuple[_Payload, ...]
     segments: tuple[Segment, ...]
     daq: Mapping[str, Any] = field(default_factory=dict)
     source: str = ""
@@ -327,16 +321,8 @@ class Campaign:
     def limits(self) -> JointLimits:
         return self.joint.limits
 
-    def quick(self) -> Campaign:
-        """A short version for smoke runs and demos (about 25 s per payload run).
-
-        See :func:`shorten`; keeps low-velocity moves in both directions and, through the
-        sines, the whole position range.
-        """
-        return shorten(self, QUICK_FACTOR)
-
     @classmethod
-    def from_dict(cls, raw: Mapping[str, Any], source: str = "") -> Campaign:
+    def from_dict(cls, raw: Mapping[str, Any], source: str = "") -> _JointCampaign:
         """Validate a parsed TOML mapping and build the campaign.
 
         Parameters
@@ -352,9 +338,6 @@ class Campaign:
             Unknown key, wrong type, missing field, non-positive limit, segment outside the
             position range...; the one-line message names the key and the expected value.
         """
-        if isinstance(raw, Mapping) and "robot" in raw and "joint" not in raw:
-            raise fail(source, "robot", "a single-joint campaign ([joint]) here; a [robot] "
-                       "campaign is read by trajectories.robot_campaign.campaign_from_dict")
         top = _CAMPAIGN.validate(raw, "", source)
         j = top["joint"]
         lim = j["limits"]
@@ -378,14 +361,14 @@ class Campaign:
 
         c = top["control"]
         ff = c["feedforward"] or {k: 0.0 for k in FEEDFORWARD_KEYS}
-        control = ControlSettings(
+        control = _ControlSettings(
             cycle_s=c["cycle_s"],
             kp=c["kp"],
             kd=c["kd"],
             feedforward={k: float(ff[k]) for k in FEEDFORWARD_KEYS},
             velocity_cutoff_hz=c["velocity_cutoff_hz"],
         )
-        payloads = tuple(Payload(p["mass_kg"], p["arm_m"]) for p in top["payloads"])
+        payloads = tuple(_Payload(p["mass_kg"], p["arm_m"]) for p in top["payloads"])
 
         segments: list[Segment] = []
         for i, s in enumerate(top["segments"]):
@@ -569,12 +552,15 @@ def _segment(s: dict, key: str, source: str, limits: JointLimits, rng: str) -> S
 
 
 # --------------------------------------------------------------------------- quick runs
-#: factor used by :meth:`Campaign.quick`
+#: factor of :meth:`trajectories.robot_campaign.RobotCampaign.quick`
 QUICK_FACTOR = 0.12
 
 
-def shorten(campaign: Campaign, factor: float) -> Campaign:
-    """Scale a campaign down for quick runs; the result stays within the joint limits.
+def shorten_segments(segments: Sequence[Segment], limits: JointLimits,
+                     factor: float) -> tuple[Segment, ...]:
+    """Scale the segments of one joint with ``limits`` down for quick runs
+    (:meth:`trajectories.robot_campaign.RobotCampaign.quick`); the result stays within the
+    limits.
 
     - trapezoid segments: only the lowest speed is kept (low-velocity moves in both
       directions, where dry friction changes), across the range span x ``factor`` around
@@ -585,29 +571,37 @@ def shorten(campaign: Campaign, factor: float) -> Campaign:
 
     Parameters
     ----------
-    campaign : Campaign
+    segments : sequence of TrapezoidSweep or SineSegment
+    limits : JointLimits
     factor : float
         In (0, 1]: the share of each trapezoid's range kept.
 
     Returns
     -------
-    Campaign
-        A new campaign, same joint, control and payloads.
+    tuple of segments
+
+    Raises
+    ------
+    trajectories.SchemaError
+        ``factor`` outside (0, 1], or a segment that is neither a trapezoid nor a sine.
     """
     if not 0.0 < factor <= 1.0:
         raise SchemaError(f"shorten: factor: expected a number in (0, 1], got {factor!r}")
-    lim = campaign.joint.limits
+    lim = limits
     out: list[Segment] = []
-    for seg in campaign.segments:
+    for seg in segments:
         if isinstance(seg, TrapezoidSweep):
             mid = 0.5 * (seg.range[0] + seg.range[1])
             half = 0.5 * (seg.range[1] - seg.range[0]) * factor
             out.append(replace(seg, range=(mid - half, mid + half), speeds=(min(seg.speeds),),
                                cycles=1, dwell_s=seg.dwell_s * factor))
-        else:
+        elif isinstance(seg, SineSegment):
             a = seg.amplitude
             w = min(0.9 * lim.max_velocity / a, math.sqrt(0.9 * lim.max_acceleration / a),
                     (0.9 * lim.max_jerk / a) ** (1.0 / 3.0))
             w = max(w, seg.omega)  # never slower than the original (its peaks fit already)
             out.append(replace(seg, frequency_hz=w / (2.0 * math.pi), periods=1))
-    return replace(campaign, segments=tuple(out), name=f"{campaign.name} (quick)")
+        else:
+            raise SchemaError(f"shorten: {getattr(seg, 'kind', type(seg).__name__)} segment: "
+                              f"expected trapezoid and sine segments only")
+    return tuple(out)

@@ -1,11 +1,12 @@
-"""Read a campaign TOML file; validation is in `trajectories.campaign.Campaign.from_dict`."""
+"""Read a campaign TOML file of either format into the one campaign type,
+:class:`~trajectories.robot_campaign.RobotCampaign` (validation:
+:func:`trajectories.robot_campaign.campaign_from_dict`)."""
 
 from __future__ import annotations
 
 import tomllib
 from pathlib import Path
 
-from trajectories.campaign import Campaign
 from trajectories.robot_campaign import RobotCampaign, campaign_from_dict
 
 from . import CampaignFileError
@@ -13,17 +14,19 @@ from . import CampaignFileError
 __all__ = ["load_any_campaign", "load_campaign"]
 
 
-def load_campaign(path: str | Path) -> Campaign:
-    """Load and validate a campaign file.
+def load_campaign(path: str | Path) -> RobotCampaign:
+    """Load and validate a campaign file: a ``[robot]`` file, or a ``[joint]`` file read as a
+    robot with one moving joint (no robot file; its drives are those of ``[daq]``).
 
     Parameters
     ----------
     path : str or Path
-        A TOML file in the format documented in :mod:`trajectories.campaign`.
+        A TOML file in the format documented in :mod:`trajectories.robot_campaign` or
+        :mod:`trajectories.campaign`.
 
     Returns
     -------
-    Campaign
+    RobotCampaign
         Frozen; ``campaign.source`` is ``str(path)``.
 
     Raises
@@ -36,14 +39,11 @@ def load_campaign(path: str | Path) -> Campaign:
     OSError
         The file cannot be read.
     """
-    return Campaign.from_dict(_read(path), source=str(path))
-
-
-def load_any_campaign(path: str | Path) -> Campaign | RobotCampaign:
-    """Load either campaign format: a ``[joint]`` file (:class:`Campaign`) or a ``[robot]``
-    file (:class:`~trajectories.robot_campaign.RobotCampaign`). Errors as
-    :func:`load_campaign`."""
     return campaign_from_dict(_read(path), source=str(path))
+
+
+#: the former name of :func:`load_campaign` (which reads both formats)
+load_any_campaign = load_campaign
 
 
 def _read(path: str | Path) -> dict:

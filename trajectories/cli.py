@@ -21,11 +21,9 @@ import argparse
 from dataclasses import replace
 from pathlib import Path
 
-from . import TrajectoryError
-from .campaign_file import load_any_campaign
+from .campaign_file import load_campaign
 from .excitation import assess_robot_campaign
 from .multi import feedforward_dynamics
-from .robot_campaign import RobotCampaign, as_robot_campaign
 from .robot_model import OPTIMISE_EVALUATIONS, prepare_robot_campaign, robot_for_campaign
 from .sampled import BANDS, RobotPlan
 
@@ -43,8 +41,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--plot", type=Path, metavar="FILE.png",
                    help="draw position, velocity and acceleration against time")
     p.add_argument("--quick", action="store_true",
-                   help="plan the shortened campaign used by quick runs (Campaign.quick; "
-                   "single-joint campaigns)")
+                   help="plan the shortened campaign used by quick runs (RobotCampaign.quick; "
+                   "one moving joint, trapezoids and sines)")
     p.add_argument("--no-optimise", action="store_true",
                    help="robot campaigns: play the multi-sines as written even where "
                    "optimise = true")
@@ -53,15 +51,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``jointid plan``; returns the exit code."""
-    campaign = load_any_campaign(args.campaign)
-    if isinstance(campaign, RobotCampaign):
-        if args.quick:
-            raise TrajectoryError(f"{campaign.source}: --quick: expected a single-joint "
-                                  f"campaign (robot campaigns have no shortened form)")
-    elif args.quick:
-        campaign = campaign.quick()
     # one path: a [joint] campaign is a robot with one moving joint
-    rc = as_robot_campaign(campaign)
+    rc = load_campaign(args.campaign)
+    if args.quick:
+        rc = rc.quick()
     robot = robot_for_campaign(rc)
     played, dyn, results = prepare_robot_campaign(rc, robot=robot,
                                                   optimise=not args.no_optimise)

@@ -4,10 +4,9 @@
 public planning functions belong together; the result types live in
 :mod:`trajectories.sampled`, the Fourier numerics in :mod:`trajectories.fourier`.)
 
-A :class:`~trajectories.robot_campaign.RobotCampaign` -- or a ``[joint]``
-:class:`~trajectories.campaign.Campaign`, read as a robot with one moving joint
-(:meth:`~trajectories.robot_campaign.RobotCampaign.from_joint_campaign`) -- becomes one sampled
-reference of every moving joint, run once per payload:
+A :class:`~trajectories.robot_campaign.RobotCampaign` -- of either file format: a ``[joint]``
+file is read as a robot with one moving joint -- becomes one sampled reference of every
+moving joint, run once per payload:
 
 - every run starts at rest at the campaign's start pose and ends there at rest (a final
   ``return`` move at ``POSITIONING_SPEED``);
@@ -58,7 +57,7 @@ import numpy as np
 import ruckig
 
 from . import LimitError, TrajectoryError
-from .campaign import Campaign, JointLimits, SineSegment
+from .campaign import JointLimits, SineSegment
 from .fourier import (
     _ratios,
     default_coefficients,
@@ -75,7 +74,6 @@ from .robot_campaign import (
     RobotPayload,
     RobotSegment,
     TrapezoidSweep,
-    as_robot_campaign,
 )
 from .sampled import (
     BANDS,
@@ -651,15 +649,15 @@ def plan_robot(segments: Sequence[RobotSegment], names: Sequence[str],
     return plan
 
 
-def plan_robot_campaign(campaign: RobotCampaign | Campaign, *,
+def plan_robot_campaign(campaign: RobotCampaign, *,
                         inverse_dynamics: InverseDynamics | None = None) -> RobotPlan:
     """Plan a campaign (one reference, run once per payload): the one plan path.
 
     Parameters
     ----------
-    campaign : RobotCampaign or Campaign
-        A ``[joint]`` campaign is planned as a robot with one moving joint
-        (:meth:`RobotCampaign.from_joint_campaign`); ``plan.reference`` is its 1-D view.
+    campaign : RobotCampaign
+        Either file format (a ``[joint]`` file: a robot with one moving joint, no robot
+        file); with one moving joint ``plan.reference`` is its 1-D view.
     inverse_dynamics : callable, optional
         ``(q, dq, ddq, payload) -> tau (n, k)`` [N m] of the robot model; when given, every
         payload run's torque is checked against ``max_torque`` (:func:`check_torques`) and
@@ -677,13 +675,13 @@ def plan_robot_campaign(campaign: RobotCampaign | Campaign, *,
         payload run's torque would exceed ``max_torque``; the message names the segment (and
         payload), the joint's table and the limit.
     """
-    rc = as_robot_campaign(campaign)
-    if inverse_dynamics is None and rc.single_joint:
-        inverse_dynamics = feedforward_dynamics(rc.joints)
-    plan = plan_robot(rc.segments, rc.moving, rc.limits, rc.start, rc.cycle_s, name=rc.name,
-                      payloads=rc.payloads, units=tuple(j.unit for j in rc.joints),
-                      keys=tuple(j.key for j in rc.joints))
+    if inverse_dynamics is None and campaign.single_joint:
+        inverse_dynamics = feedforward_dynamics(campaign.joints)
+    c = campaign
+    plan = plan_robot(c.segments, c.moving, c.limits, c.start, c.cycle_s, name=c.name,
+                      payloads=c.payloads, units=tuple(j.unit for j in c.joints),
+                      keys=tuple(j.key for j in c.joints))
     if inverse_dynamics is not None:
-        peaks = check_torques(plan, inverse_dynamics, rc.payloads)
+        peaks = check_torques(plan, inverse_dynamics, campaign.payloads)
         plan = replace(plan, peak_torque=tuple(tuple(float(x) for x in row) for row in peaks))
     return plan

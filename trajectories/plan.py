@@ -4,8 +4,9 @@ There is one plan path (:func:`trajectories.multi.plan_robot_campaign`) and one 
 (:class:`~trajectories.sampled.RobotPlan`); this module keeps the names single-joint callers
 use:
 
-- :func:`plan_campaign` plans a :class:`~trajectories.campaign.Campaign` through it; the
-  result's ``.reference`` is the joint's 1-D :class:`~trajectories.sampled.Reference`;
+- :func:`plan_campaign` plans a campaign of one moving joint (a ``[joint]`` file's
+  :class:`~trajectories.robot_campaign.RobotCampaign`) through it; the result's
+  ``.reference`` is the joint's 1-D :class:`~trajectories.sampled.Reference`;
 - :func:`plan_segment` plans one segment of a joint alone (tests, diagnostics).
 
 The plans are those of the former single-joint planner sample for sample (regression test:
@@ -14,9 +15,9 @@ The plans are those of the former single-joint planner sample for sample (regres
 
 from __future__ import annotations
 
-from .campaign import Campaign, Joint, Segment
+from .campaign import Joint, Segment
 from .multi import G, plan_robot, plan_robot_campaign
-from .robot_campaign import JOINT_NAME
+from .robot_campaign import JOINT_NAME, RobotCampaign
 from .sampled import (
     BANDS,
     MOVING_FRACTION,
@@ -45,18 +46,18 @@ CampaignPlan = RobotPlan
 PlanSummary = RobotPlanSummary
 
 
-def plan_campaign(campaign: Campaign) -> RobotPlan:
-    """Plan a ``[joint]`` campaign as a robot with one moving joint.
+def plan_campaign(campaign: RobotCampaign) -> RobotPlan:
+    """Plan a campaign of one moving joint (a ``[joint]`` file) as the robot it is.
 
     Parameters
     ----------
-    campaign : Campaign
+    campaign : RobotCampaign
 
     Returns
     -------
     RobotPlan
         One joint; ``.reference`` sampled every ``campaign.cycle_s`` from t = 0, at rest at
-        ``campaign.joint.start`` at both ends; run once per payload.
+        ``campaign.start`` at both ends; run once per payload.
 
     Raises
     ------

@@ -1,13 +1,13 @@
-"""The robot campaign: a multi-joint arm, its drives, limits, payloads and coordinated excitation.
+"""The one campaign type: a robot -- its moving joints, drives, limits, payloads and excitation.
 
 (Past 600 lines: one file format -- its documented dataclasses, schema and cross-checks,
 and the reading of a ``[joint]`` campaign as a robot with one moving joint; split, the format
 would be scattered.)
 
-A campaign file has either a ``[joint]`` table (the single-joint format of
-:mod:`trajectories.campaign`, unchanged) or a ``[robot]`` table (this module).
-:func:`campaign_from_dict` dispatches on which one is present; :meth:`RobotCampaign.from_dict`
-validates a robot campaign (pure: dictionaries in, frozen dataclasses out). Every mistake
+A campaign file has either a ``[joint]`` table (the single-joint format, validated by
+:mod:`trajectories.campaign`) or a ``[robot]`` table (this module); both are read into a
+:class:`RobotCampaign`. :func:`campaign_from_dict` (:meth:`RobotCampaign.from_dict`)
+dispatches on which one is present (pure: dictionaries in, frozen dataclasses out). Every mistake
 raises :class:`trajectories.SchemaError` with one line naming the source and the dotted key::
 
     arm.toml: robot.joints.j2.limits.max_velocity: expected a number > 0 <= 1000 [rad/s or m/s],
@@ -70,9 +70,13 @@ description in docs/campaign-robot.md)::
     dwell_s = 0.5
     [daq]                             # optional, kept raw for daq/
 
-A ``[joint]`` campaign is read as a robot campaign with one moving joint, without loss, by
-:meth:`RobotCampaign.from_joint_campaign` (no robot file; the one planner,
-:func:`trajectories.multi.plan_robot_campaign`, takes either).
+There is one campaign type: a ``[joint]`` file is read by :func:`campaign_from_dict` (and
+:meth:`RobotCampaign.from_dict`) into a :class:`RobotCampaign` with one moving joint, without
+loss -- the joint named ``joint``, without a drive of its own (its drives are those of
+``[daq]``), carrying the gains and ``[control.feedforward]``; payloads with their lever arm
+``arm_m``; no robot file (:attr:`RobotCampaign.plant` ``"joint"``). The one planner,
+:func:`trajectories.multi.plan_robot_campaign`, and the runtime (:mod:`daq.runtime`) take
+only this type.
 
 The payload inertia is given about the payload's centre of mass, in the flange frame.
 The robot file itself is read by :func:`trajectories.robot.load_robot` (not here: this
@@ -83,21 +87,24 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 # the single-joint schema's pieces: the same limits table, raw tables, name check, segment
 # fields and plan-size check
 from .campaign import (
     _LIMITS,
-    Campaign,
+    FEEDFORWARD_KEYS,
+    QUICK_FACTOR,
     JointLimits,
     SineSegment,
     TrapezoidSweep,
+    _JointCampaign,
     _nonempty,
     _RawTable,
     check_plan_size,
     min_duration_s,
+    shorten_segments,
 )
 from .campaign import _SINE as _JOINT_SINE
 from .campaign import _TRAPEZOID as _JOINT_TRAPEZOID
@@ -115,7 +122,6 @@ __all__ = [
     "JOINT_NAME",
     "SineSegment",
     "TrapezoidSweep",
-    "as_robot_campaign",
     "campaign_from_dict",
 ]
 
@@ -181,6 +187,18 @@ class RobotJoint:
     def key(self) -> str:
         """Dotted key of the joint's table (``joint`` or ``robot.joints.<name>``)."""
         return self.table or f"robot.joints.{self.name}"
+
+    @property
+    def revolute(self) -> bool:
+        return self.kind == "revolute"
+
+    def gains_kwargs(self, velocity_cutoff_hz: float) -> dict[str, float]:
+        """Keyword arguments for ``daq.protocol.control.ControllerGains(**kwargs)``: the
+        joint's gains, the cut-off [Hz] and its feed-forward model (0 where not given)."""
+        out = {"kp": self.kp, "kd": self.kd, "velocity_cutoff_hz": velocity_cutoff_hz}
+        for key, name in FEEDFORWARD_KEYS.items():
+            out[name] = float(self.feedforward.get(key, 0.0))
+        return out
 
 
 @dataclass(frozen=True)
@@ -314,7 +332,7 @@ class RobotCampaign:
     name : str
     robot_file : str
         The robot file as written in the campaign (resolve it relative to the campaign file);
-        ``""`` for a ``[joint]`` campaign (:meth:`from_joint_campaign`): a robot with one
+        ``""`` for a ``[joint]`` campaign (no robot file): a robot with one
         moving joint, described by the campaign itself (limits, ``[control.feedforward]``).
     joints : tuple of RobotJoint
         The moving joints, in the order of ``robot.moving``.
@@ -358,7 +376,8 @@ class RobotCampaign:
 
     @classmethod
     def from_dict(cls, raw: Mapping[str, Any], source: str = "") -> RobotCampaign:
-        """Validate a parsed TOML mapping with a ``[robot]`` table.
+        """Validate a parsed TOML mapping of either format: a ``[robot]`` table, or a
+        ``[joint]`` table read as a robot with one moving joint (no robot file).
 
         Parameters
         ----------
@@ -370,65 +389,89 @@ class RobotCampaign:
         Raises
         ------
         trajectories.SchemaError
-            One line naming the source, the dotted key and what was expected.
+            One line naming the source, the dotted key and what was expected; neither or
+            both of ``[joint]`` and ``[robot]``.
         """
-        return _build(raw, source)
-
-    @classmethod
-    def from_joint_campaign(cls, campaign: Campaign) -> RobotCampaign:
-        """A ``[joint]`` campaign as a robot with one moving joint, without loss.
-
-        The joint is named ``"joint"`` (its table; messages name ``joint.limits...``) and
-        carries the gains and ``[control.feedforward]``; each payload's lever arm becomes
-        ``arm_m`` and ``com = (arm_m, 0, 0)``; the segments are the same (their ``joint``
-        ``""`` is the only moving joint). No robot file: ``robot_file`` is ``""``.
-
-        Parameters
-        ----------
-        campaign : Campaign
-
-        Returns
-        -------
-        RobotCampaign
-        """
-        j = campaign.joint
-        c = campaign.control
-        joint = RobotJoint(JOINT_NAME, j.kind, j.limits, None, c.kp, c.kd,
-                           feedforward=dict(c.feedforward), table="joint")
-        return cls(
-            name=campaign.name,
-            robot_file="",
-            joints=(joint,),
-            start=(j.start,),
-            locked={},
-            control=RobotControl(c.cycle_s, c.velocity_cutoff_hz),
-            payloads=tuple(RobotPayload(p.mass_kg, (p.arm_m, 0.0, 0.0), arm_m=p.arm_m)
-                           for p in campaign.payloads),
-            segments=campaign.segments,
-            daq=campaign.daq,
-            source=campaign.source,
-        )
+        return campaign_from_dict(raw, source)
 
     @property
     def single_joint(self) -> bool:
         """True for a ``[joint]`` campaign read as a robot (no robot file, one joint)."""
         return not self.robot_file
 
+    def gains_kwargs(self, k: int = 0) -> dict[str, float]:
+        """Keyword arguments for ``daq.protocol.control.ControllerGains(**kwargs)`` of moving
+        joint ``k``: its gains and feed-forward model, the campaign's velocity cut-off."""
+        return self.joints[k].gains_kwargs(self.control.velocity_cutoff_hz)
+
+    @property
+    def plant(self) -> Literal["arm", "joint"]:
+        """The simulated plant this campaign asks for (``jointid run --simulate``).
+
+        ``"arm"``: one simulated arm of the robot file behind all the drives
+        (``--simulate`` alone); ``"joint"``: no robot file -- the campaign describes its one
+        joint itself, and each drive runs its own simulated joint plant of a plant file
+        (``--simulate PLANT.toml``).
+        """
+        return "arm" if self.robot_file else "joint"
+
+    def quick(self) -> RobotCampaign:
+        """A short version for smoke runs and demos (about 25 s per payload run of the
+        example), same joints, control and payloads
+        (:func:`trajectories.campaign.shorten_segments`).
+
+        Raises
+        ------
+        trajectories.SchemaError
+            More than one moving joint, or a multi-sine or move segment: such campaigns
+            have no shortened form.
+        """
+        if len(self.joints) != 1:
+            raise fail(self.source, "robot.moving", "one moving joint for a shortened "
+                       "campaign (--quick)", list(self.moving))
+        for i, seg in enumerate(self.segments):
+            if not isinstance(seg, TrapezoidSweep | SineSegment):
+                raise fail(self.source, f"segments[{i}].kind", "'trapezoid' or 'sine' in a "
+                           "shortened campaign (--quick)", seg.kind)
+        segs = shorten_segments(self.segments, self.joints[0].limits, QUICK_FACTOR)
+        return replace(self, segments=segs, name=f"{self.name} (quick)")
+
 
 #: name of the moving joint of a ``[joint]`` campaign read as a robot
 JOINT_NAME = "joint"
 
 
-def as_robot_campaign(campaign: Campaign | RobotCampaign) -> RobotCampaign:
-    """Either campaign as a :class:`RobotCampaign` (a ``[joint]`` one:
-    :meth:`RobotCampaign.from_joint_campaign`)."""
-    if isinstance(campaign, RobotCampaign):
-        return campaign
-    return RobotCampaign.from_joint_campaign(campaign)
+def _from_joint_file(campaign: _JointCampaign) -> RobotCampaign:
+    """A ``[joint]`` file as a robot with one moving joint, without loss.
+
+    The joint is named ``"joint"`` (its table; messages name ``joint.limits...``), has no
+    drive of its own (its drives are those of ``[daq]``) and carries the gains and
+    ``[control.feedforward]``; each payload's lever arm becomes ``arm_m`` and
+    ``com = (arm_m, 0, 0)``; the segments are the same (their ``joint`` ``""`` is the only
+    moving joint). No robot file: ``robot_file`` is ``""``.
+    """
+    j = campaign.joint
+    c = campaign.control
+    joint = RobotJoint(JOINT_NAME, j.kind, j.limits, None, c.kp, c.kd,
+                       feedforward=dict(c.feedforward), table="joint")
+    return RobotCampaign(
+        name=campaign.name,
+        robot_file="",
+        joints=(joint,),
+        start=(j.start,),
+        locked={},
+        control=RobotControl(c.cycle_s, c.velocity_cutoff_hz),
+        payloads=tuple(RobotPayload(p.mass_kg, (p.arm_m, 0.0, 0.0), arm_m=p.arm_m)
+                       for p in campaign.payloads),
+        segments=campaign.segments,
+        daq=campaign.daq,
+        source=campaign.source,
+    )
 
 
-def campaign_from_dict(raw: Mapping[str, Any], source: str = "") -> Campaign | RobotCampaign:
-    """Validate either campaign format: ``[joint]`` -> Campaign, ``[robot]`` -> RobotCampaign.
+def campaign_from_dict(raw: Mapping[str, Any], source: str = "") -> RobotCampaign:
+    """Validate either campaign format into a :class:`RobotCampaign`: a ``[robot]`` table, or
+    a ``[joint]`` table read as a robot with one moving joint (no robot file).
 
     Raises
     ------
@@ -441,8 +484,8 @@ def campaign_from_dict(raw: Mapping[str, Any], source: str = "") -> Campaign | R
     if has_joint and has_robot:
         raise fail(source, "robot", "either a [joint] or a [robot] table, not both")
     if has_robot:
-        return RobotCampaign.from_dict(raw, source)
-    return Campaign.from_dict(raw, source)
+        return _build(raw, source)
+    return _from_joint_file(_JointCampaign.from_dict(raw, source))
 
 
 # --------------------------------------------------------------------------- schema pieces

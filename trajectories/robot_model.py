@@ -103,7 +103,7 @@ def joint_robot(campaign: RobotCampaign) -> Robot:
     Parameters
     ----------
     campaign : RobotCampaign
-        With one moving joint (:meth:`RobotCampaign.from_joint_campaign`).
+        With one moving joint and no robot file (a ``[joint]`` file).
 
     Returns
     -------

@@ -65,7 +65,7 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, max_steps: int = 3,
     out_dir : path-like
         Output folder: ``logs/*.mcap``, ``fit.json``, ``demo.json``, PNG figures, ``report.html``.
     quick : bool
-        Use :meth:`trajectories.campaign.Campaign.quick` (a shortened campaign).
+        Use :meth:`trajectories.robot_campaign.RobotCampaign.quick` (a shortened campaign).
     max_steps : int
         Refinement steps at most.
     stream : text stream
@@ -95,6 +95,9 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
     cpath = campaign_path or examples.path("campaign.toml")
     ppath = plant_path or examples.path("plant_rx130l.toml")
     campaign = load_campaign(cpath)
+    if campaign.plant != "joint":  # the demo's plant is a plant file's joint
+        raise DaqError(f"{cpath}: expected a single-joint campaign ([joint] table), got a "
+                       f"robot campaign (jointid demo --robot)")
     if quick:
         campaign = campaign.quick()
     plant = load_plant(ppath)
@@ -125,8 +128,9 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
     # is complete (after refinement), to the value that minimises the residual.
     t0 = time.perf_counter()
     hb.status("loading the logs and fitting the usual and the paper model")
-    exps = load_experiments(list(logs), joint=campaign.joint.kind)
-    qs0 = round(campaign.joint.limits.max_velocity / 30.0, 6)
+    (joint,) = campaign.joints
+    exps = load_experiments(list(logs), joint=joint.kind)
+    qs0 = round(joint.limits.max_velocity / 30.0, 6)
     report = fit_models(exps, ("usual", "paper"), q_s=qs0)
     est = report.models["paper"].estimator_.upper()
     _say(stream, f"[3/4] fitted the usual and the paper model on {len(exps)} runs "

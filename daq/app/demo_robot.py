@@ -50,7 +50,7 @@ from ident.robot.loaders import (
 from ident.robot.plots import joint_validation
 from ident.robot.refine_joint import joint_coulomb, refine_joint
 from ident.robot.tables import format_table_iii, table_iii
-from trajectories.campaign_file import load_any_campaign
+from trajectories.campaign_file import load_campaign
 from trajectories.cli import plot_robot_plan
 from trajectories.excitation import Quality, assess_robot_campaign, condition_number
 from trajectories.robot_campaign import RobotCampaign
@@ -163,8 +163,8 @@ def _run_robot_demo(hb: Heartbeat, out_dir: str | Path, *, robot: str, max_steps
         if robot not in ROBOT_DEMOS:
             raise DaqError(f"--robot: expected one of {', '.join(ROBOT_DEMOS)}, got {robot!r}")
         campaign_path = _example(ROBOT_DEMOS[robot])
-    campaign = load_any_campaign(campaign_path)
-    if not isinstance(campaign, RobotCampaign):
+    campaign = load_campaign(campaign_path)
+    if campaign.plant != "arm":  # a simulated arm of the campaign's robot file
         raise DaqError(f"{campaign_path}: expected a robot campaign ([robot] table)")
     rob = robot_for_campaign(campaign)
     timing: dict[str, float] = {}

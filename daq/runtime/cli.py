@@ -1,8 +1,11 @@
 """``jointid run CAMPAIGN.toml [--simulate [PLANT.toml]] [--out DIR]``: execute a campaign.
 
-A robot campaign (``[robot]``) drives one drive per moving joint from one coordinated plan;
-``--simulate`` (no file) runs it against a simulated arm built from the campaign's robot file
-(:mod:`daq.runtime.robot_rig`). A single-joint campaign needs ``--simulate PLANT.toml``.
+Either file format is read into one campaign type (a ``[joint]`` file is a robot with one
+moving joint, its drives those of ``[daq]``) and run by one path. ``--simulate`` puts the
+plant the campaign asks for behind the drives (:mod:`daq.runtime.robot_rig`): a robot file's
+campaign (``[robot]``) a simulated arm built from the robot file (``--simulate``, no file);
+a ``[joint]`` file one simulated joint plant per drive (``--simulate PLANT.toml``).
+``--quick`` shortens a campaign of one moving joint with trapezoid and sine segments.
 
 Exit codes: 0 done, 2 configuration error or refusal (nothing moved), 3 a run stopped on a
 fault (the message names the cause; the log is kept), 130 / 143 / 129 interrupted by SIGINT
@@ -19,8 +22,7 @@ from pathlib import Path
 
 from daq import ConfigError
 from sim_drivers.plant_config import load_plant
-from trajectories.campaign_file import load_any_campaign
-from trajectories.robot_campaign import RobotCampaign
+from trajectories.campaign_file import load_campaign
 
 from .progress import ProgressLine
 from .runner import Progress, prompt_payload, run_campaign
@@ -65,15 +67,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    campaign = load_any_campaign(args.campaign)
-    robot = isinstance(campaign, RobotCampaign)
-    if args.quick:
-        if robot:
-            raise ConfigError(f"{campaign.source}: --quick: expected a single-joint campaign "
-                              f"(robot campaigns have no shortened form)")
+    campaign = load_campaign(args.campaign)
+    if args.quick:  # one moving joint, trapezoids and sines (else a one-line SchemaError)
         campaign = campaign.quick()
     plant = None
-    if robot and args.simulate not in (None, True):
+    if campaign.plant == "arm" and args.simulate not in (None, True):
         raise ConfigError(f"{campaign.source}: --simulate {args.simulate}: a robot campaign "
                           f"is simulated from its robot file; give --simulate alone")
     if args.simulate is True:

@@ -389,7 +389,7 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "", *,
     Parameters
     ----------
     raw : mapping or None
-        ``Campaign.daq`` (``{}`` or None when the campaign has no ``[daq]``).
+        ``RobotCampaign.daq`` (``{}`` or None when the campaign has no ``[daq]``).
     source : str
         The campaign file name: used in messages and to resolve relative EDS paths.
     use_can_config : bool

@@ -19,12 +19,16 @@ file, cycle by cycle:
    limits and watchdog, RPDO out;
 4. log the joint states, the setpoint and every CAN frame of the cycle.
 
-Several drives (``[[daq.drives]]``) of a single-joint campaign all follow the campaign's one
-plan, each with its own controller; drive k logs on ``/joint/<k>/state``. With ``--simulate``
-each gets its own plant. A robot campaign (``[robot]``, :mod:`trajectories.robot_campaign`)
-has one drive per moving joint: drive k follows column k of the multi-joint plan with its
-joint's gains and limits and logs its own reference on ``/joint/<k>/setpoint``; the safety
-checks below are per drive, each against its own joint's limits.
+The campaign is a :class:`~trajectories.robot_campaign.RobotCampaign` (either file format)
+and its plan a :class:`~trajectories.sampled.RobotPlan`, one column per moving joint. Each
+drive follows the column of its joint (:func:`drive_joints`) with that joint's gains
+(feed-forward included) and limits, and logs on ``/joint/<k>/state``; the safety checks
+below are per drive, each against its own joint's limits. With one drive per moving joint
+(``[robot]``: each joint names its drive) drive k follows joint k and logs its own reference
+on ``/joint/<k>/setpoint``. A joint without a drive of its own (a ``[joint]`` file, one
+moving joint) is followed by every drive of ``[[daq.drives]]``, each with its own
+controller (and, with ``--simulate``, its own plant); their one reference is logged once on
+``/setpoint``.
 
 Clocks
 ------
@@ -175,6 +179,24 @@ def _approach(q0: list[float], q1: list[float], vmax: list[float], amax: list[fl
 
 
 
+def drive_joints(campaign: RobotCampaign, n_drives: int) -> list[int]:
+    """The moving joint (index, column of the plan) each of ``n_drives`` drives follows: one
+    drive per moving joint, in order; a campaign whose one joint has no drive of its own
+    (a ``[joint]`` file) has all its ``[daq]`` drives follow that joint.
+
+    Raises
+    ------
+    ValueError
+        The drives do not match the joints.
+    """
+    k = len(campaign.joints)
+    if any(j.drive is None for j in campaign.joints) and k == 1:
+        return [0] * n_drives
+    if k != n_drives:
+        raise ValueError(f"Engine: {n_drives} drives for {k} joints")
+    return list(range(k))
+
+
 class Engine(Supervisor):
     """Executes the payload runs of one campaign on an open bus (built by :func:`run_campaign`).
 
@@ -200,21 +222,18 @@ class Engine(Supervisor):
         # paced: a SYNC later than this [s] is the master's own stall: the RPDO deadline it
         # gave the drives (0x1400.5, 3 cycles + 100 ms), after which a drive faults anyway
         self.stall_s = rpdo_timeout_ms(campaign.cycle_s, True) / 1000.0
-        self.robot = isinstance(campaign, RobotCampaign)
-        if self.robot:
-            if len(campaign.joints) != len(drives):
-                raise ValueError(f"Engine: {len(drives)} drives for {len(campaign.joints)} "
-                                 f"joints")
-            cut = campaign.control.velocity_cutoff_hz
-            self.gains = [ControllerGains(kp=j.kp, kd=j.kd, velocity_cutoff_hz=cut)
-                          for j in campaign.joints]
-            self.revolute = [j.kind == "revolute" for j in campaign.joints]
-            self.joint_limits = [j.limits for j in campaign.joints]
-        else:
-            gains = ControllerGains(**campaign.control.gains_kwargs())
-            self.gains = [gains] * len(drives)
-            self.revolute = [campaign.joint.revolute] * len(drives)
-            self.joint_limits = [campaign.joint.limits] * len(drives)
+        #: the moving joint each drive follows (its column of the plan)
+        self.columns = drive_joints(campaign, len(drives))
+        #: one reference for every drive, logged once on ``/setpoint``: the joint has no
+        #: drive of its own (a [joint] file), the drives of [daq] all follow it
+        self.shared_reference = any(j.drive is None for j in campaign.joints)
+        joints = [campaign.joints[c] for c in self.columns]
+        cut = campaign.control.velocity_cutoff_hz
+        self.gains = [ControllerGains(**j.gains_kwargs(cut)) for j in joints]
+        self.revolute = [j.revolute for j in joints]
+        self.joint_limits = [j.limits for j in joints]
+        #: the dotted key of each drive's joint table (messages: ``<key>.limits...``)
+        self.joint_keys = [j.key for j in joints]
         self._init_limits(self.joint_limits, cfg)
         self.sync_msg = can.Message(arbitration_id=0x80, data=b"", is_extended_id=False)
         self.rpdo_msgs = [can.Message(arbitration_id=0x200 + d.node_id, data=bytes(
@@ -261,10 +280,10 @@ class Engine(Supervisor):
         ----------
         index : int
             Payload index in the campaign.
-        payload : trajectories.campaign.Payload
-        ref : trajectories.plan.Reference
-            The planned reference, sampled every cycle: ``q`` [rad], ``dq`` [rad/s],
-            ``ddq`` [rad/s^2], ``segment``, ``segment_names``.
+        payload : trajectories.robot_campaign.RobotPayload
+        ref : trajectories.sampled.RobotPlan
+            The planned reference, sampled every cycle, one column per moving joint:
+            ``q`` [rad], ``dq`` [rad/s], ``ddq`` [rad/s^2], ``segment``, ``segment_names``.
         log : RunLog
             Open log; closed here on every path with the ``result`` metadata.
         sim_drive_cycle0 : int
@@ -285,9 +304,8 @@ class Engine(Supervisor):
         ctrls = [PositionController(g, cycle_s, rv)
                  for g, rv in zip(self.gains, self.revolute, strict=True)]
         q_lo, q_hi, v_max, tau_act_max = self.q_lo, self.q_hi, self.v_max, self.tau_act_max
-        robot = self.robot
-        # reference column of each drive: its own joint's (robot) or the one shared plan
-        col = list(range(n_dr)) if robot else [0] * n_dr
+        shared = self.shared_reference
+        col = self.columns  # the plan's column each drive follows
         log_sp_axis = log.setpoint_axis
         packs = [d.rpdo_struct.pack for d in self.drives]
         unpack1, unpack2 = TPDO1_STRUCT.unpack, TPDO2_STRUCT.unpack
@@ -493,13 +511,14 @@ class Engine(Supervisor):
                 why, axis = monitor.step(cycle, t, mq, mdq, mtau, log, valid=m_ok)
                 if why:  # a collision with stop configured: the stop sequence
                     self._fault(why, cycle, t, log, axis, kind="collision")
-            if robot:
-                for d in range(n_dr):
-                    log_sp_axis(d, cycle, t, q_refs[d], dq_refs[d], ddq_refs[d], seg,
-                                round(q_refs[d] * cpr[d]) if csp[d] else 0)
-            else:
+            if shared:
                 log_sp(cycle, t, q_refs[0], dq_refs[0], ddq_refs[0], seg,
                        round(q_refs[0] * cpr[0]) if csp[0] else 0)
+            else:
+                for d in range(n_dr):
+                    cd = col[d]
+                    log_sp_axis(d, cycle, t, q_refs[cd], dq_refs[cd], ddq_refs[cd], seg,
+                                round(q_refs[cd] * cpr[d]) if csp[d] else 0)
             buf, nf = io.take_frames()
             log_frames(cycle, buf, nf)
             if self.paced:
@@ -583,7 +602,7 @@ class Engine(Supervisor):
             log.event(0, 0.0, "info", f"SYNC from send_periodic ({type(sync_task).__name__})")
         for note in self.notes:
             log.event(0, 0.0, "warning", note)
-        n_col = n_dr if robot else 1
+        n_col = len(c.joints)
         zero = [0.0] * n_col
         run_log = log
 

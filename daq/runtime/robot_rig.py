@@ -1,17 +1,22 @@
-"""What a robot campaign (``[robot]``, :mod:`trajectories.robot_campaign`) changes in a run:
-the drives come from the joints, the plan has one column per joint, and ``--simulate`` puts
-one simulated arm behind all the drives.
+"""What the campaign (:class:`~trajectories.robot_campaign.RobotCampaign`, the one campaign
+type) says about the drives and the simulated plant of a run.
 
 - :func:`robot_daq_config`: the ``[daq]`` table with one drive per moving joint, in the
   order of ``robot.moving`` -- node id and bus (channel) from ``[robot.joints.<name>].drive``;
   ``[[daq.drives]]`` entries, when given, are matched by node id and add the drive's EDS,
   mode, heartbeat and scaling (one naming a node id of no joint is refused). Node ids must be
-  unique over all buses (the master routes frames by node id).
-- :func:`arm_truth`: the simulated ground truth, ``ArmParams.from_robot`` of the campaign's
-  robot file with its moving and locked joints; :func:`arm_scalings` its drive chains.
+  unique over all buses (the master routes frames by node id). A joint without a drive of
+  its own (a ``[joint]`` file: one moving joint, no robot file) is followed by every drive
+  of ``[daq]`` as written (default one drive, node 1).
+- :func:`sim_params`, :func:`sim_scalings`: the simulated plant the campaign asks for
+  (:attr:`RobotCampaign.plant`): ``"arm"``, :func:`arm_truth` (``ArmParams.from_robot`` of
+  the campaign's robot file with its moving and locked joints, the ground truth) and
+  :func:`arm_scalings` its drive chains; ``"joint"``, the plant file's
+  :class:`~sim_drivers.plant_config.PlantParams` and its ``[drive]`` scaling on every drive.
 - :func:`start_arm_sim`: :class:`sim_drivers.arm_bus.ArmOnBus` -- one arm behind k
   simulated CiA 402 drives (real canopen nodes) on the simulated channels of the joints'
-  buses, stepping together on SYNC, at the campaign's start pose.
+  buses, stepping together on SYNC, at the campaign's start pose (a ``"joint"`` plant:
+  :func:`daq.runtime.simrig.start_sim`, one joint plant per drive).
 - :func:`robot_metadata`: the ``robot`` metadata record (robot file, joints, buses).
 """
 
@@ -30,14 +35,15 @@ from trajectories.robot_campaign import RobotCampaign
 from trajectories.robot_model import robot_file_path, robot_for_campaign
 
 from .config import DaqConfig, Scaling, parse_daq
-from .simrig import SimRig
+from .simrig import SimRig, plant_scaling
 
-__all__ = ["arm_scalings", "arm_truth", "robot_daq_config", "robot_metadata",
-           "start_arm_sim"]
+__all__ = ["arm_scalings", "arm_truth", "robot_daq_config", "robot_metadata", "sim_params",
+           "sim_scalings", "start_arm_sim"]
 
 
 def robot_daq_config(campaign: RobotCampaign, *, use_can_config: bool = True) -> DaqConfig:
-    """``[daq]`` of a robot campaign with one drive per moving joint (module docstring).
+    """``[daq]`` of a campaign with one drive per moving joint, or every drive of ``[daq]``
+    on a joint without a drive of its own (module docstring).
 
     Raises
     ------
@@ -46,6 +52,8 @@ def robot_daq_config(campaign: RobotCampaign, *, use_can_config: bool = True) ->
         bus than its joint's), or any ``[daq]`` error (one line naming the file and key).
     """
     src = str(campaign.source)
+    if any(j.drive is None for j in campaign.joints):  # (a [joint] file: one joint)
+        return parse_daq(campaign.daq, src, use_can_config=use_can_config)
     raw = dict(campaign.daq or {})
     given = raw.pop("drives", None) or []
     if not isinstance(given, list) or not all(isinstance(d, dict) for d in given):
@@ -76,6 +84,41 @@ def robot_daq_config(campaign: RobotCampaign, *, use_can_config: bool = True) ->
     raw["drives"] = drives
     raw.setdefault("channel", campaign.joints[0].drive.bus)
     return parse_daq(raw, src, use_can_config=use_can_config)
+
+
+def sim_params(campaign: RobotCampaign, simulate: Any) -> Any:
+    """The parameters of the simulated plant the campaign asks for (:attr:`RobotCampaign.plant`).
+
+    Parameters
+    ----------
+    campaign : RobotCampaign
+    simulate : ArmParams, PlantParams or True
+        ``run_campaign``'s ``simulate``: True for :func:`arm_truth` of the robot file.
+
+    Raises
+    ------
+    daq.ConfigError
+        A ``"joint"`` plant (no robot file) without a plant file, an ``"arm"`` with one.
+    """
+    if campaign.plant == "arm":
+        if simulate is True:
+            return arm_truth(campaign)
+        if not isinstance(simulate, ArmParams):
+            raise ConfigError(f"{campaign.source}: --simulate: a robot campaign is simulated "
+                              f"from its robot file (ArmParams), got a plant file")
+        return simulate
+    if simulate is True or isinstance(simulate, ArmParams):
+        raise ConfigError(f"{campaign.source}: --simulate: expected a plant file for a "
+                          f"single-joint campaign")
+    return simulate
+
+
+def sim_scalings(campaign: RobotCampaign, params: Any, n_drives: int) -> list[Scaling]:
+    """The drive scaling of each of ``n_drives`` drives of the simulated plant ``params``
+    (:func:`sim_params`): the arm's drive chains, or the plant file's ``[drive]`` on each."""
+    if campaign.plant == "arm":
+        return arm_scalings(params)
+    return [plant_scaling(params)] * n_drives
 
 
 def arm_truth(campaign: RobotCampaign, seed: int = 0) -> ArmParams:

@@ -26,17 +26,17 @@ from trajectories.robot_model import prepare_robot_campaign, robot_file_path
 
 from .buses import open_buses, sync_clocked
 from .busload import bus_loads, check_loads
-from .config import DaqConfig, Scaling, parse_daq, with_scaling
+from .config import DaqConfig, Scaling
 from .cycle_io import BUS_ERRORS, CycleIO
-from .engine import ENABLE_MAX_CYCLES, SETTLE_CYCLES, Engine
+from .engine import ENABLE_MAX_CYCLES, SETTLE_CYCLES, Engine, drive_joints
 from .master import MasterDrive, MasterHeartbeat, pdo_lengths, rpdo_timeout_ms
 from .mcaplog import RunLog
 from .results import CampaignResult, PayloadResult, Progress
 from .robot_rig import (
-    arm_scalings,
-    arm_truth,
     robot_daq_config,
     robot_metadata,
+    sim_params,
+    sim_scalings,
     start_arm_sim,
     with_scalings,
 )
@@ -52,7 +52,7 @@ from .runfolder import (
     write_state,
 )
 from .safety import StopSignals, interrupt_reason
-from .simrig import SimRig, plant_scaling, start_sim
+from .simrig import SimRig, start_sim
 
 __all__ = ["CampaignResult", "PayloadResult", "Progress", "file_stem", "run_campaign"]
 
@@ -97,36 +97,34 @@ def _state_path(out_dir: Path, name: str) -> Path:
     return out_dir / f"{file_stem(name)}.state.json"
 
 
-def _metadata(campaign: Any, cfg: DaqConfig, plan: Any, index: int, payload: Any,
+def _metadata(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, index: int, payload: Any,
               scalings: list[Scaling], plant_params: Any,
               bus_info: str = "", drives: Sequence[MasterDrive] = (),
               torque_delay_cycles: float | None = None,
               ) -> dict[str, dict[str, str]]:
-    robot = isinstance(campaign, RobotCampaign)
-    ref = plan if robot else plan.reference
-    if robot:
-        kind = campaign.joints[0].kind
-        pos = [list(j.limits.position) for j in campaign.joints]
-        gains = {j.name: {"kp": j.kp, "kd": j.kd,
-                          "velocity_cutoff_hz": campaign.control.velocity_cutoff_hz}
-                 for j in campaign.joints}
-        pay = {"index": str(index), "mass_kg": repr(float(payload.mass_kg)),
-               "com_m": json.dumps([float(x) for x in payload.com]),
-               "inertia_kgm2": json.dumps([float(x) for x in payload.inertia])}
+    joints = campaign.joints
+    cut = campaign.control.velocity_cutoff_hz
+    if campaign.robot_file:  # per joint, as ident's robot loader reads them
+        pos: Any = [list(j.limits.position) for j in joints]
+        gains: Any = {j.name: {"kp": j.kp, "kd": j.kd, "velocity_cutoff_hz": cut}
+                      for j in joints}
+    else:  # no robot file: its one joint, as ident's single-joint loader reads it
+        pos = list(joints[0].limits.position)
+        gains = joints[0].gains_kwargs(cut)
+    pay = {"index": str(index), "mass_kg": repr(float(payload.mass_kg))}
+    if payload.arm_m is not None:  # a point mass on a lever arm (a [joint] file)
+        pay["arm_m"] = repr(float(payload.arm_m))
     else:
-        kind = campaign.joint.kind
-        pos = list(campaign.joint.limits.position)
-        gains = campaign.control.gains_kwargs()
-        pay = {"index": str(index), "mass_kg": repr(float(payload.mass_kg)),
-               "arm_m": repr(float(payload.arm_m))}
+        pay["com_m"] = json.dumps([float(x) for x in payload.com])
+        pay["inertia_kgm2"] = json.dumps([float(x) for x in payload.inertia])
     md: dict[str, dict[str, str]] = {
         "campaign": {
             "name": campaign.name, "source": str(campaign.source),
-            "joint_kind": kind, "cycle_s": repr(campaign.cycle_s),
+            "joint_kind": joints[0].kind, "cycle_s": repr(campaign.cycle_s),
             "clock": cfg.clock, "interface": cfg.interface, "channel": cfg.channel,
             "bitrate": str(cfg.bitrate), "bus": bus_info,
             "n_payloads": str(len(campaign.payloads)),
-            "segments": json.dumps(list(ref.segment_names)),
+            "segments": json.dumps(list(plan.segment_names)),
             "position_limits": json.dumps(pos),
             "gains": json.dumps(gains),
             # [cycles] from a logged position's SYNC to the middle of the cycle the torque
@@ -140,14 +138,15 @@ def _metadata(campaign: Any, cfg: DaqConfig, plan: Any, index: int, payload: Any
                      "canopen": getattr(canopen, "__version__", "?"),
                      "python": sys.version.split()[0]},
     }
-    if robot:
+    if campaign.robot_file:
         md["campaign"]["kind"] = "robot"
         md["robot"] = robot_metadata(campaign)
+    cols = drive_joints(campaign, len(cfg.drives))
     for k, (d, s) in enumerate(zip(cfg.drives, scalings, strict=True)):
         md[f"drive{k}"] = {"node_id": str(d.node_id), "eds": d.eds.name, "mode": d.mode_name,
                            "channel": d.channel or cfg.channel, **s.as_dict()}
-        if robot:
-            md[f"drive{k}"]["joint"] = campaign.joints[k].name
+        if campaign.robot_file:
+            md[f"drive{k}"]["joint"] = joints[cols[k]].name
         if k < len(drives):
             v = drives[k].consumer_value
             md[f"drive{k}"]["heartbeat_consumer"] = ("" if v is None else f"0x{v:08X}")
@@ -193,8 +192,8 @@ def _sync_period_us(cfg: DaqConfig, cycle_s: float) -> int:
     return int(round(cycle_s * 1e6)) if cfg.clock == "paced" else 0
 
 
-def _attachments(campaign: Any, cfg: DaqConfig, plant_params: Any) -> list[tuple[str, str,
-                                                                                    bytes]]:
+def _attachments(campaign: RobotCampaign, cfg: DaqConfig,
+                 plant_params: Any) -> list[tuple[str, str, bytes]]:
     out = []
     src = Path(str(campaign.source)) if campaign.source else None
     if src is not None and src.is_file():
@@ -208,7 +207,7 @@ def _attachments(campaign: Any, cfg: DaqConfig, plant_params: Any) -> list[tuple
         p = Path(str(getattr(plant_params, "source", "")))
         if p.suffix == ".toml" and p.is_file():
             out.append((p.name, "application/toml", p.read_bytes()))
-    if isinstance(campaign, RobotCampaign):
+    if campaign.robot_file:
         p = Path(robot_file_path(campaign))
         if p.suffix in (".toml", ".urdf") and p.is_file():
             media = "application/toml" if p.suffix == ".toml" else "application/xml"
@@ -229,7 +228,7 @@ def prompt_payload(index: int, payload: Any, n: int) -> bool:
 
 
 def run_campaign(
-    campaign: Any,
+    campaign: RobotCampaign,
     *,
     out_dir: str | Path,
     simulate: Any = None,
@@ -246,18 +245,21 @@ def run_campaign(
 
     Parameters
     ----------
-    campaign : trajectories.campaign.Campaign
+    campaign : trajectories.robot_campaign.RobotCampaign
+        Either file format (:func:`trajectories.campaign_file.load_campaign`); a ``[joint]``
+        file is a robot with one moving joint whose drives are those of ``[daq]``.
     out_dir : path-like
         Created if needed; receives ``<name>_payload<k>.mcap`` and ``<name>.state.json``.
         Locked for the whole run (one run per folder); an existing log is never replaced
         without ``overwrite`` (:mod:`daq.runtime.runfolder`).
     simulate : sim_drivers.plant_config.PlantParams, sim_drivers.arm.ArmParams, True or None
-        Run against simulated drives (one plant per drive) on python-can's virtual bus; the
-        drive scaling comes from the plant's ``[drive]`` table. A robot campaign
-        (:class:`~trajectories.robot_campaign.RobotCampaign`) runs one simulated arm behind
-        its drives (:mod:`daq.runtime.robot_rig`): ``simulate`` is its
-        :class:`~sim_drivers.arm.ArmParams`, or True for ``ArmParams.from_robot`` of the
-        campaign's robot file.
+        Run against simulated drives on python-can's virtual bus, the plant the campaign
+        asks for (:attr:`~trajectories.robot_campaign.RobotCampaign.plant`,
+        :mod:`daq.runtime.robot_rig`): ``"arm"``, one simulated arm behind its drives --
+        ``simulate`` is its :class:`~sim_drivers.arm.ArmParams`, or True for
+        ``ArmParams.from_robot`` of the campaign's robot file; ``"joint"`` (no robot file),
+        one joint plant per drive -- ``simulate`` is a plant file's
+        :class:`~sim_drivers.plant_config.PlantParams` (drive scaling: its ``[drive]``).
     yes : bool
         Do not ask the operator between payloads (unattended).
     progress : callable or None
@@ -299,23 +301,12 @@ def run_campaign(
     """
     # a simulated run is on python-can's virtual bus: python-can's own configuration (which
     # names the real bus) must not fill what [daq] leaves out
-    robot = isinstance(campaign, RobotCampaign)
-    if robot:
-        cfg = robot_daq_config(campaign, use_can_config=simulate is None)
-        # the multi-sines as jointid plan optimised them (deterministic)
-        campaign, _dyn, _opt = prepare_robot_campaign(campaign)
-        if simulate is True:
-            simulate = arm_truth(campaign)
-        if simulate is not None:
-            cfg = with_scalings(cfg, arm_scalings(simulate))
-    else:
-        if simulate is True:
-            raise ConfigError(f"{campaign.source}: --simulate: expected a plant file for a "
-                              f"single-joint campaign")
-        cfg = parse_daq(campaign.daq, str(campaign.source), use_can_config=simulate is None)
-        if simulate is not None:
-            cfg = with_scaling(cfg, plant_scaling(simulate))
-    if simulate is not None:
+    cfg = robot_daq_config(campaign, use_can_config=simulate is None)
+    # the multi-sines as jointid plan optimised them (deterministic)
+    campaign, _dyn, _opt = prepare_robot_campaign(campaign)
+    if simulate is not None:  # the plant the campaign asks for (campaign.plant)
+        simulate = sim_params(campaign, simulate)
+        cfg = with_scalings(cfg, sim_scalings(campaign, simulate, len(cfg.drives)))
         if cfg.interface != "virtual":
             raise ConfigError(f"{campaign.source}: daq.interface: expected 'virtual' with "
                               f"--simulate, got {cfg.interface!r}")
@@ -333,14 +324,14 @@ def run_campaign(
     stem = file_stem(campaign.name)
     lock = FolderLock(out)  # one run per folder, from here to the end
     try:
-        return _run_locked(campaign, cfg, plan, load, out, stem, todo, simulate, robot, yes,
+        return _run_locked(campaign, cfg, plan, load, out, stem, todo, simulate, yes,
                            progress, resume, overwrite, fault_injectors, prompt, monitor)
     finally:
         lock.release()
 
 
-def _run_locked(campaign: Any, cfg: DaqConfig, plan: Any, load: Any, out: Path, stem: str,
-                todo: list[int], simulate: Any, robot: bool, yes: bool,
+def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, out: Path,
+                stem: str, todo: list[int], simulate: Any, yes: bool,
                 progress: Callable[[Progress], None] | None, resume: bool, overwrite: bool,
                 fault_injectors: dict[int, Any] | None,
                 prompt: Callable[[int, Any, int], bool] | None,
@@ -354,7 +345,7 @@ def _run_locked(campaign: Any, cfg: DaqConfig, plan: Any, load: Any, out: Path, 
     todo = [i for i in todo if i not in done_before]
     check_logs(out, stem, todo, completed, resume=resume, overwrite=overwrite)
     attachments = _attachments(campaign, cfg, simulate)
-    n_ref = len(plan.t) if robot else len(plan.reference.t)
+    n_ref = len(plan.t)
     log_bytes = expected_log_bytes(len(cfg.drives), campaign.cycle_s,
                                    n_ref + ENABLE_MAX_CYCLES + SETTLE_CYCLES + 100,
                                    sum(len(a[2]) for a in attachments))
@@ -376,10 +367,9 @@ def _run_locked(campaign: Any, cfg: DaqConfig, plan: Any, load: Any, out: Path, 
     status, reason = "done", ""
     try:
         signals.install()  # SIGINT, SIGTERM, SIGHUP: the stop sequence (safety.StopSignals)
-        if simulate is not None and robot:
-            sim = start_arm_sim(cfg, simulate, campaign, fault_injectors or {})
-        elif simulate is not None:
-            sim = start_sim(cfg, simulate, campaign, fault_injectors or {})
+        if simulate is not None:  # the plant the campaign asks for (robot_rig.sim_params)
+            start = start_arm_sim if campaign.plant == "arm" else start_sim
+            sim = start(cfg, simulate, campaign, fault_injectors or {})
         bus = open_buses(cfg, simulated=sim is not None)
         io = CycleIO([d.node_id for d in cfg.drives])
         if cfg.clock == "lockstep" and sync_clocked(bus):  # heartbeats paced by SYNC
@@ -395,12 +385,9 @@ def _run_locked(campaign: Any, cfg: DaqConfig, plan: Any, load: Any, out: Path, 
         else:
             notes.append("daq.master_heartbeat_ms = 0: the master sends no heartbeat, the "
                          "drives do not watch it")
-        if robot:
-            tau_maxes = [cfg.max_torque if cfg.max_torque is not None else j.limits.max_torque
-                         for j in campaign.joints]
-        else:
-            tau_maxes = [cfg.max_torque if cfg.max_torque is not None else (
-                campaign.joint.limits.max_torque)] * len(drives)
+        tau_maxes = [cfg.max_torque if cfg.max_torque is not None
+                     else campaign.joints[c].limits.max_torque
+                     for c in drive_joints(campaign, len(drives))]
         scalings = [d.start_up(campaign.cycle_s, tau_max, master_id=cfg.master_node_id,
                                consumer_ms=cfg.heartbeat_consumer_ms,
                                sync_period_us=_sync_period_us(cfg, campaign.cycle_s),
@@ -418,15 +405,12 @@ def _run_locked(campaign: Any, cfg: DaqConfig, plan: Any, load: Any, out: Path, 
         if monitor is not None:
             engine.monitor = monitor
             monitor.arm = getattr(sim, "arm", None)
-        engine.check_drive_limits(tuple(j.name for j in campaign.joints) if robot else ())
+        engine.check_drive_limits()
         ask = prompt or prompt_payload
         for n_done, i in enumerate(todo):
             p = campaign.payloads[i]
-            if sim is not None and robot:
+            if sim is not None:
                 sim.set_payload(p)
-            elif sim is not None:
-                for d in sim.drives:
-                    d.set_payload(p.mass_kg, p.arm_m)
             if not yes and (n_done > 0 or sim is None or prompt is not None):
                 try:  # a stop signal at the prompt interrupts it at once (RunInterrupted)
                     accepted = ask(i, p, n_pay)
@@ -460,13 +444,13 @@ def _run_locked(campaign: Any, cfg: DaqConfig, plan: Any, load: Any, out: Path, 
                                                 drives, None if sim is None
                                                 else sim.torque_delay_cycles),
                              attachments=attachments, chunk_seconds=cfg.chunk_seconds,
-                             frames_per_cycle=1 + 3 * len(drives), axis_setpoints=robot)
+                             frames_per_cycle=1 + 3 * len(drives),
+                             axis_setpoints=not engine.shared_reference)
             except OSError as exc:  # writing the header: nothing moved yet
                 raise DaqError(f"log write failed: {path}: {exc.strerror or exc}") from None
             signals.engine = engine  # a stop signal now ends the run with the stop sequence
             try:
-                r = engine.run_payload(i, p, plan if robot else plan.reference, log,
-                                       drive_cycle0)
+                r = engine.run_payload(i, p, plan, log, drive_cycle0)
             finally:
                 signals.engine = None
             runs.append(r)

@@ -134,6 +134,8 @@ class Supervisor:
     """
 
     _stall: tuple[int, float] = (-2, 0.0)  # (cycle, lateness [s]) of the last stall seen
+    #: per drive, the dotted key of its joint's table (``joint``, ``robot.joints.<name>``)
+    joint_keys: list[str]
 
     def _init_limits(self, limits: Any, cfg: DaqConfig) -> None:
         """Per drive: ``[daq.limits]``, else that drive's joint limits (``limits``, one
@@ -155,7 +157,7 @@ class Supervisor:
             self.tau_max.append(tau)
             self.tau_act_max.append(tau * 1.2)
 
-    def check_drive_limits(self, robot_joints: tuple[str, ...] = ()) -> None:
+    def check_drive_limits(self) -> None:
         """Refuse a velocity watchdog no drive could ever trip: ``v_max`` of a drive above its
         max motor speed 0x6080 [rpm] (the EDS default) seen at the joint (rpm / 60 x 2 pi /
         gear ratio), unless ``daq.allow_beyond_drive_limits``. Called after the start-up
@@ -177,12 +179,8 @@ class Supervisor:
             joint_max = rpm / 60.0 * sc.rad_per_count * sc.encoder_counts_per_rev  # [rad/s]
             if self.v_max[k] <= joint_max:
                 continue
-            if self.cfg.max_velocity is not None:
-                key = "daq.limits.max_velocity"
-            elif robot_joints:
-                key = f"robot.joints.{robot_joints[k]}.limits.max_velocity"
-            else:
-                key = "joint.limits.max_velocity"
+            key = ("daq.limits.max_velocity" if self.cfg.max_velocity is not None
+                   else f"{self.joint_keys[k]}.limits.max_velocity")
             raise ConfigError(
                 f"{self.cfg.source or 'campaign'}: {key}: the velocity watchdog at "
                 f"{self.v_max[k]:.4g} rad/s is beyond {d.name}'s max motor speed 0x6080 = "

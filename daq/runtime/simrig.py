@@ -38,6 +38,12 @@ class SimRig:
     #: the timing of the logs of these drives [cycles] (``DaqConfig.torque_delay_cycles``)
     torque_delay_cycles: float = DRIVE_TORQUE_DELAY
 
+    def set_payload(self, payload: Any) -> None:
+        """Mount a campaign payload (its mass [kg] at its lever arm ``arm_m`` [m]) on every
+        drive's joint plant."""
+        for d in self.drives:
+            d.set_payload(payload.mass_kg, payload.arm_m)
+
     def close(self) -> None:
         """Stop every drive, then every network's notifier and bus (idempotent)."""
         for net in self.networks.values():
@@ -46,10 +52,11 @@ class SimRig:
 
 def start_sim(cfg: DaqConfig, plant_params: Any, campaign: Any, fault_injectors: dict) -> SimRig:
     """Start one simulated drive per ``cfg.drives`` entry, each with its own
-    :class:`~sim_drivers.plant.JointPlant` (seed ``plant.drive.seed + k``) at the campaign's
-    start position, on the :class:`SimNetwork` of its channel (lockstep clock: ``"inline"``
-    dispatch, the channel clocked by SYNC and the drives on the ``"sync"`` clock; paced clock:
-    one notifier thread per channel, wall-clock drives)."""
+    :class:`~sim_drivers.plant.JointPlant` (seed ``plant.drive.seed + k``) at the start
+    position of the campaign's one moving joint (its ``plant`` is ``"joint"``), on the
+    :class:`SimNetwork` of its channel (lockstep clock: ``"inline"`` dispatch, the channel
+    clocked by SYNC and the drives on the ``"sync"`` clock; paced clock: one notifier thread
+    per channel, wall-clock drives)."""
     lockstep = cfg.clock == "lockstep"
     sim = SimRig()
     try:
@@ -59,7 +66,7 @@ def start_sim(cfg: DaqConfig, plant_params: Any, campaign: Any, fault_injectors:
         for k, dcfg in enumerate(cfg.drives):
             plant = JointPlant(plant_params, campaign.cycle_s,
                                seed=int(plant_params.drive.seed) + k)
-            plant.reset(campaign.joint.start)
+            plant.reset(campaign.start[0])
             net = sim.networks[dcfg.channel or cfg.channel]
             drive = SimulatedDrive(net.network, dcfg.node_id, plant, dcfg.eds,
                                    fault_injector=fault_injectors.get(dcfg.node_id),
