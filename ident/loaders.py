@@ -73,7 +73,10 @@ from .signals import Signals
 from .timing import align_to_torque
 
 __all__ = [
+    "RawRobotRun",
+    "read_file",
     "Experiment",
+    "make_experiment",
     "ResamplingWarning",
     "load_experiments",
     "load_experiment",
@@ -123,7 +126,8 @@ class ResamplingWarning(UserWarning):
 
 @dataclass(frozen=True)
 class Experiment:
-    """One experiment (input file), uniformly sampled.
+    """One experiment (input file) of one joint, uniformly sampled: the view with k = 1 of the
+    run :func:`read_file` reads (:class:`RawRobotRun`), as the single-joint fit takes it.
 
     Attributes
     ----------
