@@ -116,6 +116,85 @@ def make(d: Path) -> None:
     (d / "arm_run.mcap").write_bytes(Path(res.runs[0].path).read_bytes())
 
 
+def _bad_cases(d: Path, arm_j: tuple[str, ...]) -> dict:
+    """Bad inputs: the one-line messages of both loaders (compared as text)."""
+    import scipy.io
+
+    from ident.loaders import load_experiment, make_experiment
+    from ident.robot.loaders import load_robot_runs
+
+    b = d / "bad"
+    b.mkdir(exist_ok=True)
+    n = 200
+    t = np.arange(n) * 1e-3
+    q = 0.1 * np.sin(t)
+
+    def csv(name: str, header: str, *cols: np.ndarray) -> Path:
+        np.savetxt(b / name, np.column_stack(cols), delimiter=",", header=header, comments="")
+        return b / name
+
+    nanq = q.copy()
+    nanq[7] = np.nan
+    gap = t.copy()
+    gap[100:] += 0.05
+    one = np.ones(n)
+    k3 = np.column_stack([q, q, q])
+    scipy.io.savemat(b / "m.mat", {"t": t, "q": k3, "tau": k3, "rec": {"pos": k3.T, "x": 1.0},
+                                   "q2d": k3})
+    out = {
+        "nan": lambda: load_experiment(csv("nan.csv", "t,q,tau", t, nanq, q)),
+        "huge": lambda: load_experiment(csv("huge.csv", "t,q,current", t, q, 1e12 * one),
+                                        mapping={"tau": "current"}),
+        "reversed": lambda: load_experiment(csv("rev.csv", "t,q,tau", t[::-1], q, q)),
+        "few": lambda: load_experiment(csv("few.csv", "t,q,tau", t[:10], q[:10], q[:10])),
+        "gap": lambda: load_experiment(csv("gap.csv", "t,q,tau", gap, q, q)),
+        "missing_tau": lambda: load_experiment(csv("mt.csv", "t,q,torque", t, q, q)),
+        "neg_mass": lambda: load_experiment(csv("neg.csv", "t,q,tau,payload_kg", t, q, q,
+                                                -2 * one)),
+        "varying_mass": lambda: load_experiment(csv("vm.csv", "t,q,tau,payload_kg", t, q, q,
+                                                    t)),
+        "mat_2d": lambda: load_experiment(b / "m.mat", mapping={"q": "q2d", "tau": "tau"}),
+        "mat_bad_field": lambda: load_experiment(b / "m.mat", mapping={"q": "rec.nope"}),
+        "mat_row": lambda: load_experiment(b / "m.mat", mapping={"q": "rec.pos[7]"}),
+        "mat_const": lambda: load_experiment(b / "m.mat", mapping={"q": 1.0}),
+        "mcap_deg": lambda: load_experiment(d / "sj0.mcap", q_unit="deg"),
+        "mcap_axis": lambda: load_experiment(d / "sj0.mcap", axis=3),
+        "unit_kind": lambda: load_experiment(csv("u.csv", "t,q,tau", t, q, q), q_unit="mm",
+                                             joint="revolute"),
+        "mk_len": lambda: make_experiment("arrays", t, q[:-1], q),
+        "mk_nan": lambda: make_experiment("arrays", t, nanq, q),
+        "mk_mass": lambda: make_experiment("arrays", t, q, q, payload_mass=-1.0),
+        "mk_arm": lambda: make_experiment("arrays", t, q, q, payload_arm=np.inf),
+        "r_nan": lambda: load_robot_runs(csv("rn.csv", "t,q1,q2,q3,tau1,tau2,tau3", t, q,
+                                             nanq, q, q, q, q), arm_j),
+        "r_huge": lambda: load_robot_runs(csv("rh.csv", "t,q1,q2,q3,tau1,tau2,tau3", t, q, q,
+                                              q, q, q, 1e12 * one), arm_j),
+        "r_no_tau": lambda: load_robot_runs(csv("rt.csv", "t,q1,q2,q3", t, q, q, q), arm_j),
+        "r_2axes": lambda: load_robot_runs(csv("r2.csv", "t,q1,q2,tau1,tau2", t, q, q, q, q),
+                                           arm_j),
+        "r_named": lambda: load_robot_runs(csv("rj.csv", "t,q_j9,tau_j9", t, q, q), arm_j),
+        "r_no_q": lambda: load_robot_runs(csv("rq.csv", "t,x,tau", t, q, q), arm_j),
+        "r_no_t": lambda: load_robot_runs(csv("rnt.csv", "time,q1,tau1", t, q, q), ("j",)),
+        "r_pay_varies": lambda: load_robot_runs(csv("rp.csv", "t,q1,tau1,payload_mass_kg", t, q,
+                                                    q, t), ("j",)),
+        "r_mat_no_t": lambda: load_robot_runs(b / "m.mat", arm_j, mapping={"t": "rec.t"}),
+        "r_mat_no_q": lambda: load_robot_runs(b / "m.mat", arm_j, mapping={"q": "rec.x"}),
+        "r_mat_peraxis": lambda: load_robot_runs(b / "m.mat", arm_j, mapping={"q1": "q[:, 0]"}),
+        "r_mat_extra": lambda: load_robot_runs(b / "m.mat", arm_j, mapping={
+            "q1": "q[:, 0]", "q2": "q[:, 1]", "q3": "q[:, 2]", "q4": "q[:, 2]"}),
+        "r_mat_2axes": lambda: load_robot_runs(b / "m.mat", arm_j[:2]),
+        "r_mat_pay": lambda: load_robot_runs(b / "m.mat", arm_j, mapping={"payload_kg": "t"}),
+        "r_mat_neg": lambda: load_robot_runs(b / "m.mat", arm_j, mapping={"payload_kg": "-3"}),
+        "r_mcap_axes": lambda: load_robot_runs(d / "sj0.mcap", arm_j),
+        "r_mcap_names": lambda: load_robot_runs(d / "arm.mcap", ("a", "b", "c")),
+        "r_mcap_deg": lambda: load_robot_runs(d / "arm.mcap", arm_j, q_unit="deg"),
+        "r_unit": lambda: load_robot_runs(d / "arm.mcap", arm_j, q_unit="furlong"),
+        "r_nofile": lambda: load_robot_runs(b / "none.csv", arm_j),
+        "r_ext": lambda: load_robot_runs(csv("x.parquet", "t", t), arm_j),
+    }
+    return out
+
+
 def _arrays(obj) -> dict:
     out = {}
     for name in ("source", "t", "q", "tau", "q_ref", "dq", "ddq", "payload_mass",
@@ -185,6 +264,7 @@ def dump(d: Path, out: Path) -> None:
                 "t": "rec.time_cont", "q": f"rec.act_pos_mot_deg[{a}]",
                 "q_ref": f"rec.ref_pos_deg[{a}]", "tau": f"rec.act_torque_abs_nm[{a}]"},
                 gain=f"para.u[{a}]", q_unit="deg") for a in range(6)]
+    cases.update(_bad_cases(d, arm_j))
     res = {}
     for name, fn in cases.items():
         with warnings.catch_warnings(record=True) as rec:

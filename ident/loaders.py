@@ -588,6 +588,8 @@ def _make_run(source: str, t: np.ndarray, q: np.ndarray, tau: np.ndarray, *,
         names = (columns or {}).get(name)
         if names:
             col = f"column {names[j or 0]!r}"
+            if joints is None and names[j or 0] != name:  # one joint: the key it was for
+                col += f" ({name})"
         elif j is None or joints is None:
             col = f"column {name!r}"
         else:
