@@ -175,26 +175,28 @@ def parse_mapping(items: Sequence[str] | str | None) -> dict[str, str | float]:
     Values that parse as numbers become floats (payload constants). Commas inside brackets
     belong to a path (``q=rec.pos[:, 2]``) and do not separate entries.
     """
+    out: dict[str, str | float] = {}
+    for part in map_entries(items):
+        if "=" not in part:
+            raise DataError(f"mapping entry {part!r}: expected KEY=NAME (e.g. q=qm)")
+        k, v = (x.strip() for x in part.split("=", 1))
+        if k not in CANONICAL:
+            raise DataError(f"mapping key {k!r}: expected one of {', '.join(CANONICAL)}")
+        try:
+            out[k] = float(v)
+        except ValueError:
+            out[k] = v
+    return out
+
+
+def map_entries(items: Sequence[str] | str | None) -> list[str]:
+    """The non-empty ``KEY=PATH`` entries of ``--map`` items (one joint's and a robot's):
+    split on the commas that are not inside square brackets (``q=rec.pos[:, 2]``)."""
     if not items:
-        return {}
+        return []
     if isinstance(items, str):
         items = [items]
-    out: dict[str, str | float] = {}
-    for item in items:
-        for part in _split_top_commas(item):
-            part = part.strip()
-            if not part:
-                continue
-            if "=" not in part:
-                raise DataError(f"mapping entry {part!r}: expected KEY=NAME (e.g. q=qm)")
-            k, v = (x.strip() for x in part.split("=", 1))
-            if k not in CANONICAL:
-                raise DataError(f"mapping key {k!r}: expected one of {', '.join(CANONICAL)}")
-            try:
-                out[k] = float(v)
-            except ValueError:
-                out[k] = v
-    return out
+    return [p.strip() for item in items for p in _split_top_commas(item) if p.strip()]
 
 
 def _split_top_commas(text: str) -> list[str]:

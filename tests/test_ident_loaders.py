@@ -20,7 +20,7 @@ from ident.loaders import (
     read_file,
 )
 from ident.robot import RobotIdentError
-from ident.robot.loaders import load_robot_runs
+from ident.robot.loaders import load_robot_runs, parse_robot_mapping
 
 
 def _arrays(n=500, dt=1e-3):
@@ -208,3 +208,20 @@ def test_single_joint_errors_keep_their_spelling(tmp_path):
     with pytest.raises(RobotIdentError, match=r"x\.csv: 2 axes in the file \(q1\.\.q2\), the "
                                               r"robot moves 1 joints \(elbow\)"):
         load_robot_runs(p, ("elbow",))
+
+
+def test_a_foreign_mat_file_reads_the_same_as_one_joint_and_as_a_one_joint_robot(tmp_path):
+    """The EMPS layout (``qm``, ``vir``, a gain variable ``gtau``): ``--map``/``--gain`` of the
+    single joint and ``--map`` with the drive gain of a one-joint robot give the same arrays,
+    the payload (mass and lever arm) included."""
+    t, q, tau = _arrays()
+    p = tmp_path / "emps_like.mat"
+    scipy.io.savemat(p, {"t": t[:, None], "qm": q[:, None], "vir": (tau / 35.15)[:, None],
+                         "gtau": np.array([[35.15]])})
+    e = load_experiment(p, mapping=parse_mapping("q=qm,tau=vir,payload_kg=2,payload_arm_m=0.5"),
+                        gain="gtau")
+    (r,) = load_robot_runs(p, ("slide",), gains=[35.15], mapping=parse_robot_mapping(
+        "q=qm,tau=vir,payload_kg=2,payload_arm_m=0.5"))
+    np.testing.assert_array_equal(r.q[:, 0], e.q)
+    np.testing.assert_array_equal(r.tau[:, 0], e.tau)
+    assert (r.payload.mass, r.payload.arm_m) == (e.payload_mass, e.payload_arm) == (2.0, 0.5)

@@ -70,7 +70,7 @@ from ..loaders import (
     IRREGULAR_TOL,
     Q_UNITS,
     RawRobotRun,
-    _split_top_commas,
+    map_entries,
     read_file,
 )
 from . import RobotIdentError
@@ -88,7 +88,7 @@ __all__ = [
     "parse_robot_mapping",
 ]
 
-_SIGNALS = ("t", "q", "tau", "q_ref", "dq", "ddq", "payload_kg")
+_SIGNALS = ("t", "q", "tau", "q_ref", "dq", "ddq", "payload_kg", "payload_arm_m")
 
 
 @dataclass(frozen=True)
@@ -113,29 +113,22 @@ class RobotPreprocessing:
 
 
 def parse_robot_mapping(items: Sequence[str] | str | None) -> dict[str, str]:
-    """Parse ``--map`` entries ``KEY=PATH`` (KEY: t, q, tau, q_ref, dq, ddq, payload_kg or q1,
-    tau3...).
+    """Parse ``--map`` entries ``KEY=PATH`` (KEY: t, q, tau, q_ref, dq, ddq, payload_kg,
+    payload_arm_m or q1, tau3...).
 
     Commas inside brackets belong to a path and do not separate entries.
     """
-    if not items:
-        return {}
-    if isinstance(items, str):
-        items = [items]
     out: dict[str, str] = {}
-    for item in items:
-        for part in (p.strip() for p in _split_top_commas(item)):
-            if not part:
-                continue
-            if "=" not in part:
-                raise RobotIdentError(f"--map entry {part!r}: expected KEY=PATH (e.g. q=rec.q)")
-            k, v = (x.strip() for x in part.split("=", 1))
-            if k not in _SIGNALS and not AXIS_KEY_RE.match(k):
-                raise RobotIdentError(
-                    f"--map key {k!r}: expected one of {', '.join(_SIGNALS)} or a per-axis "
-                    "key such as q1, tau2, q_ref3"
-                )
-            out[k] = v
+    for part in map_entries(items):
+        if "=" not in part:
+            raise RobotIdentError(f"--map entry {part!r}: expected KEY=PATH (e.g. q=rec.q)")
+        k, v = (x.strip() for x in part.split("=", 1))
+        if k not in _SIGNALS and not AXIS_KEY_RE.match(k):
+            raise RobotIdentError(
+                f"--map key {k!r}: expected one of {', '.join(_SIGNALS)} or a per-axis "
+                "key such as q1, tau2, q_ref3"
+            )
+        out[k] = v
     return out
 
 
