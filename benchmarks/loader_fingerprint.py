@@ -29,6 +29,7 @@ if not SHARED.is_dir():
     SHARED = ROOT.parent / "shared" / "data"
 if not SHARED.is_dir():
     SHARED = Path("/work/shared/data")
+SHARED = SHARED.resolve()  # the same file names from any checkout
 EMPS = SHARED / "emps"
 KUKA = SHARED / "kuka_kr300_weigand2021"
 KUKA_MAP = {"t": "rec.time_cont", "q": "rec.act_pos_mot_deg", "tau": "rec.act_torque_abs_nm",
