@@ -60,7 +60,9 @@ def load(
     q_unit: str | None = None,
     axis: int = 0,
 ) -> list[Experiment]:
-    """Load files as experiments (one per file): MCAP logs of ``jointid run``, CSV, MAT.
+    """Load files as experiments (one per file): MCAP logs of ``jointid run``, CSV, MAT, each
+    read by the one reader of one joint and n (:func:`ident.loaders.read_file`) as a run of
+    one joint.
 
     Parameters
     ----------

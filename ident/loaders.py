@@ -1,18 +1,30 @@
-"""Loading measured experiments: MCAP logs of ``jointid run``, CSV and MATLAB files.
+"""Reading measured runs: MCAP logs of ``jointid run``, CSV and MATLAB files, one reader.
 
-(Past 600 lines: the one module of ident that reads files, by design -- three formats sharing
-the column mapping, unit conversion and one-line error messages.)
+(Past 600 lines: the one module of ident that reads files, by design -- one reader of three
+formats for one joint and for n, sharing the column mapping, unit conversion, validation,
+resampling and one-line error messages.)
 
 This is the only module of :mod:`ident` that reads files. Each input file is one experiment
-(one payload run); :func:`concat` stacks them into one :class:`~ident.signals.Signals`
-(paper eq. 36-37), with derivatives left to :func:`ident.preprocess.build_design`.
+(one payload run) of the k moving joints of a robot: :func:`read_file` reads it into the one
+data contract, :class:`RawRobotRun` (t, q and tau of shape (n, k), q_ref, payload). A joint
+is a 1-dof robot: :func:`load_experiment` reads a file as a run of one unnamed joint and
+views it as the single-joint :class:`Experiment`; :func:`concat` stacks experiments into one
+:class:`~ident.signals.Signals` (paper eq. 36-37), with derivatives left to
+:func:`ident.preprocess.build_design`. The robot's loader (:mod:`ident.robot.loaders`) reads
+the same files through :func:`read_file` with the robot's moving joints.
+
+What differs between one joint and n is data: the names (``q``, ``tau``, ``q_ref`` for one
+joint, or ``q1..qk`` numbered / ``q_<joint>`` named by joint, and per-axis ``--map`` keys
+``q1=PATH``), the payload (a single-joint lever arm ``payload_arm_m`` / log ``arm_m``, or a
+CoM in the flange frame), the gains (one expression, or the robot file's drive gains) and
+the wording of a missing signal's error.
 
 Column mapping
 --------------
 The canonical variables are ``t`` [s], ``q`` [rad or m], ``tau`` [N m or N] and the optional
-``payload_kg`` (M_aw [kg]) and ``payload_arm_m`` (L_a [m]). CSV files need a header row;
-MATLAB ``.mat`` files (v5/v7 through scipy, v7.3 -- HDF5 -- through h5py, read into the same
-structure) hold named variables. A mapping renames them::
+``q_ref`` (IV instruments), ``payload_kg`` (M_aw [kg]) and ``payload_arm_m`` (L_a [m]). CSV
+files need a header row; MATLAB ``.mat`` files (v5/v7 through scipy, v7.3 -- HDF5 -- through
+h5py, read into the same structure) hold named variables. A mapping renames them::
 
     mapping = {"q": "qm", "tau": "vir"}      # canonical -> name in the file
     gain = "gtau"                            # tau = gain * column; a number or a variable name
@@ -28,19 +40,21 @@ positions in degrees. A mapping value is then a *path* (see :func:`resolve_path`
 A name that exists as such in the file (e.g. a CSV header ``q.motor``) is always taken
 verbatim. The gain may be a number, a path to a scalar (``para.u[2]``) or a product of them
 (``para.u[2]*0.5``). ``q_unit`` converts q and q_ref to SI (degrees to radians, mm to m).
-Irregular time stamps are put on a uniform grid by :func:`uniform_grid` (shared with the
-robot loader, :mod:`ident.robot.loaders`), with a :class:`ResamplingWarning` saying which
-reading of the stamps it took and why.
+Irregular time stamps are put on a uniform grid by :func:`uniform_grid`, with a
+:class:`ResamplingWarning` saying which reading of the stamps it took and why.
 
-Length (~940 lines): the path language of ``--map``/``--gain`` (struct fields, row and
-column indices) and its one-line error messages are most of it; it serves CSV, MAT and
-MCAP inputs alike; the MATLAB v7.3 (HDF5) reader that feeds the same paths and the one
-resampling of irregular stamps (:func:`uniform_grid`, also the robot loader's) are the rest.
+MCAP logs
+---------
+One ``/joint/<i>/state`` channel per drive; the torque is ``tau_ref``, already joint-side
+[N m]. Only the longest stretch of consecutive cycles with every read drive in OPERATION
+ENABLED is kept (never interpolated across lost cycles), re-paired to the log's torque
+timing (:func:`log_torque_delay`, :func:`ident.timing.align_to_torque`).
 """
 
 from __future__ import annotations
 
 import csv
+import json
 import re
 import warnings
 from collections.abc import Mapping, Sequence
@@ -51,14 +65,18 @@ import h5py
 import numpy as np
 import scipy.io
 
-from daq.protocol.reader import read_run
+from daq.protocol.reader import LogReadError, RunArrays, read_run
+from trajectories.robot.payload import RobotPayloadData
 
 from . import DataError
 from .signals import Signals
 from .timing import align_to_torque
 
 __all__ = [
+    "RawRobotRun",
+    "read_file",
     "Experiment",
+    "make_experiment",
     "ResamplingWarning",
     "load_experiments",
     "load_experiment",
@@ -108,7 +126,8 @@ class ResamplingWarning(UserWarning):
 
 @dataclass(frozen=True)
 class Experiment:
-    """One experiment (input file), uniformly sampled.
+    """One experiment (input file) of one joint, uniformly sampled: the view with k = 1 of the
+    run :func:`read_file` reads (:class:`RawRobotRun`), as the single-joint fit takes it.
 
     Attributes
     ----------
@@ -156,26 +175,28 @@ def parse_mapping(items: Sequence[str] | str | None) -> dict[str, str | float]:
     Values that parse as numbers become floats (payload constants). Commas inside brackets
     belong to a path (``q=rec.pos[:, 2]``) and do not separate entries.
     """
+    out: dict[str, str | float] = {}
+    for part in map_entries(items):
+        if "=" not in part:
+            raise DataError(f"mapping entry {part!r}: expected KEY=NAME (e.g. q=qm)")
+        k, v = (x.strip() for x in part.split("=", 1))
+        if k not in CANONICAL:
+            raise DataError(f"mapping key {k!r}: expected one of {', '.join(CANONICAL)}")
+        try:
+            out[k] = float(v)
+        except ValueError:
+            out[k] = v
+    return out
+
+
+def map_entries(items: Sequence[str] | str | None) -> list[str]:
+    """The non-empty ``KEY=PATH`` entries of ``--map`` items (one joint's and a robot's):
+    split on the commas that are not inside square brackets (``q=rec.pos[:, 2]``)."""
     if not items:
-        return {}
+        return []
     if isinstance(items, str):
         items = [items]
-    out: dict[str, str | float] = {}
-    for item in items:
-        for part in _split_top_commas(item):
-            part = part.strip()
-            if not part:
-                continue
-            if "=" not in part:
-                raise DataError(f"mapping entry {part!r}: expected KEY=NAME (e.g. q=qm)")
-            k, v = (x.strip() for x in part.split("=", 1))
-            if k not in CANONICAL:
-                raise DataError(f"mapping key {k!r}: expected one of {', '.join(CANONICAL)}")
-            try:
-                out[k] = float(v)
-            except ValueError:
-                out[k] = v
-    return out
+    return [p.strip() for item in items for p in _split_top_commas(item) if p.strip()]
 
 
 def _split_top_commas(text: str) -> list[str]:
@@ -466,25 +487,424 @@ def _read_mat_v73(path: Path) -> dict[str, object]:
         raise DataError(f"{path}: not a readable MATLAB v7.3 (HDF5) file ({exc})") from None
 
 
-def _pick(
-    table: Mapping[str, object], key: str, mapping: Mapping[str, str | float], path: Path
-) -> np.ndarray | float | None:
-    """The mapped (or same-named) entry for ``key``: a float constant, a 1-D signal, or
-    None when an optional key is neither mapped nor present."""
-    name = mapping.get(key, key)
-    if isinstance(name, float):
-        return name
-    if key not in mapping and name not in table:
-        if key in ("payload_kg", "payload_arm_m", "q_ref"):
-            return None
-        avail = _listing([str(k) for k in table])
+# -- the one reader: a file -> RawRobotRun of the k moving joints of a robot ----------------
+
+#: Per-axis keys and CSV columns: ``q1``, ``tau2``, ``q_ref3``, ``dq1``, ``ddq1``.
+AXIS_KEY_RE = re.compile(r"^(?P<sig>q_ref|ddq|dq|q|tau)(?P<idx>\d+)$")
+#: The robot CSV's constant payload columns: mass, CoM (flange frame), inertia about the CoM.
+PAYLOAD_COLUMNS = ("payload_mass_kg", "payload_com_x_m", "payload_com_y_m", "payload_com_z_m",
+                   *(f"payload_i{a}_kgm2" for a in ("xx", "xy", "xz", "yy", "yz", "zz")))
+
+
+@dataclass(frozen=True)
+class RawRobotRun:
+    """One experiment as read from its file (joint-side SI, uniformly sampled): the one data
+    contract of every reader; a single-joint :class:`Experiment` is its view with k = 1.
+
+    Attributes
+    ----------
+    source : str
+        File name.
+    t : ndarray, shape (n,)
+        Time from the start of the run [s].
+    q, tau : ndarray, shape (n, k)
+        Positions [rad or m] and joint-side torques [N m or N].
+    q_ref : ndarray, shape (n, k), or None
+        Reference trajectory, when the file carries it.
+    dq, ddq : ndarray, shape (n, k), or None
+        Derivatives given by the file (taken as is), else None.
+    payload : RobotPayloadData
+        The file's payload; ``arm_m`` is the lever arm of a single-joint log or column.
+    revolute : bool or None
+        The joint kind of a one-axis reading of a log (``campaign.joint_kind``, revolute
+        when absent); None: the file does not say (CSV, MAT, several axes).
+    """
+
+    source: str
+    t: np.ndarray
+    q: np.ndarray
+    tau: np.ndarray
+    q_ref: np.ndarray | None = None
+    dq: np.ndarray | None = None
+    ddq: np.ndarray | None = None
+    payload: RobotPayloadData = RobotPayloadData()
+    revolute: bool | None = None
+
+    @property
+    def dt(self) -> float:
+        """Sampling period [s]."""
+        return float((self.t[-1] - self.t[0]) / (len(self.t) - 1))
+
+
+def _names(joints: Sequence[str]) -> str:
+    return ", ".join(joints)
+
+
+def _payload(source: str, mass: float, arm: float | None = None,
+             com: Sequence[float] | None = None,
+             inertia: Sequence[float] | None = None,
+             mass_spec: object = None) -> RobotPayloadData:
+    """The payload of one file, checked: a mass >= 0 [kg], a finite lever arm [m];
+    ``mass_spec``: the ``--map`` text the mass came from, named in the message."""
+    if not (np.isfinite(mass) and mass >= 0):
+        what = f"{mass_spec!r}" if isinstance(mass_spec, str) else f"{mass!r}"
+        got = f", got {mass}" if isinstance(mass_spec, str) else ""
+        raise DataError(f"{source}: payload_kg {what}: expected a mass >= 0 [kg]{got}")
+    if arm is not None and not np.isfinite(arm):
+        raise DataError(f"{source}: payload_arm_m {arm!r}: expected a finite lever arm [m]")
+    return RobotPayloadData(mass=float(mass), arm_m=None if arm is None else float(arm),
+                            com=np.zeros(3) if com is None else com,
+                            inertia=np.zeros(6) if inertia is None else inertia)
+
+
+def _make_run(source: str, t: np.ndarray, q: np.ndarray, tau: np.ndarray, *,
+              q_ref: np.ndarray | None = None, dq: np.ndarray | None = None,
+              ddq: np.ndarray | None = None, payload: RobotPayloadData | None = None,
+              joints: Sequence[str] | None = None,
+              columns: Mapping[str, Sequence[str]] | None = None,
+              first_row: int | None = None, revolute: bool | None = None) -> RawRobotRun:
+    """Validate the arrays of one file (lengths, finite values within
+    :data:`MAX_ABS_SIGNAL`, increasing time without gaps) and resample an irregular grid
+    (:func:`uniform_grid`): the one check of every reader and of :func:`make_experiment`.
+
+    ``joints`` (None: one unnamed joint) and ``columns`` (signal -> column name of each axis)
+    name the culprit of a bad value; ``first_row`` is the file line of sample 0 (CSV: 2,
+    after the header), if any.
+
+    Raises
+    ------
+    DataError
+        Different lengths, NaN/inf, values beyond :data:`MAX_ABS_SIGNAL`, non-increasing
+        time, a gap longer than :data:`GAP_PERIODS` median periods, fewer than
+        :data:`MIN_SAMPLES` samples.
+    """
+    t = np.asarray(t, dtype=float).reshape(-1)
+    arrays = {"q": q, "tau": tau, "q_ref": q_ref, "dq": dq, "ddq": ddq}
+    for name, a in arrays.items():
+        if a is not None and a.shape[0] != t.size:
+            raise DataError(f"{source}: {name} has {a.shape[0]} samples, t has {t.size}")
+    if t.size < MIN_SAMPLES:
+        raise DataError(f"{source}: {t.size} samples, need at least {MIN_SAMPLES}")
+
+    def where(name: str, i: int, j: int | None) -> str:
+        names = (columns or {}).get(name)
+        if names:
+            col = f"column {names[j or 0]!r}"
+            if joints is None and names[j or 0] != name:  # one joint: the key it was for
+                col += f" ({name})"
+        elif j is None or joints is None:
+            col = f"column {name!r}"
+        else:
+            col = f"{name} of axis {j + 1}"
+        if j is not None and joints is not None and j < len(joints):
+            col += f" (joint {joints[j]!r})"
+        row = f"sample {i}" + (f", line {i + first_row}" if first_row is not None else "")
+        return f"{col}, {row} (t={t[i]:.6g} s)" if np.isfinite(t[i]) else f"{col}, {row}"
+
+    for name, a in (("t", t), *arrays.items()):
+        if a is None:
+            continue
+        a2 = np.asarray(a, dtype=float).reshape(a.shape[0], -1)
+        checks = [(~np.isfinite(a2), "NaN/inf values", "")]
+        if name != "t":  # time may be an epoch stamp; the signals are SI
+            checks.append((np.abs(a2) > MAX_ABS_SIGNAL, f"values beyond +-{MAX_ABS_SIGNAL:g}",
+                           "; expected SI values [rad, m, N m or N] after --q-unit and the "
+                           "gains: wrong column, unit or gain?"))
+        for bad, what, hint in checks:
+            if bad.any():
+                i = int(np.argmax(bad.any(axis=1)))
+                j = int(np.argmax(bad[i])) if name != "t" else None
+                raise DataError(f"{source}: {int(bad.sum())} {what}, first at "
+                                f"{where(name, i, j)}: {float(a2[i, j or 0]):.6g}{hint}")
+    d = np.diff(t)
+    if np.any(d <= 0):
+        i = int(np.argmax(d <= 0))
+        raise DataError(f"{source}: time is not strictly increasing at sample {i + 1} "
+                        f"(t={t[i + 1]})")
+    med = float(np.median(d))
+    if np.max(d) > GAP_PERIODS * med:
+        i = int(np.argmax(d > GAP_PERIODS * med))
+        n_gaps = int(np.count_nonzero(d > GAP_PERIODS * med))
         raise DataError(
-            f"{path}: missing column/variable {name!r} for {key!r} (found: {avail}; "
+            f"{source}: gap in the recording at t={t[i]:.6g} s (next sample {d[i]:.6g} s later, "
+            f"{d[i] / med:.0f} periods of {med:.6g} s; {n_gaps} gap(s) over {GAP_PERIODS:g} "
+            "periods): split the file at the gap into separate experiments")
+    t, arrays, _ = uniform_grid(t, arrays, source=source, stacklevel=5)
+    return RawRobotRun(source=source, t=t - t[0], payload=payload or RobotPayloadData(),
+                       revolute=revolute, **arrays)  # type: ignore[arg-type]
+
+
+# -- MCAP logs of ``jointid run`` -------------------------------------------------------------
+
+
+def _longest_true_run(mask: np.ndarray, breaks: np.ndarray | None = None) -> slice:
+    """Slice of the longest contiguous stretch of True in a boolean array (empty if none).
+
+    ``breaks`` (n - 1 booleans): True where sample i + 1 does not follow sample i (cycles
+    lost between them, e.g. a damaged log chunk); a stretch never spans a break.
+    """
+    m = np.asarray(mask, dtype=bool)
+    if m.size == 0 or not m.any():
+        return slice(0, 0)
+    prev = np.concatenate(([False], m[:-1]))
+    start = m & ~prev
+    if breaks is not None:
+        start[1:] |= m[1:] & np.asarray(breaks, dtype=bool)
+    starts = np.flatnonzero(start)
+    label = np.cumsum(start)  # stretch number of every sample (0 before the first)
+    lengths = np.bincount(label[m], minlength=starts.size + 1)[1:]
+    k = int(np.argmax(lengths))
+    return slice(int(starts[k]), int(starts[k] + lengths[k]))
+
+
+def lost_cycle_breaks(cycle: np.ndarray) -> np.ndarray:
+    """n - 1 booleans: True where the logged cycle numbers jump (cycles lost in between)."""
+    return np.diff(np.asarray(cycle, dtype=np.int64)) != 1
+
+
+def log_torque_delay(metadata: Mapping[str, Mapping[str, str]], path: Path | str) -> float:
+    """The log's torque timing ``campaign.torque_delay_cycles`` [cycles] (docs/log-format.md),
+    0.5 for logs written before jointid recorded it.
+
+    Raises
+    ------
+    DataError
+        A value that is not a number >= 0 (one line naming the file and the key).
+    """
+    text = metadata.get("campaign", {}).get("torque_delay_cycles")
+    if text is None:
+        return 0.5
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not np.isfinite(value) or value < 0:
+        raise DataError(f"{path}: metadata campaign.torque_delay_cycles {text!r}: expected a "
+                        "number >= 0 [cycles]")
+    return value
+
+
+def _mcap_axes(path: Path, first: RunArrays) -> int:
+    """Number of drives of a jointid log (``drive<i>`` metadata, else probing channels)."""
+    drives = [k for k in first.metadata if re.fullmatch(r"drive\d+", k)]
+    if drives:
+        return len(drives)
+    n = 1
+    while True:
+        try:
+            read_run(path, axis=n)
+        except LogReadError:
+            return n
+        n += 1
+
+
+def _meta_number(meta: Mapping[str, str], key: str, unit: str, path: Path) -> float:
+    try:
+        return float(meta.get(key, "nan"))
+    except ValueError:
+        raise DataError(f"{path}: metadata payload.{key} {meta.get(key)!r}: expected a number "
+                        f"{unit}") from None
+
+
+def _json_vector(text: str | None, size: int, what: str, source: str) -> np.ndarray:
+    if not text:
+        return np.zeros(size)
+    try:
+        v = np.asarray(json.loads(text), dtype=float).reshape(size)
+    except (ValueError, TypeError):
+        raise DataError(f"{source}: metadata {what} {text!r}: expected a JSON list of "
+                        f"{size} numbers") from None
+    return v
+
+
+def _read_mcap(path: Path, joints: Sequence[str] | None, axis: int | None) -> RawRobotRun:
+    """One run log: the axes of ``joints`` (every axis of the log, matched by number and by
+    the ``drive<i>.joint`` names), or the one axis ``axis`` (``joints`` None), restricted to
+    the cycles an identification can use: every drive read in OPERATION ENABLED with its
+    TPDOs received (:attr:`daq.protocol.reader.RunArrays.valid`; during enable, quick stop
+    and shutdown a drive ignores the torque reference), the longest stretch of consecutive
+    cycles (never interpolated across lost ones), re-paired to the log's torque timing
+    (:func:`ident.timing.align_to_torque`)."""
+    if axis is not None:
+        runs = [read_run(path, axis=axis)]
+    else:
+        joints = tuple(joints or ())
+        k = len(joints)
+        first = read_run(path, axis=0)
+        n_axes = _mcap_axes(path, first)
+        if n_axes != k:
+            raise DataError(
+                f"{path}: the log has {n_axes} axes (/joint/0..{n_axes - 1}/state), the robot "
+                f"moves {k} joints ({_names(joints)})"
+            )
+        runs = [first, *(read_run(path, axis=i) for i in range(1, k))]
+        for i, (run, name) in enumerate(zip(runs, joints, strict=True)):
+            logged = run.metadata.get(f"drive{i}", {}).get("joint")
+            if logged and logged != name:
+                raise DataError(
+                    f"{path}: metadata drive{i}.joint is {logged!r}, the robot's moving joint "
+                    f"{i + 1} is {name!r} (moving: {_names(joints)})"
+                )
+    cycles = runs[0].cycle
+    for i, run in enumerate(runs[1:], start=1):
+        if run.cycle.shape != cycles.shape or np.any(run.cycle != cycles):
+            raise DataError(f"{path}: /joint/{i}/state does not cover the cycles of "
+                            "/joint/0/state (one state per drive and cycle expected)")
+    drive = "the drive" if len(runs) == 1 else "every drive"
+    valid = np.logical_and.reduce([r.valid for r in runs])
+    keep = _longest_true_run(valid, lost_cycle_breaks(cycles))
+    if keep.stop == keep.start:
+        raise DataError(f"{path}: no cycle with {drive} in OPERATION ENABLED")
+    others = int(np.count_nonzero(valid)) - (keep.stop - keep.start)
+    if others > 0:
+        warnings.warn(
+            f"{path}: kept the longest stretch of cycles with {drive} enabled "
+            f"({keep.stop - keep.start} cycles); {others} other enabled cycles are separated "
+            "from it by a stop, missing TPDOs or lost cycles (never interpolated across)",
+            stacklevel=4,
+        )
+    runs = [r.select(keep) for r in runs]
+    # logs without a /setpoint channel carry NaN: no reference, plain least squares; the
+    # /setpoint channel carries one reference: q_ref of a one-axis reading only
+    q_ref = None
+    if len(runs) == 1 and np.all(np.isfinite(runs[0].q_ref)):
+        q_ref = runs[0].q_ref[:, None]
+    meta = runs[0].metadata.get("payload", {})
+    mass = _meta_number(meta, "mass_kg", "[kg]", path)
+    arm = None
+    if meta.get("com_m") is None and meta.get("arm_m") is not None:
+        # a single-joint log's lever arm L_a (eq. 34-35), placed on a one-joint robot
+        arm = _meta_number(meta, "arm_m", "[m]", path)
+        arm = arm if np.isfinite(arm) else None
+    payload = _payload(str(path), mass if np.isfinite(mass) else 0.0, arm,
+                       _json_vector(meta.get("com_m"), 3, "payload.com_m", str(path)),
+                       _json_vector(meta.get("inertia_kgm2"), 6, "payload.inertia_kgm2",
+                                    str(path)))
+    t, q, tau, q_ref = align_to_torque(
+        runs[0].t, np.column_stack([r.q for r in runs]),
+        np.column_stack([r.tau_ref for r in runs]), q_ref,
+        log_torque_delay(runs[0].metadata, path), str(path))
+    return _make_run(str(path), t, q, tau, q_ref=q_ref, payload=payload, joints=joints,
+                     revolute=bool(runs[0].revolute) if len(runs) == 1 else None)
+
+
+# -- CSV and MAT files: named columns / variables ---------------------------------------------
+
+
+def _axis_columns(
+    table: Mapping[str, object], joints: Sequence[str] | None, path: Path
+) -> dict[str, list[str] | None] | None:
+    """CSV: the column name of each (signal, axis), numbered ``q1..qk`` or named by joint
+    ``q_<joint>``; None when the file has neither (a single joint's ``q``, ``tau``)."""
+    cols = [str(c) for c in table]
+    numbered: dict[str, dict[int, str]] = {}
+    for c in cols:
+        m = AXIS_KEY_RE.match(c)
+        if m:
+            numbered.setdefault(m["sig"], {})[int(m["idx"])] = c
+    named_q = ([] if joints is None else
+               [c[2:] for c in cols if c.startswith("q_") and not c.startswith("q_ref")])
+    k = 1 if joints is None else len(joints)
+    names = ("joint",) if joints is None else joints
+    out: dict[str, list[str] | None] = {}
+    if "q" in numbered:
+        idx = sorted(numbered["q"])
+        if idx != list(range(1, len(idx) + 1)):
+            listed = ", ".join(numbered["q"][i] for i in idx)
+            raise DataError(f"{path}: position columns {listed} are not numbered 1..k")
+        if len(idx) != k:
+            raise DataError(
+                f"{path}: {len(idx)} axes in the file (q1..q{len(idx)}), the robot moves {k} "
+                f"joints ({_names(names)})"
+            )
+        for sig in ("q", "tau", "q_ref", "dq", "ddq"):
+            have = numbered.get(sig, {})
+            if not have:
+                if sig == "tau":
+                    raise DataError(f"{path}: no torque columns tau1..tau{k} "
+                                    f"(columns: {', '.join(cols)})")
+                out[sig] = None
+                continue
+            missing = [f"{sig}{i}" for i in range(1, k + 1) if i not in have]
+            extra = [have[i] for i in sorted(have) if i > k]
+            if missing or extra:
+                what = f"missing {', '.join(missing)}" if missing else f"extra {', '.join(extra)}"
+                raise DataError(f"{path}: column {what} (the robot moves {k} joints: "
+                                f"{_names(names)})")
+            out[sig] = [have[i] for i in range(1, k + 1)]
+        return out
+    if named_q and joints is not None:
+        unknown = [n for n in named_q if n not in joints]
+        if unknown:
+            raise DataError(
+                f"{path}: column q_{unknown[0]} names no moving joint of the robot "
+                f"(moving: {_names(joints)})"
+            )
+        for sig in ("q", "tau", "q_ref", "dq", "ddq"):
+            wanted = [f"{sig}_{j}" for j in joints]
+            present = [n in table for n in wanted]
+            if not any(present) and sig not in ("q", "tau"):
+                out[sig] = None
+                continue
+            if not all(present):
+                miss = wanted[present.index(False)]
+                raise DataError(f"{path}: missing column {miss!r} (the robot moves "
+                                f"{_names(joints)})")
+            out[sig] = wanted
+        return out
+    return None
+
+
+def _matrix(table: Mapping[str, object], spec: str, key: str, n: int, k: int,
+            path: Path, joints: Sequence[str] | None) -> np.ndarray:
+    """A mapped signal as (n, k): one 1-D signal for one joint, else a 2-D array whose rows
+    or columns are the axes."""
+    if k == 1 and joints is None:
+        return _signal(table, spec, key, str(path))[:, None]
+    names = ("joint",) if joints is None else joints
+    a = resolve_path(table, spec, str(path))
+    if a.ndim == 1 and k == 1:
+        a = a[:, None]
+    if a.ndim != 2:
+        raise DataError(f"{path}: {spec!r} for {key!r} has shape {a.shape}, expected one "
+                        f"row (or column) per axis ({k} x samples)")
+    if a.shape[1] == n and a.shape[0] != n:
+        a = a.T
+    if a.shape[0] != n:
+        raise DataError(f"{path}: {spec!r} for {key!r} has shape {a.shape}, expected "
+                        f"{n} samples (the length of t)")
+    if a.shape[1] != k:
+        raise DataError(
+            f"{path}: {spec!r} has {a.shape[1]} axes, the robot moves {k} joints "
+            f"({_names(names)})"
+        )
+    return np.asarray(a, dtype=float)
+
+
+def _missing(table: Mapping[str, object], key: str, path: Path,
+             joints: Sequence[str] | None, csv_file: bool, k: int) -> DataError:
+    """The one-line error of a required signal found neither mapped nor in the file."""
+    listed = [str(c) for c in table]
+    if joints is None:  # a single joint: canonical names, --map with paths
+        return DataError(
+            f"{path}: missing column/variable {key!r} for {key!r} (found: {_listing(listed)}; "
             f"map one with --map {key}=NAME or a path like rec.pos[2])"
         )
-    if key in ("payload_kg", "payload_arm_m"):
-        return _constant(table, name, key, str(path))
-    return _signal(table, name, key, str(path))
+    if csv_file:
+        if key == "t":
+            return DataError(f"{path}: missing column 't' (columns: {', '.join(listed)})")
+        if key == "tau":
+            return DataError(f"{path}: no torque columns tau1..tau{k} "
+                             f"(columns: {', '.join(listed)})")
+        return DataError(f"{path}: no position columns q1..q{k} or q_<joint> "
+                         f"(columns: {', '.join(listed)})")
+    if key == "t":
+        return DataError(f"{path}: no variable 't'; map the time with --map t=PATH "
+                         f"(variables: {', '.join(sorted(listed))})")
+    return DataError(
+        f"{path}: no mapping for {key!r} (map it with --map {key}=PATH, one row per "
+        f"axis, or {key}1=PATH,...; variables: {', '.join(sorted(listed))})"
+    )
 
 
 def _gain_value(table: Mapping[str, object], gain: float | str, path: Path) -> float:
@@ -508,37 +928,175 @@ def _gain_value(table: Mapping[str, object], gain: float | str, path: Path) -> f
     return g
 
 
-def _from_table(
-    table: Mapping[str, object],
-    path: Path,
-    mapping: Mapping[str, str | float],
-    gain: float | str | None,
-    revolute: bool | None,
-    q_scale: float = 1.0,
-) -> Experiment:
-    for key in ("t", "q", "tau", "q_ref"):
+def _table_payload(table: Mapping[str, object], mapping: Mapping[str, str | float],
+                   path: Path, one_value: bool) -> RobotPayloadData:
+    """The file's payload: ``payload_kg`` / ``payload_arm_m`` mapped (a number or a path to a
+    scalar or constant; ``one_value``: a scalar, the robot MAT rule) or same-named; the robot
+    CSV's constant ``payload_mass_kg``, ``payload_com_*_m``, ``payload_i*_kgm2`` columns."""
+
+    def constant(key: str) -> float | None:
+        spec = mapping.get(key)
+        if isinstance(spec, str):
+            try:
+                spec = float(spec)
+            except ValueError:
+                pass
+        if isinstance(spec, float):
+            return spec
+        if spec is None:
+            if key not in table:
+                return None
+            spec = key
+        if one_value:
+            a = resolve_path(table, spec, str(path))
+            if a.size != 1:
+                unit = "[kg]" if key == "payload_kg" else "[m]"
+                raise DataError(f"{path}: {key} {spec!r} has shape {a.shape}, expected one "
+                                f"value {unit}")
+            return float(a.ravel()[0])
+        return _constant(table, spec, key, str(path))
+
+    mass, arm = constant("payload_kg"), constant("payload_arm_m")
+    cols = [float(np.asarray(table[c]).flat[0]) if c in table else 0.0 for c in PAYLOAD_COLUMNS]
+    for c in PAYLOAD_COLUMNS:
+        if c in table and np.ptp(np.asarray(table[c], dtype=float)) > 0:
+            raise DataError(f"{path}: column {c!r} varies, expected a constant "
+                            "(one payload per file)")
+    if mass is None:
+        mass = cols[0]
+    return _payload(str(path), mass, arm, cols[1:4], cols[4:10], mapping.get("payload_kg"))
+
+
+def _read_table(path: Path, table: Mapping[str, object], joints: Sequence[str] | None,
+                gains: Sequence[float | str] | None, q_scale: float,
+                mapping: Mapping[str, str | float], csv_file: bool) -> RawRobotRun:
+    """A CSV or MAT file: per signal (t, q, tau, q_ref, dq, ddq) the per-axis mapping keys
+    (``q1=PATH``...), the mapped path (one row or column per axis), the numbered or named
+    CSV columns (``q1``, ``q_<joint>``), else the same-named column or variable."""
+    k = 1 if joints is None else len(joints)
+    for key in ("t", "q", "tau", "q_ref", "dq", "ddq"):
         if isinstance(mapping.get(key), float):
             raise DataError(f"{path}: {key} must be a column/variable, not a constant")
-    t = _pick(table, "t", mapping, path)
-    q = _pick(table, "q", mapping, path)
-    tau = _pick(table, "tau", mapping, path)
-    q_ref = _pick(table, "q_ref", mapping, path)
-    g = 1.0 if gain is None else _gain_value(table, gain, path)
-    consts = {}
-    for key in ("payload_kg", "payload_arm_m"):
-        v = _pick(table, key, mapping, path)
-        consts[key] = 0.0 if v is None else float(v)  # type: ignore[arg-type]
-    return make_experiment(
-        str(path),
-        t,  # type: ignore[arg-type]
-        q_scale * np.asarray(q, dtype=float),
-        g * np.asarray(tau, dtype=float),
-        payload_mass=consts["payload_kg"],
-        payload_arm=consts["payload_arm_m"],
-        revolute=True if revolute is None else revolute,
-        q_ref=None if q_ref is None else q_scale * np.asarray(q_ref, dtype=float),
-        columns={k: str(mapping.get(k, k)) for k in ("t", "q", "tau", "q_ref")},
+    spec_t = mapping.get("t", "t")
+    if "t" not in mapping and "t" not in table:
+        raise _missing(table, "t", path, joints, csv_file, k)
+    t = _signal(table, str(spec_t), "t", str(path))
+    names = ("joint",) if joints is None else joints
+    columns: dict[str, list[str]] = {}
+    discovered = None  # the numbered / named CSV columns (a single joint's when q is absent)
+    if csv_file and (joints is not None or ("q" not in mapping and "q" not in table)):
+        try:
+            discovered = _axis_columns(table, joints, path)
+        except DataError:
+            if joints is not None:
+                raise
+            raise _missing(table, "q", path, joints, csv_file, k) from None
+
+    def signal(sig: str, required: bool) -> np.ndarray | None:
+        per_axis = [f"{sig}{i}" for i in range(1, k + 1)]
+        if any(key in mapping for key in per_axis):
+            miss = [key for key in per_axis if key not in mapping]
+            if miss:
+                raise DataError(f"{path}: --map gives {sig} per axis but not {miss[0]} "
+                                f"(the robot moves {k} joints: {_names(names)})")
+            extra = sorted(key for key in mapping if (m := AXIS_KEY_RE.match(key))
+                           and m["sig"] == sig and int(m["idx"]) > k)
+            if extra:
+                raise DataError(f"{path}: --map {extra[0]}: the robot moves only {k} "
+                                f"joints ({_names(names)})")
+            columns[sig] = [str(mapping[key]) for key in per_axis]
+            return np.column_stack([_signal(table, str(mapping[key]), key, str(path))
+                                    for key in per_axis])
+        spec = mapping.get(sig)
+        if spec is None and discovered is not None:
+            cols = discovered[sig]
+            if cols is None:
+                return None
+            columns[sig] = cols
+            return np.column_stack([np.asarray(table[c], dtype=float) for c in cols])
+        if spec is None:
+            if sig not in table:
+                if required:
+                    raise _missing(table, sig, path, joints, csv_file, k)
+                return None
+            spec = sig
+        if k == 1:
+            columns[sig] = [str(spec)]
+        return _matrix(table, str(spec), sig, t.size, k, path, joints)
+
+    q = signal("q", True)
+    tau = signal("tau", True)
+    q_ref = signal("q_ref", False)
+    g = np.ones(k) if gains is None else np.array([_gain_value(table, x, path) for x in gains])
+    dq = ddq = None
+    if joints is not None:  # derivatives given by the file (a robot's states chain)
+        dq, ddq = signal("dq", False), signal("ddq", False)
+        if dq is None or ddq is None:
+            dq = ddq = None
+    return _make_run(
+        str(path), t, q_scale * q, g * tau,  # type: ignore[operator]
+        q_ref=None if q_ref is None else q_scale * q_ref,
+        dq=None if dq is None else q_scale * dq,
+        ddq=None if ddq is None else q_scale * ddq,
+        payload=_table_payload(table, mapping, path, joints is not None and not csv_file),
+        joints=joints, columns=columns, first_row=2 if csv_file else None,
     )
+
+
+def read_file(
+    path: str | Path,
+    joints: Sequence[str] | None,
+    *,
+    gains: Sequence[float | str] | None = None,
+    mapping: Mapping[str, str | float] | None = None,
+    q_unit: str | None = None,
+    axis: int | None = None,
+) -> RawRobotRun:
+    """Read one file (``.mcap``, ``.csv``/``.txt``, ``.mat``) as a run of the moving joints
+    ``joints`` of a robot: the one reader of :mod:`ident` (single joint and robot alike).
+
+    Parameters
+    ----------
+    path : str or Path
+        Input file.
+    joints : sequence of str or None
+        The robot's moving joints, in order (the axes of the file); None: one unnamed joint
+        (:func:`load_experiment`: canonical names ``q``, ``tau``..., axis ``axis`` of a log).
+    gains : sequence of float or str, shape (k,), or None
+        Joint-side torque per unit of the file's torque, per axis: a number or a path to a
+        scalar of the file, or a product of them (``para.u[2]*0.5``); CSV and MAT only.
+    mapping : mapping or None
+        Signal or per-axis key (``t, q, tau, q_ref, dq, ddq, payload_kg, payload_arm_m``,
+        ``q1``, ``tau2``...) -> path (:func:`resolve_path`); payload entries may be numbers.
+    q_unit : {"rad", "deg", "m", "mm"} or None
+        Unit of q, q_ref (and dq, ddq) of a CSV/MAT file; MCAP logs are SI.
+    axis : int or None
+        With ``joints`` None: the axis of an MCAP log to read.
+
+    Raises
+    ------
+    DataError
+        Missing file, unknown type, axes that do not match ``joints``, bad mapping or values
+        (one line naming the file and the key, column or path).
+    daq.protocol.reader.LogReadError
+        An unreadable log.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise DataError(f"{p}: no such file")
+    scale = 1.0 if q_unit is None else Q_UNITS[str(q_unit).strip().lower()][0]
+    ext = p.suffix.lower()
+    if ext == ".mcap":
+        if scale != 1.0:
+            raise DataError(f"{p}: MCAP logs are in SI units; q unit {q_unit!r} does not apply")
+        return _read_mcap(p, joints, (axis or 0) if joints is None else None)
+    mapping = dict(mapping or {})
+    if ext in (".csv", ".txt"):
+        table: Mapping[str, object] = {str(k): v for k, v in _read_csv(p).items()}
+        return _read_table(p, table, joints, gains, scale, mapping, True)
+    if ext == ".mat":
+        return _read_table(p, _read_mat(p), joints, gains, scale, mapping, False)
+    raise DataError(f"{p}: unknown file type {ext!r}, expected .mcap, .csv or .mat")
 
 
 def _hf_noise(x: np.ndarray, dt: float) -> float:
@@ -663,6 +1221,24 @@ def uniform_grid(
     return tu, out, note
 
 
+# -- the single joint: a view of the run of a one-joint robot ---------------------------------
+
+
+def _experiment(run: RawRobotRun, revolute: bool) -> Experiment:
+    """The single-joint view of a run of one joint (k = 1)."""
+    arm = run.payload.arm_m
+    return Experiment(
+        source=run.source,
+        t=run.t,
+        q=run.q[:, 0],
+        tau=run.tau[:, 0],
+        payload_mass=float(run.payload.mass),
+        payload_arm=0.0 if arm is None else float(arm),
+        revolute=bool(revolute),
+        q_ref=None if run.q_ref is None else run.q_ref[:, 0],
+    )
+
+
 def make_experiment(
     source: str,
     t: np.ndarray,
@@ -675,7 +1251,8 @@ def make_experiment(
     q_ref: np.ndarray | None = None,
     columns: Mapping[str, str] | None = None,
 ) -> Experiment:
-    """Validate arrays and build an :class:`Experiment` (resampling if irregular).
+    """Validate arrays and build an :class:`Experiment` (resampling if irregular): the
+    checks of every reader (:func:`_make_run`) on one joint.
 
     Parameters
     ----------
@@ -688,165 +1265,16 @@ def make_experiment(
     DataError
         Different lengths, NaN/inf, values beyond :data:`MAX_ABS_SIGNAL`, non-increasing
         time, a gap longer than :data:`GAP_PERIODS` median periods, fewer than
-        :data:`MIN_SAMPLES`.
+        :data:`MIN_SAMPLES`, a payload mass < 0 or a lever arm that is not finite.
     """
-    cols = dict(columns or {})
-    t = np.asarray(t, dtype=float).ravel()
-    q = np.asarray(q, dtype=float).ravel()
-    tau = np.asarray(tau, dtype=float).ravel()
-    if not (t.shape == q.shape == tau.shape):
-        raise DataError(
-            f"{source}: t, q, tau have different lengths ({t.size}, {q.size}, {tau.size})"
-        )
-    if q_ref is not None:
-        q_ref = np.asarray(q_ref, dtype=float).ravel()
-        if q_ref.shape != t.shape:
-            raise DataError(f"{source}: q_ref has {q_ref.size} samples, t has {t.size}")
-    if t.size < MIN_SAMPLES:
-        raise DataError(f"{source}: {t.size} samples, need at least {MIN_SAMPLES}")
-    if not (np.isfinite(payload_mass) and payload_mass >= 0):
-        raise DataError(f"{source}: payload_kg {payload_mass!r}: expected a mass >= 0 [kg]")
-    if not np.isfinite(payload_arm):
-        raise DataError(f"{source}: payload_arm_m {payload_arm!r}: expected a finite lever "
-                        "arm [m]")
-    for name, a in (("t", t), ("q", q), ("tau", tau), ("q_ref", q_ref)):
-        if a is None:
-            continue
-        col = cols.get(name, name)
-        label = repr(name) if col == name else f"{col!r} ({name})"
-        bad = ~np.isfinite(a)
-        if bad.any():
-            raise DataError(
-                f"{source}: {label} has {int(bad.sum())} NaN/inf values "
-                f"(first at sample {int(np.argmax(bad))})"
-            )
-        big = np.abs(a) > MAX_ABS_SIGNAL
-        if name != "t" and big.any():
-            k = int(np.argmax(big))
-            raise DataError(
-                f"{source}: {label} has {int(big.sum())} values beyond +-{MAX_ABS_SIGNAL:g} "
-                f"(first {a[k]:.6g} at sample {k}); expected SI values [rad, m, N m or N] "
-                "after --q-unit and --gain: wrong column, unit or gain?"
-            )
-    d = np.diff(t)
-    if np.any(d <= 0):
-        k = int(np.argmax(d <= 0))
-        raise DataError(
-            f"{source}: time is not strictly increasing at sample {k + 1} (t={t[k + 1]})"
-        )
-    med = float(np.median(d))
-    if np.max(d) > GAP_PERIODS * med:
-        k = int(np.argmax(d > GAP_PERIODS * med))
-        n_gaps = int(np.count_nonzero(d > GAP_PERIODS * med))
-        raise DataError(
-            f"{source}: gap in the recording at t={t[k]:.6g} s (next sample {d[k]:.6g} s "
-            f"later, {d[k] / med:.0f} periods of {med:.6g} s; {n_gaps} gap(s) over "
-            f"{GAP_PERIODS:g} periods): split the file at the gap into separate experiments"
-        )
-    t, grid, _ = uniform_grid(t, {"q": q, "tau": tau, "q_ref": q_ref}, source=source,
-                              stacklevel=4)
-    q, tau, q_ref = grid["q"], grid["tau"], grid["q_ref"]
-    return Experiment(
-        source=source,
-        t=t - t[0],
-        q=q,
-        tau=tau,
-        payload_mass=float(payload_mass),
-        payload_arm=float(payload_arm),
-        revolute=bool(revolute),
-        q_ref=q_ref,
-    )
 
+    def axis(a: np.ndarray | None) -> np.ndarray | None:
+        return None if a is None else np.asarray(a, dtype=float).reshape(-1)[:, None]
 
-def _finite_or_zero(x: float | None) -> float:
-    """Payload metadata: absent (None/NaN) means no payload."""
-    try:
-        v = float(x)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        return 0.0
-    return v if np.isfinite(v) else 0.0
-
-
-def _longest_true_run(mask: np.ndarray, breaks: np.ndarray | None = None) -> slice:
-    """Slice of the longest contiguous stretch of True in a boolean array (empty if none).
-
-    ``breaks`` (n - 1 booleans): True where sample i + 1 does not follow sample i (cycles
-    lost between them, e.g. a damaged log chunk); a stretch never spans a break.
-    """
-    m = np.asarray(mask, dtype=bool)
-    if m.size == 0 or not m.any():
-        return slice(0, 0)
-    prev = np.concatenate(([False], m[:-1]))
-    start = m & ~prev
-    if breaks is not None:
-        start[1:] |= m[1:] & np.asarray(breaks, dtype=bool)
-    starts = np.flatnonzero(start)
-    label = np.cumsum(start)  # stretch number of every sample (0 before the first)
-    lengths = np.bincount(label[m], minlength=starts.size + 1)[1:]
-    k = int(np.argmax(lengths))
-    return slice(int(starts[k]), int(starts[k] + lengths[k]))
-
-
-def lost_cycle_breaks(cycle: np.ndarray) -> np.ndarray:
-    """n - 1 booleans: True where the logged cycle numbers jump (cycles lost in between)."""
-    return np.diff(np.asarray(cycle, dtype=np.int64)) != 1
-
-
-def _load_mcap(path: Path, revolute: bool | None, axis: int) -> Experiment:
-    """One MCAP run, restricted to the cycles an identification can use: the drive in
-    OPERATION ENABLED with its TPDOs received (:attr:`daq.protocol.reader.RunArrays.valid`);
-    during enable, quick stop and shutdown the drive ignores the torque reference."""
-    run = read_run(path, axis=axis)
-    keep = _longest_true_run(run.valid, lost_cycle_breaks(run.cycle))
-    inner_dropped = int(np.count_nonzero(run.valid)) - (keep.stop - keep.start)
-    if inner_dropped > 0:
-        warnings.warn(
-            f"{path}: kept the longest stretch of cycles with the drive enabled "
-            f"({keep.stop - keep.start} cycles); {inner_dropped} other enabled cycles "
-            "are separated from it by a stop, missing TPDOs or lost cycles (never "
-            "interpolated across)",
-            stacklevel=2,
-        )
-    if keep.stop - keep.start == 0:
-        raise DataError(f"{path}: no cycle with the drive in OPERATION ENABLED")
-    run = run.select(keep)
-    rev = bool(run.revolute) if revolute is None else revolute
-    # logs without a /setpoint channel carry NaN: no reference, plain least squares
-    q_ref = run.q_ref if np.all(np.isfinite(run.q_ref)) else None
-    t, q, tau, q_ref = align_to_torque(run.t, run.q, run.tau_ref, q_ref,
-                                       log_torque_delay(run.metadata, path), str(path))
-    return make_experiment(
-        str(path),
-        t,
-        q,
-        tau,
-        payload_mass=_finite_or_zero(run.payload_mass_kg),
-        payload_arm=_finite_or_zero(run.payload_arm_m),
-        revolute=rev,
-        q_ref=q_ref,
-    )
-
-
-def log_torque_delay(metadata: Mapping[str, Mapping[str, str]], path: Path | str) -> float:
-    """The log's torque timing ``campaign.torque_delay_cycles`` [cycles] (docs/log-format.md),
-    0.5 for logs written before jointid recorded it.
-
-    Raises
-    ------
-    DataError
-        A value that is not a number >= 0 (one line naming the file and the key).
-    """
-    text = metadata.get("campaign", {}).get("torque_delay_cycles")
-    if text is None:
-        return 0.5
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not np.isfinite(value) or value < 0:
-        raise DataError(f"{path}: metadata campaign.torque_delay_cycles {text!r}: expected a "
-                        "number >= 0 [cycles]")
-    return value
+    run = _make_run(source, t, axis(q), axis(tau), q_ref=axis(q_ref),  # type: ignore[arg-type]
+                    payload=_payload(source, payload_mass, payload_arm),
+                    columns={k: [v] for k, v in (columns or {}).items()})
+    return _experiment(run, revolute)
 
 
 def _q_unit(q_unit: str | None, rev: bool | None, source: str) -> tuple[float, bool | None]:
@@ -876,7 +1304,8 @@ def load_experiment(
     axis: int = 0,
     q_unit: str | None = None,
 ) -> Experiment:
-    """Load one file (``.mcap``, ``.csv``, ``.mat``) as an :class:`Experiment`.
+    """Load one file (``.mcap``, ``.csv``, ``.mat``) as an :class:`Experiment`: the file read
+    as a run of one unnamed joint (:func:`read_file`), viewed with k = 1.
 
     Parameters
     ----------
@@ -885,7 +1314,8 @@ def load_experiment(
     mapping : mapping or None
         Canonical name (``t``, ``q``, ``tau``, ``q_ref``, ``payload_kg``, ``payload_arm_m``)
         -> column/variable name or path (:func:`resolve_path`: ``rec.act_pos_mot_deg[2]``,
-        ``data[:, 1]``), or a number for payload entries.
+        ``data[:, 1]``), or a number for payload entries. Unmapped, a CSV file's ``q``,
+        ``tau``, ``q_ref`` columns are taken, else its numbered ``q1``, ``tau1``, ``q_ref1``.
     gain : float, str or None
         Drive gain applied to the ``tau`` signal: a number, a scalar (or constant) variable
         or path (``para.u[2]``), or a product of them (``para.u[2]*0.5``); ``None`` = 1.
@@ -909,18 +1339,12 @@ def load_experiment(
     if not p.exists():
         raise DataError(f"{p}: no such file")
     rev = _joint_flag(joint)
-    ext = p.suffix.lower()
-    mapping = dict(mapping or {})
-    scale, rev_u = _q_unit(q_unit, rev, str(p))
-    if ext == ".mcap":
-        if scale != 1.0:
-            raise DataError(f"{p}: MCAP logs are in SI units; q unit {q_unit!r} does not apply")
-        return _load_mcap(p, rev, axis)
-    if ext == ".csv" or ext == ".txt":
-        return _from_table(_read_csv(p), p, mapping, gain, rev_u, scale)
-    if ext == ".mat":
-        return _from_table(_read_mat(p), p, mapping, gain, rev_u, scale)
-    raise DataError(f"{p}: unknown file type {ext!r}, expected .mcap, .csv or .mat")
+    _, rev_u = _q_unit(q_unit, rev, str(p))
+    run = read_file(p, None, gains=None if gain is None else [gain], mapping=mapping,
+                    q_unit=q_unit, axis=axis)
+    if rev is None:
+        rev = run.revolute if run.revolute is not None else rev_u
+    return _experiment(run, True if rev is None else rev)
 
 
 def load_experiments(

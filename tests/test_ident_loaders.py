@@ -17,7 +17,10 @@ from ident.loaders import (
     load_experiment,
     load_experiments,
     parse_mapping,
+    read_file,
 )
+from ident.robot import RobotIdentError
+from ident.robot.loaders import load_robot_runs, parse_robot_mapping
 
 
 def _arrays(n=500, dt=1e-3):
@@ -153,3 +156,72 @@ def test_longest_enabled_stretch_is_kept():
     assert _longest_true_run(mask) == slice(6, 10)
     assert _longest_true_run(np.ones(5, bool)) == slice(0, 5)
     assert _longest_true_run(np.zeros(4, bool)) == slice(0, 0)
+
+
+# -- one reader for one joint and n (a joint is a 1-dof robot) ---------------------------------
+
+
+def test_a_joint_is_a_one_joint_robot_in_both_spellings(tmp_path):
+    """The single-joint spelling (``q``, ``tau``, ``payload_arm_m``) and the robot's numbered
+    one (``q1``, ``tau1``, ``q_ref1``) read the same arrays through both loaders, and the
+    single-joint Experiment is the k = 1 view of the robot reader's run."""
+    t, q, tau = _arrays()
+    single = tmp_path / "single.csv"
+    _write_csv(single, ["t", "q", "tau", "q_ref", "payload_kg", "payload_arm_m"],
+               [t, q, tau, 1.1 * q, np.full_like(t, 2.0), np.full_like(t, 0.75)])
+    numbered = tmp_path / "numbered.csv"
+    _write_csv(numbered, ["t", "tau1", "q1", "q_ref1", "payload_mass_kg"],
+               [t, tau, q, 1.1 * q, np.full_like(t, 2.0)])
+    a, b = load_experiment(single), load_experiment(numbered, gain=2.0)
+    (r,) = load_robot_runs(single, ("elbow",), gains=[2.0])
+    for x in (a, b):
+        np.testing.assert_array_equal(x.q, q)
+        np.testing.assert_array_equal(x.q_ref, 1.1 * q)
+        assert x.payload_mass == 2.0
+    np.testing.assert_array_equal(a.tau, tau)
+    np.testing.assert_array_equal(b.tau, 2.0 * tau)
+    assert (a.payload_arm, b.payload_arm) == (0.75, 0.0)
+    np.testing.assert_array_equal(r.q[:, 0], a.q)
+    np.testing.assert_array_equal(r.tau[:, 0], 2.0 * a.tau)
+    assert r.payload.mass == 2.0 and r.payload.arm_m == 0.75
+    raw = read_file(single, None)
+    assert raw.q.shape == (t.size, 1) and raw.revolute is None
+    np.testing.assert_array_equal(raw.t, a.t)
+    np.testing.assert_array_equal(raw.q[:, 0], a.q)
+    # a lever arm without a mass places nothing: the robot drops it, the Experiment keeps it
+    _write_csv(single, ["t", "q", "tau", "payload_arm_m"], [t, q, tau, np.full_like(t, 0.75)])
+    assert load_robot_runs(single, ("elbow",))[0].payload.arm_m is None
+    assert load_experiment(single).payload_arm == 0.75
+
+
+def test_single_joint_errors_keep_their_spelling(tmp_path):
+    """Read by the one reader, a single joint's missing signal is still named with its
+    canonical key and the --map hint; a robot's with its numbered columns."""
+    t, q, tau = _arrays()
+    p = tmp_path / "x.csv"
+    _write_csv(p, ["t", "q1", "q2", "tau1", "tau2"], [t, q, q, tau, tau])
+    with pytest.raises(DataError, match=r"x\.csv: missing column/variable 'q' for 'q' "
+                                        r"\(found: q1, q2, t, tau1, tau2; map one with --map"):
+        load_experiment(p)
+    e = load_experiment(p, mapping={"q": "q2", "tau": "tau2"})  # mapped: the other axes ignored
+    np.testing.assert_array_equal(e.q, q)
+    with pytest.raises(RobotIdentError, match=r"x\.csv: 2 axes in the file \(q1\.\.q2\), the "
+                                              r"robot moves 1 joints \(elbow\)"):
+        load_robot_runs(p, ("elbow",))
+
+
+def test_a_foreign_mat_file_reads_the_same_as_one_joint_and_as_a_one_joint_robot(tmp_path):
+    """The EMPS layout (``qm``, ``vir``, a gain variable ``gtau``): ``--map``/``--gain`` of the
+    single joint and ``--map`` with the drive gain of a one-joint robot give the same arrays,
+    the payload (mass and lever arm) included."""
+    t, q, tau = _arrays()
+    p = tmp_path / "emps_like.mat"
+    scipy.io.savemat(p, {"t": t[:, None], "qm": q[:, None], "vir": (tau / 35.15)[:, None],
+                         "gtau": np.array([[35.15]])})
+    e = load_experiment(p, mapping=parse_mapping("q=qm,tau=vir,payload_kg=2,payload_arm_m=0.5"),
+                        gain="gtau")
+    (r,) = load_robot_runs(p, ("slide",), gains=[35.15], mapping=parse_robot_mapping(
+        "q=qm,tau=vir,payload_kg=2,payload_arm_m=0.5"))
+    np.testing.assert_array_equal(r.q[:, 0], e.q)
+    np.testing.assert_array_equal(r.tau[:, 0], e.tau)
+    assert (r.payload.mass, r.payload.arm_m) == (e.payload_mass, e.payload_arm) == (2.0, 0.5)
