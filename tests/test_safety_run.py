@@ -204,11 +204,15 @@ def test_hung_paced_master_drive_faults_on_sync_loss(tmp_path):
     assert r.status == "stopped"
     # the master names its own stall as the cause; the drive's EMCY is an event of the log
     assert r.reason.startswith("master stalled for "), r.reason
-    assert rig.drive.sync_losses == 1 and rig.drive.heartbeat_timeouts == 0
+    assert rig.drive.sync_losses == 1
     assert t["sync"] <= t["fault_delay"] <= t["sync"] + MARGIN_S
     assert r.runs[0].fault_cycle >= t["cycle"]
     a = read_run(r.runs[0].path)
     assert a.metadata["safety"]["sync_period_us"] == "1000"
+    # the fault is the SYNC loss's: the drive's first EMCY (on a loaded host the starved
+    # heartbeat producer may also time out afterwards, which is not what this test is about)
+    emcys = [e["message"] for e in a.events if e["kind"] == "emcy"]
+    assert emcys and f"EMCY 0x{SYNC_LOST:04X}" in emcys[0], emcys
     assert any(e["kind"] == "emcy" and f"node {NODE}: EMCY 0x{SYNC_LOST:04X}" in e["message"]
                for e in a.events), a.events
 
