@@ -496,12 +496,14 @@ def report(work: Path, res: dict) -> None:
                   f"validation peak {pk:.1f} sigma")
         if th.regime:
             blo, bhi = th.bands()
-            print(f"  regime bands, half-width [N m] per moving-time bin (edges "
-                  f"{list(th.edges_s)} s; *: < {th.min_samples} samples, constant):")
+            print(f"  regime bands, half-width [N m] (samples, episodes) per moving-time bin "
+                  f"(edges {list(th.edges_s)} s; *: < {th.min_samples} samples or "
+                  f"{th.min_episodes} episodes, constant):")
             for j, name in enumerate(joints):
                 print(f"    {name}: " + "  ".join(
-                    f"{(b - a) / 2:.3g}{'' if u else '*'} ({n})" for a, b, u, n in zip(
-                        blo[j], bhi[j], th.bin_used[j], th.bin_samples[j], strict=True)))
+                    f"{(b - a) / 2:.3g}{'' if u else '*'} ({n}, {e})" for a, b, u, n, e in zip(
+                        blo[j], bhi[j], th.bin_used[j], th.bin_samples[j],
+                        th.bin_episodes[j], strict=True)))
         if (work / "false" / "monitor.json").is_file():
             logs = json.loads((work / "false" / "monitor.json").read_text())["logs"]
             res["false_alarms"] = {}

@@ -35,9 +35,9 @@ from .cli_export_model import consistent_from_record, read_fit_record
 from .robot.export_model import FRICTION_FORMAT, friction_record, urdf_text
 from .vocab import upgrade_record
 
-__all__ = ["DEFAULT_EDGES_S", "DEFAULT_MIN_SAMPLES", "THRESHOLDS_FORMAT", "Thresholds",
-           "TorquePredictor", "exported_from_fit", "load_exported", "load_model",
-           "thresholds_from_residual"]
+__all__ = ["DEFAULT_EDGES_S", "DEFAULT_MIN_EPISODES", "DEFAULT_MIN_SAMPLES",
+           "THRESHOLDS_FORMAT", "Thresholds", "TorquePredictor", "exported_from_fit",
+           "load_exported", "load_model", "thresholds_from_residual"]
 
 THRESHOLDS_FORMAT = "jointid-monitor-thresholds/2"
 #: the format before the regime bins (read too: a constant band)
@@ -258,6 +258,9 @@ def load_model(path: str | Path, robot: Robot | None, model: str | None = None
 DEFAULT_EDGES_S = (0.03, 0.1, 0.3, 1.0)
 #: a regime bin with fewer validation samples than this takes the joint's constant band
 DEFAULT_MIN_SAMPLES = 1000
+#: ... or entered fewer times than this (separate motions): the chance that the next motion
+#: in the bin goes beyond all N seen is 1 / (N + 1), here < 5 % (before the peak margin)
+DEFAULT_MIN_EPISODES = 20
 
 
 def _band(mean: float, sigma: float, peak: float, k_sigma: float, margin: float
@@ -296,8 +299,10 @@ class Thresholds:
         largest deviation [sigma] of the validation samples in the bin (0 for an empty bin).
     bin_samples : tuple of tuple of int
         Per joint and bin: validation samples in it.
-    min_samples : int
-        A bin with fewer samples (or no spread) takes the joint's constant band.
+    bin_episodes : tuple of tuple of int
+        Per joint and bin: times the validation entered it (separate motions).
+    min_samples, min_episodes : int
+        A bin with fewer samples or episodes (or no spread) takes the joint's constant band.
     """
 
     joints: tuple[str, ...]
@@ -313,7 +318,9 @@ class Thresholds:
     bin_sigma: tuple[tuple[float, ...], ...] = ()
     bin_peak: tuple[tuple[float, ...], ...] = ()
     bin_samples: tuple[tuple[int, ...], ...] = ()
+    bin_episodes: tuple[tuple[int, ...], ...] = ()
     min_samples: int = DEFAULT_MIN_SAMPLES
+    min_episodes: int = DEFAULT_MIN_EPISODES
 
     @property
     def half_width(self) -> list[float]:
@@ -339,10 +346,12 @@ class Thresholds:
 
     @property
     def bin_used(self) -> list[list[bool]]:
-        """Per joint and bin: its own statistics set its band (enough samples, spread > 0);
-        else the constant band."""
-        return [[n >= self.min_samples and s > 0 for n, s in zip(ns, ss, strict=True)]
-                for ns, ss in zip(self.bin_samples, self.bin_sigma, strict=True)]
+        """Per joint and bin: its own statistics set its band (enough samples and
+        episodes, spread > 0); else the constant band."""
+        return [[n >= self.min_samples and e >= self.min_episodes and s > 0
+                 for n, e, s in zip(ns, es, ss, strict=True)]
+                for ns, es, ss in zip(self.bin_samples, self.bin_episodes, self.bin_sigma,
+                                      strict=True)]
 
     def bands(self) -> tuple[list[list[float]], list[list[float]]]:
         """(lower, upper) [N m] per joint and regime bin: the bin's own band where
@@ -364,7 +373,7 @@ class Thresholds:
     def constant(self) -> Thresholds:
         """The same statistics without the regime bins: the constant band (format /1)."""
         return dataclasses.replace(self, edges_s=(), bin_mean=(), bin_sigma=(), bin_peak=(),
-                                   bin_samples=())
+                                   bin_samples=(), bin_episodes=())
 
     def with_k(self, k_sigma: float | None = None, peak_margin: float | None = None
                ) -> Thresholds:
@@ -384,11 +393,12 @@ class Thresholds:
             lo, hi = self.bands()
             d["regime"] = {
                 "variable": "moving_s", "edges_s": list(self.edges_s),
-                "min_samples": self.min_samples,
+                "min_samples": self.min_samples, "min_episodes": self.min_episodes,
                 "mean": [list(x) for x in self.bin_mean],
                 "sigma": [list(x) for x in self.bin_sigma],
                 "peak_sigmas": [list(x) for x in self.bin_peak],
                 "samples": [list(x) for x in self.bin_samples],
+                "episodes": [list(x) for x in self.bin_episodes],
                 "own": self.bin_used, "lower": lo, "upper": hi}
         return d
 
@@ -444,28 +454,29 @@ def _read_regime(p: Path, reg: Any, th: Thresholds) -> Thresholds:
                         f"{reg.get('variable')!r}")
     try:
         edges = tuple(float(x) for x in reg["edges_s"])
-        mins = int(reg["min_samples"])
+        mins, mine = int(reg["min_samples"]), int(reg["min_episodes"])
         tabs = [tuple(tuple(float(x) for x in row) for row in reg[key])
                 for key in ("mean", "sigma", "peak_sigmas")]
-        counts = tuple(tuple(int(x) for x in row) for row in reg["samples"])
+        counts, eps = (tuple(tuple(int(x) for x in row) for row in reg[key])
+                       for key in ("samples", "episodes"))
     except (KeyError, TypeError, ValueError) as e:
         raise DataError(f"{p}: regime: key {e.args[0] if e.args else '?'!r} missing or "
                         "not numbers") from None
     if not _increasing(edges):
         raise DataError(f"{p}: regime.edges_s: expected increasing numbers > 0 [s]")
-    if not mins >= 1:
-        raise DataError(f"{p}: regime.min_samples: expected an integer >= 1")
+    if not (mins >= 1 and mine >= 1):
+        raise DataError(f"{p}: regime.min_samples, min_episodes: expected integers >= 1")
     shape = (len(th.joints), len(edges) + 1)
-    for key, t in zip(("mean", "sigma", "peak_sigmas", "samples"), (*tabs, counts),
-                      strict=True):
+    for key, t in zip(("mean", "sigma", "peak_sigmas", "samples", "episodes"),
+                      (*tabs, counts, eps), strict=True):
         if len(t) != shape[0] or any(len(row) != shape[1] for row in t):
             raise DataError(f"{p}: regime.{key}: expected {shape[0]} rows (one per joint) "
                             f"of {shape[1]} values (one per bin)")
-    if any(x < 0 for row in tabs[1] for x in row) or any(x < 0 for row in counts
-                                                          for x in row):
-        raise DataError(f"{p}: regime.sigma and regime.samples: expected numbers >= 0")
+    if any(x < 0 for t in (tabs[1], counts, eps) for row in t for x in row):
+        raise DataError(f"{p}: regime.sigma, samples, episodes: expected numbers >= 0")
     return dataclasses.replace(th, edges_s=edges, bin_mean=tabs[0], bin_sigma=tabs[1],
-                               bin_peak=tabs[2], bin_samples=counts, min_samples=mins)
+                               bin_peak=tabs[2], bin_samples=counts, bin_episodes=eps,
+                               min_samples=mins, min_episodes=mine)
 
 
 def _stats(x: np.ndarray) -> tuple[float, float, float]:
@@ -481,12 +492,14 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
                              source: str = "", peak_margin: float = 0.0,
                              moving_s: Any = None,
                              edges_s: Sequence[float] = DEFAULT_EDGES_S,
-                             min_samples: int = DEFAULT_MIN_SAMPLES) -> Thresholds:
+                             min_samples: int = DEFAULT_MIN_SAMPLES,
+                             min_episodes: int = DEFAULT_MIN_EPISODES) -> Thresholds:
     """Thresholds from a residual (n, k) [N m] recorded without collision: per joint the
     mean, standard deviation and peak of its samples off the static band (residual not
     exactly 0; near rest the model predicts an interval, :meth:`TorquePredictor.band`);
-    with ``moving_s`` (n, k) [s] (each sample's moving time, the monitor's), the same per
-    bin of ``edges_s``.
+    with ``moving_s`` (n, k) [s] (each sample's moving time, the monitor's; the samples in
+    time order), the same per bin of ``edges_s``, and how many times each bin was entered
+    (episodes: separate motions).
 
     Raises
     ------
@@ -505,8 +518,9 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
     edges = tuple(float(e) for e in edges_s)
     if not _increasing(edges):
         raise DataError(f"regime edges: expected increasing numbers > 0 [s], got {edges}")
-    if not int(min_samples) >= 1:
-        raise DataError(f"regime min_samples: expected an integer >= 1, got {min_samples}")
+    if not (int(min_samples) >= 1 and int(min_episodes) >= 1):
+        raise DataError(f"regime min_samples, min_episodes: expected integers >= 1, got "
+                        f"{min_samples}, {min_episodes}")
     s = None
     if moving_s is not None:
         s = np.asarray(moving_s, dtype=float)
@@ -516,6 +530,7 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
     mean, sigma, peak = [], [], []
     bins: list[list[tuple[float, float, float]]] = []
     counts: list[tuple[int, ...]] = []
+    episodes: list[tuple[int, ...]] = []
     for j, name in enumerate(joints):
         off = r[:, j] != 0.0  # 0 exactly: inside the static band (no prediction)
         x = r[off, j]
@@ -527,9 +542,13 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
         sigma.append(sd)
         peak.append(pk)
         if s is not None:
+            nb = len(edges) + 1
             b = np.searchsorted(edges, s[off, j], side="right")
-            bins.append([_stats(x[b == i]) for i in range(len(edges) + 1)])
-            counts.append(tuple(int(n) for n in np.bincount(b, minlength=len(edges) + 1)))
+            bins.append([_stats(x[b == i]) for i in range(nb)])
+            counts.append(tuple(int(n) for n in np.bincount(b, minlength=nb)))
+            ball = np.searchsorted(edges, s[:, j], side="right")  # every sample, in order
+            enter = ball[np.r_[True, ball[1:] != ball[:-1]]]
+            episodes.append(tuple(int(n) for n in np.bincount(enter, minlength=nb)))
     th = Thresholds(tuple(joints), float(k_sigma), tuple(mean), tuple(sigma), tuple(peak),
                     int(r.shape[0]), source, float(peak_margin))
     if s is None:
@@ -538,4 +557,5 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
         th, edges_s=edges, bin_mean=tuple(tuple(v[0] for v in bj) for bj in bins),
         bin_sigma=tuple(tuple(v[1] for v in bj) for bj in bins),
         bin_peak=tuple(tuple(v[2] for v in bj) for bj in bins),
-        bin_samples=tuple(counts), min_samples=int(min_samples))
+        bin_samples=tuple(counts), bin_episodes=tuple(episodes),
+        min_samples=int(min_samples), min_episodes=int(min_episodes))

@@ -86,9 +86,10 @@ def _zero(payload):
 
 @pytest.fixture(scope="module")
 def validation() -> Thresholds:
-    """Thresholds of a 40 s validation run: 20 breakaways with a 2 N m bump each."""
+    """Thresholds of an 80 s validation run: 40 breakaways with a 2 N m bump each (every bin
+    entered 40 times, more than DEFAULT_MIN_EPISODES)."""
     mon = TorqueMonitor(_zero, ["a"], CYCLE_S, rest_velocity=[V_REST])
-    log = _run(mon, *_motion(40.0, 1, 2.0))
+    log = _run(mon, *_motion(80.0, 1, 2.0))
     s = log.samples(0)
     armed = s["armed"].astype(bool)
     return thresholds_from_residual(s["residual"][armed, None], ["a"], 6.0, "synthetic",
@@ -149,19 +150,24 @@ def test_push_in_steady_motion_flagged_reversal_peak_not(validation):
 
 
 def test_sparse_bins_take_the_constant_band():
-    """A bin with fewer validation samples than min_samples takes the joint's constant
-    band, whatever its own spread."""
+    """A bin with fewer validation samples than min_samples, or entered fewer times than
+    min_episodes (separate motions), takes the joint's constant band, whatever its own
+    spread."""
     rng = np.random.default_rng(3)
-    r = rng.normal(0.0, 0.1, (5000, 1))
-    m = np.full((5000, 1), 2.0)
-    m[:50] = 0.01  # 50 samples in the first bin
-    r[:50] *= 0.01  # narrow there: its own band would be tiny
+    m = np.tile(np.arange(100) * 0.02, 50)[:, None]  # 50 motions of 2 s each
+    r = rng.normal(0.0, 0.1, m.shape)
+    r[m < 0.1] *= 0.01  # narrow in the first bin: its own band would be tiny
     th = thresholds_from_residual(r, ["a"], 6.0, moving_s=m, edges_s=(0.1, 1.0),
-                                  min_samples=100)
+                                  min_samples=300, min_episodes=20)
+    assert th.bin_samples[0] == (250, 2250, 2500) and th.bin_episodes[0] == (50, 50, 50)
     lo, hi = th.bands()
-    assert th.bin_used[0] == [False, False, True]  # 50, 0, 4950 samples
+    assert th.bin_used[0] == [False, True, True]  # 250 samples < 300
     assert (lo[0][0], hi[0][0]) == (th.lower[0], th.upper[0])
-    assert (lo[0][1], hi[0][1]) == (th.lower[0], th.upper[0])
+    assert hi[0][1] != th.upper[0]
+    few = thresholds_from_residual(r, ["a"], 6.0, moving_s=m, edges_s=(0.1, 1.0),
+                                   min_samples=300, min_episodes=51)
+    assert few.bin_used[0] == [False, False, False]  # 50 motions < 51
+    assert few.bands() == ([few.lower * 3], [few.upper * 3])
     with pytest.raises(DataError, match="moving_s"):
         thresholds_from_residual(r, ["a"], 6.0, moving_s=m[:10])
     with pytest.raises(DataError, match="edges"):

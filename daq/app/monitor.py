@@ -37,6 +37,7 @@ from daq import ConfigError, __version__
 from daq.runtime.monitor import PushSpec, TorqueMonitor, read_monitor
 from ident.monitor import (
     DEFAULT_EDGES_S,
+    DEFAULT_MIN_EPISODES,
     DEFAULT_MIN_SAMPLES,
     Thresholds,
     load_model,
@@ -277,7 +278,7 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
                                       DEFAULT_PEAK_MARGIN if peak_margin is None
                                       else peak_margin,
                                       np.concatenate(mov) if edges else None, edges,
-                                      DEFAULT_MIN_SAMPLES)
+                                      DEFAULT_MIN_SAMPLES, DEFAULT_MIN_EPISODES)
         write_json(out / "thresholds.json", th.to_json())
         summary["thresholds"] = th.to_json()
     else:
@@ -376,19 +377,20 @@ def _bin_names(edges: list[float]) -> list[str]:
 
 
 def _regime_section(reg: dict[str, Any], joints: list[str]) -> Section:
-    """Half-width [N m] and samples of the regime bins per joint ('*': too few samples,
+    """Half-width [N m], samples and episodes of the regime bins per joint ('*': too few,
     the constant band)."""
     rows = []
     for j, name in enumerate(joints):
         rows.append([name] + [
-            f"{(hi - lo) / 2:.3g}{'' if own else '*'} ({n})" for lo, hi, own, n in zip(
+            f"{(hi - lo) / 2:.3g}{'' if own else '*'} ({n}, {e})" for lo, hi, own, n, e in zip(
                 reg["lower"][j], reg["upper"][j], reg["own"][j], reg["samples"][j],
-                strict=True)])
+                reg["episodes"][j], strict=True)])
     return Section("Thresholds per regime").para(
-        "Band half-width [N m] (validation samples) per bin of the joint's moving time "
-        "(time its filtered velocity has kept its sign above the rest velocity: 0 at "
-        f"rest, at a reversal, at breakaway). *: fewer than {reg['min_samples']} samples, "
-        "the constant band.").table(["joint", *_bin_names(reg["edges_s"])], rows)
+        "Band half-width [N m] (validation samples, episodes) per bin of the joint's moving "
+        "time (time its filtered velocity has kept its sign above the rest velocity: 0 at "
+        f"rest, at a reversal, at breakaway). *: fewer than {reg['min_samples']} samples "
+        f"or {reg['min_episodes']} episodes, the constant band.").table(
+            ["joint", *_bin_names(reg["edges_s"])], rows)
 
 
 def _run(args: argparse.Namespace) -> int:
