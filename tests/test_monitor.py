@@ -320,6 +320,10 @@ def test_monitor_bad_inputs_one_line(tmp_path, arm3, capfd):
         (["monitor", str(model), str(camp), "--simulate", "--thresholds", str(th)],
          "joints"),
         (["monitor", str(model), str(ARM3), "--simulate", "--calibrate"], "arm3.toml"),
+        (["monitor", str(model), str(camp), "--simulate", "--calibrate", "--regime-edges",
+          "0.1,0.05"], "--regime-edges"),
+        (["monitor", str(model), str(camp), "--simulate", "--thresholds", str(th),
+          "--regime-edges", "0.1"], "--calibrate"),
     ]
     for argv, what in cases:
         out = tmp_path / "never"

@@ -50,7 +50,8 @@ from trajectories.robot_model import robot_for_campaign
 
 from .running import run_with_bar
 
-__all__ = ["analyse", "load_campaign", "parse_push", "register", "run_monitor"]
+__all__ = ["analyse", "load_campaign", "parse_edges", "parse_push", "register",
+           "run_monitor"]
 
 #: default --rest-velocity: this many times each joint's Stribeck velocity q_s (E < 5 %)
 REST_QS = 3.0
@@ -91,7 +92,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--peak-margin", type=float, default=None,
                    help="the band is at least this times the validation residual's largest "
                    "deviation (default 1.5, 0: k-sigma alone; with --thresholds: the file's)")
-    p.add_argument("--regime-edges", type=_edges, default=None, metavar="S1,S2,...",
+    p.add_argument("--regime-edges", default=None, metavar="S1,S2,...",
                    help="--calibrate: edges [s] of the regime bins on each joint's moving "
                    "time (time since its last reversal, start or rest); default "
                    f"{','.join(f'{e:g}' for e in DEFAULT_EDGES_S)}; 'none': one constant "
@@ -114,15 +115,25 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_run)
 
 
-def _edges(text: str) -> tuple[float, ...]:
-    """``--regime-edges``: comma-separated seconds, or ``none`` (no bins)."""
+def parse_edges(text: str) -> tuple[float, ...]:
+    """``--regime-edges``: increasing seconds > 0 separated by commas, or ``none`` (no
+    bins: the constant band alone).
+
+    Raises
+    ------
+    ConfigError
+        Not of that form.
+    """
     if text.strip().lower() == "none":
         return ()
     try:
-        return tuple(float(x) for x in text.split(","))
+        edges = tuple(float(x) for x in text.split(","))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected seconds separated by commas or 'none', "
-                                         f"got {text!r}") from None
+        edges = ()
+    if not edges or any(not e > 0 for e in edges) or list(edges) != sorted(set(edges)):
+        raise ConfigError(f"--regime-edges {text!r}: expected increasing seconds > 0 "
+                          "separated by commas, or 'none'")
+    return edges
 
 
 def parse_push(text: str, joints: list[str]) -> PushSpec:
@@ -193,7 +204,7 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
                 model_name: str | None = None, payloads: list[int] | None = None,
                 calibrate: bool = False, thresholds: Path | None = None,
                 k_sigma: float | None = None, peak_margin: float | None = None,
-                regime_edges: tuple[float, ...] | None = None, constant_band: bool = False,
+                regime_edges: str | None = None, constant_band: bool = False,
                 cutoff_hz: float = 20.0,
                 rest_velocity: float | None = None, pushes: list[str] | None = None,
                 stop: bool = False, paced: bool = False,
@@ -225,10 +236,7 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
                           "thresholds file's)")
     if constant_band and calibrate:
         raise ConfigError("--constant-band: expected --thresholds")
-    edges = DEFAULT_EDGES_S if regime_edges is None else tuple(regime_edges)
-    if any(not e > 0 for e in edges) or list(edges) != sorted(set(edges)):
-        raise ConfigError(f"--regime-edges: expected increasing seconds > 0, got "
-                          f"{','.join(f'{e:g}' for e in edges)}")
+    edges = DEFAULT_EDGES_S if regime_edges is None else parse_edges(regime_edges)
     robot = robot_for_campaign(campaign)
     exported = load_model(model, robot, model_name)
     pred0 = exported.predictor(None)
