@@ -290,6 +290,10 @@ def test_monitor_calibrate_then_detect_a_push_on_the_bus(tmp_path, arm3, capfd):
     want = np.array(reg["upper"])[np.arange(3)[None, :], b]
     assert np.allclose(ml.upper, want)
     assert (out / "report.html").is_file() and (out / "residual_0_j2.png").is_file()
+    j2 = s["per_joint"][1]
+    assert j2["joint"] == "j2" and (j2["pushes"], j2["detected"]) == (1, 1)
+    assert all(0 < d["worst_fraction_of_band"] for d in s["per_joint"])
+    assert "Per joint" in (out / "report.html").read_text()
     # --stop: the crossing stops the run through the stop sequence
     stop = tmp_path / "stop"
     main(["monitor", str(model), str(camp), "--simulate", "--thresholds",

@@ -50,7 +50,7 @@ from trajectories.robot_model import robot_for_campaign
 
 from .running import run_with_bar
 
-__all__ = ["analyse", "load_campaign", "parse_edges", "parse_push", "register",
+__all__ = ["analyse", "load_campaign", "parse_edges", "parse_push", "per_joint", "register",
            "run_monitor"]
 
 #: default --rest-velocity: this many times each joint's Stribeck velocity q_s (E < 5 %)
@@ -190,6 +190,44 @@ def analyse(monitor: TorqueMonitor, cycle_s: float) -> list[dict[str, Any]]:
     return out
 
 
+def per_joint(monitor: TorqueMonitor, logs: list[Path], runs: list[dict[str, Any]],
+              cycle_s: float) -> list[dict[str, Any]]:
+    """Per joint, over the runs (:func:`analyse`'s ``runs``, their logs): the band
+    half-widths the check used [N m] (smallest, largest), the pushes on its link (detected,
+    delays [s]), its false alarms, and its largest ``|r - centre| / half-width`` over the
+    armed cycles outside every push window (1: on the threshold)."""
+    k = monitor.k
+    worst, hw_min, hw_max = [0.0] * k, [np.inf] * k, [0.0] * k
+    for rec, path in zip(monitor.records, logs, strict=False):
+        ml = read_monitor(path)
+        inside = np.zeros(len(ml.cycle), bool)
+        for c0, spec in rec.staged:
+            c1 = c0 + int(round((spec.duration_s + AFTER_PUSH_S) / cycle_s))
+            inside |= (ml.cycle >= c0) & (ml.cycle <= c1)
+        sel = ml.armed & ~inside
+        half = (ml.upper - ml.lower) / 2
+        if not sel.any() or not np.isfinite(half[sel]).all():
+            continue
+        mid = (ml.upper + ml.lower) / 2
+        x = (np.abs(ml.residual[sel] - mid[sel]) / half[sel]).max(axis=0)
+        for j in range(k):
+            worst[j] = max(worst[j], float(x[j]))
+            hw_min[j] = min(hw_min[j], float(half[ml.armed, j].min()))
+            hw_max[j] = max(hw_max[j], float(half[ml.armed, j].max()))
+    out = []
+    for j, name in enumerate(monitor.joints):
+        ps = [p for run in runs for p in run["pushes"] if p["joint"] == name]
+        out.append({
+            "joint": name,
+            "half_width_Nm": [hw_min[j], hw_max[j]] if np.isfinite(hw_min[j]) else None,
+            "pushes": len(ps), "detected": sum(p["detected"] for p in ps),
+            "delays_s": [p["delay_s"] for p in ps if p["detected"]],
+            "false_alarms": sum(f["joint"] == name for run in runs
+                                for f in run["false_alarms"]),
+            "worst_fraction_of_band": worst[j]})
+    return out
+
+
 def load_campaign(path: Path, paced: bool = False) -> RobotCampaign:
     """The robot campaign of ``path``; ``paced``: on the real-time clock."""
     campaign = load_any_campaign(path)
@@ -292,6 +330,7 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
     else:
         summary["thresholds"] = th.to_json() if th is not None else None
         summary["runs"] = analyse(mon, campaign.cycle_s)
+        summary["per_joint"] = per_joint(mon, logs, summary["runs"], campaign.cycle_s)
     summary["report"] = str(_report(out, logs, summary, mon).relative_to(out))
     write_json(out / "monitor.json", summary)
     return summary
@@ -354,6 +393,20 @@ def _report(out: Path, logs: list[Path], summary: dict[str, Any], mon: TorqueMon
             "Delay: from the cycle the push was staged to the first crossing (any joint).")
             .table(["payload", "pushed link", "force [N]", "t0 [s]", "detected",
                     "delay [ms]", "joints crossed"], rows))
+    if summary.get("per_joint"):
+        sections.append(Section("Per joint").para(
+            "Band half-width the check used (smallest..largest over the regimes met), the "
+            "pushes on the joint's link (detected of staged, delays), the joint's crossings "
+            "outside every push window (false alarms), and its largest |residual - band "
+            "centre| / half-width outside the push windows (1 = on the threshold).").table(
+            ["joint", "band half-width [N m]", "pushes detected", "delays [ms]",
+             "false alarms", "largest excursion / band"],
+            [[d["joint"], "—" if d["half_width_Nm"] is None else
+              f"{d['half_width_Nm'][0]:.3g}..{d['half_width_Nm'][1]:.3g}",
+              f"{d['detected']}/{d['pushes']}",
+              ", ".join(f"{1000 * t:.0f}" for t in d["delays_s"]) or "—",
+              d["false_alarms"], f"{d['worst_fraction_of_band']:.2f}"]
+             for d in summary["per_joint"]]))
     if "runs" in summary:
         fa = [[run["payload"], f"{run['armed_s']:.1f}", len(run["false_alarms"]),
                f"{run['step_us_mean']:.0f}", f"{run['step_us_max']:.0f}"]
