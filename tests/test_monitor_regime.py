@@ -11,6 +11,7 @@ import math
 import numpy as np
 import pytest
 
+from daq import ConfigError
 from daq.runtime.monitor import (
     _SAMPLE_DTYPE,
     TorqueMonitor,
@@ -199,8 +200,6 @@ def test_thresholds_file_v2_round_trip_v1_read_bad_regime(tmp_path, validation):
 
 
 def test_monitor_rejects_a_table_of_the_wrong_size():
-    from daq import ConfigError
-
     with pytest.raises(ConfigError, match="regime bin"):
         TorqueMonitor(_zero, ["a"], CYCLE_S, lower=[[-1.0, -2.0]], upper=[[1.0, 2.0]],
                       edges_s=(0.1, 0.2))
