@@ -1,5 +1,8 @@
 """Torque monitoring on a simulated robot (docs/monitoring.md, issue 25).
 
+(Past 600 lines: the stages share the campaign derivation, the offline replay and the
+band evaluation, and the bench stays one file run as a script.)
+
 Usage::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_monitor.py --work DIR \
