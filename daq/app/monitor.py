@@ -473,7 +473,7 @@ def format_summary(s: dict[str, Any]) -> str:
              f"{s['missed_cycles']}"]
     th = s.get("thresholds")
     if th:
-        lines.append("thresholds [N m]: " + ", ".join(
+        lines.append("thresholds, constant band [N m]: " + ", ".join(
             f"{j} {lo:+.3g}..{hi:+.3g}" for j, lo, hi in zip(
                 s["joints"], th["lower"], th["upper"], strict=True)))
         reg = th.get("regime")
