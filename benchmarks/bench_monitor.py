@@ -1,5 +1,8 @@
 """Torque monitoring on a simulated robot (docs/monitoring.md, issue 25).
 
+(Past 600 lines: the stages share the campaign derivation, the offline replay and the
+band evaluation, and the bench stays one file run as a script.)
+
 Usage::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_monitor.py --work DIR \
@@ -22,22 +25,26 @@ clock unless said, i.e. simulated time):
     ``jointid export-model`` (paper model) -> DIR/model.
 ``calibrate``
     The validation run: the campaign again with the monitor in calibration mode ->
-    DIR/calibrate/thresholds.json (k = 6 sigma, at least 1.5 x the validation peak).
+    DIR/calibrate/thresholds.json (k = 6 sigma, at least 1.5 x the validation peak; per
+    regime bin of the moving time, and the constant band).
 ``false``
     At least ``--false-minutes`` (default 10) of excitation without pushes: the campaign
     with another multi-sine (seed 7) of as many periods as that takes over all payloads
     (``--false-periods`` to set them); the monitor logs its residual, and the crossings of
     the calibration's thresholds are counted on it (the thresholds do not change the
-    residual, so counting them on the log is what the live check would count).
+    residual, so counting them on the log, with its moving time, is what the live check
+    would count), for the regime bands and for the constant band.
 ``detect``
     Pushes of 20 N and 40 N on the link of every moving joint (default point and direction
     of ``sim_drivers.arm_push.staged_push``) for 0.2 s, every 1.5 s (3 per link and force,
     links in turn), during a multi-sine of all joints (seed 5, as many periods as the pushes
     take; the pushes fall at whatever speed the joints have then), with the calibration's
-    thresholds: detection and delay per pushed link (from the cycle the push is staged to the
-    first crossing on any joint), crossings outside the push windows; per push, the joint
-    torques J^T F of the push (at the logged q) and the largest |r - mean| / half-width per
-    joint in its window.
+    thresholds (regime bands, live): detection and delay per pushed link (from the cycle
+    the push is staged to the first crossing on any joint), crossings outside the push
+    windows; per push, the joint torques J^T F of the push (at the logged q), the largest
+    |r - centre| / half-width per joint in its window and the moving time of each joint
+    at the push. The same log evaluated offline with the constant band (the /1 rule) and
+    with the regime bands (must equal the live result).
 ``oracle``
     The logs of calibrate, false and detect re-evaluated offline with the simulator's own
     parameters as the model (the best an identification could give; the replay gives the
@@ -82,7 +89,7 @@ from daq.app.monitor import (
 )
 from daq.app.running import run_with_bar
 from daq.protocol.reader import read_run, read_topics
-from daq.runtime.monitor import SVFilter, read_monitor
+from daq.runtime.monitor import SVFilter, moving_seconds, read_monitor
 from ident.monitor import ExportedModel, Thresholds, thresholds_from_residual
 from ident.robot.export_model import friction_record, urdf_text
 from sim_drivers.arm import ArmParams
@@ -188,16 +195,26 @@ def stage_calibrate(work: Path) -> dict:
             "missed": s["missed_cycles"]}
 
 
+def sample_bands(th: Thresholds, moving_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) (n, k) [N m] of ``th`` at each sample's moving time (n, k) [s]: the
+    band the live check uses (the constant band when ``th`` has no regime bins)."""
+    lo, hi = (np.array(x) for x in th.bands())
+    b = (np.searchsorted(np.array(th.edges_s), moving_s, side="right") if th.edges_s
+         else np.zeros(moving_s.shape, int))
+    cols = np.arange(moving_s.shape[1])[None, :]
+    return lo[cols, b], hi[cols, b]
+
+
 def crossings(path: Path, th: Thresholds) -> tuple[list, float, list]:
     """Rising edges out of the thresholds' band on the armed samples of a log, per joint;
-    armed seconds; the largest |r - mean| / half-width per joint."""
+    armed seconds; the largest |r - centre| / half-width per joint."""
     ml = read_monitor(path)
     r = ml.residual[ml.armed]
-    lo, hi = np.array(th.lower), np.array(th.upper)
+    lo, hi = sample_bands(th, ml.moving_s[ml.armed])
     out = (r < lo) | (r > hi)
     edges = ((out[1:] & ~out[:-1]).sum(axis=0) + out[0]).astype(int).tolist()
     cycle_s = float(np.median(np.diff(ml.t)))
-    worst = (np.abs(r - np.array(th.mean)) / np.array(th.half_width)).max(axis=0)
+    worst = (np.abs(r - (lo + hi) / 2) / ((hi - lo) / 2)).max(axis=0)
     return edges, r.shape[0] * cycle_s, worst.tolist()
 
 
@@ -245,9 +262,16 @@ def stage_detect(work: Path) -> dict:
     s = run_monitor(work / "model", camp, work / "detect", simulate=True,
                     thresholds=work / "calibrate" / "thresholds.json", pushes=pushes)
     th = Thresholds.read(work / "calibrate" / "thresholds.json")
+    offline: dict = {"constant": [], "regime": []}
     for run, log in zip(s["runs"], s["logs"], strict=True):
         _push_figures(work / "detect" / log, run, th, c)
-    return {"runs": s["runs"], "wall_s": s["wall_s"], "missed": s["missed_cycles"]}
+        ml = read_monitor(work / "detect" / log)
+        for tag, t in (("constant", th.constant()), ("regime", th)):
+            lo, hi = sample_bands(t, ml.moving_s)
+            offline[tag].append(detect_offline(ml, ml.residual, lo, hi, list(c.moving),
+                                               c.cycle_s))
+    return {"runs": s["runs"], "wall_s": s["wall_s"], "missed": s["missed_cycles"],
+            "offline": offline}
 
 
 def _push_figures(log: Path, run: dict, th: Thresholds, campaign: object) -> None:
@@ -259,7 +283,7 @@ def _push_figures(log: Path, run: dict, th: Thresholds, campaign: object) -> Non
     model = ArmParams.from_robot(robot_for_campaign(campaign)).model
     data = model.createData()
     cycle_s = float(np.median(np.diff(ml.t)))
-    mean, half = np.array(th.mean), np.array(th.half_width)
+    mid, half = (ml.upper + ml.lower) / 2, (ml.upper - ml.lower) / 2
     for p in run["pushes"]:
         j = th.joints.index(p["joint"])
         q = [float(np.interp(p["cycle"], a.cycle, a.q)) for a in axes]
@@ -268,8 +292,10 @@ def _push_figures(log: Path, run: dict, th: Thresholds, campaign: object) -> Non
         c1 = p["cycle"] + int(round((p["duration_s"] + AFTER_PUSH_S) / cycle_s))
         sel = (ml.cycle >= p["cycle"]) & (ml.cycle <= c1) & ml.armed
         p["peak_fraction_of_band"] = (
-            (np.abs(ml.residual[sel] - mean) / half).max(axis=0).round(3).tolist()
+            (np.abs(ml.residual[sel] - mid[sel]) / half[sel]).max(axis=0).round(3).tolist()
             if sel.any() else None)
+        i0 = int(np.searchsorted(ml.cycle, p["cycle"]))
+        p["moving_s_at_push"] = ml.moving_s[min(i0, len(ml.cycle) - 1)].round(3).tolist()
         p["dq_at_push"] = [round(float(np.interp(p["cycle"], a.cycle, a.dq)), 3)
                            for a in axes]
 
@@ -286,12 +312,12 @@ def truth_model(campaign: object) -> ExportedModel:
 
 
 def replay(log: Path, campaign: object, model: ExportedModel, cutoff_hz: float = 20.0
-           ) -> tuple[object, np.ndarray]:
+           ) -> tuple[object, np.ndarray, np.ndarray]:
     """The monitor's residual (n, k) [N m] of a monitored run log recomputed offline with
     another model: the logged q, dq, torque actual of the monitored cycles through the same
     filters, band (rest velocity 3 q_s) and clip as :class:`daq.runtime.monitor.TorqueMonitor`
     (with the log's own model it gives the logged residual exactly). Returns (the log's
-    :class:`MonitorLog`, residual)."""
+    :class:`MonitorLog`, residual, moving time (n, k) [s] at the model's rest velocity)."""
     ml = read_monitor(log)
     k = len(campaign.moving)
     axes = [read_run(log, axis=j) for j in range(k)]
@@ -304,19 +330,45 @@ def replay(log: Path, campaign: object, model: ExportedModel, cutoff_hz: float =
     v_rest = [REST_QS * x for x in pred.q_s]
     fq, fdq, ft = (SVFilter(cutoff_hz, campaign.cycle_s, k) for _ in range(3))
     r = np.zeros((len(idx), k))
+    dqf = np.zeros((len(idx), k))
     for i in range(len(idx)):
         for f, u in ((fq, q[i]), (fdq, dq[i]), (ft, tau[i])):
             f.reset(u) if i == 0 else f.update(u)
         lo, hi = pred.band(fq.y, fdq.y, fdq.dy, v_rest)
         r[i] = [x - min(max(x, a), b) for x, a, b in zip(ft.y, lo, hi, strict=True)]
-    return ml, r
+        dqf[i] = fdq.y
+    return ml, r, moving_seconds(dqf, v_rest, campaign.cycle_s)
 
 
-def _rising(r: np.ndarray, armed: np.ndarray, th: Thresholds) -> np.ndarray:
-    """(n, k) bool: the armed samples where r leaves the band (first sample out)."""
-    out = ((r < np.array(th.lower)) | (r > np.array(th.upper))) & armed[:, None]
+def _rising(r: np.ndarray, armed: np.ndarray, lo: np.ndarray, hi: np.ndarray
+            ) -> np.ndarray:
+    """(n, k) bool: the armed samples where r leaves the band [lo, hi] (first sample out)."""
+    out = ((r < lo) | (r > hi)) & armed[:, None]
     prev = np.vstack([np.zeros((1, r.shape[1]), bool), out[:-1]])
     return out & ~prev
+
+
+def detect_offline(ml: object, r: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                   joints: list[str], cycle_s: float) -> dict:
+    """The detect stage's pushes (the log's push events) against residual ``r`` and bands
+    ``lo``, ``hi`` (n, k): detection, delay, joints crossed; crossings outside the push
+    windows."""
+    hits = _rising(r, ml.armed, lo, hi)
+    used = np.zeros(len(ml.cycle), bool)
+    span = int(round((PUSH_S + AFTER_PUSH_S) / cycle_s))
+    pushes = []
+    for e in (e for e in ml.events if e["kind"] == "push"):
+        force = float(e["message"].split(":")[1].split("N")[0])
+        win = (ml.cycle >= e["cycle"]) & (ml.cycle <= e["cycle"] + span)
+        used |= win
+        rows = np.flatnonzero(win & hits.any(axis=1))
+        pushes.append({"joint": joints[e["axis"]], "force_N": force,
+                       "detected": bool(rows.size),
+                       "delay_s": float((ml.cycle[rows[0]] - e["cycle"]) * cycle_s)
+                       if rows.size else None,
+                       "joints_crossed": sorted({joints[j] for j in
+                                                 np.flatnonzero(hits[win].any(axis=0))})})
+    return {"pushes": pushes, "crossings_outside": int(hits[~used].sum())}
 
 
 def stage_oracle(work: Path) -> dict:
@@ -330,33 +382,22 @@ def stage_oracle(work: Path) -> dict:
     joints = list(c.moving)
     logs = sorted((work / "calibrate" / "logs").glob("*.mcap"))
     res = [replay(p, c, model) for p in logs]
-    th = thresholds_from_residual(np.concatenate([r[ml.armed] for ml, r in res]), joints,
-                                  DEFAULT_K_SIGMA, "oracle", DEFAULT_PEAK_MARGIN)
+    th = thresholds_from_residual(np.concatenate([r[ml.armed] for ml, r, _ in res]), joints,
+                                  DEFAULT_K_SIGMA, "oracle", DEFAULT_PEAK_MARGIN,
+                                  np.concatenate([m[ml.armed] for ml, _, m in res]))
     out: dict = {"thresholds": th.to_json()}
     false_n, secs = np.zeros(len(joints), int), 0.0
     for p in sorted((work / "false" / "logs").glob("*.mcap")):
-        ml, r = replay(p, c, model)
-        false_n += _rising(r, ml.armed, th).sum(axis=0)
+        ml, r, m = replay(p, c, model)
+        false_n += _rising(r, ml.armed, *sample_bands(th, m)).sum(axis=0)
         secs += float(ml.armed.sum()) * c.cycle_s
     out["false_alarms"] = {"per_joint": false_n.tolist(), "monitored_s": secs}
     pushes, outside = [], 0
     for p in sorted((work / "detect" / "logs").glob("*.mcap")):
-        ml, r = replay(p, c, model)
-        hits = _rising(r, ml.armed, th)
-        used = np.zeros(len(ml.cycle), bool)
-        span = int(round((PUSH_S + AFTER_PUSH_S) / c.cycle_s))
-        for e in (e for e in ml.events if e["kind"] == "push"):
-            force = float(e["message"].split(":")[1].split("N")[0])
-            win = (ml.cycle >= e["cycle"]) & (ml.cycle <= e["cycle"] + span)
-            used |= win
-            rows = np.flatnonzero(win & hits.any(axis=1))
-            pushes.append({"joint": joints[e["axis"]], "force_N": force,
-                           "detected": bool(rows.size),
-                           "delay_s": float((ml.cycle[rows[0]] - e["cycle"]) * c.cycle_s)
-                           if rows.size else None,
-                           "joints_crossed": sorted({joints[j] for j in
-                                                     np.flatnonzero(hits[win].any(axis=0))})})
-        outside += int(hits[~used].sum())
+        ml, r, m = replay(p, c, model)
+        d = detect_offline(ml, r, *sample_bands(th, m), joints, c.cycle_s)
+        pushes += d["pushes"]
+        outside += d["crossings_outside"]
     out["detect"] = {"pushes": pushes, "crossings_outside": outside}
     return out
 
@@ -433,6 +474,19 @@ def stage_paced(work: Path, seconds: float, realtime: int = 0, repeat: int = 1) 
     return out
 
 
+def _print_detect(pushes: list, outside: int) -> None:
+    """Detected of n, delays and joints crossed per pushed link and force."""
+    by: dict = {}
+    for p in pushes:
+        by.setdefault((p["force_N"], p["joint"]), []).append(p)
+    for (f, j), ps in sorted(by.items()):
+        d = [1000 * p["delay_s"] for p in ps if p["detected"]]
+        print(f"  link of {j}, {f:g} N: {len(d)}/{len(ps)} detected, delay "
+              + (f"{min(d):.0f}..{max(d):.0f} ms" if d else "-") + "; joints crossed: "
+              + ", ".join(sorted({x for p in ps for x in p["joints_crossed"]})))
+    print(f"  crossings outside the push windows: {outside}")
+
+
 def report(work: Path, res: dict) -> None:
     th_path = work / "calibrate" / "thresholds.json"
     if th_path.is_file():
@@ -441,23 +495,36 @@ def report(work: Path, res: dict) -> None:
         print(f"thresholds (validation: {SOURCE['campaign'].name}, all payloads):")
         for j, s, lo, hi, pk in zip(th.joints, th.sigma, th.lower, th.upper,
                                        th.peak, strict=True):
-            print(f"  {j}: sigma {s:.4f} N m, band [{lo:+.3f}, {hi:+.3f}] N m, "
+            print(f"  {j}: sigma {s:.4f} N m, constant band [{lo:+.3f}, {hi:+.3f}] N m, "
                   f"validation peak {pk:.1f} sigma")
+        if th.regime:
+            blo, bhi = th.bands()
+            print(f"  regime bands, half-width [N m] (samples, episodes) per moving-time bin "
+                  f"(edges {list(th.edges_s)} s; *: < {th.min_samples} samples or "
+                  f"{th.min_episodes} episodes, constant):")
+            for j, name in enumerate(joints):
+                print(f"    {name}: " + "  ".join(
+                    f"{(b - a) / 2:.3g}{'' if u else '*'} ({n}, {e})" for a, b, u, n, e in zip(
+                        blo[j], bhi[j], th.bin_used[j], th.bin_samples[j],
+                        th.bin_episodes[j], strict=True)))
         if (work / "false" / "monitor.json").is_file():
             logs = json.loads((work / "false" / "monitor.json").read_text())["logs"]
-            total, secs, worst = np.zeros(k, int), 0.0, np.zeros(k)
-            for lg in logs:
-                n, sec, w = crossings(work / "false" / lg, th)
-                total += n
-                secs += sec
-                worst = np.maximum(worst, w)
-            res["false_alarms"] = {"per_joint": total.tolist(), "monitored_s": secs,
-                                   "worst_fraction_of_band": worst.tolist()}
-            print(f"false alarms: {int(total.sum())} ("
-                  + ", ".join(f"{j} {n}" for j, n in zip(joints, total, strict=True))
-                  + f") in {secs / 60:.1f} min of monitored excitation without pushes; "
-                  "largest |r - mean| / half-width per joint: "
-                  + ", ".join(f"{j} {w:.2f}" for j, w in zip(joints, worst, strict=True)))
+            res["false_alarms"] = {}
+            for tag, t in (("regime", th), ("constant", th.constant())):
+                total, secs, worst = np.zeros(k, int), 0.0, np.zeros(k)
+                for lg in logs:
+                    n, sec, w = crossings(work / "false" / lg, t)
+                    total += n
+                    secs += sec
+                    worst = np.maximum(worst, w)
+                res["false_alarms"][tag] = {"per_joint": total.tolist(), "monitored_s": secs,
+                                            "worst_fraction_of_band": worst.tolist()}
+                print(f"false alarms, {tag} band: {int(total.sum())} ("
+                      + ", ".join(f"{j} {n}" for j, n in zip(joints, total, strict=True))
+                      + f") in {secs / 60:.1f} min of monitored excitation without pushes; "
+                      "largest |r - centre| / half-width per joint: "
+                      + ", ".join(f"{j} {w:.2f}" for j, w in zip(joints, worst,
+                                                                 strict=True)))
     det = res.get("detect")
     if det:
         for run in det["runs"]:
@@ -475,27 +542,29 @@ def report(work: Path, res: dict) -> None:
                 for p in ps:
                     if "joint_torques_Nm" in p:
                         print(f"    t0 {p['t0_s']:g} s: J^T F "
-                              f"{p['joint_torques_Nm']} N m, peak |r - mean| / half-width "
-                              f"{p['peak_fraction_of_band']}, dq {p['dq_at_push']} rad/s")
+                              f"{p['joint_torques_Nm']} N m, peak |r - centre| / half-width "
+                              f"{p['peak_fraction_of_band']}, dq {p['dq_at_push']} rad/s, "
+                              f"moving {p.get('moving_s_at_push')} s")
             print(f"  crossings outside the push windows: {len(run['false_alarms'])}")
+        for tag, runs in det.get("offline", {}).items():
+            print(f"offline on the same log, {tag} band:")
+            _print_detect([p for d in runs for p in d["pushes"]],
+                          sum(d["crossings_outside"] for d in runs))
     orc = res.get("oracle")
     if orc:
         t = orc["thresholds"]
         print("oracle (the simulator's own parameters as the model, same logs): bands +-"
               + ", ".join(f"{j} {(hi - lo) / 2:.3f}" for j, lo, hi in
                           zip(t["joints"], t["lower"], t["upper"], strict=True)) + " N m")
+        if t.get("regime"):
+            print("  oracle regime bands, half-width per bin: " + "; ".join(
+                f"{j} " + " ".join(f"{(b - a) / 2:.3g}" for a, b in zip(lo, hi, strict=True))
+                for j, lo, hi in zip(t["joints"], t["regime"]["lower"],
+                                     t["regime"]["upper"], strict=True)))
         fa = orc["false_alarms"]
         print(f"  false alarms: {sum(fa['per_joint'])} {fa['per_joint']} in "
               f"{fa['monitored_s'] / 60:.1f} min")
-        by = {}
-        for p in orc["detect"]["pushes"]:
-            by.setdefault((p["force_N"], p["joint"]), []).append(p)
-        for (f, j), ps in sorted(by.items()):
-            d = [1000 * p["delay_s"] for p in ps if p["detected"]]
-            print(f"  link of {j}, {f:g} N: {len(d)}/{len(ps)} detected, delay "
-                  + (f"{min(d):.0f}..{max(d):.0f} ms" if d else "-") + "; joints crossed: "
-                  + ", ".join(sorted({x for p in ps for x in p["joints_crossed"]})))
-        print(f"  crossings outside the push windows: {orc['detect']['crossings_outside']}")
+        _print_detect(orc["detect"]["pushes"], orc["detect"]["crossings_outside"])
     pc = res.get("paced")
     if pc and "runs" in pc.get("monitor", {}):
         print(f"paced 1 kHz (realtime_priority {pc.get('realtime_priority', 0)}), in run "

@@ -35,10 +35,13 @@ from .cli_export_model import consistent_from_record, read_fit_record
 from .robot.export_model import FRICTION_FORMAT, friction_record, urdf_text
 from .vocab import upgrade_record
 
-__all__ = ["THRESHOLDS_FORMAT", "Thresholds", "TorquePredictor", "exported_from_fit",
+__all__ = ["DEFAULT_EDGES_S", "DEFAULT_MIN_EPISODES", "DEFAULT_MIN_SAMPLES",
+           "THRESHOLDS_FORMAT", "Thresholds", "TorquePredictor", "exported_from_fit",
            "load_exported", "load_model", "thresholds_from_residual"]
 
-THRESHOLDS_FORMAT = "jointid-monitor-thresholds/1"
+THRESHOLDS_FORMAT = "jointid-monitor-thresholds/2"
+#: the format before the regime bins (read too: a constant band)
+THRESHOLDS_FORMAT_1 = "jointid-monitor-thresholds/1"
 
 
 
@@ -249,10 +252,29 @@ def load_model(path: str | Path, robot: Robot | None, model: str | None = None
     return exported_from_fit(p, robot, model)
 
 
+#: default regime bins: edges [s] on a joint's moving time (time since its filtered velocity
+#: was last inside the rest band or changed sign, daq.runtime.monitor): bin 0 below the
+#: first edge (reversals, breakaway, rest), the last bin from the last edge on (steady motion)
+DEFAULT_EDGES_S = (0.03, 0.1, 0.3, 1.0)
+#: a regime bin with fewer validation samples than this takes the joint's constant band
+DEFAULT_MIN_SAMPLES = 1000
+#: ... or entered fewer times than this (separate motions): the chance that the next motion
+#: in the bin goes beyond all N seen is 1 / (N + 1), here < 5 % (before the peak margin)
+DEFAULT_MIN_EPISODES = 20
+
+
+def _band(mean: float, sigma: float, peak: float, k_sigma: float, margin: float
+          ) -> tuple[float, float]:
+    """(lower, upper) [N m] of ``mean +- max(k_sigma, margin peak) sigma``."""
+    h = sigma * max(k_sigma, margin * peak)
+    return mean - h, mean + h
+
+
 @dataclass(frozen=True)
 class Thresholds:
     """Per joint: the band ``mean +- max(k_sigma, peak_margin peak) sigma`` of the monitored
-    residual [N m].
+    residual [N m], constant (the whole validation run's statistics) or per regime bin (the
+    statistics of the validation samples in each bin of the joint's moving time).
 
     Attributes
     ----------
@@ -262,12 +284,25 @@ class Thresholds:
         The band is at least ``peak_margin`` times the validation's largest deviation
         (0: k_sigma alone).
     mean, sigma : tuple of float
-        Mean and standard deviation of the validation residual [N m].
+        Mean and standard deviation of the validation residual [N m] (all its samples off
+        the static band: the constant band).
     peak : tuple of float
         Largest ``|r - mean| / sigma`` seen in the validation residual (the margin k_sigma
         leaves: k_sigma / peak).
     samples : int
     source : str
+    edges_s : tuple of float
+        Edges [s] of the regime bins on the moving time (increasing, > 0; bin b holds
+        ``edges_s[b-1] <= moving_s < edges_s[b]``); empty: the constant band only.
+    bin_mean, bin_sigma, bin_peak : tuple of tuple of float
+        Per joint and bin (``len(edges_s) + 1``): mean [N m], standard deviation [N m] and
+        largest deviation [sigma] of the validation samples in the bin (0 for an empty bin).
+    bin_samples : tuple of tuple of int
+        Per joint and bin: validation samples in it.
+    bin_episodes : tuple of tuple of int
+        Per joint and bin: times the validation entered it (separate motions).
+    min_samples, min_episodes : int
+        A bin with fewer samples or episodes (or no spread) takes the joint's constant band.
     """
 
     joints: tuple[str, ...]
@@ -278,23 +313,67 @@ class Thresholds:
     samples: int
     source: str = ""
     peak_margin: float = 0.0
+    edges_s: tuple[float, ...] = ()
+    bin_mean: tuple[tuple[float, ...], ...] = ()
+    bin_sigma: tuple[tuple[float, ...], ...] = ()
+    bin_peak: tuple[tuple[float, ...], ...] = ()
+    bin_samples: tuple[tuple[int, ...], ...] = ()
+    bin_episodes: tuple[tuple[int, ...], ...] = ()
+    min_samples: int = DEFAULT_MIN_SAMPLES
+    min_episodes: int = DEFAULT_MIN_EPISODES
 
     @property
     def half_width(self) -> list[float]:
-        """Half-width of the band per joint [N m]: ``max(k_sigma sigma, peak_margin peak
-        sigma)``."""
+        """Half-width of the constant band per joint [N m]: ``max(k_sigma sigma,
+        peak_margin peak sigma)``."""
         return [s * max(self.k_sigma, self.peak_margin * p)
                 for s, p in zip(self.sigma, self.peak, strict=True)]
 
     @property
     def lower(self) -> list[float]:
-        """Lower bound per joint [N m]."""
+        """Lower bound of the constant band per joint [N m]."""
         return [m - h for m, h in zip(self.mean, self.half_width, strict=True)]
 
     @property
     def upper(self) -> list[float]:
-        """Upper bound per joint [N m]."""
+        """Upper bound of the constant band per joint [N m]."""
         return [m + h for m, h in zip(self.mean, self.half_width, strict=True)]
+
+    @property
+    def regime(self) -> bool:
+        """True when the bands depend on the regime (bins present)."""
+        return bool(self.bin_samples)
+
+    @property
+    def bin_used(self) -> list[list[bool]]:
+        """Per joint and bin: its own statistics set its band (enough samples and
+        episodes, spread > 0); else the constant band."""
+        return [[n >= self.min_samples and e >= self.min_episodes and s > 0
+                 for n, e, s in zip(ns, es, ss, strict=True)]
+                for ns, es, ss in zip(self.bin_samples, self.bin_episodes, self.bin_sigma,
+                                      strict=True)]
+
+    def bands(self) -> tuple[list[list[float]], list[list[float]]]:
+        """(lower, upper) [N m] per joint and regime bin: the bin's own band where
+        :attr:`bin_used`, the joint's constant band elsewhere; one bin per joint (the
+        constant band) without regime bins."""
+        if not self.regime:
+            return [[x] for x in self.lower], [[x] for x in self.upper]
+        lo: list[list[float]] = []
+        hi: list[list[float]] = []
+        for j, used in enumerate(self.bin_used):
+            c = (self.lower[j], self.upper[j])
+            b = [_band(self.bin_mean[j][i], self.bin_sigma[j][i], self.bin_peak[j][i],
+                       self.k_sigma, self.peak_margin) if u else c
+                 for i, u in enumerate(used)]
+            lo.append([x for x, _ in b])
+            hi.append([x for _, x in b])
+        return lo, hi
+
+    def constant(self) -> Thresholds:
+        """The same statistics without the regime bins: the constant band (format /1)."""
+        return dataclasses.replace(self, edges_s=(), bin_mean=(), bin_sigma=(), bin_peak=(),
+                                   bin_samples=(), bin_episodes=())
 
     def with_k(self, k_sigma: float | None = None, peak_margin: float | None = None
                ) -> Thresholds:
@@ -304,15 +383,28 @@ class Thresholds:
             peak_margin=self.peak_margin if peak_margin is None else float(peak_margin))
 
     def to_json(self) -> dict[str, Any]:
-        return {"format": THRESHOLDS_FORMAT, "joints": list(self.joints),
-                "k_sigma": self.k_sigma, "peak_margin": self.peak_margin,
-                "mean": list(self.mean), "sigma": list(self.sigma),
-                "peak_sigmas": list(self.peak), "lower": self.lower, "upper": self.upper,
-                "samples": self.samples, "source": self.source}
+        d: dict[str, Any] = {
+            "format": THRESHOLDS_FORMAT, "joints": list(self.joints),
+            "k_sigma": self.k_sigma, "peak_margin": self.peak_margin,
+            "mean": list(self.mean), "sigma": list(self.sigma),
+            "peak_sigmas": list(self.peak), "lower": self.lower, "upper": self.upper,
+            "samples": self.samples, "source": self.source, "regime": None}
+        if self.regime:
+            lo, hi = self.bands()
+            d["regime"] = {
+                "variable": "moving_s", "edges_s": list(self.edges_s),
+                "min_samples": self.min_samples, "min_episodes": self.min_episodes,
+                "mean": [list(x) for x in self.bin_mean],
+                "sigma": [list(x) for x in self.bin_sigma],
+                "peak_sigmas": [list(x) for x in self.bin_peak],
+                "samples": [list(x) for x in self.bin_samples],
+                "episodes": [list(x) for x in self.bin_episodes],
+                "own": self.bin_used, "lower": lo, "upper": hi}
+        return d
 
     @classmethod
     def read(cls, path: str | Path) -> Thresholds:
-        """Read a thresholds file (:meth:`to_json`).
+        """Read a thresholds file (:meth:`to_json`; format /1, without regime bins, too).
 
         Raises
         ------
@@ -321,7 +413,8 @@ class Thresholds:
         """
         p = Path(path)
         d = _read_json(p, "no such thresholds file")
-        if not isinstance(d, dict) or d.get("format") != THRESHOLDS_FORMAT:
+        if not isinstance(d, dict) or d.get("format") not in (THRESHOLDS_FORMAT,
+                                                               THRESHOLDS_FORMAT_1):
             raise DataError(f"{p}: format: expected {THRESHOLDS_FORMAT!r} (jointid monitor "
                             "--calibrate)")
         try:
@@ -341,20 +434,78 @@ class Thresholds:
             raise DataError(f"{p}: sigma and k_sigma: expected numbers > 0")
         if not margin >= 0:
             raise DataError(f"{p}: peak_margin: expected a number >= 0")
-        return cls(joints, k, vals[0], vals[1], vals[2], n, str(d.get("source", "")),
-                   margin)
+        th = cls(joints, k, vals[0], vals[1], vals[2], n, str(d.get("source", "")), margin)
+        reg = d.get("regime") if d["format"] == THRESHOLDS_FORMAT else None
+        return th if reg is None else _read_regime(p, reg, th)
+
+
+def _increasing(edges: Sequence[float]) -> bool:
+    """True when ``edges`` are > 0 and strictly increasing (or empty)."""
+    return all(e > 0 for e in edges[:1]) and all(
+        edges[i + 1] > edges[i] for i in range(len(edges) - 1))
+
+
+def _read_regime(p: Path, reg: Any, th: Thresholds) -> Thresholds:
+    """``th`` with the regime bins of a thresholds file's ``regime`` object."""
+    if not isinstance(reg, dict):
+        raise DataError(f"{p}: regime: expected an object or null")
+    if reg.get("variable") != "moving_s":
+        raise DataError(f"{p}: regime.variable: expected 'moving_s', got "
+                        f"{reg.get('variable')!r}")
+    try:
+        edges = tuple(float(x) for x in reg["edges_s"])
+        mins, mine = int(reg["min_samples"]), int(reg["min_episodes"])
+        tabs = [tuple(tuple(float(x) for x in row) for row in reg[key])
+                for key in ("mean", "sigma", "peak_sigmas")]
+        counts, eps = (tuple(tuple(int(x) for x in row) for row in reg[key])
+                       for key in ("samples", "episodes"))
+    except (KeyError, TypeError, ValueError) as e:
+        raise DataError(f"{p}: regime: key {e.args[0] if e.args else '?'!r} missing or "
+                        "not numbers") from None
+    if not _increasing(edges):
+        raise DataError(f"{p}: regime.edges_s: expected increasing numbers > 0 [s]")
+    if not (mins >= 1 and mine >= 1):
+        raise DataError(f"{p}: regime.min_samples, min_episodes: expected integers >= 1")
+    shape = (len(th.joints), len(edges) + 1)
+    for key, t in zip(("mean", "sigma", "peak_sigmas", "samples", "episodes"),
+                      (*tabs, counts, eps), strict=True):
+        if len(t) != shape[0] or any(len(row) != shape[1] for row in t):
+            raise DataError(f"{p}: regime.{key}: expected {shape[0]} rows (one per joint) "
+                            f"of {shape[1]} values (one per bin)")
+    if any(x < 0 for t in (tabs[1], counts, eps) for row in t for x in row):
+        raise DataError(f"{p}: regime.sigma, samples, episodes: expected numbers >= 0")
+    return dataclasses.replace(th, edges_s=edges, bin_mean=tabs[0], bin_sigma=tabs[1],
+                               bin_peak=tabs[2], bin_samples=counts, bin_episodes=eps,
+                               min_samples=mins, min_episodes=mine)
+
+
+def _stats(x: np.ndarray) -> tuple[float, float, float]:
+    """(mean, standard deviation, largest |x - mean| / sd) of ``x``; zeros when it has
+    fewer than 2 samples or no spread."""
+    if x.size < 2 or not x.std() > 0:
+        return (float(x.mean()) if x.size else 0.0), 0.0, 0.0
+    m, sd = float(x.mean()), float(x.std())
+    return m, sd, float(np.abs(x - m).max() / sd)
 
 
 def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: float,
-                             source: str = "", peak_margin: float = 0.0) -> Thresholds:
+                             source: str = "", peak_margin: float = 0.0,
+                             moving_s: Any = None,
+                             edges_s: Sequence[float] = DEFAULT_EDGES_S,
+                             min_samples: int = DEFAULT_MIN_SAMPLES,
+                             min_episodes: int = DEFAULT_MIN_EPISODES) -> Thresholds:
     """Thresholds from a residual (n, k) [N m] recorded without collision: per joint the
     mean, standard deviation and peak of its samples off the static band (residual not
-    exactly 0; near rest the model predicts an interval, :meth:`TorquePredictor.band`).
+    exactly 0; near rest the model predicts an interval, :meth:`TorquePredictor.band`);
+    with ``moving_s`` (n, k) [s] (each sample's moving time, the monitor's; the samples in
+    time order), the same per bin of ``edges_s``, and how many times each bin was entered
+    (episodes: separate motions).
 
     Raises
     ------
     DataError
-        Fewer than 100 samples, a joint whose residual is constant, k_sigma not > 0.
+        Fewer than 100 samples, a joint whose residual is constant, k_sigma not > 0,
+        moving_s not of the residual's shape or not finite, edges not increasing > 0.
     """
     r = np.asarray(residual, dtype=float)
     if r.ndim != 2 or r.shape[1] != len(joints):
@@ -364,14 +515,47 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
                         "(a validation run without collision)")
     if not k_sigma > 0:
         raise DataError(f"k_sigma: expected a number > 0, got {k_sigma}")
+    edges = tuple(float(e) for e in edges_s)
+    if not _increasing(edges):
+        raise DataError(f"regime edges: expected increasing numbers > 0 [s], got {edges}")
+    if not (int(min_samples) >= 1 and int(min_episodes) >= 1):
+        raise DataError(f"regime min_samples, min_episodes: expected integers >= 1, got "
+                        f"{min_samples}, {min_episodes}")
+    s = None
+    if moving_s is not None:
+        s = np.asarray(moving_s, dtype=float)
+        if s.shape != r.shape or not np.isfinite(s).all():
+            raise DataError(f"{source}: moving_s: expected {r.shape} finite values (the "
+                            "residual's samples)")
     mean, sigma, peak = [], [], []
+    bins: list[list[tuple[float, float, float]]] = []
+    counts: list[tuple[int, ...]] = []
+    episodes: list[tuple[int, ...]] = []
     for j, name in enumerate(joints):
-        x = r[:, j][r[:, j] != 0.0]  # 0 exactly: inside the static band (no prediction)
+        off = r[:, j] != 0.0  # 0 exactly: inside the static band (no prediction)
+        x = r[off, j]
         if x.size < 100 or not x.std() > 0:
             raise DataError(f"{source}: residual of {name}: {x.size} samples off its static "
                             "band, expected at least 100 that vary (did the joint move?)")
-        mean.append(float(x.mean()))
-        sigma.append(float(x.std()))
-        peak.append(float(np.abs(x - x.mean()).max() / x.std()))
-    return Thresholds(tuple(joints), float(k_sigma), tuple(mean), tuple(sigma), tuple(peak),
-                      int(r.shape[0]), source, float(peak_margin))
+        m, sd, pk = _stats(x)
+        mean.append(m)
+        sigma.append(sd)
+        peak.append(pk)
+        if s is not None:
+            nb = len(edges) + 1
+            b = np.searchsorted(edges, s[off, j], side="right")
+            bins.append([_stats(x[b == i]) for i in range(nb)])
+            counts.append(tuple(int(n) for n in np.bincount(b, minlength=nb)))
+            ball = np.searchsorted(edges, s[:, j], side="right")  # every sample, in order
+            enter = ball[np.r_[True, ball[1:] != ball[:-1]]]
+            episodes.append(tuple(int(n) for n in np.bincount(enter, minlength=nb)))
+    th = Thresholds(tuple(joints), float(k_sigma), tuple(mean), tuple(sigma), tuple(peak),
+                    int(r.shape[0]), source, float(peak_margin))
+    if s is None:
+        return th
+    return dataclasses.replace(
+        th, edges_s=edges, bin_mean=tuple(tuple(v[0] for v in bj) for bj in bins),
+        bin_sigma=tuple(tuple(v[1] for v in bj) for bj in bins),
+        bin_peak=tuple(tuple(v[2] for v in bj) for bj in bins),
+        bin_samples=tuple(counts), bin_episodes=tuple(episodes),
+        min_samples=int(min_samples), min_episodes=int(min_episodes))

@@ -282,8 +282,18 @@ def test_monitor_calibrate_then_detect_a_push_on_the_bus(tmp_path, arm3, capfd):
     assert kinds.index("push") < kinds.index("collision")
     ml = read_monitor(log)
     assert ml.residual.shape[1] == 3 and ml.armed.any()
-    assert np.allclose(ml.upper[ml.armed][0], th["upper"])
+    # the band of each cycle is the thresholds' at the logged moving time (regime bins)
+    reg = th["regime"]
+    assert reg["edges_s"] and np.all(np.diff(ml.moving_s[:, 0])[ml.moving_s[1:, 0] > 0]
+                                      == pytest.approx(0.002))
+    b = np.searchsorted(reg["edges_s"], ml.moving_s, side="right")
+    want = np.array(reg["upper"])[np.arange(3)[None, :], b]
+    assert np.allclose(ml.upper, want)
     assert (out / "report.html").is_file() and (out / "residual_0_j2.png").is_file()
+    j2 = s["per_joint"][1]
+    assert j2["joint"] == "j2" and (j2["pushes"], j2["detected"]) == (1, 1)
+    assert all(0 < d["worst_fraction_of_band"] for d in s["per_joint"])
+    assert "Per joint" in (out / "report.html").read_text()
     # --stop: the crossing stops the run through the stop sequence
     stop = tmp_path / "stop"
     main(["monitor", str(model), str(camp), "--simulate", "--thresholds",
@@ -314,6 +324,10 @@ def test_monitor_bad_inputs_one_line(tmp_path, arm3, capfd):
         (["monitor", str(model), str(camp), "--simulate", "--thresholds", str(th)],
          "joints"),
         (["monitor", str(model), str(ARM3), "--simulate", "--calibrate"], "arm3.toml"),
+        (["monitor", str(model), str(camp), "--simulate", "--calibrate", "--regime-edges",
+          "0.1,0.05"], "--regime-edges"),
+        (["monitor", str(model), str(camp), "--simulate", "--thresholds", str(th),
+          "--regime-edges", "0.1"], "--calibrate"),
     ]
     for argv, what in cases:
         out = tmp_path / "never"

@@ -5,7 +5,10 @@ the predicted torque (:mod:`ident.monitor`); the campaign runs on its buses (``-
 the simulated arm) with :class:`daq.runtime.monitor.TorqueMonitor` checking every cycle.
 
 * ``--calibrate``: a validation run without collision; the residual's mean and standard
-  deviation per joint give ``OUT/thresholds.json`` (band ``mean +- k sigma``).
+  deviation per joint, and per bin of the joint's moving time (its regime: time since its
+  last reversal, start or rest), give ``OUT/thresholds.json`` (band ``mean +- k sigma``,
+  at least the peak times a margin, per bin; a bin with few samples takes the constant
+  band).
 * otherwise ``--thresholds FILE``: crossings are ``collision`` events in the run log, and
   with ``--stop`` they stop the run (quick stop, disable). ``--push`` stages pushes on the
   simulated arm; the detection delay of each and the crossings outside every push (false
@@ -32,7 +35,14 @@ import numpy as np
 
 from daq import ConfigError, __version__
 from daq.runtime.monitor import PushSpec, TorqueMonitor, read_monitor
-from ident.monitor import Thresholds, load_model, thresholds_from_residual
+from ident.monitor import (
+    DEFAULT_EDGES_S,
+    DEFAULT_MIN_EPISODES,
+    DEFAULT_MIN_SAMPLES,
+    Thresholds,
+    load_model,
+    thresholds_from_residual,
+)
 from ident.report import Section, write_html, write_json
 from trajectories.campaign_file import load_any_campaign
 from trajectories.robot_campaign import RobotCampaign
@@ -40,7 +50,8 @@ from trajectories.robot_model import robot_for_campaign
 
 from .running import run_with_bar
 
-__all__ = ["analyse", "load_campaign", "parse_push", "register", "run_monitor"]
+__all__ = ["analyse", "load_campaign", "parse_edges", "parse_push", "per_joint", "register",
+           "run_monitor"]
 
 #: default --rest-velocity: this many times each joint's Stribeck velocity q_s (E < 5 %)
 REST_QS = 3.0
@@ -81,6 +92,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--peak-margin", type=float, default=None,
                    help="the band is at least this times the validation residual's largest "
                    "deviation (default 1.5, 0: k-sigma alone; with --thresholds: the file's)")
+    p.add_argument("--regime-edges", default=None, metavar="S1,S2,...",
+                   help="--calibrate: edges [s] of the regime bins on each joint's moving "
+                   "time (time since its last reversal, start or rest); default "
+                   f"{','.join(f'{e:g}' for e in DEFAULT_EDGES_S)}; 'none': one constant "
+                   "band")
+    p.add_argument("--constant-band", action="store_true",
+                   help="with --thresholds: the file's constant band, not its regime bins "
+                   "(the format /1 behaviour)")
     p.add_argument("--cutoff-hz", type=float, default=20.0,
                    help="cut-off of the residual filter [Hz] (default 20)")
     p.add_argument("--rest-velocity", type=float, default=None,
@@ -94,6 +113,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--paced", action="store_true",
                    help="real-time clock (daq.clock = 'paced'): cycles on the wall clock")
     p.set_defaults(func=_run)
+
+
+def parse_edges(text: str) -> tuple[float, ...]:
+    """``--regime-edges``: increasing seconds > 0 separated by commas, or ``none`` (no
+    bins: the constant band alone).
+
+    Raises
+    ------
+    ConfigError
+        Not of that form.
+    """
+    if text.strip().lower() == "none":
+        return ()
+    try:
+        edges = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        edges = ()
+    if not edges or any(not e > 0 for e in edges) or list(edges) != sorted(set(edges)):
+        raise ConfigError(f"--regime-edges {text!r}: expected increasing seconds > 0 "
+                          "separated by commas, or 'none'")
+    return edges
 
 
 def parse_push(text: str, joints: list[str]) -> PushSpec:
@@ -150,6 +190,44 @@ def analyse(monitor: TorqueMonitor, cycle_s: float) -> list[dict[str, Any]]:
     return out
 
 
+def per_joint(monitor: TorqueMonitor, logs: list[Path], runs: list[dict[str, Any]],
+              cycle_s: float) -> list[dict[str, Any]]:
+    """Per joint, over the runs (:func:`analyse`'s ``runs``, their logs): the band
+    half-widths the check used [N m] (smallest, largest), the pushes on its link (detected,
+    delays [s]), its false alarms, and its largest ``|r - centre| / half-width`` over the
+    armed cycles outside every push window (1: on the threshold)."""
+    k = monitor.k
+    worst, hw_min, hw_max = [0.0] * k, [np.inf] * k, [0.0] * k
+    for rec, path in zip(monitor.records, logs, strict=False):
+        ml = read_monitor(path)
+        inside = np.zeros(len(ml.cycle), bool)
+        for c0, spec in rec.staged:
+            c1 = c0 + int(round((spec.duration_s + AFTER_PUSH_S) / cycle_s))
+            inside |= (ml.cycle >= c0) & (ml.cycle <= c1)
+        sel = ml.armed & ~inside
+        half = (ml.upper - ml.lower) / 2
+        if not sel.any() or not np.isfinite(half[sel]).all():
+            continue
+        mid = (ml.upper + ml.lower) / 2
+        x = (np.abs(ml.residual[sel] - mid[sel]) / half[sel]).max(axis=0)
+        for j in range(k):
+            worst[j] = max(worst[j], float(x[j]))
+            hw_min[j] = min(hw_min[j], float(half[ml.armed, j].min()))
+            hw_max[j] = max(hw_max[j], float(half[ml.armed, j].max()))
+    out = []
+    for j, name in enumerate(monitor.joints):
+        ps = [p for run in runs for p in run["pushes"] if p["joint"] == name]
+        out.append({
+            "joint": name,
+            "half_width_Nm": [hw_min[j], hw_max[j]] if np.isfinite(hw_min[j]) else None,
+            "pushes": len(ps), "detected": sum(p["detected"] for p in ps),
+            "delays_s": [p["delay_s"] for p in ps if p["detected"]],
+            "false_alarms": sum(f["joint"] == name for run in runs
+                                for f in run["false_alarms"]),
+            "worst_fraction_of_band": worst[j]})
+    return out
+
+
 def load_campaign(path: Path, paced: bool = False) -> RobotCampaign:
     """The robot campaign of ``path``; ``paced``: on the real-time clock."""
     campaign = load_any_campaign(path)
@@ -164,6 +242,7 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
                 model_name: str | None = None, payloads: list[int] | None = None,
                 calibrate: bool = False, thresholds: Path | None = None,
                 k_sigma: float | None = None, peak_margin: float | None = None,
+                regime_edges: str | None = None, constant_band: bool = False,
                 cutoff_hz: float = 20.0,
                 rest_velocity: float | None = None, pushes: list[str] | None = None,
                 stop: bool = False, paced: bool = False,
@@ -190,6 +269,12 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
         raise ConfigError(f"--k-sigma: expected a number > 0, got {k_sigma}")
     if peak_margin is not None and not peak_margin >= 0:
         raise ConfigError(f"--peak-margin: expected a number >= 0, got {peak_margin}")
+    if regime_edges is not None and not calibrate:
+        raise ConfigError("--regime-edges: expected --calibrate (the bins are the "
+                          "thresholds file's)")
+    if constant_band and calibrate:
+        raise ConfigError("--constant-band: expected --thresholds")
+    edges = DEFAULT_EDGES_S if regime_edges is None else parse_edges(regime_edges)
     robot = robot_for_campaign(campaign)
     exported = load_model(model, robot, model_name)
     pred0 = exported.predictor(None)
@@ -206,14 +291,16 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
             raise ConfigError(f"{thresholds}: joints {list(th.joints)}, the campaign's are "
                               f"{joints}")
         th = th.with_k(k_sigma, peak_margin)
+        if constant_band:
+            th = th.constant()
 
     def predictor_for(payload: Any) -> Any:
         return functools.partial(exported.predictor(payload).band, v_rest=v_rest)
 
-    mon = TorqueMonitor(predictor_for, joints, campaign.cycle_s,
-                        lower=None if th is None else th.lower,
-                        upper=None if th is None else th.upper, cutoff_hz=cutoff_hz,
-                        stop=stop, pushes=specs)
+    lower, upper = (None, None) if th is None else th.bands()
+    mon = TorqueMonitor(predictor_for, joints, campaign.cycle_s, lower=lower, upper=upper,
+                        edges_s=() if th is None else th.edges_s, rest_velocity=v_rest,
+                        cutoff_hz=cutoff_hz, stop=stop, pushes=specs)
     out.mkdir(parents=True, exist_ok=True)
     result, wall = run_with_bar(campaign, out / "logs", True if simulate else None, stream,
                                 payloads=payloads, monitor=mon)
@@ -226,20 +313,24 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
         "wall_s": wall, "missed_cycles": [r.missed for r in result.runs],
         "logs": [str(p.relative_to(out)) for p in logs]}
     if calibrate:
-        res = []
+        res, mov = [], []
         for p in logs:
             ml = read_monitor(p)
             res.append(ml.residual[ml.armed])
+            mov.append(ml.moving_s[ml.armed])
         th = thresholds_from_residual(np.concatenate(res), joints,
                                       DEFAULT_K_SIGMA if k_sigma is None else k_sigma,
                                       ", ".join(summary["logs"]),
                                       DEFAULT_PEAK_MARGIN if peak_margin is None
-                                      else peak_margin)
+                                      else peak_margin,
+                                      np.concatenate(mov) if edges else None, edges,
+                                      DEFAULT_MIN_SAMPLES, DEFAULT_MIN_EPISODES)
         write_json(out / "thresholds.json", th.to_json())
         summary["thresholds"] = th.to_json()
     else:
         summary["thresholds"] = th.to_json() if th is not None else None
         summary["runs"] = analyse(mon, campaign.cycle_s)
+        summary["per_joint"] = per_joint(mon, logs, summary["runs"], campaign.cycle_s)
     summary["report"] = str(_report(out, logs, summary, mon).relative_to(out))
     write_json(out / "monitor.json", summary)
     return summary
@@ -280,12 +371,16 @@ def _report(out: Path, logs: list[Path], summary: dict[str, Any], mon: TorqueMon
     sections = [intro]
     th = summary.get("thresholds")
     if th:
-        sections.append(Section("Thresholds").table(
+        sections.append(Section("Thresholds").para(
+            f"Constant band: mean +- max({th['k_sigma']:g}, {th['peak_margin']:g} peak) "
+            "sigma of the validation residual.").table(
             ["joint", "mean [N m]", "sigma [N m]", "k", "lower", "upper", "peak/sigma"],
             [[j, f"{m:.4g}", f"{s:.4g}", f"{th['k_sigma']:g}", f"{lo:.4g}", f"{hi:.4g}",
               f"{pk:.3g}"] for j, m, s, lo, hi, pk in zip(
                 joints, th["mean"], th["sigma"], th["lower"], th["upper"],
                 th["peak_sigmas"], strict=True)]))
+        if th.get("regime"):
+            sections.append(_regime_section(th["regime"], joints))
     rows = []
     for run in summary.get("runs", []):
         for p in run["pushes"]:
@@ -298,6 +393,20 @@ def _report(out: Path, logs: list[Path], summary: dict[str, Any], mon: TorqueMon
             "Delay: from the cycle the push was staged to the first crossing (any joint).")
             .table(["payload", "pushed link", "force [N]", "t0 [s]", "detected",
                     "delay [ms]", "joints crossed"], rows))
+    if summary.get("per_joint"):
+        sections.append(Section("Per joint").para(
+            "Band half-width the check used (smallest..largest over the regimes met), the "
+            "pushes on the joint's link (detected of staged, delays), the joint's crossings "
+            "outside every push window (false alarms), and its largest |residual - band "
+            "centre| / half-width outside the push windows (1 = on the threshold).").table(
+            ["joint", "band half-width [N m]", "pushes detected", "delays [ms]",
+             "false alarms", "largest excursion / band"],
+            [[d["joint"], "—" if d["half_width_Nm"] is None else
+              f"{d['half_width_Nm'][0]:.3g}..{d['half_width_Nm'][1]:.3g}",
+              f"{d['detected']}/{d['pushes']}",
+              ", ".join(f"{1000 * t:.0f}" for t in d["delays_s"]) or "—",
+              d["false_alarms"], f"{d['worst_fraction_of_band']:.2f}"]
+             for d in summary["per_joint"]]))
     if "runs" in summary:
         fa = [[run["payload"], f"{run['armed_s']:.1f}", len(run["false_alarms"]),
                f"{run['step_us_mean']:.0f}", f"{run['step_us_max']:.0f}"]
@@ -321,11 +430,36 @@ def _report(out: Path, logs: list[Path], summary: dict[str, Any], mon: TorqueMon
                       f"jointid {__version__} — torque monitoring", sections)
 
 
+def _bin_names(edges: list[float]) -> list[str]:
+    """Column titles of the regime bins: moving-time ranges [s]."""
+    b = [0.0, *edges]
+    return [f"{lo:g}-{hi:g} s" for lo, hi in zip(b[:-1], b[1:], strict=True)] + [
+        f">= {b[-1]:g} s"]
+
+
+def _regime_section(reg: dict[str, Any], joints: list[str]) -> Section:
+    """Half-width [N m], samples and episodes of the regime bins per joint ('*': too few,
+    the constant band)."""
+    rows = []
+    for j, name in enumerate(joints):
+        rows.append([name] + [
+            f"{(hi - lo) / 2:.3g}{'' if own else '*'} ({n}, {e})" for lo, hi, own, n, e in zip(
+                reg["lower"][j], reg["upper"][j], reg["own"][j], reg["samples"][j],
+                reg["episodes"][j], strict=True)])
+    return Section("Thresholds per regime").para(
+        "Band half-width [N m] (validation samples, episodes) per bin of the joint's moving "
+        "time (time its filtered velocity has kept its sign above the rest velocity: 0 at "
+        f"rest, at a reversal, at breakaway). *: fewer than {reg['min_samples']} samples "
+        f"or {reg['min_episodes']} episodes, the constant band.").table(
+            ["joint", *_bin_names(reg["edges_s"])], rows)
+
+
 def _run(args: argparse.Namespace) -> int:
     s = run_monitor(args.model, args.campaign, args.out, simulate=args.simulate,
                     model_name=args.model_name, payloads=args.payload,
                     calibrate=args.calibrate, thresholds=args.thresholds,
                     k_sigma=args.k_sigma, peak_margin=args.peak_margin,
+                    regime_edges=args.regime_edges, constant_band=args.constant_band,
                     cutoff_hz=args.cutoff_hz,
                     rest_velocity=args.rest_velocity, pushes=args.push, stop=args.stop,
                     paced=args.paced)
@@ -339,9 +473,17 @@ def format_summary(s: dict[str, Any]) -> str:
              f"{s['missed_cycles']}"]
     th = s.get("thresholds")
     if th:
-        lines.append("thresholds [N m]: " + ", ".join(
+        lines.append("thresholds, constant band [N m]: " + ", ".join(
             f"{j} {lo:+.3g}..{hi:+.3g}" for j, lo, hi in zip(
                 s["joints"], th["lower"], th["upper"], strict=True)))
+        reg = th.get("regime")
+        if reg:
+            lines.append(f"  per regime (moving time bins {_bin_names(reg['edges_s'])}), "
+                         "half-width [N m]: " + "; ".join(
+                             f"{j} " + " ".join(f"{(b - a) / 2:.3g}" for a, b in zip(
+                                 lo, hi, strict=True))
+                             for j, lo, hi in zip(s["joints"], reg["lower"], reg["upper"],
+                                                  strict=True)))
     for run in s.get("runs", []):
         for p in run["pushes"]:
             lines.append(f"payload {run['payload']}: push {p['force_N']:g} N on {p['joint']}"

@@ -18,8 +18,16 @@ torque with the same filter keeps both sides delayed alike. A collision (an exte
 on a link) moves the arm without passing through the drives' torque: r_j is then about
 ``-(J^T F)_j``.
 
-A joint's residual outside ``[lower_j, upper_j]`` (``mean +- k sigma`` of a validation run,
-``ident.monitor.Thresholds``) after the first ``warmup_s`` of the phase is a ``collision``
+Each joint's regime is its *moving time* ``moving_s``: how long [s] its filtered velocity has
+kept its sign with ``|dq_f,j| >= v_rest_j`` (0 at rest, at a reversal and at breakaway; the
+rest velocity of the model's band). The thresholds may depend on it: ``edges_s`` cut it
+into bins (bin b: ``edges_s[b-1] <= moving_s < edges_s[b]``) and each bin has its band,
+so the band can be wide right after a reversal or a start and narrow while the joint moves
+steadily (``ident.monitor.Thresholds``: the validation residual's statistics per bin). The
+bin is found by bisection over the few edges: O(k) per cycle.
+
+A joint's residual outside ``[lower_j, upper_j]`` of its current bin (``mean +- k sigma``
+of a validation run) after the first ``warmup_s`` of the phase is a ``collision``
 event on ``/events`` (one per crossing: the joint must come back inside before it counts
 again), and with ``stop=True`` the run stops through the engine's stop sequence (quick stop,
 disable: the same path as a limit). Without thresholds (``calibrate``) the residual is only
@@ -40,6 +48,7 @@ import json
 import math
 import struct
 import time
+from bisect import bisect_right
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,7 +62,7 @@ from daq.protocol.reader import read_topics
 from sim_drivers.arm_push import staged_push
 
 __all__ = ["MONITOR_SCHEMA", "MonitorRecord", "PushSpec", "SVFilter", "TorqueMonitor",
-           "read_monitor"]
+           "moving_seconds", "read_monitor"]
 
 MONITOR_SCHEMA_NAME = "jointid_msgs/msg/MonitorSample"
 MONITOR_SCHEMA = """\
@@ -65,12 +74,16 @@ float64 upper         # [N m] upper threshold (+inf: none)
 float64 tau_filtered  # [N m] measured torque (0x6077), low-passed
 float64 tau_predicted # [N m] the model's torque at the filtered state (nearest in its
                       # interval near rest)
+float64 moving_s      # [s] time the filtered velocity has kept its sign above the rest
+                      # velocity (the regime of the thresholds)
 uint8 armed           # 1 when crossings count (after the warm-up)
 """
-_SAMPLE = struct.Struct("<4sqddddddB")
-_SAMPLE_DTYPE = np.dtype([("head", "V4"), ("cycle", "<i8"), ("t", "<f8"), ("residual", "<f8"),
-                          ("lower", "<f8"), ("upper", "<f8"), ("tau_filtered", "<f8"),
-                          ("tau_predicted", "<f8"), ("armed", "u1")])
+_SAMPLE = struct.Struct("<4sqdddddddB")
+_FIELDS = [("head", "V4"), ("cycle", "<i8"), ("t", "<f8"), ("residual", "<f8"),
+           ("lower", "<f8"), ("upper", "<f8"), ("tau_filtered", "<f8"), ("tau_predicted", "<f8")]
+_SAMPLE_DTYPE = np.dtype([*_FIELDS, ("moving_s", "<f8"), ("armed", "u1")])
+#: logs written before the moving time (61-byte messages): moving_s reads as NaN
+_SAMPLE_DTYPE_1 = np.dtype([*_FIELDS, ("armed", "u1")])
 _MAX_AXES = 64
 _CDR_HEADER = b"\x00\x01\x00\x00"
 
@@ -106,6 +119,36 @@ class SVFilter:
         y, dy = self.y, self.dy
         self.y = [a11 * y0 + a12 * d0 + b1 * x for y0, d0, x in zip(y, dy, u, strict=True)]
         self.dy = [a21 * y0 + a22 * d0 + b2 * x for y0, d0, x in zip(y, dy, u, strict=True)]
+
+
+def _table(x: Sequence[Any] | None, k: int, nb: int, default: float) -> list[list[float]]:
+    """Thresholds per joint and regime bin (k x nb): ``x`` one value per joint (every bin)
+    or one row of nb per joint; None: ``default`` everywhere."""
+    if x is None:
+        return [[default] * nb for _ in range(k)]
+    if len(x) != k:
+        raise ConfigError(f"monitor: expected {k} thresholds (one per joint)")
+    rows = [[float(v)] * nb if np.ndim(v) == 0 else [float(y) for y in v] for v in x]
+    if any(len(r) != nb for r in rows):
+        raise ConfigError(f"monitor: expected one threshold per regime bin ({nb}) of each "
+                          "joint")
+    return rows
+
+
+def moving_seconds(dq_f: Any, rest_velocity: Any, cycle_s: float) -> np.ndarray:
+    """The moving time [s] of :class:`TorqueMonitor` over a run, offline: (n, k) from the
+    filtered velocities ``dq_f`` (n, k) [rad/s] of its cycles, ``rest_velocity`` per joint
+    [rad/s] (the same per-cycle rule: 0 when the sign changed or ``|dq_f| < v_rest``, else
+    one cycle more)."""
+    d = np.asarray(dq_f, float)
+    vr = np.broadcast_to(np.asarray(rest_velocity, float), d.shape[1:])
+    sg = np.sign(d).astype(int)
+    prev = np.vstack([np.zeros((1, d.shape[1]), int), sg[:-1]])
+    reset = (sg != prev) | (np.abs(d) < vr)
+    idx = np.arange(d.shape[0])[:, None]
+    last = np.maximum.accumulate(np.where(reset, idx, -1), axis=0)
+    n = np.where(last >= 0, idx - last, idx + 1)  # never reset yet: counting from the start
+    return n * float(cycle_s)
 
 
 @dataclass(frozen=True)
@@ -148,8 +191,13 @@ class TorqueMonitor:
         Joint names (k), the drives' order.
     cycle_s : float
         Control cycle [s].
-    lower, upper : sequence of float, optional
-        Thresholds per joint [N m]; None: calibration (log only).
+    lower, upper : sequence, optional
+        Thresholds per joint [N m]: one value per joint, or per joint one value per regime
+        bin (``len(edges_s) + 1``); None: calibration (log only).
+    edges_s : sequence of float
+        Edges of the regime bins on the moving time [s] (increasing; empty: one band).
+    rest_velocity : float or sequence of float
+        Per joint [rad/s]: below it the joint's moving time is 0 (the model's rest band).
     cutoff_hz : float
         Cut-off of the filter [Hz].
     warmup_s : float
@@ -163,7 +211,8 @@ class TorqueMonitor:
 
     def __init__(self, predictor_for: Callable[[Any], Callable[..., Sequence[float]]],
                  joints: Sequence[str], cycle_s: float, *,
-                 lower: Sequence[float] | None = None, upper: Sequence[float] | None = None,
+                 lower: Sequence[Any] | None = None, upper: Sequence[Any] | None = None,
+                 edges_s: Sequence[float] = (), rest_velocity: float | Sequence[float] = 0.0,
                  cutoff_hz: float = 20.0, warmup_s: float = 0.25, stop: bool = False,
                  pushes: Sequence[PushSpec] = ()) -> None:
         self.predictor_for = predictor_for
@@ -172,10 +221,17 @@ class TorqueMonitor:
         self.cycle_s = float(cycle_s)
         if (lower is None) != (upper is None):
             raise ConfigError("monitor: give both thresholds (lower and upper) or neither")
-        self.lower = [-math.inf] * k if lower is None else [float(x) for x in lower]
-        self.upper = [math.inf] * k if upper is None else [float(x) for x in upper]
-        if len(self.lower) != k or len(self.upper) != k:
-            raise ConfigError(f"monitor: expected {k} thresholds (one per joint)")
+        self.edges_s = [float(e) for e in edges_s]
+        if any(b <= a for a, b in zip(self.edges_s, self.edges_s[1:], strict=False)):
+            raise ConfigError(f"monitor: regime edges {self.edges_s}: expected increasing")
+        nb = len(self.edges_s) + 1
+        #: per joint, per regime bin [N m]
+        self.lower = _table(lower, k, nb, -math.inf)
+        self.upper = _table(upper, k, nb, math.inf)
+        vr = rest_velocity if np.ndim(rest_velocity) else [rest_velocity] * k
+        self.rest_velocity = [float(v) for v in vr]  # type: ignore[union-attr]
+        if len(self.rest_velocity) != k:
+            raise ConfigError(f"monitor: rest_velocity: expected {k} values (one per joint)")
         self.cutoff_hz = float(cutoff_hz)
         self.warmup_cycles = int(round(warmup_s / self.cycle_s))
         self.stop = bool(stop)
@@ -195,6 +251,8 @@ class TorqueMonitor:
         self._disarmed_until = 0
         self._next_push = 0
         self._out = [False] * k
+        self._moving = [0] * k  # cycles the filtered velocity kept its sign above v_rest
+        self._sign = [0] * k
 
     # -- per run ---------------------------------------------------------------------------
     def begin(self, index: int, payload: Any, log: Any) -> None:
@@ -210,12 +268,16 @@ class TorqueMonitor:
             w.add_metadata("monitor", {
                 "joints": json.dumps(self.joints), "cutoff_hz": repr(self.cutoff_hz),
                 "lower": json.dumps(self.lower), "upper": json.dumps(self.upper),
+                "edges_s": json.dumps(self.edges_s),
+                "rest_velocity": json.dumps(self.rest_velocity),
                 "warmup_cycles": str(self.warmup_cycles), "stop": str(self.stop).lower(),
                 "pushes": json.dumps([p.__dict__ for p in self.pushes])})
         self._n = 0
         self._disarmed_until = 0
         self._next_push = 0
         self._out = [False] * self.k
+        self._moving = [0] * self.k
+        self._sign = [0] * self.k
         self.records.append(MonitorRecord(index))
 
     def step(self, cycle: int, t: float, q: Sequence[float], dq: Sequence[float],
@@ -243,29 +305,38 @@ class TorqueMonitor:
             self._stage(cycle, t, log, rec)
         p_lo, p_hi = self._predict(self._fq.y, self._fdq.y,  # type: ignore[misc]
                                    self._fdq.dy)
-        tau_f = self._ftau.y
+        tau_f, dq_f = self._ftau.y, self._fdq.y
         armed = n >= self.warmup_cycles and n >= self._disarmed_until
         rec.armed_cycles += armed
         lo, hi, out = self.lower, self.upper, self._out
+        moving, sign, v_rest = self._moving, self._sign, self.rest_velocity
+        edges, cycle_s = self.edges_s, self.cycle_s
         chans = self._channels
         add = getattr(log, "_add", None) if chans else None
         ts = log.start_ns + cycle * log.cycle_ns if add is not None else 0
         now_ns = time.time_ns()
         stop_why, stop_joint = "", -1
         for j in range(self.k):
+            v = dq_f[j]
+            sg = 1 if v > 0.0 else -1 if v < 0.0 else 0
+            moving[j] = 0 if sg != sign[j] or abs(v) < v_rest[j] else moving[j] + 1
+            sign[j] = sg
+            mv = moving[j] * cycle_s
+            b = bisect_right(edges, mv) if edges else 0
+            lo_j, hi_j = lo[j][b], hi[j][b]
             x = tau_f[j]
             pred = p_lo[j] if x < p_lo[j] else p_hi[j] if x > p_hi[j] else x
             r = x - pred
             if add is not None:
-                add(chans[j], ts, _SAMPLE.pack(_CDR_HEADER, cycle, t, r, lo[j], hi[j], x, pred,
-                                               armed), now_ns, cycle)
+                add(chans[j], ts, _SAMPLE.pack(_CDR_HEADER, cycle, t, r, lo_j, hi_j, x, pred,
+                                               mv, armed), now_ns, cycle)
             if not armed:
                 continue
-            crossed = r < lo[j] or r > hi[j]
+            crossed = r < lo_j or r > hi_j
             if crossed and not out[j]:
                 rec.detections.append((cycle, j, r))
                 why = (f"{self.joints[j]}: torque residual {r:+.3f} N m outside "
-                       f"[{lo[j]:.3f}, {hi[j]:.3f}] (collision?)")
+                       f"[{lo_j:.3f}, {hi_j:.3f}] (collision?)")
                 log.event(cycle, t, "collision", why, j)
                 if self.stop and not stop_why:
                     stop_why, stop_joint = why, j
@@ -301,9 +372,16 @@ class MonitorLog:
     upper: np.ndarray
     tau_filtered: np.ndarray
     tau_predicted: np.ndarray
+    moving_s: np.ndarray  # (n, k) [s] the regime (NaN: a log without it)
     armed: np.ndarray  # (n,) bool
     events: list[dict[str, Any]]
     metadata: dict[str, str]
+
+
+def _decode(msgs: list[bytes]) -> np.ndarray:
+    """The MonitorSample messages of one channel as a structured array (either layout)."""
+    dt = _SAMPLE_DTYPE_1 if len(msgs[0]) == _SAMPLE_DTYPE_1.itemsize else _SAMPLE_DTYPE
+    return np.frombuffer(b"".join(msgs), dt)
 
 
 def read_monitor(path: str | Path) -> MonitorLog:
@@ -320,7 +398,7 @@ def read_monitor(path: str | Path) -> MonitorLog:
     """
     topics = {f"/monitor/{j}/residual": j for j in range(_MAX_AXES)}
     scan = read_topics(path, set(topics))
-    cols = {topics[t]: np.frombuffer(b"".join(v), _SAMPLE_DTYPE) for t, v in scan.raw.items()}
+    cols = {topics[t]: _decode(v) for t, v in scan.raw.items() if v}
     if not cols:
         raise ConfigError(f"{path}: no /monitor channel (not a jointid monitor run)")
     k = max(cols) + 1
@@ -330,9 +408,11 @@ def read_monitor(path: str | Path) -> MonitorLog:
     def stack(name: str) -> np.ndarray:
         return np.stack([r[name] for r in rec], axis=1).astype(float)
 
+    moving = (stack("moving_s") if "moving_s" in rec[0].dtype.names
+              else np.full((n, k), np.nan))
     return MonitorLog(rec[0]["cycle"].astype(np.int64), rec[0]["t"].astype(float),
                       stack("residual"), stack("lower"), stack("upper"),
-                      stack("tau_filtered"), stack("tau_predicted"),
+                      stack("tau_filtered"), stack("tau_predicted"), moving,
                       rec[0]["armed"].astype(bool),
                       sorted(scan.events, key=lambda e: e["cycle"]),
                       dict(scan.metadata.get("monitor", {})))
