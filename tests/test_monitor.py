@@ -32,6 +32,8 @@ from sim_drivers.arm import (
 from sim_drivers.arm_push import DEFAULT_OFFSET_M
 from trajectories.robot import load_robot
 
+JOINT_CAMPAIGN = Path(__file__).resolve().parents[1] / "examples" / "campaign.toml"
+
 
 @pytest.fixture(scope="module")
 def arm3():
@@ -324,6 +326,8 @@ def test_monitor_bad_inputs_one_line(tmp_path, arm3, capfd):
         (["monitor", str(model), str(camp), "--simulate", "--thresholds", str(th)],
          "joints"),
         (["monitor", str(model), str(ARM3), "--simulate", "--calibrate"], "arm3.toml"),
+        (["monitor", str(model), str(JOINT_CAMPAIGN), "--simulate", "--calibrate"],
+         "single-joint [joint] campaign"),
         (["monitor", str(model), str(camp), "--simulate", "--calibrate", "--regime-edges",
           "0.1,0.05"], "--regime-edges"),
         (["monitor", str(model), str(camp), "--simulate", "--thresholds", str(th),

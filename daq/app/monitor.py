@@ -231,8 +231,9 @@ def per_joint(monitor: TorqueMonitor, logs: list[Path], runs: list[dict[str, Any
 def load_campaign(path: Path, paced: bool = False) -> RobotCampaign:
     """The robot campaign of ``path``; ``paced``: on the real-time clock."""
     campaign = load_any_campaign(path)
-    if not isinstance(campaign, RobotCampaign):
-        raise ConfigError(f"{path}: expected a robot campaign ([robot] table)")
+    if campaign.plant != "arm":
+        raise ConfigError(f"{path}: expected a robot campaign ([robot] table with a robot "
+                          "file), got a single-joint [joint] campaign")
     if paced:
         campaign = dataclasses.replace(campaign, daq={**dict(campaign.daq), "clock": "paced"})
     return campaign
