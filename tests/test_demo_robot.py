@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 
 import numpy as np
 import pytest
@@ -95,23 +94,43 @@ def test_paper_friction_recovered_against_the_simulator_truth(demo):
 
 @pytest.mark.slow
 def test_usual_residual_refinement_points_to_quadrant_or_load_friction(demo):
-    """ident.refine on the usual model's residual of the shoulder finds what the usual model
-    misses (the paper's quadrant/load-dependent dry friction), and on the paper model's
-    residual finds less to explain (a smaller share of its error removed); no step of any
-    joint uses another joint's variables (the arm has no cross-joint effect)."""
+    """ident.refine on the usual model's residual finds what the usual model misses (the
+    paper's quadrant/load-dependent dry friction) first on every joint, and on the paper
+    model's residual finds less to explain (a smaller share of its error removed). A later
+    step of the usual model may name another joint's q or dq: what the usual model still
+    lacks after that step (the velocity dependence of the load-dependent friction) follows
+    joint j's load, a function of the whole arm's state (j3's gravity load of q2), so such a
+    variable describes it; the paper model, which has it, finds nothing (test below)."""
     _, res = demo
     d = json.loads((res.out_dir / "demo.json").read_text())
+    for j in ("j1", "j2", "j3"):
+        usual = d["refinement"]["usual"][j]
+        assert usual["steps"], (j, usual)
+        assert usual["steps"][0]["variable"] in ("quadrant", "load"), (j, usual["steps"][0])
     usual = d["refinement"]["usual"]["j2"]
-    assert usual["steps"], usual
-    assert usual["steps"][0]["variable"] in ("quadrant", "load")
     paper = d["refinement"]["paper"]["j2"]
     assert paper["rel_error_initial"] < usual["rel_error_initial"]
     assert (paper["rel_error_final"] / paper["rel_error_initial"]
             > usual["rel_error_final"] / usual["rel_error_initial"])
+
+
+@pytest.mark.slow
+def test_paper_model_refinement_finds_no_effect_the_arm_does_not_have(demo):
+    """The simulated arm has the paper model's friction and no other effect (no torque lag,
+    no cross-joint effect): the refinement of the paper model's residual, on the fit's own
+    rows with the log's torque timing, adds nothing on any joint. On the states chain (no
+    torque delay: half a cycle short of the arm's 1.5-cycle timing, and a band where the
+    closed loop's reaction to the encoder quantisation looks like a lag) it found a torque
+    lag of 1.2 and 1.8 ms on j1 and j2 of this campaign."""
+    _, res = demo
+    d = json.loads((res.out_dir / "demo.json").read_text())
+    for j, r in d["refinement"]["paper"].items():
+        assert not isinstance(r, str), (j, r)
+        assert r["steps"] == [], (j, [(s["named_effect"], s["structure"]) for s in r["steps"]])
     for per in d["refinement"].values():
-        for r in per.values():
+        for j, r in per.items():
             for s in [] if isinstance(r, str) else r["steps"]:
-                assert not any(re.fullmatch(r"d?q\d+", v) for v in s["variables"]), s
+                assert s["named_effect"] not in ("torque_lag", "zero_order_hold"), (j, s)
 
 
 def test_robot_demo_refuses_a_single_joint_campaign(tmp_path):

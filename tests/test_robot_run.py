@@ -15,11 +15,13 @@ import scipy.signal
 
 from daq import ConfigError
 from daq.protocol.reader import list_runs, read_attachments, read_run
+from daq.runtime.robot_rig import arm_truth
 from daq.runtime.runner import run_campaign
 from ident.robot.design import design_runs, resolve_design
 from ident.robot.estimate import RobotModel
 from ident.robot.loaders import load_robot_runs
 from ident.robot.regressor import RobotRegressor
+from sim_drivers.arm_bus import TORQUE_DELAY_CYCLES
 from tests.robot_campaigns import ARM3, ROOT, arm3_campaign, arm3_raw, to_toml
 from trajectories.excitation import condition_number, quality
 from trajectories.multi import plan_robot_campaign
@@ -138,6 +140,30 @@ def test_predicted_condition_number_matches_the_logged_data(robot_run):
         w = dyn.regressor(q[idx], dq[idx], ddq[idx])
         logged = condition_number(w, pred.base_columns)
         assert abs(logged / pred.cond - 1.0) < 0.2, (run.path.name, pred.cond, logged)
+
+
+def test_each_joints_torque_timing_on_the_buses_is_the_declared_one(robot_run):
+    """The log's torque timing is the same on every joint, whichever bus its drive is on:
+    the torque actual (0x6077) the drive reports at SYNC k + 2 is the command the master sent
+    after SYNC k plus the arm's ripple noise (latched at SYNC k + 1, applied over
+    [k + 1, k + 2]; 1.5 cycles from the position of SYNC k to that interval's middle, the
+    metadata's ``torque_delay_cycles``). Any other shift differs by the command's own
+    cycle-to-cycle change."""
+    c, result, _ = robot_run
+    noise = arm_truth(c).drive.torque_noise_std_Nm
+    shift = round(TORQUE_DELAY_CYCLES + 0.5)
+    for run in result.runs:
+        axes = _axes(run.path)
+        assert float(axes[0].metadata["campaign"]["torque_delay_cycles"]) == TORQUE_DELAY_CYCLES
+        for j, a in enumerate(axes):
+            sel = np.flatnonzero((a.segment >= 0) & a.valid)
+            ref, act = a.tau_ref[sel], a.tau_actual[sel]
+            spread = {s: float(np.std(act[s:] - ref[:ref.size - s])) for s in range(5)}
+            best = min(spread, key=spread.get)
+            assert best == shift, (run.path.name, j, spread)
+            # the ripple noise, up to the per-mille quantisation of both torques
+            assert abs(spread[shift] / noise[j] - 1.0) < 0.25, (run.path.name, j, spread,
+                                                                 noise[j])
 
 
 def test_bus_budget_refuses_before_anything_moves(tmp_path):
