@@ -43,3 +43,18 @@ def test_the_metadata_value_and_its_errors():
             log_torque_delay({"campaign": {"torque_delay_cycles": bad}}, "a.mcap")
     with pytest.raises(DataError, match="too few to align"):
         align_to_torque(np.arange(4.0), np.arange(4.0), np.arange(4.0), None, 2.5, "s.mcap")
+
+
+def test_the_states_chain_completes_the_logs_timing_like_the_columns_chain():
+    """Both robot chains pair a jointid log's torque with q half a cycle later (the chain's
+    part of the log's timing); files of unknown timing get none. The states chain had none,
+    which left a re-paired arm log's q half a cycle early (read as a torque lag)."""
+    from ident.chain import TORQUE_DELAY
+    from ident.robot.loaders import RawRobotRun, RobotPreprocessing, _settings
+
+    t = np.arange(4000) * 1e-3
+    q = np.column_stack([np.sin(2 * t), np.cos(3 * t)])
+    tau = np.column_stack([np.cos(2 * t), np.sin(3 * t)])
+    for name, want in (("run.mcap", TORQUE_DELAY), ("run.csv", 0.0)):
+        runs = [RawRobotRun(name, t, q, tau)]
+        assert _settings(runs, RobotPreprocessing()).torque_delay == want, name

@@ -48,10 +48,11 @@ states (MATLAB ``decimate``); the estimator builds the rigid-body regressor afte
 the decimated, already band-limited states, chunk by chunk (memory bounded on any log
 length). Its own settings: the decimation r = floor(0.4 f_s / cut-off) by default (the
 decimated states keep the motion's band, since the nonlinear columns are built after the
-decimation; the columns chain uses round(f_s / cut-off)), no torque delay, and derivatives
-given by the file taken as they are. The columns chain -- the regressor columns built at full
-rate and decimated in parallel with the torque, the torque delay, the IV cut-off floor, the
-guard -- is :mod:`ident.robot.design` (``jointid fit --robot``'s default).
+decimation; the columns chain uses round(f_s / cut-off)), the columns chain's torque delay
+(half a cycle for jointid logs), and derivatives given by the file taken as they are. The
+columns chain -- the regressor columns built at full rate and decimated in parallel with the
+torque, the IV cut-off floor, the guard -- is :mod:`ident.robot.design` (``jointid fit
+--robot``'s default).
 """
 
 from __future__ import annotations
@@ -223,16 +224,18 @@ def chain_period(runs: Sequence[RawRobotRun]) -> float:
 def _settings(runs: Sequence[RawRobotRun], pre: RobotPreprocessing) -> ChainSettings:
     """The chain's settings (:func:`ident.chain.resolve_settings`) with the states chain's
     decimation rule: r = floor(0.4 f_s / cut-off) when not given (the decimated states keep
-    the motion's band), no torque delay."""
+    the motion's band); the torque delay of the columns chain (:func:`ident.chain.
+    default_torque_delay`: half a cycle for jointid logs, whose hold the chain completes)."""
     if not runs:
         raise RobotIdentError("no experiment to preprocess")
     dt = chain_period(runs)
+    sources = [r.source for r in runs]
     s = resolve_settings(runs[0].q, dt, cutoff_hz=pre.cutoff_hz, decimation=pre.decimation,
-                         trim=pre.trim, torque_delay=0.0, error=RobotIdentError)
+                         trim=pre.trim, sources=sources, error=RobotIdentError)
     if pre.decimation is None:
         r = max(1, int(0.4 / dt / s.cutoff_hz + 1e-9))  # 1e-9: an exact ratio stays whole
         s = resolve_settings(runs[0].q, dt, cutoff_hz=s.cutoff_hz, decimation=r,
-                             trim=pre.trim, torque_delay=0.0, error=RobotIdentError)
+                             trim=pre.trim, sources=sources, error=RobotIdentError)
     return s
 
 
