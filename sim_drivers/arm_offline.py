@@ -3,10 +3,10 @@
 The loop is :func:`sim_drivers.closed_loop.run_closed_loop`, the same as the single joint's
 (:mod:`sim_drivers.offline`); only the plant (:class:`sim_drivers.arm_plant.ArmPlant`) and the
 control law differ. Each control cycle, per joint: the measured position comes from the encoder
-counts, the torque reference of :class:`ArmPDLaw` (the PD law of
-``daq.protocol.control.PositionController``, vectorised over the joints: velocity from the
-backward difference of the measured position, low-passed at ``velocity_cutoff_hz``, plus a
-model feed-forward) is quantised to the int16 per-mille target torque of object 0x6071, and the
+counts, the torque reference of ``daq.protocol.control.PDLaw`` (the PD law of the single
+joint's ``PositionController``, on arrays (k,): velocity from the backward difference of the
+measured position, low-passed at ``velocity_cutoff_hz``) around a model feed-forward is
+quantised to the int16 per-mille target torque of object 0x6071, and the
 plant is stepped one cycle with the joint-side torque of that target.
 
 Feed-forward (computed torque at the reference, computed once for the whole run): by default
@@ -19,15 +19,24 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
+from daq.protocol.control import PDLaw
+
 from . import SimError
 from .arm_params import ArmParams, Payload, _vec
-from .arm_plant import REGIME_REST, REGIME_SLIDING, ArmPlant
-from .closed_loop import cycle_period, per_payload, reference_arrays, run_closed_loop
+from .arm_plant import ArmPlant
+from .closed_loop import (
+    LoopRecord,
+    cycle_period,
+    per_payload,
+    reference_arrays,
+    run_closed_loop,
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -96,106 +105,30 @@ class ArmGains:
                    velocity_cutoff_hz=velocity_cutoff_hz)
 
 
-class ArmPDLaw:
-    """The arm's control law (a strategy of :func:`sim_drivers.closed_loop.run_closed_loop`):
-    per joint the PD position loop of ``daq.protocol.control.PositionController``, vectorised,
-    plus a feed-forward computed for the whole run.
-
-    ``tau_k = ff_k + kp (q_ref,k - q_m) + kd (dq_ref,k - dq_est)`` [N m], with ``dq_est`` the
-    backward difference of the measured position low-passed at ``gains.velocity_cutoff_hz``
-    (first-order, ``alpha = wc / (1 + wc)``, ``wc = 2 pi f_c cycle_s``; 0 at the first cycle).
-
-    Parameters
-    ----------
-    gains : ArmGains
-    cycle_s : float
-        Control cycle [s].
-    ff : ndarray (n, k)
-        Feed-forward torque per cycle [N m].
-    q_ref, dq_ref : ndarray (n, k)
-        Reference [rad, rad/s].
-    """
-
-    def __init__(self, gains: ArmGains, cycle_s: float, ff: np.ndarray, q_ref: np.ndarray,
-                 dq_ref: np.ndarray) -> None:
-        self._kp, self._kd = gains.kp, gains.kd
-        wc = 2.0 * math.pi * gains.velocity_cutoff_hz * cycle_s
-        self._alpha = wc / (1.0 + wc)
-        self._cycle_s = cycle_s
-        self._ff, self._q_ref, self._dq_ref = ff, q_ref, dq_ref
-        self._dq_est = np.zeros(q_ref.shape[1])
-        self._q_prev: np.ndarray | None = None
-
-    def __call__(self, k: int, q_measured: np.ndarray) -> np.ndarray:
-        """Torque reference of cycle k (k,) [N m] from the measured positions [rad]."""
-        if self._q_prev is not None:
-            self._dq_est += self._alpha * ((q_measured - self._q_prev) / self._cycle_s
-                                           - self._dq_est)
-        self._q_prev = q_measured
-        return (self._ff[k] + self._kp * (self._q_ref[k] - q_measured)
-                + self._kd * (self._dq_ref[k] - self._dq_est))
-
-
 @dataclass(frozen=True, eq=False)
-class ArmRun:
-    """One simulated run of the arm, one record per control cycle; arrays (n,) or (n, k).
+class ArmRun(LoopRecord):
+    """One simulated run of the arm: the :class:`sim_drivers.closed_loop.LoopRecord` (arrays
+    (n, k), ``t`` and ``cycle`` (n,): ``t, cycle, counts, q, x, tau_ref, tau_applied,
+    tau_noise, q_true, dq_true, ddq_true, regime, cycle_s``; ``stuck``, ``sliding``) plus the
+    reference tracked, the payload and the joint labels.
 
-    Record i holds the measurement the controller used at the start of cycle i and the command
-    it sent for that cycle (like ``sim_drivers.offline.SimRun``), plus the plant's truth.
+    ``inverse_arm_torque(params, q_true, dq_true, ddq_true, payload, t) == tau_applied`` on
+    the sliding entries.
 
     Attributes
     ----------
-    t : ndarray, (n,)
-        Time of the measurement, i * cycle_s [s].
-    cycle : ndarray of int64, (n,)
-    counts : ndarray of int64, (n, k)
-        Encoder readings [counts] (motor side).
-    q : ndarray, (n, k)
-        Measured joint positions from the counts [rad].
-    x : ndarray of int16, (n, k)
-        Target torques sent [per-mille of rated torque] (0x6071).
-    tau_ref : ndarray, (n, k)
-        Joint-side torque references of x (eq. 7) [N m]: what a master logs.
-    tau_applied : ndarray, (n, k)
-        Torque acting on the joints at the start of cycle i, after its command was applied
-        (lagged command + ripple noise) [N m].
-    tau_noise : ndarray, (n, k)
-        Ripple-noise samples [N m].
-    q_true, dq_true, ddq_true : ndarray, (n, k)
-        True state at time t; ddq_true right after the command of cycle i is applied, so
-        ``inverse_arm_torque(params, q_true, dq_true, ddq_true, payload, t) == tau_applied``
-        on the sliding entries.
-    regime : ndarray of int8, (n, k)
-        ``sim_drivers.arm_plant.REGIME_*`` per joint: 0 sliding, 1 at rest, 2 zero load.
     q_ref, dq_ref, ddq_ref : ndarray, (n, k)
         The reference tracked [rad, rad/s, rad/s^2].
     payload : Payload or None
-    cycle_s : float
     joint_numbers : tuple of int
         Labels of the joints (``ArmParams.joint_numbers``).
     """
 
-    t: np.ndarray
-    cycle: np.ndarray
-    counts: np.ndarray
-    q: np.ndarray
-    x: np.ndarray
-    tau_ref: np.ndarray
-    tau_applied: np.ndarray
-    tau_noise: np.ndarray
-    q_true: np.ndarray
-    dq_true: np.ndarray
-    ddq_true: np.ndarray
-    regime: np.ndarray
     q_ref: np.ndarray
     dq_ref: np.ndarray
     ddq_ref: np.ndarray
     payload: Payload | None
-    cycle_s: float
     joint_numbers: tuple[int, ...]
-
-    def __len__(self) -> int:
-        return int(self.t.shape[0])
 
     @property
     def k(self) -> int:
@@ -216,16 +149,6 @@ class ArmRun:
     def ddq(self) -> np.ndarray:
         """TRUE acceleration ``ddq_true`` (n, k) [rad/s^2]."""
         return self.ddq_true
-
-    @property
-    def stuck(self) -> np.ndarray:
-        """Boolean mask (n, k): the joint is at rest (dq_true == 0)."""
-        return self.regime == REGIME_REST
-
-    @property
-    def sliding(self) -> np.ndarray:
-        """Boolean mask (n, k): eq. 30 holds exactly on that joint."""
-        return self.regime == REGIME_SLIDING
 
     @property
     def payload_mass_kg(self) -> float:
@@ -350,21 +273,18 @@ def simulate_arm(
     rng = np.random.default_rng(seed)
     noise = rng.standard_normal((n, k)) * params.drive.torque_noise_std_Nm
 
-    drive = params.drive
-    cpr = drive.counts_per_rad
-    per_mille = drive.torque_per_permille
-    law = ArmPDLaw(gains, cycle_s, ff, ref_q, ref_dq)
-    rec = run_closed_loop(plant, law, drive.quantise, n, joints=k, counts_per_rad=cpr,
-                          torque_per_permille=per_mille, rnd=np.rint, noise=noise)
+    torque = PDLaw(gains.kp, gains.kd, gains.velocity_cutoff_hz, cycle_s).torque
 
-    cycle = np.arange(n, dtype=np.int64)
-    return ArmRun(
-        t=cycle * cycle_s, cycle=cycle, counts=rec.counts, q=rec.counts / cpr, x=rec.x,
-        tau_ref=rec.x.astype(float) * per_mille, tau_applied=rec.tau_applied,
-        tau_noise=rec.tau_noise, q_true=rec.q_true, dq_true=rec.dq_true,
-        ddq_true=rec.ddq_true, regime=rec.regime, q_ref=ref_q, dq_ref=ref_dq,
-        ddq_ref=ref_ddq, payload=payload, cycle_s=float(cycle_s),
-        joint_numbers=params.joint_numbers)
+    def law(i: int, q_measured: np.ndarray) -> np.ndarray:
+        return torque(ff[i], ref_q[i], ref_dq[i], q_measured)
+
+    drive = params.drive
+    record = partial(ArmRun, q_ref=ref_q, dq_ref=ref_dq, ddq_ref=ref_ddq, payload=payload,
+                     joint_numbers=params.joint_numbers)
+    return run_closed_loop(plant, law, drive.quantise, n, joints=k,
+                           counts_per_rad=drive.counts_per_rad,
+                           torque_per_permille=drive.torque_per_permille, rnd=np.rint,
+                           noise=noise, record=record)
 
 
 def simulate_arm_payloads(

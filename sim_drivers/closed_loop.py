@@ -12,27 +12,31 @@ The single joint (:func:`sim_drivers.offline.simulate`, ``JointPlant``, the law 
 feed-forward, arrays of shape (k,)) run this same loop; they differ only in the plant, the
 control law (a strategy: a callable ``law(k, q_measured) -> torque``), the rounding of the
 counts and the quantiser they pass in. The reference reader and the cycle period are also
-shared here.
+shared here, and the record both runs are (:class:`LoopRecord`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
 from . import SimError
+from .dynamics import REGIME_REST, REGIME_SLIDING
 
 # law(k, q_measured) -> joint-side torque reference [N m]; q_measured [rad] is a float for the
 # single joint, an array (k,) for the arm. A law may keep state (filters) between cycles.
 ControlLaw = Callable[[int, Any], Any]
 
+R = TypeVar("R", bound="LoopRecord")
+
 
 class LoopPlant(Protocol):
     """What the loop needs of a plant (``JointPlant`` and ``ArmPlant`` both have it)."""
 
+    cycle_s: float
     q: Any
     dq: Any
     ddq_start: Any
@@ -43,33 +47,73 @@ class LoopPlant(Protocol):
     def step(self, tau_cmd: Any, *noise: Any) -> None: ...
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class LoopRecord:
-    """The per-cycle record of :func:`run_closed_loop`: arrays (n,) for one joint (``joints``
-    None) or (n, k); the meanings are those of ``sim_drivers.offline.SimRun``.
+    """One offline run, one record per control cycle: arrays (n,) for one joint or (n, k) for
+    k joints (``t`` and ``cycle`` are (n,) in both). The record of :func:`run_closed_loop` and
+    the part that ``sim_drivers.offline.SimRun`` and ``sim_drivers.arm_offline.ArmRun`` share
+    (each adds its own fields: the payload, the reference, ...).
+
+    Record i holds the measurement the controller used at the start of cycle i and the command
+    it sent for that cycle, like the MCAP reader's ``RunArrays``, plus the plant's truth.
 
     Attributes
     ----------
+    t : ndarray, (n,)
+        Time of the measurement, i * cycle_s [s].
+    cycle : ndarray of int64, (n,)
+        Cycle index i.
     counts : ndarray of int64
-        Encoder readings at the start of cycle k [counts].
+        Encoder readings [counts] (motor side, what 0x6064 carries).
+    q : ndarray
+        Measured joint positions from the counts [rad].
     x : ndarray of int16
-        Target torques sent [per-mille of rated torque].
-    tau_applied, tau_noise : ndarray
-        Torque acting at the start of the cycle after its command, and its ripple noise [N m].
+        Target torques sent [per-mille of rated torque] (0x6071).
+    tau_ref : ndarray
+        Joint-side torque references of x, tau = g_f v_f (eq. 7) [N m]: what a master logs.
+    tau_applied : ndarray
+        Torque acting on the joints at the start of cycle i, after its command was applied
+        (lagged command + ripple noise) [N m].
+    tau_noise : ndarray
+        Ripple-noise samples [N m].
     q_true, dq_true, ddq_true : ndarray
-        True state at the start of the cycle [rad, rad/s, rad/s^2] (ddq after the command).
+        True state at time t [rad, rad/s, rad/s^2]; ddq_true is the acceleration right after
+        the command of cycle i is applied, so that the plant's inverse model
+        (``inverse_torque`` / ``inverse_arm_torque``) gives ``tau_applied`` on the sliding
+        entries.
     regime : ndarray of int8
-        Plant regime at the start of the cycle.
+        Plant regime at time t (``sim_drivers.dynamics.REGIME_*``): 0 sliding, 1 at rest,
+        2 sliding with zero load.
+    cycle_s : float
+        Control cycle [s].
     """
 
+    t: np.ndarray
+    cycle: np.ndarray
     counts: np.ndarray
+    q: np.ndarray
     x: np.ndarray
+    tau_ref: np.ndarray
     tau_applied: np.ndarray
     tau_noise: np.ndarray
     q_true: np.ndarray
     dq_true: np.ndarray
     ddq_true: np.ndarray
     regime: np.ndarray
+    cycle_s: float
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def stuck(self) -> np.ndarray:
+        """Boolean mask of the entries where the joint is at rest (dq_true == 0)."""
+        return self.regime == REGIME_REST
+
+    @property
+    def sliding(self) -> np.ndarray:
+        """Boolean mask of the entries where the balance (eq. 30) holds exactly."""
+        return self.regime == REGIME_SLIDING
 
 
 def reference_arrays(reference: Any, joints: int | None = None
@@ -151,7 +195,8 @@ def run_closed_loop(
     torque_per_permille: float,
     rnd: Callable[[Any], Any] = round,
     noise: np.ndarray | None = None,
-) -> LoopRecord:
+    record: Callable[..., R] = LoopRecord,  # type: ignore[assignment]
+) -> R:
     """Run ``n`` control cycles of the closed loop on a plant that is already reset.
 
     Parameters
@@ -163,7 +208,7 @@ def run_closed_loop(
     quantise : callable
         Joint-side torque [N m] -> per-mille target torque (int16 range).
     n : int
-        Number of cycles.
+        Number of cycles (the record's times are ``i plant.cycle_s`` [s]).
     joints : int or None
         None: scalar records (n,); k: records (n, k).
     counts_per_rad : float
@@ -176,10 +221,14 @@ def run_closed_loop(
     noise : ndarray, optional
         Ripple-noise samples (n, k) [N m] passed to ``plant.step``; default: the plant draws
         its own.
+    record : callable
+        Makes the record from the keywords of the :class:`LoopRecord` fields: a subclass
+        with its own fields given (e.g. a ``functools.partial`` of ``SimRun``).
 
     Returns
     -------
     LoopRecord
+        What ``record`` makes.
     """
     shape = (n,) if joints is None else (n, joints)
     counts = np.empty(shape, dtype=np.int64)
@@ -206,8 +255,12 @@ def run_closed_loop(
         tau_applied[k] = plant.tau_applied_start
         tau_noise[k] = plant.tau_noise
         regime[k] = plant.regime_start
-    return LoopRecord(counts=counts, x=xs, tau_applied=tau_applied, tau_noise=tau_noise,
-                      q_true=q_true, dq_true=dq_true, ddq_true=ddq_true, regime=regime)
+    cycle = np.arange(n, dtype=np.int64)
+    cycle_s = plant.cycle_s
+    return record(t=cycle * cycle_s, cycle=cycle, counts=counts, q=counts / cpr, x=xs,
+                  tau_ref=xs.astype(float) * per_mille, tau_applied=tau_applied,
+                  tau_noise=tau_noise, q_true=q_true, dq_true=dq_true, ddq_true=ddq_true,
+                  regime=regime, cycle_s=float(cycle_s))
 
 
 def per_payload(run_one: Callable[[Any, int], Any], payloads: Iterable[Any], seed: int

@@ -12,82 +12,41 @@ the fast path for identification tests: a 60 s run at 1 kHz takes well under a s
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
-
-import numpy as np
 
 from daq.protocol.control import ControllerGains, PositionController
 
-from .closed_loop import cycle_period, per_payload, reference_arrays, run_closed_loop
-from .plant import REGIME_REST, JointPlant
+from .closed_loop import (
+    LoopRecord,
+    cycle_period,
+    per_payload,
+    reference_arrays,
+    run_closed_loop,
+)
+from .plant import JointPlant
 from .plant_config import PlantParams
 
 
 @dataclass(frozen=True)
-class SimRun:
-    """One simulated run, one record per control cycle (shape ``(n,)`` arrays).
+class SimRun(LoopRecord):
+    """One simulated run of one joint: the :class:`sim_drivers.closed_loop.LoopRecord` (arrays
+    of shape ``(n,)``: ``t, cycle, counts, q, x, tau_ref, tau_applied, tau_noise, q_true,
+    dq_true, ddq_true, regime, cycle_s``; ``stuck``, ``sliding``) plus the run's payload.
 
-    Record k holds the measurement the controller used at the start of cycle k and the
-    command it sent for that cycle, like the MCAP reader's ``RunArrays``, plus the plant's truth.
+    ``inverse_torque(params, q_true, dq_true, ddq_true, M_a, L_a, t) == tau_applied`` on
+    sliding samples.
 
     Attributes
     ----------
-    t : ndarray of float
-        Time of the measurement, k * cycle_s [s].
-    cycle : ndarray of int64
-        Cycle index k.
-    counts : ndarray of int64
-        Encoder reading [counts] (motor side, what 0x6064 carries).
-    q : ndarray of float
-        Measured joint position from the counts [rad].
-    x : ndarray of int16
-        Target torque sent [per-mille of rated torque] (0x6071).
-    tau_ref : ndarray of float
-        Joint-side torque reference of x, tau = g_f v_f (eq. 7) [N m]: what the master logs.
-    tau_applied : ndarray of float
-        Torque acting on the joint at the start of cycle k, after the command was applied
-        (lagged command + ripple noise) [N m].
-    tau_noise : ndarray of float
-        Ripple-noise sample of cycle k [N m].
-    q_true, dq_true, ddq_true : ndarray of float
-        True state at time t [rad, rad/s, rad/s^2]; ddq_true is the acceleration right after
-        the command of cycle k is applied, so that
-        ``inverse_torque(params, q_true, dq_true, ddq_true, M_a, L_a, t) == tau_applied`` on
-        sliding samples.
-    regime : ndarray of int8
-        Plant regime at time t (``sim_drivers.plant.REGIME_*``): 0 sliding, 1 at rest,
-        2 sliding with zero load.
     payload_mass_kg, payload_arm_m : float
         Payload of the run.
     revolute : bool
-    cycle_s : float
-        Control cycle [s].
     """
 
-    t: np.ndarray
-    cycle: np.ndarray
-    counts: np.ndarray
-    q: np.ndarray
-    x: np.ndarray
-    tau_ref: np.ndarray
-    tau_applied: np.ndarray
-    tau_noise: np.ndarray
-    q_true: np.ndarray
-    dq_true: np.ndarray
-    ddq_true: np.ndarray
-    regime: np.ndarray
     payload_mass_kg: float
     payload_arm_m: float
     revolute: bool
-    cycle_s: float
-
-    def __len__(self) -> int:
-        return int(self.t.shape[0])
-
-    @property
-    def stuck(self) -> np.ndarray:
-        """Boolean mask of the samples where the joint is at rest (dq_true == 0)."""
-        return self.regime == REGIME_REST
 
 
 def simulate(
@@ -148,31 +107,12 @@ def simulate(
     def law(k: int, q_measured: float) -> float:
         return update(rq[k], rdq[k], rddq[k], q_measured)
 
-    cpr = params.drive.counts_per_joint_rad
-    per_mille = params.drive.torque_per_permille
-    rec = run_closed_loop(plant, law, plant.permille_from_torque, n, joints=None,
-                          counts_per_rad=cpr, torque_per_permille=per_mille)
-    counts, xs = rec.counts, rec.x
-
-    cycle = np.arange(n, dtype=np.int64)
-    return SimRun(
-        t=cycle * cycle_s,
-        cycle=cycle,
-        counts=counts,
-        q=counts / cpr,
-        x=xs,
-        tau_ref=xs.astype(float) * per_mille,
-        tau_applied=rec.tau_applied,
-        tau_noise=rec.tau_noise,
-        q_true=rec.q_true,
-        dq_true=rec.dq_true,
-        ddq_true=rec.ddq_true,
-        regime=rec.regime,
-        payload_mass_kg=float(payload_mass),
-        payload_arm_m=float(payload_arm),
-        revolute=params.revolute,
-        cycle_s=float(cycle_s),
-    )
+    record = partial(SimRun, payload_mass_kg=float(payload_mass),
+                     payload_arm_m=float(payload_arm), revolute=params.revolute)
+    return run_closed_loop(plant, law, plant.permille_from_torque, n, joints=None,
+                           counts_per_rad=params.drive.counts_per_joint_rad,
+                           torque_per_permille=params.drive.torque_per_permille,
+                           record=record)
 
 
 def simulate_payloads(

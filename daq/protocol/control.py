@@ -1,8 +1,11 @@
-"""Joint position controller used in cyclic synchronous torque mode (pure, no I/O).
+"""Joint position control law used in cyclic synchronous torque mode (pure, no I/O).
 
-The runner computes the torque reference every cycle from the planned trajectory and the
-measured encoder position; the offline simulator (``sim_drivers.offline``) uses the same
-class so that bus runs and offline runs share one control law.
+One law, :class:`PDLaw` (PD on the position error + velocity filter, with the feed-forward an
+input), on a float (one joint) or on arrays (k,) (k joints). Its two uses:
+:class:`PositionController` (one joint, feed-forward from :class:`ControllerGains`), which the
+runner calls every cycle per drive and the offline simulator (``sim_drivers.offline``) uses as
+its law, so that bus runs and offline runs share one control law; and the arm's
+``sim_drivers.arm_offline.simulate_arm`` (feed-forward computed for the whole run).
 
     tau_ref = J_ff * ddq_ref + MX_ff * g * cos(q_ref) + MY_ff * g * sin(q_ref)
               + Fc_ff * sign(dq_ref) + Fv_ff * dq_ref
@@ -16,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 G = 9.81  # [m/s^2] gravity used by the paper (section IV.A)
 
@@ -47,8 +51,52 @@ class ControllerGains:
     velocity_cutoff_hz: float = 100.0
 
 
-class PositionController:
-    """Stateful PD + feed-forward position loop; call :meth:`update` once per cycle.
+class PDLaw:
+    """Stateful PD position loop around a given feed-forward; call :meth:`torque` once per
+    cycle. Works on floats (one joint) or on arrays (k,) (k joints, element-wise).
+
+    ``tau = ff + kp (q_ref - q) + kd (dq_ref - dq_est)`` [N m], with ``dq_est`` the backward
+    difference of the measured position [rad/s] low-passed by a first-order filter
+    (``alpha = wc / (1 + wc)``, ``wc = 2 pi f_c cycle_s``; 0 at the first cycle).
+
+    Parameters
+    ----------
+    kp, kd : float or ndarray (k,)
+        Proportional [N m/rad] and derivative [N m s/rad] gains.
+    velocity_cutoff_hz : float
+        Cut-off of the velocity-estimate low-pass [Hz].
+    cycle_s : float
+        Control cycle [s].
+    """
+
+    __slots__ = ("kp", "kd", "dt", "_q_prev", "_dq_est", "_alpha")
+
+    def __init__(self, kp: Any, kd: Any, velocity_cutoff_hz: float, cycle_s: float) -> None:
+        self.kp, self.kd = kp, kd
+        self.dt = cycle_s
+        self._q_prev: Any = None
+        self._dq_est: Any = 0.0
+        wc = 2.0 * math.pi * velocity_cutoff_hz * cycle_s
+        self._alpha = wc / (1.0 + wc)
+
+    def reset(self) -> None:
+        self._q_prev = None
+        self._dq_est = 0.0
+
+    def torque(self, ff: Any, q_ref: Any, dq_ref: Any, q_meas: Any) -> Any:
+        """Return the torque reference [N m] for this cycle from the feed-forward ``ff``
+        [N m], the reference ``q_ref, dq_ref`` [rad, rad/s] and the measured position
+        ``q_meas`` [rad]."""
+        if self._q_prev is not None:
+            raw = (q_meas - self._q_prev) / self.dt
+            self._dq_est = self._dq_est + self._alpha * (raw - self._dq_est)
+        self._q_prev = q_meas
+        return ff + self.kp * (q_ref - q_meas) + self.kd * (dq_ref - self._dq_est)
+
+
+class PositionController(PDLaw):
+    """Stateful PD + feed-forward position loop of one joint; call :meth:`update` once per
+    cycle: the :class:`PDLaw` of ``gains`` around the model feed-forward of ``gains``.
 
     Parameters
     ----------
@@ -59,28 +107,16 @@ class PositionController:
         Whether gravity feed-forward applies.
     """
 
-    __slots__ = ("g", "dt", "revolute", "_q_prev", "_dq_est", "_alpha")
+    __slots__ = ("g", "revolute")
 
     def __init__(self, gains: ControllerGains, cycle_s: float, revolute: bool = True) -> None:
+        super().__init__(gains.kp, gains.kd, gains.velocity_cutoff_hz, cycle_s)
         self.g = gains
-        self.dt = cycle_s
         self.revolute = revolute
-        self._q_prev: float | None = None
-        self._dq_est = 0.0
-        wc = 2.0 * math.pi * gains.velocity_cutoff_hz * cycle_s
-        self._alpha = wc / (1.0 + wc)
-
-    def reset(self) -> None:
-        self._q_prev = None
-        self._dq_est = 0.0
 
     def update(self, q_ref: float, dq_ref: float, ddq_ref: float, q_meas: float) -> float:
         """Return the torque reference [N m] for this cycle."""
         g = self.g
-        if self._q_prev is not None:
-            raw = (q_meas - self._q_prev) / self.dt
-            self._dq_est += self._alpha * (raw - self._dq_est)
-        self._q_prev = q_meas
         tau = g.J_ff * ddq_ref + g.Fv_ff * dq_ref
         if dq_ref > 0.0:
             tau += g.Fc_ff
@@ -88,4 +124,4 @@ class PositionController:
             tau -= g.Fc_ff
         if self.revolute and (g.MX_ff or g.MY_ff):
             tau += G * (g.MX_ff * math.cos(q_ref) + g.MY_ff * math.sin(q_ref))
-        return tau + g.kp * (q_ref - q_meas) + g.kd * (dq_ref - self._dq_est)
+        return self.torque(tau, q_ref, dq_ref, q_meas)
