@@ -4,14 +4,18 @@ the shared reference reader and cycle period accept and refuse the same things f
 
 from __future__ import annotations
 
+from functools import partial
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from daq.protocol.control import ControllerGains, PDLaw, PositionController
 from sim_drivers import SimError
-from sim_drivers.arm import ArmParams, ArmPlant
-from sim_drivers.closed_loop import cycle_period, reference_arrays, run_closed_loop
+from sim_drivers.arm import ArmGains, ArmParams, ArmPlant, ArmRun, simulate_arm, sine_reference
+from sim_drivers.closed_loop import LoopRecord, cycle_period, reference_arrays, run_closed_loop
+from sim_drivers.dynamics import REGIME_REST, REGIME_SLIDING
+from sim_drivers.offline import SimRun, simulate
 from sim_drivers.plant import JointPlant
 from sim_drivers.plant_config import default_plant
 from sim_drivers.robots import ur10
@@ -72,6 +76,10 @@ def test_one_joint_record_is_what_the_loop_measured_and_sent():
     assert np.all(rec.x[5:] == round(-300.0 / pm))
     assert rec.q_true[0] == 0.2 and rec.dq_true[0] == 0.0
     assert np.any(rec.dq_true != 0.0)  # the torque moved the joint
+    assert isinstance(rec, LoopRecord) and len(rec) == 40 and rec.cycle_s == 0.001
+    np.testing.assert_array_equal(rec.q, rec.counts / cpr)
+    np.testing.assert_array_equal(rec.tau_ref, rec.x * pm)
+    np.testing.assert_array_equal(rec.t, np.arange(40) * 0.001)
 
 
 def test_n_joint_record_uses_the_given_noise():
@@ -89,3 +97,57 @@ def test_n_joint_record_uses_the_given_noise():
     np.testing.assert_array_equal(rec.tau_noise, noise)
     np.testing.assert_array_equal(rec.x, np.tile(drive.quantise(hold), (30, 1)))
     np.testing.assert_array_equal(rec.counts, np.rint(rec.q_true * drive.counts_per_rad))
+
+
+def test_the_pd_law_on_k_joints_is_k_single_joint_laws_bit_for_bit():
+    """A joint is a 1-dof robot: PDLaw on arrays (k,) gives, element by element, what the
+    single-joint PositionController gives with the same feed-forward (no gravity term)."""
+    kp, kd = np.array([900.0, 20000.0, 3.5]), np.array([40.0, 1000.0, 0.7])
+    rng = np.random.default_rng(3)
+    ins = rng.standard_normal((50, 4, 3))  # ff, q_ref, dq_ref, q_meas per cycle
+    arm = PDLaw(kp, kd, 80.0, 0.001)
+    ones = [PositionController(ControllerGains(kp=kp[j], kd=kd[j], J_ff=1.0,
+                                               velocity_cutoff_hz=80.0), 0.001, False)
+            for j in range(3)]
+    for ff, q_ref, dq_ref, q_meas in ins:
+        tau = arm.torque(ff, q_ref, dq_ref, q_meas)
+        assert tau.shape == (3,)
+        # J_ff = 1, ddq_ref = ff, dq_ref * 0 friction: the controller's feed-forward is ff
+        one = [c.update(q_ref[j], dq_ref[j], ff[j], q_meas[j]) for j, c in enumerate(ones)]
+        np.testing.assert_array_equal(tau, one)
+    arm.reset()
+    ff, q_ref, dq_ref, q_meas = ins[0]
+    np.testing.assert_array_equal(arm.torque(ff, q_ref, dq_ref, q_meas),
+                                  ff + kp * (q_ref - q_meas) + kd * dq_ref)  # no velocity yet
+
+
+def test_single_joint_and_arm_runs_are_one_record():
+    p = default_plant()
+    t = np.arange(0.0, 1.0, 0.001)
+    ref = SimpleNamespace(t=t, q=0.3 * np.sin(t), dq=0.3 * np.cos(t), ddq=-0.3 * np.sin(t))
+    one = simulate(p, ref, ControllerGains(kp=20000.0, kd=1000.0), payload_mass=1.5,
+                   payload_arm=0.4)
+    params = ArmParams.from_model(ur10(3))
+    arm = simulate_arm(params, sine_reference(np.array([0.1, -1.0, 0.8]), 0.2,
+                                              duration_s=2.5),
+                       ArmGains.for_params(params), seed=2)
+    for run, shape in ((one, (1000,)), (arm, (arm.t.shape[0], 3))):
+        assert isinstance(run, LoopRecord) and run.q.shape == shape and run.t.ndim == 1
+        np.testing.assert_array_equal(run.stuck, run.regime == REGIME_REST)
+        np.testing.assert_array_equal(run.sliding, run.regime == REGIME_SLIDING)
+        assert len(run) == run.t.shape[0]
+    assert isinstance(one, SimRun) and (one.payload_mass_kg, one.payload_arm_m) == (1.5, 0.4)
+    assert isinstance(arm, ArmRun) and arm.k == 3 and arm.q_ref.shape == arm.q.shape
+
+
+def test_the_loop_makes_the_record_it_is_given():
+    p = default_plant()
+    plant = JointPlant(p, 0.002, seed=1)
+    plant.reset(0.0)
+    rec = run_closed_loop(plant, lambda k, q: 0.0, plant.permille_from_torque, 5, joints=None,
+                          counts_per_rad=p.drive.counts_per_joint_rad,
+                          torque_per_permille=p.drive.torque_per_permille,
+                          record=partial(SimRun, payload_mass_kg=2.0, payload_arm_m=0.1,
+                                         revolute=True))
+    assert isinstance(rec, SimRun) and rec.payload_mass_kg == 2.0
+    np.testing.assert_array_equal(rec.t, np.arange(5) * 0.002)
