@@ -98,28 +98,21 @@ def robot_cutoff(q0: np.ndarray, dt: float, instruments: bool = False,
     every axis is: taking its bound for every joint leaves the accelerations of the other
     joints unfiltered, and on a joint whose load is inertial only (a vertical axis) the
     noise of tau_out_hat then decides the paper model's quadrant and biases c_m down and
-    c_g up (docs/robot-identification.md). One axis: :func:`choose_cutoff` itself.
+    c_g up (docs/robot-identification.md). One axis: its :func:`choose_cutoff`.
     """
     q0 = np.asarray(q0, dtype=float)
     q0 = q0[:, None] if q0.ndim == 1 else q0
     floor = CUTOFF_FLOOR_IV if instruments else 0.05
-    if q0.shape[1] == 1:
-        return choose_cutoff(q0[:, 0], dt, floor)
     hi = float(f"{max(floor, 0.4) / dt:.6g}")  # choose_cutoff's upper bound, as it rounds
-    cuts, notes = [], []
-    for j in range(q0.shape[1]):
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            cuts.append(choose_cutoff(q0[:, j], dt, floor))
-        notes.append([str(w.message) for w in caught])
+    # choose_cutoff's own warnings pass as they are (no catch_warnings: it would reset the
+    # once-per-location registry and repeat them on every fit of a process)
+    cuts = [choose_cutoff(q0[:, j], dt, floor) for j in range(q0.shape[1])]
     found = [j for j, c in enumerate(cuts) if c < hi]
-    use = found if found else list(range(len(cuts)))
+    if not found:
+        return max(cuts)
+    cut = max(cuts[j] for j in found)
     where = f"{source}: " if source else ""
-    for j in use:
-        for msg in notes[j]:
-            warnings.warn(f"{where}axis {j + 1}: {msg}", stacklevel=3)
-    cut = max(cuts[j] for j in use)
-    for j in sorted(set(range(len(cuts))) - set(use)):
+    for j in sorted(set(range(len(cuts))) - set(found)):
         warnings.warn(f"{where}axis {j + 1}: its velocity spectrum stays above its noise "
                       f"floor up to the Nyquist frequency (cut-off {cuts[j]:g} Hz, the "
                       f"upper bound 0.4 f_s): left out of the chain's cut-off, {cut:g} Hz "
