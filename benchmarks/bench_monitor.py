@@ -24,7 +24,9 @@ clock unless said, i.e. simulated time):
     ``--no-prune``: a monitor wants the best predictor, docs/monitoring.md),
     ``jointid export-model`` (paper model) -> DIR/model.
 ``calibrate``
-    The validation run: the campaign again with the monitor in calibration mode ->
+    The validation run: the campaign with another multi-sine (seed 3, as many periods; the
+    campaign itself would repeat the model's logs bit for bit in lockstep) with the monitor
+    in calibration mode ->
     DIR/calibrate/thresholds.json (k = 6 sigma, at least 1.5 x the validation peak; per
     regime bin of the moving time, and the constant band).
 ``false``
@@ -189,8 +191,14 @@ def stage_model(work: Path) -> None:
 
 
 def stage_calibrate(work: Path) -> dict:
-    s = run_monitor(work / "model", SOURCE["campaign"], work / "calibrate", simulate=True,
-                    calibrate=True)
+    # the validation run is not the fit's: another multi-sine (seed 3) of as many periods
+    # (with the source campaign itself the lockstep simulation repeats the model's logs bit
+    # for bit, and the bands would be the training residual's)
+    _, c = _source()
+    periods = max(s.periods for s in c.segments if hasattr(s, "seed"))
+    camp = _campaign(work, "calibrate", seed=_other_seed(3), periods=periods,
+                     multisine_only=False, payloads=len(c.payloads))
+    s = run_monitor(work / "model", camp, work / "calibrate", simulate=True, calibrate=True)
     return {"thresholds": s["thresholds"], "wall_s": s["wall_s"],
             "missed": s["missed_cycles"]}
 
