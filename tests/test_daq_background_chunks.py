@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import errno
 import io
-import itertools
 import json
 import os
 import subprocess
@@ -22,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from daq_campaigns import sine_campaign
 from mcap.reader import make_reader
 
 from daq import ConfigError
@@ -141,25 +141,8 @@ def test_worker_runs_one_realtime_priority_below_the_loop():
     assert out["worker"] == (os.SCHED_FIFO, 9)
 
 
-_chan = itertools.count()
-
-
 def _campaign(clock: str, **daq) -> RobotCampaign:
-    raw = {
-        "name": "paced-bg",
-        "joint": {"kind": "revolute", "limits": {
-            "position": [-1.0, 1.0], "max_velocity": 1.0, "max_acceleration": 4.0,
-            "max_jerk": 40.0, "max_torque": 700.0}},
-        "control": {"cycle_s": 0.002, "kp": 6000.0, "kd": 200.0,
-                    "feedforward": {"J": 30.0, "MX": 21.0}},
-        "payloads": [{"mass_kg": 0.0, "arm_m": 1.0}],
-        "segments": [{"kind": "sine", "amplitude": 0.02, "frequency_hz": 2.0, "center": 0.0,
-                      "periods": 1}],
-        "daq": {"channel": f"test_paced_bg_{next(_chan)}", "clock": clock,
-                "tpdo_timeout_cycles": 50, "heartbeat_timeout_s": 2.0,
-                "max_following_error": 1.0, "chunk_seconds": 0.02, **daq},
-    }
-    return RobotCampaign.from_dict(raw, f"{clock}.toml")
+    return sine_campaign(f"paced_bg_{clock}", clock=clock, chunk_seconds=0.02, **daq)
 
 
 def _run(tmp_path, c: RobotCampaign) -> tuple[object, list[tuple[set[str], float]]]:

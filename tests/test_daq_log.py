@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import io
-import itertools
 import struct
 import warnings
 
 import numpy as np
 import pytest
+from daq_campaigns import sine_campaign
 from mcap.reader import make_reader
 
 from daq import ConfigError
@@ -188,30 +188,13 @@ def test_progress_line():
 
 
 # ---------------------------------------------------------------------------- paced clock
-_chan = itertools.count()
-
 
 @pytest.mark.parametrize("source", ["runner", "periodic"])
 def test_paced_clock_records_timing_of_every_cycle(tmp_path, source):
     from daq.runtime.runner import run_campaign
     from sim_drivers.plant_config import default_plant
-    from trajectories.robot_campaign import RobotCampaign
 
-    raw = {
-        "name": "paced",
-        "joint": {"kind": "revolute", "limits": {
-            "position": [-1.0, 1.0], "max_velocity": 1.0, "max_acceleration": 4.0,
-            "max_jerk": 40.0, "max_torque": 700.0}},
-        "control": {"cycle_s": 0.002, "kp": 6000.0, "kd": 200.0,
-                    "feedforward": {"J": 30.0, "MX": 21.0}},
-        "payloads": [{"mass_kg": 0.0, "arm_m": 1.0}],
-        "segments": [{"kind": "sine", "amplitude": 0.02, "frequency_hz": 2.0, "center": 0.0,
-                      "periods": 1}],
-        "daq": {"channel": f"test_paced_{next(_chan)}", "clock": "paced", "sync_source": source,
-                "tpdo_timeout_cycles": 50, "heartbeat_timeout_s": 2.0,
-                "max_following_error": 1.0},
-    }
-    c = RobotCampaign.from_dict(raw, "paced.toml")
+    c = sine_campaign("paced", clock="paced", sync_source=source)
     r = run_campaign(c, out_dir=tmp_path, simulate=default_plant(), yes=True)
     assert r.status == "done", r.reason
     run = r.runs[0]

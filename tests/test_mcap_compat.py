@@ -10,7 +10,6 @@ reason, when node/npm or the install is unavailable).
 from __future__ import annotations
 
 import io
-import itertools
 import json
 import shutil
 import struct
@@ -21,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zstandard
+from daq_campaigns import sine_campaign
 from mcap.data_stream import ReadDataStream
 from mcap.reader import make_reader
 from mcap.records import Chunk, MessageIndex, Opcode
@@ -33,7 +33,6 @@ from daq.runtime.mcaplog import RunLog
 from daq.runtime.mcaprecover import recover_log
 from daq.runtime.runner import run_campaign
 from sim_drivers.plant_config import default_plant
-from trajectories.robot_campaign import RobotCampaign
 
 NODE_DIR = Path.home() / ".cache" / "jointid-mcap-node"
 NODE_PACKAGES = ("@mcap/core@2", "@mcap/support@1")
@@ -72,28 +71,12 @@ const fs = require("fs/promises");
 })().catch((e) => { console.error(String(e)); process.exit(1); });
 """
 
-_chan = itertools.count()
-
 
 @pytest.fixture(scope="module")
 def real_log(tmp_path_factory) -> Path:
     """One payload run of the runner on a simulated drive (lockstep, ~1.4 s of campaign at
     2 ms, 50 ms chunks)."""
-    raw = {
-        "name": "compat",
-        "joint": {"kind": "revolute", "limits": {
-            "position": [-1.0, 1.0], "max_velocity": 1.0, "max_acceleration": 4.0,
-            "max_jerk": 40.0, "max_torque": 700.0}},
-        "control": {"cycle_s": 0.002, "kp": 6000.0, "kd": 200.0,
-                    "feedforward": {"J": 30.0, "MX": 21.0}},
-        "payloads": [{"mass_kg": 0.0, "arm_m": 1.0}],
-        "segments": [{"kind": "sine", "amplitude": 0.02, "frequency_hz": 2.0, "center": 0.0,
-                      "periods": 1}],
-        "daq": {"channel": f"test_mcap_compat_{next(_chan)}", "tpdo_timeout_cycles": 50,
-                "heartbeat_timeout_s": 2.0, "max_following_error": 1.0,
-                "chunk_seconds": 0.05},
-    }
-    c = RobotCampaign.from_dict(raw, "compat.toml")
+    c = sine_campaign("compat", chunk_seconds=0.05)
     out = tmp_path_factory.mktemp("compat")
     r = run_campaign(c, out_dir=out, simulate=default_plant(), yes=True)
     assert r.status == "done", r.reason
