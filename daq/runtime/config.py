@@ -79,7 +79,7 @@ project's generic EDS, cyclic synchronous torque)::
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -478,6 +478,8 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "", *,
     )
 
 
-def with_scaling(cfg: DaqConfig, scaling: Scaling) -> DaqConfig:
-    """The same configuration with every drive's scaling replaced (``--simulate``)."""
-    return replace(cfg, drives=tuple(replace(d, scaling=scaling) for d in cfg.drives))
+def with_scalings(cfg: DaqConfig, scalings: Sequence[Scaling]) -> DaqConfig:
+    """The same configuration with drive k's scaling replaced by ``scalings[k]``
+    (``--simulate``: the simulated drives' own chains)."""
+    return replace(cfg, drives=tuple(replace(d, scaling=s)
+                                     for d, s in zip(cfg.drives, scalings, strict=True)))

@@ -23,8 +23,6 @@ type) says about the drives and the simulated plant of a run.
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
-from dataclasses import replace
 from typing import Any
 
 from daq import ConfigError
@@ -133,12 +131,6 @@ def arm_scalings(params: ArmParams) -> list[Scaling]:
     d = params.drive
     return [Scaling(float(d.rated_torque_Nm[j]), float(d.gear_ratio[j]),
                     int(d.encoder_counts_per_rev[j])) for j in range(params.k)]
-
-
-def with_scalings(cfg: DaqConfig, scalings: Sequence[Scaling]) -> DaqConfig:
-    """The same configuration with drive k's scaling replaced by ``scalings[k]``."""
-    return replace(cfg, drives=tuple(replace(d, scaling=s)
-                                     for d, s in zip(cfg.drives, scalings, strict=True)))
 
 
 class ArmRig(SimRig):

@@ -26,7 +26,7 @@ from trajectories.robot_model import prepare_robot_campaign, robot_file_path
 
 from .buses import open_buses, sync_clocked
 from .busload import bus_loads, check_loads
-from .config import DaqConfig, Scaling
+from .config import DaqConfig, Scaling, with_scalings
 from .cycle_io import BUS_ERRORS, CycleIO
 from .engine import ENABLE_MAX_CYCLES, SETTLE_CYCLES, Engine, drive_joints
 from .master import MasterDrive, MasterHeartbeat, pdo_lengths, rpdo_timeout_ms
@@ -38,7 +38,6 @@ from .robot_rig import (
     sim_params,
     sim_scalings,
     start_arm_sim,
-    with_scalings,
 )
 from .runfolder import (
     FolderLock,
