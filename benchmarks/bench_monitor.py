@@ -24,7 +24,8 @@ clock unless said, i.e. simulated time):
     ``--no-prune``: a monitor wants the best predictor, docs/monitoring.md),
     ``jointid export-model`` (paper model) -> DIR/model.
 ``calibrate``
-    The validation run: the campaign with another multi-sine (seed 3, as many periods; the
+    The validation run: the campaign with another multi-sine (seed 3, or the next free one
+    when the campaign's is 3: ``_other_seed``; as many periods; the
     campaign itself would repeat the model's logs bit for bit in lockstep) with the monitor
     in calibration mode ->
     DIR/calibrate/thresholds.json (k = 6 sigma, at least 1.5 x the validation peak; per
@@ -131,16 +132,23 @@ def _multisine_periods(segments_s: float, total_s: float) -> int:
     return max(1, math.ceil(total_s / segments_s))
 
 
+def _multisines() -> list:
+    """The source campaign's multi-sine segments (the stages vary their seed and periods)."""
+    _, c = _source()
+    ms = [s for s in c.segments if type(s).__name__ == "MultisineSegment"]
+    if not ms:
+        raise SystemExit(f"{SOURCE['campaign']}: no multi-sine segment to derive the "
+                         "stages' campaigns from")
+    return ms
+
+
 def _plan_parts() -> tuple[float, float]:
     """(the source campaign's plan duration without its multi-sines [s], one period of all
     its multi-sines [s]); the plan is the one ``jointid run`` plays (no optimisation needed:
     the coefficients change the motion, not the durations)."""
     _, c = _source()
     plan = plan_robot_campaign(c)
-    ms = [s for s in c.segments if type(s).__name__ == "MultisineSegment"]
-    if not ms:
-        raise SystemExit(f"{SOURCE['campaign']}: no multi-sine segment to derive the "
-                         "stages' campaigns from")
+    ms = _multisines()
     one = sum(s.period_s for s in ms)
     return plan.duration_s - sum(s.period_s * s.periods for s in ms), one
 
@@ -191,11 +199,11 @@ def stage_model(work: Path) -> None:
 
 
 def stage_calibrate(work: Path) -> dict:
-    # the validation run is not the fit's: another multi-sine (seed 3) of as many periods
+    # the validation run is not the fit's: another multi-sine (seed 3 or the next free one)
     # (with the source campaign itself the lockstep simulation repeats the model's logs bit
     # for bit, and the bands would be the training residual's)
     _, c = _source()
-    periods = max(s.periods for s in c.segments if hasattr(s, "seed"))
+    periods = max(s.periods for s in _multisines())
     camp = _campaign(work, "calibrate", seed=_other_seed(3), periods=periods,
                      multisine_only=False, payloads=len(c.payloads))
     s = run_monitor(work / "model", camp, work / "calibrate", simulate=True, calibrate=True)
