@@ -54,6 +54,7 @@ __all__ = [
     "BUTTER_ORDER",
     "CUTOFF_FLOOR_IV",
     "TORQUE_DELAY",
+    "axes_cutoff",
     "ChainBlock",
     "ChainSettings",
     "FullRate",
@@ -240,6 +241,11 @@ def _sosfiltfilt(sos: np.ndarray, zi: np.ndarray, x: np.ndarray, padlen: int) ->
     return y[:, padlen:-padlen] if padlen > 0 else y
 
 
+def _upper_cutoff(fs: float, min_fraction: float) -> float:
+    """:func:`choose_cutoff`'s upper bound [Hz]: 0.4 f_s (or the lower bound, if above)."""
+    return max(min_fraction, 0.4) * fs
+
+
 def choose_cutoff(q: np.ndarray, dt: float, min_fraction: float = 0.05,
                   t: np.ndarray | None = None, source: str = "") -> float:
     """Low-pass cut-off [Hz] chosen from the bandwidth of the measured motion.
@@ -271,7 +277,7 @@ def choose_cutoff(q: np.ndarray, dt: float, min_fraction: float = 0.05,
         if note is not None:
             q = grid["q"]
             dt = float((tu[-1] - tu[0]) / (tu.size - 1))
-    lo, hi = min_fraction * fs, max(min_fraction, 0.4) * fs
+    lo, hi = min_fraction * fs, _upper_cutoff(fs, min_fraction)
     v = np.diff(q) / dt
     v = v - v.mean()
     n = v.size
@@ -353,6 +359,37 @@ def default_torque_delay(sources: Iterable[str]) -> float:
 
 
 
+def axes_cutoff(q0: np.ndarray, dt: float, min_fraction: float = 0.05,
+                source: str = "") -> float:
+    """The chain's default cut-off [Hz] on the axes of ``q0`` (n, k) [rad or m] sampled every
+    ``dt`` [s]: the largest :func:`choose_cutoff` over the axes whose choice found a motion
+    bandwidth, i.e. stayed below the upper bound 0.4 f_s. An axis at that bound (its velocity
+    spectrum above its noise floor up to the Nyquist frequency: noise, not motion) is left
+    out, with a warning naming it, unless every axis is: taking its bound for every joint
+    leaves the accelerations of the other joints unfiltered, and on a joint whose load is
+    inertial only (a vertical axis) the noise of tau_out_hat then decides the paper model's
+    quadrant and biases c_m down and c_g up (docs/robot-identification.md). One axis: its
+    :func:`choose_cutoff`.
+    """
+    q0 = np.asarray(q0, dtype=float)
+    q0 = q0[:, None] if q0.ndim == 1 else q0
+    hi = float(f"{_upper_cutoff(1.0 / dt, min_fraction):.6g}")  # as choose_cutoff rounds
+    # choose_cutoff's own warnings pass as they are (no catch_warnings: it would reset the
+    # once-per-location registry and repeat them on every fit of a process)
+    cuts = [choose_cutoff(q0[:, j], dt, min_fraction) for j in range(q0.shape[1])]
+    found = [j for j, c in enumerate(cuts) if c < hi]
+    if not found:
+        return max(cuts)
+    cut = max(cuts[j] for j in found)
+    where = f"{source}: " if source else ""
+    for j in sorted(set(range(len(cuts))) - set(found)):
+        warnings.warn(f"{where}axis {j + 1}: its velocity spectrum stays above its noise "
+                      f"floor up to the Nyquist frequency (cut-off {cuts[j]:g} Hz, the "
+                      f"upper bound 0.4 f_s): left out of the chain's cut-off, {cut:g} Hz "
+                      "from the other axes; give --cutoff to choose another", stacklevel=4)
+    return cut
+
+
 # -- the settings ------------------------------------------------------------------------
 
 
@@ -409,8 +446,8 @@ def resolve_settings(
     Parameters
     ----------
     q0 : ndarray, shape (n,) or (n, k)
-        Positions of the first experiment (the default cut-off is the largest
-        :func:`choose_cutoff` over its axes).
+        Positions of the first experiment (the default cut-off: :func:`axes_cutoff` of
+        its axes).
     dt : float
         Sampling period [s] of every experiment.
     instruments : bool
@@ -421,16 +458,18 @@ def resolve_settings(
     torque_delay : float or None
         [samples]; None: :func:`default_torque_delay` of ``sources``.
     sources : iterable of str
-        File names of the experiments (for the default torque delay).
+        File names of the experiments (for the default torque delay; the first names the
+        data in :func:`axes_cutoff`'s warning).
     error : exception class
         Raised, with one line naming the setting, for a bad one (the caller's package's).
     """
     fs = 1.0 / dt
     q0 = np.asarray(q0, dtype=float)
     q0 = q0[:, None] if q0.ndim == 1 else q0
+    sources = list(sources)
     if cutoff_hz is None:
         floor = CUTOFF_FLOOR_IV if instruments else 0.05
-        cutoff_hz = max(choose_cutoff(q0[:, j], dt, floor) for j in range(q0.shape[1]))
+        cutoff_hz = axes_cutoff(q0, dt, floor, sources[0] if sources else "")
     cutoff_hz = float(cutoff_hz)
     if not 0 < cutoff_hz < fs / 2:
         raise error(f"cut-off {cutoff_hz:g} Hz: expected between 0 and the Nyquist "

@@ -1,4 +1,4 @@
-"""The robot chain's default cut-off (ident.robot.design.robot_cutoff): the largest
+"""The chain's default cut-off over several axes (ident.chain.axes_cutoff): the largest
 choose_cutoff over the axes that found a motion bandwidth; an axis whose velocity spectrum is
 noise up to the Nyquist frequency (its choice at the upper bound 0.4 f_s) is left out, with a
 warning naming it, unless every axis is. On the simulated UR10 demo campaign one wrist set
@@ -12,8 +12,8 @@ import warnings
 import numpy as np
 import pytest
 
-from ident.chain import choose_cutoff
-from ident.robot.design import resolve_design, robot_cutoff
+from ident.chain import axes_cutoff, choose_cutoff
+from ident.robot.design import resolve_design
 from ident.robot.loaders import RawRobotRun
 
 DT = 0.002  # [s]
@@ -53,14 +53,14 @@ def test_a_noise_axis_does_not_set_the_robot_cut_off():
 def test_every_axis_noise_keeps_the_upper_bound():
     q = _axes(n_noise=2, n_smooth=0)
     with pytest.warns(UserWarning, match="upper bound 0.4 f_s"):
-        assert robot_cutoff(q, DT) == pytest.approx(0.4 / DT)
+        assert axes_cutoff(q, DT) == pytest.approx(0.4 / DT)
 
 
 def test_one_axis_is_choose_cutoff_and_a_given_cut_off_is_kept():
     q = _axes(n_noise=0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        assert robot_cutoff(q, DT) == choose_cutoff(q[:, 0], DT)
+        assert axes_cutoff(q, DT) == choose_cutoff(q[:, 0], DT)
     q2 = _axes(n_noise=1)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # a given cut-off: no choice, no warning

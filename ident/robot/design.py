@@ -23,7 +23,6 @@ of one experiment, k p (1 + IV) floats per sample, refused above :data:`MAX_BYTE
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from typing import Any
@@ -31,11 +30,9 @@ from typing import Any
 import numpy as np
 
 from ..chain import (
-    CUTOFF_FLOOR_IV,
     ChainSettings,
     FullRate,
     RawExperiment,
-    choose_cutoff,
     decimation_index,
     filter_experiment,
     resolve_settings,
@@ -49,8 +46,8 @@ from .loaders import RawRobotRun, chain_period
 from .refine_joint import joint_term_columns
 from .signals import RobotColumns, RobotSignals
 
-__all__ = ["DesignSettings", "design_runs", "joint_columns", "resolve_design", "robot_cutoff",
-           "sign_checked", "MAX_BYTES"]
+__all__ = ["DesignSettings", "design_runs", "joint_columns", "resolve_design", "sign_checked",
+           "MAX_BYTES"]
 
 #: Largest full-rate regressor of one experiment the columns chain builds [bytes].
 MAX_BYTES = 4 * 2**30
@@ -70,7 +67,7 @@ def resolve_design(
     """The settings :func:`design_runs` uses on ``runs``: :func:`ident.chain.resolve_settings`
     on the first run's axes and the common period (the defaults of
     :func:`ident.preprocess.build_design`; the cut-off, when not given, by
-    :func:`robot_cutoff`).
+    :func:`ident.chain.axes_cutoff`).
 
     ``given``: ``cutoff_hz``, ``decimation``, ``trim``, ``guard``, ``torque_delay``,
     ``dq_min`` (None: chosen from the data). ``torque_delay`` None:
@@ -79,45 +76,9 @@ def resolve_design(
     """
     if not runs:
         raise RobotIdentError("no experiment to preprocess")
-    dt = chain_period(runs)
-    if given.get("cutoff_hz") is None:
-        given = {**given, "cutoff_hz": robot_cutoff(runs[0].q, dt, instruments,
-                                                    runs[0].source)}
-    return resolve_settings(runs[0].q, dt, instruments=instruments,
+    return resolve_settings(runs[0].q, chain_period(runs), instruments=instruments,
                             sources=[run.source for run in runs], error=RobotIdentError,
                             **given)  # type: ignore[arg-type]
-
-
-def robot_cutoff(q0: np.ndarray, dt: float, instruments: bool = False,
-                 source: str = "") -> float:
-    """The chain's default cut-off [Hz] on a robot: the largest
-    :func:`ident.chain.choose_cutoff` over the axes of ``q0`` (n, k) [rad] sampled every
-    ``dt`` [s] whose choice found a motion bandwidth, i.e. stayed below the upper bound
-    0.4 f_s. An axis at that bound (its velocity spectrum above its noise floor up to the
-    Nyquist frequency: noise, not motion) is left out, with a warning naming it, unless
-    every axis is: taking its bound for every joint leaves the accelerations of the other
-    joints unfiltered, and on a joint whose load is inertial only (a vertical axis) the
-    noise of tau_out_hat then decides the paper model's quadrant and biases c_m down and
-    c_g up (docs/robot-identification.md). One axis: its :func:`choose_cutoff`.
-    """
-    q0 = np.asarray(q0, dtype=float)
-    q0 = q0[:, None] if q0.ndim == 1 else q0
-    floor = CUTOFF_FLOOR_IV if instruments else 0.05
-    hi = float(f"{max(floor, 0.4) / dt:.6g}")  # choose_cutoff's upper bound, as it rounds
-    # choose_cutoff's own warnings pass as they are (no catch_warnings: it would reset the
-    # once-per-location registry and repeat them on every fit of a process)
-    cuts = [choose_cutoff(q0[:, j], dt, floor) for j in range(q0.shape[1])]
-    found = [j for j, c in enumerate(cuts) if c < hi]
-    if not found:
-        return max(cuts)
-    cut = max(cuts[j] for j in found)
-    where = f"{source}: " if source else ""
-    for j in sorted(set(range(len(cuts))) - set(found)):
-        warnings.warn(f"{where}axis {j + 1}: its velocity spectrum stays above its noise "
-                      f"floor up to the Nyquist frequency (cut-off {cuts[j]:g} Hz, the "
-                      f"upper bound 0.4 f_s): left out of the chain's cut-off, {cut:g} Hz "
-                      "from the other axes; give --cutoff to choose another", stacklevel=3)
-    return cut
 
 
 def _experiments(runs: Sequence[RawRobotRun], refs: bool) -> list[RawExperiment]:
