@@ -29,7 +29,9 @@ h5py, read into the same structure) hold named variables. A mapping renames them
     mapping = {"q": "qm", "tau": "vir"}      # canonical -> name in the file
     gain = "gtau"                            # tau = gain * column; a number or a variable name
 
-Payload entries of the mapping may also be numbers (a constant for the whole file).
+Payload entries of the mapping may also be numbers (a constant for the whole file). The
+``--map`` entries of one joint and of a robot (which adds ``dq``, ``ddq`` and the per-axis
+keys ``q1``, ``tau3`` ...) are read by one parser, :func:`parse_mapping`.
 
 Foreign MATLAB data keep their signals in structs, several axes in one 2-D array and
 positions in degrees. A mapping value is then a *path* (see :func:`resolve_path`)::
@@ -69,6 +71,7 @@ from daq.protocol.reader import LogReadError, RunArrays, read_run
 from trajectories.robot.payload import RobotPayloadData
 
 from . import DataError
+from .robot import RobotIdentError
 from .signals import Signals
 from .timing import align_to_torque
 
@@ -102,7 +105,11 @@ GAP_PERIODS = 5.0
 #: and would overflow the least-squares sums.
 MAX_ABS_SIGNAL = 1e9
 
+#: ``--map`` keys of one joint (``jointid fit``): its signals and payload constants.
 CANONICAL = ("t", "q", "tau", "q_ref", "payload_kg", "payload_arm_m")
+#: ``--map`` keys of a robot (``jointid fit --robot``): one joint's and the derivatives a file
+#: may give (dq, ddq), besides the per-axis keys of :data:`AXIS_KEY_RE` (q1, tau3, ...).
+ROBOT_KEYS = ("t", "q", "tau", "q_ref", "dq", "ddq", "payload_kg", "payload_arm_m")
 
 #: Units accepted for q (and q_ref): factor to SI [rad or m] and whether the unit is an angle.
 Q_UNITS: dict[str, tuple[float, bool]] = {
@@ -116,6 +123,8 @@ _PATH_RE = re.compile(
     r"^\s*(?P<names>[A-Za-z_]\w*(?:\s*\.\s*[A-Za-z_]\w*)*)\s*"
     r"(?:\[\s*(?:(?P<row>\d+)|:\s*,\s*(?P<col>\d+))\s*\])?\s*$"
 )
+#: A ``--map`` value that starts like a name is a name (``nan``, ``inf``), not a number.
+_NAME_START = re.compile(r"^[A-Za-z_]")
 #: Most names listed in an error message.
 _MAX_LISTED = 40
 
@@ -169,21 +178,40 @@ class Experiment:
         return int(self.t.shape[0])
 
 
-def parse_mapping(items: Sequence[str] | str | None) -> dict[str, str | float]:
-    """Parse ``"q=qm,tau=vir"`` or ``["q=qm", "tau=vir"]`` into a mapping.
+def parse_mapping(items: Sequence[str] | str | None, *,
+                  robot: bool = False) -> dict[str, str | float]:
+    """Parse ``--map`` entries ``"q=qm,tau=vir"`` or ``["q=qm", "tau=vir"]`` into a mapping:
+    the one parser of a single joint's ``--map`` and a robot's.
 
-    Values that parse as numbers become floats (payload constants). Commas inside brackets
-    belong to a path (``q=rec.pos[:, 2]``) and do not separate entries.
+    Values that parse as numbers become floats (payload constants; a signal refuses them
+    when the file is read); a value that starts like a name (``nan``, ``inf``) stays a name.
+    Commas inside brackets belong to a path (``q=rec.pos[:, 2]``) and do not separate entries.
+
+    Parameters
+    ----------
+    items : str, sequence of str or None
+        The ``--map`` arguments (each may hold several comma-separated entries).
+    robot : bool
+        The keys of a robot (:data:`ROBOT_KEYS` and the per-axis keys ``q1``, ``tau3`` ... of
+        :data:`AXIS_KEY_RE`) and its error class; else one joint's (:data:`CANONICAL`).
+
+    Raises
+    ------
+    DataError or RobotIdentError (``robot``)
+        An entry without ``=`` or an unknown key: one line naming it and what was expected.
     """
+    error = RobotIdentError if robot else DataError
+    keys = ROBOT_KEYS if robot else CANONICAL
     out: dict[str, str | float] = {}
     for part in map_entries(items):
         if "=" not in part:
-            raise DataError(f"mapping entry {part!r}: expected KEY=NAME (e.g. q=qm)")
+            raise error(f"--map entry {part!r}: expected KEY=PATH (e.g. q=rec.q)")
         k, v = (x.strip() for x in part.split("=", 1))
-        if k not in CANONICAL:
-            raise DataError(f"mapping key {k!r}: expected one of {', '.join(CANONICAL)}")
+        if k not in keys and not (robot and AXIS_KEY_RE.match(k)):
+            axis = " or a per-axis key such as q1, tau2, q_ref3" if robot else ""
+            raise error(f"--map key {k!r}: expected one of {', '.join(keys)}{axis}")
         try:
-            out[k] = float(v)
+            out[k] = v if _NAME_START.match(v) else float(v)
         except ValueError:
             out[k] = v
     return out
@@ -974,8 +1002,9 @@ def _read_table(path: Path, table: Mapping[str, object], joints: Sequence[str] |
     (``q1=PATH``...), the mapped path (one row or column per axis), the numbered or named
     CSV columns (``q1``, ``q_<joint>``), else the same-named column or variable."""
     k = 1 if joints is None else len(joints)
-    for key in ("t", "q", "tau", "q_ref", "dq", "ddq"):
-        if isinstance(mapping.get(key), float):
+    for key, spec in mapping.items():  # signals and per-axis keys: paths, never numbers
+        if isinstance(spec, float) and (key in ("t", "q", "tau", "q_ref", "dq", "ddq")
+                                        or AXIS_KEY_RE.match(key)):
             raise DataError(f"{path}: {key} must be a column/variable, not a constant")
     spec_t = mapping.get("t", "t")
     if "t" not in mapping and "t" not in table:

@@ -20,7 +20,7 @@ from ident.loaders import (
     read_file,
 )
 from ident.robot import RobotIdentError
-from ident.robot.loaders import load_robot_runs, parse_robot_mapping
+from ident.robot.loaders import load_robot_runs
 
 
 def _arrays(n=500, dt=1e-3):
@@ -112,8 +112,38 @@ def test_unknown_extension_and_missing_file(tmp_path):
     p.write_text("x")
     with pytest.raises(DataError, match="unknown file type"):
         load_experiment(p)
-    with pytest.raises(DataError, match="KEY=NAME"):
+    with pytest.raises(DataError, match="KEY=PATH"):
         parse_mapping("q")
+
+
+def test_one_map_parser_for_one_joint_and_a_robot(tmp_path):
+    """One ``--map`` parser: a single joint's keys are a robot's without the derivatives and
+    the per-axis keys; numbers become floats on both paths, a name stays a name; each path
+    keeps its error class, one line naming the entry or key and what was expected."""
+    line = ["t=rec.t,q=rec.q[:, 1]", "tau=vir,payload_kg=2,payload_arm_m=nan"]
+    one = parse_mapping(line)
+    assert one == {"t": "rec.t", "q": "rec.q[:, 1]", "tau": "vir", "payload_kg": 2.0,
+                   "payload_arm_m": "nan"}
+    assert parse_mapping(line, robot=True) == one
+    assert parse_mapping("dq=x,ddq=y,q_ref2=z", robot=True) == {"dq": "x", "ddq": "y",
+                                                                 "q_ref2": "z"}
+    for bad in ("dq=x", "q2=y"):
+        with pytest.raises(DataError, match=rf"^--map key '{bad[:-2]}': expected one of t, q, "
+                                            r"tau, q_ref, payload_kg, payload_arm_m$"):
+            parse_mapping(bad)
+    with pytest.raises(RobotIdentError, match=r"^--map key 'x': expected one of t, q, tau, "
+                                              r"q_ref, dq, ddq, payload_kg, payload_arm_m or a "
+                                              r"per-axis key such as q1, tau2, q_ref3$"):
+        parse_mapping("x=y", robot=True)
+    with pytest.raises(RobotIdentError, match=r"^--map entry 'q': expected KEY=PATH"):
+        parse_mapping("q=a, q", robot=True)
+    # a number where a signal's path is expected is refused when the file is read, per-axis too
+    t, q, tau = _arrays()
+    p = tmp_path / "x.csv"
+    _write_csv(p, ["t", "q", "tau"], [t, q, tau])
+    with pytest.raises(RobotIdentError, match=r"x\.csv: q1 must be a column/variable, not a "
+                                              r"constant"):
+        load_robot_runs(p, ("elbow",), mapping=parse_mapping("q1=3,tau1=tau", robot=True))
 
 
 def test_concat_marks_experiments(tmp_path):
@@ -220,8 +250,8 @@ def test_a_foreign_mat_file_reads_the_same_as_one_joint_and_as_a_one_joint_robot
                          "gtau": np.array([[35.15]])})
     e = load_experiment(p, mapping=parse_mapping("q=qm,tau=vir,payload_kg=2,payload_arm_m=0.5"),
                         gain="gtau")
-    (r,) = load_robot_runs(p, ("slide",), gains=[35.15], mapping=parse_robot_mapping(
-        "q=qm,tau=vir,payload_kg=2,payload_arm_m=0.5"))
+    (r,) = load_robot_runs(p, ("slide",), gains=[35.15], mapping=parse_mapping(
+        "q=qm,tau=vir,payload_kg=2,payload_arm_m=0.5", robot=True))
     np.testing.assert_array_equal(r.q[:, 0], e.q)
     np.testing.assert_array_equal(r.tau[:, 0], e.tau)
     assert (r.payload.mass, r.payload.arm_m) == (e.payload_mass, e.payload_arm) == (2.0, 0.5)
