@@ -71,7 +71,7 @@ def robot_for_campaign(campaign: RobotCampaign) -> Robot:
         Unreadable robot file, or a campaign joint the robot file does not have (one line
         naming the campaign, the key and the robot file).
     """
-    if campaign.single_joint:
+    if campaign.plant == "joint":
         return joint_robot(campaign)
     path = robot_file_path(campaign)
     robot = load_robot(path)
