@@ -21,7 +21,6 @@ deterministically: ``jointid plan`` and ``jointid run`` play the same plan).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -215,8 +214,3 @@ def prepare_robot_campaign(campaign: RobotCampaign, *, robot: Robot | None = Non
         campaign, results = optimise_campaign(campaign, dyn.regressor,
                                               max_evaluations=max_evaluations)
     return campaign, dyn, results
-
-
-def campaign_limits(campaign: RobotCampaign) -> Sequence[Any]:
-    """Per moving joint limits of the campaign (the ones the plan respects)."""
-    return campaign.limits
