@@ -12,6 +12,7 @@ import scipy.io
 
 from ident import DataError
 from ident.loaders import (
+    Experiment,
     ResamplingWarning,
     concat,
     load_experiment,
@@ -103,6 +104,40 @@ def test_irregular_sampling_is_resampled_with_warning(tmp_path):
         e = load_experiment(p)
     assert np.allclose(np.diff(e.t), e.dt)
     np.testing.assert_allclose(e.q, 0.5 * np.sin(2.0 * e.t), atol=1e-5)
+
+
+def test_an_experiment_is_a_view_of_its_one_joint_run(tmp_path):
+    """An Experiment holds the run of one joint (RawRobotRun, k = 1) and reads its first axis
+    without copying; built from 1-D arrays it builds that run; a run of several axes is no
+    Experiment."""
+    t, q, tau = _arrays()
+    p = tmp_path / "run.csv"
+    _write_csv(p, ["t", "q", "tau", "q_ref", "payload_kg"], [t, q, tau, 1.1 * q, 2 + 0 * t])
+    e = load_experiment(p, joint="prismatic")
+    raw = read_file(p, None)
+    assert e.run.q.shape == e.run.tau.shape == e.run.q_ref.shape == (t.size, 1)
+    assert e.run.revolute is False and raw.revolute is None  # the kind resolved on the view
+    for name in ("q", "tau", "q_ref"):
+        view, col = getattr(e, name), getattr(e.run, name)
+        assert view.shape == (t.size,) and np.shares_memory(view, col)
+        np.testing.assert_array_equal(view, getattr(raw, name)[:, 0])
+    assert e.t is e.run.t and e.dt == e.run.dt and len(e) == t.size
+    assert (e.payload_mass, e.payload_arm) == (2.0, 0.0) and e.run.payload.arm_m is None
+    f = Experiment("arrays", t, q, tau, 3.0, 0.5, False)
+    assert f.run.q.shape == (t.size, 1) and np.shares_memory(f.q, q) and f.q_ref is None
+    assert (f.payload_mass, f.payload_arm, f.revolute, f.source) == (3.0, 0.5, False, "arrays")
+    assert Experiment.of_run(f.run).revolute is False
+    with pytest.raises(DataError, match=r"^arrays: payload_kg -1\.0: expected a mass >= 0"):
+        Experiment("arrays", t, q, tau, -1.0)
+    (arm,) = load_robot_runs(_write_two_axes(tmp_path, t, q, tau), ("a", "b"))
+    with pytest.raises(DataError, match=r"two\.csv: 2 axes, an Experiment has one"):
+        Experiment.of_run(arm)
+
+
+def _write_two_axes(d, t, q, tau):
+    p = d / "two.csv"
+    _write_csv(p, ["t", "q1", "q2", "tau1", "tau2"], [t, q, q, tau, tau])
+    return p
 
 
 def test_unknown_extension_and_missing_file(tmp_path):
