@@ -48,9 +48,9 @@ def make(d: Path) -> None:
     from sim_drivers.arm import ArmGains, ArmParams, model_reference, simulate_arm
     from sim_drivers.offline import simulate
     from sim_drivers.plant_config import default_plant, load_plant
-    from trajectories.campaign import Campaign
     from trajectories.plan import plan_campaign
     from trajectories.robot import load_robot
+    from trajectories.robot_campaign import RobotCampaign
 
     d.mkdir(parents=True, exist_ok=True)
     # single-joint MCAP logs of the simulated campaign, one of them damaged
@@ -63,10 +63,10 @@ def make(d: Path) -> None:
     # jittered CSV files (single joint, both spellings)
     import tomllib
     with open(ROOT / "examples" / "campaign.toml", "rb") as f:
-        campaign = Campaign.from_dict(tomllib.load(f), "campaign.toml").quick()
+        campaign = RobotCampaign.from_dict(tomllib.load(f), "campaign.toml").quick()
     plan = plan_campaign(campaign)
     plant = load_plant(ROOT / "sim_drivers" / "data" / "plant_default.toml")
-    gains = ControllerGains(**campaign.control.gains_kwargs())
+    gains = ControllerGains(**campaign.gains_kwargs())
     p = plan.payloads[1]
     run = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg, payload_arm=p.arm_m,
                    seed=70)

@@ -33,11 +33,11 @@ from . import DataError
 from .cli_robot import (
     fit_files,
     format_report,
-    parse_robot_mapping,
     public_record,
     refine_robot,
 )
 from .hyperparams import HyperParameters
+from .loaders import parse_mapping
 from .robot.estimate import RobotModel
 from .robot.loaders import RawRobotRun
 from .robot.signals import RobotSignals
@@ -171,11 +171,11 @@ class RobotFit(HyperParameters):
             return self.robot
         return load_robot(self.robot)
 
-    def _mapping(self) -> dict[str, str]:
+    def _mapping(self) -> dict[str, str | float]:
         m = self.mapping
         if isinstance(m, Mapping):
             m = [f"{k}={v}" for k, v in m.items()]
-        return parse_robot_mapping(m)  # checks the keys as --map does
+        return parse_mapping(m, robot=True)  # checks the keys as --map does
 
     def fit(self, data: RobotData, validation: RobotData | None = None) -> RobotFit:
         """Identify the robot on ``data`` (one multi-axis experiment per file or run).

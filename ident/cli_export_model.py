@@ -23,10 +23,11 @@ from trajectories.robot import Robot, load_robot
 
 from . import DataError
 from .cli_robot import FORMAT, OLD_FORMATS, fit_robot, robot_gains
+from .loaders import parse_mapping
 from .report import write_json
 from .robot.consistent_fit import consistent_record, fit_consistent
 from .robot.export_model import export_model
-from .robot.loaders import RobotPreprocessing, load_robot_runs, parse_robot_mapping
+from .robot.loaders import RobotPreprocessing, load_robot_runs
 from .vocab import model_name, upgrade_record
 
 __all__ = ["register", "run", "consistent_from_record"]
@@ -121,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
     if list(robot.moving) != list(rec["robot"]["moving"]):
         raise DataError(f"{args.robot or rec['robot']['source']}: moving joints "
                         f"{list(robot.moving)}, the record's are {rec['robot']['moving']}")
-    mapping = parse_robot_mapping(args.map) if args.map else None
+    mapping = parse_mapping(args.map, robot=True) if args.map else None
     cons, fixed = consistent_from_record(args.fit, rec, robot, name, mapping, args.q_unit)
     if not cons.get("valid", False):
         raise DataError(f"{args.fit}: models.{name}.consistent: a link is not physically "

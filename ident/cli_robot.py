@@ -37,6 +37,7 @@ from trajectories.robot import Robot, RobotRegressor, load_robot
 from . import DataError, IdentError
 from .estimate import DEFAULT_THRESHOLD_PCT
 from .fitting import DQ_MIN_FRACTION, SIGN_CHECK_MIN_KEPT
+from .loaders import parse_mapping
 from .report import write_json
 from .results import DEFAULT_BANDS
 from .robot.consistency import check_consistency
@@ -47,7 +48,6 @@ from .robot.loaders import (
     RawRobotRun,
     RobotPreprocessing,
     load_robot_runs,
-    parse_robot_mapping,
     preprocess_runs,
     resolved_settings,
 )
@@ -92,7 +92,7 @@ def robot_gains(robot: Robot) -> list[float]:
 
 
 def load_runs(robot: Robot, data: Sequence[str | Path] | str | Path | Sequence[RawRobotRun],
-              *, mapping: Mapping[str, str] | None = None,
+              *, mapping: Mapping[str, str | float] | None = None,
               q_unit: str | None = None) -> list[RawRobotRun]:
     """The robot's experiment files read as ``jointid fit --robot`` reads them: the robot
     file's drive gains (:func:`robot_gains`), the ``--map`` entries and ``--q-unit``
@@ -112,7 +112,7 @@ def fit_files(
     validate: Sequence[str | Path] | str | Path | Sequence[RawRobotRun] | None = None,
     *,
     model: str = "both",
-    mapping: Mapping[str, str] | None = None,
+    mapping: Mapping[str, str | float] | None = None,
     q_unit: str | None = None,
     cutoff: float | None = None,
     decimation: int | None = None,
@@ -132,7 +132,7 @@ def fit_files(
     model : {"usual", "paper", "both"}
         ``--model`` (:data:`MODELS`).
     mapping, q_unit
-        ``--map`` entries (:func:`~ident.robot.loaders.parse_robot_mapping`), ``--q-unit``.
+        ``--map`` entries (:func:`~ident.loaders.parse_mapping`, ``robot=True``), ``--q-unit``.
     cutoff, decimation, trim
         ``--cutoff`` [Hz], ``--decimation``, ``--trim`` (None: chosen from the data).
     consistent : bool
@@ -797,7 +797,7 @@ def run(args: argparse.Namespace) -> int:
     _check_args(args)
     robot = load_robot(args.robot)
     out = fit_files(robot, args.inputs, args.validate, model=args.model,
-                    mapping=parse_robot_mapping(args.map), q_unit=args.q_unit,
+                    mapping=parse_mapping(args.map, robot=True), q_unit=args.q_unit,
                     cutoff=args.cutoff, decimation=args.decimation, trim=args.trim,
                     method=args.method, q_s=_qs(args.q_s), dq_min=args.dq_min,
                     known_rotor_inertia=args.known_rotor_inertia,

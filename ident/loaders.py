@@ -8,7 +8,8 @@ This is the only module of :mod:`ident` that reads files. Each input file is one
 (one payload run) of the k moving joints of a robot: :func:`read_file` reads it into the one
 data contract, :class:`RawRobotRun` (t, q and tau of shape (n, k), q_ref, payload). A joint
 is a 1-dof robot: :func:`load_experiment` reads a file as a run of one unnamed joint and
-views it as the single-joint :class:`Experiment`; :func:`concat` stacks experiments into one
+views it as the single-joint :class:`Experiment` (which holds that run, ``Experiment.run``,
+and reads its first axis); :func:`concat` stacks experiments into one
 :class:`~ident.signals.Signals` (paper eq. 36-37), with derivatives left to
 :func:`ident.preprocess.build_design`. The robot's loader (:mod:`ident.robot.loaders`) reads
 the same files through :func:`read_file` with the robot's moving joints.
@@ -29,7 +30,9 @@ h5py, read into the same structure) hold named variables. A mapping renames them
     mapping = {"q": "qm", "tau": "vir"}      # canonical -> name in the file
     gain = "gtau"                            # tau = gain * column; a number or a variable name
 
-Payload entries of the mapping may also be numbers (a constant for the whole file).
+Payload entries of the mapping may also be numbers (a constant for the whole file). The
+``--map`` entries of one joint and of a robot (which adds ``dq``, ``ddq`` and the per-axis
+keys ``q1``, ``tau3`` ...) are read by one parser, :func:`parse_mapping`.
 
 Foreign MATLAB data keep their signals in structs, several axes in one 2-D array and
 positions in degrees. A mapping value is then a *path* (see :func:`resolve_path`)::
@@ -58,7 +61,7 @@ import json
 import re
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import h5py
@@ -69,6 +72,7 @@ from daq.protocol.reader import LogReadError, RunArrays, read_run
 from trajectories.robot.payload import RobotPayloadData
 
 from . import DataError
+from .robot import RobotIdentError
 from .signals import Signals
 from .timing import align_to_torque
 
@@ -102,7 +106,11 @@ GAP_PERIODS = 5.0
 #: and would overflow the least-squares sums.
 MAX_ABS_SIGNAL = 1e9
 
+#: ``--map`` keys of one joint (``jointid fit``): its signals and payload constants.
 CANONICAL = ("t", "q", "tau", "q_ref", "payload_kg", "payload_arm_m")
+#: ``--map`` keys of a robot (``jointid fit --robot``): one joint's and the derivatives a file
+#: may give (dq, ddq), besides the per-axis keys of :data:`AXIS_KEY_RE` (q1, tau3, ...).
+ROBOT_KEYS = ("t", "q", "tau", "q_ref", "dq", "ddq", "payload_kg", "payload_arm_m")
 
 #: Units accepted for q (and q_ref): factor to SI [rad or m] and whether the unit is an angle.
 Q_UNITS: dict[str, tuple[float, bool]] = {
@@ -116,6 +124,8 @@ _PATH_RE = re.compile(
     r"^\s*(?P<names>[A-Za-z_]\w*(?:\s*\.\s*[A-Za-z_]\w*)*)\s*"
     r"(?:\[\s*(?:(?P<row>\d+)|:\s*,\s*(?P<col>\d+))\s*\])?\s*$"
 )
+#: A ``--map`` value that starts like a name is a name (``nan``, ``inf``), not a number.
+_NAME_START = re.compile(r"^[A-Za-z_]")
 #: Most names listed in an error message.
 _MAX_LISTED = 40
 
@@ -124,66 +134,40 @@ class ResamplingWarning(UserWarning):
     """An experiment was irregularly sampled and has been resampled to a uniform grid."""
 
 
-@dataclass(frozen=True)
-class Experiment:
-    """One experiment (input file) of one joint, uniformly sampled: the view with k = 1 of the
-    run :func:`read_file` reads (:class:`RawRobotRun`), as the single-joint fit takes it.
+def parse_mapping(items: Sequence[str] | str | None, *,
+                  robot: bool = False) -> dict[str, str | float]:
+    """Parse ``--map`` entries ``"q=qm,tau=vir"`` or ``["q=qm", "tau=vir"]`` into a mapping:
+    the one parser of a single joint's ``--map`` and a robot's.
 
-    Attributes
+    Values that parse as numbers become floats (payload constants; a signal refuses them
+    when the file is read); a value that starts like a name (``nan``, ``inf``) stays a name.
+    Commas inside brackets belong to a path (``q=rec.pos[:, 2]``) and do not separate entries.
+
+    Parameters
     ----------
-    source : str
-        File it came from (or a label).
-    t : ndarray, shape (n,)
-        Time from the start of the run [s], uniform step ``dt``.
-    q : ndarray, shape (n,)
-        Joint position [rad or m].
-    tau : ndarray, shape (n,)
-        Motor torque from the current reference [N m or N] (eq. 7).
-    payload_mass : float
-        Weighed additional mass M_aw [kg].
-    payload_arm : float
-        Lever arm L_a [m].
-    revolute : bool
-        Joint kind.
-    q_ref : ndarray, shape (n,), or None
-        Reference (planned) position the controller tracked [rad or m], when the data carry it
-        (MCAP logs of ``jointid run``; CSV/MAT column ``q_ref``). With it the fit uses
-        instrumental variables (IDIM-IV), which removes the closed-loop noise bias of OLS.
+    items : str, sequence of str or None
+        The ``--map`` arguments (each may hold several comma-separated entries).
+    robot : bool
+        The keys of a robot (:data:`ROBOT_KEYS` and the per-axis keys ``q1``, ``tau3`` ... of
+        :data:`AXIS_KEY_RE`) and its error class; else one joint's (:data:`CANONICAL`).
+
+    Raises
+    ------
+    DataError or RobotIdentError (``robot``)
+        An entry without ``=`` or an unknown key: one line naming it and what was expected.
     """
-
-    source: str
-    t: np.ndarray
-    q: np.ndarray
-    tau: np.ndarray
-    payload_mass: float = 0.0
-    payload_arm: float = 0.0
-    revolute: bool = True
-    q_ref: np.ndarray | None = None
-
-    @property
-    def dt(self) -> float:
-        """Sampling period [s]."""
-        return float((self.t[-1] - self.t[0]) / (len(self.t) - 1))
-
-    def __len__(self) -> int:
-        return int(self.t.shape[0])
-
-
-def parse_mapping(items: Sequence[str] | str | None) -> dict[str, str | float]:
-    """Parse ``"q=qm,tau=vir"`` or ``["q=qm", "tau=vir"]`` into a mapping.
-
-    Values that parse as numbers become floats (payload constants). Commas inside brackets
-    belong to a path (``q=rec.pos[:, 2]``) and do not separate entries.
-    """
+    error = RobotIdentError if robot else DataError
+    keys = ROBOT_KEYS if robot else CANONICAL
     out: dict[str, str | float] = {}
     for part in map_entries(items):
         if "=" not in part:
-            raise DataError(f"mapping entry {part!r}: expected KEY=NAME (e.g. q=qm)")
+            raise error(f"--map entry {part!r}: expected KEY=PATH (e.g. q=rec.q)")
         k, v = (x.strip() for x in part.split("=", 1))
-        if k not in CANONICAL:
-            raise DataError(f"mapping key {k!r}: expected one of {', '.join(CANONICAL)}")
+        if k not in keys and not (robot and AXIS_KEY_RE.match(k)):
+            axis = " or a per-axis key such as q1, tau2, q_ref3" if robot else ""
+            raise error(f"--map key {k!r}: expected one of {', '.join(keys)}{axis}")
         try:
-            out[k] = float(v)
+            out[k] = v if _NAME_START.match(v) else float(v)
         except ValueError:
             out[k] = v
     return out
@@ -517,7 +501,8 @@ class RawRobotRun:
         The file's payload; ``arm_m`` is the lever arm of a single-joint log or column.
     revolute : bool or None
         The joint kind of a one-axis reading of a log (``campaign.joint_kind``, revolute
-        when absent); None: the file does not say (CSV, MAT, several axes).
+        when absent); None: the file does not say (CSV, MAT, several axes). The run an
+        :class:`Experiment` views holds the kind it resolved (``joint``, the log, ``q_unit``).
     """
 
     source: str
@@ -534,6 +519,114 @@ class RawRobotRun:
     def dt(self) -> float:
         """Sampling period [s]."""
         return float((self.t[-1] - self.t[0]) / (len(self.t) - 1))
+
+
+@dataclass(frozen=True, init=False)
+class Experiment:
+    """One experiment (input file) of one joint, uniformly sampled, as the single-joint fit
+    takes it: a view of the run of one joint (:class:`RawRobotRun`, k = 1) that holds the
+    run and reads its first axis; no array is copied.
+
+    ``Experiment(source, t, q, tau, payload_mass, payload_arm, revolute, q_ref)`` builds the
+    run from 1-D arrays (the payload checked as by :func:`make_experiment`, the arrays taken
+    as given); :meth:`of_run` views a run already read (:func:`load_experiment`).
+
+    Attributes
+    ----------
+    run : RawRobotRun
+        The run of one joint: arrays of shape (n, 1), its payload, ``revolute`` the joint kind.
+    source : str
+        File it came from (or a label).
+    t : ndarray, shape (n,)
+        Time from the start of the run [s], uniform step ``dt``.
+    q : ndarray, shape (n,)
+        Joint position [rad or m].
+    tau : ndarray, shape (n,)
+        Motor torque from the current reference [N m or N] (eq. 7).
+    payload_mass : float
+        Weighed additional mass M_aw [kg].
+    payload_arm : float
+        Lever arm L_a [m] (0 when the file gives none).
+    revolute : bool
+        Joint kind.
+    q_ref : ndarray, shape (n,), or None
+        Reference (planned) position the controller tracked [rad or m], when the data carry it
+        (MCAP logs of ``jointid run``; CSV/MAT column ``q_ref``). With it the fit uses
+        instrumental variables (IDIM-IV), which removes the closed-loop noise bias of OLS.
+    """
+
+    run: RawRobotRun
+
+    def __init__(self, source: str, t: np.ndarray, q: np.ndarray, tau: np.ndarray,
+                 payload_mass: float = 0.0, payload_arm: float = 0.0, revolute: bool = True,
+                 q_ref: np.ndarray | None = None) -> None:
+        def axis(a: np.ndarray | None) -> np.ndarray | None:
+            return None if a is None else np.asarray(a)[:, None]
+
+        run = RawRobotRun(source=source, t=t, q=axis(q), tau=axis(tau),  # type: ignore[arg-type]
+                          q_ref=axis(q_ref), payload=_payload(source, payload_mass, payload_arm),
+                          revolute=bool(revolute))
+        object.__setattr__(self, "run", run)
+
+    @classmethod
+    def of_run(cls, run: RawRobotRun, revolute: bool | None = None) -> Experiment:
+        """The view of a run of one joint (``run.q`` of shape (n, 1)); ``revolute`` (when
+        given) is set on the run, else the run's own (revolute when it does not say).
+
+        Raises
+        ------
+        DataError
+            The run has more than one axis.
+        """
+        if run.q.ndim != 2 or run.q.shape[1] != 1:
+            raise DataError(f"{run.source}: {run.q.shape[-1]} axes, an Experiment has one "
+                            "(pick one with axis=)")
+        rev = run.revolute if revolute is None else revolute
+        self = object.__new__(cls)
+        object.__setattr__(self, "run", replace(run, revolute=True if rev is None else
+                                                bool(rev)))
+        return self
+
+    @property
+    def source(self) -> str:
+        return self.run.source
+
+    @property
+    def t(self) -> np.ndarray:
+        return self.run.t
+
+    @property
+    def q(self) -> np.ndarray:
+        return self.run.q[:, 0]
+
+    @property
+    def tau(self) -> np.ndarray:
+        return self.run.tau[:, 0]
+
+    @property
+    def q_ref(self) -> np.ndarray | None:
+        return None if self.run.q_ref is None else self.run.q_ref[:, 0]
+
+    @property
+    def payload_mass(self) -> float:
+        return float(self.run.payload.mass)
+
+    @property
+    def payload_arm(self) -> float:
+        arm = self.run.payload.arm_m
+        return 0.0 if arm is None else float(arm)
+
+    @property
+    def revolute(self) -> bool:
+        return bool(self.run.revolute)
+
+    @property
+    def dt(self) -> float:
+        """Sampling period [s]."""
+        return self.run.dt
+
+    def __len__(self) -> int:
+        return int(self.run.t.shape[0])
 
 
 def _names(joints: Sequence[str]) -> str:
@@ -974,8 +1067,9 @@ def _read_table(path: Path, table: Mapping[str, object], joints: Sequence[str] |
     (``q1=PATH``...), the mapped path (one row or column per axis), the numbered or named
     CSV columns (``q1``, ``q_<joint>``), else the same-named column or variable."""
     k = 1 if joints is None else len(joints)
-    for key in ("t", "q", "tau", "q_ref", "dq", "ddq"):
-        if isinstance(mapping.get(key), float):
+    for key, spec in mapping.items():  # signals and per-axis keys: paths, never numbers
+        if isinstance(spec, float) and (key in ("t", "q", "tau", "q_ref", "dq", "ddq")
+                                        or AXIS_KEY_RE.match(key)):
             raise DataError(f"{path}: {key} must be a column/variable, not a constant")
     spec_t = mapping.get("t", "t")
     if "t" not in mapping and "t" not in table:
@@ -1224,21 +1318,6 @@ def uniform_grid(
 # -- the single joint: a view of the run of a one-joint robot ---------------------------------
 
 
-def _experiment(run: RawRobotRun, revolute: bool) -> Experiment:
-    """The single-joint view of a run of one joint (k = 1)."""
-    arm = run.payload.arm_m
-    return Experiment(
-        source=run.source,
-        t=run.t,
-        q=run.q[:, 0],
-        tau=run.tau[:, 0],
-        payload_mass=float(run.payload.mass),
-        payload_arm=0.0 if arm is None else float(arm),
-        revolute=bool(revolute),
-        q_ref=None if run.q_ref is None else run.q_ref[:, 0],
-    )
-
-
 def make_experiment(
     source: str,
     t: np.ndarray,
@@ -1274,7 +1353,7 @@ def make_experiment(
     run = _make_run(source, t, axis(q), axis(tau), q_ref=axis(q_ref),  # type: ignore[arg-type]
                     payload=_payload(source, payload_mass, payload_arm),
                     columns={k: [v] for k, v in (columns or {}).items()})
-    return _experiment(run, revolute)
+    return Experiment.of_run(run, revolute)
 
 
 def _q_unit(q_unit: str | None, rev: bool | None, source: str) -> tuple[float, bool | None]:
@@ -1344,7 +1423,7 @@ def load_experiment(
                     q_unit=q_unit, axis=axis)
     if rev is None:
         rev = run.revolute if run.revolute is not None else rev_u
-    return _experiment(run, True if rev is None else rev)
+    return Experiment.of_run(run, True if rev is None else rev)
 
 
 def load_experiments(

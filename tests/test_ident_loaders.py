@@ -12,6 +12,7 @@ import scipy.io
 
 from ident import DataError
 from ident.loaders import (
+    Experiment,
     ResamplingWarning,
     concat,
     load_experiment,
@@ -20,7 +21,7 @@ from ident.loaders import (
     read_file,
 )
 from ident.robot import RobotIdentError
-from ident.robot.loaders import load_robot_runs, parse_robot_mapping
+from ident.robot.loaders import load_robot_runs
 
 
 def _arrays(n=500, dt=1e-3):
@@ -105,6 +106,40 @@ def test_irregular_sampling_is_resampled_with_warning(tmp_path):
     np.testing.assert_allclose(e.q, 0.5 * np.sin(2.0 * e.t), atol=1e-5)
 
 
+def test_an_experiment_is_a_view_of_its_one_joint_run(tmp_path):
+    """An Experiment holds the run of one joint (RawRobotRun, k = 1) and reads its first axis
+    without copying; built from 1-D arrays it builds that run; a run of several axes is no
+    Experiment."""
+    t, q, tau = _arrays()
+    p = tmp_path / "run.csv"
+    _write_csv(p, ["t", "q", "tau", "q_ref", "payload_kg"], [t, q, tau, 1.1 * q, 2 + 0 * t])
+    e = load_experiment(p, joint="prismatic")
+    raw = read_file(p, None)
+    assert e.run.q.shape == e.run.tau.shape == e.run.q_ref.shape == (t.size, 1)
+    assert e.run.revolute is False and raw.revolute is None  # the kind resolved on the view
+    for name in ("q", "tau", "q_ref"):
+        view, col = getattr(e, name), getattr(e.run, name)
+        assert view.shape == (t.size,) and np.shares_memory(view, col)
+        np.testing.assert_array_equal(view, getattr(raw, name)[:, 0])
+    assert e.t is e.run.t and e.dt == e.run.dt and len(e) == t.size
+    assert (e.payload_mass, e.payload_arm) == (2.0, 0.0) and e.run.payload.arm_m is None
+    f = Experiment("arrays", t, q, tau, 3.0, 0.5, False)
+    assert f.run.q.shape == (t.size, 1) and np.shares_memory(f.q, q) and f.q_ref is None
+    assert (f.payload_mass, f.payload_arm, f.revolute, f.source) == (3.0, 0.5, False, "arrays")
+    assert Experiment.of_run(f.run).revolute is False
+    with pytest.raises(DataError, match=r"^arrays: payload_kg -1\.0: expected a mass >= 0"):
+        Experiment("arrays", t, q, tau, -1.0)
+    (arm,) = load_robot_runs(_write_two_axes(tmp_path, t, q, tau), ("a", "b"))
+    with pytest.raises(DataError, match=r"two\.csv: 2 axes, an Experiment has one"):
+        Experiment.of_run(arm)
+
+
+def _write_two_axes(d, t, q, tau):
+    p = d / "two.csv"
+    _write_csv(p, ["t", "q1", "q2", "tau1", "tau2"], [t, q, q, tau, tau])
+    return p
+
+
 def test_unknown_extension_and_missing_file(tmp_path):
     with pytest.raises(DataError, match="no such file"):
         load_experiment(tmp_path / "none.csv")
@@ -112,8 +147,38 @@ def test_unknown_extension_and_missing_file(tmp_path):
     p.write_text("x")
     with pytest.raises(DataError, match="unknown file type"):
         load_experiment(p)
-    with pytest.raises(DataError, match="KEY=NAME"):
+    with pytest.raises(DataError, match="KEY=PATH"):
         parse_mapping("q")
+
+
+def test_one_map_parser_for_one_joint_and_a_robot(tmp_path):
+    """One ``--map`` parser: a single joint's keys are a robot's without the derivatives and
+    the per-axis keys; numbers become floats on both paths, a name stays a name; each path
+    keeps its error class, one line naming the entry or key and what was expected."""
+    line = ["t=rec.t,q=rec.q[:, 1]", "tau=vir,payload_kg=2,payload_arm_m=nan"]
+    one = parse_mapping(line)
+    assert one == {"t": "rec.t", "q": "rec.q[:, 1]", "tau": "vir", "payload_kg": 2.0,
+                   "payload_arm_m": "nan"}
+    assert parse_mapping(line, robot=True) == one
+    assert parse_mapping("dq=x,ddq=y,q_ref2=z", robot=True) == {"dq": "x", "ddq": "y",
+                                                                 "q_ref2": "z"}
+    for bad in ("dq=x", "q2=y"):
+        with pytest.raises(DataError, match=rf"^--map key '{bad[:-2]}': expected one of t, q, "
+                                            r"tau, q_ref, payload_kg, payload_arm_m$"):
+            parse_mapping(bad)
+    with pytest.raises(RobotIdentError, match=r"^--map key 'x': expected one of t, q, tau, "
+                                              r"q_ref, dq, ddq, payload_kg, payload_arm_m or a "
+                                              r"per-axis key such as q1, tau2, q_ref3$"):
+        parse_mapping("x=y", robot=True)
+    with pytest.raises(RobotIdentError, match=r"^--map entry 'q': expected KEY=PATH"):
+        parse_mapping("q=a, q", robot=True)
+    # a number where a signal's path is expected is refused when the file is read, per-axis too
+    t, q, tau = _arrays()
+    p = tmp_path / "x.csv"
+    _write_csv(p, ["t", "q", "tau"], [t, q, tau])
+    with pytest.raises(RobotIdentError, match=r"x\.csv: q1 must be a column/variable, not a "
+                                              r"constant"):
+        load_robot_runs(p, ("elbow",), mapping=parse_mapping("q1=3,tau1=tau", robot=True))
 
 
 def test_concat_marks_experiments(tmp_path):
@@ -220,8 +285,8 @@ def test_a_foreign_mat_file_reads_the_same_as_one_joint_and_as_a_one_joint_robot
                          "gtau": np.array([[35.15]])})
     e = load_experiment(p, mapping=parse_mapping("q=qm,tau=vir,payload_kg=2,payload_arm_m=0.5"),
                         gain="gtau")
-    (r,) = load_robot_runs(p, ("slide",), gains=[35.15], mapping=parse_robot_mapping(
-        "q=qm,tau=vir,payload_kg=2,payload_arm_m=0.5"))
+    (r,) = load_robot_runs(p, ("slide",), gains=[35.15], mapping=parse_mapping(
+        "q=qm,tau=vir,payload_kg=2,payload_arm_m=0.5", robot=True))
     np.testing.assert_array_equal(r.q[:, 0], e.q)
     np.testing.assert_array_equal(r.tau[:, 0], e.tau)
     assert (r.payload.mass, r.payload.arm_m) == (e.payload_mass, e.payload_arm) == (2.0, 0.5)

@@ -163,7 +163,7 @@ def test_a_joint_campaign_is_a_robot_with_one_moving_joint_without_loss(campaign
 
     r = campaigns["prismatic"]  # _PRISMATIC, read as a robot with one moving joint
     (j,) = r.joints
-    assert r.single_joint and r.robot_file == "" and r.moving == ("joint",)
+    assert r.robot_file == "" and r.moving == ("joint",)
     assert r.plant == "joint"
     assert (j.kind, j.limits.position, j.limits.max_velocity, j.limits.max_torque, j.kp, j.kd,
             j.key, j.drive) == ("prismatic", (-0.2, 0.3), 0.4, 900.0, 5000.0, 100.0,

@@ -20,10 +20,11 @@ import scipy.stats
 from test_robot_cli import ARM3, api_signals, run_cli
 from test_robot_fit import PAYLOADS, ROOT, _check_recovery, _signals, _simulate
 
+from ident.loaders import parse_mapping
 from ident.robot import RobotIdentError
 from ident.robot.base import PAYLOAD_NAMES, payload_base
 from ident.robot.estimate import RobotModel
-from ident.robot.loaders import load_robot_runs, parse_robot_mapping
+from ident.robot.loaders import load_robot_runs
 from ident.robot.payload import format_misfit, payload_misfit
 from ident.robot.regressor import RobotRegressor
 from ident.robot.signals import RobotPayloadData
@@ -238,8 +239,8 @@ def test_mat_payload_mass_from_map(tmp_path):
     assert load_robot_runs(f, joints, mapping=base)[0].payload.mass == 0.0
     assert load_robot_runs(f, joints, mapping={**base, "payload_kg": "7.5"})[0].payload.mass \
         == 7.5
-    run = load_robot_runs(f, joints, mapping=parse_robot_mapping(
-        "t=t,q=q,tau=tau,payload_kg=rec.load"))[0]
+    run = load_robot_runs(f, joints, mapping=parse_mapping(
+        "t=t,q=q,tau=tau,payload_kg=rec.load", robot=True))[0]
     assert run.payload.mass == 12.5 and not np.any(run.payload.com)
     with pytest.raises(RobotIdentError, match=r"run.mat: payload_kg '-3'"):
         load_robot_runs(f, joints, mapping={**base, "payload_kg": "-3"})

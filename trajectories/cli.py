@@ -60,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
                                                   optimise=not args.no_optimise)
     # a [joint] campaign's torques: its feed-forward model (its robot has no inertias),
     # without the friction for the quadrants of (dq, tau_out)
-    if rc.single_joint:
+    if rc.plant == "joint":
         a = assess_robot_campaign(played, regressor=dyn.regressor,
                                   inverse_dynamics=feedforward_dynamics(rc.joints),
                                   tau_out=feedforward_dynamics(rc.joints, friction=False))
@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
                                   inverse_dynamics=dyn.inverse_dynamics)
     if results:
         a = replace(a, optimised=results)
-    where = robot.source if not rc.single_joint else "its [joint] table, no robot file"
+    where = robot.source if rc.plant == "arm" else "its [joint] table, no robot file"
     print(f"robot {robot.name!r} ({where}): moving {', '.join(robot.moving)}; "
           f"regressor: {len(dyn.names)} columns (standard parameters, Ia, FC FV OFF per "
           f"joint)")

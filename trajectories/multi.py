@@ -675,7 +675,7 @@ def plan_robot_campaign(campaign: RobotCampaign, *,
         payload run's torque would exceed ``max_torque``; the message names the segment (and
         payload), the joint's table and the limit.
     """
-    if inverse_dynamics is None and campaign.single_joint:
+    if inverse_dynamics is None and campaign.plant == "joint":
         inverse_dynamics = feedforward_dynamics(campaign.joints)
     c = campaign
     plan = plan_robot(c.segments, c.moving, c.limits, c.start, c.cycle_s, name=c.name,

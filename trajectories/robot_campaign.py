@@ -394,11 +394,6 @@ class RobotCampaign:
         """
         return campaign_from_dict(raw, source)
 
-    @property
-    def single_joint(self) -> bool:
-        """True for a ``[joint]`` campaign read as a robot (no robot file, one joint)."""
-        return not self.robot_file
-
     def gains_kwargs(self, k: int = 0) -> dict[str, float]:
         """Keyword arguments for ``daq.protocol.control.ControllerGains(**kwargs)`` of moving
         joint ``k``: its gains and feed-forward model, the campaign's velocity cut-off."""

@@ -21,7 +21,6 @@ deterministically: ``jointid plan`` and ``jointid run`` play the same plan).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -71,7 +70,7 @@ def robot_for_campaign(campaign: RobotCampaign) -> Robot:
         Unreadable robot file, or a campaign joint the robot file does not have (one line
         naming the campaign, the key and the robot file).
     """
-    if campaign.single_joint:
+    if campaign.plant == "joint":
         return joint_robot(campaign)
     path = robot_file_path(campaign)
     robot = load_robot(path)
@@ -215,8 +214,3 @@ def prepare_robot_campaign(campaign: RobotCampaign, *, robot: Robot | None = Non
         campaign, results = optimise_campaign(campaign, dyn.regressor,
                                               max_evaluations=max_evaluations)
     return campaign, dyn, results
-
-
-def campaign_limits(campaign: RobotCampaign) -> Sequence[Any]:
-    """Per moving joint limits of the campaign (the ones the plan respects)."""
-    return campaign.limits

@@ -23,7 +23,6 @@ refinement exists yet.
 from __future__ import annotations
 
 import html
-import json
 import sys
 import time
 from dataclasses import dataclass
@@ -387,8 +386,3 @@ def _write_report(out: Path, campaign: RobotCampaign, rob: Any, assessment: Any,
     path = write_html(out / "report.html", f"jointid demo --robot: {rob.name}", sub, sections)
     (out / "summary.txt").write_text(summary + "\n", encoding="utf-8")
     return path
-
-
-def demo_json(out: Path) -> dict:
-    """The ``demo.json`` of a robot demo folder."""
-    return json.loads((out / "demo.json").read_text())

@@ -67,11 +67,9 @@ from daq.protocol.reader import LogReadError
 
 from ..chain import ChainSettings, RawExperiment, resolve_settings, run_chain
 from ..loaders import (
-    AXIS_KEY_RE,
     IRREGULAR_TOL,
     Q_UNITS,
     RawRobotRun,
-    map_entries,
     read_file,
 )
 from . import RobotIdentError
@@ -86,10 +84,7 @@ __all__ = [
     "chain_period",
     "preprocess_runs",
     "resolved_settings",
-    "parse_robot_mapping",
 ]
-
-_SIGNALS = ("t", "q", "tau", "q_ref", "dq", "ddq", "payload_kg", "payload_arm_m")
 
 
 @dataclass(frozen=True)
@@ -113,26 +108,6 @@ class RobotPreprocessing:
     trim: int | None = None
 
 
-def parse_robot_mapping(items: Sequence[str] | str | None) -> dict[str, str]:
-    """Parse ``--map`` entries ``KEY=PATH`` (KEY: t, q, tau, q_ref, dq, ddq, payload_kg,
-    payload_arm_m or q1, tau3...).
-
-    Commas inside brackets belong to a path and do not separate entries.
-    """
-    out: dict[str, str] = {}
-    for part in map_entries(items):
-        if "=" not in part:
-            raise RobotIdentError(f"--map entry {part!r}: expected KEY=PATH (e.g. q=rec.q)")
-        k, v = (x.strip() for x in part.split("=", 1))
-        if k not in _SIGNALS and not AXIS_KEY_RE.match(k):
-            raise RobotIdentError(
-                f"--map key {k!r}: expected one of {', '.join(_SIGNALS)} or a per-axis "
-                "key such as q1, tau2, q_ref3"
-            )
-        out[k] = v
-    return out
-
-
 # -- reading --------------------------------------------------------------------------------
 
 
@@ -149,7 +124,7 @@ def load_robot_runs(
     joints: Sequence[str],
     *,
     gains: Sequence[float] | None = None,
-    mapping: Mapping[str, str] | None = None,
+    mapping: Mapping[str, str | float] | None = None,
     q_unit: str | None = None,
 ) -> list[RawRobotRun]:
     """Read every file as one multi-axis experiment (no filtering yet).
@@ -164,7 +139,7 @@ def load_robot_runs(
         Joint-side torque per unit of the logged torque of each axis (the robot file's
         ``drive_gain``; CSV and MAT only -- MCAP torques are already joint-side N m).
     mapping : mapping or None
-        MAT/CSV ``--map`` entries (:func:`parse_robot_mapping`).
+        MAT/CSV ``--map`` entries (:func:`ident.loaders.parse_mapping` with ``robot=True``).
     q_unit : {"rad", "deg", "m", "mm"} or None
         Unit of q and q_ref in CSV/MAT files (converted to SI).
 
@@ -306,7 +281,7 @@ def load_robot_signals(
     joints: Sequence[str],
     *,
     gains: Sequence[float] | None = None,
-    mapping: Mapping[str, str] | None = None,
+    mapping: Mapping[str, str | float] | None = None,
     q_unit: str | None = None,
     preprocessing: RobotPreprocessing | None = None,
 ) -> RobotSignals:
