@@ -2,6 +2,7 @@
 docs/robot-identification.md, "Known limit: quadrants blended by the low-pass").
 
     python benchmarks/quadrant_blend.py ur10 LOGDIR      # jointid run of the UR10 demo campaign
+    python benchmarks/quadrant_blend.py ur10 LOGDIR --robot examples/robots/arm3.toml
     python benchmarks/quadrant_blend.py kuka             # ../shared KUKA recording A
 
 ``ur10``: LOGDIR holds the two payload logs of ``examples/campaign_ur10_demo.toml`` run on
@@ -84,8 +85,7 @@ def report(tag: str, m: RobotModel, params) -> None:
           f"{m.n_samples_.tolist()}\n    {pan}", flush=True)
 
 
-def ur10(logdir: Path) -> None:
-    robot_file = ROOT / "examples" / "robots" / "ur10.toml"
+def ur10(logdir: Path, robot_file: Path) -> None:
     files = sorted(logdir.glob("*.mcap"))
     if not files:
         sys.exit(f"{logdir}: no .mcap logs")
@@ -135,12 +135,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("case", choices=("ur10", "kuka"))
     ap.add_argument("logdir", nargs="?", type=Path)
+    ap.add_argument("--robot", type=Path, default=ROOT / "examples" / "robots" / "ur10.toml",
+                    help="robot file of the simulated logs (the first joint's terms are shown)")
     a = ap.parse_args()
     warnings.simplefilter("ignore")
     if a.case == "ur10":
         if a.logdir is None:
             ap.error("ur10 needs LOGDIR")
-        ur10(a.logdir)
+        ur10(a.logdir, a.robot)
     else:
         kuka()
 

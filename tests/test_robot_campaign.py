@@ -307,6 +307,25 @@ def test_assessment_is_what_jointid_plan_prints():
         bare.plan.summary())
 
 
+def test_a_joint_cruising_at_zero_load_is_named_by_the_plan():
+    """The base yaw carries no gravity: its trapezoid alone cruises at zero output torque,
+    where the paper model's quadrant is decided by noise; the plan names it. Multi-sines of
+    every joint accelerate it all the time: no note."""
+    robot = ur_model.ur10(3)
+    c = campaign_from_dict(raw_robot3(), "campaign_robot3.toml")
+    yaw = replace(c, segments=(c.segments[2],))
+    assert isinstance(yaw.segments[0], TrapezoidSweep) and yaw.segments[0].joint == "j1"
+    a = assess_robot_campaign(yaw, regressor=robot.regressor,
+                              inverse_dynamics=robot.inverse_dynamics_payload)
+    flagged = a.zero_load_joints()
+    assert list(flagged) == ["j1"] and flagged["j1"] > 0.2
+    assert "note: j1: " in str(a) and "at zero output torque" in str(a)
+    ms = replace(c, segments=c.segments[3:4])
+    b = assess_robot_campaign(ms, regressor=robot.regressor,
+                              inverse_dynamics=robot.inverse_dynamics_payload)
+    assert b.zero_load_joints() == {} and "note: " not in str(b)
+
+
 def test_whole_plan_objective_predicts_the_plans_condition_number():
     """With the other segments as background, the optimiser's condition number is the one
     quality() gives for the planned campaign, before and after the optimisation."""
