@@ -21,7 +21,8 @@ clock unless said, i.e. simulated time):
 ``model``
     The identified model: ``jointid run`` of the campaign on the simulated arm (all its
     payloads), ``jointid fit --robot`` (its robot file; both models, consistent estimate,
-    ``--no-prune``: a monitor wants the best predictor, docs/monitoring.md),
+    ``--no-prune``: a monitor wants the best predictor, docs/monitoring.md; ``--prune``: the
+    fit's default pruning),
     ``jointid export-model`` (paper model) -> DIR/model.
 ``calibrate``
     The validation run: the campaign with another multi-sine (seed 3, or the next free one
@@ -192,7 +193,8 @@ def stage_model(work: Path) -> None:
                     "--overwrite"], check=True)
     subprocess.run([*jid, "fit", "--robot", _robot_file(src),
                     *map(str, sorted(logs.glob("*.mcap"))), "--model", "both", "--json",
-                    str(fit), "--no-consistency", "--consistent", "--no-prune"], check=True,
+                    str(fit), "--no-consistency", "--consistent",
+                    *(() if SOURCE.get("prune") else ("--no-prune",))], check=True,
                    stdout=subprocess.DEVNULL)
     subprocess.run([*jid, "export-model", str(fit), "--model", "paper", "-o", str(model)],
                    check=True)
@@ -606,6 +608,9 @@ def main() -> None:
     ap.add_argument("--campaign", type=Path, default=DEMO,
                     help="robot campaign the stages derive theirs from (default: "
                     "examples/campaign_robot3_demo.toml)")
+    ap.add_argument("--prune", action="store_true",
+                    help="model stage: the fit's default pruning (held at 0: the paper "
+                         "model's friction terms above 30 %% relative sigma)")
     ap.add_argument("--false-minutes", type=float, default=10.0,
                     help="false stage: at least this long [min] over all payloads")
     ap.add_argument("--false-periods", type=int, default=None,
@@ -621,6 +626,7 @@ def main() -> None:
                                                   "oracle", "paced", "report"))
     a = ap.parse_args()
     SOURCE["campaign"] = a.campaign.resolve()
+    SOURCE["prune"] = a.prune
     a.work.mkdir(parents=True, exist_ok=True)
     store = a.work / "bench_monitor.json"
     res = json.loads(store.read_text()) if store.is_file() else {}
