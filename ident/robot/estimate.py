@@ -10,6 +10,11 @@ Model (eq. 8-10 on every joint j, base parameters theta shared by all joints)::
     usual:  tau_j = W_j theta + p_j + FC_j sign(dq_j) + FV_j dq_j + OFF_j          (eq. 5, 8)
     paper:  eq. 30 with tau_out,j = W_j theta + p_j       (see :mod:`ident.robot.paper`)
 
+The paper model is bilinear in (theta, per-joint a, b, c, d) by default; ``form="products"``
+identifies instead eq. 42's free products per joint (a_m theta_i, b_m theta_i, ... as
+independent linear parameters, no theta: the single-joint model on each joint, linear
+least squares; :mod:`ident.robot.paper`, "Products form").
+
 W_j is the joint's row of the base regressor (rigid body + rotor inertias, ``RobotRegressor``
 reduced by ``BaseParameters.reduce``), p_j the known payload torque of the sample's experiment
 (subtracted as the paper's eq. 34 does with the weighed mass).
@@ -75,6 +80,7 @@ from .paper import (
     products_names,
     products_size,
     products_start,
+    require_theta,
     usual_coefficients,
 )
 from .quadrants import QuadrantStore
@@ -184,6 +190,21 @@ class RobotModel:
     payload_ratio : bool
         Identify the payload ratio M_ae / M_aw (``Ma_ratio``, eq. 35) instead of taking the
         payload torque as known; needs an experiment with a payload.
+    form : {"bilinear", "products"}
+        Paper model only. ``"bilinear"`` (default): theta shared by every joint times the
+        per-joint a, b (p_b + 10 k parameters, Gauss-Newton). ``"products"``: eq. 42's
+        products free per joint, sum_j (4 (p_j + 1) + 6) parameters named after the
+        single-joint ones with the joint number (``a_m_ZZ3R_3``, ``b_m_MX3_3``, ...,
+        ``a_m3`` ... for the payload torque, ``c_m3`` ... ``OFF3``;
+        :func:`~ident.robot.paper.products_names`), one linear least squares (one step);
+        on a one-joint robot the single-joint paper model. No base parameters are
+        identified (``load_torque``, the consistency check, the uncertainty assessment and
+        the refit refuse it). With ``quadrant="model"`` the quadrants are decided ONCE, by
+        the usual fit's theta on every row (or ``quadrant_theta``): there is no theta of its
+        own to re-decide them with (the single-joint fit decides them by its first usual
+        fit too). A joint whose payload torque is zero on every row has its payload
+        products fixed at 0 (``fixed_``); ``payload_ratio`` is refused (the payload's
+        products are free already).
     payload_params : bool
         The payload's mass known, its first moments and inertia identified (module doc;
         ``payload_base_``, ``payload_masses_``); needs experiments without a payload to
@@ -199,7 +220,11 @@ class RobotModel:
     ------------------------------
     names_ : tuple of str
         Parameter names: base parameters, then per joint FC/FV/OFF (usual) or
-        a_m..OFF (paper), suffixed with the joint's number.
+        a_m..OFF (paper), suffixed with the joint's number; ``form="products"``: per joint
+        its products block only (``form`` above).
+    theta_names_ : tuple of str
+        Names of theta's entries (base parameters, ``Ma_ratio``, payload parameters): the
+        first entries of ``names_`` except in the products form.
     coef_, std_ : ndarray (b,)
         Estimate and standard deviations (eq. 15).
     rel_std_ : ndarray (b,)
@@ -216,7 +241,8 @@ class RobotModel:
     n_samples_ : ndarray (k,)
         Rows used per joint.
     fixed_ : dict
-        Parameters held fixed (paper model without payload torque).
+        Parameters held fixed (paper model without payload torque; products form: the
+        payload products of a joint without payload torque, at 0).
     n_passes_, n_iter_ : int
         Data passes (the start pass counted as one, even on every ``start_stride_``-th row)
         and Gauss-Newton iterations of the final fit.
@@ -230,7 +256,8 @@ class RobotModel:
     quadrant_from_ : ndarray or None
         The theta whose sign(tau_out_hat dq) decided the final quadrants (``quadrant="model"``
         of the paper model), else None: :mod:`ident.robot.uncertainty` rebuilds the moments of
-        parts of the data on the same quadrants.
+        parts of the data on the same quadrants; the products form's :meth:`predict` decides
+        with it.
     """
 
     def __init__(
@@ -1227,9 +1254,7 @@ class RobotModel:
         """tau_out_hat (n, k) [N m]: the rigid-body, rotor and payload torque of the fitted
         model, W_j theta + p_j (the load of eq. 17-30, before friction), on ``signals``."""
         passes = self._fitted_rows(signals, "load_torque")
-        if not self._theta_x:
-            raise RobotIdentError("RobotModel.load_torque: form='products' identifies no "
-                                  "base parameters (only their products with a, b: eq. 42)")
+        require_theta(self, "RobotModel.load_torque")
         out = np.full(signals.tau.shape, np.nan)
         theta = self.coef_[:self.n_theta_]
         for r, j, cols, WjT, pj, _dq, _tau, _sg in passes:

@@ -34,17 +34,33 @@ The scale of theta against (a, b) is fixed by the known payload torques (p_j ent
 coefficient a, not a free ratio) when they are not in the span of the base columns: without a
 payload, or with one and the same payload in every experiment, only products are identifiable
 and the estimator fixes a_m of the first joint to 1 (reported in ``fixed_``).
+
+Products form
+-------------
+``RobotModel(model="paper", form="products")`` drops the rank-one constraint: eq. 42
+generalised to every joint, linear in its parameters, no theta shared between the joints, no
+gauge (:func:`products_coefficients`). Joint j's coefficient of each load column w_i -- its
+base columns, then its payload torque p_j -- is alpha_i + E beta_i in the motor quadrant and
+alpha_i - E beta_i in the generator one, all free; then c + E d of each quadrant on
+sign(dq_j), FV_j on dq_j, OFF_j on 1: 4 (p_j + 1) + 6 parameters per joint
+(:func:`products_names`: the single-joint ``LoadDependent`` names ``a_m_<column>`` ... with
+the joint number appended, ``a_m_MX3_3``; the payload torque's products ``a_m{j}``, ...,
+and ``c_m{j}`` ... ``OFF{j}``, as the bilinear form names them). On a one-joint robot this
+is the single-joint ``new_model`` (tests/test_robot_fit.py, tests/test_robot_design.py).
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
+from . import RobotIdentError
 from .moments import IDQ, IP, ISG, N_EXTRA, ONE
 
 __all__ = ["PAPER_BLOCK", "USUAL_BLOCK", "PRODUCT_PREFIXES", "paper_coefficients",
            "usual_coefficients", "products_coefficients", "products_names", "products_start",
-           "products_size", "paper_start", "batch_coefficients"]
+           "products_size", "paper_start", "batch_coefficients", "require_theta"]
 
 #: Per-joint parameter prefixes of the paper model (ROBOT_FORMAT order).
 PAPER_BLOCK = ("a_m", "b_m", "a_g", "b_g", "c_m", "d_m", "c_g", "d_g", "FV", "OFF")
@@ -191,6 +207,16 @@ def products_start(theta: np.ndarray, usual_blk: np.ndarray) -> np.ndarray:
     out[2 * nl:4 * nl:2] = alpha
     out[4 * nl:] = (fc, 0.0, fc, 0.0, fv, off)
     return out
+
+
+def require_theta(model: Any, what: str) -> None:
+    """Refuse, in one line, what needs a fitted model's base parameters when the model is
+    the paper model's products form (``form="products"``: only their products with a, b are
+    identified, eq. 42)."""
+    if getattr(model, "form", "bilinear") == "products":
+        raise RobotIdentError(f"{what}: needs the base parameters, and the paper model's "
+                              "form='products' identifies only their products with a, b "
+                              "(eq. 42); fit form='bilinear'")
 
 
 def _diag(n: int) -> tuple[np.ndarray, np.ndarray]:
