@@ -29,6 +29,7 @@ from example_campaign import simulate_example_campaign
 from one_joint_products import products_as_single
 
 from ident.estimate import fit_least_squares
+from ident.estimators import dependent_columns
 from ident.loaders import concat, make_experiment
 from ident.models import new_model, usual_model
 from ident.preprocess import TORQUE_DELAY, build_design
@@ -36,7 +37,7 @@ from ident.robot import RobotIdentError
 from ident.robot.base import base_parameters, lever_arm_payload, single_joint_map
 from ident.robot.consistency import check_consistency
 from ident.robot.design import design_runs, resolve_design
-from ident.robot.estimate import RobotModel
+from ident.robot.estimate import RobotModel, _dependent
 from ident.robot.loaders import RawRobotRun
 from ident.robot.regressor import RobotRegressor
 from ident.robot.signals import RobotPayloadData, RobotSignals
@@ -377,6 +378,7 @@ def test_products_form_hyper_parameter():
     m = RobotModel(reg, "paper", form="products")
     assert m.get_params()["form"] == "products"
     assert RobotModel(reg, "paper").get_params()["form"] == "bilinear"  # the default
+    assert RobotModel(reg, "paper").set_params(form="products").get_params() == m.get_params()
     assert "form='products'" in repr(m)
     for kw, match in (({"model": "paper", "form": "linear"}, r"RobotModel\.form: expected one"),
                       ({"model": "usual", "form": "products"}, r"needs? model='paper'|form of "
@@ -424,6 +426,38 @@ def test_arm3_products_form_fits_at_least_as_well_as_bilinear():
     ls = RobotModel(reg, "paper", "ls", base=base, quadrant_theta=theta,
                     form="products").fit(sigs)
     np.testing.assert_allclose(ls.coef_, prod.coef_, rtol=1e-7, atol=1e-9)
+
+
+def test_products_rank_rule_is_the_single_joint_one():
+    """The products form leaves out (fixes at 0) the products of the load columns the
+    single-joint rank rule (``dependent_columns``: pivoted QR of the unit-norm columns)
+    leaves out, decided from their Gram matrix (the moments) by a pivoted Cholesky."""
+    rng = np.random.default_rng(7)
+    W = rng.standard_normal((400, 6)) * [1.0, 1e3, 1e-2, 1.0, 5.0, 1.0]
+    W[:, 3] = 2.0 * W[:, 0] - 1e-3 * W[:, 1]  # dependent (the scales differ)
+    W[:, 5] = 0.0  # zero (no payload)
+    names = [f"c{i}" for i in range(6)]
+    lost = {n for n, _ in dependent_columns(W[:, :5], names[:5])} | {"c5"}
+    assert {names[i] for i in _dependent(W.T @ W)} == lost and len(lost) == 2
+
+
+@pytest.mark.slow
+def test_ur10_products_form_leaves_out_dependent_columns(ur10):
+    """UR10: on the shoulder pan's rows some base columns are combinations of the others
+    (separable only through the other joints' rows, where the bilinear form's shared theta
+    takes them); the products form fixes their products at 0 and fits every joint at least
+    as well as the bilinear form on the same quadrants (true theta)."""
+    params, reg, base, runs = ur10
+    truth = params.truth(None)
+    sigs = _signals(params, reg, runs, 0)
+    usual = RobotModel(reg, "usual", base=base).fit(sigs)
+    theta = usual.truth_vector(truth)[:usual.n_theta_]
+    bil = RobotModel(reg, "paper", "wls", base=base, quadrant_theta=theta).fit(sigs)
+    prod = RobotModel(reg, "paper", "wls", base=base, quadrant_theta=theta,
+                      form="products").fit(sigs)
+    assert prod.fixed_ and all(n.endswith("_1") for n in prod.fixed_)
+    for joint in reg.joints:
+        assert prod.rel_error_[joint] <= bil.rel_error_[joint] * (1 + 1e-12), joint
 
 
 # --------------------------------------------------------------------------- RX130L joint 3

@@ -66,6 +66,7 @@ from trajectories.friction import DEFAULT_Q_S, stribeck_exp
 
 from .. import DataError
 from ..estimators import ESTIMATORS, RCOND, Estimator, RankDeficientError
+from ..hyperparams import HyperParameters
 from ..vocab import renamed_keywords
 from . import RobotIdentError
 from .base import base_parameters, payload_base, placed_payload
@@ -140,6 +141,33 @@ class _Unidentifiable(RobotIdentError):
         self.names, self.lo, self.hi, self.zero = names, lo, hi, zero
 
 
+def _dependent(G: np.ndarray, tol: float = RCOND) -> np.ndarray:
+    """Columns left out by the single-joint rank rule (:func:`ident.estimators.dependent_columns`:
+    column-pivoted QR of the unit-norm columns, kept while |R_kk| > tol |R_00|) from their
+    Gram matrix G = W^T W: the same pivots by a pivoted Cholesky of the scaled G. Zero columns
+    included."""
+    d = np.sqrt(np.clip(np.diagonal(G), 0.0, None))
+    live = np.flatnonzero(d > 0)
+    out = [int(i) for i in np.flatnonzero(~(d > 0))]
+    if not live.size:
+        return np.array(out, dtype=int)
+    Gs = G[np.ix_(live, live)] / d[live, None] / d[None, live]
+    n = live.size
+    L = np.zeros((n, n))
+    r = np.diagonal(Gs).copy()
+    left = np.ones(n, dtype=bool)
+    for k in range(n):
+        i = int(np.argmax(np.where(left, r, -np.inf)))
+        if not np.sqrt(max(r[i], 0.0)) > tol:  # |R_00| = 1: unit columns
+            break
+        col = (Gs[:, i] - L[:, :k] @ L[i, :k]) / np.sqrt(r[i])
+        L[:, k] = col
+        r = r - col**2
+        left[i] = False
+    out += [int(live[i]) for i in np.flatnonzero(left)]
+    return np.array(sorted(out), dtype=int)
+
+
 def _ref_acceleration(t: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
     """d^2 q_ref / dt^2 (n, k) by central differences (np.gradient twice)."""
     if t.size < 3:
@@ -148,7 +176,7 @@ def _ref_acceleration(t: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
 
 
 
-class RobotModel:
+class RobotModel(HyperParameters):
     """Identification of an n-dof robot with the usual or the paper friction (module doc).
 
     Parameters
@@ -202,9 +230,10 @@ class RobotModel:
         the refit refuse it). With ``quadrant="model"`` the quadrants are decided ONCE, by
         the usual fit's theta on every row (or ``quadrant_theta``): there is no theta of its
         own to re-decide them with (the single-joint fit decides them by its first usual
-        fit too). A joint whose payload torque is zero on every row has its payload
-        products fixed at 0 (``fixed_``); ``payload_ratio`` is refused (the payload's
-        products are free already).
+        fit too). The products of a load column that is zero on a joint's rows (no payload
+        torque) or a combination of its other columns there (the single-joint rank rule)
+        are fixed at 0 (``fixed_``); ``payload_ratio`` is refused (the payload's products
+        are free already).
     payload_params : bool
         The payload's mass known, its first moments and inertia identified (module doc;
         ``payload_base_``, ``payload_masses_``); needs experiments without a payload to
@@ -242,7 +271,7 @@ class RobotModel:
         Rows used per joint.
     fixed_ : dict
         Parameters held fixed (paper model without payload torque; products form: the
-        payload products of a joint without payload torque, at 0).
+        products of a joint's load columns that are zero or dependent on its rows, at 0).
     n_passes_, n_iter_ : int
         Data passes (the start pass counted as one, even on every ``start_stride_``-th row)
         and Gauss-Newton iterations of the final fit.
@@ -300,7 +329,8 @@ class RobotModel:
         self.form = form
 
     def get_params(self, deep: bool = False) -> dict[str, Any]:
-        """Hyper-parameters (scikit-learn convention)."""
+        """Hyper-parameters (scikit-learn convention; ``set_params`` sets them by name,
+        :class:`~ident.hyperparams.HyperParameters`)."""
         return {n: getattr(self, n) for n in (
             "regressor", "model", "method", "q_s", "base", "quadrant", "dq_min", "chunk_size",
             "max_iter", "tol", "max_passes", "payload_ratio", "quadrant_theta",
@@ -994,8 +1024,10 @@ class RobotModel:
         if one_sign:
             fixes.append(f"a trajectory on which the load of {', '.join(one_sign)} changes "
                          "sign (c_m, c_g and the offset are not separable otherwise)")
-        if self._theta_x and any(n.startswith(("a_m", "a_g", "b_m", "b_g"))
-                                 for n in e.names) or not fixes:
+        if not self._theta_x and not fixes:
+            fixes.append("a trajectory that excites these columns on the joint's rows")
+        elif self._theta_x and any(n.startswith(("a_m", "a_g", "b_m", "b_g"))
+                                   for n in e.names) or not fixes:
             fixes.append("experiments with different payloads (they fix the scale of the "
                          "base parameters against a_m, a_g)")
         if self.quadrant == "measured":
@@ -1127,9 +1159,11 @@ class RobotModel:
         linear least squares (or IV, WLS) on the moments of the final quadrants. With
         ``quadrant="model"`` they are decided once, by the usual fit's theta (or
         ``quadrant_theta``): the products form has no theta of its own to re-decide them
-        with. A joint whose payload torque is zero on every row (no payload, no known
-        rotor) has its payload products fixed at 0 (``fixed_``), as the single-joint model
-        leaves out its payload term."""
+        with. The products of a load column that is zero on every row of the joint (its
+        payload torque without payload or known rotor, a payload parameter not acting on
+        it) or a linear combination of its other load columns there (UR10 shoulder pan:
+        MX2 and XY2) are fixed at 0 (``fixed_``): the single-joint rank rule
+        (:func:`~ident.estimators.dependent_columns`, pivoted on the scaled Gram matrix)."""
         pb, k, nbu = self.n_theta_, len(self.joints_), len(USUAL_BLOCK)
         model_q = self.quadrant == "model"
         theta_q = self.quadrant_theta_.copy() if self.quadrant_theta_ is not None else xu[:pb]
@@ -1144,12 +1178,13 @@ class RobotModel:
                             for j, c in enumerate(self.cols_)])
         free = np.ones(x.size, dtype=bool)
         for j, m in enumerate(moms):
-            ip = m.nv - N_EXTRA + IP
-            if not m.vv[0, 0, ip, ip] + m.vv[1, 0, ip, ip] > 0:  # no payload torque
-                nl = len(self.cols_[j]) + 1
-                for i in (2 * nl - 2, 2 * nl - 1, 4 * nl - 2, 4 * nl - 1):
-                    free[self._bstart[j] + i] = False
-                    x[self._bstart[j] + i] = 0.0
+            nl = len(self.cols_[j]) + 1
+            # the load columns (theta's, then p) on the joint's rows
+            for c in _dependent(m.vv[0, 0, :nl, :nl] + m.vv[1, 0, :nl, :nl]):
+                i = self._bstart[j] + np.array([2 * c, 2 * c + 1, 2 * nl + 2 * c,
+                                                2 * nl + 2 * c + 1])
+                free[i] = False
+                x[i] = 0.0
         self.fixed_ = {self.names_[i]: 0.0 for i in np.flatnonzero(~free)}
         self.quadrant_rows_ = self._quadrant_rows(moms)
         try:
