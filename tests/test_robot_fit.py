@@ -26,8 +26,10 @@ import numpy as np
 import pytest
 import scipy.stats
 from example_campaign import simulate_example_campaign
+from one_joint_products import products_as_single
 
 from ident.estimate import fit_least_squares
+from ident.estimators import dependent_columns
 from ident.loaders import concat, make_experiment
 from ident.models import new_model, usual_model
 from ident.preprocess import TORQUE_DELAY, build_design
@@ -35,11 +37,12 @@ from ident.robot import RobotIdentError
 from ident.robot.base import base_parameters, lever_arm_payload, single_joint_map
 from ident.robot.consistency import check_consistency
 from ident.robot.design import design_runs, resolve_design
-from ident.robot.estimate import RobotModel
+from ident.robot.estimate import RobotModel, _dependent
 from ident.robot.loaders import RawRobotRun
 from ident.robot.regressor import RobotRegressor
 from ident.robot.signals import RobotPayloadData, RobotSignals
 from ident.robot.tables import format_table_iii, table_iii
+from ident.robot.uncertainty import assess
 from ident.signals import Signals
 from sim_drivers.arm import ArmGains, ArmParams, Payload, model_reference, simulate_arm
 from trajectories.robot import load_robot
@@ -263,10 +266,10 @@ def test_consistency_report(arm3_usual):
 
 
 # --------------------------------------------------------------------------- one joint
-def test_one_joint_paper_model_matches_single_joint_eq42():
-    """RX130L joint 3 alone: the bilinear n-dof estimate and the single-joint linear
-    eq. 42 (products a_m J, b_m J, ...) agree -- exactly on exact data, within the
-    standard deviations with noise. Same samples, same q_s, quadrant sign(tau dq) (eq. 26)."""
+def _one_joint_eq30():
+    """RX130L joint 3 alone moving on a sum of sines through the gravity sign change, its
+    torque by eq. 30 (no payload) outside the stiction band: (reg, base, smap, chi_b, f, q_s,
+    rng, t, q, dq, ddq, tau0), rng to draw the noise from."""
     robot = load_robot(ROOT / "examples" / "robots" / "rx130l.toml")
     reg = RobotRegressor(robot)
     base = base_parameters(reg)
@@ -292,7 +295,15 @@ def test_one_joint_paper_model_matches_single_joint_eq42():
             + (pp * (f["c_m"] + f["d_m"] * e) + pm * (f["c_g"] + f["d_g"] * e)) * np.sign(dq)
             + f["FV"] * dq + f["OFF"])
     keep = (np.sign(tau0 * dq) == s) & (np.abs(dq) > 1e-3)  # outside the stiction band
-    t, q, dq, ddq, tau0 = t[keep], q[keep], dq[keep], ddq[keep], tau0[keep]
+    return (reg, base, smap, chi_b, f, q_s, rng, t[keep], q[keep], dq[keep], ddq[keep],
+            tau0[keep])
+
+
+def test_one_joint_paper_model_matches_single_joint_eq42():
+    """RX130L joint 3 alone: the bilinear n-dof estimate and the single-joint linear
+    eq. 42 (products a_m J, b_m J, ...) agree -- exactly on exact data, within the
+    standard deviations with noise. Same samples, same q_s, quadrant sign(tau dq) (eq. 26)."""
+    reg, base, smap, chi_b, f, q_s, rng, t, q, dq, ddq, tau0 = _one_joint_eq30()
     sj = new_model(q_s, revolute=True, payload=False)
     for noise in (0.0, 1.0):
         tau = tau0 + noise * rng.standard_normal(tau0.shape)
@@ -324,6 +335,129 @@ def test_one_joint_paper_model_matches_single_joint_eq42():
                 assert v == pytest.approx(r[n], rel=1e-7, abs=1e-7 * max(1, abs(r[n]))), n
             else:
                 assert abs(v - r[n]) <= 3 * rs[n] + 1e-9, (n, v, r[n], rs[n])
+
+
+def test_one_joint_products_form_is_single_joint_eq42():
+    """The products form (``form="products"``) on a one-joint robot IS the single-joint
+    eq. 42: same samples, same quadrant (sign(tau dq), eq. 26), same q_s, so the same linear
+    least squares -- values, standard deviations (eq. 15) and relative error to 1e-8, with
+    noise as without. No payload: the payload torque's products are fixed at 0 (the
+    single-joint model leaves its payload term out)."""
+    reg, base, smap, chi_b, f, q_s, rng, t, q, dq, ddq, tau0 = _one_joint_eq30()
+    sj = new_model(q_s, revolute=True, payload=False)
+    for noise in (0.0, 1.0):
+        tau = tau0 + noise * rng.standard_normal(tau0.shape)
+        sig1 = Signals(t=t, q=q, dq=dq, ddq=ddq, tau=tau, payload_mass=np.zeros_like(t),
+                       payload_arm=np.zeros_like(t), experiment=np.zeros(t.size, int))
+        ref = fit_least_squares(sj.columns(sig1), tau, sj.names(), eliminate=False)
+        m = RobotModel(reg, "paper", q_s=q_s, base=base, quadrant="measured",
+                       form="products").fit(
+            RobotSignals(t=t, q=q[:, None], dq=dq[:, None], ddq=ddq[:, None],
+                         tau=tau[:, None], joints=reg.joints))
+        assert m.fixed_ == {"a_m3": 0.0, "b_m3": 0.0, "a_g3": 0.0, "b_g3": 0.0}
+        assert len(m.names_) == 4 * (len(m.cols_[0]) + 1) + 6
+        ours, ours_std = products_as_single(m, smap)
+        assert set(ours) == set(ref.names)
+        for n, v, sd in zip(ref.names, ref.chi, ref.std, strict=True):
+            assert ours[n] == pytest.approx(v, rel=1e-8, abs=1e-10), n
+            if noise:  # (exact data: both deviations are rounding)
+                assert ours_std[n] == pytest.approx(sd, rel=1e-8), n
+        if noise:
+            assert m.rel_error_["j3"] == pytest.approx(ref.rel_error, rel=1e-8)
+        if noise == 0:  # exact data: the true products
+            std = dict(zip(reg.standard_names, reg.standard_values(), strict=True))
+            tv = m.truth_vector({**std, **{f"{p}3": v for p, v in f.items()}})
+            free = ~np.isin(np.array(m.names_), list(m.fixed_))
+            np.testing.assert_allclose(m.coef_[free], tv[free], rtol=1e-6, atol=1e-6)
+
+
+def test_products_form_hyper_parameter():
+    reg, base, _smap, _chi, _f, q_s, _rng, t, q, dq, ddq, tau0 = _one_joint_eq30()
+    sig = RobotSignals(t=t, q=q[:, None], dq=dq[:, None], ddq=ddq[:, None],
+                       tau=tau0[:, None], joints=reg.joints)
+    m = RobotModel(reg, "paper", form="products")
+    assert m.get_params()["form"] == "products"
+    assert RobotModel(reg, "paper").get_params()["form"] == "bilinear"  # the default
+    assert RobotModel(reg, "paper").set_params(form="products").get_params() == m.get_params()
+    assert "form='products'" in repr(m)
+    for kw, match in (({"model": "paper", "form": "linear"}, r"RobotModel\.form: expected one"),
+                      ({"model": "usual", "form": "products"}, r"needs? model='paper'|form of "
+                       "the paper model"),
+                      ({"model": "paper", "form": "products", "payload_ratio": True},
+                       "RobotModel.payload_ratio: form='products'")):
+        with pytest.raises(RobotIdentError, match=match) as err:
+            RobotModel(reg, q_s=q_s, base=base, **kw).fit(sig)
+        assert "\n" not in str(err.value)
+    fitted = RobotModel(reg, "paper", q_s=q_s, base=base, form="products").fit(sig)
+    # what needs the base parameters refuses the products form in one line
+    for call in (fitted.load_torque, lambda x: check_consistency(fitted),
+                 lambda x: assess(fitted, x, n_blocks=0, iv=False)):
+        with pytest.raises(RobotIdentError, match="form='products' identifies only their "
+                           "products") as err:
+            call(sig)
+        assert "\n" not in str(err.value)
+    # the model quadrants are decided once, by the usual fit's theta
+    assert fitted.n_passes_ == 2 and fitted.quadrant_from_ is not None
+    assert not hasattr(fitted, "quadrant_changes_") or fitted.quadrant_changes_ == []
+    np.testing.assert_allclose(fitted.predict(sig)[:, 0], tau0 - fitted.residual(sig)[:, 0])
+
+
+def test_arm3_products_form_fits_at_least_as_well_as_bilinear():
+    """arm3, short data (8 s per payload): on the same rows and quadrants (both decided once
+    by the simulator's true theta, ``quadrant_theta``) the products form -- the bilinear
+    model without its rank-one constraint, sum_j (4 (p_j + 1) + 6) = 162 parameters against
+    p_b + 10 k = 46 -- has a per-joint relative error <= the bilinear form's, recovers the
+    true products within the criterion of the module doc (IDIM-WLS: per-joint sigma), and its
+    estimate does not depend on the joints' weights (one linear least squares per joint:
+    LS and WLS agree)."""
+    params, reg, base, runs = _simulate("arm3", duration_s=8.0, seed=1)
+    truth = params.truth(None)
+    sigs = _signals(params, reg, runs, 0)
+    usual = RobotModel(reg, "usual", base=base).fit(sigs)
+    theta = usual.truth_vector(truth)[:usual.n_theta_]
+    bil = RobotModel(reg, "paper", "wls", base=base, quadrant_theta=theta).fit(sigs)
+    prod = RobotModel(reg, "paper", "wls", base=base, quadrant_theta=theta,
+                      form="products").fit(sigs)
+    assert len(bil.names_) == 46 and len(prod.names_) == 162 and prod.fixed_ == {}
+    np.testing.assert_array_equal(prod.n_samples_, bil.n_samples_)
+    for joint in reg.joints:
+        assert prod.rel_error_[joint] <= bil.rel_error_[joint] * (1 + 1e-12), joint
+    _check_recovery([prod], truth)
+    ls = RobotModel(reg, "paper", "ls", base=base, quadrant_theta=theta,
+                    form="products").fit(sigs)
+    np.testing.assert_allclose(ls.coef_, prod.coef_, rtol=1e-7, atol=1e-9)
+
+
+def test_products_rank_rule_is_the_single_joint_one():
+    """The products form leaves out (fixes at 0) the products of the load columns the
+    single-joint rank rule (``dependent_columns``: pivoted QR of the unit-norm columns)
+    leaves out, decided from their Gram matrix (the moments) by a pivoted Cholesky."""
+    rng = np.random.default_rng(7)
+    W = rng.standard_normal((400, 6)) * [1.0, 1e3, 1e-2, 1.0, 5.0, 1.0]
+    W[:, 3] = 2.0 * W[:, 0] - 1e-3 * W[:, 1]  # dependent (the scales differ)
+    W[:, 5] = 0.0  # zero (no payload)
+    names = [f"c{i}" for i in range(6)]
+    lost = {n for n, _ in dependent_columns(W[:, :5], names[:5])} | {"c5"}
+    assert {names[i] for i in _dependent(W.T @ W)} == lost and len(lost) == 2
+
+
+@pytest.mark.slow
+def test_ur10_products_form_leaves_out_dependent_columns(ur10):
+    """UR10: on the shoulder pan's rows some base columns are combinations of the others
+    (separable only through the other joints' rows, where the bilinear form's shared theta
+    takes them); the products form fixes their products at 0 and fits every joint at least
+    as well as the bilinear form on the same quadrants (true theta)."""
+    params, reg, base, runs = ur10
+    truth = params.truth(None)
+    sigs = _signals(params, reg, runs, 0)
+    usual = RobotModel(reg, "usual", base=base).fit(sigs)
+    theta = usual.truth_vector(truth)[:usual.n_theta_]
+    bil = RobotModel(reg, "paper", "wls", base=base, quadrant_theta=theta).fit(sigs)
+    prod = RobotModel(reg, "paper", "wls", base=base, quadrant_theta=theta,
+                      form="products").fit(sigs)
+    assert prod.fixed_ and all(n.endswith("_1") for n in prod.fixed_)
+    for joint in reg.joints:
+        assert prod.rel_error_[joint] <= bil.rel_error_[joint] * (1 + 1e-12), joint
 
 
 # --------------------------------------------------------------------------- RX130L joint 3

@@ -37,6 +37,7 @@ import scipy.stats
 
 from . import RobotIdentError
 from .consistent_fit import fit_consistent
+from .paper import require_theta
 
 __all__ = ["ConsistencyReport", "check_consistency"]
 
@@ -170,6 +171,7 @@ def check_consistency(model: Any, *, feasibility: bool = True, starts: int = 3,
     if method not in ("lmi", "cholesky"):
         raise RobotIdentError(f"check_consistency: method {method!r}: expected 'lmi' or "
                               "'cholesky'")
+    require_theta(model, "check_consistency")
     rep = ConsistencyReport()
     base = model.base_
     pb = len(base.names)

@@ -55,6 +55,7 @@ import scipy.linalg
 import scipy.stats
 
 from . import RobotIdentError
+from .paper import require_theta
 
 __all__ = ["ConsistentFit", "fit_consistent", "consistent_model", "link_validity",
            "consistent_record", "add_consistent", "MARGIN", "PRIOR_WEIGHT"]
@@ -212,6 +213,7 @@ def fit_consistent(model: Any, signals: Any = None, *, friction: str | None = No
     """
     if not hasattr(model, "coef_"):
         raise RobotIdentError("fit_consistent: the RobotModel is not fitted")
+    require_theta(model, "fit_consistent")
     if friction is None:
         friction = "profile" if model.model == "usual" else "fixed"
     if friction not in ("profile", "fixed"):

@@ -10,6 +10,11 @@ Model (eq. 8-10 on every joint j, base parameters theta shared by all joints)::
     usual:  tau_j = W_j theta + p_j + FC_j sign(dq_j) + FV_j dq_j + OFF_j          (eq. 5, 8)
     paper:  eq. 30 with tau_out,j = W_j theta + p_j       (see :mod:`ident.robot.paper`)
 
+The paper model is bilinear in (theta, per-joint a, b, c, d) by default; ``form="products"``
+identifies instead eq. 42's free products per joint (a_m theta_i, b_m theta_i, ... as
+independent linear parameters, no theta: the single-joint model on each joint, linear
+least squares; :mod:`ident.robot.paper`, "Products form").
+
 W_j is the joint's row of the base regressor (rigid body + rotor inertias, ``RobotRegressor``
 reduced by ``BaseParameters.reduce``), p_j the known payload torque of the sample's experiment
 (subtracted as the paper's eq. 34 does with the weighed mass).
@@ -61,6 +66,7 @@ from trajectories.friction import DEFAULT_Q_S, stribeck_exp
 
 from .. import DataError
 from ..estimators import ESTIMATORS, RCOND, Estimator, RankDeficientError
+from ..hyperparams import HyperParameters
 from ..vocab import renamed_keywords
 from . import RobotIdentError
 from .base import base_parameters, payload_base, placed_payload
@@ -71,15 +77,23 @@ from .paper import (
     USUAL_BLOCK,
     paper_coefficients,
     paper_start,
+    products_coefficients,
+    products_names,
+    products_size,
+    products_start,
+    require_theta,
     usual_coefficients,
 )
 from .quadrants import QuadrantStore
 from .regressor import RobotRegressor
 from .signals import RobotSignals
 
-__all__ = ["RobotModel", "MODELS", "METHODS"]
+__all__ = ["RobotModel", "MODELS", "METHODS", "FORMS"]
 
 MODELS = ("usual", "paper")
+#: Forms of the paper model: theta shared by the joints times per-joint (a, b) (bilinear), or
+#: eq. 42's free products per joint (``form="products"``).
+FORMS = ("bilinear", "products")
 #: Name of the identified payload ratio M_ae / M_aw (eq. 35; ``payload_ratio=True``).
 RATIO = "Ma_ratio"
 #: The estimators (:data:`ident.estimators.ESTIMATORS`: "ls", "wls", "iv").
@@ -127,6 +141,33 @@ class _Unidentifiable(RobotIdentError):
         self.names, self.lo, self.hi, self.zero = names, lo, hi, zero
 
 
+def _dependent(G: np.ndarray, tol: float = RCOND) -> np.ndarray:
+    """Columns left out by the single-joint rank rule (:func:`ident.estimators.dependent_columns`:
+    column-pivoted QR of the unit-norm columns, kept while |R_kk| > tol |R_00|) from their
+    Gram matrix G = W^T W: the same pivots by a pivoted Cholesky of the scaled G. Zero columns
+    included."""
+    d = np.sqrt(np.clip(np.diagonal(G), 0.0, None))
+    live = np.flatnonzero(d > 0)
+    out = [int(i) for i in np.flatnonzero(~(d > 0))]
+    if not live.size:
+        return np.array(out, dtype=int)
+    Gs = G[np.ix_(live, live)] / d[live, None] / d[None, live]
+    n = live.size
+    L = np.zeros((n, n))
+    r = np.diagonal(Gs).copy()
+    left = np.ones(n, dtype=bool)
+    for k in range(n):
+        i = int(np.argmax(np.where(left, r, -np.inf)))
+        if not np.sqrt(max(r[i], 0.0)) > tol:  # |R_00| = 1: unit columns
+            break
+        col = (Gs[:, i] - L[:, :k] @ L[i, :k]) / np.sqrt(r[i])
+        L[:, k] = col
+        r = r - col**2
+        left[i] = False
+    out += [int(live[i]) for i in np.flatnonzero(left)]
+    return np.array(sorted(out), dtype=int)
+
+
 def _ref_acceleration(t: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
     """d^2 q_ref / dt^2 (n, k) by central differences (np.gradient twice)."""
     if t.size < 3:
@@ -135,7 +176,7 @@ def _ref_acceleration(t: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
 
 
 
-class RobotModel:
+class RobotModel(HyperParameters):
     """Identification of an n-dof robot with the usual or the paper friction (module doc).
 
     Parameters
@@ -177,6 +218,22 @@ class RobotModel:
     payload_ratio : bool
         Identify the payload ratio M_ae / M_aw (``Ma_ratio``, eq. 35) instead of taking the
         payload torque as known; needs an experiment with a payload.
+    form : {"bilinear", "products"}
+        Paper model only. ``"bilinear"`` (default): theta shared by every joint times the
+        per-joint a, b (p_b + 10 k parameters, Gauss-Newton). ``"products"``: eq. 42's
+        products free per joint, sum_j (4 (p_j + 1) + 6) parameters named after the
+        single-joint ones with the joint number (``a_m_ZZ3R_3``, ``b_m_MX3_3``, ...,
+        ``a_m3`` ... for the payload torque, ``c_m3`` ... ``OFF3``;
+        :func:`~ident.robot.paper.products_names`), one linear least squares (one step);
+        on a one-joint robot the single-joint paper model. No base parameters are
+        identified (``load_torque``, the consistency check, the uncertainty assessment and
+        the refit refuse it). With ``quadrant="model"`` the quadrants are decided ONCE, by
+        the usual fit's theta on every row (or ``quadrant_theta``): there is no theta of its
+        own to re-decide them with (the single-joint fit decides them by its first usual
+        fit too). The products of a load column that is zero on a joint's rows (no payload
+        torque) or a combination of its other columns there (the single-joint rank rule)
+        are fixed at 0 (``fixed_``); ``payload_ratio`` is refused (the payload's products
+        are free already).
     payload_params : bool
         The payload's mass known, its first moments and inertia identified (module doc;
         ``payload_base_``, ``payload_masses_``); needs experiments without a payload to
@@ -192,7 +249,11 @@ class RobotModel:
     ------------------------------
     names_ : tuple of str
         Parameter names: base parameters, then per joint FC/FV/OFF (usual) or
-        a_m..OFF (paper), suffixed with the joint's number.
+        a_m..OFF (paper), suffixed with the joint's number; ``form="products"``: per joint
+        its products block only (``form`` above).
+    theta_names_ : tuple of str
+        Names of theta's entries (base parameters, ``Ma_ratio``, payload parameters): the
+        first entries of ``names_`` except in the products form.
     coef_, std_ : ndarray (b,)
         Estimate and standard deviations (eq. 15).
     rel_std_ : ndarray (b,)
@@ -209,7 +270,8 @@ class RobotModel:
     n_samples_ : ndarray (k,)
         Rows used per joint.
     fixed_ : dict
-        Parameters held fixed (paper model without payload torque).
+        Parameters held fixed (paper model without payload torque; products form: the
+        products of a joint's load columns that are zero or dependent on its rows, at 0).
     n_passes_, n_iter_ : int
         Data passes (the start pass counted as one, even on every ``start_stride_``-th row)
         and Gauss-Newton iterations of the final fit.
@@ -223,7 +285,8 @@ class RobotModel:
     quadrant_from_ : ndarray or None
         The theta whose sign(tau_out_hat dq) decided the final quadrants (``quadrant="model"``
         of the paper model), else None: :mod:`ident.robot.uncertainty` rebuilds the moments of
-        parts of the data on the same quadrants.
+        parts of the data on the same quadrants; the products form's :meth:`predict` decides
+        with it.
     """
 
     def __init__(
@@ -244,6 +307,7 @@ class RobotModel:
         quadrant_theta: Any = None,
         quadrant_band: float = 0.03,
         payload_params: bool = False,
+        form: str = "bilinear",
         **deprecated: Any,
     ) -> None:
         q_s = renamed_keywords("RobotModel", deprecated).get("q_s", q_s)
@@ -262,16 +326,20 @@ class RobotModel:
         self.quadrant_theta = quadrant_theta
         self.quadrant_band = quadrant_band
         self.payload_params = payload_params
+        self.form = form
 
     def get_params(self, deep: bool = False) -> dict[str, Any]:
-        """Hyper-parameters (scikit-learn convention)."""
+        """Hyper-parameters (scikit-learn convention; ``set_params`` sets them by name,
+        :class:`~ident.hyperparams.HyperParameters`)."""
         return {n: getattr(self, n) for n in (
             "regressor", "model", "method", "q_s", "base", "quadrant", "dq_min", "chunk_size",
             "max_iter", "tol", "max_passes", "payload_ratio", "quadrant_theta",
-            "quadrant_band", "payload_params")}
+            "quadrant_band", "payload_params", "form")}
 
     def __repr__(self) -> str:
-        return f"RobotModel(model={self.model!r}, method={self.method!r}, q_s={self.q_s!r})"
+        form = "" if self.form == "bilinear" else f", form={self.form!r}"
+        return (f"RobotModel(model={self.model!r}, method={self.method!r}, "
+                f"q_s={self.q_s!r}{form})")
 
     # ------------------------------------------------------------------ setup
     def _setup(self) -> None:
@@ -281,6 +349,17 @@ class RobotModel:
         if self.method not in METHODS:
             raise RobotIdentError(f"RobotModel.method: expected one of {METHODS}, got "
                                   f"{self.method!r}")
+        if self.form not in FORMS:
+            raise RobotIdentError(f"RobotModel.form: expected one of {FORMS}, got "
+                                  f"{self.form!r}")
+        if self.form == "products" and self.model != "paper":
+            raise RobotIdentError(f"RobotModel.form: 'products' is a form of the paper model "
+                                  f"(model='paper'), got model={self.model!r}")
+        if self.form == "products" and self.payload_ratio:
+            raise RobotIdentError("RobotModel.payload_ratio: form='products' identifies the "
+                                  "payload torque's products (a_m{j} = a_m M_ae/M_aw, eq. 42) "
+                                  "freely, so there is no ratio to identify; use "
+                                  "payload_ratio=False")
         if self.quadrant not in ("model", "measured"):
             raise RobotIdentError(f"RobotModel.quadrant: expected 'model' or 'measured', got "
                                   f"{self.quadrant!r}")
@@ -325,8 +404,10 @@ class RobotModel:
             pay_names = self._setup_payload(reg)
         block = USUAL_BLOCK if self.model == "usual" else PAPER_BLOCK
         self.block_ = block
-        self.names_ = tuple(base.names) + (RATIO,) * ratio + pay_names + tuple(
+        self.theta_names_ = tuple(base.names) + (RATIO,) * ratio + pay_names
+        self.names_ = self.theta_names_ + tuple(
             f"{p}{n}" for n in self.numbers_ for p in block)
+        self._layout(self.form == "products")
         self._damp = 0.0
         self._band_h = np.zeros(k)
         if not (np.isfinite(float(self.quadrant_band)) and float(self.quadrant_band) >= 0):
@@ -342,6 +423,28 @@ class RobotModel:
             if self.quadrant != "model":
                 raise RobotIdentError("RobotModel.quadrant_theta: needs quadrant='model'")
             self.quadrant_theta_ = qt
+
+    def _layout(self, products: bool) -> None:
+        """The parameter vector's layout: theta (``n_theta_``) then one block of
+        ``len(block_)`` per joint; or, ``products``, no theta and per joint its products
+        block (:func:`~ident.robot.paper.products_names`: its size depends on the joint's
+        base columns), ``names_`` set accordingly."""
+        k = len(self.cols_)
+        if products:
+            sizes = np.array([products_size(len(c)) for c in self.cols_])
+            self._theta_x = False
+            self.names_ = tuple(n for c, num in zip(self.cols_, self.numbers_, strict=True)
+                                for n in products_names([self.theta_names_[i] for i in c],
+                                                        num))
+        else:
+            sizes = np.full(k, len(self.block_))
+            self._theta_x = True
+        self._bsize = sizes
+        self._bstart = np.r_[0, np.cumsum(sizes)[:-1]].astype(int)
+
+    def _nt(self, j: int) -> int:
+        """Entries of joint j's local parameters (:meth:`_local`) that are theta."""
+        return len(self.cols_[j]) if self._theta_x else 0
 
     def _setup_payload(self, reg: Any) -> tuple[str, ...]:
         """``payload_params``: the payload's base columns after the base parameters, one set
@@ -606,8 +709,12 @@ class RobotModel:
 
     # ------------------------------------------------------------------ solver
     def _local(self, j: int) -> np.ndarray:
-        pb, nb = self.n_theta_, len(self.block_)
-        return np.concatenate([self.cols_[j], pb + j * nb + np.arange(nb)])
+        """Indices in x of joint j's parameters: its theta entries (none in the products
+        form), then its block."""
+        if not self._theta_x:
+            return self._bstart[j] + np.arange(self._bsize[j])
+        pb = self.n_theta_
+        return np.concatenate([self.cols_[j], pb + self._bstart[j] + np.arange(self._bsize[j])])
 
     @property
     def _estimator(self) -> Estimator:
@@ -623,7 +730,7 @@ class RobotModel:
         yy = np.zeros(len(moms))
         for j, mom in enumerate(moms):
             idx = self._local(j)
-            nt = len(self.cols_[j])
+            nt = self._nt(j)
             th, blk = x[idx[:nt]], x[idx[nt:]]
             cf = [coeffs(th, blk, 0), coeffs(th, blk, 1)]
             Aj, gj, rrj, Cj, yyj = mom.normal(cf)
@@ -641,7 +748,7 @@ class RobotModel:
         rr = np.zeros(len(moms))
         for j, mom in enumerate(moms):
             idx = self._local(j)
-            nt = len(self.cols_[j])
+            nt = self._nt(j)
             th, blk = x[idx[:nt]], x[idx[nt:]]
             rr[j] = mom.cost([coeffs(th, blk, 0, jacobian=False),
                               coeffs(th, blk, 1, jacobian=False)])
@@ -656,7 +763,7 @@ class RobotModel:
         out = np.zeros(5)
         for j, mom in enumerate(moms):
             idx = self._local(j)
-            nt = len(self.cols_[j])
+            nt = self._nt(j)
             xs = (x[idx], x[idx] + step[idx], x[idx] - step[idx])
             ey = np.zeros(mom.nv)
             ey[-1] = 1.0
@@ -890,14 +997,13 @@ class RobotModel:
     def _evidence(self, e: _Unidentifiable, moms: list[JointMoments]) -> str:
         rows = self._quadrant_rows(moms)
         loads = {j: self._load_signs(m) for j, m in zip(self.joints_, moms, strict=True)}
-        by_number = dict(zip((str(n) for n in self.numbers_), self.joints_, strict=True))
+        of_name = {self.names_[i]: joint for j, joint in enumerate(self.joints_)
+                   for i in self._local(j)[self._nt(j):]}
         named = []
         for n in e.names:
-            for p in PAPER_BLOCK:
-                if n.startswith(p) and n[len(p):] in by_number:
-                    j = by_number[n[len(p):]]
-                    if j not in named:
-                        named.append(j)
+            j = of_name.get(n)
+            if j is not None and j not in named:
+                named.append(j)
         frac = {j: min(r) / max(sum(r), 1) for j, r in rows.items()}
         lfrac = {j: min(r) / max(sum(r), 1) for j, r in loads.items()}
         thin = [j for j in self.joints_ if frac[j] < THIN_QUADRANT]
@@ -918,7 +1024,10 @@ class RobotModel:
         if one_sign:
             fixes.append(f"a trajectory on which the load of {', '.join(one_sign)} changes "
                          "sign (c_m, c_g and the offset are not separable otherwise)")
-        if any(n.startswith(("a_m", "a_g", "b_m", "b_g")) for n in e.names) or not fixes:
+        if not self._theta_x and not fixes:
+            fixes.append("a trajectory that excites these columns on the joint's rows")
+        elif self._theta_x and any(n.startswith(("a_m", "a_g", "b_m", "b_g"))
+                                   for n in e.names) or not fixes:
             fixes.append("experiments with different payloads (they fix the scale of the "
                          "base parameters against a_m, a_g)")
         if self.quadrant == "measured":
@@ -952,7 +1061,7 @@ class RobotModel:
         # it is taken on every stride-th row, and the full pass with the model quadrants
         # follows (module constant START_ROWS)
         stride = 1
-        if model_q:
+        if model_q and self.form != "products":  # (products: the usual fit decides for good)
             stride = max(1, self._n_samples(signals) // int(START_ROWS))
         moms, _, _, _ = self._pass(signals, None, 3 if paper and not model_q else 1,
                                    stride=stride)
@@ -962,12 +1071,15 @@ class RobotModel:
         nbu = len(USUAL_BLOCK)
         saved = self.block_, self.names_
         self.block_ = USUAL_BLOCK
-        self.names_ = tuple(saved[1][:pb]) + tuple(
+        self._layout(False)
+        self.names_ = tuple(self.theta_names_) + tuple(
             f"{p}{n}" for n in self.numbers_ for p in USUAL_BLOCK)
         xu0 = np.zeros(pb + nbu * k)
         free_u = np.ones(xu0.size, dtype=bool)
         xu, wu, it = self._fit_on(moms, usual_coefficients, xu0, free_u, linear=True)
-        self.block_, self.names_ = saved
+        self.block_ = saved[0]
+        self._layout(self.form == "products")
+        self.names_ = saved[1]
         self.fixed_: dict[str, float] = {}
         self.quadrant_changes_: list[int] = []
         self.n_store_updates_ = 0
@@ -978,6 +1090,8 @@ class RobotModel:
             self.weights_ = wu
             self.n_passes_, self.n_iter_ = passes, it
             return self
+        if self.form == "products":
+            return self._fit_products(signals, moms, xu, passes)
         nb = len(PAPER_BLOCK)
         x = np.zeros(pb + nb * k)
         x[:pb] = xu[:pb]
@@ -1039,6 +1153,50 @@ class RobotModel:
         self.n_passes_, self.n_iter_ = passes, it
         return self
 
+    def _fit_products(self, signals: Any, moms: list[JointMoments], xu: np.ndarray,
+                      passes: int) -> RobotModel:
+        """The products form (``form="products"``) after the usual fit ``xu`` on ``moms``:
+        linear least squares (or IV, WLS) on the moments of the final quadrants. With
+        ``quadrant="model"`` they are decided once, by the usual fit's theta (or
+        ``quadrant_theta``): the products form has no theta of its own to re-decide them
+        with. The products of a load column that is zero on every row of the joint (its
+        payload torque without payload or known rotor, a payload parameter not acting on
+        it) or a linear combination of its other load columns there (UR10 shoulder pan:
+        MX2 and XY2) are fixed at 0 (``fixed_``): the single-joint rank rule
+        (:func:`~ident.estimators.dependent_columns`, pivoted on the scaled Gram matrix)."""
+        pb, k, nbu = self.n_theta_, len(self.joints_), len(USUAL_BLOCK)
+        model_q = self.quadrant == "model"
+        theta_q = self.quadrant_theta_.copy() if self.quadrant_theta_ is not None else xu[:pb]
+        self.band_ = np.zeros(k)
+        if model_q and float(self.quadrant_band) > 0:
+            self.band_ = float(self.quadrant_band) * self._rms_load(moms, theta_q)
+        self._band_h = self.band_
+        if model_q:
+            moms, _, _, _ = self._pass(signals, theta_q, 3)
+            passes += 1
+        x = np.concatenate([products_start(xu[c], xu[pb + nbu * j: pb + nbu * (j + 1)])
+                            for j, c in enumerate(self.cols_)])
+        free = np.ones(x.size, dtype=bool)
+        for j, m in enumerate(moms):
+            nl = len(self.cols_[j]) + 1
+            # the load columns (theta's, then p) on the joint's rows
+            for c in _dependent(m.vv[0, 0, :nl, :nl] + m.vv[1, 0, :nl, :nl]):
+                i = self._bstart[j] + np.array([2 * c, 2 * c + 1, 2 * nl + 2 * c,
+                                                2 * nl + 2 * c + 1])
+                free[i] = False
+                x[i] = 0.0
+        self.fixed_ = {self.names_[i]: 0.0 for i in np.flatnonzero(~free)}
+        self.quadrant_rows_ = self._quadrant_rows(moms)
+        try:
+            x, w, it = self._fit_on(moms, products_coefficients, x, free, linear=True)
+        except _Unidentifiable as e:
+            raise RobotIdentError(self._evidence(e, moms)) from None
+        self.quadrant_from_ = theta_q if model_q else None
+        self._statistics(moms, products_coefficients, x, free, w)
+        self.weights_ = w
+        self.n_passes_, self.n_iter_ = passes, it
+        return self
+
     def _payload_groups(self, signals: Any) -> None:
         """``payload_params``: the distinct payload masses of the experiments
         (``payload_masses_`` [kg]); errors when no experiment carries a payload or every one
@@ -1068,6 +1226,13 @@ class RobotModel:
         self.payload_merged_ = not empty
         self.payload_masses_ = tuple(masses)
 
+    @property
+    def _coefficients(self) -> Coeffs:
+        """The coefficient function of the fitted model and form (:mod:`ident.robot.paper`)."""
+        if self.model == "usual":
+            return usual_coefficients
+        return products_coefficients if self.form == "products" else paper_coefficients
+
     def _check_fitted(self) -> None:
         if not hasattr(self, "coef_"):
             raise RobotIdentError("RobotModel is not fitted; call fit(signals) first")
@@ -1095,13 +1260,16 @@ class RobotModel:
         """Predicted joint torques tau_hat (n, k) [N m] on the samples of ``signals``."""
         passes = self._fitted_rows(signals, "predict")
         out = np.full(signals.tau.shape, np.nan)
-        coeffs = usual_coefficients if self.model == "usual" else paper_coefficients
-        theta = self.coef_[:self.n_theta_]
+        coeffs = self._coefficients
+        if not self._theta_x:  # products: the quadrants of the fit (the usual fit's theta)
+            theta = self.quadrant_from_
+        else:
+            theta = self.coef_[:self.n_theta_]
         if self.quadrant_theta_ is not None:
             theta = self.quadrant_theta_
         for r, j, cols, WjT, pj, dqj, tauj, sg in passes:
             idx = self._local(j)
-            nt = len(cols)
+            nt = self._nt(j)
             th, blk = self.coef_[idx[:nt]], self.coef_[idx[nt:]]
             V = self._v(WjT, pj, dqj, np.zeros(dqj.size), sg).T
             if self.quadrant == "model" or self.model == "usual":
@@ -1121,6 +1289,7 @@ class RobotModel:
         """tau_out_hat (n, k) [N m]: the rigid-body, rotor and payload torque of the fitted
         model, W_j theta + p_j (the load of eq. 17-30, before friction), on ``signals``."""
         passes = self._fitted_rows(signals, "load_torque")
+        require_theta(self, "RobotModel.load_torque")
         out = np.full(signals.tau.shape, np.nan)
         theta = self.coef_[:self.n_theta_]
         for r, j, cols, WjT, pj, _dq, _tau, _sg in passes:
@@ -1153,12 +1322,29 @@ class RobotModel:
     def truth_vector(self, std_values: Mapping[str, float]) -> np.ndarray:
         """Map true standard parameters and friction (ROBOT_FORMAT names) onto ``names_``:
         base parameters through ``base_.beta``, friction by name (``FC{j}`` of the usual model
-        is not a paper parameter and is NaN)."""
+        is not a paper parameter and is NaN). ``form="products"``: the true products (a_m
+        theta_i, b_m theta_i, ... of each base column, a_m ... of the payload torque, then
+        the true c, d, FV, OFF); NaN where a column's true value is not known (the payload's
+        base parameters of ``payload_params``)."""
         self._check_fitted()
         std_names = tuple(self.regressor_.standard_names)
         s = np.array([float(std_values.get(n, 0.0)) for n in std_names])
         out = np.full(len(self.names_), np.nan)
-        out[:self.n_base_] = np.asarray(self.base_.beta, dtype=float) @ s
+        theta = np.asarray(self.base_.beta, dtype=float) @ s
+        if not self._theta_x:
+            th = np.full(self.n_theta_, np.nan)
+            th[:self.n_base_] = theta
+            for j, (cols, n) in enumerate(zip(self.cols_, self.numbers_, strict=True)):
+                f = [float(std_values.get(f"{p}{n}", np.nan)) for p in PAPER_BLOCK]
+                load = np.r_[th[cols], 1.0]
+                nl = load.size
+                blk = np.empty(4 * nl + 6)
+                blk[0:2 * nl:2], blk[1:2 * nl:2] = f[0] * load, f[1] * load
+                blk[2 * nl:4 * nl:2], blk[2 * nl + 1:4 * nl:2] = f[2] * load, f[3] * load
+                blk[4 * nl:] = f[4:]
+                out[self._local(j)] = blk
+            return out
+        out[:self.n_base_] = theta
         for i, name in enumerate(self.names_[self.n_base_:], start=self.n_base_):
             if name in std_values:
                 out[i] = float(std_values[name])

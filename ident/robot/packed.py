@@ -4,8 +4,9 @@
 J^T W r of all joints and the cost along the step; joint by joint (:meth:`JointMoments.normal`)
 that is ~30 small numpy calls per joint and quadrant. Here the joints' moments are padded to
 one number of base columns and stacked, so each sum is a few batched products for all joints
-(the usual and the paper model; IDIM-IV and other models keep the per-joint path). Same sums,
-rounding apart (tests/test_robot_normal.py).
+(the usual and the paper model; IDIM-IV and the paper model's products form -- a linear
+model whose per-joint blocks differ in size, solved in one step -- keep the per-joint path).
+Same sums, rounding apart (tests/test_robot_normal.py).
 """
 
 from __future__ import annotations

@@ -34,21 +34,42 @@ The scale of theta against (a, b) is fixed by the known payload torques (p_j ent
 coefficient a, not a free ratio) when they are not in the span of the base columns: without a
 payload, or with one and the same payload in every experiment, only products are identifiable
 and the estimator fixes a_m of the first joint to 1 (reported in ``fixed_``).
+
+Products form
+-------------
+``RobotModel(model="paper", form="products")`` drops the rank-one constraint: eq. 42
+generalised to every joint, linear in its parameters, no theta shared between the joints, no
+gauge (:func:`products_coefficients`). Joint j's coefficient of each load column w_i -- its
+base columns, then its payload torque p_j -- is alpha_i + E beta_i in the motor quadrant and
+alpha_i - E beta_i in the generator one, all free; then c + E d of each quadrant on
+sign(dq_j), FV_j on dq_j, OFF_j on 1: 4 (p_j + 1) + 6 parameters per joint
+(:func:`products_names`: the single-joint ``LoadDependent`` names ``a_m_<column>`` ... with
+the joint number appended, ``a_m_MX3_3``; the payload torque's products ``a_m{j}``, ...,
+and ``c_m{j}`` ... ``OFF{j}``, as the bilinear form names them). On a one-joint robot this
+is the single-joint ``new_model`` (tests/test_robot_fit.py, tests/test_robot_design.py).
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
+from . import RobotIdentError
 from .moments import IDQ, IP, ISG, N_EXTRA, ONE
 
-__all__ = ["PAPER_BLOCK", "USUAL_BLOCK", "paper_coefficients", "usual_coefficients",
-           "paper_start", "batch_coefficients"]
+__all__ = ["PAPER_BLOCK", "USUAL_BLOCK", "PRODUCT_PREFIXES", "paper_coefficients",
+           "usual_coefficients", "products_coefficients", "products_names", "products_start",
+           "products_size", "paper_start", "batch_coefficients", "require_theta"]
 
 #: Per-joint parameter prefixes of the paper model (ROBOT_FORMAT order).
 PAPER_BLOCK = ("a_m", "b_m", "a_g", "b_g", "c_m", "d_m", "c_g", "d_g", "FV", "OFF")
 #: Per-joint parameter prefixes of the usual model (eq. 5).
 USUAL_BLOCK = ("FC", "FV", "OFF")
+#: The products of each load column in the products form (eq. 42-43): motor, then generator.
+PRODUCT_PREFIXES = (("a_m", "b_m"), ("a_g", "b_g"))
+#: The products form's per-joint parameters after the load columns' products (eq. 42-44).
+PRODUCTS_TAIL = ("c_m", "d_m", "c_g", "d_g", "FV", "OFF")
 
 
 def usual_coefficients(theta: np.ndarray, blk: np.ndarray, s: int,
@@ -112,6 +133,90 @@ def paper_coefficients(theta: np.ndarray, blk: np.ndarray, s: int,
     D0[nt + IDQ, nt + 8] = 1.0
     D0[nt + ONE, nt + 9] = 1.0
     return c0, c1, D0, D1
+
+
+def products_size(nt: int) -> int:
+    """Parameters of one joint in the products form: 2 x 2 products of each of its ``nt``
+    base columns and of its payload torque, then c_m, d_m, c_g, d_g, FV, OFF."""
+    return 4 * (nt + 1) + len(PRODUCTS_TAIL)
+
+
+def products_names(columns: list[str] | tuple[str, ...], number: int) -> tuple[str, ...]:
+    """Names of one joint's products-form parameters, in :func:`products_coefficients`'s
+    order: the single-joint ``LoadDependent`` names (``a_m_<column>``, ``b_m_<column>`` per
+    load column, the payload torque's bare ``a_m``, ``b_m``; then the generator's a_g, b_g)
+    with the robot's joint number appended (``_<number>`` after a column name, which
+    carries digits of its own: ``a_m_MX3_3``; directly after a bare name: ``a_m3``), then
+    ``c_m{n} d_m{n} c_g{n} d_g{n} FV{n} OFF{n}``."""
+    suf = [f"_{c}_{number}" for c in columns] + [str(number)]
+    out = [f"{p}{x}" for pre in PRODUCT_PREFIXES for x in suf for p in pre]
+    return tuple(out) + tuple(f"{p}{number}" for p in PRODUCTS_TAIL)
+
+
+def products_coefficients(theta: np.ndarray, blk: np.ndarray, s: int,
+                          jacobian: bool = True) -> tuple[np.ndarray, ...]:
+    """(c0, c1, D0, D1) of the products form (eq. 42-44 on joint j) in quadrant ``s``.
+
+    ``theta``: empty (no shared parameter: every coefficient is one of the joint's);
+    ``blk``: the joint's parameters in :func:`products_names`'s order, ``4 (nt + 1) + 6``
+    values for ``nt`` base columns. In quadrant 0 (motor) the load column i (base columns,
+    then the payload torque p) has the coefficient alpha_i + E beta_i (a_m_i, b_m_i), in
+    quadrant 1 (generator) alpha_i - E beta_i (a_g_i, b_g_i, the single-joint column
+    -P- E W); sign(dq) c + E d of the quadrant; FV on dq and OFF on 1 in both. Linear in
+    the parameters: D0, D1 are constant."""
+    nx = blk.shape[0]
+    nt = (nx - len(PRODUCTS_TAIL)) // 4 - 1
+    nl = nt + 1
+    nv = nt + N_EXTRA
+    vi = np.r_[np.arange(nt), nt + IP]  # the load columns' entries of v
+    base = 0 if s == 0 else 2 * nl
+    ia = base + 2 * np.arange(nl)
+    tail = 4 * nl
+    ic, idd = (tail, tail + 1) if s == 0 else (tail + 2, tail + 3)
+    sb = 1.0 if s == 0 else -1.0
+    c0 = np.zeros(nv)
+    c1 = np.zeros(nv)
+    c0[vi] = blk[ia]
+    c1[vi] = sb * blk[ia + 1]
+    c0[nt + ISG] = blk[ic]
+    c1[nt + ISG] = blk[idd]
+    c0[nt + IDQ] = blk[tail + 4]
+    c0[nt + ONE] = blk[tail + 5]
+    if not jacobian:
+        return c0, c1
+    D0 = np.zeros((nv, nx))
+    D1 = np.zeros((nv, nx))
+    D0[vi, ia] = 1.0
+    D1[vi, ia + 1] = sb
+    D0[nt + ISG, ic] = 1.0
+    D1[nt + ISG, idd] = 1.0
+    D0[nt + IDQ, tail + 4] = 1.0
+    D0[nt + ONE, tail + 5] = 1.0
+    return c0, c1, D0, D1
+
+
+def products_start(theta: np.ndarray, usual_blk: np.ndarray) -> np.ndarray:
+    """Products block of one joint from a usual fit (its base parameters ``theta`` and
+    (FC, FV, OFF)): the paper start a = 1, b = 0, c = FC, d = 0 as products (alpha_i =
+    theta_i, alpha_p = 1, beta = 0)."""
+    fc, fv, off = usual_blk
+    nl = theta.shape[0] + 1
+    alpha = np.r_[theta, 1.0]
+    out = np.zeros(products_size(theta.shape[0]))
+    out[0:2 * nl:2] = alpha
+    out[2 * nl:4 * nl:2] = alpha
+    out[4 * nl:] = (fc, 0.0, fc, 0.0, fv, off)
+    return out
+
+
+def require_theta(model: Any, what: str) -> None:
+    """Refuse, in one line, what needs a fitted model's base parameters when the model is
+    the paper model's products form (``form="products"``: only their products with a, b are
+    identified, eq. 42)."""
+    if getattr(model, "form", "bilinear") == "products":
+        raise RobotIdentError(f"{what}: needs the base parameters, and the paper model's "
+                              "form='products' identifies only their products with a, b "
+                              "(eq. 42); fit form='bilinear'")
 
 
 def _diag(n: int) -> tuple[np.ndarray, np.ndarray]:

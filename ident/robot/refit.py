@@ -54,7 +54,7 @@ from ..unseen import N_BLOCKS, heldout_kind, noise_floor
 from . import RobotIdentError
 from .design import joint_columns
 from .moments import quadrant_weights
-from .paper import paper_coefficients, usual_coefficients
+from .paper import paper_coefficients, require_theta, usual_coefficients
 from .signals import RobotSignals
 
 __all__ = ["RobotRefit", "refit_robot", "extra_name"]
@@ -201,6 +201,7 @@ def refit_robot(
         An unfitted model, IDIM-IV, bad shapes, parameters not identifiable with the terms.
     """
     model._check_fitted()
+    require_theta(model, "refit_robot")
     if model.method not in ("ls", "wls"):
         raise RobotIdentError(f"refit_robot: method {model.method!r} is not supported (the "
                               "extra columns have no instruments); refit with 'ls' or 'wls'")

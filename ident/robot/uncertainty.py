@@ -80,7 +80,7 @@ from scipy.stats import chi2
 from ..estimate import DEFAULT_THRESHOLD_PCT
 from . import RobotIdentError
 from .moments import JointMoments
-from .paper import PAPER_BLOCK, paper_coefficients, usual_coefficients
+from .paper import PAPER_BLOCK, paper_coefficients, require_theta, usual_coefficients
 from .signals import RobotColumns, RobotSignals
 
 __all__ = ["Uncertainty", "assess", "jackknife_units", "parameter_records", "N_BLOCKS", "Z_IV",
@@ -397,6 +397,7 @@ def assess(model: Any, signals: RobotSignals | Sequence[RobotSignals], *,
     """
     if not hasattr(model, "coef_"):
         raise RobotIdentError("uncertainty: the model is not fitted")
+    require_theta(model, "uncertainty")  # (the jackknife and the pruning are bilinear's)
     n_blocks = int(n_blocks)
     if n_blocks < 0 or n_blocks == 1:
         raise RobotIdentError(f"uncertainty: n_blocks (--sigma-blocks): expected 0 (no "
