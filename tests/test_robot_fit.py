@@ -299,6 +299,13 @@ def _one_joint_eq30():
             tau0[keep])
 
 
+def _single_eq42(sj, t, q, dq, ddq, tau):
+    """The single-joint eq. 42 least squares of library ``sj`` on these samples."""
+    sig1 = Signals(t=t, q=q, dq=dq, ddq=ddq, tau=tau, payload_mass=np.zeros_like(t),
+                   payload_arm=np.zeros_like(t), experiment=np.zeros(t.size, int))
+    return fit_least_squares(sj.columns(sig1), tau, sj.names(), eliminate=False)
+
+
 def test_one_joint_paper_model_matches_single_joint_eq42():
     """RX130L joint 3 alone: the bilinear n-dof estimate and the single-joint linear
     eq. 42 (products a_m J, b_m J, ...) agree -- exactly on exact data, within the
@@ -307,9 +314,7 @@ def test_one_joint_paper_model_matches_single_joint_eq42():
     sj = new_model(q_s, revolute=True, payload=False)
     for noise in (0.0, 1.0):
         tau = tau0 + noise * rng.standard_normal(tau0.shape)
-        sig1 = Signals(t=t, q=q, dq=dq, ddq=ddq, tau=tau, payload_mass=np.zeros_like(t),
-                       payload_arm=np.zeros_like(t), experiment=np.zeros(t.size, int))
-        ref = fit_least_squares(sj.columns(sig1), tau, sj.names(), eliminate=False)
+        ref = _single_eq42(sj, t, q, dq, ddq, tau)
         r = dict(zip(ref.names, ref.chi, strict=True))
         rs = dict(zip(ref.names, ref.std, strict=True))
         m = RobotModel(reg, "paper", q_s=q_s, base=base, quadrant="measured").fit(
@@ -347,9 +352,7 @@ def test_one_joint_products_form_is_single_joint_eq42():
     sj = new_model(q_s, revolute=True, payload=False)
     for noise in (0.0, 1.0):
         tau = tau0 + noise * rng.standard_normal(tau0.shape)
-        sig1 = Signals(t=t, q=q, dq=dq, ddq=ddq, tau=tau, payload_mass=np.zeros_like(t),
-                       payload_arm=np.zeros_like(t), experiment=np.zeros(t.size, int))
-        ref = fit_least_squares(sj.columns(sig1), tau, sj.names(), eliminate=False)
+        ref = _single_eq42(sj, t, q, dq, ddq, tau)
         m = RobotModel(reg, "paper", q_s=q_s, base=base, quadrant="measured",
                        form="products").fit(
             RobotSignals(t=t, q=q[:, None], dq=dq[:, None], ddq=ddq[:, None],
@@ -402,6 +405,16 @@ def test_products_form_hyper_parameter():
     np.testing.assert_allclose(fitted.predict(sig)[:, 0], tau0 - fitted.residual(sig)[:, 0])
 
 
+def _both_forms(reg, base, sigs, truth):
+    """The true theta, and the bilinear and products paper fits (WLS) on its quadrants."""
+    usual = RobotModel(reg, "usual", base=base).fit(sigs)
+    theta = usual.truth_vector(truth)[:usual.n_theta_]
+    bil = RobotModel(reg, "paper", "wls", base=base, quadrant_theta=theta).fit(sigs)
+    prod = RobotModel(reg, "paper", "wls", base=base, quadrant_theta=theta,
+                      form="products").fit(sigs)
+    return theta, bil, prod
+
+
 def test_arm3_products_form_fits_at_least_as_well_as_bilinear():
     """arm3, short data (8 s per payload): on the same rows and quadrants (both decided once
     by the simulator's true theta, ``quadrant_theta``) the products form -- the bilinear
@@ -413,11 +426,7 @@ def test_arm3_products_form_fits_at_least_as_well_as_bilinear():
     params, reg, base, runs = _simulate("arm3", duration_s=8.0, seed=1)
     truth = params.truth(None)
     sigs = _signals(params, reg, runs, 0)
-    usual = RobotModel(reg, "usual", base=base).fit(sigs)
-    theta = usual.truth_vector(truth)[:usual.n_theta_]
-    bil = RobotModel(reg, "paper", "wls", base=base, quadrant_theta=theta).fit(sigs)
-    prod = RobotModel(reg, "paper", "wls", base=base, quadrant_theta=theta,
-                      form="products").fit(sigs)
+    theta, bil, prod = _both_forms(reg, base, sigs, truth)
     assert len(bil.names_) == 46 and len(prod.names_) == 162 and prod.fixed_ == {}
     np.testing.assert_array_equal(prod.n_samples_, bil.n_samples_)
     for joint in reg.joints:
@@ -450,11 +459,7 @@ def test_ur10_products_form_leaves_out_dependent_columns(ur10):
     params, reg, base, runs = ur10
     truth = params.truth(None)
     sigs = _signals(params, reg, runs, 0)
-    usual = RobotModel(reg, "usual", base=base).fit(sigs)
-    theta = usual.truth_vector(truth)[:usual.n_theta_]
-    bil = RobotModel(reg, "paper", "wls", base=base, quadrant_theta=theta).fit(sigs)
-    prod = RobotModel(reg, "paper", "wls", base=base, quadrant_theta=theta,
-                      form="products").fit(sigs)
+    theta, bil, prod = _both_forms(reg, base, sigs, truth)
     assert prod.fixed_ and all(n.endswith("_1") for n in prod.fixed_)
     for joint in reg.joints:
         assert prod.rel_error_[joint] <= bil.rel_error_[joint] * (1 + 1e-12), joint
