@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from trajectories.excitation import ZERO_LOAD_SHARE
 from trajectories.friction import DEFAULT_Q_S
 from trajectories.robot import Robot, RobotRegressor, load_robot
 
@@ -368,6 +369,18 @@ def fit_robot(
         }
         if name == "paper":
             flag_unidentified(rec)
+            rec["quadrant_band_share"] = {j: float(x) for j, x in
+                                          zip(joints, est.band_share_, strict=True)}
+            for j, x, h in zip(joints, est.band_share_, est.band_, strict=True):
+                if x > ZERO_LOAD_SHARE:
+                    notes.append(
+                        f"paper model, {j}: {100 * x:.0f} % of its rows have a predicted load "
+                        f"within the quadrant band (|tau_out| < {h:.3g}, "
+                        f"{100 * float(est.quadrant_band):g} % of its RMS load): it moves at about "
+                        "zero load (no gravity on it, cruising), where the quadrant is decided "
+                        "by noise; its dry-friction terms may be biased beyond their sigma "
+                        "(docs/robot-identification.md, 'quadrants blended by the low-pass'); "
+                        "excite it with accelerated motion")
             if unc.pruned:
                 notes.append(f"paper model: {', '.join(unc.pruned)} pruned (relative std "
                              f"above {DEFAULT_THRESHOLD_PCT:g} %, eq. 14-16): held at 0 and the "

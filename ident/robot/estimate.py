@@ -282,6 +282,11 @@ class RobotModel(HyperParameters):
         (:mod:`ident.robot.quadrants`).
     quadrant_changes_ : list of int
         Samples whose quadrant changed at each re-decision (``quadrant="model"``).
+    band_share_ : ndarray (k,)
+        Share of each joint's rows (after ``dq_min`` and the columns' ``keep``) left out by
+        the quadrant band at the last full pass (0 without a band). Large on a joint that
+        cruises at zero load, where the quadrant is decided by noise
+        (docs/robot-identification.md, "quadrants blended by the low-pass").
     quadrant_from_ : ndarray or None
         The theta whose sign(tau_out_hat dq) decided the final quadrants (``quadrant="model"``
         of the paper model), else None: :mod:`ident.robot.uncertainty` rebuilds the moments of
@@ -643,6 +648,7 @@ class RobotModel(HyperParameters):
             stores = [QuadrantStore(theta[c], capacity, g, h)
                       for c, g, h in zip(self.cols_, grams, self._band_h, strict=True)]
         rows = changed = 0
+        in_band, considered = np.zeros(len(self.cols_)), np.zeros(len(self.cols_))
         for _sig, _r, q, dq, ddq, tau, zdd, pay, cc in self._chunks(signals, stride):
             W, p, kn = self._rows(q, dq, ddq, tau, pay, None if cc is None else cc[:2])
             Wz = pz = knz = None
@@ -683,6 +689,8 @@ class RobotModel(HyperParameters):
                 pminus = None
                 if h > 0:  # rows in the band around the quadrant boundary are left out
                     inb = np.abs(tout) < h
+                    in_band[j] += np.count_nonzero(inb)
+                    considered[j] += inb.size
                     pplus[inb] = 0.0
                     pminus = 1.0 - pplus
                     pminus[inb] = 0.0
@@ -693,6 +701,9 @@ class RobotModel(HyperParameters):
                     moms[j].add(VT, pplus, E, VzT)
                 if stores is not None:
                     stores[j].offer(VT, VzT, E, pplus, tout, pminus)
+        if theta is not None and stride == 1:
+            # the share of each joint's rows the quadrant band leaves out, at this pass
+            self._pass_band_share = in_band / np.maximum(considered, 1)
         return moms, rows, changed, stores
 
     @staticmethod
@@ -1048,6 +1059,9 @@ class RobotModel(HyperParameters):
             self._payload_groups(signals)
         self._setup()
         k, pb = len(self.joints_), self.n_theta_
+        # the share of each joint's rows in the quadrant band, set by every full pass
+        self._pass_band_share = np.zeros(k)
+        self.band_share_ = np.zeros(k)
         if self.payload_ratio:
             items = [signals] if isinstance(signals, RobotSignals) else list(signals)
             if not any(pl.mass > 0 for sig in items if isinstance(sig, RobotSignals)
@@ -1148,6 +1162,7 @@ class RobotModel(HyperParameters):
         if pending is not None:  # the last quadrants still leave a direction unexcited
             raise pending
         self.quadrant_from_ = theta_q if model_q else None
+        self.band_share_ = self._pass_band_share.copy()
         self._statistics(moms, paper_coefficients, x, free, w)
         self.weights_ = w
         self.n_passes_, self.n_iter_ = passes, it
@@ -1192,6 +1207,7 @@ class RobotModel(HyperParameters):
         except _Unidentifiable as e:
             raise RobotIdentError(self._evidence(e, moms)) from None
         self.quadrant_from_ = theta_q if model_q else None
+        self.band_share_ = self._pass_band_share.copy()
         self._statistics(moms, products_coefficients, x, free, w)
         self.weights_ = w
         self.n_passes_, self.n_iter_ = passes, it
