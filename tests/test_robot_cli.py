@@ -414,6 +414,21 @@ def test_kuka_paper_model_is_identified_from_the_model_quadrant(tmp_path, capfd)
 
 
 @pytest.mark.skipif(not KUKA_DATA.is_dir(), reason="../shared/data/kuka_kr300_weigand2021 absent")
+def test_kuka_b_alone_fits_both_models_with_wls(tmp_path, capfd):
+    """Recording B alone: while the model quadrants are being decided, one axis has no row in
+    a step of the paper fit; WLS gives it any weight (it adds nothing) instead of refusing
+    the fit ("a joint has zero residual"), as it did before 2026-11-27."""
+    f = KUKA_DATA / "recorded_2020-10-21_FF_B_08ms.mat"
+    out_json = tmp_path / "kuka_b.json"
+    code, out, err = run_cli(capfd, "--robot", KUKA, f, "--q-unit", "deg", "--map", KUKA_MAP,
+                             "--model", "both", "--json", out_json)
+    assert code == 0, err
+    rec = json.loads(out_json.read_text())["models"]
+    assert "error" not in rec["paper"] and "error" not in rec["usual"], rec
+    assert all(0 < v < 1 for v in rec["paper"]["rel_error"].values())
+
+
+@pytest.mark.skipif(not KUKA_DATA.is_dir(), reason="../shared/data/kuka_kr300_weigand2021 absent")
 def test_kuka_paper_model_under_iv_is_refused_with_the_evidence_and_the_fix(tmp_path, capfd):
     """IV instruments leave a direction unexcited on these files: one line with the rows per
     model quadrant, the load signs, the singular values and the fix; no JSON."""

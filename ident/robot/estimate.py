@@ -917,10 +917,22 @@ class RobotModel(HyperParameters):
         est = self._estimator
         if est.reweights:  # WLS: the joints' weights from the first fit's residuals
             sj = self._joint_sigma(moms, self._cost(moms, coeffs, x), free)
+            # a joint without rows (at this quadrant decision) adds nothing to the normal
+            # equations: its weight is irrelevant, not undefined
+            sj = np.where([m.n == 0 for m in moms], 1.0, sj)
             try:
                 w = est.weights(sj)
             except DataError as e:
-                raise RobotIdentError(f"RobotModel: {e}") from None
+                bad = [j for j, s in enumerate(sj) if not s > 0]
+                if not bad:
+                    raise RobotIdentError(f"RobotModel: {e}") from None
+                j = bad[0]
+                nj, bj = moms[j].n, int(free[self._local(j)].sum())
+                raise RobotIdentError(
+                    f"RobotModel (WLS): joint {self.joints_[j]} has zero residual on its "
+                    f"{nj} rows at this step of the fit ({bj} parameters involve them), so "
+                    f"its weight 1/sigma^2 is undefined; use LS (method='ls', --method ls)"
+                ) from None
             x, it = self._gauss_newton(moms, coeffs, x, free, w, linear)
         return x, w, it
 
