@@ -1112,10 +1112,7 @@ class RobotModel(HyperParameters):
         # the theta that decided the final moments' quadrants (ident.robot.uncertainty)
         self.quadrant_from_ = None
         if not paper:
-            self._statistics(moms, usual_coefficients, xu, free_u, wu)
-            self.weights_ = wu
-            self.n_passes_, self.n_iter_ = passes, it
-            return self
+            return self._finish(moms, usual_coefficients, xu, free_u, wu, passes, it, None)
         if self.form == "products":
             return self._fit_products(signals, moms, xu, passes)
         nb = len(PAPER_BLOCK)
@@ -1130,10 +1127,7 @@ class RobotModel(HyperParameters):
         # the theta that decides the moments' quadrants
         given = self.quadrant_theta_ is not None
         theta_q = self.quadrant_theta_.copy() if given else xu[:pb].copy()
-        self.band_ = np.zeros(k)
-        if model_q and float(self.quadrant_band) > 0:
-            self.band_ = float(self.quadrant_band) * self._rms_load(moms, theta_q)
-        self._band_h = self.band_
+        self._set_band(moms, theta_q, model_q)
         if model_q:
             # the model quadrant sign(tau_out_hat dq) of the usual fit, never the measured
             # torque's: on a joint whose dry friction exceeds its load, sign(tau dq) is
@@ -1173,12 +1167,8 @@ class RobotModel(HyperParameters):
                     break
         if pending is not None:  # the last quadrants still leave a direction unexcited
             raise pending
-        self.quadrant_from_ = theta_q if model_q else None
-        self.band_share_ = self._pass_band_share.copy()
-        self._statistics(moms, paper_coefficients, x, free, w)
-        self.weights_ = w
-        self.n_passes_, self.n_iter_ = passes, it
-        return self
+        return self._finish(moms, paper_coefficients, x, free, w, passes, it,
+                            theta_q if model_q else None)
 
     def _fit_products(self, signals: Any, moms: list[JointMoments], xu: np.ndarray,
                       passes: int) -> RobotModel:
@@ -1191,13 +1181,10 @@ class RobotModel(HyperParameters):
         it) or a linear combination of its other load columns there (UR10 shoulder pan:
         MX2 and XY2) are fixed at 0 (``fixed_``): the single-joint rank rule
         (:func:`~ident.estimators.dependent_columns`, pivoted on the scaled Gram matrix)."""
-        pb, k, nbu = self.n_theta_, len(self.joints_), len(USUAL_BLOCK)
+        pb, nbu = self.n_theta_, len(USUAL_BLOCK)
         model_q = self.quadrant == "model"
         theta_q = self.quadrant_theta_.copy() if self.quadrant_theta_ is not None else xu[:pb]
-        self.band_ = np.zeros(k)
-        if model_q and float(self.quadrant_band) > 0:
-            self.band_ = float(self.quadrant_band) * self._rms_load(moms, theta_q)
-        self._band_h = self.band_
+        self._set_band(moms, theta_q, model_q)
         if model_q:
             moms, _, _, _ = self._pass(signals, theta_q, 3)
             passes += 1
@@ -1218,9 +1205,24 @@ class RobotModel(HyperParameters):
             x, w, it = self._fit_on(moms, products_coefficients, x, free, linear=True)
         except _Unidentifiable as e:
             raise RobotIdentError(self._evidence(e, moms)) from None
-        self.quadrant_from_ = theta_q if model_q else None
+        return self._finish(moms, products_coefficients, x, free, w, passes, it,
+                            theta_q if model_q else None)
+
+    def _set_band(self, moms: list[JointMoments], theta_q: np.ndarray, model_q: bool) -> None:
+        """``band_`` [N m] (``quadrant_band`` x each joint's RMS predicted load with
+        ``theta_q``, with model quadrants; else 0), the band the passes leave out."""
+        self.band_ = np.zeros(len(moms))
+        if model_q and float(self.quadrant_band) > 0:
+            self.band_ = float(self.quadrant_band) * self._rms_load(moms, theta_q)
+        self._band_h = self.band_
+
+    def _finish(self, moms: list[JointMoments], coeffs: Coeffs, x: np.ndarray,
+                free: np.ndarray, w: np.ndarray, passes: int, it: int,
+                quadrant_from: np.ndarray | None) -> RobotModel:
+        """The fitted attributes of the final fit ``x`` (weights ``w``) on ``moms``."""
+        self.quadrant_from_ = quadrant_from
         self.band_share_ = self._pass_band_share.copy()
-        self._statistics(moms, products_coefficients, x, free, w)
+        self._statistics(moms, coeffs, x, free, w)
         self.weights_ = w
         self.n_passes_, self.n_iter_ = passes, it
         return self
