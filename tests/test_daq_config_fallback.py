@@ -8,12 +8,12 @@ import can
 import can.util
 import numpy as np
 import pytest
+from daq_campaigns import joint_campaign
 
 from daq import ConfigError
 from daq.protocol.reader import read_run
 from daq.runtime.config import parse_daq
 from daq.runtime.runner import run_campaign
-from trajectories.robot_campaign import RobotCampaign
 
 _chan = itertools.count()
 
@@ -82,20 +82,10 @@ def test_campaign_without_bus_keys_runs_on_the_configured_bus(tmp_path, monkeypa
     channel = f"fallback_{next(_chan)}"
     monkeypatch.setenv("CAN_INTERFACE", "virtual")
     monkeypatch.setenv("CAN_CHANNEL", channel)
-    raw = {
-        "name": "fallback",
-        "joint": {"kind": "revolute", "limits": {
-            "position": [-1.0, 1.0], "max_velocity": 1.0, "max_acceleration": 4.0,
-            "max_jerk": 40.0, "max_torque": 700.0}},
-        "control": {"cycle_s": 0.001, "kp": 6000.0, "kd": 200.0,
-                    "feedforward": {"J": 30.0, "MX": 21.0}},
-        "payloads": [{"mass_kg": 0.0, "arm_m": 1.0}],
-        "segments": [{"kind": "sine", "amplitude": 0.1, "frequency_hz": 1.0, "center": 0.0,
-                      "periods": 1}],
-        "daq": {"drives": [{"node_id": 5, "scaling": {
-            "rated_torque_Nm": 5.0, "gear_ratio": 100.0, "encoder_counts_per_rev": 4096}}]},
-    }
-    campaign = RobotCampaign.from_dict(raw, "fallback.toml")
+    campaign = joint_campaign(
+        "fallback", cycle_s=0.001, sine={"amplitude": 0.1, "frequency_hz": 1.0, "periods": 1},
+        daq={"drives": [{"node_id": 5, "scaling": {
+            "rated_torque_Nm": 5.0, "gear_ratio": 100.0, "encoder_counts_per_rev": 4096}}]})
     plant = JointPlant(default_plant(), 0.001)
     plant.reset(0.0)
     # the drive on simulated time, its channel clocked by the master's SYNCs (heartbeats
@@ -123,19 +113,10 @@ def test_simulated_run_ignores_python_can_configuration(tmp_path, monkeypatch):
 
     monkeypatch.setenv("CAN_INTERFACE", "socketcan")
     monkeypatch.setenv("CAN_CHANNEL", "can0")
-    raw = {
-        "name": "simcfg",
-        "joint": {"kind": "revolute", "limits": {
-            "position": [-1.0, 1.0], "max_velocity": 1.0, "max_acceleration": 4.0,
-            "max_jerk": 40.0, "max_torque": 700.0}},
-        "control": {"cycle_s": 0.001, "kp": 6000.0, "kd": 200.0,
-                    "feedforward": {"J": 30.0, "MX": 21.0}},
-        "payloads": [{"mass_kg": 0.0, "arm_m": 1.0}],
-        "segments": [{"kind": "sine", "amplitude": 0.1, "frequency_hz": 1.0, "center": 0.0,
-                      "periods": 1}],
-        "daq": {"channel": f"simcfg_{next(_chan)}"},
-    }
-    r = run_campaign(RobotCampaign.from_dict(raw, "simcfg.toml"), out_dir=tmp_path,
+    c = joint_campaign("simcfg", cycle_s=0.001,
+                       sine={"amplitude": 0.1, "frequency_hz": 1.0, "periods": 1},
+                       daq={"channel": f"simcfg_{next(_chan)}"})
+    r = run_campaign(c, out_dir=tmp_path,
                      simulate=default_plant(), yes=True)
     assert r.ok, r.reason
     assert read_run(r.runs[0].path).metadata["campaign"]["interface"] == "virtual"

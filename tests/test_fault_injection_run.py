@@ -24,6 +24,7 @@ from pathlib import Path
 import can
 import numpy as np
 import pytest
+from daq_campaigns import joint_campaign
 
 from daq import ConfigError
 from daq.protocol.cia402 import State, state_from_statusword
@@ -48,20 +49,12 @@ _chan = itertools.count()
 
 
 def campaign(daq=None, periods=1, n_payloads=2, name="inj"):
-    raw = {
-        "name": name,
-        "joint": {"kind": "revolute", "limits": {
-            "position": [-1.0, 1.0], "max_velocity": 1.0, "max_acceleration": 4.0,
-            "max_jerk": 40.0, "max_torque": 700.0}},
-        "control": {"cycle_s": 0.001, "kp": 6000.0, "kd": 200.0,
-                    "feedforward": {"J": 30.0, "MX": 21.0}},
-        "payloads": [{"mass_kg": 3.0 * k, "arm_m": 1.0} for k in range(n_payloads)],
-        "segments": [{"kind": "sine", "amplitude": 0.3, "frequency_hz": 0.5, "center": 0.0,
-                      "periods": periods}],
-        "daq": {"channel": f"test_inj_{os.getpid()}_{next(_chan)}", "quick_stop_cycles": QS,
-                **(daq or {})},
-    }
-    return RobotCampaign.from_dict(raw, "inj.toml")
+    return joint_campaign(
+        name, cycle_s=0.001,
+        sine={"amplitude": 0.3, "frequency_hz": 0.5, "periods": periods},
+        payload_masses=tuple(3.0 * k for k in range(n_payloads)),
+        daq={"channel": f"test_inj_{os.getpid()}_{next(_chan)}", "quick_stop_cycles": QS,
+             **(daq or {})}, source="inj.toml")
 
 
 def write_campaign(path: Path, periods: int, extra: str = "") -> Path:

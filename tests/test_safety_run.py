@@ -18,6 +18,7 @@ import time
 import can
 import numpy as np
 import pytest
+from daq_campaigns import joint_campaign
 
 from daq import ConfigError
 from daq.protocol.cia402 import State, state_from_statusword
@@ -40,21 +41,11 @@ SCALING = {"rated_torque_Nm": 5.0, "gear_ratio": 100.0, "encoder_counts_per_rev"
 
 
 def campaign(daq=None, periods=1, scaling=None, clock="lockstep"):
-    raw = {
-        "name": "safety",
-        "joint": {"kind": "revolute", "limits": {
-            "position": [-1.0, 1.0], "max_velocity": 1.0, "max_acceleration": 4.0,
-            "max_jerk": 40.0, "max_torque": 700.0}},
-        "control": {"cycle_s": 0.001, "kp": 6000.0, "kd": 200.0,
-                    "feedforward": {"J": 30.0, "MX": 21.0}},
-        "payloads": [{"mass_kg": 0.0, "arm_m": 1.0}],
-        "segments": [{"kind": "sine", "amplitude": 0.1, "frequency_hz": 1.0, "center": 0.0,
-                      "periods": periods}],
-        "daq": {"channel": f"test_safety_{next(_chan)}", "clock": clock,
-                "drives": [{"node_id": NODE, "scaling": scaling or SCALING}],
-                **(daq or {})},
-    }
-    return RobotCampaign.from_dict(raw, "safety.toml")
+    return joint_campaign(
+        "safety", cycle_s=0.001,
+        sine={"amplitude": 0.1, "frequency_hz": 1.0, "periods": periods},
+        daq={"channel": f"test_safety_{next(_chan)}", "clock": clock,
+             "drives": [{"node_id": NODE, "scaling": scaling or SCALING}], **(daq or {})})
 
 
 class Rig:

@@ -17,6 +17,7 @@ import can
 import canopen
 import numpy as np
 import pytest
+from daq_campaigns import joint_campaign
 
 from daq.protocol.cia402 import State, path
 from daq.protocol.reader import read_frames, read_run
@@ -28,7 +29,6 @@ from sim_drivers.plant import JointPlant
 from sim_drivers.plant_config import default_plant
 from sim_drivers.simbus import SimBus, SimNetwork, SyncPeriodicTask
 from sim_drivers.testing import unique_channel
-from trajectories.robot_campaign import RobotCampaign
 
 NODE = 5
 MASTER = 127
@@ -157,20 +157,10 @@ def test_sync_clock_drive_times_out_the_master_heartbeat_at_a_fixed_sync():
 
 
 def campaign(daq=None, periods=2):
-    raw = {
-        "name": "clocked",
-        "joint": {"kind": "revolute", "limits": {
-            "position": [-1.0, 1.0], "max_velocity": 1.0, "max_acceleration": 4.0,
-            "max_jerk": 40.0, "max_torque": 700.0}},
-        "control": {"cycle_s": 0.001, "kp": 6000.0, "kd": 200.0,
-                    "feedforward": {"J": 30.0, "MX": 21.0}},
-        "payloads": [{"mass_kg": 0.0, "arm_m": 1.0}],
-        "segments": [{"kind": "sine", "amplitude": 0.3, "frequency_hz": 0.5, "center": 0.0,
-                      "periods": periods}],
-        "daq": {"channel": f"test_clock_{next(_chan)}", "quick_stop_cycles": 2,
-                **(daq or {})},
-    }
-    return RobotCampaign.from_dict(raw, "clocked.toml")
+    return joint_campaign(
+        "clocked", cycle_s=0.001,
+        sine={"amplitude": 0.3, "frequency_hz": 0.5, "periods": periods},
+        daq={"channel": f"test_clock_{next(_chan)}", "quick_stop_cycles": 2, **(daq or {})})
 
 
 def test_simulated_lockstep_run_paces_heartbeats_by_sync_and_a_stall_is_nothing(tmp_path):
