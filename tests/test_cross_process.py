@@ -15,6 +15,7 @@ import time
 import can
 import numpy as np
 import pytest
+from daq_campaigns import joint_campaign
 
 from daq.protocol.cia402 import State, state_from_statusword
 from daq.protocol.reader import read_frames, read_run
@@ -33,29 +34,20 @@ def remote_campaign(url: str, node_id: int = 1, *, sync_source: str = "runner",
                     periods: int = 1, name: str = "xproc", cycle_s: float = 0.001,
                     **daq) -> RobotCampaign:
     sc = plant_scaling(default_plant())
-    raw = {
-        "name": name,
-        "joint": {"kind": "revolute", "limits": {
-            "position": [-1.0, 1.0], "max_velocity": 1.0, "max_acceleration": 4.0,
-            "max_jerk": 40.0, "max_torque": 700.0}},
-        "control": {"cycle_s": cycle_s, "kp": 6000.0, "kd": 200.0,
-                    "feedforward": {"J": 30.0, "MX": 21.0}},
-        "payloads": [{"mass_kg": 0.0, "arm_m": 1.0}],
-        "segments": [{"kind": "sine", "amplitude": 0.1, "frequency_hz": 0.5, "center": 0.0,
-                      "periods": periods}],
-        "daq": {"interface": "remote", "channel": url, "clock": "paced",
-                "sync_source": sync_source,
-                # a shared 2-core host stalls for tens of ms: the TPDO watchdog of this test
-                # tolerates that, the drive's own watchdogs stay at their defaults
-                "tpdo_timeout_cycles": 200, "max_following_error": 0.5,
-                # the served drives are simulated single joints (serve prints their timing)
-                "torque_delay_cycles": TORQUE_DELAY_CYCLES,
-                "drives": [{"node_id": node_id, "scaling": {
-                    "rated_torque_Nm": sc.rated_torque_Nm, "gear_ratio": sc.gear_ratio,
-                    "encoder_counts_per_rev": sc.encoder_counts_per_rev}}],
-                **daq},
-    }
-    return RobotCampaign.from_dict(raw, f"{name}.toml")
+    return joint_campaign(
+        name, cycle_s=cycle_s,
+        sine={"amplitude": 0.1, "frequency_hz": 0.5, "periods": periods},
+        daq={"interface": "remote", "channel": url, "clock": "paced",
+             "sync_source": sync_source,
+             # a shared 2-core host stalls for tens of ms: the TPDO watchdog of this test
+             # tolerates that, the drive's own watchdogs stay at their defaults
+             "tpdo_timeout_cycles": 200, "max_following_error": 0.5,
+             # the served drives are simulated single joints (serve prints their timing)
+             "torque_delay_cycles": TORQUE_DELAY_CYCLES,
+             "drives": [{"node_id": node_id, "scaling": {
+                 "rated_torque_Nm": sc.rated_torque_Nm, "gear_ratio": sc.gear_ratio,
+                 "encoder_counts_per_rev": sc.encoder_counts_per_rev}}],
+             **daq})
 
 
 #: control cycle of this file's paced runs [s]: 4 ms, so that a drive served in another

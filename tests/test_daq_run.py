@@ -8,6 +8,7 @@ import math
 import can
 import numpy as np
 import pytest
+from daq_campaigns import joint_campaign
 
 from daq import ConfigError
 from daq.protocol.cia402 import State, state_from_statusword
@@ -16,26 +17,17 @@ from daq.runtime.runner import run_campaign
 from sim_drivers.plant_config import default_plant
 from tests.conftest import VENDOR_EDS, shared_path
 from trajectories.plan import plan_campaign
-from trajectories.robot_campaign import RobotCampaign
 
 _chan = itertools.count()
 
 
 def small_campaign(n_payloads=3, daq=None, periods=1, freq=0.5, amplitude=0.3, name="small",
                    cycle_s=0.001):
-    raw = {
-        "name": name,
-        "joint": {"kind": "revolute", "limits": {
-            "position": [-1.0, 1.0], "max_velocity": 1.0, "max_acceleration": 4.0,
-            "max_jerk": 40.0, "max_torque": 700.0}},
-        "control": {"cycle_s": cycle_s, "kp": 6000.0, "kd": 200.0,
-                    "feedforward": {"J": 30.0, "MX": 21.0}},
-        "payloads": [{"mass_kg": 3.0 * k, "arm_m": 1.0} for k in range(n_payloads)],
-        "segments": [{"kind": "sine", "amplitude": amplitude, "frequency_hz": freq,
-                      "center": 0.0, "periods": periods}],
-        "daq": {"channel": f"test_run_{next(_chan)}", **(daq or {})},
-    }
-    return RobotCampaign.from_dict(raw, "small.toml")
+    return joint_campaign(
+        name, cycle_s=cycle_s,
+        sine={"amplitude": amplitude, "frequency_hz": freq, "periods": periods},
+        payload_masses=tuple(3.0 * k for k in range(n_payloads)),
+        daq={"channel": f"test_run_{next(_chan)}", **(daq or {})}, source="small.toml")
 
 
 def drive_cycles(result, run):
