@@ -78,6 +78,8 @@ __all__ = [
     "quadrant_shares",
     "quality",
     "random_states",
+    "zero_load_share",
+    "ZERO_LOAD_SHARE",
 ]
 
 #: (n, k) x 3 -> (n * k, p)
@@ -186,6 +188,12 @@ def quadrant_shares(dq: np.ndarray, tau: np.ndarray, limits: Sequence[JointLimit
     return np.stack([(m & moving).sum(axis=0) / n_mov for m in masks], axis=1)
 
 
+def zero_load_share(row: np.ndarray) -> float:
+    """The share of a joint's moving samples at zero output torque: what its row of
+    :func:`quadrant_shares` (the four quadrants) leaves to 1."""
+    return max(0.0, 1.0 - float(np.sum(row)))
+
+
 @dataclass(frozen=True)
 class Quality:
     """Predicted excitation quality of a plan.
@@ -237,7 +245,7 @@ class Quality:
                       + f" {'tau ~ 0':>12}"]
             for nm, row in zip(self.joint_names, self.quadrant_share, strict=True):
                 lines.append(f"{nm:<{w}} " + " ".join(f"{100 * x:>11.1f}%" for x in row)
-                             + f" {100 * max(0.0, 1.0 - row.sum()):>11.1f}%")
+                             + f" {100 * zero_load_share(row):>11.1f}%")
         return "\n".join(lines)
 
     def __str__(self) -> str:
@@ -554,7 +562,7 @@ class Assessment:
                      + f" {'tau ~ 0':>12}"]
             for nm, row in zip(names, quad, strict=True):
                 lines.append(f"{nm:<{w}} " + " ".join(f"{100 * x:>11.1f}%" for x in row)
-                             + f" {100 * max(0.0, 1.0 - row.sum()):>11.1f}%")
+                             + f" {100 * zero_load_share(row):>11.1f}%")
             parts.append("\n".join(lines))
         for name, share in self.zero_load_joints().items():
             parts.append(f"\nnote: {name}: {100 * share:.1f} % of its moving samples at zero "
@@ -572,7 +580,7 @@ class Assessment:
         moves = np.any(np.abs(self.plan.dq) > MOVING_FRACTION * vmax, axis=0)
         for quad in self.quadrants:
             for name, row, moving in zip(self.plan.joint_names, quad, moves, strict=True):
-                share = max(0.0, 1.0 - float(np.sum(row)))
+                share = zero_load_share(row)
                 if moving and share > limit:
                     out[name] = max(share, out.get(name, 0.0))
         return out
