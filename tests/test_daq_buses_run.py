@@ -9,31 +9,21 @@ import can
 import numpy as np
 import pytest
 from can.interfaces import virtual
+from daq_campaigns import joint_campaign
 
 from daq import ConfigError
 from daq.protocol.reader import read_frames, read_run
 from daq.runtime.runner import run_campaign
 from sim_drivers.plant_config import default_plant
-from trajectories.robot_campaign import RobotCampaign
 
 _chan = itertools.count()
 
 
 def campaign(drives, cycle_s=0.002, clock="lockstep", channel=None, **daq):
-    raw = {
-        "name": "multi",
-        "joint": {"kind": "revolute", "limits": {
-            "position": [-1.0, 1.0], "max_velocity": 1.0, "max_acceleration": 4.0,
-            "max_jerk": 40.0, "max_torque": 700.0}},
-        "control": {"cycle_s": cycle_s, "kp": 6000.0, "kd": 200.0,
-                    "feedforward": {"J": 30.0, "MX": 21.0}},
-        "payloads": [{"mass_kg": 0.0, "arm_m": 1.0}],
-        "segments": [{"kind": "sine", "amplitude": 0.1, "frequency_hz": 1.0, "center": 0.0,
-                      "periods": 1}],
-        "daq": {"channel": channel or f"multi_{next(_chan)}", "clock": clock,
-                "drives": drives, **daq},
-    }
-    return RobotCampaign.from_dict(raw, "multi.toml")
+    return joint_campaign(
+        "multi", cycle_s=cycle_s, sine={"amplitude": 0.1, "frequency_hz": 1.0, "periods": 1},
+        daq={"channel": channel or f"multi_{next(_chan)}", "clock": clock, "drives": drives,
+             **daq})
 
 
 def check_axes_equal_records(r, n):

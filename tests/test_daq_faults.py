@@ -13,13 +13,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from daq_campaigns import joint_campaign
 
 from daq.protocol.cia402 import State, state_from_statusword
 from daq.protocol.reader import read_run
 from daq.runtime.runner import run_campaign
 from sim_drivers.faults import FaultInjector
 from sim_drivers.plant_config import default_plant
-from trajectories.robot_campaign import RobotCampaign
 
 ROOT = Path(__file__).resolve().parents[1]
 _chan = itertools.count()
@@ -27,20 +27,10 @@ QS = 2  # daq.quick_stop_cycles used below
 
 
 def campaign(daq=None, periods=2):
-    raw = {
-        "name": "faulty",
-        "joint": {"kind": "revolute", "limits": {
-            "position": [-1.0, 1.0], "max_velocity": 1.0, "max_acceleration": 4.0,
-            "max_jerk": 40.0, "max_torque": 700.0}},
-        "control": {"cycle_s": 0.001, "kp": 6000.0, "kd": 200.0,
-                    "feedforward": {"J": 30.0, "MX": 21.0}},
-        "payloads": [{"mass_kg": 0.0, "arm_m": 1.0}, {"mass_kg": 3.0, "arm_m": 1.0}],
-        "segments": [{"kind": "sine", "amplitude": 0.3, "frequency_hz": 0.5, "center": 0.0,
-                      "periods": periods}],
-        "daq": {"channel": f"test_faults_{next(_chan)}", "quick_stop_cycles": QS,
-                **(daq or {})},
-    }
-    return RobotCampaign.from_dict(raw, "faulty.toml")
+    return joint_campaign(
+        "faulty", cycle_s=0.001, payload_masses=(0.0, 3.0),
+        sine={"amplitude": 0.3, "frequency_hz": 0.5, "periods": periods},
+        daq={"channel": f"test_faults_{next(_chan)}", "quick_stop_cycles": QS, **(daq or {})})
 
 
 def check_stopped(result, reason_part):
