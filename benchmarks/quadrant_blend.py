@@ -14,9 +14,14 @@ the simulator (``jointid run examples/campaign_ur10_demo.toml --simulate --out L
 * bands of 0, 10 % and 30 % of it,
 * the quadrants decided by the simulator's true theta (``quadrant_theta``),
 * a band of 3 x the torque's RMS above the chain's cut-off per joint ("jitter"),
+* without the sign check (``fit_files(sign_check=False)``),
 
 and each fit's parameters are compared with the simulator's truth (in the model's gauge):
-how many of the 100 lie outside 3 sigma, and the shoulder pan's friction terms.
+how many of the 100 lie outside 3 sigma, and the shoulder pan's friction terms. A check that
+needs no truth is printed too: how far each parameter moves when the band widens from 3 % to
+30 % of the RMS load, in sigmas of the wider fit (|theta_30 - theta_3| / sigma_30, a bound on
+Hausman's statistic, which divides by sqrt(sigma_30^2 - sigma_3^2)): where the narrow band's
+rows are blended it moves.
 ``kuka``: the torque above the cut-off per axis against the default band, and whether the
 jitter band leaves the fit identifiable (it does not).
 """
@@ -85,6 +90,22 @@ def report(tag: str, m: RobotModel, params) -> None:
           f"{m.n_samples_.tolist()}\n    {pan}", flush=True)
 
 
+def band_shift(base: RobotModel, wide: RobotModel, params) -> None:
+    """Per joint, the largest |theta_wide - theta| / sigma_wide and its parameter; the
+    parameters outside 3 sigma of the truth with it."""
+    tv = gauged_truth(base, params)
+    shift = np.abs(wide.coef_ - base.coef_) / np.where(wide.std_ > 0, wide.std_, np.inf)
+    z = (base.coef_ - tv) / base.std_
+    names = list(base.names_)
+    print("band 3 % -> 30 %: largest shift / sigma_30 per joint (|z| > 3 against the truth):")
+    for j, joint in enumerate(base.joints_):
+        idx = [i for i, n in enumerate(names) if n[-1:] == str(j + 1) or
+               n.endswith(f"{j + 1}R")]
+        i = max(idx, key=lambda i: shift[i])
+        far = ", ".join(f"{names[i]} {z[i]:+.1f}" for i in idx if abs(z[i]) > 3) or "none"
+        print(f"    {joint:<22} {shift[i]:.1f} ({names[i]})   {far}")
+
+
 def ur10(logdir: Path, robot_file: Path) -> None:
     files = sorted(logdir.glob("*.mcap"))
     if not files:
@@ -100,6 +121,11 @@ def ur10(logdir: Path, robot_file: Path) -> None:
     p = base.get_params()
     p.update(quadrant_theta=gauged_truth(base, truth)[:base.n_theta_])
     report("true-theta quadrants", RobotModel(**p).fit(sig), truth)
+    p = base.get_params()
+    p.update(quadrant_band=0.3)
+    band_shift(base, RobotModel(**p).fit(sig), truth)
+    report("no sign check", RobotFit(robot_file, model="paper", consistency=False, prune=False,
+                                     sign_check=False).fit(files).models_["paper"], truth)
     runs = load_runs(load_robot(robot_file), files)
     jit = jitter(fit, runs)
     print("torque above the cut-off [N m]:", np.round(jit, 3).tolist())

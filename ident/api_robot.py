@@ -94,6 +94,9 @@ class RobotFit(HyperParameters):
     prune : bool
         Prune the paper model's friction parameters above the relative-σ threshold (False:
         ``--no-prune``).
+    sign_check : bool
+        Leave out the paper model's rows where sign(tau) != sign(tau_out) of a first usual fit
+        (False: ``--no-sign-check``).
     **deprecated
         ``qs=``: the older spelling of ``q_s`` (accepted with a DeprecationWarning,
         :mod:`ident.vocab`).
@@ -140,6 +143,7 @@ class RobotFit(HyperParameters):
         consistent: bool = False,
         sigma_blocks: int = N_BLOCKS,
         prune: bool = True,
+        sign_check: bool = True,
         **deprecated: Any,
     ) -> None:
         q_s = renamed_keywords("RobotFit", deprecated).get("q_s", q_s)
@@ -160,6 +164,7 @@ class RobotFit(HyperParameters):
         self.consistent = consistent
         self.sigma_blocks = sigma_blocks
         self.prune = prune
+        self.sign_check = sign_check
 
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
@@ -198,7 +203,7 @@ class RobotFit(HyperParameters):
             consistent=self.consistent, method=self.method, q_s=self.q_s, dq_min=self.dq_min,
             known_rotor_inertia=self.known_rotor_inertia, chain=self.chain,
             payload=self.payload, feasibility=self.consistency,
-            sigma_blocks=self.sigma_blocks, prune=self.prune)
+            sigma_blocks=self.sigma_blocks, prune=self.prune, sign_check=self.sign_check)
         self._set(out)
         return self
 

@@ -79,7 +79,8 @@ MODELS = {"usual": ("usual",), "paper": ("paper",), "both": ("usual", "paper")}
 _SINGLE_ONLY = (("joint", "--joint", "the robot file gives the joint types"),
                 ("gain", "--gain", "use drive_gain in the robot file's [joints.drive]"),
                 ("tau_min", "--tau-min", "single-joint only"),
-                ("threshold", "--threshold", "single-joint only"))
+                ("threshold", "--threshold", "single-joint only"),
+                ("no_eliminate", "--no-eliminate", "its pruning is turned off by --no-prune"))
 
 
 def robot_gains(robot: Robot) -> list[float]:
@@ -819,6 +820,7 @@ def run(args: argparse.Namespace) -> int:
                     consistent=getattr(args, "consistent", False),
                     sigma_blocks=N_BLOCKS if getattr(args, "sigma_blocks", None) is None
                     else args.sigma_blocks, prune=not getattr(args, "no_prune", False),
+                    sign_check=not getattr(args, "no_sign_check", False),
                     progress=lambda m: print(m, file=sys.stderr))
     if getattr(args, "refine", False):
         refine_robot(out, max_steps=args.max_steps,

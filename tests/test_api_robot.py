@@ -41,10 +41,10 @@ def arm_files(tmp_path_factory):
     return robot, files
 
 
-def _cli(tmp_path, capfd, robot_file, fit, val):
+def _cli(tmp_path, capfd, robot_file, fit, val, *options):
     out = tmp_path / "fit.json"
     code = main(["fit", "--robot", str(robot_file), *map(str, fit), "--validate",
-                 *map(str, val), "--no-consistency", "--json", str(out)])
+                 *map(str, val), "--no-consistency", *options, "--json", str(out)])
     text, err = capfd.readouterr()
     assert code == 0, err
     return json.loads(out.read_text()), text
@@ -78,6 +78,21 @@ def test_api_defaults_give_the_cli_json(tmp_path, arm_files, capfd):
     # errors differ (the reason this API exists); the API is not that chain renamed
     sig = load_robot_signals(files[:2], robot.moving)
     assert sig.columns is None and fit.signals_.columns is not None
+
+
+def test_api_sign_check_false_is_the_cli_no_sign_check(tmp_path, arm_files, capfd):
+    """``RobotFit(sign_check=False)`` gives ``--no-sign-check``'s record, which keeps more
+    of the paper model's rows than the default."""
+    robot, files = arm_files
+    rec, _ = _cli(tmp_path, capfd, ARM3, files[:2], files[2:], "--no-sign-check")
+    fit = RobotFit(ARM3, consistency=False, sign_check=False).fit(files[:2],
+                                                                 validation=files[2:])
+    assert _numbers(json.loads(json.dumps(fit.record_, default=float))) == _numbers(rec)
+    checked = RobotFit(ARM3, consistency=False).fit(files[:2], validation=files[2:])
+    assert not any(n.startswith("sign check") for n in rec["notes"])
+    assert any(n.startswith("sign check") for n in checked.record_["notes"])
+    assert (fit.models_["paper"].n_samples_.sum()
+            > checked.models_["paper"].n_samples_.sum())
 
 
 def test_api_applies_the_robot_files_drive_gains_like_the_cli(tmp_path, arm_files, capfd):

@@ -368,6 +368,8 @@ def test_single_joint_fit_options_are_refused_with_robot(tmp_path, arm_runs, cap
     run.to_csv(p)
     code, _, err = run_cli(capfd, "--robot", ARM3, p, "--gain", "2")
     assert code != 0 and "--gain: not used with --robot" in err
+    code, _, err = run_cli(capfd, "--robot", ARM3, p, "--no-eliminate")
+    assert code != 0 and "--no-eliminate: not used with --robot" in err and "--no-prune" in err
     code, _, err = run_cli(capfd, p, "--chain", "states")  # single joint
     assert code != 0 and "--chain: applies to --robot fits only" in err
 
