@@ -4,6 +4,8 @@ written here from the arm simulator (sim_drivers.arm), and on the KUKA recording
 
 from __future__ import annotations
 
+import argparse
+import inspect
 import json
 import re
 import subprocess
@@ -17,6 +19,7 @@ from robot_campaigns import write_arm_csv
 
 from daq.app.cli import main
 from daq.runtime.mcaplog import RunLog
+from ident import cli, cli_robot
 from ident.api import JointModel, load
 from ident.fitting import SIGN_CHECK_MIN_KEPT
 from ident.preprocess import decimate, diffcent, lowpass
@@ -372,6 +375,19 @@ def test_single_joint_fit_options_are_refused_with_robot(tmp_path, arm_runs, cap
     assert code != 0 and "--no-eliminate: not used with --robot" in err and "--no-prune" in err
     code, _, err = run_cli(capfd, p, "--chain", "states")  # single joint
     assert code != 0 and "--chain: applies to --robot fits only" in err
+
+
+def test_every_fit_option_is_read_or_refused_with_robot():
+    """No ``jointid fit`` option is silently ignored with ``--robot`` (``--no-sign-check``
+    was): each is read by ``ident.cli_robot`` or refused there in one line."""
+    sub = argparse.ArgumentParser().add_subparsers()
+    cli.register(sub)
+    dests = {a.dest for a in sub.choices["fit"]._actions} - {"help"}
+    refused = {attr for attr, _flag, _hint in cli_robot._SINGLE_ONLY} | {"axis"}
+    src = inspect.getsource(cli_robot)
+    ignored = sorted(d for d in dests - refused
+                     if f"args.{d}" not in src and f'"{d}"' not in src)
+    assert not ignored, f"options neither read nor refused with --robot: {ignored}"
 
 
 # -- KUKA KR300 recordings (Weigand et al.) ---------------------------------------------------
