@@ -256,13 +256,22 @@ def test_consistency_report(arm3_usual):
     assert "M1" in rep.unchecked  # link 1's mass acts on no joint torque
     # a negative rotor inertia beyond its uncertainty is reported, and no physical set of
     # links reproduces it
+    fitted = m.coef_.copy()
     i = m.names_.index("Ia3")
-    m.coef_ = m.coef_.copy()
+    m.coef_ = fitted.copy()
     m.coef_[i] = -1.0
     bad = check_consistency(m)
     assert not bad.ok
     assert any(c[3] == "violated" and "Ia3" in c[0] for c in bad.checks), bad.format()
     assert bad.feasible is False and bad.d2 > bad.d2_limit
+    # a generator load coefficient above the motor one at rest (the stiction band narrowing
+    # with the load, against eq. 21-23; KUKA A4's fit: a_g4 13.2 against a_m4 5.3) is reported
+    what = "a_m + b_m - a_g + b_g >= 0 (joint 2)"
+    assert any(c[0] == what and c[3] == "ok" for c in rep.checks), rep.format()
+    m.coef_ = fitted.copy()
+    m.coef_[m.names_.index("a_g2")] += 10.0
+    swapped = check_consistency(m)
+    assert any(c[0] == what and c[3] == "violated" for c in swapped.checks), swapped.format()
 
 
 # --------------------------------------------------------------------------- one joint

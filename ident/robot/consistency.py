@@ -50,6 +50,9 @@ _FRICTION = {
     "a_m + b_m > 0": (("a_m", 1.0), ("b_m", 1.0)),
     "a_g > 0": (("a_g", 1.0),),
     "a_g - b_g > 0": (("a_g", 1.0), ("b_g", -1.0)),
+    # the stiction band widens with the load (eq. 21-23): at rest the motor quadrant's load
+    # coefficient is at least the generator's (gauge-free: one payload scales both alike)
+    "a_m + b_m - a_g + b_g >= 0": (("a_m", 1.0), ("b_m", 1.0), ("a_g", -1.0), ("b_g", 1.0)),
     "c_m >= 0": (("c_m", 1.0),),
     "c_g >= 0": (("c_g", 1.0),),
     "c_m + d_m >= 0": (("c_m", 1.0), ("d_m", 1.0)),
