@@ -125,14 +125,21 @@ def run(args: argparse.Namespace) -> int:
     mapping = parse_mapping(args.map, robot=True) if args.map else None
     cons, fixed = consistent_from_record(args.fit, rec, robot, name, mapping, args.q_unit)
     if not cons.get("valid", False):
-        raise DataError(f"{args.fit}: models.{name}.consistent: a link is not physically "
-                        "valid; nothing exported")
+        left = cons.get("friction_bounds", {}).get("still_violated", [])
+        raise DataError(f"{args.fit}: models.{name}.consistent: " + (
+            f"friction bounds {', '.join(left)} still violated (on parameters held fixed)"
+            if left else "a link is not physically valid") + "; nothing exported")
     files = export_model(robot, cons, args.output, fixed)
     files.append(write_json(args.output / "consistent.json", cons))
     before, after = cons.get("rel_error_before", {}), cons.get("rel_error_after", {})
     print(f"{name} model, consistent estimate (LMI, {cons['solver']}, {cons['solve_s']:.3g} s): "
           f"d^2 = {cons['d2']:.4g} (99 % limit {cons['d2_limit']:.4g}), weighted residual "
           f"sum of squares +{100 * cons['cost_ratio']:.3g} %")
+    bounds = cons.get("friction_bounds", {})
+    if bounds.get("violated"):
+        print(f"friction bounds the free fit violated: {', '.join(bounds['violated'])}; "
+              f"moved onto them: {', '.join(bounds['moved']) or 'none'} "
+              f"(d^2 +{bounds['d2']:.4g})")
     if before and after:
         print(f"relative error ||rho|| / ||tau|| on the fit data: free {100 * before['all']:.4f}"
               f" %, consistent {100 * after['all']:.4f} %")

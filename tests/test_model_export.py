@@ -27,6 +27,7 @@ from ident.robot.consistent_fit import (
 )
 from ident.robot.estimate import RobotModel
 from ident.robot.export_model import export_model, exported_torque, urdf_text
+from ident.robot.friction_bounds import bound_rows
 from ident.robot.regressor import RobotRegressor
 from sim_drivers.arm import ArmGains, ArmParams, Payload, model_reference, simulate_arm
 from trajectories.robot import load_robot
@@ -268,6 +269,56 @@ def test_export_model_cli(tmp_path, capfd):
         err = capfd.readouterr().err.strip()
         assert code == 2 and len(err.splitlines()) == 1 and what in err, err
         assert not out.exists()
+
+
+@pytest.mark.parametrize("model,param", [("paper", "d_m2"), ("usual", "FV2")])
+def test_consistent_estimate_meets_the_friction_bounds(arm3, model, param):
+    """A friction parameter moved beyond a physical bound (c_m + d_m >= 0, FV >= 0) is brought
+    back onto it by the consistent estimate, at a Mahalanobis cost no larger than the naive
+    repair (that parameter alone put on the bound); a fit meeting every bound keeps its
+    friction (the paper model's: exactly the free fit's)."""
+    params, reg, base, runs = arm3
+    sigs = _signals(params, reg, runs, 0)
+    m = RobotModel(reg, model, "ls", base=base).fit(sigs)
+    nt = m.n_theta_
+    fine = fit_consistent(m)
+    assert fine.friction_violated == () and fine.friction_d2 == 0.0 and fine.valid
+    if model == "paper":
+        np.testing.assert_array_equal(fine.coef[nt:], m.coef_[nt:])
+    i = m.names_.index(param)
+    rows = bound_rows(m.names_, m.numbers_)
+    m.coef_ = m.coef_.copy()
+    # beyond its bound by 0.5 N m (c_m2 + d_m2 = -0.5, FV2 = -0.5 N m s/rad)
+    m.coef_[i] -= 0.5 + next(g @ m.coef_ for w, g, _ in rows
+                             if w.startswith(("c_m + d_m", "FV")) and g[i] != 0)
+    bad = [w for w, g, _ in rows if g @ m.coef_ < 0]
+    assert len(bad) == 1, bad
+    fit = fit_consistent(m, sigs)
+    assert fit.friction_violated == tuple(bad) and param in fit.friction_moved
+    assert fit.valid and fit.friction_left == () and fit.friction_d2 > 0
+    for w, g, _ in rows:
+        assert g @ fit.coef >= -1e-7 * (1 + np.abs(g) @ np.abs(fit.coef)), w
+    assert "friction bounds violated" in fit.format()
+    # the naive repair: the same theta, the friction before the bounds (the free fit's for
+    # the paper model, profiled on theta for the usual one), the parameter alone on its bound
+    free = np.flatnonzero(np.diag(m.cov_) > 0)
+    naive = fit.coef.copy()
+    if model == "paper":
+        naive[nt:] = m.coef_[nt:]
+    else:
+        th, oth = free[free < nt], free[free >= nt]
+        gain = m.cov_[np.ix_(oth, th)] @ np.linalg.inv(m.cov_[np.ix_(th, th)])
+        naive[oth] = m.coef_[oth] + gain @ (fit.coef[th] - m.coef_[th])
+    g = next(g for w, g, _ in rows if w == bad[0])
+    naive[i] -= min(g @ naive, 0.0) / g[i]
+    assert all(g @ naive >= -1e-12 for _, g, _ in rows)
+    prec = np.linalg.inv(m.cov_[np.ix_(free, free)])
+
+    def d2(x):
+        dx = (x - m.coef_)[free]
+        return float(dx @ prec @ dx)
+
+    assert d2(fit.coef) <= d2(naive) * (1 + 1e-6) + 1e-9, (d2(fit.coef), d2(naive))
 
 
 def test_add_consistent_hook(arm3):

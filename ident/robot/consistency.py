@@ -37,29 +37,13 @@ import scipy.stats
 
 from . import RobotIdentError
 from .consistent_fit import fit_consistent
+from .friction_bounds import bound_rows
 from .paper import require_theta
 
 __all__ = ["ConsistencyReport", "check_consistency"]
 
 _LINK = ("XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M", "Ia")
 _POSITIVE = {"M": "link mass M > 0", "XX": "XX > 0", "YY": "YY > 0", "ZZ": "ZZ > 0"}
-#: Friction sign checks: statement -> linear combination (prefix, coefficient) of a joint's
-#: parameters (the simulator's ArmFriction bounds; dissipative friction).
-_FRICTION = {
-    "a_m > 0": (("a_m", 1.0),),
-    "a_m + b_m > 0": (("a_m", 1.0), ("b_m", 1.0)),
-    "a_g > 0": (("a_g", 1.0),),
-    "a_g - b_g > 0": (("a_g", 1.0), ("b_g", -1.0)),
-    # the stiction band widens with the load (eq. 21-23): at rest the motor quadrant's load
-    # coefficient is at least the generator's (gauge-free: one payload scales both alike)
-    "a_m + b_m - a_g + b_g >= 0": (("a_m", 1.0), ("b_m", 1.0), ("a_g", -1.0), ("b_g", 1.0)),
-    "c_m >= 0": (("c_m", 1.0),),
-    "c_g >= 0": (("c_g", 1.0),),
-    "c_m + d_m >= 0": (("c_m", 1.0), ("d_m", 1.0)),
-    "c_g + d_g >= 0": (("c_g", 1.0), ("d_g", 1.0)),
-    "FV >= 0": (("FV", 1.0),),
-    "FC >= 0": (("FC", 1.0),),
-}
 
 
 @dataclass
@@ -194,20 +178,12 @@ def check_consistency(model: Any, *, feasibility: bool = True, starts: int = 3,
         elif kind == "Ia":
             rep.checks.append((f"Ia >= 0 ({sname})", coef[i], std[i],
                                "ok" if coef[i] >= 0 else _status(coef[i], std[i])))
-    index = {n: i for i, n in enumerate(model.names_)}
     cov_all = np.asarray(model.cov_)
-    for j in model.numbers_:
-        for what, combo in _FRICTION.items():
-            names = [f"{p}{j}" for p, _ in combo]
-            if not all(n in index for n in names):
-                continue
-            g = np.zeros(len(coef))
-            for n, c in zip(names, (c for _, c in combo), strict=True):
-                g[index[n]] = c
-            v = float(g @ coef)
-            s = float(np.sqrt(max(g @ cov_all @ g, 0.0)))
-            ok = v > 0 or (v == 0 and ">=" in what)
-            rep.checks.append((f"{what} (joint {j})", v, s, "ok" if ok else _status(v, s)))
+    for what, g, strict in bound_rows(model.names_, model.numbers_):
+        v = float(g @ coef)
+        s = float(np.sqrt(max(g @ cov_all @ g, 0.0)))
+        ok = v > 0 or (v == 0 and not strict)
+        rep.checks.append((what, v, s, "ok" if ok else _status(v, s)))
     used = np.any(beta != 0, axis=0)
     rep.unchecked = tuple(n for n, u in zip(std_names, used, strict=True) if not u)
     if not feasibility:

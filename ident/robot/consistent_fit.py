@@ -55,6 +55,7 @@ import scipy.linalg
 import scipy.stats
 
 from . import RobotIdentError
+from .friction_bounds import bound_rows
 from .paper import require_theta
 
 __all__ = ["ConsistentFit", "fit_consistent", "consistent_model", "link_validity",
@@ -98,6 +99,17 @@ class ConsistentFit:
     solve_s : float
         Wall time of the convex solve [s]; ``solver`` its name and ``status`` cvxpy's status
         names ("optimal", "optimal_inaccurate"; Clarabel's Solved / AlmostSolved).
+    friction_violated : tuple of str
+        The friction bounds (:mod:`ident.robot.friction_bounds`) the friction violated after
+        the links were made consistent (empty: the friction was kept as it was).
+    friction_moved : tuple of str
+        The friction parameters the projection onto those bounds changed.
+    friction_d2 : float
+        What the projection added to the Mahalanobis distance from the free fit (in the
+        metric of all the free parameters, theta held).
+    friction_left : tuple of str
+        Bounds still violated: those on parameters held fixed (pruned), which no projection
+        can move.
     """
 
     names: tuple[str, ...]
@@ -113,6 +125,10 @@ class ConsistentFit:
     solve_s: float = float("nan")
     solver: str = ""
     status: str = ""
+    friction_violated: tuple[str, ...] = ()
+    friction_moved: tuple[str, ...] = ()
+    friction_d2: float = 0.0
+    friction_left: tuple[str, ...] = ()
 
     @property
     def within_uncertainty(self) -> bool:
@@ -121,8 +137,9 @@ class ConsistentFit:
 
     @property
     def valid(self) -> bool:
-        """Every link physically consistent (:func:`link_validity`)."""
-        return all(lk["valid"] for lk in self.links)
+        """Every link physically consistent (:func:`link_validity`) and every friction bound
+        met."""
+        return all(lk["valid"] for lk in self.links) and not self.friction_left
 
     def format(self) -> str:
         """Plain-text summary."""
@@ -133,6 +150,13 @@ class ConsistentFit:
                  f"{self.d2_limit:.4g}: {'within' if self.within_uncertainty else 'OUTSIDE'} "
                  f"its uncertainty); weighted residual sum of squares +{100 * self.cost_ratio:.3g}"
                  " %"]
+        if self.friction_violated:
+            lines.append(f"  friction bounds violated by the free friction: "
+                         f"{', '.join(self.friction_violated)}; moved onto them: "
+                         f"{', '.join(self.friction_moved) or 'none'} (d^2 +"
+                         f"{self.friction_d2:.4g})" + (
+                             f"; still violated (fixed parameters): "
+                             f"{', '.join(self.friction_left)}" if self.friction_left else ""))
         if self.rel_error_before:
             b, a = self.rel_error_before["all"], self.rel_error_after["all"]
             lines.append(f"  relative error ||rho|| / ||tau||: free {100 * b:.4f} %, consistent "
@@ -409,17 +433,91 @@ def _finish(model: Any, signals: Any, friction: str, solver: str, status: str,
     if friction == "profile" and other.size:
         gain = cov[np.ix_(other, theta_idx)] @ _inv_spd(cov[np.ix_(theta_idx, theta_idx)])
         coef[other] = x_hat[other] + gain @ dth
+    violated, moved, fd2, left = _project_friction(model, coef, cov, free, theta_idx, other)
     dof = max(int(np.sum(model.n_samples_)) - int(free.sum()), 1)
     out = ConsistentFit(
         names=tuple(model.names_), coef=coef,
         standard=dict(zip(std_names, chi_v.tolist(), strict=True)), friction=friction,
         d2=d2, d2_limit=float(scipy.stats.chi2.ppf(0.99, theta_idx.size)),
-        cost_ratio=d2 / dof, links=link_validity(chi_v, k), solve_s=solve_s, solver=solver,
-        status=status)
+        cost_ratio=(d2 + fd2) / dof, links=link_validity(chi_v, k), solve_s=solve_s,
+        solver=solver, status=status, friction_violated=violated, friction_moved=moved,
+        friction_d2=fd2, friction_left=left)
     if signals is not None:
         out.rel_error_before = model.rel_error(signals)
         out.rel_error_after = consistent_model(model, out).rel_error(signals)
     return out
+
+
+def _meets(v: np.ndarray, strict: np.ndarray, tol: np.ndarray | float = 0.0) -> np.ndarray:
+    """Which bounds ``g . x`` = v are met: v > 0 (strict) or v >= 0 (the consistency
+    report's rule); with ``tol`` > 0, v > -tol (a solver's accuracy)."""
+    if np.any(np.asarray(tol) > 0):
+        return v > -np.asarray(tol)
+    return (v > 0) | (~strict & (v == 0))
+
+
+def _project_friction(model: Any, coef: np.ndarray, cov: np.ndarray, free: np.ndarray,
+                      theta_idx: np.ndarray, other: np.ndarray
+                      ) -> tuple[tuple[str, ...], tuple[str, ...], float, tuple[str, ...]]:
+    """Move the free friction parameters of ``coef`` (in place) onto the friction bounds
+    (:mod:`ident.robot.friction_bounds`) when they violate one: the closest point in the
+    metric of the free fit's precision (C^-1 over every free parameter, theta held at its
+    consistent value), a quadratic program (Clarabel). Nothing changes when every bound is
+    met. Returns (bounds violated before, parameters moved, the d^2 added, bounds still
+    violated)."""
+    rows = bound_rows(model.names_, model.numbers_)
+    if not rows:
+        return (), (), 0.0, ()
+    G = np.array([g for _, g, _ in rows])
+    strict = np.array([st for *_, st in rows])
+    labels = [w for w, *_ in rows]
+    bad = ~_meets(G @ coef, strict)
+    if not bad.any():
+        return (), (), 0.0, ()
+    violated = tuple(lb for lb, b in zip(labels, bad, strict=True) if b)
+    if other.size == 0:
+        return violated, (), 0.0, violated
+    import clarabel  # with cvxpy's solvers; imported only when a consistent fit is asked for
+    import scipy.sparse as sp
+
+    x_hat = np.asarray(model.coef_, dtype=float)
+    allf = np.flatnonzero(free)
+    prec = _inv_spd(cov[np.ix_(allf, allf)])
+    pos_t, pos_f = np.searchsorted(allf, theta_idx), np.searchsorted(allf, other)
+    sd = np.sqrt(np.diag(cov)[other])
+    dth, dxf = coef[theta_idx] - x_hat[theta_idx], coef[other] - x_hat[other]
+    pff = prec[np.ix_(pos_f, pos_f)]
+
+    def d2_friction(dx: np.ndarray) -> float:
+        """The friction's part of d^2 (theta held): 2 dth^T P_tf dx + dx^T P_ff dx."""
+        return float(2.0 * dth @ prec[np.ix_(pos_t, pos_f)] @ dx + dx @ pff @ dx)
+
+    # u = (x_F - coef_F) / sd: minimise d^2, subject to g . x >= margin for every bound
+    # acting on a free parameter
+    P = 2.0 * pff * sd[:, None] * sd[None, :]
+    q = 2.0 * sd * (pff @ dxf + prec[np.ix_(pos_f, pos_t)] @ dth)
+    movable = np.any(G[:, other] != 0, axis=1)
+    A = -(G[np.ix_(movable, other)] * sd[None, :])
+    b = G[movable] @ coef - np.where(strict[movable], MARGIN, 0.0)
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    sol = clarabel.DefaultSolver(sp.csc_matrix(np.triu(0.5 * (P + P.T))), q,
+                                 sp.csc_matrix(A), b,
+                                 [clarabel.NonnegativeConeT(int(movable.sum()))],
+                                 settings).solve()
+    if not str(sol.status).endswith("Solved"):
+        raise RobotIdentError(f"fit_consistent: solver CLARABEL: status {sol.status} on the "
+                              "friction bounds")
+    before = d2_friction(dxf)
+    step = sd * np.asarray(sol.x, dtype=float)
+    coef[other] = coef[other] + step
+    names = tuple(model.names_)
+    moved = tuple(names[i] for i, st, sdi in zip(other, step, sd, strict=True)
+                  if abs(st) > 1e-3 * sdi)
+    tol = 1e-7 * (1.0 + np.abs(G) @ np.abs(coef))
+    left = tuple(lb for lb, ok in zip(labels, _meets(G @ coef, strict, tol), strict=True)
+                 if not ok)
+    return violated, moved, d2_friction(coef[other] - x_hat[other]) - before, left
 
 
 def _solve(cp: Any, prob: Any, solver: str, what: str) -> None:
@@ -464,6 +562,9 @@ def consistent_record(model: Any, fit: ConsistentFit) -> dict[str, Any]:
         "parameters": {n: float(v) for n, v in zip(fit.names, fit.coef, strict=True)},
         "standard": {n: float(v) for n, v in fit.standard.items()},
         "links": fit.links,
+        "friction_bounds": {"violated": list(fit.friction_violated),
+                            "moved": list(fit.friction_moved), "d2": fit.friction_d2,
+                            "still_violated": list(fit.friction_left)},
         "valid": fit.valid,
         "q_s": [float(q) for q in model.q_s_],
         "model": model.model,
