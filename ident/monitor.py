@@ -1,11 +1,19 @@
 """The identified model as a torque predictor for monitoring, and the thresholds' statistics.
 
+(Past 600 lines: the predictor's band and its observer quantities share the friction's
+per-joint coefficients and formula, and the thresholds file is read and written next to the
+statistics that fill it; splitting would spread one monitor model over two modules.)
+
 :class:`TorquePredictor` evaluates an exported model (docs/model-export.md: a URDF with the
 consistent inertials, ``friction.json``) one sample at a time, fast enough for a 1 kHz loop:
 pinocchio's RNEA on the URDF (gravity of the friction file, the run's payload attached to the
 last moving link, scaled by ``payload_ratio`` when given), then eq. 30 (paper) or
 ``FC sign + FV dq + OFF`` (usual) per joint -- :func:`ident.robot.export_model.exported_torque`
-on one row, written with scalars. It is built from an ``export-model`` folder
+on one row, written with scalars. For the generalized-momentum observer
+(``daq.runtime.monitor.MomentumObserver``) it also gives M (with the rotor inertias), C^T dq
+and g of one sample, and the load torque the measured drive torque gives through the
+friction's inverse per quadrant (:meth:`TorquePredictor.observer_terms`). It is built from
+an ``export-model`` folder
 (:func:`load_exported`) or from a fit record (:func:`exported_from_fit`: its consistent
 estimate, as ``jointid export-model`` computes it, kept in memory).
 

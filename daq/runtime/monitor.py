@@ -1,5 +1,6 @@
-"""Torque monitoring in the cycle loop: the filtered residual of an identified model, its
-thresholds, collision events, an optional safe stop, and staged pushes on a simulated arm.
+"""Torque monitoring in the cycle loop: the residual of an identified model (filtered, or a
+generalized-momentum observer's), its thresholds, collision events, an optional safe stop,
+and staged pushes on a simulated arm.
 
 Every cycle of a run's ``run`` phase (approach, plan, settle) the engine
 (:mod:`daq.runtime.engine`) hands :meth:`TorqueMonitor.step` the measured joint positions q
@@ -17,6 +18,15 @@ so the friction -- is not known (then r_j = 0 inside the interval). Filtering th
 torque with the same filter keeps both sides delayed alike. A collision (an external force
 on a link) moves the arm without passing through the drives' torque: r_j is then about
 ``-(J^T F)_j``.
+
+The other residual, ``residual="observer"`` (:class:`ObserverResidual`,
+:class:`MomentumObserver`): De Luca and Mattone's generalized-momentum observer on the
+measured q, dq, tau themselves (no filter, no acceleration), ``r -> external torque`` through
+a first-order low-pass of gain K_O [1/s]; the residual is ``-(r - clip(r, -w, w))`` with w
+the low-passed bound of the static friction's share near rest (the same meaning as the band's
+interval), so it is about ``-(J^T F)`` like the filtered one. :func:`residual_for` is the one
+place that makes either; its velocity (dq_f, or the measured dq for the observer) sets the
+regime.
 
 Each joint's regime is its *moving time* ``moving_s``: how long [s] its filtered velocity has
 kept its sign with ``|dq_f,j| >= v_rest_j`` (0 at rest, at a reversal and at breakaway; the
