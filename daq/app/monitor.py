@@ -519,7 +519,9 @@ def _run(args: argparse.Namespace) -> int:
 
 def format_summary(s: dict[str, Any]) -> str:
     """Lines for the terminal."""
-    lines = [f"monitor: {s['status']} {s['reason']}".rstrip() + f"; missed cycles "
+    kind = ("observer residual, K_O " f"{s['observer_gain']:g} 1/s"
+            if s.get("residual") == "observer" else "filtered residual")
+    lines = [f"monitor ({kind}): {s['status']} {s['reason']}".rstrip() + f"; missed cycles "
              f"{s['missed_cycles']}"]
     th = s.get("thresholds")
     if th:

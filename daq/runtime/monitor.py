@@ -249,10 +249,12 @@ class ObserverResidual:
         the measured torque minus the residual, the measured velocity)."""
         p, beta, half = self.terms(q, dq, tau)
         r = self.observer.update(p, beta, half)
-        res = [c - x for x, h in zip(r, self.observer.w, strict=True)
-               for c in (-h if x < -h else h if x > h else x,)]
-        tau = [float(x) for x in tau]
-        return res, tau, [t - x for t, x in zip(tau, res, strict=True)], [float(v) for v in dq]
+        res, pred = [], []
+        for x, h, t in zip(r, self.observer.w, tau, strict=True):
+            c = -h if x < -h else h if x > h else x  # what the static friction can explain
+            res.append(c - x)
+            pred.append(float(t) - (c - x))
+        return res, [float(t) for t in tau], pred, [float(v) for v in dq]
 
 
 def residual_for(kind: str, model: Callable[..., Any], k: int, cycle_s: float, *,
@@ -431,7 +433,8 @@ class TorqueMonitor:
                               for j in range(self.k)]
             w.add_metadata("monitor", {
                 "joints": json.dumps(self.joints), "cutoff_hz": repr(self.cutoff_hz),
-                "residual": self.residual, "observer_gain": repr(self.observer_gain),
+                "residual": self.residual, "observer_gain": repr(self.observer_gain)
+                if self.residual == "observer" else "",
                 "lower": json.dumps(self.lower), "upper": json.dumps(self.upper),
                 "edges_s": json.dumps(self.edges_s),
                 "rest_velocity": json.dumps(self.rest_velocity),
