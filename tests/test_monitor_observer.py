@@ -16,7 +16,8 @@ from test_monitor import _campaign, _model_dir, truth_model
 from daq import ConfigError
 from daq.app.cli import main
 from daq.runtime.monitor import MomentumObserver, ObserverResidual, TorqueMonitor, read_monitor
-from ident.monitor import Thresholds
+from ident import DataError
+from ident.monitor import Thresholds, thresholds_from_residual
 from ident.robot.export_model import exported_torque
 from sim_drivers.arm import ArmParams
 from trajectories.robot import load_robot
@@ -164,3 +165,30 @@ def test_observer_calibrate_detect_and_the_other_kind_refused(tmp_path, arm3, ca
         err = capfd.readouterr().err.strip()
         assert code == 2 and len(err.splitlines()) == 1 and what in err, (argv, err)
         assert not never.exists()
+
+
+def test_thresholds_file_records_its_residual(tmp_path):
+    """The residual and the observer's gain round-trip through the file; a /2 file without
+    the key is filtered; an unknown residual or an observer file without its gain is one
+    DataError naming the file."""
+    rng = np.random.default_rng(4)
+    th = thresholds_from_residual(rng.normal(size=(500, 2)), ["a", "b"], 6.0, kind="observer",
+                                  observer_gain=40.0)
+    p = tmp_path / "th.json"
+    p.write_text(json.dumps(th.to_json()))
+    back = Thresholds.read(p)
+    assert (back.residual, back.observer_gain) == ("observer", 40.0)
+    d = th.to_json()
+    for key, value, what in (("residual", None, "filtered"), ("residual", "momentum", None),
+                             ("observer_gain_per_s", None, None)):
+        bad = {k: v for k, v in d.items() if k != key}
+        if value is not None:
+            bad[key] = value
+        p.write_text(json.dumps(bad))
+        if what:
+            assert Thresholds.read(p).residual == what
+        else:
+            with pytest.raises(DataError, match=f"{p.name}.*{key}"):
+                Thresholds.read(p)
+    with pytest.raises(DataError, match="residual"):
+        thresholds_from_residual(rng.normal(size=(500, 2)), ["a", "b"], 6.0, kind="observer")
