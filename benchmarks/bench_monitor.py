@@ -54,6 +54,15 @@ clock unless said, i.e. simulated time):
     parameters as the model (the best an identification could give; the replay gives the
     logged residual exactly with the logged model): thresholds, false alarms, detection.
     Separates what the identified model costs from what the monitor itself can do.
+``observer``
+    Offline, on the logs of calibrate, false and detect (no simulator run): the filtered
+    residual and the generalized-momentum observer's (``--observer-gain`` K_O [1/s]) side by
+    side, each with the identified model and with the simulator's own parameters (oracle):
+    thresholds from the calibrate logs by the live rule, false alarms and the largest
+    excursion / band on the false logs, the detect log's pushes (detected, delays, crossings
+    outside them). The identified filtered figures are checked against those the stages
+    recorded (``check_against_recorded``: the comparison is on equal terms). With
+    ``--results FILE`` the figures go to FILE (the work folder is only read).
 ``paced``
     ``--paced-seconds`` of the demo's multi-sine on the real-time clock (daq.clock = paced,
     1 kHz) with the monitor checking every cycle, then the same run without the monitor,
@@ -70,6 +79,7 @@ clock unless said, i.e. simulated time):
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import os
@@ -93,8 +103,14 @@ from daq.app.monitor import (
 )
 from daq.app.running import run_with_bar
 from daq.protocol.reader import read_run, read_topics
-from daq.runtime.monitor import SVFilter, moving_seconds, read_monitor
-from ident.monitor import ExportedModel, Thresholds, thresholds_from_residual
+from daq.runtime.monitor import (
+    DEFAULT_OBSERVER_GAIN,
+    RESIDUALS,
+    moving_seconds,
+    read_monitor,
+    residual_for,
+)
+from ident.monitor import ExportedModel, Thresholds, load_exported, thresholds_from_residual
 from ident.robot.export_model import friction_record, urdf_text
 from sim_drivers.arm import ArmParams
 from sim_drivers.arm_push import push_torque, staged_push
@@ -329,13 +345,16 @@ def truth_model(campaign: object) -> ExportedModel:
                          "simulator truth")
 
 
-def replay(log: Path, campaign: object, model: ExportedModel, cutoff_hz: float = 20.0
+def replay(log: Path, campaign: object, model: ExportedModel, cutoff_hz: float = 20.0,
+           kind: str = "filtered", gain: float = DEFAULT_OBSERVER_GAIN
            ) -> tuple[object, np.ndarray, np.ndarray]:
     """The monitor's residual (n, k) [N m] of a monitored run log recomputed offline with
-    another model: the logged q, dq, torque actual of the monitored cycles through the same
-    filters, band (rest velocity 3 q_s) and clip as :class:`daq.runtime.monitor.TorqueMonitor`
-    (with the log's own model it gives the logged residual exactly). Returns (the log's
-    :class:`MonitorLog`, residual, moving time (n, k) [s] at the model's rest velocity)."""
+    another model or another residual (``kind`` filtered or observer, its gain K_O [1/s]):
+    the logged q, dq, torque actual of the monitored cycles through the residual
+    :class:`daq.runtime.monitor.TorqueMonitor` makes (:func:`residual_for`; rest velocity
+    3 q_s) (with the log's own model and residual it gives the logged residual exactly).
+    Returns (the log's :class:`MonitorLog`, residual, moving time (n, k) [s] at the model's
+    rest velocity)."""
     ml = read_monitor(log)
     k = len(campaign.moving)
     axes = [read_run(log, axis=j) for j in range(k)]
@@ -346,16 +365,14 @@ def replay(log: Path, campaign: object, model: ExportedModel, cutoff_hz: float =
     payload = campaign.payloads[int(m.group(1))] if m else None
     pred = model.predictor(payload)
     v_rest = [REST_QS * x for x in pred.q_s]
-    fq, fdq, ft = (SVFilter(cutoff_hz, campaign.cycle_s, k) for _ in range(3))
+    fn = functools.partial(pred.band if kind == "filtered" else pred.observer_terms,
+                           v_rest=v_rest)
+    res = residual_for(kind, fn, k, campaign.cycle_s, cutoff_hz=cutoff_hz, gain=gain)
     r = np.zeros((len(idx), k))
-    dqf = np.zeros((len(idx), k))
+    vel = np.zeros((len(idx), k))
     for i in range(len(idx)):
-        for f, u in ((fq, q[i]), (fdq, dq[i]), (ft, tau[i])):
-            f.reset(u) if i == 0 else f.update(u)
-        lo, hi = pred.band(fq.y, fdq.y, fdq.dy, v_rest)
-        r[i] = [x - min(max(x, a), b) for x, a, b in zip(ft.y, lo, hi, strict=True)]
-        dqf[i] = fdq.y
-    return ml, r, moving_seconds(dqf, v_rest, campaign.cycle_s)
+        r[i], _, _, vel[i] = res.step(q[i], dq[i], tau[i])
+    return ml, r, moving_seconds(vel, v_rest, campaign.cycle_s)
 
 
 def _rising(r: np.ndarray, armed: np.ndarray, lo: np.ndarray, hi: np.ndarray
@@ -418,6 +435,150 @@ def stage_oracle(work: Path) -> dict:
         outside += d["crossings_outside"]
     out["detect"] = {"pushes": pushes, "crossings_outside": outside}
     return out
+
+
+def _evaluate(work: Path, campaign: object, model: ExportedModel, kind: str, gain: float
+              ) -> dict:
+    """One residual (``kind``, gain K_O [1/s]) with one model, offline on the logs of the
+    calibrate, false and detect stages (:func:`replay`): thresholds from the calibrate logs
+    (the live rule: :func:`thresholds_from_residual`, k = 6, peak margin 1.5, the default
+    regime bins), the false logs' crossings and largest |r - centre| / half-width per joint
+    (armed samples), the detect log's pushes (:func:`detect_offline`); with the regime bands
+    (``false_alarms``, ``detect``) and with the constant band (``constant_...``)."""
+    joints = list(campaign.moving)
+    res = [replay(p, campaign, model, kind=kind, gain=gain)
+           for p in sorted((work / "calibrate" / "logs").glob("*.mcap"))]
+    th = thresholds_from_residual(np.concatenate([r[ml.armed] for ml, r, _ in res]), joints,
+                                  DEFAULT_K_SIGMA, f"{kind} offline", DEFAULT_PEAK_MARGIN,
+                                  np.concatenate([m[ml.armed] for ml, _, m in res]),
+                                  kind=kind, observer_gain=gain if kind == "observer" else 0.0)
+    out: dict = {"thresholds": th.to_json()}
+    bands = {"": th, "constant_": th.constant()}  # the regime bands, and the constant band
+    false_n = {t: np.zeros(len(joints), int) for t in bands}
+    worst = {t: np.zeros(len(joints)) for t in bands}
+    secs = 0.0
+    for p in sorted((work / "false" / "logs").glob("*.mcap")):
+        ml, r, m = replay(p, campaign, model, kind=kind, gain=gain)
+        secs += float(ml.armed.sum()) * campaign.cycle_s
+        a = ml.armed
+        for t, x in bands.items():
+            lo, hi = sample_bands(x, m)
+            false_n[t] += _rising(r, a, lo, hi).sum(axis=0)
+            worst[t] = np.maximum(worst[t], (np.abs(r[a] - (lo[a] + hi[a]) / 2)
+                                             / ((hi[a] - lo[a]) / 2)).max(axis=0))
+    pushes: dict = {t: [] for t in bands}
+    outside = dict.fromkeys(bands, 0)
+    for p in sorted((work / "detect" / "logs").glob("*.mcap")):
+        ml, r, m = replay(p, campaign, model, kind=kind, gain=gain)
+        for t, x in bands.items():
+            d = detect_offline(ml, r, *sample_bands(x, m), joints, campaign.cycle_s)
+            pushes[t] += d["pushes"]
+            outside[t] += d["crossings_outside"]
+    for t in bands:
+        out[f"{t}false_alarms"] = {"per_joint": false_n[t].tolist(), "monitored_s": secs,
+                                   "worst_fraction_of_band": worst[t].tolist()}
+        out[f"{t}detect"] = {"pushes": pushes[t], "crossings_outside": outside[t]}
+    return out
+
+
+def _pushes_key(pushes: list) -> list:
+    """(joint, force, detected, delay [ms] rounded) per push: what two evaluations must
+    share to be the same."""
+    return [(p["joint"], p["force_N"], p["detected"],
+             None if p["delay_s"] is None else round(1000 * p["delay_s"]))
+            for p in pushes]
+
+
+def stage_observer(work: Path, gain: float, kinds: tuple[str, ...] = RESIDUALS) -> dict:
+    """Offline, on the logs of the calibrate, false and detect stages: the filtered residual
+    and the momentum observer's (gain K_O [1/s]) side by side, with the identified model
+    (DIR/model) and with the simulator's own parameters (:func:`truth_model`, the oracle);
+    :func:`_evaluate` each (``kinds``: the residuals to evaluate). The identified filtered
+    figures are checked against the ones the stages recorded in DIR/bench_monitor.json (the
+    same rule: ``check_against_recorded``)."""
+    _, c = _source()
+    models = {"identified": load_exported(work / "model"), "oracle": truth_model(c)}
+    out: dict = {"gain_per_s": gain, "figures": {}}
+    for name, model in models.items():
+        for kind in kinds:
+            t0 = time.perf_counter()
+            out["figures"][f"{name}/{kind}"] = _evaluate(work, c, model, kind, gain)
+            print(f"  observer stage: {name}/{kind} in {time.perf_counter() - t0:.0f} s",
+                  file=sys.stderr)
+    out["check_against_recorded"] = chk = {}
+    if "filtered" not in kinds:
+        return out
+    store = work / "bench_monitor.json"
+    rec = json.loads(store.read_text()) if store.is_file() else {}
+    mine = out["figures"]["identified/filtered"]
+    live = Thresholds.read(work / "calibrate" / "thresholds.json").to_json()["regime"]
+    chk["thresholds_max_diff_Nm"] = float(max(
+        np.abs(np.array(mine["thresholds"]["regime"][b]) - np.array(live[b])).max()
+        for b in ("lower", "upper")))
+    fa = rec.get("false_alarms", {}).get("regime")
+    if fa:
+        chk["false_alarms_equal"] = fa["per_joint"] == mine["false_alarms"]["per_joint"]
+        chk["worst_fraction_max_diff"] = float(np.abs(
+            np.array(fa["worst_fraction_of_band"])
+            - np.array(mine["false_alarms"]["worst_fraction_of_band"])).max())
+    det = rec.get("detect", {}).get("offline", {}).get("regime")
+    if det:
+        chk["detect_equal"] = (_pushes_key([p for d in det for p in d["pushes"]])
+                               == _pushes_key(mine["detect"]["pushes"])
+                               and sum(d["crossings_outside"] for d in det)
+                               == mine["detect"]["crossings_outside"])
+    orc, mo = rec.get("oracle"), out["figures"]["oracle/filtered"]
+    if orc:
+        chk["oracle_false_alarms_equal"] = (orc["false_alarms"]["per_joint"]
+                                            == mo["false_alarms"]["per_joint"])
+        chk["oracle_detect_equal"] = (_pushes_key(orc["detect"]["pushes"])
+                                      == _pushes_key(mo["detect"]["pushes"]))
+    return out
+
+
+def print_observer(res: dict) -> None:
+    """The observer stage's tables (regime bands, then the constant band): per pushed link
+    and force, detected of 3 and delays [ms]; per joint, false alarms and the largest
+    excursion / band; for each model and residual."""
+    print(f"observer stage (K_O = {res['gain_per_s']:g} 1/s), offline on the same logs; "
+          "check against the recorded filtered figures: " + json.dumps(
+              res["check_against_recorded"]))
+    for band in ("", "constant_"):
+        print(f"-- {'constant band' if band else 'regime bands'}")
+        _print_observer({t: {"thresholds": f["thresholds"], "detect": f[f"{band}detect"],
+                             "false_alarms": f[f"{band}false_alarms"]}
+                         for t, f in res["figures"].items()}, not band)
+
+
+def _print_observer(figs: dict, bins: bool) -> None:
+    """One table of :func:`print_observer` (``bins``: and the regime bands' widths)."""
+    tags = list(figs)
+    joints = figs[tags[0]]["thresholds"]["joints"]
+    print("  " + "link/force".ljust(28) + "".join(t.rjust(26) for t in tags))
+    forces = sorted({p["force_N"] for p in figs[tags[0]]["detect"]["pushes"]})
+    for f in forces:
+        for j in joints:
+            cells = []
+            for t in tags:
+                ps = [p for p in figs[t]["detect"]["pushes"]
+                      if p["joint"] == j and p["force_N"] == f]
+                d = [f"{1000 * p['delay_s']:.0f}" for p in ps if p["detected"]]
+                cells.append(f"{len(d)}/{len(ps)} [{','.join(d) or '-'}]")
+            print(f"  {j[:20]:20s} {f:4g} N " + "".join(x.rjust(26) for x in cells))
+    print("  " + "crossings outside pushes".ljust(28) + "".join(
+        str(figs[t]["detect"]["crossings_outside"]).rjust(26) for t in tags))
+    for i, j in enumerate(joints):
+        print(f"  false alarms {j[:15]:15s}" + "".join(
+            (f"{figs[t]['false_alarms']['per_joint'][i]} "
+             f"({figs[t]['false_alarms']['worst_fraction_of_band'][i]:.2f})").rjust(26)
+            for t in tags))
+    print("  monitored [min]".ljust(30) + "".join(
+        f"{figs[t]['false_alarms']['monitored_s'] / 60:.1f}".rjust(26) for t in tags))
+    for t in tags if bins else ():
+        reg = figs[t]["thresholds"]["regime"]
+        print(f"  {t} half-width per moving-time bin {reg['edges_s']} s [N m]: " + "; ".join(
+            f"{j} " + " ".join(f"{(b - a) / 2:.3g}" for a, b in zip(lo, hi, strict=True))
+            for j, lo, hi in zip(joints, reg["lower"], reg["upper"], strict=True)))
 
 
 def _paced_timing(path: Path) -> dict:
@@ -622,13 +783,21 @@ def main() -> None:
                          "realtime_priority, pinned to the last CPU; needs CAP_SYS_NICE)")
     ap.add_argument("--paced-repeat", type=int, default=1,
                     help="paced stage: pairs of runs (with, without the monitor), interleaved")
+    ap.add_argument("--observer-gain", type=float, default=DEFAULT_OBSERVER_GAIN,
+                    help="observer stage: the momentum observer's gain K_O [1/s]")
+    ap.add_argument("--residuals", default=",".join(RESIDUALS),
+                    help="observer stage: the residuals to evaluate, comma-separated "
+                    "(default: filtered,observer)")
+    ap.add_argument("--results", type=Path, default=None,
+                    help="where the figures are stored (default DIR/bench_monitor.json)")
     ap.add_argument("stages", nargs="+", choices=("model", "calibrate", "false", "detect",
-                                                  "oracle", "paced", "report"))
+                                                  "oracle", "observer", "paced", "report"))
     a = ap.parse_args()
     SOURCE["campaign"] = a.campaign.resolve()
     SOURCE["prune"] = a.prune
     a.work.mkdir(parents=True, exist_ok=True)
-    store = a.work / "bench_monitor.json"
+    store = a.results or a.work / "bench_monitor.json"
+    store.parent.mkdir(parents=True, exist_ok=True)
     res = json.loads(store.read_text()) if store.is_file() else {}
     for st in a.stages:
         t0 = time.perf_counter()
@@ -642,12 +811,21 @@ def main() -> None:
             res["detect"] = stage_detect(a.work)
         elif st == "oracle":
             res["oracle"] = stage_oracle(a.work)
+        elif st == "observer":
+            kinds = tuple(a.residuals.split(","))
+            if not kinds or not set(kinds) <= set(RESIDUALS):
+                raise SystemExit(f"--residuals {a.residuals!r}: expected some of "
+                                 f"{','.join(RESIDUALS)}")
+            res["observer"] = stage_observer(a.work, a.observer_gain, kinds)
         elif st == "paced":
             res["paced"] = stage_paced(a.work, a.paced_seconds, a.realtime, a.paced_repeat)
         if st != "report":
             res.setdefault("stage_wall_s", {})[st] = time.perf_counter() - t0
             store.write_text(json.dumps(res, indent=1, default=str))
-    report(a.work, res)
+    if "report" in a.stages or set(a.stages) != {"observer"}:
+        report(a.work, res)
+    if "observer" in res:
+        print_observer(res["observer"])
     store.write_text(json.dumps(res, indent=1, default=str))
 
 

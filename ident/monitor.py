@@ -1,11 +1,19 @@
 """The identified model as a torque predictor for monitoring, and the thresholds' statistics.
 
+(Past 600 lines: the predictor's band and its observer quantities share the friction's
+per-joint coefficients and formula, and the thresholds file is read and written next to the
+statistics that fill it; splitting would spread one monitor model over two modules.)
+
 :class:`TorquePredictor` evaluates an exported model (docs/model-export.md: a URDF with the
 consistent inertials, ``friction.json``) one sample at a time, fast enough for a 1 kHz loop:
 pinocchio's RNEA on the URDF (gravity of the friction file, the run's payload attached to the
 last moving link, scaled by ``payload_ratio`` when given), then eq. 30 (paper) or
 ``FC sign + FV dq + OFF`` (usual) per joint -- :func:`ident.robot.export_model.exported_torque`
-on one row, written with scalars. It is built from an ``export-model`` folder
+on one row, written with scalars. For the generalized-momentum observer
+(``daq.runtime.monitor.MomentumObserver``) it also gives M (with the rotor inertias), C^T dq
+and g of one sample, and the load torque the measured drive torque gives through the
+friction's inverse per quadrant (:meth:`TorquePredictor.observer_terms`). It is built from
+an ``export-model`` folder
 (:func:`load_exported`) or from a fit record (:func:`exported_from_fit`: its consistent
 estimate, as ``jointid export-model`` computes it, kept in memory).
 
@@ -36,10 +44,13 @@ from .robot.export_model import FRICTION_FORMAT, friction_record, urdf_text
 from .vocab import upgrade_record
 
 __all__ = ["DEFAULT_EDGES_S", "DEFAULT_MIN_EPISODES", "DEFAULT_MIN_SAMPLES",
-           "THRESHOLDS_FORMAT", "Thresholds", "TorquePredictor", "exported_from_fit",
-           "load_exported", "load_model", "thresholds_from_residual"]
+           "RESIDUAL_KINDS", "THRESHOLDS_FORMAT", "Thresholds", "TorquePredictor",
+           "exported_from_fit", "load_exported", "load_model", "thresholds_from_residual"]
 
 THRESHOLDS_FORMAT = "jointid-monitor-thresholds/2"
+#: the residuals a thresholds file can be calibrated on (its ``residual`` key; a /2 file
+#: without it, and every /1 file: ``filtered``)
+RESIDUAL_KINDS = ("filtered", "observer")
 #: the format before the regime bins (read too: a constant band)
 THRESHOLDS_FORMAT_1 = "jointid-monitor-thresholds/1"
 
@@ -176,6 +187,86 @@ class TorquePredictor:
         return lo, hi
 
 
+    # -- the generalized-momentum observer's quantities (daq.runtime.monitor) ------------
+    def momentum_terms(self, q: Sequence[float], dq: Sequence[float]
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(M (k, k) [kg m^2] with the rotor inertias Ia on its diagonal, C(q, dq)^T dq (k,)
+        [N m], g(q) (k,) [N m]) at q [rad], dq [rad/s]: pinocchio's CRBA, Coriolis matrix
+        (the one with dM/dt = C + C^T) and generalized gravity on this predictor's model
+        (its payload attached). ``M ddq + C dq + g = tau_out`` is the model's rigid body
+        (:meth:`_rigid`), so ``dp/dt = tau_out + C^T dq - g`` for ``p = M dq``."""
+        model, data = self.model, self.data
+        qa, va = np.asarray(q, float), np.asarray(dq, float)
+        m = pin.crba(model, data, qa)
+        m = np.triu(m) + np.triu(m, 1).T  # CRBA fills the upper triangle
+        m[np.diag_indices(self.k)] += [c[0] for c in self._coef]
+        c = pin.computeCoriolisMatrix(model, data, qa, va)
+        g = pin.computeGeneralizedGravity(model, data, qa)
+        return m, c.T @ va, np.array(g)
+
+    def _load(self, j: int, tau: float, v: float, s: float, e: float) -> list[float]:
+        """Output torques tau_out [N m] of joint j whose friction model gives the drive torque
+        ``tau`` [N m] at velocity ``v``, sign ``s`` and Stribeck factor ``e``: the inverse of
+        :meth:`_friction` per quadrant (motor candidate if ``tau_out s > 0``, generator
+        candidate if ``tau_out s < 0``, the simulator's choice); both when both are
+        consistent (then any load between them fits), 0 when neither is (``tau`` inside the
+        jump of the dry friction at zero load)."""
+        c = self._coef[j]
+        if not self.paper:
+            return [tau - c[1] * s - c[2] * v - c[3]]
+        _, _, am, bm, ag, bg, cm, dm, cg, dg, fv, off = c
+        x = tau - fv * v - off
+        out = []
+        km, kg = am + bm * e, ag - bg * e
+        if km > 0 and (xm := (x - (cm + dm * e) * s) / km) * s > 0:
+            out.append(xm)
+        if kg > 0 and (xg := (x - (cg + dg * e) * s) / kg) * s < 0:
+            out.append(xg)
+        return out or [0.0]
+
+    def load_interval(self, dq: Sequence[float], tau: Sequence[float],
+                      v_rest: float | Sequence[float] = 0.0
+                      ) -> tuple[list[float], list[float]]:
+        """The output (load) torque tau_out [N m] per joint that the measured drive torque
+        ``tau`` [N m] gives through the inverse of the friction model (no acceleration
+        needed): one value where ``|dq_j| >= v_rest`` [rad/s] (an interval only where both
+        quadrants fit), and below it -- where sign(dq) is not known -- the interval over
+        either sign and the Stribeck factor from ``exp(-v_rest / q_s)`` to 1, the corners
+        of :meth:`band` (each corner's friction is increasing in tau_out, so the corners'
+        inverses bound the loads the whole band allows)."""
+        lo, hi = [], []
+        exp = math.exp
+        vr = [float(v_rest)] * self.k if np.ndim(v_rest) == 0 else list(v_rest)
+        for j in range(self.k):
+            v, x = float(dq[j]), float(tau[j])
+            if abs(v) >= vr[j] and v != 0.0:
+                e = exp(-abs(v) / self._coef[j][1]) if self.paper else 1.0
+                t = self._load(j, x, v, 1.0 if v > 0 else -1.0, e)
+            else:
+                e0 = exp(-vr[j] / self._coef[j][1]) if self.paper else 1.0
+                t = [y for s in (1.0, -1.0) for e in (1.0, e0)
+                     for y in self._load(j, x, v, s, e)]
+            lo.append(min(t))
+            hi.append(max(t))
+        return lo, hi
+
+    def observer_terms(self, q: Sequence[float], dq: Sequence[float], tau: Sequence[float],
+                       v_rest: float | Sequence[float] = 0.0
+                       ) -> tuple[list[float], list[float], list[float]]:
+        """What the momentum observer (``daq.runtime.monitor.MomentumObserver``) needs of
+        one sample of measured q [rad], dq [rad/s], drive torque tau [N m]: the momentum
+        ``p = M dq`` [N m s], its model rate without external torque ``beta = tau_out + C^T
+        dq - g`` [N m] with tau_out the centre of :meth:`load_interval`, and the interval's
+        half-width [N m] (0 while the joint moves; the static friction's share below
+        ``v_rest``)."""
+        m, ctdq, g = self.momentum_terms(q, dq)
+        lo, hi = self.load_interval(dq, tau, v_rest)
+        p = (m @ np.asarray(dq, float)).tolist()
+        beta = [0.5 * (a + b) + c - gg for a, b, c, gg in zip(lo, hi, ctdq.tolist(),
+                                                            g.tolist(), strict=True)]
+        return p, beta, [0.5 * (b - a) for a, b in zip(lo, hi, strict=True)]
+
+
 @dataclass(frozen=True)
 class ExportedModel:
     """An exported model in memory: URDF text and friction record (docs/model-export.md)."""
@@ -303,6 +394,12 @@ class Thresholds:
         Per joint and bin: times the validation entered it (separate motions).
     min_samples, min_episodes : int
         A bin with fewer samples or episodes (or no spread) takes the joint's constant band.
+    residual : str
+        The residual the statistics are of (:data:`RESIDUAL_KINDS`): ``filtered`` or
+        ``observer`` (the generalized-momentum observer, docs/monitoring.md).
+    observer_gain : float
+        The observer's gain K_O [1/s] the statistics were taken with (0: the filtered
+        residual).
     """
 
     joints: tuple[str, ...]
@@ -321,6 +418,8 @@ class Thresholds:
     bin_episodes: tuple[tuple[int, ...], ...] = ()
     min_samples: int = DEFAULT_MIN_SAMPLES
     min_episodes: int = DEFAULT_MIN_EPISODES
+    residual: str = "filtered"
+    observer_gain: float = 0.0
 
     @property
     def half_width(self) -> list[float]:
@@ -388,7 +487,10 @@ class Thresholds:
             "k_sigma": self.k_sigma, "peak_margin": self.peak_margin,
             "mean": list(self.mean), "sigma": list(self.sigma),
             "peak_sigmas": list(self.peak), "lower": self.lower, "upper": self.upper,
-            "samples": self.samples, "source": self.source, "regime": None}
+            "samples": self.samples, "source": self.source, "residual": self.residual,
+            "regime": None}
+        if self.residual == "observer":
+            d["observer_gain_per_s"] = self.observer_gain
         if self.regime:
             lo, hi = self.bands()
             d["regime"] = {
@@ -434,7 +536,18 @@ class Thresholds:
             raise DataError(f"{p}: sigma and k_sigma: expected numbers > 0")
         if not margin >= 0:
             raise DataError(f"{p}: peak_margin: expected a number >= 0")
-        th = cls(joints, k, vals[0], vals[1], vals[2], n, str(d.get("source", "")), margin)
+        kind = d.get("residual", "filtered")
+        if kind not in RESIDUAL_KINDS:
+            raise DataError(f"{p}: residual: expected one of {', '.join(RESIDUAL_KINDS)}, got "
+                            f"{kind!r}")
+        gain = 0.0
+        if kind == "observer":
+            gain = d.get("observer_gain_per_s")
+            if isinstance(gain, bool) or not isinstance(gain, int | float) or not gain > 0:
+                raise DataError(f"{p}: observer_gain_per_s: expected a number > 0 [1/s] (the "
+                                "observer residual's gain)")
+        th = cls(joints, k, vals[0], vals[1], vals[2], n, str(d.get("source", "")), margin,
+                 residual=kind, observer_gain=float(gain))
         reg = d.get("regime") if d["format"] == THRESHOLDS_FORMAT else None
         return th if reg is None else _read_regime(p, reg, th)
 
@@ -493,13 +606,16 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
                              moving_s: Any = None,
                              edges_s: Sequence[float] = DEFAULT_EDGES_S,
                              min_samples: int = DEFAULT_MIN_SAMPLES,
-                             min_episodes: int = DEFAULT_MIN_EPISODES) -> Thresholds:
+                             min_episodes: int = DEFAULT_MIN_EPISODES,
+                             kind: str = "filtered", observer_gain: float = 0.0
+                             ) -> Thresholds:
     """Thresholds from a residual (n, k) [N m] recorded without collision: per joint the
     mean, standard deviation and peak of its samples off the static band (residual not
     exactly 0; near rest the model predicts an interval, :meth:`TorquePredictor.band`);
     with ``moving_s`` (n, k) [s] (each sample's moving time, the monitor's; the samples in
     time order), the same per bin of ``edges_s``, and how many times each bin was entered
-    (episodes: separate motions).
+    (episodes: separate motions). ``kind`` and ``observer_gain`` [1/s] say which
+    residual it is (recorded in the file, :class:`Thresholds`).
 
     Raises
     ------
@@ -549,8 +665,12 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
             ball = np.searchsorted(edges, s[:, j], side="right")  # every sample, in order
             enter = ball[np.r_[True, ball[1:] != ball[:-1]]]
             episodes.append(tuple(int(n) for n in np.bincount(enter, minlength=nb)))
+    if kind not in RESIDUAL_KINDS or (kind == "observer") != (observer_gain > 0):
+        raise DataError(f"residual {kind!r}, gain {observer_gain}: expected one of "
+                        f"{', '.join(RESIDUAL_KINDS)} (the observer's with its gain > 0)")
     th = Thresholds(tuple(joints), float(k_sigma), tuple(mean), tuple(sigma), tuple(peak),
-                    int(r.shape[0]), source, float(peak_margin))
+                    int(r.shape[0]), source, float(peak_margin), residual=kind,
+                    observer_gain=float(observer_gain))
     if s is None:
         return th
     return dataclasses.replace(

@@ -107,7 +107,7 @@ def test_moving_time_online_is_the_offline_rule():
     dqf = []
     for c in range(t.size):
         mon.step(c, t[c], [0.0], [dq[c]], [tau[c]], log)
-        dqf.append(mon._fdq.y[0])
+        dqf.append(mon.velocity[0])
     logged = log.samples(0)["moving_s"]
     np.testing.assert_allclose(logged, moving_seconds(np.array(dqf)[:, None], [V_REST],
                                                       CYCLE_S)[:, 0], atol=1e-12)

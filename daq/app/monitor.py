@@ -3,6 +3,10 @@
 MODEL (an ``export-model`` folder, or a fit record whose consistent estimate is taken) gives
 the predicted torque (:mod:`ident.monitor`); the campaign runs on its buses (``--simulate``:
 the simulated arm) with :class:`daq.runtime.monitor.TorqueMonitor` checking every cycle.
+``--residual`` chooses the residual: ``filtered`` (default: measured torque minus the model's,
+both low-passed) or ``observer`` (the generalized-momentum observer, gain
+``--observer-gain`` [1/s]); a thresholds file holds the residual it was calibrated with and
+is refused for the other.
 
 * ``--calibrate``: a validation run without collision; the residual's mean and standard
   deviation per joint, and per bin of the joint's moving time (its regime: time since its
@@ -34,7 +38,13 @@ import matplotlib
 import numpy as np
 
 from daq import ConfigError, __version__
-from daq.runtime.monitor import PushSpec, TorqueMonitor, read_monitor
+from daq.runtime.monitor import (
+    DEFAULT_OBSERVER_GAIN,
+    RESIDUALS,
+    PushSpec,
+    TorqueMonitor,
+    read_monitor,
+)
 from ident.monitor import (
     DEFAULT_EDGES_S,
     DEFAULT_MIN_EPISODES,
@@ -66,7 +76,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "monitor", help="run a robot campaign with torque monitoring (collision detection)",
         description="Run a robot campaign and compare every cycle's measured torque with the "
-        "identified model's (filtered residual); thresholds from a validation run "
+        "identified model's (filtered residual, or a generalized-momentum observer with "
+        "--residual observer); thresholds from a validation run "
         "(--calibrate); crossings are collision events in the log, a stop with --stop. "
         "docs/monitoring.md.")
     p.add_argument("model", type=Path, metavar="MODEL",
@@ -101,7 +112,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --thresholds: the file's constant band, not its regime bins "
                    "(the format /1 behaviour)")
     p.add_argument("--cutoff-hz", type=float, default=20.0,
-                   help="cut-off of the residual filter [Hz] (default 20)")
+                   help="cut-off of the residual filter [Hz] (default 20; filtered residual)")
+    p.add_argument("--residual", choices=RESIDUALS, default="filtered",
+                   help="filtered: measured minus predicted torque, both low-passed "
+                   "(default); observer: the generalized-momentum observer (no acceleration "
+                   "needed). A thresholds file must be of the same residual")
+    p.add_argument("--observer-gain", type=float, default=None, metavar="K_O",
+                   help="--residual observer: the observer's gain [1/s] (time constant "
+                   f"1/K_O; default {DEFAULT_OBSERVER_GAIN:g}; with --thresholds: the file's)")
     p.add_argument("--rest-velocity", type=float, default=None,
                    help="below this |dq| [rad/s] the friction is the static band "
                    f"(default: {REST_QS:g} q_s of each joint, the Stribeck region)")
@@ -244,7 +262,8 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
                 calibrate: bool = False, thresholds: Path | None = None,
                 k_sigma: float | None = None, peak_margin: float | None = None,
                 regime_edges: str | None = None, constant_band: bool = False,
-                cutoff_hz: float = 20.0,
+                cutoff_hz: float = 20.0, residual: str = "filtered",
+                observer_gain: float | None = None,
                 rest_velocity: float | None = None, pushes: list[str] | None = None,
                 stop: bool = False, paced: bool = False,
                 stream: TextIO | None = None) -> dict[str, Any]:
@@ -275,6 +294,13 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
                           "thresholds file's)")
     if constant_band and calibrate:
         raise ConfigError("--constant-band: expected --thresholds")
+    if residual not in RESIDUALS:
+        raise ConfigError(f"--residual {residual!r}: expected one of {', '.join(RESIDUALS)}")
+    if observer_gain is not None and residual != "observer":
+        raise ConfigError("--observer-gain: expected --residual observer")
+    if observer_gain is not None and not 0 < observer_gain * campaign.cycle_s < 1:
+        raise ConfigError(f"--observer-gain: expected 0 < K_O < {1 / campaign.cycle_s:g} "
+                          f"[1/s] (1 / the campaign's cycle), got {observer_gain}")
     edges = DEFAULT_EDGES_S if regime_edges is None else parse_edges(regime_edges)
     robot = robot_for_campaign(campaign)
     exported = load_model(model, robot, model_name)
@@ -291,17 +317,35 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
         if list(th.joints) != joints:
             raise ConfigError(f"{thresholds}: joints {list(th.joints)}, the campaign's are "
                               f"{joints}")
+        if th.residual != residual:
+            raise ConfigError(f"{thresholds}: calibrated with the {th.residual} residual, "
+                              f"expected the {residual} one (--residual {th.residual}, or "
+                              f"--calibrate with --residual {residual})")
+        if (residual == "observer" and observer_gain is not None
+                and observer_gain != th.observer_gain):
+            raise ConfigError(f"{thresholds}: observer gain {th.observer_gain:g} 1/s, expected "
+                              f"--observer-gain {observer_gain:g} (the thresholds hold only "
+                              "for their gain)")
+        if residual == "observer":
+            observer_gain = th.observer_gain
         th = th.with_k(k_sigma, peak_margin)
         if constant_band:
             th = th.constant()
 
+    gain = (DEFAULT_OBSERVER_GAIN if observer_gain is None else observer_gain
+            ) if residual == "observer" else 0.0
+
     def predictor_for(payload: Any) -> Any:
-        return functools.partial(exported.predictor(payload).band, v_rest=v_rest)
+        pred = exported.predictor(payload)
+        if residual == "observer":
+            return functools.partial(pred.observer_terms, v_rest=v_rest)
+        return functools.partial(pred.band, v_rest=v_rest)
 
     lower, upper = (None, None) if th is None else th.bands()
     mon = TorqueMonitor(predictor_for, joints, campaign.cycle_s, lower=lower, upper=upper,
                         edges_s=() if th is None else th.edges_s, rest_velocity=v_rest,
-                        cutoff_hz=cutoff_hz, stop=stop, pushes=specs)
+                        cutoff_hz=cutoff_hz, stop=stop, pushes=specs, residual=residual,
+                        observer_gain=gain or DEFAULT_OBSERVER_GAIN)
     out.mkdir(parents=True, exist_ok=True)
     result, wall = run_with_bar(campaign, out / "logs", True if simulate else None, stream,
                                 payloads=payloads, monitor=mon)
@@ -309,7 +353,7 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
     summary: dict[str, Any] = {
         "campaign": str(campaign_path), "model": exported.source, "joints": joints,
         "cycle_s": campaign.cycle_s, "clock": campaign.daq.get("clock", "default"),
-        "cutoff_hz": cutoff_hz,
+        "cutoff_hz": cutoff_hz, "residual": residual, "observer_gain": gain or None,
         "rest_velocity": v_rest, "status": result.status, "reason": result.reason,
         "wall_s": wall, "missed_cycles": [r.missed for r in result.runs],
         "logs": [str(p.relative_to(out)) for p in logs]}
@@ -325,7 +369,8 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
                                       DEFAULT_PEAK_MARGIN if peak_margin is None
                                       else peak_margin,
                                       np.concatenate(mov) if edges else None, edges,
-                                      DEFAULT_MIN_SAMPLES, DEFAULT_MIN_EPISODES)
+                                      DEFAULT_MIN_SAMPLES, DEFAULT_MIN_EPISODES,
+                                      kind=residual, observer_gain=gain)
         write_json(out / "thresholds.json", th.to_json())
         summary["thresholds"] = th.to_json()
     else:
@@ -362,9 +407,12 @@ def _report(out: Path, logs: list[Path], summary: dict[str, Any], mon: TorqueMon
             ) -> Path:
     matplotlib.use("Agg")
     joints = summary["joints"]
+    what = (f"residual = measured torque minus the model's, both low-passed at "
+            f"{summary['cutoff_hz']:g} Hz" if summary["residual"] == "filtered" else
+            "residual = minus the generalized-momentum observer's external torque (gain "
+            f"{summary['observer_gain']:g} 1/s)")
     intro = Section("What was run").para(
-        f"Campaign {summary['campaign']}, model {summary['model']}; residual = measured "
-        f"torque minus the model's, both low-passed at {summary['cutoff_hz']:g} Hz "
+        f"Campaign {summary['campaign']}, model {summary['model']}; {what} "
         f"(static friction band below |dq| = "
         f"{', '.join(f'{v:.3g}' for v in summary['rest_velocity'])} rad/s). Status: "
         f"{summary['status']} {summary['reason']}; missed cycles per run: "
@@ -461,7 +509,8 @@ def _run(args: argparse.Namespace) -> int:
                     calibrate=args.calibrate, thresholds=args.thresholds,
                     k_sigma=args.k_sigma, peak_margin=args.peak_margin,
                     regime_edges=args.regime_edges, constant_band=args.constant_band,
-                    cutoff_hz=args.cutoff_hz,
+                    cutoff_hz=args.cutoff_hz, residual=args.residual,
+                    observer_gain=args.observer_gain,
                     rest_velocity=args.rest_velocity, pushes=args.push, stop=args.stop,
                     paced=args.paced)
     print(format_summary(s))
@@ -470,7 +519,9 @@ def _run(args: argparse.Namespace) -> int:
 
 def format_summary(s: dict[str, Any]) -> str:
     """Lines for the terminal."""
-    lines = [f"monitor: {s['status']} {s['reason']}".rstrip() + f"; missed cycles "
+    kind = ("observer residual, K_O " f"{s['observer_gain']:g} 1/s"
+            if s.get("residual") == "observer" else "filtered residual")
+    lines = [f"monitor ({kind}): {s['status']} {s['reason']}".rstrip() + f"; missed cycles "
              f"{s['missed_cycles']}"]
     th = s.get("thresholds")
     if th:

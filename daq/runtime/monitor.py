@@ -1,5 +1,6 @@
-"""Torque monitoring in the cycle loop: the filtered residual of an identified model, its
-thresholds, collision events, an optional safe stop, and staged pushes on a simulated arm.
+"""Torque monitoring in the cycle loop: the residual of an identified model (filtered, or a
+generalized-momentum observer's), its thresholds, collision events, an optional safe stop,
+and staged pushes on a simulated arm.
 
 Every cycle of a run's ``run`` phase (approach, plan, settle) the engine
 (:mod:`daq.runtime.engine`) hands :meth:`TorqueMonitor.step` the measured joint positions q
@@ -17,6 +18,15 @@ so the friction -- is not known (then r_j = 0 inside the interval). Filtering th
 torque with the same filter keeps both sides delayed alike. A collision (an external force
 on a link) moves the arm without passing through the drives' torque: r_j is then about
 ``-(J^T F)_j``.
+
+The other residual, ``residual="observer"`` (:class:`ObserverResidual`,
+:class:`MomentumObserver`): De Luca and Mattone's generalized-momentum observer on the
+measured q, dq, tau themselves (no filter, no acceleration), ``r -> external torque`` through
+a first-order low-pass of gain K_O [1/s]; the residual is ``-(r - clip(r, -w, w))`` with w
+the low-passed bound of the static friction's share near rest (the same meaning as the band's
+interval), so it is about ``-(J^T F)`` like the filtered one. :func:`residual_for` is the one
+place that makes either; its velocity (dq_f, or the measured dq for the observer) sets the
+regime.
 
 Each joint's regime is its *moving time* ``moving_s``: how long [s] its filtered velocity has
 kept its sign with ``|dq_f,j| >= v_rest_j`` (0 at rest, at a reversal and at breakaway; the
@@ -61,8 +71,9 @@ from daq import ConfigError
 from daq.protocol.reader import read_topics
 from sim_drivers.arm_push import staged_push
 
-__all__ = ["MONITOR_SCHEMA", "MonitorRecord", "PushSpec", "SVFilter", "TorqueMonitor",
-           "moving_seconds", "read_monitor"]
+__all__ = ["DEFAULT_OBSERVER_GAIN", "MONITOR_SCHEMA", "RESIDUALS", "FilteredResidual",
+           "MomentumObserver", "MonitorRecord", "ObserverResidual", "PushSpec", "SVFilter",
+           "TorqueMonitor", "moving_seconds", "read_monitor", "residual_for"]
 
 MONITOR_SCHEMA_NAME = "jointid_msgs/msg/MonitorSample"
 MONITOR_SCHEMA = """\
@@ -119,6 +130,144 @@ class SVFilter:
         y, dy = self.y, self.dy
         self.y = [a11 * y0 + a12 * d0 + b1 * x for y0, d0, x in zip(y, dy, u, strict=True)]
         self.dy = [a21 * y0 + a22 * d0 + b2 * x for y0, d0, x in zip(y, dy, u, strict=True)]
+
+
+#: the residuals :class:`TorqueMonitor` can check (:func:`residual_for`)
+RESIDUALS = ("filtered", "observer")
+#: default gain K_O [1/s] of the momentum observer: time constant 1 / K_O = 20 ms (a push's
+#: torque reaches 1 - e^-1 of its value in 20 ms, 92 % in 50 ms: the issue's delay), while
+#: the noise of p = M dq reaches r multiplied by K_O
+DEFAULT_OBSERVER_GAIN = 50.0
+
+
+class FilteredResidual:
+    """The filtered residual (module docstring): ``predict(q_f, dq_f, ddq_f) -> (lo, hi)``
+    [N m] the model's torque interval at the filtered state, ``cutoff_hz`` the filters'."""
+
+    kind = "filtered"
+
+    def __init__(self, predict: Callable[..., Any], k: int, cycle_s: float,
+                 cutoff_hz: float) -> None:
+        self.predict = predict
+        self._fq = SVFilter(cutoff_hz, cycle_s, k)
+        self._fdq = SVFilter(cutoff_hz, cycle_s, k)
+        self._ftau = SVFilter(cutoff_hz, cycle_s, k)
+        self._n = 0
+
+    def step(self, q: Sequence[float], dq: Sequence[float], tau: Sequence[float]
+             ) -> tuple[list[float], list[float], list[float], list[float]]:
+        """One cycle of measured q [rad], dq [rad/s], tau [N m]: (residual, the torque it
+        compares (tau_f), the model's torque nearest to it, the velocity of the regime
+        (dq_f)) per joint."""
+        if self._n == 0:
+            self._fq.reset(q)
+            self._fdq.reset(dq)
+            self._ftau.reset(tau)
+        else:
+            self._fq.update(q)
+            self._fdq.update(dq)
+            self._ftau.update(tau)
+        self._n += 1
+        p_lo, p_hi = self.predict(self._fq.y, self._fdq.y, self._fdq.dy)
+        tau_f = self._ftau.y
+        r, pred = [], []
+        for x, lo, hi in zip(tau_f, p_lo, p_hi, strict=True):
+            pr = lo if x < lo else hi if x > hi else x
+            pred.append(pr)
+            r.append(x - pr)
+        return r, tau_f, pred, self._fdq.y
+
+
+class MomentumObserver:
+    """De Luca and Mattone's generalized-momentum observer of k joints, one cycle at a time
+    (docs/monitoring.md)::
+
+        r(t) = K_O [ p(t) - p(t0) - integral_t0^t (beta + r) ds ],   p = M(q) dq,
+        beta = tau_out + C(q, dq)^T dq - g(q)
+
+    so dr/dt = K_O (tau_ext - r): r is the external torque (plus the model's error) through
+    a first-order low-pass of time constant 1 / K_O. Discretised with the trapezoid rule on
+    beta and r held over the cycle (pole 1 - K_O dt, hence 0 < K_O dt < 1)::
+
+        s_k = s_(k-1) + dt (beta_(k-1) + beta_k) / 2 + dt r_(k-1),   r_k = K_O (p_k - s_k)
+
+    Where beta is only known within +-w (the static friction near rest), the error it leaves
+    in r is bounded by the same low-pass of w: :attr:`w`.
+    """
+
+    def __init__(self, gain: float, cycle_s: float, k: int) -> None:
+        if not 0 < gain * cycle_s < 1:
+            raise ConfigError(f"observer gain: expected 0 < K_O < {1 / cycle_s:g} 1/s (1 / "
+                              f"cycle), got {gain}")
+        self.gain, self.cycle_s, self.k = float(gain), float(cycle_s), k
+        self.reset()
+
+    def reset(self) -> None:
+        """The next :meth:`update` starts the observer (r = 0 there)."""
+        self.r = [0.0] * self.k  # [N m] the external torque's estimate
+        self.w = [0.0] * self.k  # [N m] the bound of r's error from beta's interval
+        self._s: list[float] | None = None
+        self._beta = [0.0] * self.k
+        self._hw = [0.0] * self.k
+
+    def update(self, p: Sequence[float], beta: Sequence[float], half: Sequence[float]
+               ) -> list[float]:
+        """One cycle: momentum ``p`` [N m s], ``beta`` [N m] (class docstring) and the
+        half-width of its interval ``half`` [N m]; returns r [N m] (also :attr:`r`)."""
+        dt, kg = self.cycle_s, self.gain
+        if self._s is None:
+            self._s = [float(x) for x in p]
+        else:
+            h, a = 0.5 * dt, kg * dt
+            self._s = [s + h * (b0 + b1) + dt * r for s, b0, b1, r in zip(
+                self._s, self._beta, beta, self.r, strict=True)]
+            self.w = [(1.0 - a) * w + a * 0.5 * (w0 + w1) for w, w0, w1 in zip(
+                self.w, self._hw, half, strict=True)]
+        self.r = [kg * (x - s) for x, s in zip(p, self._s, strict=True)]
+        self._beta = [float(b) for b in beta]
+        self._hw = [float(x) for x in half]
+        return self.r
+
+
+class ObserverResidual:
+    """The observer residual: ``terms(q, dq, tau) -> (p, beta, half)`` the model's
+    momentum, rate and its interval at the measured sample (no filter, no acceleration),
+    :class:`MomentumObserver` of gain K_O [1/s]; the residual is ``-(r - clip(r, -w, w))``
+    (0 where the static friction could explain r; the sign of the filtered residual: about
+    ``-(J^T F)`` under a push)."""
+
+    kind = "observer"
+
+    def __init__(self, terms: Callable[..., Any], k: int, cycle_s: float, gain: float
+                 ) -> None:
+        self.terms = terms
+        self.observer = MomentumObserver(gain, cycle_s, k)
+
+    def step(self, q: Sequence[float], dq: Sequence[float], tau: Sequence[float]
+             ) -> tuple[list[float], list[float], list[float], list[float]]:
+        """One cycle (as :meth:`FilteredResidual.step`): (residual, the measured torque,
+        the measured torque minus the residual, the measured velocity)."""
+        p, beta, half = self.terms(q, dq, tau)
+        r = self.observer.update(p, beta, half)
+        res, pred = [], []
+        for x, h, t in zip(r, self.observer.w, tau, strict=True):
+            c = -h if x < -h else h if x > h else x  # what the static friction can explain
+            res.append(c - x)
+            pred.append(float(t) - (c - x))
+        return res, [float(t) for t in tau], pred, [float(v) for v in dq]
+
+
+def residual_for(kind: str, model: Callable[..., Any], k: int, cycle_s: float, *,
+                 cutoff_hz: float = 20.0, gain: float = DEFAULT_OBSERVER_GAIN
+                 ) -> FilteredResidual | ObserverResidual:
+    """The one place a residual is made: ``filtered`` (``model`` the band
+    ``predict(q, dq, ddq) -> (lo, hi)``, ``cutoff_hz``) or ``observer`` (``model`` the
+    observer's ``terms(q, dq, tau) -> (p, beta, half)``, ``gain`` K_O [1/s])."""
+    if kind == "filtered":
+        return FilteredResidual(model, k, cycle_s, cutoff_hz)
+    if kind == "observer":
+        return ObserverResidual(model, k, cycle_s, gain)
+    raise ConfigError(f"monitor residual {kind!r}: expected one of {', '.join(RESIDUALS)}")
 
 
 def _table(x: Sequence[Any] | None, k: int, nb: int, default: float) -> list[list[float]]:
@@ -179,14 +328,21 @@ class MonitorRecord:
     step_s_total: float = 0.0
 
 
+def _none(payload: Any) -> None:
+    """No model (the residual's check at construction)."""
+    return None
+
+
 class TorqueMonitor:
     """The per-cycle check (module docstring).
 
     Parameters
     ----------
     predictor_for : callable
-        ``payload -> predict``, ``predict(q, dq, ddq) -> (lo, hi)`` (k values each) [N m]:
-        the torque interval of the identified model for a run with that payload.
+        ``payload -> model`` for a run with that payload: for the filtered residual
+        ``predict(q, dq, ddq) -> (lo, hi)`` (k values each) [N m], the torque interval of
+        the identified model; for the observer ``terms(q, dq, tau) -> (p, beta, half)``
+        (:class:`ObserverResidual`).
     joints : sequence of str
         Joint names (k), the drives' order.
     cycle_s : float
@@ -199,7 +355,11 @@ class TorqueMonitor:
     rest_velocity : float or sequence of float
         Per joint [rad/s]: below it the joint's moving time is 0 (the model's rest band).
     cutoff_hz : float
-        Cut-off of the filter [Hz].
+        Cut-off of the filter [Hz] (filtered residual).
+    residual : str
+        ``filtered`` or ``observer`` (:func:`residual_for`).
+    observer_gain : float
+        The observer's gain K_O [1/s].
     warmup_s : float
         Crossings are not counted during the first ``warmup_s`` [s] of the run phase (the
         filter's start transient).
@@ -214,7 +374,8 @@ class TorqueMonitor:
                  lower: Sequence[Any] | None = None, upper: Sequence[Any] | None = None,
                  edges_s: Sequence[float] = (), rest_velocity: float | Sequence[float] = 0.0,
                  cutoff_hz: float = 20.0, warmup_s: float = 0.25, stop: bool = False,
-                 pushes: Sequence[PushSpec] = ()) -> None:
+                 pushes: Sequence[PushSpec] = (), residual: str = "filtered",
+                 observer_gain: float = DEFAULT_OBSERVER_GAIN) -> None:
         self.predictor_for = predictor_for
         self.joints = list(joints)
         k = self.k = len(self.joints)
@@ -241,12 +402,15 @@ class TorqueMonitor:
                 raise ConfigError(f"push on joint index {p.joint}: expected 0..{k - 1}")
         self.arm: Any = None  # sim_drivers.arm_bus.ArmOnBus when simulated
         self.records: list[MonitorRecord] = []
-        self._fq = SVFilter(self.cutoff_hz, self.cycle_s, k)
-        self._fdq = SVFilter(self.cutoff_hz, self.cycle_s, k)
-        self._ftau = SVFilter(self.cutoff_hz, self.cycle_s, k)
+        self.residual = residual
+        self.observer_gain = float(observer_gain)
+        residual_for(residual, _none, k, self.cycle_s, cutoff_hz=self.cutoff_hz,
+                     gain=self.observer_gain)  # checks kind, cut-off and gain now
         self._log: Any = None
         self._channels: list[int] = []
-        self._predict: Callable[..., Sequence[float]] | None = None
+        self._res: FilteredResidual | ObserverResidual | None = None
+        #: the velocity of the regime at the last cycle [rad/s] (filtered: dq_f; observer: dq)
+        self.velocity: list[float] = [0.0] * k
         self._n = 0
         self._disarmed_until = 0
         self._next_push = 0
@@ -257,7 +421,9 @@ class TorqueMonitor:
     # -- per run ---------------------------------------------------------------------------
     def begin(self, index: int, payload: Any, log: Any) -> None:
         """A payload run starts: the model for its payload, the log's channels."""
-        self._predict = self.predictor_for(payload)
+        self._res = residual_for(self.residual, self.predictor_for(payload), self.k,
+                                 self.cycle_s, cutoff_hz=self.cutoff_hz,
+                                 gain=self.observer_gain)
         self._log = log
         self._channels = []
         w = getattr(log, "_w", None)
@@ -267,6 +433,8 @@ class TorqueMonitor:
                               for j in range(self.k)]
             w.add_metadata("monitor", {
                 "joints": json.dumps(self.joints), "cutoff_hz": repr(self.cutoff_hz),
+                "residual": self.residual, "observer_gain": repr(self.observer_gain)
+                if self.residual == "observer" else "",
                 "lower": json.dumps(self.lower), "upper": json.dumps(self.upper),
                 "edges_s": json.dumps(self.edges_s),
                 "rest_velocity": json.dumps(self.rest_velocity),
@@ -287,14 +455,8 @@ class TorqueMonitor:
         last ones): crossings are not counted from this cycle for another warm-up."""
         t_in = time.perf_counter()
         rec = self.records[-1]
-        if self._n == 0:
-            self._fq.reset(q)
-            self._fdq.reset(dq)
-            self._ftau.reset(tau)
-        else:
-            self._fq.update(q)
-            self._fdq.update(dq)
-            self._ftau.update(tau)
+        res, tau_f, pred_all, dq_f = self._res.step(q, dq, tau)  # type: ignore[union-attr]
+        self.velocity = dq_f
         n = self._n
         self._n += 1
         if not valid:  # stale values in the filters: disarm for a warm-up
@@ -303,9 +465,6 @@ class TorqueMonitor:
         if self._next_push < len(self.pushes) and n * self.cycle_s >= self.pushes[
                 self._next_push].t0_s:
             self._stage(cycle, t, log, rec)
-        p_lo, p_hi = self._predict(self._fq.y, self._fdq.y,  # type: ignore[misc]
-                                   self._fdq.dy)
-        tau_f, dq_f = self._ftau.y, self._fdq.y
         armed = n >= self.warmup_cycles and n >= self._disarmed_until
         rec.armed_cycles += armed
         lo, hi, out = self.lower, self.upper, self._out
@@ -324,9 +483,7 @@ class TorqueMonitor:
             mv = moving[j] * cycle_s
             b = bisect_right(edges, mv) if edges else 0
             lo_j, hi_j = lo[j][b], hi[j][b]
-            x = tau_f[j]
-            pred = p_lo[j] if x < p_lo[j] else p_hi[j] if x > p_hi[j] else x
-            r = x - pred
+            x, pred, r = tau_f[j], pred_all[j], res[j]
             if add is not None:
                 add(chans[j], ts, _SAMPLE.pack(_CDR_HEADER, cycle, t, r, lo_j, hi_j, x, pred,
                                                mv, armed), now_ns, cycle)
