@@ -15,6 +15,7 @@ import canopen
 import numpy as np
 import pytest
 
+from daq import ConfigError
 from daq.protocol.cia402 import State, path, state_from_statusword
 from daq.runtime.config import parse_daq
 from daq.runtime.master import MasterDrive, rpdo_timeout_ms
@@ -120,6 +121,15 @@ def test_master_timer_rule():
     assert rpdo_timeout_ms(0.001, paced=True) == 103  # 3 cycles + 100 ms
     assert rpdo_timeout_ms(0.004, paced=True) == 112
     assert rpdo_timeout_ms(0.001, paced=False) == 0  # lockstep: off
+    # [daq] rpdo_margin_ms: the margin over the 3 cycles (a loaded host's stalls)
+    assert parse_daq({}, "c.toml").rpdo_margin_ms == 100
+    margin = parse_daq({"rpdo_margin_ms": 400}, "c.toml").rpdo_margin_ms
+    assert rpdo_timeout_ms(0.004, True, margin) == 412
+    assert rpdo_timeout_ms(0.004, False, margin) == 0
+    for bad in (-1, 60001, 1.5, "x"):
+        with pytest.raises(ConfigError, match="rpdo_margin_ms") as e:
+            parse_daq({"rpdo_margin_ms": bad}, "c.toml")
+        assert "\n" not in str(e.value) and "c.toml" in str(e.value)
 
 
 # the RPDO event timer in the vendor files of ../shared/eds

@@ -25,6 +25,10 @@ project's generic EDS, cyclic synchronous torque)::
                                   # most about this long for the GIL held by another thread
                                   # (the simulated drives, the log's chunk writer)
     tpdo_timeout_cycles = 3       # watchdog: TPDOs missing for k consecutive cycles -> stop
+    rpdo_margin_ms = 100          # paced: the drives' RPDO deadline (0x1400.5) is 3 cycles +
+                                  # this [ms]; a master stalled longer stops the run (and a
+                                  # drive faults by itself). Longer tolerates a loaded host's
+                                  # stalls; the drives then fault later if the master dies
     heartbeat_timeout_s = 0.5     # watchdog: no heartbeat for this long [s] -> stop
     max_following_error = 0.2     # watchdog: |q_ref - q| above this [rad] or [m] -> stop
     quick_stop_cycles = 2         # cycles of quick stop before disable voltage
@@ -194,6 +198,7 @@ class DaqConfig:
     realtime_priority: int
     drives: tuple[DriveConfig, ...]
     tpdo_timeout_cycles: int
+    rpdo_margin_ms: int
     heartbeat_timeout_s: float
     max_following_error: float
     quick_stop_cycles: int
@@ -288,6 +293,7 @@ _DAQ = Table(
         "realtime_priority": Field(int, required=False, default=0, ge=0, le=99),
         "drives": ArrayOfTables(_DRIVE, required=False),
         "tpdo_timeout_cycles": Field(int, required=False, default=3, ge=1, unit="cycles"),
+        "rpdo_margin_ms": Field(int, required=False, default=100, ge=0, le=60000, unit="ms"),
         "heartbeat_timeout_s": Field(float, required=False, default=0.5, gt=0, unit="s"),
         "max_following_error": Field(float, required=False, default=0.2, gt=0, unit="rad"),
         "quick_stop_cycles": Field(int, required=False, default=2, ge=1, le=1000),
@@ -458,6 +464,7 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "", *,
         realtime_priority=d["realtime_priority"],
         drives=tuple(drives),
         tpdo_timeout_cycles=d["tpdo_timeout_cycles"],
+        rpdo_margin_ms=d["rpdo_margin_ms"],
         heartbeat_timeout_s=d["heartbeat_timeout_s"],
         max_following_error=d["max_following_error"],
         quick_stop_cycles=d["quick_stop_cycles"],

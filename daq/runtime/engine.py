@@ -220,8 +220,8 @@ class Engine(Supervisor):
         self.periodic = self.paced and cfg.sync_source == "periodic"
         self.interrupted = ""  # the name of the stop signal received (SIGINT, SIGTERM...)
         # paced: a SYNC later than this [s] is the master's own stall: the RPDO deadline it
-        # gave the drives (0x1400.5, 3 cycles + 100 ms), after which a drive faults anyway
-        self.stall_s = rpdo_timeout_ms(campaign.cycle_s, True) / 1000.0
+        # gave the drives (0x1400.5, 3 cycles + rpdo_margin_ms), after which a drive faults anyway
+        self.stall_s = rpdo_timeout_ms(campaign.cycle_s, True, cfg.rpdo_margin_ms) / 1000.0
         #: the moving joint each drive follows (its column of the plan)
         self.columns = drive_joints(campaign, len(drives))
         #: one reference for every drive, logged once on ``/setpoint``: the joint has no

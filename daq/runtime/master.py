@@ -96,13 +96,15 @@ RPDO_TIMEOUT_CYCLES = 3  # RPDO event timer: this many cycles ...
 RPDO_TIMEOUT_MARGIN_MS = 100  # ... plus this margin [ms] (host stalls), like the heartbeat
 
 
-def rpdo_timeout_ms(cycle_s: float, paced: bool) -> int:
-    """RPDO1 event timer for the drives [ms]: ``ceil(3 x cycle) + 100`` when paced, 0 (off)
-    in lockstep, where cycles may be far apart in wall time."""
+def rpdo_timeout_ms(cycle_s: float, paced: bool,
+                    margin_ms: int = RPDO_TIMEOUT_MARGIN_MS) -> int:
+    """RPDO1 event timer for the drives [ms]: ``ceil(3 x cycle) + margin_ms`` (``[daq]
+    rpdo_margin_ms``, default 100) when paced, 0 (off) in lockstep, where cycles may be far
+    apart in wall time."""
     if not paced:
         return 0
     return min(0xFFFF, math.ceil(RPDO_TIMEOUT_CYCLES * cycle_s * 1000.0 - 1e-9)
-               + RPDO_TIMEOUT_MARGIN_MS)
+               + int(margin_ms))
 
 
 @dataclass(frozen=True)

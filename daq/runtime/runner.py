@@ -156,7 +156,8 @@ def _metadata(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, index: int, pa
         "master_heartbeat_ms": str(cfg.master_heartbeat_ms),
         "heartbeat_consumer_ms": str(cfg.heartbeat_consumer_ms),
         "sync_period_us": str(_sync_period_us(cfg, campaign.cycle_s)),
-        "rpdo_timeout_ms": str(rpdo_timeout_ms(campaign.cycle_s, cfg.clock == "paced")),
+        "rpdo_timeout_ms": str(rpdo_timeout_ms(campaign.cycle_s, cfg.clock == "paced",
+                                               cfg.rpdo_margin_ms)),
     }
     if plant_params is not None:
         md["plant"] = {"name": str(getattr(plant_params, "name", "")),
@@ -390,8 +391,8 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
         scalings = [d.start_up(campaign.cycle_s, tau_max, master_id=cfg.master_node_id,
                                consumer_ms=cfg.heartbeat_consumer_ms,
                                sync_period_us=_sync_period_us(cfg, campaign.cycle_s),
-                               rpdo_timeout_ms=rpdo_timeout_ms(campaign.cycle_s,
-                                                               cfg.clock == "paced"))
+                               rpdo_timeout_ms=rpdo_timeout_ms(
+                                   campaign.cycle_s, cfg.clock == "paced", cfg.rpdo_margin_ms))
                     for d, tau_max in zip(drives, tau_maxes, strict=True)]
         if heartbeat is not None:
             heartbeat.beat()  # the drives watch the master from now on, not a period later
