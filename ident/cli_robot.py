@@ -42,7 +42,7 @@ from .loaders import parse_mapping
 from .report import write_json
 from .results import DEFAULT_BANDS
 from .robot.consistency import check_consistency
-from .robot.consistent_fit import add_consistent
+from .robot.consistent_fit import add_consistent, format_record
 from .robot.design import design_runs, resolve_design, sign_checked
 from .robot.estimate import RobotModel
 from .robot.loaders import (
@@ -798,6 +798,10 @@ def format_report(out: dict[str, Any]) -> str:
     for name, text in out.get("_consistency", {}).items():
         lines.append("")
         lines.append(f"{name} model: " + text)
+    for name, rec in fitted.items():
+        if rec.get("consistent"):  # --consistent
+            lines.append("")
+            lines.append(f"{name} model: " + format_record(rec["consistent"]))
     return "\n".join(lines)
 
 

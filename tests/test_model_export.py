@@ -23,6 +23,7 @@ from ident.robot.consistent_fit import (
     consistent_model,
     consistent_record,
     fit_consistent,
+    format_record,
     link_validity,
 )
 from ident.robot.estimate import RobotModel
@@ -253,6 +254,10 @@ def test_export_model_cli(tmp_path, capfd):
                  "--json", str(j4), "--no-consistency", "--consistent"]) == 0
     rec4 = json.loads(j4.read_text())
     assert rec4["models"]["usual"]["consistent"]["valid"]
+    # ... and prints it: the record's figures, as format_record writes them
+    printed = capfd.readouterr().out
+    summary = format_record(rec4["models"]["usual"]["consistent"])
+    assert "usual model: " + summary in printed and "d^2 = " in summary
     j4.write_text(json.dumps(dict(rec4, inputs=[str(tmp_path / "gone.csv")])))
     assert main(["export-model", str(j4), "-o", str(tmp_path / "from_fit")]) == 0
     capfd.readouterr()

@@ -59,7 +59,7 @@ from .friction_bounds import bound_rows
 from .paper import require_theta
 
 __all__ = ["ConsistentFit", "fit_consistent", "consistent_model", "link_validity",
-           "consistent_record", "add_consistent", "MARGIN", "PRIOR_WEIGHT"]
+           "consistent_record", "format_record", "add_consistent", "MARGIN", "PRIOR_WEIGHT"]
 
 #: Pseudo-inertia lower bound J >= MARGIN 1_4 [kg, kg m^2]: strict physical consistency
 #: (mass > 0, inertia about the CoM positive definite) without changing any fit visibly.
@@ -142,26 +142,42 @@ class ConsistentFit:
         return all(lk["valid"] for lk in self.links) and not self.friction_left
 
     def format(self) -> str:
-        """Plain-text summary."""
-        lines = [f"Consistent estimate (LMI fit, {self.solver}, {self.solve_s:.3g} s, friction "
-                 f"{self.friction}): every link physically valid: "
-                 f"{'yes' if self.valid else 'NO'}",
-                 f"  distance from the free fit d^2 = {self.d2:.4g} (99 % limit "
-                 f"{self.d2_limit:.4g}: {'within' if self.within_uncertainty else 'OUTSIDE'} "
-                 f"its uncertainty); weighted residual sum of squares +{100 * self.cost_ratio:.3g}"
-                 " %"]
-        if self.friction_violated:
-            lines.append(f"  friction bounds violated by the free friction: "
-                         f"{', '.join(self.friction_violated)}; moved onto them: "
-                         f"{', '.join(self.friction_moved) or 'none'} (d^2 +"
-                         f"{self.friction_d2:.4g})" + (
-                             f"; still violated (fixed parameters): "
-                             f"{', '.join(self.friction_left)}" if self.friction_left else ""))
-        if self.rel_error_before:
-            b, a = self.rel_error_before["all"], self.rel_error_after["all"]
-            lines.append(f"  relative error ||rho|| / ||tau||: free {100 * b:.4f} %, consistent "
-                         f"{100 * a:.4f} % (x {a / b:.4f})")
-        return "\n".join(lines)
+        """Plain-text summary (:func:`format_record` of its record's fields)."""
+        return format_record({
+            "solver": self.solver, "solve_s": self.solve_s, "friction": self.friction,
+            "valid": self.valid, "d2": self.d2, "d2_limit": self.d2_limit,
+            "within_uncertainty": self.within_uncertainty, "cost_ratio": self.cost_ratio,
+            "friction_bounds": {"violated": list(self.friction_violated),
+                                "moved": list(self.friction_moved), "d2": self.friction_d2,
+                                "still_violated": list(self.friction_left)},
+            "rel_error_before": self.rel_error_before, "rel_error_after": self.rel_error_after})
+
+
+def format_record(rec: Any) -> str:
+    """Plain-text summary of a consistent estimate's record (:func:`consistent_record`, the
+    ``consistent`` block of ``jointid fit --robot --consistent``), as ``jointid fit`` prints
+    it."""
+    lines = [f"Consistent estimate (LMI fit, {rec['solver']}, {rec['solve_s']:.3g} s, friction "
+             f"{rec['friction']}): every link physically valid and every friction bound met: "
+             f"{'yes' if rec['valid'] else 'NO'}",
+             f"  links: distance from the free fit d^2 = {rec['d2']:.4g} (99 % limit "
+             f"{rec['d2_limit']:.4g}: {'within' if rec['within_uncertainty'] else 'OUTSIDE'} "
+             f"its uncertainty); weighted residual sum of squares +{100 * rec['cost_ratio']:.3g}"
+             " %"]
+    fb = rec.get("friction_bounds") or {}
+    if fb.get("violated"):
+        lines.append(f"  friction bounds violated by the free friction: "
+                     f"{', '.join(fb['violated'])}; moved onto them: "
+                     f"{', '.join(fb['moved']) or 'none'} (d^2 +{fb['d2']:.4g})" + (
+                         f"; still violated (fixed parameters): "
+                         f"{', '.join(fb['still_violated'])}" if fb.get("still_violated")
+                         else ""))
+    before, after = rec.get("rel_error_before") or {}, rec.get("rel_error_after") or {}
+    if before and after:
+        b, a = before["all"], after["all"]
+        lines.append(f"  relative error ||rho|| / ||tau||: free {100 * b:.4f} %, consistent "
+                     f"{100 * a:.4f} % (x {a / b:.4f})")
+    return "\n".join(lines)
 
 
 def _pseudo_inertia(p: Any) -> list[list[Any]]:
