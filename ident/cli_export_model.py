@@ -25,7 +25,7 @@ from . import DataError
 from .cli_robot import FORMAT, OLD_FORMATS, fit_robot, robot_gains
 from .loaders import parse_mapping
 from .report import write_json
-from .robot.consistent_fit import consistent_record, fit_consistent
+from .robot.consistent_fit import consistent_record, fit_consistent, format_record
 from .robot.export_model import export_model
 from .robot.loaders import RobotPreprocessing, load_robot_runs
 from .vocab import model_name, upgrade_record
@@ -131,18 +131,7 @@ def run(args: argparse.Namespace) -> int:
             if left else "a link is not physically valid") + "; nothing exported")
     files = export_model(robot, cons, args.output, fixed)
     files.append(write_json(args.output / "consistent.json", cons))
-    before, after = cons.get("rel_error_before", {}), cons.get("rel_error_after", {})
-    print(f"{name} model, consistent estimate (LMI, {cons['solver']}, {cons['solve_s']:.3g} s): "
-          f"d^2 = {cons['d2']:.4g} (99 % limit {cons['d2_limit']:.4g}), weighted residual "
-          f"sum of squares +{100 * cons['cost_ratio']:.3g} %")
-    bounds = cons.get("friction_bounds", {})
-    if bounds.get("violated"):
-        print(f"friction bounds the free fit violated: {', '.join(bounds['violated'])}; "
-              f"moved onto them: {', '.join(bounds['moved']) or 'none'} "
-              f"(d^2 +{bounds['d2']:.4g})")
-    if before and after:
-        print(f"relative error ||rho|| / ||tau|| on the fit data: free {100 * before['all']:.4f}"
-              f" %, consistent {100 * after['all']:.4f} %")
+    print(f"{name} model: " + format_record(cons))
     for f in files:
         print(f"wrote {f}")
     return 0

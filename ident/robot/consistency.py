@@ -37,7 +37,7 @@ import scipy.stats
 
 from . import RobotIdentError
 from .consistent_fit import fit_consistent
-from .friction_bounds import bound_rows
+from .friction_bounds import bound_rows, met
 from .paper import require_theta
 
 __all__ = ["ConsistencyReport", "check_consistency"]
@@ -182,8 +182,7 @@ def check_consistency(model: Any, *, feasibility: bool = True, starts: int = 3,
     for what, g, strict in bound_rows(model.names_, model.numbers_):
         v = float(g @ coef)
         s = float(np.sqrt(max(g @ cov_all @ g, 0.0)))
-        ok = v > 0 or (v == 0 and not strict)
-        rep.checks.append((what, v, s, "ok" if ok else _status(v, s)))
+        rep.checks.append((what, v, s, "ok" if met(v, strict) else _status(v, s)))
     used = np.any(beta != 0, axis=0)
     rep.unchecked = tuple(n for n, u in zip(std_names, used, strict=True) if not u)
     if not feasibility:

@@ -55,7 +55,7 @@ import scipy.linalg
 import scipy.stats
 
 from . import RobotIdentError
-from .friction_bounds import bound_rows
+from .friction_bounds import bound_rows, met
 from .paper import require_theta
 
 __all__ = ["ConsistentFit", "fit_consistent", "consistent_model", "link_validity",
@@ -464,14 +464,6 @@ def _finish(model: Any, signals: Any, friction: str, solver: str, status: str,
     return out
 
 
-def _meets(v: np.ndarray, strict: np.ndarray, tol: np.ndarray | float = 0.0) -> np.ndarray:
-    """Which bounds ``g . x`` = v are met: v > 0 (strict) or v >= 0 (the consistency
-    report's rule); with ``tol`` > 0, v > -tol (a solver's accuracy)."""
-    if np.any(np.asarray(tol) > 0):
-        return v > -np.asarray(tol)
-    return (v > 0) | (~strict & (v == 0))
-
-
 def _project_friction(model: Any, coef: np.ndarray, cov: np.ndarray, free: np.ndarray,
                       theta_idx: np.ndarray, other: np.ndarray
                       ) -> tuple[tuple[str, ...], tuple[str, ...], float, tuple[str, ...]]:
@@ -487,7 +479,7 @@ def _project_friction(model: Any, coef: np.ndarray, cov: np.ndarray, free: np.nd
     G = np.array([g for _, g, _ in rows])
     strict = np.array([st for *_, st in rows])
     labels = [w for w, *_ in rows]
-    bad = ~_meets(G @ coef, strict)
+    bad = ~met(G @ coef, strict)
     if not bad.any():
         return (), (), 0.0, ()
     violated = tuple(lb for lb, b in zip(labels, bad, strict=True) if b)
@@ -531,8 +523,8 @@ def _project_friction(model: Any, coef: np.ndarray, cov: np.ndarray, free: np.nd
     moved = tuple(names[i] for i, st, sdi in zip(other, step, sd, strict=True)
                   if abs(st) > 1e-3 * sdi)
     tol = 1e-7 * (1.0 + np.abs(G) @ np.abs(coef))
-    left = tuple(lb for lb, ok in zip(labels, _meets(G @ coef, strict, tol), strict=True)
-                 if not ok)
+    # met to the solver's accuracy
+    left = tuple(lb for lb, v, t in zip(labels, G @ coef, tol, strict=True) if not v > -t)
     return violated, moved, d2_friction(coef[other] - x_hat[other]) - before, left
 
 

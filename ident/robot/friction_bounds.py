@@ -11,11 +11,11 @@ joint's parameters, so it is also one row of a convex program.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["FRICTION_BOUNDS", "bound_rows"]
+__all__ = ["FRICTION_BOUNDS", "bound_rows", "met"]
 
 #: statement -> linear combination ((prefix, coefficient), ...) of a joint's parameters
 #: (prefix + joint number is the parameter's name); ">" statements are strict.
@@ -36,8 +36,7 @@ FRICTION_BOUNDS: dict[str, tuple[tuple[str, float], ...]] = {
 }
 
 
-def bound_rows(names: Sequence[str], numbers: Sequence[int],
-               index: Mapping[str, int] | None = None
+def bound_rows(names: Sequence[str], numbers: Sequence[int]
                ) -> list[tuple[str, np.ndarray, bool]]:
     """The bounds that apply to a model's parameters.
 
@@ -47,8 +46,6 @@ def bound_rows(names: Sequence[str], numbers: Sequence[int],
         The model's parameter names (``RobotModel.names_``).
     numbers : sequence of int
         The joints' numbers (``RobotModel.numbers_``), the suffix of their parameters.
-    index : mapping, optional
-        name -> position in ``names`` (built when not given).
 
     Returns
     -------
@@ -56,8 +53,7 @@ def bound_rows(names: Sequence[str], numbers: Sequence[int],
         Per bound whose parameters all exist: ``"<statement> (joint j)"``, the row g (len(names),)
         of ``g . x >= 0``, and whether it is strict (``>``).
     """
-    if index is None:
-        index = {n: i for i, n in enumerate(names)}
+    index = {n: i for i, n in enumerate(names)}
     out = []
     for j in numbers:
         for what, combo in FRICTION_BOUNDS.items():
@@ -69,3 +65,8 @@ def bound_rows(names: Sequence[str], numbers: Sequence[int],
                 g[index[c]] = w
             out.append((f"{what} (joint {j})", g, ">=" not in what))
     return out
+
+
+def met(v: np.ndarray | float, strict: np.ndarray | bool) -> np.ndarray | bool:
+    """Whether bounds with values ``v = g . x`` are met: v > 0 where strict, v >= 0 else."""
+    return (v > 0) | (~np.asarray(strict) & (v == 0))
