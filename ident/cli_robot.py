@@ -39,6 +39,7 @@ from . import DataError, IdentError
 from .estimate import DEFAULT_THRESHOLD_PCT
 from .fitting import DQ_MIN_FRACTION, SIGN_CHECK_MIN_KEPT
 from .loaders import parse_mapping
+from .refine_result import ONE_TRAJECTORY_NOTE
 from .report import write_json
 from .results import DEFAULT_BANDS
 from .robot.consistency import check_consistency
@@ -528,7 +529,8 @@ def refine_robot(
             "ndof_rel_error": out["models"][model]["rel_error"].get(joint),
             "fit": {"before": js["rel_error_initial"], "after": js["rel_error_final"]},
             "heldout": {"kind": js["heldout_kind"], "before": js["heldout_rel_error_initial"],
-                        "after": js["heldout_rel_error_final"]},
+                        "after": js["heldout_rel_error_final"],
+                        "one_trajectory": js["heldout_one_trajectory"]},
             "noise_floor": {"before": js["noise_floor_initial"], "after": js["noise_floor"]},
             "validation": None if js["validation_rel_error_initial"] is None else {
                 "before": js["validation_rel_error_initial"],
@@ -589,6 +591,9 @@ def format_refinement(rec: dict[str, Any]) -> str:
                      f"{ba(r['noise_floor']):>18}  {added}")
         if r["validation"] is not None:
             lines.append(f"{'':<{w}}validation {ba(r['validation'])}")
+    if any(r.get("heldout", {}).get("one_trajectory") and r.get("validation") is None
+           for r in rec["joints"].values()):
+        lines.append(ONE_TRAJECTORY_NOTE)
     if rec.get("refit"):
         lines.append("")
         lines += format_refit(rec["refit"], rec["model"])

@@ -66,7 +66,7 @@ from .refine_lsq import quick_residual
 from .refine_result import Refinement, Rejected, Step, _pct
 from .signals import Signals
 from .terms import Library, Term
-from .unseen import LEAK_RATIO, heldout_error, heldout_kind, noise_floor
+from .unseen import LEAK_RATIO, heldout_error, heldout_kind, noise_floor, one_trajectory
 
 if TYPE_CHECKING:  # pragma: no cover
     from .preprocess import Design
@@ -400,6 +400,9 @@ def refine(
     initial = cur
     runs = cur_design.signals.experiment
     unseen = heldout_kind(runs)
+    # leave one run out on runs of one trajectory cannot reject a term locked to it
+    one_path = unseen == "leave one run out" and one_trajectory(
+        cur_design.signals.t, cur_design.signals.q, runs)
     floor = noise_floor(cur.residual_, cur_design.Y, runs)
     floor_initial = floor
     h_cur = heldout_error(_kept(cur_design, cur), cur_design.Y, runs)
@@ -681,6 +684,7 @@ def refine(
         final_validation_design=cur_val,
         library_tried=library_tried,
         heldout_kind=unseen,
+        heldout_one_trajectory=one_path,
         heldout_rel_error_initial=h_initial,
         heldout_rel_error_final=h_cur,
         noise_floor=floor,

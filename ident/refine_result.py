@@ -19,6 +19,13 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = ["Step", "Rejected", "Refinement"]
 
+#: What the report says when every run replays one trajectory and no validation data were
+#: given (:attr:`Refinement.heldout_one_trajectory`).
+ONE_TRAJECTORY_NOTE = (
+    "note: the runs replay one trajectory, so leaving one out cannot reject a term locked to "
+    "it (time since the start, position along the path); validate the added terms on a run "
+    "of another trajectory (jointid fit --validate FILE)")
+
 
 @dataclass
 class Step:
@@ -217,6 +224,10 @@ class Refinement:
     library_tried : list of dict
         Per step, every structure of the library search with its held-out error and the
         reason it was not selected (see :meth:`ident.library_search.Tried.to_json`).
+    heldout_one_trajectory : bool
+        Every run replays one trajectory (:func:`ident.unseen.one_trajectory`): leaving a
+        run out then cannot reject a term locked to that trajectory; the report says so when
+        no validation data were given.
     """
 
     steps: list[Step]
@@ -237,6 +248,7 @@ class Refinement:
     heldout_rel_error_final: float = math.nan
     noise_floor: float = math.nan
     noise_floor_initial: float = math.nan
+    heldout_one_trajectory: bool = False
 
     @property
     def terms(self) -> list[Effect]:
@@ -252,6 +264,7 @@ class Refinement:
             "noise_floor": _num(fl),
             "noise_floor_initial": _num(self.noise_floor_initial),
             "heldout_kind": self.heldout_kind,
+            "heldout_one_trajectory": self.heldout_one_trajectory,
             "heldout_rel_error_initial": _num(self.heldout_rel_error_initial),
             "heldout_rel_error_final": _num(self.heldout_rel_error_final),
             "floor_ratio_final": {"fit": _ratio(self.rel_error_final, fl),
@@ -296,6 +309,8 @@ class Refinement:
             f"(fit / floor x{_ratio_s(self.rel_error_final, fl)}, held-out / floor "
             f"x{_ratio_s(self.heldout_rel_error_final, fl)})",
         ]
+        if self.heldout_one_trajectory and self.validation_rel_error_initial is None:
+            out.append(f"  {ONE_TRAJECTORY_NOTE}")
         for i, s in enumerate(self.steps, 1):
             out.append("")
             out.append(

@@ -19,7 +19,12 @@ Two numbers guard every refinement step (:func:`ident.refine.refine`, docs/refin
   times the true structure's error);
 * the **unseen-data error** (:func:`heldout_error`): every run fitted on the others and
   predicted (leave one run out) when the design has two runs or more, else five contiguous
-  blocks of the single run (blocked folds). A step is kept only if it lowers it.
+  blocks of the single run (blocked folds). A step is kept only if it lowers it. When every
+  run replays one trajectory (:func:`one_trajectory`: the payload runs of the paper's
+  campaign), the held-out run follows the path the others were fitted on, so a term locked
+  to that path (a function of the time since the start, or of the position along it) passes
+  this test as well as a property of the joint does; only data of another trajectory (a
+  validation file) can tell them apart, and the refinement says so.
 
 Pure numerics (no file access).
 """
@@ -31,7 +36,8 @@ import math
 import numpy as np
 from scipy import signal
 
-__all__ = ["LEAK_RATIO", "N_BLOCKS", "heldout_error", "heldout_kind", "noise_floor"]
+__all__ = ["LEAK_RATIO", "N_BLOCKS", "TRAJECTORY_TOL", "heldout_error", "heldout_kind",
+           "noise_floor", "one_trajectory"]
 
 #: A fit or held-out error below this fraction of the estimated noise floor is a leak.
 LEAK_RATIO = 0.5
@@ -41,6 +47,12 @@ SPECTRUM_BAND = 0.1
 
 #: Contiguous folds of a single run (blocked cross-validation).
 N_BLOCKS = 5
+
+#: Two runs replay one trajectory when the RMS difference of their positions at the same time
+#: since their start is below this fraction of the positions' standard deviation. (Measured:
+#: about 1e-3 for the payload runs of one plan, whose tracking errors differ with the load;
+#: about 1 for two multi-sines of other seeds.)
+TRAJECTORY_TOL = 0.05
 
 
 def _mad(x: np.ndarray) -> float:
@@ -89,6 +101,56 @@ def noise_floor(residual: np.ndarray, y: np.ndarray, experiment: np.ndarray) -> 
 def heldout_kind(experiment: np.ndarray) -> str:
     """``"leave one run out"`` with two runs or more, else ``"blocked folds"``."""
     return "leave one run out" if np.unique(experiment).size >= 2 else "blocked folds"
+
+
+def one_trajectory(t: np.ndarray, q: np.ndarray, experiment: np.ndarray,
+                   tol: float = TRAJECTORY_TOL) -> bool:
+    """Whether every run replays the first run's trajectory (two runs or more).
+
+    Parameters
+    ----------
+    t : ndarray, shape (m,)
+        Time since the start of the sample's own run [s] (``Signals.t``).
+    q : ndarray, shape (m,) or (m, k)
+        Positions [rad or m] (k joints: all compared).
+    experiment : ndarray of int, shape (m,)
+        Run of each sample.
+    tol : float
+        :data:`TRAJECTORY_TOL`.
+
+    Returns
+    -------
+    bool
+        True when, for every run after the first, the RMS difference between its positions
+        and the first run's (interpolated at the same time since the start, over the time both
+        cover) is at most ``tol`` times the standard deviation of the positions (per joint);
+        False with one run, or when a run shares less than half its time span with the first.
+    """
+    t = np.asarray(t, dtype=float)
+    q = np.asarray(q, dtype=float)
+    q = q[:, None] if q.ndim == 1 else q
+    exp = np.asarray(experiment)
+    runs = np.unique(exp)
+    if runs.size < 2:
+        return False
+    spread = np.std(q, axis=0)
+    if not np.all(spread > 0):
+        return False
+    first = exp == runs[0]
+    t0, q0 = t[first], q[first]
+    order = np.argsort(t0)
+    t0, q0 = t0[order], q0[order]
+    for r in runs[1:]:
+        m = exp == r
+        tr, qr = t[m], q[m]
+        inside = (tr >= t0[0]) & (tr <= t0[-1])
+        if inside.sum() < 2 or np.ptp(tr[inside]) < 0.5 * np.ptp(tr):
+            return False
+        for j in range(q.shape[1]):
+            d = qr[inside, j] - np.interp(tr[inside], t0, q0[:, j])
+            if math.sqrt(float(np.mean(d * d))) > tol * spread[j]:
+                return False
+    return True
 
 
 def _folds(experiment: np.ndarray) -> np.ndarray:

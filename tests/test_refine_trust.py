@@ -32,8 +32,9 @@ from ident.library_search import LibraryTerm, build_library
 from ident.models import IdentModel, RigidBody, new_model, usual_model
 from ident.preprocess import build_design
 from ident.refine import refine
+from ident.refine_result import ONE_TRAJECTORY_NOTE
 from ident.signals import Signals
-from ident.unseen import LEAK_RATIO, heldout_error, heldout_kind, noise_floor
+from ident.unseen import LEAK_RATIO, heldout_error, heldout_kind, noise_floor, one_trajectory
 from sim_drivers.plant_config import default_plant
 
 
@@ -191,3 +192,44 @@ def test_named_effects_declare_their_physical_range():
     assert w.physical_range({"T_w": {"value": 20.0, "std2": 1.0}}, setting) is None
     assert "excitation" in w.physical_range({"T_w": {"value": 2.0, "std2": 0.1}}, setting)
     assert "run" in w.physical_range({"T_w": {"value": 500.0, "std2": 9.0}}, setting)
+
+
+def test_one_trajectory_tells_a_replayed_path_from_another():
+    """Runs that replay one trajectory (tracking errors that differ with the load) are told
+    from runs of another trajectory: another multi-sine, the same one started later, one
+    joint of several that differs; one run is never "one trajectory"."""
+    rng = np.random.default_rng(5)
+    t = np.arange(0.0, 20.0, 0.01)
+
+    def path(seed: int, delay: float = 0.0) -> np.ndarray:
+        r = np.random.default_rng(seed)
+        a, w, ph = r.uniform(0.2, 1.0, 4), r.uniform(0.3, 2.0, 4), r.uniform(0, 6.3, 4)
+        return sum(ai * np.sin(wi * (t - delay) + pi) for ai, wi, pi in zip(a, w, ph, strict=True))
+
+    q0 = path(1)
+    track = [q0 + 0.002 * rng.standard_normal(t.size) + 0.003 * np.sin(3 * t + k)
+             for k in range(3)]  # one path, three loads
+    tt, runs = np.tile(t, 3), np.repeat([0, 1, 2], t.size)
+    assert one_trajectory(tt, np.concatenate(track), runs)
+    assert not one_trajectory(t, q0, np.zeros(t.size, int))
+    assert not one_trajectory(tt, np.concatenate([track[0], path(2), track[2]]), runs)
+    assert not one_trajectory(tt, np.concatenate([track[0], track[1], path(1, 0.5)]), runs)
+    # rows left out (the stiction area) do not matter; one joint of two that differs does
+    keep = rng.random(tt.size) > 0.3
+    assert one_trajectory(tt[keep], np.concatenate(track)[keep], runs[keep])
+    q2 = np.column_stack([np.concatenate(track), np.concatenate([q0, q0, path(3)])])
+    assert not one_trajectory(tt, q2, runs)
+    assert one_trajectory(tt, q2[:, :1], runs)
+
+
+def test_refinement_says_when_leaving_a_run_out_cannot_reject_a_path_locked_term():
+    """The example campaign's payload runs replay one plan: the refinement records it and,
+    without validation data, its report says that only another trajectory can test the
+    added terms; given validation data it does not."""
+    d, lib = _design("new", 2)
+    R = refine(d, IdentModel(lib, "paper"), max_steps=0)
+    assert R.heldout_kind == "leave one run out" and R.heldout_one_trajectory
+    assert R.to_json()["heldout_one_trajectory"] is True
+    assert ONE_TRAJECTORY_NOTE in R.format_report()
+    v = refine(d, IdentModel(lib, "paper"), max_steps=0, validation=d)
+    assert v.heldout_one_trajectory and ONE_TRAJECTORY_NOTE not in v.format_report()

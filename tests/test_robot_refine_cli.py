@@ -35,11 +35,12 @@ from robot_campaigns import write_arm_csv
 
 from daq.app.cli import main
 from ident import DataError
-from ident.cli_robot import fit_robot, kept_rows, refine_robot
+from ident.cli_robot import fit_robot, format_refinement, kept_rows, refine_robot
 from ident.estimate import DEFAULT_THRESHOLD_PCT
 from ident.loaders import concat, make_experiment
 from ident.models import Coulomb, IdentModel, Offset, RigidBody, Viscous
 from ident.refine import refine
+from ident.refine_result import ONE_TRAJECTORY_NOTE
 from ident.robot.loaders import load_robot_runs
 from ident.robot.refine_joint import fit_rows_design
 from ident.signals import Signals
@@ -147,6 +148,9 @@ def test_cli_refine_and_all_rows_figures(coupled_files, tmp_path, capfd):
                            for v in a["variables"]), (joint, r["added"])
     assert ref["joints"]["j1"]["added"][0]["named_effect"] == "periodic_q2_direction"
     assert "refinement of the usual model" in text and "periodic_q2_direction" in text
+    # the three payload runs replay one trajectory, no validation file: said once
+    assert all(r["heldout"]["one_trajectory"] for r in ref["joints"].values())
+    assert text.count(ONE_TRAJECTORY_NOTE) == 1
     # all rows: the estimator's error on every decimated row; shares left out in (0, 1)
     n = rec["preprocessing"]["samples"]
     for name in ("usual", "paper"):
@@ -249,6 +253,7 @@ def test_refinement_judged_on_validation_files_too(coupled_files):
     assert j1["added"][0]["named_effect"] == "periodic_q2_direction", j1["added"]
     v = j1["validation"]
     assert v is not None and v["after"] < 0.5 * v["before"], v
+    assert ONE_TRAJECTORY_NOTE not in format_refinement(rec)
     ref = out["_refinements"]["j1"]
     vkeep = out["_validation_all"].columns.keep[:, 0]
     assert len(ref.final_validation_design) == int(vkeep.sum())

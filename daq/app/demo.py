@@ -24,7 +24,7 @@ from ident.loaders import load_experiments
 from ident.plots import write_plots
 from ident.refine import refine
 from ident.refine_plots import plot_refinement
-from ident.refine_result import leak_note
+from ident.refine_result import ONE_TRAJECTORY_NOTE, leak_note
 from ident.report import write_json
 from ident.report_build import build_report, discover_figures
 from sim_drivers.plant_config import load_plant
@@ -176,6 +176,8 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
     _say(stream, f"[4/4] refinement: {len(ref.steps)} step(s), relative error "
                  f"{ref.rel_error_initial:.4f} -> {ref.rel_error_final:.4f}, q_s = "
                  f"{report.q_s:.4g} rad/s ({time.perf_counter() - t0:.1f} s)")
+    if ref.heldout_one_trajectory and ref.validation_rel_error_initial is None:
+        _say(stream, f"      {ONE_TRAJECTORY_NOTE}")
 
     # figures (captions and grouping: report_build.discover_figures)
     hb.status("drawing the figures and writing the report")
