@@ -106,7 +106,7 @@ def consistent_from_record(path: Path, rec: dict[str, Any], robot: Robot, name: 
         raise DataError(f"{path}: the {name} model fitted again from its inputs "
                         f"{rec['inputs']} does not give its parameters (inputs changed, or "
                         "other --map/--q-unit)")
-    cf = fit_consistent(est, out["_signals"][0])
+    cf = fit_consistent(est, out["_signals"][0], tau_peak=out["_tau_peak"])
     return consistent_record(est, cf), dict(est.fixed_)
 
 

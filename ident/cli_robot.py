@@ -46,6 +46,7 @@ from .robot.consistency import check_consistency
 from .robot.consistent_fit import add_consistent, format_record
 from .robot.design import design_runs, resolve_design, sign_checked
 from .robot.estimate import RobotModel
+from .robot.friction_bounds import torque_peak
 from .robot.loaders import (
     RawRobotRun,
     RobotPreprocessing,
@@ -336,6 +337,7 @@ def fit_robot(
         "_consistency": {},
         "_signals": (selected(sig, dq_min), val),
         "_identification": sig,
+        "_tau_peak": torque_peak(sig),  # the static friction's data bound [N m]
         "_validation_all": val_all,
         "_cycle_s": float(np.median(np.diff(runs[0].t))),
         "_keep": kept_rows(sig, est_dq_min),
@@ -408,7 +410,7 @@ def fit_robot(
                 k: float(v) for k, v in est.rel_error(val_all).items()}
             rec["validation_rows_left_out"] = _left_out(np.isfinite(val.tau).sum(0),
                                                         val_all.n, joints)
-        cons = check_consistency(est, feasibility=feasibility)
+        cons = check_consistency(est, feasibility=feasibility, tau_peak=out["_tau_peak"])
         rec["consistency"] = {
             "ok": cons.ok,
             "checks": [{"check": c, "value": float(v), "std": float(sd), "status": st}

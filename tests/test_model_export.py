@@ -28,7 +28,7 @@ from ident.robot.consistent_fit import (
 )
 from ident.robot.estimate import RobotModel
 from ident.robot.export_model import export_model, exported_torque, urdf_text
-from ident.robot.friction_bounds import bound_rows
+from ident.robot.friction_bounds import bound_rows, torque_peak
 from ident.robot.regressor import RobotRegressor
 from sim_drivers.arm import ArmGains, ArmParams, Payload, model_reference, simulate_arm
 from trajectories.robot import load_robot
@@ -294,14 +294,14 @@ def test_consistent_estimate_meets_the_friction_bounds(arm3, model, param):
     rows = bound_rows(m.names_, m.numbers_)
     m.coef_ = m.coef_.copy()
     # beyond its bound by 0.5 N m (c_m2 + d_m2 = -0.5, FV2 = -0.5 N m s/rad)
-    m.coef_[i] -= 0.5 + next(g @ m.coef_ for w, g, _ in rows
+    m.coef_[i] -= 0.5 + next(g @ m.coef_ for w, g, _, _ in rows
                              if w.startswith(("c_m + d_m", "FV")) and g[i] != 0)
-    bad = [w for w, g, _ in rows if g @ m.coef_ < 0]
+    bad = [w for w, g, _, _ in rows if g @ m.coef_ < 0]
     assert len(bad) == 1, bad
     fit = fit_consistent(m, sigs)
     assert fit.friction_violated == tuple(bad) and param in fit.friction_moved
     assert fit.valid and fit.friction_left == () and fit.friction_d2 > 0
-    for w, g, _ in rows:
+    for w, g, _, _ in rows:
         assert g @ fit.coef >= -1e-7 * (1 + np.abs(g) @ np.abs(fit.coef)), w
     assert "friction bounds violated" in fit.format()
     # the naive repair: the same theta, the friction before the bounds (the free fit's for
@@ -314,9 +314,9 @@ def test_consistent_estimate_meets_the_friction_bounds(arm3, model, param):
         th, oth = free[free < nt], free[free >= nt]
         gain = m.cov_[np.ix_(oth, th)] @ np.linalg.inv(m.cov_[np.ix_(th, th)])
         naive[oth] = m.coef_[oth] + gain @ (fit.coef[th] - m.coef_[th])
-    g = next(g for w, g, _ in rows if w == bad[0])
+    g = next(g for w, g, _, _ in rows if w == bad[0])
     naive[i] -= min(g @ naive, 0.0) / g[i]
-    assert all(g @ naive >= -1e-12 for _, g, _ in rows)
+    assert all(g @ naive >= -1e-12 for _, g, _, _ in rows)
     prec = np.linalg.inv(m.cov_[np.ix_(free, free)])
 
     def d2(x):
@@ -324,6 +324,40 @@ def test_consistent_estimate_meets_the_friction_bounds(arm3, model, param):
         return float(dx @ prec @ dx)
 
     assert d2(fit.coef) <= d2(naive) * (1 + 1e-6) + 1e-9, (d2(fit.coef), d2(naive))
+
+
+def test_static_friction_above_every_measured_torque_is_refused(arm3):
+    """The joint moved, so its static friction is below the largest torque measured on it
+    (friction_bounds.PEAK_BOUNDS): the simulator's friction meets the data's bounds (a fit
+    of its data too); a Stribeck term pushed above the peak is reported violated by the
+    consistency check and put back onto T_j - c_m by the consistent estimate; without the
+    peaks neither knows the bound."""
+    params, reg, base, runs = arm3
+    sigs = _signals(params, reg, runs, 0)
+    peak = torque_peak(sigs)
+    assert peak.shape == (3,) and np.all(peak > 0)
+    m = RobotModel(reg, "paper", "ls", base=base).fit(sigs)
+    f = params.friction
+    for j in range(3):  # the truth: c_m + d_m well below the joint's peak torque
+        assert f.c_m[j] + f.d_m[j] < peak[j]
+    rows = bound_rows(m.names_, m.numbers_, peak)
+    assert sum("max|tau|" in w for w, *_ in rows) == 3
+    for w, g, h, _ in rows:
+        if "max|tau|" in w:
+            assert g @ m.coef_ + h > 0, w  # the free fit meets them
+    m.coef_ = m.coef_.copy()
+    i = m.names_.index("d_m2")
+    m.coef_[i] = peak[1] + 5.0 - m.coef_[m.names_.index("c_m2")]  # 5 N m above the peak
+    label = next(w for w, *_ in rows if w.startswith("max|tau| - c_m - d_m >= 0 (joint 2,"))
+    cons = check_consistency(m, feasibility=False, tau_peak=peak)
+    row = next(c for c in cons.checks if c[0] == label)
+    assert row[1] == pytest.approx(-5.0) and row[3] != "ok"
+    assert not any("max|tau|" in c[0] for c in check_consistency(m, feasibility=False).checks)
+    fit = fit_consistent(m, sigs, tau_peak=peak)
+    assert label in fit.friction_violated and "d_m2" in fit.friction_moved and fit.valid
+    c2, d2 = (fit.coef[m.names_.index(n)] for n in ("c_m2", "d_m2"))
+    assert c2 + d2 <= peak[1] + 1e-6 * peak[1]
+    assert label not in fit_consistent(m, sigs).friction_violated
 
 
 def test_add_consistent_hook(arm3):

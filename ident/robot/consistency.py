@@ -145,11 +145,15 @@ def _standard_jacobian(z: np.ndarray, k: int) -> np.ndarray:
 
 
 def check_consistency(model: Any, *, feasibility: bool = True, starts: int = 3,
-                      seed: int = 0, method: str = "lmi") -> ConsistencyReport:
+                      seed: int = 0, method: str = "lmi",
+                      tau_peak: Any = None) -> ConsistencyReport:
     """Physical consistency of a fitted :class:`~ident.robot.estimate.RobotModel` (module doc).
 
     ``method``: "lmi" (the convex program; the Cholesky search if its solver fails) or
-    "cholesky" (the local search only, ``starts`` seeded starts).
+    "cholesky" (the local search only, ``starts`` seeded starts). ``tau_peak`` (k,) [N m]:
+    the largest measured |tau| per joint (:func:`~ident.robot.friction_bounds.torque_peak`),
+    which adds the bounds no static friction may exceed
+    (:data:`~ident.robot.friction_bounds.PEAK_BOUNDS`).
 
     Returns
     -------
@@ -179,8 +183,8 @@ def check_consistency(model: Any, *, feasibility: bool = True, starts: int = 3,
             rep.checks.append((f"Ia >= 0 ({sname})", coef[i], std[i],
                                "ok" if coef[i] >= 0 else _status(coef[i], std[i])))
     cov_all = np.asarray(model.cov_)
-    for what, g, strict in bound_rows(model.names_, model.numbers_):
-        v = float(g @ coef)
+    for what, g, h, strict in bound_rows(model.names_, model.numbers_, tau_peak):
+        v = float(g @ coef) + h
         s = float(np.sqrt(max(g @ cov_all @ g, 0.0)))
         rep.checks.append((what, v, s, "ok" if met(v, strict) else _status(v, s)))
     used = np.any(beta != 0, axis=0)
@@ -195,7 +199,7 @@ def check_consistency(model: Any, *, feasibility: bool = True, starts: int = 3,
     cf = None
     if method == "lmi":
         try:  # the convex program: global minimum of d^2 (profile metric C_bb^-1, module doc)
-            cf = fit_consistent(model, friction="profile")
+            cf = fit_consistent(model, friction="profile", tau_peak=tau_peak)
         except (RobotIdentError, np.linalg.LinAlgError, ValueError):
             cf = None
     if cf is not None:

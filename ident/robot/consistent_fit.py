@@ -227,7 +227,8 @@ def _inv_spd(a: np.ndarray) -> np.ndarray:
 
 
 def fit_consistent(model: Any, signals: Any = None, *, friction: str | None = None,
-                   prior: np.ndarray | None = None, solver: str = "CLARABEL") -> ConsistentFit:
+                   prior: np.ndarray | None = None, solver: str = "CLARABEL",
+                   tau_peak: Any = None) -> ConsistentFit:
     """Physically consistent estimate of a fitted :class:`~ident.robot.estimate.RobotModel`
     (module doc).
 
@@ -246,6 +247,10 @@ def fit_consistent(model: Any, signals: Any = None, *, friction: str | None = No
     solver : str
         "CLARABEL" (direct), "cvxpy-clarabel" (Clarabel through cvxpy), or another cvxpy
         solver name ("SCS").
+    tau_peak : array_like, shape (k,), optional
+        The largest measured |tau| of each joint [N m]
+        (:func:`~ident.robot.friction_bounds.torque_peak` of the identification data): the
+        static friction is also kept below it (:data:`~ident.robot.friction_bounds.PEAK_BOUNDS`).
 
     Returns
     -------
@@ -318,7 +323,7 @@ def fit_consistent(model: Any, signals: Any = None, *, friction: str | None = No
     if extra_v is not None:
         coef[nb:nt] = extra_v
     return _finish(model, signals, friction, solver, status, solve_s, chi_v, coef, cov,
-                   metric, theta_idx, other, free, std_names, k)
+                   metric, theta_idx, other, free, std_names, k, tau_peak)
 
 
 def _solve_cvxpy(beta: np.ndarray, scale: float, n_extra: int, theta_idx: np.ndarray,
@@ -441,7 +446,7 @@ def _solve_clarabel(beta: np.ndarray, scale: float, n_extra: int, theta_idx: np.
 def _finish(model: Any, signals: Any, friction: str, solver: str, status: str,
             solve_s: float, chi_v: np.ndarray, coef: np.ndarray, cov: np.ndarray,
             metric: np.ndarray, theta_idx: np.ndarray, other: np.ndarray, free: np.ndarray,
-            std_names: tuple[str, ...], k: int) -> ConsistentFit:
+            std_names: tuple[str, ...], k: int, tau_peak: Any = None) -> ConsistentFit:
     """The :class:`ConsistentFit` of a solved program."""
     x_hat = np.asarray(model.coef_, dtype=float)
     dth = coef[theta_idx] - x_hat[theta_idx]
@@ -449,7 +454,8 @@ def _finish(model: Any, signals: Any, friction: str, solver: str, status: str,
     if friction == "profile" and other.size:
         gain = cov[np.ix_(other, theta_idx)] @ _inv_spd(cov[np.ix_(theta_idx, theta_idx)])
         coef[other] = x_hat[other] + gain @ dth
-    violated, moved, fd2, left = _project_friction(model, coef, cov, free, theta_idx, other)
+    violated, moved, fd2, left = _project_friction(model, coef, cov, free, theta_idx, other,
+                                                   tau_peak)
     dof = max(int(np.sum(model.n_samples_)) - int(free.sum()), 1)
     out = ConsistentFit(
         names=tuple(model.names_), coef=coef,
@@ -465,7 +471,7 @@ def _finish(model: Any, signals: Any, friction: str, solver: str, status: str,
 
 
 def _project_friction(model: Any, coef: np.ndarray, cov: np.ndarray, free: np.ndarray,
-                      theta_idx: np.ndarray, other: np.ndarray
+                      theta_idx: np.ndarray, other: np.ndarray, tau_peak: Any = None
                       ) -> tuple[tuple[str, ...], tuple[str, ...], float, tuple[str, ...]]:
     """Move the free friction parameters of ``coef`` (in place) onto the friction bounds
     (:mod:`ident.robot.friction_bounds`) when they violate one: the closest point in the
@@ -473,13 +479,14 @@ def _project_friction(model: Any, coef: np.ndarray, cov: np.ndarray, free: np.nd
     consistent value), a quadratic program (Clarabel). Nothing changes when every bound is
     met. Returns (bounds violated before, parameters moved, the d^2 added, bounds still
     violated)."""
-    rows = bound_rows(model.names_, model.numbers_)
+    rows = bound_rows(model.names_, model.numbers_, tau_peak)
     if not rows:
         return (), (), 0.0, ()
-    G = np.array([g for _, g, _ in rows])
+    G = np.array([g for _, g, _, _ in rows])
+    h = np.array([hj for _, _, hj, _ in rows])
     strict = np.array([st for *_, st in rows])
     labels = [w for w, *_ in rows]
-    bad = ~met(G @ coef, strict)
+    bad = ~met(G @ coef + h, strict)
     if not bad.any():
         return (), (), 0.0, ()
     violated = tuple(lb for lb, b in zip(labels, bad, strict=True) if b)
@@ -506,7 +513,7 @@ def _project_friction(model: Any, coef: np.ndarray, cov: np.ndarray, free: np.nd
     q = 2.0 * sd * (pff @ dxf + prec[np.ix_(pos_f, pos_t)] @ dth)
     movable = np.any(G[:, other] != 0, axis=1)
     A = -(G[np.ix_(movable, other)] * sd[None, :])
-    b = G[movable] @ coef - np.where(strict[movable], MARGIN, 0.0)
+    b = G[movable] @ coef + h[movable] - np.where(strict[movable], MARGIN, 0.0)
     settings = clarabel.DefaultSettings()
     settings.verbose = False
     sol = clarabel.DefaultSolver(sp.csc_matrix(np.triu(0.5 * (P + P.T))), q,
@@ -524,7 +531,7 @@ def _project_friction(model: Any, coef: np.ndarray, cov: np.ndarray, free: np.nd
                   if abs(st) > 1e-3 * sdi)
     tol = 1e-7 * (1.0 + np.abs(G) @ np.abs(coef))
     # met to the solver's accuracy
-    left = tuple(lb for lb, v, t in zip(labels, G @ coef, tol, strict=True) if not v > -t)
+    left = tuple(lb for lb, v, t in zip(labels, G @ coef + h, tol, strict=True) if not v > -t)
     return violated, moved, d2_friction(coef[other] - x_hat[other]) - before, left
 
 
@@ -587,5 +594,7 @@ def add_consistent(out: dict[str, Any]) -> None:
     (:func:`consistent_record`, measured on the fit's selected signals) for every fitted model,
     so that ``jointid export-model`` exports without fitting again."""
     sig = out["_signals"][0]
+    peak = out.get("_tau_peak")
     for name, est in out["_estimators"].items():
-        out["models"][name]["consistent"] = consistent_record(est, fit_consistent(est, sig))
+        out["models"][name]["consistent"] = consistent_record(
+            est, fit_consistent(est, sig, tau_peak=peak))
