@@ -23,16 +23,19 @@ of one experiment, k p (1 + IV) floats per sample, refused above :data:`MAX_BYTE
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
+from trajectories.friction import DEFAULT_Q_S, stribeck_exp
+
 from ..chain import (
     ChainSettings,
     FullRate,
     RawExperiment,
+    decimate,
     decimation_index,
     filter_experiment,
     resolve_settings,
@@ -41,13 +44,14 @@ from ..chain import (
 )
 from ..fitting import DQ_MIN_FRACTION
 from . import RobotIdentError
-from .base import placed_payload
+from .base import base_parameters, placed_payload
 from .loaders import RawRobotRun, chain_period
+from .moments import quadrant_weights
 from .refine_joint import joint_term_columns
-from .signals import RobotColumns, RobotSignals
+from .signals import FullRateProducts, RobotColumns, RobotSignals
 
 __all__ = ["DesignSettings", "design_runs", "joint_columns", "resolve_design", "sign_checked",
-           "MAX_BYTES"]
+           "products_columns", "MAX_BYTES"]
 
 #: Largest full-rate regressor of one experiment the columns chain builds [bytes].
 MAX_BYTES = 4 * 2**30
@@ -79,6 +83,18 @@ def resolve_design(
     return resolve_settings(runs[0].q, chain_period(runs), instruments=instruments,
                             sources=[run.source for run in runs], error=RobotIdentError,
                             **given)  # type: ignore[arg-type]
+
+
+def _known_torque(regressor, f: FullRate, acc: np.ndarray, pay) -> np.ndarray:
+    """The known torques (n_f, k) [N m] at full rate: the (placed) payload's and the known
+    rotors' Ia_j ddq_j (zero unless ``RobotRegressor(known_rotor_inertia=True)``), filtered
+    with the columns."""
+    k = f.q.shape[1]
+    out = (np.asarray(regressor.payload_torque(f.q, f.dq, acc, pay), dtype=float)
+           if pay.mass > 0 else np.zeros((f.n, k)))
+    if np.any(getattr(regressor, "known_Ia", 0.0)):
+        out = out + regressor.known_torque(acc)
+    return out
 
 
 def _experiments(runs: Sequence[RawRobotRun], refs: bool) -> list[RawExperiment]:
@@ -151,13 +167,7 @@ def design_runs(
         pay = placed_payload(run.payload, regressor, base, run.source, placed)
 
         def torque(acc: np.ndarray) -> np.ndarray:
-            # the known torques: the payload's and the known rotors' Ia_j ddq_j (zero unless
-            # RobotRegressor(known_rotor_inertia=True)), filtered with the columns
-            out = (np.asarray(regressor.payload_torque(f.q, f.dq, acc, pay), dtype=float)
-                   if pay.mass > 0 else np.zeros((f.n, k)))
-            if np.any(getattr(regressor, "known_Ia", 0.0)):
-                out = out + regressor.known_torque(acc)
-            return out
+            return _known_torque(regressor, f, acc, pay)
 
         rows = [torque(f.ddq).T, np.sign(f.dq).T,
                 np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ddq)).reshape(k * p, f.n)]
@@ -263,6 +273,174 @@ def sign_checked(
     skip = kept < np.broadcast_to(np.asarray(min_kept, dtype=float), kept.shape)
     keep[:, skip] = cols.keep[:, skip]
     return replace(signals, columns=replace(cols, keep=keep)), kept
+
+
+def _joint_structure(regressor, base) -> list[np.ndarray]:
+    """Per joint, the indices into ``base.columns`` of the base parameters' standard columns
+    that are not structurally zero in its row: probed at seeded random states, as
+    ``RobotModel`` finds each joint's base columns."""
+    k = len(regressor.joints)
+    rng = np.random.default_rng(12345)
+    m = 32
+    q = rng.uniform(-np.pi, np.pi, (m, k))
+    W = np.asarray(regressor.rigid_kpn(q, rng.normal(size=(m, k)), rng.normal(size=(m, k)),
+                                       columns=base.columns))
+    mag = np.abs(W).max(axis=2)  # (k, nb)
+    tol = 1e-10 * max(float(mag.max()), 1e-300)
+    return [np.flatnonzero(mag[j] > tol) for j in range(k)]
+
+
+def _per_joint(q_s: float | Sequence[float] | Mapping[str, float],
+               joints: tuple[str, ...]) -> np.ndarray:
+    """q_s [rad/s] per joint from one value, one per joint or a mapping by joint name."""
+    if isinstance(q_s, Mapping):
+        missing = [j for j in joints if j not in q_s]
+        if missing:
+            raise RobotIdentError(f"products_columns: q_s has no value for joint(s) {missing}")
+        q_s = [q_s[j] for j in joints]
+    try:
+        out = np.broadcast_to(np.asarray(q_s, dtype=float), (len(joints),)).copy()
+    except ValueError:
+        raise RobotIdentError(f"products_columns: q_s: expected one value or {len(joints)}, "
+                              f"got {np.size(q_s)}") from None
+    if not np.all(np.isfinite(out) & (out > 0)):
+        raise RobotIdentError(f"products_columns: q_s: expected positive velocities [rad/s], "
+                              f"got {out.tolist()}")
+    return out
+
+
+def products_columns(
+    signals: RobotSignals,
+    runs: Sequence[RawRobotRun],
+    regressor,
+    settings: DesignSettings,
+    load_torque: Callable[[RobotSignals], np.ndarray],
+    q_s: float | Sequence[float] | Mapping[str, float] = DEFAULT_Q_S,
+    *,
+    base=None,
+) -> RobotSignals:
+    """The paper model's eq. 42 columns of every joint formed at FULL rate, then low-passed and
+    decimated like the other columns: what the single-joint chain does
+    (:func:`ident.preprocess.build_design` with the ``load_model`` of a first usual fit).
+
+    Per run, the chain's full-rate signals are formed again (:func:`ident.chain.
+    filter_experiment`, as :func:`sign_checked` does); on them, per joint j, with the model
+    quadrant P+_j = (1 + sign(tau_out_hat_j dq_j)) / 2 (eq. 27-28, 44; tau_out_hat from
+    ``load_torque``), P-_j = 1 - P+_j and E_j = exp(-|dq_j| / q_s,j) (eq. 29): each load
+    column w of the joint (its base parameters' standard columns, ``rigid_kpn`` at full rate,
+    then its known torque p_j: payload and known rotors) gives P+ w, P+ E w, P- w, -P- E w
+    (a_m, b_m, a_g, b_g; eq. 42-43), sign(dq_j) gives P+ sign, P+ E sign, P- sign, P- E sign
+    (c_m, d_m, c_g, d_g; eq. 30), and P+ itself is kept for the quadrant counts. These rows
+    are filtered and decimated by :func:`ident.chain.decimate`, the chain's own anti-alias
+    filter and decimation (the same floats as in the chain's stack: the rows are filtered
+    independently), so ``RobotModel(model="paper", form="products")`` reads them and gives,
+    on a one-joint robot, the single-joint paper fit (tests/test_robot_design.py).
+
+    Memory: at full rate, per run, the base regressor (k b floats per sample, b the base
+    parameters) and one joint's rows (4 (l_j + 1) + 5); kept, per decimated sample,
+    sum_j 4 (l_j + 1) + 5 k floats (l_j: joint j's base columns). Refused above
+    :data:`MAX_BYTES` at full rate.
+
+    Parameters
+    ----------
+    signals : RobotSignals
+        :func:`design_runs`'s output for ``runs`` with ``settings`` (``dq_min`` resolved),
+        possibly after :func:`sign_checked` (its ``keep`` is kept).
+    runs, regressor, settings
+        What built ``signals`` (``regressor``: ``rigid_kpn``, ``payload_torque``, ``joints``).
+    load_torque : callable
+        RobotSignals -> tau_out_hat (n, k) [N m] on full-rate signals, e.g.
+        ``RobotModel.load_torque`` of the first usual fit (the one :func:`sign_checked`
+        reads): it decides the quadrants.
+    q_s : float, sequence or mapping
+        q_s of E [rad/s]: one value, one per joint or by joint name; the products form's
+        ``q_s`` must be the same.
+    base : BaseParameters or None
+        Whose columns are formed (default ``base_parameters(regressor)``); the products
+        form's ``base`` must be the same (or have the same columns).
+
+    Returns
+    -------
+    RobotSignals
+        ``signals`` with ``columns.products`` (:class:`~ident.robot.signals.FullRateProducts`).
+
+    Raises
+    ------
+    RobotIdentError
+        Signals not from ``design_runs``, unresolved settings, runs that do not match the
+        signals, a bad ``load_torque`` output, rows too large for memory; one line.
+    """
+    cols = signals.columns
+    if cols is None or settings.dq_min is None:
+        raise RobotIdentError("products_columns: expected design_runs signals and resolved "
+                              "settings (dq_min)")
+    joints = tuple(regressor.joints)
+    if tuple(signals.joints) != joints:
+        raise RobotIdentError(f"products_columns: signals of joints {signals.joints}, the "
+                              f"regressor's are {joints}")
+    k = len(joints)
+    qs = _per_joint(q_s, joints)
+    if base is None:
+        base = base_parameters(regressor)
+    bcols = np.asarray(base.columns, dtype=int)
+    pos = _joint_structure(regressor, base)
+    width = [4 * (c.size + 1) + 5 for c in pos]
+    if int(signals.experiment.max(initial=-1)) >= len(runs):
+        raise RobotIdentError(f"products_columns: the signals have "
+                              f"{int(signals.experiment.max()) + 1} experiments, {len(runs)} "
+                              "runs given")
+    dt = chain_period(runs)
+    r = settings.decimation
+    n = signals.n
+    loads = [np.empty((4, c.size + 1, n)) for c in pos]
+    coulomb = np.empty((4, n, k))
+    pplus = np.empty((n, k))
+    placed: dict = {}
+    for i, exp in enumerate(_experiments(runs, False)):
+        need = (exp.q.shape[0] - 2 * settings.trim) * (k * bcols.size + max(width) + 4 * k) * 8
+        if need > MAX_BYTES:
+            raise RobotIdentError(f"{exp.label}: the full-rate products need "
+                                  f"{need / 2**30:.1f} GiB (more than "
+                                  f"{MAX_BYTES / 2**30:.0f}); split the log")
+        f = filter_experiment(exp, dt, settings, error=RobotIdentError)
+        rows = np.flatnonzero(signals.experiment == i)
+        if decimation_index(f.n, r).size != rows.size:
+            raise RobotIdentError(f"{exp.label}: {rows.size} decimated samples in the "
+                                  f"signals, the settings give "
+                                  f"{decimation_index(f.n, r).size}: not design_runs' "
+                                  "output for these runs and settings")
+        run = runs[i]
+        full = RobotSignals(t=run.t[f.keep], q=f.q, dq=f.dq, ddq=f.ddq, tau=f.tau_f,
+                            joints=joints, payloads=(run.payload,), source=exp.label)
+        tau_out = np.asarray(load_torque(full), dtype=float)
+        if tau_out.shape != (f.n, k) or not np.all(np.isfinite(tau_out)):
+            raise RobotIdentError(f"{exp.label}: load_torque gave {tau_out.shape} values "
+                                  f"(finite: {bool(np.all(np.isfinite(tau_out)))}), "
+                                  f"expected ({f.n}, {k}) finite [N m]")
+        pay = placed_payload(run.payload, regressor, base, run.source, placed)
+        known = _known_torque(regressor, f, f.ddq, pay)
+        W = np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ddq, columns=bcols))
+        for j in range(k):
+            dq = f.dq[:, j]
+            pp = quadrant_weights(tau_out[:, j] * dq)  # P+ of eq. 27, 1/2 where P = 0
+            pm = 1.0 - pp
+            e = stribeck_exp(dq, qs[j])
+            pe, me = pp * e, pm * e
+            sg = np.sign(dq)
+            load = np.concatenate([W[j, pos[j]], known[None, :, j]], axis=0)  # (l + 1, n_f)
+            stack = np.concatenate([pp * load, pe * load, pm * load, -me * load,
+                                    np.stack([pp * sg, pe * sg, pm * sg, me * sg, pp])])
+            del load
+            dec = decimate(stack.T, r)[0].T  # (rows, m): the chain's filter, row by row
+            del stack
+            nl = pos[j].size + 1
+            loads[j][:, :, rows] = dec[:4 * nl].reshape(4, nl, rows.size)
+            coulomb[:, rows, j] = dec[4 * nl:4 * nl + 4]
+            pplus[rows, j] = dec[-1]
+        del W, known
+    products = FullRateProducts(loads=tuple(loads), coulomb=coulomb, pplus=pplus,
+                                cols=tuple(bcols[c] for c in pos), q_s=qs)
+    return replace(signals, columns=replace(cols, products=products))
 
 
 def joint_columns(
