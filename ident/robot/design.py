@@ -16,9 +16,14 @@
 On a robot with one moving joint this is exactly the single-joint design (the RX130L joint 3
 of the demo gives the single-joint ``jointid fit`` numbers, ``tests/test_robot_design.py``).
 The estimator reads the decimated columns instead of evaluating the regressor on decimated
-states (``chain="states"``, :func:`ident.robot.loaders.preprocess_runs`); the paper model's
-E_j and quadrant are still taken on the decimated samples. Memory: the full-rate regressor
-of one experiment, k p (1 + IV) floats per sample, refused above :data:`MAX_BYTES`.
+states (``chain="states"``, :func:`ident.robot.loaders.preprocess_runs`). The paper model
+takes E_j and the quadrant on the decimated samples, unless :func:`products_columns` formed
+eq. 42's quadrant and E products at full rate, as the single-joint chain does (P from a
+first usual fit's tau_out_hat, after :func:`sign_checked`); ``RobotModel(model="paper",
+form="products")`` then reads them (``RobotColumns.products``) and on a one-joint robot gives
+the single-joint paper fit. Memory: the full-rate regressor of one experiment, k p (1 + IV)
+floats per sample, refused above :data:`MAX_BYTES` (:func:`products_columns`: its own
+bound, in its doc).
 """
 
 from __future__ import annotations

@@ -13,7 +13,8 @@ Model (eq. 8-10 on every joint j, base parameters theta shared by all joints)::
 The paper model is bilinear in (theta, per-joint a, b, c, d) by default; ``form="products"``
 identifies instead eq. 42's free products per joint (a_m theta_i, b_m theta_i, ... as
 independent linear parameters, no theta: the single-joint model on each joint, linear
-least squares; :mod:`ident.robot.paper`, "Products form").
+least squares; :mod:`ident.robot.paper`, "Products form"), on the columns formed at full
+rate when the signals carry them (:func:`ident.robot.design.products_columns`).
 
 W_j is the joint's row of the base regressor (rigid body + rotor inertias, ``RobotRegressor``
 reduced by ``BaseParameters.reduce``), p_j the known payload torque of the sample's experiment
@@ -234,7 +235,13 @@ class RobotModel(HyperParameters):
         fit too). The products of a load column that is zero on a joint's rows (no payload
         torque) or a combination of its other columns there (the single-joint rank rule)
         are fixed at 0 (``fixed_``); ``payload_ratio`` is refused (the payload's products
-        are free already).
+        are free already). On signals carrying the products formed at full rate
+        (``RobotColumns.products``, :func:`ident.robot.design.products_columns`: the
+        single-joint chain's columns) it reads those rows whole instead
+        (``full_rate_products_``): their quadrants are the load model's they were formed
+        with, so ``quadrant="measured"``, ``quadrant_theta``, ``method="iv"`` and
+        ``payload_params`` are refused, ``quadrant_band`` does not apply (``band_`` 0) and
+        :meth:`predict` needs signals carrying them.
     payload_params : bool
         The payload's mass known, its first moments and inertia identified (module doc;
         ``payload_base_``, ``payload_masses_``); needs experiments without a payload to
@@ -288,6 +295,8 @@ class RobotModel(HyperParameters):
         the quadrant band at the last full pass (0 without a band). Large on a joint that
         cruises at zero load, where the quadrant is decided by noise
         (docs/robot-identification.md, "quadrants blended by the low-pass").
+    full_rate_products_ : bool
+        The products form read the products formed at full rate (``form`` above).
     quadrant_from_ : ndarray or None
         The theta whose sign(tau_out_hat dq) decided the final quadrants (``quadrant="model"``
         of the paper model), else None: :mod:`ident.robot.uncertainty` rebuilds the moments of
