@@ -323,6 +323,7 @@ def products_columns(
     q_s: float | Sequence[float] | Mapping[str, float] = DEFAULT_Q_S,
     *,
     base=None,
+    instruments: bool = False,
 ) -> RobotSignals:
     """The paper model's eq. 42 columns of every joint formed at FULL rate, then low-passed and
     decimated like the other columns: what the single-joint chain does
@@ -341,9 +342,16 @@ def products_columns(
     independently), so ``RobotModel(model="paper", form="products")`` reads them and gives,
     on a one-joint robot, the single-joint paper fit (tests/test_robot_design.py).
 
+    With ``instruments`` the IDIM-IV instruments of these columns too, as the single-joint
+    chain builds them: the load columns with the reference trajectory's acceleration (the
+    regressor and the known torque on q, dq and the filtered reference's ddq), times the
+    same P and E (decided on the measured states); the Coulomb columns, dq and 1 are their
+    own instruments.
+
     Memory: at full rate, per run, the base regressor (k b floats per sample, b the base
-    parameters) and one joint's rows (4 (l_j + 1) + 5); kept, per decimated sample,
-    sum_j 4 (l_j + 1) + 5 k floats (l_j: joint j's base columns). Refused above
+    parameters) and one joint's rows (4 (l_j + 1) + 5), twice the load parts with
+    ``instruments``; kept, per decimated sample, sum_j 4 (l_j + 1) + 5 k floats (plus
+    sum_j 4 (l_j + 1) with ``instruments``; l_j: joint j's base columns). Refused above
     :data:`MAX_BYTES` at full rate.
 
     Parameters
@@ -363,6 +371,8 @@ def products_columns(
     base : BaseParameters or None
         Whose columns are formed (default ``base_parameters(regressor)``); the products
         form's ``base`` must be the same (or have the same columns).
+    instruments : bool
+        Also form the IDIM-IV instruments (needs every run's ``q_ref``).
 
     Returns
     -------
@@ -397,17 +407,26 @@ def products_columns(
     dt = chain_period(runs)
     r = settings.decimation
     n = signals.n
+    if instruments:
+        missing = next((run.source for run in runs if run.q_ref is None), None)
+        if missing is not None:
+            raise RobotIdentError(f"{missing}: no reference trajectory q_ref for the IDIM-IV "
+                                  "instruments of the full-rate products")
     loads = [np.empty((4, c.size + 1, n)) for c in pos]
+    loads_z = [np.empty((4, c.size + 1, n)) for c in pos] if instruments else None
     coulomb = np.empty((4, n, k))
     pplus = np.empty((n, k))
     placed: dict = {}
-    for i, exp in enumerate(_experiments(runs, False)):
-        need = (exp.q.shape[0] - 2 * settings.trim) * (k * bcols.size + max(width) + 4 * k) * 8
+    iv = 2 if instruments else 1
+    for i, exp in enumerate(_experiments(runs, instruments)):
+        need = (exp.q.shape[0] - 2 * settings.trim) * 8 * (
+            iv * k * bcols.size + max(width) + (iv - 1) * (max(width) - 5) + 4 * k)
         if need > MAX_BYTES:
             raise RobotIdentError(f"{exp.label}: the full-rate products need "
                                   f"{need / 2**30:.1f} GiB (more than "
                                   f"{MAX_BYTES / 2**30:.0f}); split the log")
-        f = filter_experiment(exp, dt, settings, error=RobotIdentError)
+        f = filter_experiment(exp, dt, settings, instruments=instruments,
+                              error=RobotIdentError)
         rows = np.flatnonzero(signals.experiment == i)
         if decimation_index(f.n, r).size != rows.size:
             raise RobotIdentError(f"{exp.label}: {rows.size} decimated samples in the "
@@ -425,6 +444,10 @@ def products_columns(
         pay = placed_payload(run.payload, regressor, base, run.source, placed)
         known = _known_torque(regressor, f, f.ddq, pay)
         W = np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ddq, columns=bcols))
+        Wz = knownz = None
+        if instruments:
+            Wz = np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ref_ddq, columns=bcols))
+            knownz = _known_torque(regressor, f, f.ref_ddq, pay)
         for j in range(k):
             dq = f.dq[:, j]
             pp = quadrant_weights(tau_out[:, j] * dq)  # P+ of eq. 27, 1/2 where P = 0
@@ -433,18 +456,25 @@ def products_columns(
             pe, me = pp * e, pm * e
             sg = np.sign(dq)
             load = np.concatenate([W[j, pos[j]], known[None, :, j]], axis=0)  # (l + 1, n_f)
-            stack = np.concatenate([pp * load, pe * load, pm * load, -me * load,
-                                    np.stack([pp * sg, pe * sg, pm * sg, me * sg, pp])])
-            del load
+            parts = [pp * load, pe * load, pm * load, -me * load,
+                     np.stack([pp * sg, pe * sg, pm * sg, me * sg, pp])]
+            if Wz is not None and knownz is not None:  # the instruments' load rows
+                load = np.concatenate([Wz[j, pos[j]], knownz[None, :, j]], axis=0)
+                parts += [pp * load, pe * load, pm * load, -me * load]
+            stack = np.concatenate(parts)
+            del load, parts
             dec = decimate(stack.T, r)[0].T  # (rows, m): the chain's filter, row by row
             del stack
             nl = pos[j].size + 1
             loads[j][:, :, rows] = dec[:4 * nl].reshape(4, nl, rows.size)
             coulomb[:, rows, j] = dec[4 * nl:4 * nl + 4]
-            pplus[rows, j] = dec[-1]
-        del W, known
+            pplus[rows, j] = dec[4 * nl + 4]
+            if loads_z is not None:
+                loads_z[j][:, :, rows] = dec[4 * nl + 5:].reshape(4, nl, rows.size)
+        del W, known, Wz, knownz
     products = FullRateProducts(loads=tuple(loads), coulomb=coulomb, pplus=pplus,
-                                cols=tuple(bcols[c] for c in pos), q_s=qs)
+                                cols=tuple(bcols[c] for c in pos), q_s=qs,
+                                loads_z=None if loads_z is None else tuple(loads_z))
     return replace(signals, columns=replace(cols, products=products))
 
 

@@ -239,9 +239,10 @@ class RobotModel(HyperParameters):
         (``RobotColumns.products``, :func:`ident.robot.design.products_columns`: the
         single-joint chain's columns) it reads those rows whole instead
         (``full_rate_products_``): their quadrants are the load model's they were formed
-        with, so ``quadrant="measured"``, ``quadrant_theta``, ``method="iv"`` and
-        ``payload_params`` are refused, ``quadrant_band`` does not apply (``band_`` 0) and
-        :meth:`predict` needs signals carrying them.
+        with, so ``quadrant="measured"``, ``quadrant_theta``, ``method="iv"`` without their
+        instruments (``products_columns(instruments=True)``) and ``payload_params`` are
+        refused, ``quadrant_band`` does not apply (``band_`` 0) and :meth:`predict` needs
+        signals carrying them.
     payload_params : bool
         The payload's mass known, its first moments and inertia identified (module doc;
         ``payload_base_``, ``payload_masses_``); needs experiments without a payload to
@@ -1284,7 +1285,10 @@ class RobotModel(HyperParameters):
                                           "with another base (products_columns(base=...))")
         for bad, why in ((self.quadrant != "model", f"quadrant={self.quadrant!r}"),
                          (self.quadrant_theta_ is not None, "quadrant_theta"),
-                         (self.method == "iv", "method='iv' (no instruments formed)"),
+                         (self.method == "iv" and any(s.columns.products.loads_z is None
+                                                      for s in items),
+                          "method='iv' (no instruments formed: products_columns("
+                          "instruments=True))"),
                          (self.payload_params, "payload_params")):
             if bad:
                 raise RobotIdentError(f"RobotModel: {why} does not apply to {what}: their "
@@ -1292,14 +1296,15 @@ class RobotModel(HyperParameters):
                                       "fit without them or without that option")
         return True
 
-    def _row_block(self, fr, j: int, dqj: np.ndarray) -> np.ndarray:
+    def _row_block(self, fr, j: int, dqj: np.ndarray, iv: bool = False) -> np.ndarray:
         """Joint j's rows u (nx_j, m) of a chunk's full-rate products ``fr`` in
         :func:`~ident.robot.paper.products_names`'s order: per load column (its base
         columns, then p) the a_m, b_m columns, then the a_g, b_g ones, the four quadrant
-        Coulomb columns, dq (F_V) and 1 (OFF)."""
+        Coulomb columns, dq (F_V) and 1 (OFF). ``iv``: the instruments' rows (the load
+        columns' instruments ``loads_z``, the rest the same)."""
         where = {int(c): i for i, c in enumerate(fr.cols[j])}
         pos = np.array([where[int(c)] for c in self.std_cols_[j]] + [fr.cols[j].size], int)
-        L = fr.loads[j][:, pos]  # (4, nl, m)
+        L = (fr.loads_z if iv else fr.loads)[j][:, pos]  # (4, nl, m)
         nl, m = pos.size, dqj.size
         U = np.empty((4 * nl + 6, m))
         U[0:2 * nl:2], U[1:2 * nl:2] = L[0], L[1]
@@ -1312,14 +1317,19 @@ class RobotModel(HyperParameters):
     def _pass_rows(self, signals: Any) -> list[RowMoments]:
         """One pass over the full-rate products' rows (:meth:`_row_block`, tau appended) of
         every joint, with the rows :meth:`_pass` keeps (dq_min, finite, ``keep``)."""
-        moms = [RowMoments(np.arange(products_size(len(c)))) for c in self.cols_]
+        iv = self.method == "iv"
+        moms = [RowMoments(np.arange(products_size(len(c))), iv=iv) for c in self.cols_]
         for _sig, _r, _q, dq, _ddq, tau, _z, _pay, cc in self._chunks(signals, iv=False):
             fr = cc[6]
             for j in range(len(self.cols_)):
                 U = self._row_block(fr, j, dq[:, j])
                 ok = (np.abs(dq[:, j]) > self.dq_min) & np.isfinite(tau[:, j]) & np.all(
                     np.isfinite(U), axis=0) & cc[3][:, j]
-                moms[j].add_rows(np.vstack([U[:, ok], tau[ok, j]]), fr.pplus[ok, j])
+                VzT = None
+                if iv:
+                    Uz = self._row_block(fr, j, dq[:, j], iv=True)
+                    VzT = np.vstack([Uz[:, ok], tau[ok, j]])
+                moms[j].add_rows(np.vstack([U[:, ok], tau[ok, j]]), fr.pplus[ok, j], VzT)
         return moms
 
     def _set_band(self, moms: list[JointMoments], theta_q: np.ndarray, model_q: bool) -> None:

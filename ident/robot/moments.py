@@ -325,13 +325,19 @@ class RowMoments(JointMoments):
     def nv(self) -> int:
         return len(self.cols) + 1
 
-    def add_rows(self, VT: np.ndarray, pplus: np.ndarray) -> None:
+    def add_rows(self, VT: np.ndarray, pplus: np.ndarray,
+                 VzT: np.ndarray | None = None) -> None:
         """Accumulate the rows given TRANSPOSED, VT (nu + 1, m) (u then tau), with their
-        low-passed P+ (m,) (counted only)."""
+        low-passed P+ (m,) (counted only); VzT the instrument rows (nu + 1, m)."""
         if VT.shape[1] == 0:
             return
+        if self.iv and VzT is None:
+            raise RobotIdentError("RowMoments.add_rows: instrument rows missing for IDIM-IV")
         self.n += VT.shape[1]
         self.vv[0, 0] += VT @ VT.T
+        if VzT is not None and self.zv is not None and self.zz is not None:
+            self.zv[0, 0] += VzT @ VT.T
+            self.zz[0, 0] += VzT @ VzT.T
         w = quadrant_weights(pplus - 0.5)
         self.quadrant_n += (float(w.sum()), float(w.size - w.sum()))
 

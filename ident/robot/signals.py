@@ -37,6 +37,9 @@ class FullRateProducts:
         zero in its row.
     q_s : ndarray, shape (k,)
         The q_s of E [rad/s] per joint.
+    loads_z : tuple of ndarray or None
+        The IDIM-IV instruments of ``loads`` (same shapes): the load columns with the
+        reference trajectory's acceleration, times the same P and E; None: not formed.
     """
 
     loads: tuple[np.ndarray, ...]
@@ -44,6 +47,7 @@ class FullRateProducts:
     pplus: np.ndarray
     cols: tuple[np.ndarray, ...]
     q_s: np.ndarray
+    loads_z: tuple[np.ndarray, ...] | None = None
 
     def check(self, n: int, k: int, source: str) -> None:
         """Raise :class:`RobotIdentError` unless the shapes fit n samples of k joints."""
@@ -55,15 +59,25 @@ class FullRateProducts:
         if len(self.loads) != k or len(self.cols) != k:
             raise RobotIdentError(f"{source}: columns.products has {len(self.loads)} load "
                                   f"blocks and {len(self.cols)} column lists, expected {k}")
-        for j, (a, c) in enumerate(zip(self.loads, self.cols, strict=True)):
-            if np.shape(a) != (4, len(c) + 1, n):
-                raise RobotIdentError(f"{source}: columns.products.loads[{j}] has shape "
-                                      f"{np.shape(a)}, expected (4, {len(c) + 1}, {n})")
+        for name in ("loads", "loads_z"):
+            blocks = getattr(self, name)
+            if blocks is None:
+                continue
+            if len(blocks) != k:
+                raise RobotIdentError(f"{source}: columns.products.{name} has {len(blocks)} "
+                                      f"blocks, expected {k}")
+            for j, (a, c) in enumerate(zip(blocks, self.cols, strict=True)):
+                if np.shape(a) != (4, len(c) + 1, n):
+                    raise RobotIdentError(f"{source}: columns.products.{name}[{j}] has "
+                                          f"shape {np.shape(a)}, expected "
+                                          f"(4, {len(c) + 1}, {n})")
 
     def take(self, rows: slice | np.ndarray) -> FullRateProducts:
         """The decimated samples ``rows`` (a chunk)."""
         return FullRateProducts(tuple(a[:, :, rows] for a in self.loads),
-                                self.coulomb[:, rows], self.pplus[rows], self.cols, self.q_s)
+                                self.coulomb[:, rows], self.pplus[rows], self.cols, self.q_s,
+                                None if self.loads_z is None else
+                                tuple(a[:, :, rows] for a in self.loads_z))
 
 
 @dataclass(frozen=True)
