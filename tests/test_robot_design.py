@@ -36,17 +36,19 @@ FRICTION = {"F_C": "FC3", "F_V": "FV3", "tau_off": "OFF3", "Ma_ratio": "Ma_ratio
 @pytest.fixture(scope="module")
 def campaign_runs():
     """The example campaign simulated offline (seeds 11-13): single-joint experiments and the
-    same arrays as one-joint robot runs (the payload as the log gives it: mass, lever arm)."""
+    same arrays as one-joint robot runs (the payload as the log gives it: mass, lever arm),
+    and each run's reference position (the planned trajectory at its cycles) [rad]."""
     _, plan, sims = simulate_example_campaign(11)
-    exps, runs = [], []
+    exps, runs, refs = [], [], []
     for i, (p, r) in enumerate(zip(plan.payloads, sims, strict=True)):
         exps.append(make_experiment(f"payload{i}.csv", r.t, r.q, r.tau_ref,
                                     payload_mass=p.mass_kg, payload_arm=p.arm_m))
         pay = RobotPayloadData(p.mass_kg, arm_m=p.arm_m) if p.mass_kg else RobotPayloadData()
         runs.append(RawRobotRun(f"payload{i}.csv", r.t, r.q[:, None], r.tau_ref[:, None],
                                 payload=pay))
+        refs.append(plan.reference.q[np.minimum(r.cycle, plan.reference.q.size - 1)])
     robot = load_robot(ROOT / "examples" / "robots" / "rx130l.toml")
-    return exps, runs, robot
+    return exps, runs, robot, refs
 
 
 def _single_joint_values(est: RobotModel) -> dict[str, float]:
@@ -60,7 +62,7 @@ def _single_joint_values(est: RobotModel) -> dict[str, float]:
 
 @pytest.mark.slow
 def test_columns_chain_gives_the_single_joint_fit(campaign_runs):
-    exps, runs, robot = campaign_runs
+    exps, runs, robot, _ = campaign_runs
     single = fit_models(exps, models=["usual", "paper"])
     rec = fit_robot(robot, runs, models=("usual", "paper"), method="ls")
     assert rec["payload"] == "ratio"  # lever-arm payloads: the ratio is identified (eq. 35)
@@ -98,7 +100,7 @@ def test_columns_chain_products_form_is_the_single_joint_paper_fit(campaign_runs
     samples; against the single-joint paper fit the products without E agree within 1e-2
     (measured 2.0e-3), the E products do not (measured up to 82 %, b_g_J): the 50-67 %
     difference of the E ddq columns at low velocity."""
-    exps, runs, robot = campaign_runs
+    exps, runs, robot, _ = campaign_runs
     single = fit_models(exps, models=["usual", "paper"])
     ref, du, dp = single.models["paper"], single.designs["usual"], single.designs["paper"]
     assert not ref.removed_ and single.settings.get("load_model") is not None
@@ -166,8 +168,40 @@ def test_columns_chain_products_form_is_the_single_joint_paper_fit(campaign_runs
             assert dec[name] == pytest.approx(v, rel=1e-2), name
 
 
+def test_columns_chain_products_form_is_the_single_joint_iv_paper_fit(campaign_runs):
+    """The same with IDIM-IV (the reference trajectory of each run given to both paths):
+    ``products_columns(instruments=True)`` forms the instruments as the single-joint chain
+    does (the load columns on the reference acceleration times the same P and E), and the
+    products form's IV estimate is ``fit_models``' paper fit: values, standard deviations
+    and relative error to 1e-8 (measured 1.0e-12)."""
+    _, runs, robot, refs = campaign_runs
+    exps = [make_experiment(r.source, r.t, r.q[:, 0], r.tau[:, 0], q_ref=q,
+                            payload_mass=r.payload.mass, payload_arm=r.payload.arm_m or 0.0)
+            for r, q in zip(runs, refs, strict=True)]
+    runs = [replace(r, q_ref=q[:, None]) for r, q in zip(runs, refs, strict=True)]
+    single = fit_models(exps, models=["usual", "paper"])
+    ref, dp = single.models["paper"], single.designs["paper"]
+    assert dp.Z is not None and not ref.removed_  # IDIM-IV, nothing eliminated
+    reg = RobotRegressor(robot)
+    design = resolve_design(runs, instruments=True)
+    sig, dq_min = design_runs(runs, reg, design, instruments=True)
+    design = replace(design, dq_min=dq_min)
+    first = RobotModel(reg, "usual", "iv", payload_ratio=True).fit(sig)
+    sig, _ = sign_checked(sig, runs, design, first.load_torque, SIGN_CHECK_MIN_KEPT)
+    full = products_columns(sig, runs, reg, design, first.load_torque, single.q_s,
+                            instruments=True)
+    est = RobotModel(reg, "paper", "iv", form="products", q_s=single.q_s).fit(full)
+    assert int(est.n_samples_[0]) == len(dp)
+    ours, ours_std = products_as_single(est, single_joint_map(est.base_, est.regressor_))
+    assert set(ours) == set(ref.coef_)
+    for name, v in ref.coef_.items():
+        assert ours[name] == pytest.approx(v, rel=1e-8), name
+        assert ours_std[name] == pytest.approx(ref.std_[name], rel=1e-8), name
+    assert est.rel_error_["j3"] == pytest.approx(ref.rel_error_, rel=1e-8)
+
+
 def test_payload_ratio_needs_a_payload(campaign_runs):
-    _, runs, robot = campaign_runs
+    _, runs, robot, _ = campaign_runs
     reg = RobotRegressor(robot)
     empty = [RawRobotRun(r.source, r.t[:4000], r.q[:4000], r.tau[:4000]) for r in runs[:1]]
     sig, _ = design_runs(empty, reg, resolve_design(empty))
@@ -176,7 +210,7 @@ def test_payload_ratio_needs_a_payload(campaign_runs):
 
 
 def test_design_errors_are_one_line_naming_the_run(campaign_runs, monkeypatch):
-    _, runs, robot = campaign_runs
+    _, runs, robot, _ = campaign_runs
     reg = RobotRegressor(robot)
     short = [RawRobotRun("short.csv", runs[0].t[:40], runs[0].q[:40], runs[0].tau[:40])]
     with pytest.raises(RobotIdentError, match=r"short\.csv: 40 samples, too few"):
@@ -194,7 +228,7 @@ def test_products_columns_errors_are_one_line(campaign_runs, monkeypatch):
     """products_columns and the products form on them refuse, in one line, what does not
     fit: unresolved settings, other runs, a bad load torque, too much memory, another q_s,
     the options that would re-decide the quadrants, signals without them."""
-    _, runs, robot = campaign_runs
+    _, runs, robot, _ = campaign_runs
     reg = RobotRegressor(robot)
     part = [RawRobotRun(r.source, r.t[:6000], r.q[:6000], r.tau[:6000], payload=r.payload)
             for r in runs[:2]]
@@ -242,7 +276,7 @@ def test_decimated_columns_equal_the_single_joint_design_columns(campaign_runs):
     """Linear columns commute with the filters: the decimated inertia column is the decimated
     ddq; sign(dq) is decided at full rate (not the sign of the decimated dq); rows of the
     stiction area and of the edges are not kept."""
-    _, runs, robot = campaign_runs
+    _, runs, robot, _ = campaign_runs
     reg = RobotRegressor(robot)
     part = [RawRobotRun(r.source, r.t[:20000], r.q[:20000], r.tau[:20000], payload=r.payload)
             for r in runs]
