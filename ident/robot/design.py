@@ -16,23 +16,31 @@
 On a robot with one moving joint this is exactly the single-joint design (the RX130L joint 3
 of the demo gives the single-joint ``jointid fit`` numbers, ``tests/test_robot_design.py``).
 The estimator reads the decimated columns instead of evaluating the regressor on decimated
-states (``chain="states"``, :func:`ident.robot.loaders.preprocess_runs`); the paper model's
-E_j and quadrant are still taken on the decimated samples. Memory: the full-rate regressor
-of one experiment, k p (1 + IV) floats per sample, refused above :data:`MAX_BYTES`.
+states (``chain="states"``, :func:`ident.robot.loaders.preprocess_runs`). The paper model
+takes E_j and the quadrant on the decimated samples, unless :func:`products_columns` formed
+eq. 42's quadrant and E products at full rate, as the single-joint chain does (P from a
+first usual fit's tau_out_hat, after :func:`sign_checked`); ``RobotModel(model="paper",
+form="products")`` then reads them (``RobotColumns.products``) and on a one-joint robot gives
+the single-joint paper fit. Memory: the full-rate regressor of one experiment, k p (1 + IV)
+floats per sample, refused above :data:`MAX_BYTES` (:func:`products_columns`: its own
+bound, in its doc).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
+from trajectories.friction import DEFAULT_Q_S, stribeck_exp
+
 from ..chain import (
     ChainSettings,
     FullRate,
     RawExperiment,
+    decimate,
     decimation_index,
     filter_experiment,
     resolve_settings,
@@ -41,13 +49,14 @@ from ..chain import (
 )
 from ..fitting import DQ_MIN_FRACTION
 from . import RobotIdentError
-from .base import placed_payload
+from .base import base_parameters, placed_payload
 from .loaders import RawRobotRun, chain_period
+from .moments import quadrant_weights
 from .refine_joint import joint_term_columns
-from .signals import RobotColumns, RobotSignals
+from .signals import FullRateProducts, RobotColumns, RobotSignals
 
 __all__ = ["DesignSettings", "design_runs", "joint_columns", "resolve_design", "sign_checked",
-           "MAX_BYTES"]
+           "products_columns", "MAX_BYTES"]
 
 #: Largest full-rate regressor of one experiment the columns chain builds [bytes].
 MAX_BYTES = 4 * 2**30
@@ -79,6 +88,18 @@ def resolve_design(
     return resolve_settings(runs[0].q, chain_period(runs), instruments=instruments,
                             sources=[run.source for run in runs], error=RobotIdentError,
                             **given)  # type: ignore[arg-type]
+
+
+def _known_torque(regressor, f: FullRate, acc: np.ndarray, pay) -> np.ndarray:
+    """The known torques (n_f, k) [N m] at full rate: the (placed) payload's and the known
+    rotors' Ia_j ddq_j (zero unless ``RobotRegressor(known_rotor_inertia=True)``), filtered
+    with the columns."""
+    k = f.q.shape[1]
+    out = (np.asarray(regressor.payload_torque(f.q, f.dq, acc, pay), dtype=float)
+           if pay.mass > 0 else np.zeros((f.n, k)))
+    if np.any(getattr(regressor, "known_Ia", 0.0)):
+        out = out + regressor.known_torque(acc)
+    return out
 
 
 def _experiments(runs: Sequence[RawRobotRun], refs: bool) -> list[RawExperiment]:
@@ -151,13 +172,7 @@ def design_runs(
         pay = placed_payload(run.payload, regressor, base, run.source, placed)
 
         def torque(acc: np.ndarray) -> np.ndarray:
-            # the known torques: the payload's and the known rotors' Ia_j ddq_j (zero unless
-            # RobotRegressor(known_rotor_inertia=True)), filtered with the columns
-            out = (np.asarray(regressor.payload_torque(f.q, f.dq, acc, pay), dtype=float)
-                   if pay.mass > 0 else np.zeros((f.n, k)))
-            if np.any(getattr(regressor, "known_Ia", 0.0)):
-                out = out + regressor.known_torque(acc)
-            return out
+            return _known_torque(regressor, f, acc, pay)
 
         rows = [torque(f.ddq).T, np.sign(f.dq).T,
                 np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ddq)).reshape(k * p, f.n)]
@@ -263,6 +278,204 @@ def sign_checked(
     skip = kept < np.broadcast_to(np.asarray(min_kept, dtype=float), kept.shape)
     keep[:, skip] = cols.keep[:, skip]
     return replace(signals, columns=replace(cols, keep=keep)), kept
+
+
+def _joint_structure(regressor, base) -> list[np.ndarray]:
+    """Per joint, the indices into ``base.columns`` of the base parameters' standard columns
+    that are not structurally zero in its row: probed at seeded random states, as
+    ``RobotModel`` finds each joint's base columns."""
+    k = len(regressor.joints)
+    rng = np.random.default_rng(12345)
+    m = 32
+    q = rng.uniform(-np.pi, np.pi, (m, k))
+    W = np.asarray(regressor.rigid_kpn(q, rng.normal(size=(m, k)), rng.normal(size=(m, k)),
+                                       columns=base.columns))
+    mag = np.abs(W).max(axis=2)  # (k, nb)
+    tol = 1e-10 * max(float(mag.max()), 1e-300)
+    return [np.flatnonzero(mag[j] > tol) for j in range(k)]
+
+
+def _per_joint(q_s: float | Sequence[float] | Mapping[str, float],
+               joints: tuple[str, ...]) -> np.ndarray:
+    """q_s [rad/s] per joint from one value, one per joint or a mapping by joint name."""
+    if isinstance(q_s, Mapping):
+        missing = [j for j in joints if j not in q_s]
+        if missing:
+            raise RobotIdentError(f"products_columns: q_s has no value for joint(s) {missing}")
+        q_s = [q_s[j] for j in joints]
+    try:
+        out = np.broadcast_to(np.asarray(q_s, dtype=float), (len(joints),)).copy()
+    except ValueError:
+        raise RobotIdentError(f"products_columns: q_s: expected one value or {len(joints)}, "
+                              f"got {np.size(q_s)}") from None
+    if not np.all(np.isfinite(out) & (out > 0)):
+        raise RobotIdentError(f"products_columns: q_s: expected positive velocities [rad/s], "
+                              f"got {out.tolist()}")
+    return out
+
+
+def products_columns(
+    signals: RobotSignals,
+    runs: Sequence[RawRobotRun],
+    regressor,
+    settings: DesignSettings,
+    load_torque: Callable[[RobotSignals], np.ndarray],
+    q_s: float | Sequence[float] | Mapping[str, float] = DEFAULT_Q_S,
+    *,
+    base=None,
+    instruments: bool = False,
+) -> RobotSignals:
+    """The paper model's eq. 42 columns of every joint formed at FULL rate, then low-passed and
+    decimated like the other columns: what the single-joint chain does
+    (:func:`ident.preprocess.build_design` with the ``load_model`` of a first usual fit).
+
+    Per run, the chain's full-rate signals are formed again (:func:`ident.chain.
+    filter_experiment`, as :func:`sign_checked` does); on them, per joint j, with the model
+    quadrant P+_j = (1 + sign(tau_out_hat_j dq_j)) / 2 (eq. 27-28, 44; tau_out_hat from
+    ``load_torque``), P-_j = 1 - P+_j and E_j = exp(-|dq_j| / q_s,j) (eq. 29): each load
+    column w of the joint (its base parameters' standard columns, ``rigid_kpn`` at full rate,
+    then its known torque p_j: payload and known rotors) gives P+ w, P+ E w, P- w, -P- E w
+    (a_m, b_m, a_g, b_g; eq. 42-43), sign(dq_j) gives P+ sign, P+ E sign, P- sign, P- E sign
+    (c_m, d_m, c_g, d_g; eq. 30), and P+ itself is kept for the quadrant counts. These rows
+    are filtered and decimated by :func:`ident.chain.decimate`, the chain's own anti-alias
+    filter and decimation (the same floats as in the chain's stack: the rows are filtered
+    independently), so ``RobotModel(model="paper", form="products")`` reads them and gives,
+    on a one-joint robot, the single-joint paper fit (tests/test_robot_design.py).
+
+    With ``instruments`` the IDIM-IV instruments of these columns too, as the single-joint
+    chain builds them: the load columns with the reference trajectory's acceleration (the
+    regressor and the known torque on q, dq and the filtered reference's ddq), times the
+    same P and E (decided on the measured states); the Coulomb columns, dq and 1 are their
+    own instruments.
+
+    Memory: at full rate, per run, the base regressor (k b floats per sample, b the base
+    parameters) and one joint's rows (4 (l_j + 1) + 5), twice the load parts with
+    ``instruments``; kept, per decimated sample, sum_j 4 (l_j + 1) + 5 k floats (plus
+    sum_j 4 (l_j + 1) with ``instruments``; l_j: joint j's base columns). Refused above
+    :data:`MAX_BYTES` at full rate.
+
+    Parameters
+    ----------
+    signals : RobotSignals
+        :func:`design_runs`'s output for ``runs`` with ``settings`` (``dq_min`` resolved),
+        possibly after :func:`sign_checked` (its ``keep`` is kept).
+    runs, regressor, settings
+        What built ``signals`` (``regressor``: ``rigid_kpn``, ``payload_torque``, ``joints``).
+    load_torque : callable
+        RobotSignals -> tau_out_hat (n, k) [N m] on full-rate signals, e.g.
+        ``RobotModel.load_torque`` of the first usual fit (the one :func:`sign_checked`
+        reads): it decides the quadrants.
+    q_s : float, sequence or mapping
+        q_s of E [rad/s]: one value, one per joint or by joint name; the products form's
+        ``q_s`` must be the same.
+    base : BaseParameters or None
+        Whose columns are formed (default ``base_parameters(regressor)``); the products
+        form's ``base`` must be the same (or have the same columns).
+    instruments : bool
+        Also form the IDIM-IV instruments (needs every run's ``q_ref``).
+
+    Returns
+    -------
+    RobotSignals
+        ``signals`` with ``columns.products`` (:class:`~ident.robot.signals.FullRateProducts`).
+
+    Raises
+    ------
+    RobotIdentError
+        Signals not from ``design_runs``, unresolved settings, runs that do not match the
+        signals, a bad ``load_torque`` output, rows too large for memory; one line.
+    """
+    cols = signals.columns
+    if cols is None or settings.dq_min is None:
+        raise RobotIdentError("products_columns: expected design_runs signals and resolved "
+                              "settings (dq_min)")
+    joints = tuple(regressor.joints)
+    if tuple(signals.joints) != joints:
+        raise RobotIdentError(f"products_columns: signals of joints {signals.joints}, the "
+                              f"regressor's are {joints}")
+    k = len(joints)
+    qs = _per_joint(q_s, joints)
+    if base is None:
+        base = base_parameters(regressor)
+    bcols = np.asarray(base.columns, dtype=int)
+    pos = _joint_structure(regressor, base)
+    width = [4 * (c.size + 1) + 5 for c in pos]
+    if int(signals.experiment.max(initial=-1)) >= len(runs):
+        raise RobotIdentError(f"products_columns: the signals have "
+                              f"{int(signals.experiment.max()) + 1} experiments, {len(runs)} "
+                              "runs given")
+    dt = chain_period(runs)
+    r = settings.decimation
+    n = signals.n
+    if instruments:
+        missing = next((run.source for run in runs if run.q_ref is None), None)
+        if missing is not None:
+            raise RobotIdentError(f"{missing}: no reference trajectory q_ref for the IDIM-IV "
+                                  "instruments of the full-rate products")
+    loads = [np.empty((4, c.size + 1, n)) for c in pos]
+    loads_z = [np.empty((4, c.size + 1, n)) for c in pos] if instruments else None
+    coulomb = np.empty((4, n, k))
+    pplus = np.empty((n, k))
+    placed: dict = {}
+    iv = 2 if instruments else 1
+    for i, exp in enumerate(_experiments(runs, instruments)):
+        need = (exp.q.shape[0] - 2 * settings.trim) * 8 * (
+            iv * k * bcols.size + max(width) + (iv - 1) * (max(width) - 5) + 4 * k)
+        if need > MAX_BYTES:
+            raise RobotIdentError(f"{exp.label}: the full-rate products need "
+                                  f"{need / 2**30:.1f} GiB (more than "
+                                  f"{MAX_BYTES / 2**30:.0f}); split the log")
+        f = filter_experiment(exp, dt, settings, instruments=instruments,
+                              error=RobotIdentError)
+        rows = np.flatnonzero(signals.experiment == i)
+        if decimation_index(f.n, r).size != rows.size:
+            raise RobotIdentError(f"{exp.label}: {rows.size} decimated samples in the "
+                                  f"signals, the settings give "
+                                  f"{decimation_index(f.n, r).size}: not design_runs' "
+                                  "output for these runs and settings")
+        run = runs[i]
+        full = RobotSignals(t=run.t[f.keep], q=f.q, dq=f.dq, ddq=f.ddq, tau=f.tau_f,
+                            joints=joints, payloads=(run.payload,), source=exp.label)
+        tau_out = np.asarray(load_torque(full), dtype=float)
+        if tau_out.shape != (f.n, k) or not np.all(np.isfinite(tau_out)):
+            raise RobotIdentError(f"{exp.label}: load_torque gave {tau_out.shape} values "
+                                  f"(finite: {bool(np.all(np.isfinite(tau_out)))}), "
+                                  f"expected ({f.n}, {k}) finite [N m]")
+        pay = placed_payload(run.payload, regressor, base, run.source, placed)
+        known = _known_torque(regressor, f, f.ddq, pay)
+        W = np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ddq, columns=bcols))
+        Wz = knownz = None
+        if instruments:
+            Wz = np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ref_ddq, columns=bcols))
+            knownz = _known_torque(regressor, f, f.ref_ddq, pay)
+        for j in range(k):
+            dq = f.dq[:, j]
+            pp = quadrant_weights(tau_out[:, j] * dq)  # P+ of eq. 27, 1/2 where P = 0
+            pm = 1.0 - pp
+            e = stribeck_exp(dq, qs[j])
+            pe, me = pp * e, pm * e
+            sg = np.sign(dq)
+            load = np.concatenate([W[j, pos[j]], known[None, :, j]], axis=0)  # (l + 1, n_f)
+            parts = [pp * load, pe * load, pm * load, -me * load,
+                     np.stack([pp * sg, pe * sg, pm * sg, me * sg, pp])]
+            if Wz is not None and knownz is not None:  # the instruments' load rows
+                load = np.concatenate([Wz[j, pos[j]], knownz[None, :, j]], axis=0)
+                parts += [pp * load, pe * load, pm * load, -me * load]
+            stack = np.concatenate(parts)
+            del load, parts
+            dec = decimate(stack.T, r)[0].T  # (rows, m): the chain's filter, row by row
+            del stack
+            nl = pos[j].size + 1
+            loads[j][:, :, rows] = dec[:4 * nl].reshape(4, nl, rows.size)
+            coulomb[:, rows, j] = dec[4 * nl:4 * nl + 4]
+            pplus[rows, j] = dec[4 * nl + 4]
+            if loads_z is not None:
+                loads_z[j][:, :, rows] = dec[4 * nl + 5:].reshape(4, nl, rows.size)
+        del W, known, Wz, knownz
+    products = FullRateProducts(loads=tuple(loads), coulomb=coulomb, pplus=pplus,
+                                cols=tuple(bcols[c] for c in pos), q_s=qs,
+                                loads_z=None if loads_z is None else tuple(loads_z))
+    return replace(signals, columns=replace(cols, products=products))
 
 
 def joint_columns(

@@ -13,7 +13,8 @@ Model (eq. 8-10 on every joint j, base parameters theta shared by all joints)::
 The paper model is bilinear in (theta, per-joint a, b, c, d) by default; ``form="products"``
 identifies instead eq. 42's free products per joint (a_m theta_i, b_m theta_i, ... as
 independent linear parameters, no theta: the single-joint model on each joint, linear
-least squares; :mod:`ident.robot.paper`, "Products form").
+least squares; :mod:`ident.robot.paper`, "Products form"), on the columns formed at full
+rate when the signals carry them (:func:`ident.robot.design.products_columns`).
 
 W_j is the joint's row of the base regressor (rigid body + rotor inertias, ``RobotRegressor``
 reduced by ``BaseParameters.reduce``), p_j the known payload torque of the sample's experiment
@@ -70,7 +71,7 @@ from ..hyperparams import HyperParameters
 from ..vocab import renamed_keywords
 from . import RobotIdentError
 from .base import base_parameters, payload_base, placed_payload
-from .moments import IDQ, IP, ISG, N_EXTRA, ONE, JointMoments, quadrant_weights
+from .moments import IDQ, IP, ISG, N_EXTRA, ONE, JointMoments, RowMoments, quadrant_weights
 from .packed import PackedMoments
 from .paper import (
     PAPER_BLOCK,
@@ -82,6 +83,7 @@ from .paper import (
     products_size,
     products_start,
     require_theta,
+    rows_coefficients,
     usual_coefficients,
 )
 from .quadrants import QuadrantStore
@@ -233,7 +235,14 @@ class RobotModel(HyperParameters):
         fit too). The products of a load column that is zero on a joint's rows (no payload
         torque) or a combination of its other columns there (the single-joint rank rule)
         are fixed at 0 (``fixed_``); ``payload_ratio`` is refused (the payload's products
-        are free already).
+        are free already). On signals carrying the products formed at full rate
+        (``RobotColumns.products``, :func:`ident.robot.design.products_columns`: the
+        single-joint chain's columns) it reads those rows whole instead
+        (``full_rate_products_``): their quadrants are the load model's they were formed
+        with, so ``quadrant="measured"``, ``quadrant_theta``, ``method="iv"`` without their
+        instruments (``products_columns(instruments=True)``) and ``payload_params`` are
+        refused, ``quadrant_band`` does not apply (``band_`` 0) and :meth:`predict` needs
+        signals carrying them.
     payload_params : bool
         The payload's mass known, its first moments and inertia identified (module doc;
         ``payload_base_``, ``payload_masses_``); needs experiments without a payload to
@@ -287,6 +296,8 @@ class RobotModel(HyperParameters):
         the quadrant band at the last full pass (0 without a band). Large on a joint that
         cruises at zero load, where the quadrant is decided by noise
         (docs/robot-identification.md, "quadrants blended by the low-pass").
+    full_rate_products_ : bool
+        The products form read the products formed at full rate (``form`` above).
     quadrant_from_ : ndarray or None
         The theta whose sign(tau_out_hat dq) decided the final quadrants (``quadrant="model"``
         of the paper model), else None: :mod:`ident.robot.uncertainty` rebuilds the moments of
@@ -519,7 +530,8 @@ class RobotModel(HyperParameters):
     def _chunks(self, signals: Any, stride: int = 1, iv: bool | None = None):
         """Yield (sig, rows, q, dq, ddq, tau, ddq_ref or None, payload, columns or None) per
         chunk; every ``stride``-th row of each experiment only when ``stride`` > 1.
-        ``columns``: the chunk's (W, p, sign, keep, Wz, pz) of ``RobotSignals.columns``.
+        ``columns``: the chunk's (W, p, sign, keep, Wz, pz, products) of
+        ``RobotSignals.columns`` (products: its ``FullRateProducts`` of the chunk, or None).
         ``iv``: whether the instruments are needed (default: ``method == "iv"``)."""
         iv = self.method == "iv" if iv is None else iv
         items = [signals] if isinstance(signals, RobotSignals) else list(signals)
@@ -562,7 +574,8 @@ class RobotModel(HyperParameters):
                     if given is not None:
                         cc = (given.W[:, :, r], given.p[r], given.sign[r], given.keep[r],
                               None if given.Wz is None else given.Wz[:, :, r],
-                              None if given.pz is None else given.pz[r])
+                              None if given.pz is None else given.pz[r],
+                              None if given.products is None else given.products.take(r))
                     yield (sig, r, sig.q[r], sig.dq[r], sig.ddq[r], sig.tau[r],
                            None if zr is None else zr[a:a + int(self.chunk_size)], pay, cc)
 
@@ -653,7 +666,7 @@ class RobotModel(HyperParameters):
             W, p, kn = self._rows(q, dq, ddq, tau, pay, None if cc is None else cc[:2])
             Wz = pz = knz = None
             if iv:
-                Wz, pz, knz = self._rows(q, dq, zdd, tau, pay, None if cc is None else cc[4:])
+                Wz, pz, knz = self._rows(q, dq, zdd, tau, pay, None if cc is None else cc[4:6])
             for j, cols in enumerate(self.cols_):
                 dqj = dq[:, j]
                 WjT, pj = self._joint(W, p, kn, j)
@@ -986,6 +999,9 @@ class RobotModel(HyperParameters):
         """Rows of every joint in the motor and the generator quadrant (P = 0: half each)."""
         out = {}
         for joint, m in zip(self.joints_, moms, strict=True):
+            if isinstance(m, RowMoments):  # rows given whole: their low-passed P+
+                out[joint] = (int(round(m.quadrant_n[0])), int(round(m.quadrant_n[1])))
+                continue
             i = m.nv - N_EXTRA + ONE
             out[joint] = (int(round(m.vv[0, 0, i, i])), int(round(m.vv[1, 0, i, i])))
         return out
@@ -1012,7 +1028,10 @@ class RobotModel(HyperParameters):
     @staticmethod
     def _load_signs(m: JointMoments) -> tuple[int, int]:
         """Rows with a positive and a negative load (sign(P) sign(dq)): motor rows with
-        dq > 0 and generator rows with dq < 0 have tau_out > 0."""
+        dq > 0 and generator rows with dq < 0 have tau_out > 0 (rows given whole: not
+        counted, (0, 0))."""
+        if isinstance(m, RowMoments):
+            return 0, 0
         i, sg = m.nv - N_EXTRA + ONE, m.nv - N_EXTRA + ISG
         pos = 0.5 * (m.vv[0, 0, i, i] + m.vv[0, 0, sg, i] + m.vv[1, 0, i, i] - m.vv[1, 0, sg, i])
         return int(round(pos)), int(round(m.vv[0, 0, i, i] + m.vv[1, 0, i, i] - pos))
@@ -1028,14 +1047,19 @@ class RobotModel(HyperParameters):
             if j is not None and j not in named:
                 named.append(j)
         frac = {j: min(r) / max(sum(r), 1) for j, r in rows.items()}
-        lfrac = {j: min(r) / max(sum(r), 1) for j, r in loads.items()}
+        # rows given whole (full-rate products): their load signs are not counted
+        whole = any(isinstance(m, RowMoments) for m in moms)
+        lfrac = {j: 1.0 if whole else min(r) / max(sum(r), 1) for j, r in loads.items()}
         thin = [j for j in self.joints_ if frac[j] < THIN_QUADRANT]
         one_sign = [j for j in self.joints_ if lfrac[j] < THIN_QUADRANT and j not in thin]
         show = named + [j for j in thin + one_sign if j not in named] or list(self.joints_)
         how = ("model quadrant sign(tau_out_hat dq) of the fit" if self.quadrant == "model"
                else "measured quadrant sign(tau dq)")
-        ev = "; ".join(f"{j}: {rows[j][0]} rows motor, {rows[j][1]} generator, load > 0 on "
-                       f"{loads[j][0]}, < 0 on {loads[j][1]}" for j in show)
+        if whole:
+            how = "quadrant of the load model the full-rate products were formed with"
+        ev = "; ".join(f"{j}: {rows[j][0]} rows motor, {rows[j][1]} generator"
+                       + ("" if whole else f", load > 0 on {loads[j][0]}, < 0 on "
+                          f"{loads[j][1]}") for j in show)
         sv = (f"scaled normal matrix singular values {e.lo:.3g} .. {e.hi:.3g}" if not e.zero
               else f"largest singular value {e.hi:.3g}, zero columns")
         fixes = []
@@ -1083,6 +1107,7 @@ class RobotModel(HyperParameters):
                                       "cannot be identified")
         paper = self.model == "paper"
         model_q = paper and self.quadrant == "model"
+        self.full_rate_products_ = self._full_rate(signals)
         # quadrant="model": the start (the usual fit) only needs a first theta; on large data
         # it is taken on every stride-th row, and the full pass with the model quadrants
         # follows (module constant START_ROWS)
@@ -1184,17 +1209,25 @@ class RobotModel(HyperParameters):
         pb, nbu = self.n_theta_, len(USUAL_BLOCK)
         model_q = self.quadrant == "model"
         theta_q = self.quadrant_theta_.copy() if self.quadrant_theta_ is not None else xu[:pb]
-        self._set_band(moms, theta_q, model_q)
-        if model_q:
-            moms, _, _, _ = self._pass(signals, theta_q, 3)
+        coeffs: Coeffs = products_coefficients
+        if self.full_rate_products_:
+            # the rows formed at full rate (products_columns) carry their own quadrants
+            self.band_ = self._band_h = np.zeros(len(moms))
+            moms = self._pass_rows(signals)
             passes += 1
+            coeffs, model_q = rows_coefficients, False
+        else:
+            self._set_band(moms, theta_q, model_q)
+            if model_q:
+                moms, _, _, _ = self._pass(signals, theta_q, 3)
+                passes += 1
         x = np.concatenate([products_start(xu[c], xu[pb + nbu * j: pb + nbu * (j + 1)])
                             for j, c in enumerate(self.cols_)])
         free = np.ones(x.size, dtype=bool)
         for j, m in enumerate(moms):
             nl = len(self.cols_[j]) + 1
             # the load columns (theta's, then p) on the joint's rows
-            for c in _dependent(m.vv[0, 0, :nl, :nl] + m.vv[1, 0, :nl, :nl]):
+            for c in _dependent(self._load_gram(m, nl)):
                 i = self._bstart[j] + np.array([2 * c, 2 * c + 1, 2 * nl + 2 * c,
                                                 2 * nl + 2 * c + 1])
                 free[i] = False
@@ -1202,11 +1235,102 @@ class RobotModel(HyperParameters):
         self.fixed_ = {self.names_[i]: 0.0 for i in np.flatnonzero(~free)}
         self.quadrant_rows_ = self._quadrant_rows(moms)
         try:
-            x, w, it = self._fit_on(moms, products_coefficients, x, free, linear=True)
+            x, w, it = self._fit_on(moms, coeffs, x, free, linear=True)
         except _Unidentifiable as e:
             raise RobotIdentError(self._evidence(e, moms)) from None
-        return self._finish(moms, products_coefficients, x, free, w, passes, it,
+        return self._finish(moms, coeffs, x, free, w, passes, it,
                             theta_q if model_q else None)
+
+    @staticmethod
+    def _load_gram(m: JointMoments, nl: int) -> np.ndarray:
+        """Gram matrix (nl, nl) of a joint's load columns (its base columns, then p) on its
+        rows: from the quadrant moments, or, rows given whole (:class:`RowMoments`), from
+        the products' moments: P+ w + P- w = w (the low-pass is linear), so the sum of the
+        a_m and a_g columns of each load column."""
+        if not isinstance(m, RowMoments):
+            return m.vv[0, 0, :nl, :nl] + m.vv[1, 0, :nl, :nl]
+        S = np.zeros((m.nv, nl))
+        S[2 * np.arange(nl), np.arange(nl)] = 1.0
+        S[2 * nl + 2 * np.arange(nl), np.arange(nl)] = 1.0
+        return S.T @ m.vv[0, 0] @ S
+
+    def _full_rate(self, signals: Any) -> bool:
+        """Whether the fit reads the paper model's products formed at full rate
+        (``RobotColumns.products``, :func:`ident.robot.design.products_columns`): the
+        products form on signals that carry them (all of them, else a one-line error), and
+        the options that would re-decide their quadrants refused."""
+        if self.model != "paper" or self.form != "products":
+            return False
+        items = [signals] if isinstance(signals, RobotSignals) else list(signals)
+        has = [isinstance(s, RobotSignals) and s.columns is not None
+               and s.columns.products is not None for s in items]
+        if not any(has):
+            return False
+        what = "the full-rate products (columns.products)"
+        if not all(has):
+            bad = next(s for s, h in zip(items, has, strict=True) if not h)
+            raise RobotIdentError(f"{getattr(bad, 'source', '') or 'RobotSignals'}: no "
+                                  f"{what}, which other signals of the fit carry; form them "
+                                  "on every one (products_columns)")
+        for s in items:
+            fr = s.columns.products
+            if not np.allclose(fr.q_s, self.q_s_, rtol=1e-12, atol=0.0):
+                raise RobotIdentError(f"{s.source or 'RobotSignals'}: {what} were formed "
+                                      f"with q_s {fr.q_s.tolist()} rad/s, the model's is "
+                                      f"{self.q_s_.tolist()}")
+            for j, c in enumerate(self.std_cols_ if self._kpn else [None] * len(self.cols_)):
+                if c is None or not np.all(np.isin(c, fr.cols[j])):
+                    raise RobotIdentError(f"{s.source or 'RobotSignals'}: {what} lack "
+                                          f"base columns of joint {self.joints_[j]}: formed "
+                                          "with another base (products_columns(base=...))")
+        for bad, why in ((self.quadrant != "model", f"quadrant={self.quadrant!r}"),
+                         (self.quadrant_theta_ is not None, "quadrant_theta"),
+                         (self.method == "iv" and any(s.columns.products.loads_z is None
+                                                      for s in items),
+                          "method='iv' (no instruments formed: products_columns("
+                          "instruments=True))"),
+                         (self.payload_params, "payload_params")):
+            if bad:
+                raise RobotIdentError(f"RobotModel: {why} does not apply to {what}: their "
+                                      "quadrants are the load model's they were formed with; "
+                                      "fit without them or without that option")
+        return True
+
+    def _row_block(self, fr, j: int, dqj: np.ndarray, iv: bool = False) -> np.ndarray:
+        """Joint j's rows u (nx_j, m) of a chunk's full-rate products ``fr`` in
+        :func:`~ident.robot.paper.products_names`'s order: per load column (its base
+        columns, then p) the a_m, b_m columns, then the a_g, b_g ones, the four quadrant
+        Coulomb columns, dq (F_V) and 1 (OFF). ``iv``: the instruments' rows (the load
+        columns' instruments ``loads_z``, the rest the same)."""
+        where = {int(c): i for i, c in enumerate(fr.cols[j])}
+        pos = np.array([where[int(c)] for c in self.std_cols_[j]] + [fr.cols[j].size], int)
+        L = (fr.loads_z if iv else fr.loads)[j][:, pos]  # (4, nl, m)
+        nl, m = pos.size, dqj.size
+        U = np.empty((4 * nl + 6, m))
+        U[0:2 * nl:2], U[1:2 * nl:2] = L[0], L[1]
+        U[2 * nl:4 * nl:2], U[2 * nl + 1:4 * nl:2] = L[2], L[3]
+        U[4 * nl:4 * nl + 4] = fr.coulomb[:, :, j]
+        U[4 * nl + 4] = dqj
+        U[4 * nl + 5] = 1.0
+        return U
+
+    def _pass_rows(self, signals: Any) -> list[RowMoments]:
+        """One pass over the full-rate products' rows (:meth:`_row_block`, tau appended) of
+        every joint, with the rows :meth:`_pass` keeps (dq_min, finite, ``keep``)."""
+        iv = self.method == "iv"
+        moms = [RowMoments(np.arange(products_size(len(c))), iv=iv) for c in self.cols_]
+        for _sig, _r, _q, dq, _ddq, tau, _z, _pay, cc in self._chunks(signals, iv=False):
+            fr = cc[6]
+            for j in range(len(self.cols_)):
+                U = self._row_block(fr, j, dq[:, j])
+                ok = (np.abs(dq[:, j]) > self.dq_min) & np.isfinite(tau[:, j]) & np.all(
+                    np.isfinite(U), axis=0) & cc[3][:, j]
+                VzT = None
+                if iv:
+                    Uz = self._row_block(fr, j, dq[:, j], iv=True)
+                    VzT = np.vstack([Uz[:, ok], tau[ok, j]])
+                moms[j].add_rows(np.vstack([U[:, ok], tau[ok, j]]), fr.pplus[ok, j], VzT)
+        return moms
 
     def _set_band(self, moms: list[JointMoments], theta_q: np.ndarray, model_q: bool) -> None:
         """``band_`` [N m] (``quadrant_band`` x each joint's RMS predicted load with
@@ -1288,6 +1412,8 @@ class RobotModel(HyperParameters):
 
     def predict(self, signals: RobotSignals) -> np.ndarray:
         """Predicted joint torques tau_hat (n, k) [N m] on the samples of ``signals``."""
+        if getattr(self, "full_rate_products_", False):
+            return self._predict_rows(signals)
         passes = self._fitted_rows(signals, "predict")
         out = np.full(signals.tau.shape, np.nan)
         coeffs = self._coefficients
@@ -1313,6 +1439,24 @@ class RobotModel(HyperParameters):
                 c0, c1, _, _ = coeffs(th, blk, s)
                 pred += ws * (V @ c0 + E * (V @ c1))
             out[r, j] = pred
+        return out
+
+    def _predict_rows(self, signals: RobotSignals) -> np.ndarray:
+        """:meth:`predict` of a fit on the full-rate products: u_j^T x_j on the products the
+        signals carry (their quadrants: the model has no theta to decide others)."""
+        self._check_fitted()
+        if not isinstance(signals, RobotSignals):
+            raise RobotIdentError(f"predict: expected RobotSignals, got "
+                                  f"{type(signals).__name__}")
+        if signals.columns is None or signals.columns.products is None:
+            raise RobotIdentError(f"{signals.source or 'RobotSignals'}: the model was fitted "
+                                  "on full-rate products (columns.products); predict needs "
+                                  "signals carrying them (products_columns)")
+        self._full_rate(signals)  # the same checks as the fit's
+        out = np.full(signals.tau.shape, np.nan)
+        for _sig, r, _q, dq, _ddq, _tau, _z, _pay, cc in self._chunks(signals, iv=False):
+            for j in range(len(self.cols_)):
+                out[r, j] = self.coef_[self._local(j)] @ self._row_block(cc[6], j, dq[:, j])
         return out
 
     def load_torque(self, signals: RobotSignals) -> np.ndarray:

@@ -22,6 +22,13 @@ the data builds them (memory: k x 2 x 3 matrices of size (p_j + 5)^2, independen
 number of samples); the iterations then cost nothing per sample. Only the samples where E is
 not negligible (< :data:`E_TINY`) enter the e >= 1 moments, so the pass costs about one
 Gram matrix per joint.
+
+When the rows of a LINEAR model are given whole -- the paper model's products form on the
+columns formed at full rate (:func:`ident.robot.design.products_columns`), whose low-pass
+blends both quadrants near a quadrant change, so that no row belongs to one quadrant --
+:class:`RowMoments` holds sum u u^T of the rows v = [u, tau] instead (one slot, no power of E),
+and the same :meth:`JointMoments.normal` evaluates them with the coefficients
+:func:`ident.robot.paper.rows_coefficients` (c0 = the parameters, D0 = the identity).
 """
 
 from __future__ import annotations
@@ -32,7 +39,7 @@ import numpy as np
 
 from . import RobotIdentError
 
-__all__ = ["E_TINY", "N_EXTRA", "JointMoments", "quadrant_weights"]
+__all__ = ["E_TINY", "N_EXTRA", "JointMoments", "RowMoments", "quadrant_weights"]
 
 #: E below this is treated as 0 in the E-weighted moments (relative contribution < 1e-14).
 E_TINY = 1e-14
@@ -71,7 +78,7 @@ class JointMoments:
     n: int = field(init=False, default=0)
 
     def __post_init__(self) -> None:
-        nv = len(self.cols) + N_EXTRA
+        nv = self.nv
         self.vv = np.zeros((2, 3, nv, nv))
         if self.iv:
             self.zv = np.zeros((2, 3, nv, nv))
@@ -291,3 +298,51 @@ def _sandwich(Mz: np.ndarray, Dz: np.ndarray, gam: tuple[float, float], nt: int,
     MD[:, :nt] = left
     MD[:, nt:] = Mz @ Dz[:, nt:]
     return _apply_t(Dz, gam, nt, nv, MD)
+
+
+@dataclass
+class RowMoments(JointMoments):
+    """Moments of one joint's rows given whole: v = [u, tau] with u the nu = ``len(cols)``
+    columns of a linear model tau = u^T x (module doc). All in the slot s = 0, e = 0 (nothing
+    in s = 1 nor e >= 1), so :meth:`JointMoments.normal` and :meth:`JointMoments.cost` give
+    the linear least squares' sums; ``nv = nu + 1``.
+
+    Attributes
+    ----------
+    quadrant_n : ndarray, shape (2,)
+        Rows in the motor and the generator quadrant by their low-passed P+ (> 1/2: motor,
+        = 1/2: half each), for reports.
+    """
+
+    powers: int = 1
+    quadrant_n: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self.quadrant_n = np.zeros(2)
+
+    @property
+    def nv(self) -> int:
+        return len(self.cols) + 1
+
+    def add_rows(self, VT: np.ndarray, pplus: np.ndarray,
+                 VzT: np.ndarray | None = None) -> None:
+        """Accumulate the rows given TRANSPOSED, VT (nu + 1, m) (u then tau), with their
+        low-passed P+ (m,) (counted only); VzT the instrument rows (nu + 1, m)."""
+        if VT.shape[1] == 0:
+            return
+        if self.iv and VzT is None:
+            raise RobotIdentError("RowMoments.add_rows: instrument rows missing for IDIM-IV")
+        self.n += VT.shape[1]
+        self.vv[0, 0] += VT @ VT.T
+        if VzT is not None and self.zv is not None and self.zz is not None:
+            self.zv[0, 0] += VzT @ VT.T
+            self.zz[0, 0] += VzT @ VzT.T
+        w = quadrant_weights(pplus - 0.5)
+        self.quadrant_n += (float(w.sum()), float(w.size - w.sum()))
+
+    def add(self, *args, **kwargs) -> None:  # noqa: D102 (the rows are given whole)
+        raise RobotIdentError("RowMoments: rows are given whole (add_rows), not by quadrant")
+
+    def move(self, *args, **kwargs) -> None:  # noqa: D102
+        raise RobotIdentError("RowMoments: rows are given whole; no quadrant to move")

@@ -47,6 +47,16 @@ sign(dq_j), FV_j on dq_j, OFF_j on 1: 4 (p_j + 1) + 6 parameters per joint
 the joint number appended, ``a_m_MX3_3``; the payload torque's products ``a_m{j}``, ...,
 and ``c_m{j}`` ... ``OFF{j}``, as the bilinear form names them). On a one-joint robot this
 is the single-joint ``new_model`` (tests/test_robot_fit.py, tests/test_robot_design.py).
+
+Where the products are formed decides what "the single-joint model" means on filtered data.
+By default the estimator weights the DECIMATED columns by P and E of the decimated samples;
+the single-joint chain forms eq. 42's columns P+ w, P+ E w, P- w, -P- E w, P+- sign,
+P+- E sign at FULL rate and then low-passes and decimates them, and filt(P E w) differs from
+P filt(E) filt(w) wherever P or E varies within the filter's window (a quadrant change; E at
+low velocity). :func:`ident.robot.design.products_columns` forms them at full rate on every
+joint, as the single-joint chain does (``RobotColumns.products``); the products form then
+reads these rows whole (:func:`rows_coefficients`, :class:`~ident.robot.moments.RowMoments`):
+the same parameters and names, on a one-joint robot the single-joint paper fit to 1e-8.
 """
 
 from __future__ import annotations
@@ -60,6 +70,7 @@ from .moments import IDQ, IP, ISG, N_EXTRA, ONE
 
 __all__ = ["PAPER_BLOCK", "USUAL_BLOCK", "PRODUCT_PREFIXES", "paper_coefficients",
            "usual_coefficients", "products_coefficients", "products_names", "products_start",
+           "rows_coefficients",
            "products_size", "paper_start", "batch_coefficients", "require_theta"]
 
 #: Per-joint parameter prefixes of the paper model (ROBOT_FORMAT order).
@@ -193,6 +204,21 @@ def products_coefficients(theta: np.ndarray, blk: np.ndarray, s: int,
     D0[nt + IDQ, tail + 4] = 1.0
     D0[nt + ONE, tail + 5] = 1.0
     return c0, c1, D0, D1
+
+
+def rows_coefficients(theta: np.ndarray, blk: np.ndarray, s: int,
+                      jacobian: bool = True) -> tuple[np.ndarray, ...]:
+    """(c0, c1, D0, D1) of a linear model whose rows are given whole, v = [u, tau]
+    (:class:`~ident.robot.moments.RowMoments`: the products form on the columns formed at full
+    rate, u in :func:`products_names`'s order): c0 = (blk, 0), D0 the identity on u, c1 = D1
+    = 0, the same in both slots ``s`` (only s = 0 holds rows). ``theta``: empty."""
+    nx = blk.shape[0]
+    c0 = np.zeros(nx + 1)
+    c0[:nx] = blk
+    c1 = np.zeros(nx + 1)
+    if not jacobian:
+        return c0, c1
+    return c0, c1, np.eye(nx + 1, nx), np.zeros((nx + 1, nx))
 
 
 def products_start(theta: np.ndarray, usual_blk: np.ndarray) -> np.ndarray:

@@ -12,6 +12,75 @@ from . import RobotIdentError
 
 
 @dataclass(frozen=True)
+class FullRateProducts:
+    """The paper model's eq. 42 columns of every joint formed at FULL rate, then low-passed and
+    decimated with the torque (:func:`ident.robot.design.products_columns`), n decimated
+    samples of k joints: what the single-joint chain's ``LoadDependent`` and
+    ``QuadrantCoulomb`` columns are (:mod:`ident.models`). P+_j, P-_j: the model quadrant
+    (1 + sign(tau_out_hat_j dq_j)) / 2 and its complement (eq. 27-28, 44), E_j =
+    exp(-|dq_j| / q_s,j) (eq. 29), all at full rate.
+
+    Attributes
+    ----------
+    loads : tuple of ndarray, one per joint, shape (4, l_j + 1, n)
+        Joint j's load columns w -- the standard regressor columns ``cols[j]``, then its
+        known torque p_j (payload and known rotors) -- times P+, P+ E, P-, -P- E (the
+        families of a_m, b_m, a_g, b_g, eq. 42-43) [N m per parameter unit].
+    coulomb : ndarray, shape (4, n, k)
+        P+ sign(dq), P+ E sign(dq), P- sign(dq), P- E sign(dq) (c_m, d_m, c_g, d_g).
+    pplus : ndarray, shape (n, k)
+        P+ itself, low-passed and decimated: 1 or 0 away from a quadrant change, fractional
+        where the low-pass blends both quadrants (a row's quadrant: P+ > 1/2 motor).
+    cols : tuple of ndarray of int
+        Per joint, the standard columns (``RobotRegressor.standard_names`` indices) of its
+        load columns: the base parameters' (``BaseParameters.columns``) not structurally
+        zero in its row.
+    q_s : ndarray, shape (k,)
+        The q_s of E [rad/s] per joint.
+    loads_z : tuple of ndarray or None
+        The IDIM-IV instruments of ``loads`` (same shapes): the load columns with the
+        reference trajectory's acceleration, times the same P and E; None: not formed.
+    """
+
+    loads: tuple[np.ndarray, ...]
+    coulomb: np.ndarray
+    pplus: np.ndarray
+    cols: tuple[np.ndarray, ...]
+    q_s: np.ndarray
+    loads_z: tuple[np.ndarray, ...] | None = None
+
+    def check(self, n: int, k: int, source: str) -> None:
+        """Raise :class:`RobotIdentError` unless the shapes fit n samples of k joints."""
+        shapes = {"coulomb": (4, n, k), "pplus": (n, k), "q_s": (k,)}
+        for name, shape in shapes.items():
+            if np.shape(getattr(self, name)) != shape:
+                raise RobotIdentError(f"{source}: columns.products.{name} has shape "
+                                      f"{np.shape(getattr(self, name))}, expected {shape}")
+        if len(self.loads) != k or len(self.cols) != k:
+            raise RobotIdentError(f"{source}: columns.products has {len(self.loads)} load "
+                                  f"blocks and {len(self.cols)} column lists, expected {k}")
+        for name in ("loads", "loads_z"):
+            blocks = getattr(self, name)
+            if blocks is None:
+                continue
+            if len(blocks) != k:
+                raise RobotIdentError(f"{source}: columns.products.{name} has {len(blocks)} "
+                                      f"blocks, expected {k}")
+            for j, (a, c) in enumerate(zip(blocks, self.cols, strict=True)):
+                if np.shape(a) != (4, len(c) + 1, n):
+                    raise RobotIdentError(f"{source}: columns.products.{name}[{j}] has "
+                                          f"shape {np.shape(a)}, expected "
+                                          f"(4, {len(c) + 1}, {n})")
+
+    def take(self, rows: slice | np.ndarray) -> FullRateProducts:
+        """The decimated samples ``rows`` (a chunk)."""
+        return FullRateProducts(tuple(a[:, :, rows] for a in self.loads),
+                                self.coulomb[:, rows], self.pplus[rows], self.cols, self.q_s,
+                                None if self.loads_z is None else
+                                tuple(a[:, :, rows] for a in self.loads_z))
+
+
+@dataclass(frozen=True)
 class RobotColumns:
     """Regressor columns filtered and decimated in parallel with the torque (the single-joint
     chain, :func:`ident.robot.design.design_runs`), n decimated samples of k joints.
@@ -32,6 +101,11 @@ class RobotColumns:
         the guard) and away from the experiment's edges.
     Wz, pz : ndarray or None
         The same with the reference trajectory's acceleration (IDIM-IV instruments).
+    products : FullRateProducts or None
+        The paper model's quadrant and E products formed at full rate
+        (:func:`ident.robot.design.products_columns`), read by
+        ``RobotModel(model="paper", form="products")``; None: that form weights the
+        decimated columns by P and E of the decimated samples.
     """
 
     W: np.ndarray
@@ -40,6 +114,7 @@ class RobotColumns:
     keep: np.ndarray
     Wz: np.ndarray | None = None
     pz: np.ndarray | None = None
+    products: FullRateProducts | None = None
 
     def check(self, n: int, k: int, source: str) -> None:
         """Raise :class:`RobotIdentError` unless the shapes fit n samples of k joints."""
@@ -56,6 +131,8 @@ class RobotColumns:
                                   or np.shape(a)[2] != n):
                 raise RobotIdentError(f"{source}: columns.{name} has shape {np.shape(a)}, "
                                       f"expected ({k}, p, {n})")
+        if self.products is not None:
+            self.products.check(n, k, source)
 
 
 @dataclass(frozen=True)
