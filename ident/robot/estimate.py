@@ -1459,6 +1459,28 @@ class RobotModel(HyperParameters):
                 out[r, j] = self.coef_[self._local(j)] @ self._row_block(cc[6], j, dq[:, j])
         return out
 
+    def fitted_rows(self, signals: RobotSignals) -> np.ndarray:
+        """Which samples of ``signals`` the fit's row rule takes into each joint's rows,
+        shape (n, k) bool: |dq_j| > ``dq_min``, finite torque and regressor, the columns'
+        ``keep`` mask, and (paper model, model quadrants) outside the quadrant band,
+        |tau_out_hat_j| >= ``band_[j]`` with the theta that decided the final quadrants
+        (``quadrant_from_``) -- the rows ``rel_error_`` is measured on."""
+        passes = self._fitted_rows(signals, "fitted_rows")
+        out = np.zeros(signals.tau.shape, dtype=bool)
+        band = np.asarray(getattr(self, "band_", np.zeros(len(self.cols_))), dtype=float)
+        theta = self.quadrant_theta_ if self.quadrant_theta_ is not None else (
+            self.quadrant_from_)
+        keep = None if signals.columns is None else signals.columns.keep
+        for r, j, cols, WjT, pj, dqj, tauj, _sg in passes:
+            ok = (np.abs(dqj) > self.dq_min) & np.isfinite(tauj) & np.all(np.isfinite(WjT),
+                                                                          axis=0)
+            if keep is not None:
+                ok &= keep[r, j]
+            if band[j] > 0 and theta is not None:
+                ok &= np.abs(theta[cols] @ WjT + pj) >= band[j]
+            out[r, j] = ok
+        return out
+
     def load_torque(self, signals: RobotSignals) -> np.ndarray:
         """tau_out_hat (n, k) [N m]: the rigid-body, rotor and payload torque of the fitted
         model, W_j theta + p_j (the load of eq. 17-30, before friction), on ``signals``."""
