@@ -45,7 +45,7 @@ from .results import DEFAULT_BANDS
 from .robot.consistency import check_consistency
 from .robot.consistent_fit import add_consistent, format_record
 from .robot.design import design_runs, resolve_design, sign_checked
-from .robot.estimate import RobotModel
+from .robot.estimate import QUADRANT_TOL, RobotModel
 from .robot.friction_bounds import torque_peak
 from .robot.loaders import (
     RawRobotRun,
@@ -395,6 +395,8 @@ def fit_robot(
                              "not prunable: base parameters, a_m, a_g" + (
                                  "" if prune else ", or --no-prune") + "): kept in the fit, "
                              "their values are not identified")
+        if name == "paper":
+            _settled(est, rec, out["_signals"][0], joints, notes)
         expressions = getattr(est.base_, "expressions", None)
         if expressions:
             rec["base_expressions"] = list(expressions)
@@ -701,6 +703,31 @@ def band_left_out(sel: RobotSignals, every: RobotSignals,
             row[band] = float(1.0 - ok[m].sum() / m.sum()) if m.any() else math.nan
         out[joint] = row
     return out
+
+
+def _settled(est: RobotModel, rec: dict[str, Any], rows_sig: RobotSignals,
+             joints: Sequence[str], notes: list[str]) -> None:
+    """Whether the paper fit settled its quadrants: ``converged``, ``quadrant_drift`` per joint
+    (:meth:`RobotModel.quadrant_drift`) and, where a joint's drift exceeds ``QUADRANT_TOL``,
+    ``rel_error_own_quadrants`` (the fitted parameters on their own quadrants, the same
+    rows) and a note: its reported error is then not the error of its values."""
+    rec["converged"] = bool(getattr(est, "converged_", True))
+    drift = est.quadrant_drift(rows_sig)
+    rec["quadrant_drift"] = {j: float(x) for j, x in zip(joints, drift, strict=True)}
+    bad = [(j, x) for j, x in zip(joints, drift, strict=True) if x > QUADRANT_TOL]
+    if not bad:
+        return
+    own = est.rel_error(replace(rows_sig, tau=np.where(est.fitted_rows(rows_sig), rows_sig.tau,
+                                                       np.nan)))
+    rec["rel_error_own_quadrants"] = {k: float(v) for k, v in own.items()}
+    why = "" if rec["converged"] else " (Gauss-Newton stopped at its iteration limit)"
+    notes.append(
+        f"paper model: the fit did not settle{why}: with its final values the model quadrant "
+        "changes on " + ", ".join(f"{100 * x:.0f} % of {j}'s rows" for j, x in bad)
+        + "; on the same rows their errors are then " + ", ".join(
+            f"{j} {_pct(own[j]).strip()} %" for j, _ in bad)
+        + " (reported: " + ", ".join(f"{_pct(rec['rel_error'][j]).strip()} %" for j, _ in bad)
+        + "), so these joints' paper-model values are not a fit of their own quadrants")
 
 
 def selected(sig: RobotSignals, dq_min: float) -> RobotSignals:

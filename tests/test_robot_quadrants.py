@@ -4,6 +4,9 @@ fit with the one that makes a full pass at every re-decision."""
 
 from __future__ import annotations
 
+import copy
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -120,3 +123,37 @@ def test_start_on_every_stride_th_row_gives_the_same_fit(arm3_short, monkeypatch
     dz = np.abs(b.coef_ - a.coef_) / a.std_
     assert dz.max() <= 0.1, dz.max()
     np.testing.assert_allclose(b.std_, a.std_, rtol=1e-2)
+
+
+def test_quadrant_drift_tells_a_settled_fit_from_an_unsettled_one(arm3_short):
+    """A settled paper fit: its final values decide the quadrants its fit used (drift 0 on
+    every joint) and predict its rows with its reported error. Values moved after the fit
+    (here: theta negated, as a Gauss-Newton stopped at ``max_iter`` leaves them moving) change
+    the quadrant of rows, which quadrant_drift counts on the fitted rows, and predict those
+    rows with another error; the fitted rows themselves stay the fit's (decided by
+    ``quadrant_from_``)."""
+    reg, base, sigs = arm3_short
+    m = RobotModel(reg, "paper", "wls", base=base, quadrant="model").fit(sigs)
+    assert m.converged_ and m.quadrant_from_ is not None
+    rows = [m.fitted_rows(s) for s in sigs]
+    np.testing.assert_array_equal(sum(r.sum(axis=0) for r in rows), m.n_samples_)
+    on_rows = [dataclasses.replace(s, tau=np.where(r, s.tau, np.nan))
+               for s, r in zip(sigs, rows, strict=True)]
+    for s in sigs:
+        np.testing.assert_array_equal(m.quadrant_drift(s), 0.0)
+    own = m.rel_error(on_rows)
+    for j in reg.joints:
+        assert own[j] == pytest.approx(m.rel_error_[j], rel=1e-6), j
+    moved = copy.copy(m)
+    moved.coef_ = m.coef_.copy()
+    # theta negated: the load flips wherever the rigid body outweighs the known payload torque
+    moved.coef_[:m.n_theta_] *= -1.0
+    for s, r in zip(sigs, rows, strict=True):
+        d = moved.quadrant_drift(s)
+        assert np.all(d > 0.25), d
+        np.testing.assert_array_equal(moved.fitted_rows(s), r)
+    worse = moved.rel_error(on_rows)
+    assert all(worse[j] > own[j] for j in reg.joints)
+    # without model quadrants there is nothing to drift
+    measured = RobotModel(reg, "paper", "wls", base=base, quadrant="measured").fit(sigs)
+    np.testing.assert_array_equal(measured.quadrant_drift(sigs[0]), 0.0)

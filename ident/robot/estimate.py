@@ -284,6 +284,9 @@ class RobotModel(HyperParameters):
     n_passes_, n_iter_ : int
         Data passes (the start pass counted as one, even on every ``start_stride_``-th row)
         and Gauss-Newton iterations of the final fit.
+    converged_ : bool
+        False when the paper model's final Gauss-Newton stopped at ``max_iter`` instead of
+        its step tolerance (the parameters still moving; see :meth:`quadrant_drift`).
     start_stride_ : int
         Rows read by the start pass: every start_stride_-th (``START_ROWS``).
     n_store_updates_ : int
@@ -1349,6 +1352,8 @@ class RobotModel(HyperParameters):
         self._statistics(moms, coeffs, x, free, w)
         self.weights_ = w
         self.n_passes_, self.n_iter_ = passes, it
+        # Gauss-Newton stopped by its step tolerance (linear forms: always)
+        self.converged_ = bool(coeffs is not paper_coefficients or it < int(self.max_iter))
         return self
 
     def _payload_groups(self, signals: Any) -> None:
@@ -1480,6 +1485,28 @@ class RobotModel(HyperParameters):
                 ok &= np.abs(theta[cols] @ WjT + pj) >= band[j]
             out[r, j] = ok
         return out
+
+    def quadrant_drift(self, signals: RobotSignals) -> np.ndarray:
+        """Per joint, the share of its fitted rows (:meth:`fitted_rows`) whose model quadrant
+        sign(tau_out_hat dq) with the final theta differs from the one the fit used
+        (``quadrant_from_``), shape (k,); zeros without model quadrants. Above
+        :data:`QUADRANT_TOL` the joint's ``rel_error_`` is not the error of the fitted
+        parameters on their own quadrants (what :meth:`predict` gives): the quadrant passes
+        stopped before the fit settled (``converged_`` False: Gauss-Newton at ``max_iter``)."""
+        k = len(self.cols_)
+        out = np.zeros(k)
+        if self.quadrant_from_ is None or not self._theta_x or self.quadrant_theta_ is not None:
+            return out
+        rows = self.fitted_rows(signals)
+        theta, used = self.coef_[:self.n_theta_], self.quadrant_from_
+        changed = np.zeros(k)
+        for r, j, cols, WjT, pj, dqj, _tau, _sg in self._fitted_rows(signals, "quadrant_drift"):
+            ok = rows[r, j]
+            now = np.sign((theta[cols] @ WjT + pj) * dqj)
+            then = np.sign((used[cols] @ WjT + pj) * dqj)
+            changed[j] += np.count_nonzero((now != then) & ok)
+        n = rows.sum(axis=0)
+        return np.where(n > 0, changed / np.maximum(n, 1), 0.0)
 
     def load_torque(self, signals: RobotSignals) -> np.ndarray:
         """tau_out_hat (n, k) [N m]: the rigid-body, rotor and payload torque of the fitted
