@@ -47,7 +47,7 @@ from __future__ import annotations
 import copy
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -93,7 +93,7 @@ class ConsistentFit:
         Predicted relative growth of the weighted residual sum of squares, d2 / dof.
     rel_error_before, rel_error_after : dict
         ||rho_j|| / ||tau_j|| and "all" of the free and of the consistent model on the
-        signals given (empty when none were).
+        fitted rows of the signals given (empty when none were).
     links : list of dict
         :func:`link_validity` of the consistent standard set.
     solve_s : float
@@ -238,7 +238,9 @@ def fit_consistent(model: Any, signals: Any = None, *, friction: str | None = No
         Fitted (usual or paper model).
     signals : RobotSignals or sequence, optional
         Data to measure the relative errors of the free and the consistent model on (the fit
-        data: ``rel_error_before`` / ``rel_error_after``).
+        data: ``rel_error_before`` / ``rel_error_after``), on the rows the fit used
+        (``RobotModel.fitted_rows``: the free model's error is then its fit's, when its
+        quadrants settled).
     friction : {"profile", "fixed"} or None
         None: "profile" for the usual model, "fixed" for the paper model.
     prior : ndarray (11 k,), optional
@@ -465,9 +467,17 @@ def _finish(model: Any, signals: Any, friction: str, solver: str, status: str,
         solver=solver, status=status, friction_violated=violated, friction_moved=moved,
         friction_d2=fd2, friction_left=left)
     if signals is not None:
-        out.rel_error_before = model.rel_error(signals)
-        out.rel_error_after = consistent_model(model, out).rel_error(signals)
+        rows = _on_fitted_rows(model, signals)
+        out.rel_error_before = model.rel_error(rows)
+        out.rel_error_after = consistent_model(model, out).rel_error(rows)
     return out
+
+
+def _on_fitted_rows(model: Any, signals: Any) -> list[Any]:
+    """``signals`` (one or a sequence) with the torque NaN outside the rows the model's fit
+    used (``RobotModel.fitted_rows``), so that the free model's error is its fit's."""
+    items = signals if isinstance(signals, list | tuple) else [signals]
+    return [replace(s, tau=np.where(model.fitted_rows(s), s.tau, np.nan)) for s in items]
 
 
 def _project_friction(model: Any, coef: np.ndarray, cov: np.ndarray, free: np.ndarray,
