@@ -62,7 +62,8 @@ clock unless said, i.e. simulated time):
     excursion / band on the false logs, the detect log's pushes (detected, delays, crossings
     outside them). The identified filtered figures are checked against those the stages
     recorded (``check_against_recorded``: the comparison is on equal terms). With
-    ``--results FILE`` the figures go to FILE (the work folder is only read).
+    ``--results FILE`` the figures go to FILE (the work folder is only read);
+    ``--thin-bins constant`` calibrates with the rule before the pooled thin bins.
 ``paced``
     ``--paced-seconds`` of the demo's multi-sine on the real-time clock (daq.clock = paced,
     1 kHz) with the monitor checking every cycle, then the same run without the monitor,
@@ -79,6 +80,7 @@ clock unless said, i.e. simulated time):
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import functools
 import json
 import math
@@ -110,7 +112,13 @@ from daq.runtime.monitor import (
     read_monitor,
     residual_for,
 )
-from ident.monitor import ExportedModel, Thresholds, load_exported, thresholds_from_residual
+from ident.monitor import (
+    THIN_BINS,
+    ExportedModel,
+    Thresholds,
+    load_exported,
+    thresholds_from_residual,
+)
 from ident.robot.export_model import friction_record, urdf_text
 from sim_drivers.arm import ArmParams
 from sim_drivers.arm_push import push_torque, staged_push
@@ -437,13 +445,14 @@ def stage_oracle(work: Path) -> dict:
     return out
 
 
-def _evaluate(work: Path, campaign: object, model: ExportedModel, kind: str, gain: float
-              ) -> dict:
+def _evaluate(work: Path, campaign: object, model: ExportedModel, kind: str, gain: float,
+              thin_bins: str = "pooled") -> dict:
     """One residual (``kind``, gain K_O [1/s]) with one model, offline on the logs of the
     calibrate, false and detect stages (:func:`replay`): thresholds from the calibrate logs
     (the live rule: :func:`thresholds_from_residual`, k = 6, peak margin 1.5, the default
-    regime bins), the false logs' crossings and largest |r - centre| / half-width per joint
-    (armed samples), the detect log's pushes (:func:`detect_offline`); with the regime bands
+    regime bins, ``thin_bins`` the rule of the bins with too few samples or episodes), the
+    false logs' crossings and largest |r - centre| / half-width per joint (armed samples),
+    the detect log's pushes (:func:`detect_offline`); with the regime bands
     (``false_alarms``, ``detect``) and with the constant band (``constant_...``)."""
     joints = list(campaign.moving)
     res = [replay(p, campaign, model, kind=kind, gain=gain)
@@ -451,7 +460,8 @@ def _evaluate(work: Path, campaign: object, model: ExportedModel, kind: str, gai
     th = thresholds_from_residual(np.concatenate([r[ml.armed] for ml, r, _ in res]), joints,
                                   DEFAULT_K_SIGMA, f"{kind} offline", DEFAULT_PEAK_MARGIN,
                                   np.concatenate([m[ml.armed] for ml, _, m in res]),
-                                  kind=kind, observer_gain=gain if kind == "observer" else 0.0)
+                                  kind=kind, observer_gain=gain if kind == "observer" else 0.0,
+                                  thin_bins=thin_bins)
     out: dict = {"thresholds": th.to_json()}
     bands = {"": th, "constant_": th.constant()}  # the regime bands, and the constant band
     false_n = {t: np.zeros(len(joints), int) for t in bands}
@@ -489,20 +499,25 @@ def _pushes_key(pushes: list) -> list:
             for p in pushes]
 
 
-def stage_observer(work: Path, gain: float, kinds: tuple[str, ...] = RESIDUALS) -> dict:
+def stage_observer(work: Path, gain: float, kinds: tuple[str, ...] = RESIDUALS,
+                   thin_bins: str = "pooled") -> dict:
     """Offline, on the logs of the calibrate, false and detect stages: the filtered residual
     and the momentum observer's (gain K_O [1/s]) side by side, with the identified model
     (DIR/model) and with the simulator's own parameters (:func:`truth_model`, the oracle);
-    :func:`_evaluate` each (``kinds``: the residuals to evaluate). The identified filtered
-    figures are checked against the ones the stages recorded in DIR/bench_monitor.json (the
-    same rule: ``check_against_recorded``)."""
+    :func:`_evaluate` each (``kinds``: the residuals to evaluate; ``thin_bins``: the rule of
+    the regime bins with too few samples or episodes, ``ident.monitor.THIN_BINS``). The
+    identified filtered figures are checked against the ones the stages recorded in
+    DIR/bench_monitor.json (``check_against_recorded``: the thresholds' statistics always;
+    the false alarms and detections are the same only with the rule the live calibration
+    file has, ``constant`` for files written before the key)."""
     _, c = _source()
     models = {"identified": load_exported(work / "model"), "oracle": truth_model(c)}
-    out: dict = {"gain_per_s": gain, "figures": {}}
+    out: dict = {"gain_per_s": gain, "thin_bins": thin_bins, "figures": {}}
     for name, model in models.items():
         for kind in kinds:
             t0 = time.perf_counter()
-            out["figures"][f"{name}/{kind}"] = _evaluate(work, c, model, kind, gain)
+            out["figures"][f"{name}/{kind}"] = _evaluate(work, c, model, kind, gain,
+                                                         thin_bins)
             print(f"  observer stage: {name}/{kind} in {time.perf_counter() - t0:.0f} s",
                   file=sys.stderr)
     out["check_against_recorded"] = chk = {}
@@ -511,7 +526,8 @@ def stage_observer(work: Path, gain: float, kinds: tuple[str, ...] = RESIDUALS) 
     store = work / "bench_monitor.json"
     rec = json.loads(store.read_text()) if store.is_file() else {}
     mine = out["figures"]["identified/filtered"]
-    live = Thresholds.read(work / "calibrate" / "thresholds.json").to_json()["regime"]
+    live = dataclasses.replace(Thresholds.read(work / "calibrate" / "thresholds.json"),
+                               thin_bins=thin_bins).to_json()["regime"]
     chk["thresholds_max_diff_Nm"] = float(max(
         np.abs(np.array(mine["thresholds"]["regime"][b]) - np.array(live[b])).max()
         for b in ("lower", "upper")))
@@ -540,7 +556,8 @@ def print_observer(res: dict) -> None:
     """The observer stage's tables (regime bands, then the constant band): per pushed link
     and force, detected of 3 and delays [ms]; per joint, false alarms and the largest
     excursion / band; for each model and residual."""
-    print(f"observer stage (K_O = {res['gain_per_s']:g} 1/s), offline on the same logs; "
+    print(f"observer stage (K_O = {res['gain_per_s']:g} 1/s, thin bins "
+          f"{res.get('thin_bins', 'constant')}), offline on the same logs; "
           "check against the recorded filtered figures: " + json.dumps(
               res["check_against_recorded"]))
     for band in ("", "constant_"):
@@ -788,6 +805,10 @@ def main() -> None:
     ap.add_argument("--residuals", default=",".join(RESIDUALS),
                     help="observer stage: the residuals to evaluate, comma-separated "
                     "(default: filtered,observer)")
+    ap.add_argument("--thin-bins", choices=THIN_BINS, default=THIN_BINS[0],
+                    help="observer stage: what a regime bin with too few samples or episodes "
+                    "takes (default pooled; constant: the rule before, to compare with "
+                    "figures recorded by it)")
     ap.add_argument("--results", type=Path, default=None,
                     help="where the figures are stored (default DIR/bench_monitor.json)")
     ap.add_argument("stages", nargs="+", choices=("model", "calibrate", "false", "detect",
@@ -816,7 +837,7 @@ def main() -> None:
             if not kinds or not set(kinds) <= set(RESIDUALS):
                 raise SystemExit(f"--residuals {a.residuals!r}: expected some of "
                                  f"{','.join(RESIDUALS)}")
-            res["observer"] = stage_observer(a.work, a.observer_gain, kinds)
+            res["observer"] = stage_observer(a.work, a.observer_gain, kinds, a.thin_bins)
         elif st == "paced":
             res["paced"] = stage_paced(a.work, a.paced_seconds, a.realtime, a.paced_repeat)
         if st != "report":

@@ -44,7 +44,7 @@ from .robot.export_model import FRICTION_FORMAT, friction_record, urdf_text
 from .vocab import upgrade_record
 
 __all__ = ["DEFAULT_EDGES_S", "DEFAULT_MIN_EPISODES", "DEFAULT_MIN_SAMPLES",
-           "RESIDUAL_KINDS", "THRESHOLDS_FORMAT", "Thresholds", "TorquePredictor",
+           "RESIDUAL_KINDS", "THIN_BINS", "THRESHOLDS_FORMAT", "Thresholds", "TorquePredictor",
            "exported_from_fit", "load_exported", "load_model", "thresholds_from_residual"]
 
 THRESHOLDS_FORMAT = "jointid-monitor-thresholds/2"
@@ -352,6 +352,11 @@ DEFAULT_MIN_SAMPLES = 1000
 #: ... or entered fewer times than this (separate motions): the chance that the next motion
 #: in the bin goes beyond all N seen is 1 / (N + 1), here < 5 % (before the peak margin)
 DEFAULT_MIN_EPISODES = 20
+#: what a bin without its own statistics (too few samples or episodes) takes: ``pooled``
+#: (default of a new calibration) its samples pooled with the nearest shorter bins until
+#: they are enough, that band intersected with the constant band; ``constant`` the joint's
+#: constant band (files written before the key: their bands are unchanged)
+THIN_BINS = ("pooled", "constant")
 
 
 def _band(mean: float, sigma: float, peak: float, k_sigma: float, margin: float
@@ -359,6 +364,21 @@ def _band(mean: float, sigma: float, peak: float, k_sigma: float, margin: float
     """(lower, upper) [N m] of ``mean +- max(k_sigma, margin peak) sigma``."""
     h = sigma * max(k_sigma, margin * peak)
     return mean - h, mean + h
+
+
+def _pooled(n: Sequence[int], mean: Sequence[float], sigma: Sequence[float],
+            peak: Sequence[float]) -> tuple[float, float, float]:
+    """(mean [N m], standard deviation [N m], peak [sigma]) of the samples of several bins
+    together, from each bin's count, mean, standard deviation and peak: mean and spread
+    exact, the peak bounded by ``max |mean_i - mean| + peak_i sigma_i`` (each bin's
+    farthest sample lies at most that far from the pooled mean)."""
+    total = sum(n)
+    m = sum(k * x for k, x in zip(n, mean, strict=True)) / total
+    sd = math.sqrt(sum(k * (s * s + (x - m) ** 2)
+                       for k, x, s in zip(n, mean, sigma, strict=True)) / total)
+    far = max(abs(x - m) + p * s for k, x, s, p in zip(n, mean, sigma, peak, strict=True)
+              if k)
+    return m, sd, (far / sd if sd > 0 else 0.0)
 
 
 @dataclass(frozen=True)
@@ -393,7 +413,13 @@ class Thresholds:
     bin_episodes : tuple of tuple of int
         Per joint and bin: times the validation entered it (separate motions).
     min_samples, min_episodes : int
-        A bin with fewer samples or episodes (or no spread) takes the joint's constant band.
+        A bin with fewer samples or episodes (or no spread) has no band of its own.
+    thin_bins : str
+        What such a bin takes (:data:`THIN_BINS`): ``pooled``, the band of its samples
+        pooled with the nearest shorter bins (moving time below it) until the pool has
+        ``min_samples`` samples and ``min_episodes`` entries, intersected with the constant
+        band (both hold every validation sample of the bin; the joint's constant band when
+        no pool qualifies); ``constant``, the constant band.
     residual : str
         The residual the statistics are of (:data:`RESIDUAL_KINDS`): ``filtered`` or
         ``observer`` (the generalized-momentum observer, docs/monitoring.md).
@@ -420,6 +446,7 @@ class Thresholds:
     min_episodes: int = DEFAULT_MIN_EPISODES
     residual: str = "filtered"
     observer_gain: float = 0.0
+    thin_bins: str = "pooled"
 
     @property
     def half_width(self) -> list[float]:
@@ -454,20 +481,39 @@ class Thresholds:
 
     def bands(self) -> tuple[list[list[float]], list[list[float]]]:
         """(lower, upper) [N m] per joint and regime bin: the bin's own band where
-        :attr:`bin_used`, the joint's constant band elsewhere; one bin per joint (the
-        constant band) without regime bins."""
+        :attr:`bin_used`, elsewhere the :attr:`thin_bins` rule (pooled with the nearest
+        shorter bins, or the joint's constant band); one bin per joint (the constant band)
+        without regime bins."""
         if not self.regime:
             return [[x] for x in self.lower], [[x] for x in self.upper]
         lo: list[list[float]] = []
         hi: list[list[float]] = []
         for j, used in enumerate(self.bin_used):
-            c = (self.lower[j], self.upper[j])
             b = [_band(self.bin_mean[j][i], self.bin_sigma[j][i], self.bin_peak[j][i],
-                       self.k_sigma, self.peak_margin) if u else c
+                       self.k_sigma, self.peak_margin) if u else self._thin_band(j, i)
                  for i, u in enumerate(used)]
             lo.append([x for x, _ in b])
             hi.append([x for _, x in b])
         return lo, hi
+
+    def _thin_band(self, j: int, i: int) -> tuple[float, float]:
+        """The band [N m] of joint j's bin i, which has no statistics of its own
+        (:attr:`thin_bins`)."""
+        c = (self.lower[j], self.upper[j])
+        if self.thin_bins != "pooled":
+            return c
+        for a in range(i - 1, -1, -1):  # the nearest shorter bins first
+            n = self.bin_samples[j][a:i + 1]
+            # a motion enters bins a..i through bin a (the moving time grows one cycle at a
+            # time or restarts at 0): the pool's episodes are bin a's
+            if sum(n) < self.min_samples or self.bin_episodes[j][a] < self.min_episodes:
+                continue
+            m, sd, pk = _pooled(n, self.bin_mean[j][a:i + 1], self.bin_sigma[j][a:i + 1],
+                                self.bin_peak[j][a:i + 1])
+            if sd > 0:
+                p = _band(m, sd, pk, self.k_sigma, self.peak_margin)
+                return max(p[0], c[0]), min(p[1], c[1])
+        return c
 
     def constant(self) -> Thresholds:
         """The same statistics without the regime bins: the constant band (format /1)."""
@@ -501,7 +547,8 @@ class Thresholds:
                 "peak_sigmas": [list(x) for x in self.bin_peak],
                 "samples": [list(x) for x in self.bin_samples],
                 "episodes": [list(x) for x in self.bin_episodes],
-                "own": self.bin_used, "lower": lo, "upper": hi}
+                "own": self.bin_used, "thin_bins": self.thin_bins, "lower": lo,
+                "upper": hi}
         return d
 
     @classmethod
@@ -587,9 +634,13 @@ def _read_regime(p: Path, reg: Any, th: Thresholds) -> Thresholds:
                             f"of {shape[1]} values (one per bin)")
     if any(x < 0 for t in (tabs[1], counts, eps) for row in t for x in row):
         raise DataError(f"{p}: regime.sigma, samples, episodes: expected numbers >= 0")
+    thin = reg.get("thin_bins", "constant")  # before the key: the constant band
+    if thin not in THIN_BINS:
+        raise DataError(f"{p}: regime.thin_bins: expected one of {', '.join(THIN_BINS)}, "
+                        f"got {thin!r}")
     return dataclasses.replace(th, edges_s=edges, bin_mean=tabs[0], bin_sigma=tabs[1],
                                bin_peak=tabs[2], bin_samples=counts, bin_episodes=eps,
-                               min_samples=mins, min_episodes=mine)
+                               min_samples=mins, min_episodes=mine, thin_bins=thin)
 
 
 def _stats(x: np.ndarray) -> tuple[float, float, float]:
@@ -607,15 +658,16 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
                              edges_s: Sequence[float] = DEFAULT_EDGES_S,
                              min_samples: int = DEFAULT_MIN_SAMPLES,
                              min_episodes: int = DEFAULT_MIN_EPISODES,
-                             kind: str = "filtered", observer_gain: float = 0.0
-                             ) -> Thresholds:
+                             kind: str = "filtered", observer_gain: float = 0.0,
+                             thin_bins: str = "pooled") -> Thresholds:
     """Thresholds from a residual (n, k) [N m] recorded without collision: per joint the
     mean, standard deviation and peak of its samples off the static band (residual not
     exactly 0; near rest the model predicts an interval, :meth:`TorquePredictor.band`);
     with ``moving_s`` (n, k) [s] (each sample's moving time, the monitor's; the samples in
     time order), the same per bin of ``edges_s``, and how many times each bin was entered
     (episodes: separate motions). ``kind`` and ``observer_gain`` [1/s] say which
-    residual it is (recorded in the file, :class:`Thresholds`).
+    residual it is (recorded in the file, :class:`Thresholds`); ``thin_bins`` what a bin
+    with too few samples or episodes takes (:data:`THIN_BINS`).
 
     Raises
     ------
@@ -637,6 +689,9 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
     if not (int(min_samples) >= 1 and int(min_episodes) >= 1):
         raise DataError(f"regime min_samples, min_episodes: expected integers >= 1, got "
                         f"{min_samples}, {min_episodes}")
+    if thin_bins not in THIN_BINS:
+        raise DataError(f"thin_bins: expected one of {', '.join(THIN_BINS)}, got "
+                        f"{thin_bins!r}")
     s = None
     if moving_s is not None:
         s = np.asarray(moving_s, dtype=float)
@@ -678,4 +733,4 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
         bin_sigma=tuple(tuple(v[1] for v in bj) for bj in bins),
         bin_peak=tuple(tuple(v[2] for v in bj) for bj in bins),
         bin_samples=tuple(counts), bin_episodes=tuple(episodes),
-        min_samples=int(min_samples), min_episodes=int(min_episodes))
+        min_samples=int(min_samples), min_episodes=int(min_episodes), thin_bins=thin_bins)

@@ -5,6 +5,7 @@ file (format /2, /1 still read)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -153,7 +154,8 @@ def test_push_in_steady_motion_flagged_reversal_peak_not(validation):
 def test_sparse_bins_take_the_constant_band():
     """A bin with fewer validation samples than min_samples, or entered fewer times than
     min_episodes (separate motions), takes the joint's constant band, whatever its own
-    spread."""
+    spread, when no pool with shorter bins has enough (the first bin has none; here every
+    bin was entered 50 times, fewer than 51)."""
     rng = np.random.default_rng(3)
     m = np.tile(np.arange(100) * 0.02, 50)[:, None]  # 50 motions of 2 s each
     r = rng.normal(0.0, 0.1, m.shape)
@@ -175,6 +177,58 @@ def test_sparse_bins_take_the_constant_band():
         thresholds_from_residual(r, ["a"], 6.0, moving_s=m, edges_s=(1.0, 0.5))
 
 
+def _thin_last_bin(seed: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Validation residual (n, 1) [N m] and moving time (n, 1) [s] of 60 motions, 50 of 0.5 s
+    and 10 of 2 s (edges 0.1, 1 s: the last bin entered 10 times): wide in the first 0.1 s
+    of each motion (sd 1 N m, the start transient), narrow after (sd 0.1 N m)."""
+    rng = np.random.default_rng(seed)
+    m = np.concatenate([np.arange(n) * 0.01 for n in [50] * 50 + [200] * 10])[:, None]
+    r = np.where(m < 0.1, rng.normal(0.0, 1.0, m.shape), rng.normal(0.05, 0.1, m.shape))
+    return r, m
+
+
+def test_thin_bin_is_pooled_with_the_nearest_shorter_bins():
+    """A bin entered too few times (the last: 10 of 20 motions reach it) takes the band of
+    its samples pooled with the nearest shorter bin that makes the pool enough (mean and
+    spread those of the pooled samples; every one of them inside): a few times narrower
+    than the constant band, which the start transients set, so a 1 N m step while the joint
+    has moved for more than 1 s is outside it (inside the constant band, the ``constant``
+    rule); the pool never widens a band beyond the constant one."""
+    r, m = _thin_last_bin()
+    th = thresholds_from_residual(r, ["a"], 6.0, moving_s=m, edges_s=(0.1, 1.0),
+                                  min_samples=300, min_episodes=20, peak_margin=1.5)
+    assert th.thin_bins == "pooled"
+    assert th.bin_episodes[0] == (60, 60, 10) and th.bin_used[0] == [True, True, False]
+    lo, hi = (np.array(x[0]) for x in th.bands())
+    pool = r[m >= 0.1]  # bins 1 and 2: the thin bin and its shorter neighbour
+    assert (lo[2] + hi[2]) / 2 == pytest.approx(pool.mean(), abs=1e-12)
+    assert np.all((pool > lo[2]) & (pool < hi[2]))  # every validation sample of the pool
+    half = (hi[2] - lo[2]) / 2
+    assert half >= 1.5 * np.abs(pool - pool.mean()).max() - 1e-12  # peak margin kept
+    assert half >= 6.0 * pool.std() - 1e-12
+    assert half < th.half_width[0] / 3
+    step = 0.05 + 1.0  # the residual's mean in steady motion plus a 1 N m push
+    assert step > hi[2] and th.lower[0] < step < th.upper[0]
+    const = dataclasses.replace(th, thin_bins="constant")
+    assert [x[0][2] for x in const.bands()] == [th.lower[0], th.upper[0]]
+    assert const.bands()[0][0][:2] == th.bands()[0][0][:2]  # own bins unchanged
+    # a thin bin right after the wide first one (one sample per motion): pooled with the
+    # start transients, 6 sigma of the pool is wider than the constant band (its peak;
+    # narrow samples dominate its sigma): the band stays the constant one
+    t2 = thresholds_from_residual(r, ["a"], 6.0, moving_s=m, edges_s=(0.1, 0.105, 1.0),
+                                  min_samples=300, min_episodes=20, peak_margin=1.0)
+    assert t2.bin_used[0] == [True, False, True, False]
+    n0, n1 = t2.bin_samples[0][:2]
+    sd01 = math.sqrt((n0 * (t2.bin_sigma[0][0] ** 2 + t2.bin_mean[0][0] ** 2) + n1 * (
+        t2.bin_sigma[0][1] ** 2 + t2.bin_mean[0][1] ** 2)) / (n0 + n1))  # about the pool's 0
+    assert 6.0 * sd01 > 1.3 * t2.half_width[0]  # the pool alone would widen bin 1
+    lo2, hi2 = (x[0] for x in t2.bands())
+    assert (lo2[1], hi2[1]) == (t2.lower[0], t2.upper[0])
+    assert hi2[3] < t2.upper[0] / 2  # the last bin pooled with the third (narrow)
+    with pytest.raises(DataError, match="thin_bins"):
+        thresholds_from_residual(r, ["a"], 6.0, moving_s=m, thin_bins="widest")
+
+
 def test_thresholds_file_v2_round_trip_v1_read_bad_regime(tmp_path, validation):
     p = tmp_path / "th.json"
     d = validation.to_json()
@@ -189,8 +243,22 @@ def test_thresholds_file_v2_round_trip_v1_read_bad_regime(tmp_path, validation):
     old = Thresholds.read(p)
     assert not old.regime and old.bands() == ([[x] for x in validation.lower],
                                                [[x] for x in validation.upper])
+    # a /2 file written before the thin-bin rule: its thin bins keep the constant band
+    r, m = _thin_last_bin()
+    th = thresholds_from_residual(r, ["a"], 6.0, moving_s=m, edges_s=(0.1, 1.0),
+                                  min_samples=300, min_episodes=20)
+    dt = th.to_json()
+    assert dt["regime"]["thin_bins"] == "pooled"
+    p.write_text(json.dumps(dt))
+    assert Thresholds.read(p) == th
+    p.write_text(json.dumps({**dt, "regime": {k: v for k, v in dt["regime"].items()
+                                              if k != "thin_bins"}}))
+    before = Thresholds.read(p)
+    assert before.thin_bins == "constant" and before.bands()[1][0][2] == th.upper[0]
+    assert before.bands()[1][0][2] > th.bands()[1][0][2]
     bad = tmp_path / "bad.json"
     for reg, what in (({**d["regime"], "sigma": [[1.0]]}, "regime.sigma"),
+                      ({**d["regime"], "thin_bins": "widest"}, "regime.thin_bins"),
                       ({**d["regime"], "edges_s": [0.5, 0.1, 1, 2]}, "edges_s"),
                       ({**d["regime"], "variable": "speed"}, "variable")):
         bad.write_text(json.dumps({**d, "regime": reg}))

@@ -488,7 +488,7 @@ def _bin_names(edges: list[float]) -> list[str]:
 
 def _regime_section(reg: dict[str, Any], joints: list[str]) -> Section:
     """Half-width [N m], samples and episodes of the regime bins per joint ('*': too few,
-    the constant band)."""
+    pooled with the shorter bins or the constant band)."""
     rows = []
     for j, name in enumerate(joints):
         rows.append([name] + [
@@ -499,7 +499,10 @@ def _regime_section(reg: dict[str, Any], joints: list[str]) -> Section:
         "Band half-width [N m] (validation samples, episodes) per bin of the joint's moving "
         "time (time its filtered velocity has kept its sign above the rest velocity: 0 at "
         f"rest, at a reversal, at breakaway). *: fewer than {reg['min_samples']} samples "
-        f"or {reg['min_episodes']} episodes, the constant band.").table(
+        f"or {reg['min_episodes']} episodes, " + (
+            "pooled with the nearest shorter bins that make enough, within the constant "
+            "band" if reg.get("thin_bins") == "pooled" else "the constant band")
+        + ".").table(
             ["joint", *_bin_names(reg["edges_s"])], rows)
 
 
