@@ -697,7 +697,9 @@ def report(work: Path, res: dict) -> None:
             blo, bhi = th.bands()
             print(f"  regime bands, half-width [N m] (samples, episodes) per moving-time bin "
                   f"(edges {list(th.edges_s)} s; *: < {th.min_samples} samples or "
-                  f"{th.min_episodes} episodes, constant):")
+                  f"{th.min_episodes} episodes, "
+                  + ("pooled with shorter bins, within the constant band):"
+                     if th.thin_bins == "pooled" else "constant):"))
             for j, name in enumerate(joints):
                 print(f"    {name}: " + "  ".join(
                     f"{(b - a) / 2:.3g}{'' if u else '*'} ({n}, {e})" for a, b, u, n, e in zip(
