@@ -39,7 +39,13 @@ from trajectories.friction import DEFAULT_Q_S
 from trajectories.robot import RobotPayloadData, RobotRegressor, base_parameters, one_joint_robot
 
 from . import DataError
-from .chain import ChainSettings
+from .chain import (
+    ChainSettings,
+    RawExperiment,
+    decimation_index,
+    filter_experiment,
+    selection,
+)
 from .estimate import DEFAULT_THRESHOLD_PCT
 from .loaders import Experiment
 from .models import new_model, usual_model
@@ -47,12 +53,13 @@ from .robot import RobotIdentError
 from .robot.base import single_joint_map
 from .robot.design import design_runs, products_columns, resolve_design, sign_checked
 from .robot.estimate import RobotModel
-from .robot.loaders import RawRobotRun
+from .robot.loaders import RawRobotRun, chain_period
 from .robot.signals import RobotSignals
 from .signals import G
 from .vocab import model_name
 
-__all__ = ["OneJointModel", "OneJointFit", "fit_one_joint", "SIGN_CHECK_MIN_KEPT"]
+__all__ = ["OneJointModel", "OneJointFit", "OneJointProblem", "fit_one_joint",
+           "SIGN_CHECK_MIN_KEPT"]
 
 #: The sign check is skipped when it would keep fewer samples than this fraction (as
 #: :data:`ident.fitting.SIGN_CHECK_MIN_KEPT`).
@@ -256,6 +263,7 @@ def fit_one_joint(
     cutoff_hz: float | None = None,
     decimation: int | None = None,
     dq_min: float | None = None,
+    tau_min: float | None = None,
     trim: int | None = None,
     guard: int | None = None,
     sign_check: bool = True,
@@ -276,7 +284,7 @@ def fit_one_joint(
         q_s of the paper model [rad/s].
     joint : {"revolute", "prismatic"}, bool or None
         Overrides the joint kind of the experiments.
-    cutoff_hz, decimation, dq_min, trim, guard
+    cutoff_hz, decimation, dq_min, tau_min, trim, guard
         The chain's settings (None: chosen from the data as
         :func:`ident.preprocess.build_design` does).
     sign_check, eliminate, threshold_pct, references, torque_delay, payload
@@ -321,60 +329,175 @@ def fit_one_joint(
         delay = None
     else:
         delay = float(torque_delay)
-    thr = DEFAULT_THRESHOLD_PCT if threshold_pct is None else float(threshold_pct)
     refs = _references(exps, references)
-    iv = refs is not None
-    method = "iv" if iv else "ls"
-    runs = _runs(exps, revolute, has_payload, refs)
-    reg = RobotRegressor(one_joint_robot("revolute" if revolute else "prismatic", gravity=G))
-    base = base_parameters(reg)
-    smap = single_joint_map(base, reg)
+    problem = OneJointProblem(exps, revolute=revolute, has_payload=has_payload,
+                              references=refs, paper="paper" in models,
+                              sign_check=sign_check, tau_min=tau_min, cutoff_hz=cutoff_hz,
+                              decimation=decimation, dq_min=dq_min, trim=trim, guard=guard,
+                              torque_delay=delay)
     notes: list[str] = []
     if not has_payload:
         notes.append("no run carries a payload: the payload term (Ma_ratio / a_m, b_m...) is "
                      "left out")
     if not revolute:
         notes.append("prismatic joint: no gravity columns (MX, MY)")
-    try:
-        settings = resolve_design(runs, instruments=iv, cutoff_hz=cutoff_hz,
-                                  decimation=decimation, trim=trim, guard=guard,
-                                  torque_delay=delay, dq_min=dq_min)
-        sig, dqm = design_runs(runs, reg, settings, instruments=iv, base=base)
-        settings = replace(settings, dq_min=dqm)
-        first = None
-        checked = False
-        load = None
-        if "paper" in models:
-            if sign_check:
-                first = RobotModel(reg, "usual", method, base=base,
-                                   payload_ratio=has_payload).fit(sig)
-                out, kept = sign_checked(sig, runs, settings, first.load_torque,
-                                         SIGN_CHECK_MIN_KEPT)
-                if kept[0] >= SIGN_CHECK_MIN_KEPT:
-                    sig, checked, load = out, True, first.load_torque
+    fitted = {name: problem.fit(name, q_s, eliminate=eliminate, threshold_pct=threshold_pct)
+              for name in models}
+    return OneJointFit(models=fitted, q_s=q_s, revolute=revolute, has_payload=has_payload,
+                       settings=problem.settings, notes=notes + problem.notes,
+                       first=problem.first, sign_checked=problem.sign_checked)
+
+
+class OneJointProblem:
+    """The experiments of one joint prepared for the robot fits (module doc, 1.-3.), fitted
+    by :meth:`fit` for any model and q_s (the products re-formed per q_s).
+
+    Parameters
+    ----------
+    exps : sequence of Experiment
+    revolute, has_payload : bool
+        The joint kind; the payload term (the runs' payloads dropped when False).
+    references : list of ndarray or None
+        The reference position of each experiment (IDIM-IV), or None (LS).
+    paper : bool
+        The paper model will be fitted: the sign check (``sign_check``) and its load model.
+    sign_check : bool
+        As in :func:`ident.fitting.fit_models`.
+    first : RobotModel or None
+        A first usual fit to take as the load model instead of fitting one (Table IV: the
+        load model of all the experiments on those without payload); its sign check is
+        applied without the ``SIGN_CHECK_MIN_KEPT`` test (``first_checked``: whether it was
+        applied on the data it was fitted on).
+    tau_min : float or None
+        Rows within the guard of a full-rate sample with |tau| < tau_min (the low-passed
+        torque) are left out too, as :func:`ident.preprocess.build_design` does.
+    **settings
+        ``cutoff_hz``, ``decimation``, ``dq_min``, ``trim``, ``guard``, ``torque_delay``
+        (None: chosen from the data).
+
+    Attributes
+    ----------
+    settings : ChainSettings
+        Resolved.
+    signals : RobotSignals
+        The columns chain's signals, after the sign check.
+    first : RobotModel or None
+    sign_checked : bool
+    notes : list of str
+        The sign check skipped.
+    """
+
+    def __init__(self, exps: Sequence[Experiment], *, revolute: bool, has_payload: bool,
+                 references: list[np.ndarray] | None, paper: bool, sign_check: bool = True,
+                 first: RobotModel | None = None, first_checked: bool = True,
+                 tau_min: float | None = None, **settings: float | None) -> None:
+        self.revolute, self.has_payload = revolute, has_payload
+        self.iv = references is not None
+        self.method = "iv" if self.iv else "ls"
+        self.runs = _runs(exps, revolute, has_payload, references)
+        self.reg = RobotRegressor(one_joint_robot("revolute" if revolute else "prismatic",
+                                                  gravity=G))
+        self.base = base_parameters(self.reg)
+        self.smap = single_joint_map(self.base, self.reg)
+        self.notes: list[str] = []
+        self.first = first
+        self.sign_checked = False
+        self._products: dict[float, RobotSignals] = {}
+        try:
+            st = resolve_design(self.runs, instruments=self.iv, **settings)
+            sig, dqm = design_runs(self.runs, self.reg, st, instruments=self.iv,
+                                   base=self.base)
+            self.settings = st = replace(st, dq_min=dqm)
+            tau_keep = None
+            if tau_min is not None:
+                tau_keep = self._tau_keep(sig, float(tau_min))
+                sig = replace(sig, columns=replace(sig.columns, keep=sig.columns.keep
+                                                   & tau_keep))
+            if paper and sign_check and first is None:
+                self.first = RobotModel(self.reg, "usual", self.method, base=self.base,
+                                        payload_ratio=has_payload).fit(sig)
+            if paper and self.first is not None and (first is None or first_checked):
+                out, kept = sign_checked(sig, self.runs, st, self.first.load_torque)
+                if tau_keep is not None:  # the check's rows recomputed: tau_min again
+                    keep = out.columns.keep & tau_keep
+                    out = replace(out, columns=replace(out.columns, keep=keep))
+                    kept = keep.sum(axis=0) / np.maximum(sig.columns.keep.sum(axis=0), 1)
+                if kept[0] >= SIGN_CHECK_MIN_KEPT or first is not None:
+                    sig, self.sign_checked = out, True
                 else:
-                    notes.append(
+                    self.notes.append(
                         f"sign check skipped: it would keep only {100 * kept[0]:.0f} % of the "
                         "samples (tau_out near zero over much of the data: no gravity or "
                         "payload load), so sign(P) = sign(tau dq) of eq. 26 is used as is")
-            if load is None:  # the measured quadrant sign(tau dq) (eq. 26): the filtered
-                # torque of the full-rate signals products_columns forms
-                def load(s: RobotSignals) -> np.ndarray:
-                    return s.tau
-            sig = products_columns(sig, runs, reg, settings, load, q_s, base=base,
-                                   instruments=iv)
-        fitted: dict[str, OneJointModel] = {}
-        for name in models:
+        except RobotIdentError as err:
+            raise DataError(str(err)) from None
+        self.signals = sig
+
+    def _tau_keep(self, sig: RobotSignals, tau_min: float) -> np.ndarray:
+        """The rows (n, 1) not within the guard of a full-rate |tau_f| < ``tau_min``, of the
+        stiction area or of the edges (:func:`ident.chain.selection`)."""
+        st = self.settings
+        dt = chain_period(self.runs)
+        keep = np.zeros((sig.n, 1), dtype=bool)
+        for i, run in enumerate(self.runs):
+            f = filter_experiment(RawExperiment(run.source, run.q, run.tau), dt, st,
+                                  error=RobotIdentError)
+            rows = np.flatnonzero(sig.experiment == i)
+            keep[rows] = selection(f.dq, st.dq_min, st.guard,
+                                   decimation_index(f.n, st.decimation),
+                                   np.abs(f.tau_f) < tau_min)
+        return keep
+
+    def load_values(self) -> dict[str, float]:
+        """The first usual fit's load parameters by the single-joint names (J, MX, MY,
+        Ma_ratio): the ``load_model`` of :func:`ident.preprocess.build_design`."""
+        if self.first is None:
+            raise DataError("no first usual fit (the sign check was not made)")
+        out = self.smap.values(self.first.coef_[:self.first.n_base_])
+        if "Ma_ratio" in self.first.params_:
+            out["Ma_ratio"] = self.first.params_["Ma_ratio"]
+        return out
+
+    def _load(self, s: RobotSignals) -> np.ndarray:
+        """The load deciding the quadrants: the first fit's tau_out_hat after the sign
+        check, else the measured quadrant sign(tau dq) (eq. 26) -- the filtered torque of the
+        full-rate signals :func:`~ident.robot.design.products_columns` forms."""
+        if self.sign_checked and self.first is not None:
+            return self.first.load_torque(s)
+        return s.tau
+
+    def products(self, q_s: float) -> RobotSignals:
+        """The signals with eq. 42's columns formed at full rate for ``q_s`` [rad/s]
+        (the last one kept)."""
+        q_s = float(q_s)
+        if q_s not in self._products:
+            self._products = {q_s: products_columns(
+                self.signals, self.runs, self.reg, self.settings, self._load, q_s,
+                base=self.base, instruments=self.iv)}
+        return self._products[q_s]
+
+    def fit(self, name: str, q_s: float = DEFAULT_Q_S, *, eliminate: bool = True,
+            threshold_pct: float | None = None) -> OneJointModel:
+        """Fit model ``name`` ("usual" or "paper", q_s [rad/s]) through RobotModel."""
+        thr = DEFAULT_THRESHOLD_PCT if threshold_pct is None else float(threshold_pct)
+        q_s = float(q_s)
+        if not q_s > 0:
+            raise DataError(f"q_s must be positive [rad/s], got {q_s}")
+        try:
             if name == "usual":
-                est = RobotModel(reg, "usual", method, base=base, payload_ratio=has_payload,
-                                 eliminate=eliminate, threshold_pct=thr).fit(sig)
-                single = usual_model(revolute, payload=has_payload).names()
+                sig = self.signals
+                est = RobotModel(self.reg, "usual", self.method, base=self.base,
+                                 payload_ratio=self.has_payload, eliminate=eliminate,
+                                 threshold_pct=thr).fit(sig)
+                single = usual_model(self.revolute, payload=self.has_payload).names()
+            elif name == "paper":
+                sig = self.products(q_s)
+                est = RobotModel(self.reg, "paper", self.method, base=self.base,
+                                 form="products", q_s=q_s, eliminate=eliminate,
+                                 threshold_pct=thr).fit(sig)
+                single = new_model(q_s, self.revolute, payload=self.has_payload).names()
             else:
-                est = RobotModel(reg, "paper", method, base=base, form="products", q_s=q_s,
-                                 eliminate=eliminate, threshold_pct=thr).fit(sig)
-                single = new_model(q_s, revolute, payload=has_payload).names()
-            fitted[name] = _single(est, sig, name, single, smap, method)
-    except RobotIdentError as err:
-        raise DataError(str(err)) from None
-    return OneJointFit(models=fitted, q_s=q_s, revolute=revolute, has_payload=has_payload,
-                       settings=settings, notes=notes, first=first, sign_checked=checked)
+                raise DataError(f"model {name!r}: expected 'usual' or 'paper'")
+            return _single(est, sig, name, single, self.smap, self.method)
+        except RobotIdentError as err:
+            raise DataError(str(err)) from None

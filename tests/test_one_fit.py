@@ -1,12 +1,15 @@
 """A joint is a 1-dof robot (issue 24): :func:`ident.one_joint.fit_one_joint` -- the one-joint
 robot, the columns chain, the sign check, the products formed at full rate and
-``RobotModel`` with the single-joint elimination -- gives ``ident.fitting.fit_models``'
-numbers: values, standard deviations, relative deviations, covariance, sigma_rho, residual,
-relative error, condition number, removed parameters and rows, to 1e-8 (measured: 5e-12 at
-worst on the example campaign, 4e-13 on EMPS; the raw condition number, from the Gram
-matrix's eigenvalues, 4e-9)."""
+``RobotModel`` with the single-joint elimination -- and ``ident.fitting.fit_models`` (whose
+fit is now that one) give the single-joint least squares' numbers (``IdentModel.fit``: QR on
+the decimated columns of :func:`ident.preprocess.build_design`, the fit of ``fit_models``
+before the switch): values, standard deviations, relative deviations, covariance,
+sigma_rho, residual, relative error, condition numbers, removed parameters and rows, to 1e-8
+(measured: 5e-12 at worst on the example campaign, 4e-13 on EMPS)."""
 
 from __future__ import annotations
+
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -15,6 +18,7 @@ from example_campaign import simulate_example_campaign
 from ident import DataError
 from ident.fitting import fit_models
 from ident.loaders import load_experiment, make_experiment
+from ident.models import IdentModel
 from ident.one_joint import fit_one_joint
 from ident.robot import RobotIdentError
 from ident.robot.estimate import RobotModel
@@ -41,31 +45,51 @@ def _experiments(campaign, suffix: str, with_ref: bool):
             for i, (p, r, q) in enumerate(zip(plan.payloads, sims, refs, strict=True))]
 
 
-def _assert_same(report, ours) -> None:
-    """Every number of each model of ``report`` (fit_models) in ``ours`` (fit_one_joint)."""
+def _assert_same(report, ours, eliminate: bool = True,
+                 threshold_pct: float | None = None) -> None:
+    """Every number of each model of ``ours`` (fit_one_joint) and of ``report`` (fit_models,
+    whose fit is the robot model's) is the single-joint least squares
+    (:meth:`ident.models.IdentModel.fit`, QR on the columns) on ``report``'s design of that
+    model (built by :func:`ident.preprocess.build_design`), to ``RTOL``."""
     assert set(report.models) == set(ours.models)
     assert report.q_s == ours.q_s and report.revolute == ours.revolute
     assert [n for n in report.notes if "condition" not in n] == ours.notes
     d = next(iter(report.designs.values())).settings()
     for k in ("cutoff_hz", "decimation", "trim", "guard", "torque_delay", "dq_min"):
         assert ours.settings.as_dict()[k] == d[k], k
-    for name, m in report.models.items():
+    for name, fitted in report.models.items():
+        design = report.designs[name]
+        ref = IdentModel(fitted.library, name).fit(design, eliminate=eliminate,
+                                                   threshold_pct=threshold_pct)
+        for o in (ours.models[name], _as_fit(fitted)):
+            assert o.names == ref.names_, name
+            assert o.removed == ref.removed_, name
+            assert o.estimator == ref.estimator_ and o.m == ref.result_.m == len(design)
+            for n in ref.names_:
+                assert o.values[n] == pytest.approx(ref.coef_[n], rel=RTOL), (name, n)
+                assert o.std[n] == pytest.approx(ref.std_[n], rel=RTOL), (name, n)
+                assert o.rel_std_pct[n] == pytest.approx(ref.rel_std_pct_[n], rel=RTOL)
+            np.testing.assert_allclose(o.cov, ref.cov_, rtol=RTOL,
+                                       atol=RTOL * np.abs(ref.cov_).max())
+            for a, b in ((o.sigma_rho, ref.sigma_rho_), (o.rel_error, ref.rel_error_),
+                         (o.cond, ref.cond_), (o.cond_raw, ref.result_.cond_raw)):
+                assert a == pytest.approx(b, rel=RTOL), name
+            # the same rows in the same order: the residual sample for sample
+            np.testing.assert_allclose(o.residual, ref.residual_, rtol=0,
+                                       atol=RTOL * np.abs(ref.residual_).max())
         o = ours.models[name]
-        assert o.names == m.names_, name
-        assert o.removed == m.removed_, name
-        assert o.estimator == m.estimator_ and o.m == m.result_.m == len(report.designs[name])
-        for n in m.names_:
-            assert o.values[n] == pytest.approx(m.coef_[n], rel=RTOL), (name, n)
-            assert o.std[n] == pytest.approx(m.std_[n], rel=RTOL), (name, n)
-            assert o.rel_std_pct[n] == pytest.approx(m.rel_std_pct_[n], rel=RTOL), (name, n)
-        np.testing.assert_allclose(o.cov, m.cov_, rtol=RTOL, atol=RTOL * np.abs(m.cov_).max())
-        for a, b in ((o.sigma_rho, m.sigma_rho_), (o.rel_error, m.rel_error_),
-                     (o.cond, m.cond_), (o.cond_raw, m.result_.cond_raw)):
-            assert a == pytest.approx(b, rel=RTOL), name
-        # the same rows in the same order: the residual sample for sample
-        np.testing.assert_allclose(o.residual, m.residual_, rtol=0,
-                                   atol=RTOL * np.abs(m.residual_).max())
-        np.testing.assert_array_equal(o.signals.t[o.rows], report.designs[name].signals.t)
+        np.testing.assert_array_equal(o.signals.t[o.rows], design.signals.t)
+        assert fitted.robot_ is not None and fitted.predict(design) == pytest.approx(
+            ref.predict(design), rel=RTOL, abs=RTOL * np.abs(design.Y).max())
+
+
+def _as_fit(m: IdentModel) -> SimpleNamespace:
+    """A fitted IdentModel under OneJointModel's attribute names."""
+    return SimpleNamespace(names=m.names_, removed=m.removed_, estimator=m.estimator_,
+                           m=m.result_.m, values=m.coef_, std=m.std_,
+                           rel_std_pct=m.rel_std_pct_, cov=m.cov_, sigma_rho=m.sigma_rho_,
+                           rel_error=m.rel_error_, cond=m.cond_, cond_raw=m.result_.cond_raw,
+                           residual=m.residual_)
 
 
 @pytest.mark.parametrize("suffix, with_ref", [("csv", False), ("mcap", True)])
@@ -92,10 +116,11 @@ def test_elimination_is_fit_models(campaign):
     threshold = 0.5 * (rel[2] + rel[3])
     report = fit_models(exps, threshold_pct=threshold, table_iv=False)
     assert len(report.models["paper"].removed_) >= 3
-    _assert_same(report, fit_one_joint(exps, threshold_pct=threshold))
+    _assert_same(report, fit_one_joint(exps, threshold_pct=threshold),
+                 threshold_pct=threshold)
     off = fit_one_joint(exps, eliminate=False)
     assert all(not m.removed for m in off.models.values())
-    _assert_same(full, off)
+    _assert_same(full, off, eliminate=False)
 
 
 def test_emps_is_fit_models():
@@ -126,3 +151,15 @@ def test_robot_model_elimination_options():
     with pytest.raises(DataError, match="model 'x'"):
         fit_one_joint([make_experiment("a.csv", np.arange(100) * 1e-3, np.zeros(100),
                                        np.zeros(100))], models=["x"])
+
+
+def test_tau_min_is_fit_models(campaign):
+    """``tau_min``: the rows near a low-passed |tau| below it are left out by both paths
+    (with the sign check and its kept fraction on the remaining rows)."""
+    exps = _experiments(campaign, "csv", False)
+    tau = np.concatenate([e.tau for e in exps])
+    tau_min = float(np.quantile(np.abs(tau), 0.2))  # a fifth of the samples and more out
+    report = fit_models(exps, tau_min=tau_min, table_iv=False)
+    ours = fit_one_joint(exps, tau_min=tau_min)
+    assert ours.models["usual"].m < fit_one_joint(exps, models=["usual"]).models["usual"].m
+    _assert_same(report, ours)
