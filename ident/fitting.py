@@ -566,7 +566,8 @@ class FitReport:
     Attributes
     ----------
     models : dict[str, IdentModel]
-        Fitted models by name (``"usual"``, ``"paper"``).
+        Fitted models by name (``"usual"``, ``"paper"``): the robot model's fits by the
+        single-joint names (``robot_``: the :class:`~ident.robot.estimate.RobotModel`).
     designs : dict[str, Design]
         The identification system of each model.
     validation_designs : dict[str, Design]

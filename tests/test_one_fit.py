@@ -5,7 +5,8 @@ fit is now that one) give the single-joint least squares' numbers (``IdentModel.
 the decimated columns of :func:`ident.preprocess.build_design`, the fit of ``fit_models``
 before the switch): values, standard deviations, relative deviations, covariance,
 sigma_rho, residual, relative error, condition numbers, removed parameters and rows, to 1e-8
-(measured: 5e-12 at worst on the example campaign, 4e-13 on EMPS)."""
+(measured: 5e-12 at worst on the example campaign, 4e-13 on EMPS, 1.5e-12 on the quick
+demo's MCAP logs)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import numpy as np
 import pytest
 from example_campaign import simulate_example_campaign
 
+from daq.app.demo import run_demo
 from ident import DataError
 from ident.fitting import fit_models
 from ident.loaders import load_experiment, make_experiment
@@ -162,4 +164,20 @@ def test_tau_min_is_fit_models(campaign):
     report = fit_models(exps, tau_min=tau_min, table_iv=False)
     ours = fit_one_joint(exps, tau_min=tau_min)
     assert ours.models["usual"].m < fit_one_joint(exps, models=["usual"]).models["usual"].m
+    _assert_same(report, ours)
+
+
+@pytest.mark.slow
+def test_demo_logs_are_the_single_joint_fit(tmp_path):
+    """The quick demo's MCAP logs (simulated CiA 402 drive, real master, jointid logs):
+    IDIM-IV with the half-cycle torque delay, the sign check, and several terms of the paper
+    model eliminated -- the same numbers as the single-joint least squares (measured
+    1.5e-12)."""
+    run_demo(tmp_path, quick=True)
+    exps = [load_experiment(p) for p in sorted((tmp_path / "logs").glob("*.mcap"))]
+    report = fit_models(exps)
+    ours = fit_one_joint(exps)
+    assert ours.sign_checked and ours.settings.torque_delay == 0.5
+    assert {m.estimator for m in ours.models.values()} == {"iv"}
+    assert ours.models["paper"].removed  # exponential terms not significant on the quick run
     _assert_same(report, ours)
