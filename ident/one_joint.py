@@ -52,7 +52,7 @@ from .models import new_model, usual_model
 from .robot import RobotIdentError
 from .robot.base import single_joint_map
 from .robot.design import design_runs, products_columns, resolve_design, sign_checked
-from .robot.estimate import RobotModel
+from .robot.estimate import ZERO_COLUMN, RobotModel
 from .robot.loaders import RawRobotRun, chain_period
 from .robot.signals import RobotSignals
 from .signals import G
@@ -208,11 +208,15 @@ def _single(est: RobotModel, sig: RobotSignals, name: str, single_names: Sequenc
     index = {n: i for i, n in enumerate(est.names_)}
     base_rows = {n: r for n, r in zip(smap.names, smap.matrix, strict=True)}
     rows: dict[str, np.ndarray] = {}
+    absent = []  # payload=True without a payload: Ma_ratio's column is zero
     for single in single_names:
         row = np.zeros(len(est.names_))
         if name == "usual":
             if single in base_rows:
                 row[:est.n_base_] = base_rows[single]
+            elif single == "Ma_ratio" and "Ma_ratio" not in index:
+                absent.append(single)
+                continue
             else:
                 key = _USUAL_TAIL[single]
                 row[index[key if key == "Ma_ratio" else f"{key}{num}"]] = 1.0
@@ -232,9 +236,10 @@ def _single(est: RobotModel, sig: RobotSignals, name: str, single_names: Sequenc
         rows[single] = row
     fixed = set(est.fixed_)
     robot_name = {s: est.names_[int(np.flatnonzero(r)[0])] for s, r in rows.items()}
-    kept = [s for s in single_names if robot_name[s] not in fixed]
+    kept = [s for s in single_names if s in robot_name and robot_name[s] not in fixed]
     of_robot = {v: s for s, v in robot_name.items()}
-    removed = [(of_robot[n], why) for n, why in est.removed_ if n in of_robot]
+    removed = [(s, ZERO_COLUMN) for s in absent] + [
+        (of_robot[n], why) for n, why in est.removed_ if n in of_robot]
     M = np.array([rows[s] for s in kept]).reshape(len(kept), len(est.names_))
     val = M @ est.coef_
     cov = M @ est.cov_ @ M.T
@@ -316,9 +321,6 @@ def fit_one_joint(
             raise DataError(f"joint kind {joint!r}: expected 'revolute' or 'prismatic'")
     has_payload = (any(float(e.payload_mass) != 0 for e in exps) if payload is None
                    else bool(payload))
-    if has_payload and not any(float(e.payload_mass) != 0 for e in exps):
-        raise DataError("payload=True: no experiment carries a payload (payload_mass), so "
-                        "M_ae/M_aw cannot be identified")
     q_s = float(q_s)
     if not q_s > 0:
         raise DataError(f"q_s must be positive [rad/s], got {q_s}")
@@ -395,6 +397,9 @@ class OneJointProblem:
         self.iv = references is not None
         self.method = "iv" if self.iv else "ls"
         self.runs = _runs(exps, revolute, has_payload, references)
+        # the payload ratio (eq. 35) is identified when a run carries a payload; named
+        # without one (payload=True), it is reported removed (a zero column)
+        self._ratio = has_payload and any(run.payload.mass > 0 for run in self.runs)
         self.reg = RobotRegressor(one_joint_robot("revolute" if revolute else "prismatic",
                                                   gravity=G))
         self.base = base_parameters(self.reg)
@@ -415,7 +420,7 @@ class OneJointProblem:
                                                    & tau_keep))
             if paper and sign_check and first is None:
                 self.first = RobotModel(self.reg, "usual", self.method, base=self.base,
-                                        payload_ratio=has_payload).fit(sig)
+                                        payload_ratio=self._ratio).fit(sig)
             if paper and self.first is not None and (first is None or first_checked):
                 out, kept = sign_checked(sig, self.runs, st, self.first.load_torque)
                 if tau_keep is not None:  # the check's rows recomputed: tau_min again
@@ -487,7 +492,7 @@ class OneJointProblem:
             if name == "usual":
                 sig = self.signals
                 est = RobotModel(self.reg, "usual", self.method, base=self.base,
-                                 payload_ratio=self.has_payload, eliminate=eliminate,
+                                 payload_ratio=self._ratio, eliminate=eliminate,
                                  threshold_pct=thr).fit(sig)
                 single = usual_model(self.revolute, payload=self.has_payload).names()
             elif name == "paper":

@@ -127,6 +127,11 @@ SCALE_TOL = 1e-9
 #: cause when the paper model is not identifiable.
 THIN_QUADRANT = 0.02
 
+#: Why a parameter is fixed at 0 (``removed_``): the reasons of
+#: :func:`ident.estimate.fit_least_squares` (a dependent column's partners not named).
+ZERO_COLUMN = "zero column on these data: not excited (no payload, no gravity?)"
+DEPENDENT_COLUMN = "not separable: linear combination of the other columns"
+
 #: Levenberg-Marquardt damping (relative to the column-scaled normal matrix) of the fits made
 #: while the model quadrants are still being decided and leave a direction unexcited.
 DAMPING = 1e-6
@@ -1255,14 +1260,18 @@ class RobotModel(HyperParameters):
         x = np.concatenate([products_start(xu[c], xu[pb + nbu * j: pb + nbu * (j + 1)])
                             for j, c in enumerate(self.cols_)])
         free = np.ones(x.size, dtype=bool)
+        self._fixed_why: dict[str, str] = {}
         for j, m in enumerate(moms):
             nl = len(self.cols_[j]) + 1
             # the load columns (theta's, then p) on the joint's rows
-            for c in _dependent(self._load_gram(m, nl)):
+            gram = self._load_gram(m, nl)
+            for c in _dependent(gram):
                 i = self._bstart[j] + np.array([2 * c, 2 * c + 1, 2 * nl + 2 * c,
                                                 2 * nl + 2 * c + 1])
                 free[i] = False
                 x[i] = 0.0
+                why = ZERO_COLUMN if not gram[c, c] > 0 else DEPENDENT_COLUMN
+                self._fixed_why.update({self.names_[k]: why for k in i})
         self.fixed_ = {self.names_[i]: 0.0 for i in np.flatnonzero(~free)}
         self.quadrant_rows_ = self._quadrant_rows(moms)
         try:
@@ -1378,9 +1387,8 @@ class RobotModel(HyperParameters):
         ``eliminate`` (linear forms) after the single-joint elimination (:meth:`_eliminate`)."""
         self.quadrant_from_ = quadrant_from
         self.band_share_ = self._pass_band_share.copy()
-        self.removed_ = [(n, "zero or dependent load column on the joint's rows: its "
-                          "products fixed at 0") for n, v in self.fixed_.items()
-                         if v == 0.0 and self.form == "products"]
+        why = getattr(self, "_fixed_why", {}) if self.form == "products" else {}
+        self.removed_ = [(n, why[n]) for n in self.fixed_ if n in why]
         if self.eliminate and coeffs is not paper_coefficients:
             x, free, w, it = self._eliminate(moms, coeffs, x, free.copy(), w, it)
         self._statistics(moms, coeffs, x, free, w)
@@ -1447,9 +1455,8 @@ class RobotModel(HyperParameters):
         G = self._w_gram(moms, coeffs, x)[np.ix_(idx, idx)]
         dep = _dependent(G)
         for i in idx[dep]:
-            fix(int(i), "zero column on these data: not excited" if G[
-                np.searchsorted(idx, i), np.searchsorted(idx, i)] <= 0 else
-                "not separable: linear combination of the other columns")
+            k = int(np.searchsorted(idx, i))
+            fix(int(i), ZERO_COLUMN if not G[k, k] > 0 else DEPENDENT_COLUMN)
         if dep.size:
             try:
                 x, w, it = self._fit_on(moms, coeffs, x, free, linear=True)
