@@ -4,15 +4,24 @@
 assemble the result -- whose stages share the preprocessing state; split by stage it would pass
 that state between modules.)
 
-:func:`fit_models` takes experiments (or concatenated signals), builds the decimated system
-once per model with the same preprocessing and the same samples ("the two models are
+:func:`fit_models` takes experiments (or concatenated signals) and fits the usual model
+(eq. 38-39) and/or the paper model (eq. 42-43) on the same samples ("the two models are
 compared using exactly the same identification method with the same measurements",
-section IV.C), fits the usual model (eq. 38-39) and/or the paper model (eq. 42-43),
-optionally scans q_s, evaluates Table III bands, Table IV and cross-validation files, and
-returns a :class:`FitReport` (``.to_json()``, ``.format_tables()``).
-Pure numerics: loading belongs to :mod:`ident.loaders`.
+section IV.C), optionally scans q_s, evaluates Table III bands, Table IV and
+cross-validation files, and returns a :class:`FitReport` (``.to_json()``,
+``.format_tables()``). Pure numerics: loading belongs to :mod:`ident.loaders`.
 
-Length (~830 lines): one pipeline whose steps share their settled preprocessing (sign
+The fit is the robot model's (issue 24, a joint is a 1-dof robot): every estimate -- the
+first usual fit of the sign check, the q_s scan, the two models, Table IV -- is
+:class:`ident.robot.estimate.RobotModel`'s through :class:`ident.one_joint.OneJointProblem`
+(the columns chain, eq. 42's products formed at full rate per q_s, the single-joint
+elimination), held in an :class:`~ident.models.IdentModel` by the single-joint names
+(:func:`_fitted`). The decimated system of each model (:class:`ident.preprocess.Design`,
+built as before with the same settings and the robot's load model: the same rows, checked)
+is still built for what reads it: Table III's bands, the validation files, the plots and
+the refinement (:mod:`ident.refine`), and :func:`rescan_qs`.
+
+Length (~1000 lines): one pipeline whose steps share their settled preprocessing (sign
 check, q_s scan, Table IV without payload, validation systems) and the report built from
 it; splitting it would pass that state around between files. The q_s rescan's fast designs
 (:class:`_QsDesigns`, ~150 lines) rebuild part of a design and stay next to
@@ -33,6 +42,7 @@ from trajectories.friction import DEFAULT_Q_S
 
 from . import DataError
 from .chain import _decimate_rows, default_torque_delay
+from .estimate import LSResult
 from .loaders import Experiment, concat
 from .models import (
     IdentModel,
@@ -45,6 +55,7 @@ from .models import (
     power_split,
     usual_model,
 )
+from .one_joint import SIGN_CHECK_MIN_KEPT, OneJointModel, OneJointProblem
 from .preprocess import Design, build_design
 from .refine_lsq import quick_residual
 from .results import (
@@ -56,6 +67,7 @@ from .results import (
     parameters_json,
     removed_json,
 )
+from .robot.design import DQ_MIN_FRACTION
 from .signals import Signals
 from .terms import Library, Term
 from .vocab import MODEL_NAMES, model_name, renamed_keywords
@@ -70,6 +82,8 @@ __all__ = [
     "FORMAT",
     "DEFAULT_QS",
     "DEFAULT_Q_S",
+    "DQ_MIN_FRACTION",
+    "SIGN_CHECK_MIN_KEPT",
 ]
 
 FORMAT = "jointid-fit/2"
@@ -79,12 +93,10 @@ OLD_FORMATS = ("jointid-fit/1",)
 #: The paper's final a-priori velocity constant [rad/s] (section III.D); defined once, in
 #: :mod:`trajectories.friction` (``DEFAULT_QS`` is the older spelling, kept for callers).
 DEFAULT_QS = DEFAULT_Q_S
-#: Default stiction-area threshold: samples with |dq| below this fraction of the maximum
-#: velocity (and their neighbours, see ``guard``) are left out (section III.D, eq. 26).
-DQ_MIN_FRACTION = 0.01
-#: The sign check (see :func:`fit_models`) is skipped when it would keep fewer samples than
+#: DQ_MIN_FRACTION (:mod:`ident.robot.design`): default stiction-area threshold, a fraction of the
+#: maximum velocity (section III.D, eq. 26). SIGN_CHECK_MIN_KEPT (:mod:`ident.one_joint`):
+#: the sign check (see :func:`fit_models`) is skipped when it would keep fewer samples than
 #: this fraction: then tau_out is near zero most of the time and the check is meaningless.
-SIGN_CHECK_MIN_KEPT = 0.7
 #: Resolution of the q_s scan after the grid, on log q_s (1 %).
 QS_XTOL = 0.01
 #: Condition number (unit-norm columns) above which a note warns of poor excitation.
@@ -468,6 +480,44 @@ def _as_signals(data: Sequence[Experiment] | Signals, joint: str | bool | None) 
     return s
 
 
+def _fitted(library: Library, name: str, fit: OneJointModel) -> IdentModel:
+    """An :class:`~ident.models.IdentModel` holding the robot model's fit ``fit`` (by the
+    single-joint names): the same public attributes (``coef_`` ... ``result_``,
+    ``estimator_``), so ``predict``, ``rel_error_on``, the reports and the refinement read
+    it as they read a single-joint fit; ``robot_`` is the fitted
+    :class:`~ident.robot.estimate.RobotModel`."""
+    m = IdentModel(library, name)
+    n = fit.names
+    m._set(LSResult(
+        names=n, chi=np.array([fit.values[k] for k in n]),
+        std=np.array([fit.std[k] for k in n]),
+        rel_std_pct=np.array([fit.rel_std_pct[k] for k in n]), cov=fit.cov,
+        sigma_rho=fit.sigma_rho, residual=fit.residual, rel_error=fit.rel_error,
+        cond=fit.cond, cond_raw=fit.cond_raw, m=fit.m, removed=list(fit.removed)))
+    m.estimator_ = fit.estimator
+    m.robot_ = fit.robot
+    return m
+
+
+def _split(
+    data: Sequence[Experiment] | Signals, s: Signals, ref: np.ndarray | None
+) -> tuple[list[Experiment], list[np.ndarray] | None]:
+    """The experiments of ``data`` (concatenated signals: one per run of equal
+    ``experiment``) and their references (``ref`` aligned with ``s``) cut to them."""
+    if isinstance(data, Signals):
+        cut = np.flatnonzero(np.diff(s.experiment) != 0) + 1
+        bounds = list(zip(np.r_[0, cut], np.r_[cut, len(s)], strict=True))
+        exps = [Experiment(f"experiment {int(s.experiment[a])}", s.t[a:b], s.q[a:b],
+                           s.tau[a:b], float(s.payload_mass[a]), float(s.payload_arm[a]),
+                           s.revolute) for a, b in bounds]
+    else:
+        exps = list(data)
+        ends = np.cumsum([len(e) for e in exps])
+        bounds = list(zip(np.r_[0, ends[:-1]], ends, strict=True))
+    refs = None if ref is None else [ref[a:b] for a, b in bounds]
+    return exps, refs
+
+
 def _library(name: str, q_s: float, revolute: bool, payload: bool) -> Library:
     if name == "usual":
         return usual_model(revolute, payload=payload)
@@ -516,7 +566,8 @@ class FitReport:
     Attributes
     ----------
     models : dict[str, IdentModel]
-        Fitted models by name (``"usual"``, ``"paper"``).
+        Fitted models by name (``"usual"``, ``"paper"``): the robot model's fits by the
+        single-joint names (``robot_``: the :class:`~ident.robot.estimate.RobotModel`).
     designs : dict[str, Design]
         The identification system of each model.
     validation_designs : dict[str, Design]
@@ -772,9 +823,11 @@ def fit_models(
     like : FitReport, optional
         A report of an earlier call on the same data with the same options but ``q_s`` (the
         demo's refit once q_s is adjusted): its settled preprocessing (cut-off, decimation,
-        trim, guard, dq_min) and its sign check's load model are taken as they are instead
-        of being found again (neither depends on q_s: the same values, one design build and
-        one fit fewer). Its ``sources`` must be this call's.
+        trim, guard, dq_min) and its sign check's load model are taken as they are for the
+        designs instead of being found again (neither depends on q_s: the same values, one
+        design build fewer; the robot's first usual fit, which decides the rows and
+        quadrants of the fit, is made again on the settled preprocessing: the same numbers).
+        Its ``sources`` must be this call's.
     **deprecated
         ``qs``: the older spelling of ``q_s`` (:mod:`ident.vocab`, with a DeprecationWarning).
 
@@ -827,13 +880,6 @@ def fit_models(
     def part(d: Design, name: str, payload: bool, q: float = qs0) -> tuple[Library, Design]:
         return _part(d, name, payload, q, qs0)
 
-    def fit_part(
-        d: Design, name: str, payload: bool, q: float = qs0, elim: bool = eliminate
-    ) -> tuple[IdentModel, Design]:
-        lib, sub = part(d, name, payload, q)
-        m = IdentModel(lib, name).fit(sub, eliminate=elim, threshold_pct=threshold_pct)
-        return m, sub
-
     if like is not None:
         if list(like.sources) != sources or like.revolute != s.revolute:
             raise DataError("fit_models: like= is a report on other data "
@@ -853,29 +899,27 @@ def fit_models(
             dq_min=full.dq_min,
             dq_min_rel=None,
         )
+    # the fit is the robot model's (ident.one_joint): the joint as a 1-dof robot, the
+    # columns chain with the settled preprocessing, the sign check of a first usual fit
+    exps, refs = _split(data, s, ref)
+    settled = {k: pre[k] for k in ("cutoff_hz", "decimation", "dq_min", "trim", "guard")}
+    problem = OneJointProblem(
+        exps, revolute=s.revolute, has_payload=has_payload, references=refs,
+        paper="paper" in models, torque_delay=float(torque_delay), **settled,
+        tau_min=tau_min,
+        sign_check=sign_check and (like is None or "load_model" in like.settings))
     if like is None and sign_check and "paper" in models:
-        # a first usual fit estimates tau_out; drop samples where sign(tau) != sign(tau_out)
-        lib0 = usual_model(s.revolute, payload=has_payload)
-        d0 = full
-        for t in lib0.terms():
-            if not set(t.names()) <= set(d0.names):
-                d0 = d0.with_term(t)
-        first = IdentModel(lib0, "usual").fit(d0, eliminate=False)
-        inner = Library(*[t for t in lib0.terms() if isinstance(t, RigidBody | Payload)])
-        chi = np.array([first.coef_.get(n, 0.0) for n in inner.names()])
-        checked = full.select(dq_min=pre["dq_min"], tau_min=tau_min, load_model=(inner, chi))
-        kept = len(checked) / len(full)
-        if kept >= SIGN_CHECK_MIN_KEPT:
-            pre["load_model"] = (inner, chi)
-            # rebuilt with the load model: the same rows as ``checked``, and the paper model's
-            # P+/P- columns from the model quadrant sign(tau_out_hat dq), not from tau
+        if problem.sign_checked and problem.first is not None:
+            # the same rows in the design: the load model of the robot's first usual fit
+            lib0 = usual_model(s.revolute, payload=has_payload)
+            inner = Library(*[t for t in lib0.terms() if isinstance(t, RigidBody | Payload)])
+            first = problem.load_values()
+            pre["load_model"] = (inner, np.array([first.get(n, 0.0) for n in inner.names()]))
+            # rebuilt with the load model: the paper model's P+/P- columns from the model
+            # quadrant sign(tau_out_hat dq), not from tau
             full = combined(s, has_payload, ref)
         else:
-            notes.append(
-                f"sign check skipped: it would keep only {100 * kept:.0f} % of the samples "
-                "(tau_out near zero over much of the data: no gravity or payload load), so "
-                "sign(P) = sign(tau dq) of eq. 26 is used as is"
-            )
+            notes.extend(problem.notes)
     vmax = float(np.max(np.abs(full.signals.dq)))
 
     scan: list[tuple[float, float]] = []
@@ -885,10 +929,11 @@ def fit_models(
         if "paper" in models:
 
             def err(q: float) -> float:
-                # full model (no elimination): the residual as a function of q_s alone
-                m, _ = fit_part(full, "paper", has_payload, float(q), False)
-                scan.append((float(q), m.rel_error_))
-                return m.rel_error_
+                # full model (no elimination): the residual as a function of q_s alone,
+                # eq. 42's columns formed again at full rate for each q_s
+                e = problem.fit("paper", float(q), eliminate=False).rel_error
+                scan.append((float(q), e))
+                return e
 
             # the grid steps by 36 %, and the b and d terms follow q_s closely (a 14 %
             # error in q_s put b_m_MX 40 % off on the quick demo): the minimum is refined
@@ -906,7 +951,12 @@ def fit_models(
     vdesigns: dict[str, Design] = {}
     vfull = combined(sv, has_payload) if sv is not None else None
     for name in models:
-        m, d = fit_part(full, name, has_payload, qs_val)
+        lib, d = part(full, name, has_payload, qs_val)
+        m = _fitted(lib, name, problem.fit(name, qs_val, eliminate=eliminate,
+                                           threshold_pct=threshold_pct))
+        if m.result_.m != len(d):
+            raise DataError(f"{name} model: the robot fit has {m.result_.m} rows, the design "
+                            f"{len(d)}: not the same samples")
         fitted[name], designs[name] = m, d
         if vfull is not None:
             vdesigns[name] = part(vfull, name, has_payload, qs_val)[1]
@@ -923,18 +973,25 @@ def fit_models(
     exp_ids = np.unique(s.experiment)
     no_payload_ids = np.unique(s.experiment[s.payload_mass == 0])
     if table_iv and has_payload and 0 < no_payload_ids.size < exp_ids.size:
-        in0 = np.isin(s.experiment, no_payload_ids)
-        s0 = s.take(in0)
         t4 = {"with_payloads": {}, "without_payload": {}}
+        empty = [i for i, e in enumerate(exps) if float(e.payload_mass) == 0]
         try:
-            full0 = combined(s0, False, None if ref is None else ref[in0])
+            # the same preprocessing, and the sign check and quadrants of the load model
+            # of all the experiments
+            p0 = OneJointProblem(
+                [exps[i] for i in empty], revolute=s.revolute, has_payload=False,
+                references=None if refs is None else [refs[i] for i in empty],
+                paper="paper" in models, torque_delay=float(torque_delay), **settled,
+                tau_min=tau_min, sign_check=False, first=problem.first,
+                first_checked="load_model" in pre)
         except DataError as exc:  # too few samples without payload
             notes.append(f"Table IV without payload: {exc}")
-            full0 = None
+            p0 = None
         for name in models:
             t4["with_payloads"][name] = fitted[name].rel_error_
             t4["without_payload"][name] = (
-                fit_part(full0, name, False, qs_val)[0].rel_error_ if full0 is not None else None
+                p0.fit(name, qs_val, eliminate=eliminate, threshold_pct=threshold_pct).rel_error
+                if p0 is not None else None
             )
     return FitReport(
         models=fitted,

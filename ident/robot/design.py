@@ -47,7 +47,6 @@ from ..chain import (
     run_chain,
     selection,
 )
-from ..fitting import DQ_MIN_FRACTION
 from . import RobotIdentError
 from .base import base_parameters, placed_payload
 from .loaders import RawRobotRun, chain_period
@@ -56,7 +55,12 @@ from .refine_joint import joint_term_columns
 from .signals import FullRateProducts, RobotColumns, RobotSignals
 
 __all__ = ["DesignSettings", "design_runs", "joint_columns", "resolve_design", "sign_checked",
-           "products_columns", "MAX_BYTES"]
+           "products_columns", "MAX_BYTES", "DQ_MIN_FRACTION"]
+
+#: Default stiction-area threshold: samples with |dq| below this fraction of the largest
+#: full-rate velocity (and their neighbours, the guard) are left out (section III.D,
+#: eq. 26); the default of the single-joint fit too (:func:`ident.fitting.fit_models`).
+DQ_MIN_FRACTION = 0.01
 
 #: Largest full-rate regressor of one experiment the columns chain builds [bytes].
 MAX_BYTES = 4 * 2**30

@@ -66,6 +66,7 @@ import scipy.linalg
 from trajectories.friction import DEFAULT_Q_S, stribeck_exp
 
 from .. import DataError
+from ..estimate import DEFAULT_THRESHOLD_PCT
 from ..estimators import ESTIMATORS, RCOND, Estimator, RankDeficientError
 from ..hyperparams import HyperParameters
 from ..vocab import renamed_keywords
@@ -125,6 +126,11 @@ SCALE_TOL = 1e-9
 #: A joint with fewer than this fraction of its rows in one quadrant is named as the likely
 #: cause when the paper model is not identifiable.
 THIN_QUADRANT = 0.02
+
+#: Why a parameter is fixed at 0 (``removed_``): the reasons of
+#: :func:`ident.estimate.fit_least_squares` (a dependent column's partners not named).
+ZERO_COLUMN = "zero column on these data: not excited (no payload, no gravity?)"
+DEPENDENT_COLUMN = "not separable: linear combination of the other columns"
 
 #: Levenberg-Marquardt damping (relative to the column-scaled normal matrix) of the fits made
 #: while the model quadrants are still being decided and leave a direction unexcited.
@@ -250,6 +256,16 @@ class RobotModel(HyperParameters):
         and the same payload (``payload_merged_``), only its mass at the flange origin is
         subtracted and its first moments and inertia merge into the last link's base
         parameters (no payload columns).
+    eliminate : bool
+        The linear forms only (``model="usual"``, or ``"paper"`` with ``form="products"``):
+        the single-joint elimination of :func:`ident.estimate.fit_least_squares` after the
+        fit -- the free parameters whose columns are zero or dependent (the rank rule) are
+        fixed at 0, then, while the largest relative deviation (eq. 16) of a free parameter
+        exceeds ``threshold_pct``, that parameter is fixed at 0 and the model refitted
+        (``fixed_``, ``removed_``). Default False: nothing is eliminated.
+    threshold_pct : float
+        Relative-deviation threshold [%] of ``eliminate``
+        (:data:`ident.estimate.DEFAULT_THRESHOLD_PCT`).
     **deprecated
         ``qs=``: the older spelling of ``q_s`` (accepted with a DeprecationWarning,
         :mod:`ident.vocab`).
@@ -281,6 +297,14 @@ class RobotModel(HyperParameters):
     fixed_ : dict
         Parameters held fixed (paper model without payload torque; products form: the
         products of a joint's load columns that are zero or dependent on its rows, at 0).
+    removed_ : list of (str, str)
+        Parameters fixed at 0 and why: the products form's zero or dependent load columns,
+        and with ``eliminate`` the zero, dependent and non-significant parameters in the
+        order they were removed (the reasons of :func:`ident.estimate.fit_least_squares`).
+    cond_, cond_raw_ : float
+        Condition numbers of the column-scaled and of the raw regressor (the Jacobian at
+        the solution for the bilinear form) of the free parameters, from its Gram matrix
+        (as ``LSResult.cond`` and ``cond_raw``).
     n_passes_, n_iter_ : int
         Data passes (the start pass counted as one, even on every ``start_stride_``-th row)
         and Gauss-Newton iterations of the final fit.
@@ -327,6 +351,8 @@ class RobotModel(HyperParameters):
         quadrant_band: float = 0.03,
         payload_params: bool = False,
         form: str = "bilinear",
+        eliminate: bool = False,
+        threshold_pct: float = DEFAULT_THRESHOLD_PCT,
         **deprecated: Any,
     ) -> None:
         q_s = renamed_keywords("RobotModel", deprecated).get("q_s", q_s)
@@ -346,6 +372,8 @@ class RobotModel(HyperParameters):
         self.quadrant_band = quadrant_band
         self.payload_params = payload_params
         self.form = form
+        self.eliminate = eliminate
+        self.threshold_pct = threshold_pct
 
     def get_params(self, deep: bool = False) -> dict[str, Any]:
         """Hyper-parameters (scikit-learn convention; ``set_params`` sets them by name,
@@ -353,7 +381,7 @@ class RobotModel(HyperParameters):
         return {n: getattr(self, n) for n in (
             "regressor", "model", "method", "q_s", "base", "quadrant", "dq_min", "chunk_size",
             "max_iter", "tol", "max_passes", "payload_ratio", "quadrant_theta",
-            "quadrant_band", "payload_params", "form")}
+            "quadrant_band", "payload_params", "form", "eliminate", "threshold_pct")}
 
     def __repr__(self) -> str:
         form = "" if self.form == "bilinear" else f", form={self.form!r}"
@@ -379,6 +407,14 @@ class RobotModel(HyperParameters):
                                   "payload torque's products (a_m{j} = a_m M_ae/M_aw, eq. 42) "
                                   "freely, so there is no ratio to identify; use "
                                   "payload_ratio=False")
+        if self.eliminate and self.model == "paper" and self.form != "products":
+            raise RobotIdentError("RobotModel.eliminate: the elimination of non-significant "
+                                  "parameters applies to the linear forms (model='usual', "
+                                  "or model='paper' with form='products'), not to the "
+                                  "bilinear paper model")
+        if not float(self.threshold_pct) > 0:
+            raise RobotIdentError(f"RobotModel.threshold_pct: expected a relative deviation "
+                                  f"> 0 [%], got {self.threshold_pct!r}")
         if self.quadrant not in ("model", "measured"):
             raise RobotIdentError(f"RobotModel.quadrant: expected 'model' or 'measured', got "
                                   f"{self.quadrant!r}")
@@ -1227,14 +1263,18 @@ class RobotModel(HyperParameters):
         x = np.concatenate([products_start(xu[c], xu[pb + nbu * j: pb + nbu * (j + 1)])
                             for j, c in enumerate(self.cols_)])
         free = np.ones(x.size, dtype=bool)
+        self._fixed_why: dict[str, str] = {}
         for j, m in enumerate(moms):
             nl = len(self.cols_[j]) + 1
             # the load columns (theta's, then p) on the joint's rows
-            for c in _dependent(self._load_gram(m, nl)):
+            gram = self._load_gram(m, nl)
+            for c in _dependent(gram):
                 i = self._bstart[j] + np.array([2 * c, 2 * c + 1, 2 * nl + 2 * c,
                                                 2 * nl + 2 * c + 1])
                 free[i] = False
                 x[i] = 0.0
+                why = ZERO_COLUMN if not gram[c, c] > 0 else DEPENDENT_COLUMN
+                self._fixed_why.update({self.names_[k]: why for k in i})
         self.fixed_ = {self.names_[i]: 0.0 for i in np.flatnonzero(~free)}
         self.quadrant_rows_ = self._quadrant_rows(moms)
         try:
@@ -1346,15 +1386,99 @@ class RobotModel(HyperParameters):
     def _finish(self, moms: list[JointMoments], coeffs: Coeffs, x: np.ndarray,
                 free: np.ndarray, w: np.ndarray, passes: int, it: int,
                 quadrant_from: np.ndarray | None) -> RobotModel:
-        """The fitted attributes of the final fit ``x`` (weights ``w``) on ``moms``."""
+        """The fitted attributes of the final fit ``x`` (weights ``w``) on ``moms``; with
+        ``eliminate`` (linear forms) after the single-joint elimination (:meth:`_eliminate`)."""
         self.quadrant_from_ = quadrant_from
         self.band_share_ = self._pass_band_share.copy()
+        why = getattr(self, "_fixed_why", {}) if self.form == "products" else {}
+        self.removed_ = [(n, why[n]) for n in self.fixed_ if n in why]
+        if self.eliminate and coeffs is not paper_coefficients:
+            x, free, w, it = self._eliminate(moms, coeffs, x, free.copy(), w, it)
         self._statistics(moms, coeffs, x, free, w)
+        self._condition(moms, coeffs, x, free)
         self.weights_ = w
         self.n_passes_, self.n_iter_ = passes, it
         # Gauss-Newton stopped by its step tolerance (linear forms: always)
         self.converged_ = bool(coeffs is not paper_coefficients or it < int(self.max_iter))
         return self
+
+    def _w_gram(self, moms, coeffs: Coeffs, x: np.ndarray) -> np.ndarray:
+        """J^T J (nx, nx) of the regressor (the Jacobian at ``x``: the regressor itself for a
+        linear form) from the moments sum v v^T, whatever the estimator (IDIM-IV's normal
+        matrix is Z^T W: not this)."""
+        nx = x.size
+        G = np.zeros((nx, nx))
+        for j, mom in enumerate(moms):
+            idx = self._local(j)
+            nt = self._nt(j)
+            th, blk = x[idx[:nt]], x[idx[nt:]]
+            for s in (0, 1):
+                _, _, D0, D1 = coeffs(th, blk, s)
+                D = (D0, D1)
+                for e in (0, 1):
+                    for f in (0, 1):
+                        if np.any(D[e]) and np.any(D[f]):
+                            G[np.ix_(idx, idx)] += D[e].T @ mom.vv[s, e + f] @ D[f]
+        return G
+
+    def _condition(self, moms, coeffs: Coeffs, x: np.ndarray, free: np.ndarray) -> None:
+        """``cond_``, ``cond_raw_``: the condition numbers of the column-scaled and of the raw
+        regressor of the free parameters (as :func:`ident.estimate.solve_ls`' ``cond`` and
+        ``cond_raw``: the singular values of R and of R D, R^T R the scaled Gram matrix, D
+        the column norms), R here the Cholesky factor of the scaled Gram matrix."""
+        G = self._w_gram(moms, coeffs, x)[np.ix_(free, free)]
+        d = np.sqrt(np.clip(np.diagonal(G), 0.0, None))
+        d = np.where(d > 0, d, 1.0)
+        self.cond_ = self.cond_raw_ = float("inf")
+        if not G.size:
+            return
+        try:
+            R = scipy.linalg.cholesky(G / d[:, None] / d[None, :], lower=False)
+        except np.linalg.LinAlgError:
+            return
+        for attr, M in (("cond_", R), ("cond_raw_", R * d[None, :])):
+            sv = np.linalg.svd(M, compute_uv=False)
+            setattr(self, attr, float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf"))
+
+    def _eliminate(self, moms, coeffs: Coeffs, x: np.ndarray, free: np.ndarray,
+                   w: np.ndarray, it: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+        """The single-joint elimination (:func:`ident.estimate.fit_least_squares`) on a
+        linear form's fit ``x``: the free parameters whose columns are zero or dependent (the
+        rank rule, :func:`_dependent` on their Gram matrix) are fixed at 0, then, while the
+        largest relative deviation of a free parameter exceeds ``threshold_pct``, that one is
+        fixed at 0 and the model refitted. Each goes to ``fixed_`` (at 0) and ``removed_``
+        (name, reason). Returns the final (x, free, weights, iterations)."""
+        thr = float(self.threshold_pct)
+
+        def fix(i: int, why: str) -> None:
+            free[i] = False
+            x[i] = 0.0
+            self.fixed_[self.names_[i]] = 0.0
+            self.removed_.append((self.names_[i], why))
+
+        idx = np.flatnonzero(free)
+        G = self._w_gram(moms, coeffs, x)[np.ix_(idx, idx)]
+        dep = _dependent(G)
+        for i in idx[dep]:
+            k = int(np.searchsorted(idx, i))
+            fix(int(i), ZERO_COLUMN if not G[k, k] > 0 else DEPENDENT_COLUMN)
+        if dep.size:
+            try:
+                x, w, it = self._fit_on(moms, coeffs, x, free, linear=True)
+            except _Unidentifiable as e:
+                raise RobotIdentError(self._evidence(e, moms)) from None
+        while int(free.sum()) > 1:
+            self._statistics(moms, coeffs, x, free, w)
+            rel = np.where(free, self.rel_std_, -np.inf)
+            k = int(np.argmax(rel))
+            if not rel[k] > thr:
+                break
+            fix(k, f"not significant: relative deviation {rel[k]:.3g} % > {thr:g} %")
+            try:
+                x, w, it = self._fit_on(moms, coeffs, x, free, linear=True)
+            except _Unidentifiable as e:
+                raise RobotIdentError(self._evidence(e, moms)) from None
+        return x, free, w, it
 
     def _payload_groups(self, signals: Any) -> None:
         """``payload_params``: the distinct payload masses of the experiments

@@ -1,0 +1,508 @@
+"""The single-joint fit through the robot model: a joint is a 1-dof robot (issue 24).
+
+:func:`fit_one_joint` fits the experiments of one joint as :func:`ident.fitting.fit_models`
+does, but with the n-dof path's one chain and one model class:
+
+1. the joint as a 1-dof robot (:func:`trajectories.robot.one_joint_robot`, revolute or
+   prismatic from the experiments), its runs (:attr:`ident.loaders.Experiment.run`; the
+   lever-arm payloads placed on it, eq. 34-35);
+2. the columns chain (:func:`ident.robot.design.design_runs`, the settings of
+   :func:`ident.robot.design.resolve_design`: the single-joint defaults, IDIM-IV
+   instruments when every experiment has its reference, the torque delay of
+   :func:`ident.chain.default_torque_delay`);
+3. when the paper model is fitted, the sign check (:func:`ident.robot.design.sign_checked`
+   with a first usual fit's tau_out_hat, skipped with a note below
+   :data:`SIGN_CHECK_MIN_KEPT`), then eq. 42's columns formed at full rate
+   (:func:`ident.robot.design.products_columns`) with that load model (or the measured
+   quadrant sign(tau dq), eq. 26, when the check is off or skipped);
+4. :class:`ident.robot.estimate.RobotModel` ``"usual"`` (payload ratio eq. 35) and
+   ``"paper"`` with ``form="products"``, LS or IDIM-IV, with the single-joint elimination
+   (``eliminate``);
+5. the estimates by the single-joint names (J, MX, MY through
+   :func:`ident.robot.base.single_joint_map`, a signed selection; the friction and the
+   products by name), in the single-joint models' order (:func:`ident.models.usual_model`,
+   :func:`ident.models.new_model`).
+
+``tests/test_one_fit.py`` checks it gives ``fit_models``' numbers (to 1e-8) on the example
+campaign (LS and IDIM-IV with the half-cycle torque delay) and on the EMPS data.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from trajectories.friction import DEFAULT_Q_S
+from trajectories.robot import RobotPayloadData, RobotRegressor, base_parameters, one_joint_robot
+
+from . import DataError
+from .chain import (
+    ChainSettings,
+    RawExperiment,
+    decimation_index,
+    filter_experiment,
+    selection,
+)
+from .estimate import DEFAULT_THRESHOLD_PCT
+from .loaders import Experiment
+from .models import new_model, usual_model
+from .robot import RobotIdentError
+from .robot.base import single_joint_map
+from .robot.design import design_runs, products_columns, resolve_design, sign_checked
+from .robot.estimate import ZERO_COLUMN, RobotModel
+from .robot.loaders import RawRobotRun, chain_period
+from .robot.signals import RobotSignals
+from .signals import G
+from .vocab import model_name
+
+__all__ = ["OneJointModel", "OneJointFit", "OneJointProblem", "fit_one_joint",
+           "SIGN_CHECK_MIN_KEPT"]
+
+#: The sign check is skipped when it would keep fewer samples than this fraction (as
+#: :data:`ident.fitting.SIGN_CHECK_MIN_KEPT`).
+SIGN_CHECK_MIN_KEPT = 0.7
+
+#: The friction and offset of the usual model: single-joint name -> RobotModel block entry.
+_USUAL_TAIL = {"Ma_ratio": "Ma_ratio", "F_C": "FC", "F_V": "FV", "tau_off": "OFF"}
+#: The products form's tail: single-joint name -> RobotModel block entry.
+_PAPER_TAIL = {"c_m": "c_m", "d_m": "d_m", "c_g": "c_g", "d_g": "d_g", "F_V": "FV",
+               "tau_off": "OFF"}
+
+
+@dataclass
+class OneJointModel:
+    """One model fitted through :class:`~ident.robot.estimate.RobotModel`, by the
+    single-joint names (the attributes of :class:`ident.models.IdentModel` of the same
+    meaning, without the trailing underscore).
+
+    Attributes
+    ----------
+    name : str
+        ``"usual"`` or ``"paper"``.
+    names : tuple of str
+        Kept parameters, in the single-joint model's order.
+    values, std, rel_std_pct : dict
+        Estimate (eq. 12), standard deviation (eq. 15), relative deviation [%] (eq. 16).
+    cov : ndarray (b, b)
+        Covariance of ``names`` (eq. 15).
+    sigma_rho, rel_error, cond, cond_raw : float
+        eq. 14; ||rho|| / ||Y||; condition numbers of the scaled and raw regressor.
+    residual : ndarray (m,)
+        rho on the fitted rows, in time order.
+    removed : list of (str, str)
+        Eliminated parameters and why, by the single-joint names.
+    estimator : {"ls", "iv"}
+    m : int
+        Rows of the fit.
+    robot : RobotModel
+        The fitted robot model (robot names).
+    signals : RobotSignals
+        What it was fitted on (the products formed at full rate for the paper model).
+    rows : ndarray of bool (n,)
+        The samples of ``signals`` the fit took.
+    """
+
+    name: str
+    names: tuple[str, ...]
+    values: dict[str, float]
+    std: dict[str, float]
+    rel_std_pct: dict[str, float]
+    cov: np.ndarray
+    sigma_rho: float
+    residual: np.ndarray
+    rel_error: float
+    cond: float
+    cond_raw: float
+    removed: list[tuple[str, str]]
+    estimator: str
+    m: int
+    robot: RobotModel
+    signals: RobotSignals
+    rows: np.ndarray
+
+
+@dataclass
+class OneJointFit:
+    """Result of :func:`fit_one_joint`.
+
+    Attributes
+    ----------
+    models : dict[str, OneJointModel]
+    q_s : float
+        q_s of the paper model [rad/s].
+    revolute, has_payload : bool
+    settings : ChainSettings
+        The chain's resolved settings (``dq_min`` included).
+    notes : list of str
+        As ``FitReport.notes`` (the sign check skipped).
+    first : RobotModel or None
+        The first usual fit that decided the sign check and the quadrants (None without).
+    sign_checked : bool
+        Whether the sign check's rows were applied.
+    """
+
+    models: dict[str, OneJointModel]
+    q_s: float
+    revolute: bool
+    has_payload: bool
+    settings: ChainSettings
+    notes: list[str] = field(default_factory=list)
+    first: RobotModel | None = None
+    sign_checked: bool = False
+
+
+def _references(exps: Sequence[Experiment], references: Any) -> list[np.ndarray] | None:
+    """The reference position per experiment (IDIM-IV), or None (LS): ``fit_models``'
+    rule ("auto": every experiment's finite ``q_ref`` of the right length, else none)."""
+    if references is None:
+        return None
+    if isinstance(references, str):
+        if references != "auto":
+            raise DataError(f"references {references!r}: expected arrays, 'auto' or None")
+        found = [getattr(e, "q_ref", None) for e in exps]
+        if any(r is None for r in found):
+            return None
+        arrays = [np.asarray(r, dtype=float).ravel() for r in found]
+        if not all(a.size == len(e) and np.all(np.isfinite(a))
+                   for a, e in zip(arrays, exps, strict=True)):
+            return None
+        return arrays
+    parts = list(references)
+    if len(parts) != len(exps):
+        raise DataError(f"references: {len(parts)} given for {len(exps)} experiments (one "
+                        "per experiment)")
+    out = []
+    for i, (r, e) in enumerate(zip(parts, exps, strict=True)):
+        a = np.asarray(getattr(r, "q_ref", r), dtype=float).ravel()
+        if a.size != len(e):
+            raise DataError(f"references[{i}] ({e.source}): {a.size} samples, expected "
+                            f"{len(e)}")
+        out.append(a)
+    return out
+
+
+def _runs(exps: Sequence[Experiment], revolute: bool, payload: bool,
+          refs: list[np.ndarray] | None) -> list[RawRobotRun]:
+    """The experiments as runs of the 1-dof robot: a revolute joint's lever-arm payload,
+    a prismatic joint's mass at the flange (no arm); none when ``payload`` is off."""
+    runs = []
+    for i, e in enumerate(exps):
+        mass, arm = float(e.payload_mass), float(e.payload_arm)
+        pay = RobotPayloadData()
+        if payload and mass:
+            pay = RobotPayloadData(mass, arm_m=arm) if revolute else RobotPayloadData(mass)
+        runs.append(RawRobotRun(e.source, np.asarray(e.t, dtype=float),
+                                np.asarray(e.q, dtype=float)[:, None],
+                                np.asarray(e.tau, dtype=float)[:, None], payload=pay,
+                                q_ref=None if refs is None else refs[i][:, None]))
+    return runs
+
+
+def _single(est: RobotModel, sig: RobotSignals, name: str, single_names: Sequence[str],
+            smap: Any, estimator: str) -> OneJointModel:
+    """The robot model's estimate by the single-joint names (module doc, 5.)."""
+    (num,) = est.numbers_
+    index = {n: i for i, n in enumerate(est.names_)}
+    base_rows = {n: r for n, r in zip(smap.names, smap.matrix, strict=True)}
+    rows: dict[str, np.ndarray] = {}
+    absent = []  # payload=True without a payload: Ma_ratio's column is zero
+    for single in single_names:
+        row = np.zeros(len(est.names_))
+        if name == "usual":
+            if single in base_rows:
+                row[:est.n_base_] = base_rows[single]
+            elif single == "Ma_ratio" and "Ma_ratio" not in index:
+                absent.append(single)
+                continue
+            else:
+                key = _USUAL_TAIL[single]
+                row[index[key if key == "Ma_ratio" else f"{key}{num}"]] = 1.0
+        else:
+            pre, rest = single[:3], single[4:]  # a_m_J: the product a_m of column J
+            if single in _PAPER_TAIL:
+                row[index[f"{_PAPER_TAIL[single]}{num}"]] = 1.0
+            elif rest in base_rows:  # a product of a rigid-body column: a_m_J ...
+                for c in est.cols_[0]:
+                    row[index[f"{pre}_{est.theta_names_[c]}_{num}"]] = base_rows[rest][c]
+            else:  # the payload torque's products: a_m, b_m, a_g, b_g
+                row[index[f"{single}{num}"]] = 1.0
+        nz = np.flatnonzero(row)
+        if nz.size != 1 or abs(abs(row[nz[0]]) - 1.0) > 1e-9:
+            raise RobotIdentError(f"{single}: not one robot parameter (the single-joint map "
+                                  "is not a signed selection)")
+        rows[single] = row
+    fixed = set(est.fixed_)
+    robot_name = {s: est.names_[int(np.flatnonzero(r)[0])] for s, r in rows.items()}
+    kept = [s for s in single_names if s in robot_name and robot_name[s] not in fixed]
+    of_robot = {v: s for s, v in robot_name.items()}
+    removed = [(s, ZERO_COLUMN) for s in absent] + [
+        (of_robot[n], why) for n, why in est.removed_ if n in of_robot]
+    M = np.array([rows[s] for s in kept]).reshape(len(kept), len(est.names_))
+    val = M @ est.coef_
+    cov = M @ est.cov_ @ M.T
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = np.where(val != 0, 100.0 * std / np.abs(val), np.inf)
+    taken = est.fitted_rows(sig)[:, 0]
+    rho = est.residual(sig)[taken, 0]
+    return OneJointModel(
+        name=name, names=tuple(kept),
+        values=dict(zip(kept, val.tolist(), strict=True)),
+        std=dict(zip(kept, std.tolist(), strict=True)),
+        rel_std_pct=dict(zip(kept, rel.tolist(), strict=True)),
+        cov=cov, sigma_rho=float(est.sigma_), residual=rho,
+        rel_error=float(est.rel_error_[est.joints_[0]]), cond=float(est.cond_),
+        cond_raw=float(est.cond_raw_), removed=removed, estimator=estimator,
+        m=int(est.n_samples_[0]), robot=est, signals=sig, rows=taken)
+
+
+def fit_one_joint(
+    data: Sequence[Experiment],
+    models: Sequence[str] = ("usual", "paper"),
+    *,
+    q_s: float = DEFAULT_Q_S,
+    joint: str | bool | None = None,
+    cutoff_hz: float | None = None,
+    decimation: int | None = None,
+    dq_min: float | None = None,
+    tau_min: float | None = None,
+    trim: int | None = None,
+    guard: int | None = None,
+    sign_check: bool = True,
+    eliminate: bool = True,
+    threshold_pct: float | None = None,
+    references: Sequence[Any] | str | None = "auto",
+    torque_delay: float | str = "auto",
+    payload: bool | None = None,
+) -> OneJointFit:
+    """Fit the experiments of one joint through the robot model (module doc).
+
+    Parameters
+    ----------
+    data : list of Experiment
+        Identification experiments of one joint (one per payload run).
+    models : sequence of {"usual", "paper"}
+    q_s : float
+        q_s of the paper model [rad/s].
+    joint : {"revolute", "prismatic"}, bool or None
+        Overrides the joint kind of the experiments.
+    cutoff_hz, decimation, dq_min, tau_min, trim, guard
+        The chain's settings (None: chosen from the data as
+        :func:`ident.preprocess.build_design` does).
+    sign_check, eliminate, threshold_pct, references, torque_delay, payload
+        As in :func:`ident.fitting.fit_models`.
+
+    Returns
+    -------
+    OneJointFit
+
+    Raises
+    ------
+    DataError
+        Bad options or data (one line).
+    """
+    exps = list(data)
+    if not exps:
+        raise DataError("no experiment given")
+    models = list(dict.fromkeys(model_name(n) for n in models))
+    for n in models:
+        if n not in ("usual", "paper"):
+            raise DataError(f"model {n!r}: expected 'usual' or 'paper'")
+    revolute = bool(exps[0].revolute)
+    if joint is not None:
+        if isinstance(joint, bool):
+            revolute = joint
+        elif str(joint).lower() in ("revolute", "prismatic"):
+            revolute = str(joint).lower() == "revolute"
+        else:
+            raise DataError(f"joint kind {joint!r}: expected 'revolute' or 'prismatic'")
+    has_payload = (any(float(e.payload_mass) != 0 for e in exps) if payload is None
+                   else bool(payload))
+    q_s = float(q_s)
+    if not q_s > 0:
+        raise DataError(f"q_s must be positive [rad/s], got {q_s}")
+    if isinstance(torque_delay, str):
+        if torque_delay != "auto":
+            raise DataError(f"torque_delay {torque_delay!r}: expected a number [samples] or "
+                            "'auto'")
+        delay = None
+    else:
+        delay = float(torque_delay)
+    refs = _references(exps, references)
+    problem = OneJointProblem(exps, revolute=revolute, has_payload=has_payload,
+                              references=refs, paper="paper" in models,
+                              sign_check=sign_check, tau_min=tau_min, cutoff_hz=cutoff_hz,
+                              decimation=decimation, dq_min=dq_min, trim=trim, guard=guard,
+                              torque_delay=delay)
+    notes: list[str] = []
+    if not has_payload:
+        notes.append("no run carries a payload: the payload term (Ma_ratio / a_m, b_m...) is "
+                     "left out")
+    if not revolute:
+        notes.append("prismatic joint: no gravity columns (MX, MY)")
+    fitted = {name: problem.fit(name, q_s, eliminate=eliminate, threshold_pct=threshold_pct)
+              for name in models}
+    return OneJointFit(models=fitted, q_s=q_s, revolute=revolute, has_payload=has_payload,
+                       settings=problem.settings, notes=notes + problem.notes,
+                       first=problem.first, sign_checked=problem.sign_checked)
+
+
+class OneJointProblem:
+    """The experiments of one joint prepared for the robot fits (module doc, 1.-3.), fitted
+    by :meth:`fit` for any model and q_s (the products re-formed per q_s).
+
+    Parameters
+    ----------
+    exps : sequence of Experiment
+    revolute, has_payload : bool
+        The joint kind; the payload term (the runs' payloads dropped when False).
+    references : list of ndarray or None
+        The reference position of each experiment (IDIM-IV), or None (LS).
+    paper : bool
+        The paper model will be fitted: the sign check (``sign_check``) and its load model.
+    sign_check : bool
+        As in :func:`ident.fitting.fit_models`.
+    first : RobotModel or None
+        A first usual fit to take as the load model instead of fitting one (Table IV: the
+        load model of all the experiments on those without payload); its sign check is
+        applied without the ``SIGN_CHECK_MIN_KEPT`` test (``first_checked``: whether it was
+        applied on the data it was fitted on).
+    tau_min : float or None
+        Rows within the guard of a full-rate sample with |tau| < tau_min (the low-passed
+        torque) are left out too, as :func:`ident.preprocess.build_design` does.
+    **settings
+        ``cutoff_hz``, ``decimation``, ``dq_min``, ``trim``, ``guard``, ``torque_delay``
+        (None: chosen from the data).
+
+    Attributes
+    ----------
+    settings : ChainSettings
+        Resolved.
+    signals : RobotSignals
+        The columns chain's signals, after the sign check.
+    first : RobotModel or None
+    sign_checked : bool
+    notes : list of str
+        The sign check skipped.
+    """
+
+    def __init__(self, exps: Sequence[Experiment], *, revolute: bool, has_payload: bool,
+                 references: list[np.ndarray] | None, paper: bool, sign_check: bool = True,
+                 first: RobotModel | None = None, first_checked: bool = True,
+                 tau_min: float | None = None, **settings: float | None) -> None:
+        self.revolute, self.has_payload = revolute, has_payload
+        self.iv = references is not None
+        self.method = "iv" if self.iv else "ls"
+        self.runs = _runs(exps, revolute, has_payload, references)
+        # the payload ratio (eq. 35) is identified when a run carries a payload; named
+        # without one (payload=True), it is reported removed (a zero column)
+        self._ratio = has_payload and any(run.payload.mass > 0 for run in self.runs)
+        self.reg = RobotRegressor(one_joint_robot("revolute" if revolute else "prismatic",
+                                                  gravity=G))
+        self.base = base_parameters(self.reg)
+        self.smap = single_joint_map(self.base, self.reg)
+        self.notes: list[str] = []
+        self.first = first
+        self.sign_checked = False
+        self._products: dict[float, RobotSignals] = {}
+        try:
+            st = resolve_design(self.runs, instruments=self.iv, **settings)
+            sig, dqm = design_runs(self.runs, self.reg, st, instruments=self.iv,
+                                   base=self.base)
+            self.settings = st = replace(st, dq_min=dqm)
+            tau_keep = None
+            if tau_min is not None:
+                tau_keep = self._tau_keep(sig, float(tau_min))
+                sig = replace(sig, columns=replace(sig.columns, keep=sig.columns.keep
+                                                   & tau_keep))
+            if paper and sign_check and first is None:
+                self.first = RobotModel(self.reg, "usual", self.method, base=self.base,
+                                        payload_ratio=self._ratio).fit(sig)
+            if paper and self.first is not None and (first is None or first_checked):
+                out, kept = sign_checked(sig, self.runs, st, self.first.load_torque)
+                if tau_keep is not None:  # the check's rows recomputed: tau_min again
+                    keep = out.columns.keep & tau_keep
+                    out = replace(out, columns=replace(out.columns, keep=keep))
+                    kept = keep.sum(axis=0) / np.maximum(sig.columns.keep.sum(axis=0), 1)
+                if kept[0] >= SIGN_CHECK_MIN_KEPT or first is not None:
+                    sig, self.sign_checked = out, True
+                else:
+                    self.notes.append(
+                        f"sign check skipped: it would keep only {100 * kept[0]:.0f} % of the "
+                        "samples (tau_out near zero over much of the data: no gravity or "
+                        "payload load), so sign(P) = sign(tau dq) of eq. 26 is used as is")
+        except RobotIdentError as err:
+            raise DataError(str(err)) from None
+        self.signals = sig
+
+    def _tau_keep(self, sig: RobotSignals, tau_min: float) -> np.ndarray:
+        """The rows (n, 1) not within the guard of a full-rate |tau_f| < ``tau_min``, of the
+        stiction area or of the edges (:func:`ident.chain.selection`)."""
+        st = self.settings
+        dt = chain_period(self.runs)
+        keep = np.zeros((sig.n, 1), dtype=bool)
+        for i, run in enumerate(self.runs):
+            f = filter_experiment(RawExperiment(run.source, run.q, run.tau), dt, st,
+                                  error=RobotIdentError)
+            rows = np.flatnonzero(sig.experiment == i)
+            keep[rows] = selection(f.dq, st.dq_min, st.guard,
+                                   decimation_index(f.n, st.decimation),
+                                   np.abs(f.tau_f) < tau_min)
+        return keep
+
+    def load_values(self) -> dict[str, float]:
+        """The first usual fit's load parameters by the single-joint names (J, MX, MY,
+        Ma_ratio): the ``load_model`` of :func:`ident.preprocess.build_design`."""
+        if self.first is None:
+            raise DataError("no first usual fit (the sign check was not made)")
+        out = self.smap.values(self.first.coef_[:self.first.n_base_])
+        if "Ma_ratio" in self.first.params_:
+            out["Ma_ratio"] = self.first.params_["Ma_ratio"]
+        return out
+
+    def _load(self, s: RobotSignals) -> np.ndarray:
+        """The load deciding the quadrants: the first fit's tau_out_hat after the sign
+        check, else the measured quadrant sign(tau dq) (eq. 26) -- the filtered torque of the
+        full-rate signals :func:`~ident.robot.design.products_columns` forms."""
+        if self.sign_checked and self.first is not None:
+            return self.first.load_torque(s)
+        return s.tau
+
+    def products(self, q_s: float) -> RobotSignals:
+        """The signals with eq. 42's columns formed at full rate for ``q_s`` [rad/s]
+        (the last one kept)."""
+        q_s = float(q_s)
+        if q_s not in self._products:
+            self._products = {q_s: products_columns(
+                self.signals, self.runs, self.reg, self.settings, self._load, q_s,
+                base=self.base, instruments=self.iv)}
+        return self._products[q_s]
+
+    def fit(self, name: str, q_s: float = DEFAULT_Q_S, *, eliminate: bool = True,
+            threshold_pct: float | None = None) -> OneJointModel:
+        """Fit model ``name`` ("usual" or "paper", q_s [rad/s]) through RobotModel."""
+        thr = DEFAULT_THRESHOLD_PCT if threshold_pct is None else float(threshold_pct)
+        q_s = float(q_s)
+        if not q_s > 0:
+            raise DataError(f"q_s must be positive [rad/s], got {q_s}")
+        try:
+            if name == "usual":
+                sig = self.signals
+                est = RobotModel(self.reg, "usual", self.method, base=self.base,
+                                 payload_ratio=self._ratio, eliminate=eliminate,
+                                 threshold_pct=thr).fit(sig)
+                single = usual_model(self.revolute, payload=self.has_payload).names()
+            elif name == "paper":
+                sig = self.products(q_s)
+                est = RobotModel(self.reg, "paper", self.method, base=self.base,
+                                 form="products", q_s=q_s, eliminate=eliminate,
+                                 threshold_pct=thr).fit(sig)
+                single = new_model(q_s, self.revolute, payload=self.has_payload).names()
+            else:
+                raise DataError(f"model {name!r}: expected 'usual' or 'paper'")
+            return _single(est, sig, name, single, self.smap, self.method)
+        except RobotIdentError as err:
+            raise DataError(str(err)) from None

@@ -1,0 +1,197 @@
+"""A joint is a 1-dof robot (issue 24): :func:`ident.one_joint.fit_one_joint` -- the one-joint
+robot, the columns chain, the sign check, the products formed at full rate and
+``RobotModel`` with the single-joint elimination -- and ``ident.fitting.fit_models`` (whose
+fit is now that one) give the single-joint least squares' numbers (``IdentModel.fit``: QR on
+the decimated columns of :func:`ident.preprocess.build_design`, the fit of ``fit_models``
+before the switch): values, standard deviations, relative deviations, covariance,
+sigma_rho, residual, relative error, condition numbers, removed parameters and rows, to 1e-8
+(measured: 5e-12 at worst on the example campaign, 4e-13 on EMPS, 1.5e-12 on the quick
+demo's MCAP logs)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from example_campaign import simulate_example_campaign
+
+from daq.app.demo import run_demo
+from ident import DataError
+from ident.fitting import fit_models
+from ident.loaders import load_experiment, make_experiment
+from ident.models import IdentModel
+from ident.one_joint import fit_one_joint
+from ident.robot import RobotIdentError
+from ident.robot.estimate import RobotModel
+from tests.conftest import shared_path
+from trajectories.robot import RobotRegressor, one_joint_robot
+
+RTOL = 1e-8
+
+
+@pytest.fixture(scope="module")
+def campaign():
+    """The example campaign simulated offline (seeds 11-13): its runs and each run's
+    reference position (the planned trajectory at its cycles) [rad]."""
+    _, plan, sims = simulate_example_campaign(11)
+    refs = [plan.reference.q[np.minimum(r.cycle, plan.reference.q.size - 1)] for r in sims]
+    return plan, sims, refs
+
+
+def _experiments(campaign, suffix: str, with_ref: bool):
+    plan, sims, refs = campaign
+    return [make_experiment(f"payload{i}.{suffix}", r.t, r.q, r.tau_ref,
+                            q_ref=q if with_ref else None, payload_mass=p.mass_kg,
+                            payload_arm=p.arm_m)
+            for i, (p, r, q) in enumerate(zip(plan.payloads, sims, refs, strict=True))]
+
+
+def _assert_same(report, ours, eliminate: bool = True,
+                 threshold_pct: float | None = None) -> None:
+    """Every number of each model of ``ours`` (fit_one_joint) and of ``report`` (fit_models,
+    whose fit is the robot model's) is the single-joint least squares
+    (:meth:`ident.models.IdentModel.fit`, QR on the columns) on ``report``'s design of that
+    model (built by :func:`ident.preprocess.build_design`), to ``RTOL``."""
+    assert set(report.models) == set(ours.models)
+    assert report.q_s == ours.q_s and report.revolute == ours.revolute
+    assert [n for n in report.notes
+            if "condition number" not in n and "not identifiable" not in n] == ours.notes
+    d = next(iter(report.designs.values())).settings()
+    for k in ("cutoff_hz", "decimation", "trim", "guard", "torque_delay", "dq_min"):
+        assert ours.settings.as_dict()[k] == d[k], k
+    for name, fitted in report.models.items():
+        design = report.designs[name]
+        ref = IdentModel(fitted.library, name).fit(design, eliminate=eliminate,
+                                                   threshold_pct=threshold_pct)
+        for o in (ours.models[name], _as_fit(fitted)):
+            assert o.names == ref.names_, name
+            assert o.removed == ref.removed_, name
+            assert o.estimator == ref.estimator_ and o.m == ref.result_.m == len(design)
+            for n in ref.names_:
+                assert o.values[n] == pytest.approx(ref.coef_[n], rel=RTOL), (name, n)
+                assert o.std[n] == pytest.approx(ref.std_[n], rel=RTOL), (name, n)
+                assert o.rel_std_pct[n] == pytest.approx(ref.rel_std_pct_[n], rel=RTOL)
+            np.testing.assert_allclose(o.cov, ref.cov_, rtol=RTOL,
+                                       atol=RTOL * np.abs(ref.cov_).max())
+            for a, b in ((o.sigma_rho, ref.sigma_rho_), (o.rel_error, ref.rel_error_),
+                         (o.cond, ref.cond_), (o.cond_raw, ref.result_.cond_raw)):
+                assert a == pytest.approx(b, rel=RTOL), name
+            # the same rows in the same order: the residual sample for sample
+            np.testing.assert_allclose(o.residual, ref.residual_, rtol=0,
+                                       atol=RTOL * np.abs(ref.residual_).max())
+        o = ours.models[name]
+        np.testing.assert_array_equal(o.signals.t[o.rows], design.signals.t)
+        assert fitted.robot_ is not None and fitted.predict(design) == pytest.approx(
+            ref.predict(design), rel=RTOL, abs=RTOL * np.abs(design.Y).max())
+
+
+def _as_fit(m: IdentModel) -> SimpleNamespace:
+    """A fitted IdentModel under OneJointModel's attribute names."""
+    return SimpleNamespace(names=m.names_, removed=m.removed_, estimator=m.estimator_,
+                           m=m.result_.m, values=m.coef_, std=m.std_,
+                           rel_std_pct=m.rel_std_pct_, cov=m.cov_, sigma_rho=m.sigma_rho_,
+                           rel_error=m.rel_error_, cond=m.cond_, cond_raw=m.result_.cond_raw,
+                           residual=m.residual_)
+
+
+@pytest.mark.parametrize("suffix, with_ref", [("csv", False), ("mcap", True)])
+def test_example_campaign_is_fit_models(campaign, suffix, with_ref):
+    """LS on CSV-named runs (torque delay 0), IDIM-IV with the half-cycle torque delay on
+    MCAP-named runs with their references (the demo's settings)."""
+    exps = _experiments(campaign, suffix, with_ref)
+    report = fit_models(exps)
+    ours = fit_one_joint(exps)
+    assert ours.sign_checked  # the campaign crosses zero load at low velocity
+    assert ours.settings.torque_delay == (0.5 if with_ref else 0.0)
+    assert {m.estimator for m in ours.models.values()} == {"iv" if with_ref else "ls"}
+    _assert_same(report, ours)
+
+
+def test_elimination_is_fit_models(campaign):
+    """The single-joint elimination (iteratively the largest relative deviation above the
+    threshold) through RobotModel(eliminate=True): a threshold below the third largest
+    relative deviation of the full paper model removes several parameters, in the same
+    order, with the same reasons."""
+    exps = _experiments(campaign, "csv", False)
+    full = fit_models(exps, eliminate=False, table_iv=False)
+    rel = sorted(full.models["paper"].rel_std_pct_.values(), reverse=True)
+    threshold = 0.5 * (rel[2] + rel[3])
+    report = fit_models(exps, threshold_pct=threshold, table_iv=False)
+    assert len(report.models["paper"].removed_) >= 3
+    _assert_same(report, fit_one_joint(exps, threshold_pct=threshold),
+                 threshold_pct=threshold)
+    off = fit_one_joint(exps, eliminate=False)
+    assert all(not m.removed for m in off.models.values())
+    _assert_same(full, off, eliminate=False)
+
+
+def test_emps_is_fit_models():
+    """The real EMPS data (prismatic, no payload): the reference script's settings (no sign
+    check, every sample) and the defaults (the sign check skipped with its note), the
+    exponential terms eliminated."""
+    d = shared_path("data", "emps")
+    exp = load_experiment(d / "DATA_EMPS.mat", mapping={"q": "qm", "tau": "vir"},
+                          gain="gtau", joint="prismatic")
+    for opts in ({"cutoff_hz": 100.0, "decimation": 10, "dq_min": 0.0, "sign_check": False},
+                 {}):
+        report = fit_models([exp], **opts)
+        ours = fit_one_joint([exp], **opts)
+        assert report.models["paper"].removed_  # d_m, ... not significant
+        assert not ours.revolute and not ours.sign_checked
+        _assert_same(report, ours)
+
+
+def test_robot_model_elimination_options():
+    """Elimination is off by default and refused on the bilinear paper model."""
+    assert RobotModel(None).get_params()["eliminate"] is False
+    reg = RobotRegressor(one_joint_robot("revolute"))
+    with pytest.raises(RobotIdentError, match="linear forms") as err:
+        RobotModel(reg, "paper", eliminate=True)._setup()
+    assert "\n" not in str(err.value)
+    with pytest.raises(RobotIdentError, match="threshold_pct"):
+        RobotModel(reg, "usual", eliminate=True, threshold_pct=0.0)._setup()
+    with pytest.raises(DataError, match="model 'x'"):
+        fit_one_joint([make_experiment("a.csv", np.arange(100) * 1e-3, np.zeros(100),
+                                       np.zeros(100))], models=["x"])
+
+
+def test_tau_min_is_fit_models(campaign):
+    """``tau_min``: the rows near a low-passed |tau| below it are left out by both paths
+    (with the sign check and its kept fraction on the remaining rows)."""
+    exps = _experiments(campaign, "csv", False)
+    tau = np.concatenate([e.tau for e in exps])
+    tau_min = float(np.quantile(np.abs(tau), 0.2))  # a fifth of the samples and more out
+    report = fit_models(exps, tau_min=tau_min, table_iv=False)
+    ours = fit_one_joint(exps, tau_min=tau_min)
+    assert ours.models["usual"].m < fit_one_joint(exps, models=["usual"]).models["usual"].m
+    _assert_same(report, ours)
+
+
+@pytest.mark.slow
+def test_demo_logs_are_the_single_joint_fit(tmp_path):
+    """The quick demo's MCAP logs (simulated CiA 402 drive, real master, jointid logs):
+    IDIM-IV with the half-cycle torque delay, the sign check, and several terms of the paper
+    model eliminated -- the same numbers as the single-joint least squares (measured
+    1.5e-12)."""
+    run_demo(tmp_path, quick=True)
+    exps = [load_experiment(p) for p in sorted((tmp_path / "logs").glob("*.mcap"))]
+    report = fit_models(exps)
+    ours = fit_one_joint(exps)
+    assert ours.sign_checked and ours.settings.torque_delay == 0.5
+    assert {m.estimator for m in ours.models.values()} == {"iv"}
+    assert ours.models["paper"].removed  # exponential terms not significant on the quick run
+    _assert_same(report, ours)
+
+
+def test_payload_named_without_payload_is_fit_models(campaign):
+    """``payload=True`` on a run without payload: Ma_ratio (usual) and the payload torque's
+    products a_m, b_m, a_g, b_g (paper) are reported removed as zero columns, in the
+    single-joint order, and the rest is the fit without them."""
+    plan, sims, _ = campaign
+    exps = [make_experiment("p.csv", sims[0].t, sims[0].q, sims[0].tau_ref)]
+    report = fit_models(exps, payload=True, table_iv=False)
+    ours = fit_one_joint(exps, payload=True)
+    assert [n for n, _ in ours.models["usual"].removed] == ["Ma_ratio"]
+    assert [n for n, _ in ours.models["paper"].removed][:4] == ["a_m", "b_m", "a_g", "b_g"]
+    _assert_same(report, ours)
