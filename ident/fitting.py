@@ -42,7 +42,6 @@ from trajectories.friction import DEFAULT_Q_S
 
 from . import DataError
 from .chain import _decimate_rows, default_torque_delay
-from .estimate import LSResult
 from .loaders import Experiment, concat
 from .models import (
     IdentModel,
@@ -487,13 +486,7 @@ def _fitted(library: Library, name: str, fit: OneJointModel) -> IdentModel:
     it as they read a single-joint fit; ``robot_`` is the fitted
     :class:`~ident.robot.estimate.RobotModel`."""
     m = IdentModel(library, name)
-    n = fit.names
-    m._set(LSResult(
-        names=n, chi=np.array([fit.values[k] for k in n]),
-        std=np.array([fit.std[k] for k in n]),
-        rel_std_pct=np.array([fit.rel_std_pct[k] for k in n]), cov=fit.cov,
-        sigma_rho=fit.sigma_rho, residual=fit.residual, rel_error=fit.rel_error,
-        cond=fit.cond, cond_raw=fit.cond_raw, m=fit.m, removed=list(fit.removed)))
+    m._set(fit.result)
     m.estimator_ = fit.estimator
     m.robot_ = fit.robot
     return m

@@ -46,7 +46,7 @@ from .chain import (
     filter_experiment,
     selection,
 )
-from .estimate import DEFAULT_THRESHOLD_PCT
+from .estimate import DEFAULT_THRESHOLD_PCT, LSResult
 from .loaders import Experiment
 from .models import new_model, usual_model
 from .robot import RobotIdentError
@@ -75,28 +75,20 @@ _PAPER_TAIL = {"c_m": "c_m", "d_m": "d_m", "c_g": "c_g", "d_g": "d_g", "F_V": "F
 @dataclass
 class OneJointModel:
     """One model fitted through :class:`~ident.robot.estimate.RobotModel`, by the
-    single-joint names (the attributes of :class:`ident.models.IdentModel` of the same
-    meaning, without the trailing underscore).
+    single-joint names: its statistics are an :class:`~ident.estimate.LSResult` (what
+    :class:`ident.models.IdentModel` holds as ``result_``), read through the properties below
+    (the attributes of ``IdentModel`` of the same meaning, without the trailing underscore).
 
     Attributes
     ----------
     name : str
         ``"usual"`` or ``"paper"``.
-    names : tuple of str
-        Kept parameters, in the single-joint model's order.
-    values, std, rel_std_pct : dict
-        Estimate (eq. 12), standard deviation (eq. 15), relative deviation [%] (eq. 16).
-    cov : ndarray (b, b)
-        Covariance of ``names`` (eq. 15).
-    sigma_rho, rel_error, cond, cond_raw : float
-        eq. 14; ||rho|| / ||Y||; condition numbers of the scaled and raw regressor.
-    residual : ndarray (m,)
-        rho on the fitted rows, in time order.
-    removed : list of (str, str)
-        Eliminated parameters and why, by the single-joint names.
+    result : LSResult
+        Kept parameters (in the single-joint model's order), estimate (eq. 12), standard and
+        relative deviations (eq. 15-16), covariance, sigma_rho (eq. 14), residual on the
+        fitted rows in time order, ||rho|| / ||Y||, condition numbers, rows, and the
+        eliminated parameters with why.
     estimator : {"ls", "iv"}
-    m : int
-        Rows of the fit.
     robot : RobotModel
         The fitted robot model (robot names).
     signals : RobotSignals
@@ -106,22 +98,59 @@ class OneJointModel:
     """
 
     name: str
-    names: tuple[str, ...]
-    values: dict[str, float]
-    std: dict[str, float]
-    rel_std_pct: dict[str, float]
-    cov: np.ndarray
-    sigma_rho: float
-    residual: np.ndarray
-    rel_error: float
-    cond: float
-    cond_raw: float
-    removed: list[tuple[str, str]]
+    result: LSResult
     estimator: str
-    m: int
     robot: RobotModel
     signals: RobotSignals
     rows: np.ndarray
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(self.result.names)
+
+    @property
+    def values(self) -> dict[str, float]:
+        return dict(zip(self.result.names, self.result.chi.tolist(), strict=True))
+
+    @property
+    def std(self) -> dict[str, float]:
+        return dict(zip(self.result.names, self.result.std.tolist(), strict=True))
+
+    @property
+    def rel_std_pct(self) -> dict[str, float]:
+        return dict(zip(self.result.names, self.result.rel_std_pct.tolist(), strict=True))
+
+    @property
+    def removed(self) -> list[tuple[str, str]]:
+        return list(self.result.removed)
+
+    @property
+    def cov(self) -> np.ndarray:
+        return self.result.cov
+
+    @property
+    def sigma_rho(self) -> float:
+        return self.result.sigma_rho
+
+    @property
+    def residual(self) -> np.ndarray:
+        return self.result.residual
+
+    @property
+    def rel_error(self) -> float:
+        return self.result.rel_error
+
+    @property
+    def cond(self) -> float:
+        return self.result.cond
+
+    @property
+    def cond_raw(self) -> float:
+        return self.result.cond_raw
+
+    @property
+    def m(self) -> int:
+        return self.result.m
 
 
 @dataclass
@@ -249,14 +278,13 @@ def _single(est: RobotModel, sig: RobotSignals, name: str, single_names: Sequenc
     taken = est.fitted_rows(sig)[:, 0]
     rho = est.residual(sig)[taken, 0]
     return OneJointModel(
-        name=name, names=tuple(kept),
-        values=dict(zip(kept, val.tolist(), strict=True)),
-        std=dict(zip(kept, std.tolist(), strict=True)),
-        rel_std_pct=dict(zip(kept, rel.tolist(), strict=True)),
-        cov=cov, sigma_rho=float(est.sigma_), residual=rho,
-        rel_error=float(est.rel_error_[est.joints_[0]]), cond=float(est.cond_),
-        cond_raw=float(est.cond_raw_), removed=removed, estimator=estimator,
-        m=int(est.n_samples_[0]), robot=est, signals=sig, rows=taken)
+        name=name,
+        result=LSResult(names=tuple(kept), chi=val, std=std, rel_std_pct=rel, cov=cov,
+                        sigma_rho=float(est.sigma_), residual=rho,
+                        rel_error=float(est.rel_error_[est.joints_[0]]),
+                        cond=float(est.cond_), cond_raw=float(est.cond_raw_),
+                        m=int(est.n_samples_[0]), removed=removed),
+        estimator=estimator, robot=est, signals=sig, rows=taken)
 
 
 def fit_one_joint(
