@@ -176,8 +176,6 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
     _say(stream, f"[4/4] refinement: {len(ref.steps)} step(s), relative error "
                  f"{ref.rel_error_initial:.4f} -> {ref.rel_error_final:.4f}, q_s = "
                  f"{report.q_s:.4g} rad/s ({time.perf_counter() - t0:.1f} s)")
-    if ref.heldout_one_trajectory and ref.validation_rel_error_initial is None:
-        _say(stream, f"      {ONE_TRAJECTORY_NOTE}")
 
     # figures (captions and grouping: report_build.discover_figures)
     hb.status("drawing the figures and writing the report")
@@ -237,6 +235,8 @@ def _summary(fit: dict, ref: Any, wall_s: float) -> str:
                      f"({params}); {_f(s.rel_error_before)} -> {_f(s.rel_error_after)}")
     if not ref.steps:
         lines.append("  nothing significant left in the residual")
+    if ref.heldout_one_trajectory and ref.validation_rel_error_initial is None:
+        lines.append(f"  {ONE_TRAJECTORY_NOTE}")
     lines.append(f"(whole demo: {wall_s:.0f} s)")
     return "\n".join(lines)
 
