@@ -36,8 +36,8 @@ import math
 import numpy as np
 from scipy import signal
 
-__all__ = ["LEAK_RATIO", "N_BLOCKS", "TRAJECTORY_TOL", "heldout_error", "heldout_kind",
-           "noise_floor", "one_trajectory"]
+__all__ = ["LEAK_RATIO", "MAX_START_OFFSET", "N_BLOCKS", "TRAJECTORY_TOL", "heldout_error",
+           "heldout_kind", "noise_floor", "one_trajectory"]
 
 #: A fit or held-out error below this fraction of the estimated noise floor is a leak.
 LEAK_RATIO = 0.5
@@ -49,10 +49,14 @@ SPECTRUM_BAND = 0.1
 N_BLOCKS = 5
 
 #: Two runs replay one trajectory when the RMS difference of their positions at the same time
-#: since their start is below this fraction of the positions' standard deviation. (Measured:
-#: about 1e-3 for the payload runs of one plan, whose tracking errors differ with the load;
-#: about 1 for two multi-sines of other seeds.)
+#: since their (aligned) start is below this fraction of the positions' standard deviation.
+#: (Measured: about 1e-3 for the payload runs of one plan, whose tracking errors differ with
+#: the load; about 1 for two multi-sines of other seeds.)
 TRAJECTORY_TOL = 0.05
+
+#: Largest start offset between runs :func:`one_trajectory` aligns, as a fraction of the first
+#: run's duration (the demo's payload logs start 0.20 s apart in 199 s).
+MAX_START_OFFSET = 0.1
 
 
 def _mad(x: np.ndarray) -> float:
@@ -103,6 +107,41 @@ def heldout_kind(experiment: np.ndarray) -> str:
     return "leave one run out" if np.unique(experiment).size >= 2 else "blocked folds"
 
 
+def _start_offset(t0: np.ndarray, q0: np.ndarray, tr: np.ndarray, qr: np.ndarray,
+                  spread: np.ndarray, max_shift: float) -> float:
+    """The delay [s] of run r's start against the first run's that best aligns their
+    positions: the least mean squared difference of the normalised positions (summed over
+    joints) over the time both cover, on a uniform grid at the first run's median period,
+    for every delay within +-``max_shift`` with at least half the shorter run in common (all
+    delays at once by FFT cross-correlations)."""
+    dt = float(np.median(np.diff(t0))) if t0.size > 1 else 0.0
+    if not dt > 0:
+        return 0.0
+    grid0 = np.arange(t0[0], t0[-1] + 0.5 * dt, dt)
+    gridr = np.arange(tr[0], tr[-1] + 0.5 * dt, dt)
+    n = grid0.size + gridr.size
+
+    def xcorr(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        # c[k] = sum_i y[i + k] x[i] (k < 0 wrapped to the end)
+        return np.fft.irfft(np.fft.rfft(y, n) * np.conj(np.fft.rfft(x, n)), n)
+
+    ones0, onesr = np.ones(grid0.size), np.ones(gridr.size)
+    common = xcorr(ones0, onesr)
+    sq = np.zeros(n)
+    for j in range(q0.shape[1]):
+        a = np.interp(grid0, t0, q0[:, j]) / spread[j]
+        b = np.interp(gridr, tr, qr[:, j]) / spread[j]
+        sq += xcorr(a * a, onesr) + xcorr(ones0, b * b) - 2.0 * xcorr(a, b)
+    lags = np.arange(n)
+    lags = np.where(lags > n // 2, lags - n, lags)
+    offsets = lags * dt + (gridr[0] - grid0[0])
+    ok = (np.abs(offsets) <= max_shift) & (common >= 0.5 * min(grid0.size, gridr.size) - 0.5)
+    if not ok.any():
+        return 0.0
+    msd = sq[ok] / common[ok]
+    return float(offsets[ok][int(np.argmin(msd))])
+
+
 def one_trajectory(t: np.ndarray, q: np.ndarray, experiment: np.ndarray,
                    tol: float = TRAJECTORY_TOL) -> bool:
     """Whether every run replays the first run's trajectory (two runs or more).
@@ -122,9 +161,12 @@ def one_trajectory(t: np.ndarray, q: np.ndarray, experiment: np.ndarray,
     -------
     bool
         True when, for every run after the first, the RMS difference between its positions
-        and the first run's (interpolated at the same time since the start, over the time both
-        cover) is at most ``tol`` times the standard deviation of the positions (per joint);
-        False with one run, or when a run shares less than half its time span with the first.
+        and the first run's, once its start is aligned with the first run's (the delay that
+        best matches them, at most :data:`MAX_START_OFFSET` of the first run's duration:
+        logs whose recording starts a little earlier or later replay the same path), over
+        the time both cover, is at most ``tol`` times the standard deviation of the positions
+        (per joint); False with one run, or when a run shares less than half its time span
+        with the first.
     """
     t = np.asarray(t, dtype=float)
     q = np.asarray(q, dtype=float)
@@ -140,9 +182,12 @@ def one_trajectory(t: np.ndarray, q: np.ndarray, experiment: np.ndarray,
     t0, q0 = t[first], q[first]
     order = np.argsort(t0)
     t0, q0 = t0[order], q0[order]
+    max_shift = MAX_START_OFFSET * float(np.ptp(t0))
     for r in runs[1:]:
         m = exp == r
-        tr, qr = t[m], q[m]
+        order = np.argsort(t[m])
+        tr, qr = t[m][order], q[m][order]
+        tr = tr - _start_offset(t0, q0, tr, qr, spread, max_shift)
         inside = (tr >= t0[0]) & (tr <= t0[-1])
         if inside.sum() < 2 or np.ptp(tr[inside]) < 0.5 * np.ptp(tr):
             return False

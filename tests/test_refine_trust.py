@@ -196,8 +196,9 @@ def test_named_effects_declare_their_physical_range():
 
 def test_one_trajectory_tells_a_replayed_path_from_another():
     """Runs that replay one trajectory (tracking errors that differ with the load) are told
-    from runs of another trajectory: another multi-sine, the same one started later, one
-    joint of several that differs; one run is never "one trajectory"."""
+    from runs of another trajectory: another multi-sine, the same one delayed beyond
+    MAX_START_OFFSET (a recording started a little earlier or later replays the same path),
+    one joint of several that differs; one run is never "one trajectory"."""
     rng = np.random.default_rng(5)
     t = np.arange(0.0, 20.0, 0.01)
 
@@ -213,7 +214,11 @@ def test_one_trajectory_tells_a_replayed_path_from_another():
     assert one_trajectory(tt, np.concatenate(track), runs)
     assert not one_trajectory(t, q0, np.zeros(t.size, int))
     assert not one_trajectory(tt, np.concatenate([track[0], path(2), track[2]]), runs)
-    assert not one_trajectory(tt, np.concatenate([track[0], track[1], path(1, 0.5)]), runs)
+    # a recording started earlier or later replays the same path (the start is aligned, up
+    # to MAX_START_OFFSET of the duration, either way); beyond it, it is another trajectory
+    for delay in (0.5, -0.5, 1.7):
+        assert one_trajectory(tt, np.concatenate([track[0], track[1], path(1, delay)]), runs)
+    assert not one_trajectory(tt, np.concatenate([track[0], track[1], path(1, 5.0)]), runs)
     # rows left out (the stiction area) do not matter; one joint of two that differs does
     keep = rng.random(tt.size) > 0.3
     assert one_trajectory(tt[keep], np.concatenate(track)[keep], runs[keep])
