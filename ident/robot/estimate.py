@@ -709,10 +709,7 @@ class RobotModel(HyperParameters):
             for j, cols in enumerate(self.cols_):
                 dqj = dq[:, j]
                 WjT, pj = self._joint(W, p, kn, j)
-                ok = (np.abs(dqj) > self.dq_min) & np.isfinite(tau[:, j]) & np.all(
-                    np.isfinite(WjT), axis=0)
-                if cc is not None:
-                    ok &= cc[3][:, j]
+                ok = self._usable(dqj, tau[:, j], WjT, None if cc is None else cc[3][:, j])
                 every = bool(ok.all())
                 if not every:
                     WjT = WjT[:, ok]
@@ -757,6 +754,13 @@ class RobotModel(HyperParameters):
             # the share of each joint's rows the quadrant band leaves out, at this pass
             self._pass_band_share = in_band / np.maximum(considered, 1)
         return moms, rows, changed, stores
+
+    def _usable(self, dqj: np.ndarray, tauj: np.ndarray, WjT: np.ndarray,
+                keep: np.ndarray | None) -> np.ndarray:
+        """The row rule of joint j (before the quadrant band): |dq_j| > ``dq_min``, finite
+        torque and regressor, and the columns' ``keep`` mask when given; shape (n,)."""
+        ok = (np.abs(dqj) > self.dq_min) & np.isfinite(tauj) & np.all(np.isfinite(WjT), axis=0)
+        return ok if keep is None else ok & keep
 
     @staticmethod
     def _n_samples(signals: Any) -> int:
@@ -1601,10 +1605,7 @@ class RobotModel(HyperParameters):
             self.quadrant_from_)
         keep = None if signals.columns is None else signals.columns.keep
         for r, j, cols, WjT, pj, dqj, tauj, _sg in passes:
-            ok = (np.abs(dqj) > self.dq_min) & np.isfinite(tauj) & np.all(np.isfinite(WjT),
-                                                                          axis=0)
-            if keep is not None:
-                ok &= keep[r, j]
+            ok = self._usable(dqj, tauj, WjT, None if keep is None else keep[r, j])
             if band[j] > 0 and theta is not None:
                 ok &= np.abs(theta[cols] @ WjT + pj) >= band[j]
             out[r, j] = ok
