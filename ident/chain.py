@@ -59,10 +59,12 @@ __all__ = [
     "ChainSettings",
     "FullRate",
     "RawExperiment",
+    "chain_blocks",
     "choose_cutoff",
     "decimate",
     "decimation_index",
     "default_rates",
+    "filter_chain",
     "default_torque_delay",
     "diffcent",
     "filter_experiment",
@@ -711,6 +713,24 @@ def run_chain(
     dq_min : float or None
         The stiction threshold used [rad/s].
     """
+    fulls, dq_min = filter_chain(experiments, dt, settings, instruments=instruments,
+                                 dq_min_rel=dq_min_rel, check=check, error=error)
+    return chain_blocks(fulls, settings, dq_min, build), dq_min
+
+
+def filter_chain(
+    experiments: Sequence[RawExperiment],
+    dt: float,
+    settings: ChainSettings,
+    *,
+    instruments: bool = False,
+    dq_min_rel: float | None = None,
+    check: Callable[[int, RawExperiment], None] | None = None,
+    error: type[Exception] = DataError,
+) -> tuple[list[FullRate], float | None]:
+    """The first half of :func:`run_chain` (same parameters): every experiment at full rate
+    (:func:`filter_experiment`) and the stiction threshold [rad/s] they give (``settings.dq_min``,
+    else ``dq_min_rel`` of the largest full-rate |dq|, else None)."""
     fulls = []
     for i, exp in enumerate(experiments):
         if check is not None:
@@ -720,6 +740,20 @@ def run_chain(
     dq_min = settings.dq_min
     if dq_min is None and dq_min_rel is not None:
         dq_min = dq_min_rel * max(float(np.max(np.abs(f.dq))) for f in fulls)
+    return fulls, dq_min
+
+
+def chain_blocks(
+    fulls: Sequence[FullRate],
+    settings: ChainSettings,
+    dq_min: float | None,
+    build: ColumnBuilder,
+) -> list[ChainBlock]:
+    """The second half of :func:`run_chain`: on experiments already at full rate (the output
+    of :func:`filter_chain`, possibly kept from an earlier chain on the same data), the
+    model's columns, the decimation in parallel with the torque and the selection. Another
+    model's columns on the same samples thus need no second filtering (issue 24: the
+    single-joint design built on the robot chain's full-rate signals)."""
     blocks = []
     for i, full in enumerate(fulls):
         rows, bad = build(i, full)
@@ -730,4 +764,4 @@ def run_chain(
         del stack
         blocks.append(ChainBlock(full=full, index=index, dec=dec, sizes=sizes,
                                  keep=selection(full.dq, dq_min, settings.guard, index, bad)))
-    return blocks, dq_min
+    return blocks

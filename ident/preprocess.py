@@ -23,7 +23,7 @@ access.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -33,21 +33,23 @@ from .chain import (
     BUTTER_ORDER,
     CUTOFF_FLOOR_IV,
     TORQUE_DELAY,
+    ChainSettings,
     FullRate,
     RawExperiment,
     _antialias,
     _decimate_rows,
     _factors,
+    chain_blocks,
     choose_cutoff,
     decimate,
     decimation_index,
     default_rates,
     default_torque_delay,
     diffcent,
+    filter_chain,
     guarded_keep,
     lowpass,
     resolve_settings,
-    run_chain,
     selection,
     shift,
 )
@@ -57,6 +59,7 @@ from .terms import Library, Term
 __all__ = [
     "Design",
     "build_design",
+    "design_on_full_rate",
     "diffcent",
     "lowpass",
     "decimate",
@@ -435,6 +438,48 @@ def build_design(
                       signals.tau[sl, None], None if reference is None else reference[sl, None])
         for sl in slices
     ]
+    fulls, dq_min = filter_chain(experiments, dt, settings, instruments=reference is not None,
+                                 dq_min_rel=dq_min_rel)
+    return design_on_full_rate(lib, signals, fulls, settings, dq_min, tau_min=tau_min,
+                               load_model=load_model)
+
+
+def design_on_full_rate(
+    library: Term,
+    signals: Signals,
+    fulls: Sequence[FullRate],
+    settings: ChainSettings,
+    dq_min: float | None,
+    *,
+    tau_min: float | None = None,
+    load_model: tuple[Term, np.ndarray] | None = None,
+) -> Design:
+    """The design of ``library`` on experiments already filtered at full rate: the second
+    half of :func:`build_design` (columns, parallel decimation, selection;
+    :func:`ident.chain.chain_blocks`).
+
+    ``fulls`` are the chain's full-rate signals of each experiment of ``signals``
+    (:func:`ident.chain.filter_chain` with ``settings``; e.g. those the robot chain of the
+    same joint kept, :class:`ident.one_joint.OneJointProblem`): the design then equals
+    :func:`build_design`'s with the same settings, without filtering the data again. With
+    ``fulls`` carrying the reference's acceleration (``ref_ddq``) it has the IDIM-IV
+    instruments. ``dq_min`` [rad/s] is the resolved stiction threshold; ``tau_min``,
+    ``load_model`` as in :func:`build_design`.
+
+    Raises
+    ------
+    DataError
+        ``fulls`` do not match the experiments of ``signals``.
+    """
+    lib = library if isinstance(library, Library) else Library(library)
+    slices = split_experiments(signals)
+    if len(fulls) != len(slices):
+        raise DataError(f"{len(fulls)} full-rate experiments given for the {len(slices)} "
+                        "experiments of the signals")
+    for i, (sl, f) in enumerate(zip(slices, fulls, strict=True)):
+        if len(range(sl.start, sl.stop)[f.keep]) != f.n:
+            raise DataError(f"experiment {i}: {sl.stop - sl.start} samples, its full-rate "
+                            f"signals keep {f.n} after the trim {f.keep}: not its chain")
     b = len(lib.names())
     made: list[tuple[Signals, Signals, Signals | None, list[int]]] = []
 
@@ -460,8 +505,7 @@ def build_design(
         bad = _rejected(full, tau_min, load_model)
         return rows, None if bad is None else bad[:, None]
 
-    chained, dq_min = run_chain(experiments, dt, settings, columns,
-                                instruments=reference is not None, dq_min_rel=dq_min_rel)
+    chained = chain_blocks(fulls, settings, dq_min, columns)
     blocks: list[_Block] = []
     for c, (sub, full, zfull, zrows) in zip(chained, made, strict=True):
         dec = c.dec
