@@ -519,6 +519,19 @@ def _library(name: str, q_s: float, revolute: bool, payload: bool) -> Library:
     raise DataError(f"model {name!r}: expected 'usual' or 'paper'")
 
 
+def _combined_library(models: Sequence[str], qs0: float, revolute: bool,
+                      payload: bool) -> Library:
+    """The terms of every requested model, each once (q_s ``qs0``)."""
+    terms: list[Term] = []
+    seen: set[str] = set()
+    for name in models:
+        for t in _library(name, qs0, revolute, payload).terms():
+            if not set(t.names()) & seen:
+                terms.append(t)
+                seen |= set(t.names())
+    return Library(*terms)
+
+
 def _combined(
     models: Sequence[str],
     qs0: float,
@@ -527,15 +540,10 @@ def _combined(
     pre: dict[str, Any],
     reference: np.ndarray | None = None,
 ) -> Design:
-    """One design holding the columns of every requested model (built once)."""
-    terms: list[Term] = []
-    seen: set[str] = set()
-    for name in models:
-        for t in _library(name, qs0, sig.revolute, payload).terms():
-            if not set(t.names()) & seen:
-                terms.append(t)
-                seen |= set(t.names())
-    return build_design(Library(*terms), sig, reference=reference, **pre)
+    """One design holding the columns of every requested model (built once) on other data
+    than the fit's (validation files), with the fit's settled preprocessing."""
+    lib = _combined_library(models, qs0, sig.revolute, payload)
+    return build_design(lib, sig, reference=reference, **pre)
 
 
 def _part(d: Design, name: str, payload: bool, q: float, qs0: float) -> tuple[Library, Design]:
@@ -867,9 +875,6 @@ def fit_models(
     if not qs0 > 0:
         raise DataError(f"q_s must be positive [rad/s], got {qs0}")
 
-    def combined(sig: Signals, payload: bool, reference: np.ndarray | None = None) -> Design:
-        return _combined(models, qs0, sig, payload, pre, reference)
-
     def part(d: Design, name: str, payload: bool, q: float = qs0) -> tuple[Library, Design]:
         return _part(d, name, payload, q, qs0)
 
@@ -880,27 +885,19 @@ def fit_models(
         # the settled preprocessing and the sign check's load model (independent of q_s)
         pre.update({k: v for k, v in like.settings.items() if k in pre or k == "load_model"})
         notes += [n for n in like.notes if n.startswith("sign check skipped")]
-        full = combined(s, has_payload, ref)
-    else:
-        # settle the preprocessing once (cut-off, decimation, stiction threshold from the data)
-        full = combined(s, has_payload, ref)
-        pre.update(
-            cutoff_hz=full.cutoff_hz,
-            decimation=full.decimation,
-            trim=full.trim,
-            guard=full.guard,
-            dq_min=full.dq_min,
-            dq_min_rel=None,
-        )
     # the fit is the robot model's (ident.one_joint): the joint as a 1-dof robot, the
-    # columns chain with the settled preprocessing, the sign check of a first usual fit
+    # columns chain (which settles the cut-off, decimation and stiction threshold from the
+    # data), the sign check of a first usual fit
     exps, refs = _split(data, s, ref)
-    settled = {k: pre[k] for k in ("cutoff_hz", "decimation", "dq_min", "trim", "guard")}
+    given = {k: pre[k] for k in ("cutoff_hz", "decimation", "dq_min", "trim", "guard")}
     problem = OneJointProblem(
         exps, revolute=s.revolute, has_payload=has_payload, references=refs,
-        paper="paper" in models, torque_delay=float(torque_delay), **settled,
+        paper="paper" in models, torque_delay=float(torque_delay), **given,
         tau_min=tau_min,
         sign_check=sign_check and (like is None or "load_model" in like.settings))
+    st = problem.settings
+    pre.update(cutoff_hz=st.cutoff_hz, decimation=st.decimation, trim=st.trim,
+               guard=st.guard, dq_min=st.dq_min, dq_min_rel=None)
     if like is None and sign_check and "paper" in models:
         if problem.sign_checked and problem.first is not None:
             # the same rows in the design: the load model of the robot's first usual fit
@@ -908,11 +905,13 @@ def fit_models(
             inner = Library(*[t for t in lib0.terms() if isinstance(t, RigidBody | Payload)])
             first = problem.load_values()
             pre["load_model"] = (inner, np.array([first.get(n, 0.0) for n in inner.names()]))
-            # rebuilt with the load model: the paper model's P+/P- columns from the model
-            # quadrant sign(tau_out_hat dq), not from tau
-            full = combined(s, has_payload, ref)
         else:
             notes.extend(problem.notes)
+    # the single-joint design of both models on the chain's full-rate signals (no second
+    # filtering): the paper model's P+/P- columns from the model quadrant
+    # sign(tau_out_hat dq), not from tau, when the sign check applied
+    full = problem.design(_combined_library(models, qs0, s.revolute, has_payload), s,
+                          tau_min=tau_min, load_model=pre.get("load_model"))
     vmax = float(np.max(np.abs(full.signals.dq)))
 
     scan: list[tuple[float, float]] = []
@@ -942,7 +941,7 @@ def fit_models(
     fitted: dict[str, IdentModel] = {}
     designs: dict[str, Design] = {}
     vdesigns: dict[str, Design] = {}
-    vfull = combined(sv, has_payload) if sv is not None else None
+    vfull = _combined(models, qs0, sv, has_payload, pre) if sv is not None else None
     for name in models:
         lib, d = part(full, name, has_payload, qs_val)
         m = _fitted(lib, name, problem.fit(name, qs_val, eliminate=eliminate,
@@ -974,7 +973,8 @@ def fit_models(
             p0 = OneJointProblem(
                 [exps[i] for i in empty], revolute=s.revolute, has_payload=False,
                 references=None if refs is None else [refs[i] for i in empty],
-                paper="paper" in models, torque_delay=float(torque_delay), **settled,
+                paper="paper" in models, torque_delay=float(torque_delay),
+                **{k: pre[k] for k in given},
                 tau_min=tau_min, sign_check=False, first=problem.first,
                 first_checked="load_model" in pre)
         except DataError as exc:  # too few samples without payload

@@ -39,23 +39,19 @@ from trajectories.friction import DEFAULT_Q_S
 from trajectories.robot import RobotPayloadData, RobotRegressor, base_parameters, one_joint_robot
 
 from . import DataError
-from .chain import (
-    ChainSettings,
-    RawExperiment,
-    decimation_index,
-    filter_experiment,
-    selection,
-)
+from .chain import ChainSettings, FullRate, decimation_index, selection
 from .estimate import DEFAULT_THRESHOLD_PCT, LSResult
 from .loaders import Experiment
 from .models import new_model, usual_model
+from .preprocess import Design, design_on_full_rate
 from .robot import RobotIdentError
 from .robot.base import single_joint_map
 from .robot.design import design_runs, products_columns, resolve_design, sign_checked
 from .robot.estimate import ZERO_COLUMN, RobotModel
-from .robot.loaders import RawRobotRun, chain_period
+from .robot.loaders import RawRobotRun
 from .robot.signals import RobotSignals
-from .signals import G
+from .signals import G, Signals
+from .terms import Term
 from .vocab import model_name
 
 __all__ = ["OneJointModel", "OneJointFit", "OneJointProblem", "fit_one_joint",
@@ -439,7 +435,7 @@ class OneJointProblem:
         try:
             st = resolve_design(self.runs, instruments=self.iv, **settings)
             sig, dqm = design_runs(self.runs, self.reg, st, instruments=self.iv,
-                                   base=self.base)
+                                   base=self.base, keep_full=True)
             self.settings = st = replace(st, dq_min=dqm)
             tau_keep = None
             if tau_min is not None:
@@ -470,16 +466,33 @@ class OneJointProblem:
         """The rows (n, 1) not within the guard of a full-rate |tau_f| < ``tau_min``, of the
         stiction area or of the edges (:func:`ident.chain.selection`)."""
         st = self.settings
-        dt = chain_period(self.runs)
         keep = np.zeros((sig.n, 1), dtype=bool)
-        for i, run in enumerate(self.runs):
-            f = filter_experiment(RawExperiment(run.source, run.q, run.tau), dt, st,
-                                  error=RobotIdentError)
+        for i, f in enumerate(self.full_rate(sig)):
             rows = np.flatnonzero(sig.experiment == i)
             keep[rows] = selection(f.dq, st.dq_min, st.guard,
                                    decimation_index(f.n, st.decimation),
                                    np.abs(f.tau_f) < tau_min)
         return keep
+
+    def full_rate(self, sig: RobotSignals | None = None) -> tuple[FullRate, ...]:
+        """Every run's full-rate signals, as the columns chain filtered them (kept by
+        :func:`~ident.robot.design.design_runs`)."""
+        full = (self.signals if sig is None else sig).columns.full
+        if full is None:  # pragma: no cover - design_runs was asked to keep them
+            raise DataError("the columns chain kept no full-rate signals")
+        return full
+
+    def design(self, library: Term, signals: Signals, *, tau_min: float | None = None,
+               load_model: tuple[Term, np.ndarray] | None = None) -> Design:
+        """The single-joint :class:`~ident.preprocess.Design` of ``library`` on these
+        experiments (``signals``: them concatenated), built on the columns chain's full-rate
+        signals with its settings: :func:`ident.preprocess.build_design`'s result with those
+        settings, without filtering the data a second time (``tau_min``, ``load_model`` as
+        there). What reads a design -- Table III's bands, the plots, the refinement -- sees
+        the samples the robot model was fitted on."""
+        st = self.settings
+        return design_on_full_rate(library, signals, self.full_rate(), st, st.dq_min,
+                                   tau_min=tau_min, load_model=load_model)
 
     def load_values(self) -> dict[str, float]:
         """The first usual fit's load parameters by the single-joint names (J, MX, MY,

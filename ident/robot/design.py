@@ -118,6 +118,7 @@ def design_runs(
     *,
     instruments: bool = False,
     base=None,
+    keep_full: bool = False,
 ) -> tuple[RobotSignals, float]:
     """The chain with the n-dof regressor as column builder (module doc).
 
@@ -134,6 +135,10 @@ def design_runs(
     base : BaseParameters or None
         Places a single-joint log's lever-arm payload (``arm_m``); default
         ``base_parameters(regressor)``.
+    keep_full : bool
+        Keep every run's full-rate signals in ``columns.full`` (read by :func:`sign_checked`,
+        :func:`products_columns` and :func:`ident.preprocess.design_on_full_rate` instead of
+        filtering the runs again).
 
     Returns
     -------
@@ -215,13 +220,25 @@ def design_runs(
 
     columns_ = RobotColumns(W=cat("W", 2), p=cat("p"), sign=cat("sign"), keep=cat("keep"),
                             Wz=cat("Wz", 2) if instruments else None,
-                            pz=cat("pz") if instruments else None)
+                            pz=cat("pz") if instruments else None,
+                            full=tuple(b.full for b in blocks) if keep_full else None)
     sig = RobotSignals(t=cat("t"), q=cat("q"), dq=cat("dq"), ddq=cat("ddq"), tau=cat("tau"),
                        joints=joints, experiment=cat("e"),
                        payloads=tuple(run.payload for run in runs),
                        q_ref=cat("ref") if has_ref else None,
                        source=", ".join(run.source for run in runs), columns=columns_)
     return sig, float(dq_min)  # type: ignore[arg-type]
+
+
+def _full_rate(cols: RobotColumns, i: int, exp: RawExperiment, dt: float,
+               settings: DesignSettings, instruments: bool = False) -> FullRate:
+    """Run i's full-rate signals: those the chain kept (``cols.full``, with the reference's
+    acceleration when ``instruments``), else :func:`ident.chain.filter_experiment` again."""
+    if cols.full is not None and i < len(cols.full):
+        f = cols.full[i]
+        if not instruments or f.ref_ddq is not None:
+            return f
+    return filter_experiment(exp, dt, settings, instruments=instruments, error=RobotIdentError)
 
 
 def sign_checked(
@@ -268,7 +285,7 @@ def sign_checked(
     dt = chain_period(runs)
     keep = cols.keep.copy()
     for i, exp in enumerate(_experiments(runs, False)):
-        f = filter_experiment(exp, dt, settings, error=RobotIdentError)
+        f = _full_rate(cols, i, exp, dt, settings)
         full = RobotSignals(t=runs[i].t[f.keep], q=f.q, dq=f.dq, ddq=f.ddq, tau=f.tau_f,
                             joints=signals.joints, payloads=(runs[i].payload,),
                             source=exp.label)
@@ -429,8 +446,7 @@ def products_columns(
             raise RobotIdentError(f"{exp.label}: the full-rate products need "
                                   f"{need / 2**30:.1f} GiB (more than "
                                   f"{MAX_BYTES / 2**30:.0f}); split the log")
-        f = filter_experiment(exp, dt, settings, instruments=instruments,
-                              error=RobotIdentError)
+        f = _full_rate(cols, i, exp, dt, settings, instruments)
         rows = np.flatnonzero(signals.experiment == i)
         if decimation_index(f.n, r).size != rows.size:
             raise RobotIdentError(f"{exp.label}: {rows.size} decimated samples in the "

@@ -106,6 +106,12 @@ class RobotColumns:
         (:func:`ident.robot.design.products_columns`), read by
         ``RobotModel(model="paper", form="products")``; None: that form weights the
         decimated columns by P and E of the decimated samples.
+    full : tuple of ident.chain.FullRate, or None
+        The chain's full-rate signals of each run (filtered q, dq, ddq, low-passed tau,
+        reference), kept when :func:`ident.robot.design.design_runs` is asked to
+        (``keep_full``): the sign check, the full-rate products and another model's design
+        on the same samples (:func:`ident.preprocess.design_on_full_rate`) then read them
+        instead of filtering the runs again. Memory: about 7 n_f k floats per run.
     """
 
     W: np.ndarray
@@ -115,6 +121,7 @@ class RobotColumns:
     Wz: np.ndarray | None = None
     pz: np.ndarray | None = None
     products: FullRateProducts | None = None
+    full: tuple | None = None
 
     def check(self, n: int, k: int, source: str) -> None:
         """Raise :class:`RobotIdentError` unless the shapes fit n samples of k joints."""
