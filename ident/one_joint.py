@@ -47,7 +47,7 @@ from .preprocess import Design, design_on_full_rate
 from .robot import RobotIdentError
 from .robot.base import single_joint_map
 from .robot.design import design_runs, products_columns, resolve_design, sign_checked
-from .robot.estimate import ZERO_COLUMN, RobotModel
+from .robot.estimate import ZERO_COLUMN, RobotModel, renamed_reason
 from .robot.loaders import RawRobotRun
 from .robot.signals import RobotSignals
 from .signals import G, Signals
@@ -264,7 +264,7 @@ def _single(est: RobotModel, sig: RobotSignals, name: str, single_names: Sequenc
     kept = [s for s in single_names if s in robot_name and robot_name[s] not in fixed]
     of_robot = {v: s for s, v in robot_name.items()}
     removed = [(s, ZERO_COLUMN) for s in absent] + [
-        (of_robot[n], why) for n, why in est.removed_ if n in of_robot]
+        (of_robot[n], renamed_reason(why, of_robot)) for n, why in est.removed_ if n in of_robot]
     M = np.array([rows[s] for s in kept]).reshape(len(kept), len(est.names_))
     val = M @ est.coef_
     cov = M @ est.cov_ @ M.T

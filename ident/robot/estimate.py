@@ -128,9 +128,15 @@ SCALE_TOL = 1e-9
 THIN_QUADRANT = 0.02
 
 #: Why a parameter is fixed at 0 (``removed_``): the reasons of
-#: :func:`ident.estimate.fit_least_squares` (a dependent column's partners not named).
+#: :func:`ident.estimate.fit_least_squares`; a dependent column's is DEPENDENT_PREFIX followed
+#: by its partners (:func:`dependent_reason`).
 ZERO_COLUMN = "zero column on these data: not excited (no payload, no gravity?)"
-DEPENDENT_COLUMN = "not separable: linear combination of the other columns"
+DEPENDENT_PREFIX = "not separable: linear combination of "
+
+#: A kept column is a dependent column's partner when its coefficient (unit-norm columns) in
+#: the column's least-squares expression exceeds this fraction of the largest one: the rule of
+#: :func:`ident.estimators.dependent_columns`, so the partners are the single-joint ones.
+PARTNER_TOL = 1e-3
 
 #: Levenberg-Marquardt damping (relative to the column-scaled normal matrix) of the fits made
 #: while the model quadrants are still being decided and leave a direction unexcited.
@@ -149,21 +155,25 @@ class _Unidentifiable(RobotIdentError):
         self.names, self.lo, self.hi, self.zero = names, lo, hi, zero
 
 
-def _dependent(G: np.ndarray, tol: float = RCOND) -> np.ndarray:
-    """Columns left out by the single-joint rank rule (:func:`ident.estimators.dependent_columns`:
-    column-pivoted QR of the unit-norm columns, kept while |R_kk| > tol |R_00|) from their
-    Gram matrix G = W^T W: the same pivots by a pivoted Cholesky of the scaled G. Zero columns
-    included."""
+def _rank_rule(G: np.ndarray, tol: float = RCOND) -> tuple[np.ndarray, dict[int, list[int]]]:
+    """The single-joint rank rule (:func:`ident.estimators.dependent_columns`: column-pivoted
+    QR of the unit-norm columns, kept while |R_kk| > tol |R_00|) from the Gram matrix
+    G = W^T W: the same pivots by a pivoted Cholesky of the scaled G (L's rows are R's
+    columns). Returns the columns left out (zero columns included, sorted) and, for each
+    nonzero one, its partners: the kept columns whose coefficients in its least-squares
+    expression on them (R11 a = R[:rank, c], unit-norm columns) exceed PARTNER_TOL times the
+    largest, in pivot order (as ``dependent_columns``)."""
     d = np.sqrt(np.clip(np.diagonal(G), 0.0, None))
     live = np.flatnonzero(d > 0)
     out = [int(i) for i in np.flatnonzero(~(d > 0))]
     if not live.size:
-        return np.array(out, dtype=int)
+        return np.array(out, dtype=int), {}
     Gs = G[np.ix_(live, live)] / d[live, None] / d[None, live]
     n = live.size
     L = np.zeros((n, n))
     r = np.diagonal(Gs).copy()
     left = np.ones(n, dtype=bool)
+    piv: list[int] = []
     for k in range(n):
         i = int(np.argmax(np.where(left, r, -np.inf)))
         if not np.sqrt(max(r[i], 0.0)) > tol:  # |R_00| = 1: unit columns
@@ -172,8 +182,38 @@ def _dependent(G: np.ndarray, tol: float = RCOND) -> np.ndarray:
         L[:, k] = col
         r = r - col**2
         left[i] = False
+        piv.append(i)
+    rank = len(piv)
+    R11 = L[piv, :rank].T  # upper triangular: R11[a, b] = L[piv[b], a]
+    partners: dict[int, list[int]] = {}
+    for i in np.flatnonzero(left):
+        coef = (np.abs(scipy.linalg.solve_triangular(R11, L[i, :rank], lower=False))
+                if rank else np.zeros(0))  # rank 0: a non-finite G
+        big = coef > PARTNER_TOL * max(float(coef.max(initial=0.0)), 1e-300)
+        partners[int(live[i])] = [int(live[piv[t]]) for t in np.flatnonzero(big)]
     out += [int(live[i]) for i in np.flatnonzero(left)]
-    return np.array(sorted(out), dtype=int)
+    return np.array(sorted(out), dtype=int), partners
+
+
+def _dependent(G: np.ndarray, tol: float = RCOND) -> np.ndarray:
+    """Columns left out by the single-joint rank rule (:func:`_rank_rule`), zero columns
+    included."""
+    return _rank_rule(G, tol)[0]
+
+
+def dependent_reason(partners: Sequence[str]) -> str:
+    """Why a dependent column is fixed at 0, naming its partners: the reason of
+    :func:`ident.estimate.fit_least_squares` (``"not separable: linear combination of A,
+    B"``)."""
+    return DEPENDENT_PREFIX + ", ".join(partners)
+
+
+def renamed_reason(why: str, names: Mapping[str, str]) -> str:
+    """``why`` (a ``removed_`` reason) with the partners of a dependent column renamed by
+    ``names`` (others kept as they are); any other reason unchanged."""
+    if not why.startswith(DEPENDENT_PREFIX):
+        return why
+    return dependent_reason([names.get(n, n) for n in why[len(DEPENDENT_PREFIX):].split(", ")])
 
 
 def _ref_acceleration(t: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
@@ -1248,7 +1288,9 @@ class RobotModel(HyperParameters):
         payload torque without payload or known rotor, a payload parameter not acting on
         it) or a linear combination of its other load columns there (UR10 shoulder pan:
         MX2 and XY2) are fixed at 0 (``fixed_``): the single-joint rank rule
-        (:func:`~ident.estimators.dependent_columns`, pivoted on the scaled Gram matrix)."""
+        (:func:`~ident.estimators.dependent_columns`, pivoted on the scaled Gram matrix,
+        :func:`_rank_rule`); ``removed_`` names as a product's partners the same products of
+        the load column's partners."""
         pb, nbu = self.n_theta_, len(USUAL_BLOCK)
         model_q = self.quadrant == "model"
         theta_q = self.quadrant_theta_.copy() if self.quadrant_theta_ is not None else xu[:pb]
@@ -1272,13 +1314,17 @@ class RobotModel(HyperParameters):
             nl = len(self.cols_[j]) + 1
             # the load columns (theta's, then p) on the joint's rows
             gram = self._load_gram(m, nl)
-            for c in _dependent(gram):
-                i = self._bstart[j] + np.array([2 * c, 2 * c + 1, 2 * nl + 2 * c,
-                                                2 * nl + 2 * c + 1])
+            dep, partners = _rank_rule(gram)
+            # load column 0's a_m, b_m, a_g, b_g (products_names' order); column c's: + 2 c
+            off = self._bstart[j] + np.array([0, 1, 2 * nl, 2 * nl + 1])
+            for c in dep:
+                i = off + 2 * c
                 free[i] = False
                 x[i] = 0.0
-                why = ZERO_COLUMN if not gram[c, c] > 0 else DEPENDENT_COLUMN
-                self._fixed_why.update({self.names_[k]: why for k in i})
+                for o, k in zip(off, i, strict=True):  # the same product of each partner
+                    self._fixed_why[self.names_[k]] = (
+                        ZERO_COLUMN if not gram[c, c] > 0 else dependent_reason(
+                            [self.names_[o + 2 * q] for q in partners[c]]))
         self.fixed_ = {self.names_[i]: 0.0 for i in np.flatnonzero(~free)}
         self.quadrant_rows_ = self._quadrant_rows(moms)
         try:
@@ -1448,10 +1494,11 @@ class RobotModel(HyperParameters):
                    w: np.ndarray, it: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
         """The single-joint elimination (:func:`ident.estimate.fit_least_squares`) on a
         linear form's fit ``x``: the free parameters whose columns are zero or dependent (the
-        rank rule, :func:`_dependent` on their Gram matrix) are fixed at 0, then, while the
-        largest relative deviation of a free parameter exceeds ``threshold_pct``, that one is
-        fixed at 0 and the model refitted. Each goes to ``fixed_`` (at 0) and ``removed_``
-        (name, reason). Returns the final (x, free, weights, iterations)."""
+        rank rule, :func:`_rank_rule` on their Gram matrix; the reason names the partners) are
+        fixed at 0, then, while the largest relative deviation of a free parameter exceeds
+        ``threshold_pct``, that one is fixed at 0 and the model refitted. Each goes to
+        ``fixed_`` (at 0) and ``removed_`` (name, reason). Returns the final (x, free,
+        weights, iterations)."""
         thr = float(self.threshold_pct)
 
         def fix(i: int, why: str) -> None:
@@ -1462,10 +1509,10 @@ class RobotModel(HyperParameters):
 
         idx = np.flatnonzero(free)
         G = self._w_gram(moms, coeffs, x)[np.ix_(idx, idx)]
-        dep = _dependent(G)
-        for i in idx[dep]:
-            k = int(np.searchsorted(idx, i))
-            fix(int(i), ZERO_COLUMN if not G[k, k] > 0 else DEPENDENT_COLUMN)
+        dep, partners = _rank_rule(G)
+        for k in dep:
+            fix(int(idx[k]), ZERO_COLUMN if not G[k, k] > 0 else dependent_reason(
+                [self.names_[idx[q]] for q in partners[k]]))
         if dep.size:
             try:
                 x, w, it = self._fit_on(moms, coeffs, x, free, linear=True)

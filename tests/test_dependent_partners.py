@@ -1,0 +1,112 @@
+"""A parameter left out because its column is a linear combination of others is removed with
+the single-joint reason naming its partners ("not separable: linear combination of A, B",
+:func:`ident.estimate.fit_least_squares`), also on the robot model's path, whose rank rule
+reads only the Gram matrix (:func:`ident.robot.estimate._rank_rule`), and by the single-joint
+names when a joint is fitted as a 1-dof robot (:func:`ident.one_joint.fit_one_joint`,
+:func:`ident.fitting.fit_models`)."""
+
+from __future__ import annotations
+
+import tomllib
+
+import numpy as np
+import pytest
+from example_campaign import ROOT
+
+from daq.protocol.control import ControllerGains
+from ident.estimators import dependent_columns
+from ident.fitting import fit_models
+from ident.loaders import make_experiment
+from ident.models import IdentModel
+from ident.one_joint import fit_one_joint
+from ident.robot.estimate import (
+    ZERO_COLUMN,
+    _rank_rule,
+    dependent_reason,
+    renamed_reason,
+)
+from sim_drivers.offline import simulate
+from sim_drivers.plant_config import load_plant
+from trajectories.plan import plan_campaign
+from trajectories.robot_campaign import RobotCampaign
+
+PREFIX = "not separable: linear combination of "
+OLD = "not separable: linear combination of the other columns"
+
+
+def _partners(why: str) -> list[str]:
+    assert why.startswith(PREFIX), why
+    return why[len(PREFIX):].split(", ")
+
+
+def test_rank_rule_partners_are_the_single_joint_ones():
+    """From W^T W alone: the same dependent columns and partners as ``dependent_columns``
+    (pivoted QR of W), whatever the column scales; a kept column with a coefficient below
+    1e-3 of the largest (here 1e-6) is not a partner; a zero column has none."""
+    rng = np.random.default_rng(3)
+    W = rng.standard_normal((500, 7)) * [1.0, 1e3, 1e-2, 1.0, 5.0, 1.0, 1.0]
+    W[:, 3] = 2.0 * W[:, 0] - 1e-3 * W[:, 1]  # a combination of 0 and 1
+    W[:, 5] = 30.0 * W[:, 2] + 1e-6 * 6.0 * W[:, 4]  # of 2, and 4 negligibly
+    W[:, 6] = 0.0
+    names = [f"c{i}" for i in range(7)]
+    dep, partners = _rank_rule(W.T @ W)
+    ref = dict(dependent_columns(W[:, :6], names[:6]))
+    assert [names[i] for i in dep] == sorted([*ref, "c6"]) and len(ref) == 2
+    assert 6 not in partners  # the zero column: ZERO_COLUMN, no partners
+    for c, ps in partners.items():
+        assert [names[p] for p in ps] == ref[names[c]]
+    got = {frozenset({names[c], *(names[p] for p in ps)}) for c, ps in partners.items()}
+    assert got == {frozenset({"c0", "c1", "c3"}), frozenset({"c2", "c5"})}  # c4: no partner
+
+
+def test_reason_strings():
+    """The reason reads as the single-joint one; renaming touches only the partner names."""
+    assert dependent_reason(["A", "B"]) == PREFIX + "A, B"
+    why = dependent_reason(["a_m_MX1_1", "a_m_ZZ1R_1"])
+    assert renamed_reason(why, {"a_m_MX1_1": "a_m_MX", "a_m_ZZ1R_1": "a_m_J"}) == \
+        PREFIX + "a_m_MX, a_m_J"
+    assert renamed_reason(ZERO_COLUMN, {"zero": "x"}) == ZERO_COLUMN
+
+
+@pytest.fixture(scope="module")
+def loaded_run():
+    """The example campaign's first loaded run alone (the default plant): one payload on
+    every row, whose torque m r^2 ddq + m g r cos q is exactly a combination of the J and MX
+    columns (arm along the link: not of MY)."""
+    with open(ROOT / "examples" / "campaign.toml", "rb") as fh:
+        campaign = RobotCampaign.from_dict(tomllib.load(fh), "examples/campaign.toml")
+    plan = plan_campaign(campaign)
+    plant = load_plant(ROOT / "sim_drivers" / "data" / "plant_default.toml")
+    p = next(p for p in plan.payloads if p.mass_kg > 0)
+    r = simulate(plant, plan.reference, ControllerGains(**campaign.gains_kwargs()),
+                 payload_mass=p.mass_kg, payload_arm=p.arm_m, seed=12)
+    return make_experiment("loaded.csv", r.t, r.q, r.tau_ref, payload_mass=p.mass_kg,
+                           payload_arm=p.arm_m)
+
+
+def test_products_form_names_the_partners(loaded_run):
+    """The paper model's products form on one joint: the payload torque's products a_m, b_m,
+    a_g, b_g are fixed at 0, each naming the same products of J and MX -- by the robot's
+    names in ``RobotModel.removed_``, by the single-joint names in fit_one_joint and
+    fit_models -- and the same partners as the single-joint least squares (QR on the
+    columns) names for the parameters it removes too."""
+    kw = {"models": ["paper"], "payload": True, "sign_check": False}
+    ours = fit_one_joint([loaded_run], **kw).models["paper"]
+    report = fit_models([loaded_run], table_iv=False, **kw)
+    robot = {n: set(_partners(why)) for n, why in ours.robot.removed_}
+    assert robot == {f"{p}1": {f"{p}_MX1_1", f"{p}_ZZ1R_1"}
+                     for p in ("a_m", "b_m", "a_g", "b_g")}
+    for removed in (ours.removed, report.models["paper"].removed_):
+        assert [n for n, _ in removed] == ["a_m", "b_m", "a_g", "b_g"]
+        for n, why in removed:
+            assert OLD not in why and "_1" not in why
+            assert sorted(_partners(why)) == [f"{n}_J", f"{n}_MX"], why
+    # the single-joint least squares on the same design: removes a_m, a_g, b_g too (and
+    # b_m_MX instead of b_m: its rank rule pivots on the products, not the load columns)
+    name = "paper"
+    ref = IdentModel(report.models[name].library, name).fit(report.designs[name])
+    single = {n: set(_partners(why)) for n, why in ref.removed_}
+    mine = {n: set(_partners(why)) for n, why in ours.removed}
+    both = set(single) & set(mine)
+    assert both >= {"a_m", "a_g", "b_g"}
+    assert all(single[n] == mine[n] for n in both)
