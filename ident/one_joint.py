@@ -444,7 +444,8 @@ class OneJointProblem:
                                                    & tau_keep))
             if paper and sign_check and first is None:
                 self.first = RobotModel(self.reg, "usual", self.method, base=self.base,
-                                        payload_ratio=self._ratio).fit(sig)
+                                        payload_ratio=self._ratio, eliminate=True,
+                                        threshold_pct=np.inf).fit(sig)
             if paper and self.first is not None and (first is None or first_checked):
                 out, kept = sign_checked(sig, self.runs, st, self.first.load_torque)
                 if tau_keep is not None:  # the check's rows recomputed: tau_min again
@@ -525,7 +526,10 @@ class OneJointProblem:
     def fit(self, name: str, q_s: float = DEFAULT_Q_S, *, eliminate: bool = True,
             threshold_pct: float | None = None) -> OneJointModel:
         """Fit model ``name`` ("usual" or "paper", q_s [rad/s]) through RobotModel."""
-        thr = DEFAULT_THRESHOLD_PCT if threshold_pct is None else float(threshold_pct)
+        # without elimination, the rank rule still drops zero and dependent columns (as
+        # fit_least_squares does): no parameter's deviation exceeds an infinite threshold
+        thr = (np.inf if not eliminate else DEFAULT_THRESHOLD_PCT if threshold_pct is None
+               else float(threshold_pct))
         q_s = float(q_s)
         if not q_s > 0:
             raise DataError(f"q_s must be positive [rad/s], got {q_s}")
@@ -533,13 +537,13 @@ class OneJointProblem:
             if name == "usual":
                 sig = self.signals
                 est = RobotModel(self.reg, "usual", self.method, base=self.base,
-                                 payload_ratio=self._ratio, eliminate=eliminate,
+                                 payload_ratio=self._ratio, eliminate=True,
                                  threshold_pct=thr).fit(sig)
                 single = usual_model(self.revolute, payload=self.has_payload).names()
             elif name == "paper":
                 sig = self.products(q_s)
                 est = RobotModel(self.reg, "paper", self.method, base=self.base,
-                                 form="products", q_s=q_s, eliminate=eliminate,
+                                 form="products", q_s=q_s, eliminate=True,
                                  threshold_pct=thr).fit(sig)
                 single = new_model(q_s, self.revolute, payload=self.has_payload).names()
             else:

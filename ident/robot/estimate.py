@@ -155,14 +155,21 @@ class _Unidentifiable(RobotIdentError):
         self.names, self.lo, self.hi, self.zero = names, lo, hi, zero
 
 
-def _rank_rule(G: np.ndarray, tol: float = RCOND) -> tuple[np.ndarray, dict[int, list[int]]]:
+def _rank_rule(G: np.ndarray, tol: float = RCOND,
+               first: int = 0) -> tuple[np.ndarray, dict[int, list[int]]]:
     """The single-joint rank rule (:func:`ident.estimators.dependent_columns`: column-pivoted
     QR of the unit-norm columns, kept while |R_kk| > tol |R_00|) from the Gram matrix
     G = W^T W: the same pivots by a pivoted Cholesky of the scaled G (L's rows are R's
     columns). Returns the columns left out (zero columns included, sorted) and, for each
     nonzero one, its partners: the kept columns whose coefficients in its least-squares
     expression on them (R11 a = R[:rank, c], unit-norm columns) exceed PARTNER_TOL times the
-    largest, in pivot order (as ``dependent_columns``)."""
+    largest, in pivot order (as ``dependent_columns``).
+
+    The columns ``0 .. first - 1`` are pivoted before the others (while one of them is
+    independent of those already taken): of a dependent group, a later column is left out
+    -- the payload's ratio or products rather than the base parameters whose combination
+    they are (one payload in every run). Without it the first pivot among unit columns is
+    decided by rounding."""
     d = np.sqrt(np.clip(np.diagonal(G), 0.0, None))
     live = np.flatnonzero(d > 0)
     out = [int(i) for i in np.flatnonzero(~(d > 0))]
@@ -174,8 +181,12 @@ def _rank_rule(G: np.ndarray, tol: float = RCOND) -> tuple[np.ndarray, dict[int,
     r = np.diagonal(Gs).copy()
     left = np.ones(n, dtype=bool)
     piv: list[int] = []
+    group = live < int(first)
     for k in range(n):
-        i = int(np.argmax(np.where(left, r, -np.inf)))
+        i = int(np.argmax(np.where(left & group, r, -np.inf)))
+        if not (group[i] and left[i] and np.sqrt(max(r[i], 0.0)) > tol):
+            group[:] = False  # the first columns are all taken (or dependent)
+            i = int(np.argmax(np.where(left, r, -np.inf)))
         if not np.sqrt(max(r[i], 0.0)) > tol:  # |R_00| = 1: unit columns
             break
         col = (Gs[:, i] - L[:, :k] @ L[i, :k]) / np.sqrt(r[i])
@@ -1210,6 +1221,17 @@ class RobotModel(HyperParameters):
             f"{p}{n}" for n in self.numbers_ for p in USUAL_BLOCK)
         xu0 = np.zeros(pb + nbu * k)
         free_u = np.ones(xu0.size, dtype=bool)
+        self._fixed_why = {}
+        if self.eliminate:
+            # the single-joint rank rule before the first solve (fit_least_squares drops
+            # zero and dependent columns first): e.g. one payload in every run, whose
+            # ratio's column is a combination of J and MX, is removed, not an error
+            G = self._w_gram(moms, usual_coefficients, xu0)
+            dep, partners = _rank_rule(G, first=self.n_base_)
+            for c in dep:
+                free_u[c] = False
+                self._fixed_why[self.names_[c]] = ZERO_COLUMN if not G[c, c] > 0 else (
+                    dependent_reason([self.names_[q] for q in partners[c]]))
         xu, wu, it = self._fit_on(moms, usual_coefficients, xu0, free_u, linear=True)
         self.block_ = saved[0]
         self._layout(self.form == "products")
@@ -1220,6 +1242,7 @@ class RobotModel(HyperParameters):
         # the theta that decided the final moments' quadrants (ident.robot.uncertainty)
         self.quadrant_from_ = None
         if not paper:
+            self.fixed_ = {self.names_[c]: 0.0 for c in np.flatnonzero(~free_u)}
             return self._finish(moms, usual_coefficients, xu, free_u, wu, passes, it, None)
         if self.form == "products":
             return self._fit_products(signals, moms, xu, passes)
@@ -1314,7 +1337,7 @@ class RobotModel(HyperParameters):
             nl = len(self.cols_[j]) + 1
             # the load columns (theta's, then p) on the joint's rows
             gram = self._load_gram(m, nl)
-            dep, partners = _rank_rule(gram)
+            dep, partners = _rank_rule(gram, first=nl - 1)
             # load column 0's a_m, b_m, a_g, b_g (products_names' order); column c's: + 2 c
             off = self._bstart[j] + np.array([0, 1, 2 * nl, 2 * nl + 1])
             for c in dep:
@@ -1440,7 +1463,7 @@ class RobotModel(HyperParameters):
         ``eliminate`` (linear forms) after the single-joint elimination (:meth:`_eliminate`)."""
         self.quadrant_from_ = quadrant_from
         self.band_share_ = self._pass_band_share.copy()
-        why = getattr(self, "_fixed_why", {}) if self.form == "products" else {}
+        why = getattr(self, "_fixed_why", {})
         self.removed_ = [(n, why[n]) for n in self.fixed_ if n in why]
         if self.eliminate and coeffs is not paper_coefficients:
             x, free, w, it = self._eliminate(moms, coeffs, x, free.copy(), w, it)
@@ -1509,7 +1532,7 @@ class RobotModel(HyperParameters):
 
         idx = np.flatnonzero(free)
         G = self._w_gram(moms, coeffs, x)[np.ix_(idx, idx)]
-        dep, partners = _rank_rule(G)
+        dep, partners = _rank_rule(G, first=int(np.sum(idx < self.n_base_)))
         for k in dep:
             fix(int(idx[k]), ZERO_COLUMN if not G[k, k] > 0 else dependent_reason(
                 [self.names_[idx[q]] for q in partners[k]]))
