@@ -1,7 +1,7 @@
 """The single-joint fit through the robot model: a joint is a 1-dof robot (issue 24).
 
-:func:`fit_one_joint` fits the experiments of one joint as :func:`ident.fitting.fit_models`
-does, but with the n-dof path's one chain and one model class:
+:class:`OneJointProblem` is what :func:`ident.fitting.fit_models` fits the experiments of one
+joint with -- the n-dof path's one chain and one model class:
 
 1. the joint as a 1-dof robot (:func:`trajectories.robot.one_joint_robot`, revolute or
    prismatic from the experiments), its runs (:attr:`ident.loaders.Experiment.run`; the
@@ -23,14 +23,18 @@ does, but with the n-dof path's one chain and one model class:
    products by name), in the single-joint models' order (:func:`ident.models.usual_model`,
    :func:`ident.models.new_model`).
 
-``tests/test_one_fit.py`` checks it gives ``fit_models``' numbers (to 1e-8) on the example
-campaign (LS and IDIM-IV with the half-cycle torque delay) and on the EMPS data.
+The single-joint :class:`~ident.preprocess.Design` that Table III's bands, the plots and the
+refinement read is built on the same chain's full-rate signals (:meth:`OneJointProblem.design`,
+:func:`ident.preprocess.design_on_full_rate`): the data are filtered once.
+``tests/test_one_fit.py`` checks the fit gives the single-joint least squares' numbers on that
+design (to 1e-8) on the example campaign (LS and IDIM-IV with the half-cycle torque delay),
+the EMPS data and the demo's logs.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -39,7 +43,7 @@ from trajectories.friction import DEFAULT_Q_S
 from trajectories.robot import RobotPayloadData, RobotRegressor, base_parameters, one_joint_robot
 
 from . import DataError
-from .chain import ChainSettings, FullRate, decimation_index, selection
+from .chain import FullRate, decimation_index, selection
 from .estimate import DEFAULT_THRESHOLD_PCT, LSResult
 from .loaders import Experiment
 from .models import new_model, usual_model
@@ -52,10 +56,8 @@ from .robot.loaders import RawRobotRun
 from .robot.signals import RobotSignals
 from .signals import G, Signals
 from .terms import Term
-from .vocab import model_name
 
-__all__ = ["OneJointModel", "OneJointFit", "OneJointProblem", "fit_one_joint",
-           "SIGN_CHECK_MIN_KEPT"]
+__all__ = ["OneJointModel", "OneJointProblem", "SIGN_CHECK_MIN_KEPT"]
 
 #: The sign check is skipped when it would keep fewer samples than this fraction (as
 #: :data:`ident.fitting.SIGN_CHECK_MIN_KEPT`).
@@ -149,66 +151,6 @@ class OneJointModel:
         return self.result.m
 
 
-@dataclass
-class OneJointFit:
-    """Result of :func:`fit_one_joint`.
-
-    Attributes
-    ----------
-    models : dict[str, OneJointModel]
-    q_s : float
-        q_s of the paper model [rad/s].
-    revolute, has_payload : bool
-    settings : ChainSettings
-        The chain's resolved settings (``dq_min`` included).
-    notes : list of str
-        As ``FitReport.notes`` (the sign check skipped).
-    first : RobotModel or None
-        The first usual fit that decided the sign check and the quadrants (None without).
-    sign_checked : bool
-        Whether the sign check's rows were applied.
-    """
-
-    models: dict[str, OneJointModel]
-    q_s: float
-    revolute: bool
-    has_payload: bool
-    settings: ChainSettings
-    notes: list[str] = field(default_factory=list)
-    first: RobotModel | None = None
-    sign_checked: bool = False
-
-
-def _references(exps: Sequence[Experiment], references: Any) -> list[np.ndarray] | None:
-    """The reference position per experiment (IDIM-IV), or None (LS): ``fit_models``'
-    rule ("auto": every experiment's finite ``q_ref`` of the right length, else none)."""
-    if references is None:
-        return None
-    if isinstance(references, str):
-        if references != "auto":
-            raise DataError(f"references {references!r}: expected arrays, 'auto' or None")
-        found = [getattr(e, "q_ref", None) for e in exps]
-        if any(r is None for r in found):
-            return None
-        arrays = [np.asarray(r, dtype=float).ravel() for r in found]
-        if not all(a.size == len(e) and np.all(np.isfinite(a))
-                   for a, e in zip(arrays, exps, strict=True)):
-            return None
-        return arrays
-    parts = list(references)
-    if len(parts) != len(exps):
-        raise DataError(f"references: {len(parts)} given for {len(exps)} experiments (one "
-                        "per experiment)")
-    out = []
-    for i, (r, e) in enumerate(zip(parts, exps, strict=True)):
-        a = np.asarray(getattr(r, "q_ref", r), dtype=float).ravel()
-        if a.size != len(e):
-            raise DataError(f"references[{i}] ({e.source}): {a.size} samples, expected "
-                            f"{len(e)}")
-        out.append(a)
-    return out
-
-
 def _runs(exps: Sequence[Experiment], revolute: bool, payload: bool,
           refs: list[np.ndarray] | None) -> list[RawRobotRun]:
     """The experiments as runs of the 1-dof robot: a revolute joint's lever-arm payload,
@@ -281,97 +223,6 @@ def _single(est: RobotModel, sig: RobotSignals, name: str, single_names: Sequenc
                         cond=float(est.cond_), cond_raw=float(est.cond_raw_),
                         m=int(est.n_samples_[0]), removed=removed),
         estimator=estimator, robot=est, signals=sig, rows=taken)
-
-
-def fit_one_joint(
-    data: Sequence[Experiment],
-    models: Sequence[str] = ("usual", "paper"),
-    *,
-    q_s: float = DEFAULT_Q_S,
-    joint: str | bool | None = None,
-    cutoff_hz: float | None = None,
-    decimation: int | None = None,
-    dq_min: float | None = None,
-    tau_min: float | None = None,
-    trim: int | None = None,
-    guard: int | None = None,
-    sign_check: bool = True,
-    eliminate: bool = True,
-    threshold_pct: float | None = None,
-    references: Sequence[Any] | str | None = "auto",
-    torque_delay: float | str = "auto",
-    payload: bool | None = None,
-) -> OneJointFit:
-    """Fit the experiments of one joint through the robot model (module doc).
-
-    Parameters
-    ----------
-    data : list of Experiment
-        Identification experiments of one joint (one per payload run).
-    models : sequence of {"usual", "paper"}
-    q_s : float
-        q_s of the paper model [rad/s].
-    joint : {"revolute", "prismatic"}, bool or None
-        Overrides the joint kind of the experiments.
-    cutoff_hz, decimation, dq_min, tau_min, trim, guard
-        The chain's settings (None: chosen from the data as
-        :func:`ident.preprocess.build_design` does).
-    sign_check, eliminate, threshold_pct, references, torque_delay, payload
-        As in :func:`ident.fitting.fit_models`.
-
-    Returns
-    -------
-    OneJointFit
-
-    Raises
-    ------
-    DataError
-        Bad options or data (one line).
-    """
-    exps = list(data)
-    if not exps:
-        raise DataError("no experiment given")
-    models = list(dict.fromkeys(model_name(n) for n in models))
-    for n in models:
-        if n not in ("usual", "paper"):
-            raise DataError(f"model {n!r}: expected 'usual' or 'paper'")
-    revolute = bool(exps[0].revolute)
-    if joint is not None:
-        if isinstance(joint, bool):
-            revolute = joint
-        elif str(joint).lower() in ("revolute", "prismatic"):
-            revolute = str(joint).lower() == "revolute"
-        else:
-            raise DataError(f"joint kind {joint!r}: expected 'revolute' or 'prismatic'")
-    has_payload = (any(float(e.payload_mass) != 0 for e in exps) if payload is None
-                   else bool(payload))
-    q_s = float(q_s)
-    if not q_s > 0:
-        raise DataError(f"q_s must be positive [rad/s], got {q_s}")
-    if isinstance(torque_delay, str):
-        if torque_delay != "auto":
-            raise DataError(f"torque_delay {torque_delay!r}: expected a number [samples] or "
-                            "'auto'")
-        delay = None
-    else:
-        delay = float(torque_delay)
-    refs = _references(exps, references)
-    problem = OneJointProblem(exps, revolute=revolute, has_payload=has_payload,
-                              references=refs, paper="paper" in models,
-                              sign_check=sign_check, tau_min=tau_min, cutoff_hz=cutoff_hz,
-                              decimation=decimation, dq_min=dq_min, trim=trim, guard=guard,
-                              torque_delay=delay)
-    notes: list[str] = []
-    if not has_payload:
-        notes.append("no run carries a payload: the payload term (Ma_ratio / a_m, b_m...) is "
-                     "left out")
-    if not revolute:
-        notes.append("prismatic joint: no gravity columns (MX, MY)")
-    fitted = {name: problem.fit(name, q_s, eliminate=eliminate, threshold_pct=threshold_pct)
-              for name in models}
-    return OneJointFit(models=fitted, q_s=q_s, revolute=revolute, has_payload=has_payload,
-                       settings=problem.settings, notes=notes + problem.notes,
-                       first=problem.first, sign_checked=problem.sign_checked)
 
 
 class OneJointProblem:

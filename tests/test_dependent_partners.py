@@ -2,8 +2,8 @@
 the single-joint reason naming its partners ("not separable: linear combination of A, B",
 :func:`ident.estimate.fit_least_squares`), also on the robot model's path, whose rank rule
 reads only the Gram matrix (:func:`ident.robot.estimate._rank_rule`), and by the single-joint
-names when a joint is fitted as a 1-dof robot (:func:`ident.one_joint.fit_one_joint`,
-:func:`ident.fitting.fit_models`)."""
+names when a joint is fitted as a 1-dof robot (:func:`ident.fitting.fit_models` through
+:class:`ident.one_joint.OneJointProblem`)."""
 
 from __future__ import annotations
 
@@ -18,7 +18,6 @@ from ident.estimators import dependent_columns
 from ident.fitting import fit_models
 from ident.loaders import make_experiment
 from ident.models import IdentModel
-from ident.one_joint import fit_one_joint
 from ident.robot.estimate import (
     ZERO_COLUMN,
     _rank_rule,
@@ -87,16 +86,16 @@ def loaded_run():
 def test_products_form_names_the_partners(loaded_run):
     """The paper model's products form on one joint: the payload torque's products a_m, b_m,
     a_g, b_g are fixed at 0, each naming the same products of J and MX -- by the robot's
-    names in ``RobotModel.removed_``, by the single-joint names in fit_one_joint and
-    fit_models -- and the same partners as the single-joint least squares (QR on the
-    columns) names for the parameters it removes too."""
+    names in ``RobotModel.removed_``, by the single-joint names in fit_models -- and the
+    same partners as the single-joint least squares (QR on the columns) names for the
+    parameters it removes too."""
     kw = {"models": ["paper"], "payload": True, "sign_check": False}
-    ours = fit_one_joint([loaded_run], **kw).models["paper"]
     report = fit_models([loaded_run], table_iv=False, **kw)
-    robot = {n: set(_partners(why)) for n, why in ours.robot.removed_}
+    ours = report.models["paper"]
+    robot = {n: set(_partners(why)) for n, why in ours.robot_.removed_}
     assert robot == {f"{p}1": {f"{p}_MX1_1", f"{p}_ZZ1R_1"}
                      for p in ("a_m", "b_m", "a_g", "b_g")}
-    for removed in (ours.removed, report.models["paper"].removed_):
+    for removed in (ours.removed_,):
         assert [n for n, _ in removed] == ["a_m", "b_m", "a_g", "b_g"]
         for n, why in removed:
             assert OLD not in why and "_1" not in why
@@ -106,7 +105,7 @@ def test_products_form_names_the_partners(loaded_run):
     name = "paper"
     ref = IdentModel(report.models[name].library, name).fit(report.designs[name])
     single = {n: set(_partners(why)) for n, why in ref.removed_}
-    mine = {n: set(_partners(why)) for n, why in ours.removed}
+    mine = {n: set(_partners(why)) for n, why in ours.removed_}
     both = set(single) & set(mine)
     assert both >= {"a_m", "a_g", "b_g"}
     assert all(single[n] == mine[n] for n in both)

@@ -1,7 +1,7 @@
-"""A joint is a 1-dof robot (issue 24): :func:`ident.one_joint.fit_one_joint` -- the one-joint
-robot, the columns chain, the sign check, the products formed at full rate and
-``RobotModel`` with the single-joint elimination -- and ``ident.fitting.fit_models`` (whose
-fit is now that one) give the single-joint least squares' numbers (``IdentModel.fit``: QR on
+"""A joint is a 1-dof robot (issue 24): ``ident.fitting.fit_models``, whose fit is
+:class:`ident.one_joint.OneJointProblem`'s -- the one-joint robot, the columns chain, the
+sign check, the products formed at full rate and ``RobotModel`` with the single-joint
+elimination -- gives the single-joint least squares' numbers (``IdentModel.fit``: QR on
 the decimated columns of :func:`ident.preprocess.build_design`, the fit of ``fit_models``
 before the switch): values, standard deviations, relative deviations, covariance,
 sigma_rho, residual, relative error, condition numbers, removed parameters and rows, to 1e-8
@@ -21,7 +21,6 @@ from ident import DataError
 from ident.fitting import fit_models
 from ident.loaders import load_experiment, make_experiment
 from ident.models import IdentModel
-from ident.one_joint import fit_one_joint
 from ident.robot import RobotIdentError
 from ident.robot.estimate import RobotModel
 from tests.conftest import shared_path
@@ -47,43 +46,38 @@ def _experiments(campaign, suffix: str, with_ref: bool):
             for i, (p, r, q) in enumerate(zip(plan.payloads, sims, refs, strict=True))]
 
 
-def _assert_same(report, ours, eliminate: bool = True,
-                 threshold_pct: float | None = None) -> None:
-    """Every number of each model of ``ours`` (fit_one_joint) and of ``report`` (fit_models,
-    whose fit is the robot model's) is the single-joint least squares
-    (:meth:`ident.models.IdentModel.fit`, QR on the columns) on ``report``'s design of that
-    model (built by :func:`ident.preprocess.build_design`), to ``RTOL``."""
-    assert set(report.models) == set(ours.models)
-    assert report.q_s == ours.q_s and report.revolute == ours.revolute
-    assert [n for n in report.notes
-            if "condition number" not in n and "not identifiable" not in n] == ours.notes
-    d = next(iter(report.designs.values())).settings()
-    for k in ("cutoff_hz", "decimation", "trim", "guard", "torque_delay", "dq_min"):
-        assert ours.settings.as_dict()[k] == d[k], k
+def _assert_same(report, eliminate: bool = True, threshold_pct: float | None = None) -> None:
+    """Every number of each model of ``report`` (fit_models, whose fit is the robot model's)
+    is the single-joint least squares (:meth:`ident.models.IdentModel.fit`, QR on the
+    columns) on ``report``'s design of that model (built on the columns chain's full-rate
+    signals, :func:`ident.preprocess.design_on_full_rate`), to ``RTOL``."""
     for name, fitted in report.models.items():
         design = report.designs[name]
         ref = IdentModel(fitted.library, name).fit(design, eliminate=eliminate,
                                                    threshold_pct=threshold_pct)
-        for o in (ours.models[name], _as_fit(fitted)):
-            assert o.names == ref.names_, name
-            assert o.removed == ref.removed_, name
-            assert o.estimator == ref.estimator_ and o.m == ref.result_.m == len(design)
-            for n in ref.names_:
-                assert o.values[n] == pytest.approx(ref.coef_[n], rel=RTOL), (name, n)
-                assert o.std[n] == pytest.approx(ref.std_[n], rel=RTOL), (name, n)
-                assert o.rel_std_pct[n] == pytest.approx(ref.rel_std_pct_[n], rel=RTOL)
-            np.testing.assert_allclose(o.cov, ref.cov_, rtol=RTOL,
-                                       atol=RTOL * np.abs(ref.cov_).max())
-            for a, b in ((o.sigma_rho, ref.sigma_rho_), (o.rel_error, ref.rel_error_),
-                         (o.cond, ref.cond_), (o.cond_raw, ref.result_.cond_raw)):
-                assert a == pytest.approx(b, rel=RTOL), name
-            # the same rows in the same order: the residual sample for sample
-            np.testing.assert_allclose(o.residual, ref.residual_, rtol=0,
-                                       atol=RTOL * np.abs(ref.residual_).max())
-        o = ours.models[name]
-        np.testing.assert_array_equal(o.signals.t[o.rows], design.signals.t)
+        o = _as_fit(fitted)
+        assert o.names == ref.names_, name
+        assert o.removed == ref.removed_, name
+        assert o.estimator == ref.estimator_ and o.m == ref.result_.m == len(design)
+        for n in ref.names_:
+            assert o.values[n] == pytest.approx(ref.coef_[n], rel=RTOL), (name, n)
+            assert o.std[n] == pytest.approx(ref.std_[n], rel=RTOL), (name, n)
+            assert o.rel_std_pct[n] == pytest.approx(ref.rel_std_pct_[n], rel=RTOL)
+        np.testing.assert_allclose(o.cov, ref.cov_, rtol=RTOL,
+                                   atol=RTOL * np.abs(ref.cov_).max())
+        for a, b in ((o.sigma_rho, ref.sigma_rho_), (o.rel_error, ref.rel_error_),
+                     (o.cond, ref.cond_), (o.cond_raw, ref.result_.cond_raw)):
+            assert a == pytest.approx(b, rel=RTOL), name
+        # the same rows in the same order: the residual sample for sample
+        np.testing.assert_allclose(o.residual, ref.residual_, rtol=0,
+                                   atol=RTOL * np.abs(ref.residual_).max())
         assert fitted.robot_ is not None and fitted.predict(design) == pytest.approx(
             ref.predict(design), rel=RTOL, abs=RTOL * np.abs(design.Y).max())
+
+
+def _sign_checked(report) -> bool:
+    """Whether the sign check's rows (the first usual fit's load model) were applied."""
+    return "load_model" in report.settings
 
 
 def _as_fit(m: IdentModel) -> SimpleNamespace:
@@ -101,11 +95,10 @@ def test_example_campaign_is_fit_models(campaign, suffix, with_ref):
     MCAP-named runs with their references (the demo's settings)."""
     exps = _experiments(campaign, suffix, with_ref)
     report = fit_models(exps)
-    ours = fit_one_joint(exps)
-    assert ours.sign_checked  # the campaign crosses zero load at low velocity
-    assert ours.settings.torque_delay == (0.5 if with_ref else 0.0)
-    assert {m.estimator for m in ours.models.values()} == {"iv" if with_ref else "ls"}
-    _assert_same(report, ours)
+    assert _sign_checked(report)  # the campaign crosses zero load at low velocity
+    assert report.settings["torque_delay"] == (0.5 if with_ref else 0.0)
+    assert {m.estimator_ for m in report.models.values()} == {"iv" if with_ref else "ls"}
+    _assert_same(report)
 
 
 def test_elimination_is_fit_models(campaign):
@@ -119,11 +112,9 @@ def test_elimination_is_fit_models(campaign):
     threshold = 0.5 * (rel[2] + rel[3])
     report = fit_models(exps, threshold_pct=threshold, table_iv=False)
     assert len(report.models["paper"].removed_) >= 3
-    _assert_same(report, fit_one_joint(exps, threshold_pct=threshold),
-                 threshold_pct=threshold)
-    off = fit_one_joint(exps, eliminate=False)
-    assert all(not m.removed for m in off.models.values())
-    _assert_same(full, off, eliminate=False)
+    _assert_same(report, threshold_pct=threshold)
+    assert all(not m.removed_ for m in full.models.values())
+    _assert_same(full, eliminate=False)
 
 
 def test_emps_is_fit_models():
@@ -136,10 +127,9 @@ def test_emps_is_fit_models():
     for opts in ({"cutoff_hz": 100.0, "decimation": 10, "dq_min": 0.0, "sign_check": False},
                  {}):
         report = fit_models([exp], **opts)
-        ours = fit_one_joint([exp], **opts)
         assert report.models["paper"].removed_  # d_m, ... not significant
-        assert not ours.revolute and not ours.sign_checked
-        _assert_same(report, ours)
+        assert not report.revolute and not _sign_checked(report)
+        _assert_same(report)
 
 
 def test_robot_model_elimination_options():
@@ -152,8 +142,8 @@ def test_robot_model_elimination_options():
     with pytest.raises(RobotIdentError, match="threshold_pct"):
         RobotModel(reg, "usual", eliminate=True, threshold_pct=0.0)._setup()
     with pytest.raises(DataError, match="model 'x'"):
-        fit_one_joint([make_experiment("a.csv", np.arange(100) * 1e-3, np.zeros(100),
-                                       np.zeros(100))], models=["x"])
+        fit_models([make_experiment("a.csv", np.arange(100) * 1e-3, np.zeros(100),
+                                    np.zeros(100))], models=["x"])
 
 
 def test_tau_min_is_fit_models(campaign):
@@ -163,9 +153,9 @@ def test_tau_min_is_fit_models(campaign):
     tau = np.concatenate([e.tau for e in exps])
     tau_min = float(np.quantile(np.abs(tau), 0.2))  # a fifth of the samples and more out
     report = fit_models(exps, tau_min=tau_min, table_iv=False)
-    ours = fit_one_joint(exps, tau_min=tau_min)
-    assert ours.models["usual"].m < fit_one_joint(exps, models=["usual"]).models["usual"].m
-    _assert_same(report, ours)
+    every = fit_models(exps, models=["usual"], table_iv=False)
+    assert report.models["usual"].result_.m < every.models["usual"].result_.m
+    _assert_same(report)
 
 
 @pytest.mark.slow
@@ -177,11 +167,10 @@ def test_demo_logs_are_the_single_joint_fit(tmp_path):
     run_demo(tmp_path, quick=True)
     exps = [load_experiment(p) for p in sorted((tmp_path / "logs").glob("*.mcap"))]
     report = fit_models(exps)
-    ours = fit_one_joint(exps)
-    assert ours.sign_checked and ours.settings.torque_delay == 0.5
-    assert {m.estimator for m in ours.models.values()} == {"iv"}
-    assert ours.models["paper"].removed  # exponential terms not significant on the quick run
-    _assert_same(report, ours)
+    assert _sign_checked(report) and report.settings["torque_delay"] == 0.5
+    assert {m.estimator_ for m in report.models.values()} == {"iv"}
+    assert report.models["paper"].removed_  # exponential terms not significant (quick run)
+    _assert_same(report)
 
 
 def test_payload_named_without_payload_is_fit_models(campaign):
@@ -191,7 +180,6 @@ def test_payload_named_without_payload_is_fit_models(campaign):
     plan, sims, _ = campaign
     exps = [make_experiment("p.csv", sims[0].t, sims[0].q, sims[0].tau_ref)]
     report = fit_models(exps, payload=True, table_iv=False)
-    ours = fit_one_joint(exps, payload=True)
-    assert [n for n, _ in ours.models["usual"].removed] == ["Ma_ratio"]
-    assert [n for n, _ in ours.models["paper"].removed][:4] == ["a_m", "b_m", "a_g", "b_g"]
-    _assert_same(report, ours)
+    assert [n for n, _ in report.models["usual"].removed_] == ["Ma_ratio"]
+    assert [n for n, _ in report.models["paper"].removed_][:4] == ["a_m", "b_m", "a_g", "b_g"]
+    _assert_same(report)

@@ -1,0 +1,88 @@
+"""CPU time of ``fit_models`` in two checkouts of jointid, interleaved in one shell.
+
+    python benchmarks/bench_fit_versions.py OLD_TREE NEW_TREE [--rounds 2] [--repeat 3]
+
+Each round runs this script's worker once with OLD_TREE, then once with NEW_TREE, first on
+``sys.path`` (a fresh process each: no module of the other version is loaded). The worker
+simulates the example campaign (seed 11, ``tests/example_campaign.py`` of that tree), then
+times ``fit_models`` on its three payload runs: LS (CSV-named runs, no reference), IDIM-IV
+(MCAP-named runs with their references, half-cycle torque delay) and LS with ``q_s="scan"``;
+the best of ``--repeat`` process-CPU times per case. Printed: one line per tree and round,
+and the NEW/OLD ratio of the per-case minima over the rounds (issue 24's measurement of the
+single chain: the single-joint design built on the robot chain's full-rate signals).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+CASES = ("ls", "iv", "scan")
+
+
+def _worker(tree: Path, repeat: int) -> None:
+    import time
+    import warnings
+
+    import numpy as np
+
+    sys.path[:0] = [str(tree), str(tree / "tests")]
+    warnings.simplefilter("ignore")
+    from example_campaign import simulate_example_campaign
+
+    from ident.fitting import fit_models
+    from ident.loaders import make_experiment
+
+    _, plan, sims = simulate_example_campaign(11)
+    refs = [plan.reference.q[np.minimum(r.cycle, plan.reference.q.size - 1)] for r in sims]
+
+    def exps(suffix: str, ref: bool) -> list:
+        return [make_experiment(f"payload{i}.{suffix}", r.t, r.q, r.tau_ref,
+                                q_ref=q if ref else None, payload_mass=p.mass_kg,
+                                payload_arm=p.arm_m)
+                for i, (p, r, q) in enumerate(zip(plan.payloads, sims, refs, strict=True))]
+
+    ls, iv = exps("csv", False), exps("mcap", True)
+    kwargs = {"ls": {"data": ls}, "iv": {"data": iv}, "scan": {"data": ls, "q_s": "scan"}}
+    out = {}
+    for case in CASES:
+        ts = []
+        for _ in range(repeat):
+            t0 = time.process_time()
+            fit_models(**kwargs[case])
+            ts.append(time.process_time() - t0)
+        out[case] = min(ts)
+    print(json.dumps(out))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("old", type=Path)
+    ap.add_argument("new", type=Path)
+    ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
+    a = ap.parse_args()
+    if a.worker is not None:
+        _worker(a.worker.resolve(), a.repeat)
+        return
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
+    best: dict[str, dict[str, float]] = {"old": {}, "new": {}}
+    for r in range(a.rounds):
+        for label, tree in (("old", a.old), ("new", a.new)):
+            res = subprocess.run([sys.executable, __file__, str(a.old), str(a.new),
+                                  "--repeat", str(a.repeat), "--worker", str(tree)],
+                                 capture_output=True, text=True, env=env, check=True)
+            t = json.loads(res.stdout.strip().splitlines()[-1])
+            print(f"round {r + 1} {label:3s} " + "  ".join(f"{c} {t[c]:.3f} s" for c in CASES))
+            for c in CASES:
+                best[label][c] = min(best[label].get(c, float("inf")), t[c])
+    print("new/old " + "  ".join(f"{c} {best['new'][c] / best['old'][c]:.2f}" for c in CASES))
+
+
+if __name__ == "__main__":
+    main()
