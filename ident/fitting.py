@@ -16,10 +16,11 @@ first usual fit of the sign check, the q_s scan, the two models, Table IV -- is
 :class:`ident.robot.estimate.RobotModel`'s through :class:`ident.one_joint.OneJointProblem`
 (the columns chain, eq. 42's products formed at full rate per q_s, the single-joint
 elimination), held in an :class:`~ident.models.IdentModel` by the single-joint names
-(:func:`_fitted`). The decimated system of each model (:class:`ident.preprocess.Design`,
-built as before with the same settings and the robot's load model: the same rows, checked)
-is still built for what reads it: Table III's bands, the validation files, the plots and
-the refinement (:mod:`ident.refine`), and :func:`rescan_qs`.
+(:func:`_fitted`). The decimated system of each model (:class:`ident.preprocess.Design`:
+Table III's bands, the plots, the refinement (:mod:`ident.refine`) and :func:`rescan_qs` read
+it) is built on the same chain's full-rate signals (:meth:`OneJointProblem.design`, the
+robot's load model: the same rows, checked), so the data are filtered once; validation
+files get theirs from :func:`ident.preprocess.build_design` with the settled settings.
 
 Length (~1000 lines): one pipeline whose steps share their settled preprocessing (sign
 check, q_s scan, Table IV without payload, validation systems) and the report built from
