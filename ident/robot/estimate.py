@@ -309,11 +309,14 @@ class RobotModel(HyperParameters):
         parameters (no payload columns).
     eliminate : bool
         The linear forms only (``model="usual"``, or ``"paper"`` with ``form="products"``):
-        the single-joint elimination of :func:`ident.estimate.fit_least_squares` after the
-        fit -- the free parameters whose columns are zero or dependent (the rank rule) are
-        fixed at 0, then, while the largest relative deviation (eq. 16) of a free parameter
-        exceeds ``threshold_pct``, that parameter is fixed at 0 and the model refitted
-        (``fixed_``, ``removed_``). Default False: nothing is eliminated.
+        the single-joint elimination of :func:`ident.estimate.fit_least_squares` -- the
+        parameters whose columns are zero or dependent (the rank rule, before the first
+        solve, base parameters pivoted first: a payload's ratio or products go before the
+        parameters they combine; the reason names the partners) are fixed at 0, then,
+        while the largest relative deviation (eq. 16) of a free parameter exceeds
+        ``threshold_pct``, that parameter is fixed at 0 and the model refitted (``fixed_``,
+        ``removed_``); ``threshold_pct=inf``: the rank rule alone. Default False: nothing is
+        eliminated (dependent columns are an error naming the weakest direction).
     threshold_pct : float
         Relative-deviation threshold [%] of ``eliminate``
         (:data:`ident.estimate.DEFAULT_THRESHOLD_PCT`).
