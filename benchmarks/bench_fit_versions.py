@@ -4,12 +4,13 @@
 
 Each round runs this script's worker once with OLD_TREE, then once with NEW_TREE, first on
 ``sys.path`` (a fresh process each: no module of the other version is loaded). The worker
-simulates the example campaign (seed 11, ``tests/example_campaign.py`` of that tree), then
-times ``fit_models`` on its three payload runs: LS (CSV-named runs, no reference), IDIM-IV
-(MCAP-named runs with their references, half-cycle torque delay) and LS with ``q_s="scan"``;
-the best of ``--repeat`` process-CPU times per case. Printed: one line per tree and round,
-and the NEW/OLD ratio of the per-case minima over the rounds (issue 24's measurement of the
-single chain: the single-joint design built on the robot chain's full-rate signals).
+simulates the example campaign (seed 11, ``tests/example_campaign.py`` of that tree, the
+runs of ``fit_fingerprint.campaign_runs``), then times ``fit_models`` on its three payload
+runs: LS (CSV-named runs, no reference), IDIM-IV (MCAP-named runs with their references,
+half-cycle torque delay) and LS with ``q_s="scan"``; the best of ``--repeat`` process-CPU
+times per case. Printed: one line per tree and round, and the NEW/OLD ratio of the per-case
+minima over the rounds (issue 24's measurement of the single chain: the single-joint design
+built on the robot chain's full-rate signals).
 """
 
 from __future__ import annotations
@@ -28,25 +29,13 @@ def _worker(tree: Path, repeat: int) -> None:
     import time
     import warnings
 
-    import numpy as np
-
-    sys.path[:0] = [str(tree), str(tree / "tests")]
+    sys.path[:0] = [str(tree), str(tree / "tests"), str(Path(__file__).resolve().parent)]
     warnings.simplefilter("ignore")
-    from example_campaign import simulate_example_campaign
+    from fit_fingerprint import campaign_runs  # imports the tree's ident and example_campaign
 
     from ident.fitting import fit_models
-    from ident.loaders import make_experiment
 
-    _, plan, sims = simulate_example_campaign(11)
-    refs = [plan.reference.q[np.minimum(r.cycle, plan.reference.q.size - 1)] for r in sims]
-
-    def exps(suffix: str, ref: bool) -> list:
-        return [make_experiment(f"payload{i}.{suffix}", r.t, r.q, r.tau_ref,
-                                q_ref=q if ref else None, payload_mass=p.mass_kg,
-                                payload_arm=p.arm_m)
-                for i, (p, r, q) in enumerate(zip(plan.payloads, sims, refs, strict=True))]
-
-    ls, iv = exps("csv", False), exps("mcap", True)
+    ls, iv = campaign_runs()
     kwargs = {"ls": {"data": ls}, "iv": {"data": iv}, "scan": {"data": ls, "q_s": "scan"}}
     out = {}
     for case in CASES:

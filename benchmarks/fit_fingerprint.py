@@ -22,13 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ident.fitting import fit_models
+from ident.loaders import load_experiment, make_experiment
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
-
-from example_campaign import simulate_example_campaign  # noqa: E402
-
-from ident.fitting import fit_models  # noqa: E402
-from ident.loaders import load_experiment, make_experiment  # noqa: E402
 
 
 def _h(x) -> str:
@@ -49,9 +46,13 @@ def _print(name: str, rep) -> None:
                 print(name, kind, m, what, _h(a))
 
 
-def main() -> None:
-    warnings.simplefilter("ignore")
-    _, plan, sims = simulate_example_campaign(11)
+def campaign_runs(seed: int = 11) -> tuple[list, list]:
+    """The example campaign simulated offline (``tests/example_campaign.py``, which must be
+    importable): its three payload runs as CSV-named experiments (LS) and as MCAP-named ones
+    with their references (IDIM-IV, half-cycle torque delay)."""
+    from example_campaign import simulate_example_campaign
+
+    _, plan, sims = simulate_example_campaign(seed)
     refs = [plan.reference.q[np.minimum(r.cycle, plan.reference.q.size - 1)] for r in sims]
 
     def exps(suffix: str, ref: bool) -> list:
@@ -60,7 +61,12 @@ def main() -> None:
                                 payload_arm=p.arm_m)
                 for i, (p, r, q) in enumerate(zip(plan.payloads, sims, refs, strict=True))]
 
-    ls, iv = exps("csv", False), exps("mcap", True)
+    return exps("csv", False), exps("mcap", True)
+
+
+def main() -> None:
+    warnings.simplefilter("ignore")
+    ls, iv = campaign_runs()
     _print("ls", fit_models(ls))
     _print("iv", fit_models(iv))
     _print("ls_validation", fit_models(ls[:2], validation=ls[2:]))
@@ -85,4 +91,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    sys.path.insert(0, str(ROOT / "tests"))
     main()
