@@ -283,6 +283,7 @@ class OneJointProblem:
         self.first = first
         self.sign_checked = False
         self._products: dict[float, RobotSignals] = {}
+        self._products_cache: dict = {}  # the products' part without q_s (a scan)
         try:
             st = resolve_design(self.runs, instruments=self.iv, **settings)
             sig, dqm = design_runs(self.runs, self.reg, st, instruments=self.iv,
@@ -371,7 +372,7 @@ class OneJointProblem:
         if q_s not in self._products:
             self._products = {q_s: products_columns(
                 self.signals, self.runs, self.reg, self.settings, self._load, q_s,
-                base=self.base, instruments=self.iv)}
+                base=self.base, instruments=self.iv, cache=self._products_cache)}
         return self._products[q_s]
 
     def fit(self, name: str, q_s: float = DEFAULT_Q_S, *, eliminate: bool = True,

@@ -19,6 +19,7 @@ from ident.cli_robot import fit_robot
 from ident.estimate import fit_least_squares
 from ident.fitting import SIGN_CHECK_MIN_KEPT, fit_models
 from ident.loaders import make_experiment
+from ident.models import IdentModel
 from ident.robot import RobotIdentError
 from ident.robot import design as design_mod
 from ident.robot.base import base_parameters, single_joint_map
@@ -102,8 +103,11 @@ def test_columns_chain_products_form_is_the_single_joint_paper_fit(campaign_runs
     difference of the E ddq columns at low velocity."""
     exps, runs, robot, _ = campaign_runs
     single = fit_models(exps, models=["usual", "paper"])
-    ref, du, dp = single.models["paper"], single.designs["usual"], single.designs["paper"]
-    assert not ref.removed_ and single.settings.get("load_model") is not None
+    du, dp = single.designs["usual"], single.designs["paper"]
+    # the reference: the single-joint least squares (QR) on the single-joint design's
+    # columns (ident.models' Terms), not fit_models' estimate (which is this very fit now)
+    ref = IdentModel(single.models["paper"].library, "paper").fit(dp, eliminate=False)
+    assert not single.models["paper"].removed_ and single.settings.get("load_model") is not None
     reg = RobotRegressor(robot)
     design = resolve_design(runs)
     sig, dq_min = design_runs(runs, reg, design)
@@ -180,8 +184,10 @@ def test_columns_chain_products_form_is_the_single_joint_iv_paper_fit(campaign_r
             for r, q in zip(runs, refs, strict=True)]
     runs = [replace(r, q_ref=q[:, None]) for r, q in zip(runs, refs, strict=True)]
     single = fit_models(exps, models=["usual", "paper"])
-    ref, dp = single.models["paper"], single.designs["paper"]
-    assert dp.Z is not None and not ref.removed_  # IDIM-IV, nothing eliminated
+    dp = single.designs["paper"]
+    # the single-joint IDIM-IV on the design's columns and instruments (not fit_models')
+    ref = IdentModel(single.models["paper"].library, "paper").fit(dp, eliminate=False)
+    assert dp.Z is not None and not single.models["paper"].removed_  # nothing eliminated
     reg = RobotRegressor(robot)
     design = resolve_design(runs, instruments=True)
     sig, dq_min = design_runs(runs, reg, design, instruments=True)
@@ -296,3 +302,35 @@ def test_decimated_columns_equal_the_single_joint_design_columns(campaign_runs):
     # at full rate the stiction area |dq| < dq_min is out; the decimated |dq| of a kept row
     # is then about above it (the anti-alias filter smooths the differentiated quantisation)
     assert np.abs(sig.dq[cols.keep[:, 0], 0]).min() > 0.5 * dq_min
+
+
+def test_products_cache_gives_the_same_floats(campaign_runs):
+    """``products_columns(cache=...)`` (the q_s scan of the single-joint fit) keeps, per run,
+    what does not depend on q_s and forms only the E products again: for each q_s, with the
+    instruments, every array equals the uncached one bit for bit -- whichever q_s filled the
+    cache -- and the cache is used (a load model changed after it was filled is not seen)."""
+    _, runs, robot, refs = campaign_runs
+    reg = RobotRegressor(robot)
+    part = [RawRobotRun(r.source, r.t[:6000], r.q[:6000], r.tau[:6000], payload=r.payload,
+                        q_ref=q[:6000, None]) for r, q in zip(runs[:2], refs[:2], strict=True)]
+    settings = resolve_design(part, cutoff_hz=50.0, instruments=True)
+    sig, dq_min = design_runs(part, reg, settings, instruments=True, keep_full=True)
+    resolved = replace(settings, dq_min=dq_min)
+
+    def load(s):
+        return s.ddq  # an inertial load: both signs, a quadrant on every row
+
+    cache: dict = {}
+    for q_s in (0.05, 0.02, 0.05):
+        fresh = products_columns(sig, part, reg, resolved, load, q_s, instruments=True)
+        cached = products_columns(sig, part, reg, resolved, load, q_s, instruments=True,
+                                  cache=cache)
+        a, b = fresh.columns.products, cached.columns.products
+        assert a.q_s == b.q_s
+        for x, y in zip((*a.loads, *a.loads_z, a.coulomb, a.pplus),
+                        (*b.loads, *b.loads_z, b.coulomb, b.pplus), strict=True):
+            np.testing.assert_array_equal(x, y)
+    assert set(cache) == {0, 1}
+    other = products_columns(sig, part, reg, resolved, lambda s: -s.ddq, 0.05,
+                             instruments=True, cache=cache)
+    np.testing.assert_array_equal(other.columns.products.pplus, b.pplus)  # from the cache

@@ -335,6 +335,63 @@ def _per_joint(q_s: float | Sequence[float] | Mapping[str, float],
     return out
 
 
+def _products_fixed(exp: RawExperiment, i: int, run: RawRobotRun, cols: RobotColumns,
+                    dt: float, settings: DesignSettings, instruments: bool, regressor, base,
+                    bcols: np.ndarray, pos: list[np.ndarray], width: list[int],
+                    rows: np.ndarray, load_torque: Callable[[RobotSignals], np.ndarray],
+                    placed: dict) -> list[tuple]:
+    """Run i's part of :func:`products_columns` that does not depend on q_s, per joint j:
+    (dq_j, P+_j, P-_j, sign(dq_j), its load rows (l_j + 1, n_f), their instruments or None,
+    and the decimated rows P+ w, P- w, P+ sign, P- sign, P+ (then P+ w_z, P- w_z)): what a
+    q_s scan would otherwise form and filter again for every q_s."""
+    k = len(pos)
+    iv = 2 if instruments else 1
+    need = (exp.q.shape[0] - 2 * settings.trim) * 8 * (
+        iv * k * bcols.size + max(width) + (iv - 1) * (max(width) - 5) + 4 * k)
+    if need > MAX_BYTES:
+        raise RobotIdentError(f"{exp.label}: the full-rate products need "
+                              f"{need / 2**30:.1f} GiB (more than "
+                              f"{MAX_BYTES / 2**30:.0f}); split the log")
+    f = _full_rate(cols, i, exp, dt, settings, instruments)
+    r = settings.decimation
+    if decimation_index(f.n, r).size != rows.size:
+        raise RobotIdentError(f"{exp.label}: {rows.size} decimated samples in the "
+                              f"signals, the settings give "
+                              f"{decimation_index(f.n, r).size}: not design_runs' "
+                              "output for these runs and settings")
+    full = RobotSignals(t=run.t[f.keep], q=f.q, dq=f.dq, ddq=f.ddq, tau=f.tau_f,
+                        joints=tuple(regressor.joints), payloads=(run.payload,),
+                        source=exp.label)
+    tau_out = np.asarray(load_torque(full), dtype=float)
+    if tau_out.shape != (f.n, k) or not np.all(np.isfinite(tau_out)):
+        raise RobotIdentError(f"{exp.label}: load_torque gave {tau_out.shape} values "
+                              f"(finite: {bool(np.all(np.isfinite(tau_out)))}), "
+                              f"expected ({f.n}, {k}) finite [N m]")
+    pay = placed_payload(run.payload, regressor, base, run.source, placed)
+    known = _known_torque(regressor, f, f.ddq, pay)
+    W = np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ddq, columns=bcols))
+    Wz = knownz = None
+    if instruments:
+        Wz = np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ref_ddq, columns=bcols))
+        knownz = _known_torque(regressor, f, f.ref_ddq, pay)
+    out = []
+    for j in range(k):
+        dq = f.dq[:, j]
+        pp = quadrant_weights(tau_out[:, j] * dq)  # P+ of eq. 27, 1/2 where P = 0
+        pm = 1.0 - pp
+        sg = np.sign(dq)
+        load = np.concatenate([W[j, pos[j]], known[None, :, j]], axis=0)  # (l + 1, n_f)
+        loadz = None
+        parts = [pp * load, pm * load, np.stack([pp * sg, pm * sg, pp])]
+        if Wz is not None and knownz is not None:  # the instruments' load rows
+            loadz = np.concatenate([Wz[j, pos[j]], knownz[None, :, j]], axis=0)
+            parts += [pp * loadz, pm * loadz]
+        # the chain's filter, row by row (the same floats as in one stack)
+        fixed = decimate(np.concatenate(parts).T, r)[0].T
+        out.append((dq, pp, pm, sg, load, loadz, fixed))
+    return out
+
+
 def products_columns(
     signals: RobotSignals,
     runs: Sequence[RawRobotRun],
@@ -345,6 +402,7 @@ def products_columns(
     *,
     base=None,
     instruments: bool = False,
+    cache: dict | None = None,
 ) -> RobotSignals:
     """The paper model's eq. 42 columns of every joint formed at FULL rate, then low-passed and
     decimated like the other columns: what the single-joint chain does
@@ -394,6 +452,11 @@ def products_columns(
         form's ``base`` must be the same (or have the same columns).
     instruments : bool
         Also form the IDIM-IV instruments (needs every run's ``q_ref``).
+    cache : dict or None
+        Keeps, per run, what does not depend on q_s (the load model's quadrants, the load
+        rows at full rate, their decimated P+/P- products): pass the same dict for other q_s
+        of the same signals, load model and settings (a q_s scan) and only the E products are
+        formed and filtered again. Memory: about (2 + l_j) n_f floats per run and joint.
 
     Returns
     -------
@@ -438,60 +501,34 @@ def products_columns(
     coulomb = np.empty((4, n, k))
     pplus = np.empty((n, k))
     placed: dict = {}
-    iv = 2 if instruments else 1
     for i, exp in enumerate(_experiments(runs, instruments)):
-        need = (exp.q.shape[0] - 2 * settings.trim) * 8 * (
-            iv * k * bcols.size + max(width) + (iv - 1) * (max(width) - 5) + 4 * k)
-        if need > MAX_BYTES:
-            raise RobotIdentError(f"{exp.label}: the full-rate products need "
-                                  f"{need / 2**30:.1f} GiB (more than "
-                                  f"{MAX_BYTES / 2**30:.0f}); split the log")
-        f = _full_rate(cols, i, exp, dt, settings, instruments)
         rows = np.flatnonzero(signals.experiment == i)
-        if decimation_index(f.n, r).size != rows.size:
-            raise RobotIdentError(f"{exp.label}: {rows.size} decimated samples in the "
-                                  f"signals, the settings give "
-                                  f"{decimation_index(f.n, r).size}: not design_runs' "
-                                  "output for these runs and settings")
-        run = runs[i]
-        full = RobotSignals(t=run.t[f.keep], q=f.q, dq=f.dq, ddq=f.ddq, tau=f.tau_f,
-                            joints=joints, payloads=(run.payload,), source=exp.label)
-        tau_out = np.asarray(load_torque(full), dtype=float)
-        if tau_out.shape != (f.n, k) or not np.all(np.isfinite(tau_out)):
-            raise RobotIdentError(f"{exp.label}: load_torque gave {tau_out.shape} values "
-                                  f"(finite: {bool(np.all(np.isfinite(tau_out)))}), "
-                                  f"expected ({f.n}, {k}) finite [N m]")
-        pay = placed_payload(run.payload, regressor, base, run.source, placed)
-        known = _known_torque(regressor, f, f.ddq, pay)
-        W = np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ddq, columns=bcols))
-        Wz = knownz = None
-        if instruments:
-            Wz = np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ref_ddq, columns=bcols))
-            knownz = _known_torque(regressor, f, f.ref_ddq, pay)
-        for j in range(k):
-            dq = f.dq[:, j]
-            pp = quadrant_weights(tau_out[:, j] * dq)  # P+ of eq. 27, 1/2 where P = 0
-            pm = 1.0 - pp
+        per_joint = None if cache is None else cache.get(i)
+        if per_joint is None or len(per_joint) != k or per_joint[0][-1].shape[1] != rows.size:
+            per_joint = _products_fixed(exp, i, runs[i], cols, dt, settings, instruments,
+                                        regressor, base, bcols, pos, width, rows, load_torque,
+                                        placed)
+            if cache is not None:
+                cache[i] = per_joint
+        for j, (dq, pp, pm, sg, load, loadz, fixed) in enumerate(per_joint):
+            # the q_s-dependent rows: E = exp(-|dq| / q_s) times the fixed ones
             e = stribeck_exp(dq, qs[j])
             pe, me = pp * e, pm * e
-            sg = np.sign(dq)
-            load = np.concatenate([W[j, pos[j]], known[None, :, j]], axis=0)  # (l + 1, n_f)
-            parts = [pp * load, pe * load, pm * load, -me * load,
-                     np.stack([pp * sg, pe * sg, pm * sg, me * sg, pp])]
-            if Wz is not None and knownz is not None:  # the instruments' load rows
-                load = np.concatenate([Wz[j, pos[j]], knownz[None, :, j]], axis=0)
-                parts += [pp * load, pe * load, pm * load, -me * load]
-            stack = np.concatenate(parts)
-            del load, parts
-            dec = decimate(stack.T, r)[0].T  # (rows, m): the chain's filter, row by row
-            del stack
+            parts = [pe * load, -me * load, np.stack([pe * sg, me * sg])]
+            if loadz is not None:
+                parts += [pe * loadz, -me * loadz]
+            dep = decimate(np.concatenate(parts).T, r)[0].T
+            del parts
             nl = pos[j].size + 1
-            loads[j][:, :, rows] = dec[:4 * nl].reshape(4, nl, rows.size)
-            coulomb[:, rows, j] = dec[4 * nl:4 * nl + 4]
-            pplus[rows, j] = dec[4 * nl + 4]
+            for block, src, at in ((0, fixed, 0), (1, dep, 0), (2, fixed, nl), (3, dep, nl)):
+                loads[j][block, :, rows] = src[at:at + nl].T
+            coulomb[0, rows, j], coulomb[2, rows, j] = fixed[2 * nl], fixed[2 * nl + 1]
+            coulomb[1, rows, j], coulomb[3, rows, j] = dep[2 * nl], dep[2 * nl + 1]
+            pplus[rows, j] = fixed[2 * nl + 2]
             if loads_z is not None:
-                loads_z[j][:, :, rows] = dec[4 * nl + 5:].reshape(4, nl, rows.size)
-        del W, known, Wz, knownz
+                for block, src, at in ((0, fixed, 2 * nl + 3), (1, dep, 2 * nl + 2),
+                                       (2, fixed, 3 * nl + 3), (3, dep, 3 * nl + 2)):
+                    loads_z[j][block, :, rows] = src[at:at + nl].T
     products = FullRateProducts(loads=tuple(loads), coulomb=coulomb, pplus=pplus,
                                 cols=tuple(bcols[c] for c in pos), q_s=qs,
                                 loads_z=None if loads_z is None else tuple(loads_z))
