@@ -744,6 +744,14 @@ def _references(
     ref = np.concatenate(arrays)
     if ref.size != len(s):
         raise DataError(f"references: {ref.size} samples, expected {len(s)}")
+    bad = ~np.isfinite(ref)
+    if bad.any():
+        where = int(s.experiment[int(np.argmax(bad))])
+        name = (data[where].source if not isinstance(data, Signals) and where < len(data)
+                else f"experiment {where}")
+        raise DataError(f"references: {int(bad.sum())} NaN/inf values (first in {name}; the "
+                        "log lacks setpoints for some cycles): give finite references or "
+                        "references=None (least squares)")
     return ref
 
 

@@ -429,10 +429,7 @@ def build_design(
                 f"reference has {int(np.sum(~np.isfinite(reference)))} NaN/inf values "
                 "(the log lacks setpoints for some cycles)"
             )
-    for k, v in (signals.extra or {}).items():
-        if np.shape(v) != signals.q.shape or not np.all(np.isfinite(v)):
-            raise DataError(f"signals.extra[{k!r}]: expected {signals.q.size} finite values "
-                            "(one per position sample)")
+    _check_extra(signals)
     experiments = [
         RawExperiment(f"experiment {int(signals.experiment[sl.start])}", signals.q[sl, None],
                       signals.tau[sl, None], None if reference is None else reference[sl, None])
@@ -442,6 +439,15 @@ def build_design(
                                  dq_min_rel=dq_min_rel)
     return design_on_full_rate(lib, signals, fulls, settings, dq_min, tau_min=tau_min,
                                load_model=load_model)
+
+
+def _check_extra(signals: Signals) -> None:
+    """The extra signals (other joints' states, read by refinement terms) must be one finite
+    value per position sample."""
+    for k, v in (signals.extra or {}).items():
+        if np.shape(v) != signals.q.shape or not np.all(np.isfinite(v)):
+            raise DataError(f"signals.extra[{k!r}]: expected {signals.q.size} finite values "
+                            "(one per position sample)")
 
 
 def design_on_full_rate(
@@ -469,9 +475,10 @@ def design_on_full_rate(
     Raises
     ------
     DataError
-        ``fulls`` do not match the experiments of ``signals``.
+        ``fulls`` do not match the experiments of ``signals``; non-finite extra signals.
     """
     lib = library if isinstance(library, Library) else Library(library)
+    _check_extra(signals)
     slices = split_experiments(signals)
     if len(fulls) != len(slices):
         raise DataError(f"{len(fulls)} full-rate experiments given for the {len(slices)} "

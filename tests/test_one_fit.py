@@ -10,6 +10,7 @@ demo's MCAP logs)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -19,7 +20,7 @@ from example_campaign import simulate_example_campaign
 from daq.app.demo import run_demo
 from ident import DataError
 from ident.fitting import fit_models
-from ident.loaders import load_experiment, make_experiment
+from ident.loaders import concat, load_experiment, make_experiment
 from ident.models import IdentModel
 from ident.robot import RobotIdentError
 from ident.robot.estimate import RobotModel
@@ -183,3 +184,25 @@ def test_payload_named_without_payload_is_fit_models(campaign):
     assert [n for n, _ in report.models["usual"].removed_] == ["Ma_ratio"]
     assert [n for n, _ in report.models["paper"].removed_][:4] == ["a_m", "b_m", "a_g", "b_g"]
     _assert_same(report)
+
+
+def test_bad_references_and_extra_signals_are_one_line_errors(campaign):
+    """What the single-joint chain refused before the design was built on the robot chain is
+    still refused in one line naming it: references with NaN (a log without setpoints for some
+    cycles; the IV columns would otherwise be NaN and fail in the SVD) and non-finite extra
+    signals (other joints' states) in concatenated signals."""
+    exps = _experiments(campaign, "csv", False)
+    refs = [np.array(e, dtype=float) for e in campaign[2]]
+    refs[1][500:510] = np.nan
+    with pytest.raises(DataError, match=r"references: 10 NaN/inf values \(first in "
+                                        r"payload1\.csv") as err:
+        fit_models(exps, references=refs, table_iv=False)
+    assert "\n" not in str(err.value)
+    s = concat(exps)
+    extra = np.zeros(len(s))
+    extra[7] = np.inf
+    with pytest.raises(DataError, match=r"signals\.extra\['q2'\]: expected") as err:
+        fit_models(replace(s, extra={"q2": extra}), table_iv=False)
+    assert "\n" not in str(err.value)
+    fine = fit_models(replace(s, extra={"q2": np.zeros(len(s))}), table_iv=False)
+    assert np.all(fine.designs["paper"].signals.extra["q2"] == 0.0)  # carried to the design
