@@ -932,7 +932,7 @@ def fit_models(
             def err(q: float) -> float:
                 # full model (no elimination): the residual as a function of q_s alone,
                 # eq. 42's columns formed again at full rate for each q_s
-                e = problem.fit("paper", float(q), eliminate=False).rel_error
+                e = problem.fit("paper", float(q), eliminate=False).result.rel_error
                 scan.append((float(q), e))
                 return e
 
@@ -992,7 +992,8 @@ def fit_models(
         for name in models:
             t4["with_payloads"][name] = fitted[name].rel_error_
             t4["without_payload"][name] = (
-                p0.fit(name, qs_val, eliminate=eliminate, threshold_pct=threshold_pct).rel_error
+                p0.fit(name, qs_val, eliminate=eliminate,
+                       threshold_pct=threshold_pct).result.rel_error
                 if p0 is not None else None
             )
     return FitReport(

@@ -73,9 +73,8 @@ _PAPER_TAIL = {"c_m": "c_m", "d_m": "d_m", "c_g": "c_g", "d_g": "d_g", "F_V": "F
 @dataclass
 class OneJointModel:
     """One model fitted through :class:`~ident.robot.estimate.RobotModel`, by the
-    single-joint names: its statistics are an :class:`~ident.estimate.LSResult` (what
-    :class:`ident.models.IdentModel` holds as ``result_``), read through the properties below
-    (the attributes of ``IdentModel`` of the same meaning, without the trailing underscore).
+    single-joint names: what :func:`ident.fitting.fit_models` holds in an
+    :class:`ident.models.IdentModel` (``result_``, ``estimator_``, ``robot_``).
 
     Attributes
     ----------
@@ -89,66 +88,12 @@ class OneJointModel:
     estimator : {"ls", "iv"}
     robot : RobotModel
         The fitted robot model (robot names).
-    signals : RobotSignals
-        What it was fitted on (the products formed at full rate for the paper model).
-    rows : ndarray of bool (n,)
-        The samples of ``signals`` the fit took.
     """
 
     name: str
     result: LSResult
     estimator: str
     robot: RobotModel
-    signals: RobotSignals
-    rows: np.ndarray
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        return tuple(self.result.names)
-
-    @property
-    def values(self) -> dict[str, float]:
-        return dict(zip(self.result.names, self.result.chi.tolist(), strict=True))
-
-    @property
-    def std(self) -> dict[str, float]:
-        return dict(zip(self.result.names, self.result.std.tolist(), strict=True))
-
-    @property
-    def rel_std_pct(self) -> dict[str, float]:
-        return dict(zip(self.result.names, self.result.rel_std_pct.tolist(), strict=True))
-
-    @property
-    def removed(self) -> list[tuple[str, str]]:
-        return list(self.result.removed)
-
-    @property
-    def cov(self) -> np.ndarray:
-        return self.result.cov
-
-    @property
-    def sigma_rho(self) -> float:
-        return self.result.sigma_rho
-
-    @property
-    def residual(self) -> np.ndarray:
-        return self.result.residual
-
-    @property
-    def rel_error(self) -> float:
-        return self.result.rel_error
-
-    @property
-    def cond(self) -> float:
-        return self.result.cond
-
-    @property
-    def cond_raw(self) -> float:
-        return self.result.cond_raw
-
-    @property
-    def m(self) -> int:
-        return self.result.m
 
 
 def _runs(exps: Sequence[Experiment], revolute: bool, payload: bool,
@@ -222,7 +167,7 @@ def _single(est: RobotModel, sig: RobotSignals, name: str, single_names: Sequenc
                         rel_error=float(est.rel_error_[est.joints_[0]]),
                         cond=float(est.cond_), cond_raw=float(est.cond_raw_),
                         m=int(est.n_samples_[0]), removed=removed),
-        estimator=estimator, robot=est, signals=sig, rows=taken)
+        estimator=estimator, robot=est)
 
 
 class OneJointProblem:

@@ -429,7 +429,6 @@ def build_design(
                 f"reference has {int(np.sum(~np.isfinite(reference)))} NaN/inf values "
                 "(the log lacks setpoints for some cycles)"
             )
-    _check_extra(signals)
     experiments = [
         RawExperiment(f"experiment {int(signals.experiment[sl.start])}", signals.q[sl, None],
                       signals.tau[sl, None], None if reference is None else reference[sl, None])

@@ -346,8 +346,9 @@ def _products_fixed(exp: RawExperiment, i: int, run: RawRobotRun, cols: RobotCol
     q_s scan would otherwise form and filter again for every q_s."""
     k = len(pos)
     iv = 2 if instruments else 1
+    held = sum(iv * (w - 5) // 4 + 4 for w in width)  # every joint's q_s-free rows
     need = (exp.q.shape[0] - 2 * settings.trim) * 8 * (
-        iv * k * bcols.size + max(width) + (iv - 1) * (max(width) - 5) + 4 * k)
+        iv * k * bcols.size + held + max(width) + (iv - 1) * (max(width) - 5) + 4 * k)
     if need > MAX_BYTES:
         raise RobotIdentError(f"{exp.label}: the full-rate products need "
                               f"{need / 2**30:.1f} GiB (more than "
@@ -428,7 +429,9 @@ def products_columns(
     own instruments.
 
     Memory: at full rate, per run, the base regressor (k b floats per sample, b the base
-    parameters) and one joint's rows (4 (l_j + 1) + 5), twice the load parts with
+    parameters), every joint's q_s-free rows (its load rows, dq, P+, P-, sign: sum_j
+    (l_j + 1) + 4, the load rows twice with ``instruments``; kept across q_s with a
+    ``cache``) and one joint's filtered rows (4 (l_j + 1) + 5), twice the load parts with
     ``instruments``; kept, per decimated sample, sum_j 4 (l_j + 1) + 5 k floats (plus
     sum_j 4 (l_j + 1) with ``instruments``; l_j: joint j's base columns). Refused above
     :data:`MAX_BYTES` at full rate.
