@@ -27,8 +27,8 @@ import numpy as np
 
 from . import DataError, IdentifiabilityError
 from .estimators import RCOND, get_estimator
+from .estimators.base import ZERO_COLUMN, dependent_columns, dependent_reason
 from .estimators.base import dependency_message as _dependency_message
-from .estimators.base import dependent_columns
 
 __all__ = [
     "DEFAULT_THRESHOLD_PCT",
@@ -223,7 +223,7 @@ def fit_least_squares(
                 "(no payload run, prismatic joint, or no excitation)"
             )
         for n in zn:
-            removed.append((n, "zero column on these data: not excited (no payload, no gravity?)"))
+            removed.append((n, ZERO_COLUMN))
     cols = [i for i in range(len(names)) if not zero[i]]
     deps = dependent_columns(W[:, cols], [names[i] for i in cols])
     if deps:
@@ -231,7 +231,7 @@ def fit_least_squares(
             raise IdentifiabilityError(_dependency_message(deps))
         drop = {n for n, _ in deps}
         for n, partners in deps:
-            removed.append((n, "not separable: linear combination of " + ", ".join(partners)))
+            removed.append((n, dependent_reason(partners)))
         cols = [i for i in cols if names[i] not in drop]
     while True:
         sub = [names[i] for i in cols]

@@ -1,7 +1,8 @@
 """A parameter left out because its column is a linear combination of others is removed with
 the single-joint reason naming its partners ("not separable: linear combination of A, B",
 :func:`ident.estimate.fit_least_squares`), also on the robot model's path, whose rank rule
-reads only the Gram matrix (:func:`ident.robot.estimate._rank_rule`), and by the single-joint
+reads only the Gram matrix (:func:`ident.estimators.rank_rule`, the one rule of every model), and
+by the single-joint
 names when a joint is fitted as a 1-dof robot (:func:`ident.fitting.fit_models` through
 :class:`ident.one_joint.OneJointProblem`)."""
 
@@ -11,19 +12,15 @@ import tomllib
 
 import numpy as np
 import pytest
+import scipy.linalg
 from example_campaign import ROOT
 
 from daq.protocol.control import ControllerGains
-from ident.estimators import dependent_columns
+from ident.estimators import RCOND, ZERO_COLUMN, dependent_columns, dependent_reason, rank_rule
 from ident.fitting import fit_models
 from ident.loaders import make_experiment
 from ident.models import IdentModel
-from ident.robot.estimate import (
-    ZERO_COLUMN,
-    _rank_rule,
-    dependent_reason,
-    renamed_reason,
-)
+from ident.robot.estimate import renamed_reason
 from sim_drivers.offline import simulate
 from sim_drivers.plant_config import load_plant
 from trajectories.plan import plan_campaign
@@ -38,24 +35,68 @@ def _partners(why: str) -> list[str]:
     return why[len(PREFIX):].split(", ")
 
 
-def test_rank_rule_partners_are_the_single_joint_ones():
-    """From W^T W alone: the same dependent columns and partners as ``dependent_columns``
-    (pivoted QR of W), whatever the column scales; a kept column with a coefficient below
-    1e-3 of the largest (here 1e-6) is not a partner; a zero column has none."""
+def qr_rule_reference(W: np.ndarray, names: list[str]) -> dict[str, list[str]]:
+    """The rank rule computed independently of :func:`rank_rule`, on the rows: column-pivoted
+    QR of the unit-norm columns, kept while |R_kk| > RCOND |R_00|; a dependent column's
+    partners are the kept columns whose coefficients (R11 a = R[:rank, k]) exceed 1e-3 of the
+    largest, in pivot order (what ``dependent_columns`` computed before it read W^T W)."""
+    norms = np.linalg.norm(W, axis=0)
+    Ws = W / np.where(norms > 0, norms, 1.0)
+    _, R, piv = scipy.linalg.qr(Ws, mode="economic", pivoting=True)
+    d = np.abs(np.diag(R))
+    rank = int(np.sum(d > RCOND * d[0]))
+    out = {}
+    for k in range(rank, W.shape[1]):
+        coef = np.abs(scipy.linalg.solve_triangular(R[:rank, :rank], R[:rank, k]))
+        big = coef > 1e-3 * max(coef.max(), 1e-300)
+        out[names[piv[k]]] = [names[piv[i]] for i in np.flatnonzero(big)]
+    return out
+
+
+def test_rank_rule_partners_are_the_rows_qr_ones():
+    """From W^T W alone: the same dependent columns and partners as the column-pivoted QR of
+    the rows (:func:`qr_rule_reference`), whatever the column scales; a kept column with a
+    coefficient below 1e-3 of the largest (here 1e-6) is not a partner; a zero column has
+    none. ``dependent_columns`` (the rows' entry point) gives the same."""
     rng = np.random.default_rng(3)
     W = rng.standard_normal((500, 7)) * [1.0, 1e3, 1e-2, 1.0, 5.0, 1.0, 1.0]
     W[:, 3] = 2.0 * W[:, 0] - 1e-3 * W[:, 1]  # a combination of 0 and 1
     W[:, 5] = 30.0 * W[:, 2] + 1e-6 * 6.0 * W[:, 4]  # of 2, and 4 negligibly
     W[:, 6] = 0.0
     names = [f"c{i}" for i in range(7)]
-    dep, partners = _rank_rule(W.T @ W)
-    ref = dict(dependent_columns(W[:, :6], names[:6]))
+    dep, partners = rank_rule(W.T @ W)
+    ref = qr_rule_reference(W[:, :6], names[:6])
     assert [names[i] for i in dep] == sorted([*ref, "c6"]) and len(ref) == 2
     assert 6 not in partners  # the zero column: ZERO_COLUMN, no partners
     for c, ps in partners.items():
         assert [names[p] for p in ps] == ref[names[c]]
     got = {frozenset({names[c], *(names[p] for p in ps)}) for c, ps in partners.items()}
     assert got == {frozenset({"c0", "c1", "c3"}), frozenset({"c2", "c5"})}  # c4: no partner
+    assert dict(dependent_columns(W, names)) == {**ref, "c6": []}
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3, 4])
+def test_rows_and_moments_decide_alike(seed):
+    """Random regressors with random column scales (1e-3..1e3) and 1 to 3 exact dependencies:
+    the rows' QR (:func:`qr_rule_reference`) and the Gram matrix (``dependent_columns``, the
+    rule every model applies) leave out the same number of columns, each with the QR's
+    partners (as a set) when the same column is left out; the kept columns have full rank."""
+    rng = np.random.default_rng(seed)
+    b = int(rng.integers(6, 12))
+    W = rng.standard_normal((300, b))
+    n_dep = int(rng.integers(1, 4))
+    for k in range(n_dep):
+        src = rng.choice(b - n_dep, size=2, replace=False)
+        W[:, b - 1 - k] = rng.normal() * W[:, src[0]] + rng.normal() * W[:, src[1]]
+    W = W * 10.0 ** rng.uniform(-3, 3, size=b)
+    names = [f"c{i}" for i in range(b)]
+    ref = qr_rule_reference(W, names)
+    got = dict(dependent_columns(W, names))
+    assert len(got) == len(ref) == n_dep
+    for n in set(got) & set(ref):
+        assert set(got[n]) == set(ref[n])  # the order: pivots, which rounding may swap
+    kept = [i for i, n in enumerate(names) if n not in got]
+    assert np.linalg.matrix_rank(W[:, kept] / np.linalg.norm(W[:, kept], axis=0)) == len(kept)
 
 
 def test_reason_strings():

@@ -27,9 +27,9 @@ import pytest
 import scipy.stats
 from example_campaign import simulate_example_campaign
 from one_joint_products import products_as_single
+from test_dependent_partners import qr_rule_reference
 
 from ident.estimate import fit_least_squares
-from ident.estimators import dependent_columns
 from ident.fitting import SIGN_CHECK_MIN_KEPT
 from ident.loaders import concat, make_experiment
 from ident.models import new_model, usual_model
@@ -538,14 +538,15 @@ def test_arm3_full_rate_products_instruments():
 
 def test_products_rank_rule_is_the_single_joint_one():
     """The products form leaves out (fixes at 0) the products of the load columns the
-    single-joint rank rule (``dependent_columns``: pivoted QR of the unit-norm columns)
-    leaves out, decided from their Gram matrix (the moments) by a pivoted Cholesky."""
+    rank rule leaves out on the rows (pivoted QR of the unit-norm columns, computed
+    independently in ``test_dependent_partners.qr_rule_reference``), decided from their Gram
+    matrix (the moments) by a pivoted Cholesky."""
     rng = np.random.default_rng(7)
     W = rng.standard_normal((400, 6)) * [1.0, 1e3, 1e-2, 1.0, 5.0, 1.0]
     W[:, 3] = 2.0 * W[:, 0] - 1e-3 * W[:, 1]  # dependent (the scales differ)
     W[:, 5] = 0.0  # zero (no payload)
     names = [f"c{i}" for i in range(6)]
-    lost = {n for n, _ in dependent_columns(W[:, :5], names[:5])} | {"c5"}
+    lost = set(qr_rule_reference(W[:, :5], names[:5])) | {"c5"}
     assert {names[i] for i in _dependent(W.T @ W)} == lost and len(lost) == 2
 
 

@@ -12,13 +12,25 @@ per-group weights), :mod:`~ident.estimators.iv` (IDIM-IV).
 from __future__ import annotations
 
 from .. import DataError
-from .base import RCOND, Estimator, RankDeficientError, Solution, dependent_columns
+from .base import (
+    DEPENDENT_PREFIX,
+    PARTNER_TOL,
+    RCOND,
+    ZERO_COLUMN,
+    Estimator,
+    RankDeficientError,
+    Solution,
+    dependent_columns,
+    dependent_reason,
+    rank_rule,
+)
 from .iv import IV
 from .ls import LS
 from .wls import WLS
 
-__all__ = ["ESTIMATORS", "RCOND", "Estimator", "IV", "LS", "RankDeficientError", "Solution",
-           "WLS", "dependent_columns", "get_estimator"]
+__all__ = ["DEPENDENT_PREFIX", "ESTIMATORS", "PARTNER_TOL", "RCOND", "ZERO_COLUMN", "Estimator",
+           "IV", "LS", "RankDeficientError", "Solution", "WLS", "dependent_columns",
+           "dependent_reason", "get_estimator", "rank_rule"]
 
 #: name -> class: the registered estimators (the CLI choices, in this order).
 ESTIMATORS: dict[str, type[Estimator]] = {cls.name: cls for cls in (LS, WLS, IV)}

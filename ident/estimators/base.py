@@ -29,7 +29,8 @@ import scipy.linalg
 
 from .. import DataError, IdentifiabilityError
 
-__all__ = ["RCOND", "Estimator", "Solution", "RankDeficientError", "scaled", "dependent_columns"]
+__all__ = ["DEPENDENT_PREFIX", "PARTNER_TOL", "RCOND", "ZERO_COLUMN", "Estimator", "Solution",
+           "RankDeficientError", "scaled", "dependent_columns", "dependent_reason", "rank_rule"]
 
 #: Relative singular-value tolerance of the column-scaled regressor (module doc). On normal
 #: equations the threshold is RCOND**2 = 1e-12 (their eigenvalues are squared singular values;
@@ -109,35 +110,108 @@ def scaled(W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return W / safe, safe
 
 
+#: Why a parameter is fixed at 0 (``removed_`` of every model): its column is zero on the
+#: data, or it is a combination of kept columns -- DEPENDENT_PREFIX followed by its partners
+#: (:func:`dependent_reason`).
+ZERO_COLUMN = "zero column on these data: not excited (no payload, no gravity?)"
+DEPENDENT_PREFIX = "not separable: linear combination of "
+
+
+def dependent_reason(partners: Sequence[str]) -> str:
+    """Why a dependent column is fixed at 0, naming its partners (``"not separable: linear
+    combination of A, B"``)."""
+    return DEPENDENT_PREFIX + ", ".join(partners)
+
+
+#: A kept column is a dependent column's partner when its coefficient (unit-norm columns) in
+#: the column's least-squares expression on the kept columns exceeds this fraction of the
+#: largest one (:func:`rank_rule`).
+PARTNER_TOL = 1e-3
+
+
+def rank_rule(G: np.ndarray, tol: float = RCOND,
+              first: int = 0) -> tuple[np.ndarray, dict[int, list[int]]]:
+    """The rank rule (module doc) on a Gram matrix G = W^T W, shape (b, b): the columns of W
+    left out and, for each nonzero one, its partners.
+
+    The column-pivoted QR of the unit-norm columns (kept while |R_kk| > tol |R_00|) computed
+    as a pivoted Cholesky of the scaled G (L's rows are R's columns): the same pivots, from
+    the rows (:func:`dependent_columns`) or from moments summed chunk by chunk (the n-dof
+    fit, :mod:`ident.robot.estimate`), so both decide alike. A column's partners are the kept
+    columns whose coefficients in its least-squares expression on them (R11 a = R[:rank, c],
+    unit-norm columns) exceed :data:`PARTNER_TOL` times the largest, in pivot order.
+
+    The columns ``0 .. first - 1`` are pivoted before the others (while one of them is
+    independent of those already taken): of a dependent group, a later column is left out
+    -- the payload's ratio or products rather than the base parameters whose combination
+    they are (one payload in every run). Without it the first pivot among unit columns is
+    decided by rounding.
+
+    Parameters
+    ----------
+    G : ndarray, shape (b, b)
+        W^T W (any column scaling: the rule scales it to unit diagonal).
+    tol : float
+        RCOND of the module doc (on |R_kk| / |R_00|, i.e. sqrt of the scaled pivots).
+    first : int
+        Columns pivoted first (above).
+
+    Returns
+    -------
+    (ndarray of int, dict of int to list of int)
+        The left-out columns (zero columns included), sorted; partners of each nonzero one.
+    """
+    d = np.sqrt(np.clip(np.diagonal(G), 0.0, None))
+    live = np.flatnonzero(d > 0)
+    out = [int(i) for i in np.flatnonzero(~(d > 0))]
+    if not live.size:
+        return np.array(out, dtype=int), {}
+    Gs = G[np.ix_(live, live)] / d[live, None] / d[None, live]
+    n = live.size
+    L = np.zeros((n, n))
+    r = np.diagonal(Gs).copy()
+    left = np.ones(n, dtype=bool)
+    piv: list[int] = []
+    group = live < int(first)
+    for k in range(n):
+        i = int(np.argmax(np.where(left & group, r, -np.inf)))
+        if not (group[i] and left[i] and np.sqrt(max(r[i], 0.0)) > tol):
+            group[:] = False  # the first columns are all taken (or dependent)
+            i = int(np.argmax(np.where(left, r, -np.inf)))
+        if not np.sqrt(max(r[i], 0.0)) > tol:  # |R_00| = 1: unit columns
+            break
+        col = (Gs[:, i] - L[:, :k] @ L[i, :k]) / np.sqrt(r[i])
+        L[:, k] = col
+        r = r - col**2
+        left[i] = False
+        piv.append(i)
+    rank = len(piv)
+    R11 = L[piv, :rank].T  # upper triangular: R11[a, b] = L[piv[b], a]
+    partners: dict[int, list[int]] = {}
+    for i in np.flatnonzero(left):
+        coef = (np.abs(scipy.linalg.solve_triangular(R11, L[i, :rank], lower=False))
+                if rank else np.zeros(0))  # rank 0: a non-finite G
+        big = coef > PARTNER_TOL * max(float(coef.max(initial=0.0)), 1e-300)
+        partners[int(live[i])] = [int(live[piv[t]]) for t in np.flatnonzero(big)]
+    out += [int(live[i]) for i in np.flatnonzero(left)]
+    return np.array(sorted(out), dtype=int), partners
+
+
 def dependent_columns(
     W: np.ndarray, names: Sequence[str], tol: float = RCOND
 ) -> list[tuple[str, list[str]]]:
-    """Columns that are (numerically) linear combinations of the others (the rank rule).
-
-    Uses a column-pivoted QR of the unit-norm-scaled W. For each dependent column returns
-    its name and the names of the kept columns it is a combination of.
+    """Columns that are (numerically) linear combinations of the others: :func:`rank_rule`
+    on the rows' Gram matrix W^T W.
 
     Returns
     -------
     list of (name, partners)
-        Empty when W has full column rank.
+        Each left-out column's name and the names of the kept columns it is a combination of
+        (empty for a zero column); empty when W has full column rank.
     """
-    Ws, _ = scaled(W)
-    _, R, piv = scipy.linalg.qr(Ws, mode="economic", pivoting=True)
-    d = np.abs(np.diag(R))
-    if d.size == 0 or d[0] == 0:
-        return [(n, []) for n in names]
-    rank = int(np.sum(d > tol * d[0]))
-    out: list[tuple[str, list[str]]] = []
-    if rank == W.shape[1]:
-        return out
-    R11 = R[:rank, :rank]
-    for k in range(rank, W.shape[1]):
-        coef = scipy.linalg.solve_triangular(R11, R[:rank, k])
-        big = np.abs(coef) > 1e-3 * max(np.abs(coef).max(), 1e-300)
-        partners = [names[piv[i]] for i in np.flatnonzero(big)]
-        out.append((names[piv[k]], partners))
-    return out
+    W = np.asarray(W, dtype=float)
+    out, partners = rank_rule(W.T @ W, tol)
+    return [(names[i], [names[p] for p in partners.get(int(i), [])]) for i in out]
 
 
 def dependency_message(deps: list[tuple[str, list[str]]]) -> str:
@@ -231,7 +305,9 @@ class Estimator:
         m, b = W.shape
         d = np.abs(np.diag(R))
         if b and (d[0] == 0 or d[-1] <= RCOND * d[0]):
-            deps = dependent_columns(W, names)
+            # the rule on W^T W names the columns (at the tolerance to ~1e-4 of it, the rows'
+            # QR may see a deficiency the Gram matrix does not: its weakest pivot then)
+            deps = dependent_columns(W, names) or [(names[int(piv[-1])], [])]
             raise RankDeficientError(dependency_message(deps), [n for n, _ in deps])
         theta_s, cov_s = self._solve_scaled(Ws, y, Q, R, piv, Z, names)
         theta = theta_s / norms

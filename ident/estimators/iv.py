@@ -37,7 +37,7 @@ class IV(Estimator):
         Qz, Rz = scipy.linalg.qr(Zs, mode="economic")
         dz = np.abs(np.diag(Rz))
         if b and (dz.max() == 0 or dz.min() <= RCOND * dz.max()):
-            deps = dependent_columns(Z, names)
+            deps = dependent_columns(Z, names) or [(names[int(np.argmin(dz))], [])]
             raise RankDeficientError("instruments: " + dependency_message(deps),
                                      [n for n, _ in deps])
         A = Qz.T @ Ws

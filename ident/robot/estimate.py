@@ -67,7 +67,16 @@ from trajectories.friction import DEFAULT_Q_S, stribeck_exp
 
 from .. import DataError
 from ..estimate import DEFAULT_THRESHOLD_PCT
-from ..estimators import ESTIMATORS, RCOND, Estimator, RankDeficientError
+from ..estimators import (
+    DEPENDENT_PREFIX,
+    ESTIMATORS,
+    RCOND,
+    ZERO_COLUMN,
+    Estimator,
+    RankDeficientError,
+    dependent_reason,
+    rank_rule,
+)
 from ..hyperparams import HyperParameters
 from ..vocab import renamed_keywords
 from . import RobotIdentError
@@ -127,16 +136,6 @@ SCALE_TOL = 1e-9
 #: cause when the paper model is not identifiable.
 THIN_QUADRANT = 0.02
 
-#: Why a parameter is fixed at 0 (``removed_``): the reasons of
-#: :func:`ident.estimate.fit_least_squares`; a dependent column's is DEPENDENT_PREFIX followed
-#: by its partners (:func:`dependent_reason`).
-ZERO_COLUMN = "zero column on these data: not excited (no payload, no gravity?)"
-DEPENDENT_PREFIX = "not separable: linear combination of "
-
-#: A kept column is a dependent column's partner when its coefficient (unit-norm columns) in
-#: the column's least-squares expression exceeds this fraction of the largest one: the rule of
-#: :func:`ident.estimators.dependent_columns`, so the partners are the single-joint ones.
-PARTNER_TOL = 1e-3
 
 #: Levenberg-Marquardt damping (relative to the column-scaled normal matrix) of the fits made
 #: while the model quadrants are still being decided and leave a direction unexcited.
@@ -155,68 +154,10 @@ class _Unidentifiable(RobotIdentError):
         self.names, self.lo, self.hi, self.zero = names, lo, hi, zero
 
 
-def _rank_rule(G: np.ndarray, tol: float = RCOND,
-               first: int = 0) -> tuple[np.ndarray, dict[int, list[int]]]:
-    """The single-joint rank rule (:func:`ident.estimators.dependent_columns`: column-pivoted
-    QR of the unit-norm columns, kept while |R_kk| > tol |R_00|) from the Gram matrix
-    G = W^T W: the same pivots by a pivoted Cholesky of the scaled G (L's rows are R's
-    columns). Returns the columns left out (zero columns included, sorted) and, for each
-    nonzero one, its partners: the kept columns whose coefficients in its least-squares
-    expression on them (R11 a = R[:rank, c], unit-norm columns) exceed PARTNER_TOL times the
-    largest, in pivot order (as ``dependent_columns``).
-
-    The columns ``0 .. first - 1`` are pivoted before the others (while one of them is
-    independent of those already taken): of a dependent group, a later column is left out
-    -- the payload's ratio or products rather than the base parameters whose combination
-    they are (one payload in every run). Without it the first pivot among unit columns is
-    decided by rounding."""
-    d = np.sqrt(np.clip(np.diagonal(G), 0.0, None))
-    live = np.flatnonzero(d > 0)
-    out = [int(i) for i in np.flatnonzero(~(d > 0))]
-    if not live.size:
-        return np.array(out, dtype=int), {}
-    Gs = G[np.ix_(live, live)] / d[live, None] / d[None, live]
-    n = live.size
-    L = np.zeros((n, n))
-    r = np.diagonal(Gs).copy()
-    left = np.ones(n, dtype=bool)
-    piv: list[int] = []
-    group = live < int(first)
-    for k in range(n):
-        i = int(np.argmax(np.where(left & group, r, -np.inf)))
-        if not (group[i] and left[i] and np.sqrt(max(r[i], 0.0)) > tol):
-            group[:] = False  # the first columns are all taken (or dependent)
-            i = int(np.argmax(np.where(left, r, -np.inf)))
-        if not np.sqrt(max(r[i], 0.0)) > tol:  # |R_00| = 1: unit columns
-            break
-        col = (Gs[:, i] - L[:, :k] @ L[i, :k]) / np.sqrt(r[i])
-        L[:, k] = col
-        r = r - col**2
-        left[i] = False
-        piv.append(i)
-    rank = len(piv)
-    R11 = L[piv, :rank].T  # upper triangular: R11[a, b] = L[piv[b], a]
-    partners: dict[int, list[int]] = {}
-    for i in np.flatnonzero(left):
-        coef = (np.abs(scipy.linalg.solve_triangular(R11, L[i, :rank], lower=False))
-                if rank else np.zeros(0))  # rank 0: a non-finite G
-        big = coef > PARTNER_TOL * max(float(coef.max(initial=0.0)), 1e-300)
-        partners[int(live[i])] = [int(live[piv[t]]) for t in np.flatnonzero(big)]
-    out += [int(live[i]) for i in np.flatnonzero(left)]
-    return np.array(sorted(out), dtype=int), partners
-
-
 def _dependent(G: np.ndarray, tol: float = RCOND) -> np.ndarray:
-    """Columns left out by the single-joint rank rule (:func:`_rank_rule`), zero columns
+    """Columns left out by the rank rule (:func:`ident.estimators.rank_rule`), zero columns
     included."""
-    return _rank_rule(G, tol)[0]
-
-
-def dependent_reason(partners: Sequence[str]) -> str:
-    """Why a dependent column is fixed at 0, naming its partners: the reason of
-    :func:`ident.estimate.fit_least_squares` (``"not separable: linear combination of A,
-    B"``)."""
-    return DEPENDENT_PREFIX + ", ".join(partners)
+    return rank_rule(G, tol)[0]
 
 
 def renamed_reason(why: str, names: Mapping[str, str]) -> str:
@@ -1230,7 +1171,7 @@ class RobotModel(HyperParameters):
             # zero and dependent columns first): e.g. one payload in every run, whose
             # ratio's column is a combination of J and MX, is removed, not an error
             G = self._w_gram(moms, usual_coefficients, xu0)
-            dep, partners = _rank_rule(G, first=self.n_base_)
+            dep, partners = rank_rule(G, first=self.n_base_)
             for c in dep:
                 free_u[c] = False
                 self._fixed_why[self.names_[c]] = ZERO_COLUMN if not G[c, c] > 0 else (
@@ -1313,10 +1254,9 @@ class RobotModel(HyperParameters):
         with. The products of a load column that is zero on every row of the joint (its
         payload torque without payload or known rotor, a payload parameter not acting on
         it) or a linear combination of its other load columns there (UR10 shoulder pan:
-        MX2 and XY2) are fixed at 0 (``fixed_``): the single-joint rank rule
-        (:func:`~ident.estimators.dependent_columns`, pivoted on the scaled Gram matrix,
-        :func:`_rank_rule`); ``removed_`` names as a product's partners the same products of
-        the load column's partners."""
+        MX2 and XY2) are fixed at 0 (``fixed_``): the rank rule of every model
+        (:func:`ident.estimators.rank_rule`, pivoted on the scaled Gram matrix); ``removed_``
+        names as a product's partners the same products of the load column's partners."""
         pb, nbu = self.n_theta_, len(USUAL_BLOCK)
         model_q = self.quadrant == "model"
         theta_q = self.quadrant_theta_.copy() if self.quadrant_theta_ is not None else xu[:pb]
@@ -1340,7 +1280,7 @@ class RobotModel(HyperParameters):
             nl = len(self.cols_[j]) + 1
             # the load columns (theta's, then p) on the joint's rows
             gram = self._load_gram(m, nl)
-            dep, partners = _rank_rule(gram, first=nl - 1)
+            dep, partners = rank_rule(gram, first=nl - 1)
             # load column 0's a_m, b_m, a_g, b_g (products_names' order); column c's: + 2 c
             off = self._bstart[j] + np.array([0, 1, 2 * nl, 2 * nl + 1])
             for c in dep:
@@ -1520,7 +1460,8 @@ class RobotModel(HyperParameters):
                    w: np.ndarray, it: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
         """The single-joint elimination (:func:`ident.estimate.fit_least_squares`) on a
         linear form's fit ``x``: the free parameters whose columns are zero or dependent (the
-        rank rule, :func:`_rank_rule` on their Gram matrix; the reason names the partners) are
+        rank rule, :func:`ident.estimators.rank_rule` on their Gram matrix; the reason names the
+        partners) are
         fixed at 0, then, while the largest relative deviation of a free parameter exceeds
         ``threshold_pct``, that one is fixed at 0 and the model refitted. Each goes to
         ``fixed_`` (at 0) and ``removed_`` (name, reason). Returns the final (x, free,
@@ -1535,7 +1476,7 @@ class RobotModel(HyperParameters):
 
         idx = np.flatnonzero(free)
         G = self._w_gram(moms, coeffs, x)[np.ix_(idx, idx)]
-        dep, partners = _rank_rule(G, first=int(np.sum(idx < self.n_base_)))
+        dep, partners = rank_rule(G, first=int(np.sum(idx < self.n_base_)))
         for k in dep:
             fix(int(idx[k]), ZERO_COLUMN if not G[k, k] > 0 else dependent_reason(
                 [self.names_[idx[q]] for q in partners[k]]))
