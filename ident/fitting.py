@@ -56,7 +56,7 @@ from .models import (
     usual_model,
 )
 from .one_joint import SIGN_CHECK_MIN_KEPT, OneJointModel, OneJointProblem
-from .preprocess import Design, build_design
+from .preprocess import Design, build_design, check_reference
 from .refine_lsq import quick_residual
 from .results import (
     band_errors,
@@ -744,14 +744,7 @@ def _references(
     ref = np.concatenate(arrays)
     if ref.size != len(s):
         raise DataError(f"references: {ref.size} samples, expected {len(s)}")
-    bad = ~np.isfinite(ref)
-    if bad.any():
-        where = int(s.experiment[int(np.argmax(bad))])
-        name = (data[where].source if not isinstance(data, Signals) and where < len(data)
-                else f"experiment {where}")
-        raise DataError(f"references: {int(bad.sum())} NaN/inf values (first in {name}; the "
-                        "log lacks setpoints for some cycles): give finite references or "
-                        "references=None (least squares)")
+    check_reference(ref, s, None if isinstance(data, Signals) else [e.source for e in data])
     return ref
 
 

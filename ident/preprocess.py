@@ -59,6 +59,7 @@ from .terms import Library, Term
 __all__ = [
     "Design",
     "build_design",
+    "check_reference",
     "design_on_full_rate",
     "diffcent",
     "lowpass",
@@ -424,11 +425,7 @@ def build_design(
                 f"reference has {reference.size} samples, expected {signals.q.size} (one per "
                 "position sample)"
             )
-        if not np.all(np.isfinite(reference)):
-            raise DataError(
-                f"reference has {int(np.sum(~np.isfinite(reference)))} NaN/inf values "
-                "(the log lacks setpoints for some cycles)"
-            )
+        check_reference(reference, signals)
     experiments = [
         RawExperiment(f"experiment {int(signals.experiment[sl.start])}", signals.q[sl, None],
                       signals.tau[sl, None], None if reference is None else reference[sl, None])
@@ -438,6 +435,26 @@ def build_design(
                                  dq_min_rel=dq_min_rel)
     return design_on_full_rate(lib, signals, fulls, settings, dq_min, tau_min=tau_min,
                                load_model=load_model)
+
+
+def check_reference(reference: np.ndarray, signals: Signals,
+                    sources: Sequence[str] | None = None) -> None:
+    """The reference positions (IDIM-IV), one per sample of ``signals``, must be finite.
+
+    Raises
+    ------
+    DataError
+        One line: how many values are NaN/inf and the experiment of the first (its
+        ``sources`` name, e.g. the file, else its index).
+    """
+    bad = ~np.isfinite(reference)
+    if bad.any():
+        where = int(signals.experiment[int(np.argmax(bad))])
+        name = (sources[where] if sources is not None and where < len(sources)
+                else f"experiment {where}")
+        raise DataError(f"references: {int(bad.sum())} NaN/inf values (first in {name}; the "
+                        "log lacks setpoints for some cycles): give finite references or "
+                        "references=None (least squares)")
 
 
 def _check_extra(signals: Signals) -> None:

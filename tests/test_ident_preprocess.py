@@ -185,5 +185,6 @@ def test_reference_instruments_follow_the_design_through_its_edits():
         build_design(RigidBody(), s, reference=ref[:-1])
     bad = ref.copy()
     bad[5] = np.nan
-    with pytest.raises(DataError, match="NaN"):
+    with pytest.raises(DataError, match=r"references: 1 NaN/inf values \(first in experiment "
+                                        f"{int(s.experiment[5])};"):
         build_design(RigidBody(), s, reference=bad)
