@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from daq.protocol.logformat import MONITOR_RESIDUALS
 from trajectories.robot import Robot
 
 from . import DataError
@@ -50,7 +51,7 @@ __all__ = ["DEFAULT_EDGES_S", "DEFAULT_MIN_EPISODES", "DEFAULT_MIN_SAMPLES",
 THRESHOLDS_FORMAT = "jointid-monitor-thresholds/2"
 #: the residuals a thresholds file can be calibrated on (its ``residual`` key; a /2 file
 #: without it, and every /1 file: ``filtered``)
-RESIDUAL_KINDS = ("filtered", "observer")
+RESIDUAL_KINDS = MONITOR_RESIDUALS  # the log format's (daq.protocol.logformat)
 #: the format before the regime bins (read too: a constant band)
 THRESHOLDS_FORMAT_1 = "jointid-monitor-thresholds/1"
 

@@ -111,6 +111,11 @@ FRAME_DTYPE = np.dtype(
 assert FRAME_DTYPE.itemsize == FRAME.size
 CAN_HEAD_STRUCT = struct.Struct("<4sqI4x")  # header, cycle, sequence length, pad to 8
 
+#: The residuals a torque monitor checks: the low-passed measured torque minus the model's
+#: prediction, or the generalized-momentum observer's. The "residual" of a log's "monitor"
+#: metadata and of a thresholds file (``ident.monitor``) is one of them.
+MONITOR_RESIDUALS = ("filtered", "observer")
+
 EVENT_SCHEMA = json.dumps(
     {
         "title": "jointid event",

@@ -68,6 +68,7 @@ import numpy as np
 import scipy.linalg
 
 from daq import ConfigError
+from daq.protocol.logformat import MONITOR_RESIDUALS
 from daq.protocol.reader import read_topics
 from sim_drivers.arm_push import staged_push
 
@@ -132,8 +133,8 @@ class SVFilter:
         self.dy = [a21 * y0 + a22 * d0 + b2 * x for y0, d0, x in zip(y, dy, u, strict=True)]
 
 
-#: the residuals :class:`TorqueMonitor` can check (:func:`residual_for`)
-RESIDUALS = ("filtered", "observer")
+#: the residuals :class:`TorqueMonitor` can check (:func:`residual_for`; the log format's)
+RESIDUALS = MONITOR_RESIDUALS
 #: default gain K_O [1/s] of the momentum observer: time constant 1 / K_O = 20 ms (a push's
 #: torque reaches 1 - e^-1 of its value in 20 ms, 92 % in 50 ms: the issue's delay), while
 #: the noise of p = M dq reaches r multiplied by K_O
