@@ -1373,23 +1373,56 @@ class RobotModel(HyperParameters):
         U[4 * nl + 5] = 1.0
         return U
 
-    def _pass_rows(self, signals: Any) -> list[RowMoments]:
-        """One pass over the full-rate products' rows (:meth:`_row_block`, tau appended) of
-        every joint, with the rows :meth:`_pass` keeps (dq_min, finite, ``keep``)."""
-        iv = self.method == "iv"
-        moms = [RowMoments(np.arange(products_size(len(c))), iv=iv) for c in self.cols_]
-        for _sig, _r, _q, dq, _ddq, tau, _z, _pay, cc in self._chunks(signals, iv=False):
+    def _row_chunks(self, signals: Any):
+        """Per chunk and joint j: (rows, j, the chunk's full-rate products, dq_j, tau_j, U,
+        ok): joint j's rows U (nx_j, m) (:meth:`_row_block`) and the rows :meth:`_pass`
+        keeps (dq_min, finite, ``keep``), ok (m,) bool."""
+        for _sig, r, _q, dq, _ddq, tau, _z, _pay, cc in self._chunks(signals, iv=False):
             fr = cc[6]
             for j in range(len(self.cols_)):
                 U = self._row_block(fr, j, dq[:, j])
                 ok = (np.abs(dq[:, j]) > self.dq_min) & np.isfinite(tau[:, j]) & np.all(
                     np.isfinite(U), axis=0) & cc[3][:, j]
-                VzT = None
-                if iv:
-                    Uz = self._row_block(fr, j, dq[:, j], iv=True)
-                    VzT = np.vstack([Uz[:, ok], tau[ok, j]])
-                moms[j].add_rows(np.vstack([U[:, ok], tau[ok, j]]), fr.pplus[ok, j], VzT)
+                yield r, j, fr, dq[:, j], tau[:, j], U, ok
+
+    def _pass_rows(self, signals: Any) -> list[RowMoments]:
+        """One pass over the full-rate products' rows (:meth:`_row_block`, tau appended) of
+        every joint, with the rows :meth:`_pass` keeps (dq_min, finite, ``keep``)."""
+        iv = self.method == "iv"
+        moms = [RowMoments(np.arange(products_size(len(c))), iv=iv) for c in self.cols_]
+        for _r, j, fr, dqj, tauj, U, ok in self._row_chunks(signals):
+            VzT = None
+            if iv:
+                Uz = self._row_block(fr, j, dqj, iv=True)
+                VzT = np.vstack([Uz[:, ok], tauj[ok]])
+            moms[j].add_rows(np.vstack([U[:, ok], tauj[ok]]), fr.pplus[ok, j], VzT)
         return moms
+
+    def products_rows(self, signals: RobotSignals):
+        """The rows a fit on the full-rate products (``full_rate_products_``) reads: per chunk
+        and joint, (rows, j, U, ok) with ``rows`` the chunk's samples of ``signals`` (slice or
+        indices), U (nx_j, m) joint j's products in ``names_``' order of its block
+        (:meth:`_local`; :func:`~ident.robot.paper.products_names`) and ok (m,) the fit's row
+        rule (|dq_j| > ``dq_min``, finite torque and products, ``keep``). The prediction on
+        them is ``coef_[_local(j)] @ U``. For the n-dof refit (:mod:`ident.robot.refit`).
+
+        Raises
+        ------
+        RobotIdentError
+            The model was not fitted on full-rate products, or ``signals`` do not carry
+            them (or carry them formed otherwise: :meth:`fit`'s checks).
+        """
+        self._check_fitted()
+        if not getattr(self, "full_rate_products_", False):
+            raise RobotIdentError("RobotModel.products_rows: the model was not fitted on "
+                                  "full-rate products (columns.products)")
+        if not isinstance(signals, RobotSignals) or signals.columns is None or (
+                signals.columns.products is None):
+            raise RobotIdentError(f"{getattr(signals, 'source', '') or 'RobotSignals'}: the "
+                                  "model was fitted on full-rate products (columns.products); "
+                                  "its rows need signals carrying them (products_columns)")
+        self._full_rate(signals)  # the same checks as the fit's
+        return ((r, j, U, ok) for r, j, _fr, _dqj, _tauj, U, ok in self._row_chunks(signals))
 
     def _set_band(self, moms: list[JointMoments], theta_q: np.ndarray, model_q: bool) -> None:
         """``band_`` [N m] (``quadrant_band`` x each joint's RMS predicted load with

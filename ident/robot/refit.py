@@ -8,7 +8,8 @@ and its coefficients are biased towards zero (docs/refinement.md, section 8.7).
 joint's rows of the stacked n-dof system, and the whole model -- base parameters, every
 joint's friction, the extra coefficients -- is fitted again in one estimation::
 
-    tau_j = (the n-dof model of joint j: usual eq. 5/8 or paper eq. 30) + X_j e_j
+    tau_j = (the n-dof model of joint j: usual eq. 5/8, paper eq. 30 or its products
+             form eq. 42) + X_j e_j
 
 X_j (:func:`ident.robot.design.joint_columns`) is computed from the states only: the term
 sees joint j's signals of the refinement through :meth:`ident.signals.Signals.states` (the
@@ -23,6 +24,20 @@ Gauss-Newton from the first fit (one step for the usual model, which is linear),
 the model (WLS: per-joint weights 1/sigma_j^2 of an LS refit); the parameters the first fit
 held fixed stay fixed. IDIM-IV is refused (no instruments for the extra columns).
 
+The paper model's products form (``form="products"``, eq. 42: the products of the load
+columns with a_m, b_m, a_g, b_g free, no base parameters) is linear in its parameters: the
+refit is one (weighted) least-squares solve, the same code with one step. On the products
+formed at full rate (``full_rate_products_``, what :class:`ident.one_joint.OneJointProblem`
+fits a joint with) each joint's rows are the model's own
+(:meth:`~ident.robot.estimate.RobotModel.products_rows`: its products and its row rule, the
+quadrants already in the products), ``[u_j, X_j]``; on the decimated columns, the model's
+rows with the quadrants of the usual fit's theta that decided them (``quadrant_from_``, as
+its ``predict``). The products the first fit fixed at 0 (zero or dependent load columns,
+eliminated ones) stay at 0. On a one-joint robot, with a term's columns as the single-joint
+design forms them (filtered at full rate), the refit is the single-joint refit of the design
+with that term (tests/test_robot_refit_products.py); ``joint_columns`` evaluates the term on
+the decimated states instead, which moves the error by ~1e-4 relative.
+
 Reported before (the n-dof fit as it is) and after (the refit), per joint and for the whole
 robot: the relative error ||rho_j|| / ||tau_j|| on the rows used, the error on unseen data
 (:func:`ident.unseen.heldout_error`'s folds: leave one run out with two runs or more, else
@@ -31,7 +46,8 @@ five blocks; the refit linearised at the solution), the noise floor
 validation samples are given.
 
 Memory: the rows of every joint (their base columns, friction and extra columns) are held
-while iterating: ~8 (p_j + 10 + c_j) bytes per row; meant for the decimated rows of a fit.
+while iterating: ~8 (p_j + 10 + c_j) bytes per row (products form on full-rate products:
+~8 (4 p_j + 11 + c_j)); meant for the decimated rows of a fit.
 Pure numerics (no file access).
 """
 
@@ -54,7 +70,7 @@ from ..unseen import N_BLOCKS, heldout_kind, noise_floor
 from . import RobotIdentError
 from .design import joint_columns
 from .moments import quadrant_weights
-from .paper import paper_coefficients, require_theta, usual_coefficients
+from .paper import rows_coefficients
 from .signals import RobotSignals
 
 __all__ = ["RobotRefit", "refit_robot", "extra_name"]
@@ -173,9 +189,11 @@ def refit_robot(
     Parameters
     ----------
     model : RobotModel
-        A fitted n-dof model (method ``"ls"`` or ``"wls"``).
+        A fitted n-dof model (method ``"ls"`` or ``"wls"``; usual, paper, or the paper
+        model's ``form="products"``).
     signals : RobotSignals
-        The samples it was fitted on (or any with the same joints).
+        The samples it was fitted on (or any with the same joints); a products-form fit on
+        the full-rate products needs signals carrying them (``columns.products``).
     terms : sequence of (int, Term)
         (joint index, single-joint term), e.g. every step of
         :func:`~ident.robot.refine_joint.refine_joint` on each joint. Empty: the refit is
@@ -198,10 +216,10 @@ def refit_robot(
     Raises
     ------
     RobotIdentError
-        An unfitted model, IDIM-IV, bad shapes, parameters not identifiable with the terms.
+        An unfitted model, IDIM-IV, bad shapes, parameters not identifiable with the terms,
+        a fit on full-rate products and signals without them.
     """
     model._check_fitted()
-    require_theta(model, "refit_robot")
     if model.method not in ("ls", "wls"):
         raise RobotIdentError(f"refit_robot: method {model.method!r} is not supported (the "
                               "extra columns have no instruments); refit with 'ls' or 'wls'")
@@ -233,8 +251,8 @@ def refit_robot(
     rows = _rows(model, signals, X, keep)
     free = np.array([n not in model.fixed_ for n in names])
     x0 = np.concatenate([model.coef_, np.zeros(len(names) - nx0)])
-    coeffs = usual_coefficients if model.model == "usual" else paper_coefficients
-    linear = model.model == "usual"
+    coeffs = _coefficients(model)
+    linear = model.model == "usual" or model.form == "products"
     sys = _System(model, rows, ext_idx, coeffs, len(names), names)
     w = np.ones(k)
     x, it = sys.solve(x0, free, w, linear)
@@ -339,6 +357,18 @@ def _floors(joints: Sequence[str], rr: list[np.ndarray], rows: list[_Rows]) -> d
     return out
 
 
+def _full_rate(model: Any) -> bool:
+    """Whether ``model`` was fitted on the products formed at full rate (its rows given
+    whole: :meth:`~ident.robot.estimate.RobotModel.products_rows`)."""
+    return bool(getattr(model, "full_rate_products_", False))
+
+
+def _coefficients(model: Any) -> Any:
+    """The coefficient function of the model's rows (:mod:`ident.robot.paper`): the model's
+    own, or :func:`~ident.robot.paper.rows_coefficients` on full-rate products."""
+    return rows_coefficients if _full_rate(model) else model._coefficients
+
+
 def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
           keep: np.ndarray | None) -> list[_Rows]:
     """Every joint's rows of the stacked system, as the model's own pass selects them."""
@@ -350,7 +380,10 @@ def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
         if keep.shape != signals.tau.shape:
             raise RobotIdentError(f"refit_robot: keep of shape {keep.shape}, expected "
                                   f"{signals.tau.shape}")
-    theta_q = model.coef_[:model.n_theta_]
+    if _full_rate(model):
+        return _product_rows(model, signals, X, keep)
+    # the theta that decided the fit's quadrants (products form: the usual fit's, as predict)
+    theta_q = model.coef_[:model.n_theta_] if model._theta_x else model.quadrant_from_
     if model.quadrant_theta_ is not None:
         theta_q = model.quadrant_theta_
     band = np.asarray(getattr(model, "band_", np.zeros(k)), dtype=float)
@@ -391,6 +424,37 @@ def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
     return out
 
 
+def _product_rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
+                  keep: np.ndarray | None) -> list[_Rows]:
+    """The rows of a products-form fit on the full-rate products, as the fit read them
+    (:meth:`~ident.robot.estimate.RobotModel.products_rows`: the columns and the row rule
+    of the model's own pass, ``keep`` too when given): V = [u, 0] (the tau slot of
+    :func:`~ident.robot.paper.rows_coefficients`), one quadrant slot (P+ = 1, E = 0): the
+    quadrants are in the products already."""
+    k = len(model.joints_)
+    parts: list[dict[str, list[np.ndarray]]] = [
+        {n: [] for n in ("idx", "V", "tau")} for _ in range(k)]
+    for r, j, U, ok in model.products_rows(signals):
+        idx = np.arange(signals.n)[r]
+        if keep is not None:
+            ok = ok & keep[idx, j]
+        p = parts[j]
+        p["idx"].append(idx[ok])
+        p["V"].append(np.concatenate([U[:, ok].T, np.zeros((int(ok.sum()), 1))], axis=1))
+        p["tau"].append(signals.tau[idx[ok], j])
+    out = []
+    for j in range(k):
+        p = parts[j]
+        idx = np.concatenate(p["idx"]) if p["idx"] else np.zeros(0, dtype=int)
+        nv = int(model._bsize[j]) + 1
+        m = idx.size
+        out.append(_Rows(idx=idx, V=np.concatenate(p["V"]) if p["V"] else np.zeros((0, nv)),
+                         pp=np.ones(m), E=np.zeros(m), X=X[j][idx],
+                         tau=np.concatenate(p["tau"]) if p["tau"] else np.zeros(0),
+                         experiment=signals.experiment[idx]))
+    return out
+
+
 class _System:
     """The stacked system: per joint the model's prediction and Jacobian plus X_j e_j."""
 
@@ -406,7 +470,7 @@ class _System:
         """Residual (m,) and Jacobian (m, n_local) of joint j at x."""
         m, rw = self.model, self.rows[j]
         li = m._local(j)
-        nt = len(m.cols_[j])
+        nt = m._nt(j)  # (products form: no theta)
         th, blk = x[li[:nt]], x[li[nt:]]
         e = x[np.asarray(self.ext_idx[j], dtype=int)]
         pred = rw.X @ e
