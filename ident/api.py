@@ -415,6 +415,10 @@ class JointModel(HyperParameters):
             progress=progress,
             **options,
         )
+        # the loop closed inside the robot model too: every term found so far (this
+        # estimator's earlier refinements' and this one's) refitted in the fit's robot model
+        ref.refit = self.report_.refit_found_terms(self.name_, self._terms + tuple(ref.terms),
+                                                   ref.final_design)
         out = copy.copy(self)
         out._set(
             self.name_,

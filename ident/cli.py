@@ -314,6 +314,8 @@ def run(args: argparse.Namespace) -> int:
         )
         ref = refined.refinement_
         print("\n" + ref.format_report())
+        if ref.refit is not None:  # the found terms refitted inside the joint's robot model
+            print("\n" + "\n".join(cli_robot.format_refit(ref.refit, refined.name_)))
         out["refinement"] = refined.refinement_json()
     if args.report is not None:
         args.report.mkdir(parents=True, exist_ok=True)

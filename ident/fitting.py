@@ -55,7 +55,7 @@ from .models import (
     power_split,
     usual_model,
 )
-from .one_joint import SIGN_CHECK_MIN_KEPT, OneJointModel, OneJointProblem
+from .one_joint import SIGN_CHECK_MIN_KEPT, OneJointModel, OneJointProblem, refit_found_terms
 from .preprocess import Design, build_design, check_reference
 from .refine_lsq import quick_residual
 from .results import (
@@ -68,6 +68,7 @@ from .results import (
     removed_json,
 )
 from .robot.design import DQ_MIN_FRACTION
+from .robot.signals import RobotSignals
 from .signals import Signals
 from .terms import Library, Term
 from .vocab import MODEL_NAMES, model_name, renamed_keywords
@@ -490,6 +491,7 @@ def _fitted(library: Library, name: str, fit: OneJointModel) -> IdentModel:
     m._set(fit.result)
     m.estimator_ = fit.estimator
     m.robot_ = fit.robot
+    m.robot_names_ = fit.names
     return m
 
 
@@ -569,7 +571,8 @@ class FitReport:
     ----------
     models : dict[str, IdentModel]
         Fitted models by name (``"usual"``, ``"paper"``): the robot model's fits by the
-        single-joint names (``robot_``: the :class:`~ident.robot.estimate.RobotModel`).
+        single-joint names (``robot_``: the :class:`~ident.robot.estimate.RobotModel`;
+        ``robot_names_``: robot name -> (single-joint name, sign)).
     designs : dict[str, Design]
         The identification system of each model.
     validation_designs : dict[str, Design]
@@ -594,6 +597,9 @@ class FitReport:
     qs_design : float
         q_s the combined design was built with (the q_s-dependent columns are rebuilt
         when ``q_s`` differs).
+    robot_signals : dict[str, RobotSignals]
+        The samples each model's robot fit read (the paper model: with its products formed
+        at full rate), for :meth:`refit_found_terms`; not serialised.
     """
 
     models: dict[str, IdentModel]
@@ -610,6 +616,40 @@ class FitReport:
     has_payload: bool = False
     settings: dict[str, Any] = field(default_factory=dict, repr=False)
     qs_design: float = DEFAULT_QS
+    robot_signals: dict[str, RobotSignals] = field(default_factory=dict, repr=False,
+                                                   compare=False)
+
+    def refit_found_terms(self, name: str, terms: Sequence[Term],
+                          design: Design | None = None) -> dict[str, Any]:
+        """The terms a refinement of model ``name`` found, refitted inside its robot model
+        with every parameter (:func:`ident.one_joint.refit_found_terms`): the ``refit``
+        record of the refinement (docs/fit-json.md), or ``{"error": why}``.
+
+        ``design``: the refinement's final design (``Refinement.final_design``): the terms'
+        columns are then its own (formed at full rate, filtered and decimated with the
+        torque), so the refit is the refinement's final fit computed by the robot model;
+        without it they are evaluated on the decimated states
+        (:func:`ident.robot.design.joint_columns`, as the n-dof refit does)."""
+        m = self.models[name]
+        if getattr(m, "robot_", None) is None or name not in self.robot_signals:
+            return {"error": f"{name} model: no robot model to refit"}
+        sig = self.robot_signals[name]
+        columns = None
+        if design is not None:
+            rows = np.flatnonzero(m.robot_.fitted_rows(sig)[:, 0])
+            if rows.size != len(design) or not np.allclose(design.Y, sig.tau[rows, 0],
+                                                           rtol=1e-9, atol=0.0):
+                return {"error": f"{name} model: the refinement's design is not on the robot "
+                                 "fit's rows"}
+            names = [n for t in terms for n in t.names()]
+            missing = [n for n in names if n not in design.names]
+            if missing:
+                return {"error": f"{name} model: the design has no column {missing[0]}"}
+            X = np.zeros((sig.n, len(names)))
+            X[rows] = design.W[:, [design.names.index(n) for n in names]]
+            columns = [X]
+        return refit_found_terms(m.robot_, sig, terms, revolute=self.revolute,
+                                 names=getattr(m, "robot_names_", None), columns=columns)
 
     def designs_for(self, data: Sequence[Experiment] | Signals) -> dict[str, Design]:
         """The system of other data (e.g. validation files) for every fitted model, with the
@@ -942,6 +982,7 @@ def fit_models(
 
     fitted: dict[str, IdentModel] = {}
     designs: dict[str, Design] = {}
+    robot_signals: dict[str, RobotSignals] = {}
     vdesigns: dict[str, Design] = {}
     vfull = _combined(models, qs0, sv, has_payload, pre) if sv is not None else None
     for name in models:
@@ -952,6 +993,7 @@ def fit_models(
             raise DataError(f"{name} model: the robot fit has {m.result_.m} rows, the design "
                             f"{len(d)}: not the same samples")
         fitted[name], designs[name] = m, d
+        robot_signals[name] = problem.signals if name == "usual" else problem.products(qs_val)
         if vfull is not None:
             vdesigns[name] = part(vfull, name, has_payload, qs_val)[1]
         if m.cond_ > COND_WARN:
@@ -1004,4 +1046,5 @@ def fit_models(
         has_payload=has_payload,
         settings=dict(pre),
         qs_design=qs0,
+        robot_signals=robot_signals,
     )

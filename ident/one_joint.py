@@ -34,7 +34,7 @@ the EMPS data and the demo's logs.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -53,11 +53,12 @@ from .robot.base import single_joint_map
 from .robot.design import design_runs, products_columns, resolve_design, sign_checked
 from .robot.estimate import ZERO_COLUMN, RobotModel, renamed_reason
 from .robot.loaders import RawRobotRun
+from .robot.refit import refit_robot
 from .robot.signals import RobotSignals
 from .signals import G, Signals
 from .terms import Term
 
-__all__ = ["OneJointModel", "OneJointProblem", "SIGN_CHECK_MIN_KEPT"]
+__all__ = ["OneJointModel", "OneJointProblem", "SIGN_CHECK_MIN_KEPT", "refit_found_terms"]
 
 #: The sign check is skipped when it would keep fewer samples than this fraction (as
 #: :data:`ident.fitting.SIGN_CHECK_MIN_KEPT`).
@@ -88,12 +89,16 @@ class OneJointModel:
     estimator : {"ls", "iv"}
     robot : RobotModel
         The fitted robot model (robot names).
+    names : dict of str to (str, float)
+        Robot parameter name -> (single-joint name, sign): the single-joint value is sign x
+        the robot's (e.g. MY = -MY1).
     """
 
     name: str
     result: LSResult
     estimator: str
     robot: RobotModel
+    names: dict[str, tuple[str, float]] = field(default_factory=dict)
 
 
 def _runs(exps: Sequence[Experiment], revolute: bool, payload: bool,
@@ -167,7 +172,8 @@ def _single(est: RobotModel, sig: RobotSignals, name: str, single_names: Sequenc
                         rel_error=float(est.rel_error_[est.joints_[0]]),
                         cond=float(est.cond_), cond_raw=float(est.cond_raw_),
                         m=int(est.n_samples_[0]), removed=removed),
-        estimator=estimator, robot=est)
+        estimator=estimator, robot=est,
+        names={v: (k, float(np.sign(rows[k][index[v]]))) for k, v in robot_name.items()})
 
 
 class OneJointProblem:
@@ -348,3 +354,52 @@ class OneJointProblem:
             return _single(est, sig, name, single, self.smap, self.method)
         except RobotIdentError as err:
             raise DataError(str(err)) from None
+
+
+def refit_found_terms(robot: RobotModel, signals: RobotSignals, terms: Sequence[Term], *,
+                      revolute: bool, names: dict[str, tuple[str, float]] | None = None,
+                      columns: Sequence[np.ndarray] | None = None) -> dict[str, Any]:
+    """The terms a single-joint refinement found, refitted inside the joint's robot model:
+    :func:`ident.robot.refit.refit_robot` on the one-joint robot, as ``jointid fit --robot
+    --refine`` refits every joint's found terms in the n-dof model (issue 24: the loop closes
+    in the one model class). Their columns come from the states and the fit's prediction
+    (:func:`ident.robot.design.joint_columns`) unless ``columns`` gives them (a single-joint
+    design's, :meth:`ident.fitting.FitReport.refit_found_terms`), the model's own from the
+    rows it was fitted on.
+
+    Parameters
+    ----------
+    robot : RobotModel
+        The fit (``IdentModel.robot_`` of :func:`ident.fitting.fit_models`).
+    signals : RobotSignals
+        What it was fitted on (``FitReport.robot_signals``).
+    terms : sequence of Term
+        The refinement's steps' terms, in order.
+    revolute : bool
+    names : dict, optional
+        Robot name -> (single-joint name, sign) (``IdentModel.robot_names_``): the record's
+        parameters by the single-joint names (values times the sign); the extra ones keep
+        theirs (``<joint>:<term parameter>``, :func:`~ident.robot.refit.extra_name`).
+    columns : sequence of ndarray, optional
+        The terms' columns (``refit_robot``'s ``columns``).
+
+    Returns
+    -------
+    dict
+        The ``refit`` record of docs/fit-json.md (:meth:`~ident.robot.refit.RobotRefit.
+        to_json`), or ``{"error": why}`` when the refit cannot be made (e.g. an estimator it
+        does not support).
+    """
+    try:
+        rec = refit_robot(robot, signals, [(0, t) for t in terms], revolute=[revolute],
+                          columns=columns).to_json()
+    except (RobotIdentError, DataError) as exc:
+        return {"error": str(exc)}
+    pars = {}
+    for n, v in rec["parameters"].items():
+        single, sign = (names or {}).get(n, (n, 1.0))
+        pars[single] = {"value": None if v["value"] is None else sign * v["value"],
+                        "std": v["std"]}
+    rec["parameters"] = pars
+    return rec
+

@@ -228,6 +228,11 @@ class Refinement:
         Every run replays one trajectory (:func:`ident.unseen.one_trajectory`): leaving a
         run out then cannot reject a term locked to that trajectory; the report says so when
         no validation data were given.
+    refit : dict or None
+        The found terms refitted inside the joint's robot model, every parameter together
+        (:meth:`ident.fitting.FitReport.refit_found_terms`; the ``refit`` record of
+        ``jointid fit --robot --refine``), set by the callers that hold the fit report
+        (``JointModel.refine``, ``jointid fit --refine``, ``jointid demo``); None: not made.
     """
 
     steps: list[Step]
@@ -249,6 +254,7 @@ class Refinement:
     noise_floor: float = math.nan
     noise_floor_initial: float = math.nan
     heldout_one_trajectory: bool = False
+    refit: dict[str, Any] | None = None
 
     @property
     def terms(self) -> list[Effect]:
@@ -285,6 +291,7 @@ class Refinement:
                 for n in self.final_model.names_
             },
             "final_diagnosis": self.final_diagnosis.to_json(),
+            **({} if self.refit is None else {"refit": self.refit}),
         }
 
     def format_table(self) -> str:

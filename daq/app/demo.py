@@ -145,8 +145,11 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
 
     def refine_new(rep: Any) -> Any:
         hb.status("refining the paper model, step 1: scoring the candidate effects")
-        return refine(rep.designs["paper"], rep.models["paper"], max_steps=max_steps,
-                      vmax=rep.vmax, progress=step_line)
+        ref = refine(rep.designs["paper"], rep.models["paper"], max_steps=max_steps,
+                     vmax=rep.vmax, progress=step_line)
+        # the found terms refitted inside the joint's robot model (issue 24's closed loop)
+        ref.refit = rep.refit_found_terms("paper", ref.terms, ref.final_design)
+        return ref
 
     ref = refine_new(report)
     bar = ProgressLine(stream)
@@ -176,6 +179,11 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
     _say(stream, f"[4/4] refinement: {len(ref.steps)} step(s), relative error "
                  f"{ref.rel_error_initial:.4f} -> {ref.rel_error_final:.4f}, q_s = "
                  f"{report.q_s:.4g} rad/s ({time.perf_counter() - t0:.1f} s)")
+    rf = ref.refit or {"error": "not made"}
+    _say(stream, "      the found terms refitted inside the joint's robot model, every parameter "
+                 + (f"together: {rf['rel_error']['before']['all']:.4f} -> "
+                    f"{rf['rel_error']['after']['all']:.4f}" if "error" not in rf
+                    else f"together: not made ({rf['error']})"))
 
     # figures (captions and grouping: report_build.discover_figures)
     hb.status("drawing the figures and writing the report")

@@ -229,6 +229,7 @@ def _joint_signals(
         exps.append(make_experiment(f"{sig.joints[j]} run {e}", dt * np.arange(m.size),
                                     sig.q[m, j], y[m],
                                     payload_mass=float(sig.payloads[e].mass),
+                                    payload_arm=float(sig.payloads[e].arm_m or 0.0),
                                     revolute=revolute))
         idx.append(m)
     order = np.concatenate(idx)

@@ -183,6 +183,7 @@ def refit_robot(
     keep: np.ndarray | None = None,
     revolute: Sequence[bool] | None = None,
     validation: tuple[RobotSignals, np.ndarray | None, np.ndarray | None] | None = None,
+    columns: Sequence[np.ndarray] | None = None,
 ) -> RobotRefit:
     """Refit the n-dof ``model`` with the extra per-joint ``terms`` (module doc).
 
@@ -208,6 +209,12 @@ def refit_robot(
     validation : (RobotSignals, ndarray or None, ndarray or None), optional
         Validation samples, the first fit's prediction on them (None: computed) and their
         kept rows (None: as ``keep``'s default).
+    columns : sequence of ndarray, optional
+        Per joint j, shape (n, c_j): the terms' columns already formed (joint j's terms side
+        by side, in the order given), instead of :func:`~ident.robot.design.joint_columns`
+        on the decimated states -- e.g. a single-joint design's term columns, formed at full
+        rate and decimated with the torque (:meth:`ident.fitting.FitReport.
+        refit_found_terms`); only the rows the fit uses are read. Not with ``validation``.
 
     Returns
     -------
@@ -232,7 +239,18 @@ def refit_robot(
     if pred.shape != signals.tau.shape:
         raise RobotIdentError(f"refit_robot: prediction of shape {pred.shape}, expected "
                               f"{signals.tau.shape}")
-    X = joint_columns(signals, pred, terms, revolute)
+    if columns is None:
+        X = joint_columns(signals, pred, terms, revolute)
+    else:
+        if validation is not None:
+            raise RobotIdentError("refit_robot: columns= and validation= together (the "
+                                  "validation samples' columns would be missing)")
+        X = [np.asarray(c, dtype=float) for c in columns]
+        want = [sum(len(t.names()) for jj, t in terms if jj == j) for j in range(k)]
+        if len(X) != k or any(x.shape != (signals.n, c) for x, c in zip(X, want, strict=False)):
+            raise RobotIdentError(f"refit_robot: columns of shapes {[x.shape for x in X]}, "
+                                  f"expected {[(signals.n, c) for c in want]} (samples, the "
+                                  "terms' parameters of each joint)")
     nx0 = len(model.coef_)
     # extra parameters after the model's, joint by joint in the order given
     names = list(model.names_)
