@@ -30,6 +30,8 @@ Asserted, for the usual model and the paper model's products form, both fitted b
   columns (the decimated q_ref differentiated twice, 1.2 % from the design's instruments,
   which differentiate at full rate then low-pass); its refit error is the single-joint
   refit's within ERROR_RTOL (measured 5.5e-6), its coefficient within 0.25 sigma (0.036);
+* the products form fitted by IV on the decimated columns (its quadrant band left out)
+  refits too, its instruments the columns chain's;
 * without q_ref a term reading the acceleration is refused in one line, one that does not
   is refitted (its columns its instruments); the bilinear paper form with IV is refused in
   one line.
@@ -298,3 +300,24 @@ def test_bilinear_iv_refused_in_one_line():
     odd.method = "gls"
     with pytest.raises(RobotIdentError, match="'gls' is not supported"):
         refit_robot(odd, prob.signals, [])
+
+
+def test_products_on_decimated_columns_iv():
+    """The products form fitted by IV on the decimated columns (no full-rate products; the
+    usual fit's quadrants, its band left out): its instruments are the columns chain's;
+    without terms the refit is the fit, the ripple lowers the error."""
+    rep, prob, _ = _problem()
+    sig = prob.signals
+    dec = RobotModel(prob.reg, "paper", "iv", base=prob.base, form="products",
+                     q_s=rep.q_s, payload_ratio=False).fit(sig)
+    assert not dec.full_rate_products_ and dec.method == "iv"
+    (joint,) = dec.joints_
+    rf = refit_robot(dec, sig, [])
+    assert rf.n_rows[joint] == int(dec.n_samples_[0])
+    for when in ("before", "after"):
+        assert rf.rel_error[when][joint] == pytest.approx(dec.rel_error_[joint], rel=1e-9)
+    free = np.array([n not in dec.fixed_ for n in dec.names_])
+    assert np.all(np.abs(rf.coef_ - dec.coef_)[free] <= 1e-6 * dec.std_[free])
+    assert np.allclose(rf.std_[free], dec.std_[free], rtol=1e-6)
+    rt = refit_robot(dec, sig, [(0, _refinement("paper").steps[0].term)])
+    assert rt.rel_error["after"][joint] < 0.9 * rf.rel_error["after"][joint]

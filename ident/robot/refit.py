@@ -473,9 +473,6 @@ def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
         if keep is not None:
             ok &= keep[idx, j]
         V = model._v(WjT, pj, dqj, np.zeros(dqj.size), sg).T
-        if iv:  # the instruments' rows: Wz, pz with the same sign, dq, 1 (as _pass)
-            (WzT, pzj), = z
-            parts[j]["Vz"].append(model._v(WzT, pzj, dqj, np.zeros(dqj.size), sg).T[ok])
         if model.model == "paper" and (model.quadrant == "model"):
             tout = theta_q[cols] @ WjT + pj
             sp = tout * dqj
@@ -491,6 +488,9 @@ def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
         p["pp"].append(quadrant_weights(sp[ok]))
         p["E"].append(stribeck_exp(dqj[ok], model.q_s_[j]))
         p["tau"].append(tauj[ok])
+        if iv:  # the instruments' rows: Wz, pz with the same sign, dq, 1 (as _pass)
+            (WzT, pzj), = z
+            p["Vz"].append(model._v(WzT, pzj, dqj, np.zeros(dqj.size), sg).T[ok])
     out = []
     for j in range(k):
         p = parts[j]
