@@ -634,7 +634,7 @@ class FitReport:
         if getattr(m, "robot_", None) is None or name not in self.robot_signals:
             return {"error": f"{name} model: no robot model to refit"}
         sig = self.robot_signals[name]
-        columns = None
+        columns = zcols = None
         if design is not None:
             rows = np.flatnonzero(m.robot_.fitted_rows(sig)[:, 0])
             if rows.size != len(design) or not np.allclose(design.Y, sig.tau[rows, 0],
@@ -645,11 +645,17 @@ class FitReport:
             missing = [n for n in names if n not in design.names]
             if missing:
                 return {"error": f"{name} model: the design has no column {missing[0]}"}
+            idx = [design.names.index(n) for n in names]
             X = np.zeros((sig.n, len(names)))
-            X[rows] = design.W[:, [design.names.index(n) for n in names]]
+            X[rows] = design.W[:, idx]
             columns = [X]
+            if design.Z is not None:  # IDIM-IV: the design's instruments of the terms
+                Xz = np.zeros((sig.n, len(names)))
+                Xz[rows] = design.Z[:, idx]
+                zcols = [Xz]
         return refit_found_terms(m.robot_, sig, terms, revolute=self.revolute,
-                                 names=getattr(m, "robot_names_", None), columns=columns)
+                                 names=getattr(m, "robot_names_", None), columns=columns,
+                                 instrument_columns=zcols)
 
     def designs_for(self, data: Sequence[Experiment] | Signals) -> dict[str, Design]:
         """The system of other data (e.g. validation files) for every fitted model, with the

@@ -358,7 +358,9 @@ class OneJointProblem:
 
 def refit_found_terms(robot: RobotModel, signals: RobotSignals, terms: Sequence[Term], *,
                       revolute: bool, names: dict[str, tuple[str, float]] | None = None,
-                      columns: Sequence[np.ndarray] | None = None) -> dict[str, Any]:
+                      columns: Sequence[np.ndarray] | None = None,
+                      instrument_columns: Sequence[np.ndarray] | None = None
+                      ) -> dict[str, Any]:
     """The terms a single-joint refinement found, refitted inside the joint's robot model:
     :func:`ident.robot.refit.refit_robot` on the one-joint robot, as ``jointid fit --robot
     --refine`` refits every joint's found terms in the n-dof model (issue 24: the loop closes
@@ -380,8 +382,8 @@ def refit_found_terms(robot: RobotModel, signals: RobotSignals, terms: Sequence[
         Robot name -> (single-joint name, sign) (``IdentModel.robot_names_``): the record's
         parameters by the single-joint names (values times the sign); the extra ones keep
         theirs (``<joint>:<term parameter>``, :func:`~ident.robot.refit.extra_name`).
-    columns : sequence of ndarray, optional
-        The terms' columns (``refit_robot``'s ``columns``).
+    columns, instrument_columns : sequence of ndarray, optional
+        The terms' columns and instruments (``refit_robot``'s).
 
     Returns
     -------
@@ -392,7 +394,7 @@ def refit_found_terms(robot: RobotModel, signals: RobotSignals, terms: Sequence[
     """
     try:
         rec = refit_robot(robot, signals, [(0, t) for t in terms], revolute=[revolute],
-                          columns=columns).to_json()
+                          columns=columns, instrument_columns=instrument_columns).to_json()
     except (RobotIdentError, DataError) as exc:
         return {"error": str(exc)}
     pars = {}

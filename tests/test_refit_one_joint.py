@@ -14,7 +14,6 @@ model's refinement on the example campaign).
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 from example_campaign import simulate_example_campaign
 

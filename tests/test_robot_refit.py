@@ -219,10 +219,11 @@ def test_refit_refuses_the_measured_torque_and_bad_input():
         refit_robot(fit, sig, [(5, _TrueDrag())])
     with pytest.raises(RobotIdentError, match="appear twice"):
         refit_robot(fit, sig, [(1, _TrueDrag()), (1, _TrueDrag())])
-    iv = copy.copy(fit)
+    iv = copy.copy(fit)  # IDIM-IV needs the reference (the model's own instruments)
     iv.method = "iv"
-    with pytest.raises(RobotIdentError, match="method 'iv' is not supported"):
+    with pytest.raises(RobotIdentError, match="method 'iv' needs q_ref") as e:
         refit_robot(iv, sig, [])
+    assert "\n" not in str(e.value)
 
 
 def test_cli_refine_refits_inside_the_ndof_model(tmp_path, capfd):

@@ -24,7 +24,8 @@ Asserted:
 * over two seeds the ripple's amplitude and phase within 2 sigma of the plant's truth; WLS
   (one joint: one scalar weight) gives the LS refit's numbers;
 * the products form on the decimated columns (no full-rate products) refits too;
-* IDIM-IV and a full-rate products model on signals without the products: one-line errors.
+* a full-rate products model on signals without the products: a one-line error (IDIM-IV
+  fits refit too: tests/test_robot_refit_iv.py).
 """
 
 from __future__ import annotations
@@ -265,17 +266,9 @@ def test_products_on_decimated_columns():
 
 
 def test_refused_in_one_line():
-    """IDIM-IV is refused (no instruments for the extra columns); a model fitted on the
-    full-rate products cannot be refitted on signals without them."""
-    _, prob, sig, robot = _fitted(SEEDS[0])
-    exps, refs = _campaign(SEEDS[0])
-    piv = OneJointProblem(exps, revolute=True, has_payload=True, references=refs, paper=True,
-                          torque_delay=default_torque_delay([e.source for e in exps]))
-    iv = piv.fit("paper", float(robot.q_s_[0])).robot
-    assert iv.method == "iv" and iv.form == "products"
-    with pytest.raises(RobotIdentError, match="method 'iv' is not supported") as e:
-        refit_robot(iv, piv.products(float(robot.q_s_[0])), [])
-    assert "\n" not in str(e.value)
+    """A model fitted on the full-rate products cannot be refitted on signals without
+    them."""
+    _, prob, _, robot = _fitted(SEEDS[0])
     bare = prob.signals  # the chain's signals, no columns.products
     assert bare.columns.products is None
     for pred in (None, np.zeros(bare.tau.shape)):

@@ -1398,19 +1398,22 @@ class RobotModel(HyperParameters):
             moms[j].add_rows(np.vstack([U[:, ok], tauj[ok]]), fr.pplus[ok, j], VzT)
         return moms
 
-    def products_rows(self, signals: RobotSignals):
+    def products_rows(self, signals: RobotSignals, instruments: bool = False):
         """The rows a fit on the full-rate products (``full_rate_products_``) reads: per chunk
         and joint, (rows, j, U, ok) with ``rows`` the chunk's samples of ``signals`` (slice or
         indices), U (nx_j, m) joint j's products in ``names_``' order of its block
         (:meth:`_local`; :func:`~ident.robot.paper.products_names`) and ok (m,) the fit's row
         rule (|dq_j| > ``dq_min``, finite torque and products, ``keep``). The prediction on
         them is ``coef_[_local(j)] @ U``. For the n-dof refit (:mod:`ident.robot.refit`).
+        ``instruments``: (rows, j, U, ok, Uz) with Uz (nx_j, m) the IDIM-IV instruments' rows
+        an IV fit reads (:meth:`_row_block` ``iv=True``: the products' ``loads_z``).
 
         Raises
         ------
         RobotIdentError
             The model was not fitted on full-rate products, or ``signals`` do not carry
-            them (or carry them formed otherwise: :meth:`fit`'s checks).
+            them (or carry them formed otherwise: :meth:`fit`'s checks); ``instruments``
+            and products formed without them.
         """
         self._check_fitted()
         if not getattr(self, "full_rate_products_", False):
@@ -1422,7 +1425,15 @@ class RobotModel(HyperParameters):
                                   "model was fitted on full-rate products (columns.products); "
                                   "its rows need signals carrying them (products_columns)")
         self._full_rate(signals)  # the same checks as the fit's
-        return ((r, j, U, ok) for r, j, _fr, _dqj, _tauj, U, ok in self._row_chunks(signals))
+        if not instruments:
+            return ((r, j, U, ok) for r, j, _fr, _dqj, _tauj, U, ok in
+                    self._row_chunks(signals))
+        if signals.columns.products.loads_z is None:
+            raise RobotIdentError(f"{signals.source or 'RobotSignals'}: no IDIM-IV instruments "
+                                  "formed with the full-rate products (products_columns("
+                                  "instruments=True))")
+        return ((r, j, U, ok, self._row_block(fr, j, dqj, iv=True)) for
+                r, j, fr, dqj, _tauj, U, ok in self._row_chunks(signals))
 
     def _set_band(self, moms: list[JointMoments], theta_q: np.ndarray, model_q: bool) -> None:
         """``band_`` [N m] (``quadrant_band`` x each joint's RMS predicted load with
@@ -1571,22 +1582,30 @@ class RobotModel(HyperParameters):
         if not hasattr(self, "coef_"):
             raise RobotIdentError("RobotModel is not fitted; call fit(signals) first")
 
-    def _fitted_rows(self, signals: RobotSignals, what: str):
+    def _fitted_rows(self, signals: RobotSignals, what: str, instruments: bool = False):
         """Check ``signals``, then a generator of (rows, j, cols, WjT, pj, dq_j, tau_j, sign
         column or None) per chunk and joint (no instruments): the pass of :meth:`predict`
-        and :meth:`load_torque`."""
+        and :meth:`load_torque`. ``instruments``: one more item, (WzT, pz_j), the IDIM-IV
+        instruments' columns and known torque as :meth:`_pass` forms them (the columns'
+        ``Wz``, ``pz``, or the regressor on the reference's acceleration; the same errors
+        when the signals lack them)."""
         self._check_fitted()
         if not isinstance(signals, RobotSignals):
             raise RobotIdentError(f"{what}: expected RobotSignals, got "
                                   f"{type(signals).__name__}")
 
         def rows():
-            for _sig, r, q, dq, ddq, tau, _z, pay, cc in self._chunks(signals, iv=False):
+            for _sig, r, q, dq, ddq, tau, zdd, pay, cc in self._chunks(signals,
+                                                                       iv=instruments):
                 W, p, kn = self._rows(q, dq, ddq, tau, pay, None if cc is None else cc[:2])
+                if instruments:
+                    Wz, pz, knz = self._rows(q, dq, zdd, tau, pay,
+                                             None if cc is None else cc[4:6])
                 for j, cols in enumerate(self.cols_):
                     WjT, pj = self._joint(W, p, kn, j)
-                    yield (r, j, cols, WjT, pj, dq[:, j], tau[:, j],
-                           None if cc is None else cc[2][:, j])
+                    item = (r, j, cols, WjT, pj, dq[:, j], tau[:, j],
+                            None if cc is None else cc[2][:, j])
+                    yield (item + (self._joint(Wz, pz, knz, j),)) if instruments else item
 
         return rows()
 

@@ -1,5 +1,9 @@
 """The n-dof refit: the terms a refinement found, refitted inside the n-dof model.
 
+(Past 600 lines: one function and its one stacked system -- the rows of every model form
+and their IV instruments, the solve, the record of before/after -- read the same fitted
+model's private layout; split, each part would need all of it.)
+
 :func:`ident.robot.refine_joint.refine_joint` looks for an effect in one joint's residual
 after the n-dof fit; on its own the found term is fitted on that residual (two stages), so
 the n-dof parameters have already absorbed the part of its column that lies in their span
@@ -20,9 +24,34 @@ their own coefficients (not scaled by the paper model's a, b).
 Estimation: the rows of each joint are those the n-dof fit used (|dq_j| > ``dq_min``, finite,
 ``RobotColumns.keep`` or the given ``keep``, the paper model's quadrant band); the quadrants
 of the paper model are those of the first fit's prediction (its ``predict``), held fixed;
-Gauss-Newton from the first fit (one step for the usual model, which is linear), LS or WLS as
-the model (WLS: per-joint weights 1/sigma_j^2 of an LS refit); the parameters the first fit
-held fixed stay fixed. IDIM-IV is refused (no instruments for the extra columns).
+Gauss-Newton from the first fit (one step for the usual model, which is linear), LS, WLS or
+IDIM-IV as the model (WLS: per-joint weights 1/sigma_j^2 of an LS refit); the parameters the
+first fit held fixed stay fixed.
+
+IDIM-IV (``method="iv"``), for the linear forms only (the usual model and the products
+form; the bilinear paper form is refused in one line: its Jacobian and quadrants move with
+theta, so there is no one IV solve to make): one IV solve, the model's estimator's
+(:class:`ident.estimators.IV` ``solve_normal`` on Z^T W, its covariance the IV sandwich
+sigma^2 (Z^T W)^-1 Z^T Z (W^T Z)^-1 as the model's fit computes it), on the stacked rows
+W = [the model's columns on the fit's rows, X_j] with the instruments Z = [the model's own
+instrument rows of those columns, X_j's instruments]. The model's are what its IV fit read:
+the columns chain's ``Wz``, ``pz`` (the regressor on the reference's acceleration; the
+states chain: the regressor on q_ref differentiated twice), through
+``RobotModel._fitted_rows(..., instruments=True)``; on full-rate products the products'
+``loads_z`` (``products_rows(..., instruments=True)``). X_j's follow the single-joint rule
+(:meth:`ident.preprocess.Design.with_term`): a term's columns are their own instruments
+unless they read the acceleration, then they are the term's columns with the reference's
+acceleration instead of the measured one. The single-joint design forms those at full rate
+(the reference differentiated there, then low-passed and decimated with the columns); the
+signals here carry only the decimated, filtered q_ref, so the reference's acceleration is
+that differentiated twice per experiment by central differences (as the model's states
+chain does) -- 1.2 % from the design's on the example campaign, which moves the refit's
+error by ~1e-5 relative (tests/test_robot_refit_iv.py). Signals without q_ref: the terms
+that do not read the acceleration are their own instruments, the others are refused in one
+line. On a one-joint robot with the design's own term columns and instruments the IV refit
+is the single-joint IV refit of the design with the term, to round-off. The held-out error
+is, as for LS, the least-squares fit on the other folds (what
+:func:`ident.unseen.heldout_error` gives the single-joint fits, IV included).
 
 The paper model's products form (``form="products"``, eq. 42: the products of the load
 columns with a_m, b_m, a_g, b_g free, no base parameters) is linear in its parameters: the
@@ -47,7 +76,8 @@ validation samples are given.
 
 Memory: the rows of every joint (their base columns, friction and extra columns) are held
 while iterating: ~8 (p_j + 10 + c_j) bytes per row (products form on full-rate products:
-~8 (4 p_j + 11 + c_j)); meant for the decimated rows of a fit.
+~8 (4 p_j + 11 + c_j)), twice that with IDIM-IV (the instruments' rows); meant for the
+decimated rows of a fit.
 Pure numerics (no file access).
 """
 
@@ -55,7 +85,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -64,11 +94,12 @@ import scipy.stats
 
 from trajectories.friction import stribeck_exp
 
-from ..estimators import LS, RankDeficientError
+from ..estimators import RankDeficientError, get_estimator
 from ..terms import Term
 from ..unseen import N_BLOCKS, heldout_kind, noise_floor
 from . import RobotIdentError
 from .design import joint_columns
+from .estimate import _ref_acceleration
 from .moments import quadrant_weights
 from .paper import rows_coefficients
 from .signals import RobotSignals
@@ -98,6 +129,8 @@ class _Rows:
     X: np.ndarray  # (m, c) extra columns
     tau: np.ndarray  # measured torque [N m]
     experiment: np.ndarray
+    Vz: np.ndarray | None = None  # IDIM-IV: the instruments' rows of V (the model's own)
+    Xz: np.ndarray | None = None  # IDIM-IV: the extra columns' instruments
 
 
 @dataclass
@@ -113,7 +146,8 @@ class RobotRefit:
     names_ : tuple of str
         The model's ``names_`` then the extra parameters (:func:`extra_name`).
     coef_, std_ : ndarray
-        Estimates and standard deviations (eq. 15, sigma^2 (J^T J)^-1 at the solution).
+        Estimates and standard deviations (eq. 15, sigma^2 (J^T J)^-1 at the solution;
+        IDIM-IV: the sandwich sigma^2 (Z^T J)^-1 Z^T Z (J^T Z)^-1).
     cov_ : ndarray
     params_ : dict
         name -> value.
@@ -184,6 +218,7 @@ def refit_robot(
     revolute: Sequence[bool] | None = None,
     validation: tuple[RobotSignals, np.ndarray | None, np.ndarray | None] | None = None,
     columns: Sequence[np.ndarray] | None = None,
+    instrument_columns: Sequence[np.ndarray] | None = None,
 ) -> RobotRefit:
     """Refit the n-dof ``model`` with the extra per-joint ``terms`` (module doc).
 
@@ -191,7 +226,8 @@ def refit_robot(
     ----------
     model : RobotModel
         A fitted n-dof model (method ``"ls"`` or ``"wls"``; usual, paper, or the paper
-        model's ``form="products"``).
+        model's ``form="products"``; method ``"iv"`` for the usual model and the products
+        form, with signals carrying the instruments the fit read).
     signals : RobotSignals
         The samples it was fitted on (or any with the same joints); a products-form fit on
         the full-rate products needs signals carrying them (``columns.products``).
@@ -215,6 +251,9 @@ def refit_robot(
         on the decimated states -- e.g. a single-joint design's term columns, formed at full
         rate and decimated with the torque (:meth:`ident.fitting.FitReport.
         refit_found_terms`); only the rows the fit uses are read. Not with ``validation``.
+    instrument_columns : sequence of ndarray, optional
+        With ``columns`` and IDIM-IV: the terms' instruments, shaped as ``columns`` (e.g.
+        the design's Z columns of the terms); default the columns themselves.
 
     Returns
     -------
@@ -223,13 +262,22 @@ def refit_robot(
     Raises
     ------
     RobotIdentError
-        An unfitted model, IDIM-IV, bad shapes, parameters not identifiable with the terms,
-        a fit on full-rate products and signals without them.
+        An unfitted model, IDIM-IV of the bilinear paper form, IDIM-IV without the model's
+        instruments or (a term reading the acceleration) without q_ref, bad shapes,
+        parameters not identifiable with the terms, a fit on full-rate products and
+        signals without them.
     """
     model._check_fitted()
-    if model.method not in ("ls", "wls"):
-        raise RobotIdentError(f"refit_robot: method {model.method!r} is not supported (the "
-                              "extra columns have no instruments); refit with 'ls' or 'wls'")
+    linear = model.model == "usual" or model.form == "products"
+    if model.method not in ("ls", "wls", "iv"):
+        raise RobotIdentError(f"refit_robot: method {model.method!r} is not supported; "
+                              "expected 'ls', 'wls' or 'iv'")
+    iv = model.method == "iv"
+    if iv and not linear:
+        raise RobotIdentError("refit_robot: method 'iv' is not supported for the paper "
+                              "model's bilinear form (its Jacobian and quadrants move with "
+                              "theta: no one IV solve); fit it with form='products', or "
+                              "method 'ls' or 'wls'")
     if tuple(signals.joints) != tuple(model.joints_):
         raise RobotIdentError(f"refit_robot: joints {signals.joints}, expected the model's "
                               f"{model.joints_}")
@@ -241,16 +289,27 @@ def refit_robot(
                               f"{signals.tau.shape}")
     if columns is None:
         X = joint_columns(signals, pred, terms, revolute)
+        Xz = _extra_instruments(signals, pred, terms, revolute, X) if iv else None
     else:
         if validation is not None:
             raise RobotIdentError("refit_robot: columns= and validation= together (the "
                                   "validation samples' columns would be missing)")
-        X = [np.asarray(c, dtype=float) for c in columns]
         want = [sum(len(t.names()) for jj, t in terms if jj == j) for j in range(k)]
-        if len(X) != k or any(x.shape != (signals.n, c) for x, c in zip(X, want, strict=False)):
-            raise RobotIdentError(f"refit_robot: columns of shapes {[x.shape for x in X]}, "
-                                  f"expected {[(signals.n, c) for c in want]} (samples, the "
-                                  "terms' parameters of each joint)")
+
+        def given(cols: Sequence[np.ndarray], what: str) -> list[np.ndarray]:
+            out = [np.asarray(c, dtype=float) for c in cols]
+            if len(out) != k or any(x.shape != (signals.n, c)
+                                    for x, c in zip(out, want, strict=False)):
+                raise RobotIdentError(f"refit_robot: {what} of shapes {[x.shape for x in out]}"
+                                      f", expected {[(signals.n, c) for c in want]} (samples, "
+                                      "the terms' parameters of each joint)")
+            return out
+
+        X = given(columns, "columns")
+        Xz = None
+        if iv:  # the given instruments, else the columns are their own
+            Xz = X if instrument_columns is None else given(instrument_columns,
+                                                             "instrument_columns")
     nx0 = len(model.coef_)
     # extra parameters after the model's, joint by joint in the order given
     names = list(model.names_)
@@ -266,11 +325,10 @@ def refit_robot(
         ext_idx[j] += extras[-1]["index"]
         names += own
     # X[j]'s columns are in the order of the terms on joint j, as ext_idx[j]
-    rows = _rows(model, signals, X, keep)
+    rows = _rows(model, signals, X, keep, Xz)
     free = np.array([n not in model.fixed_ for n in names])
     x0 = np.concatenate([model.coef_, np.zeros(len(names) - nx0)])
     coeffs = _coefficients(model)
-    linear = model.model == "usual" or model.form == "products"
     sys = _System(model, rows, ext_idx, coeffs, len(names), names)
     w = np.ones(k)
     x, it = sys.solve(x0, free, w, linear)
@@ -285,7 +343,7 @@ def refit_robot(
         w = 1.0 / sj**2
         x, it = sys.solve(x, free, w, linear)
     out = RobotRefit(model=model, terms=terms, names_=tuple(names), n_iter=it)
-    A, _ = sys.normal(x, free, w)
+    A, _, C = sys.normal(x, free, w)
     rr, _, _ = sys.residuals(x)
     n_rows = sum(rw.V.shape[0] for rw in rows)
     dof = n_rows - int(free.sum())
@@ -293,7 +351,8 @@ def refit_robot(
         raise RobotIdentError(f"refit_robot: {n_rows} rows for {int(free.sum())} parameters")
     sigma2 = float(sum(wj * float(r @ r) for wj, r in zip(w, rr, strict=True))) / dof
     cov = np.zeros((len(names), len(names)))
-    cov[np.ix_(free, free)] = sigma2 * np.linalg.inv(A)
+    # the estimator's covariance, as the model's fit: sigma^2 A^-1, or IV's sandwich
+    cov[np.ix_(free, free)] = sys.est.normal_covariance(A, C, sigma2)
     out.coef_, out.cov_ = x, cov
     out.std_ = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     out.params_ = dict(zip(names, x.tolist(), strict=True))
@@ -327,7 +386,7 @@ def refit_robot(
         if vpred is None:
             vpred = model.predict(vsig)
         vX = joint_columns(vsig, vpred, terms, revolute)
-        vrows = _rows(model, vsig, vX, vkeep)
+        vrows = _rows(model, vsig, vX, vkeep)  # (the errors only: no instruments)
         vsys = _System(model, vrows, ext_idx, coeffs, len(names), names)
         out.validation = {"before": _rel(model.joints_, vsys.residuals(x0)[0], vrows),
                           "after": _rel(model.joints_, vsys.residuals(x)[0], vrows)}
@@ -387,9 +446,40 @@ def _coefficients(model: Any) -> Any:
     return rows_coefficients if _full_rate(model) else model._coefficients
 
 
+def _extra_instruments(signals: RobotSignals, pred: np.ndarray,
+                       terms: Sequence[tuple[int, Term]], revolute: Sequence[bool] | None,
+                       X: list[np.ndarray]) -> list[np.ndarray]:
+    """The IDIM-IV instruments of the extra columns, by the single-joint rule
+    (:meth:`ident.preprocess.Design.with_term`): a term's columns are their own instruments
+    unless they read the acceleration; those are evaluated again with the reference's
+    acceleration instead of the measured one -- here d^2 q_ref / dt^2 of the signals'
+    (decimated) ``q_ref`` by central differences per experiment, as the model's states chain
+    forms its instruments (:func:`~ident.robot.estimate._ref_acceleration`). Without
+    ``q_ref`` a term that reads the acceleration is refused (one line)."""
+    if signals.q_ref is not None:
+        zdd = np.empty_like(signals.ddq)
+        for e in np.unique(signals.experiment):
+            m = signals.experiment == e
+            zdd[m] = _ref_acceleration(signals.t[m], signals.q_ref[m])
+        return joint_columns(replace(signals, ddq=zdd), pred, terms, revolute)
+    # which terms read the acceleration: their columns move with another ddq
+    other = replace(signals, ddq=2.0 * signals.ddq + 1.0)
+    for j, t in terms:
+        a = joint_columns(signals, pred, [(j, t)], revolute)[j]
+        b = joint_columns(other, pred, [(j, t)], revolute)[j]
+        if not np.array_equal(a, b):
+            raise RobotIdentError(f"refit_robot: term {t.effect} ({', '.join(t.names())}) of "
+                                  f"joint {signals.joints[j]} reads the acceleration, and its "
+                                  "IDIM-IV instruments need the reference's: signals without "
+                                  "q_ref")
+    return X
+
+
 def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
-          keep: np.ndarray | None) -> list[_Rows]:
-    """Every joint's rows of the stacked system, as the model's own pass selects them."""
+          keep: np.ndarray | None, Xz: list[np.ndarray] | None = None) -> list[_Rows]:
+    """Every joint's rows of the stacked system, as the model's own pass selects them; with
+    ``Xz`` (IDIM-IV) their instruments too: the model's own (:meth:`RobotModel._pass`'s
+    ``Wz``, ``pz``; the products' ``loads_z``) and ``Xz``."""
     k = len(model.joints_)
     if keep is None and signals.columns is not None:
         keep = signals.columns.keep
@@ -399,15 +489,17 @@ def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
             raise RobotIdentError(f"refit_robot: keep of shape {keep.shape}, expected "
                                   f"{signals.tau.shape}")
     if _full_rate(model):
-        return _product_rows(model, signals, X, keep)
+        return _product_rows(model, signals, X, keep, Xz)
     # the theta that decided the fit's quadrants (products form: the usual fit's, as predict)
     theta_q = model.coef_[:model.n_theta_] if model._theta_x else model.quadrant_from_
     if model.quadrant_theta_ is not None:
         theta_q = model.quadrant_theta_
     band = np.asarray(getattr(model, "band_", np.zeros(k)), dtype=float)
     parts: list[dict[str, list[np.ndarray]]] = [
-        {n: [] for n in ("idx", "V", "pp", "E", "tau")} for _ in range(k)]
-    for r, j, cols, WjT, pj, dqj, tauj, sg in model._fitted_rows(signals, "refit_robot"):
+        {n: [] for n in ("idx", "V", "pp", "E", "tau", "Vz")} for _ in range(k)]
+    iv = Xz is not None
+    for r, j, cols, WjT, pj, dqj, tauj, sg, *z in model._fitted_rows(signals, "refit_robot",
+                                                                      instruments=iv):
         idx = np.arange(signals.n)[r]
         ok = (np.abs(dqj) > model.dq_min) & np.isfinite(tauj) & np.all(np.isfinite(WjT), axis=0)
         if keep is not None:
@@ -428,6 +520,9 @@ def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
         p["pp"].append(quadrant_weights(sp[ok]))
         p["E"].append(stribeck_exp(dqj[ok], model.q_s_[j]))
         p["tau"].append(tauj[ok])
+        if iv:  # the instruments' rows: Wz, pz with the same sign, dq, 1 (as _pass)
+            (WzT, pzj), = z
+            p["Vz"].append(model._v(WzT, pzj, dqj, np.zeros(dqj.size), sg).T[ok])
     out = []
     for j in range(k):
         p = parts[j]
@@ -438,27 +533,34 @@ def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
                          pp=np.concatenate(p["pp"]) if p["pp"] else np.zeros(0),
                          E=np.concatenate(p["E"]) if p["E"] else np.zeros(0),
                          X=X[j][idx], tau=np.concatenate(p["tau"]) if p["tau"] else
-                         np.zeros(0), experiment=signals.experiment[idx]))
+                         np.zeros(0), experiment=signals.experiment[idx],
+                         Vz=None if not iv else np.concatenate(p["Vz"]) if p["Vz"] else
+                         np.zeros((0, nv)), Xz=None if Xz is None else Xz[j][idx]))
     return out
 
 
 def _product_rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
-                  keep: np.ndarray | None) -> list[_Rows]:
+                  keep: np.ndarray | None, Xz: list[np.ndarray] | None = None) -> list[_Rows]:
     """The rows of a products-form fit on the full-rate products, as the fit read them
     (:meth:`~ident.robot.estimate.RobotModel.products_rows`: the columns and the row rule
     of the model's own pass, ``keep`` too when given): V = [u, 0] (the tau slot of
     :func:`~ident.robot.paper.rows_coefficients`), one quadrant slot (P+ = 1, E = 0): the
-    quadrants are in the products already."""
+    quadrants are in the products already. With ``Xz`` (IDIM-IV) Vz = [u_z, 0], the
+    instruments' rows of the fit (``products_rows(..., instruments=True)``)."""
     k = len(model.joints_)
+    iv = Xz is not None
     parts: list[dict[str, list[np.ndarray]]] = [
-        {n: [] for n in ("idx", "V", "tau")} for _ in range(k)]
-    for r, j, U, ok in model.products_rows(signals):
+        {n: [] for n in ("idx", "V", "tau", "Vz")} for _ in range(k)]
+    for r, j, U, ok, *z in model.products_rows(signals, instruments=iv):
         idx = np.arange(signals.n)[r]
         if keep is not None:
             ok = ok & keep[idx, j]
         p = parts[j]
         p["idx"].append(idx[ok])
         p["V"].append(np.concatenate([U[:, ok].T, np.zeros((int(ok.sum()), 1))], axis=1))
+        if iv:
+            p["Vz"].append(np.concatenate([z[0][:, ok].T, np.zeros((int(ok.sum()), 1))],
+                                          axis=1))
         p["tau"].append(signals.tau[idx[ok], j])
     out = []
     for j in range(k):
@@ -469,7 +571,9 @@ def _product_rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
         out.append(_Rows(idx=idx, V=np.concatenate(p["V"]) if p["V"] else np.zeros((0, nv)),
                          pp=np.ones(m), E=np.zeros(m), X=X[j][idx],
                          tau=np.concatenate(p["tau"]) if p["tau"] else np.zeros(0),
-                         experiment=signals.experiment[idx]))
+                         experiment=signals.experiment[idx],
+                         Vz=None if not iv else np.concatenate(p["Vz"]) if p["Vz"] else
+                         np.zeros((0, nv)), Xz=None if Xz is None else Xz[j][idx]))
     return out
 
 
@@ -480,47 +584,66 @@ class _System:
                  nx: int, names: Sequence[str]) -> None:
         self.model, self.rows, self.ext_idx, self.coeffs = model, rows, ext_idx, coeffs
         self.nx, self.names = nx, list(names)
+        # the model's estimator (its rank rule, covariance); IDIM-IV when the rows carry
+        # instruments (the validation rows never do: their errors only)
+        self.est = get_estimator(model.method if rows and rows[0].Vz is not None else "ls")
 
     def local(self, j: int) -> np.ndarray:
         return np.concatenate([self.model._local(j), np.asarray(self.ext_idx[j], dtype=int)])
 
-    def joint(self, j: int, x: np.ndarray, jac: bool = True):
-        """Residual (m,) and Jacobian (m, n_local) of joint j at x."""
+    def joint(self, j: int, x: np.ndarray, jac: bool = True, instruments: bool = False):
+        """Residual (m,) and Jacobian (m, n_local) of joint j at x; ``instruments``: also
+        the instruments' Jacobian Z (m, n_local), the same coefficients on the rows' ``Vz``
+        and ``Xz`` (what the model's IV moments sum: Z^T J, Z^T Z)."""
         m, rw = self.model, self.rows[j]
         li = m._local(j)
         nt = m._nt(j)  # (products form: no theta)
         th, blk = x[li[:nt]], x[li[nt:]]
         e = x[np.asarray(self.ext_idx[j], dtype=int)]
         pred = rw.X @ e
-        J = None
-        parts = []
+        J = Z = None
+        parts, zparts = [], []
         for s, ws in ((0, rw.pp), (1, 1.0 - rw.pp)):
             c0, c1, D0, D1 = self.coeffs(th, blk, s)
             pred = pred + ws * (rw.V @ c0 + rw.E * (rw.V @ c1))
             if jac:
                 parts.append(ws[:, None] * (rw.V @ D0 + rw.E[:, None] * (rw.V @ D1)))
+            if instruments:
+                zparts.append(ws[:, None] * (rw.Vz @ D0 + rw.E[:, None] * (rw.Vz @ D1)))
         if jac:
             J = np.concatenate([parts[0] + parts[1], rw.X], axis=1)
-        return rw.tau - pred, J
+        if instruments:
+            Z = np.concatenate([zparts[0] + zparts[1], rw.Xz], axis=1)
+        return (rw.tau - pred, J, Z) if instruments else (rw.tau - pred, J)
 
     def residuals(self, x: np.ndarray):
         rr = [self.joint(j, x, jac=False)[0] for j in range(len(self.rows))]
         return rr, None, None
 
     def normal(self, x: np.ndarray, free: np.ndarray, w: np.ndarray):
+        """A = J^T W J, g = J^T W r (LS, WLS), or Z^T J, Z^T r and C = Z^T Z (IDIM-IV; C
+        None otherwise), on the free parameters."""
         A = np.zeros((self.nx, self.nx))
         g = np.zeros(self.nx)
+        iv = self.est.needs_instruments
+        C = np.zeros((self.nx, self.nx)) if iv else None
         for j in range(len(self.rows)):
-            r, J = self.joint(j, x)
             li = self.local(j)
+            if iv:
+                r, J, Z = self.joint(j, x, instruments=True)
+                A[np.ix_(li, li)] += w[j] * (Z.T @ J)
+                g[li] += w[j] * (Z.T @ r)
+                C[np.ix_(li, li)] += w[j] ** 2 * (Z.T @ Z)
+                continue
+            r, J = self.joint(j, x)
             A[np.ix_(li, li)] += w[j] * (J.T @ J)
             g[li] += w[j] * (J.T @ r)
-        return A[np.ix_(free, free)], g[free]
+        return A[np.ix_(free, free)], g[free], None if C is None else C[np.ix_(free, free)]
 
     def _step(self, A: np.ndarray, g: np.ndarray, free: np.ndarray) -> np.ndarray:
-        """Gauss-Newton step on the column-scaled normal equations, through the LS estimator's
-        ``solve_normal`` (the one rank rule, :data:`ident.estimators.RCOND`; the weights are
-        already in A and g)."""
+        """Gauss-Newton step on the column-scaled normal equations, through the model's
+        estimator's ``solve_normal`` (the one rank rule, :data:`ident.estimators.RCOND`; the
+        weights are already in A and g; IDIM-IV: A = Z^T J, not symmetric)."""
         d = np.sqrt(np.abs(np.diag(A)))
         zero = d == 0
         if zero.any():
@@ -529,7 +652,7 @@ class _System:
                                   "rows used (zero columns)")
         names = [self.names[i] for i in np.flatnonzero(free)]
         try:
-            sol = LS().solve_normal(A / d[:, None] / d[None, :], g / d, names)
+            sol = self.est.solve_normal(A / d[:, None] / d[None, :], g / d, names)
         except RankDeficientError as e:
             raise RobotIdentError(f"refit_robot: with the extra terms, {e}") from None
         step = np.zeros(free.size)
@@ -547,7 +670,7 @@ class _System:
         it = 0
         while it < MAX_ITER:
             it += 1
-            A, g = self.normal(x, free, w)
+            A, g, _ = self.normal(x, free, w)
             step = self._step(A, g, free)
             lam = 1.0
             while True:
