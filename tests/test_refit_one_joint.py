@@ -21,19 +21,27 @@ from ident.api import JointModel
 from ident.loaders import make_experiment
 
 
-def _experiments(seed: int) -> list:
+def _experiments(seed: int, iv: bool = False) -> list:
+    """The example campaign's runs: CSV-named (least squares), or MCAP-named with their
+    reference trajectory (IDIM-IV, the half-cycle torque timing of jointid's logs)."""
     _, plan, sims = simulate_example_campaign(seed)
-    return [make_experiment(f"payload{i}.csv", r.t, r.q, r.tau_ref, payload_mass=p.mass_kg,
-                            payload_arm=p.arm_m)
+    return [make_experiment(f"payload{i}.{'mcap' if iv else 'csv'}", r.t, r.q, r.tau_ref,
+                            payload_mass=p.mass_kg, payload_arm=p.arm_m,
+                            q_ref=plan.reference.q[r.cycle.clip(0, plan.reference.q.size - 1)]
+                            if iv else None)
             for i, (p, r) in enumerate(zip(plan.payloads, sims, strict=True))]
 
 
-@pytest.fixture(scope="module", params=[11, 12])
+@pytest.fixture(scope="module", params=[(11, False), (12, False), (11, True)],
+                ids=["ls-11", "ls-12", "iv-11"])
 def refined(request):
-    """The usual model (least squares: CSV-named runs, no references) refined on the example
-    campaign, whose plant has the paper's friction: the refinement finds load-dependent
-    friction terms, which read the load tau_out (the payload's lever arm included)."""
-    est = JointModel(model="usual").fit(_experiments(request.param))
+    """The usual model refined on the example campaign, whose plant has the paper's friction:
+    the refinement finds load-dependent friction terms, which read the load tau_out (the
+    payload's lever arm included). Least squares on two seeds; IDIM-IV (the refit's
+    instruments: the design's) on one."""
+    seed, iv = request.param
+    est = JointModel(model="usual").fit(_experiments(seed, iv))
+    assert est.estimator_ == ("iv" if iv else "ls")
     return est, est.refine(max_steps=2)
 
 
