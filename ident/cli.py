@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -283,9 +284,42 @@ def check_numbers(args: argparse.Namespace) -> None:
             raise DataError(f"{flag} {v:g}: expected {expected}")
 
 
+def _check_output(flag: str, path: Path | None, directory: bool) -> None:
+    """Refuse an output path that cannot be written, before anything is fitted: the
+    directory ``--report`` names (created if absent) or the file ``--json`` names (its
+    folder created if absent).
+
+    Raises
+    ------
+    DataError
+        One line naming the flag, the path and what is in the way.
+    """
+    if path is None:
+        return
+    if path.exists() and path.is_dir() != directory:
+        what = "a file" if directory else "a directory"
+        raise DataError(f"{flag} {path}: is {what}, expected "
+                        f"{'a directory' if directory else 'a file name'}")
+    folder = path if directory else path.parent
+    anc = folder
+    while not anc.exists() and anc != anc.parent:
+        anc = anc.parent
+    if anc.exists() and not anc.is_dir():
+        raise DataError(f"{flag} {path}: {anc} is a file, not a directory")
+    if not os.access(anc, os.W_OK | os.X_OK):
+        raise DataError(f"{flag} {path}: {anc} is not writable")
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """:func:`_check_output` of ``--report`` (a directory) and ``--json`` (a file)."""
+    _check_output("--report", getattr(args, "report", None), True)
+    _check_output("--json", getattr(args, "json", None), False)
+
+
 def run(args: argparse.Namespace) -> int:
     """Execute ``jointid fit``; returns the exit code."""
     check_numbers(args)
+    check_outputs(args)
     # the one vocabulary (ident.vocab): "new" is a deprecated "paper", "ols" a deprecated "ls"
     args.model = model_name(args.model, extra=("both",))
     if args.method is not None:
