@@ -214,12 +214,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _qs(value: str) -> float | str:
+    """``--q-s``: 'scan' or a finite velocity > 0 [rad/s or m/s] (one line naming the flag
+    otherwise, as ``--robot`` says it)."""
     if value.strip().lower() == "scan":
         return "scan"
     try:
-        return float(value)
+        v = float(value)
     except ValueError:
         raise DataError(f"--q-s {value!r}: expected a number [rad/s] or 'scan'") from None
+    if not (math.isfinite(v) and v > 0):
+        raise DataError(f"--q-s {value!r}: expected a number > 0 [rad/s] or 'scan'")
+    return v
 
 
 def estimator_from_args(args: argparse.Namespace) -> JointModel:
@@ -329,6 +334,7 @@ def run(args: argparse.Namespace) -> int:
     for attr, flag, hint in _ROBOT_ONLY:
         if getattr(args, attr, None) not in (None, False):
             raise DataError(f"{flag}: applies to --robot fits only{hint}")
+    _qs(args.q_s)  # refused before the files are read
     mapping = parse_mapping(args.map)
     gain: float | str | None = args.gain
     load_kw: dict[str, Any] = dict(
