@@ -321,10 +321,32 @@ def check_outputs(args: argparse.Namespace) -> None:
     _check_output("--json", getattr(args, "json", None), False)
 
 
+def check_foreign_options(args: argparse.Namespace) -> None:
+    """Refuse ``--map`` and ``--gain`` when every file (inputs and ``--validate``) is a
+    jointid MCAP log: they apply to CSV and MAT files only, and were ignored in silence (an
+    MCAP log has its own channels and joint-side torque [N m] or force [N]).
+
+    Raises
+    ------
+    DataError
+        One line naming the flags and the logs.
+    """
+    files = [str(f) for f in [*args.inputs, *(getattr(args, "validate", None) or [])]]
+    if not files or not all(f.lower().endswith(".mcap") for f in files):
+        return
+    used = [flag for flag, v in (("--map", getattr(args, "map", None)),
+                                 ("--gain", getattr(args, "gain", None))) if v]
+    if used:
+        logs = files[0] + (f" and {len(files) - 1} more" if len(files) > 1 else "")
+        raise DataError(f"{' and '.join(used)}: apply to CSV and MAT files only; {logs}: "
+                        "jointid MCAP log(s), with their own channels and joint-side torque")
+
+
 def run(args: argparse.Namespace) -> int:
     """Execute ``jointid fit``; returns the exit code."""
     check_numbers(args)
     check_outputs(args)
+    check_foreign_options(args)
     # the one vocabulary (ident.vocab): "new" is a deprecated "paper", "ols" a deprecated "ls"
     args.model = model_name(args.model, extra=("both",))
     if args.method is not None:
