@@ -1,7 +1,8 @@
 """``--map`` and ``--gain`` when every file is a jointid MCAP log are refused in one line
 naming the flags and the log: ``jointid fit run.mcap --gain 2`` and ``--map q=foo`` ran the
 fit with them silently ignored (the log's own channels and joint-side torque). With a CSV or
-MAT file among the inputs or the validation files they still apply to those."""
+MAT file among the inputs or the validation files they still apply to those. And ``--joint``
+contradicting a log's own joint kind (its metadata) is refused, not obeyed in silence."""
 
 from __future__ import annotations
 
@@ -63,3 +64,13 @@ def test_options_still_apply_to_a_csv_validation_file(log):
                         "--map", "t=time,q=pos,tau=cmd", "--gain", "2")
     assert rc == 0, err
     assert "Validation files" in out
+
+
+def test_joint_kind_contradicting_the_log_is_one_line(log):
+    # the log's metadata says revolute: fitted as prismatic it gave a 60 % error in silence
+    rc, out, err = _fit(log.parent, log.name, "--joint", "prismatic")
+    lines = err.strip().splitlines()
+    assert rc == 2 and len(lines) == 1, err
+    assert log.name in lines[0] and "revolute" in lines[0] and "--joint" in lines[0], lines[0]
+    rc, out, err = _fit(log.parent, log.name, "--joint", "revolute")  # agreeing: fitted
+    assert rc == 0, err
