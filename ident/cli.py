@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -213,12 +214,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _qs(value: str) -> float | str:
+    """``--q-s``: 'scan' or a finite velocity > 0 [rad/s or m/s] (one line naming the flag
+    otherwise, as ``--robot`` says it)."""
     if value.strip().lower() == "scan":
         return "scan"
     try:
-        return float(value)
+        v = float(value)
     except ValueError:
         raise DataError(f"--q-s {value!r}: expected a number [rad/s] or 'scan'") from None
+    if not (math.isfinite(v) and v > 0):
+        raise DataError(f"--q-s {value!r}: expected a number > 0 [rad/s] or 'scan'")
+    return v
 
 
 def estimator_from_args(args: argparse.Namespace) -> JointModel:
@@ -283,9 +289,64 @@ def check_numbers(args: argparse.Namespace) -> None:
             raise DataError(f"{flag} {v:g}: expected {expected}")
 
 
+def _check_output(flag: str, path: Path | None, directory: bool) -> None:
+    """Refuse an output path that cannot be written, before anything is fitted: the
+    directory ``--report`` names (created if absent) or the file ``--json`` names (its
+    folder created if absent).
+
+    Raises
+    ------
+    DataError
+        One line naming the flag, the path and what is in the way.
+    """
+    if path is None:
+        return
+    if path.exists() and path.is_dir() != directory:
+        what = "a file" if directory else "a directory"
+        raise DataError(f"{flag} {path}: is {what}, expected "
+                        f"{'a directory' if directory else 'a file name'}")
+    folder = path if directory else path.parent
+    anc = folder
+    while not anc.exists() and anc != anc.parent:
+        anc = anc.parent
+    if anc.exists() and not anc.is_dir():
+        raise DataError(f"{flag} {path}: {anc} is a file, not a directory")
+    if not os.access(anc, os.W_OK | os.X_OK):
+        raise DataError(f"{flag} {path}: {anc} is not writable")
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """:func:`_check_output` of ``--report`` (a directory) and ``--json`` (a file)."""
+    _check_output("--report", getattr(args, "report", None), True)
+    _check_output("--json", getattr(args, "json", None), False)
+
+
+def check_foreign_options(args: argparse.Namespace) -> None:
+    """Refuse ``--map`` and ``--gain`` when every file (inputs and ``--validate``) is a
+    jointid MCAP log: they apply to CSV and MAT files only, and were ignored in silence (an
+    MCAP log has its own channels and joint-side torque [N m] or force [N]).
+
+    Raises
+    ------
+    DataError
+        One line naming the flags and the logs.
+    """
+    files = [str(f) for f in [*args.inputs, *(getattr(args, "validate", None) or [])]]
+    if not files or not all(f.lower().endswith(".mcap") for f in files):
+        return
+    used = [flag for flag, v in (("--map", getattr(args, "map", None)),
+                                 ("--gain", getattr(args, "gain", None))) if v]
+    if used:
+        logs = files[0] + (f" and {len(files) - 1} more" if len(files) > 1 else "")
+        raise DataError(f"{' and '.join(used)}: apply to CSV and MAT files only; {logs}: "
+                        "jointid MCAP log(s), with their own channels and joint-side torque")
+
+
 def run(args: argparse.Namespace) -> int:
     """Execute ``jointid fit``; returns the exit code."""
     check_numbers(args)
+    check_outputs(args)
+    check_foreign_options(args)
     # the one vocabulary (ident.vocab): "new" is a deprecated "paper", "ols" a deprecated "ls"
     args.model = model_name(args.model, extra=("both",))
     if args.method is not None:
@@ -295,6 +356,7 @@ def run(args: argparse.Namespace) -> int:
     for attr, flag, hint in _ROBOT_ONLY:
         if getattr(args, attr, None) not in (None, False):
             raise DataError(f"{flag}: applies to --robot fits only{hint}")
+    _qs(args.q_s)  # refused before the files are read
     mapping = parse_mapping(args.map)
     gain: float | str | None = args.gain
     load_kw: dict[str, Any] = dict(

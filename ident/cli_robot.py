@@ -110,6 +110,21 @@ def load_runs(robot: Robot, data: Sequence[str | Path] | str | Path | Sequence[R
                            mapping=mapping, q_unit=q_unit)
 
 
+def _check_ratio_separable(runs: Sequence[RawRobotRun]) -> None:
+    """Refuse the payload ratio M_ae/M_aw (eq. 35) when every run carries the same payload:
+    its torque is then a combination of the last link's columns in every run, the ratio not
+    separable from them (the fit ended in 'parameters not identifiable (cond 2.9e+300)')."""
+    seen = {(float(r.payload.mass), r.payload.arm_m,
+             tuple(np.round(np.asarray(r.payload.com, dtype=float), 12))) for r in runs}
+    if len(seen) == 1 and next(iter(seen))[0] > 0:
+        mass = next(iter(seen))[0]
+        raise DataError(
+            f"payload ratio M_ae/M_aw (eq. 35): every run carries the same payload ({mass:g} "
+            f"kg; {', '.join(str(r.source) for r in runs[:3])}"
+            f"{' ...' if len(runs) > 3 else ''}), so it is not separable from the robot's "
+            "parameters: give runs with another payload (or none), or --payload known")
+
+
 def fit_files(
     robot: Robot,
     inputs: Sequence[str | Path] | str | Path | Sequence[RawRobotRun],
@@ -278,6 +293,8 @@ def fit_robot(
         # the instruments' columns also for the IDIM-IV check of the honest sigma
         iv_cols = method == "iv" or (sigma_blocks > 0 and all(r.q_ref is not None for r in runs))
         sig, dq_min = design_runs(runs, reg, design, instruments=iv_cols)
+        if payload == "ratio":  # after the payloads were placed on the robot (design_runs)
+            _check_ratio_separable(runs)
         design = replace(design, dq_min=dq_min)
         val = design_runs(validation, reg, design)[0] if validation else None
         settings: dict[str, Any] = design.as_dict()
@@ -310,6 +327,8 @@ def fit_robot(
         if dq_min is None:
             dq_min = DQ_MIN_FRACTION * float(np.max(np.abs(sig.dq)))
         est_dq_min = dq_min
+        if payload == "ratio":
+            _check_ratio_separable(runs)
     val_all = val
     if val is not None:
         # the validation error is taken on the samples the fit would use (as the single-joint

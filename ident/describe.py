@@ -39,7 +39,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import optimize
@@ -337,6 +337,19 @@ def _sinusoid_share(f: np.ndarray, x: np.ndarray) -> tuple[float, float, float]:
 
 
 # ----------------------------------------------------------------------------- describe
+#: A revolute joint's units in the sentences and a prismatic joint's: longest first.
+_PRISMATIC_UNITS = ((re.compile(r"\bN m\b"), "N"), (re.compile(r"\brad/s\^2\b"), "m/s^2"),
+                    (re.compile(r"\brad/s\b"), "m/s"), (re.compile(r"\brad\b"), "m"))
+
+
+def prismatic_units(sentence: str) -> str:
+    """A sentence written in a revolute joint's units ([rad], [rad/s], [rad/s^2], [N m]) in
+    a prismatic joint's ([m], [m/s], [m/s^2], [N])."""
+    for pat, unit in _PRISMATIC_UNITS:
+        sentence = pat.sub(unit, sentence)
+    return sentence
+
+
 def describe_group(
     group: Group,
     coef: np.ndarray,
@@ -348,8 +361,29 @@ def describe_group(
     tau_out: Prediction | None = None,
     folds: np.ndarray | None = None,
     min_gain: float = 0.05,
+    revolute: bool = True,
 ) -> Description:
-    """Name (with parameters ± 2σ) or describe a selected group.
+    """Name (with parameters ± 2σ) or describe a selected group (its sentence in the
+    joint's units: ``revolute`` False, a prismatic joint's [m], [m/s], [N]); the parameters
+    as :func:`_describe_group` gives them."""
+    d = _describe_group(group, coef, y, W, values, reference=reference, tau_out=tau_out,
+                        folds=folds, min_gain=min_gain)
+    return d if revolute else replace(d, sentence=prismatic_units(d.sentence))
+
+
+def _describe_group(
+    group: Group,
+    coef: np.ndarray,
+    y: np.ndarray,
+    W: np.ndarray,
+    values: Mapping[str, np.ndarray],
+    *,
+    reference: Mapping[str, float] | None = None,
+    tau_out: Prediction | None = None,
+    folds: np.ndarray | None = None,
+    min_gain: float = 0.05,
+) -> Description:
+    """Name (with parameters ± 2σ) or describe a selected group, in a revolute joint's units.
 
     Parameters
     ----------

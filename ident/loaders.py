@@ -1421,6 +1421,10 @@ def load_experiment(
     _, rev_u = _q_unit(q_unit, rev, str(p))
     run = read_file(p, None, gains=None if gain is None else [gain], mapping=mapping,
                     q_unit=q_unit, axis=axis)
+    if rev is not None and run.revolute is not None and rev != run.revolute:
+        kinds = {True: "revolute", False: "prismatic"}
+        raise DataError(f"{p}: the file says its joint is {kinds[bool(run.revolute)]}, the "
+                        f"joint kind given (--joint) is {kinds[rev]}")
     if rev is None:
         rev = run.revolute if run.revolute is not None else rev_u
     return Experiment.of_run(run, True if rev is None else rev)

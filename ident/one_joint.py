@@ -245,6 +245,7 @@ class OneJointProblem:
                 tau_keep = self._tau_keep(sig, float(tau_min))
                 sig = replace(sig, columns=replace(sig.columns, keep=sig.columns.keep
                                                    & tau_keep))
+            self._check_rows(sig)
             if paper and sign_check and first is None:
                 self.first = RobotModel(self.reg, "usual", self.method, base=self.base,
                                         payload_ratio=self._ratio, eliminate=True,
@@ -265,6 +266,28 @@ class OneJointProblem:
         except RobotIdentError as err:
             raise DataError(str(err)) from None
         self.signals = sig
+
+    def _check_rows(self, sig: RobotSignals) -> None:
+        """Refuse, in one line, experiments that leave the robot fits nothing to solve: a
+        joint that never moves (its position constant in every experiment: every column
+        but the gravity and offset ones is zero, and those are one constant) or fewer
+        selected rows than the usual model's parameters (the design's own check,
+        :func:`ident.preprocess.build_design`, runs after the first usual fit).
+
+        Raises
+        ------
+        DataError
+            Naming the files, or the rows left and the parameters.
+        """
+        if all(np.ptp(run.q) == 0 for run in self.runs):
+            names = ", ".join(str(run.source) for run in self.runs)
+            raise DataError(f"{names}: the joint does not move (q constant at "
+                            f"{float(self.runs[0].q[0, 0]):.6g}): nothing to identify")
+        rows = int(np.sum(sig.columns.keep))
+        n_par = len(usual_model(self.revolute, payload=self.has_payload).names())
+        if rows <= n_par:
+            raise DataError(f"{rows} samples left after selection for {n_par} parameters; "
+                            "lower dq_min/tau_min or the decimation")
 
     def _tau_keep(self, sig: RobotSignals, tau_min: float) -> np.ndarray:
         """The rows (n, 1) not within the guard of a full-rate |tau_f| < ``tau_min``, of the

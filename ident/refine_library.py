@@ -202,7 +202,7 @@ def library_step(
             X = np.column_stack((W, g.columns(values)))
             c = np.linalg.lstsq(X, y, rcond=None)[0][W.shape[1]:]
         desc = describe_group(g, c, y, W, values, reference=reference, tau_out=tau_out,
-                              folds=folds, min_gain=min_gain)
+                              folds=folds, min_gain=min_gain, revolute=bool(s.revolute))
         if desc.term is not None:
             cand, generic, n_hyper = desc.term, False, len(desc.term.hyper_names)
         elif all(v in LIBRARY_VARIABLES or v in (others or {}) for v in g.variables):
