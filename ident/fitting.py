@@ -931,8 +931,9 @@ def fit_models(
             raise DataError("fit_models: like= is a report on other data "
                             f"({', '.join(like.sources) or 'signals'})")
         # the settled preprocessing and the sign check's load model (independent of q_s)
-        pre.update({k: v for k, v in like.settings.items() if k in pre or k == "load_model"})
-        notes += [n for n in like.notes if n.startswith("sign check skipped")]
+        pre.update({k: v for k, v in like.settings.items()
+                    if k in pre or k in ("load_model", "sign_check")})
+        notes += [n for n in like.notes if n.startswith("sign check")]
     # the fit is the robot model's (ident.one_joint): the joint as a 1-dof robot, the
     # columns chain (which settles the cut-off, decimation and stiction threshold from the
     # data), the sign check of a first usual fit
@@ -947,19 +948,26 @@ def fit_models(
     pre.update(cutoff_hz=st.cutoff_hz, decimation=st.decimation, trim=st.trim,
                guard=st.guard, dq_min=st.dq_min, dq_min_rel=None)
     if like is None and sign_check and "paper" in models:
-        if problem.sign_checked and problem.first is not None:
-            # the same rows in the design: the load model of the robot's first usual fit
+        if (problem.sign_checked or problem.model_quadrant) and problem.first is not None:
+            # the same rows and quadrants in the design: the load model of the robot's first
+            # usual fit (the check skipped: the quadrant only, every row kept)
             lib0 = usual_model(s.revolute, payload=has_payload)
             inner = Library(*[t for t in lib0.terms() if isinstance(t, RigidBody | Payload)])
             first = problem.load_values()
             pre["load_model"] = (inner, np.array([first.get(n, 0.0) for n in inner.names()]))
-        else:
-            notes.extend(problem.notes)
+            if problem.model_quadrant:
+                pre["sign_check"] = False
+            elif problem.sign_kept < 1.0:
+                notes.append(f"sign check: {100 * (1 - problem.sign_kept):.1f} % of the samples "
+                             "left out of both models (sign(tau) != sign(tau_out) of a first "
+                             "usual fit: there eq. 26's sign(tau dq) is not the quadrant)")
+        notes.extend(problem.notes)
     # the single-joint design of both models on the chain's full-rate signals (no second
     # filtering): the paper model's P+/P- columns from the model quadrant
     # sign(tau_out_hat dq), not from tau, when the sign check applied
     full = problem.design(_combined_library(models, qs0, s.revolute, has_payload), s,
-                          tau_min=tau_min, load_model=pre.get("load_model"))
+                          tau_min=tau_min, load_model=pre.get("load_model"),
+                          sign_check=pre.get("sign_check", True))
     vmax = float(np.max(np.abs(full.signals.dq)))
 
     scan: list[tuple[float, float]] = []
@@ -1026,7 +1034,8 @@ def fit_models(
                 paper="paper" in models, torque_delay=float(torque_delay),
                 **{k: pre[k] for k in given},
                 tau_min=tau_min, sign_check=False, first=problem.first,
-                first_checked="load_model" in pre)
+                first_checked="load_model" in pre and pre.get("sign_check", True),
+                model_quadrant="load_model" in pre)
         except DataError as exc:  # too few samples without payload
             notes.append(f"Table IV without payload: {exc}")
             p0 = None

@@ -196,6 +196,9 @@ class OneJointProblem:
         load model of all the experiments on those without payload); its sign check is
         applied without the ``SIGN_CHECK_MIN_KEPT`` test (``first_checked``: whether it was
         applied on the data it was fitted on).
+    model_quadrant : bool
+        With ``first`` and not ``first_checked``: its load decides the quadrant, every row
+        kept (the sign check was skipped on the data it was fitted on).
     tau_min : float or None
         Rows within the guard of a full-rate sample with |tau| < tau_min (the low-passed
         torque) are left out too, as :func:`ident.preprocess.build_design` does.
@@ -211,6 +214,11 @@ class OneJointProblem:
         The columns chain's signals, after the sign check.
     first : RobotModel or None
     sign_checked : bool
+    model_quadrant : bool
+        The sign check was skipped (it would keep too few rows): every row is kept and the
+        first usual fit's load decides the quadrant, sign(tau_out_hat dq).
+    sign_kept : float
+        Share of the rows the sign check keeps (1 when it was not made).
     notes : list of str
         The sign check skipped.
     """
@@ -218,6 +226,7 @@ class OneJointProblem:
     def __init__(self, exps: Sequence[Experiment], *, revolute: bool, has_payload: bool,
                  references: list[np.ndarray] | None, paper: bool, sign_check: bool = True,
                  first: RobotModel | None = None, first_checked: bool = True,
+                 model_quadrant: bool = False,
                  tau_min: float | None = None, **settings: float | None) -> None:
         self.revolute, self.has_payload = revolute, has_payload
         self.iv = references is not None
@@ -233,6 +242,10 @@ class OneJointProblem:
         self.notes: list[str] = []
         self.first = first
         self.sign_checked = False
+        # the quadrant from the first fit's load without the sign check's rows (the check
+        # skipped; or given, with ``first``, for Table IV's runs without payload)
+        self.model_quadrant = bool(model_quadrant and first is not None)
+        self.sign_kept = 1.0  # share of the rows the sign check keeps (1: not made)
         self._products: dict[float, RobotSignals] = {}
         self._products_cache: dict = {}  # the products' part without q_s (a scan)
         try:
@@ -256,13 +269,22 @@ class OneJointProblem:
                     keep = out.columns.keep & tau_keep
                     out = replace(out, columns=replace(out.columns, keep=keep))
                     kept = keep.sum(axis=0) / np.maximum(sig.columns.keep.sum(axis=0), 1)
+                self.sign_kept = float(kept[0])
                 if kept[0] >= SIGN_CHECK_MIN_KEPT or first is not None:
                     sig, self.sign_checked = out, True
                 else:
+                    # every row kept, the quadrant still the model's: where sign(tau) and
+                    # sign(tau_out) differ that often, eq. 26's sign(tau dq) is not the
+                    # quadrant (a joint whose friction exceeds its load: sign(tau) follows
+                    # dq, every row would read "motor")
+                    self.model_quadrant = True
                     self.notes.append(
                         f"sign check skipped: it would keep only {100 * kept[0]:.0f} % of the "
-                        "samples (tau_out near zero over much of the data: no gravity or "
-                        "payload load), so sign(P) = sign(tau dq) of eq. 26 is used as is")
+                        "samples (sign(tau) != sign(tau_out) of a first usual fit that often: "
+                        "the load near zero, or the friction above it, over much of the data); "
+                        "every sample is kept and the quadrant sign(P) is that of the first "
+                        "fit's load, sign(tau_out_hat dq) (eq. 26's sign(tau dq) is not the "
+                        "quadrant where the friction exceeds the load)")
         except RobotIdentError as err:
             raise DataError(str(err)) from None
         self.signals = sig
@@ -310,16 +332,18 @@ class OneJointProblem:
         return full
 
     def design(self, library: Term, signals: Signals, *, tau_min: float | None = None,
-               load_model: tuple[Term, np.ndarray] | None = None) -> Design:
+               load_model: tuple[Term, np.ndarray] | None = None,
+               sign_check: bool = True) -> Design:
         """The single-joint :class:`~ident.preprocess.Design` of ``library`` on these
         experiments (``signals``: them concatenated), built on the columns chain's full-rate
         signals with its settings: :func:`ident.preprocess.build_design`'s result with those
-        settings, without filtering the data a second time (``tau_min``, ``load_model`` as
-        there). What reads a design -- Table III's bands, the plots, the refinement -- sees
-        the samples the robot model was fitted on."""
+        settings, without filtering the data a second time (``tau_min``, ``load_model``,
+        ``sign_check`` as there). What reads a design -- Table III's bands, the plots, the
+        refinement -- sees the samples the robot model was fitted on."""
         st = self.settings
         return design_on_full_rate(library, signals, self.full_rate(), st, st.dq_min,
-                                   tau_min=tau_min, load_model=load_model)
+                                   tau_min=tau_min, load_model=load_model,
+                                   sign_check=sign_check)
 
     def load_values(self) -> dict[str, float]:
         """The first usual fit's load parameters by the single-joint names (J, MX, MY,
@@ -335,7 +359,7 @@ class OneJointProblem:
         """The load deciding the quadrants: the first fit's tau_out_hat after the sign
         check, else the measured quadrant sign(tau dq) (eq. 26) -- the filtered torque of the
         full-rate signals :func:`~ident.robot.design.products_columns` forms."""
-        if self.sign_checked and self.first is not None:
+        if (self.sign_checked or self.model_quadrant) and self.first is not None:
             return self.first.load_torque(s)
         return s.tau
 

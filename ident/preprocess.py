@@ -347,6 +347,7 @@ def build_design(
     dq_min_rel: float | None = None,
     torque_delay: float = 0.0,
     reference: np.ndarray | None = None,
+    sign_check: bool = True,
 ) -> Design:
     """Filter, differentiate, build W, decimate in parallel and select (see module doc).
 
@@ -385,7 +386,13 @@ def build_design(
         payload terms with the values of a first fit of the usual model). Samples where
         sign(tau) differs from sign(tau_out_hat) are dropped (with the guard): there the
         proxy sign(P) = sign(tau dq) of eq. 26 is not sign(P_out) (the friction exceeds
-        the load, the paper's "stiction area" rectangle of Fig. 2.b).
+        the load, the paper's "stiction area" rectangle of Fig. 2.b). The quadrant of the
+        paper model's columns is then sign(tau_out_hat dq) (the same on the kept rows).
+    sign_check : bool
+        With ``load_model``: drop those samples (default). False: keep them; the load model
+        only decides the quadrant (where the sign check would keep too few samples: a joint
+        whose friction exceeds its load over much of the motion, where eq. 26's sign(tau dq)
+        is not the quadrant).
     torque_delay : float
         Instant the torque of sample k refers to, after the position sample, in samples
         (0 <= d < 1); q is interpolated there (step 0 of the module doc). 0 (default)
@@ -434,7 +441,7 @@ def build_design(
     fulls, dq_min = filter_chain(experiments, dt, settings, instruments=reference is not None,
                                  dq_min_rel=dq_min_rel)
     return design_on_full_rate(lib, signals, fulls, settings, dq_min, tau_min=tau_min,
-                               load_model=load_model)
+                               load_model=load_model, sign_check=sign_check)
 
 
 def check_reference(reference: np.ndarray, signals: Signals,
@@ -475,6 +482,7 @@ def design_on_full_rate(
     *,
     tau_min: float | None = None,
     load_model: tuple[Term, np.ndarray] | None = None,
+    sign_check: bool = True,
 ) -> Design:
     """The design of ``library`` on experiments already filtered at full rate: the second
     half of :func:`build_design` (columns, parallel decimation, selection;
@@ -486,7 +494,7 @@ def design_on_full_rate(
     :func:`build_design`'s with the same settings, without filtering the data again. With
     ``fulls`` carrying the reference's acceleration (``ref_ddq``) it has the IDIM-IV
     instruments. ``dq_min`` [rad/s] is the resolved stiction threshold; ``tau_min``,
-    ``load_model`` as in :func:`build_design`.
+    ``load_model``, ``sign_check`` as in :func:`build_design`.
 
     Raises
     ------
@@ -525,7 +533,7 @@ def design_on_full_rate(
                 zrows += _instrument_rows(term.columns(zfull).T, c, tsl.start)
         made.append((sub, full, zfull, [j for j, _ in zrows]))
         rows = [cols, np.stack([r for _, r in zrows])] if zrows else [cols]
-        bad = _rejected(full, tau_min, load_model)
+        bad = _rejected(full, tau_min, load_model if sign_check else None)
         return rows, None if bad is None else bad[:, None]
 
     chained = chain_blocks(fulls, settings, dq_min, columns)

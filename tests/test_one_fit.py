@@ -77,8 +77,9 @@ def _assert_same(report, eliminate: bool = True, threshold_pct: float | None = N
 
 
 def _sign_checked(report) -> bool:
-    """Whether the sign check's rows (the first usual fit's load model) were applied."""
-    return "load_model" in report.settings
+    """Whether the sign check's rows (the first usual fit's load model) were applied (the
+    check skipped: the load model decides the quadrant only, ``sign_check`` False)."""
+    return "load_model" in report.settings and report.settings.get("sign_check", True)
 
 
 def _as_fit(m: IdentModel) -> SimpleNamespace:
@@ -120,8 +121,8 @@ def test_elimination_is_fit_models(campaign):
 
 def test_emps_is_fit_models():
     """The real EMPS data (prismatic, no payload): the reference script's settings (no sign
-    check, every sample) and the defaults (the sign check skipped with its note), the
-    exponential terms eliminated."""
+    check, every sample) and the defaults (the sign check skipped with its note: every
+    sample, the quadrant of the first usual fit's load), the exponential terms eliminated."""
     d = shared_path("data", "emps")
     exp = load_experiment(d / "DATA_EMPS.mat", mapping={"q": "qm", "tau": "vir"},
                           gain="gtau", joint="prismatic")

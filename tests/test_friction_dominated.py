@@ -1,0 +1,75 @@
+"""A friction-dominated joint (found by a stranger's sweep): the dry friction (c_m = 60 N m)
+is three times the gravity load (MX g = 20 N m), so sign(tau) follows the velocity and
+differs from sign(tau_out) on 39 % of the samples. The sign check would keep too few rows and
+is skipped; eq. 26's proxy sign(tau dq) then put nearly every row in the motor quadrant
+(c_m 52.8 against 60, -168 sigma; b_m 0.04 against 0.24; the refinement then added a spring
+that does not exist). Now the quadrant is the first usual fit's load's, sign(tau_out_hat dq),
+every row kept (the note says so), as the robot path decides it.
+
+What remains (stated in the note of the change, docs/identification.md): the Coulomb and
+Stribeck terms keep a bias of a few percent (c_m 59.0, c_g 46.1, d_m 22, d_g 24 against 60, 45,
+25, 20; 13 to 24 sigma), where the estimated load is near zero and its sign is uncertain; the
+load-dependent terms a, b and F_V are within their sigma.
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+
+import pytest
+from example_campaign import ROOT
+
+from daq.protocol.control import ControllerGains
+from ident.fitting import fit_models
+from ident.loaders import make_experiment
+from sim_drivers.offline import simulate
+from sim_drivers.plant_config import load_plant
+from trajectories.plan import plan_campaign
+from trajectories.robot_campaign import RobotCampaign
+
+#: The plant's values changed from the default (a light arm, strong dry friction).
+FRICTION_DOMINATED = {"J": 3.0, "MX": 2.0, "MY": 0.3, "c_m": 60.0, "d_m": 25.0, "c_g": 45.0,
+                      "d_g": 20.0, "F_V": 20.0, "tau_off": 5.0}
+TRUTH = {**FRICTION_DOMINATED, "a_m": 1.03, "a_g": 0.97, "b_m": 0.24, "b_g": 0.25}
+
+
+@pytest.fixture(scope="module")
+def setup(tmp_path_factory):
+    txt = (ROOT / "sim_drivers" / "data" / "plant_default.toml").read_text()
+    for k, v in FRICTION_DOMINATED.items():
+        txt, n = re.subn(rf"^{k} = [-0-9.]+", f"{k} = {v}", txt, flags=re.M)
+        assert n == 1, k
+    path = tmp_path_factory.mktemp("fric") / "plant.toml"
+    path.write_text(txt)
+    plant = load_plant(path)
+    for k in ("a_m", "a_g", "b_m", "b_g"):  # the default's, kept
+        assert getattr(plant.friction, k) == pytest.approx(TRUTH[k])
+    with open(ROOT / "examples" / "campaign.toml", "rb") as fh:
+        d = tomllib.load(fh)
+    d["control"]["feedforward"].update(J=3.0, MX=2.0, Fc=60.0, Fv=20.0)
+    camp = RobotCampaign.from_dict(d, "friction-dominated")
+    return plant, plan_campaign(camp), ControllerGains(**camp.gains_kwargs())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 21])
+def test_quadrant_from_the_model_where_the_sign_check_is_skipped(setup, seed):
+    plant, plan, gains = setup
+    runs = [simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
+                     payload_arm=p.arm_m, seed=seed + i) for i, p in enumerate(plan.payloads)]
+    exps = [make_experiment(f"p{i}.csv", r.t, r.q, r.tau_ref, payload_mass=p.mass_kg,
+                            payload_arm=p.arm_m)
+            for i, (p, r) in enumerate(zip(plan.payloads, runs, strict=True))]
+    rep = fit_models(exps, ("paper",), table_iv=False)
+    note = [n for n in rep.notes if n.startswith("sign check skipped")]
+    assert note and "sign(tau_out_hat dq)" in note[0], rep.notes
+    m = rep.models["paper"]
+    # the load-dependent terms and the viscous friction within 3 sigma of the truth
+    for n in ("a_m", "a_g", "b_m", "b_g", "F_V"):
+        assert abs(m.coef_[n] - TRUTH[n]) < 3 * m.std_[n], (n, m.coef_[n], m.std_[n])
+    # the dry friction within 3 % (eq. 26's proxy: c_m 12 % low)
+    for n in ("c_m", "c_g"):
+        assert abs(m.coef_[n] / TRUTH[n] - 1) < 0.03, (n, m.coef_[n])
+    # eq. 26's proxy gave 3.9 % (the quadrants of the motor and generator rows mixed up)
+    assert m.rel_error_ < 0.03
