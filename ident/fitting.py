@@ -999,10 +999,22 @@ def fit_models(
     robot_signals: dict[str, RobotSignals] = {}
     vdesigns: dict[str, Design] = {}
     vfull = _combined(models, qs0, sv, has_payload, pre) if sv is not None else None
+    failed: list[str] = []
     for name in models:
         lib, d = part(full, name, has_payload, qs_val)
-        m = _fitted(lib, name, problem.fit(name, qs_val, eliminate=eliminate,
-                                           threshold_pct=threshold_pct))
+        try:
+            m = _fitted(lib, name, problem.fit(name, qs_val, eliminate=eliminate,
+                                               threshold_pct=threshold_pct))
+        except DataError as exc:
+            if len(models) == 1:
+                raise
+            # one of several models cannot be identified on these data: say so, keep the
+            # others (the data are not bad, they do not excite that model; as jointid fit
+            # --robot does)
+            why = str(exc).removeprefix(f"{name} model: ")
+            failed.append(f"{name} model: {why}")
+            notes.append(f"{name} model: not fitted: {why}")
+            continue
         if m.result_.m != len(d):
             raise DataError(f"{name} model: the robot fit has {m.result_.m} rows, the design "
                             f"{len(d)}: not the same samples")
@@ -1019,6 +1031,8 @@ def fit_models(
         if identifiable:
             notes.append(f"{name} model: not identifiable on these data: {', '.join(identifiable)}")
 
+    if not fitted:
+        raise DataError("; ".join(failed))
     t4 = None
     exp_ids = np.unique(s.experiment)
     no_payload_ids = np.unique(s.experiment[s.payload_mass == 0])
@@ -1039,13 +1053,17 @@ def fit_models(
         except DataError as exc:  # too few samples without payload
             notes.append(f"Table IV without payload: {exc}")
             p0 = None
-        for name in models:
+        for name in fitted:
             t4["with_payloads"][name] = fitted[name].rel_error_
-            t4["without_payload"][name] = (
-                p0.fit(name, qs_val, eliminate=eliminate,
-                       threshold_pct=threshold_pct).result.rel_error
-                if p0 is not None else None
-            )
+            try:
+                t4["without_payload"][name] = (
+                    p0.fit(name, qs_val, eliminate=eliminate,
+                           threshold_pct=threshold_pct).result.rel_error
+                    if p0 is not None else None
+                )
+            except DataError as exc:  # that model not identifiable without the payloads
+                notes.append(f"Table IV without payload, {name} model: {exc}")
+                t4["without_payload"][name] = None
     return FitReport(
         models=fitted,
         designs=designs,

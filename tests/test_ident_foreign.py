@@ -246,3 +246,26 @@ def test_kuka_a1_inertia_positive(kuka_fits):
     assert par["J"]["value"] > 609 and par["J"]["rel_std_pct"] < 10
     assert par["F_V"]["value"] > 0 and par["F_C"]["value"] > 0
     assert u["rel_error"] < 0.20
+
+
+def test_kuka_a2_paper_model_not_identifiable_keeps_the_usual_one():
+    """Axis A2 (index 1): its predicted load keeps one sign, so the paper model's c_m, c_g,
+    d_g and the offset are dependent on its rows and that model cannot be fitted. With both
+    models asked the usual one is still fitted and reported (a note says why the paper one
+    is not, once); before, the whole fit ended in one error and the usual result was lost.
+    The paper model alone still gives that error."""
+    from ident import DataError
+    from ident.fitting import fit_models
+
+    kw = dict(mapping=_kuka_map(1), gain="para.u[1]", q_unit="deg")
+    fit = load_experiments([_kuka("A")], **kw)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rep = fit_models(fit, ("usual", "paper"), cutoff_hz=5.0, decimation=4)
+        assert list(rep.models) == ["usual"]
+        note = [n for n in rep.notes if n.startswith("paper model: not fitted: ")]
+        assert len(note) == 1 and "not identifiable" in note[0]
+        assert "paper model: paper model" not in note[0]
+        assert rep.to_json()["models"]["usual"]["rel_error"] > 0
+        with pytest.raises(DataError, match="not identifiable"):
+            fit_models(fit, ("paper",), cutoff_hz=5.0, decimation=4)
