@@ -362,12 +362,15 @@ def describe_group(
     folds: np.ndarray | None = None,
     min_gain: float = 0.05,
     revolute: bool = True,
+    load_dependent: bool = False,
 ) -> Description:
     """Name (with parameters ± 2σ) or describe a selected group (its sentence in the
     joint's units: ``revolute`` False, a prismatic joint's [m], [m/s], [N]); the parameters
-    as :func:`_describe_group` gives them."""
+    as :func:`_describe_group` gives them. ``load_dependent``: the model already has the
+    load-dependent dry friction of eq. 24 (the paper model, or a step that added it), so
+    the group is not named ``quadrant_load_velocity`` (its columns would repeat the model's)."""
     d = _describe_group(group, coef, y, W, values, reference=reference, tau_out=tau_out,
-                        folds=folds, min_gain=min_gain)
+                        folds=folds, min_gain=min_gain, load_dependent=load_dependent)
     return d if revolute else replace(d, sentence=prismatic_units(d.sentence))
 
 
@@ -382,6 +385,7 @@ def _describe_group(
     tau_out: Prediction | None = None,
     folds: np.ndarray | None = None,
     min_gain: float = 0.05,
+    load_dependent: bool = False,
 ) -> Description:
     """Name (with parameters ± 2σ) or describe a selected group, in a revolute joint's units.
 
@@ -408,6 +412,9 @@ def _describe_group(
     reference : mapping, optional
         Current model coefficients; ``F_C`` (Coulomb) scales the "±x %" of a dry-friction
         variation.
+    load_dependent : bool
+        The model has eq. 24's load-dependent dry friction already: no
+        ``quadrant_load_velocity`` form (:func:`describe_group`).
     """
     reference = reference or {}
     # the named forms are scanned on at most ~8000 samples (regular stride)
@@ -507,7 +514,7 @@ def _describe_group(
         term = LoadViscous(tau_out) if tau_out is not None else None
         tried.append(("load_dependent_viscous", share(rss, C),
                       {"p": pars, "s": sent, "t": term}))
-    if group.variables == ("velocity",) and mod == "load_quadrant":
+    if group.variables == ("velocity",) and mod == "load_quadrant" and not load_dependent:
         lq = values["load"] * values["quadrant"]
         adq = np.abs(values["velocity"])
         vmax = float(np.max(adq))

@@ -414,7 +414,10 @@ def refit_found_terms(robot: RobotModel, signals: RobotSignals, terms: Sequence[
     in the one model class). Their columns come from the states and the fit's prediction
     (:func:`ident.robot.design.joint_columns`) unless ``columns`` gives them (a single-joint
     design's, :meth:`ident.fitting.FitReport.refit_found_terms`), the model's own from the
-    rows it was fitted on.
+    rows it was fitted on. As the refinement refits (without elimination), the parameters
+    the fit's elimination held at 0 as not significant are estimated again
+    (``refit_eliminated``): "after" is then the refinement's final fit, "before" the fit as
+    reported.
 
     Parameters
     ----------
@@ -440,8 +443,10 @@ def refit_found_terms(robot: RobotModel, signals: RobotSignals, terms: Sequence[
         does not support).
     """
     try:
+        # as the refinement refits (no elimination): the eliminated parameters estimated
         rec = refit_robot(robot, signals, [(0, t) for t in terms], revolute=[revolute],
-                          columns=columns, instrument_columns=instrument_columns).to_json()
+                          columns=columns, instrument_columns=instrument_columns,
+                          refit_eliminated=True).to_json()
     except (RobotIdentError, DataError) as exc:
         return {"error": str(exc)}
     pars = {}

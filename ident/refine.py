@@ -77,6 +77,10 @@ __all__ = ["GENERIC_MARGIN", "Refinement", "Rejected", "Step", "refine"]
 #: what the best generic basis removes.
 GENERIC_MARGIN = 0.5
 
+#: Effects that are eq. 24's load-dependent dry friction (the paper model's, or a step's): a
+#: model holding one is not offered the library's named form of it again.
+LOAD_DEPENDENT = ("load_dependent", "quadrant_load", "quadrant_load_velocity")
+
 
 # ------------------------------------------------------------------------ scoring
 def _unscaled(design: Design) -> Signals:
@@ -430,7 +434,9 @@ def refine(
             lstep = library_step(cur_design.Y, cur_design.W[:, kept], s, r, tau_out=tau_out,
                                  reference={**cur.coef_, **(reference or {})}, others=other_values,
                                  min_gain=min_gain,
-                                 alpha=alpha)
+                                 alpha=alpha,
+                                 load_dependent=any(t.effect in LOAD_DEPENDENT
+                                                    for t in lib.terms()))
             library_tried.append({"step": k, "tried": lstep.tried_json()})
             if lstep.candidate is not None:
                 e = lstep.candidate

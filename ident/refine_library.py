@@ -138,6 +138,7 @@ def library_step(
     min_gain: float = 0.05,
     alpha: float = 1e-3,
     max_samples: int = MAX_SAMPLES,
+    load_dependent: bool = False,
 ) -> LibraryStep:
     """Run the interaction diagnosis and the library search on the current fit.
 
@@ -164,6 +165,9 @@ def library_step(
         Relative decrease of the held-out error a group must bring.
     alpha : float
         Family-wise level of the interaction diagnosis.
+    load_dependent : bool
+        The model already has eq. 24's load-dependent dry friction
+        (:func:`~ident.describe.describe_group`'s).
     """
     n = y.shape[0]
     stride = max(1, math.ceil(n / max_samples))
@@ -202,7 +206,8 @@ def library_step(
             X = np.column_stack((W, g.columns(values)))
             c = np.linalg.lstsq(X, y, rcond=None)[0][W.shape[1]:]
         desc = describe_group(g, c, y, W, values, reference=reference, tau_out=tau_out,
-                              folds=folds, min_gain=min_gain, revolute=bool(s.revolute))
+                              folds=folds, min_gain=min_gain, revolute=bool(s.revolute),
+                              load_dependent=load_dependent)
         if desc.term is not None:
             cand, generic, n_hyper = desc.term, False, len(desc.term.hyper_names)
         elif all(v in LIBRARY_VARIABLES or v in (others or {}) for v in g.variables):

@@ -79,3 +79,33 @@ def test_terms_on_the_decimated_states_see_the_payload_lever_arm(refined):
     assert "error" not in rec, rec
     ratio = rec["rel_error"]["after"]["all"] / ref.rel_error_final
     assert 0.9 < ratio < 1.1, ratio
+
+
+@pytest.mark.parametrize("iv", [False, True], ids=["ls", "iv"])
+def test_paper_model_with_eliminated_parameters(iv):
+    """The paper model (products form) as the demo fits it: its elimination fixed some
+    parameters at 0 as not significant, while the refinement refits without elimination; the
+    refit estimates them again (``refit_eliminated``), so its result is the refinement's
+    final one -- least squares and IDIM-IV (the design's instruments), on the quick example
+    campaign on the RX130L plant, whose undeclared ripple the refinement finds. "before" is
+    the fit as reported (with its elimination)."""
+    from test_robot_refit_products import _campaign
+
+    from ident.fitting import fit_models
+    from ident.refine import refine
+
+    exps, refs = _campaign(11)
+    rep = fit_models(exps, ("paper",), table_iv=False, references=refs if iv else None)
+    m = rep.models["paper"]
+    assert m.estimator_ == ("iv" if iv else "ls")
+    assert any(why.startswith("not significant") for _, why in m.removed_)
+    R = refine(rep.designs["paper"], m, max_steps=1, vmax=rep.vmax)
+    assert [st.effect for st in R.steps] == ["position_ripple"]
+    rec = rep.refit_found_terms("paper", R.terms, R.final_design)
+    assert rec["rel_error"]["before"]["all"] == pytest.approx(m.rel_error_, rel=1e-9)
+    assert rec["rel_error"]["after"]["all"] == pytest.approx(R.rel_error_final, rel=1e-9)
+    fm = R.final_model
+    pars = rec["parameters"]
+    for n in fm.names_:
+        got = pars[n] if n in pars else pars[f"joint:{n}"]
+        assert abs(got["value"] - fm.coef_[n]) <= 1e-6 * fm.std_[n], n

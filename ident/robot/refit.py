@@ -219,6 +219,7 @@ def refit_robot(
     validation: tuple[RobotSignals, np.ndarray | None, np.ndarray | None] | None = None,
     columns: Sequence[np.ndarray] | None = None,
     instrument_columns: Sequence[np.ndarray] | None = None,
+    refit_eliminated: bool = False,
 ) -> RobotRefit:
     """Refit the n-dof ``model`` with the extra per-joint ``terms`` (module doc).
 
@@ -254,6 +255,11 @@ def refit_robot(
     instrument_columns : sequence of ndarray, optional
         With ``columns`` and IDIM-IV: the terms' instruments, shaped as ``columns`` (e.g.
         the design's Z columns of the terms); default the columns themselves.
+    refit_eliminated : bool
+        Estimate again the parameters the first fit's elimination fixed at 0 as not
+        significant (``removed_`` reasons "not significant ...", the linear forms' single-
+        joint elimination): the refinement refits without elimination. The zero and
+        dependent columns stay at 0. Default False: every parameter the fit held stays held.
 
     Returns
     -------
@@ -326,7 +332,12 @@ def refit_robot(
         names += own
     # X[j]'s columns are in the order of the terms on joint j, as ext_idx[j]
     rows = _rows(model, signals, X, keep, Xz)
-    free = np.array([n not in model.fixed_ for n in names])
+    # held at 0 as the first fit held them; with refit_eliminated, not those its elimination
+    # found not significant (eq. 14-16): they are estimated again, as the refinement's refits
+    # do (no elimination)
+    again = {n for n, why in getattr(model, "removed_", [])
+             if refit_eliminated and why.startswith("not significant")}
+    free = np.array([n not in model.fixed_ or n in again for n in names])
     x0 = np.concatenate([model.coef_, np.zeros(len(names) - nx0)])
     coeffs = _coefficients(model)
     sys = _System(model, rows, ext_idx, coeffs, len(names), names)
