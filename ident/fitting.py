@@ -68,6 +68,7 @@ from .results import (
     removed_json,
 )
 from .robot.design import DQ_MIN_FRACTION
+from .robot.estimate import THIN_QUADRANT
 from .robot.signals import RobotSignals
 from .signals import Signals
 from .terms import Library, Term
@@ -493,6 +494,22 @@ def _fitted(library: Library, name: str, fit: OneJointModel) -> IdentModel:
     m.robot_ = fit.robot
     m.robot_names_ = fit.names
     return m
+
+
+def _one_sign_load(d: Design) -> str | None:
+    """What to say when the load keeps one sign on the paper design's rows (its quadrant,
+    the model's or eq. 26's proxy, times sign(dq)): the motor and the generator rows are then
+    one direction each and c_m, c_g and the offset (d_m, d_g) trade off (section III.B); the
+    elimination would keep a combination under one name. None otherwise."""
+    pos = float(np.mean(d.signals.sign_power * np.sign(d.signals.dq) > 0))
+    if min(pos, 1.0 - pos) >= THIN_QUADRANT:
+        return None
+    return (f"the load tau_out keeps one sign on {100 * max(pos, 1 - pos):.1f} % of the "
+            "samples, so the motor and the generator rows are one direction each: c_m, c_g "
+            "and the offset (and d_m, d_g) cannot be told apart, and their values are "
+            "combinations of them, not the friction of each quadrant (section III.B: a "
+            "trajectory across the position where the gravity torque changes sign, or a "
+            "payload that reverses the load)")
 
 
 def _split(
@@ -1000,14 +1017,19 @@ def fit_models(
     vdesigns: dict[str, Design] = {}
     vfull = _combined(models, qs0, sv, has_payload, pre) if sv is not None else None
     failed: list[str] = []
+    one_sign = None
     for name in models:
         lib, d = part(full, name, has_payload, qs_val)
+        if name == "paper":
+            one_sign = _one_sign_load(d)
         try:
             m = _fitted(lib, name, problem.fit(name, qs_val, eliminate=eliminate,
                                                threshold_pct=threshold_pct))
         except DataError as exc:
+            if name == "paper" and one_sign:
+                exc = DataError(f"{exc}; {one_sign}")
             if len(models) == 1:
-                raise
+                raise exc from None
             # one of several models cannot be identified on these data: say so, keep the
             # others (the data are not bad, they do not excite that model; as jointid fit
             # --robot does)
@@ -1033,6 +1055,8 @@ def fit_models(
 
     if not fitted:
         raise DataError("; ".join(failed))
+    if "paper" in designs and one_sign:
+        notes.append(f"paper model: {one_sign}")
     t4 = None
     exp_ids = np.unique(s.experiment)
     no_payload_ids = np.unique(s.experiment[s.payload_mass == 0])
