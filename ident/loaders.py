@@ -341,6 +341,9 @@ def _constant(table: Mapping[str, object], spec: str, what: str, source: str) ->
     a = resolve_path(table, spec, source)
     if a.size == 0 or not np.all(a == a.flat[0]):
         hint = f" (pick one with an index, e.g. {spec}[0])" if _PATH_RE.match(spec + "[0]") else ""
+        if what.startswith("payload"):  # not one value of it: the runs of two payloads
+            hint = (" (one payload per run: split the file where the payload changes, one "
+                    "file per payload)")
         raise DataError(
             f"{source}: {what} {spec!r} is {_shape_str(a.shape)} values that differ, "
             f"expected a scalar or a constant column{hint}"

@@ -269,3 +269,22 @@ def test_kuka_a2_paper_model_not_identifiable_keeps_the_usual_one():
         assert rep.to_json()["models"]["usual"]["rel_error"] > 0
         with pytest.raises(DataError, match="not identifiable"):
             fit_models(fit, ("paper",), cutoff_hz=5.0, decimation=4)
+
+
+def test_payload_changing_within_a_file_says_split_it(tmp_path):
+    """A payload column whose value changes within the file is two runs in one file: the
+    message says to split it (the generic hint, pick one value with [0], would give part of
+    the samples the wrong payload)."""
+    import scipy.io
+
+    from ident import DataError
+    from ident.loaders import load_experiment
+
+    n = 1000
+    t = np.arange(n) * 1e-3
+    path = tmp_path / "two_runs.mat"
+    scipy.io.savemat(path, {"t": t, "q": np.sin(t), "tau": np.cos(t),
+                            "pm": np.r_[np.zeros(n // 2), np.full(n // 2, 3.0)]})
+    with pytest.raises(DataError, match="split the file where the payload changes") as err:
+        load_experiment(path, mapping={"t": "t", "q": "q", "tau": "tau", "payload_kg": "pm"})
+    assert "[0]" not in str(err.value) and "two_runs.mat" in str(err.value)
