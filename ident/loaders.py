@@ -77,6 +77,8 @@ from .signals import Signals
 from .timing import align_to_torque
 
 __all__ = [
+    "SLOW_PERIOD_S",
+    "SlowSamplingWarning",
     "RawRobotRun",
     "read_file",
     "Experiment",
@@ -132,6 +134,16 @@ _MAX_LISTED = 40
 
 class ResamplingWarning(UserWarning):
     """An experiment was irregularly sampled and has been resampled to a uniform grid."""
+
+
+class SlowSamplingWarning(UserWarning):
+    """An experiment's sampling period exceeds :data:`SLOW_PERIOD_S` (e.g. a time column in
+    milliseconds read as seconds)."""
+
+
+#: Sampling period above which a recording is said to be too slow for dynamic
+#: identification [s] (20 Hz; the project's data: 250 Hz to 1 kHz).
+SLOW_PERIOD_S = 0.05
 
 
 def parse_mapping(items: Sequence[str] | str | None, *,
@@ -725,6 +737,13 @@ def _make_run(source: str, t: np.ndarray, q: np.ndarray, tau: np.ndarray, *,
             f"{source}: gap in the recording at t={t[i]:.6g} s (next sample {d[i]:.6g} s later, "
             f"{d[i] / med:.0f} periods of {med:.6g} s; {n_gaps} gap(s) over {GAP_PERIODS:g} "
             "periods): split the file at the gap into separate experiments")
+    if med > SLOW_PERIOD_S:
+        # dynamic identification differentiates the positions twice: a few hertz cannot
+        # carry it, and a time column in milliseconds read as seconds looks just like this
+        warnings.warn(f"{source}: sampling period {med:.6g} s ({1 / med:.3g} Hz) is slow for "
+                      "dynamic identification (accelerations from the positions need about "
+                      "100 Hz or more); if the time column is in milliseconds, give it in "
+                      "seconds", SlowSamplingWarning, stacklevel=5)
     t, arrays, _ = uniform_grid(t, arrays, source=source, stacklevel=5)
     return RawRobotRun(source=source, t=t - t[0], payload=payload or RobotPayloadData(),
                        revolute=revolute, **arrays)  # type: ignore[arg-type]

@@ -288,3 +288,23 @@ def test_payload_changing_within_a_file_says_split_it(tmp_path):
     with pytest.raises(DataError, match="split the file where the payload changes") as err:
         load_experiment(path, mapping={"t": "t", "q": "q", "tau": "tau", "payload_kg": "pm"})
     assert "[0]" not in str(err.value) and "two_runs.mat" in str(err.value)
+
+
+def test_time_in_milliseconds_is_said(tmp_path):
+    """A CSV whose time column is in milliseconds reads as a 1 Hz recording: it is fitted,
+    but a warning names the file, the rate and the likely cause (it fitted in silence)."""
+    from ident.loaders import SlowSamplingWarning, load_experiment
+
+    n = 2000
+    t_ms = np.arange(n) * 1.0  # 1 kHz in ms
+    q = np.sin(2 * np.pi * 0.5 * t_ms / 1e3)
+    path = tmp_path / "ms.csv"
+    np.savetxt(path, np.column_stack((t_ms, q, np.cos(q))), delimiter=",",
+               header="t,q,tau", comments="")
+    with pytest.warns(SlowSamplingWarning, match=r"ms\.csv: sampling period 1 s .*milli"):
+        load_experiment(path)
+    np.savetxt(path, np.column_stack((t_ms / 1e3, q, np.cos(q))), delimiter=",",
+               header="t,q,tau", comments="")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SlowSamplingWarning)
+        load_experiment(path)  # in seconds: no warning
