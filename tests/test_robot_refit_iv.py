@@ -41,7 +41,6 @@ from __future__ import annotations
 
 import copy
 import functools
-import tomllib
 from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
@@ -49,11 +48,10 @@ from typing import Any
 
 import numpy as np
 import pytest
+from test_robot_refit_products import _campaign
 
-from daq.protocol.control import ControllerGains
 from ident.chain import default_torque_delay
 from ident.fitting import fit_models
-from ident.loaders import make_experiment
 from ident.models import IdentModel
 from ident.one_joint import OneJointProblem
 from ident.refine import refine
@@ -63,10 +61,6 @@ from ident.robot.estimate import RobotModel
 from ident.robot.refit import refit_robot
 from ident.signals import Signals
 from ident.terms import Library, Term
-from sim_drivers.offline import simulate
-from sim_drivers.plant_config import load_plant
-from trajectories.plan import plan_campaign
-from trajectories.robot_campaign import RobotCampaign
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANT = ROOT / "examples" / "plant_rx130l.toml"
@@ -83,20 +77,8 @@ COEF_SIGMA = 0.25
 def _problem():
     """The campaign on the RX130L plant as MCAP runs with references: fit_models' IV report
     (no elimination), its one-joint problem, and the signals each model was fitted on."""
-    with open(ROOT / "examples" / "campaign.toml", "rb") as fh:
-        campaign = RobotCampaign.from_dict(tomllib.load(fh), "examples/campaign.toml").quick()
-    plan = plan_campaign(campaign)
-    plant = load_plant(PLANT)
-    gains = ControllerGains(**campaign.gains_kwargs())
-    exps, refs = [], []
-    for i, p in enumerate(plan.payloads):
-        r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
-                     payload_arm=p.arm_m, seed=SEED + i)
-        ref = plan.reference.q[np.minimum(r.cycle, plan.reference.q.size - 1)]
-        exps.append(make_experiment(f"payload{i}.mcap", r.t, r.q, r.tau_ref, q_ref=ref,
-                                    payload_mass=p.mass_kg, payload_arm=p.arm_m))
-        refs.append(ref)
-    rep = fit_models(exps, NAMES, eliminate=False, table_iv=False)
+    exps, refs = _campaign(SEED)  # the same simulated runs; references: IDIM-IV
+    rep = fit_models(exps, NAMES, eliminate=False, table_iv=False, references=refs)
     prob = OneJointProblem(exps, revolute=rep.revolute, has_payload=True, references=refs,
                            paper=True,
                            torque_delay=default_torque_delay([e.source for e in exps]))
