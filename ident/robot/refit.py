@@ -506,8 +506,7 @@ def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
     if model.quadrant_theta_ is not None:
         theta_q = model.quadrant_theta_
     band = np.asarray(getattr(model, "band_", np.zeros(k)), dtype=float)
-    parts: list[dict[str, list[np.ndarray]]] = [
-        {n: [] for n in ("idx", "V", "pp", "E", "tau", "Vz")} for _ in range(k)]
+    parts = _parts(k)
     iv = Xz is not None
     for r, j, cols, WjT, pj, dqj, tauj, sg, *z in model._fitted_rows(signals, "refit_robot",
                                                                       instruments=iv):
@@ -534,20 +533,7 @@ def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
         if iv:  # the instruments' rows: Wz, pz with the same sign, dq, 1 (as _pass)
             (WzT, pzj), = z
             p["Vz"].append(model._v(WzT, pzj, dqj, np.zeros(dqj.size), sg).T[ok])
-    out = []
-    for j in range(k):
-        p = parts[j]
-        idx = np.concatenate(p["idx"]) if p["idx"] else np.zeros(0, dtype=int)
-        nv = len(model.cols_[j]) + 5
-        out.append(_Rows(idx=idx,
-                         V=np.concatenate(p["V"]) if p["V"] else np.zeros((0, nv)),
-                         pp=np.concatenate(p["pp"]) if p["pp"] else np.zeros(0),
-                         E=np.concatenate(p["E"]) if p["E"] else np.zeros(0),
-                         X=X[j][idx], tau=np.concatenate(p["tau"]) if p["tau"] else
-                         np.zeros(0), experiment=signals.experiment[idx],
-                         Vz=None if not iv else np.concatenate(p["Vz"]) if p["Vz"] else
-                         np.zeros((0, nv)), Xz=None if Xz is None else Xz[j][idx]))
-    return out
+    return _assemble(parts, [len(c) + 5 for c in model.cols_], signals, X, Xz)
 
 
 def _product_rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
@@ -558,33 +544,47 @@ def _product_rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
     :func:`~ident.robot.paper.rows_coefficients`), one quadrant slot (P+ = 1, E = 0): the
     quadrants are in the products already. With ``Xz`` (IDIM-IV) Vz = [u_z, 0], the
     instruments' rows of the fit (``products_rows(..., instruments=True)``)."""
-    k = len(model.joints_)
+    parts = _parts(len(model.joints_))
     iv = Xz is not None
-    parts: list[dict[str, list[np.ndarray]]] = [
-        {n: [] for n in ("idx", "V", "tau", "Vz")} for _ in range(k)]
     for r, j, U, ok, *z in model.products_rows(signals, instruments=iv):
         idx = np.arange(signals.n)[r]
         if keep is not None:
             ok = ok & keep[idx, j]
+        m = int(ok.sum())
         p = parts[j]
         p["idx"].append(idx[ok])
-        p["V"].append(np.concatenate([U[:, ok].T, np.zeros((int(ok.sum()), 1))], axis=1))
+        p["V"].append(np.concatenate([U[:, ok].T, np.zeros((m, 1))], axis=1))
+        p["pp"].append(np.ones(m))
+        p["E"].append(np.zeros(m))
         if iv:
-            p["Vz"].append(np.concatenate([z[0][:, ok].T, np.zeros((int(ok.sum()), 1))],
-                                          axis=1))
+            p["Vz"].append(np.concatenate([z[0][:, ok].T, np.zeros((m, 1))], axis=1))
         p["tau"].append(signals.tau[idx[ok], j])
+    return _assemble(parts, [int(b) + 1 for b in model._bsize], signals, X, Xz)
+
+
+def _parts(k: int) -> list[dict[str, list[np.ndarray]]]:
+    """Per joint, the chunks of its rows' fields (:class:`_Rows`) as a pass collects them."""
+    return [{n: [] for n in ("idx", "V", "pp", "E", "tau", "Vz")} for _ in range(k)]
+
+
+def _assemble(parts: list[dict[str, list[np.ndarray]]], nv: Sequence[int],
+              signals: RobotSignals, X: list[np.ndarray],
+              Xz: list[np.ndarray] | None) -> list[_Rows]:
+    """Each joint's :class:`_Rows` from its collected chunks (``nv[j]``: the width of its V,
+    for a joint without rows), the extra columns ``X`` (and their instruments ``Xz``) on
+    those rows."""
+    def cat(chunks: list[np.ndarray], empty: tuple[int, ...], dtype: type = float
+            ) -> np.ndarray:
+        return np.concatenate(chunks) if chunks else np.zeros(empty, dtype=dtype)
+
     out = []
-    for j in range(k):
-        p = parts[j]
-        idx = np.concatenate(p["idx"]) if p["idx"] else np.zeros(0, dtype=int)
-        nv = int(model._bsize[j]) + 1
-        m = idx.size
-        out.append(_Rows(idx=idx, V=np.concatenate(p["V"]) if p["V"] else np.zeros((0, nv)),
-                         pp=np.ones(m), E=np.zeros(m), X=X[j][idx],
-                         tau=np.concatenate(p["tau"]) if p["tau"] else np.zeros(0),
+    for j, p in enumerate(parts):
+        idx = cat(p["idx"], (0,), int)
+        out.append(_Rows(idx=idx, V=cat(p["V"], (0, nv[j])), pp=cat(p["pp"], (0,)),
+                         E=cat(p["E"], (0,)), X=X[j][idx], tau=cat(p["tau"], (0,)),
                          experiment=signals.experiment[idx],
-                         Vz=None if not iv else np.concatenate(p["Vz"]) if p["Vz"] else
-                         np.zeros((0, nv)), Xz=None if Xz is None else Xz[j][idx]))
+                         Vz=None if Xz is None else cat(p["Vz"], (0, nv[j])),
+                         Xz=None if Xz is None else Xz[j][idx]))
     return out
 
 
