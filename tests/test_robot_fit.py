@@ -30,6 +30,7 @@ from one_joint_products import products_as_single
 from test_dependent_partners import qr_rule_reference
 
 from ident.estimate import fit_least_squares
+from ident.estimators import rank_rule
 from ident.fitting import SIGN_CHECK_MIN_KEPT
 from ident.loaders import concat, make_experiment
 from ident.models import new_model, usual_model
@@ -38,7 +39,7 @@ from ident.robot import RobotIdentError
 from ident.robot.base import base_parameters, lever_arm_payload, single_joint_map
 from ident.robot.consistency import check_consistency
 from ident.robot.design import design_runs, products_columns, resolve_design, sign_checked
-from ident.robot.estimate import RobotModel, _dependent
+from ident.robot.estimate import RobotModel
 from ident.robot.loaders import RawRobotRun
 from ident.robot.regressor import RobotRegressor
 from ident.robot.signals import RobotPayloadData, RobotSignals
@@ -547,7 +548,7 @@ def test_products_rank_rule_is_the_single_joint_one():
     W[:, 5] = 0.0  # zero (no payload)
     names = [f"c{i}" for i in range(6)]
     lost = set(qr_rule_reference(W[:, :5], names[:5])) | {"c5"}
-    assert {names[i] for i in _dependent(W.T @ W)} == lost and len(lost) == 2
+    assert {names[i] for i in rank_rule(W.T @ W)[0]} == lost and len(lost) == 2
 
 
 @pytest.mark.slow

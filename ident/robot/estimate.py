@@ -154,12 +154,6 @@ class _Unidentifiable(RobotIdentError):
         self.names, self.lo, self.hi, self.zero = names, lo, hi, zero
 
 
-def _dependent(G: np.ndarray, tol: float = RCOND) -> np.ndarray:
-    """Columns left out by the rank rule (:func:`ident.estimators.rank_rule`), zero columns
-    included."""
-    return rank_rule(G, tol)[0]
-
-
 def renamed_reason(why: str, names: Mapping[str, str]) -> str:
     """``why`` (a ``removed_`` reason) with the partners of a dependent column renamed by
     ``names`` (others kept as they are); any other reason unchanged."""
@@ -1504,12 +1498,11 @@ class RobotModel(HyperParameters):
                    w: np.ndarray, it: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
         """The single-joint elimination (:func:`ident.estimate.fit_least_squares`) on a
         linear form's fit ``x``: the free parameters whose columns are zero or dependent (the
-        rank rule, :func:`ident.estimators.rank_rule` on their Gram matrix; the reason names the
-        partners) are
-        fixed at 0, then, while the largest relative deviation of a free parameter exceeds
-        ``threshold_pct``, that one is fixed at 0 and the model refitted. Each goes to
-        ``fixed_`` (at 0) and ``removed_`` (name, reason). Returns the final (x, free,
-        weights, iterations)."""
+        rank rule, :func:`ident.estimators.rank_rule` on their Gram matrix; the reason names
+        the partners) are fixed at 0, then, while the largest relative deviation of a free
+        parameter exceeds ``threshold_pct``, that one is fixed at 0 and the model refitted.
+        Each goes to ``fixed_`` (at 0) and ``removed_`` (name, reason). Returns the final (x,
+        free, weights, iterations)."""
         thr = float(self.threshold_pct)
 
         def fix(i: int, why: str) -> None:
