@@ -480,7 +480,8 @@ def refine_robot(
     With validation files, a step must lower their error too (their rows selected alike).
     Then every term found is refitted inside the n-dof model, every joint together
     (:func:`ident.robot.refit.refit_robot`: before/after per joint and for the robot, under
-    ``"refit"``; ``{"error": ...}`` when it cannot be done, e.g. IDIM-IV).
+    ``"refit"``; ``{"error": ...}`` when it cannot be done, e.g. a term reading the
+    acceleration under IDIM-IV without q_ref).
 
     Parameters
     ----------

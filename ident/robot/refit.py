@@ -28,9 +28,11 @@ Gauss-Newton from the first fit (one step for the usual model, which is linear),
 IDIM-IV as the model (WLS: per-joint weights 1/sigma_j^2 of an LS refit); the parameters the
 first fit held fixed stay fixed.
 
-IDIM-IV (``method="iv"``), for the linear forms only (the usual model and the products
-form; the bilinear paper form is refused in one line: its Jacobian and quadrants move with
-theta, so there is no one IV solve to make): one IV solve, the model's estimator's
+IDIM-IV (``method="iv"``). The bilinear paper form is refitted as the model fits it:
+Gauss-Newton whose steps are IV solves, Z^T J dx = Z^T r with Z the Jacobian on the
+instrument rows (below), full steps (IV minimises no cost: no line search), the quadrants
+the fit's, held (tests/test_robot_refit_iv.py ``test_bilinear_iv``). The linear forms (the
+usual model and the products form): one IV solve, the model's estimator's
 (:class:`ident.estimators.IV` ``solve_normal`` on Z^T W, its covariance the IV sandwich
 sigma^2 (Z^T W)^-1 Z^T Z (W^T Z)^-1 as the model's fit computes it), on the stacked rows
 W = [the model's columns on the fit's rows, X_j] with the instruments Z = [the model's own
@@ -226,9 +228,9 @@ def refit_robot(
     Parameters
     ----------
     model : RobotModel
-        A fitted n-dof model (method ``"ls"`` or ``"wls"``; usual, paper, or the paper
-        model's ``form="products"``; method ``"iv"`` for the usual model and the products
-        form, with signals carrying the instruments the fit read).
+        A fitted n-dof model (method ``"ls"``, ``"wls"`` or ``"iv"``; usual, paper, or the
+        paper model's ``form="products"``; with ``"iv"``, signals carrying the instruments
+        the fit read).
     signals : RobotSignals
         The samples it was fitted on (or any with the same joints); a products-form fit on
         the full-rate products needs signals carrying them (``columns.products``).
@@ -268,7 +270,7 @@ def refit_robot(
     Raises
     ------
     RobotIdentError
-        An unfitted model, IDIM-IV of the bilinear paper form, IDIM-IV without the model's
+        An unfitted model, an unknown method, IDIM-IV without the model's
         instruments or (a term reading the acceleration) without q_ref, bad shapes,
         parameters not identifiable with the terms, a fit on full-rate products and
         signals without them.
@@ -279,11 +281,6 @@ def refit_robot(
         raise RobotIdentError(f"refit_robot: method {model.method!r} is not supported; "
                               "expected 'ls', 'wls' or 'iv'")
     iv = model.method == "iv"
-    if iv and not linear:
-        raise RobotIdentError("refit_robot: method 'iv' is not supported for the paper "
-                              "model's bilinear form (its Jacobian and quadrants move with "
-                              "theta: no one IV solve); fit it with form='products', or "
-                              "method 'ls' or 'wls'")
     if tuple(signals.joints) != tuple(model.joints_):
         raise RobotIdentError(f"refit_robot: joints {signals.joints}, expected the model's "
                               f"{model.joints_}")
@@ -684,10 +681,11 @@ class _System:
             A, g, _ = self.normal(x, free, w)
             step = self._step(A, g, free)
             lam = 1.0
-            while True:
+            while True:  # IDIM-IV minimises no cost: full steps (as the model's fit)
                 xn = x + lam * step
                 cn = self.cost(xn, w)
-                if linear or cn <= cost * (1 + 1e-12) or lam < 1e-6:
+                if (linear or not self.est.symmetric or cn <= cost * (1 + 1e-12)
+                        or lam < 1e-6):
                     break
                 lam *= 0.5
             x, cost = xn, cn
