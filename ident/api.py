@@ -42,7 +42,7 @@ from .models import IdentModel
 from .preprocess import Design
 from .refine import Refinement, refine
 from .signals import Signals
-from .vocab import method_name, model_name, renamed_keywords
+from .vocab import method_name, model_name, refined_model, renamed_keywords
 
 __all__ = ["JointModel", "RobotFit", "load"]
 
@@ -293,7 +293,7 @@ class JointModel(HyperParameters):
             references=self._references(),
             payload=self.payload,
         )
-        name = "paper" if "paper" in report.models else next(iter(report.models))
+        name = refined_model(report.models)
         if self.estimator == "iv" and report.models[name].estimator_ != "iv":
             raise DataError(
                 "estimator='iv' needs the reference trajectory q_ref of every experiment "

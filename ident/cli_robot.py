@@ -61,7 +61,7 @@ from .robot.refit import refit_robot
 from .robot.signals import RobotSignals
 from .robot.tables import format_table_iii, format_uncertainty, table_iii
 from .robot.uncertainty import N_BLOCKS, assess, parameter_records
-from .vocab import method_name, model_name
+from .vocab import method_name, model_name, refined_model
 
 __all__ = ["run", "fit_robot", "fit_files", "load_runs", "public_record", "refine_robot",
            "format_report", "format_refinement", "format_refit", "FORMAT", "OLD_FORMATS",
@@ -474,8 +474,10 @@ def refine_robot(
 
     Joint j's design is the identification data as the fit has them (every decimated row,
     the torque as Y, the fitted n-dof prediction as the declared column ``k_ndof``,
-    :class:`~ident.robot.refine_joint.NdofPrediction`), selected by the rows the fit used
-    (:func:`kept_rows`), the other joints' q and dq offered as variables, a zero-order hold
+    :class:`~ident.robot.refine_joint.NdofPrediction`), selected by the rows the refined
+    model's fit used (:meth:`~ident.robot.estimate.RobotModel.fitted_rows`: :func:`kept_rows`,
+    and the paper model's quadrant band), the other joints' q and dq offered as variables,
+    a zero-order hold
     named against the raw log's period (:func:`ident.robot.refine_joint.refine_joint`).
     With validation files, a step must lower their error too (their rows selected alike).
     Then every term found is refitted inside the n-dof model, every joint together
@@ -490,8 +492,9 @@ def refine_robot(
     max_steps : int
         Refinement steps per joint at most.
     model : {"usual", "paper"} or None
-        The fitted n-dof model whose prediction is refined; None: the usual model when it was
-        fitted, else the paper model.
+        The fitted n-dof model whose prediction is refined; None: the paper model when it was
+        fitted, else the usual model (:func:`ident.vocab.refined_model`, the single joint's
+        rule).
     joints : sequence of str, optional
         The moving joints to refine (default every one).
     progress : callable, optional
@@ -506,21 +509,21 @@ def refine_robot(
         ``"_refinements"`` (not serialised). Also stored in ``out["refinement"]``.
     """
     ests = out["_estimators"]
-    if model is None:
-        model = "usual" if "usual" in ests else next(iter(ests))
-    model = model_name(model)  # "new": deprecated "paper" (ident.vocab)
+    # "new": deprecated "paper"; None: the paper model when fitted (ident.vocab, one rule
+    # with the single joint's)
+    model = refined_model(ests) if model is None else model_name(model)
     if model not in ests:
         raise DataError(f"refine: model {model!r} was not fitted ({', '.join(ests) or 'none'})")
     est = ests[model]
     sig: RobotSignals = out["_identification"]
-    keep = out["_keep"]
+    # the refined model's own rows (the paper model's leave its quadrant band out too): its
+    # residual where it was fitted, what its n-dof refit reads
+    keep = est.fitted_rows(sig)
     pred = est.predict(sig)
     val_all: RobotSignals | None = out.get("_validation_all")
     validation = None
     if val_all is not None:
-        vkeep = kept_rows(val_all, 0.0 if val_all.columns is not None else
-                          float(out["preprocessing"]["dq_min"]))
-        validation = (val_all, est.predict(val_all), vkeep)
+        validation = (val_all, est.predict(val_all), est.fitted_rows(val_all))
     types = dict(zip(out["robot"]["moving"], _revolute(out), strict=True))
     say = progress or (lambda _m: None)
     if joints is not None:

@@ -55,6 +55,28 @@ def test_demo_writes_logs_fit_and_report(demo):
     assert set(d["refinement"]["paper"]) == {"j1", "j2", "j3"}
     fit = json.loads((res.out_dir / "fit.json").read_text())
     assert set(fit["models"]) == {"usual", "paper"}
+    # the refinement `jointid fit --robot --refine` writes: the paper model's, as the single
+    # joint's; demo.json has both models' n-dof refits (before/after per joint and "all")
+    assert fit["refinement"]["model"] == "paper"
+    assert fit["refinement"]["refit"] == d["refit"]["paper"]
+    for model in ("usual", "paper"):
+        rf = d["refit"][model]
+        assert "error" not in rf, (model, rf)
+        assert list(rf["rel_error"]["after"]) == ["j1", "j2", "j3", "all"]
+        for j, after in rf["rel_error"]["after"].items():
+            before = rf["rel_error"]["before"][j]
+            if rf["extras"]:  # terms found: the robot's error lowered
+                assert j != "all" or after < before, (model, rf["rel_error"])
+            else:  # none: the refit is the (pruned) fit, up to its step tolerance (WLS)
+                assert after == pytest.approx(before, rel=1e-4), (model, j, rf["rel_error"])
+            if j != "all":
+                assert rf["rel_error"]["before"][j] == pytest.approx(
+                    fit["models"][model]["rel_error"][j], rel=1e-6)
+    assert "n-dof refit" in html
+    print("\n" + "\n".join(f"{m}: " + ", ".join(
+        f"{j} {rf['rel_error']['before'][j]:.4%} -> {rf['rel_error']['after'][j]:.4%}"
+        for j in rf["rel_error"]["before"]) + f" ({len(rf['extras'])} terms)"
+        for m, rf in d["refit"].items()))
     assert len(res.figures["paper"]) == 3 and all(
         (res.out_dir / f).is_file() for f in res.figures["paper"])
 

@@ -3,21 +3,24 @@
 plan (optimised multi-sine, predicted condition number) -> run on the simulated CANopen buses
 (one simulated CiA 402 drive per joint in front of one simulated arm, the production master
 and MCAP logging) -> the logged condition number -> n-dof fit of the usual and the paper
-model (:mod:`ident.robot`) -> Table III per joint -> per-joint refinement of each model's
-residual -> ``report.html``.
+model (:mod:`ident.robot`) -> Table III per joint -> each model refined joint by joint and
+the found terms refitted inside its n-dof model -> ``report.html``.
 
-The per-joint refinement is ident's single-joint refinement (:func:`ident.refine.refine`)
-applied to each joint of each n-dof fit (usual and paper), :func:`ident.robot.refine_joint.
-refine_joint`: joint j's measured torque (one experiment per payload run, the samples the fit
-used) is the torque of a single-joint design whose declared model is the n-dof prediction
-(times a gain ~1, taken as the load tau_out) plus the usual friction (F_C, F_V, tau_off, ~0),
-so its residual is the n-dof residual and sign(P), the load are not read from the residual
-itself; the refinement then looks for effects left in it (quadrant and load-dependent
-friction, Stribeck, position ripple, torque lag, generic bases, ...). The other joints'
-positions and velocities are given to it as ``q<m>``, ``dq<m>`` (m: 1-based index in the
-moving chain), so that an effect of another joint's state (a cable, a coupled bearing load)
-is found and named by that variable. Relative errors are ||rho_j|| / ||tau_j||. No n-dof
-refinement exists yet.
+The refinement is ``jointid fit --robot --refine``'s (:func:`ident.cli_robot.refine_robot`),
+run on each fitted model (usual and paper): joint j's design is the fit's own rows of that
+model (:meth:`ident.robot.estimate.RobotModel.fitted_rows`), its torque as Y and the n-dof
+prediction as the declared model (times a gain ~1, taken as the load tau_out) plus the usual
+friction (F_C, F_V, tau_off, ~0), so its residual is the n-dof residual and sign(P), the load
+are not read from the residual itself (:func:`ident.robot.refine_joint.refine_joint`); the
+refinement then looks for effects left in it (quadrant and load-dependent friction, Stribeck,
+position ripple, torque lag, generic bases, ...). The other joints' positions and velocities
+are given to it as ``q<m>``, ``dq<m>`` (m: 1-based index in the moving chain), so that an
+effect of another joint's state (a cable, a coupled bearing load) is found and named by that
+variable. Then every term found is refitted inside the n-dof model with every parameter
+together (:func:`ident.robot.refit.refit_robot`): before/after per joint and for the robot.
+Relative errors are ||rho_j|| / ||tau_j||. ``fit.json`` holds the refinement of the model
+``jointid fit --robot --refine`` refines (:func:`ident.vocab.refined_model`), ``demo.json``
+both.
 """
 
 from __future__ import annotations
@@ -37,8 +40,7 @@ from daq import DaqError, __version__, examples
 from daq.protocol.reader import read_run
 from daq.runtime.progress import Heartbeat
 from daq.runtime.robot_rig import arm_truth
-from ident import IdentError
-from ident.cli_robot import fit_robot, format_report
+from ident.cli_robot import fit_robot, format_report, refine_robot
 from ident.report import Section, html_table, write_html, write_json
 from ident.robot.loaders import (
     RobotPreprocessing,
@@ -47,8 +49,8 @@ from ident.robot.loaders import (
     resolved_settings,
 )
 from ident.robot.plots import joint_validation
-from ident.robot.refine_joint import joint_coulomb, refine_joint
 from ident.robot.tables import format_table_iii, table_iii
+from ident.vocab import refined_model
 from trajectories.campaign_file import load_campaign
 from trajectories.cli import plot_robot_plan
 from trajectories.excitation import Quality, assess_robot_campaign, condition_number
@@ -108,18 +110,6 @@ def logged_condition_number(paths: list[Path], dyn: RobotDynamics, predicted: Qu
         out.append(condition_number(dyn.regressor(q[idx], dq[idx], ddq[idx]),
                                     predicted.base_columns))
     return out
-
-
-def _refine_joint(fit: dict, pred: np.ndarray, j: int, revolute: bool, vmax: float,
-                  max_steps: int, coulomb: float | None = None, progress: Any = None) -> Any:
-    """ident.refine on joint j of the n-dof fit whose prediction is ``pred`` (module
-    docstring), the other joints' q and dq given as ``q<m>``, ``dq<m>``
-    (:func:`ident.robot.refine_joint.refine_joint`): on the fit's own rows, as
-    ``jointid fit --robot --refine`` (the log's torque timing, the zero-order hold named
-    against the raw cycle)."""
-    return refine_joint(fit["_identification"], pred, j, revolute=revolute, vmax=vmax,
-                        max_steps=max_steps, coulomb=coulomb, keep=fit["_keep"],
-                        cycle_s=fit["_cycle_s"], progress=progress)
 
 
 def run_robot_demo(out_dir: str | Path, *, robot: str = "3", max_steps: int = 2,
@@ -227,34 +217,37 @@ def _run_robot_demo(hb: Heartbeat, out_dir: str | Path, *, robot: str, max_steps
                  f"samples ({fit['method']}; "
                  f"{timing['fit_s']:.1f} s)")
 
-    # 5. per-joint refinement of each model's residual
+    # 5. each model refined joint by joint on its own rows, the found terms refitted inside
+    # its n-dof model (ident.cli_robot.refine_robot: what `jointid fit --robot --refine` does)
     t0 = time.perf_counter()
     refinements: dict[str, dict[str, Any]] = {}
-    n_ref, i_ref = len(ests) * len(rob.moving), 0
-    for model, est in ests.items():
-        tau_hat = est.predict(fit["_identification"])
+    refits: dict[str, dict[str, Any]] = {}
+    records: dict[str, dict[str, Any]] = {}
+    for model in ests:
+        what = f"refining the {model} model's residual"
+        hb.status(what)
+
+        def step(m: str, what: str = what) -> None:
+            hb.status(f"{what}: {m}", restart=False)
+
+        t_m = time.perf_counter()
+        rec = refine_robot(fit, max_steps=max_steps, model=model, progress=step)
+        done = fit.pop("_refinements")
+        fit.pop("_refit", None)
+        records[model] = fit.pop("refinement")
+        refits[model] = rec["refit"]
         per: dict[str, Any] = {}
-        for j, name in enumerate(rob.moving):
-            i_ref += 1
-            what = f"refining the {model} model's residual of {name} ({i_ref}/{n_ref})"
-            hb.status(f"{what}, step 1")
-
-            def step(m: str, what: str = what) -> None:
-                hb.status(f"{what}, {m}", restart=False)
-
-            t_j = time.perf_counter()
-            try:
-                per[name] = _refine_joint(
-                    fit, tau_hat, j, campaign.joints[j].kind == "revolute", vmax[j],
-                    max_steps, joint_coulomb(est, j), progress=step)
-            except IdentError as exc:
-                per[name] = str(exc)
-            r = per[name]
+        for name in rob.moving:
+            r = done.get(name, rec["joints"].get(name, {}).get("error", "not refined"))
+            per[name] = r
             _say(stream, f"      {model} {name}: " + (
                 f"not run ({r})" if isinstance(r, str) else
-                ("; ".join(f"{s.effect} ({s.variable})" for s in r.steps) or "nothing left")
-                + f" ({time.perf_counter() - t_j:.1f} s)"))
+                ("; ".join(f"{s.effect} ({s.variable})" for s in r.steps) or "nothing left")))
+        _say(stream, f"      {model} " + _refit_line(rec["refit"])
+             + f" ({time.perf_counter() - t_m:.1f} s)")
         refinements[model] = per
+    # fit.json holds the refinement `jointid fit --robot --refine` would write
+    fit["refinement"] = records[refined_model(ests)]
     timing["refine_s"] = time.perf_counter() - t0
     _say(stream, f"[5/5] refined each joint's residual of the {' and the '.join(ests)} "
                  f"model(s) ({timing['refine_s']:.1f} s)")
@@ -270,7 +263,8 @@ def _run_robot_demo(hb: Heartbeat, out_dir: str | Path, *, robot: str, max_steps
     truth_std = arm_truth(played).truth()
     wall = time.perf_counter() - t_start
     timing["wall_s"] = wall
-    summary = _summary(campaign, t3, refinements, pred.cond, logged, sim_s, run_wall, wall)
+    summary = _summary(campaign, t3, refinements, refits, pred.cond, logged, sim_s, run_wall,
+                       wall)
     public = {k: v for k, v in fit.items() if not k.startswith("_")}
     write_json(out / "fit.json", public)
     demo = {
@@ -280,15 +274,27 @@ def _run_robot_demo(hb: Heartbeat, out_dir: str | Path, *, robot: str, max_steps
         "table_iii": t3, "timing": timing, "cycles": cycles, "simulated_s": sim_s,
         "refinement": {m: {n: (r if isinstance(r, str) else r.to_json())
                            for n, r in per.items()} for m, per in refinements.items()},
+        "refit": refits,
         "logs": [str(p.relative_to(out)) for p in logs],
     }
     write_json(out / "demo.json", demo)
     report = _write_report(out, campaign, rob, assessment, result, fit, text, t3, ests,
-                           truth_std, refinements, logged, figures, summary, sim_s)
+                           truth_std, refinements, refits, logged, figures, summary, sim_s)
     return RobotDemoResult(out, report, logs, summary, figures)
 
 
-def _summary(campaign: RobotCampaign, t3: dict, refinements: dict, pred: float,
+def _refit_line(fit: dict[str, Any]) -> str:
+    """One line of the n-dof refit (:func:`ident.robot.refit.refit_robot`): per joint and
+    for the robot, the error of the n-dof fit -> the refit with the found terms."""
+    if "error" in fit:
+        return f"n-dof refit not done: {fit['error']}"
+    ba = fit["rel_error"]
+    n = len(fit.get("extras", []))
+    return (f"n-dof refit with {n} found term(s), every parameter together: " + ", ".join(
+        f"{j} {ba['before'][j]:.4f} -> {ba['after'][j]:.4f}" for j in ba["before"]))
+
+
+def _summary(campaign: RobotCampaign, t3: dict, refinements: dict, refits: dict, pred: float,
              logged: list[float], sim_s: float, run_wall: float, wall: float) -> str:
     lines = ["", f"Robot demo {campaign.name}: {sim_s:.0f} s of simulated motion in "
              f"{run_wall:.0f} s on the bus ({sim_s / run_wall:.2f}x real time)",
@@ -306,13 +312,15 @@ def _summary(campaign: RobotCampaign, t3: dict, refinements: dict, pred: float,
             steps = "; ".join(f"{s.effect} ({s.variable})" for s in r.steps) or "nothing left"
             lines.append(f"  {model:>6} {name}: {steps}; {r.rel_error_initial:.4f} -> "
                          f"{r.rel_error_final:.4f}")
+        lines.append(f"  {model:>6} {_refit_line(refits[model])}")
     lines.append(f"(whole demo: {wall:.0f} s)")
     return "\n".join(lines)
 
 
 def _write_report(out: Path, campaign: RobotCampaign, rob: Any, assessment: Any, result: Any,
                   fit: dict, text: str, t3: dict, ests: dict, truth_std: dict,
-                  refinements: dict, logged: list[float], figures: dict, summary: str,
+                  refinements: dict, refits: dict, logged: list[float], figures: dict,
+                  summary: str,
                   sim_s: float) -> Path:
     pred = assessment.quality
     intro = Section("What was run").para(
@@ -363,9 +371,9 @@ def _write_report(out: Path, campaign: RobotCampaign, rob: Any, assessment: Any,
         "on the joint's measured torque, so the residual is the n-dof residual; an accepted "
         "step names an effect still in it. Relative errors are ||rho_j|| / ||tau_j||. The "
         "other joints' positions and velocities (q<m>, dq<m>, m = joint number in the moving "
-        "chain) are searched too: a step in one of them is a cross-joint effect. No n-dof "
-        "refinement exists yet: this is the single-joint "
-        "loop joint by joint.")
+        "chain) are searched too: a step in one of them is a cross-joint effect. Then the "
+        "terms found on every joint are refitted inside the n-dof model with every parameter "
+        "together (ident.robot.refit; last rows: the n-dof fit -> the refit, per joint).")
     rows = []
     for model, per in refinements.items():
         for joint, r in per.items():
@@ -376,6 +384,14 @@ def _write_report(out: Path, campaign: RobotCampaign, rob: Any, assessment: Any,
             rej = "; ".join(f"{x.effect}: {x.reason}" for x in r.rejected[:3]) or "—"
             rows.append([model, joint, steps, rej,
                          f"{r.rel_error_initial:.4f}", f"{r.rel_error_final:.4f}"])
+    for model, fit_ in refits.items():
+        if "error" in fit_:
+            rows.append([model, "n-dof refit", "not done", fit_["error"], "", ""])
+            continue
+        terms = "; ".join(f"{x['joint']}: {x['effect']}" for x in fit_.get("extras", []))
+        for joint, before in fit_["rel_error"]["before"].items():
+            rows.append([model, f"n-dof refit, {joint}", terms or "no term", "—",
+                         f"{before:.4f}", f"{fit_['rel_error']['after'][joint]:.4f}"])
     ref.raw(html_table(["model", "joint", "accepted", "rejected (first 3)",
                         "rel. error before", "after"], rows))
     sections.append(ref)

@@ -26,7 +26,8 @@ Estimation: the rows of each joint are those the n-dof fit used (|dq_j| > ``dq_m
 of the paper model are those of the first fit's prediction (its ``predict``), held fixed;
 Gauss-Newton from the first fit (one step for the usual model, which is linear), LS, WLS or
 IDIM-IV as the model (WLS: per-joint weights 1/sigma_j^2 of an LS refit); the parameters the
-first fit held fixed stay fixed.
+first fit held fixed stay fixed, and so do the paper model's pruned ones (``pruned_``, at 0:
+re-estimated, they would move the "after" error without any found term).
 
 IDIM-IV (``method="iv"``). The bilinear paper form is refitted as the model fits it:
 Gauss-Newton whose steps are IV solves, Z^T J dx = Z^T r with Z the Jacobian on the
@@ -260,8 +261,10 @@ def refit_robot(
     refit_eliminated : bool
         Estimate again the parameters the first fit's elimination fixed at 0 as not
         significant (``removed_`` reasons "not significant ...", the linear forms' single-
-        joint elimination): the refinement refits without elimination. The zero and
-        dependent columns stay at 0. Default False: every parameter the fit held stays held.
+        joint elimination) and those the paper model's uncertainty step pruned (``pruned_``,
+        :mod:`ident.robot.uncertainty`): the refinement refits without elimination. The zero
+        and dependent columns stay at 0. Default False: every parameter the fit held stays
+        held, the pruned ones included.
 
     Returns
     -------
@@ -332,9 +335,15 @@ def refit_robot(
     # held at 0 as the first fit held them; with refit_eliminated, not those its elimination
     # found not significant (eq. 14-16): they are estimated again, as the refinement's refits
     # do (no elimination)
+    # and the paper model's pruned parameters (ident.robot.uncertainty: removed above the
+    # relative-deviation threshold, held at 0 but not in fixed_) stay pruned
+    pruned = set(getattr(model, "pruned_", ()))
+    held = set(model.fixed_) | pruned
     again = {n for n, why in getattr(model, "removed_", [])
              if refit_eliminated and why.startswith("not significant")}
-    free = np.array([n not in model.fixed_ or n in again for n in names])
+    if refit_eliminated:
+        again |= pruned
+    free = np.array([n not in held or n in again for n in names])
     x0 = np.concatenate([model.coef_, np.zeros(len(names) - nx0)])
     coeffs = _coefficients(model)
     sys = _System(model, rows, ext_idx, coeffs, len(names), names)
@@ -500,8 +509,12 @@ def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
         return _product_rows(model, signals, X, keep, Xz)
     # the theta that decided the fit's quadrants (products form: the usual fit's, as predict)
     theta_q = model.coef_[:model.n_theta_] if model._theta_x else model.quadrant_from_
+    # the band's rows are the fit's (RobotModel.fitted_rows: decided by the theta that
+    # decided the final quadrants): with the final theta a row on the band's edge could
+    # change side, and the "before" error would not be the fit's
+    theta_b = model.quadrant_from_
     if model.quadrant_theta_ is not None:
-        theta_q = model.quadrant_theta_
+        theta_q = theta_b = model.quadrant_theta_
     band = np.asarray(getattr(model, "band_", np.zeros(k)), dtype=float)
     parts = _parts(k)
     iv = Xz is not None
@@ -515,8 +528,8 @@ def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
         if model.model == "paper" and (model.quadrant == "model"):
             tout = theta_q[cols] @ WjT + pj
             sp = tout * dqj
-            if band[j] > 0:
-                ok &= np.abs(tout) >= band[j]
+            if band[j] > 0 and theta_b is not None:
+                ok &= np.abs(theta_b[cols] @ WjT + pj) >= band[j]
         elif model.model == "paper":
             sp = tauj * dqj
         else:
