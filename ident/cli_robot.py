@@ -657,7 +657,11 @@ def format_refit(fit: dict[str, Any], model: str) -> list[str]:
         flag = ("" if x.get("significant", True) else
                 "  [not significant inside the n-dof model: Wald "
                 f"{x['wald'] if x.get('wald') is None else format(x['wald'], '.3g')}]")
-        lines.append(f"  {x['joint']}: {x['effect']}: {vals} (± 2σ){flag}")
+        # the term's derived values (a periodic form's amplitude, phase, period)
+        derived = "".join(
+            f"; {n} = {v['value']:.4g}" + (f" ± {v['two_sigma']:.2g}" if v["two_sigma"] else "")
+            for n, v in (x.get("parameters") or {}).items())
+        lines.append(f"  {x['joint']}: {x['effect']}: {vals}{derived} (± 2σ){flag}")
     if not fit["extras"]:
         lines.append("  (no term found: the refit is the n-dof fit)")
     return lines
