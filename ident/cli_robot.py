@@ -575,6 +575,11 @@ def refine_robot(
     # (ident.robot.refit): before / after per joint and for the whole robot
     terms = [(sig.joints.index(joint), st.term) for joint, ref in refs.items()
              for st in ref.steps]
+    if not terms:  # nothing to refit: the n-dof model is as it was fitted
+        rec["refit"] = {"skipped": "no term found on any joint: the n-dof model is unchanged"}
+        out["refinement"] = rec
+        out["_refinements"] = refs
+        return rec
     say(f"n-dof refit with {len(terms)} found term(s)")
     try:
         fitted = refit_robot(est, sig, terms, prediction=pred, keep=keep,
@@ -632,6 +637,8 @@ def format_refit(fit: dict[str, Any], model: str) -> list[str]:
     n-dof model, :func:`ident.robot.refit.refit_robot`)."""
     if "error" in fit:
         return [f"n-dof refit with the found terms: not done: {fit['error']}"]
+    if "skipped" in fit:
+        return [f"n-dof refit: none ({fit['skipped']})"]
     lines = [f"n-dof refit of the {model} model with the found terms, every joint together "
              "(errors ||rho_j||/||tau_j|| [%], the n-dof fit -> the refit)"]
     joints = list(fit["rel_error"]["before"])
@@ -664,6 +671,12 @@ def format_refit(fit: dict[str, Any], model: str) -> list[str]:
         lines.append(f"  {x['joint']}: {x['effect']}: {vals}{derived} (± 2σ){flag}")
     if not fit["extras"]:
         lines.append("  (no term found: the refit is the n-dof fit)")
+    if fit.get("unsettled"):
+        lines.append("  note: the n-dof fit had not settled on " + ", ".join(
+            f"{j} ({100 * s:.1f} % of its rows in another quadrant with its final values)"
+            for j, s in fit["unsettled"].items())
+            + ": 'before' is the model refitted on those quadrants without the terms, so "
+            "before -> after is what the terms add")
     return lines
 
 

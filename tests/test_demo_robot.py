@@ -61,21 +61,24 @@ def test_demo_writes_logs_fit_and_report(demo):
     assert fit["refinement"]["refit"] == d["refit"]["paper"]
     for model in ("usual", "paper"):
         rf = d["refit"][model]
+        found = any(r["steps"] for r in d["refinement"][model].values()
+                    if not isinstance(r, str))
         assert "error" not in rf, (model, rf)
+        if not found:  # nothing to refit: said, not a refit equal to the fit
+            assert "no term found" in rf["skipped"], (model, rf)
+            continue
         assert list(rf["rel_error"]["after"]) == ["j1", "j2", "j3", "all"]
+        assert rf["extras"]
         for j, after in rf["rel_error"]["after"].items():
             before = rf["rel_error"]["before"][j]
-            if rf["extras"]:  # terms found: the robot's error lowered
-                assert j != "all" or after < before, (model, rf["rel_error"])
-            else:  # none: the refit is the (pruned) fit, up to its step tolerance (WLS)
-                assert after == pytest.approx(before, rel=1e-4), (model, j, rf["rel_error"])
-            if j != "all":
+            assert j != "all" or after < before, (model, rf["rel_error"])
+            if j != "all" and not rf["unsettled"]:
                 assert rf["rel_error"]["before"][j] == pytest.approx(
                     fit["models"][model]["rel_error"][j], rel=1e-6)
     assert "n-dof refit" in html
-    print("\n" + "\n".join(f"{m}: " + ", ".join(
+    print("\n" + "\n".join(f"{m}: " + (rf.get("skipped") or ", ".join(
         f"{j} {rf['rel_error']['before'][j]:.4%} -> {rf['rel_error']['after'][j]:.4%}"
-        for j in rf["rel_error"]["before"]) + f" ({len(rf['extras'])} terms)"
+        for j in rf["rel_error"]["before"]) + f" ({len(rf['extras'])} terms)")
         for m, rf in d["refit"].items()))
     assert len(res.figures["paper"]) == 3 and all(
         (res.out_dir / f).is_file() for f in res.figures["paper"])

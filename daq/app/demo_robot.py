@@ -288,6 +288,8 @@ def _refit_line(fit: dict[str, Any]) -> str:
     for the robot, the error of the n-dof fit -> the refit with the found terms."""
     if "error" in fit:
         return f"n-dof refit not done: {fit['error']}"
+    if "skipped" in fit:
+        return f"n-dof refit: none ({fit['skipped']})"
     ba = fit["rel_error"]
     n = len(fit.get("extras", []))
     return (f"n-dof refit with {n} found term(s), every parameter together: " + ", ".join(
@@ -385,8 +387,9 @@ def _write_report(out: Path, campaign: RobotCampaign, rob: Any, assessment: Any,
             rows.append([model, joint, steps, rej,
                          f"{r.rel_error_initial:.4f}", f"{r.rel_error_final:.4f}"])
     for model, fit_ in refits.items():
-        if "error" in fit_:
-            rows.append([model, "n-dof refit", "not done", fit_["error"], "", ""])
+        if "error" in fit_ or "skipped" in fit_:
+            rows.append([model, "n-dof refit", "not done" if "error" in fit_ else "none",
+                         fit_.get("error") or fit_["skipped"], "", ""])
             continue
         terms = "; ".join(f"{x['joint']}: {x['effect']}" for x in fit_.get("extras", []))
         for joint, before in fit_["rel_error"]["before"].items():

@@ -102,7 +102,7 @@ from ..terms import Term
 from ..unseen import N_BLOCKS, heldout_kind, noise_floor
 from . import RobotIdentError
 from .design import joint_columns
-from .estimate import _ref_acceleration
+from .estimate import QUADRANT_TOL, _ref_acceleration
 from .moments import quadrant_weights
 from .paper import rows_coefficients
 from .signals import RobotSignals
@@ -166,6 +166,13 @@ class RobotRefit:
     n_rows : dict
         Rows used per joint.
     n_iter : int
+    unsettled : dict
+        ``{joint: share}``: the joints of a paper fit that had not settled, whose final
+        values put that share of their rows in another model quadrant than the fit used
+        (:meth:`~ident.robot.estimate.RobotModel.quadrant_drift` above ``QUADRANT_TOL``).
+        Then "before" is the model refitted on the refit's quadrants WITHOUT the terms
+        (same rows, same held parameters), not the fit as it is, so that before -> after is
+        what the terms add; empty otherwise.
     """
 
     model: Any
@@ -183,6 +190,7 @@ class RobotRefit:
     heldout_kind: str = ""
     n_rows: dict[str, int] = field(default_factory=dict)
     n_iter: int = 0
+    unsettled: dict[str, float] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         """The ``refit`` record of docs/fit-json.md (plain floats; NaN as None)."""
@@ -208,6 +216,7 @@ class RobotRefit:
             "validation_rel_error": ba(self.validation),
             "rows": dict(self.n_rows),
             "iterations": int(self.n_iter),
+            "unsettled": dict(self.unsettled),
         }
 
 
@@ -347,19 +356,19 @@ def refit_robot(
     x0 = np.concatenate([model.coef_, np.zeros(len(names) - nx0)])
     coeffs = _coefficients(model)
     sys = _System(model, rows, ext_idx, coeffs, len(names), names)
-    w = np.ones(k)
-    x, it = sys.solve(x0, free, w, linear)
-    if model.method == "wls":
-        rr, _, _ = sys.residuals(x)
-        nfree = [int(free[sys.local(j)].sum()) for j in range(k)]
-        sj = np.array([math.sqrt(float(r @ r) / max(rw.V.shape[0] - b, 1))
-                       for r, rw, b in zip(rr, rows, nfree, strict=True)])
-        if np.any(sj <= 0):
-            raise RobotIdentError("refit_robot: a joint has zero residual; WLS weights "
-                                  "undefined (use method='ls')")
-        w = 1.0 / sj**2
-        x, it = sys.solve(x, free, w, linear)
+    x, it, w = _estimate(sys, x0, free, linear, model.method)
     out = RobotRefit(model=model, terms=terms, names_=tuple(names), n_iter=it)
+    # the extra parameters after the model's
+    base = np.array([i < nx0 for i in range(len(names))])
+    drift = model.quadrant_drift(signals) if hasattr(model, "quadrant_drift") else np.zeros(k)
+    out.unsettled = {jn: float(d) for jn, d in zip(model.joints_, drift, strict=True)
+                     if d > QUADRANT_TOL}
+    # before: the n-dof fit as it is, on the same rows, without the extra columns; a paper
+    # fit that had not settled is refitted on the refit's quadrants without the terms first
+    # (else "after" would credit the terms with the settling)
+    xb, wb = x0, w
+    if out.unsettled:
+        xb, _, wb = _estimate(sys, x0, free & base, linear, model.method)
     A, _, C = sys.normal(x, free, w)
     rr, _, _ = sys.residuals(x)
     n_rows = sum(rw.V.shape[0] for rw in rows)
@@ -387,16 +396,14 @@ def refit_robot(
             ex["parameters"] = {n: (float(v[0]), float(v[1])) for n, v in got.items()}
     out.extras = extras
     out.n_rows = {model.joints_[j]: int(rw.V.shape[0]) for j, rw in enumerate(rows)}
-    # before: the n-dof fit as it is, on the same rows, without the extra columns
-    base = np.array([i < nx0 for i in range(len(names))])
-    r0, _, _ = sys.residuals(x0)
+    r0, _, _ = sys.residuals(xb)
     out.rel_error = {"before": _rel(model.joints_, r0, rows), "after": _rel(model.joints_, rr,
                                                                             rows)}
     out.noise_floor = {"before": _floors(model.joints_, r0, rows),
                        "after": _floors(model.joints_, rr, rows)}
     exp_all = np.concatenate([rw.experiment for rw in rows])
     out.heldout_kind = heldout_kind(exp_all)
-    out.heldout = {"before": sys.heldout(x0, free & base, w),
+    out.heldout = {"before": sys.heldout(xb, free & base, wb),
                    "after": sys.heldout(x, free, w)}
     if validation is not None:
         vsig, vpred, vkeep = validation
@@ -405,9 +412,30 @@ def refit_robot(
         vX = joint_columns(vsig, vpred, terms, revolute)
         vrows = _rows(model, vsig, vX, vkeep)  # (the errors only: no instruments)
         vsys = _System(model, vrows, ext_idx, coeffs, len(names), names)
-        out.validation = {"before": _rel(model.joints_, vsys.residuals(x0)[0], vrows),
+        out.validation = {"before": _rel(model.joints_, vsys.residuals(xb)[0], vrows),
                           "after": _rel(model.joints_, vsys.residuals(x)[0], vrows)}
     return out
+
+
+def _estimate(sys: _System, x0: np.ndarray, free: np.ndarray, linear: bool,
+              method: str) -> tuple[np.ndarray, int, np.ndarray]:
+    """The refit's estimate from x0 on the ``free`` parameters: the solve, and for WLS the
+    per-joint weights 1/sigma_j^2 of that first (LS) solve and the solve again. Returns
+    (x, iterations, weights)."""
+    k = len(sys.rows)
+    w = np.ones(k)
+    x, it = sys.solve(x0, free, w, linear)
+    if method == "wls":
+        rr, _, _ = sys.residuals(x)
+        nfree = [int(free[sys.local(j)].sum()) for j in range(k)]
+        sj = np.array([math.sqrt(float(r @ r) / max(rw.V.shape[0] - b, 1))
+                       for r, rw, b in zip(rr, sys.rows, nfree, strict=True)])
+        if np.any(sj <= 0):
+            raise RobotIdentError("refit_robot: a joint has zero residual; WLS weights "
+                                  "undefined (use method='ls')")
+        w = 1.0 / sj**2
+        x, it = sys.solve(x, free, w, linear)
+    return x, it, w
 
 
 def _wald(x: np.ndarray, cov: np.ndarray) -> tuple[float | None, bool]:
