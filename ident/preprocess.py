@@ -244,6 +244,20 @@ class Design:
             _blocks=blocks,
         )
 
+    def reference_acceleration(self) -> np.ndarray | None:
+        """The reference trajectory's acceleration on the design's rows, shape (m,)
+        [rad/s^2 or m/s^2]: differentiated at full rate, then low-passed, decimated and
+        selected as the columns are (what the IDIM-IV instruments read in place of the
+        measured ``signals.ddq``); None without instruments."""
+        if self.Z is None or any(b.zfull is None for b in self._blocks):
+            return None
+        out = []
+        for b in self._blocks:
+            rows, _ = _decimate_rows(np.asarray(b.zfull.ddq, dtype=float)[None, :],
+                                     self.decimation)
+            out.append(rows[0, b.mask])
+        return np.concatenate(out) if out else np.zeros(0)
+
     def without(self, names: Iterable[str]) -> Design:
         """A new design without the given parameter columns.
 

@@ -420,11 +420,14 @@ def refine(
     stop = f"step limit ({max_steps}) reached"
     # candidates (terms, variables, bases) see the states only: none can read the torque
     s = cur_design.signals.states()
+    # an IV fit's diagnosis bins the acceleration on the reference's (diagnose's doc)
+    ref_acc = cur_design.reference_acceleration()
     diag = None
     for k in range(1, max_steps + 1):
         r = cur.residual_
         tau_out = rigid_prediction(lib, cur.coef_)
-        diag = diagnose(r, s, Y=cur_design.Y, tau_out=tau_out, alpha=alpha)
+        diag = diagnose(r, s, Y=cur_design.Y, tau_out=tau_out, alpha=alpha,
+                        acceleration=ref_acc)
         kept = [cur_design.names.index(n) for n in cur.names_]
         scorer = Scorer(cur_design.W[:, kept], r)
         cols = Columns(s, scorer)
@@ -671,7 +674,8 @@ def refine(
             cur_val, val_err = val1, v1
     if diag is None or steps and diag is steps[-1].diagnosis:
         diag = diagnose(
-            cur.residual_, s, Y=cur_design.Y, tau_out=rigid_prediction(lib, cur.coef_), alpha=alpha
+            cur.residual_, s, Y=cur_design.Y, tau_out=rigid_prediction(lib, cur.coef_),
+            alpha=alpha, acceleration=ref_acc,
         )
     for st in steps:  # every error is reported against the final (lowest) floor estimate
         st.noise_floor = floor
