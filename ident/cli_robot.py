@@ -125,6 +125,22 @@ def _check_ratio_separable(runs: Sequence[RawRobotRun]) -> None:
             "parameters: give runs with another payload (or none), or --payload known")
 
 
+def _check_validation_payloads(runs: Sequence[RawRobotRun],
+                               validation: Sequence[RawRobotRun] | None) -> None:
+    """``--payload mass`` identifies one parameter set per payload mass of the fit's runs: a
+    validation run whose payload is none of them has no parameters to predict with. Refused
+    before fitting, naming the file (the estimator's own error came after the fit and named
+    neither the file nor the option)."""
+    fitted = sorted({float(r.payload.mass) for r in runs} - {0.0})
+    for r in validation or []:
+        mass = float(r.payload.mass)
+        if mass > 0 and mass not in fitted:
+            raise DataError(
+                f"{r.source}: payload of {mass:g} kg: with --payload mass a validation file "
+                f"must carry one of the payloads the fit identifies "
+                f"({', '.join(f'{m:g}' for m in fitted) or 'none'} kg) or none")
+
+
 def fit_files(
     robot: Robot,
     inputs: Sequence[str | Path] | str | Path | Sequence[RawRobotRun],
@@ -285,6 +301,8 @@ def fit_robot(
                                  for r in runs) else "known"
     if payload not in PAYLOADS:
         raise DataError(f"payload {payload!r}: expected one of {PAYLOADS}")
+    if payload == "mass":
+        _check_validation_payloads(runs, validation)
     pre = preprocessing or RobotPreprocessing()
     notes: list[str] = []
     if chain == "columns":
