@@ -45,7 +45,7 @@ from .results import DEFAULT_BANDS
 from .robot.consistency import check_consistency
 from .robot.consistent_fit import add_consistent, format_record
 from .robot.design import design_runs, resolve_design, sign_checked
-from .robot.estimate import QUADRANT_TOL, RobotModel
+from .robot.estimate import QUADRANT_TOL, THIN_QUADRANT, RobotModel
 from .robot.friction_bounds import torque_peak
 from .robot.loaders import (
     RawRobotRun,
@@ -434,6 +434,7 @@ def fit_robot(
                              "their values are not identified")
         if name == "paper":
             _settled(est, rec, out["_signals"][0], joints, notes)
+            _one_signed_loads(est, rec, out["_signals"][0], joints, notes)
         expressions = getattr(est.base_, "expressions", None)
         if expressions:
             rec["base_expressions"] = list(expressions)
@@ -765,6 +766,48 @@ def _settled(est: RobotModel, rec: dict[str, Any], rows_sig: RobotSignals,
             f"{j} {_pct(own[j]).strip()} %" for j, _ in bad)
         + " (reported: " + ", ".join(f"{_pct(rec['rel_error'][j]).strip()} %" for j, _ in bad)
         + "), so these joints' paper-model values are not a fit of their own quadrants")
+
+
+def _one_signed_loads(est: RobotModel, rec: dict[str, Any], rows_sig: RobotSignals,
+                      joints: Sequence[str], notes: list[str]) -> None:
+    """Paper model: a joint whose load tau_out_hat keeps one sign on (all but
+    :data:`~ident.robot.estimate.THIN_QUADRANT` of) its fitted rows has its quadrant set by
+    the sign of dq alone, so P+ sign(dq), P- sign(dq) and 1 are dependent: c_m, c_g and the
+    offset are not separable (only OFF - c_m and OFF + c_g, or their mirror, are). The
+    estimator refuses it on decimated states (``--chain states``), but on the columns chain
+    the low-passed sign(dq) near the reversals breaks the dependence by a hair: the fit went
+    through, the pruning held one or two of them at 0 and the others took their place with a
+    tight sigma (found by the identification sweep: arm3's elbow, c_g3 pruned and c_m3 27
+    sigma from the simulator's value). Those not pruned are flagged ``unidentified``
+    (``rec["unidentified"]``) with a note; ``rec["one_signed_load"]`` lists the joints."""
+    try:
+        load = est.load_torque(rows_sig)
+        rows = est.fitted_rows(rows_sig)
+    except IdentError:  # products form: no theta, no load to read
+        return
+    found = []
+    for j, (joint, n) in enumerate(zip(joints, est.numbers_, strict=True)):
+        lj = load[rows[:, j], j]
+        pos, neg = int((lj > 0).sum()), int((lj < 0).sum())
+        if pos + neg == 0 or min(pos, neg) >= THIN_QUADRANT * (pos + neg):
+            continue
+        found.append(joint)
+        names = [f"{p}{n}" for p in ("c_m", "c_g", "OFF")]
+        pars = rec["parameters"]
+        flagged = [p for p in names if p in pars and not pars[p].get("pruned")]
+        for p in flagged:
+            pars[p]["unidentified"] = True
+        pruned = [p for p in names if p in pars and pars[p].get("pruned")]
+        notes.append(
+            f"paper model, {joint}: its load tau_out_hat is {'> 0' if pos > neg else '< 0'} "
+            f"on {100 * max(pos, neg) / (pos + neg):.1f} % of its fitted rows, so its quadrant "
+            f"is the sign of dq: {', '.join(names)} are not separable (a trajectory on which "
+            "its load changes sign separates them)"
+            + (f"; {', '.join(pruned)} pruned, " if pruned else "; ")
+            + f"{', '.join(flagged)} flagged unidentified: their values are not the "
+            "parameters")
+    rec["unidentified"] = [p for p, v in rec["parameters"].items() if v.get("unidentified")]
+    rec["one_signed_load"] = found
 
 
 def selected(sig: RobotSignals, dq_min: float) -> RobotSignals:
