@@ -370,6 +370,8 @@ def fit_robot(
         "q_s": q_s,
         "notes": notes,
         "models": {},
+        # the unit of dq_min in the printed summary: the moving joints' kinds
+        "_dq_unit": _speed_unit(robot),
         "_estimators": {},
         "_consistency": {},
         "_signals": (selected(sig, dq_min), val),
@@ -833,8 +835,9 @@ def format_report(out: dict[str, Any]) -> str:
     lines.append(f"robot {r['name']} ({r['source']}): moving joints {', '.join(r['moving'])}")
     lines.append(f"preprocessing ({pre['chain']} chain): cut-off {pre['cutoff_hz']:g} Hz, "
                  f"decimation {pre['decimation']}, trim {pre['trim']}, dq_min "
-                 f"{pre['dq_min']:.4g} rad/s, {pre['samples']} samples x {len(r['moving'])} "
-                 f"joints; method {out['method']}, payload {out['payload']}")
+                 f"{pre['dq_min']:.4g} {out.get('_dq_unit', 'rad/s')}, {pre['samples']} "
+                 f"samples x {len(r['moving'])} joint{'s' if len(r['moving']) > 1 else ''}; "
+                 f"method {out['method']}, payload {out['payload']}")
     lines.extend(f"note: {n}" for n in out.get("notes", []))
     fitted = {n: rec for n, rec in out["models"].items() if "error" not in rec}
     for name, rec in out["models"].items():
@@ -917,6 +920,15 @@ def format_report(out: dict[str, Any]) -> str:
             lines.append("")
             lines.append(f"{name} model: " + format_record(rec["consistent"]))
     return "\n".join(lines)
+
+
+def _speed_unit(robot: Robot) -> str:
+    """Unit of a velocity threshold of the moving joints: rad/s, m/s (every joint prismatic:
+    the EMPS axis) or both (one dq_min for joints of both kinds)."""
+    kinds = {robot.types[robot.joint_names.index(j)] for j in robot.moving}
+    if kinds == {"prismatic"}:
+        return "m/s"
+    return "rad/s" if kinds == {"revolute"} else "rad/s or m/s (one threshold, every joint)"
 
 
 def public_record(out: dict[str, Any]) -> dict[str, Any]:
