@@ -50,6 +50,7 @@ from .robot.friction_bounds import torque_peak
 from .robot.loaders import (
     RawRobotRun,
     RobotPreprocessing,
+    check_periods,
     load_robot_runs,
     preprocess_runs,
     resolved_settings,
@@ -303,6 +304,10 @@ def fit_robot(
         raise DataError(f"payload {payload!r}: expected one of {PAYLOADS}")
     if payload == "mass":
         _check_validation_payloads(runs, validation)
+    if validation:
+        # the settings resolved on the identification files are in samples (decimation,
+        # trim, guard): a validation file at another rate was processed with other ones
+        check_periods([*runs, *validation])
     pre = preprocessing or RobotPreprocessing()
     notes: list[str] = []
     if chain == "columns":
