@@ -108,7 +108,9 @@ class RobotFit(HyperParameters):
     models_ : dict[str, RobotModel]
         The fitted estimators by model name ("usual", "paper").
     params_, params_std_ : dict[str, dict[str, float]]
-        Per model, the parameters and their standard deviations by name (eq. 15).
+        Per model, the parameters and their standard deviations by name: the record's
+        ``std``, the honest one (max of eq. 15 and the jackknife, raised to the IDIM-IV
+        difference; ``record_["models"][m]["parameters"][p]["std_analytic"]`` is eq. 15).
     coef_, std_ : dict[str, ndarray]
         Per model, the same as arrays aligned with ``coef_names_[model]``.
     coef_names_ : dict[str, ndarray of str]

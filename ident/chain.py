@@ -378,12 +378,17 @@ def axes_cutoff(q0: np.ndarray, dt: float, min_fraction: float = 0.05,
     hi = float(f"{_upper_cutoff(1.0 / dt, min_fraction):.6g}")  # as choose_cutoff rounds
     # choose_cutoff's own warnings pass as they are (no catch_warnings: it would reset the
     # once-per-location registry and repeat them on every fit of a process)
-    cuts = [choose_cutoff(q0[:, j], dt, min_fraction) for j in range(q0.shape[1])]
+    k = q0.shape[1]
+    where = f"{source}: " if source else ""
+    # several axes: each one's bound warning names the file and the axis (three identical
+    # "cut-off 12.5 Hz is the lower bound" lines on the KUKA recording said neither)
+    cuts = [choose_cutoff(q0[:, j], dt, min_fraction,
+                          source=f"{where}axis {j + 1}" if k > 1 else source)
+            for j in range(k)]
     found = [j for j, c in enumerate(cuts) if c < hi]
     if not found:
         return max(cuts)
     cut = max(cuts[j] for j in found)
-    where = f"{source}: " if source else ""
     for j in sorted(set(range(len(cuts))) - set(found)):
         warnings.warn(f"{where}axis {j + 1}: its velocity spectrum stays above its noise "
                       f"floor up to the Nyquist frequency (cut-off {cuts[j]:g} Hz, the "

@@ -45,11 +45,12 @@ from .results import DEFAULT_BANDS
 from .robot.consistency import check_consistency
 from .robot.consistent_fit import add_consistent, format_record
 from .robot.design import design_runs, resolve_design, sign_checked
-from .robot.estimate import QUADRANT_TOL, RobotModel
+from .robot.estimate import QUADRANT_TOL, THIN_QUADRANT, RobotModel
 from .robot.friction_bounds import torque_peak
 from .robot.loaders import (
     RawRobotRun,
     RobotPreprocessing,
+    check_periods,
     load_robot_runs,
     preprocess_runs,
     resolved_settings,
@@ -123,6 +124,22 @@ def _check_ratio_separable(runs: Sequence[RawRobotRun]) -> None:
             f"kg; {', '.join(str(r.source) for r in runs[:3])}"
             f"{' ...' if len(runs) > 3 else ''}), so it is not separable from the robot's "
             "parameters: give runs with another payload (or none), or --payload known")
+
+
+def _check_validation_payloads(runs: Sequence[RawRobotRun],
+                               validation: Sequence[RawRobotRun] | None) -> None:
+    """``--payload mass`` identifies one parameter set per payload mass of the fit's runs: a
+    validation run whose payload is none of them has no parameters to predict with. Refused
+    before fitting, naming the file (the estimator's own error came after the fit and named
+    neither the file nor the option)."""
+    fitted = sorted({float(r.payload.mass) for r in runs} - {0.0})
+    for r in validation or []:
+        mass = float(r.payload.mass)
+        if mass > 0 and mass not in fitted:
+            raise DataError(
+                f"{r.source}: payload of {mass:g} kg: with --payload mass a validation file "
+                f"must carry one of the payloads the fit identifies "
+                f"({', '.join(f'{m:g}' for m in fitted) or 'none'} kg) or none")
 
 
 def fit_files(
@@ -285,6 +302,12 @@ def fit_robot(
                                  for r in runs) else "known"
     if payload not in PAYLOADS:
         raise DataError(f"payload {payload!r}: expected one of {PAYLOADS}")
+    if payload == "mass":
+        _check_validation_payloads(runs, validation)
+    if validation:
+        # the settings resolved on the identification files are in samples (decimation,
+        # trim, guard): a validation file at another rate was processed with other ones
+        check_periods([*runs, *validation])
     pre = preprocessing or RobotPreprocessing()
     notes: list[str] = []
     if chain == "columns":
@@ -352,6 +375,8 @@ def fit_robot(
         "q_s": q_s,
         "notes": notes,
         "models": {},
+        # the unit of dq_min in the printed summary: the moving joints' kinds
+        "_dq_unit": _speed_unit(robot),
         "_estimators": {},
         "_consistency": {},
         "_signals": (selected(sig, dq_min), val),
@@ -416,6 +441,7 @@ def fit_robot(
                              "their values are not identified")
         if name == "paper":
             _settled(est, rec, out["_signals"][0], joints, notes)
+            _one_signed_loads(est, rec, out["_signals"][0], joints, notes)
         expressions = getattr(est.base_, "expressions", None)
         if expressions:
             rec["base_expressions"] = list(expressions)
@@ -770,6 +796,48 @@ def _settled(est: RobotModel, rec: dict[str, Any], rows_sig: RobotSignals,
         + "), so these joints' paper-model values are not a fit of their own quadrants")
 
 
+def _one_signed_loads(est: RobotModel, rec: dict[str, Any], rows_sig: RobotSignals,
+                      joints: Sequence[str], notes: list[str]) -> None:
+    """Paper model: a joint whose load tau_out_hat keeps one sign on (all but
+    :data:`~ident.robot.estimate.THIN_QUADRANT` of) its fitted rows has its quadrant set by
+    the sign of dq alone, so P+ sign(dq), P- sign(dq) and 1 are dependent: c_m, c_g and the
+    offset are not separable (only OFF - c_m and OFF + c_g, or their mirror, are). The
+    estimator refuses it on decimated states (``--chain states``), but on the columns chain
+    the low-passed sign(dq) near the reversals breaks the dependence by a hair: the fit went
+    through, the pruning held one or two of them at 0 and the others took their place with a
+    tight sigma (found by the identification sweep: arm3's elbow, c_g3 pruned and c_m3 27
+    sigma from the simulator's value). Those not pruned are flagged ``unidentified``
+    (``rec["unidentified"]``) with a note; ``rec["one_signed_load"]`` lists the joints."""
+    try:
+        load = est.load_torque(rows_sig)
+        rows = est.fitted_rows(rows_sig)
+    except IdentError:  # products form: no theta, no load to read
+        return
+    found = []
+    for j, (joint, n) in enumerate(zip(joints, est.numbers_, strict=True)):
+        lj = load[rows[:, j], j]
+        pos, neg = int((lj > 0).sum()), int((lj < 0).sum())
+        if pos + neg == 0 or min(pos, neg) >= THIN_QUADRANT * (pos + neg):
+            continue
+        found.append(joint)
+        names = [f"{p}{n}" for p in ("c_m", "c_g", "OFF")]
+        pars = rec["parameters"]
+        flagged = [p for p in names if p in pars and not pars[p].get("pruned")]
+        for p in flagged:
+            pars[p]["unidentified"] = True
+        pruned = [p for p in names if p in pars and pars[p].get("pruned")]
+        notes.append(
+            f"paper model, {joint}: its load tau_out_hat is {'> 0' if pos > neg else '< 0'} "
+            f"on {100 * max(pos, neg) / (pos + neg):.1f} % of its fitted rows, so its quadrant "
+            f"is the sign of dq: {', '.join(names)} are not separable (a trajectory on which "
+            "its load changes sign separates them)"
+            + (f"; {', '.join(pruned)} pruned, " if pruned else "; ")
+            + f"{', '.join(flagged)} flagged unidentified: their values are not the "
+            "parameters")
+    rec["unidentified"] = [p for p, v in rec["parameters"].items() if v.get("unidentified")]
+    rec["one_signed_load"] = found
+
+
 def selected(sig: RobotSignals, dq_min: float) -> RobotSignals:
     """``sig`` with the torque of joint j set to NaN where the estimator leaves joint j's
     rows out: the columns' keep mask (:mod:`ident.robot.design`), else |dq_j| <= dq_min
@@ -793,8 +861,9 @@ def format_report(out: dict[str, Any]) -> str:
     lines.append(f"robot {r['name']} ({r['source']}): moving joints {', '.join(r['moving'])}")
     lines.append(f"preprocessing ({pre['chain']} chain): cut-off {pre['cutoff_hz']:g} Hz, "
                  f"decimation {pre['decimation']}, trim {pre['trim']}, dq_min "
-                 f"{pre['dq_min']:.4g} rad/s, {pre['samples']} samples x {len(r['moving'])} "
-                 f"joints; method {out['method']}, payload {out['payload']}")
+                 f"{pre['dq_min']:.4g} {out.get('_dq_unit', 'rad/s')}, {pre['samples']} "
+                 f"samples x {len(r['moving'])} joint{'s' if len(r['moving']) > 1 else ''}; "
+                 f"method {out['method']}, payload {out['payload']}")
     lines.extend(f"note: {n}" for n in out.get("notes", []))
     fitted = {n: rec for n, rec in out["models"].items() if "error" not in rec}
     for name, rec in out["models"].items():
@@ -877,6 +946,15 @@ def format_report(out: dict[str, Any]) -> str:
             lines.append("")
             lines.append(f"{name} model: " + format_record(rec["consistent"]))
     return "\n".join(lines)
+
+
+def _speed_unit(robot: Robot) -> str:
+    """Unit of a velocity threshold of the moving joints: rad/s, m/s (every joint prismatic:
+    the EMPS axis) or both (one dq_min for joints of both kinds)."""
+    kinds = {robot.types[robot.joint_names.index(j)] for j in robot.moving}
+    if kinds == {"prismatic"}:
+        return "m/s"
+    return "rad/s" if kinds == {"revolute"} else "rad/s or m/s (one threshold, every joint)"
 
 
 def public_record(out: dict[str, Any]) -> dict[str, Any]:

@@ -138,6 +138,11 @@ def urdf_text(model: pin.Model, standard: Mapping[str, float], numbers: Sequence
         vel = vel if math.isfinite(vel) else 1e9
         if kind == "revolute" and not (math.isfinite(lo) and math.isfinite(hi)):
             kind = "continuous"
+        # URDF has no infinity (urdfdom refuses "inf" and pinocchio cannot load the file):
+        # an unbounded side of a prismatic joint is written +-1e9 [m], like effort and
+        # velocity (a revolute joint without both bounds is "continuous", above)
+        lo = lo if math.isfinite(lo) else -1e9
+        hi = hi if math.isfinite(hi) else 1e9
         lim = (f'    <limit effort="{_f(eff)}" velocity="{_f(vel)}"'
                + (f' lower="{_f(lo)}" upper="{_f(hi)}"/>' if kind != "continuous" else "/>"))
         lines += [f"  <joint name={quoteattr(model.names[i])} type=\"{kind}\">",
