@@ -207,8 +207,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--refine",
         action="store_true",
         help="add the effects the residual points to (ident.refine), on the paper model "
-        "(or the only model fitted); with --robot: every joint on the fit's rows, on the "
-        "usual model (or the only model fitted), then the terms refitted in the n-dof model",
+        "(or the only model fitted); with --robot: every joint on the refined model's rows, "
+        "then the found terms refitted in the n-dof model",
     )
     g3.add_argument("--max-steps", type=int, default=5, metavar="N", help="refinement steps")
     p.set_defaults(func=run)
