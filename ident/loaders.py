@@ -879,11 +879,12 @@ def _read_mcap(path: Path, joints: Sequence[str] | None, axis: int | None) -> Ra
             stacklevel=4,
         )
     runs = [r.select(keep) for r in runs]
-    # logs without a /setpoint channel carry NaN: no reference, plain least squares; the
-    # /setpoint channel carries one reference: q_ref of a one-axis reading only
+    # logs without a /setpoint channel carry NaN: no reference, plain least squares; each
+    # drive's /joint/<k>/setpoint is its own axis's reference (a robot campaign's too): q_ref
+    # when every axis carries one on every kept cycle (IDIM-IV, the honest sigma's IV check)
     q_ref = None
-    if len(runs) == 1 and np.all(np.isfinite(runs[0].q_ref)):
-        q_ref = runs[0].q_ref[:, None]
+    if all(np.all(np.isfinite(r.q_ref)) for r in runs):
+        q_ref = np.column_stack([r.q_ref for r in runs])
     meta = runs[0].metadata.get("payload", {})
     mass = _meta_number(meta, "mass_kg", "[kg]", path)
     arm = None
