@@ -16,32 +16,38 @@ import warnings
 
 from threadpoolctl import threadpool_limits
 
-import daq.protocol.cli_export
-import daq.runtime.cli
-import daq.runtime.cli_recover
-import ident.cli
-import ident.cli_export_model
-import ident.cli_report
-import trajectories.cli
 from daq import DaqError, __version__
 from ident import IdentError
 from sim_drivers import SimError
 from trajectories import TrajectoryError
 
-from . import demo, monitor
 
-# subcommand modules, in the order of `jointid --help`; each sits with the package it drives
-SUBCOMMANDS = (
-    trajectories.cli,  # jointid plan
-    daq.runtime.cli,  # jointid run
-    ident.cli,  # jointid fit
-    demo,  # jointid demo
-    ident.cli_report,  # jointid report
-    daq.protocol.cli_export,  # jointid export
-    daq.runtime.cli_recover,  # jointid recover
-    ident.cli_export_model,  # jointid export-model
-    monitor,  # jointid monitor
-)
+def subcommands() -> tuple:
+    """The subcommand modules, in the order of ``jointid --help``; each sits with the package
+    it drives. Imported here, not at the top: they take seconds to import (scipy,
+    pinocchio...), and a Ctrl-C meanwhile is then caught by :func:`main` (one line, exit
+    130) instead of ending in a traceback."""
+    import daq.protocol.cli_export
+    import daq.runtime.cli
+    import daq.runtime.cli_recover
+    import ident.cli
+    import ident.cli_export_model
+    import ident.cli_report
+    import trajectories.cli
+
+    from . import demo, monitor
+
+    return (
+        trajectories.cli,  # jointid plan
+        daq.runtime.cli,  # jointid run
+        ident.cli,  # jointid fit
+        demo,  # jointid demo
+        ident.cli_report,  # jointid report
+        daq.protocol.cli_export,  # jointid export
+        daq.runtime.cli_recover,  # jointid recover
+        ident.cli_export_model,  # jointid export-model
+        monitor,  # jointid monitor
+    )
 
 #: errors raised on purpose by our packages (their exception roots) and I/O errors
 USER_ERRORS: tuple[type[BaseException], ...] = (DaqError, TrajectoryError, IdentError, SimError,
@@ -56,7 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"jointid {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for module in SUBCOMMANDS:
+    for module in subcommands():
         module.register(sub)
     return parser
 
@@ -92,7 +98,11 @@ def _one_line_warnings(command: str) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``jointid`` console script."""
     limit_blas_threads()
-    parser = build_parser()
+    try:
+        parser = build_parser()  # imports every subcommand (seconds)
+    except KeyboardInterrupt:  # Ctrl-C before anything started
+        print("jointid: interrupted (SIGINT)", file=sys.stderr)
+        return 128 + int(signal.SIGINT)
     args = parser.parse_args(argv)
     _one_line_warnings(getattr(args, "command", None) or "")
     if not getattr(args, "func", None):
