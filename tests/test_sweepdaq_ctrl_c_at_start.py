@@ -1,7 +1,7 @@
 """Ctrl-C while ``jointid`` is still starting (found by the acquisition sweep): the subcommand
 modules take seconds to import (scipy, pinocchio...), and a SIGINT in that time ended in a
 Python traceback (exit -2) instead of the one line and exit 130 of every other interrupt.
-The signal is sent once the child has begun loading scipy (seen in /proc/PID/maps), i.e. in
+The signal is sent once the child has begun loading scipy (its package in /proc/PID/maps), i.e. in
 the middle of those imports, before anything is planned or opened."""
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ pytestmark = [pytest.mark.slow,
 
 def _loading_scipy(pid: int) -> bool:
     try:
-        return "scipy" in Path(f"/proc/{pid}/maps").read_text()
+        return "/scipy/" in Path(f"/proc/{pid}/maps").read_text()
     except OSError:
         return False
 

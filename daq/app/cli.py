@@ -6,48 +6,67 @@ packages (their exception roots) print one line on stderr and exit 2; Ctrl-C exi
 (SIGTERM 143, SIGHUP 129: ``jointid run`` stops the drives first).
 """
 
+# ruff: noqa: E402 - the imports after _quiet_sigint() are meant to follow it
 from __future__ import annotations
 
 import argparse
 import os
 import signal
 import sys
+import threading
 import warnings
+
+
+def _interrupted_at_start(signum: int, frame: object) -> None:
+    """SIGINT while the subcommand modules below are still importing (seconds: scipy,
+    pinocchio...): one line and exit 130, as any other interrupt, not a traceback."""
+    print("jointid: interrupted (SIGINT)", file=sys.stderr)
+    raise SystemExit(128 + signum)
+
+
+def _quiet_sigint() -> object:
+    """Install :func:`_interrupted_at_start` for the imports; returns the handler to restore
+    (``None``: left alone, outside the main thread or where SIGINT is ignored)."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        return None
+    return signal.signal(signal.SIGINT, _interrupted_at_start)
+
+
+_sigint_before = _quiet_sigint()
 
 from threadpoolctl import threadpool_limits
 
+import daq.protocol.cli_export
+import daq.runtime.cli
+import daq.runtime.cli_recover
+import ident.cli
+import ident.cli_export_model
+import ident.cli_report
+import trajectories.cli
 from daq import DaqError, __version__
 from ident import IdentError
 from sim_drivers import SimError
 from trajectories import TrajectoryError
 
+from . import demo, monitor
 
-def subcommands() -> tuple:
-    """The subcommand modules, in the order of ``jointid --help``; each sits with the package
-    it drives. Imported here, not at the top: they take seconds to import (scipy,
-    pinocchio...), and a Ctrl-C meanwhile is then caught by :func:`main` (one line, exit
-    130) instead of ending in a traceback."""
-    import daq.protocol.cli_export
-    import daq.runtime.cli
-    import daq.runtime.cli_recover
-    import ident.cli
-    import ident.cli_export_model
-    import ident.cli_report
-    import trajectories.cli
+if _sigint_before is not None:  # imports done: Ctrl-C is main()'s again
+    signal.signal(signal.SIGINT, _sigint_before)
 
-    from . import demo, monitor
-
-    return (
-        trajectories.cli,  # jointid plan
-        daq.runtime.cli,  # jointid run
-        ident.cli,  # jointid fit
-        demo,  # jointid demo
-        ident.cli_report,  # jointid report
-        daq.protocol.cli_export,  # jointid export
-        daq.runtime.cli_recover,  # jointid recover
-        ident.cli_export_model,  # jointid export-model
-        monitor,  # jointid monitor
-    )
+# subcommand modules, in the order of `jointid --help`; each sits with the package it drives
+SUBCOMMANDS = (
+    trajectories.cli,  # jointid plan
+    daq.runtime.cli,  # jointid run
+    ident.cli,  # jointid fit
+    demo,  # jointid demo
+    ident.cli_report,  # jointid report
+    daq.protocol.cli_export,  # jointid export
+    daq.runtime.cli_recover,  # jointid recover
+    ident.cli_export_model,  # jointid export-model
+    monitor,  # jointid monitor
+)
 
 #: errors raised on purpose by our packages (their exception roots) and I/O errors
 USER_ERRORS: tuple[type[BaseException], ...] = (DaqError, TrajectoryError, IdentError, SimError,
@@ -62,7 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"jointid {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for module in subcommands():
+    for module in SUBCOMMANDS:
         module.register(sub)
     return parser
 
@@ -98,11 +117,7 @@ def _one_line_warnings(command: str) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``jointid`` console script."""
     limit_blas_threads()
-    try:
-        parser = build_parser()  # imports every subcommand (seconds)
-    except KeyboardInterrupt:  # Ctrl-C before anything started
-        print("jointid: interrupted (SIGINT)", file=sys.stderr)
-        return 128 + int(signal.SIGINT)
+    parser = build_parser()
     args = parser.parse_args(argv)
     _one_line_warnings(getattr(args, "command", None) or "")
     if not getattr(args, "func", None):
