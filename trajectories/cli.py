@@ -18,16 +18,20 @@ built in memory, its torques the ``[control.feedforward]`` model plus the payloa
 from __future__ import annotations
 
 import argparse
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
+from . import LimitError
 from .campaign_file import load_campaign
 from .excitation import assess_robot_campaign
 from .multi import feedforward_dynamics
 from .robot_model import OPTIMISE_EVALUATIONS, prepare_robot_campaign, robot_for_campaign
 from .sampled import BANDS, RobotPlan
 
-__all__ = ["plot_plan", "plot_robot_plan", "register", "run"]
+__all__ = ["file_named", "plot_plan", "plot_robot_plan", "register", "run"]
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -50,9 +54,29 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Execute ``jointid plan``; returns the exit code."""
+    """Execute ``jointid plan``; returns the exit code. A limit the plan exceeds is named
+    with the campaign file, as every other mistake (:func:`file_named`)."""
     # one path: a [joint] campaign is a robot with one moving joint
     rc = load_campaign(args.campaign)
+    with file_named(rc.source):
+        return _plan(args, rc)
+
+
+@contextmanager
+def file_named(source: str) -> Iterator[None]:
+    """Re-raise a :class:`~trajectories.LimitError` (whose message names the segment, joint
+    and limit but not the file) as ``"<source>: <message>"``."""
+    try:
+        yield
+    except LimitError as exc:
+        msg = str(exc)
+        if source and not msg.startswith(f"{source}: "):
+            raise LimitError(f"{source}: {msg}") from None
+        raise
+
+
+def _plan(args: argparse.Namespace, rc: Any) -> int:
+    """``jointid plan`` on the loaded campaign ``rc``."""
     if args.quick:
         rc = rc.quick()
     robot = robot_for_campaign(rc)

@@ -21,6 +21,7 @@ deterministically: ``jointid plan`` and ``jointid run`` play the same plan).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -41,8 +42,9 @@ from .robot import (
 )
 from .robot_campaign import MultisineSegment, RobotCampaign
 
-__all__ = ["RobotDynamics", "joint_robot", "prepare_robot_campaign", "robot_for_campaign",
-           "robot_file_path", "OPTIMISE_EVALUATIONS"]
+__all__ = ["RobotDynamics", "check_limits_within_robot", "joint_robot",
+           "prepare_robot_campaign", "robot_for_campaign", "robot_file_path",
+           "OPTIMISE_EVALUATIONS"]
 
 #: objective evaluations of the multi-sine optimisation in ``jointid plan`` / ``jointid run``
 #: (deterministic for a given seed: both play the same coefficients)
@@ -78,6 +80,7 @@ def robot_for_campaign(campaign: RobotCampaign) -> Robot:
         if n not in robot.joint_names:
             raise RobotError(f"{campaign.source}: robot.moving[{i}]: expected a joint of "
                              f"{path} ({', '.join(robot.joint_names)}), got {n!r}")
+    check_limits_within_robot(campaign, robot, path)
     locked = {n: float(robot.locked.get(n, 0.0)) for n in robot.joint_names
               if n not in campaign.moving}
     locked.update({n: float(v) for n, v in campaign.locked.items()})
@@ -85,6 +88,42 @@ def robot_for_campaign(campaign: RobotCampaign) -> Robot:
         return robot.with_motion(campaign.moving, locked)
     except RobotError as exc:
         raise RobotError(f"{campaign.source}: robot.locked: {exc}") from None
+
+
+#: campaign limit key -> the robot file's limit (``RobotLimits`` attribute, file key)
+_LIMIT_PAIRS = (("max_velocity", "dq_max"), ("max_acceleration", "ddq_max"),
+                ("max_jerk", "dddq_max"), ("max_torque", "tau_max"))
+
+
+def check_limits_within_robot(campaign: RobotCampaign, robot: Robot, path: object) -> None:
+    """Refuse a moving joint whose campaign limits go beyond the robot file's own limits.
+
+    The campaign's limits are the ones the plan and the runner's watchdogs use; a robot
+    file's limits (``q_min``, ``q_max``, ``dq_max``, ... or the URDF's) describe what the
+    joint can take, so a campaign may be tighter, never wider. Limits the robot file does
+    not give (infinite) are not checked.
+
+    Raises
+    ------
+    trajectories.RobotError
+        One line naming the campaign, the key, its value and the robot file's limit.
+    """
+    tol = 1e-9
+    for j in campaign.joints:
+        lim = robot.limits.get(j.name)
+        if lim is None:
+            continue
+        key = f"{campaign.source}: robot.joints.{j.name}.limits"
+        lo, hi = j.limits.position
+        if lo < lim.q_min - tol * abs(lim.q_min) or hi > lim.q_max + tol * abs(lim.q_max):
+            raise RobotError(f"{key}.position: expected a range within the robot file's "
+                             f"[q_min, q_max] = [{lim.q_min:g}, {lim.q_max:g}] ({path}), got "
+                             f"[{lo:g}, {hi:g}]")
+        for ours, theirs in _LIMIT_PAIRS:
+            v, top = float(getattr(j.limits, ours)), float(getattr(lim, theirs))
+            if math.isfinite(top) and v > top * (1 + tol):
+                raise RobotError(f"{key}.{ours}: expected at most the robot file's {theirs} = "
+                                 f"{top:g} ({path}), got {v:g}")
 
 
 def joint_robot(campaign: RobotCampaign) -> Robot:

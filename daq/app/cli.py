@@ -6,13 +6,35 @@ packages (their exception roots) print one line on stderr and exit 2; Ctrl-C exi
 (SIGTERM 143, SIGHUP 129: ``jointid run`` stops the drives first).
 """
 
+# ruff: noqa: E402 - the imports after _quiet_sigint() are meant to follow it
 from __future__ import annotations
 
 import argparse
 import os
 import signal
 import sys
+import threading
 import warnings
+
+
+def _interrupted_at_start(signum: int, frame: object) -> None:
+    """SIGINT while the subcommand modules below are still importing (seconds: scipy,
+    pinocchio...): one line and exit 130, as any other interrupt, not a traceback."""
+    print("jointid: interrupted (SIGINT)", file=sys.stderr)
+    raise SystemExit(128 + signum)
+
+
+def _quiet_sigint() -> object:
+    """Install :func:`_interrupted_at_start` for the imports; returns the handler to restore
+    (``None``: left alone, outside the main thread or where SIGINT is ignored)."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        return None
+    return signal.signal(signal.SIGINT, _interrupted_at_start)
+
+
+_sigint_before = _quiet_sigint()
 
 from threadpoolctl import threadpool_limits
 
@@ -29,6 +51,9 @@ from sim_drivers import SimError
 from trajectories import TrajectoryError
 
 from . import demo, monitor
+
+if _sigint_before is not None:  # imports done: Ctrl-C is main()'s again
+    signal.signal(signal.SIGINT, _sigint_before)
 
 # subcommand modules, in the order of `jointid --help`; each sits with the package it drives
 SUBCOMMANDS = (

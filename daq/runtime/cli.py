@@ -23,6 +23,7 @@ from pathlib import Path
 from daq import ConfigError
 from sim_drivers.plant_config import load_plant
 from trajectories.campaign_file import load_campaign
+from trajectories.cli import file_named
 
 from .progress import ProgressLine
 from .runner import Progress, prompt_payload, run_campaign
@@ -89,9 +90,10 @@ def main(args: argparse.Namespace) -> int:
         return prompt_payload(index, payload, n)
 
     try:
-        result = run_campaign(campaign, out_dir=args.out, simulate=plant, yes=args.yes,
-                              progress=show, payloads=args.payload, resume=args.resume,
-                              prompt=None if args.yes else ask, overwrite=args.overwrite)
+        with file_named(campaign.source):  # a limit the plan exceeds: named with the file
+            result = run_campaign(campaign, out_dir=args.out, simulate=plant, yes=args.yes,
+                                  progress=show, payloads=args.payload, resume=args.resume,
+                                  prompt=None if args.yes else ask, overwrite=args.overwrite)
     finally:
         bar.close()
     print(result.summary(), file=sys.stderr)

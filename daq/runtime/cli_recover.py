@@ -4,7 +4,8 @@ A log whose writer was killed has no summary: ``read_run`` reads it, but indexed
 (Foxglove, ``@mcap/core``, the ``mcap`` library's seeking reader) need the index. This copies
 every intact record (:func:`daq.runtime.mcaprecover.recover_log`). Without ``-o`` the log is
 replaced in place and the original kept as ``LOG.orig`` (a name ``*.mcap`` globs do not
-match, so ``jointid fit DIR`` reads the recovered run once). Logs written before message
+match, so ``jointid fit DIR`` reads the recovered run once). ``-o OUT`` is refused when OUT
+exists (it may be another run's log). Logs written before message
 indexes were written (Foxglove could not play them) are re-indexed the same way.
 """
 
@@ -26,10 +27,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Copy the intact records of a run log (schemas, channels, metadata, "
         "attachments, every chunk whose data checks out) to a new MCAP file with message "
         "indexes, a summary and a footer, so that Foxglove and the mcap indexed readers open "
-        "it. Without -o, LOG is replaced and the original kept as LOG.orig.")
+        "it. Without -o, LOG is replaced and the original kept as LOG.orig; -o never replaces an "
+        "existing file.")
     p.add_argument("log", type=Path, metavar="LOG.mcap", help="a run log written by jointid run")
     p.add_argument("-o", "--output", type=Path, metavar="OUT.mcap",
-                   help="write here instead of replacing LOG")
+                   help="write here instead of replacing LOG (refused if it exists)")
     p.set_defaults(func=run)
 
 
@@ -38,6 +40,9 @@ def run(args: argparse.Namespace) -> int:
     if not src.is_file():
         raise DaqError(f"{src}: no such run log")
     if args.output is not None:
+        if args.output.exists():  # a mistyped -o must not replace another run's log
+            raise DaqError(f"{args.output}: already exists; recover writes a new file "
+                           f"(remove it first or give another -o)")
         res = recover_log(src, args.output)
         kept = ""
     else:

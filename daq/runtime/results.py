@@ -77,6 +77,24 @@ class PayloadResult:
         return self.cycles / self.wall_s if self.wall_s > 0 else float("nan")
 
 
+#: a paced run with more than this share of its cycles late gets a note in the summary:
+#: five times the ~1 % an idle 2-core VM misses without real-time priority (README, "Timing")
+LATE_NOTE_SHARE = 0.05
+
+
+def late_note(r: PayloadResult, cycle_s: float) -> str:
+    """One line when a paced run missed more than :data:`LATE_NOTE_SHARE` of its cycles (the
+    host did not keep up: a TPDO or heartbeat watchdog that stops such a run is the load's
+    doing as much as the drive's), else ``""``. Lockstep runs (no lateness) get none."""
+    if r.lateness_s.size == 0 or r.cycles <= 0 or r.missed <= LATE_NOTE_SHARE * r.cycles:
+        return ""
+    worst = 1000.0 * float(np.max(r.lateness_s))
+    return (f"note: {r.missed} of {r.cycles} cycles late ({100.0 * r.missed / r.cycles:.1f} %, "
+            f"worst {worst:.1f} ms at a {1000.0 * cycle_s:g} ms cycle): the host did not keep "
+            f"up with the paced clock (other load?); give [daq] realtime_priority or a longer "
+            f"control.cycle_s")
+
+
 @dataclass(frozen=True)
 class CampaignResult:
     """The outcome of a campaign: one :class:`PayloadResult` per payload run executed."""
@@ -107,6 +125,8 @@ class CampaignResult:
                 f"{r.cycles} cycles in {r.wall_s:.1f} s {rate}, missed {r.missed}"
                 f" -> {r.path}" + (f"\n    {r.reason}" if r.reason else "")
             )
+            if note := late_note(r, self.bus_load.cycle_s):
+                lines.append(f"    {note}")
         lines.extend(f"  warning: {n}" for n in self.notes)
         if self.skipped:
             lines.append(f"  skipped (already completed): payloads {list(self.skipped)}")

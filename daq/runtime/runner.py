@@ -304,9 +304,16 @@ def run_campaign(
     cfg = robot_daq_config(campaign, use_can_config=simulate is None)
     # the multi-sines as jointid plan optimised them (deterministic)
     campaign, _dyn, _opt = prepare_robot_campaign(campaign)
+    sim_notes: list[str] = []
     if simulate is not None:  # the plant the campaign asks for (campaign.plant)
         simulate = sim_params(campaign, simulate)
-        cfg = with_scalings(cfg, sim_scalings(campaign, simulate, len(cfg.drives)))
+        chains = sim_scalings(campaign, simulate, len(cfg.drives))
+        sim_notes = [f"--simulate: node {d.node_id}: [daq.drives.scaling] "
+                     f"({_scaling_text(d.scaling)}) is not used: the simulated drive's chain "
+                     f"is ({_scaling_text(s)})"
+                     for d, s in zip(cfg.drives, chains, strict=True)
+                     if d.scaling is not None and _chain(d.scaling) != _chain(s)]
+        cfg = with_scalings(cfg, chains)
         if cfg.interface != "virtual":
             raise ConfigError(f"{campaign.source}: daq.interface: expected 'virtual' with "
                               f"--simulate, got {cfg.interface!r}")
@@ -325,9 +332,23 @@ def run_campaign(
     lock = FolderLock(out)  # one run per folder, from here to the end
     try:
         return _run_locked(campaign, cfg, plan, load, out, stem, todo, simulate, yes,
-                           progress, resume, overwrite, fault_injectors, prompt, monitor)
+                           progress, resume, overwrite, fault_injectors, prompt, monitor,
+                           sim_notes)
     finally:
         lock.release()
+
+
+def _chain(sc: Any) -> tuple[float, float, int]:
+    """What a scaling does to the logged values: gear ratio, joint torque per unit, counts."""
+    return (float(sc.gear_ratio), float(sc.torque_per_unit), int(sc.encoder_counts_per_rev))
+
+
+def _scaling_text(sc: Any) -> str:
+    """A drive scaling in a few words, for the ``--simulate`` note."""
+    text = (f"gear ratio {sc.gear_ratio:g}, rated torque {sc.rated_torque_Nm:g} N m, "
+            f"{sc.encoder_counts_per_rev} counts/rev")
+    gain = getattr(sc, "drive_gain", None)
+    return text + (f", drive gain {gain:g} N m/unit" if gain else "")
 
 
 def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, out: Path,
@@ -335,8 +356,9 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
                 progress: Callable[[Progress], None] | None, resume: bool, overwrite: bool,
                 fault_injectors: dict[int, Any] | None,
                 prompt: Callable[[int, Any, int], bool] | None,
-                monitor: Any = None) -> CampaignResult:
-    """:func:`run_campaign` once the refusals passed and the folder is locked."""
+                monitor: Any = None, sim_notes: list[str] | None = None) -> CampaignResult:
+    """:func:`run_campaign` once the refusals passed and the folder is locked;
+    ``sim_notes``: warnings of the ``--simulate`` set-up (a scaling the simulation ignores)."""
     n_pay = len(campaign.payloads)
     state_file = _state_path(out, campaign.name)
     completed = read_state(state_file)  # merged into, never shrunk (runfolder)
@@ -362,7 +384,7 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
     sim_records: tuple[dict[str, np.ndarray], ...] = ()
     heartbeat: MasterHeartbeat | None = None
     drives: list[MasterDrive] = []
-    notes: list[str] = []
+    notes: list[str] = list(sim_notes or ())
     clean = False
     status, reason = "done", ""
     try:
