@@ -832,6 +832,21 @@ def _json_vector(text: str | None, size: int, what: str, source: str) -> np.ndar
     return v
 
 
+def _warn_unfinished(path: Path, result: Mapping[str, str]) -> None:
+    """A warning naming the file when its run did not finish (``result.status`` other than
+    ``done``: interrupted, stopped on a fault...): its samples end where the run was cut,
+    which may leave a payload's excitation incomplete (a 14 s interrupted log of the quick
+    campaign fitted tau_off = -130.8 N m against the plant's 10, in silence). A log without a
+    result record (writer killed) is warned about by the reader (``truncated``)."""
+    status = str(result.get("status", "")) if result else ""
+    if status and status != "done":
+        reason = str(result.get("reason", "")).strip()
+        warnings.warn(f"{path}: the run did not finish ({status}"
+                      + (f": {reason}" if reason else "")
+                      + "): its excitation may be incomplete; fit it with care, or rerun "
+                      "that payload (jointid run --resume)", stacklevel=4)
+
+
 def _read_mcap(path: Path, joints: Sequence[str] | None, axis: int | None) -> RawRobotRun:
     """One run log: the axes of ``joints`` (every axis of the log, matched by number and by
     the ``drive<i>.joint`` names), or the one axis ``axis`` (``joints`` None), restricted to
@@ -860,6 +875,7 @@ def _read_mcap(path: Path, joints: Sequence[str] | None, axis: int | None) -> Ra
                     f"{path}: metadata drive{i}.joint is {logged!r}, the robot's moving joint "
                     f"{i + 1} is {name!r} (moving: {_names(joints)})"
                 )
+    _warn_unfinished(path, runs[0].metadata.get("result", {}))
     cycles = runs[0].cycle
     for i, run in enumerate(runs[1:], start=1):
         if run.cycle.shape != cycles.shape or np.any(run.cycle != cycles):

@@ -184,6 +184,12 @@ def test_sigint_stops_and_keeps_a_complete_log(tmp_path):
     assert any(e["message"] == "drives disabled" for e in a.events)
     assert state_from_statusword(int(a.statusword[-1])) is State.SWITCH_ON_DISABLED
     assert not (out / "long_payload1.mcap").exists()
+    # the identification says so (a stranger's interrupted log was fitted in silence)
+    from ident.api import load
+
+    with pytest.warns(UserWarning, match=r"long_payload0\.mcap: the run did not finish "
+                      r"\(interrupted"):
+        load([log])
 
 
 @pytest.mark.slow  # a jointid subprocess
