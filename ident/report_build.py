@@ -334,6 +334,13 @@ def build_report(directory: Path | str, *, title: str = "jointid report") -> Pat
         raise IdentError(f"{d}: not a directory (expected the output folder of jointid demo/fit)")
     fit = upgrade_record(load_json(d / "fit.json"))  # older records: "new", "qs", "ols"
     demo = upgrade_record(load_json(d / "demo.json")) if (d / "demo.json").exists() else {}
+    for name, rec in (("fit.json", fit), ("demo.json", demo)):
+        if not isinstance(rec, dict):
+            raise IdentError(f"{d / name}: expected a JSON object (the record jointid "
+                             f"writes), got a {type(rec).__name__}")
+    if not isinstance(fit.get("models"), dict) or not fit["models"]:
+        raise IdentError(f"{d / 'fit.json'}: no fitted model ('models' missing or empty): "
+                         "expected the record of jointid fit --json or jointid demo")
     if "figures" not in demo:
         demo["figures"] = discover_figures(d)
     truth = demo.get("truth")

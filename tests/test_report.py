@@ -65,6 +65,25 @@ def test_report_refuses_missing_fit(tmp_path):
         build_report(tmp_path)
 
 
+@pytest.mark.parametrize(("fit", "demo", "match"), [
+    ("[]", None, r"fit\.json: expected a JSON object .* got a list"),
+    ("{}", None, r"fit\.json: no fitted model"),
+    (None, "[1, 2]", r"demo\.json: expected a JSON object .* got a list"),
+])
+def test_report_refuses_a_record_that_is_not_a_fit(tmp_path, capsys, fit, demo, match):
+    """A fit.json (or demo.json) that is not jointid's record: one line naming the file, exit
+    2, no report written (a list ended in a traceback, an empty object built a report)."""
+    from daq.app.cli import main
+
+    (tmp_path / "fit.json").write_text(fit if fit is not None else json.dumps(_fit_json()))
+    if demo is not None:
+        (tmp_path / "demo.json").write_text(demo)
+    assert main(["report", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and re.search(match, err), err
+    assert not (tmp_path / "report.html").exists()
+
+
 _EVIL = '<script>alert("x")</script>'
 
 
