@@ -165,8 +165,19 @@ class ArmRun(LoopRecord):
         return out
 
     def to_csv(self, path: Any) -> None:
-        """Write :meth:`columns` as a comma-separated file with a header line."""
+        """Write :meth:`columns` as a comma-separated file with a header line, plus the
+        constant payload columns of docs/robot-data.md when the run carries a payload (mass
+        [kg], CoM in the flange frame [m], inertia about the CoM [kg m^2]): without them
+        the file reads as a run without payload."""
         cols = self.columns()
+        pay = self.payload
+        if pay is not None:
+            n = self.t.size
+            cols["payload_mass_kg"] = np.full(n, pay.mass)
+            for a, v in zip("xyz", pay.com, strict=True):
+                cols[f"payload_com_{a}_m"] = np.full(n, v)
+            for a, v in zip(("xx", "xy", "xz", "yy", "yz", "zz"), pay.inertia, strict=True):
+                cols[f"payload_i{a}_kgm2"] = np.full(n, v)
         np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",",
                    header=",".join(cols), comments="", fmt="%.17g")
 

@@ -105,20 +105,10 @@ def to_toml(raw: dict) -> str:
 
 
 def write_arm_csv(run: Any, path: Path) -> Path:
-    """A simulated arm run (``sim_drivers.arm_offline.ArmRun``) as a robot CSV: its columns,
-    plus the constant payload columns of docs/robot-data.md when the run carries a payload
-    (mass, CoM in the flange frame, inertia about the CoM)."""
-    cols = run.columns()
-    pay = run.payload
-    if pay is not None:
-        n = run.t.size
-        cols["payload_mass_kg"] = np.full(n, pay.mass)
-        for a, v in zip("xyz", pay.com, strict=True):
-            cols[f"payload_com_{a}_m"] = np.full(n, v)
-        for a, v in zip(("xx", "xy", "xz", "yy", "yz", "zz"), pay.inertia, strict=True):
-            cols[f"payload_i{a}_kgm2"] = np.full(n, v)
-    np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",",
-               header=",".join(cols), comments="", fmt="%.17g")
+    """A simulated arm run (``sim_drivers.arm_offline.ArmRun``) as a robot CSV
+    (:meth:`~sim_drivers.arm_offline.ArmRun.to_csv`: its columns and, with a payload, the
+    payload columns)."""
+    run.to_csv(path)
     return path
 
 

@@ -279,3 +279,25 @@ def test_the_simulator_truth_is_the_regressors_standard_parameters():
                     for t in range(20)])
     ours = reg.rigid(q, dq, ddq) @ reg.standard_values() + reg.payload_torque(q, dq, ddq, pay)
     np.testing.assert_allclose(ours, sim, rtol=1e-10, atol=1e-8)
+
+
+def test_urdf_inertia_that_is_not_a_number_is_one_line(tmp_path):
+    """An inertia entry that is not a number (here in any of the six places) is refused in
+    one line naming the link; a non-number off the diagonal ended in an UnboundLocalError."""
+    from trajectories import RobotError
+
+    for key in ("ixx", "ixy", "izz"):
+        bad = {"ixx": "0.01", "ixy": "0", "izz": "0.02", key: "np.float64(0.23)"}
+        urdf = f"""<?xml version="1.0"?>
+<robot name="one">
+  <link name="base"/>
+  <link name="l1"><inertial><origin xyz="0.1 0 0"/><mass value="2.0"/>
+    <inertia ixx="{bad['ixx']}" ixy="{bad['ixy']}" ixz="0" iyy="0.02" iyz="0"
+             izz="{bad['izz']}"/></inertial></link>
+  <joint name="q1" type="revolute"><parent link="base"/><child link="l1"/>
+    <axis xyz="0 0 1"/><limit lower="-2" upper="2" effort="50" velocity="3"/></joint>
+</robot>
+"""
+        with pytest.raises(RobotError, match=r"link 'l1': inertia: expected finite numbers") as e:
+            load_robot(_write(tmp_path, urdf, f"bad_{key}.urdf"))
+        assert "\n" not in str(e.value)

@@ -215,8 +215,8 @@ def _check_urdf_inertials(urdf: Path, src: str) -> None:
         keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
         try:
             xx, xy, xz, yy, yz, zz = (float(tensor.get(k, "0")) for k in keys)
-        except ValueError:
-            xx = math.nan
+        except ValueError:  # (every entry, so the message below is reached, no traceback)
+            xx = xy = xz = yy = yz = zz = math.nan
         i_c = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
         if not np.all(np.isfinite(i_c)):
             raise RobotError(f"{where}: link {name!r}: inertia: expected finite numbers "
