@@ -1659,16 +1659,24 @@ class RobotModel(HyperParameters):
         (``quadrant_from_``) -- the rows ``rel_error_`` is measured on."""
         passes = self._fitted_rows(signals, "fitted_rows")
         out = np.zeros(signals.tau.shape, dtype=bool)
-        band = np.asarray(getattr(self, "band_", np.zeros(len(self.cols_))), dtype=float)
-        theta = self.quadrant_theta_ if self.quadrant_theta_ is not None else (
-            self.quadrant_from_)
         keep = None if signals.columns is None else signals.columns.keep
         for r, j, cols, WjT, pj, dqj, tauj, _sg in passes:
-            ok = self._usable(dqj, tauj, WjT, None if keep is None else keep[r, j])
-            if band[j] > 0 and theta is not None:
-                ok &= np.abs(theta[cols] @ WjT + pj) >= band[j]
-            out[r, j] = ok
+            out[r, j] = self._row_rule(j, cols, WjT, pj, dqj, tauj,
+                                       None if keep is None else keep[r, j])
         return out
+
+    def _row_rule(self, j: int, cols: np.ndarray, WjT: np.ndarray, pj: np.ndarray,
+                  dqj: np.ndarray, tauj: np.ndarray, keep: np.ndarray | None) -> np.ndarray:
+        """Joint j's rows of a chunk after the fit (:meth:`fitted_rows`, the n-dof refit's
+        rows): :meth:`_usable`, and outside the quadrant band with the theta that decided
+        the final quadrants (``quadrant_theta_``, else ``quadrant_from_``); shape (m,)."""
+        ok = self._usable(dqj, tauj, WjT, keep)
+        band = float(np.asarray(getattr(self, "band_", np.zeros(len(self.cols_))))[j])
+        theta = self.quadrant_theta_ if self.quadrant_theta_ is not None else (
+            self.quadrant_from_)
+        if band > 0 and theta is not None:
+            ok &= np.abs(theta[cols] @ WjT + pj) >= band
+        return ok
 
     def quadrant_drift(self, signals: RobotSignals) -> np.ndarray:
         """Per joint, the share of its fitted rows (:meth:`fitted_rows`) whose model quadrant

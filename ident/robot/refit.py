@@ -358,7 +358,7 @@ def refit_robot(
     sys = _System(model, rows, ext_idx, coeffs, len(names), names)
     x, it, w = _estimate(sys, x0, free, linear, model.method)
     out = RobotRefit(model=model, terms=terms, names_=tuple(names), n_iter=it)
-    # the extra parameters after the model's
+    # the model's own parameters (the extra ones come after them)
     base = np.array([i < nx0 for i in range(len(names))])
     drift = model.quadrant_drift(signals) if hasattr(model, "quadrant_drift") else np.zeros(k)
     out.unsettled = {jn: float(d) for jn, d in zip(model.joints_, drift, strict=True)
@@ -537,27 +537,19 @@ def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
         return _product_rows(model, signals, X, keep, Xz)
     # the theta that decided the fit's quadrants (products form: the usual fit's, as predict)
     theta_q = model.coef_[:model.n_theta_] if model._theta_x else model.quadrant_from_
-    # the band's rows are the fit's (RobotModel.fitted_rows: decided by the theta that
-    # decided the final quadrants): with the final theta a row on the band's edge could
-    # change side, and the "before" error would not be the fit's
-    theta_b = model.quadrant_from_
     if model.quadrant_theta_ is not None:
-        theta_q = theta_b = model.quadrant_theta_
-    band = np.asarray(getattr(model, "band_", np.zeros(k)), dtype=float)
+        theta_q = model.quadrant_theta_
     parts = _parts(k)
     iv = Xz is not None
     for r, j, cols, WjT, pj, dqj, tauj, sg, *z in model._fitted_rows(signals, "refit_robot",
                                                                       instruments=iv):
         idx = np.arange(signals.n)[r]
-        ok = (np.abs(dqj) > model.dq_min) & np.isfinite(tauj) & np.all(np.isfinite(WjT), axis=0)
-        if keep is not None:
-            ok &= keep[idx, j]
+        # the fit's row rule (RobotModel.fitted_rows: its band decided by the theta that
+        # decided the final quadrants, so the "before" error is the fit's)
+        ok = model._row_rule(j, cols, WjT, pj, dqj, tauj, None if keep is None else keep[idx, j])
         V = model._v(WjT, pj, dqj, np.zeros(dqj.size), sg).T
         if model.model == "paper" and (model.quadrant == "model"):
-            tout = theta_q[cols] @ WjT + pj
-            sp = tout * dqj
-            if band[j] > 0 and theta_b is not None:
-                ok &= np.abs(theta_b[cols] @ WjT + pj) >= band[j]
+            sp = (theta_q[cols] @ WjT + pj) * dqj
         elif model.model == "paper":
             sp = tauj * dqj
         else:
