@@ -603,18 +603,16 @@ def refine_robot(
              for st in ref.steps]
     if not terms:  # nothing to refit: the n-dof model is as it was fitted
         rec["refit"] = {"skipped": "no term found on any joint: the n-dof model is unchanged"}
-        out["refinement"] = rec
-        out["_refinements"] = refs
-        return rec
-    say(f"n-dof refit with {len(terms)} found term(s)")
-    try:
-        fitted = refit_robot(est, sig, terms, prediction=pred, keep=keep,
-                             revolute=[types.get(jn, True) for jn in sig.joints],
-                             validation=validation)
-        rec["refit"] = fitted.to_json()
-        out["_refit"] = fitted
-    except IdentError as exc:
-        rec["refit"] = {"error": str(exc)}
+    else:
+        say(f"n-dof refit with {len(terms)} found term(s)")
+        try:
+            fitted = refit_robot(est, sig, terms, prediction=pred, keep=keep,
+                                 revolute=[types.get(jn, True) for jn in sig.joints],
+                                 validation=validation)
+            rec["refit"] = fitted.to_json()
+            out["_refit"] = fitted
+        except IdentError as exc:
+            rec["refit"] = {"error": str(exc)}
     out["refinement"] = rec
     out["_refinements"] = refs
     return rec
