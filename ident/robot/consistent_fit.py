@@ -601,6 +601,9 @@ def consistent_record(model: Any, fit: ConsistentFit) -> dict[str, Any]:
         "known_rotor_inertia": {j: float(v) for j, v in zip(
             model.joints_, getattr(model.regressor_, "known_Ia", np.zeros(len(model.joints_))),
             strict=True)},
+        # fitted friction parameters that carry a weight (OFF2 = OFF2 + 9.81 M2 on a vertical
+        # prismatic axis, ident.robot.confounded): the export takes it out with "standard"
+        "friction_regrouped": dict(getattr(model.base_, "friction", {}) or {}),
     }
 
 
