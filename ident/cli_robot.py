@@ -189,7 +189,10 @@ def fit_files(
     return out
 
 
-def _qs(value: str) -> float:
+def _qs(value: str | None) -> float:
+    """``--q-s`` of ``--robot``: a finite velocity > 0 [rad/s]; not given: ``DEFAULT_Q_S``."""
+    if value is None:
+        return DEFAULT_Q_S
     try:
         q_s = float(value)
     except ValueError:

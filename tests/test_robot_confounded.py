@@ -134,6 +134,13 @@ def test_regrouping_is_exact_and_only_where_needed(cylindrical):
                                            known_rotor_inertia=True)) is None
     arm3 = RobotRegressor(load_robot(ROOT / "examples" / "robots" / "arm3.toml"))
     assert regroup_friction(arm3, base_parameters(arm3)) is None
+    # no rotor inertias in the robot file: no remedy offered, the sums are what is identified
+    bare = cylindrical[0].with_name("cyl3_bare.toml")
+    bare.write_text("\n".join(ln for ln in CYLINDRICAL.splitlines()
+                              if not ln.startswith("rotor_inertia")))
+    note = regroup_friction(RobotRegressor(load_robot(bare))).note
+    assert "--known-rotor-inertia" not in note and "the regrouped sums are what is identified" \
+        in note, note
 
 
 def _value(rec: dict, name: str) -> tuple[float, float]:

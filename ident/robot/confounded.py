@@ -211,12 +211,9 @@ def _separated_by_known_rotor_inertia(reg: RobotRegressor, seed: int) -> bool:
     """Whether the rotor inertias of the robot file, known, remove every dependence."""
     if np.any(reg.known_Ia > 0):
         return False  # they are known already
-    try:
-        known = RobotRegressor(reg.robot, known_rotor_inertia=True)
-    except Exception:  # noqa: BLE001 -- a robot file without rotor inertias: no such remedy
-        return False
+    known = RobotRegressor(reg.robot, known_rotor_inertia=True)
     if not np.any(known.known_Ia > 0):
-        return False
+        return False  # the robot file gives none
     return _dependent(known, base_parameters(known), seed) is None
 
 
