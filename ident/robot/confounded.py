@@ -232,8 +232,11 @@ def _note(reg: RobotRegressor, removed: tuple[str, ...], base: RegroupedBase,
             axis = f"{'' if reg.revolute[i] else 'prismatic '}axis {joints[i]}"
         else:
             axis = fname
-        why.append(f"on the {axis} the weight of {', '.join(terms)} is a constant force, "
-                   f"the column of {fname}")
+        if fname.startswith("OFF"):
+            why.append(f"on the {axis} the weight of {', '.join(terms)} is a constant force, "
+                       f"the column of {fname}")
+        else:  # no robot met so far: said as it is
+            why.append(f"on the {axis} {', '.join(terms)} act through the column of {fname}")
     because = "; ".join(why) or "a combination of the friction columns"
     known = _separated_by_known_rotor_inertia(reg, seed)
     how = ("to identify them separately give the rotor inertias (--known-rotor-inertia, "
