@@ -142,10 +142,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--q-s",
         "--qs",  # the older spelling, still accepted
-        default=f"{DEFAULT_Q_S:g}",
         metavar="VALUE|scan",
         help="q_s of the paper model [rad/s], or 'scan' to minimise the residual (default "
-        f"{DEFAULT_Q_S:g})",
+        f"{DEFAULT_Q_S:g}; refused with --model usual, which has no q_s; the scan is "
+        "single-joint only)",
     )
     p.add_argument(
         "--validate",
@@ -214,9 +214,26 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _qs(value: str) -> float | str:
+def check_qs_model(args: argparse.Namespace) -> None:
+    """``--q-s`` is the paper model's (eq. 29): given with ``--model usual``, which has no
+    q_s-dependent term, it would be ignored; refused in one line instead, by ``jointid fit``
+    and ``jointid fit --robot`` alike (``args.model`` already resolved).
+
+    Raises
+    ------
+    DataError
+        ``--q-s`` (or ``--qs``) given and ``--model usual``.
+    """
+    if args.q_s is not None and args.model == "usual":
+        raise DataError(f"--q-s {args.q_s}: q_s is the paper model's Stribeck velocity (eq. 29) "
+                        "and --model usual has none; drop --q-s or fit --model paper or both")
+
+
+def _qs(value: str | None) -> float | str:
     """``--q-s``: 'scan' or a finite velocity > 0 [rad/s or m/s] (one line naming the flag
-    otherwise, as ``--robot`` says it)."""
+    otherwise, as ``--robot`` says it); not given: ``DEFAULT_Q_S``."""
+    if value is None:
+        return DEFAULT_Q_S
     if value.strip().lower() == "scan":
         return "scan"
     try:
@@ -352,6 +369,7 @@ def run(args: argparse.Namespace) -> int:
     args.model = model_name(args.model, extra=("both",))
     if args.method is not None:
         args.method = method_name(args.method, what="--method")
+    check_qs_model(args)  # one rule for both paths, before any file is read
     if args.robot is not None:
         return cli_robot.run(args)
     for attr, flag, hint in _ROBOT_ONLY:

@@ -33,7 +33,7 @@ import numpy as np
 
 from trajectories.excitation import ZERO_LOAD_SHARE
 from trajectories.friction import DEFAULT_Q_S
-from trajectories.robot import Robot, RobotRegressor, load_robot
+from trajectories.robot import Robot, RobotRegressor, base_parameters, load_robot
 
 from . import DataError, IdentError
 from .estimate import DEFAULT_THRESHOLD_PCT
@@ -42,6 +42,7 @@ from .loaders import parse_mapping
 from .refine_result import ONE_TRAJECTORY_NOTE
 from .report import write_json
 from .results import DEFAULT_BANDS
+from .robot.confounded import regroup_friction
 from .robot.consistency import check_consistency
 from .robot.consistent_fit import add_consistent, format_record
 from .robot.design import design_runs, resolve_design, sign_checked
@@ -188,7 +189,10 @@ def fit_files(
     return out
 
 
-def _qs(value: str) -> float:
+def _qs(value: str | None) -> float:
+    """``--q-s`` of ``--robot``: a finite velocity > 0 [rad/s]; not given: ``DEFAULT_Q_S``."""
+    if value is None:
+        return DEFAULT_Q_S
     try:
         q_s = float(value)
     except ValueError:
@@ -310,6 +314,20 @@ def fit_robot(
         check_periods([*runs, *validation])
     pre = preprocessing or RobotPreprocessing()
     notes: list[str] = []
+    # base parameters the friction columns confound (a constant weight is an offset): regrouped
+    # for every fit, with one line saying what and why (ident.robot.confounded); the paper
+    # model, whose load must carry that weight, is not fitted then
+    base = base_parameters(reg)  # the fits' own default, computed once here
+    regrouping = regroup_friction(reg, base, joints=tuple(joints))
+    refused: dict[str, str] = {}  # model -> why it is not fitted
+    if regrouping is not None:
+        base = regrouping.base
+        notes.append(regrouping.note)
+        if "paper" in models:  # its tau_out needs the weight the offset absorbs
+            if models == ("paper",):
+                raise DataError(regrouping.paper)
+            models = tuple(m for m in models if m != "paper")
+            refused["paper"] = regrouping.paper
     if chain == "columns":
         design = resolve_design(runs, instruments=method == "iv", cutoff_hz=pre.cutoff_hz,
                                 decimation=pre.decimation, trim=pre.trim, dq_min=dq_min)
@@ -325,7 +343,7 @@ def fit_robot(
         if sign_check and "paper" in models:
             # as the single-joint fit: a first usual fit estimates tau_out; rows where
             # sign(tau) != sign(tau_out) are left out of both models (and the validation)
-            first = RobotModel(reg, model="usual", method=method,
+            first = RobotModel(reg, model="usual", method=method, base=base,
                                payload_ratio=payload == "ratio",
                                payload_params=payload == "mass").fit(sig)
             sig, kept = sign_checked(sig, runs, design, first.load_torque,
@@ -391,6 +409,7 @@ def fit_robot(
             # one joint: exactly the single-joint fit's rows (no quadrant band; the sign
             # check plays its part there)
             est = RobotModel(reg, model=name, method=method, q_s=q_s, dq_min=est_dq_min,
+                             base=base,
                              payload_ratio=payload == "ratio",
                              payload_params=payload == "mass",
                              quadrant_band=0.0 if len(robot.moving) == 1 else 0.03).fit(sig)
@@ -445,6 +464,10 @@ def fit_robot(
         expressions = getattr(est.base_, "expressions", None)
         if expressions:
             rec["base_expressions"] = list(expressions)
+        if regrouping is not None:  # the fitted friction parameters that carry a weight
+            rec["base_expressions"] = [*rec.get("base_expressions", []),
+                                       *regrouping.base.friction_expressions]
+            rec["friction_regrouped"] = regrouping.base.friction
         if payload == "mass":  # the payload's identifiable combinations, the per-joint check
             rec["payload_merged"] = bool(est.payload_merged_)
             if not est.payload_merged_:
@@ -468,6 +491,8 @@ def fit_robot(
         out["_consistency"][name] = cons.format()
         out["models"][name] = rec
         out["_estimators"][name] = est
+    for name, why in refused.items():
+        out["models"][name] = {"error": why}
     if not out["_estimators"]:
         raise DataError("; ".join(f"{n} model: {r['error']}" for n, r in out["models"].items()))
     fit_sel = out["_signals"][0]

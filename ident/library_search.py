@@ -36,6 +36,11 @@ selection below is ~60 lines of numpy.
 
 Pure numerics; :class:`LibraryTerm` turns a selected group into a regressor term that
 :meth:`ident.preprocess.Design.with_term` can add (columns computed at full rate).
+
+(Past 600 lines: the groups' bases, their pruning against the current regressor, the
+per-fold Gram matrices and the forward search are one pipeline over the same arrays, and
+:class:`LibraryTerm` rebuilds a selected group's columns with the same bases; apart, the
+basis rules would be written twice.)
 """
 
 from __future__ import annotations

@@ -329,7 +329,8 @@ def exported_from_fit(path: str | Path, robot: Robot, model: str | None = None
     text = urdf_text(robot.reduced(), cons["standard"], robot.numbers, robot.name or "robot")
     fr = friction_record(cons["model"], tuple(robot.moving), robot.numbers,
                          cons["parameters"], cons["standard"], cons["q_s"], robot.gravity,
-                         cons.get("known_rotor_inertia"), fixed)
+                         cons.get("known_rotor_inertia"), fixed,
+                         cons.get("friction_regrouped"))
     return ExportedModel(text, fr, f"{path} ({name} model, consistent estimate)")
 
 

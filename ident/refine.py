@@ -33,6 +33,11 @@ order; the results (:class:`Step`, :class:`Rejected`, :class:`Refinement`) are i
 :mod:`ident.refine_result`.
 
 Pure numerics (no file access); plots are in :mod:`ident.refine_plots`.
+
+(Past 600 lines: :func:`refine` is one loop whose steps share the current library, design,
+noise floor, held-out scores and rejection list; the helpers above it are its scoring, F test
+and refits, used nowhere else. The step and report types are already in
+:mod:`ident.refine_result`.)
 """
 
 from __future__ import annotations

@@ -12,9 +12,10 @@ import pytest
 
 from daq.protocol.control import ControllerGains
 from ident import DataError
-from ident.fitting import _e_columns, _QsDesigns, _QsErrors, fit_models, rescan_qs, with_qs
+from ident.fitting import fit_models, rescan_qs, with_qs
 from ident.loaders import make_experiment
 from ident.models import IdentModel, LoadDependent, QuadrantCoulomb
+from ident.qs_scan import _e_columns, _QsDesigns, _QsErrors
 from sim_drivers.offline import simulate
 from sim_drivers.plant_config import load_plant
 from trajectories.plan import plan_campaign

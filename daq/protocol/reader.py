@@ -8,6 +8,10 @@ chunk indexes: a damaged chunk is skipped with a warning naming the cycles lost,
 chunks after it are read. A file truncated by a killed writer (no summary, a partial last
 chunk) is read record by record up to its last complete chunk, with a warning. A file
 without the MCAP magic is refused as "not an MCAP file".
+
+(Past 600 lines: the indexed read of a closed file and the record-by-record read of a
+truncated one share the chunk walk, its checks and the damage report; the decoding into
+:class:`RunArrays` and the other readers (topics, frames, attachments) follow them.)
 """
 
 from __future__ import annotations

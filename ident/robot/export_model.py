@@ -32,6 +32,7 @@ import pinocchio as pin
 from trajectories.friction import stribeck_exp
 
 from . import RobotIdentError
+from .confounded import physical_friction
 from .paper import PAPER_BLOCK, USUAL_BLOCK
 
 __all__ = ["FRICTION_FORMAT", "urdf_text", "friction_record", "exported_torque",
@@ -167,15 +168,20 @@ def friction_record(model_name: str, joints: Sequence[str], numbers: Sequence[in
                     parameters: Mapping[str, float], standard: Mapping[str, float],
                     q_s: Sequence[float], gravity: Sequence[float],
                     known_rotor_inertia: Mapping[str, float] | None = None,
-                    fixed: Mapping[str, float] | None = None) -> dict[str, Any]:
+                    fixed: Mapping[str, float] | None = None,
+                    regrouped: Mapping[str, Mapping[str, float]] | None = None
+                    ) -> dict[str, Any]:
     """The friction file's content (docs/model-export.md): per joint its rotor inertia
     (``Ia{n}`` of ``standard``, or the known value), q_s and the friction coefficients of
-    ``parameters`` (the consistent estimate's, ROBOT_FORMAT names)."""
+    ``parameters`` (the consistent estimate's, ROBOT_FORMAT names), less the weights
+    ``regrouped`` says a fitted one carries (``{"OFF2": {"M2": 9.81}}``: the URDF's
+    inverse dynamics has that weight already; :func:`ident.robot.confounded.physical_friction`
+    with the ``standard`` values)."""
     if model_name not in ("usual", "paper"):
         raise RobotIdentError(f"export: model {model_name!r}: expected 'usual' or 'paper'")
     block = USUAL_BLOCK if model_name == "usual" else PAPER_BLOCK
     known = dict(known_rotor_inertia or {})
-    values = {**(fixed or {}), **parameters}
+    values = physical_friction({**(fixed or {}), **parameters}, dict(standard), regrouped)
     out_joints = []
     for j, n, q in zip(joints, numbers, q_s, strict=True):
         coef = {}
@@ -264,7 +270,8 @@ def export_model(robot: Any, consistent: Mapping[str, Any], outdir: str | Path,
     text = urdf_text(model, consistent["standard"], numbers, name)
     fr = friction_record(consistent["model"], joints, numbers, consistent["parameters"],
                          consistent["standard"], consistent["q_s"], robot.gravity,
-                         consistent.get("known_rotor_inertia"), fixed)
+                         consistent.get("known_rotor_inertia"), fixed,
+                         consistent.get("friction_regrouped"))
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     stem = "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
