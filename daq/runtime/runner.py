@@ -26,6 +26,7 @@ from trajectories.robot_model import prepare_robot_campaign, robot_file_path
 
 from .buses import open_buses, sync_clocked
 from .busload import bus_loads, check_loads
+from .campaign_id import campaign_definition, check_folder, plant_record
 from .config import DaqConfig, Scaling, with_scalings
 from .cycle_io import BUS_ERRORS, CycleIO
 from .engine import ENABLE_MAX_CYCLES, SETTLE_CYCLES, Engine, drive_joints
@@ -99,7 +100,7 @@ def _state_path(out_dir: Path, name: str) -> Path:
 def _metadata(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, index: int, payload: Any,
               scalings: list[Scaling], plant_params: Any,
               bus_info: str = "", drives: Sequence[MasterDrive] = (),
-              torque_delay_cycles: float | None = None,
+              torque_delay_cycles: float | None = None, definition: str = "",
               ) -> dict[str, dict[str, str]]:
     joints = campaign.joints
     cut = campaign.control.velocity_cutoff_hz
@@ -131,6 +132,9 @@ def _metadata(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, index: int, pa
             "torque_delay_cycles": repr(float(cfg.torque_delay_cycles
                                               if torque_delay_cycles is None
                                               else torque_delay_cycles)),
+            # the campaign as loaded (campaign_id.campaign_definition): a run folder holds
+            # the logs of one campaign
+            "definition": definition,
         },
         "payload": pay,
         "software": {"jointid": __version__, "python-can": can.__version__,
@@ -160,11 +164,7 @@ def _metadata(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, index: int, pa
                                                cfg.rpdo_margin_ms)),
     }
     if plant_params is not None:
-        md["plant"] = {"name": str(getattr(plant_params, "name", "")),
-                       "source": str(getattr(plant_params, "source", "")),
-                       "simulated": "true"}
-        with contextlib.suppress(Exception):
-            md["plant"]["truth"] = json.dumps(plant_params.truth())
+        md["plant"] = plant_record(plant_params)
     for rec in md.values():
         for key in ("channel", "bus"):
             if key in rec:
@@ -302,6 +302,7 @@ def run_campaign(
     # a simulated run is on python-can's virtual bus: python-can's own configuration (which
     # names the real bus) must not fill what [daq] leaves out
     cfg = robot_daq_config(campaign, use_can_config=simulate is None)
+    definition = campaign_definition(campaign)  # as loaded: before any optimisation
     # the multi-sines as jointid plan optimised them (deterministic)
     campaign, _dyn, _opt = prepare_robot_campaign(campaign)
     sim_notes: list[str] = []
@@ -333,7 +334,7 @@ def run_campaign(
     try:
         return _run_locked(campaign, cfg, plan, load, out, stem, todo, simulate, yes,
                            progress, resume, overwrite, fault_injectors, prompt, monitor,
-                           sim_notes)
+                           sim_notes, definition)
     finally:
         lock.release()
 
@@ -356,10 +357,16 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
                 progress: Callable[[Progress], None] | None, resume: bool, overwrite: bool,
                 fault_injectors: dict[int, Any] | None,
                 prompt: Callable[[int, Any, int], bool] | None,
-                monitor: Any = None, sim_notes: list[str] | None = None) -> CampaignResult:
+                monitor: Any = None, sim_notes: list[str] | None = None,
+                definition: str = "") -> CampaignResult:
     """:func:`run_campaign` once the refusals passed and the folder is locked;
-    ``sim_notes``: warnings of the ``--simulate`` set-up (a scaling the simulation ignores)."""
+    ``sim_notes``: warnings of the ``--simulate`` set-up (a scaling the simulation ignores);
+    ``definition``: :func:`~daq.runtime.campaign_id.campaign_definition` of the campaign as
+    loaded."""
     n_pay = len(campaign.payloads)
+    if not overwrite:  # a folder holds the logs of one campaign (never two mixed)
+        check_folder(out, stem, campaign.name, definition, plant_record(simulate),
+                     str(campaign.source) or "this campaign")
     state_file = _state_path(out, campaign.name)
     completed = read_state(state_file)  # merged into, never shrunk (runfolder)
     done_before = completed if resume else set()
@@ -464,7 +471,7 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
                              metadata=_metadata(campaign, cfg, plan, i, p, scalings, simulate,
                                                 str(getattr(bus, "channel_info", "")),
                                                 drives, None if sim is None
-                                                else sim.torque_delay_cycles),
+                                                else sim.torque_delay_cycles, definition),
                              attachments=attachments, chunk_seconds=cfg.chunk_seconds,
                              frames_per_cycle=1 + 3 * len(drives),
                              axis_setpoints=not engine.shared_reference)
