@@ -54,7 +54,8 @@ from .runfolder import (
 from .safety import StopSignals, interrupt_reason
 from .simrig import SimRig, start_sim
 
-__all__ = ["CampaignResult", "PayloadResult", "Progress", "file_stem", "run_campaign"]
+__all__ = ["CampaignResult", "PayloadResult", "Progress", "check_daq", "file_stem",
+           "run_campaign"]
 
 
 logger = logging.getLogger(__name__)
@@ -299,9 +300,7 @@ def run_campaign(
     trajectories.TrajectoryError
         The plan violates a limit.
     """
-    # a simulated run is on python-can's virtual bus: python-can's own configuration (which
-    # names the real bus) must not fill what [daq] leaves out
-    cfg = robot_daq_config(campaign, use_can_config=simulate is None)
+    cfg, load = check_daq(campaign, simulated=simulate is not None)
     definition = campaign_definition(campaign)  # as loaded: before any optimisation
     # the multi-sines as jointid plan optimised them (deterministic)
     campaign, _dyn, _opt = prepare_robot_campaign(campaign)
@@ -319,9 +318,6 @@ def run_campaign(
             raise ConfigError(f"{campaign.source}: daq.interface: expected 'virtual' with "
                               f"--simulate, got {cfg.interface!r}")
     # every refusal before anything is created, opened or moved
-    loads = bus_loads({ch: [pdo_lengths(d.mode) for d in cfg.drives_on(ch)]
-                       for ch in cfg.channels}, campaign.cycle_s, cfg.bitrate)
-    load = check_loads(loads, cfg.max_bus_load, str(campaign.source) or "campaign")
     plan = plan_robot_campaign(campaign)  # a [joint] campaign: a robot with one moving joint
     n_pay = len(campaign.payloads)
     todo = list(range(n_pay)) if payloads is None else list(payloads)
@@ -337,6 +333,36 @@ def run_campaign(
                            sim_notes, definition)
     finally:
         lock.release()
+
+
+def check_daq(campaign: RobotCampaign, *, simulated: bool = False) -> tuple[DaqConfig, Any]:
+    """The checks of a campaign's ``[daq]`` (and its robot file's drives) that
+    :func:`run_campaign` makes before anything is opened, and ``jointid plan`` too (so a
+    campaign that plans also runs): the table itself
+    (:func:`~daq.runtime.robot_rig.robot_daq_config`: keys, values, node ids, EDS files,
+    clock) and the cyclic bus load on every bus (:func:`~daq.runtime.busload.check_loads`).
+
+    Parameters
+    ----------
+    campaign : trajectories.robot_campaign.RobotCampaign
+    simulated : bool
+        A ``--simulate`` run: on python-can's virtual bus, whose own configuration (naming
+        the real bus) must not fill what ``[daq]`` leaves out.
+
+    Returns
+    -------
+    (DaqConfig, busload.BusLoad)
+        The parsed ``[daq]`` and the highest bus load.
+
+    Raises
+    ------
+    daq.ConfigError
+        One line naming the campaign file and the key.
+    """
+    cfg = robot_daq_config(campaign, use_can_config=not simulated)
+    loads = bus_loads({ch: [pdo_lengths(d.mode) for d in cfg.drives_on(ch)]
+                       for ch in cfg.channels}, campaign.cycle_s, cfg.bitrate)
+    return cfg, check_loads(loads, cfg.max_bus_load, str(campaign.source) or "campaign")
 
 
 def _chain(sc: Any) -> tuple[float, float, int]:
