@@ -365,6 +365,11 @@ def check_daq(campaign: RobotCampaign, *, simulated: bool = False) -> tuple[DaqC
     return cfg, check_loads(loads, cfg.max_bus_load, str(campaign.source) or "campaign")
 
 
+def _emcy_text(drive: MasterDrive, code: int, register: int) -> str:
+    """An EMCY in the words of the run's ``emcy`` events."""
+    return f"{drive.name}: EMCY 0x{code:04X} (error register 0x{register:02X})"
+
+
 def _chain(sc: Any) -> tuple[float, float, int]:
     """What a scaling does to the logged values: gear ratio, joint torque per unit, counts."""
     return (float(sc.gear_ratio), float(sc.torque_per_unit), int(sc.encoder_counts_per_rev))
@@ -487,7 +492,9 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
             if overwrite and i in completed:  # its completed log is replaced: not done now
                 completed.discard(i)
                 write_state(state_file, campaign.name, completed)
-            io.emcy.clear()
+            # EMCYs since the start-up or the last payload's end (the drive's own report of a
+            # fault while no run watched it): logged in this payload's log and reported
+            early, io.emcy = io.emcy, []  # (a swap: the listener appends to io.emcy)
             io.hb_time = [io.clock()] * len(drives)
             for d in drives:
                 d.nmt_start()
@@ -503,6 +510,11 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
                              axis_setpoints=not engine.shared_reference)
             except OSError as exc:  # writing the header: nothing moved yet
                 raise DaqError(f"log write failed: {path}: {exc.strerror or exc}") from None
+            for dd, code, reg in early:
+                why = f"{_emcy_text(drives[dd], code, reg)} before the run of payload {i}"
+                log.event(0, 0.0, "emcy", why, dd)
+                notes.append(f"{why} (logged at cycle 0 of {path.name})")
+                logger.warning("%s", why)
             signals.engine = engine  # a stop signal now ends the run with the stop sequence
             try:
                 r = engine.run_payload(i, p, plan, log, drive_cycle0)
