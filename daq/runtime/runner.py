@@ -543,7 +543,9 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
         signals.closing = True  # a second signal does not cut the clean-up short
         if clean:  # normal end, drives disabled: stop watching the master, then go silent
             for d in drives:
-                d.clear_master_heartbeat()
+                if note := d.clear_master_heartbeat():
+                    notes.append(note)
+                    logger.warning("%s", note)
         if heartbeat is not None:
             with contextlib.suppress(*BUS_ERRORS):  # (a lost bus: nothing to stop)
                 heartbeat.stop()
