@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 
 from daq.protocol.reader import read_run
+from daq.runtime.campaign_id import campaign_definition
 from daq.runtime.runner import run_campaign
 from sim_drivers.plant_config import default_plant
 from trajectories.robot_campaign import campaign_from_dict
@@ -36,6 +37,9 @@ INTEGER_FIELDS = ("cycle", "counts", "statusword", "flags", "segment")
 RTOL = 1e-12
 N_FIRST = 100
 _VOLATILE = {("result", "wall_s")}
+#: metadata written since the freeze, checked on their own: the campaign as loaded
+#: (daq.runtime.campaign_id; a run folder holds the logs of one campaign)
+_ADDED = {("campaign", "definition")}
 
 _RAW = {
     "name": "sj-log",
@@ -53,14 +57,15 @@ _RAW = {
 
 def _fingerprint(out_dir: Path, channel: str) -> dict:
     raw = {**_RAW, "daq": {"channel": channel, "drives": [{"node_id": 1}, {"node_id": 2}]}}
-    result = run_campaign(campaign_from_dict(raw, "sj-log.toml"), out_dir=out_dir,
-                          simulate=default_plant(), yes=True)
+    campaign = campaign_from_dict(raw, "sj-log.toml")
+    result = run_campaign(campaign, out_dir=out_dir, simulate=default_plant(), yes=True)
     assert result.ok, result.reason
     out: dict = {}
     for k, run in enumerate(result.runs):
         runs = [read_run(run.path, axis=a) for a in range(2)]
+        assert runs[0].metadata["campaign"]["definition"] == campaign_definition(campaign)
         md = {rec: {key: v for key, v in sorted(fields.items())
-                    if (rec, key) not in _VOLATILE}
+                    if (rec, key) not in _VOLATILE | _ADDED}
               for rec, fields in sorted(runs[0].metadata.items()) if rec != "software"}
         md["campaign"]["channel"] = md["campaign"]["channel"].replace(channel, "<ch>")
         md["campaign"]["bus"] = md["campaign"]["bus"].replace(channel, "<ch>")

@@ -40,11 +40,11 @@ from threadpoolctl import threadpool_limits
 
 import daq.protocol.cli_export
 import daq.runtime.cli
+import daq.runtime.cli_plan
 import daq.runtime.cli_recover
 import ident.cli
 import ident.cli_export_model
 import ident.cli_report
-import trajectories.cli
 from daq import DaqError, __version__
 from ident import IdentError
 from sim_drivers import SimError
@@ -57,7 +57,7 @@ if _sigint_before is not None:  # imports done: Ctrl-C is main()'s again
 
 # subcommand modules, in the order of `jointid --help`; each sits with the package it drives
 SUBCOMMANDS = (
-    trajectories.cli,  # jointid plan
+    daq.runtime.cli_plan,  # jointid plan (trajectories.cli + the [daq] checks of run)
     daq.runtime.cli,  # jointid run
     ident.cli,  # jointid fit
     demo,  # jointid demo

@@ -551,6 +551,50 @@ def read_attachments(path: str | Path) -> dict[str, bytes]:
     return _scan(Path(path), set(), attachments=True).attachments
 
 
+def read_metadata(path: str | Path) -> dict[str, dict[str, str]]:
+    """The metadata records of a run log (name -> map), without reading its chunks.
+
+    A closed file is read through its metadata index; a file without a usable summary
+    (killed writer) record after record, skipping the chunks (the ``campaign``, ``payload``
+    and ``plant`` records precede them; ``result`` is written on close). Damaged metadata
+    records are skipped (no warning: what is missing stays missing).
+
+    Raises
+    ------
+    LogReadError
+        The file cannot be opened or is not an MCAP file.
+    """
+    path = Path(path)
+    out: dict[str, dict[str, str]] = {}
+    try:
+        f = open(path, "rb")  # noqa: SIM115
+    except OSError as exc:
+        raise LogReadError(f"{path}: cannot open the run log: {exc.strerror}") from exc
+    with f:
+        size = os.fstat(f.fileno()).st_size
+        if f.read(len(MAGIC)) != MAGIC:
+            what = "an empty file" if size == 0 else "no MCAP magic at its start"
+            raise LogReadError(f"{path}: not an MCAP file ({what})")
+        summary = _read_summary(f, size)
+        if summary is not None:
+            places = [(m.offset, m.length) for m in summary.metadata_indexes]
+        else:
+            places = [(pos, 9 + length) for pos, opcode, length in RecordWalk(f, size)
+                      if opcode == Opcode.METADATA]
+        for offset, length in places:
+            f.seek(offset)
+            buf = f.read(length)
+            try:
+                opcode, rec_len = _HEAD.unpack_from(buf)
+                if opcode != Opcode.METADATA or 9 + rec_len != length:
+                    continue
+                rec = Metadata.read(_stream(buf[9:]))
+            except Exception:  # a damaged record: skipped
+                continue
+            out[rec.name] = dict(rec.metadata)
+    return out
+
+
 @dataclass(frozen=True)
 class TopicData:
     """Raw messages of some topics of a run log, with the log's events and metadata."""

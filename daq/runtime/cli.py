@@ -36,7 +36,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Run the campaign's plan once per payload: one MCAP log per payload run, "
         "DIR/<name>_payload<k>.mcap, and DIR/<name>.state.json listing the completed payloads.",
         epilog="One run per folder: DIR is locked (DIR/.jointid-run.lock) and a second run "
-        "into it is refused. A log is never replaced without a word: a log left in DIR "
+        "into it is refused. One campaign per folder: a DIR/*.mcap of another campaign "
+        "(another name; the same name with other joints, limits, payloads or segments, or "
+        "another robot file; another simulated plant; [daq] may differ) makes the run "
+        "refuse, with or without --resume, naming the log and what differs. A log is "
+        "never replaced without a word: a log left in DIR "
         "makes the run refuse unless --resume (completed payloads are skipped; the log of "
         "one that did not complete is moved to DIR/partial/<name>_payload<k>.partial-<n>.mcap "
         "before it runs again) or --overwrite. The state file only grows. Before each "

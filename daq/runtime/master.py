@@ -51,9 +51,12 @@ faults with EMCY 0x8250 "RPDO timeout"). The master writes it in paced mode (the
 
 from __future__ import annotations
 
+import logging
 import math
 import struct
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -65,6 +68,35 @@ from daq import ConfigError
 from daq.protocol.cia402 import SUPPORTED_MODE_BIT, Mode, supported_modes
 
 from .config import DriveConfig, Scaling
+
+logger = logging.getLogger(__name__)
+
+#: canopen's SDO client: it logs a timeout's abort itself ("Transfer aborted by client with
+#: code 0x05040000", ERROR) and each retry ("No SDO response received", WARNING) before it
+#: raises; with no logging configured, Python prints them bare on the console
+_SDO_CLIENT_LOG = logging.getLogger("canopen.sdo.client")
+
+
+class _ToDebug(logging.Filter):
+    """Drop a canopen record, re-logged at DEBUG on this module's logger."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        logger.debug("canopen: %s", record.getMessage())
+        return False
+
+
+@contextmanager
+def handled_sdo_failures() -> Iterator[None]:
+    """Around an SDO call whose failure the master handles itself -- a refusal in its own
+    words (:class:`daq.ConfigError` naming the drive and object), a note, or a best-effort
+    write -- canopen's own log lines of that failure go to DEBUG, not the console. SDO
+    traffic outside (canopen's, another thread's) keeps its logging."""
+    f = _ToDebug()
+    _SDO_CLIENT_LOG.addFilter(f)
+    try:
+        yield
+    finally:
+        _SDO_CLIENT_LOG.removeFilter(f)
 
 OBJECT_NAMES = {
     0x6040: "controlword",
@@ -263,7 +295,8 @@ class MasterDrive:
     # -- SDO helpers --------------------------------------------------------------------
     def upload(self, index: int, sub: int = 0) -> bytes:
         try:
-            return self.node.sdo.upload(index, sub)
+            with handled_sdo_failures():
+                return self.node.sdo.upload(index, sub)
         except SdoAbortedError as exc:
             raise ConfigError(f"{self.name}: reading 0x{index:04X}.{sub} aborted: {exc}") from None
         except SdoCommunicationError:
@@ -272,7 +305,8 @@ class MasterDrive:
     def download(self, index: int, sub: int, value: int, size: int, what: str = "") -> None:
         data = (value & ((1 << (8 * size)) - 1)).to_bytes(size, "little")
         try:
-            self.node.sdo.download(index, sub, data)
+            with handled_sdo_failures():
+                self.node.sdo.download(index, sub, data)
         except SdoAbortedError as exc:
             raise ConfigError(
                 f"{self.name}: {what or 'writing'} 0x{index:04X}.{sub} = 0x{value:X} refused "
@@ -285,7 +319,8 @@ class MasterDrive:
     def check_present(self) -> int:
         """Read 0x1000 (device type); refuse a node that does not answer."""
         try:
-            raw = self.node.sdo.upload(0x1000, 0)
+            with handled_sdo_failures():
+                raw = self.node.sdo.upload(0x1000, 0)
         except SdoCommunicationError:
             raise ConfigError(
                 f"{self.name}: no answer to SDO (is node {self.node_id} on the bus and powered?)"
@@ -399,13 +434,29 @@ class MasterDrive:
                               f"!= written 0x{value:08X}")
         return value
 
-    def clear_master_heartbeat(self) -> None:
-        """0x1016.1 = 0 (stop watching the master) before a normal shutdown; best effort."""
-        if 0x1016 in self.od:
-            try:
+    def clear_master_heartbeat(self) -> str:
+        """0x1016.1 = 0 (stop watching the master) before a normal shutdown.
+
+        Returns
+        -------
+        str
+            "" when cleared (or the EDS has no 0x1016), else a note for the run's summary:
+            the drive faults (EMCY 0x8130) when the master's heartbeat stops.
+        """
+        if 0x1016 not in self.od:
+            return ""
+        try:
+            with handled_sdo_failures():
                 self.node.sdo.download(0x1016, 1, bytes(4))
-            except (SdoAbortedError, SdoCommunicationError):
-                pass
+        except SdoAbortedError as exc:
+            why = f"refused: {exc}"
+        except SdoCommunicationError:
+            why = "no SDO answer"
+        else:
+            return ""
+        return (f"{self.name}: heartbeat consumer 0x1016.1 not cleared after the run ({why}): "
+                f"the drive still watches the master and faults (EMCY 0x8130) when its "
+                f"heartbeat stops")
 
     def set_sync_period(self, period_us: int) -> bool | None:
         """Write the communication cycle period 0x1006 [µs] (0: no SYNC monitoring).
@@ -416,8 +467,9 @@ class MasterDrive:
         if 0x1006 not in self.od:
             return None
         try:
-            self.node.sdo.download(0x1006, 0, int(period_us).to_bytes(4, "little"))
-            return _u(self.node.sdo.upload(0x1006, 0)) == period_us
+            with handled_sdo_failures():
+                self.node.sdo.download(0x1006, 0, int(period_us).to_bytes(4, "little"))
+                return _u(self.node.sdo.upload(0x1006, 0)) == period_us
         except (SdoAbortedError, SdoCommunicationError):
             return False
 
@@ -458,8 +510,9 @@ class MasterDrive:
         if abs(ms - cycle_s * 1000) > 1e-9 or not 1 <= ms <= 255:
             return
         try:
-            self.node.sdo.download(0x60C2, 1, bytes([ms]))
-            self.node.sdo.download(0x60C2, 2, (-3 & 0xFF).to_bytes(1, "little"))
+            with handled_sdo_failures():
+                self.node.sdo.download(0x60C2, 1, bytes([ms]))
+                self.node.sdo.download(0x60C2, 2, (-3 & 0xFF).to_bytes(1, "little"))
         except (SdoAbortedError, SdoCommunicationError):
             pass
 

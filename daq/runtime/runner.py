@@ -26,6 +26,7 @@ from trajectories.robot_model import prepare_robot_campaign, robot_file_path
 
 from .buses import open_buses, sync_clocked
 from .busload import bus_loads, check_loads
+from .campaign_id import campaign_definition, check_folder, plant_record
 from .config import DaqConfig, Scaling, with_scalings
 from .cycle_io import BUS_ERRORS, CycleIO
 from .engine import ENABLE_MAX_CYCLES, SETTLE_CYCLES, Engine, drive_joints
@@ -53,7 +54,8 @@ from .runfolder import (
 from .safety import StopSignals, interrupt_reason
 from .simrig import SimRig, start_sim
 
-__all__ = ["CampaignResult", "PayloadResult", "Progress", "file_stem", "run_campaign"]
+__all__ = ["CampaignResult", "PayloadResult", "Progress", "check_daq", "file_stem",
+           "run_campaign"]
 
 
 logger = logging.getLogger(__name__)
@@ -99,7 +101,7 @@ def _state_path(out_dir: Path, name: str) -> Path:
 def _metadata(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, index: int, payload: Any,
               scalings: list[Scaling], plant_params: Any,
               bus_info: str = "", drives: Sequence[MasterDrive] = (),
-              torque_delay_cycles: float | None = None,
+              torque_delay_cycles: float | None = None, definition: str = "",
               ) -> dict[str, dict[str, str]]:
     joints = campaign.joints
     cut = campaign.control.velocity_cutoff_hz
@@ -131,6 +133,9 @@ def _metadata(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, index: int, pa
             "torque_delay_cycles": repr(float(cfg.torque_delay_cycles
                                               if torque_delay_cycles is None
                                               else torque_delay_cycles)),
+            # the campaign as loaded (campaign_id.campaign_definition): a run folder holds
+            # the logs of one campaign
+            "definition": definition,
         },
         "payload": pay,
         "software": {"jointid": __version__, "python-can": can.__version__,
@@ -160,11 +165,7 @@ def _metadata(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, index: int, pa
                                                cfg.rpdo_margin_ms)),
     }
     if plant_params is not None:
-        md["plant"] = {"name": str(getattr(plant_params, "name", "")),
-                       "source": str(getattr(plant_params, "source", "")),
-                       "simulated": "true"}
-        with contextlib.suppress(Exception):
-            md["plant"]["truth"] = json.dumps(plant_params.truth())
+        md["plant"] = plant_record(plant_params)
     for rec in md.values():
         for key in ("channel", "bus"):
             if key in rec:
@@ -299,9 +300,8 @@ def run_campaign(
     trajectories.TrajectoryError
         The plan violates a limit.
     """
-    # a simulated run is on python-can's virtual bus: python-can's own configuration (which
-    # names the real bus) must not fill what [daq] leaves out
-    cfg = robot_daq_config(campaign, use_can_config=simulate is None)
+    cfg, load = check_daq(campaign, simulated=simulate is not None)
+    definition = campaign_definition(campaign)  # as loaded: before any optimisation
     # the multi-sines as jointid plan optimised them (deterministic)
     campaign, _dyn, _opt = prepare_robot_campaign(campaign)
     sim_notes: list[str] = []
@@ -318,9 +318,6 @@ def run_campaign(
             raise ConfigError(f"{campaign.source}: daq.interface: expected 'virtual' with "
                               f"--simulate, got {cfg.interface!r}")
     # every refusal before anything is created, opened or moved
-    loads = bus_loads({ch: [pdo_lengths(d.mode) for d in cfg.drives_on(ch)]
-                       for ch in cfg.channels}, campaign.cycle_s, cfg.bitrate)
-    load = check_loads(loads, cfg.max_bus_load, str(campaign.source) or "campaign")
     plan = plan_robot_campaign(campaign)  # a [joint] campaign: a robot with one moving joint
     n_pay = len(campaign.payloads)
     todo = list(range(n_pay)) if payloads is None else list(payloads)
@@ -333,9 +330,44 @@ def run_campaign(
     try:
         return _run_locked(campaign, cfg, plan, load, out, stem, todo, simulate, yes,
                            progress, resume, overwrite, fault_injectors, prompt, monitor,
-                           sim_notes)
+                           sim_notes, definition)
     finally:
         lock.release()
+
+
+def check_daq(campaign: RobotCampaign, *, simulated: bool = False) -> tuple[DaqConfig, Any]:
+    """The checks of a campaign's ``[daq]`` (and its robot file's drives) that
+    :func:`run_campaign` makes before anything is opened, and ``jointid plan`` too (so a
+    campaign that plans also runs): the table itself
+    (:func:`~daq.runtime.robot_rig.robot_daq_config`: keys, values, node ids, EDS files,
+    clock) and the cyclic bus load on every bus (:func:`~daq.runtime.busload.check_loads`).
+
+    Parameters
+    ----------
+    campaign : trajectories.robot_campaign.RobotCampaign
+    simulated : bool
+        A ``--simulate`` run: on python-can's virtual bus, whose own configuration (naming
+        the real bus) must not fill what ``[daq]`` leaves out.
+
+    Returns
+    -------
+    (DaqConfig, busload.BusLoad)
+        The parsed ``[daq]`` and the highest bus load.
+
+    Raises
+    ------
+    daq.ConfigError
+        One line naming the campaign file and the key.
+    """
+    cfg = robot_daq_config(campaign, use_can_config=not simulated)
+    loads = bus_loads({ch: [pdo_lengths(d.mode) for d in cfg.drives_on(ch)]
+                       for ch in cfg.channels}, campaign.cycle_s, cfg.bitrate)
+    return cfg, check_loads(loads, cfg.max_bus_load, str(campaign.source) or "campaign")
+
+
+def _emcy_text(drive: MasterDrive, code: int, register: int) -> str:
+    """An EMCY in the words of the run's ``emcy`` events."""
+    return f"{drive.name}: EMCY 0x{code:04X} (error register 0x{register:02X})"
 
 
 def _chain(sc: Any) -> tuple[float, float, int]:
@@ -356,10 +388,16 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
                 progress: Callable[[Progress], None] | None, resume: bool, overwrite: bool,
                 fault_injectors: dict[int, Any] | None,
                 prompt: Callable[[int, Any, int], bool] | None,
-                monitor: Any = None, sim_notes: list[str] | None = None) -> CampaignResult:
+                monitor: Any = None, sim_notes: list[str] | None = None,
+                definition: str = "") -> CampaignResult:
     """:func:`run_campaign` once the refusals passed and the folder is locked;
-    ``sim_notes``: warnings of the ``--simulate`` set-up (a scaling the simulation ignores)."""
+    ``sim_notes``: warnings of the ``--simulate`` set-up (a scaling the simulation ignores);
+    ``definition``: :func:`~daq.runtime.campaign_id.campaign_definition` of the campaign as
+    loaded."""
     n_pay = len(campaign.payloads)
+    if not overwrite:  # a folder holds the logs of one campaign (never two mixed)
+        check_folder(out, stem, campaign.name, definition, plant_record(simulate),
+                     str(campaign.source) or "this campaign")
     state_file = _state_path(out, campaign.name)
     completed = read_state(state_file)  # merged into, never shrunk (runfolder)
     done_before = completed if resume else set()
@@ -454,7 +492,9 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
             if overwrite and i in completed:  # its completed log is replaced: not done now
                 completed.discard(i)
                 write_state(state_file, campaign.name, completed)
-            io.emcy.clear()
+            # EMCYs since the start-up or the last payload's end (the drive's own report of a
+            # fault while no run watched it): logged in this payload's log and reported
+            early, io.emcy = io.emcy, []  # (a swap: the listener appends to io.emcy)
             io.hb_time = [io.clock()] * len(drives)
             for d in drives:
                 d.nmt_start()
@@ -464,12 +504,17 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
                              metadata=_metadata(campaign, cfg, plan, i, p, scalings, simulate,
                                                 str(getattr(bus, "channel_info", "")),
                                                 drives, None if sim is None
-                                                else sim.torque_delay_cycles),
+                                                else sim.torque_delay_cycles, definition),
                              attachments=attachments, chunk_seconds=cfg.chunk_seconds,
                              frames_per_cycle=1 + 3 * len(drives),
                              axis_setpoints=not engine.shared_reference)
             except OSError as exc:  # writing the header: nothing moved yet
                 raise DaqError(f"log write failed: {path}: {exc.strerror or exc}") from None
+            for dd, code, reg in early:
+                why = f"{_emcy_text(drives[dd], code, reg)} before the run of payload {i}"
+                log.event(0, 0.0, "emcy", why, dd)
+                notes.append(f"{why} (logged at cycle 0 of {path.name})")
+                logger.warning("%s", why)
             signals.engine = engine  # a stop signal now ends the run with the stop sequence
             try:
                 r = engine.run_payload(i, p, plan, log, drive_cycle0)
@@ -498,7 +543,9 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
         signals.closing = True  # a second signal does not cut the clean-up short
         if clean:  # normal end, drives disabled: stop watching the master, then go silent
             for d in drives:
-                d.clear_master_heartbeat()
+                if note := d.clear_master_heartbeat():
+                    notes.append(note)
+                    logger.warning("%s", note)
         if heartbeat is not None:
             with contextlib.suppress(*BUS_ERRORS):  # (a lost bus: nothing to stop)
                 heartbeat.stop()
