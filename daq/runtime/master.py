@@ -54,13 +54,9 @@ from __future__ import annotations
 import logging
 import math
 import struct
-import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-import can
 import canopen
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
@@ -68,35 +64,12 @@ from daq import ConfigError
 from daq.protocol.cia402 import SUPPORTED_MODE_BIT, Mode, supported_modes
 
 from .config import DriveConfig, Scaling
+from .heartbeat import MasterHeartbeat
+from .sdo_log import handled_sdo_failures
+
+__all__ = ["MasterDrive", "MasterHeartbeat", "pdo_lengths", "pdo_specs", "rpdo_timeout_ms"]
 
 logger = logging.getLogger(__name__)
-
-#: canopen's SDO client: it logs a timeout's abort itself ("Transfer aborted by client with
-#: code 0x05040000", ERROR) and each retry ("No SDO response received", WARNING) before it
-#: raises; with no logging configured, Python prints them bare on the console
-_SDO_CLIENT_LOG = logging.getLogger("canopen.sdo.client")
-
-
-class _ToDebug(logging.Filter):
-    """Drop a canopen record, re-logged at DEBUG on this module's logger."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        logger.debug("canopen: %s", record.getMessage())
-        return False
-
-
-@contextmanager
-def handled_sdo_failures() -> Iterator[None]:
-    """Around an SDO call whose failure the master handles itself -- a refusal in its own
-    words (:class:`daq.ConfigError` naming the drive and object), a note, or a best-effort
-    write -- canopen's own log lines of that failure go to DEBUG, not the console. SDO
-    traffic outside (canopen's, another thread's) keeps its logging."""
-    f = _ToDebug()
-    _SDO_CLIENT_LOG.addFilter(f)
-    try:
-        yield
-    finally:
-        _SDO_CLIENT_LOG.removeFilter(f)
 
 OBJECT_NAMES = {
     0x6040: "controlword",
@@ -174,55 +147,6 @@ def pdo_lengths(mode: Mode) -> tuple[int, int, int]:
 
 def _u(data: bytes) -> int:
     return int.from_bytes(data, "little")
-
-
-class MasterHeartbeat:
-    """The master's own heartbeat producer (CiA 301): ``0x700 + node_id``, one data byte
-    0x05 (OPERATIONAL), every ``period_ms`` [ms], sent by python-can's ``send_periodic``.
-
-    Parameters
-    ----------
-    bus : can.BusABC
-        The master's bus.
-    node_id : int
-        The master's node id 1..127.
-    period_ms : int
-        Producer period [ms] (> 0).
-    """
-
-    def __init__(self, bus: can.BusABC, node_id: int, period_ms: int) -> None:
-        self.bus = bus
-        self.node_id = node_id
-        self.period_ms = period_ms
-        self.msg = can.Message(arbitration_id=0x700 + node_id, data=b"\x05",
-                               is_extended_id=False)
-        self._task: can.broadcastmanager.CyclicSendTaskABC | None = None
-        self.started_at = 0.0
-
-    def start(self) -> None:
-        """Send one heartbeat now and then every period (idempotent)."""
-        if self._task is not None:
-            return
-        self.bus.send(self.msg)
-        self.started_at = time.monotonic()
-        self._task = self.bus.send_periodic(self.msg, self.period_ms / 1000.0)
-
-    def beat(self) -> None:
-        """Send one heartbeat now, outside the period: after 0x1016 was written, so that the
-        drives start monitoring (CiA 301: at the first heartbeat received) before they are
-        started rather than up to one period later."""
-        if self._task is not None:
-            self.bus.send(self.msg)
-
-    def stop(self) -> None:
-        """Stop sending (the drives' consumers time out after their consumer time)."""
-        task, self._task = self._task, None
-        if task is not None:
-            task.stop()
-
-    @property
-    def running(self) -> bool:
-        return self._task is not None
 
 
 class MasterDrive:
