@@ -305,8 +305,12 @@ def choose_cutoff(q: np.ndarray, dt: float, min_fraction: float = 0.05,
         c2 = np.cumsum(e2)
         if c2[-1] > 0:
             fb = float(f[int(np.searchsorted(c2, 0.995 * c2[-1]))])
+        # broadband: position or quantisation noise; jittered stamps are put on a uniform grid
+        # before (the loaders, ``t`` here), with their own ResamplingWarning, and a log timed
+        # by the SYNC counter (lockstep) has none: jitter is not named as the cause here
         why = ("the velocity spectrum stays above its noise floor up to the Nyquist frequency "
-               "(broadband noise, e.g. jittered time stamps taken as uniform)")
+               "(broadband noise on the position: encoder, quantisation or measurement noise; "
+               "irregular time stamps would have their own resampling warning)")
     cut = float(f"{np.clip(5.0 * fb, lo, hi):.6g}")
     where = f"{source}: " if source else ""
     if 5.0 * fb >= hi:

@@ -57,6 +57,21 @@ def test_jittered_stamps(jitter):
     assert resampled < 0.1 / dt
 
 
+
+def test_ceiling_on_regular_stamps_does_not_blame_jitter():
+    """A log on exact stamps (lockstep: timed by the SYNC counter) whose positions carry
+    broadband noise: the ceiling is warned about, and the reason names position noise, not
+    jittered stamps, which such a log cannot have (the daq sweep's finding)."""
+    rng = np.random.default_rng(3)
+    tu = np.arange(20000) / FS
+    q = _motion(tu) + rng.normal(0.0, 2e-3, tu.size)  # noise far above the motion's tail
+    with pytest.warns(UserWarning, match="upper bound 0.4 f_s") as rec:
+        cut = choose_cutoff(q, 1 / FS, t=tu, source="lockstep.mcap")
+    assert cut == pytest.approx(0.4 * FS, rel=1e-3)
+    msg = " ".join(str(w.message) for w in rec if "upper bound" in str(w.message))
+    assert "lockstep.mcap" in msg and "position" in msg, msg
+    assert "jitter" not in msg, msg
+
 # -- the loaders' one resampling (ident.loaders.uniform_grid) on single-joint CSV files ------
 
 ROOT = Path(__file__).resolve().parents[1]
