@@ -22,6 +22,7 @@ import struct
 import warnings
 import zlib
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from io import BytesIO
 from pathlib import Path
@@ -285,9 +286,16 @@ def _read_summary(f: Any, size: int) -> Summary | None:
         return None
 
 
-def _scan(path: Path, topics: set[str], raw_topics: set[str] = frozenset(),
-          attachments: bool = False) -> _Scan:
-    scan = _Scan()
+@contextmanager
+def _opened(path: Path) -> Iterator[tuple[Any, int, Summary | None]]:
+    """The run log opened for reading: (file, size [bytes], its summary or None: an
+    unfinished log), after the MCAP magic was checked.
+
+    Raises
+    ------
+    LogReadError
+        The file cannot be opened or is not an MCAP file.
+    """
     try:
         f = open(path, "rb")  # noqa: SIM115
     except OSError as exc:
@@ -297,7 +305,13 @@ def _scan(path: Path, topics: set[str], raw_topics: set[str] = frozenset(),
         if f.read(len(MAGIC)) != MAGIC:
             what = "an empty file" if size == 0 else "no MCAP magic at its start"
             raise LogReadError(f"{path}: not an MCAP file ({what})")
-        summary = _read_summary(f, size)
+        yield f, size, _read_summary(f, size)
+
+
+def _scan(path: Path, topics: set[str], raw_topics: set[str] = frozenset(),
+          attachments: bool = False) -> _Scan:
+    scan = _Scan()
+    with _opened(path) as (f, size, summary):
         if summary is not None and summary.chunk_indexes:
             _scan_indexed(f, path, summary, scan, topics, raw_topics, attachments)
         else:
@@ -566,16 +580,7 @@ def read_metadata(path: str | Path) -> dict[str, dict[str, str]]:
     """
     path = Path(path)
     out: dict[str, dict[str, str]] = {}
-    try:
-        f = open(path, "rb")  # noqa: SIM115
-    except OSError as exc:
-        raise LogReadError(f"{path}: cannot open the run log: {exc.strerror}") from exc
-    with f:
-        size = os.fstat(f.fileno()).st_size
-        if f.read(len(MAGIC)) != MAGIC:
-            what = "an empty file" if size == 0 else "no MCAP magic at its start"
-            raise LogReadError(f"{path}: not an MCAP file ({what})")
-        summary = _read_summary(f, size)
+    with _opened(path) as (f, size, summary):
         if summary is not None:
             places = [(m.offset, m.length) for m in summary.metadata_indexes]
         else:

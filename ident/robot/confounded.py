@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from trajectories.robot import BaseParameters, RobotRegressor, base_parameters
-from trajectories.robot.base import qr_rule, random_states
+from trajectories.robot.base import qr_rule, random_states, regroup_expression
 
 from . import RobotIdentError
 
@@ -85,24 +85,6 @@ class FrictionRegrouping:
     removed: tuple[str, ...]
     note: str
     paper: str
-
-
-def _fmt(coef: float) -> str:
-    return f"{coef:.6g}"
-
-
-def _expression(lhs: str, first: str, others: list[tuple[str, float]]) -> str:
-    terms = [first]
-    for name, c in others:
-        if abs(c - 1.0) < 1e-9:
-            terms.append(f"+ {name}")
-        elif abs(c + 1.0) < 1e-9:
-            terms.append(f"- {name}")
-        elif c < 0:
-            terms.append(f"- {_fmt(-c)}*{name}")
-        else:
-            terms.append(f"+ {_fmt(c)}*{name}")
-    return f"{lhs} = " + " ".join(terms)
 
 
 def _columns(reg: RobotRegressor, base: BaseParameters, seed: int, n: int
@@ -192,13 +174,13 @@ def regroup_friction(reg: RobotRegressor, base: BaseParameters | None = None, *,
                   if j != c and new_beta[i, j] != 0.0]
         nm = std[c] + ("R" if others else "")
         new_names.append(nm)
-        exprs.append(_expression(nm, std[c], others))
+        exprs.append(regroup_expression(nm, std[c], others))
     friction: dict[str, dict[str, float]] = {}
     fexprs = []
     for fname, vec in fric.items():
         terms = {std[j]: float(v) for j, v in enumerate(vec) if abs(v) > _ZERO_COEF}
         friction[fname] = terms
-        fexprs.append(_expression(f"{fname} (fitted)", fname, list(terms.items())))
+        fexprs.append(regroup_expression(f"{fname} (fitted)", fname, list(terms.items())))
     removed = tuple(base.names[d] for d in dep)
     out = RegroupedBase(std, tuple(new_names), columns, new_beta, tuple(exprs),
                         base.unidentifiable, base.rtol, base.seed, base.n_samples,

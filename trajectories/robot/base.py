@@ -162,6 +162,22 @@ def _format(coef: float) -> str:
     return f"{coef:.6g}"
 
 
+def regroup_expression(lhs: str, first: str, others: list[tuple[str, float]]) -> str:
+    """A regrouping as it is printed: ``"lhs = first + b - 2.5*c"``, ``others`` the
+    (name, coefficient) pairs after ``first`` (coefficients +-1 written without a factor)."""
+    terms = [first]
+    for name, c in others:
+        if abs(c - 1.0) < 1e-9:
+            terms.append(f"+ {name}")
+        elif abs(c + 1.0) < 1e-9:
+            terms.append(f"- {name}")
+        elif c < 0:
+            terms.append(f"- {_format(-c)}*{name}")
+        else:
+            terms.append(f"+ {_format(c)}*{name}")
+    return f"{lhs} = " + " ".join(terms)
+
+
 def independent_columns(W: np.ndarray, rtol: float = DEFAULT_RTOL  # noqa: N803
                         ) -> tuple[np.ndarray, np.ndarray]:
     """The columns the rule (module doc) keeps: QR of the unit-norm nonzero columns of ``W``
@@ -216,17 +232,7 @@ def qr_rule(W: np.ndarray, names: tuple[str, ...], rtol: float = DEFAULT_RTOL,  
         others = [(names[j], beta[row, j]) for j in range(p) if j != c and beta[row, j] != 0]
         nm = names[c] + ("R" if others else "")
         base_names.append(nm)
-        terms = [names[c]]
-        for on, coef in others:
-            if abs(coef - 1.0) < 1e-9:
-                terms.append(f"+ {on}")
-            elif abs(coef + 1.0) < 1e-9:
-                terms.append(f"- {on}")
-            elif coef < 0:
-                terms.append(f"- {_format(-coef)}*{on}")
-            else:
-                terms.append(f"+ {_format(coef)}*{on}")
-        exprs.append(f"{nm} = " + " ".join(terms))
+        exprs.append(regroup_expression(nm, names[c], others))
     return kept, beta, base_names, exprs, zero
 
 
