@@ -61,6 +61,7 @@ from .effects import (
     Setting,
     TorqueLag,
     effective_n,
+    model_quadrant,
     registry,
     rigid_prediction,
     unique_tag,
@@ -76,7 +77,7 @@ from .unseen import LEAK_RATIO, heldout_error, heldout_kind, noise_floor, one_tr
 if TYPE_CHECKING:  # pragma: no cover
     from .preprocess import Design
 
-__all__ = ["GENERIC_MARGIN", "Refinement", "Rejected", "Step", "refine"]
+__all__ = ["GENERIC_MARGIN", "Refinement", "Rejected", "Step", "quadrant_drift", "refine"]
 
 #: A named effect is preferred to a generic basis when it removes at least this share of
 #: what the best generic basis removes.
@@ -85,6 +86,9 @@ GENERIC_MARGIN = 0.5
 #: Effects that are eq. 24's load-dependent dry friction (the paper model's, or a step's): a
 #: model holding one is not offered the library's named form of it again.
 LOAD_DEPENDENT = ("load_dependent", "quadrant_load", "quadrant_load_velocity")
+#: Declared terms whose columns read the quadrant fixed in the design (``Signals.sign_power``):
+#: the paper model's load-dependent and quadrant-dependent dry friction (eq. 42).
+FIXED_QUADRANT = ("load_dependent", "quadrant_coulomb")
 
 
 # ------------------------------------------------------------------------ scoring
@@ -322,6 +326,53 @@ def _kept(design: Design, model: IdentModel) -> np.ndarray:
     return design.W[:, [design.names.index(n) for n in model.names_]]
 
 
+def quadrant_drift(design: Design, lib: Library, coef: Mapping[str, float]) -> float | None:
+    """Share of the design's rows whose quadrant sign(P), fixed in its columns when it was
+    built (``Signals.quadrant``: the load model of a first usual fit, ``build_design``'s
+    ``load_model``), differs from the model's own, sign(τ̂_out q̇) of
+    :func:`~ident.effects.rigid_prediction` with ``coef``.
+
+    A share above 0 means the fit has not settled on its quadrants (the robot refit's
+    ``quadrant_drift``): on those rows the declared model's quadrant-dependent friction acts
+    with the other quadrant's coefficients, and a term the refinement adds may stand in for
+    that instead of an effect of the joint.
+
+    Parameters
+    ----------
+    design : Design
+        The design the model is fitted on (its blocks' full-rate signals and rows).
+    lib : Library
+        The model's library.
+    coef : mapping of str to float
+        The model's coefficients.
+
+    Returns
+    -------
+    float or None
+        The share in [0, 1]; None where no quadrant was fixed (a design built without a load
+        model), the library has no term whose columns read it (:data:`FIXED_QUADRANT`: the
+        usual model has none) or the model has no load prediction.
+    """
+    if not any(t.effect in FIXED_QUADRANT for t in lib.terms()):
+        return None
+    pred = rigid_prediction(lib, dict(coef))
+    if pred is None:
+        return None
+    blocks = getattr(design, "_blocks", None) or ()
+    if not blocks:
+        return None
+    n = moved = 0
+    for b in blocks:
+        if b.full.quadrant is None:
+            return None
+        rows = b.index[b.mask]
+        full = b.full.take(rows)
+        own = model_quadrant(full.states(), pred)
+        moved += int(np.count_nonzero(own != full.quadrant))
+        n += rows.size
+    return moved / n if n else None
+
+
 # ------------------------------------------------------------------------ the loop
 def refine(
     design: Design,
@@ -414,6 +465,7 @@ def refine(
         cur_design.signals.t, cur_design.signals.q, runs)
     floor = noise_floor(cur.residual_, cur_design.Y, runs)
     floor_initial = floor
+    drift_initial = quadrant_drift(cur_design, lib, cur.coef_)
     h_cur = heldout_error(_kept(cur_design, cur), cur_design.Y, runs)
     h_initial = h_cur
     val_err = cur.rel_error_on(cur_val) if cur_val is not None else None
@@ -704,4 +756,7 @@ def refine(
         heldout_rel_error_final=h_cur,
         noise_floor=floor,
         noise_floor_initial=floor_initial,
+        quadrant_drift_initial=drift_initial,
+        quadrant_drift_final=(None if drift_initial is None
+                              else quadrant_drift(cur_design, lib, cur.coef_)),
     )

@@ -199,6 +199,21 @@ class Rejected:
         }
 
 
+#: Quadrant drift the report mentions: its printed precision, 0.1 % of the rows (below it the
+#: few rows where the load is near zero, e.g. 0.004 % on the example joint).
+QUADRANT_DRIFT_SHOWN = 1e-3
+
+
+def quadrant_drift_note(initial: float, final: float | None) -> str:
+    """The report's line when the declared model's fixed quadrants are not its own."""
+    after = "" if final is None else f" ({100 * final:.1f} % for the final model)"
+    return (f"note: the declared model's quadrants were fixed by a first usual fit's load; its "
+            f"own fitted load puts {100 * initial:.1f} % of the rows in the other quadrant"
+            f"{after}: there its quadrant-dependent friction acts with the other quadrant's "
+            "values, and an added term may stand in for that rather than for an effect of "
+            "the joint")
+
+
 @dataclass
 class Refinement:
     """Outcome of :func:`refine`.
@@ -228,6 +243,12 @@ class Refinement:
         Every run replays one trajectory (:func:`ident.unseen.one_trajectory`): leaving a
         run out then cannot reject a term locked to that trajectory; the report says so when
         no validation data were given.
+    quadrant_drift_initial, quadrant_drift_final : float or None
+        Share of the rows whose quadrant, fixed in the declared model's columns by a first
+        usual fit's load, differs from the initial (final) model's own sign(τ̂_out q̇)
+        (:func:`ident.refine.quadrant_drift`); None where no quadrant was fixed. Above 0, the
+        report says that an added term may stand in for those rows (from
+        :data:`QUADRANT_DRIFT_SHOWN`, its printed precision).
     refit : dict or None
         The found terms refitted inside the joint's robot model, every parameter together
         (:meth:`ident.fitting.FitReport.refit_found_terms`; the ``refit`` record of
@@ -254,6 +275,8 @@ class Refinement:
     noise_floor: float = math.nan
     noise_floor_initial: float = math.nan
     heldout_one_trajectory: bool = False
+    quadrant_drift_initial: float | None = None
+    quadrant_drift_final: float | None = None
     refit: dict[str, Any] | None = None
 
     @property
@@ -271,6 +294,8 @@ class Refinement:
             "noise_floor_initial": _num(self.noise_floor_initial),
             "heldout_kind": self.heldout_kind,
             "heldout_one_trajectory": self.heldout_one_trajectory,
+            "quadrant_drift_initial": _num(self.quadrant_drift_initial),
+            "quadrant_drift_final": _num(self.quadrant_drift_final),
             "heldout_rel_error_initial": _num(self.heldout_rel_error_initial),
             "heldout_rel_error_final": _num(self.heldout_rel_error_final),
             "floor_ratio_final": {"fit": _ratio(self.rel_error_final, fl),
@@ -318,6 +343,9 @@ class Refinement:
         ]
         if self.heldout_one_trajectory and self.validation_rel_error_initial is None:
             out.append(f"  {ONE_TRAJECTORY_NOTE}")
+        drift = self.quadrant_drift_initial
+        if drift is not None and drift >= QUADRANT_DRIFT_SHOWN:
+            out.append(f"  {quadrant_drift_note(drift, self.quadrant_drift_final)}")
         for i, s in enumerate(self.steps, 1):
             out.append("")
             out.append(
