@@ -76,6 +76,7 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
               campaign_path: Path | None, plant_path: Path | None) -> DemoResult:
     """:func:`run_demo`'s body; ``hb.stream`` is the progress stream, ``hb.status`` names the
     step running (a line at least every few seconds on a silent step)."""
+    hb.status("loading the pipeline's modules")  # seconds on a loaded machine
     import matplotlib
 
     from daq.runtime.progress import ProgressLine
@@ -93,6 +94,7 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
 
     from .running import run_with_bar
 
+    hb.status(None)
     matplotlib.use("Agg")
     stream = hb.stream
     out = Path(out_dir)
@@ -286,11 +288,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _demo(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     if args.robot is not None:
-        from .demo_robot import run_robot_demo
-
         if args.quick:
             raise DaqError("--quick: expected the single-joint demo (the robot demo is "
                            "already short)")
+        with Heartbeat(sys.stderr) as hb:  # a line if this takes seconds (a loaded machine)
+            hb.status("loading the robot demo's modules")
+            from .demo_robot import run_robot_demo
         res = run_robot_demo(args.out, robot=args.robot, stream=sys.stderr,
                              max_steps=2 if args.max_steps is None else args.max_steps)
         print(res.summary)
