@@ -16,19 +16,18 @@ import math
 import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from trajectories.friction import DEFAULT_Q_S
 
-from . import DataError, cli_robot
-from .api import JointModel, load
-from .estimators import ESTIMATORS
-from .loaders import parse_mapping
-from .plots import write_plots
-from .refine_plots import plot_refinement
-from .report import write_json
-from .report_build import build_report
-from .vocab import METHOD_ALIASES, method_name, model_name
+from . import DataError
+from .vocab import METHOD_ALIASES, METHOD_NAMES, method_name, model_name
+
+if TYPE_CHECKING:
+    from .api import JointModel
+
+# the fitting modules (scipy, matplotlib, pinocchio...) are imported by the functions that
+# use them: `jointid --help` and `jointid fit --help` must not wait seconds for them
 
 __all__ = ["register", "run"]
 
@@ -82,7 +81,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--method",
-        choices=(*ESTIMATORS, *METHOD_ALIASES),
+        choices=(*METHOD_NAMES, *METHOD_ALIASES),  # METHOD_NAMES: ident.estimators' keys
         help="estimator: least squares, weighted per joint, or instrumental variables on the "
         "reference q_ref (default: wls with --robot; one joint: iv when every input carries "
         "q_ref, else ls, and wls is ls); 'ols' is a deprecated alias of 'ls'",
@@ -247,6 +246,8 @@ def _qs(value: str | None) -> float | str:
 
 def estimator_from_args(args: argparse.Namespace) -> JointModel:
     """The :class:`~ident.api.JointModel` ``jointid fit`` runs for these arguments."""
+    from .api import JointModel
+
     return JointModel(
         model=args.model,
         q_s=_qs(args.q_s),
@@ -362,6 +363,14 @@ def check_foreign_options(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``jointid fit``; returns the exit code."""
+    from . import cli_robot
+    from .api import load
+    from .loaders import parse_mapping
+    from .plots import write_plots
+    from .refine_plots import plot_refinement
+    from .report import write_json
+    from .report_build import build_report
+
     check_numbers(args)
     check_outputs(args)
     check_foreign_options(args)

@@ -15,20 +15,18 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from trajectories.robot import Robot, load_robot
-
 from . import DataError
-from .cli_robot import FORMAT, OLD_FORMATS, fit_robot, robot_gains
-from .loaders import parse_mapping
-from .report import write_json
-from .robot.consistent_fit import consistent_record, fit_consistent, format_record
-from .robot.export_model import export_model
-from .robot.loaders import RobotPreprocessing, load_robot_runs
 from .vocab import model_name, upgrade_record
+
+if TYPE_CHECKING:
+    from trajectories.robot import Robot
+
+# the fitting modules (scipy, pinocchio...) are imported by the functions that use them:
+# `jointid --help` must not wait seconds for them
 
 __all__ = ["register", "run", "consistent_from_record"]
 
@@ -60,6 +58,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def read_fit_record(path: Path) -> dict[str, Any]:
     """A `jointid fit --robot --json` record (one line naming the file when it is not one)."""
+    from .cli_robot import FORMAT, OLD_FORMATS
+
     try:
         rec = json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as e:
@@ -79,6 +79,10 @@ def consistent_from_record(path: Path, rec: dict[str, Any], robot: Robot, name: 
     """The consistent estimate of model ``name`` of the record: its ``consistent`` block, or
     a refit of its inputs (checked against its parameters) and :func:`fit_consistent`.
     Returns (consistent record, parameters held fixed by the fit)."""
+    from .cli_robot import fit_robot, robot_gains
+    from .robot.consistent_fit import consistent_record, fit_consistent
+    from .robot.loaders import RobotPreprocessing, load_robot_runs
+
     mrec = rec["models"][name]
     if "consistent" in mrec:
         return mrec["consistent"], {}
@@ -112,6 +116,13 @@ def consistent_from_record(path: Path, rec: dict[str, Any], robot: Robot, name: 
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``jointid export-model``; returns the exit code."""
+    from trajectories.robot import load_robot
+
+    from .loaders import parse_mapping
+    from .report import write_json
+    from .robot.consistent_fit import format_record
+    from .robot.export_model import export_model
+
     rec = read_fit_record(args.fit)
     fitted = [n for n, r in rec.get("models", {}).items() if "error" not in r]
     name = model_name(args.model) if args.model else ("paper" if "paper" in fitted else "usual")

@@ -6,8 +6,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .report_build import build_report
-
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``report`` subcommand to the ``jointid`` parser."""
@@ -19,6 +17,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from .report_build import build_report  # imported when run, not at `jointid --help`
+
     out = build_report(args.dir)
     print(f"report: {out}")
     return 0

@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from daq.protocol.logformat import MONITOR_RESIDUALS
+from daq.protocol.logformat import MONITOR_EDGES_S, MONITOR_RESIDUALS
 from trajectories.robot import Robot
 
 from . import DataError
@@ -345,10 +345,9 @@ def load_model(path: str | Path, robot: Robot | None, model: str | None = None
     return exported_from_fit(p, robot, model)
 
 
-#: default regime bins: edges [s] on a joint's moving time (time since its filtered velocity
-#: was last inside the rest band or changed sign, daq.runtime.monitor): bin 0 below the
-#: first edge (reversals, breakaway, rest), the last bin from the last edge on (steady motion)
-DEFAULT_EDGES_S = (0.03, 0.1, 0.3, 1.0)
+#: default regime bins: edges [s] on a joint's moving time (the log format's, where they are
+#: explained)
+DEFAULT_EDGES_S = MONITOR_EDGES_S
 #: a regime bin with fewer validation samples than this takes the joint's constant band
 DEFAULT_MIN_SAMPLES = 1000
 #: ... or entered fewer times than this (separate motions): the chance that the next motion

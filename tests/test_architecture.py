@@ -18,6 +18,17 @@ OURS = ("trajectories", "daq", "sim_drivers", "ident")
 # written). Each needs a reason; none may be added to dodge a cycle.
 ALLOWED: dict[tuple[str, str], str] = {}
 
+# The `jointid` subcommand modules import the packages they drive inside their run functions,
+# so that `jointid --help`, a mistyped option or the demo's first line do not wait seconds
+# for scipy, matplotlib, pinocchio, canopen... (tests/test_cli_import_cost.py). Nothing is
+# hidden: import-linter reads function bodies too, so these imports are held to the
+# contracts above like any other.
+LAZY_FOR_START_UP = frozenset({
+    "daq/app/demo.py", "daq/app/monitor.py", "daq/protocol/cli_export.py",
+    "daq/runtime/cli.py", "daq/runtime/cli_plan.py", "daq/runtime/cli_recover.py",
+    "ident/cli.py", "ident/cli_export_model.py", "ident/cli_report.py", "trajectories/cli.py",
+})
+
 
 def _our_module(node: ast.Import | ast.ImportFrom) -> list[str]:
     """The modules of ours an import statement names ("." prefixed when relative)."""
@@ -63,13 +74,15 @@ def test_no_function_level_imports_of_our_packages():
         for path in sorted((ROOT / pkg).rglob("*.py")):
             rel = path.relative_to(ROOT).as_posix()
             for line, mod in _function_level_imports(path):
-                if (rel, mod) in ALLOWED:
+                if rel in LAZY_FOR_START_UP:
+                    used.add(rel)
+                elif (rel, mod) in ALLOWED:
                     used.add((rel, mod))
                 else:
                     bad.append(f"{rel}:{line}: import of {mod} inside a function")
     assert not bad, ("imports of our own packages belong at module level (docs/architecture.md)"
                      ":\n" + "\n".join(bad))
-    stale = sorted(set(ALLOWED) - used)
+    stale = sorted(str(k) for k in (set(ALLOWED) | LAZY_FOR_START_UP) - used)
     assert not stale, f"allow-list entries no longer needed, remove them: {stale}"
 
 

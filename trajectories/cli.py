@@ -22,14 +22,15 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from . import LimitError
-from .campaign_file import load_campaign
-from .excitation import assess_robot_campaign
-from .multi import feedforward_dynamics
-from .robot_model import OPTIMISE_EVALUATIONS, prepare_robot_campaign, robot_for_campaign
-from .sampled import BANDS, RobotPlan
+
+if TYPE_CHECKING:
+    from .sampled import RobotPlan
+
+# the planner's modules (scipy, pinocchio...) are imported by the functions that use them:
+# `jointid --help` and `jointid plan --help` must not wait seconds for them
 
 __all__ = ["file_named", "plot_plan", "plot_robot_plan", "register", "run"]
 
@@ -56,6 +57,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Execute ``jointid plan``; returns the exit code. A limit the plan exceeds is named
     with the campaign file, as every other mistake (:func:`file_named`)."""
+    from .campaign_file import load_campaign
+
     # one path: a [joint] campaign is a robot with one moving joint
     rc = load_campaign(args.campaign)
     with file_named(rc.source):
@@ -77,6 +80,10 @@ def file_named(source: str) -> Iterator[None]:
 
 def _plan(args: argparse.Namespace, rc: Any) -> int:
     """``jointid plan`` on the loaded campaign ``rc``."""
+    from .excitation import assess_robot_campaign
+    from .multi import feedforward_dynamics
+    from .robot_model import OPTIMISE_EVALUATIONS, prepare_robot_campaign, robot_for_campaign
+
     if args.quick:
         rc = rc.quick()
     robot = robot_for_campaign(rc)
@@ -127,6 +134,8 @@ def plot_plan(plan: RobotPlan, path: str | Path) -> Path:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    from .sampled import BANDS
 
     path = Path(path)
     units = {plan.unit(j) for j in range(plan.n_joints)}

@@ -18,8 +18,9 @@ import warnings
 
 
 def _interrupted_at_start(signum: int, frame: object) -> None:
-    """SIGINT while the subcommand modules below are still importing (seconds: scipy,
-    pinocchio...): one line and exit 130, as any other interrupt, not a traceback."""
+    """SIGINT while the subcommand modules below are still importing: one line and exit 130,
+    as any other interrupt, not a traceback. (The heavy imports, scipy, pinocchio..., come
+    later, inside each subcommand's run function, where :func:`main` catches the interrupt.)"""
     print("jointid: interrupted (SIGINT)", file=sys.stderr)
     raise SystemExit(128 + signum)
 

@@ -15,25 +15,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
-import matplotlib
-
 from daq import DaqError, __version__, examples
-from daq.runtime.progress import Heartbeat, ProgressLine
-from ident.fitting import fit_models, rescan_qs
-from ident.loaders import load_experiments
-from ident.plots import write_plots
-from ident.refine import refine
-from ident.refine_plots import plot_refinement
-from ident.refine_result import ONE_TRAJECTORY_NOTE, leak_note
-from ident.report import write_json
-from ident.report_build import build_report, discover_figures
-from sim_drivers.plant_config import load_plant
-from trajectories.campaign_file import load_campaign
-from trajectories.cli import plot_plan
-from trajectories.multi import plan_robot_campaign
+from daq.runtime.progress import Heartbeat
 
-from .demo_robot import ROBOT_DEMOS, run_robot_demo
-from .running import run_with_bar
+# the pipeline's modules (scipy, matplotlib, pinocchio, canopen...) are imported by the
+# functions that run it: `jointid --help` and `jointid demo --help` must not wait for them
+
+#: ``--robot`` choices -> shipped campaign (:func:`daq.app.demo_robot.run_robot_demo`)
+ROBOT_DEMOS = {"3": "campaign_robot3_demo.toml", "6": "campaign_ur10_demo.toml"}
 
 TITLE = "jointid demo: simulated Stäubli RX130L joint 3"
 
@@ -87,6 +76,25 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
               campaign_path: Path | None, plant_path: Path | None) -> DemoResult:
     """:func:`run_demo`'s body; ``hb.stream`` is the progress stream, ``hb.status`` names the
     step running (a line at least every few seconds on a silent step)."""
+    hb.status("loading the pipeline's modules")  # seconds on a loaded machine
+    import matplotlib
+
+    from daq.runtime.progress import ProgressLine
+    from ident.fitting import fit_models, rescan_qs
+    from ident.loaders import load_experiments
+    from ident.plots import write_plots
+    from ident.refine import refine
+    from ident.refine_plots import plot_refinement
+    from ident.report import write_json
+    from ident.report_build import build_report, discover_figures
+    from sim_drivers.plant_config import load_plant
+    from trajectories.campaign_file import load_campaign
+    from trajectories.cli import plot_plan
+    from trajectories.multi import plan_robot_campaign
+
+    from .running import run_with_bar
+
+    hb.status(None)
     matplotlib.use("Agg")
     stream = hb.stream
     out = Path(out_dir)
@@ -219,6 +227,8 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
 
 
 def _summary(fit: dict, ref: Any, wall_s: float) -> str:
+    from ident.refine_result import ONE_TRAJECTORY_NOTE, leak_note
+
     m = fit["models"]
     rows = [
         ("All samples (all velocities)", "rel_error"),
@@ -281,6 +291,9 @@ def _demo(args: argparse.Namespace) -> int:
         if args.quick:
             raise DaqError("--quick: expected the single-joint demo (the robot demo is "
                            "already short)")
+        with Heartbeat(sys.stderr) as hb:  # a line if this takes seconds (a loaded machine)
+            hb.status("loading the robot demo's modules")
+            from .demo_robot import run_robot_demo
         res = run_robot_demo(args.out, robot=args.robot, stream=sys.stderr,
                              max_steps=2 if args.max_steps is None else args.max_steps)
         print(res.summary)

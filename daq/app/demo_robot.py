@@ -57,12 +57,10 @@ from trajectories.excitation import Quality, assess_robot_campaign, condition_nu
 from trajectories.robot_campaign import RobotCampaign
 from trajectories.robot_model import RobotDynamics, prepare_robot_campaign, robot_for_campaign
 
+from .demo import ROBOT_DEMOS
 from .running import run_with_bar
 
 __all__ = ["ROBOT_DEMOS", "RobotDemoResult", "logged_condition_number", "run_robot_demo"]
-
-#: ``--robot`` choices -> shipped campaign
-ROBOT_DEMOS = {"3": "campaign_robot3_demo.toml", "6": "campaign_ur10_demo.toml"}
 
 
 @dataclass(frozen=True)

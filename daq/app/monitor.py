@@ -32,33 +32,22 @@ import html
 import json
 import sys
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
-import matplotlib
 import numpy as np
 
 from daq import ConfigError, __version__
-from daq.runtime.monitor import (
-    DEFAULT_OBSERVER_GAIN,
-    RESIDUALS,
-    PushSpec,
-    TorqueMonitor,
-    read_monitor,
-)
-from ident.monitor import (
-    DEFAULT_EDGES_S,
-    DEFAULT_MIN_EPISODES,
-    DEFAULT_MIN_SAMPLES,
-    Thresholds,
-    load_model,
-    thresholds_from_residual,
-)
-from ident.report import Section, write_html, write_json
-from trajectories.campaign_file import load_any_campaign
-from trajectories.robot_campaign import RobotCampaign
-from trajectories.robot_model import robot_for_campaign
+from daq.protocol.logformat import MONITOR_EDGES_S as DEFAULT_EDGES_S
+from daq.protocol.logformat import MONITOR_OBSERVER_GAIN as DEFAULT_OBSERVER_GAIN
+from daq.protocol.logformat import MONITOR_RESIDUALS as RESIDUALS
 
-from .running import run_with_bar
+if TYPE_CHECKING:
+    from daq.runtime.monitor import PushSpec, TorqueMonitor
+    from ident.report import Section
+    from trajectories.robot_campaign import RobotCampaign
+
+# the monitor's modules (scipy, matplotlib, pinocchio, canopen...) are imported by the
+# functions that use them: `jointid --help` must not wait seconds for them
 
 __all__ = ["analyse", "load_campaign", "parse_edges", "parse_push", "per_joint", "register",
            "run_monitor"]
@@ -162,6 +151,8 @@ def parse_push(text: str, joints: list[str]) -> PushSpec:
     ConfigError
         Not of that form, an unknown joint, a force or duration not > 0, T0 < 0.
     """
+    from daq.runtime.monitor import PushSpec
+
     parts = text.split(":")
     try:
         if len(parts) not in (3, 4):
@@ -214,6 +205,8 @@ def per_joint(monitor: TorqueMonitor, logs: list[Path], runs: list[dict[str, Any
     half-widths the check used [N m] (smallest, largest), the pushes on its link (detected,
     delays [s]), its false alarms, and its largest ``|r - centre| / half-width`` over the
     armed cycles outside every push window (1: on the threshold)."""
+    from daq.runtime.monitor import read_monitor
+
     k = monitor.k
     worst, hw_min, hw_max = [0.0] * k, [np.inf] * k, [0.0] * k
     for rec, path in zip(monitor.records, logs, strict=False):
@@ -248,6 +241,8 @@ def per_joint(monitor: TorqueMonitor, logs: list[Path], runs: list[dict[str, Any
 
 def load_campaign(path: Path, paced: bool = False) -> RobotCampaign:
     """The robot campaign of ``path``; ``paced``: on the real-time clock."""
+    from trajectories.campaign_file import load_any_campaign
+
     campaign = load_any_campaign(path)
     if campaign.plant != "arm":
         raise ConfigError(f"{path}: expected a robot campaign ([robot] table with a robot "
@@ -274,6 +269,19 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
     daq.ConfigError, ident.IdentError, trajectories.TrajectoryError
         Bad input (one line), before the bus is opened.
     """
+    from daq.runtime.monitor import TorqueMonitor, read_monitor
+    from ident.monitor import (
+        DEFAULT_MIN_EPISODES,
+        DEFAULT_MIN_SAMPLES,
+        Thresholds,
+        load_model,
+        thresholds_from_residual,
+    )
+    from ident.report import write_json
+    from trajectories.robot_model import robot_for_campaign
+
+    from .running import run_with_bar
+
     stream = stream if stream is not None else sys.stderr
     campaign = load_campaign(campaign_path, paced)
     joints = list(campaign.moving)
@@ -405,6 +413,11 @@ def _plot(ml: Any, joints: list[str], path: Path, j: int, stage: list) -> None:
 
 def _report(out: Path, logs: list[Path], summary: dict[str, Any], mon: TorqueMonitor
             ) -> Path:
+    import matplotlib
+
+    from daq.runtime.monitor import read_monitor
+    from ident.report import Section, write_html
+
     matplotlib.use("Agg")
     joints = summary["joints"]
     what = (f"residual = measured torque minus the model's, both low-passed at "
@@ -489,6 +502,8 @@ def _bin_names(edges: list[float]) -> list[str]:
 def _regime_section(reg: dict[str, Any], joints: list[str]) -> Section:
     """Half-width [N m], samples and episodes of the regime bins per joint ('*': too few,
     pooled with the shorter bins or the constant band)."""
+    from ident.report import Section
+
     rows = []
     for j, name in enumerate(joints):
         rows.append([name] + [

@@ -12,7 +12,7 @@ import argparse
 import datetime
 from pathlib import Path
 
-from .export import EXPORT_FORMATS, export_can
+from .logformat import EXPORT_FORMATS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -29,6 +29,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from .export import export_can  # python-can, mcap: imported when run
+
     res = export_can(args.log, args.can)
     if res.frames:
         t0 = datetime.datetime.fromtimestamp(res.first_s, datetime.UTC)

@@ -64,12 +64,10 @@ import can
 import numpy as np
 
 from daq import DaqError
-from daq.protocol.logformat import FRAME_DTYPE
+from daq.protocol.logformat import EXPORT_FORMATS, FRAME_DTYPE
 from daq.protocol.reader import LogReadError, read_topics
 
 __all__ = ["EXPORT_FORMATS", "ExportError", "ExportResult", "export_can"]
-
-EXPORT_FORMATS = (".blf", ".asc", ".log", ".csv", ".trc")
 
 
 class _ASCWriter(can.ASCWriter):

@@ -115,6 +115,20 @@ CAN_HEAD_STRUCT = struct.Struct("<4sqI4x")  # header, cycle, sequence length, pa
 #: prediction, or the generalized-momentum observer's. The "residual" of a log's "monitor"
 #: metadata and of a thresholds file (``ident.monitor``) is one of them.
 MONITOR_RESIDUALS = ("filtered", "observer")
+#: default gain K_O [1/s] of the momentum observer: time constant 1 / K_O = 20 ms (a push's
+#: torque reaches 1 - e^-1 of its value in 20 ms, 92 % in 50 ms: the issue's delay), while
+#: the noise of p = M dq reaches r multiplied by K_O (used by :mod:`daq.runtime.monitor`;
+#: here so that ``jointid monitor --help`` needs neither scipy nor pinocchio)
+MONITOR_OBSERVER_GAIN = 50.0
+#: default regime bins of a thresholds file (:mod:`ident.monitor`): edges [s] on a joint's
+#: moving time (time since its filtered velocity was last inside the rest band or changed
+#: sign, daq.runtime.monitor): bin 0 below the first edge (reversals, breakaway, rest), the
+#: last bin from the last edge on (steady motion)
+MONITOR_EDGES_S = (0.03, 0.1, 0.3, 1.0)
+
+#: The CAN trace formats ``jointid export`` writes (:mod:`daq.protocol.export`), by extension;
+#: here, not there, so that the command's help needs neither python-can nor mcap
+EXPORT_FORMATS = (".blf", ".asc", ".log", ".csv", ".trc")
 
 EVENT_SCHEMA = json.dumps(
     {

@@ -19,14 +19,12 @@ import argparse
 import signal
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from daq import ConfigError
-from sim_drivers.plant_config import load_plant
-from trajectories.campaign_file import load_campaign
-from trajectories.cli import file_named
 
-from .progress import ProgressLine
-from .runner import Progress, prompt_payload, run_campaign
+if TYPE_CHECKING:
+    from .runner import Progress
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -72,6 +70,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    # imported here, not at the top: `jointid --help` must not wait for them (seconds)
+    from sim_drivers.plant_config import load_plant
+    from trajectories.campaign_file import load_campaign
+    from trajectories.cli import file_named
+
+    from .progress import ProgressLine
+    from .runner import prompt_payload, run_campaign
+
     campaign = load_campaign(args.campaign)
     if args.quick:  # one moving joint, trapezoids and sines (else a one-line SchemaError)
         campaign = campaign.quick()

@@ -13,9 +13,6 @@ from __future__ import annotations
 import argparse
 
 import trajectories.cli
-from trajectories.campaign_file import load_campaign
-
-from .runner import check_daq
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -27,5 +24,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def main(args: argparse.Namespace) -> int:
     """The ``[daq]`` checks of ``jointid run`` (:func:`~daq.runtime.runner.check_daq`), then
     :func:`trajectories.cli.run`; returns its exit code."""
+    from trajectories.campaign_file import load_campaign  # heavy: not at `jointid --help`
+
+    from .runner import check_daq
+
     check_daq(load_campaign(args.campaign))
     return trajectories.cli.run(args)

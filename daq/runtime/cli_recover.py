@@ -14,10 +14,12 @@ from __future__ import annotations
 import argparse
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from daq import DaqError
 
-from .mcaprecover import Recovered, recover_log
+if TYPE_CHECKING:
+    from .mcaprecover import Recovered
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -36,6 +38,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from .mcaprecover import recover_log  # mcap: imported when run, not at `jointid --help`
+
     src: Path = args.log
     if not src.is_file():
         raise DaqError(f"{src}: no such run log")

@@ -68,7 +68,7 @@ import numpy as np
 import scipy.linalg
 
 from daq import ConfigError
-from daq.protocol.logformat import MONITOR_RESIDUALS
+from daq.protocol.logformat import MONITOR_OBSERVER_GAIN, MONITOR_RESIDUALS
 from daq.protocol.reader import read_topics
 from sim_drivers.arm_push import staged_push
 
@@ -135,10 +135,8 @@ class SVFilter:
 
 #: the residuals :class:`TorqueMonitor` can check (:func:`residual_for`; the log format's)
 RESIDUALS = MONITOR_RESIDUALS
-#: default gain K_O [1/s] of the momentum observer: time constant 1 / K_O = 20 ms (a push's
-#: torque reaches 1 - e^-1 of its value in 20 ms, 92 % in 50 ms: the issue's delay), while
-#: the noise of p = M dq reaches r multiplied by K_O
-DEFAULT_OBSERVER_GAIN = 50.0
+#: default gain K_O [1/s] of the momentum observer (the log format's, where it is explained)
+DEFAULT_OBSERVER_GAIN = MONITOR_OBSERVER_GAIN
 
 
 class FilteredResidual:
