@@ -320,6 +320,25 @@ def _scan(path: Path, topics: set[str], raw_topics: set[str] = frozenset(),
     return scan
 
 
+def _record_at(f: Any, offset: int, length: int, kind: int) -> Any:
+    """The record of opcode ``kind`` (a ``_RECORDS`` class) that an index places at
+    ``offset`` with ``length`` bytes (opcode and length included).
+
+    Raises
+    ------
+    ValueError
+        Another record there, or a length that does not match; the record's own errors
+        when its bytes are damaged.
+    """
+    cls = _RECORDS[kind]
+    f.seek(offset)
+    buf = f.read(length)
+    opcode, rec_len = _HEAD.unpack_from(buf)
+    if opcode != kind or 9 + rec_len != length:
+        raise ValueError(f"not a {cls.__name__} record")
+    return cls.read(_stream(buf[9:]))
+
+
 def _scan_indexed(f: Any, path: Path, summary: Summary, scan: _Scan, topics: set[str],
                   raw_topics: set[str], attachments: bool) -> None:
     """A closed file: every chunk found through its chunk index; a damaged one is skipped."""
@@ -334,12 +353,7 @@ def _scan_indexed(f: Any, path: Path, summary: Summary, scan: _Scan, topics: set
     for offset, length, kind in sorted(wanted, key=lambda w: w[0]):
         cls = _RECORDS[kind]
         try:
-            f.seek(offset)
-            buf = f.read(length)
-            opcode, rec_len = _HEAD.unpack_from(buf)
-            if opcode != kind or 9 + rec_len != length:
-                raise ValueError(f"not a {cls.__name__} record")
-            _add_record(scan, cls.read(_stream(buf[9:])))
+            _add_record(scan, _record_at(f, offset, length, kind))
         except Exception as exc:
             warnings.warn(f"{path}: {cls.__name__.lower()} record at offset {offset} damaged "
                           f"({_why(exc)}), skipped", RuntimeWarning, stacklevel=4)
@@ -587,13 +601,8 @@ def read_metadata(path: str | Path) -> dict[str, dict[str, str]]:
             places = [(pos, 9 + length) for pos, opcode, length in RecordWalk(f, size)
                       if opcode == Opcode.METADATA]
         for offset, length in places:
-            f.seek(offset)
-            buf = f.read(length)
             try:
-                opcode, rec_len = _HEAD.unpack_from(buf)
-                if opcode != Opcode.METADATA or 9 + rec_len != length:
-                    continue
-                rec = Metadata.read(_stream(buf[9:]))
+                rec = _record_at(f, offset, length, Opcode.METADATA)
             except Exception:  # a damaged record: skipped
                 continue
             out[rec.name] = dict(rec.metadata)

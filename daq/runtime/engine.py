@@ -197,6 +197,12 @@ def drive_joints(campaign: RobotCampaign, n_drives: int) -> list[int]:
     return list(range(k))
 
 
+def emcy_text(drive: MasterDrive, code: int, register: int) -> str:
+    """An EMCY in the words of the run's ``emcy`` events (in a run, and between runs:
+    :mod:`daq.runtime.runner`)."""
+    return f"{drive.name}: EMCY 0x{code:04X} (error register 0x{register:02X})"
+
+
 class Engine(Supervisor):
     """Executes the payload runs of one campaign on an open bus (built by :func:`run_campaign`).
 
@@ -396,8 +402,7 @@ class Engine(Supervisor):
             tpdo_fault = ""
             if io.emcy:  # before the state checks: the first one names the cause
                 for dd, code, reg in io.emcy:  # every one is an event, also while stopping
-                    why = (f"{self.drives[dd].name}: EMCY 0x{code:04X} (error register "
-                           f"0x{reg:02X})")
+                    why = emcy_text(self.drives[dd], code, reg)
                     if not stopping and not self._stop_reason:
                         self._fault(why, cycle, t, log, dd, kind="emcy")
                     else:

@@ -29,7 +29,7 @@ from .busload import bus_loads, check_loads
 from .campaign_id import campaign_definition, check_folder, plant_record
 from .config import DaqConfig, Scaling, with_scalings
 from .cycle_io import BUS_ERRORS, CycleIO
-from .engine import ENABLE_MAX_CYCLES, SETTLE_CYCLES, Engine, drive_joints
+from .engine import ENABLE_MAX_CYCLES, SETTLE_CYCLES, Engine, drive_joints, emcy_text
 from .master import MasterDrive, MasterHeartbeat, pdo_lengths, rpdo_timeout_ms
 from .mcaplog import RunLog
 from .results import CampaignResult, PayloadResult, Progress
@@ -365,11 +365,6 @@ def check_daq(campaign: RobotCampaign, *, simulated: bool = False) -> tuple[DaqC
     return cfg, check_loads(loads, cfg.max_bus_load, str(campaign.source) or "campaign")
 
 
-def _emcy_text(drive: MasterDrive, code: int, register: int) -> str:
-    """An EMCY in the words of the run's ``emcy`` events."""
-    return f"{drive.name}: EMCY 0x{code:04X} (error register 0x{register:02X})"
-
-
 def _chain(sc: Any) -> tuple[float, float, int]:
     """What a scaling does to the logged values: gear ratio, joint torque per unit, counts."""
     return (float(sc.gear_ratio), float(sc.torque_per_unit), int(sc.encoder_counts_per_rev))
@@ -511,7 +506,7 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
             except OSError as exc:  # writing the header: nothing moved yet
                 raise DaqError(f"log write failed: {path}: {exc.strerror or exc}") from None
             for dd, code, reg in early:
-                why = f"{_emcy_text(drives[dd], code, reg)} before the run of payload {i}"
+                why = f"{emcy_text(drives[dd], code, reg)} before the run of payload {i}"
                 log.event(0, 0.0, "emcy", why, dd)
                 notes.append(f"{why} (logged at cycle 0 of {path.name})")
                 logger.warning("%s", why)
