@@ -228,19 +228,23 @@ def check_qs_model(args: argparse.Namespace) -> None:
                         "and --model usual has none; drop --q-s or fit --model paper or both")
 
 
-def _qs(value: str | None) -> float | str:
-    """``--q-s``: 'scan' or a finite velocity > 0 [rad/s or m/s] (one line naming the flag
-    otherwise, as ``--robot`` says it); not given: ``DEFAULT_Q_S``."""
+def parse_qs(value: str | None, *, scan: bool = True) -> float | str:
+    """``--q-s`` of ``jointid fit`` (``scan``: 'scan' accepted) or of ``--robot`` (no scan):
+    a finite velocity > 0 [rad/s or m/s], one line naming the flag otherwise; not given:
+    ``DEFAULT_Q_S``."""
     if value is None:
         return DEFAULT_Q_S
-    if value.strip().lower() == "scan":
+    if scan and value.strip().lower() == "scan":
         return "scan"
     try:
         v = float(value)
     except ValueError:
-        raise DataError(f"--q-s {value!r}: expected a number [rad/s] or 'scan'") from None
+        raise DataError(f"--q-s {value!r}: expected a number [rad/s] "
+                        + ("or 'scan'" if scan else "(the scan is single-joint only)")
+                        ) from None
     if not (math.isfinite(v) and v > 0):
-        raise DataError(f"--q-s {value!r}: expected a number > 0 [rad/s] or 'scan'")
+        raise DataError(f"--q-s {value!r}: expected a number > 0 [rad/s]"
+                        + (" or 'scan'" if scan else ""))
     return v
 
 
@@ -250,7 +254,7 @@ def estimator_from_args(args: argparse.Namespace) -> JointModel:
 
     return JointModel(
         model=args.model,
-        q_s=_qs(args.q_s),
+        q_s=parse_qs(args.q_s),
         joint=args.joint,
         cutoff=args.cutoff,
         decimation=args.decimation,
@@ -384,7 +388,7 @@ def run(args: argparse.Namespace) -> int:
     for attr, flag, hint in _ROBOT_ONLY:
         if getattr(args, attr, None) not in (None, False):
             raise DataError(f"{flag}: applies to --robot fits only{hint}")
-    _qs(args.q_s)  # refused before the files are read
+    parse_qs(args.q_s)  # refused before the files are read
     mapping = parse_mapping(args.map)
     gain: float | str | None = args.gain
     load_kw: dict[str, Any] = dict(

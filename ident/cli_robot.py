@@ -36,6 +36,7 @@ from trajectories.friction import DEFAULT_Q_S
 from trajectories.robot import Robot, RobotRegressor, base_parameters, load_robot
 
 from . import DataError, IdentError
+from .cli import parse_qs
 from .estimate import DEFAULT_THRESHOLD_PCT
 from .fitting import DQ_MIN_FRACTION, SIGN_CHECK_MIN_KEPT
 from .loaders import parse_mapping
@@ -187,20 +188,6 @@ def fit_files(
     if consistent:
         add_consistent(out)
     return out
-
-
-def _qs(value: str | None) -> float:
-    """``--q-s`` of ``--robot``: a finite velocity > 0 [rad/s]; not given: ``DEFAULT_Q_S``."""
-    if value is None:
-        return DEFAULT_Q_S
-    try:
-        q_s = float(value)
-    except ValueError:
-        raise DataError(f"--q-s {value!r}: expected a number [rad/s] (the scan is single-joint "
-                        "only)") from None
-    if not q_s > 0 or not math.isfinite(q_s):
-        raise DataError(f"--q-s {value!r}: expected a number > 0 [rad/s]")
-    return q_s
 
 
 def _check_args(args: argparse.Namespace) -> None:
@@ -992,7 +979,7 @@ def run(args: argparse.Namespace) -> int:
     out = fit_files(robot, args.inputs, args.validate, model=args.model,
                     mapping=parse_mapping(args.map, robot=True), q_unit=args.q_unit,
                     cutoff=args.cutoff, decimation=args.decimation, trim=args.trim,
-                    method=args.method, q_s=_qs(args.q_s), dq_min=args.dq_min,
+                    method=args.method, q_s=parse_qs(args.q_s, scan=False), dq_min=args.dq_min,
                     known_rotor_inertia=args.known_rotor_inertia,
                     chain=args.chain or "columns", payload=args.payload,
                     feasibility=not getattr(args, "no_consistency", False),

@@ -30,7 +30,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from trajectories.robot import BaseParameters, RobotRegressor, base_parameters
-from trajectories.robot.base import qr_rule, random_states, regroup_expression
+from trajectories.robot.base import (
+    qr_rule,
+    random_states,
+    regroup_expression,
+    regrouped_names,
+)
 
 from . import RobotIdentError
 
@@ -167,14 +172,8 @@ def regroup_friction(reg: RobotRegressor, base: BaseParameters | None = None, *,
                 i = keep_b.index(base.names.index(names[c]))
                 new_beta[i] += coef * base.beta[d]
     new_beta[np.abs(new_beta) < _ZERO_COEF] = 0.0
-    new_names, exprs = [], []
     columns = base.columns[keep_b]
-    for i, c in enumerate(columns):
-        others = [(std[j], float(new_beta[i, j])) for j in range(len(std))
-                  if j != c and new_beta[i, j] != 0.0]
-        nm = std[c] + ("R" if others else "")
-        new_names.append(nm)
-        exprs.append(regroup_expression(nm, std[c], others))
+    new_names, exprs = regrouped_names(std, columns, new_beta)
     friction: dict[str, dict[str, float]] = {}
     fexprs = []
     for fname, vec in fric.items():

@@ -30,7 +30,7 @@ estimates.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -227,13 +227,23 @@ def qr_rule(W: np.ndarray, names: tuple[str, ...], rtol: float = DEFAULT_RTOL,  
         b2 = np.linalg.lstsq(W[:, kept], W[:, dep], rcond=None)[0]  # W2 = W1 b2
         b2[np.abs(b2) < _ZERO_COEF * max(1.0, float(np.abs(b2).max()))] = 0.0
         beta[:, dep] = b2
+    base_names, exprs = regrouped_names(names, kept, beta)
+    return kept, beta, base_names, exprs, zero
+
+
+def regrouped_names(names: Sequence[str], kept: Sequence[int], beta: np.ndarray
+                    ) -> tuple[list[str], list[str]]:
+    """Names and printed regroupings of base parameters: row r of ``beta`` (chi_b = beta chi)
+    is ``names[kept[r]]``, suffixed ``R`` where others are regrouped into it, and
+    ``"XXR = XX - YY"`` (:func:`regroup_expression`)."""
     base_names, exprs = [], []
     for row, c in enumerate(kept):
-        others = [(names[j], beta[row, j]) for j in range(p) if j != c and beta[row, j] != 0]
+        others = [(names[j], float(beta[row, j])) for j in range(len(names))
+                  if j != c and beta[row, j] != 0]
         nm = names[c] + ("R" if others else "")
         base_names.append(nm)
         exprs.append(regroup_expression(nm, names[c], others))
-    return kept, beta, base_names, exprs, zero
+    return base_names, exprs
 
 
 def base_parameters(
