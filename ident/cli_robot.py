@@ -60,7 +60,7 @@ from .robot.loaders import (
 from .robot.payload import format_misfit, payload_misfit
 from .robot.plots import write_robot_report
 from .robot.refine_joint import joint_coulomb, refine_joint
-from .robot.refit import refit_robot
+from .robot.refit_accept import ALL_REFUSED, accept_refit
 from .robot.signals import RobotSignals
 from .robot.tables import format_table_iii, format_uncertainty, table_iii
 from .robot.uncertainty import N_BLOCKS, assess, parameter_records
@@ -521,7 +521,10 @@ def refine_robot(
     Then every term found is refitted inside the n-dof model, every joint together
     (:func:`ident.robot.refit.refit_robot`: before/after per joint and for the robot, under
     ``"refit"``; ``{"error": ...}`` when it cannot be done, e.g. a term reading the
-    acceleration under IDIM-IV without q_ref).
+    acceleration under IDIM-IV without q_ref), and kept only if the refit does not worsen
+    the held-out error (:func:`ident.robot.refit_accept.accept_refit`: the refused terms
+    under ``"refit"["refused"]``, one line of reason each; every term refused: the refit
+    without terms, the n-dof fit).
 
     Parameters
     ----------
@@ -617,10 +620,10 @@ def refine_robot(
         rec["refit"] = {"skipped": "no term found on any joint: the n-dof model is unchanged"}
     else:
         say(f"n-dof refit with {len(terms)} found term(s)")
-        try:
-            fitted = refit_robot(est, sig, terms, prediction=pred, keep=keep,
-                                 revolute=[types.get(jn, True) for jn in sig.joints],
-                                 validation=validation)
+        try:  # each term kept only if the refit's held-out error allows (refit_accept)
+            fitted = accept_refit(est, sig, terms, prediction=pred, keep=keep,
+                                  revolute=[types.get(jn, True) for jn in sig.joints],
+                                  validation=validation, progress=say)
             rec["refit"] = fitted.to_json()
             out["_refit"] = fitted
         except IdentError as exc:
@@ -701,12 +704,16 @@ def format_refit(fit: dict[str, Any], model: str) -> list[str]:
                 "  [not significant inside the n-dof model: Wald "
                 f"{x['wald'] if x.get('wald') is None else format(x['wald'], '.3g')}]")
         # the term's derived values (a periodic form's amplitude, phase, period)
-        derived = "".join(
+        derived = "".join(  # (not the coefficients again, e.g. a library basis's)
             f"; {n} = {v['value']:.4g}" + (f" ± {v['two_sigma']:.2g}" if v["two_sigma"] else "")
-            for n, v in (x.get("parameters") or {}).items())
+            for n, v in (x.get("parameters") or {}).items() if n not in x["names"])
         lines.append(f"  {x['joint']}: {x['effect']}: {vals}{derived} (± 2σ){flag}")
+    refused = fit.get("refused") or []
+    for r in refused:  # the held-out check of ident.robot.refit_accept
+        lines.append(f"  {r['reason']}")
     if not fit["extras"]:
-        lines.append("  (no term found: the refit is the n-dof fit)")
+        lines.append(f"  ({ALL_REFUSED})" if refused else
+                     "  (no term found: the refit is the n-dof fit)")
     if fit.get("unsettled"):
         lines.append("  note: the n-dof fit had not settled on " + ", ".join(
             f"{j} ({100 * s:.1f} % of its rows in another quadrant with its final values)"

@@ -73,9 +73,11 @@ the decimated states instead, which moves the error by ~1e-4 relative.
 Reported before (the n-dof fit as it is) and after (the refit), per joint and for the whole
 robot: the relative error ||rho_j|| / ||tau_j|| on the rows used, the error on unseen data
 (:func:`ident.unseen.heldout_error`'s folds: leave one run out with two runs or more, else
-five blocks; the refit linearised at the solution), the noise floor
+five blocks; the refit linearised at the solution; under WLS "before" weights the joints of
+its folds as the fit did, ``model.weights_``, "after" as the refit does), the noise floor
 (:func:`ident.unseen.noise_floor` of each joint's residual), and the validation error when
-validation samples are given.
+validation samples are given. Whether the found terms are kept is decided on these held-out
+errors by :func:`ident.robot.refit_accept.accept_refit` (``refused``, ``acceptance``).
 
 Memory: the rows of every joint (their base columns, friction and extra columns) are held
 while iterating: ~8 (p_j + 10 + c_j) bytes per row (products form on full-rate products:
@@ -173,6 +175,13 @@ class RobotRefit:
         Then "before" is the model refitted on the refit's quadrants WITHOUT the terms
         (same rows, same held parameters), not the fit as it is, so that before -> after is
         what the terms add; empty otherwise.
+    refused : list of dict
+        The found terms the held-out check refused (:func:`ident.robot.refit_accept.
+        accept_refit`), each with its one-line reason and figures; empty when every term
+        was kept or the refit was not checked.
+    acceptance : dict or None
+        The check's rule and per-joint tolerances (``accept_refit``); None when the refit
+        was not checked (a bare :func:`refit_robot`).
     """
 
     model: Any
@@ -191,6 +200,8 @@ class RobotRefit:
     n_rows: dict[str, int] = field(default_factory=dict)
     n_iter: int = 0
     unsettled: dict[str, float] = field(default_factory=dict)
+    refused: list[dict[str, Any]] = field(default_factory=list)
+    acceptance: dict[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The ``refit`` record of docs/fit-json.md (plain floats; NaN as None)."""
@@ -217,6 +228,10 @@ class RobotRefit:
             "rows": dict(self.n_rows),
             "iterations": int(self.n_iter),
             "unsettled": dict(self.unsettled),
+            "refused": [{**r, "heldout_rel_error": {w: {j: num(v) for j, v in d.items()}
+                                                    for w, d in r["heldout_rel_error"].items()}}
+                        for r in self.refused],
+            "acceptance": self.acceptance,
         }
 
 
@@ -365,8 +380,11 @@ def refit_robot(
                      if d > QUADRANT_TOL}
     # before: the n-dof fit as it is, on the same rows, without the extra columns; a paper
     # fit that had not settled is refitted on the refit's quadrants without the terms first
-    # (else "after" would credit the terms with the settling)
+    # (else "after" would credit the terms with the settling); its held-out folds weighted
+    # as the fit weighted its joints (WLS: not the refit's weights, which the terms move)
     xb, wb = x0, w
+    if model.method == "wls" and np.shape(getattr(model, "weights_", None)) == (k,):
+        wb = np.asarray(model.weights_, dtype=float)
     if out.unsettled:
         xb, _, wb = _estimate(sys, x0, free & base, linear, model.method)
     A, _, C = sys.normal(x, free, w)
