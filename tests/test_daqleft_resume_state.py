@@ -11,12 +11,14 @@ in one line naming the state file and what differs, nothing written."""
 from __future__ import annotations
 
 import json
+import textwrap
 from dataclasses import replace
 
 import pytest
 from daq_campaigns import sine_campaign
 
 from daq import ConfigError
+from daq.app.cli import main
 from daq.runtime.campaign_id import campaign_definition, plant_record
 from daq.runtime.runner import run_campaign
 from sim_drivers.plant_config import default_plant
@@ -109,3 +111,48 @@ def test_an_older_state_file_is_compared_by_what_it_records(tmp_path):
         assert state["campaign"] == "rig_a" and state["completed"] == [0, 1]
         assert json.dumps(state["definition"], sort_keys=True) == campaign_definition(c)
         (out / "rig_a_payload1.mcap").unlink()  # (moved away too)
+
+
+def test_cli_resume_with_a_state_of_another_campaign(tmp_path, capsys):
+    """``jointid run --resume`` into a folder holding only the state file of campaign
+    "rig a" (its logs moved away): exit 2, one line, nothing written, nothing moved."""
+    src = tmp_path / "rig_a.toml"
+    src.write_text(textwrap.dedent("""
+        name = "rig_a"
+        [joint]
+        kind = "revolute"
+        [joint.limits]
+        position = [-1.0, 1.0]
+        max_velocity = 1.0
+        max_acceleration = 4.0
+        max_jerk = 40.0
+        max_torque = 700.0
+        [control]
+        cycle_s = 0.002
+        kp = 6000.0
+        kd = 200.0
+        [[payloads]]
+        mass_kg = 0.0
+        arm_m = 1.0
+        [[segments]]
+        kind = "sine"
+        amplitude = 0.02
+        frequency_hz = 2.0
+        center = 0.0
+        periods = 1
+        [daq]
+        channel = "test_rig_a_cli"
+        """))
+    out = tmp_path / "runs"
+    out.mkdir()
+    state_file = out / "rig_a.state.json"
+    state_file.write_text(json.dumps({"campaign": "rig a", "completed": [0]}))
+    before = _listing(out)
+    code = main(["run", str(src), "--simulate", "examples/plant_rx130l.toml", "--yes",
+                 "--out", str(out), "--resume"])
+    assert code == 2
+    assert capsys.readouterr().err == (
+        f"jointid run: error: {state_file}: the resume state of another campaign, 'rig a' "
+        f"(this run's: 'rig_a'); a folder holds the logs of one campaign: give another "
+        f"--out\n")
+    assert _listing(out) == before and not list(out.glob("*.mcap"))
