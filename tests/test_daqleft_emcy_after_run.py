@@ -8,6 +8,7 @@ word. It is now a warning of the run's summary (stderr) and an entry of the stat
 from __future__ import annotations
 
 import json
+import time
 
 import can
 from daq_campaigns import sine_campaign
@@ -72,3 +73,29 @@ def test_an_emcy_after_the_last_payload_is_reported_and_recorded(tmp_path):
     assert not [n for n in again.notes if "EMCY" in n]
     assert json.loads((tmp_path / "emcyl.state.json").read_text())["emcy_outside_logs"] \
         == [rec]
+
+
+def test_an_emcy_before_a_declined_first_payload_is_recorded(tmp_path):
+    """The operator declines the first payload after the drive reported a fault at the
+    prompt: no payload ran, no log was opened; the EMCY is in the summary and the state."""
+    c = sine_campaign("emcyd")
+    sender = can.Bus(interface="virtual", channel=c.daq["channel"])
+
+    def prompt(index, payload, n) -> bool:
+        sender.send(can.Message(arbitration_id=0x81, data=EMCY, is_extended_id=False))
+        time.sleep(0.3)  # the listener takes it (its notifier polls every 50 ms)
+        return False
+
+    try:
+        r = run_campaign(c, out_dir=tmp_path, simulate=default_plant(), prompt=prompt)
+    finally:
+        sender.shutdown()
+    assert r.status == "aborted" and r.runs == ()
+    text = "node 1: EMCY 0x3210 (error register 0x05) before any payload ran"
+    assert f"  warning: {text} (in no log: recorded in emcyd.state.json)" in \
+        r.summary().splitlines()
+    assert not list(tmp_path.glob("*.mcap"))
+    state = json.loads((tmp_path / "emcyd.state.json").read_text())
+    assert state["completed"] == []
+    assert [(e["text"], e["after_payload"]) for e in state["emcy_outside_logs"]] == \
+        [(text, None)]

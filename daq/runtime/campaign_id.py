@@ -169,7 +169,7 @@ def difference(log_md: dict[str, dict[str, str]], name: str, definition: str,
     return ""
 
 
-def check_state(path: Path, campaign: str | None, recorded_definition: Any,
+def check_state(campaign: str | None, recorded_definition: Any,
                 recorded_plant: dict[str, str] | None, name: str, definition: str,
                 plant: dict[str, str], source: str) -> str:
     """What makes the resume state's campaign differ from this run's (:func:`difference`,
@@ -184,11 +184,9 @@ def check_state(path: Path, campaign: str | None, recorded_definition: Any,
 
     Parameters
     ----------
-    path : Path
-        The state file (not read here: the caller read it).
     campaign, recorded_definition, recorded_plant :
-        What it records (``RunState.campaign``, ``.definition``: the parsed definition,
-        ``.plant``); None where it records nothing.
+        What the state file records (``RunState.campaign``, ``.definition``: the parsed
+        definition, ``.plant``); None where it records nothing.
     name, definition, plant, source :
         This run's, as for :func:`difference`.
     """

@@ -405,8 +405,8 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
     state = read_state(state_file)  # merged into, never shrunk (runfolder)
     notes: list[str] = list(sim_notes or ())
     # the state file's name is the campaign's stem: another campaign's may share it
-    if why := check_state(state_file, state.campaign, state.definition, state.plant,
-                          campaign.name, definition, plant, source):
+    if why := check_state(state.campaign, state.definition, state.plant, campaign.name,
+                          definition, plant, source):
         if not overwrite:
             raise ConfigError(f"{state_file}: {why}; a folder holds the logs of one "
                               f"campaign: give another --out")
