@@ -76,7 +76,8 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
               campaign_path: Path | None, plant_path: Path | None) -> DemoResult:
     """:func:`run_demo`'s body; ``hb.stream`` is the progress stream, ``hb.status`` names the
     step running (a line at least every few seconds on a silent step)."""
-    # the demo's first line at once: the imports take seconds (6 s on a loaded machine)
+    # the demo's first line at once: the imports take seconds on a loaded machine (about
+    # 4.5 s on 2 cores at load average 2, the robot demo's 6 s)
     hb.status("loading the pipeline's modules", say=True)
     import matplotlib
 
