@@ -16,6 +16,14 @@ joints' ``drive`` (node ids, buses: how the drives are reached, recorded per log
 ``drive<k>`` records), and the campaign file's path. The robot file counts by its content
 (SHA-256), not its path. Logs written before ``campaign.definition`` existed are compared by
 name and plant only.
+
+The resume state ``<stem>.state.json`` records the same identity (``campaign``,
+``definition``, ``plant``): campaigns whose names differ only in characters a file name
+cannot hold share its file name, and a folder may hold a state file without logs (moved
+away). :func:`check_state` compares it as :func:`difference` compares a log; ``jointid
+run`` refuses a state of another campaign, with and without ``--resume``, naming the state
+file and what differs; ``--overwrite`` replaces it (the run starts from no completed
+payload).
 """
 
 from __future__ import annotations
@@ -32,7 +40,8 @@ from daq.protocol.reader import LogReadError, read_metadata
 from trajectories.robot_campaign import RobotCampaign
 from trajectories.robot_model import robot_file_path
 
-__all__ = ["campaign_definition", "check_folder", "difference", "plant_record"]
+__all__ = ["campaign_definition", "check_folder", "check_state", "difference",
+           "plant_record"]
 
 
 def campaign_definition(campaign: RobotCampaign) -> str:
@@ -113,7 +122,7 @@ def _first_difference(a: Any, b: Any, where: str = "") -> tuple[str, Any, Any] |
 
 
 def difference(log_md: dict[str, dict[str, str]], name: str, definition: str,
-               plant: dict[str, str], source: str) -> str:
+               plant: dict[str, str], source: str, *, what: str = "log") -> str:
     """What makes a log's campaign differ from this run's, in a few words; "" when it is
     the same campaign.
 
@@ -125,12 +134,17 @@ def difference(log_md: dict[str, dict[str, str]], name: str, definition: str,
         This run's campaign name, :func:`campaign_definition` and :func:`plant_record`.
     source : str
         This run's campaign file (named in the message).
+    what : {"log", "state"}
+        What ``log_md`` was read from: a run log, or the resume state
+        (:func:`check_state`), as the message names it.
     """
+    a = "a log" if what == "log" else "the resume state"
+    in_it = "in the log" if what == "log" else "in the state file"
     camp = log_md.get("campaign")
     if camp is None or "name" not in camp:
         return "not a jointid run log (no campaign metadata)"
     if camp["name"] != name:
-        return f"a log of another campaign, {camp['name']!r} (this run's: {name!r})"
+        return f"{a} of another campaign, {camp['name']!r} (this run's: {name!r})"
     theirs = camp.get("definition")
     if theirs is not None and theirs != definition:
         try:
@@ -138,21 +152,51 @@ def difference(log_md: dict[str, dict[str, str]], name: str, definition: str,
         except ValueError:
             diff = None
         if diff is None:
-            return f"a log of campaign {name!r} as it was before {source} changed"
+            return f"{a} of campaign {name!r} as it was before {source} changed"
         key, old, new = diff
         if key == "robot":
-            return (f"a log of campaign {name!r} with another robot file (content {old} in "
-                    f"the log, {new} now)")
-        return (f"a log of campaign {name!r} as it was before {source} changed: {key} is "
-                f"{_short(old)} in the log, {_short(new)} now")
+            return (f"{a} of campaign {name!r} with another robot file (content {old} "
+                    f"{in_it}, {new} now)")
+        return (f"{a} of campaign {name!r} as it was before {source} changed: {key} is "
+                f"{_short(old)} {in_it}, {_short(new)} now")
     log_plant = log_md.get("plant", {})
     if _plant_text(log_plant) != _plant_text(plant):
-        return (f"a log of campaign {name!r} run on {_plant_text(log_plant)}, this run is on "
+        return (f"{a} of campaign {name!r} run on {_plant_text(log_plant)}, this run is on "
                 f"{_plant_text(plant)}")
     if plant and log_plant.get("truth", "") != plant.get("truth", ""):
-        return (f"a log of campaign {name!r} run on a {_plant_text(log_plant)} with other "
+        return (f"{a} of campaign {name!r} run on a {_plant_text(log_plant)} with other "
                 f"parameters than this run's")
     return ""
+
+
+def check_state(campaign: str | None, recorded_definition: Any,
+                recorded_plant: dict[str, str] | None, name: str, definition: str,
+                plant: dict[str, str], source: str) -> str:
+    """What makes the resume state's campaign differ from this run's (:func:`difference`,
+    worded for the state file); "" when it is the same campaign.
+
+    The state file's stem is the campaign name made safe for file names
+    (:func:`daq.runtime.runner.file_stem`: ``"rig a"`` and ``"rig_a"`` share
+    ``rig_a.state.json``), so it records its campaign as the logs do
+    (:class:`daq.runtime.runfolder.RunState`). What it does not record is not compared: a
+    state file written before ``definition`` and ``plant`` were recorded is compared by
+    name, one that records no name (the first format) not at all.
+
+    Parameters
+    ----------
+    campaign, recorded_definition, recorded_plant :
+        What the state file records (``RunState.campaign``, ``.definition``: the parsed
+        definition, ``.plant``); None where it records nothing.
+    name, definition, plant, source :
+        This run's, as for :func:`difference`.
+    """
+    if campaign is None:
+        return ""
+    rec: dict[str, Any] = {"name": campaign}
+    if recorded_definition is not None:  # canonical again: sorted keys, the same floats
+        rec["definition"] = json.dumps(recorded_definition, sort_keys=True)
+    md = {"campaign": rec, "plant": plant if recorded_plant is None else recorded_plant}
+    return difference(md, name, definition, plant, source, what="state")
 
 
 def check_folder(folder: Path, stem: str, name: str, definition: str,

@@ -197,10 +197,11 @@ def drive_joints(campaign: RobotCampaign, n_drives: int) -> list[int]:
     return list(range(k))
 
 
-def emcy_text(drive: MasterDrive, code: int, register: int) -> str:
+def emcy_text(drive: MasterDrive | str, code: int, register: int) -> str:
     """An EMCY in the words of the run's ``emcy`` events (in a run, and between runs:
-    :mod:`daq.runtime.runner`)."""
-    return f"{drive.name}: EMCY 0x{code:04X} (error register 0x{register:02X})"
+    :mod:`daq.runtime.runner`); ``drive`` or its name (``"node 1"``)."""
+    name = drive if isinstance(drive, str) else drive.name
+    return f"{name}: EMCY 0x{code:04X} (error register 0x{register:02X})"
 
 
 class Engine(Supervisor):

@@ -92,7 +92,9 @@ class Heartbeat:
     when nothing was written for ``interval_s`` [s], a background thread writes the current
     :meth:`status` text with the time spent in it, so that a step that prints nothing for a
     long time (a fit, a refinement step, a joint of the robot refinement) still shows it is
-    alive. No line is written while the status is ``None``.
+    alive. No line is written while the status is ``None``. A heartbeat writing to another
+    one's :attr:`stream` (a step that runs its own, inside a command that runs one) counts the
+    silence from the last line written to that stream, not from its own start.
 
     Parameters
     ----------
@@ -125,13 +127,19 @@ class Heartbeat:
         #: the stream to write to (a proxy that resets the clock)
         self.stream: TextIO = _Tracked(self._raw, self)  # type: ignore[assignment]
 
-    def status(self, text: str | None, restart: bool = True) -> None:
+    def status(self, text: str | None, restart: bool = True, say: bool = False) -> None:
         """What is running now (None: say nothing, e.g. while a progress bar runs); the time
-        shown counts from the last call with ``restart`` (a new step, not a new detail)."""
+        shown counts from the last call with ``restart`` (a new step, not a new detail).
+        ``say``: write its line at once, without the time (``"      ... loading the
+        pipeline's modules"``: a command's first line, before a step that may be silent for
+        seconds)."""
         with self._lock:
             if restart:
                 self._since = time.monotonic()
             self._text = text
+        if say and text is not None:
+            self.stream.write(f"{self.indent}... {text}\n")
+            self.stream.flush()
 
     def _beat(self) -> None:
         while not self._stop.wait(min(1.0, self.interval / 4)):
@@ -147,6 +155,8 @@ class Heartbeat:
     def __enter__(self) -> Heartbeat:
         self._stop.clear()
         self._last = time.monotonic()
+        if isinstance(self._raw, _Tracked):  # on another heartbeat's stream: the silence
+            self._last = self._raw._beat._last  # counts from the last line written to it
         self._thread = threading.Thread(target=self._beat, name="heartbeat", daemon=True)
         self._thread.start()
         return self

@@ -16,7 +16,11 @@
   starts from what it lists (with or without ``--resume``) and adds to it, written
   atomically (temporary file + ``os.replace``). The one exception: ``--overwrite`` removes
   a payload from it when that payload's log is replaced (its completed log is gone). An
-  unreadable state file is refused, not taken as empty.
+  unreadable state file is refused, not taken as empty. It records its campaign as the
+  logs do (``campaign``, ``definition``, ``plant``: :class:`RunState`), so that a state of
+  another campaign is refused like its logs (:func:`daq.runtime.campaign_id.check_state`),
+  and the EMCYs received while no log was open after the last payload's
+  (``emcy_outside_logs``, kept from run to run).
 - **Room for the log.** :func:`check_free_space` refuses a payload when the file system
   has less free space than the log's expected size: :func:`expected_log_bytes`, the
   uncompressed size of its records (an upper bound: the chunks are zstd-compressed).
@@ -25,12 +29,15 @@
 from __future__ import annotations
 
 import contextlib
+import datetime
 import errno
 import fcntl
 import json
 import os
 import shutil
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from daq import ConfigError
 
@@ -93,8 +100,40 @@ class FolderLock:
 
 
 # ------------------------------------------------------------------------------ state file
-def read_state(path: Path) -> set[int]:
-    """The completed payload indices of ``<stem>.state.json`` (empty when there is none).
+@dataclass
+class RunState:
+    """The resume state ``<stem>.state.json`` of a run folder.
+
+    Attributes
+    ----------
+    completed : set of int
+        Indices of the payloads whose run completed.
+    campaign : str or None
+        The campaign's name (None: a state file that records none, the first format).
+    definition : object or None
+        The campaign as loaded, parsed
+        (:func:`daq.runtime.campaign_id.campaign_definition`; None: a state file written
+        before it was recorded).
+    plant : dict or None
+        :func:`daq.runtime.campaign_id.plant_record` of the run that wrote it (``{}``:
+        hardware; None: not recorded).
+    emcy_outside_logs : list of dict
+        The EMCYs received while no payload's log was open and none was opened after them
+        (after the last payload's run, or before any payload ran): ``text`` (the ``emcy``
+        event's words and when), ``node_id``, ``code``, ``error_register`` (hex text),
+        ``after_payload`` (index, or None) and ``utc`` (when the run that received it
+        recorded it, at its end, ISO 8601). Kept from run to run.
+    """
+
+    completed: set[int] = field(default_factory=set)
+    campaign: str | None = None
+    definition: Any = None
+    plant: dict[str, str] | None = None
+    emcy_outside_logs: list[dict[str, Any]] = field(default_factory=list)
+
+
+def read_state(path: Path) -> RunState:
+    """``<stem>.state.json`` as a :class:`RunState` (empty when there is none).
 
     Raises
     ------
@@ -105,22 +144,79 @@ def read_state(path: Path) -> set[int]:
     try:
         text = path.read_text()
     except FileNotFoundError:
-        return set()
+        return RunState()
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read the resume state: {exc.strerror}") from None
     try:
         raw = json.loads(text)
-        return {int(i) for i in raw["completed"]}
-    except (ValueError, TypeError, KeyError):
+        completed = {int(i) for i in raw["completed"]}
+        name = raw.get("campaign")
+        plant = raw.get("plant")
+        emcy = list(raw.get("emcy_outside_logs", []))
+        if not ((name is None or isinstance(name, str))
+                and (plant is None or isinstance(plant, dict))
+                and all(isinstance(e, dict) for e in emcy)):
+            raise TypeError
+    except (ValueError, TypeError, KeyError, AttributeError):
         raise ConfigError(f"{path}: expected a resume state ({{\"completed\": [0, 1]}}), "
                           f"the file is damaged; fix or remove it") from None
+    return RunState(completed, name, raw.get("definition"), plant, emcy)
 
 
-def write_state(path: Path, name: str, completed: set[int]) -> None:
-    """Write the completed payload indices atomically (temporary file + ``os.replace``)."""
+def write_state(path: Path, state: RunState) -> None:
+    """Write ``state`` atomically (temporary file + ``os.replace``)."""
     tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps({"campaign": name, "completed": sorted(completed)}))
+    rec: dict[str, Any] = {"campaign": state.campaign, "completed": sorted(state.completed)}
+    if state.emcy_outside_logs:
+        rec["emcy_outside_logs"] = state.emcy_outside_logs
+    if state.plant is not None:
+        rec["plant"] = state.plant
+    if state.definition is not None:
+        rec["definition"] = state.definition
+    # one line per key: the completed payloads and the EMCYs first, the definition last
+    tmp.write_text("{\n" + ",\n".join(f" {json.dumps(k)}: {json.dumps(v)}"
+                                        for k, v in rec.items()) + "\n}\n")
     os.replace(tmp, path)
+
+
+def keep_emcy_outside_logs(path: Path, state: RunState, after: int | None,
+                           emcy: list[tuple[str, int, int, int]]) -> list[str]:
+    """Record the EMCYs received after the last payload's log closed (or before any payload
+    ran) in the state file's ``emcy_outside_logs``: no log is left to hold them as ``emcy``
+    events, as the next payload's log holds those between payloads.
+
+    Parameters
+    ----------
+    path : Path
+        The state file, written with ``state`` (atomically; an OSError is reported, not
+        raised: this runs as the run ends).
+    state : RunState
+        The run's state; the entries are appended to ``state.emcy_outside_logs``.
+    after : int or None
+        The payload whose run came last (None: none ran).
+    emcy : list of (text, node_id, code, error register)
+        ``text``: :func:`daq.runtime.engine.emcy_text`.
+
+    Returns
+    -------
+    list of str
+        One warning per EMCY for the run's summary, e.g. ``"node 1: EMCY 0x3210 (error
+        register 0x05) after the run of payload 0 (its log closed) (in no log: recorded in
+        x.state.json)"``.
+    """
+    where = (f"after the run of payload {after} (its log closed)" if after is not None
+             else "before any payload ran")
+    utc = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+    for text, node_id, code, reg in emcy:
+        state.emcy_outside_logs.append({
+            "text": f"{text} {where}", "node_id": node_id, "code": f"0x{code:04X}",
+            "error_register": f"0x{reg:02X}", "after_payload": after, "utc": utc})
+    try:
+        write_state(path, state)
+        kept = f"in no log: recorded in {path.name}"
+    except OSError as exc:
+        kept = f"in no log, and not recorded: {path}: {exc.strerror or exc}"
+    return [f"{text} {where} ({kept})" for text, *_ in emcy]
 
 
 # ------------------------------------------------------------------------------ logs

@@ -26,7 +26,7 @@ from trajectories.robot_model import prepare_robot_campaign, robot_file_path
 
 from .buses import open_buses, sync_clocked
 from .busload import bus_loads, check_loads
-from .campaign_id import campaign_definition, check_folder, plant_record
+from .campaign_id import campaign_definition, check_folder, check_state, plant_record
 from .config import DaqConfig, Scaling, with_scalings
 from .cycle_io import BUS_ERRORS, CycleIO
 from .engine import ENABLE_MAX_CYCLES, SETTLE_CYCLES, Engine, drive_joints, emcy_text
@@ -42,10 +42,12 @@ from .robot_rig import (
 )
 from .runfolder import (
     FolderLock,
+    RunState,
     check_free_space,
     check_logs,
     create_log_file,
     expected_log_bytes,
+    keep_emcy_outside_logs,
     keep_partial,
     log_path,
     read_state,
@@ -250,7 +252,10 @@ def run_campaign(
         Either file format (:func:`trajectories.campaign_file.load_campaign`); a ``[joint]``
         file is a robot with one moving joint whose drives are those of ``[daq]``.
     out_dir : path-like
-        Created if needed; receives ``<name>_payload<k>.mcap`` and ``<name>.state.json``.
+        Created if needed; receives ``<name>_payload<k>.mcap`` and ``<name>.state.json``
+        (:class:`~daq.runtime.runfolder.RunState`: the completed payloads, the campaign's
+        identity, the EMCYs received after the last payload's log closed, which no log
+        holds: each also a warning of the result's ``notes``).
         Locked for the whole run (one run per folder); an existing log is never replaced
         without ``overwrite`` (:mod:`daq.runtime.runfolder`).
     simulate : sim_drivers.plant_config.PlantParams, sim_drivers.arm.ArmParams, True or None
@@ -294,7 +299,9 @@ def run_campaign(
     daq.ConfigError
         Refusals before any motion: invalid ``[daq]``, bus load over the limit, unknown node,
         EDS or drive without the requested mode, PDO read-back mismatch, the folder locked
-        by another run, a log that exists, an unreadable state file, too little free space.
+        by another run, a log that exists, an unreadable state file or one of another
+        campaign (:func:`~daq.runtime.campaign_id.check_state`; ``overwrite`` replaces it),
+        too little free space.
     daq.runtime.safety.RunInterrupted
         A stop signal before the first payload started (no drive enabled).
     trajectories.TrajectoryError
@@ -390,11 +397,24 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
     ``definition``: :func:`~daq.runtime.campaign_id.campaign_definition` of the campaign as
     loaded."""
     n_pay = len(campaign.payloads)
+    plant = plant_record(simulate)
+    source = str(campaign.source) or "this campaign"
     if not overwrite:  # a folder holds the logs of one campaign (never two mixed)
-        check_folder(out, stem, campaign.name, definition, plant_record(simulate),
-                     str(campaign.source) or "this campaign")
+        check_folder(out, stem, campaign.name, definition, plant, source)
     state_file = _state_path(out, campaign.name)
-    completed = read_state(state_file)  # merged into, never shrunk (runfolder)
+    state = read_state(state_file)  # merged into, never shrunk (runfolder)
+    notes: list[str] = list(sim_notes or ())
+    # the state file's name is the campaign's stem: another campaign's may share it
+    if why := check_state(state.campaign, state.definition, state.plant, campaign.name,
+                          definition, plant, source):
+        if not overwrite:
+            raise ConfigError(f"{state_file}: {why}; a folder holds the logs of one "
+                              f"campaign: give another --out")
+        notes.append(f"{state_file}: {why}: replaced (--overwrite)")
+        state = RunState()
+    state.campaign, state.plant = campaign.name, plant
+    state.definition = json.loads(definition) if definition else None
+    completed = state.completed
     done_before = completed if resume else set()
     skipped = tuple(i for i in todo if i in done_before)
     todo = [i for i in todo if i not in done_before]
@@ -417,7 +437,7 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
     sim_records: tuple[dict[str, np.ndarray], ...] = ()
     heartbeat: MasterHeartbeat | None = None
     drives: list[MasterDrive] = []
-    notes: list[str] = list(sim_notes or ())
+    io: CycleIO | None = None
     clean = False
     status, reason = "done", ""
     try:
@@ -486,7 +506,7 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
             create_log_file(path, overwrite)
             if overwrite and i in completed:  # its completed log is replaced: not done now
                 completed.discard(i)
-                write_state(state_file, campaign.name, completed)
+                write_state(state_file, state)
             # EMCYs since the start-up or the last payload's end (the drive's own report of a
             # fault while no run watched it): logged in this payload's log and reported
             early, io.emcy = io.emcy, []  # (a swap: the listener appends to io.emcy)
@@ -526,7 +546,7 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
                 status, reason = r.status, r.reason
                 break
             completed.add(i)
-            write_state(state_file, campaign.name, completed)
+            write_state(state_file, state)
             if engine.interrupted:  # a signal as the run ended: it completed, stop here
                 status, reason = "interrupted", interrupt_reason(engine.interrupted)
                 break
@@ -557,6 +577,13 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
                     can.BusABC.shutdown(network.bus)
         if sim is not None:
             sim.close()
+        if io is not None and io.emcy:  # in no log: none is open now, and none will be
+            for text in keep_emcy_outside_logs(
+                    state_file, state, runs[-1].index if runs else None,
+                    [(emcy_text(f"node {cfg.drives[dd].node_id}", code, reg),
+                      cfg.drives[dd].node_id, code, reg) for dd, code, reg in io.emcy]):
+                notes.append(text)
+                logger.warning("%s", text)
         if old_affinity is not None:
             with contextlib.suppress(OSError):
                 os.sched_setaffinity(0, old_affinity)
