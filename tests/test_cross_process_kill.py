@@ -281,8 +281,15 @@ def test_killed_drive_the_master_stops_and_names_the_cause(bus3, tmp_path):
     assert not a.truncated and len(a) == run.cycles
     missing = (a.flags & 1) > 0
     assert missing[-10:].all()  # the end of the run: no TPDO any more
-    # the drive answered until it was killed: most of the run has its TPDOs
-    assert (~missing).sum() > 200  # (0.5 s after enabling, minus host stalls)
+    # the drive answered until it was killed: its TPDOs came (0.5 s after enabling; how many
+    # cycles that is depends on the host's load: 113 to over 200 seen), and the only stretch
+    # of missing ones the master's watchdog (50 cycles) acted on is the end of the run
+    answered = np.flatnonzero(~missing)
+    assert answered.size > 50
+    edges = np.diff(np.r_[0, missing[: answered[-1] + 1].astype(int), 0])
+    gaps = np.flatnonzero(edges == -1) - np.flatnonzero(edges == 1)  # missing stretches
+    assert gaps.size == 0 or gaps.max() < 50, gaps.max()
+    assert missing[answered[-1] + 1:].all() and missing.size - answered[-1] - 1 >= 10
 
 
 def test_hung_master_with_periodic_sync_the_rpdo_timer_stops_the_drive(bus3, tmp_path):
