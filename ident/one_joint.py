@@ -33,6 +33,7 @@ the EMPS data and the demo's logs.
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -345,23 +346,47 @@ class OneJointProblem:
                                    tau_min=tau_min, load_model=load_model,
                                    sign_check=sign_check)
 
+    def _load(self, s: RobotSignals) -> np.ndarray:
+        """The load deciding the quadrants: the first fit's tau_out_hat after the sign
+        check (or the load :meth:`requadrant` set), else the measured quadrant sign(tau dq)
+        (eq. 26) -- the filtered torque of the full-rate signals
+        :func:`~ident.robot.design.products_columns` forms."""
+        if (self.sign_checked or self.model_quadrant) and self.first is not None:
+            return self._quadrant_model().load_torque(s)
+        return s.tau
+
+    def _quadrant_model(self) -> RobotModel:
+        """The fit whose load decides the quadrants: the first usual fit, or its copy with
+        the load parameters :meth:`requadrant` set."""
+        theta = getattr(self, "_quadrant_theta", None)
+        if theta is None:
+            return self.first
+        m = copy.copy(self.first)
+        m.coef_ = self.first.coef_.copy()
+        m.coef_[:self.first.n_base_] = theta
+        return m
+
+    def requadrant(self, values: dict[str, float]) -> None:
+        """Decide the quadrants (with the check skipped: ``model_quadrant``) by another load
+        model, e.g. the paper fit's own (J, MX, MY by the single-joint names); the products
+        formed before are dropped."""
+        names = [n for n in self.smap.names if n in values]
+        rows = [self.smap.names.index(n) for n in names]
+        theta = np.linalg.lstsq(self.smap.matrix[rows], np.array([values[n] for n in names]),
+                                rcond=None)[0]
+        self._quadrant_theta = theta
+        self._products = {}
+        self._products_cache = {}
+
     def load_values(self) -> dict[str, float]:
-        """The first usual fit's load parameters by the single-joint names (J, MX, MY,
+        """The load parameters deciding the quadrants by the single-joint names (J, MX, MY,
         Ma_ratio): the ``load_model`` of :func:`ident.preprocess.build_design`."""
         if self.first is None:
             raise DataError("no first usual fit (the sign check was not made)")
-        out = self.smap.values(self.first.coef_[:self.first.n_base_])
+        out = self.smap.values(self._quadrant_model().coef_[:self.first.n_base_])
         if "Ma_ratio" in self.first.params_:
             out["Ma_ratio"] = self.first.params_["Ma_ratio"]
         return out
-
-    def _load(self, s: RobotSignals) -> np.ndarray:
-        """The load deciding the quadrants: the first fit's tau_out_hat after the sign
-        check, else the measured quadrant sign(tau dq) (eq. 26) -- the filtered torque of the
-        full-rate signals :func:`~ident.robot.design.products_columns` forms."""
-        if (self.sign_checked or self.model_quadrant) and self.first is not None:
-            return self.first.load_torque(s)
-        return s.tau
 
     def products(self, q_s: float) -> RobotSignals:
         """The signals with eq. 42's columns formed at full rate for ``q_s`` [rad/s]
