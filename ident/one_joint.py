@@ -65,6 +65,11 @@ __all__ = ["OneJointModel", "OneJointProblem", "SIGN_CHECK_MIN_KEPT", "refit_fou
 #: :data:`ident.fitting.SIGN_CHECK_MIN_KEPT`).
 SIGN_CHECK_MIN_KEPT = 0.7
 
+#: Where the sign check is skipped, the paper model's rows with |tau_out_hat| below this
+#: fraction of the RMS load (and their guard) are left out: the quadrant band
+#: (:meth:`OneJointProblem.band`; the robot path's ``RobotModel.quadrant_band``)
+SKIPPED_CHECK_BAND = 0.1
+
 #: The friction and offset of the usual model: single-joint name -> RobotModel block entry.
 _USUAL_TAIL = {"Ma_ratio": "Ma_ratio", "F_C": "FC", "F_V": "FV", "tau_off": "OFF"}
 #: The products form's tail: single-joint name -> RobotModel block entry.
@@ -249,6 +254,8 @@ class OneJointProblem:
         self.sign_kept = 1.0  # share of the rows the sign check keeps (1: not made)
         self._products: dict[float, RobotSignals] = {}
         self._products_cache: dict = {}  # the products' part without q_s (a scan)
+        self.band_nm = 0.0  # the paper model's quadrant band [N m] (:meth:`band`)
+        self._band_keep: np.ndarray | None = None
         try:
             st = resolve_design(self.runs, instruments=self.iv, **settings)
             sig, dqm = design_runs(self.runs, self.reg, st, instruments=self.iv,
@@ -377,6 +384,7 @@ class OneJointProblem:
         self._quadrant_theta = theta
         self._products = {}
         self._products_cache = {}
+        self._band_keep = None
 
     def load_values(self) -> dict[str, float]:
         """The load parameters deciding the quadrants by the single-joint names (J, MX, MY,
@@ -393,10 +401,42 @@ class OneJointProblem:
         (the last one kept)."""
         q_s = float(q_s)
         if q_s not in self._products:
-            self._products = {q_s: products_columns(
+            sig = products_columns(
                 self.signals, self.runs, self.reg, self.settings, self._load, q_s,
-                base=self.base, instruments=self.iv, cache=self._products_cache)}
+                base=self.base, instruments=self.iv, cache=self._products_cache)
+            if self.band() > 0:  # the quadrant band's rows left out (the check skipped)
+                sig = replace(sig, columns=replace(sig.columns, keep=self._band_keep))
+            self._products = {q_s: sig}
         return self._products[q_s]
+
+    def band(self) -> float:
+        """The quadrant band [N m] of the paper model where the sign check was skipped
+        (``model_quadrant``): :data:`SKIPPED_CHECK_BAND` x the RMS of the load deciding the
+        quadrants over every run's full-rate samples; 0 otherwise. The paper model's rows
+        within the guard of a full-rate sample with |tau_out_hat| below it are left out
+        (``_band_keep``): there the quadrant is uncertain, and the joint can slide at zero
+        load with its dry friction anywhere between the two quadrants' values (eq. 30 does
+        not hold; the paper's stiction-area rectangle, Fig. 2.b, around P_out = 0), the rows
+        the sign check would have left out."""
+        if not (self.model_quadrant and SKIPPED_CHECK_BAND > 0 and self.first is not None):
+            return 0.0
+        if self._band_keep is None:
+            st, sig = self.settings, self.signals
+            loads = []
+            for run, f in zip(self.runs, self.full_rate(sig), strict=True):
+                full = RobotSignals(t=run.t[f.keep], q=f.q, dq=f.dq, ddq=f.ddq, tau=f.tau_f,
+                                    joints=sig.joints, payloads=(run.payload,),
+                                    source=str(run.source))
+                loads.append(np.asarray(self._load(full), dtype=float)[:, :1])
+            self.band_nm = SKIPPED_CHECK_BAND * float(np.sqrt(np.mean(np.concatenate(loads) ** 2)))
+            keep = sig.columns.keep.copy()
+            for i, (f, x) in enumerate(zip(self.full_rate(sig), loads, strict=True)):
+                rows = np.flatnonzero(sig.experiment == i)
+                keep[rows] &= selection(f.dq, st.dq_min, st.guard,
+                                        decimation_index(f.n, st.decimation),
+                                        np.abs(x) < self.band_nm)
+            self._band_keep = keep
+        return self.band_nm
 
     def fit(self, name: str, q_s: float = DEFAULT_Q_S, *, eliminate: bool = True,
             threshold_pct: float | None = None) -> OneJointModel:
