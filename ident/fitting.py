@@ -50,7 +50,13 @@ from .models import (
     new_model,
     usual_model,
 )
-from .one_joint import SIGN_CHECK_MIN_KEPT, OneJointModel, OneJointProblem, refit_found_terms
+from .one_joint import (
+    SIGN_CHECK_MIN_KEPT,
+    SKIPPED_CHECK_BAND,
+    OneJointModel,
+    OneJointProblem,
+    refit_found_terms,
+)
 from .preprocess import Design, build_design, check_reference
 from .qs_scan import (
     QS_SEARCH_EVALS,
@@ -756,11 +762,14 @@ def fit_models(
         # tests/test_friction_dominated.py's joint); decide them again, and the band, by the
         # paper fit's own load until they settle (the robot path's model-quadrant passes)
         plib = _combined_library(["paper"], qs0, s.revolute, has_payload)
+        passes, moved = 0, 0.0
         for _ in range(REQUADRANT_PASSES):
             d, m = designs["paper"], fitted["paper"]
             own = paper_load_values(d.library, m.coef_)
-            if own is None or quadrant_share(d, m.coef_) <= QUADRANT_TOL:
+            share = quadrant_share(d, m.coef_) if own is not None else 0.0
+            if own is None or share <= QUADRANT_TOL:
                 break
+            moved = share if not passes else moved
             problem.requadrant(own)
             quadrant_load = own
             inner = pre["load_model"][0]
@@ -776,6 +785,21 @@ def fit_models(
                                 f"design {len(d)}: not the same samples")
             fitted["paper"], designs["paper"] = m, d
             robot_signals["paper"] = problem.products(qs_val)
+            passes += 1
+        if passes:
+            notes.append(f"paper model: the quadrants decided again by its own fitted load "
+                         f"({passes} time(s); the first usual fit's put {100 * moved:.1f} % of "
+                         "the rows in another quadrant)")
+        if problem.band_nm > 0:
+            notes.append(f"paper model: rows near zero load left out (the quadrant band, "
+                         f"|tau_out_hat| < {problem.band_nm:.3g} {'N m' if s.revolute else 'N'}, "
+                         f"{100 * SKIPPED_CHECK_BAND:g} % of the RMS load: "
+                         f"{100 * (1 - problem.band_kept):.1f} % of the rows), where the "
+                         "quadrant is uncertain and the joint can slide at zero load")
+        elif problem.band_kept < 1.0:
+            notes.append(f"paper model: no quadrant band (it would keep only "
+                         f"{100 * problem.band_kept:.0f} % of the rows: the load near zero "
+                         "over much of the data)")
         if quadrant_load is not None and vfull is not None:
             vd = _combined(["paper"], qs0, sv, has_payload, pre)
             vdesigns["paper"] = banded(part(vd, "paper", has_payload, qs_val)[1])

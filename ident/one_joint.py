@@ -255,6 +255,7 @@ class OneJointProblem:
         self._products: dict[float, RobotSignals] = {}
         self._products_cache: dict = {}  # the products' part without q_s (a scan)
         self.band_nm = 0.0  # the paper model's quadrant band [N m] (:meth:`band`)
+        self.band_kept = 1.0  # share of the rows the band keeps (1: not decided yet)
         self._band_keep: np.ndarray | None = None
         try:
             st = resolve_design(self.runs, instruments=self.iv, **settings)
@@ -384,7 +385,7 @@ class OneJointProblem:
         self._quadrant_theta = theta
         self._products = {}
         self._products_cache = {}
-        self._band_keep = None
+        self._band_keep, self.band_kept, self.band_nm = None, 1.0, 0.0
 
     def load_values(self) -> dict[str, float]:
         """The load parameters deciding the quadrants by the single-joint names (J, MX, MY,
@@ -417,10 +418,13 @@ class OneJointProblem:
         (``_band_keep``): there the quadrant is uncertain, and the joint can slide at zero
         load with its dry friction anywhere between the two quadrants' values (eq. 30 does
         not hold; the paper's stiction-area rectangle, Fig. 2.b, around P_out = 0), the rows
-        the sign check would have left out."""
+        the sign check would have left out. Not applied (0, ``band_kept`` < 1 says what it
+        would keep) where it would keep fewer than :data:`SIGN_CHECK_MIN_KEPT` of the rows,
+        as the sign check: a load near zero over much of the data (a horizontal axis
+        cruising) leaves the dry friction's quadrant terms too few rows."""
         if not (self.model_quadrant and SKIPPED_CHECK_BAND > 0 and self.first is not None):
             return 0.0
-        if self._band_keep is None:
+        if self._band_keep is None and self.band_kept == 1.0:
             st, sig = self.settings, self.signals
             loads = []
             for run, f in zip(self.runs, self.full_rate(sig), strict=True):
@@ -435,7 +439,11 @@ class OneJointProblem:
                 keep[rows] &= selection(f.dq, st.dq_min, st.guard,
                                         decimation_index(f.n, st.decimation),
                                         np.abs(x) < self.band_nm)
-            self._band_keep = keep
+            self.band_kept = float(keep.sum() / max(int(sig.columns.keep.sum()), 1))
+            if self.band_kept >= SIGN_CHECK_MIN_KEPT:
+                self._band_keep = keep
+            else:
+                self.band_nm = 0.0
         return self.band_nm
 
     def fit(self, name: str, q_s: float = DEFAULT_Q_S, *, eliminate: bool = True,
