@@ -33,6 +33,7 @@ the EMPS data and the demo's logs.
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -63,6 +64,11 @@ __all__ = ["OneJointModel", "OneJointProblem", "SIGN_CHECK_MIN_KEPT", "refit_fou
 #: The sign check is skipped when it would keep fewer samples than this fraction (as
 #: :data:`ident.fitting.SIGN_CHECK_MIN_KEPT`).
 SIGN_CHECK_MIN_KEPT = 0.7
+
+#: Where the sign check is skipped, the paper model's rows with |tau_out_hat| below this
+#: fraction of the RMS load (and their guard) are left out: the quadrant band
+#: (:meth:`OneJointProblem.band`; the robot path's ``RobotModel.quadrant_band``)
+SKIPPED_CHECK_BAND = 0.1
 
 #: The friction and offset of the usual model: single-joint name -> RobotModel block entry.
 _USUAL_TAIL = {"Ma_ratio": "Ma_ratio", "F_C": "FC", "F_V": "FV", "tau_off": "OFF"}
@@ -248,6 +254,9 @@ class OneJointProblem:
         self.sign_kept = 1.0  # share of the rows the sign check keeps (1: not made)
         self._products: dict[float, RobotSignals] = {}
         self._products_cache: dict = {}  # the products' part without q_s (a scan)
+        self.band_nm = 0.0  # the paper model's quadrant band [N m] (:meth:`band`)
+        self.band_kept = 1.0  # share of the rows the band keeps (1: not decided yet)
+        self._band_keep: np.ndarray | None = None
         try:
             st = resolve_design(self.runs, instruments=self.iv, **settings)
             sig, dqm = design_runs(self.runs, self.reg, st, instruments=self.iv,
@@ -345,33 +354,97 @@ class OneJointProblem:
                                    tau_min=tau_min, load_model=load_model,
                                    sign_check=sign_check)
 
+    def _load(self, s: RobotSignals) -> np.ndarray:
+        """The load deciding the quadrants: the first fit's tau_out_hat after the sign
+        check (or the load :meth:`requadrant` set), else the measured quadrant sign(tau dq)
+        (eq. 26) -- the filtered torque of the full-rate signals
+        :func:`~ident.robot.design.products_columns` forms."""
+        if (self.sign_checked or self.model_quadrant) and self.first is not None:
+            return self._quadrant_model().load_torque(s)
+        return s.tau
+
+    def _quadrant_model(self) -> RobotModel:
+        """The fit whose load decides the quadrants: the first usual fit, or its copy with
+        the load parameters :meth:`requadrant` set."""
+        theta = getattr(self, "_quadrant_theta", None)
+        if theta is None:
+            return self.first
+        m = copy.copy(self.first)
+        m.coef_ = self.first.coef_.copy()
+        m.coef_[:self.first.n_base_] = theta
+        return m
+
+    def requadrant(self, values: dict[str, float]) -> None:
+        """Decide the quadrants (with the check skipped: ``model_quadrant``) by another load
+        model, e.g. the paper fit's own (J, MX, MY by the single-joint names); the products
+        formed before are dropped."""
+        names = [n for n in self.smap.names if n in values]
+        rows = [self.smap.names.index(n) for n in names]
+        theta = np.linalg.lstsq(self.smap.matrix[rows], np.array([values[n] for n in names]),
+                                rcond=None)[0]
+        self._quadrant_theta = theta
+        self._products = {}
+        self._products_cache = {}
+        self._band_keep, self.band_kept, self.band_nm = None, 1.0, 0.0
+
     def load_values(self) -> dict[str, float]:
-        """The first usual fit's load parameters by the single-joint names (J, MX, MY,
+        """The load parameters deciding the quadrants by the single-joint names (J, MX, MY,
         Ma_ratio): the ``load_model`` of :func:`ident.preprocess.build_design`."""
         if self.first is None:
             raise DataError("no first usual fit (the sign check was not made)")
-        out = self.smap.values(self.first.coef_[:self.first.n_base_])
+        out = self.smap.values(self._quadrant_model().coef_[:self.first.n_base_])
         if "Ma_ratio" in self.first.params_:
             out["Ma_ratio"] = self.first.params_["Ma_ratio"]
         return out
-
-    def _load(self, s: RobotSignals) -> np.ndarray:
-        """The load deciding the quadrants: the first fit's tau_out_hat after the sign
-        check, else the measured quadrant sign(tau dq) (eq. 26) -- the filtered torque of the
-        full-rate signals :func:`~ident.robot.design.products_columns` forms."""
-        if (self.sign_checked or self.model_quadrant) and self.first is not None:
-            return self.first.load_torque(s)
-        return s.tau
 
     def products(self, q_s: float) -> RobotSignals:
         """The signals with eq. 42's columns formed at full rate for ``q_s`` [rad/s]
         (the last one kept)."""
         q_s = float(q_s)
         if q_s not in self._products:
-            self._products = {q_s: products_columns(
+            sig = products_columns(
                 self.signals, self.runs, self.reg, self.settings, self._load, q_s,
-                base=self.base, instruments=self.iv, cache=self._products_cache)}
+                base=self.base, instruments=self.iv, cache=self._products_cache)
+            if self.band() > 0:  # the quadrant band's rows left out (the check skipped)
+                sig = replace(sig, columns=replace(sig.columns, keep=self._band_keep))
+            self._products = {q_s: sig}
         return self._products[q_s]
+
+    def band(self) -> float:
+        """The quadrant band [N m] of the paper model where the sign check was skipped
+        (``model_quadrant``): :data:`SKIPPED_CHECK_BAND` x the RMS of the load deciding the
+        quadrants over every run's full-rate samples; 0 otherwise. The paper model's rows
+        within the guard of a full-rate sample with |tau_out_hat| below it are left out
+        (``_band_keep``): there the quadrant is uncertain, and the joint can slide at zero
+        load with its dry friction anywhere between the two quadrants' values (eq. 30 does
+        not hold; the paper's stiction-area rectangle, Fig. 2.b, around P_out = 0), the rows
+        the sign check would have left out. Not applied (0, ``band_kept`` < 1 says what it
+        would keep) where it would keep fewer than :data:`SIGN_CHECK_MIN_KEPT` of the rows,
+        as the sign check: a load near zero over much of the data (a horizontal axis
+        cruising) leaves the dry friction's quadrant terms too few rows."""
+        if not (self.model_quadrant and SKIPPED_CHECK_BAND > 0 and self.first is not None):
+            return 0.0
+        if self._band_keep is None and self.band_kept == 1.0:
+            st, sig = self.settings, self.signals
+            loads = []
+            for run, f in zip(self.runs, self.full_rate(sig), strict=True):
+                full = RobotSignals(t=run.t[f.keep], q=f.q, dq=f.dq, ddq=f.ddq, tau=f.tau_f,
+                                    joints=sig.joints, payloads=(run.payload,),
+                                    source=str(run.source))
+                loads.append(np.asarray(self._load(full), dtype=float)[:, :1])
+            self.band_nm = SKIPPED_CHECK_BAND * float(np.sqrt(np.mean(np.concatenate(loads) ** 2)))
+            keep = sig.columns.keep.copy()
+            for i, (f, x) in enumerate(zip(self.full_rate(sig), loads, strict=True)):
+                rows = np.flatnonzero(sig.experiment == i)
+                keep[rows] &= selection(f.dq, st.dq_min, st.guard,
+                                        decimation_index(f.n, st.decimation),
+                                        np.abs(x) < self.band_nm)
+            self.band_kept = float(keep.sum() / max(int(sig.columns.keep.sum()), 1))
+            if self.band_kept >= SIGN_CHECK_MIN_KEPT:
+                self._band_keep = keep
+            else:
+                self.band_nm = 0.0
+        return self.band_nm
 
     def fit(self, name: str, q_s: float = DEFAULT_Q_S, *, eliminate: bool = True,
             threshold_pct: float | None = None) -> OneJointModel:

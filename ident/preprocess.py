@@ -289,11 +289,15 @@ class Design:
         dq_min: float | None = None,
         tau_min: float | None = None,
         load_model: tuple[Term, np.ndarray] | None = None,
+        quadrant_band: tuple[tuple[Term, np.ndarray], float] | None = None,
     ) -> Design:
         """The same design with another sample selection (see :func:`build_design`),
-        without recomputing or re-filtering any column."""
+        without recomputing or re-filtering any column. ``quadrant_band`` = (load model, h
+        [N m]): also leave out the rows within the guard of a full-rate sample whose
+        |tau_out_hat| < h (:meth:`ident.one_joint.OneJointProblem.band`)."""
         blocks = [
-            replace(b, mask=_selection(b.full, b.index, dq_min, tau_min, self.guard, load_model))
+            replace(b, mask=_selection(b.full, b.index, dq_min, tau_min, self.guard, load_model,
+                                       quadrant_band))
             for b in self._blocks
         ]
         Y, W, dsig, Z = _assemble(blocks, len(self.names), self.signals.revolute)
@@ -313,16 +317,20 @@ def _instrument_rows(zcols: np.ndarray, wcols: np.ndarray, offset: int) -> list:
 
 
 def _rejected(full: Signals, tau_min: float | None,
-              load_model: tuple[Term, np.ndarray] | None) -> np.ndarray | None:
+              load_model: tuple[Term, np.ndarray] | None,
+              band: tuple[tuple[Term, np.ndarray], float] | None = None) -> np.ndarray | None:
     """Full-rate samples the single joint rejects besides the stiction area (n,) or None:
-    |tau| < ``tau_min`` and sign(tau) != sign(tau_out_hat) (see build_design)."""
-    if tau_min is None and load_model is None:
+    |tau| < ``tau_min``, sign(tau) != sign(tau_out_hat) (see build_design) and, with
+    ``band`` = (load model, h [N m]), |tau_out_hat| < h (:meth:`Design.select`)."""
+    if tau_min is None and load_model is None and band is None:
         return None
     bad = np.zeros(len(full), dtype=bool)
     if tau_min is not None:
         bad |= np.abs(full.tau) < tau_min
     if load_model is not None:
         bad |= np.sign(full.tau) != np.sign(_load_torque(full, load_model))
+    if band is not None:
+        bad |= np.abs(_load_torque(full, band[0])) < band[1]
     return bad
 
 
@@ -333,10 +341,11 @@ def _selection(
     tau_min: float | None,
     guard: int,
     load_model: tuple[Term, np.ndarray] | None,
+    band: tuple[tuple[Term, np.ndarray], float] | None = None,
 ) -> np.ndarray:
     """Mask over the decimated samples ``index`` of one experiment (see build_design), the
     chain's selection (:func:`ident.chain.selection`) on one axis."""
-    bad = _rejected(full, tau_min, load_model)
+    bad = _rejected(full, tau_min, load_model, band)
     return selection(full.dq[:, None], dq_min, guard, index,
                      None if bad is None else bad[:, None])[:, 0]
 

@@ -3,13 +3,16 @@ is three times the gravity load (MX g = 20 N m), so sign(tau) follows the veloci
 differs from sign(tau_out) on 39 % of the samples. The sign check would keep too few rows and
 is skipped; eq. 26's proxy sign(tau dq) then put nearly every row in the motor quadrant
 (c_m 52.8 against 60, -168 sigma; b_m 0.04 against 0.24; the refinement then added a spring
-that does not exist). Now the quadrant is the first usual fit's load's, sign(tau_out_hat dq),
-every row kept (the note says so), as the robot path decides it.
-
-What remains (stated in the note of the change, docs/identification.md): the Coulomb and
-Stribeck terms keep a bias of a few percent (c_m 59.0, c_g 46.1, d_m 22, d_g 24 against 60, 45,
-25, 20; 13 to 24 sigma), where the estimated load is near zero and its sign is uncertain; the
-load-dependent terms a, b and F_V are within their sigma.
+that does not exist). Then the quadrant became the first usual fit's load's,
+sign(tau_out_hat dq), every row kept: that fit's MX is far off here (3.35 for 2.0), 2.4 % of
+the rows were in another quadrant than the paper fit's own load puts them (error 2.09 %, c_m
+-21 sigma, c_g +24, d_g +18; the refinement added a position basis). Now the paper model's rows
+near zero load are left out (the quadrant band, ``SKIPPED_CHECK_BAND`` of the RMS load: 12 %
+of the rows here), where the quadrant is uncertain and the joint slides at zero load with its
+dry friction anywhere between the two quadrants' values (11 % of the unloaded run's samples;
+eq. 30 does not hold there); on the rows kept the paper fit's own load decides the same
+quadrants (else ``fit_models`` decides them again). Seeds 1 and 21: 0.82 %, a, b, F_V within
+2 sigma, c_m 59.86 / 59.90 (0.2 % low, 4-6 sigma), d_g 20.64 / 20.71 (3 % high, 5-6 sigma).
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ import pytest
 from example_campaign import ROOT
 
 from daq.protocol.control import ControllerGains
-from ident.fitting import fit_models
+from ident.fitting import QUADRANT_TOL, fit_models, quadrant_share
 from ident.loaders import make_experiment
 from sim_drivers.offline import simulate
 from sim_drivers.plant_config import load_plant
@@ -64,12 +67,44 @@ def test_quadrant_from_the_model_where_the_sign_check_is_skipped(setup, seed):
     rep = fit_models(exps, ("paper",), table_iv=False)
     note = [n for n in rep.notes if n.startswith("sign check skipped")]
     assert note and "sign(tau_out_hat dq)" in note[0], rep.notes
-    m = rep.models["paper"]
+    m, d = rep.models["paper"], rep.designs["paper"]
+    # the rows near zero load left out (the quadrant band, with its note), and the quadrants
+    # of those kept are the paper fit's own (else they are decided again)
+    band = [n for n in rep.notes if n.startswith("paper model: rows near zero load left out")]
+    assert band, rep.notes
+    assert quadrant_share(d, m.coef_) <= QUADRANT_TOL
     # the load-dependent terms and the viscous friction within 3 sigma of the truth
     for n in ("a_m", "a_g", "b_m", "b_g", "F_V"):
         assert abs(m.coef_[n] - TRUTH[n]) < 3 * m.std_[n], (n, m.coef_[n], m.std_[n])
-    # the dry friction within 3 % (eq. 26's proxy: c_m 12 % low)
+    # the dry friction within 1 % (eq. 26's proxy: c_m 12 % low), its Stribeck part 5 %
     for n in ("c_m", "c_g"):
-        assert abs(m.coef_[n] / TRUTH[n] - 1) < 0.03, (n, m.coef_[n])
-    # eq. 26's proxy gave 3.9 % (the quadrants of the motor and generator rows mixed up)
-    assert m.rel_error_ < 0.03
+        assert abs(m.coef_[n] / TRUTH[n] - 1) < 0.01, (n, m.coef_[n])
+    for n in ("d_m", "d_g"):
+        assert abs(m.coef_[n] / TRUTH[n] - 1) < 0.05, (n, m.coef_[n])
+    # eq. 26's proxy gave 3.9 %, the first fit's quadrants 2.09 % (rows in the wrong one)
+    assert m.rel_error_ < 0.015
+
+
+@pytest.mark.slow
+def test_quadrants_decided_again_by_the_paper_fit_without_the_band(setup, monkeypatch):
+    """Without the quadrant band the first usual fit's quadrants leave 2.4 % of the rows in
+    another quadrant than the paper fit's own load puts them: ``fit_models`` decides them
+    again by that load until they settle (error 2.09 % -> 1.02 % on seed 1)."""
+    import ident.one_joint as one_joint
+
+    monkeypatch.setattr(one_joint, "SKIPPED_CHECK_BAND", 0.0)
+    plant, plan, gains = setup
+    runs = [simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
+                     payload_arm=p.arm_m, seed=1 + i) for i, p in enumerate(plan.payloads)]
+    exps = [make_experiment(f"p{i}.csv", r.t, r.q, r.tau_ref, payload_mass=p.mass_kg,
+                            payload_arm=p.arm_m)
+            for i, (p, r) in enumerate(zip(plan.payloads, runs, strict=True))]
+    rep = fit_models(exps, ("paper",), table_iv=False)
+    m, d = rep.models["paper"], rep.designs["paper"]
+    again = [n for n in rep.notes if n.startswith("paper model: the quadrants decided again")]
+    assert again and "quadrant_load" in rep.settings, rep.notes
+    assert not any("rows near zero load left out" in n for n in rep.notes)
+    assert quadrant_share(d, m.coef_) <= QUADRANT_TOL
+    for n in ("c_m", "c_g"):  # the first fit's quadrants: c_m -21 sigma, c_g +24 sigma
+        assert abs(m.coef_[n] / TRUTH[n] - 1) < 0.01, (n, m.coef_[n])
+    assert m.rel_error_ < 0.015  # 2.09 % with the first fit's quadrants
