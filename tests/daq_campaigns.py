@@ -35,6 +35,16 @@ def joint_campaign(name: str, *, cycle_s: float, sine: dict[str, float],
     return RobotCampaign.from_dict(raw, source or f"{name}.toml")
 
 
+def joint_toml(name: str, *, cycle_s: float) -> str:
+    """The head of ``joint_campaign``'s file as TOML (name, the joint and its limits, the PD
+    gains, no feed-forward), for tests of the CLI; the payloads, segments and ``[daq]``
+    tables follow it."""
+    return (f'name = "{name}"\n[joint]\nkind = "revolute"\n[joint.limits]\n'
+            'position = [-1.0, 1.0]\nmax_velocity = 1.0\nmax_acceleration = 4.0\n'
+            'max_jerk = 40.0\nmax_torque = 700.0\n'
+            f'[control]\ncycle_s = {cycle_s}\nkp = 6000.0\nkd = 200.0\n')
+
+
 def sine_campaign(name: str, **daq: Any) -> RobotCampaign:
     """The campaign ``name`` (its file name ``<name>.toml`` in messages); ``daq`` keys are
     added to (or replace) the defaults: a channel ``test_<name>_<n>``, a 50-cycle TPDO

@@ -15,7 +15,7 @@ import textwrap
 from dataclasses import replace
 
 import pytest
-from daq_campaigns import sine_campaign
+from daq_campaigns import joint_toml, sine_campaign
 
 from daq import ConfigError
 from daq.app.cli import main
@@ -117,20 +117,7 @@ def test_cli_resume_with_a_state_of_another_campaign(tmp_path, capsys):
     """``jointid run --resume`` into a folder holding only the state file of campaign
     "rig a" (its logs moved away): exit 2, one line, nothing written, nothing moved."""
     src = tmp_path / "rig_a.toml"
-    src.write_text(textwrap.dedent("""
-        name = "rig_a"
-        [joint]
-        kind = "revolute"
-        [joint.limits]
-        position = [-1.0, 1.0]
-        max_velocity = 1.0
-        max_acceleration = 4.0
-        max_jerk = 40.0
-        max_torque = 700.0
-        [control]
-        cycle_s = 0.002
-        kp = 6000.0
-        kd = 200.0
+    src.write_text(joint_toml("rig_a", cycle_s=0.002) + textwrap.dedent("""
         [[payloads]]
         mass_kg = 0.0
         arm_m = 1.0
