@@ -1348,7 +1348,12 @@ def uniform_grid(
                "a uniform grid)")
     for name, a in arrays.items():
         out[name] = None if a is None else at_stamps(a)
-    note = f"{where}irregular sampling ({span}), resampled to {tu.size} samples at {med:.6g} s{why}"
+    # the torque is interpolated with the positions: its noise is averaged between
+    # neighbouring samples (white noise: variance x 2/3 on average), so the fit's error and
+    # noise floor measure that smoothed torque, below what the same samples on their own give
+    note = (f"{where}irregular sampling ({span}), resampled to {tu.size} samples at {med:.6g} s"
+            f"{why}; every signal interpolated, the torque too: its noise averaged between "
+            "neighbouring samples, the fit's error and noise floor measure that smoother torque")
     if warn:
         warnings.warn(note, ResamplingWarning, stacklevel=stacklevel)
     return tu, out, note
