@@ -78,7 +78,8 @@ def test_demo_writes_logs_fit_and_report(demo):
     assert "n-dof refit" in html
     print("\n" + "\n".join(f"{m}: " + (rf.get("skipped") or ", ".join(
         f"{j} {rf['rel_error']['before'][j]:.4%} -> {rf['rel_error']['after'][j]:.4%}"
-        for j in rf["rel_error"]["before"]) + f" ({len(rf['extras'])} terms)")
+        for j in rf["rel_error"]["before"]) + f" ({len(rf['extras'])} terms kept"
+        + "".join(f"; refused {r['joint']} {r['effect']}" for r in rf.get("refused", [])) + ")")
         for m, rf in d["refit"].items()))
     assert len(res.figures["paper"]) == 3 and all(
         (res.out_dir / f).is_file() for f in res.figures["paper"])

@@ -283,15 +283,19 @@ def _run_robot_demo(hb: Heartbeat, out_dir: str | Path, *, robot: str, max_steps
 
 def _refit_line(fit: dict[str, Any]) -> str:
     """One line of the n-dof refit (:func:`ident.robot.refit.refit_robot`): per joint and
-    for the robot, the error of the n-dof fit -> the refit with the found terms."""
+    for the robot, the error of the n-dof fit -> the refit with the found terms kept, and
+    those the held-out check refused (:mod:`ident.robot.refit_accept`)."""
     if "error" in fit:
         return f"n-dof refit not done: {fit['error']}"
     if "skipped" in fit:
         return f"n-dof refit: none ({fit['skipped']})"
     ba = fit["rel_error"]
     n = len(fit.get("extras", []))
+    refused = fit.get("refused") or []
+    tail = ("" if not refused else "; refused (they raised the held-out error): " + ", ".join(
+        f"{r['joint']} {r['effect']}" for r in refused))
     return (f"n-dof refit with {n} found term(s), every parameter together: " + ", ".join(
-        f"{j} {ba['before'][j]:.4f} -> {ba['after'][j]:.4f}" for j in ba["before"]))
+        f"{j} {ba['before'][j]:.4f} -> {ba['after'][j]:.4f}" for j in ba["before"]) + tail)
 
 
 def _summary(campaign: RobotCampaign, t3: dict, refinements: dict, refits: dict, pred: float,
