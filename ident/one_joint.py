@@ -422,7 +422,8 @@ class OneJointProblem:
         would keep) where it would keep fewer than :data:`SIGN_CHECK_MIN_KEPT` of the rows,
         as the sign check: a load near zero over much of the data (a horizontal axis
         cruising) leaves the dry friction's quadrant terms too few rows."""
-        if not (self.model_quadrant and SKIPPED_CHECK_BAND > 0 and self.first is not None):
+        if not (self.model_quadrant and not self.sign_checked and SKIPPED_CHECK_BAND > 0
+                and self.first is not None):
             return 0.0
         if self._band_keep is None and self.band_kept == 1.0:
             st, sig = self.settings, self.signals
