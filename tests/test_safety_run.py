@@ -175,7 +175,10 @@ def test_dead_master_drive_faults_with_8130_within_the_consumer_time(tmp_path, m
 
 
 def test_hung_paced_master_drive_faults_on_sync_loss(tmp_path):
-    c = campaign(clock="paced")
+    # a 250 ms master heartbeat (consumer time 0.85 s): the SYNC loss is this test's subject,
+    # and the default 0.4 s consumer time faulted the drive during start-up once, with two
+    # test suites beside (the producer starved 0.405 s before the run phase)
+    c = campaign({"master_heartbeat_ms": 250}, clock="paced")
     rig = Rig(c)
     t = {}
 
@@ -191,6 +194,7 @@ def test_hung_paced_master_drive_faults_on_sync_loss(tmp_path):
         r = run_campaign(c, out_dir=tmp_path, yes=True, progress=progress)
     finally:
         rig.close()
+    assert "sync" in t, f"stopped before the run phase: {r.reason}"
     assert t["sync"] == pytest.approx(max(3 * 0.001, SYNC_LOSS_FLOOR_S))
     assert r.status == "stopped"
     # the master names its own stall as the cause; the drive's EMCY is an event of the log
