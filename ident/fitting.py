@@ -39,7 +39,7 @@ from trajectories.friction import DEFAULT_Q_S
 
 from . import DataError
 from .chain import default_torque_delay
-from .effects import model_quadrant, rigid_prediction
+from .effects import rigid_prediction
 from .loaders import Experiment, concat
 from .models import (
     IdentModel,
@@ -68,6 +68,7 @@ from .qs_scan import (
     rescan_qs,
     with_qs,
 )
+from .refine import quadrant_drift
 from .results import (
     band_errors,
     format_error_table,
@@ -151,22 +152,12 @@ def paper_load_values(lib: Library, coef: dict[str, float]) -> dict[str, float] 
     return dict(zip(names, (float(c) for c in pred.coef), strict=True))
 
 
-def quadrant_share(design: Design, coef: dict[str, float]) -> float:
-    """Share of the design's rows whose quadrant, fixed in its full-rate signals when it was
-    built, differs from the model's own sign(tau_out_hat dq) with ``coef`` (as
-    :func:`ident.refine.quadrant_drift`); 0 where no quadrant was fixed."""
-    pred = rigid_prediction(design.library, dict(coef))
-    blocks = getattr(design, "_blocks", None) or ()
-    if pred is None or not blocks:
-        return 0.0
-    n = moved = 0
-    for b in blocks:
-        if b.full.quadrant is None:
-            return 0.0
-        full = b.full.take(b.index[b.mask])
-        moved += int(np.count_nonzero(model_quadrant(full.states(), pred) != full.quadrant))
-        n += full.quadrant.size
-    return moved / n if n else 0.0
+def _same_rows(name: str, m: IdentModel, d: Design) -> None:
+    """Refuse a robot fit and a single-joint design of model ``name`` on other samples."""
+    if m.result_.m != len(d):
+        raise DataError(f"{name} model: the robot fit has {m.result_.m} rows, the design "
+                        f"{len(d)}: not the same samples")
+
 
 def _fitted(library: Library, name: str, fit: OneJointModel) -> IdentModel:
     """An :class:`~ident.models.IdentModel` holding the robot model's fit ``fit`` (by the
@@ -737,9 +728,7 @@ def fit_models(
             failed.append(f"{name} model: {why}")
             notes.append(f"{name} model: not fitted: {why}")
             continue
-        if m.result_.m != len(d):
-            raise DataError(f"{name} model: the robot fit has {m.result_.m} rows, the design "
-                            f"{len(d)}: not the same samples")
+        _same_rows(name, m, d)
         fitted[name], designs[name] = m, d
         robot_signals[name] = problem.signals if name == "usual" else problem.products(qs_val)
         if vfull is not None:
@@ -766,7 +755,7 @@ def fit_models(
         for _ in range(REQUADRANT_PASSES):
             d, m = designs["paper"], fitted["paper"]
             own = paper_load_values(d.library, m.coef_)
-            share = quadrant_share(d, m.coef_) if own is not None else 0.0
+            share = quadrant_drift(d, d.library, m.coef_) or 0.0
             if own is None or share <= QUADRANT_TOL:
                 break
             moved = share if not passes else moved
@@ -780,9 +769,7 @@ def fit_models(
             d = banded(d)
             m = _fitted(lib, "paper", problem.fit("paper", qs_val, eliminate=eliminate,
                                                   threshold_pct=threshold_pct))
-            if m.result_.m != len(d):
-                raise DataError(f"paper model: the robot fit has {m.result_.m} rows, the "
-                                f"design {len(d)}: not the same samples")
+            _same_rows("paper", m, d)
             fitted["paper"], designs["paper"] = m, d
             robot_signals["paper"] = problem.products(qs_val)
             passes += 1

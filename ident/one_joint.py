@@ -51,7 +51,13 @@ from .models import new_model, usual_model
 from .preprocess import Design, design_on_full_rate
 from .robot import RobotIdentError
 from .robot.base import single_joint_map
-from .robot.design import design_runs, products_columns, resolve_design, sign_checked
+from .robot.design import (
+    design_runs,
+    full_rate_loads,
+    products_columns,
+    resolve_design,
+    sign_checked,
+)
 from .robot.estimate import ZERO_COLUMN, RobotModel, renamed_reason
 from .robot.loaders import RawRobotRun
 from .robot.refit import refit_robot
@@ -427,19 +433,15 @@ class OneJointProblem:
             return 0.0
         if self._band_keep is None and self.band_kept == 1.0:
             st, sig = self.settings, self.signals
-            loads = []
-            for run, f in zip(self.runs, self.full_rate(sig), strict=True):
-                full = RobotSignals(t=run.t[f.keep], q=f.q, dq=f.dq, ddq=f.ddq, tau=f.tau_f,
-                                    joints=sig.joints, payloads=(run.payload,),
-                                    source=str(run.source))
-                loads.append(np.asarray(self._load(full), dtype=float)[:, :1])
-            self.band_nm = SKIPPED_CHECK_BAND * float(np.sqrt(np.mean(np.concatenate(loads) ** 2)))
+            loads = full_rate_loads(sig, self.runs, st, self._load)
+            rms = np.sqrt(np.mean(np.concatenate([x[:, 0] for _, x in loads]) ** 2))
+            self.band_nm = SKIPPED_CHECK_BAND * float(rms)
             keep = sig.columns.keep.copy()
-            for i, (f, x) in enumerate(zip(self.full_rate(sig), loads, strict=True)):
+            for i, (f, x) in enumerate(loads):
                 rows = np.flatnonzero(sig.experiment == i)
                 keep[rows] &= selection(f.dq, st.dq_min, st.guard,
                                         decimation_index(f.n, st.decimation),
-                                        np.abs(x) < self.band_nm)
+                                        np.abs(x[:, :1]) < self.band_nm)
             self.band_kept = float(keep.sum() / max(int(sig.columns.keep.sum()), 1))
             if self.band_kept >= SIGN_CHECK_MIN_KEPT:
                 self._band_keep = keep

@@ -24,8 +24,9 @@ import pytest
 from example_campaign import ROOT
 
 from daq.protocol.control import ControllerGains
-from ident.fitting import QUADRANT_TOL, fit_models, quadrant_share
+from ident.fitting import QUADRANT_TOL, fit_models
 from ident.loaders import make_experiment
+from ident.refine import quadrant_drift
 from sim_drivers.offline import simulate
 from sim_drivers.plant_config import load_plant
 from trajectories.plan import plan_campaign
@@ -72,7 +73,7 @@ def test_quadrant_from_the_model_where_the_sign_check_is_skipped(setup, seed):
     # of those kept are the paper fit's own (else they are decided again)
     band = [n for n in rep.notes if n.startswith("paper model: rows near zero load left out")]
     assert band, rep.notes
-    assert quadrant_share(d, m.coef_) <= QUADRANT_TOL
+    assert quadrant_drift(d, d.library, m.coef_) <= QUADRANT_TOL
     # the load-dependent terms and the viscous friction within 3 sigma of the truth
     for n in ("a_m", "a_g", "b_m", "b_g", "F_V"):
         assert abs(m.coef_[n] - TRUTH[n]) < 3 * m.std_[n], (n, m.coef_[n], m.std_[n])
@@ -104,7 +105,7 @@ def test_quadrants_decided_again_by_the_paper_fit_without_the_band(setup, monkey
     again = [n for n in rep.notes if n.startswith("paper model: the quadrants decided again")]
     assert again and "quadrant_load" in rep.settings, rep.notes
     assert not any("rows near zero load left out" in n for n in rep.notes)
-    assert quadrant_share(d, m.coef_) <= QUADRANT_TOL
+    assert quadrant_drift(d, d.library, m.coef_) <= QUADRANT_TOL
     for n in ("c_m", "c_g"):  # the first fit's quadrants: c_m -21 sigma, c_g +24 sigma
         assert abs(m.coef_[n] / TRUTH[n] - 1) < 0.01, (n, m.coef_[n])
     assert m.rel_error_ < 0.015  # 2.09 % with the first fit's quadrants

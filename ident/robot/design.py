@@ -55,6 +55,7 @@ from .refine_joint import joint_term_columns
 from .signals import FullRateProducts, RobotColumns, RobotSignals
 
 __all__ = ["DesignSettings", "design_runs", "joint_columns", "resolve_design", "sign_checked",
+           "full_rate_loads",
            "products_columns", "MAX_BYTES", "DQ_MIN_FRACTION"]
 
 #: Default stiction-area threshold: samples with |dq| below this fraction of the largest
@@ -282,14 +283,8 @@ def sign_checked(
     if cols is None or settings.dq_min is None:
         raise RobotIdentError("sign_checked: expected design_runs signals and resolved "
                               "settings (dq_min)")
-    dt = chain_period(runs)
     keep = cols.keep.copy()
-    for i, exp in enumerate(_experiments(runs, False)):
-        f = _full_rate(cols, i, exp, dt, settings)
-        full = RobotSignals(t=runs[i].t[f.keep], q=f.q, dq=f.dq, ddq=f.ddq, tau=f.tau_f,
-                            joints=signals.joints, payloads=(runs[i].payload,),
-                            source=exp.label)
-        tau_out = np.asarray(load_torque(full), dtype=float)
+    for i, (f, tau_out) in enumerate(full_rate_loads(signals, runs, settings, load_torque)):
         rows = np.flatnonzero(signals.experiment == i)
         keep[rows] = selection(f.dq, settings.dq_min, settings.guard,
                                decimation_index(f.n, settings.decimation),
@@ -299,6 +294,25 @@ def sign_checked(
     skip = kept < np.broadcast_to(np.asarray(min_kept, dtype=float), kept.shape)
     keep[:, skip] = cols.keep[:, skip]
     return replace(signals, columns=replace(cols, keep=keep)), kept
+
+
+def full_rate_loads(signals: RobotSignals, runs: Sequence[RawRobotRun],
+                    settings: DesignSettings,
+                    load_torque: Callable[[RobotSignals], np.ndarray],
+                    ) -> list[tuple[FullRate, np.ndarray]]:
+    """Per run of ``signals`` (:func:`design_runs`'s output for ``runs`` with ``settings``):
+    its full-rate signals as the chain filtered them and ``load_torque`` on them,
+    tau_out_hat (n_f, k) [N m] -- what :func:`sign_checked` compares with the torque and the
+    single joint's quadrant band (:meth:`ident.one_joint.OneJointProblem.band`) reads."""
+    dt = chain_period(runs)
+    out = []
+    for i, exp in enumerate(_experiments(runs, False)):
+        f = _full_rate(signals.columns, i, exp, dt, settings)
+        full = RobotSignals(t=runs[i].t[f.keep], q=f.q, dq=f.dq, ddq=f.ddq, tau=f.tau_f,
+                            joints=signals.joints, payloads=(runs[i].payload,),
+                            source=exp.label)
+        out.append((f, np.asarray(load_torque(full), dtype=float)))
+    return out
 
 
 def _joint_structure(regressor, base) -> list[np.ndarray]:
