@@ -32,7 +32,7 @@ Per experiment of k axes (k = 1 for a single joint), with one :class:`ChainSetti
 
 The settings are resolved once, by :func:`resolve_settings`, with the same rules for one
 joint and for n (cut-off: the largest :func:`choose_cutoff` over the axes of the first
-experiment, at least :data:`CUTOFF_FLOOR_IV` f_s with instruments; r = round(f_s / cut-off);
+experiment, at least :func:`iv_floor` f_s with instruments; r = round(f_s / cut-off);
 trim = max(ceil(3 f_s / cut-off), 2 r); guard = 3 r). Pure numerics: no file access.
 """
 
@@ -53,6 +53,7 @@ from .timing import shift
 __all__ = [
     "BUTTER_ORDER",
     "CUTOFF_FLOOR_IV",
+    "CUTOFF_MIN_IV_HZ",
     "TORQUE_DELAY",
     "axes_cutoff",
     "ChainBlock",
@@ -69,6 +70,7 @@ __all__ = [
     "diffcent",
     "filter_experiment",
     "guarded_keep",
+    "iv_floor",
     "keep_rows",
     "lowpass",
     "resolve_settings",
@@ -97,6 +99,21 @@ TORQUE_DELAY = 0.5
 #: 1.4 %, 0.52. The residual grows with the band because W then holds more of the encoder
 #: quantisation (amplified twice by differentiation), which OLS would absorb as bias.
 CUTOFF_FLOOR_IV = 0.125
+#: Lowest default cut-off [Hz] with instruments (up to 0.4 f_s). The bias of the narrow band
+#: depends on the band in Hz, not on its fraction of f_s: the reversals' transients have their
+#: own time scale. Measured with IV on the simulated joint's campaign subsampled to 500 and
+#: 250 Hz (``benchmarks/bench_cutoff_band.py``; sum of z^2 over the new model's 22 parameters,
+#: 22 expected, and the largest |z|): at 1 kHz 62.5 Hz gives 343 (b_m_J -14), 125 Hz 23, 200
+#: Hz 11; at 500 Hz 62.5 Hz (0.125 f_s) 281 (b_m_J -12.5), 100 Hz 36, 125 Hz 21, 150 Hz 9; at
+#: 250 Hz 31.25 Hz 438 (b_m_J -17), 100 Hz (0.4 f_s, the most the chain takes) 112 (b_m_J -7).
+#: Below 312.5 Hz the rule cannot be met and :func:`resolve_settings` warns.
+CUTOFF_MIN_IV_HZ = 125.0
+
+
+def iv_floor(fs: float) -> float:
+    """Lower bound of the default cut-off with instruments, as a fraction of ``fs`` [Hz]:
+    :data:`CUTOFF_FLOOR_IV`, raised to :data:`CUTOFF_MIN_IV_HZ` up to 0.4 f_s."""
+    return max(CUTOFF_FLOOR_IV, min(CUTOFF_MIN_IV_HZ / fs, 0.4))
 
 
 def diffcent(y: np.ndarray, dt: float) -> np.ndarray:
@@ -259,7 +276,7 @@ def choose_cutoff(q: np.ndarray, dt: float, min_fraction: float = 0.05,
     position loop put content well above the trajectory's own bandwidth (the EMPS
     reference script uses 100 Hz at 1 kHz for its 20 Hz position loop; pass it
     explicitly). At most 0.4 f_s. ``min_fraction`` is that lower bound as a fraction of f_s
-    (:func:`build_design` raises it to :data:`CUTOFF_FLOOR_IV` with instruments).
+    (:func:`resolve_settings` raises it to :func:`iv_floor` with instruments).
 
     ``t`` (the samples' time stamps [s], optional): irregular stamps are first put on a
     uniform grid by :func:`ident.loaders.uniform_grid` (the loaders' one resampling: values
@@ -462,8 +479,8 @@ def resolve_settings(
     dt : float
         Sampling period [s] of every experiment.
     instruments : bool
-        IDIM-IV instruments are built: the default cut-off is at least
-        :data:`CUTOFF_FLOOR_IV` f_s.
+        IDIM-IV instruments are built: the default cut-off is at least :func:`iv_floor`
+        f_s (warned about where that stays below :data:`CUTOFF_MIN_IV_HZ`).
     cutoff_hz, decimation, trim, guard, dq_min
         Given values (checked), or None for the defaults (:func:`default_rates`).
     torque_delay : float or None
@@ -479,8 +496,16 @@ def resolve_settings(
     q0 = q0[:, None] if q0.ndim == 1 else q0
     sources = list(sources)
     if cutoff_hz is None:
-        floor = CUTOFF_FLOOR_IV if instruments else 0.05
+        floor = iv_floor(fs) if instruments else 0.05
         cutoff_hz = axes_cutoff(q0, dt, floor, sources[0] if sources else "")
+        if instruments and cutoff_hz < CUTOFF_MIN_IV_HZ:
+            where = f"{sources[0]}: " if sources else ""
+            warnings.warn(
+                f"{where}sampled at {fs:g} Hz, the IV cut-off is {cutoff_hz:g} Hz, below the "
+                f"{CUTOFF_MIN_IV_HZ:g} Hz the friction's reversal terms need (the paper model's "
+                f"b_m_J, b_g_J, F_V): their estimates may lie beyond their standard "
+                f"deviations; log at "
+                f"{CUTOFF_MIN_IV_HZ / 0.4:g} Hz or faster", stacklevel=2)
     cutoff_hz = float(cutoff_hz)
     if not 0 < cutoff_hz < fs / 2:
         raise error(f"cut-off {cutoff_hz:g} Hz: expected between 0 and the Nyquist "

@@ -551,7 +551,9 @@ def fit_models(
         When given, every model is estimated by IDIM-IV with instruments built on the
         reference acceleration (see :mod:`ident.estimate` and ``reference`` of
         :func:`ident.preprocess.build_design`), and the default cut-off is at least
-        f_s/8; this removes the closed-loop noise bias of OLS on the E_xp ddq columns.
+        f_s/8 and at least 125 Hz up to 0.4 f_s (:func:`ident.chain.iv_floor`, a warning
+        where 0.4 f_s is below 125 Hz); this removes the closed-loop noise bias of OLS on
+        the E_xp ddq columns.
         ``"auto"`` (default): the experiments' ``q_ref`` attributes when every experiment
         has one without NaN, else OLS. None: OLS.
     torque_delay : float or "auto"

@@ -386,7 +386,8 @@ def build_design(
         ``round(0.8 f_nyq / (2 f_dyn))`` with cut-off 5 f_dyn).
     cutoff_hz : float or None
         Butterworth cut-off on q [Hz]; default :func:`choose_cutoff` of the first experiment,
-        at least f_s/20, or :data:`CUTOFF_FLOOR_IV` f_s with a ``reference``.
+        at least f_s/20, or :func:`ident.chain.iv_floor` f_s with a ``reference``
+        (f_s/8 and at least :data:`~ident.chain.CUTOFF_MIN_IV_HZ` up to 0.4 f_s).
     tau_min : float or None
         Drop decimated samples with |tau| below it [N m] (sign of P unreliable, eq. 26).
     dq_min : float or None
