@@ -103,9 +103,10 @@ CUTOFF_FLOOR_IV = 0.125
 #: depends on the band in Hz, not on its fraction of f_s: the reversals' transients have their
 #: own time scale. Measured with IV on the simulated joint's campaign subsampled to 500 and
 #: 250 Hz (``benchmarks/bench_cutoff_band.py``; sum of z^2 over the new model's 22 parameters,
-#: 22 expected, and the largest |z|): at 1 kHz 62.5 Hz gives 343 (b_m_J -14), 125 Hz 23, 200
-#: Hz 11; at 500 Hz 62.5 Hz (0.125 f_s) 281 (b_m_J -12.5), 100 Hz 36, 125 Hz 21, 150 Hz 9; at
-#: 250 Hz 31.25 Hz 438 (b_m_J -17), 100 Hz (0.4 f_s, the most the chain takes) 112 (b_m_J -7).
+#: 22 expected, and the largest |z|; seed 6): at 1 kHz 62.5 Hz gives 356 (b_m_J -14.7),
+#: 125 Hz 23, 200 Hz 11; at 500 Hz 62.5 Hz (0.125 f_s) 288 (b_m_J -12.7), 100 Hz 36, 125 Hz
+#: 21, 150 Hz 9; at 250 Hz 31.25 Hz 359 (b_m_J -14.7), 100 Hz (0.4 f_s, the most the chain
+#: takes) 36 (F_V -3.9).
 #: Below 312.5 Hz the rule cannot be met and :func:`resolve_settings` warns.
 CUTOFF_MIN_IV_HZ = 125.0
 

@@ -68,7 +68,7 @@ def test_500_hz_default_cutoff_keeps_the_truth_within_sigma(setup, seed):
     assert cut == pytest.approx(CUTOFF_MIN_IV_HZ)  # not 0.125 f_s = 62.5 Hz
     assert not [m for m in msgs if "reversal terms need" in m], msgs
     chi2 = sum(v * v for v in z.values())
-    # the old default: 281 over 22 parameters on seed 6, b_m_J -12.5 sigma
+    # the old default: 288 over 22 parameters on seed 6, b_m_J -12.7 sigma
     assert chi2 < scipy.stats.chi2.ppf(0.999, len(z)), (chi2, z)
     assert max(abs(v) for v in z.values()) < 4.0, z
 
