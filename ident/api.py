@@ -42,7 +42,7 @@ from .models import IdentModel
 from .preprocess import Design
 from .refine import Refinement, refine
 from .signals import Signals
-from .vocab import method_name, model_name, refined_model, renamed_keywords
+from .vocab import check_qs_model, method_name, model_name, refined_model, renamed_keywords
 
 __all__ = ["JointModel", "RobotFit", "load"]
 
@@ -274,11 +274,14 @@ class JointModel(HyperParameters):
         JointModel
             ``self``, fitted.
         """
+        models = self._models()
+        check_qs_model("JointModel", "paper" if len(models) > 1 else models[0], self.q_s,
+                       DEFAULT_Q_S)
         exps = _experiments(data, self.joint)
         val = _experiments(validation, self.joint) if validation is not None else None
         report = fit_models(
             exps,
-            self._models(),
+            models,
             q_s=self.q_s,
             joint=self.joint,
             validation=val,

@@ -42,7 +42,7 @@ from .robot.estimate import RobotModel
 from .robot.loaders import RawRobotRun
 from .robot.signals import RobotSignals
 from .robot.uncertainty import N_BLOCKS
-from .vocab import renamed_keywords
+from .vocab import check_qs_model, model_name, renamed_keywords
 
 __all__ = ["RobotFit"]
 
@@ -199,6 +199,8 @@ class RobotFit(HyperParameters):
         RobotFit
             ``self``, fitted.
         """
+        check_qs_model("RobotFit", model_name(self.model, extra=("both",)), self.q_s,
+                       DEFAULT_Q_S)
         out = fit_files(
             self._robot(), data, validation, model=self.model, mapping=self._mapping(),
             q_unit=self.q_unit, cutoff=self.cutoff, decimation=self.decimation, trim=self.trim,

@@ -90,6 +90,17 @@ def model_name(name: str, *, extra: tuple[str, ...] = ()) -> str:
     return name
 
 
+def check_qs_model(owner: str, model: str, q_s: Any, default: float) -> None:
+    """The Python API's ``q_s`` is the paper model's (eq. 29): set away from its default with
+    ``model="usual"`` (no q_s-dependent term) it is ignored, and a warning says so (as
+    scikit-learn does for a hyper-parameter the chosen variant does not use, so a parameter
+    grid over both models stays valid; ``jointid fit --q-s`` with ``--model usual`` is
+    refused). ``model`` resolved by :func:`model_name`."""
+    if model == "usual" and not (isinstance(q_s, (int, float)) and float(q_s) == default):
+        warnings.warn(f"{owner}: q_s={q_s!r} is ignored: it is the paper model's Stribeck "
+                      "velocity (eq. 29) and model='usual' has none", UserWarning, stacklevel=3)
+
+
 def refined_model(fitted: Iterable[str]) -> str:
     """The fitted model a refinement refines when none is named, one rule for the single
     joint (:class:`ident.api.JointModel`, ``jointid fit --refine``) and the robot
