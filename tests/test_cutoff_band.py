@@ -56,9 +56,10 @@ def _fit(setup, seed: int, every: int, cutoff_hz: float | None = None):
         rep = fit_models(exps, ("paper",), table_iv=False, eliminate=False,
                          cutoff_hz=cutoff_hz)
     m = rep.models["paper"]
+    msgs = [str(w.message) for w in rec] + [f"note: {n}" for n in rep.notes]
     truth = plant.truth()
     z = {n: (m.coef_[n] - truth[n]) / m.std_[n] for n in m.names_}
-    return rep.designs["paper"].settings()["cutoff_hz"], z, [str(w.message) for w in rec]
+    return rep.designs["paper"].settings()["cutoff_hz"], z, msgs
 
 
 @pytest.mark.slow
@@ -66,7 +67,7 @@ def _fit(setup, seed: int, every: int, cutoff_hz: float | None = None):
 def test_500_hz_default_cutoff_keeps_the_truth_within_sigma(setup, seed):
     cut, z, msgs = _fit(setup, seed, every=2)
     assert cut == pytest.approx(CUTOFF_MIN_IV_HZ)  # not 0.125 f_s = 62.5 Hz
-    assert not [m for m in msgs if "reversal terms need" in m], msgs
+    assert not [m for m in msgs if "reversal terms need" in m], msgs  # warning nor note
     chi2 = sum(v * v for v in z.values())
     # the old default: 288 over 22 parameters on seed 6, b_m_J -12.7 sigma
     assert chi2 < scipy.stats.chi2.ppf(0.999, len(z)), (chi2, z)
@@ -79,6 +80,8 @@ def test_250_hz_warns_and_the_widest_band_is_nearer_the_truth(setup):
     assert cut == pytest.approx(0.4 * 250.0)
     warned = [m for m in msgs if "reversal terms need" in m]
     assert warned and "250 Hz" in warned[0] and "b_m_J" in warned[0], msgs
+    # and the report keeps it (its notes reach the JSON and the HTML report)
+    assert [m for m in warned if m.startswith("note: IV cut-off 100 Hz")], msgs
     _, z_old, _ = _fit(setup, 2, every=4, cutoff_hz=0.125 * 250.0)
     chi2 = sum(v * v for v in z.values())
     chi2_old = sum(v * v for v in z_old.values())
