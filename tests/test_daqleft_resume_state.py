@@ -45,6 +45,13 @@ def _first_payload_then_logs_moved_away(tmp_path, c):
     return out
 
 
+def _logs_back(tmp_path, out):
+    """The moved logs put back (``--resume`` refuses a completed payload whose log is
+    missing: tests/test_daqleft4_resume_logs.py)."""
+    for p in (tmp_path / "fitted").glob("*.mcap"):
+        p.rename(out / p.name)
+
+
 def test_a_state_of_another_campaign_or_an_edited_one_is_refused(tmp_path):
     plant = default_plant()
     c = _two_payloads("rig a")
@@ -77,7 +84,8 @@ def test_a_state_of_another_campaign_or_an_edited_one_is_refused(tmp_path):
         run_campaign(c, out_dir=out, simulate=other_plant, yes=True, resume=True)
     assert _listing(out) == before  # nothing written
 
-    # the same campaign resumes after its completed payload
+    # the same campaign resumes after its completed payload (its log put back)
+    _logs_back(tmp_path, out)
     r = run_campaign(c, out_dir=out, simulate=plant, yes=True, resume=True)
     assert r.ok and r.skipped == (0,) and [x.index for x in r.runs] == [1], r.reason
     assert json.loads(state_file.read_text())["completed"] == [0, 1]
@@ -103,6 +111,7 @@ def test_an_older_state_file_is_compared_by_what_it_records(tmp_path):
     with pytest.raises(ConfigError, match="rig_a.state.json: the resume state of another "
                                           "campaign, 'rig a' "):
         run_campaign(c, out_dir=out, simulate=default_plant(), yes=True, resume=True)
+    _logs_back(tmp_path, out)
     for old in ({"campaign": "rig_a", "completed": [0]}, {"completed": [0]}):
         state_file.write_text(json.dumps(old))
         r = run_campaign(c, out_dir=out, simulate=default_plant(), yes=True, resume=True)

@@ -48,8 +48,8 @@ def test_handled_sdo_failures_print_no_canopen_line():
     out = p.stdout.splitlines()
     assert out == [
         "NOTE node 5: heartbeat consumer 0x1016.1 not cleared after the run (no SDO "
-        "answer): the drive still watches the master and faults (EMCY 0x8130) when its "
-        "heartbeat stops",
+        "answer: is the drive off, or its bus gone?): if the drive still watches the "
+        "master, it faults (EMCY 0x8130) when its heartbeat stops",
         "SYNC False",
         "ERROR node 5: no SDO answer reading 0x6502.0",
         "RAW"]

@@ -128,7 +128,9 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM/SIGHUP outside a payload run
         signum = getattr(exc, "signum", signal.SIGINT)
-        print(f"jointid: interrupted ({signal.Signals(signum).name})", file=sys.stderr)
+        detail = getattr(exc, "detail", "")  # what was left behind (a demo's run)
+        print(f"jointid: interrupted ({signal.Signals(signum).name})"
+              + (f": {detail}" if detail else ""), file=sys.stderr)
         return 128 + int(signum)
     except BrokenPipeError:  # `jointid plan ... | head`: the reader left; not an error
         devnull = os.open(os.devnull, os.O_WRONLY)

@@ -66,6 +66,9 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, max_steps: int = 3,
     ------
     DaqError
         When the campaign stops before its end (the message names the cause).
+    daq.runtime.safety.RunInterrupted
+        A stop signal (Ctrl-C...) ended the campaign's run: the drive was stopped and the
+        logs closed; ``jointid`` exits 128 + the signal (:func:`.running.stop_if_interrupted`).
     """
     with Heartbeat(stream if stream is not None else sys.stderr) as hb:
         return _run_demo(hb, out_dir, quick=quick, max_steps=max_steps,
@@ -94,7 +97,7 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
     from trajectories.cli import plot_plan
     from trajectories.multi import plan_robot_campaign
 
-    from .running import run_with_bar
+    from .running import run_with_bar, stop_if_interrupted
 
     hb.status(None)
     matplotlib.use("Agg")
@@ -123,6 +126,7 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
     # 2. run on the simulated drive over the virtual CAN bus (its own progress bar)
     hb.status(None)
     result, run_wall = run_with_bar(campaign, out / "logs", plant, stream)
+    stop_if_interrupted(result, out / "logs")  # Ctrl-C: exit 130, not a failure
     if result.status != "done":
         raise DaqError(f"demo campaign {result.status}: {result.reason} "
                        f"(logs kept in {out / 'logs'})")

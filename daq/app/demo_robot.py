@@ -58,7 +58,7 @@ from trajectories.robot_campaign import RobotCampaign
 from trajectories.robot_model import RobotDynamics, prepare_robot_campaign, robot_for_campaign
 
 from .demo import ROBOT_DEMOS
-from .running import run_with_bar
+from .running import run_with_bar, stop_if_interrupted
 
 __all__ = ["ROBOT_DEMOS", "RobotDemoResult", "logged_condition_number", "run_robot_demo"]
 
@@ -131,6 +131,8 @@ def run_robot_demo(out_dir: str | Path, *, robot: str = "3", max_steps: int = 2,
     ------
     DaqError
         The campaign stopped before its end, or the file is not a robot campaign.
+    daq.runtime.safety.RunInterrupted
+        A stop signal (Ctrl-C...) ended the campaign's run (:func:`.running.stop_if_interrupted`).
     """
     with Heartbeat(stream if stream is not None else sys.stderr) as hb:
         return _run_robot_demo(hb, out_dir, robot=robot, max_steps=max_steps,
@@ -176,6 +178,7 @@ def _run_robot_demo(hb: Heartbeat, out_dir: str | Path, *, robot: str, max_steps
     hb.status(None)
     result, run_wall = run_with_bar(campaign, out / "logs", True, stream)
     timing["run_s"] = run_wall
+    stop_if_interrupted(result, out / "logs")  # Ctrl-C: exit 130, not a failure
     if result.status != "done":
         raise DaqError(f"robot demo campaign {result.status}: {result.reason} "
                        f"(logs kept in {out / 'logs'})")

@@ -8,6 +8,7 @@ from typing import Any, TextIO
 
 from daq.runtime.progress import ProgressLine
 from daq.runtime.runner import Progress, run_campaign
+from daq.runtime.safety import RunInterrupted, interrupt_signal
 
 
 def run_with_bar(campaign: Any, logs_dir: Path, simulate: Any,
@@ -31,3 +32,27 @@ def run_with_bar(campaign: Any, logs_dir: Path, simulate: Any,
     finally:
         bar.close()
     return result, time.perf_counter() - t0
+
+
+def stop_if_interrupted(result: Any, logs_dir: Path) -> None:
+    """A demo's campaign ended by a stop signal (Ctrl-C, SIGTERM, SIGHUP during a payload:
+    the runner quick-stopped and disabled the drives and closed the log): raise
+    :class:`~daq.runtime.safety.RunInterrupted`, so that the entry point exits 128 + the
+    signal (130 for Ctrl-C) with one line, as for any other interrupt, instead of a
+    failed demo's exit 2.
+
+    Raises
+    ------
+    daq.runtime.safety.RunInterrupted
+        When ``result.status`` is "interrupted"; its ``detail`` says where the campaign
+        stopped and where its logs are.
+    """
+    if result.status != "interrupted":
+        return
+    last = result.runs[-1] if result.runs else None
+    where = f"in payload {last.index}" if last is not None else "before its first payload"
+    drives = ("drives disabled" if last is None or last.stop_cycle >= 0
+              else "the drives did not confirm the stop")
+    raise RunInterrupted(interrupt_signal(result.reason),
+                         f"the demo campaign stopped {where} ({drives}); its logs are "
+                         f"closed in {logs_dir}")

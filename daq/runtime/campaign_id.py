@@ -154,6 +154,7 @@ def difference(log_md: dict[str, dict[str, str]], name: str, definition: str,
         if diff is None:
             return f"{a} of campaign {name!r} as it was before {source} changed"
         key, old, new = diff
+        key = key or "definition"  # not a JSON object at all (a hand-edited file)
         if key == "robot":
             return (f"{a} of campaign {name!r} with another robot file (content {old} "
                     f"{in_it}, {new} now)")

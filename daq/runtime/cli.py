@@ -16,7 +16,6 @@ operator declined a payload.
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -40,10 +39,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "another campaign (it records the campaign as the logs do), makes the run "
         "refuse, with or without --resume, naming the file and what differs. A log is "
         "never replaced without a word: a log left in DIR "
-        "makes the run refuse unless --resume (completed payloads are skipped; the log of "
+        "makes the run refuse unless --resume (completed payloads are skipped, once their "
+        "logs are checked: a completed payload's log missing or changed since, by the size "
+        "the state file records, is refused, naming it; --payload K --overwrite runs it "
+        "again; the log of "
         "one that did not complete is moved to DIR/partial/<name>_payload<k>.partial-<n>.mcap "
         "before it runs again) or --overwrite. The state file only grows; it also keeps the "
-        "EMCYs received after the last payload's log closed (in no log; a warning of the "
+        "EMCYs received after the last payload's log closed and the warnings of the run's "
+        "wind-down (the bus lost, a drive no longer answering) (in no log; warnings of the "
         "summary). Before each "
         "payload the free space is checked against the log's expected size. Every end runs "
         "the stop sequence (quick stop, disable): a fault, a failing log file (disk full: "
@@ -61,7 +64,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--yes", "-y", action="store_true",
                    help="do not ask the operator to confirm each payload")
     p.add_argument("--resume", action="store_true",
-                   help="skip the payloads already completed in DIR; keep the log of a payload "
+                   help="skip the payloads already completed in DIR (refused when the log of "
+                   "one is missing or changed); keep the log of a payload "
                    "that did not complete under DIR/partial/ and run it again")
     p.add_argument("--overwrite", action="store_true",
                    help="replace the logs of the payloads run (default: refuse)")
@@ -80,6 +84,7 @@ def main(args: argparse.Namespace) -> int:
 
     from .progress import ProgressLine
     from .runner import prompt_payload, run_campaign
+    from .safety import interrupt_signal
 
     campaign = load_campaign(args.campaign)
     if args.quick:  # one moving joint, trapezoids and sines (else a one-line SchemaError)
@@ -114,13 +119,6 @@ def main(args: argparse.Namespace) -> int:
         return 0
     print(f"jointid run: {result.status}: {result.reason}", file=sys.stderr)
     if result.status == "interrupted":
-        return 128 + _signal_number(result.reason)
+        return 128 + interrupt_signal(result.reason)
     return {"stopped": 3, "aborted": 1}.get(result.status, 3)
 
-
-def _signal_number(reason: str) -> int:
-    """The signal named in an "interrupted" reason (SIGINT when none is)."""
-    for s in (signal.SIGTERM, signal.SIGHUP):
-        if s.name in reason:
-            return int(s)
-    return int(signal.SIGINT)

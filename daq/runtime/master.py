@@ -375,11 +375,11 @@ class MasterDrive:
         except SdoAbortedError as exc:
             why = f"refused: {exc}"
         except SdoCommunicationError:
-            why = "no SDO answer"
+            why = "no SDO answer: is the drive off, or its bus gone?"
         else:
             return ""
         return (f"{self.name}: heartbeat consumer 0x1016.1 not cleared after the run ({why}): "
-                f"the drive still watches the master and faults (EMCY 0x8130) when its "
+                f"if the drive still watches the master, it faults (EMCY 0x8130) when its "
                 f"heartbeat stops")
 
     def set_sync_period(self, period_us: int) -> bool | None:

@@ -16,11 +16,16 @@
   starts from what it lists (with or without ``--resume``) and adds to it, written
   atomically (temporary file + ``os.replace``). The one exception: ``--overwrite`` removes
   a payload from it when that payload's log is replaced (its completed log is gone). An
-  unreadable state file is refused, not taken as empty. It records its campaign as the
-  logs do (``campaign``, ``definition``, ``plant``: :class:`RunState`), so that a state of
-  another campaign is refused like its logs (:func:`daq.runtime.campaign_id.check_state`),
-  and the EMCYs received while no log was open after the last payload's
-  (``emcy_outside_logs``, kept from run to run).
+  unreadable state file is refused, not taken as empty, and so is one whose key does not
+  hold what :func:`write_state` writes (one line naming the file and the key). It records
+  its campaign as the logs do (``campaign``, ``definition``, ``plant``: :class:`RunState`),
+  so that a state of another campaign is refused like its logs
+  (:func:`daq.runtime.campaign_id.check_state`), each completed payload's log (``logs``:
+  name and size), which ``--resume`` checks before it skips that payload
+  (:func:`check_completed_logs`), and what no log holds (kept from run to run): the EMCYs
+  received while no log was open after the last payload's (``emcy_outside_logs``), the
+  warnings of the run's wind-down (``warnings_outside_logs``: the bus lost, a drive no
+  longer answering).
 - **Room for the log.** :func:`check_free_space` refuses a payload when the file system
   has less free space than the log's expected size: :func:`expected_log_bytes`, the
   uncompressed size of its records (an upper bound: the chunks are zstd-compressed).
@@ -123,6 +128,17 @@ class RunState:
         event's words and when), ``node_id``, ``code``, ``error_register`` (hex text),
         ``after_payload`` (index, or None) and ``utc`` (when the run that received it
         recorded it, at its end, ISO 8601). Kept from run to run.
+    warnings_outside_logs : list of dict
+        What went wrong as a run wound down, after the last payload's log closed (so no
+        log holds it): the bus lost, a drive that no longer answered (its heartbeat
+        consumer 0x1016 not cleared). ``text`` (the summary's warning), ``after_payload``
+        (index, or None) and ``utc``, as for ``emcy_outside_logs``. Kept from run to run.
+    logs : dict of int -> dict
+        Per completed payload, the log its run closed: ``name`` (the file name in the
+        folder) and ``bytes`` (its size), recorded when the payload completed, so that
+        ``--resume`` can tell that log is still there (:func:`check_completed_logs`).
+        Empty in a state file written before it was recorded (then only the file's
+        presence is checked).
     """
 
     completed: set[int] = field(default_factory=set)
@@ -130,6 +146,76 @@ class RunState:
     definition: Any = None
     plant: dict[str, str] | None = None
     emcy_outside_logs: list[dict[str, Any]] = field(default_factory=list)
+    warnings_outside_logs: list[dict[str, Any]] = field(default_factory=list)
+    logs: dict[int, dict[str, Any]] = field(default_factory=dict)
+
+
+def _json_kind(value: Any) -> str:
+    """The JSON kind of a parsed value, as a message names it ("a string", "null"...)."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return f"{str(value).lower()}"
+    if isinstance(value, dict):
+        return "an object"
+    if isinstance(value, list):
+        return "an array"
+    if isinstance(value, str):
+        return "a string"
+    return f"the number {value!r}" if isinstance(value, int | float) else type(value).__name__
+
+
+def _index(value: Any) -> bool:
+    """A payload index as the state file writes it: an integer >= 0 (not true/false)."""
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
+
+
+def _check_state_keys(path: Path, raw: Any) -> None:
+    """Refuse a state file whose keys do not hold what :func:`write_state` writes, in one
+    line naming the file, the key and what was expected (a hand-edited or damaged file)."""
+
+    def bad(key: str, expected: str, got: Any) -> ConfigError:
+        return ConfigError(f"{path}: \"{key}\": expected {expected}, got {_json_kind(got)}; "
+                           f"the resume state is damaged: fix or remove it")
+
+    if not isinstance(raw, dict):
+        raise bad("(top level)", "a JSON object ({\"completed\": [0, 1], ...})", raw)
+    if "completed" not in raw:
+        raise ConfigError(f"{path}: \"completed\": missing (expected the completed payloads, "
+                          f"e.g. [0, 1]); the resume state is damaged: fix or remove it")
+    completed = raw["completed"]
+    if not isinstance(completed, list):
+        raise bad("completed", "an array of payload indices (integers >= 0)", completed)
+    for k, i in enumerate(completed):
+        if not _index(i):
+            raise bad(f"completed[{k}]", "a payload index (an integer >= 0)", i)
+    for key, what in (("campaign", "a string (the campaign's name) or null"),):
+        if key in raw and not (raw[key] is None or isinstance(raw[key], str)):
+            raise bad(key, what, raw[key])
+    for key, what in (("definition", "a JSON object (the campaign as recorded) or null"),
+                      ("plant", "a JSON object (the simulated plant's record) or null"),
+                      ("logs", "a JSON object (payload index -> its completed log)")):
+        if key in raw and not (raw[key] is None or isinstance(raw[key], dict)):
+            raise bad(key, what, raw[key])
+    for key in ("emcy_outside_logs", "warnings_outside_logs"):
+        entries = raw.get(key, [])
+        if not isinstance(entries, list):
+            raise bad(key, "an array of objects", entries)
+        for k, e in enumerate(entries):
+            if not isinstance(e, dict):
+                raise bad(f"{key}[{k}]", "a JSON object", e)
+    for key, rec in (raw.get("logs") or {}).items():
+        where = f"logs.{key}"
+        if not (key.isdigit() and int(key) in completed):
+            raise ConfigError(f"{path}: \"{where}\": expected the index of a completed "
+                              f"payload (one of {completed}); the resume state is damaged: "
+                              f"fix or remove it")
+        if not isinstance(rec, dict):
+            raise bad(where, "a JSON object ({\"name\": ..., \"bytes\": ...})", rec)
+        if not isinstance(rec.get("name"), str):
+            raise bad(f"{where}.name", "a string (the log's file name)", rec.get("name"))
+        if not _index(rec.get("bytes")):
+            raise bad(f"{where}.bytes", "the log's size (an integer >= 0)", rec.get("bytes"))
 
 
 def read_state(path: Path) -> RunState:
@@ -139,7 +225,10 @@ def read_state(path: Path) -> RunState:
     ------
     daq.ConfigError
         The file exists but is not a state file (it is never taken as empty: that would
-        shrink it).
+        shrink it), or one of its keys does not hold what :func:`write_state` writes (a
+        hand-edited file): one line naming the file, the key and what was expected, e.g.
+        ``runs/x.state.json: "definition": expected a JSON object (the campaign as
+        recorded) or null, got a string; the resume state is damaged: fix or remove it``.
     """
     try:
         text = path.read_text()
@@ -149,26 +238,26 @@ def read_state(path: Path) -> RunState:
         raise ConfigError(f"{path}: cannot read the resume state: {exc.strerror}") from None
     try:
         raw = json.loads(text)
-        completed = {int(i) for i in raw["completed"]}
-        name = raw.get("campaign")
-        plant = raw.get("plant")
-        emcy = list(raw.get("emcy_outside_logs", []))
-        if not ((name is None or isinstance(name, str))
-                and (plant is None or isinstance(plant, dict))
-                and all(isinstance(e, dict) for e in emcy)):
-            raise TypeError
-    except (ValueError, TypeError, KeyError, AttributeError):
+    except ValueError:
         raise ConfigError(f"{path}: expected a resume state ({{\"completed\": [0, 1]}}), "
                           f"the file is damaged; fix or remove it") from None
-    return RunState(completed, name, raw.get("definition"), plant, emcy)
+    _check_state_keys(path, raw)
+    logs = {int(k): dict(v) for k, v in (raw.get("logs") or {}).items()}
+    return RunState(set(raw["completed"]), raw.get("campaign"), raw.get("definition"),
+                    raw.get("plant"), list(raw.get("emcy_outside_logs", [])),
+                    list(raw.get("warnings_outside_logs", [])), logs)
 
 
 def write_state(path: Path, state: RunState) -> None:
     """Write ``state`` atomically (temporary file + ``os.replace``)."""
     tmp = path.with_suffix(".tmp")
     rec: dict[str, Any] = {"campaign": state.campaign, "completed": sorted(state.completed)}
+    if state.logs:
+        rec["logs"] = {str(i): state.logs[i] for i in sorted(state.logs)}
     if state.emcy_outside_logs:
         rec["emcy_outside_logs"] = state.emcy_outside_logs
+    if state.warnings_outside_logs:
+        rec["warnings_outside_logs"] = state.warnings_outside_logs
     if state.plant is not None:
         rec["plant"] = state.plant
     if state.definition is not None:
@@ -219,6 +308,23 @@ def keep_emcy_outside_logs(path: Path, state: RunState, after: int | None,
     return [f"{text} {where} ({kept})" for text, *_ in emcy]
 
 
+def keep_warnings_outside_logs(path: Path, state: RunState, after: int | None,
+                               texts: list[str]) -> list[str]:
+    """Record the warnings of a run's wind-down (after the last payload's log closed: the
+    bus lost, a drive that no longer answered) in the state file's
+    ``warnings_outside_logs``, as :func:`keep_emcy_outside_logs` records the EMCYs of that
+    time; returns the summary's warnings, each with where it is kept."""
+    utc = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+    for text in texts:
+        state.warnings_outside_logs.append({"text": text, "after_payload": after, "utc": utc})
+    try:
+        write_state(path, state)
+        kept = f"in no log: recorded in {path.name}"
+    except OSError as exc:
+        kept = f"in no log, and not recorded: {path}: {exc.strerror or exc}"
+    return [f"{text} ({kept})" for text in texts]
+
+
 # ------------------------------------------------------------------------------ logs
 def log_path(folder: Path, stem: str, index: int) -> Path:
     """``DIR/<stem>_payload<index>.mcap``."""
@@ -244,6 +350,54 @@ def check_logs(folder: Path, stem: str, todo: list[int], done: set[int], *, resu
             state = " (completed)" if i in done else ""
             raise ConfigError(f"{p}: exists (an earlier run{state}); --resume keeps it and "
                               f"continues the campaign, --overwrite replaces it")
+
+
+def log_record(path: Path) -> dict[str, Any]:
+    """What the state file records of a completed payload's log (:attr:`RunState.logs`):
+    its file ``name`` and size ``bytes``."""
+    return {"name": path.name, "bytes": path.stat().st_size}
+
+
+def check_completed_logs(folder: Path, stem: str, state: RunState, state_file: Path) -> None:
+    """Refuse a ``--resume`` whose state file lists a completed payload whose log is not in
+    the folder as that payload's run left it: missing (moved away, deleted), or of another
+    size than the state file records (replaced, cut, rewritten). The resume would skip that
+    payload and leave the campaign without its log, without a word; the safe course is to
+    stop and say so. Putting the log back resumes; ``--payload K --overwrite`` runs payload K
+    again (its new log is recorded when it completes). A state file written before the logs
+    were recorded is checked for their presence, and the logs found are recorded in
+    ``state`` (written with it at the run's next write).
+
+    Raises
+    ------
+    daq.ConfigError
+        ``"runs/x_payload0.mcap: missing, but runs/x.state.json lists payload 0 as
+        completed (--resume would skip it and leave the campaign without its log); put the
+        log back, or run the payload again: --payload 0 --overwrite"``.
+    """
+    for i in sorted(state.completed):
+        p = log_path(folder, stem, i)
+        rec = state.logs.get(i, {})
+        again = (f"; put the log back, or run the payload again: --payload {i} --overwrite "
+                 f"(without --resume)")
+        if rec.get("name", p.name) != p.name:
+            raise ConfigError(f"{state_file}: \"logs.{i}.name\": expected {p.name!r} (payload "
+                              f"{i}'s log), got {rec['name']!r}; the resume state is damaged: "
+                              f"fix or remove it")
+        try:
+            size = p.stat().st_size if p.is_file() else None
+        except OSError:
+            size = None
+        if size is None:
+            raise ConfigError(f"{p}: missing, but {state_file} lists payload {i} as completed "
+                              f"(--resume would skip it and leave the campaign without its "
+                              f"log){again}")
+        if "bytes" in rec and size != rec["bytes"]:
+            raise ConfigError(f"{p}: {size} bytes, but {state_file} records {rec['bytes']} "
+                              f"bytes for payload {i}'s completed log (replaced or changed "
+                              f"since){again}")
+        if not rec:  # a state file written before the logs were recorded: as found now
+            state.logs[i] = {"name": p.name, "bytes": size}
 
 
 def keep_partial(path: Path) -> Path:

@@ -43,13 +43,16 @@ from .robot_rig import (
 from .runfolder import (
     FolderLock,
     RunState,
+    check_completed_logs,
     check_free_space,
     check_logs,
     create_log_file,
     expected_log_bytes,
     keep_emcy_outside_logs,
     keep_partial,
+    keep_warnings_outside_logs,
     log_path,
+    log_record,
     read_state,
     write_state,
 )
@@ -253,9 +256,11 @@ def run_campaign(
         file is a robot with one moving joint whose drives are those of ``[daq]``.
     out_dir : path-like
         Created if needed; receives ``<name>_payload<k>.mcap`` and ``<name>.state.json``
-        (:class:`~daq.runtime.runfolder.RunState`: the completed payloads, the campaign's
-        identity, the EMCYs received after the last payload's log closed, which no log
-        holds: each also a warning of the result's ``notes``).
+        (:class:`~daq.runtime.runfolder.RunState`: the completed payloads and their logs'
+        names and sizes, the campaign's identity, the EMCYs received after the last
+        payload's log closed and the warnings of the run's wind-down -- the bus lost, a
+        drive no longer answering --, which no log holds: each also a warning of the
+        result's ``notes``).
         Locked for the whole run (one run per folder); an existing log is never replaced
         without ``overwrite`` (:mod:`daq.runtime.runfolder`).
     simulate : sim_drivers.plant_config.PlantParams, sim_drivers.arm.ArmParams, True or None
@@ -273,8 +278,10 @@ def run_campaign(
     payloads : sequence of int or None
         Indices of the payloads to run (default: all).
     resume : bool
-        Skip the payloads the state file lists as completed; the log of a payload that did
-        not complete is moved to ``partial/`` before the payload runs again.
+        Skip the payloads the state file lists as completed, once their logs are checked
+        (:func:`~daq.runtime.runfolder.check_completed_logs`: a completed payload's log
+        missing or changed is refused); the log of a payload that did not complete is moved
+        to ``partial/`` before the payload runs again.
     fault_injectors : dict node_id -> sim_drivers.faults.FaultInjector, optional
         For tests with simulated drives.
     prompt : callable or None
@@ -290,7 +297,8 @@ def run_campaign(
     -------
     CampaignResult
         ``status`` "done", "stopped" (a fault, a log write failure, too little free space
-        before a later payload; ``reason`` names it), "interrupted" (SIGINT, SIGTERM or
+        before a later payload, the bus lost during a run or before the next payload's;
+        ``reason`` names it), "interrupted" (SIGINT, SIGTERM or
         SIGHUP during a payload or at the prompt) or "aborted" (the operator declined a
         payload).
 
@@ -301,7 +309,8 @@ def run_campaign(
         EDS or drive without the requested mode, PDO read-back mismatch, the folder locked
         by another run, a log that exists, an unreadable state file or one of another
         campaign (:func:`~daq.runtime.campaign_id.check_state`; ``overwrite`` replaces it),
-        too little free space.
+        with ``resume`` a completed payload whose log is missing or changed, too little
+        free space.
     daq.runtime.safety.RunInterrupted
         A stop signal before the first payload started (no drive enabled).
     trajectories.TrajectoryError
@@ -372,6 +381,13 @@ def check_daq(campaign: RobotCampaign, *, simulated: bool = False) -> tuple[DaqC
     return cfg, check_loads(loads, cfg.max_bus_load, str(campaign.source) or "campaign")
 
 
+def _bus_lost(exc: BaseException, when: str = "") -> str:
+    """The one-line reason of a bus that failed under the runner outside a payload's run
+    (worded as the engine's "bus lost: ..." within one): ``when`` (" before the run of
+    payload 1") is said before the error."""
+    return f"bus lost{when}: {type(exc).__name__}: {exc}".splitlines()[0]
+
+
 def _chain(sc: Any) -> tuple[float, float, int]:
     """What a scaling does to the logged values: gear ratio, joint torque per unit, counts."""
     return (float(sc.gear_ratio), float(sc.torque_per_unit), int(sc.encoder_counts_per_rev))
@@ -415,6 +431,8 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
     state.campaign, state.plant = campaign.name, plant
     state.definition = json.loads(definition) if definition else None
     completed = state.completed
+    if resume:  # each completed payload's log as its run left it, or a refusal
+        check_completed_logs(out, stem, state, state_file)
     done_before = completed if resume else set()
     skipped = tuple(i for i in todo if i in done_before)
     todo = [i for i in todo if i not in done_before]
@@ -440,6 +458,10 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
     io: CycleIO | None = None
     clean = False
     status, reason = "done", ""
+    #: the bus failed outside a payload's run (no NMT, no SDO can be sent any more)
+    bus_gone = ""
+    #: warnings of the wind-down, after the last log closed: in no log (the state file)
+    end_notes: list[str] = []
     try:
         signals.install()  # SIGINT, SIGTERM, SIGHUP: the stop sequence (safety.StopSignals)
         if simulate is not None:  # the plant the campaign asks for (robot_rig.sim_params)
@@ -506,13 +528,22 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
             create_log_file(path, overwrite)
             if overwrite and i in completed:  # its completed log is replaced: not done now
                 completed.discard(i)
+                state.logs.pop(i, None)
                 write_state(state_file, state)
             # EMCYs since the start-up or the last payload's end (the drive's own report of a
             # fault while no run watched it): logged in this payload's log and reported
             early, io.emcy = io.emcy, []  # (a swap: the listener appends to io.emcy)
             io.hb_time = [io.clock()] * len(drives)
-            for d in drives:
-                d.nmt_start()
+            try:
+                for d in drives:
+                    d.nmt_start()
+            except BUS_ERRORS as exc:  # the bus went away between payloads: nothing moved
+                bus_gone = reason = _bus_lost(exc, f" before the run of payload {i}")
+                with contextlib.suppress(OSError):
+                    path.unlink()  # the empty file create_log_file made: no log was opened
+                io.emcy[:0] = early  # in no log: recorded in the state file below
+                status = "stopped"
+                break
             drive_cycle0 = sim.drives[0].cycle if sim is not None else -1
             try:
                 log = RunLog(path, n_axes=len(drives), cycle_s=campaign.cycle_s,
@@ -539,28 +570,46 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
             if engine.bus_lost:  # nothing can be sent any more: no NMT, no SDO
                 status, reason = r.status, r.reason
                 break
-            for d in drives:
-                with contextlib.suppress(DaqError):
-                    d.nmt_preop()
+            try:
+                for d in drives:
+                    with contextlib.suppress(DaqError):
+                        d.nmt_preop()
+            except BUS_ERRORS as exc:  # the bus went away as the run ended (its log closed)
+                off = ("the drives disabled" if r.stop_cycle >= 0
+                       else "the drives did not confirm the stop")
+                bus_gone = _bus_lost(exc, f" after the run of payload {i} (its log closed, "
+                                          f"{off})")
+                end_notes.append(f"{bus_gone}; nothing the drives sent since was seen (an "
+                                 f"EMCY, a lost heartbeat)")
             if r.status != "done":
                 status, reason = r.status, r.reason
                 break
             completed.add(i)
+            state.logs[i] = log_record(path)  # what --resume checks is still there
             write_state(state_file, state)
+            if bus_gone:  # the payload completed; nothing can be sent any more
+                if rest := todo[n_done + 1:]:
+                    status, reason = "stopped", f"{bus_gone}; payloads {rest} not run"
+                break
             if engine.interrupted:  # a signal as the run ended: it completed, stop here
                 status, reason = "interrupted", interrupt_reason(engine.interrupted)
                 break
-        clean = engine is None or not engine.bus_lost
+        clean = (engine is None or not engine.bus_lost) and not bus_gone
     except KeyboardInterrupt:  # a stop signal outside a payload run: no drive enabled
-        clean = engine is None or not engine.bus_lost
+        clean = (engine is None or not engine.bus_lost) and not bus_gone
         raise
     finally:
         signals.closing = True  # a second signal does not cut the clean-up short
         if clean:  # normal end, drives disabled: stop watching the master, then go silent
             for d in drives:
-                if note := d.clear_master_heartbeat():
-                    notes.append(note)
-                    logger.warning("%s", note)
+                try:
+                    note = d.clear_master_heartbeat()
+                except BUS_ERRORS as exc:  # the bus went away now: nothing more to send
+                    note = (f"{d.name}: heartbeat consumer 0x1016.1 not cleared after the run "
+                            f"({_bus_lost(exc)}): nothing the drives sent since was seen")
+                    clean = False
+                if note:
+                    end_notes.append(note)
         if heartbeat is not None:
             with contextlib.suppress(*BUS_ERRORS):  # (a lost bus: nothing to stop)
                 heartbeat.stop()
@@ -577,11 +626,16 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
                     can.BusABC.shutdown(network.bus)
         if sim is not None:
             sim.close()
+        after = runs[-1].index if runs else None
         if io is not None and io.emcy:  # in no log: none is open now, and none will be
             for text in keep_emcy_outside_logs(
-                    state_file, state, runs[-1].index if runs else None,
+                    state_file, state, after,
                     [(emcy_text(f"node {cfg.drives[dd].node_id}", code, reg),
                       cfg.drives[dd].node_id, code, reg) for dd, code, reg in io.emcy]):
+                notes.append(text)
+                logger.warning("%s", text)
+        if end_notes:  # the wind-down's warnings: in no log either
+            for text in keep_warnings_outside_logs(state_file, state, after, end_notes):
                 notes.append(text)
                 logger.warning("%s", text)
         if old_affinity is not None:

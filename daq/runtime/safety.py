@@ -45,9 +45,21 @@ class RunInterrupted(KeyboardInterrupt):
     ``signum`` is the signal (the exit code is 128 + it).
     """
 
-    def __init__(self, signum: int) -> None:
+    def __init__(self, signum: int, detail: str = "") -> None:
         super().__init__(signal.Signals(signum).name)
         self.signum = signum
+        #: what was left behind, for the one line of the entry point (``jointid:
+        #: interrupted (SIGINT): <detail>``; "" for none)
+        self.detail = detail
+
+
+def interrupt_signal(reason: str) -> int:
+    """The signal named in the reason of a run "interrupted" (:func:`interrupt_reason`):
+    SIGTERM or SIGHUP when it names one, else SIGINT."""
+    for s in (signal.SIGTERM, signal.SIGHUP):
+        if s.name in reason:
+            return int(s)
+    return int(signal.SIGINT)
 
 
 def interrupt_reason(name: str) -> str:
