@@ -1,6 +1,11 @@
 """Campaign orchestration: ``run_campaign`` opens the bus, starts the drives (and the
 ``--simulate`` rig), runs one payload after the other through :class:`daq.runtime.engine.Engine`
-(one MCAP log each), asks the operator between payloads and keeps the resume state file."""
+(one MCAP log each), asks the operator between payloads and keeps the resume state file.
+
+(Past 600 lines: the campaign's lifecycle -- bus, drives, payloads, resume state, the
+wind-down with its bus-lost and EMCY checks -- stays in one file so that every exit path is
+read together and leaves the drives safe; the log metadata helpers (``_metadata``,
+``_attachments``) are the part that could move out.)"""
 
 from __future__ import annotations
 
