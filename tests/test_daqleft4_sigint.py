@@ -10,6 +10,7 @@ Real subprocesses, a real SIGINT, sent once the run's progress line shows payloa
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import signal
@@ -21,8 +22,12 @@ from pathlib import Path
 
 import pytest
 from daq_campaigns import joint_toml
+from robot_campaigns import ARM3
+from test_monitor import _campaign, _model_dir
 
 from daq.protocol.reader import read_run
+from sim_drivers.arm import ArmParams
+from trajectories.robot import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.slow  # jointid subprocesses
@@ -122,3 +127,28 @@ def test_ctrl_c_in_run_exits_130_with_the_drive_stopped(tmp_path):
     assert sorted(p.name for p in out.glob("*.mcap")) == ["long_payload0.mcap"]
     _interrupted_log(out / "long_payload0.mcap")
     assert not (out / "long.state.json").exists()  # nothing completed
+
+
+def test_ctrl_c_in_monitor_calibration_exits_130_and_writes_no_thresholds(tmp_path):
+    """``jointid monitor --calibrate`` interrupted: exit 130 (it returned 1, or 0 with
+    --stop), and no thresholds.json from the few cycles run (it was written from them, and a
+    later --thresholds run would have used it); an older one in the folder is removed."""
+    robot = load_robot(ARM3)
+    model = _model_dir(tmp_path, (robot, ArmParams.from_robot(robot)))
+    camp = _campaign(tmp_path, "sigint")
+    out = tmp_path / "cal"
+    out.mkdir()
+    (out / "thresholds.json").write_text("{}")  # an older calibration's
+    code, err = _interrupt_when_running(
+        ["monitor", str(model), str(camp), "--simulate", "--calibrate", "-o", str(out)],
+        tmp_path)
+    assert "Traceback" not in err, err[-3000:]
+    assert code == 130, (code, err[-3000:])
+    assert err.strip().splitlines()[-1] == (
+        f"jointid: interrupted (SIGINT): the monitor run stopped; its log is closed in {out}")
+    assert not (out / "thresholds.json").exists()
+    s = json.loads((out / "monitor.json").read_text())
+    assert s["status"] == "interrupted" and s["thresholds"] is None
+    assert s["calibration"].startswith("not written: the validation run ended interrupted")
+    (log,) = s["logs"]
+    assert read_run(out / log).metadata["result"]["status"] == "interrupted"

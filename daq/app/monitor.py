@@ -365,7 +365,14 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
         "rest_velocity": v_rest, "status": result.status, "reason": result.reason,
         "wall_s": wall, "missed_cycles": [r.missed for r in result.runs],
         "logs": [str(p.relative_to(out)) for p in logs]}
-    if calibrate:
+    if calibrate and result.status != "done":
+        # thresholds from a run cut short (Ctrl-C, a fault, a lost bus) would hold only its
+        # first cycles: not written, and an older thresholds.json of the folder goes too
+        (out / "thresholds.json").unlink(missing_ok=True)
+        summary["thresholds"] = None
+        summary["calibration"] = (f"not written: the validation run ended {result.status} "
+                                  f"({result.reason}); run --calibrate again")
+    elif calibrate:
         res, mov = [], []
         for p in logs:
             ml = read_monitor(p)
@@ -532,6 +539,11 @@ def _run(args: argparse.Namespace) -> int:
                     rest_velocity=args.rest_velocity, pushes=args.push, stop=args.stop,
                     paced=args.paced)
     print(format_summary(s))
+    if s["status"] == "interrupted":  # Ctrl-C: exit 128 + the signal (130), as jointid run
+        from daq.runtime.safety import RunInterrupted, interrupt_signal
+
+        raise RunInterrupted(interrupt_signal(s["reason"]),
+                             f"the monitor run stopped; its log is closed in {args.out}")
     return 0 if s["status"] == "done" or args.stop else 1
 
 
@@ -541,6 +553,8 @@ def format_summary(s: dict[str, Any]) -> str:
             if s.get("residual") == "observer" else "filtered residual")
     lines = [f"monitor ({kind}): {s['status']} {s['reason']}".rstrip() + f"; missed cycles "
              f"{s['missed_cycles']}"]
+    if s.get("calibration"):
+        lines.append(f"thresholds {s['calibration']}")
     th = s.get("thresholds")
     if th:
         lines.append("thresholds, constant band [N m]: " + ", ".join(
