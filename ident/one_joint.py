@@ -25,7 +25,13 @@ joint with -- the n-dof path's one chain and one model class:
 
 The single-joint :class:`~ident.preprocess.Design` that Table III's bands, the plots and the
 refinement read is built on the same chain's full-rate signals (:meth:`OneJointProblem.design`,
-:func:`ident.preprocess.design_on_full_rate`): the data are filtered once.
+:func:`ident.preprocess.design_on_full_rate`): the data are filtered once, and the columns
+the robot chain already decimated -- the 1-dof regressor's J, MX, MY, the payload torque,
+sign(dq), dq -- are the design's too (:meth:`OneJointProblem.decimated_columns`): the
+regressor is evaluated once for both (the same floats: the decimation filters each row on its
+own; ``benchmarks/fit_fingerprint.py`` unchanged). The paper model's design still forms its
+load-dependent columns from the terms (:class:`ident.models.LoadDependent`), beside the robot
+chain's full-rate products (:func:`ident.robot.design.products_columns`).
 ``tests/test_one_fit.py`` checks the fit gives the single-joint least squares' numbers on that
 design (to 1e-8) on the example campaign (LS and IDIM-IV with the half-cycle torque delay),
 the EMPS data and the demo's logs.
@@ -47,7 +53,7 @@ from . import DataError
 from .chain import FullRate, decimation_index, selection
 from .estimate import DEFAULT_THRESHOLD_PCT, LSResult
 from .loaders import Experiment
-from .models import new_model, usual_model
+from .models import _signed_selection, new_model, usual_model
 from .preprocess import Design, design_on_full_rate
 from .robot import RobotIdentError
 from .robot.base import single_joint_map
@@ -358,7 +364,39 @@ class OneJointProblem:
         st = self.settings
         return design_on_full_rate(library, signals, self.full_rate(), st, st.dq_min,
                                    tau_min=tau_min, load_model=load_model,
-                                   sign_check=sign_check)
+                                   sign_check=sign_check, decimated=self.decimated_columns())
+
+    def decimated_columns(self) -> list[dict[str, tuple[np.ndarray, np.ndarray | None]]]:
+        """Per run, the single-joint columns the robot chain already evaluated, filtered and
+        decimated (``signals.columns``, every decimated sample): J[, MX, MY] (the 1-dof
+        regressor's base columns by the signed map of
+        :func:`ident.robot.base.single_joint_map`, as :class:`ident.models.RigidBody`
+        forms them), ``Ma_ratio`` (the known payload torque, :class:`ident.models.Payload`),
+        ``F_C`` (sign(dq)) and ``F_V`` (the decimated dq), each with its IDIM-IV instrument
+        row (None: the same). The design (:meth:`design`) takes them instead of evaluating
+        those terms a second time on the same full-rate signals; empty where the map is not
+        a signed selection or the instruments are not the robot chain's."""
+        sig = self.signals
+        cols = sig.columns
+        full = self.full_rate(sig)
+        zfull = any(f.ref_ddq is not None for f in full)
+        pick = _signed_selection(np.linalg.inv(self.smap.matrix))
+        if pick is None or zfull != (cols.Wz is not None):
+            return [{} for _ in full]
+        std = list(self.base.columns)
+        out = []
+        for i in range(len(full)):
+            rows = np.flatnonzero(sig.experiment == i)
+            a, b = int(rows[0]), int(rows[-1]) + 1  # a run's rows are contiguous
+            W, Wz = cols.W[0, :, a:b], None if cols.Wz is None else cols.Wz[0, :, a:b]
+            g: dict[str, tuple[np.ndarray, np.ndarray | None]] = {}
+            for name, (c, sign) in zip(self.smap.names, pick, strict=True):
+                g[name] = (W[std[c]] * sign, None if Wz is None else Wz[std[c]] * sign)
+            g["Ma_ratio"] = (cols.p[a:b, 0], None if cols.pz is None else cols.pz[a:b, 0])
+            g["F_C"] = (cols.sign[a:b, 0], None)
+            g["F_V"] = (sig.dq[a:b, 0], None)
+            out.append(g)
+        return out
 
     def _load(self, s: RobotSignals) -> np.ndarray:
         """The load deciding the quadrants: the first fit's tau_out_hat after the sign
