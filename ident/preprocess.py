@@ -23,7 +23,7 @@ access.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -507,6 +507,7 @@ def design_on_full_rate(
     tau_min: float | None = None,
     load_model: tuple[Term, np.ndarray] | None = None,
     sign_check: bool = True,
+    decimated: Sequence[Mapping[str, tuple[np.ndarray, np.ndarray | None]]] | None = None,
 ) -> Design:
     """The design of ``library`` on experiments already filtered at full rate: the second
     half of :func:`build_design` (columns, parallel decimation, selection;
@@ -519,6 +520,14 @@ def design_on_full_rate(
     ``fulls`` carrying the reference's acceleration (``ref_ddq``) it has the IDIM-IV
     instruments. ``dq_min`` [rad/s] is the resolved stiction threshold; ``tau_min``,
     ``load_model``, ``sign_check`` as in :func:`build_design`.
+
+    ``decimated`` gives, per experiment, columns already evaluated, filtered and decimated
+    by the same chain: parameter name -> (its row over every decimated sample of the
+    experiment, the instrument row or None). A term whose every column is given is not
+    evaluated again (e.g. the rigid body, payload, Coulomb and viscous columns of the robot
+    chain of the same joint, :meth:`ident.one_joint.OneJointProblem.design`: one evaluation
+    of the 1-dof regressor feeds the robot fit and the design); the decimation filters each
+    row on its own, so the rows are those the term would give.
 
     Raises
     ------
@@ -537,6 +546,14 @@ def design_on_full_rate(
                             f"signals keep {f.n} after the trim {f.keep}: not its chain")
     b = len(lib.names())
     made: list[tuple[Signals, Signals, Signals | None, list[int]]] = []
+    given = [{} for _ in fulls] if decimated is None else list(decimated)
+    if len(given) != len(fulls):
+        raise DataError(f"{len(given)} experiments of decimated columns given for "
+                        f"{len(fulls)}")
+    # per experiment: the terms evaluated here (the others' rows are given) and their rows
+    own: list[list[tuple[Term, slice]]] = [
+        [(t, tsl) for t, tsl in lib.slices() if not all(n in g for n in t.names())]
+        for g in given]
 
     def columns(i: int, f: FullRate) -> tuple[list[np.ndarray], np.ndarray | None]:
         """The library's columns of experiment i (and the instrument rows that differ)."""
@@ -548,13 +565,16 @@ def design_on_full_rate(
             # torque: the columns read no output (equal to eq. 26's proxy on the kept rows)
             full = replace(full, quadrant=np.sign(_load_torque(full, load_model) * full.dq))
         zfull = None if f.ref_ddq is None else replace(full, ddq=f.ref_ddq[:, 0])
-        cols = np.empty((b, f.n))
+        terms = own[i]
+        cols = np.empty((sum(tsl.stop - tsl.start for _, tsl in terms), f.n))
         zrows: list[tuple[int, np.ndarray]] = []
-        for term, tsl in lib.slices():
+        at = 0
+        for term, tsl in terms:
             c = term.columns(full).T
-            cols[tsl] = c
+            cols[at:at + c.shape[0]] = c
             if zfull is not None:
                 zrows += _instrument_rows(term.columns(zfull).T, c, tsl.start)
+            at += c.shape[0]
         made.append((sub, full, zfull, [j for j, _ in zrows]))
         rows = [cols, np.stack([r for _, r in zrows])] if zrows else [cols]
         bad = _rejected(full, tau_min, load_model if sign_check else None)
@@ -562,14 +582,30 @@ def design_on_full_rate(
 
     chained = chain_blocks(fulls, settings, dq_min, columns)
     blocks: list[_Block] = []
-    for c, (sub, full, zfull, zrows) in zip(chained, made, strict=True):
-        dec = c.dec
+    names = lib.names()
+    for e, (c, (sub, full, zfull, zrows)) in enumerate(zip(chained, made, strict=True)):
+        m = c.index.size
+        dec = np.empty((4 + b, m))
+        dec[:4] = c.dec[:4]
+        at = 4
+        for _, tsl in own[e]:  # the rows evaluated here, in the library's order
+            dec[4 + tsl.start : 4 + tsl.stop] = c.dec[at : at + tsl.stop - tsl.start]
+            at += tsl.stop - tsl.start
         zdec = None
         if zfull is not None:
-            zdec = dec[4 : 4 + b].copy()
+            zdec = dec[4:].copy()
             for k, i in enumerate(zrows):
-                zdec[i] = dec[4 + b + k]
-            dec = np.ascontiguousarray(dec[: 4 + b])
+                zdec[i] = c.dec[at + k]
+        for j, n in enumerate(names):  # the given rows
+            if n not in given[e]:
+                continue
+            w, z = given[e][n]
+            if np.shape(w) != (m,):
+                raise DataError(f"experiment {e}: the given column {n} has {np.size(w)} "
+                                f"decimated samples, the chain {m}")
+            dec[4 + j] = w
+            if zdec is not None:
+                zdec[j] = w if z is None else z
         blocks.append(_Block(sub=sub, full=full, index=c.index, dec=dec, mask=c.keep[:, 0],
                              zfull=zfull, zdec=zdec))
     Y, W, dsig, Z = _assemble(blocks, b, signals.revolute)
