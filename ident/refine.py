@@ -165,7 +165,8 @@ def _effect_parameters(
     term: Effect, model: IdentModel, design: Design, all_coef: dict[str, float]
 ) -> dict[str, dict[str, float]]:
     """Term parameters with 2σ; hyper-parameters via the linearised model (Jacobian column
-    d(W_term χ_term)/dh appended to the kept regressor)."""
+    d(W_term χ_term)/dh appended to the kept regressor), raised to the term's block
+    jackknife where it makes one (:meth:`~ident.effects.Effect.jackknife`: the ripple)."""
     names = list(model.names_)
     tnames = [n for n in term.names() if n in model.coef_]
     s = design.signals.states()
@@ -204,7 +205,11 @@ def _effect_parameters(
             for n, v, d in zip(tnames, coef, sd, strict=False)
         }
     par = term.parameters(coef, sub)
-    out = {k: {"value": float(v), "std2": float(e)} for k, (v, e) in par.items()}
+    # the honest 2σ: the larger of the linearised one and the block jackknife's (the scan
+    # redone per replicate, Effect.jackknife), as the robot fit's sigma
+    jack = term.jackknife(design, names) or {}
+    out = {k: {"value": float(v), "std2": max(float(e), jack.get(k, 0.0))}
+           for k, (v, e) in par.items()}
     out.update(term.extra_parameters(all_coef, names, cov, out))
     return out
 

@@ -33,6 +33,7 @@ from ..terms import Library, Term
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..diagnose import Diagnosis
+    from ..preprocess import Design
     from ._scan import Columns
 
 __all__ = [
@@ -243,6 +244,21 @@ class Effect(Term):
             More ``{name: {"value", "std2"}}`` entries for the report (none by default).
         """
         return {}
+
+    def jackknife(self, design: Design, names: Sequence[str]) -> dict[str, float] | None:
+        """Twice the block-jackknife standard deviation of the parameters of
+        :meth:`parameters`, the hyper-parameter's scan redone in every replicate
+        (:func:`ident.effects._jackknife.hyper_jackknife`); None: not made (the default:
+        the linearised 2σ stands alone).
+
+        Parameters
+        ----------
+        design : Design
+            The design with this term's columns (the fit's rows, instruments if any).
+        names : sequence of str
+            The fitted model's kept columns, in the order of its fit.
+        """
+        return None
 
     def physical_range(self, parameters: dict[str, dict[str, float]],
                        setting: Setting) -> str | None:

@@ -20,7 +20,7 @@ from scipy import optimize
 from ..signals import Signals
 from ._base import Effect
 
-__all__ = ["Scorer", "Columns", "effective_n", "refine_1d", "scan_log"]
+__all__ = ["Scorer", "Columns", "effective_n", "fast_rows", "refine_1d", "scan_log"]
 
 
 def effective_n(residual: np.ndarray) -> float:
@@ -104,9 +104,10 @@ class Columns:
     match :meth:`Design.with_term`'s columns closely and cost no full-rate pass. The exact
     columns are used only for the acceptance refit."""
 
-    def __init__(self, s: Signals, scorer: Scorer) -> None:
+    def __init__(self, s: Signals, scorer: Scorer, fast_rows: np.ndarray | None = None) -> None:
         self.scorer, self.s = scorer, s
         self._fast: Columns | None = None
+        self._fast_rows = fast_rows
 
     def gain(self, e: Effect) -> float:
         """RSS removed by the effect's columns on the decimated signals."""
@@ -114,16 +115,23 @@ class Columns:
 
     @property
     def fast(self) -> Columns:
-        """The same scorer on at most ~8000 samples (regular stride), for hyper-parameter
-        scans; the gain of the chosen value is then computed on every sample."""
-        n = len(self.s)
-        if n <= 12000:
+        """The same scorer on at most ~8000 samples (:func:`fast_rows`, or the rows given
+        as ``fast_rows``), for hyper-parameter scans; the gain of the chosen value is then
+        computed on every sample."""
+        sub = fast_rows(len(self.s)) if self._fast_rows is None else self._fast_rows
+        if sub is None:
             return self
         if self._fast is None:
-            st = math.ceil(n / 8000)
-            sub = slice(None, None, st)
             self._fast = Columns(self.s.take(sub), Scorer(self.scorer.Q[sub], self.scorer.r[sub]))
         return self._fast
+
+
+def fast_rows(n: int) -> np.ndarray | None:
+    """Rows of :attr:`Columns.fast` among ``n`` samples: every ``ceil(n / 8000)``-th above
+    12000 samples, None (all) below."""
+    if n <= 12000:
+        return None
+    return np.arange(0, n, math.ceil(n / 8000))
 
 
 def refine_1d(

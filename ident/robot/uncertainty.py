@@ -83,7 +83,8 @@ from .moments import JointMoments
 from .paper import PAPER_BLOCK, paper_coefficients, require_theta, usual_coefficients
 from .signals import RobotColumns, RobotSignals
 
-__all__ = ["Uncertainty", "assess", "jackknife_units", "parameter_records", "N_BLOCKS", "Z_IV",
+__all__ = ["Uncertainty", "assess", "jackknife_rows", "jackknife_spread", "jackknife_units",
+           "parameter_records", "N_BLOCKS", "Z_IV",
            "RATIO_FLAG", "PRUNABLE"]
 
 #: Default number of jackknife units (experiments, or blocks of them).
@@ -185,21 +186,47 @@ def _take(sig: RobotSignals, rows: np.ndarray) -> RobotSignals:
                    q_ref=None if sig.q_ref is None else sig.q_ref[rows], columns=cols)
 
 
+def jackknife_rows(groups: Sequence[np.ndarray], n_blocks: int = N_BLOCKS
+                   ) -> tuple[list[tuple[int, np.ndarray]], str]:
+    """The jackknife's units (module doc) as rows: ``groups`` holds the rows of each
+    experiment; each is one unit when there are at least ``n_blocks`` of them, otherwise
+    each is cut into ``ceil(n_blocks / experiments)`` contiguous blocks (at least 2).
+
+    Returns
+    -------
+    (list of (int, ndarray), str)
+        Per unit the index of its experiment in ``groups`` and its rows; what they are.
+    """
+    if len(groups) >= n_blocks:
+        return [(g, np.asarray(r)) for g, r in enumerate(groups)], f"{len(groups)} experiments"
+    per = max(2, math.ceil(n_blocks / len(groups)))
+    units = [(g, part) for g, rows in enumerate(groups) for part in np.array_split(rows, per)
+             if part.size]
+    return units, (f"{per} contiguous blocks of each of {len(groups)} experiment"
+                   + ("s" if len(groups) > 1 else ""))
+
+
+def jackknife_spread(replicates: np.ndarray) -> np.ndarray:
+    """The jackknife's sigma of the U replicates (rows of ``replicates``, shape (U, p)):
+    ``sqrt(U - 1) * 1.4826 MAD`` per column (module doc), the delete-one jackknife's
+    sqrt((U - 1) / U sum_u (x_u - mean)^2) with a robust deviation, so that one replicate
+    that ends elsewhere (a weak direction) does not decide it."""
+    X = np.asarray(replicates, dtype=float)
+    mad = 1.4826 * np.median(np.abs(X - np.median(X, axis=0)), axis=0)
+    return np.sqrt(X.shape[0] - 1) * mad
+
+
 def jackknife_units(signals: RobotSignals | Sequence[RobotSignals],
                     n_blocks: int = N_BLOCKS) -> tuple[list[RobotSignals], str]:
-    """Cut the data into the jackknife's units (module doc); (units, what they are)."""
+    """Cut the data into the jackknife's units (module doc, :func:`jackknife_rows`); (units,
+    what they are)."""
     items = [signals] if isinstance(signals, RobotSignals) else list(signals)
     exps = [(s, np.flatnonzero(s.experiment == e)) for s in items
             for e in np.unique(s.experiment)]
     if not exps:
         raise RobotIdentError("uncertainty: no samples")
-    if len(exps) >= n_blocks:
-        return [_take(s, r) for s, r in exps], f"{len(exps)} experiments"
-    per = max(2, math.ceil(n_blocks / len(exps)))
-    units = [_take(s, part) for s, rows in exps for part in np.array_split(rows, per)
-             if part.size]
-    return units, (f"{per} contiguous blocks of each of {len(exps)} experiment"
-                   + ("s" if len(exps) > 1 else ""))
+    units, text = jackknife_rows([r for _, r in exps], n_blocks)
+    return [_take(exps[g][0], rows) for g, rows in units], text
 
 
 def _sum(moms: list[list[JointMoments]], counts: np.ndarray) -> list[JointMoments]:
@@ -277,11 +304,7 @@ def _replicates(model: Any, moms: list[list[JointMoments]], free: np.ndarray,
     m = len(xs)
     if m < 3:
         return np.full(model.coef_.size, np.nan), failed
-    X = np.asarray(xs)
-    # robust spread: (U - 1) mean (x_u - mean)^2 with 1.4826 MAD for the deviation, so one
-    # replicate that ends elsewhere (a weak direction) does not decide the sigma
-    mad = 1.4826 * np.median(np.abs(X - np.median(X, axis=0)), axis=0)
-    return np.sqrt(m - 1) * mad, failed
+    return jackknife_spread(np.asarray(xs)), failed
 
 
 def _iv_check(model: Any, signals: Any) -> tuple[Any, str]:
