@@ -19,6 +19,10 @@ its result in a :class:`Design`:
 The chain's functions (:func:`~ident.chain.lowpass`, :func:`~ident.chain.decimate`,
 :func:`~ident.chain.choose_cutoff`, ...) are importable from here too. Pure numerics: no file
 access.
+
+(Past 600 lines: the :class:`Design` and its two builders, :func:`build_design` and
+:func:`design_on_full_rate` (which now takes the robot chain's decimated columns), share the
+private block assembly and selection; the ``Design`` class could move to a module of its own.)
 """
 
 from __future__ import annotations
