@@ -23,7 +23,9 @@ One step of :func:`refine`:
    (b) it lowers the relative error by at least ``min_gain`` (relative), (c) with the
    library search, it lowers the held-out error (a basis: by ``min_gain``), and (d) where
    validation data exist, it lowers the validation relative error too (up to three bases
-   that pass are then compared on it); otherwise the next best candidate is tried (at
+   that pass are then compared on it), and (e) a torque lag passes (b) again with its
+   column on the motion band (:class:`_MotionPart`: the applied-torque noise the measured
+   motion carries is also in the residual); otherwise the next best candidate is tried (at
    most ``max_tries``);
 4. add the term (:meth:`~ident.preprocess.Design.with_term`: columns filtered and decimated
    like the others), refit, report; stop when nothing is accepted or after ``max_steps``.
@@ -43,6 +45,7 @@ and refits, used nowhere else. The step and report types are already in
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
@@ -50,6 +53,7 @@ import numpy as np
 from scipy import stats
 
 from . import DataError
+from .chain import choose_cutoff, lowpass
 from .describe import MATCH_SHARE, name_torque_lag
 from .diagnose import Diagnosis, diagnose
 from .effects import (
@@ -66,6 +70,7 @@ from .effects import (
     rigid_prediction,
     unique_tag,
 )
+from .effects.torque_lag import time_derivative
 from .models import IdentModel
 from .refine_library import LibraryStep, library_step
 from .refine_lsq import quick_residual
@@ -378,6 +383,92 @@ def quadrant_drift(design: Design, lib: Library, coef: Mapping[str, float]) -> f
     return moved / n if n else None
 
 
+class _MotionPart(Term):
+    """The torque-lag candidate's column on the band of the motion: d/dt of the model
+    prediction after a zero-phase low-pass (:func:`ident.chain.lowpass`) at ``cutoff_hz``
+    [Hz], per experiment, on full-rate or decimated states alike.
+
+    The lag's own column, dτ̂/dt on the measured (filtered) motion, also carries the torque
+    noise that moved the joint: in closed loop the applied-torque noise is in the residual
+    and, through the measured acceleration, in dτ̂/dt (its derivative, the jerk, is
+    broadband). That shared noise correlates the two whatever the joint does; its motion
+    band does not (see :func:`_motion_check`)."""
+
+    effect = "torque_lag"
+    variable = "acceleration"
+
+    def __init__(self, lag: TorqueLag, cutoff_hz: float) -> None:
+        self.lag, self.cutoff_hz = lag, float(cutoff_hz)
+
+    def names(self) -> tuple[str, ...]:
+        return tuple(n + "_motion" for n in self.lag.names())
+
+    def columns(self, s: Signals) -> np.ndarray:
+        x = self.lag.tau_model(s)
+        out = np.empty_like(x)
+        for e in np.unique(s.experiment):
+            k = s.experiment == e
+            t = s.t[k]
+            fs = 1.0 / float(np.median(np.diff(t))) if t.size > 1 else 0.0
+            # a run too short for the filter's padding, or a cut-off above its Nyquist
+            # frequency, keeps its prediction as it is
+            ok = t.size > 12 and self.cutoff_hz < 0.5 * fs
+            out[k] = lowpass(x[k], self.cutoff_hz, fs, order=2) if ok else x[k]
+        return time_derivative(out, s)[:, None]
+
+
+def _motion_band(design: Design) -> float | None:
+    """5 x the motion bandwidth [Hz] of the design's runs (:func:`ident.chain.choose_cutoff`
+    without its lower bound f_s/20: the trajectory's own band, the paper's "5 times the
+    bandwidth of the dynamics"), the largest over the runs; None when it is not below the
+    design's cut-off (the columns are filtered no further than the motion) or unknown."""
+    cut = getattr(design, "cutoff_hz", None)
+    bands = []
+    for b in getattr(design, "_blocks", None) or ():
+        sub = getattr(b, "sub", None)
+        if sub is None:
+            continue
+        t, q = np.asarray(sub.t, dtype=float), np.asarray(sub.q, dtype=float)
+        if q.ndim != 1 or t.size < 16:
+            continue
+        with warnings.catch_warnings():  # its bound warnings are the chain's, given there
+            warnings.simplefilter("ignore")
+            bands.append(choose_cutoff(q, float(np.median(np.diff(t))), min_fraction=1e-9))
+    if not bands or cut is None:
+        return None
+    fc = max(bands)
+    return fc if fc < cut else None
+
+
+def _motion_check(e: TorqueLag, lib: Library, design: Design, name: str, cur: IdentModel,
+                  before: dict[str, float], vmax: float | None, min_gain: float,
+                  cutoff_hz: float | None) -> str | None:
+    """Why a torque lag that passed the relative-error rule is refused, or None: its column
+    on the motion band (:class:`_MotionPart` at ``cutoff_hz``, 5 x the motion bandwidth) must
+    pass the same rule (``min_gain`` overall, or twice it in a velocity band). A lag of the
+    joint delays the torque of the motion; a gain its band does not keep came from the noise
+    the column shares with the residual (measured on the friction-dominated joint of
+    ``tests/test_refine_quadrant_drift.py``: 13 % of the residual's sum of squares explained,
+    T_lag 4 ms, with the applied-torque noise; nothing without it; docs/refinement.md)."""
+    if cutoff_hz is None:
+        return None
+    part = _MotionPart(e, cutoff_hz)
+    try:
+        d_s = design.with_term(part, states_only=True)
+        m_s = _fit(Library(*lib.terms(), part), d_s, name)
+    except DataError:
+        return None
+    overall = 1.0 - m_s.rel_error_ / cur.rel_error_ if cur.rel_error_ > 0 else 0.0
+    best = _best_band_gain(before, _bands(m_s, d_s, vmax), cur.rel_error_, m_s.rel_error_)
+    if overall < min_gain and best < 2 * min_gain:
+        return (f"its column on the motion band (below {cutoff_hz:.3g} Hz, 5 x the motion "
+                f"bandwidth) lowers the relative error {_pct(cur.rel_error_)} -> "
+                f"{_pct(m_s.rel_error_)} only: less than {100 * min_gain:g} % better overall "
+                f"and {200 * min_gain:g} % in the low- and high-velocity bands; the rest is the "
+                "noise the measured motion shares with the residual, not a lag")
+    return None
+
+
 # ------------------------------------------------------------------------ the loop
 def refine(
     design: Design,
@@ -471,6 +562,7 @@ def refine(
     floor = noise_floor(cur.residual_, cur_design.Y, runs)
     floor_initial = floor
     drift_initial = quadrant_drift(cur_design, lib, cur.coef_)
+    motion_hz = _motion_band(cur_design)
     h_cur = heldout_error(_kept(cur_design, cur), cur_design.Y, runs)
     h_initial = h_cur
     val_err = cur.rel_error_on(cur_val) if cur_val is not None else None
@@ -630,6 +722,9 @@ def refine(
                         f"less than {100 * min_gain:g} % better overall and "
                         f"{200 * min_gain:g} % in the low- and high-velocity bands"
                     )
+                elif isinstance(e, TorqueLag):
+                    reason = _motion_check(e, lib, cur_design, name, cur, before_bands, vmax,
+                                           min_gain, motion_hz)
             # data the candidate was not fitted on: other runs, or other blocks of one run
             h1 = heldout_error(_kept(d1, m1), d1.Y, runs)
             low = min(m1.rel_error_, h1)
