@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..refine_lsq import quick_residual
+from ..robot.uncertainty import jackknife_rows, jackknife_spread
 from ._scan import Columns, Scorer, fast_rows
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -68,7 +69,6 @@ def hyper_jackknife(
         One standard deviation per physical parameter; None when the term's columns are not
         all kept or fewer than :data:`MIN_REPLICATES` replicates could be fitted.
     """
-    from ..robot.uncertainty import jackknife_rows, jackknife_spread  # (heavy, rare)
 
     tnames = list(term.names())
     names = list(names)
