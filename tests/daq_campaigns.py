@@ -45,6 +45,16 @@ def joint_toml(name: str, *, cycle_s: float) -> str:
             f'[control]\ncycle_s = {cycle_s}\nkp = 6000.0\nkd = 200.0\n')
 
 
+def sine_toml(name: str, channel: str, *, masses: tuple[float, ...] = (0.0,),
+              periods: int = 1) -> str:
+    """A whole CLI campaign file: :func:`joint_toml` (2 ms cycle), one payload per mass [kg]
+    at 1 m, a 0.02 rad 2 Hz sine of ``periods`` periods, the ``[daq]`` ``channel``."""
+    pays = "".join(f"[[payloads]]\nmass_kg = {m}\narm_m = 1.0\n" for m in masses)
+    return (joint_toml(name, cycle_s=0.002) + pays
+            + '[[segments]]\nkind = "sine"\namplitude = 0.02\nfrequency_hz = 2.0\n'
+            f'center = 0.0\nperiods = {periods}\n[daq]\nchannel = "{channel}"\n')
+
+
 def sine_campaign(name: str, **daq: Any) -> RobotCampaign:
     """The campaign ``name`` (its file name ``<name>.toml`` in messages); ``daq`` keys are
     added to (or replace) the defaults: a channel ``test_<name>_<n>``, a 50-cycle TPDO

@@ -20,10 +20,9 @@ from __future__ import annotations
 
 import json
 import shutil
-import textwrap
 
 import pytest
-from daq_campaigns import joint_toml
+from daq_campaigns import sine_toml
 
 from daq.app.cli import main
 from daq.runtime.campaign_id import difference
@@ -33,22 +32,7 @@ PLANT = "examples/plant_rx130l.toml"
 
 def _campaign(tmp_path, name: str) -> object:
     src = tmp_path / f"{name}.toml"
-    src.write_text(joint_toml(name, cycle_s=0.002) + textwrap.dedent(f"""
-        [[payloads]]
-        mass_kg = 0.0
-        arm_m = 1.0
-        [[payloads]]
-        mass_kg = 2.0
-        arm_m = 1.0
-        [[segments]]
-        kind = "sine"
-        amplitude = 0.02
-        frequency_hz = 2.0
-        center = 0.0
-        periods = 1
-        [daq]
-        channel = "test_daqleft4_{name}"
-        """))
+    src.write_text(sine_toml(name, f"test_daqleft4_{name}", masses=(0.0, 2.0)))
     return src
 
 

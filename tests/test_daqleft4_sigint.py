@@ -16,12 +16,11 @@ import shutil
 import signal
 import subprocess
 import sys
-import textwrap
 import threading
 from pathlib import Path
 
 import pytest
-from daq_campaigns import joint_toml
+from daq_campaigns import sine_toml
 from robot_campaigns import ARM3
 from test_monitor import _campaign, _model_dir
 
@@ -99,22 +98,7 @@ def test_ctrl_c_in_the_demo_exits_130_with_the_drive_stopped(tmp_path):
 
 def test_ctrl_c_in_run_exits_130_with_the_drive_stopped(tmp_path):
     src = tmp_path / "long.toml"
-    src.write_text(joint_toml("long", cycle_s=0.002) + textwrap.dedent("""
-        [[payloads]]
-        mass_kg = 0.0
-        arm_m = 1.0
-        [[payloads]]
-        mass_kg = 2.0
-        arm_m = 1.0
-        [[segments]]
-        kind = "sine"
-        amplitude = 0.02
-        frequency_hz = 2.0
-        center = 0.0
-        periods = 200
-        [daq]
-        channel = "test_daqleft4_sigint_run"
-        """))
+    src.write_text(sine_toml("long", "test_daqleft4_sigint_run", masses=(0.0, 2.0), periods=200))
     out = tmp_path / "runs"
     code, err = _interrupt_when_running(
         ["run", str(src), "--simulate", str(ROOT / "examples" / "plant_rx130l.toml"),

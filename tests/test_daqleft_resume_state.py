@@ -11,11 +11,10 @@ in one line naming the state file and what differs, nothing written."""
 from __future__ import annotations
 
 import json
-import textwrap
 from dataclasses import replace
 
 import pytest
-from daq_campaigns import joint_toml, sine_campaign
+from daq_campaigns import sine_campaign, sine_toml
 
 from daq import ConfigError
 from daq.app.cli import main
@@ -126,19 +125,7 @@ def test_cli_resume_with_a_state_of_another_campaign(tmp_path, capsys):
     """``jointid run --resume`` into a folder holding only the state file of campaign
     "rig a" (its logs moved away): exit 2, one line, nothing written, nothing moved."""
     src = tmp_path / "rig_a.toml"
-    src.write_text(joint_toml("rig_a", cycle_s=0.002) + textwrap.dedent("""
-        [[payloads]]
-        mass_kg = 0.0
-        arm_m = 1.0
-        [[segments]]
-        kind = "sine"
-        amplitude = 0.02
-        frequency_hz = 2.0
-        center = 0.0
-        periods = 1
-        [daq]
-        channel = "test_rig_a_cli"
-        """))
+    src.write_text(sine_toml("rig_a", "test_rig_a_cli"))
     out = tmp_path / "runs"
     out.mkdir()
     state_file = out / "rig_a.state.json"
