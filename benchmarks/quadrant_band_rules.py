@@ -27,7 +27,6 @@ import json
 import re
 import sys
 import tempfile
-import tomllib
 import warnings
 from pathlib import Path
 
@@ -39,30 +38,17 @@ KUKA_MAP = "t=rec.time_cont,q=rec.act_pos_mot_deg,tau=rec.act_torque_abs_nm,q_re
 def joint(bands: list[float], seeds: tuple[int, ...] = (1, 21)) -> None:
     """The friction-dominated joint's paper fit with the single joint's band at ``bands``."""
     sys.path.insert(0, str(ROOT / "tests"))
-    from test_friction_dominated import FRICTION_DOMINATED, TRUTH
+    from test_friction_dominated import TRUTH, friction_dominated
 
     import ident.one_joint as one_joint
-    from daq.protocol.control import ControllerGains
     from ident.fitting import fit_models
     from ident.loaders import make_experiment
     from sim_drivers.offline import simulate
-    from sim_drivers.plant_config import load_plant
-    from trajectories.plan import plan_campaign
-    from trajectories.robot_campaign import RobotCampaign
 
     txt = (ROOT / "sim_drivers" / "data" / "plant_default.toml").read_text()
-    for k, v in FRICTION_DOMINATED.items():
-        txt = re.sub(rf"^{k} = [-0-9.]+", f"{k} = {v}", txt, flags=re.M)
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "plant.toml"
-        path.write_text(txt)
-        plant = load_plant(path)
-    with open(ROOT / "examples" / "campaign.toml", "rb") as fh:
-        raw = tomllib.load(fh)
-    raw["control"]["feedforward"].update(J=3.0, MX=2.0, Fc=60.0, Fv=20.0)
-    camp = RobotCampaign.from_dict(raw, "friction-dominated")
-    plan = plan_campaign(camp)
-    gains = ControllerGains(**camp.gains_kwargs())
+        plant, plan, gains = friction_dominated(txt, Path(tmp) / "plant.toml",
+                                                "friction-dominated")
     saved = one_joint.SKIPPED_CHECK_BAND
     try:
         for seed in seeds:

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import re
 import sys
-import tomllib
 import warnings
 from pathlib import Path
 from tempfile import TemporaryDirectory
@@ -32,9 +31,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from test_friction_dominated import FRICTION_DOMINATED  # noqa: E402
+from test_friction_dominated import friction_dominated  # noqa: E402
 
-from daq.protocol.control import ControllerGains  # noqa: E402
 from ident.effects import TorqueLag, model_prediction, rigid_prediction  # noqa: E402
 from ident.effects.torque_lag import time_derivative  # noqa: E402
 from ident.fitting import fit_models  # noqa: E402
@@ -43,9 +41,6 @@ from ident.models import IdentModel  # noqa: E402
 from ident.refine import _fit, _MotionPart, refine  # noqa: E402
 from ident.terms import Term  # noqa: E402
 from sim_drivers.offline import simulate  # noqa: E402
-from sim_drivers.plant_config import load_plant  # noqa: E402
-from trajectories.plan import plan_campaign  # noqa: E402
-from trajectories.robot_campaign import RobotCampaign  # noqa: E402
 
 LAG = "\n[effects.torque_lag]\nenabled = true\ntime_constant_s = 0.005\n"
 
@@ -57,17 +52,8 @@ def fitted(seed: int, tmp: Path, noise: bool, lag: bool):
     if not noise:
         txt = re.sub(r"^torque_noise_std_Nm = [0-9.]+", "torque_noise_std_Nm = 0.0", txt,
                      flags=re.M)
-    for k, v in FRICTION_DOMINATED.items():
-        txt = re.sub(rf"^{k} = [-0-9.]+", f"{k} = {v}", txt, flags=re.M)
-    path = tmp / f"plant_{noise}_{lag}.toml"
-    path.write_text(txt + (LAG if lag else ""))
-    plant = load_plant(path)
-    with open(ROOT / "examples" / "campaign.toml", "rb") as fh:
-        d = tomllib.load(fh)
-    d["control"]["feedforward"].update(J=3.0, MX=2.0, Fc=60.0, Fv=20.0)
-    camp = RobotCampaign.from_dict(d, "lag-noise")
-    plan = plan_campaign(camp)
-    gains = ControllerGains(**camp.gains_kwargs())
+    plant, plan, gains = friction_dominated(txt + (LAG if lag else ""),
+                                            tmp / f"plant_{noise}_{lag}.toml", "lag-noise")
     exps = []
     for i, p in enumerate(plan.payloads):
         r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,

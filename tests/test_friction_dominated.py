@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import re
 import tomllib
+from pathlib import Path
 
 import pytest
 from example_campaign import ROOT
@@ -38,22 +39,30 @@ FRICTION_DOMINATED = {"J": 3.0, "MX": 2.0, "MY": 0.3, "c_m": 60.0, "d_m": 25.0, 
 TRUTH = {**FRICTION_DOMINATED, "a_m": 1.03, "a_g": 0.97, "b_m": 0.24, "b_g": 0.25}
 
 
-@pytest.fixture(scope="module")
-def setup(tmp_path_factory):
-    txt = (ROOT / "sim_drivers" / "data" / "plant_default.toml").read_text()
+def friction_dominated(txt: str, path: Path, name: str) -> tuple:
+    """(plant, plan, gains) of the friction-dominated joint: the plant file text ``txt`` with
+    :data:`FRICTION_DOMINATED`'s values, written to ``path``; the example campaign with its
+    feed-forward set to them, named ``name`` (the tests' and the benchmarks' one setup)."""
     for k, v in FRICTION_DOMINATED.items():
         txt, n = re.subn(rf"^{k} = [-0-9.]+", f"{k} = {v}", txt, flags=re.M)
         assert n == 1, k
-    path = tmp_path_factory.mktemp("fric") / "plant.toml"
     path.write_text(txt)
     plant = load_plant(path)
-    for k in ("a_m", "a_g", "b_m", "b_g"):  # the default's, kept
-        assert getattr(plant.friction, k) == pytest.approx(TRUTH[k])
     with open(ROOT / "examples" / "campaign.toml", "rb") as fh:
         d = tomllib.load(fh)
     d["control"]["feedforward"].update(J=3.0, MX=2.0, Fc=60.0, Fv=20.0)
-    camp = RobotCampaign.from_dict(d, "friction-dominated")
+    camp = RobotCampaign.from_dict(d, name)
     return plant, plan_campaign(camp), ControllerGains(**camp.gains_kwargs())
+
+
+@pytest.fixture(scope="module")
+def setup(tmp_path_factory):
+    txt = (ROOT / "sim_drivers" / "data" / "plant_default.toml").read_text()
+    out = friction_dominated(txt, tmp_path_factory.mktemp("fric") / "plant.toml",
+                             "friction-dominated")
+    for k in ("a_m", "a_g", "b_m", "b_g"):  # the default's, kept
+        assert getattr(out[0].friction, k) == pytest.approx(TRUTH[k])
+    return out
 
 
 @pytest.mark.slow
