@@ -306,15 +306,24 @@ def test_hung_master_with_periodic_sync_the_rpdo_timer_stops_the_drive(bus3, tmp
         time.sleep(0.5)
         t_stop = time.monotonic()
         master.send_signal(signal.SIGSTOP)
-        emcy = listener.wait(lambda i, d: i == EMCY and len(d) >= 2, 5.0, t_stop)
+        # 15 s: on 2 cores beside two test suites the bridge and the drive's process can
+        # starve for seconds (the fault itself is timed from the frames below, not from here)
+        emcy = listener.wait(lambda i, d: i == EMCY and len(d) >= 2, 15.0, t_stop)
         master.send_signal(signal.SIGKILL)
     finally:
         stop(master)
-    assert emcy is not None, f"no EMCY after hanging the master; drive:\n{drive.output}"
+    rpdos = [t for t, i, _ in listener.frames if i == RPDO1 and t > t_stop]
+    n_before = sum(1 for t, i, _ in listener.frames if i == RPDO1 and t <= t_stop)
+    assert emcy is not None, (f"no EMCY after hanging the master ({n_before} RPDO1 frames "
+                              f"before the SIGSTOP, {len(rpdos)} after it, the last "
+                              f"{(rpdos[-1] - t_stop) if rpdos else 0:.3f} s after it); "
+                              f"drive:\n{drive.output}")
     code = emcy[2][0] | emcy[2][1] << 8
     assert code == 0x8250, f"EMCY 0x{code:04X}"
     last_rpdo = listener.last(RPDO1, emcy[0])
-    assert last_rpdo is not None and last_rpdo <= t_stop + 0.05
+    # the master's RPDOs stop at the SIGSTOP: the listener still receives those already on
+    # their way through the bridge (58 ms late once beside three busy loops), none later
+    assert last_rpdo is not None and last_rpdo <= t_stop + 0.5, (last_rpdo, t_stop)
     # SYNC went on between the last RPDO and the fault: the hung master's SYNC source lived
     syncs_after = [t for t, i, _ in listener.frames if i == 0x80 and last_rpdo < t < emcy[0]]
     assert len(syncs_after) > 20
