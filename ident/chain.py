@@ -70,6 +70,7 @@ __all__ = [
     "diffcent",
     "filter_experiment",
     "guarded_keep",
+    "iv_band_note",
     "iv_floor",
     "keep_rows",
     "lowpass",
@@ -115,6 +116,17 @@ def iv_floor(fs: float) -> float:
     """Lower bound of the default cut-off with instruments, as a fraction of ``fs`` [Hz]:
     :data:`CUTOFF_FLOOR_IV`, raised to :data:`CUTOFF_MIN_IV_HZ` up to 0.4 f_s."""
     return max(CUTOFF_FLOOR_IV, min(CUTOFF_MIN_IV_HZ / fs, 0.4))
+
+
+def iv_band_note(cutoff_hz: float) -> str | None:
+    """What an IV default cut-off [Hz] below :data:`CUTOFF_MIN_IV_HZ` costs (the warning of
+    :func:`resolve_settings` and the fit report's note), or None when it is not below."""
+    if cutoff_hz >= CUTOFF_MIN_IV_HZ:
+        return None
+    return (f"IV cut-off {cutoff_hz:g} Hz (0.4 f_s, the most the chain takes) is below the "
+            f"{CUTOFF_MIN_IV_HZ:g} Hz the friction's reversal terms need (the paper model's "
+            "b_m_J, b_g_J, F_V): their estimates may lie beyond their standard deviations; "
+            f"log at {CUTOFF_MIN_IV_HZ / 0.4:g} Hz or faster (docs/robot-data.md)")
 
 
 def diffcent(y: np.ndarray, dt: float) -> np.ndarray:
@@ -499,14 +511,10 @@ def resolve_settings(
     if cutoff_hz is None:
         floor = iv_floor(fs) if instruments else 0.05
         cutoff_hz = axes_cutoff(q0, dt, floor, sources[0] if sources else "")
-        if instruments and cutoff_hz < CUTOFF_MIN_IV_HZ:
+        note = iv_band_note(cutoff_hz) if instruments else None
+        if note:
             where = f"{sources[0]}: " if sources else ""
-            warnings.warn(
-                f"{where}sampled at {fs:g} Hz, the IV cut-off is {cutoff_hz:g} Hz, below the "
-                f"{CUTOFF_MIN_IV_HZ:g} Hz the friction's reversal terms need (the paper model's "
-                f"b_m_J, b_g_J, F_V): their estimates may lie beyond their standard "
-                f"deviations; log at "
-                f"{CUTOFF_MIN_IV_HZ / 0.4:g} Hz or faster", stacklevel=2)
+            warnings.warn(f"{where}sampled at {fs:g} Hz: {note}", stacklevel=2)
     cutoff_hz = float(cutoff_hz)
     if not 0 < cutoff_hz < fs / 2:
         raise error(f"cut-off {cutoff_hz:g} Hz: expected between 0 and the Nyquist "

@@ -38,7 +38,7 @@ import numpy as np
 from trajectories.friction import DEFAULT_Q_S
 
 from . import DataError
-from .chain import CUTOFF_MIN_IV_HZ, default_torque_delay
+from .chain import default_torque_delay, iv_band_note
 from .effects import rigid_prediction
 from .loaders import Experiment, concat
 from .models import (
@@ -641,12 +641,9 @@ def fit_models(
         tau_min=tau_min,
         sign_check=sign_check and (like is None or "load_model" in like.settings))
     st = problem.settings
-    if refs is not None and cutoff_hz is None and st.cutoff_hz < CUTOFF_MIN_IV_HZ:
-        # the warning of ident.chain.resolve_settings, kept in the report and its JSON
-        notes.append(f"IV cut-off {st.cutoff_hz:g} Hz (0.4 f_s, the most the chain takes) is "
-                     f"below the {CUTOFF_MIN_IV_HZ:g} Hz the friction's reversal terms need: "
-                     "b_m_J, b_g_J and F_V may lie beyond their standard deviations "
-                     "(docs/robot-data.md)")
+    band_note = iv_band_note(st.cutoff_hz) if refs is not None and cutoff_hz is None else None
+    if band_note:  # the warning of ident.chain.resolve_settings, kept in the report's notes
+        notes.append(band_note)
     pre.update(cutoff_hz=st.cutoff_hz, decimation=st.decimation, trim=st.trim,
                guard=st.guard, dq_min=st.dq_min, dq_min_rel=None)
     # the load that decided the paper model's quadrants when not the first usual fit's (the
