@@ -42,7 +42,7 @@ from .models import IdentModel
 from .preprocess import Design
 from .refine import Refinement, refine
 from .signals import Signals
-from .vocab import check_qs_model, method_name, model_name, refined_model, renamed_keywords
+from .vocab import method_name, model_name, refined_model, renamed_keywords, warn_unused_qs
 
 __all__ = ["JointModel", "RobotFit", "load"]
 
@@ -275,7 +275,7 @@ class JointModel(HyperParameters):
             ``self``, fitted.
         """
         models = self._models()
-        check_qs_model("JointModel", "paper" if len(models) > 1 else models[0], self.q_s,
+        warn_unused_qs("JointModel", "paper" if len(models) > 1 else models[0], self.q_s,
                        DEFAULT_Q_S)
         exps = _experiments(data, self.joint)
         val = _experiments(validation, self.joint) if validation is not None else None

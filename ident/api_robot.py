@@ -42,7 +42,7 @@ from .robot.estimate import RobotModel
 from .robot.loaders import RawRobotRun
 from .robot.signals import RobotSignals
 from .robot.uncertainty import N_BLOCKS
-from .vocab import check_qs_model, model_name, renamed_keywords
+from .vocab import model_name, renamed_keywords, warn_unused_qs
 
 __all__ = ["RobotFit"]
 
@@ -199,7 +199,7 @@ class RobotFit(HyperParameters):
         RobotFit
             ``self``, fitted.
         """
-        check_qs_model("RobotFit", model_name(self.model, extra=("both",)), self.q_s,
+        warn_unused_qs("RobotFit", model_name(self.model, extra=("both",)), self.q_s,
                        DEFAULT_Q_S)
         out = fit_files(
             self._robot(), data, validation, model=self.model, mapping=self._mapping(),

@@ -90,7 +90,7 @@ def model_name(name: str, *, extra: tuple[str, ...] = ()) -> str:
     return name
 
 
-def check_qs_model(owner: str, model: str, q_s: Any, default: float) -> None:
+def warn_unused_qs(owner: str, model: str, q_s: Any, default: float) -> None:
     """The Python API's ``q_s`` is the paper model's (eq. 29): set away from its default with
     ``model="usual"`` (no q_s-dependent term) it is ignored, and a warning says so (as
     scikit-learn does for a hyper-parameter the chosen variant does not use, so a parameter
