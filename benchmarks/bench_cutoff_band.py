@@ -15,19 +15,16 @@ number when the sigmas hold) and the two largest |z|.
 from __future__ import annotations
 
 import argparse
-import tomllib
+import sys
 import warnings
 from pathlib import Path
 
-from daq.protocol.control import ControllerGains
 from ident.fitting import fit_models
-from ident.loaders import make_experiment
-from sim_drivers.offline import simulate
-from sim_drivers.plant_config import load_plant
-from trajectories.plan import plan_campaign
-from trajectories.robot_campaign import RobotCampaign
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+from test_cutoff_band import campaign, simulated, subsampled  # noqa: E402
+
 #: (every n-th sample, cut-offs [Hz]; None: the default).
 CASES = ((1, (62.5, None, 200.0)), (2, (62.5, 100.0, None, 150.0)), (4, (31.25, None)))
 
@@ -36,20 +33,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=6)
     a = ap.parse_args()
-    plant = load_plant(ROOT / "sim_drivers" / "data" / "plant_default.toml")
-    with open(ROOT / "examples" / "campaign.toml", "rb") as fh:
-        camp = RobotCampaign.from_dict(tomllib.load(fh), "cut-off band")
-    plan = plan_campaign(camp)
-    gains = ControllerGains(**camp.gains_kwargs())
-    runs = [simulate(plant, plan.reference, gains, payload_mass=p.mass_kg, payload_arm=p.arm_m,
-                     seed=10 * a.seed + i) for i, p in enumerate(plan.payloads)]
+    plant, plan, gains = campaign()
+    runs = simulated(plant, plan, gains, a.seed)
     truth = plant.truth()
     print(f"seed {a.seed}: f_s [Hz], cut-off [Hz], error [%], sum z^2 / parameters, largest |z|")
     for every, cuts in CASES:
-        exps = [make_experiment(f"run{i}.csv", r.t[::every], r.q[::every], r.tau_ref[::every],
-                                payload_mass=p.mass_kg, payload_arm=p.arm_m,
-                                q_ref=plan.reference.q[: r.t.size][::every])
-                for i, (p, r) in enumerate(zip(plan.payloads, runs, strict=True))]
+        exps = subsampled(plan, runs, every)
         for cut in cuts:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")

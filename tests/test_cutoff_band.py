@@ -29,28 +29,43 @@ from trajectories.plan import plan_campaign
 from trajectories.robot_campaign import RobotCampaign
 
 
-@pytest.fixture(scope="module")
-def setup():
+def campaign() -> tuple:
+    """(plant, plan, gains): the simulated joint and the example campaign (the test's and
+    ``benchmarks/bench_cutoff_band.py``'s one setup)."""
     plant = load_plant(ROOT / "sim_drivers" / "data" / "plant_default.toml")
     with open(ROOT / "examples" / "campaign.toml", "rb") as fh:
         camp = RobotCampaign.from_dict(tomllib.load(fh), "cut-off band")
-    plan = plan_campaign(camp)
-    return plant, plan, ControllerGains(**camp.gains_kwargs()), {}
+    return plant, plan_campaign(camp), ControllerGains(**camp.gains_kwargs())
+
+
+def simulated(plant, plan, gains, seed: int) -> list:
+    """The campaign's runs, one per payload, offline at 1 kHz (noise seeds 10 seed + i)."""
+    return [simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
+                     payload_arm=p.arm_m, seed=10 * seed + i)
+            for i, p in enumerate(plan.payloads)]
+
+
+def subsampled(plan, runs, every: int) -> list:
+    """The experiments of the simulated ``runs`` (one per payload of ``plan``) keeping every
+    ``every``-th sample, with the plan's reference (IDIM-IV)."""
+    k = slice(None, None, every)
+    return [make_experiment(f"run{i}.csv", r.t[k], r.q[k], r.tau_ref[k],
+                            payload_mass=p.mass_kg, payload_arm=p.arm_m,
+                            q_ref=plan.reference.q[: r.t.size][k])
+            for i, (p, r) in enumerate(zip(plan.payloads, runs, strict=True))]
+
+
+@pytest.fixture(scope="module")
+def setup():
+    return (*campaign(), {})
 
 
 def _fit(setup, seed: int, every: int, cutoff_hz: float | None = None):
     """The paper model by IV on the runs of ``seed`` keeping every ``every``-th sample."""
     plant, plan, gains, cache = setup
     if seed not in cache:
-        cache[seed] = [simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
-                                payload_arm=p.arm_m, seed=10 * seed + i)
-                       for i, p in enumerate(plan.payloads)]
-    exps = []
-    for i, (p, r) in enumerate(zip(plan.payloads, cache[seed], strict=True)):
-        k = slice(None, None, every)
-        exps.append(make_experiment(f"run{i}.csv", r.t[k], r.q[k], r.tau_ref[k],
-                                    payload_mass=p.mass_kg, payload_arm=p.arm_m,
-                                    q_ref=plan.reference.q[: r.t.size][k]))
+        cache[seed] = simulated(plant, plan, gains, seed)
+    exps = subsampled(plan, cache[seed], every)
     with warnings.catch_warnings(record=True) as rec:
         warnings.simplefilter("always")
         rep = fit_models(exps, ("paper",), table_iv=False, eliminate=False,
