@@ -300,12 +300,18 @@ def keep_emcy_outside_logs(path: Path, state: RunState, after: int | None,
         state.emcy_outside_logs.append({
             "text": f"{text} {where}", "node_id": node_id, "code": f"0x{code:04X}",
             "error_register": f"0x{reg:02X}", "after_payload": after, "utc": utc})
+    kept = _kept_outside_logs(path, state)
+    return [f"{text} {where} ({kept})" for text, *_ in emcy]
+
+
+def _kept_outside_logs(path: Path, state: RunState) -> str:
+    """Write ``state`` to ``path`` as a run ends (an OSError reported, not raised) and say
+    where what no log holds is kept, for the summary's warnings."""
     try:
         write_state(path, state)
-        kept = f"in no log: recorded in {path.name}"
+        return f"in no log: recorded in {path.name}"
     except OSError as exc:
-        kept = f"in no log, and not recorded: {path}: {exc.strerror or exc}"
-    return [f"{text} {where} ({kept})" for text, *_ in emcy]
+        return f"in no log, and not recorded: {path}: {exc.strerror or exc}"
 
 
 def keep_warnings_outside_logs(path: Path, state: RunState, after: int | None,
@@ -317,11 +323,7 @@ def keep_warnings_outside_logs(path: Path, state: RunState, after: int | None,
     utc = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
     for text in texts:
         state.warnings_outside_logs.append({"text": text, "after_payload": after, "utc": utc})
-    try:
-        write_state(path, state)
-        kept = f"in no log: recorded in {path.name}"
-    except OSError as exc:
-        kept = f"in no log, and not recorded: {path}: {exc.strerror or exc}"
+    kept = _kept_outside_logs(path, state)
     return [f"{text} ({kept})" for text in texts]
 
 
