@@ -45,6 +45,14 @@ def _listing(folder):
             if p.is_file() and p.name != ".jointid-run.lock"}
 
 
+def _refused_unchanged(src, out, capsys, err: str) -> None:
+    """``--resume`` exits 2 with exactly ``err`` on stderr and leaves the folder as it was."""
+    before = _listing(out)
+    assert _run(src, out, "--resume") == 2
+    assert capsys.readouterr().err == err
+    assert _listing(out) == before
+
+
 def test_resume_refuses_a_completed_payload_whose_log_is_gone(tmp_path, capsys):
     src = _campaign(tmp_path, "rl")
     out = tmp_path / "runs"
@@ -60,24 +68,18 @@ def test_resume_refuses_a_completed_payload_whose_log_is_gone(tmp_path, capsys):
     elsewhere = tmp_path / "fitted"
     elsewhere.mkdir()
     shutil.move(log0, elsewhere / log0.name)
-    before = _listing(out)
-    assert _run(src, out, "--resume") == 2
-    assert capsys.readouterr().err == (
+    _refused_unchanged(src, out, capsys, (
         f"jointid run: error: {log0}: missing, but {state_file} lists payload 0 as completed "
         f"(--resume would skip it and leave the campaign without its log); put the log back, "
-        f"or run the payload again: --payload 0 --overwrite (without --resume)\n")
-    assert _listing(out) == before
+        f"or run the payload again: --payload 0 --overwrite (without --resume)\n"))
 
     # another file under its name (here: the log cut short): refused by its size
     data = (elsewhere / log0.name).read_bytes()
     log0.write_bytes(data[: len(data) // 2])
-    before = _listing(out)
-    assert _run(src, out, "--resume") == 2
-    assert capsys.readouterr().err == (
+    _refused_unchanged(src, out, capsys, (
         f"jointid run: error: {log0}: {len(data) // 2} bytes, but {state_file} records "
         f"{len(data)} bytes for payload 0's completed log (replaced or changed since); put the "
-        f"log back, or run the payload again: --payload 0 --overwrite (without --resume)\n")
-    assert _listing(out) == before
+        f"log back, or run the payload again: --payload 0 --overwrite (without --resume)\n"))
 
     # a state file written before the sizes were recorded: the log's presence is checked
     log0.unlink()
