@@ -112,6 +112,7 @@ class _Block:
     mask: np.ndarray  # selection on the decimated samples
     zfull: Signals | None = None  # ``full`` with the reference acceleration (instruments)
     zdec: np.ndarray | None = None  # decimated instrument rows (b, m), same order as columns
+    load: np.ndarray | None = None  # the load model's tau_out_hat at full rate [N m], or None
 
 
 def _assemble(blocks: list[_Block], n_par: int, revolute: bool) -> tuple:
@@ -293,19 +294,19 @@ class Design:
         dq_min: float | None = None,
         tau_min: float | None = None,
         load_model: tuple[Term, np.ndarray] | None = None,
-        quadrant_band: tuple[tuple[Term, np.ndarray], float] | None = None,
+        quadrant_band: float | None = None,
     ) -> Design:
         """The same design with another sample selection (see :func:`build_design`),
-        without recomputing or re-filtering any column. ``quadrant_band`` = (load model, h
-        [N m]): also leave out the rows within the guard of a full-rate sample whose
-        |tau_out_hat| < h (:meth:`ident.one_joint.OneJointProblem.band`)."""
+        without recomputing or re-filtering any column. ``quadrant_band`` = h [N m]: also
+        leave out the rows within the guard of a full-rate sample whose |tau_out_hat| < h,
+        tau_out_hat the prediction of the load model the design was built with
+        (:meth:`ident.one_joint.OneJointProblem.band`)."""
+        if quadrant_band is not None and any(b.load is None for b in self._blocks):
+            raise DataError("quadrant_band: the design was built without a load model")
         blocks = []
         for b in self._blocks:
             tau_out = None if load_model is None else _load_torque(b.full, load_model)
-            band = None
-            if quadrant_band is not None:
-                model, h = quadrant_band
-                band = (tau_out if model is load_model else _load_torque(b.full, model), h)
+            band = None if quadrant_band is None else (b.load, float(quadrant_band))
             blocks.append(replace(b, mask=_selection(b.full, b.index, dq_min, tau_min,
                                                      self.guard, tau_out, band)))
         Y, W, dsig, Z = _assemble(blocks, len(self.names), self.signals.revolute)
@@ -565,7 +566,7 @@ def design_on_full_rate(
             raise DataError(f"experiment {i}: {sl.stop - sl.start} samples, its full-rate "
                             f"signals keep {f.n} after the trim {f.keep}: not its chain")
     b = len(lib.names())
-    made: list[tuple[Signals, Signals, Signals | None, list[int]]] = []
+    made: list[tuple[Signals, Signals, Signals | None, list[int], np.ndarray | None]] = []
     given = [{} for _ in fulls] if decimated is None else list(decimated)
     if len(given) != len(fulls):
         raise DataError(f"{len(given)} experiments of decimated columns given for "
@@ -598,7 +599,7 @@ def design_on_full_rate(
             if zfull is not None:
                 zrows += _instrument_rows(term.columns(zfull).T, c, tsl.start)
             at += c.shape[0]
-        made.append((sub, full, zfull, [j for j, _ in zrows]))
+        made.append((sub, full, zfull, [j for j, _ in zrows], tau_out))
         rows = [cols, np.stack([r for _, r in zrows])] if zrows else [cols]
         bad = _rejected(full, tau_min, tau_out if sign_check else None)
         return rows, None if bad is None else bad[:, None]
@@ -606,7 +607,7 @@ def design_on_full_rate(
     chained = chain_blocks(fulls, settings, dq_min, columns)
     blocks: list[_Block] = []
     names = lib.names()
-    for e, (c, (sub, full, zfull, zrows)) in enumerate(zip(chained, made, strict=True)):
+    for e, (c, (sub, full, zfull, zrows, load)) in enumerate(zip(chained, made, strict=True)):
         m = c.index.size
         dec = np.empty((4 + b, m))
         dec[:4] = c.dec[:4]
@@ -630,7 +631,7 @@ def design_on_full_rate(
             if zdec is not None:
                 zdec[j] = w if z is None else z
         blocks.append(_Block(sub=sub, full=full, index=c.index, dec=dec, mask=c.keep[:, 0],
-                             zfull=zfull, zdec=zdec))
+                             zfull=zfull, zdec=zdec, load=load))
     Y, W, dsig, Z = _assemble(blocks, b, signals.revolute)
     return Design(Y=Y, W=W, names=tuple(lib.names()), library=lib, signals=dsig, Z=Z,
                   cutoff_hz=settings.cutoff_hz, decimation=settings.decimation,
