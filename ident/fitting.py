@@ -710,8 +710,7 @@ def fit_models(
         skipped: :meth:`~ident.one_joint.OneJointProblem.band`), as its robot fit."""
         if problem.band() <= 0 or "load_model" not in pre:
             return d
-        return d.select(dq_min=d.dq_min, tau_min=d.tau_min,
-                        quadrant_band=(pre["load_model"], problem.band_nm))
+        return d.select(dq_min=d.dq_min, tau_min=d.tau_min, quadrant_band=problem.band_nm)
 
     for name in models:
         lib, d = part(full, name, has_payload, qs_val)

@@ -29,12 +29,22 @@ refinement read is built on the same chain's full-rate signals (:meth:`OneJointP
 the robot chain already decimated -- the 1-dof regressor's J, MX, MY, the payload torque,
 sign(dq), dq -- are the design's too (:meth:`OneJointProblem.decimated_columns`): the
 regressor is evaluated once for both (the same floats: the decimation filters each row on its
-own; ``benchmarks/fit_fingerprint.py`` unchanged). The paper model's design still forms its
-load-dependent columns from the terms (:class:`ident.models.LoadDependent`), beside the robot
-chain's full-rate products (:func:`ident.robot.design.products_columns`).
+own; ``benchmarks/fit_fingerprint.py`` unchanged). The paper model's columns at the design's
+q_s -- a_m_<n> ... b_g, c_m ... d_g -- are the robot chain's full-rate products
+(:func:`ident.robot.design.products_columns`, not :class:`ident.models.LoadDependent` and
+:class:`ident.models.QuadrantCoulomb` evaluated again), and the load deciding the design's
+quadrants and sign check is the robot fit's prediction: each run's tau_out_hat is evaluated
+once per load model (:class:`_RunLoads`) for the sign check, the products, the quadrant band
+and the design. Another q_s than the design's (a scan, ``like=``) re-forms the paper columns
+from the terms (:func:`ident.fitting._part`); validation files are not the robot chain's
+(:func:`ident.preprocess.build_design`).
 ``tests/test_one_fit.py`` checks the fit gives the single-joint least squares' numbers on that
 design (to 1e-8) on the example campaign (LS and IDIM-IV with the half-cycle torque delay),
 the EMPS data and the demo's logs.
+
+(Past 600 lines: the problem, its load memo and the columns it gives the single-joint design
+belong together; :func:`refit_found_terms`, a thin adapter of :func:`ident.robot.refit.
+refit_robot`, could move out.)
 """
 
 from __future__ import annotations
@@ -53,7 +63,7 @@ from . import DataError
 from .chain import FullRate, decimation_index, selection
 from .estimate import DEFAULT_THRESHOLD_PCT, LSResult
 from .loaders import Experiment
-from .models import _signed_selection, new_model, usual_model
+from .models import LoadDependent, QuadrantCoulomb, _signed_selection, new_model, usual_model
 from .preprocess import Design, design_on_full_rate
 from .robot import RobotIdentError
 from .robot.base import single_joint_map
@@ -208,6 +218,34 @@ def _single(est: RobotModel, sig: RobotSignals, name: str, single_names: Sequenc
         names={v: (k, float(np.sign(rows[k][index[v]]))) for k, v in robot_name.items()})
 
 
+def _products_qs(library: Term) -> float | None:
+    """The one q_s [rad/s] of the paper model's quadrant terms in ``library`` whose quadrant
+    is the design's (no ``load`` of their own), or None (none, or several q_s)."""
+    qs = {t.q_s for t in library.terms()
+          if isinstance(t, LoadDependent | QuadrantCoulomb) and t.load is None}
+    return qs.pop() if len(qs) == 1 else None
+
+
+class _RunLoads:
+    """A load model's tau_out_hat (n_f, 1) [N m] on each run's full-rate signals, evaluated
+    once per run: the sign check (:func:`~ident.robot.design.sign_checked`), the quadrants of
+    the full-rate products (:func:`~ident.robot.design.products_columns`), the quadrant band
+    and the design (:meth:`OneJointProblem.design`) read the same prediction. A run is known
+    by the chain's kept full-rate position array (``FullRate.q``) the signals hold."""
+
+    def __init__(self, load_torque: Any) -> None:
+        self.load_torque = load_torque
+        self._done: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def __call__(self, s: RobotSignals) -> np.ndarray:
+        for q, out in self._done:
+            if q is s.q:
+                return out
+        out = np.asarray(self.load_torque(s), dtype=float)
+        self._done.append((s.q, out))
+        return out
+
+
 class OneJointProblem:
     """The experiments of one joint prepared for the robot fits (module doc, 1.-3.), fitted
     by :meth:`fit` for any model and q_s (the products re-formed per q_s).
@@ -283,6 +321,7 @@ class OneJointProblem:
         self.band_nm = 0.0  # the paper model's quadrant band [N m] (:meth:`band`)
         self.band_kept = 1.0  # share of the rows the band keeps (1: not decided yet)
         self._band_keep: np.ndarray | None = None
+        self._loads: _RunLoads | None = None  # the quadrant model's full-rate loads
         try:
             st = resolve_design(self.runs, instruments=self.iv, **settings)
             sig, dqm = design_runs(self.runs, self.reg, st, instruments=self.iv,
@@ -298,8 +337,10 @@ class OneJointProblem:
                 self.first = RobotModel(self.reg, "usual", self.method, base=self.base,
                                         payload_ratio=self._ratio, eliminate=True,
                                         threshold_pct=np.inf).fit(sig)
+            if self.first is not None:
+                self._loads = _RunLoads(self.first.load_torque)
             if paper and self.first is not None and (first is None or first_checked):
-                out, kept = sign_checked(sig, self.runs, st, self.first.load_torque)
+                out, kept = sign_checked(sig, self.runs, st, self._loads)
                 if tau_keep is not None:  # the check's rows recomputed: tau_min again
                     keep = out.columns.keep & tau_keep
                     out = replace(out, columns=replace(out.columns, keep=keep))
@@ -374,13 +415,28 @@ class OneJointProblem:
         signals with its settings: :func:`ident.preprocess.build_design`'s result with those
         settings, without filtering the data a second time (``tau_min``, ``load_model``,
         ``sign_check`` as there). What reads a design -- Table III's bands, the plots, the
-        refinement -- sees the samples the robot model was fitted on."""
+        refinement -- sees the samples the robot model was fitted on.
+
+        ``load_model`` is the load deciding this problem's quadrants (:meth:`load_values`):
+        its full-rate prediction is then the robot fit's (:class:`_RunLoads`, not its terms
+        evaluated again), and the paper model's columns at one q_s are the full-rate
+        products' (:meth:`decimated_columns`)."""
         st = self.settings
+        by_model = self._by_model()
+        loads = None
+        if load_model is not None and by_model:
+            loads = [x[:, 0] for _, x in full_rate_loads(self.signals, self.runs, st,
+                                                          self._load)]
+        # the products' quadrant is this problem's: the design's only when its load is too
+        same = (load_model is not None) == by_model
         return design_on_full_rate(library, signals, self.full_rate(), st, st.dq_min,
                                    tau_min=tau_min, load_model=load_model,
-                                   sign_check=sign_check, decimated=self.decimated_columns())
+                                   sign_check=sign_check, loads=loads,
+                                   decimated=self.decimated_columns(
+                                       _products_qs(library) if same else None))
 
-    def decimated_columns(self) -> list[dict[str, tuple[np.ndarray, np.ndarray | None]]]:
+    def decimated_columns(self, q_s: float | None = None
+                          ) -> list[dict[str, tuple[np.ndarray, np.ndarray | None]]]:
         """Per run, the single-joint columns the robot chain already evaluated, filtered and
         decimated (``signals.columns``, every decimated sample): J[, MX, MY] (the 1-dof
         regressor's base columns by the signed map of
@@ -389,7 +445,13 @@ class OneJointProblem:
         ``F_C`` (sign(dq)) and ``F_V`` (the decimated dq), each with its IDIM-IV instrument
         row (None: the same). The design (:meth:`design`) takes them instead of evaluating
         those terms a second time on the same full-rate signals; empty where the map is not
-        a signed selection or the instruments are not the robot chain's."""
+        a signed selection or the instruments are not the robot chain's.
+
+        With ``q_s`` [rad/s], also the paper model's columns at that q_s from the full-rate
+        products (:meth:`products`, eq. 42-43 and 30): a_m_<n>, b_m_<n>, a_g_<n>, b_g_<n> of
+        J[, MX, MY] (signed as above) and the bare a_m, b_m, a_g, b_g of the payload torque
+        (:class:`ident.models.LoadDependent`), and c_m, d_m, c_g, d_g
+        (:class:`ident.models.QuadrantCoulomb`), formed with this problem's quadrants."""
         sig = self.signals
         cols = sig.columns
         full = self.full_rate(sig)
@@ -410,15 +472,45 @@ class OneJointProblem:
             g["F_C"] = (cols.sign[a:b, 0], None)
             g["F_V"] = (sig.dq[a:b, 0], None)
             out.append(g)
+        if q_s is not None:
+            self._products_columns(q_s, pick, out)
         return out
+
+    def _products_columns(self, q_s: float, pick: list[tuple[int, float]],
+                          out: list[dict[str, tuple[np.ndarray, np.ndarray | None]]]) -> None:
+        """Add the paper model's decimated columns at ``q_s`` to ``out`` (per run, see
+        :meth:`decimated_columns`)."""
+        sig = self.products(q_s)
+        pr = sig.columns.products
+        at = {int(c): r for r, c in enumerate(pr.cols[0])}  # standard column -> load row
+        std = list(self.base.columns)
+        rows = {f"_{n}": (at[int(std[c])], sign)
+                for n, (c, sign) in zip(self.smap.names, pick, strict=True)
+                if int(std[c]) in at}
+        rows[""] = (len(pr.cols[0]), 1.0)  # the known (payload) torque: a_m, b_m, ...
+        L, Lz = pr.loads[0], None if pr.loads_z is None else pr.loads_z[0]
+        for i, g in enumerate(out):
+            e = np.flatnonzero(sig.experiment == i)
+            a, b = int(e[0]), int(e[-1]) + 1
+            for suffix, (r, sign) in rows.items():
+                for blk, pre in enumerate(("a_m", "b_m", "a_g", "b_g")):
+                    g[f"{pre}{suffix}"] = (L[blk, r, a:b] * sign,
+                                           None if Lz is None else Lz[blk, r, a:b] * sign)
+            for blk, name in enumerate(("c_m", "d_m", "c_g", "d_g")):
+                g[name] = (pr.coulomb[blk, a:b, 0], None)
+
+    def _by_model(self) -> bool:
+        """Whether a load model decides the quadrants (:meth:`_load`)."""
+        return (self.sign_checked or self.model_quadrant) and self._loads is not None
 
     def _load(self, s: RobotSignals) -> np.ndarray:
         """The load deciding the quadrants: the first fit's tau_out_hat after the sign
-        check (or the load :meth:`requadrant` set), else the measured quadrant sign(tau dq)
-        (eq. 26) -- the filtered torque of the full-rate signals
+        check (or the load :meth:`requadrant` set), evaluated once per run
+        (:class:`_RunLoads`), else the measured quadrant sign(tau dq) (eq. 26) -- the
+        filtered torque of the full-rate signals
         :func:`~ident.robot.design.products_columns` forms."""
-        if (self.sign_checked or self.model_quadrant) and self.first is not None:
-            return self._quadrant_model().load_torque(s)
+        if self._by_model() and self._loads is not None:
+            return self._loads(s)
         return s.tau
 
     def _quadrant_model(self) -> RobotModel:
@@ -441,6 +533,7 @@ class OneJointProblem:
         theta = np.linalg.lstsq(self.smap.matrix[rows], np.array([values[n] for n in names]),
                                 rcond=None)[0]
         self._quadrant_theta = theta
+        self._loads = _RunLoads(self._quadrant_model().load_torque)
         self._products = {}
         self._products_cache = {}
         self._band_keep, self.band_kept, self.band_nm = None, 1.0, 0.0

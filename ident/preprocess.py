@@ -112,6 +112,7 @@ class _Block:
     mask: np.ndarray  # selection on the decimated samples
     zfull: Signals | None = None  # ``full`` with the reference acceleration (instruments)
     zdec: np.ndarray | None = None  # decimated instrument rows (b, m), same order as columns
+    load: np.ndarray | None = None  # the load model's tau_out_hat at full rate [N m], or None
 
 
 def _assemble(blocks: list[_Block], n_par: int, revolute: bool) -> tuple:
@@ -293,17 +294,21 @@ class Design:
         dq_min: float | None = None,
         tau_min: float | None = None,
         load_model: tuple[Term, np.ndarray] | None = None,
-        quadrant_band: tuple[tuple[Term, np.ndarray], float] | None = None,
+        quadrant_band: float | None = None,
     ) -> Design:
         """The same design with another sample selection (see :func:`build_design`),
-        without recomputing or re-filtering any column. ``quadrant_band`` = (load model, h
-        [N m]): also leave out the rows within the guard of a full-rate sample whose
-        |tau_out_hat| < h (:meth:`ident.one_joint.OneJointProblem.band`)."""
-        blocks = [
-            replace(b, mask=_selection(b.full, b.index, dq_min, tau_min, self.guard, load_model,
-                                       quadrant_band))
-            for b in self._blocks
-        ]
+        without recomputing or re-filtering any column. ``quadrant_band`` = h [N m]: also
+        leave out the rows within the guard of a full-rate sample whose |tau_out_hat| < h,
+        tau_out_hat the prediction of the load model the design was built with
+        (:meth:`ident.one_joint.OneJointProblem.band`)."""
+        if quadrant_band is not None and any(b.load is None for b in self._blocks):
+            raise DataError("quadrant_band: the design was built without a load model")
+        blocks = []
+        for b in self._blocks:
+            tau_out = None if load_model is None else _load_torque(b.full, load_model)
+            band = None if quadrant_band is None else (b.load, float(quadrant_band))
+            blocks.append(replace(b, mask=_selection(b.full, b.index, dq_min, tau_min,
+                                                     self.guard, tau_out, band)))
         Y, W, dsig, Z = _assemble(blocks, len(self.names), self.signals.revolute)
         return replace(
             self, Y=Y, W=W, Z=Z, signals=dsig, dq_min=dq_min, tau_min=tau_min, _blocks=blocks
@@ -320,21 +325,21 @@ def _instrument_rows(zcols: np.ndarray, wcols: np.ndarray, offset: int) -> list:
     ]
 
 
-def _rejected(full: Signals, tau_min: float | None,
-              load_model: tuple[Term, np.ndarray] | None,
-              band: tuple[tuple[Term, np.ndarray], float] | None = None) -> np.ndarray | None:
+def _rejected(full: Signals, tau_min: float | None, tau_out: np.ndarray | None,
+              band: tuple[np.ndarray, float] | None = None) -> np.ndarray | None:
     """Full-rate samples the single joint rejects besides the stiction area (n,) or None:
-    |tau| < ``tau_min``, sign(tau) != sign(tau_out_hat) (see build_design) and, with
-    ``band`` = (load model, h [N m]), |tau_out_hat| < h (:meth:`Design.select`)."""
-    if tau_min is None and load_model is None and band is None:
+    |tau| < ``tau_min``, sign(tau) != sign(tau_out_hat) (``tau_out``: the load model's
+    prediction [N m], see build_design) and, with ``band`` = (tau_out_hat of a load model,
+    h [N m]), |tau_out_hat| < h (:meth:`Design.select`)."""
+    if tau_min is None and tau_out is None and band is None:
         return None
     bad = np.zeros(len(full), dtype=bool)
     if tau_min is not None:
         bad |= np.abs(full.tau) < tau_min
-    if load_model is not None:
-        bad |= np.sign(full.tau) != np.sign(_load_torque(full, load_model))
+    if tau_out is not None:
+        bad |= np.sign(full.tau) != np.sign(tau_out)
     if band is not None:
-        bad |= np.abs(_load_torque(full, band[0])) < band[1]
+        bad |= np.abs(band[0]) < band[1]
     return bad
 
 
@@ -344,12 +349,12 @@ def _selection(
     dq_min: float | None,
     tau_min: float | None,
     guard: int,
-    load_model: tuple[Term, np.ndarray] | None,
-    band: tuple[tuple[Term, np.ndarray], float] | None = None,
+    tau_out: np.ndarray | None,
+    band: tuple[np.ndarray, float] | None = None,
 ) -> np.ndarray:
     """Mask over the decimated samples ``index`` of one experiment (see build_design), the
     chain's selection (:func:`ident.chain.selection`) on one axis."""
-    bad = _rejected(full, tau_min, load_model, band)
+    bad = _rejected(full, tau_min, tau_out, band)
     return selection(full.dq[:, None], dq_min, guard, index,
                      None if bad is None else bad[:, None])[:, 0]
 
@@ -512,6 +517,7 @@ def design_on_full_rate(
     load_model: tuple[Term, np.ndarray] | None = None,
     sign_check: bool = True,
     decimated: Sequence[Mapping[str, tuple[np.ndarray, np.ndarray | None]]] | None = None,
+    loads: Sequence[np.ndarray] | None = None,
 ) -> Design:
     """The design of ``library`` on experiments already filtered at full rate: the second
     half of :func:`build_design` (columns, parallel decimation, selection;
@@ -533,10 +539,16 @@ def design_on_full_rate(
     of the 1-dof regressor feeds the robot fit and the design); the decimation filters each
     row on its own, so the rows are those the term would give.
 
+    ``loads`` gives, per experiment, the ``load_model``'s prediction tau_out_hat at full rate
+    [N m], shape (n_f,) (e.g. the robot fit's, :meth:`ident.one_joint.OneJointProblem.design`),
+    instead of evaluating its terms; without it the load model is evaluated once per
+    experiment. It decides the quadrant sign(tau_out_hat dq) and the sign check.
+
     Raises
     ------
     DataError
-        ``fulls`` do not match the experiments of ``signals``; non-finite extra signals.
+        ``fulls`` do not match the experiments of ``signals`` (or ``loads`` them);
+        non-finite extra signals.
     """
     lib = library if isinstance(library, Library) else Library(library)
     _check_extra(signals)
@@ -544,12 +556,17 @@ def design_on_full_rate(
     if len(fulls) != len(slices):
         raise DataError(f"{len(fulls)} full-rate experiments given for the {len(slices)} "
                         "experiments of the signals")
+    if loads is not None and (load_model is None or len(loads) != len(fulls)
+                              or any(np.shape(x) != (f.n,) for x, f in zip(loads, fulls,
+                                                                           strict=False))):
+        raise DataError("loads: expected one full-rate load prediction (n_f,) per experiment "
+                        "of a load_model")
     for i, (sl, f) in enumerate(zip(slices, fulls, strict=True)):
         if len(range(sl.start, sl.stop)[f.keep]) != f.n:
             raise DataError(f"experiment {i}: {sl.stop - sl.start} samples, its full-rate "
                             f"signals keep {f.n} after the trim {f.keep}: not its chain")
     b = len(lib.names())
-    made: list[tuple[Signals, Signals, Signals | None, list[int]]] = []
+    made: list[tuple[Signals, Signals, Signals | None, list[int], np.ndarray | None]] = []
     given = [{} for _ in fulls] if decimated is None else list(decimated)
     if len(given) != len(fulls):
         raise DataError(f"{len(given)} experiments of decimated columns given for "
@@ -564,10 +581,13 @@ def design_on_full_rate(
         sl = slices[i]
         sub = signals.take(np.arange(sl.start, sl.stop)[f.keep])
         full = replace(sub, q=f.q[:, 0], dq=f.dq[:, 0], ddq=f.ddq[:, 0], tau=f.tau_f[:, 0])
+        tau_out = None
         if load_model is not None:
             # the quadrant of eq. 27-28 from the model of the load, not from the measured
             # torque: the columns read no output (equal to eq. 26's proxy on the kept rows)
-            full = replace(full, quadrant=np.sign(_load_torque(full, load_model) * full.dq))
+            tau_out = (_load_torque(full, load_model) if loads is None
+                       else np.asarray(loads[i], dtype=float))
+            full = replace(full, quadrant=np.sign(tau_out * full.dq))
         zfull = None if f.ref_ddq is None else replace(full, ddq=f.ref_ddq[:, 0])
         terms = own[i]
         cols = np.empty((sum(tsl.stop - tsl.start for _, tsl in terms), f.n))
@@ -579,15 +599,15 @@ def design_on_full_rate(
             if zfull is not None:
                 zrows += _instrument_rows(term.columns(zfull).T, c, tsl.start)
             at += c.shape[0]
-        made.append((sub, full, zfull, [j for j, _ in zrows]))
+        made.append((sub, full, zfull, [j for j, _ in zrows], tau_out))
         rows = [cols, np.stack([r for _, r in zrows])] if zrows else [cols]
-        bad = _rejected(full, tau_min, load_model if sign_check else None)
+        bad = _rejected(full, tau_min, tau_out if sign_check else None)
         return rows, None if bad is None else bad[:, None]
 
     chained = chain_blocks(fulls, settings, dq_min, columns)
     blocks: list[_Block] = []
     names = lib.names()
-    for e, (c, (sub, full, zfull, zrows)) in enumerate(zip(chained, made, strict=True)):
+    for e, (c, (sub, full, zfull, zrows, load)) in enumerate(zip(chained, made, strict=True)):
         m = c.index.size
         dec = np.empty((4 + b, m))
         dec[:4] = c.dec[:4]
@@ -611,7 +631,7 @@ def design_on_full_rate(
             if zdec is not None:
                 zdec[j] = w if z is None else z
         blocks.append(_Block(sub=sub, full=full, index=c.index, dec=dec, mask=c.keep[:, 0],
-                             zfull=zfull, zdec=zdec))
+                             zfull=zfull, zdec=zdec, load=load))
     Y, W, dsig, Z = _assemble(blocks, b, signals.revolute)
     return Design(Y=Y, W=W, names=tuple(lib.names()), library=lib, signals=dsig, Z=Z,
                   cutoff_hz=settings.cutoff_hz, decimation=settings.decimation,
