@@ -15,7 +15,13 @@ with a 5 ms torque lag, with and without the noise. Printed:
 * that projection by distance of the rows to the quadrant band (in guards);
 * T_lag by least squares on the column low-passed at 2, 5 and 10 Hz (:class:`ident.refine.
   _MotionPart`), with and without the lag in the plant;
-* the refinement's step 1 (``max_steps=1``) on each plant.
+* the refinement's step 1 (``max_steps=1``) on each plant;
+* where it adds the lag, T_lag by instrumental variables on its final design (each column its
+  own instrument but those named): the lag's column instrumented by its motion band
+  (:class:`ident.refine._MotionPart` at 5 x the motion bandwidth), by dtau_hat/dt evaluated on
+  the reference trajectory's states (q_ref, dq_ref, ddq_ref: free of the plant's noise), every
+  column by its value on the reference's states (IDIM-IV's idea with the whole reference);
+  and T_lag by least squares on the rows with |dq| above 10 % of its maximum.
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ from __future__ import annotations
 import re
 import sys
 import warnings
+from dataclasses import replace
 from pathlib import Path
 from tempfile import TemporaryDirectory
 
@@ -35,10 +42,11 @@ from test_friction_dominated import friction_dominated  # noqa: E402
 
 from ident.effects import TorqueLag, model_prediction, rigid_prediction  # noqa: E402
 from ident.effects.torque_lag import time_derivative  # noqa: E402
+from ident.estimate import fit_least_squares  # noqa: E402
 from ident.fitting import fit_models  # noqa: E402
 from ident.loaders import make_experiment  # noqa: E402
 from ident.models import IdentModel  # noqa: E402
-from ident.refine import _fit, _MotionPart, refine  # noqa: E402
+from ident.refine import _fit, _motion_band, _MotionPart, refine  # noqa: E402
 from ident.terms import Term  # noqa: E402
 from sim_drivers.offline import simulate  # noqa: E402
 
@@ -60,7 +68,54 @@ def fitted(seed: int, tmp: Path, noise: bool, lag: bool):
                      payload_arm=p.arm_m, seed=10 * seed + i)
         exps.append(make_experiment(f"p{i}.csv", r.t, r.q, r.tau_ref, payload_mass=p.mass_kg,
                                     payload_arm=p.arm_m))
-    return fit_models(exps, ("paper",), table_iv=False)
+    return fit_models(exps, ("paper",), table_iv=False), plan.reference
+
+
+class _OnReference(Term):
+    """``term``'s columns on the reference trajectory's states (q, dq, ddq of ``ref``
+    interpolated at the samples' times; every run replays the same reference from t = 0)."""
+
+    def __init__(self, term: Term, ref) -> None:
+        self.term, self.ref = term, ref
+        self.effect, self.variable = term.effect, term.variable
+
+    def names(self) -> tuple[str, ...]:
+        return tuple(n + "_ref" for n in self.term.names())
+
+    def columns(self, s):
+        return self.term.columns(replace(s, **{k: np.interp(s.t, self.ref.t, getattr(self.ref, k))
+                                               for k in ("q", "dq", "ddq")}))
+
+
+def instrumented(R, rep, ref) -> None:
+    """T_lag of the refinement's final design by instrumental variables (module doc)."""
+    d1 = R.final_design
+    lag = next(t for t in d1.library.terms() if isinstance(t, TorqueLag))
+    i = d1.names.index("T_lag")
+
+    def show(label, Z, rows=slice(None)):
+        res = fit_least_squares(d1.W[rows], d1.Y[rows], d1.names, eliminate=False,
+                                Z=None if Z is None else Z[rows])
+        j = list(res.names).index("T_lag")
+        print(f"    {label}: T_lag {1e3 * res.chi[j]:.2f} +- {2e3 * res.std[j]:.2f} ms (2 sigma), "
+              f"relative error {100 * res.rel_error:.3f} %")
+
+    fc = _motion_band(rep.designs["paper"])
+    Z = d1.W.copy()
+    Z[:, i] = d1.with_term(_MotionPart(lag, fc), states_only=True).W[:, -1]
+    show(f"IV, the lag's column instrumented by its motion band ({fc:.3g} Hz)", Z)
+    Zr = d1.W.copy()
+    for t in d1.library.terms():
+        k = len(t.names())
+        cols = d1.with_term(_OnReference(t, ref), states_only=True).W[:, -k:]
+        for j, n in enumerate(t.names()):
+            Zr[:, d1.names.index(n)] = cols[:, j]
+    Z = d1.W.copy()
+    Z[:, i] = Zr[:, i]
+    show("IV, the lag's column instrumented by dtau_hat/dt on the reference", Z)
+    show("IV, every column instrumented by its value on the reference", Zr)
+    adq = np.abs(d1.signals.dq)
+    show("least squares on the rows with |dq| > 10 % of its maximum", None, adq > 0.1 * adq.max())
 
 
 class _Col(Term):
@@ -76,7 +131,7 @@ class _Col(Term):
         return self.f(s)[:, None]
 
 
-def analyse(rep, twin=None) -> None:
+def analyse(rep, twin=None, ref=None) -> None:
     d = rep.designs["paper"]
     lib = rep.models["paper"].library
     m = _fit(lib, d, "paper")
@@ -148,6 +203,8 @@ def analyse(rep, twin=None) -> None:
                                       f"{1e3 * st.parameters[key]['std2']:.2f} ms")
         print(f"  refinement adds {st.effect}{val} ({100 * st.rel_error_before:.2f} -> "
               f"{100 * st.rel_error_after:.2f} %)")
+        if key is not None and ref is not None:
+            instrumented(R, rep, ref)
     for rj in R.rejected:
         print(f"  refinement rejects {rj.effect}: {rj.reason}")
 
@@ -157,14 +214,15 @@ def main() -> None:
     warnings.filterwarnings("ignore")
     with TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        noisy, clean = fitted(seed, tmp, True, False), fitted(seed, tmp, False, False)
+        (noisy, _), (clean, _) = fitted(seed, tmp, True, False), fitted(seed, tmp, False, False)
         print(f"seed {seed}, no undeclared effect, with the applied-torque noise:")
         analyse(noisy, clean)
         print("without the noise:")
         analyse(clean)
         for noise in (True, False):
             print(f"5 ms torque lag, {'with' if noise else 'without'} the noise:")
-            analyse(fitted(seed, tmp, noise, True))
+            rep, ref = fitted(seed, tmp, noise, True)
+            analyse(rep, ref=ref)
 
 
 if __name__ == "__main__":

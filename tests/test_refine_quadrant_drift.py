@@ -120,12 +120,18 @@ def test_friction_dominated_joint_settles_its_quadrants(tmp_path, seed):
 
 
 @pytest.mark.slow
-def test_friction_dominated_joint_finds_a_real_lag(tmp_path):
+@pytest.mark.parametrize("seed", [4, 6, 11])
+def test_friction_dominated_joint_finds_a_real_lag(tmp_path, seed):
     """Positive control of the motion-band rule: the same joint with a 5 ms torque lag in the
     plant. The lag is found at step 1 and named; its estimate is biased high on this light
     arm (measured 7.22 +- 0.12 ms (2 sigma) on seed 4, docs/refinement.md): the test checks
-    it is found and lies between the truth and twice it, not within its sigma."""
-    rep, R = _refined(tmp_path, True, 4, effect="torque_lag")
+    it is found and lies between the truth and twice it, not within its sigma. No estimate
+    measured is within 2 sigma of 5 ms (benchmarks/refine_lag_noise.py, seeds 4, 6, 11):
+    instrumental variables with the lag's motion band as instrument give 6.84 +- 0.18 ms,
+    with the reference trajectory's states 6.27 +- 0.25 (seed 4); without the plant's noise
+    the estimates span 4.92 to 6.31 ms (the held command's half cycle, 0.5 ms, adds to the
+    staged lag, and the first-order form is itself off by about 0.5 ms)."""
+    rep, R = _refined(tmp_path, True, seed, effect="torque_lag")
     assert R.steps, R.format_report()
     st = R.steps[0]
     assert st.effect == "torque_lag" and st.physical_range is None, R.format_report()
