@@ -143,6 +143,7 @@ class Step:
                                       fl) or None,
             "physical_range": {"inside": self.physical_range is None,
                                "reason": self.physical_range},
+            "sigma_note": self.term.sigma_note(),
             "effect": self.effect,
             "variable": self.variable,
             "variables": list(self.variables or (self.variable,)),
@@ -369,6 +370,8 @@ class Refinement:
                 out.append(f"    {s.structure}")
             for n, v in s.parameters.items():
                 out.append(f"    {n:<18} = {v['value']:.6g} ± {v['std2']:.2g} (2σ)")
+            if s.term.sigma_note():
+                out.append(f"    note: {s.term.sigma_note()}")
             out.append(
                 f"  F test {s.f_statistic:.3g} (p={s.f_p_value:.1e}); relative error "
                 f"{_pct(s.rel_error_before)} -> {_pct(s.rel_error_after)}, "

@@ -160,6 +160,9 @@ def refinement_section(ref: dict) -> Section:
         s.table(["Step", "Residual depends on", "Effect added", "Error before", "Error after",
                  f"{ref.get('heldout_kind', 'held-out')} after", "Error / noise floor",
                  "Validation before", "Validation after", "Physical range"], rows)
+    for i, st in enumerate(steps, 1):
+        if st.get("sigma_note"):
+            s.para(f"Step {i}: {st['sigma_note']}.")
     if ref.get("noise_floor") is not None:
         s.para(f"Estimated noise floor (what no model can explain): {fmt(ref['noise_floor'])}"
                + (f"; {ref['leak_warning'].strip(' []')}" if ref.get("leak_warning") else "")

@@ -49,6 +49,11 @@ class Term(ABC):
         """One line saying what the term models, with its formula."""
         return self.effect
 
+    def sigma_note(self) -> str | None:
+        """What the parameters' 2σ leaves out, when measurements showed it (one line, printed
+        with a refinement step and kept in its JSON as ``sigma_note``); None by default."""
+        return None
+
     def __add__(self, other: Term) -> Library:
         return Library(*self.terms(), *other.terms())
 

@@ -137,6 +137,10 @@ def test_friction_dominated_joint_finds_a_real_lag(tmp_path, seed):
     assert st.effect == "torque_lag" and st.physical_range is None, R.format_report()
     T = st.parameters["T_lag"]["value"]
     assert 0.005 < T < 0.010, R.format_report()
+    # the user is told that the 2 sigma does not cover this bias: report text and JSON
+    assert "note: T_lag's 2σ covers the estimate's noise, not the lag model's" in (
+        R.format_report()), R.format_report()
+    assert st.to_json()["sigma_note"].startswith("T_lag's 2σ covers")
 
 
 @pytest.mark.slow

@@ -59,6 +59,13 @@ class TorqueLag(Effect):
     def describe(self) -> str:
         return "torque lag T_lag d(tau_model)/dt"
 
+    def sigma_note(self) -> str | None:
+        """The 2σ is the least-squares noise only (docs/refinement.md, section 6)."""
+        return ("T_lag's 2σ covers the estimate's noise, not the lag model's own error: on "
+                "the simulated friction-dominated joint a staged 5 ms lag reads 7.1 to 7.4 ms "
+                "(benchmarks/refine_lag_noise.py; docs/refinement.md, section 6); take T_lag "
+                "as its order of magnitude")
+
     def physical_range(self, parameters: dict[str, dict[str, float]],
                        setting: Setting) -> str | None:
         """A transmission or current loop lags by at most :data:`MAX_TORQUE_LAG_S` (or
