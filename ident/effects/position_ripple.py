@@ -99,9 +99,8 @@ def scan_period(cols: Columns, p0: float, span: float, tag: str) -> tuple[Effect
     """Ripple period: grid over ±1.5 frequency bins (1/span) around the periodogram peak
     p0 on :attr:`Columns.fast` (at most ~8000 rows), then a bounded search between the
     grid neighbours of its best point on every row of ``cols`` (frequency resolution
-    ~1e-7 f0); the returned gain is on every row. The subsample only brackets the peak: the
-    period chosen on it was off by up to 8 of its linearised σ (docs/refinement.md, "The
-    ripple's 2σ")."""
+    ~1e-7 f0); the returned gain is on every row. The subsample only brackets the peak: a
+    period chosen on it too was less accurate (docs/refinement.md, "The ripple's 2σ")."""
     f0, df = 1 / p0, 1.5 / span
     lo, hi = max(f0 - df, 0.5 * f0), f0 + df
     fgrid = np.linspace(lo, hi, 31)
