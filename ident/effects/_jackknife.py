@@ -4,8 +4,9 @@ the spread of its parameters when the whole estimation is redone without each un
 Why: the linearised 2σ of :func:`ident.refine._effect_parameters` (the hyper-parameter's
 Jacobian column appended to the fit's regressor, eq. 15) assumes white residuals, all rows
 behind the hyper-parameter and a least-squares fit. The refinement's scan chooses the
-hyper-parameter on at most ~8000 of the decimated rows (:attr:`ident.effects.Columns.fast`),
-the filtered, decimated residual is autocorrelated, and an IDIM-IV fit's spread is not eq. 15's.
+hyper-parameter's bracket on at most ~8000 of the decimated rows
+(:attr:`ident.effects.Columns.fast`; a ripple's period is then searched on every row), the
+filtered, decimated residual is autocorrelated, and an IDIM-IV fit's spread is not eq. 15's.
 
 Each replicate leaves one unit out (:func:`ident.robot.uncertainty.jackknife_rows`: a run when
 there are at least :data:`~ident.robot.uncertainty.N_BLOCKS` runs, else contiguous blocks of
@@ -97,9 +98,10 @@ def hyper_jackknife(
         base = quick_residual(Wk[:, other], Yk, None if Zk is None else Zk[:, other])
         if base is None:
             continue
-        # the scan reads the fit's own subsample (:attr:`Columns.fast`) less the unit, not
-        # a new stride over the replicate's rows: which rows it reads is part of the
-        # estimate, and a new subsample would make every replicate another estimator
+        # the scan's subsample part reads the fit's own subsample (:attr:`Columns.fast`)
+        # less the unit, not a new stride over the replicate's rows: which rows it reads is
+        # part of the estimate, and a new subsample would make every replicate another
+        # estimator (a ripple's final search reads every row of the replicate)
         sub = None if full is None else np.flatnonzero(np.isin(np.flatnonzero(keep), full))
         e = rescan(Columns(sk, Scorer(Wk[:, other], base[1]), fast_rows=sub))
         delta = e.columns(sk) - c0[keep]

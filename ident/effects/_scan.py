@@ -4,7 +4,9 @@ A candidate is scored by the residual sum of squares its columns remove from the
 fit (:class:`Scorer`), on columns computed from the decimated signals (:class:`Columns`);
 a nonlinear hyper-parameter (a ripple period, q_s, T_w) is chosen by a grid then a bounded
 1-D search (:func:`scan_log`, :func:`refine_1d`) on at most ~8000 samples
-(:attr:`Columns.fast`), the chosen value's gain being computed on every sample. The F tests'
+(:attr:`Columns.fast`), the chosen value's gain being computed on every sample; a ripple's
+period only takes its bracket from the subsample's grid, the bounded search reads every
+sample (:func:`ident.effects.position_ripple.scan_period`). The F tests'
 effective sample size of an autocorrelated residual (:func:`effective_n`) lives here too,
 beside the scorer that needs it (re-exported by :mod:`ident.diagnose`). Pure numerics.
 """

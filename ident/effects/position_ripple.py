@@ -1,7 +1,8 @@
 """Position ripple A sin(2π q/P + φ) (cogging, gear mesh, screw pitch).
 
 Offered when the residual's periodogram against position has a significant peak; the
-period P is refined around the peak (:func:`scan_period`).
+period P is refined around the peak (:func:`scan_period`: a grid on a subsample brackets it,
+a bounded search on every row chooses it).
 """
 
 from __future__ import annotations
@@ -65,8 +66,8 @@ class PositionRipple(Effect):
         """2σ of amplitude, period and phase by the block jackknife, the period scanned again
         in every replicate as the refinement scans it (:func:`scan_period` around the fitted
         period, on the replicate's rows): the linearised 2σ of the period assumes white
-        residuals on every row, while the scan reads ~8000 of them and the filtered residual
-        is autocorrelated (docs/refinement.md, section 2)."""
+        residuals, while the filtered, decimated residual is autocorrelated and an IDIM-IV
+        fit's spread is not eq. 15's (docs/refinement.md, "The ripple's 2σ")."""
         q = design.signals.q
         span = float(q.max() - q.min())
         if not span > 0:
@@ -96,19 +97,22 @@ class PositionRipple(Effect):
 
 def scan_period(cols: Columns, p0: float, span: float, tag: str) -> tuple[Effect, float]:
     """Ripple period: grid over ±1.5 frequency bins (1/span) around the periodogram peak
-    p0, then a bounded search (frequency resolution ~1e-7 f0), both on :attr:`Columns.fast`;
-    the returned gain is on every sample."""
+    p0 on :attr:`Columns.fast` (at most ~8000 rows), then a bounded search between the
+    grid neighbours of its best point on every row of ``cols`` (frequency resolution
+    ~1e-7 f0); the returned gain is on every row. The subsample only brackets the peak: a
+    period chosen on it too was less accurate (docs/refinement.md, "The ripple's 2σ")."""
     f0, df = 1 / p0, 1.5 / span
     lo, hi = max(f0 - df, 0.5 * f0), f0 + df
-    fast = cols.fast
     fgrid = np.linspace(lo, hi, 31)
-    gains = np.array([fast.gain(PositionRipple(1 / f, tag)) for f in fgrid])
+    gains = np.array([cols.fast.gain(PositionRipple(1 / f, tag)) for f in fgrid])
     i = int(np.argmax(gains))
     a, b = fgrid[max(i - 1, 0)], fgrid[min(i + 1, len(fgrid) - 1)]
-    e, g = refine_1d(
-        fast, lambda f: PositionRipple(1 / f, tag), a, b, fgrid[i], float(gains[i]), 1e-7 * f0
-    )
-    return (e, g) if fast is cols else (e, cols.gain(e))
+
+    def make(f: float) -> Effect:
+        return PositionRipple(1 / f, tag)
+
+    g0 = float(gains[i]) if cols.fast is cols else cols.gain(make(fgrid[i]))
+    return refine_1d(cols, make, a, b, fgrid[i], g0, 1e-7 * f0)
 
 
 @register("position_ripple", order=10)
