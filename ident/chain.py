@@ -279,7 +279,7 @@ def _upper_cutoff(fs: float, min_fraction: float) -> float:
 
 
 def choose_cutoff(q: np.ndarray, dt: float, min_fraction: float = 0.05,
-                  t: np.ndarray | None = None, source: str = "") -> float:
+                  t: np.ndarray | None = None, source: str = "", warn: bool = True) -> float:
     """Low-pass cut-off [Hz] chosen from the bandwidth of the measured motion.
 
     The velocity spectrum (differences of q) is compared with its noise floor (median power
@@ -300,7 +300,8 @@ def choose_cutoff(q: np.ndarray, dt: float, min_fraction: float = 0.05,
     with f, as differenced white position noise does), the floor is taken again in the
     position spectrum, where such noise is flat, from the band's complement of the motion
     (above f_s/4), and differenced. A choice at a bound is warned about, with the reason
-    (``source`` names the data in the message).
+    (``source`` names the data in the message), unless ``warn`` is False (a caller that
+    measures the motion band for itself and whose data the chain has warned about).
     """
     fs = 1.0 / dt
     q = np.asarray(q, dtype=float)
@@ -343,6 +344,8 @@ def choose_cutoff(q: np.ndarray, dt: float, min_fraction: float = 0.05,
                "irregular time stamps would have their own resampling warning)")
     cut = float(f"{np.clip(5.0 * fb, lo, hi):.6g}")
     where = f"{source}: " if source else ""
+    if not warn:  # a caller measuring the band for itself (the refinement's motion band)
+        return cut
     if 5.0 * fb >= hi:
         warnings.warn(f"{where}cut-off {cut:g} Hz is the upper bound 0.4 f_s: {why}; "
                       "give --cutoff", stacklevel=2)

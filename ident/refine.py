@@ -45,7 +45,6 @@ and refits, used nowhere else. The step and report types are already in
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
@@ -431,9 +430,10 @@ def _motion_band(design: Design) -> float | None:
         t, q = np.asarray(sub.t, dtype=float), np.asarray(sub.q, dtype=float)
         if q.ndim != 1 or t.size < 16:
             continue
-        with warnings.catch_warnings():  # its bound warnings are the chain's, given there
-            warnings.simplefilter("ignore")
-            bands.append(choose_cutoff(q, float(np.median(np.diff(t))), min_fraction=1e-9))
+        # its bound warnings are the chain's, given there; no catch_warnings, which would
+        # reset the once-per-location registry and repeat other warnings in the process
+        bands.append(choose_cutoff(q, float(np.median(np.diff(t))), min_fraction=1e-9,
+                                   warn=False))
     if not bands or cut is None:
         return None
     fc = max(bands)

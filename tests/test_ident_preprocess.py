@@ -3,6 +3,8 @@ Y and W, selection masks, Design.with_term / without."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 import scipy.signal
@@ -48,6 +50,17 @@ def test_decimate_passes_band_kills_alias_and_keeps_last_sample():
 def test_cutoff_never_below_a_twentieth_of_fs():
     t = np.arange(20000) * 1e-3
     assert choose_cutoff(np.sin(0.5 * t), 1e-3) == pytest.approx(50.0)
+
+
+def test_cutoff_warns_at_its_bound_unless_told_not_to():
+    """The bound's warning names the bound; ``warn=False`` (the refinement's motion band,
+    which must not wrap the call in catch_warnings) gives the same value silently."""
+    q = np.sin(0.5 * np.arange(20000) * 1e-3)
+    with pytest.warns(UserWarning, match=r"is the lower bound 0\.05 f_s"):
+        loud = choose_cutoff(q, 1e-3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert choose_cutoff(q, 1e-3, warn=False) == loud
 
 
 def _exp(seed=0, n=8000, dt=1e-3, mass=0.0):
