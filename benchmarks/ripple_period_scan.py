@@ -30,14 +30,15 @@ from ident.effects._base import Effect
 from ident.effects._scan import refine_1d
 from ident.effects.position_ripple import PositionRipple
 from ident.fitting import fit_models
-from ident.loaders import make_experiment
 from ident.refine import refine
-from sim_drivers.offline import simulate
 from sim_drivers.plant_config import load_plant
 from trajectories.plan import plan_campaign
 from trajectories.robot_campaign import RobotCampaign
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+from example_campaign import payload_experiments  # noqa: E402  (the tests' simulation)
+
 KEYS = {"ripple_amplitude": "amplitude_Nm", "ripple_period": "period_rad",
         "ripple_phase": "phase_rad"}
 
@@ -65,12 +66,7 @@ def main() -> None:
     gains = ControllerGains(**campaign.gains_kwargs())
     scans = {"subsample": subsample_scan, "every_row": pr.scan_period}
     for seed in map(int, sys.argv[1:]):
-        exps = []
-        for i, p in enumerate(plan.payloads):
-            r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
-                         payload_arm=p.arm_m, seed=1000 * seed + i)
-            exps.append(make_experiment(f"payload{i}", r.t, r.q, r.tau_ref,
-                                        payload_mass=p.mass_kg, payload_arm=p.arm_m))
+        exps = payload_experiments(plant, plan, gains, 1000 * seed)
         for est in ("iv", "ls"):
             refs = [plan.reference.q] * 3 if est == "iv" else None
             rep = fit_models(exps, ("paper",), q_s=0.03, references=refs, table_iv=False)

@@ -7,6 +7,7 @@ import tomllib
 from pathlib import Path
 
 from daq.protocol.control import ControllerGains
+from ident.loaders import Experiment, make_experiment
 from sim_drivers.offline import SimRun, simulate
 from sim_drivers.plant_config import PlantParams, load_plant
 from trajectories.plan import CampaignPlan, plan_campaign
@@ -26,3 +27,17 @@ def simulate_example_campaign(seed0: int = 11) -> tuple[PlantParams, CampaignPla
     runs = [simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
                      payload_arm=p.arm_m, seed=seed0 + i) for i, p in enumerate(plan.payloads)]
     return plant, plan, runs
+
+
+def payload_experiments(plant: PlantParams, plan: CampaignPlan, gains: ControllerGains,
+                        seed0: int, name: str = "payload{i}") -> list[Experiment]:
+    """One experiment per payload of ``plan``, simulated offline on ``plant`` (noise seeds
+    seed0, seed0 + 1, ...): what the measured log holds (q, tau_ref), named
+    ``name.format(i=i)`` (its suffix decides the default torque delay, as a file's would)."""
+    exps = []
+    for i, p in enumerate(plan.payloads):
+        r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
+                     payload_arm=p.arm_m, seed=seed0 + i)
+        exps.append(make_experiment(name.format(i=i), r.t, r.q, r.tau_ref,
+                                    payload_mass=p.mass_kg, payload_arm=p.arm_m))
+    return exps

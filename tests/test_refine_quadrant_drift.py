@@ -26,16 +26,14 @@ import re
 import tomllib
 
 import pytest
-from example_campaign import ROOT
+from example_campaign import ROOT, payload_experiments
 from test_friction_dominated import FRICTION_DOMINATED
 
 from daq.protocol.control import ControllerGains
 from ident.fitting import fit_models
-from ident.loaders import make_experiment
 from ident.models import IdentModel
 from ident.refine import quadrant_drift, refine
 from ident.refine_result import QUADRANT_DRIFT_SHOWN
-from sim_drivers.offline import simulate
 from sim_drivers.plant_config import load_plant
 from trajectories.plan import plan_campaign
 from trajectories.robot_campaign import RobotCampaign
@@ -74,12 +72,7 @@ def _plant_and_plan(tmp_path, friction_dominated: bool, effect: str = ""):
 def _refined(tmp_path, friction_dominated: bool, seed: int, first_quadrants: bool = False,
              effect: str = ""):
     plant, plan, gains = _plant_and_plan(tmp_path, friction_dominated, effect)
-    exps = []
-    for i, p in enumerate(plan.payloads):
-        r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
-                     payload_arm=p.arm_m, seed=10 * seed + i)
-        exps.append(make_experiment(f"p{i}.csv", r.t, r.q, r.tau_ref,
-                                    payload_mass=p.mass_kg, payload_arm=p.arm_m))
+    exps = payload_experiments(plant, plan, gains, 10 * seed, name="p{i}.csv")
     if not first_quadrants:
         rep = fit_models(exps, ("paper",), table_iv=False)
     else:  # the first usual fit's quadrants on every row, as before the band and the passes
