@@ -509,7 +509,7 @@ class OneJointProblem:
         (:class:`_RunLoads`), else the measured quadrant sign(tau dq) (eq. 26) -- the
         filtered torque of the full-rate signals
         :func:`~ident.robot.design.products_columns` forms."""
-        if self._by_model() and self._loads is not None:
+        if self._by_model():
             return self._loads(s)
         return s.tau
 

@@ -370,8 +370,9 @@ class Refinement:
                 out.append(f"    {s.structure}")
             for n, v in s.parameters.items():
                 out.append(f"    {n:<18} = {v['value']:.6g} ± {v['std2']:.2g} (2σ)")
-            if s.term.sigma_note():
-                out.append(f"    note: {s.term.sigma_note()}")
+            note = s.term.sigma_note()
+            if note:
+                out.append(f"    note: {note}")
             out.append(
                 f"  F test {s.f_statistic:.3g} (p={s.f_p_value:.1e}); relative error "
                 f"{_pct(s.rel_error_before)} -> {_pct(s.rel_error_after)}, "

@@ -144,8 +144,10 @@ def refinement_section(ref: dict) -> Section:
     if not steps:
         s.para("The residual showed no dependence on any candidate variable beyond noise: "
                "refinement added nothing.")
-    rows = []
+    rows, notes = [], []
     for i, st in enumerate(steps, 1):
+        if st.get("sigma_note"):
+            notes.append(f"Step {i}: {st['sigma_note']}.")
         ratio = (st.get("floor_ratio") or {}).get("fit_after")
         rng = st.get("physical_range") or {}
         rows.append([
@@ -160,9 +162,8 @@ def refinement_section(ref: dict) -> Section:
         s.table(["Step", "Residual depends on", "Effect added", "Error before", "Error after",
                  f"{ref.get('heldout_kind', 'held-out')} after", "Error / noise floor",
                  "Validation before", "Validation after", "Physical range"], rows)
-    for i, st in enumerate(steps, 1):
-        if st.get("sigma_note"):
-            s.para(f"Step {i}: {st['sigma_note']}.")
+    for text in notes:
+        s.para(text)
     if ref.get("noise_floor") is not None:
         s.para(f"Estimated noise floor (what no model can explain): {fmt(ref['noise_floor'])}"
                + (f"; {ref['leak_warning'].strip(' []')}" if ref.get("leak_warning") else "")
