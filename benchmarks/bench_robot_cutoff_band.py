@@ -3,7 +3,7 @@
 cut-off on logs slower than 1 kHz").
 
 Usage: ``python benchmarks/bench_robot_cutoff_band.py [--seed 1] [--friction paper|usual]
-[--duration 20]``
+[--duration 20] [--held] [--suffix csv|mcap] [--torque-delay default|hold] [--default-cutoff]``
 
 The simulated 3-dof arm (``examples/robots/arm3.toml``, ``sim_drivers.arm.simulate_arm`` at
 1 kHz) tracks the sum-of-sines excitation of tests/test_robot_fit.py (centre where the shoulder
@@ -17,14 +17,16 @@ is the mean of the two held around its instant, so that the files, named ``.csv`
 0, as a stranger's file), are timed right at every rate (with the held torque, delay 0 misses
 half a 1 kHz cycle at every rate and biases the usual model's F_V 6-9 sigma at 1 kHz, ``--held``;
 the ``.mcap`` rule, half a sample, is right at 1 kHz only: F_V2 +5 sigma at 250 Hz, ``--held
---suffix mcap``). The runs are
-subsampled (every 2nd, every 4th sample) and fitted by ``jointid fit --robot``'s chain with its
+--suffix mcap``; ``--held --torque-delay hold`` gives the hold's own delay, half a 1 kHz
+cycle, 0.5 / n samples when every n-th sample is kept). The runs are subsampled (every 2nd,
+every 4th sample) and fitted by ``jointid fit --robot``'s chain with its
 defaults (:func:`ident.cli_robot.fit_files`: columns chain, sign check, WLS, honest sigma,
 pruning; ``feasibility=False``, which changes no parameter). Printed per case: f_s [Hz], the
 cut-off [Hz] ("*": the default, :func:`ident.chain.choose_cutoff`'s floor 0.05 f_s), the
-decimation, the sum of z^2 = ((estimate - truth) / sigma)^2 over the judged model's parameters
-that are not pruned (about their number, printed after the slash, when the sigmas hold), the
-three largest |z| and the number of pruned parameters.
+decimation, the torque delay [samples] ("g": given), the sum of z^2 = ((estimate - truth) /
+sigma)^2 over the judged model's parameters that are not pruned (about their number, printed
+after the slash, when the sigmas hold), the three largest |z| and the number of pruned
+parameters.
 """
 
 from __future__ import annotations
@@ -57,6 +59,11 @@ def main() -> None:
                     help="log the torque held over the cycle after its sample (not centred)")
     ap.add_argument("--suffix", choices=("csv", "mcap"), default="csv",
                     help="the files' suffix (mcap: torque delay half a sample)")
+    ap.add_argument("--torque-delay", choices=("default", "hold"), default="default",
+                    help="default: the files' rule (csv 0, mcap half a sample); hold: given, "
+                    "half a 1 kHz cycle (0.5 / n samples with every n-th sample kept)")
+    ap.add_argument("--default-cutoff", action="store_true",
+                    help="only the default cut-off at each rate")
     a = ap.parse_args()
     params, reg, runs, truth = simulated(a.friction, a.seed, a.duration)
     print(f"arm3, {a.friction} friction, seed {a.seed}, {a.duration:g} s x 3 runs; "
@@ -64,15 +71,19 @@ def main() -> None:
           "largest |z|, pruned")
     for every, cuts in CASES:
         exps = logged(params, runs, every, a.held, a.suffix)
-        for cut in cuts:
+        delay = 0.5 / every if a.torque_delay == "hold" else None  # [samples]
+        for cut in cuts[:1] if a.default_cutoff else cuts:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                out = fit_files(reg.robot, exps, model="both", cutoff=cut, feasibility=False)
+                out = fit_files(reg.robot, exps, model="both", cutoff=cut, feasibility=False,
+                                torque_delay=delay)
             z, pruned = z_scores(out, a.friction, truth)
             top = sorted(z, key=lambda n: -abs(z[n]))[:3]
             s = out["preprocessing"]
             print(f"{1000 / every:5.0f} {s['cutoff_hz']:7.2f}{'*' if cut is None else ' '} "
-                  f"{s['decimation']:3d} {sum(v * v for v in z.values()):8.0f} / {len(z)}  "
+                  f"{s['decimation']:3d} {s['torque_delay']:.3f}"
+                  f"{'g' if s['torque_delay_given'] else ' '} "
+                  f"{sum(v * v for v in z.values()):8.0f} / {len(z)}  "
                   + "  ".join(f"{n} {z[n]:+.1f}" for n in top) + f"  pruned {pruned}",
                   flush=True)
 

@@ -154,6 +154,10 @@ class JointModel(HyperParameters):
     sign_check : bool
         Leave out the samples where sign(τ) differs from sign(τ̂_out) (eq. 26) when the new
         model is fitted.
+    torque_delay : float, "auto" or None
+        Instant of the torque samples after the position samples [samples], in [0, 1)
+        (``--torque-delay``; ``torque_delay`` of :func:`ident.fitting.fit_models`); None or
+        ``"auto"``: half a sample when every experiment is a jointid MCAP log, else 0.
     **deprecated
         ``qs=``: the older spelling of ``q_s`` (accepted with a DeprecationWarning,
         :mod:`ident.vocab`).
@@ -218,6 +222,7 @@ class JointModel(HyperParameters):
         eliminate: bool = True,
         threshold: float | None = None,
         sign_check: bool = True,
+        torque_delay: float | str | None = None,
         **deprecated: Any,
     ) -> None:
         self.model = model
@@ -233,6 +238,7 @@ class JointModel(HyperParameters):
         self.eliminate = eliminate
         self.threshold = threshold
         self.sign_check = sign_check
+        self.torque_delay = torque_delay
 
     def __sklearn_tags__(self) -> Any:
         """Estimator tags for scikit-learn >= 1.6 (its grid search asks for them): a
@@ -295,6 +301,7 @@ class JointModel(HyperParameters):
             threshold_pct=self.threshold,
             references=self._references(),
             payload=self.payload,
+            torque_delay="auto" if self.torque_delay is None else self.torque_delay,
         )
         name = refined_model(report.models)
         if self.estimator == "iv" and report.models[name].estimator_ != "iv":

@@ -71,6 +71,11 @@ class RobotFit(HyperParameters):
         Butterworth cut-off on q [Hz] (``--cutoff``; None: chosen from the data).
     decimation, trim : int or None
         ``--decimation``, ``--trim`` (None: from the cut-off).
+    torque_delay : float, "auto" or None
+        Instant of the torque samples after the position samples [samples], in [0, 1)
+        (``--torque-delay``, the ``torque_delay`` of :class:`~ident.api.JointModel`); None or
+        ``"auto"``: half a sample when every run is a jointid MCAP log, else 0. The record's
+        ``preprocessing`` has the delay used and ``torque_delay_given``.
     dq_min : float or None
         Stiction area [rad/s] (``--dq-min``; None: 1 % of the largest |dq|).
     mapping : mapping, sequence of "KEY=PATH" or None
@@ -135,6 +140,7 @@ class RobotFit(HyperParameters):
         cutoff: float | None = None,
         decimation: int | None = None,
         trim: int | None = None,
+        torque_delay: float | str | None = None,
         dq_min: float | None = None,
         mapping: Mapping[str, str] | Sequence[str] | None = None,
         q_unit: str | None = None,
@@ -156,6 +162,7 @@ class RobotFit(HyperParameters):
         self.cutoff = cutoff
         self.decimation = decimation
         self.trim = trim
+        self.torque_delay = torque_delay
         self.dq_min = dq_min
         self.mapping = mapping
         self.q_unit = q_unit
@@ -204,7 +211,8 @@ class RobotFit(HyperParameters):
         out = fit_files(
             self._robot(), data, validation, model=self.model, mapping=self._mapping(),
             q_unit=self.q_unit, cutoff=self.cutoff, decimation=self.decimation, trim=self.trim,
-            consistent=self.consistent, method=self.method, q_s=self.q_s, dq_min=self.dq_min,
+            torque_delay=self.torque_delay, consistent=self.consistent, method=self.method,
+            q_s=self.q_s, dq_min=self.dq_min,
             known_rotor_inertia=self.known_rotor_inertia, chain=self.chain,
             payload=self.payload, feasibility=self.consistency,
             sigma_blocks=self.sigma_blocks, prune=self.prune, sign_check=self.sign_check)

@@ -189,6 +189,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     g2.add_argument("--tau-min", type=float, metavar="T", help="drop |tau| below T [N m]")
     g2.add_argument("--trim", type=int, metavar="N", help="samples cut at both ends of each file")
     g2.add_argument(
+        "--torque-delay",
+        metavar="SAMPLES|auto",
+        help="instant of the torque samples after the position samples, in samples of the "
+        "log's period, in [0, 1): 0.5 for a command held over the cycle after its sample, "
+        "0.125 for that hold of a 1 kHz drive logged at 250 Hz (default 'auto': 0.5 when "
+        "every input is a jointid MCAP log, else 0)",
+    )
+    g2.add_argument(
         "--threshold",
         type=float,
         metavar="PCT",
@@ -248,6 +256,30 @@ def parse_qs(value: str | None, *, scan: bool = True) -> float | str:
     return v
 
 
+def check_torque_delay(value: float | str | None, what: str = "torque_delay") -> float | None:
+    """The torque delay a caller gives [samples], checked: None (or ``"auto"``, the spelling
+    of :func:`ident.fitting.fit_models`) for the default, else a number in [0, 1) (the
+    chain's bound, :func:`ident.chain.resolve_settings`: a longer timing is whole cycles the
+    log states, ``campaign.torque_delay_cycles``, paired at load time).
+
+    Raises
+    ------
+    DataError
+        One line naming ``what`` and the value.
+    """
+    if value is None or (isinstance(value, str) and value == "auto"):
+        return None
+    try:
+        d = float(value)
+    except (TypeError, ValueError):
+        raise DataError(f"{what} {value!r}: expected a delay in [0, 1) samples of the log's "
+                        "period, or 'auto'") from None
+    if not 0.0 <= d < 1.0:  # NaN fails too
+        raise DataError(f"{what} {d:g}: expected a delay in [0, 1) samples of the log's period "
+                        "(e.g. 0.125: half a 1 kHz cycle in a log at 250 Hz)")
+    return d
+
+
 def estimator_from_args(args: argparse.Namespace) -> JointModel:
     """The :class:`~ident.api.JointModel` ``jointid fit`` runs for these arguments."""
     from .api import JointModel
@@ -265,6 +297,7 @@ def estimator_from_args(args: argparse.Namespace) -> JointModel:
         eliminate=not args.no_eliminate,
         threshold=args.threshold,
         estimator="auto" if args.method is None else args.method,
+        torque_delay=args.torque_delay,
     )
 
 
@@ -376,6 +409,8 @@ def run(args: argparse.Namespace) -> int:
     from .report_build import build_report
 
     check_numbers(args)
+    args.torque_delay = check_torque_delay(getattr(args, "torque_delay", None),
+                                           "--torque-delay")
     check_outputs(args)
     check_foreign_options(args)
     # the one vocabulary (ident.vocab): "new" is a deprecated "paper", "ols" a deprecated "ls"

@@ -90,8 +90,9 @@ def consistent_from_record(path: Path, rec: dict[str, Any], robot: Robot, name: 
     try:
         runs = load_robot_runs(rec["inputs"], robot.moving, gains=robot_gains(robot),
                                mapping=mapping, q_unit=q_unit)
+        # the record's torque delay (absent from older records: the default, as then)
         settings = RobotPreprocessing(pre.get("cutoff_hz"), pre.get("decimation"),
-                                      pre.get("trim"))
+                                      pre.get("trim"), pre.get("torque_delay"))
         fitted = tuple(n for n, r in rec["models"].items() if "error" not in r)
         out = fit_robot(robot, runs, None, models=fitted, method=rec["method"], q_s=rec["q_s"],
                         dq_min=pre.get("dq_min"), preprocessing=settings,

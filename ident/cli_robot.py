@@ -36,7 +36,7 @@ from trajectories.friction import DEFAULT_Q_S
 from trajectories.robot import Robot, RobotRegressor, base_parameters, load_robot
 
 from . import DataError, IdentError
-from .cli import parse_qs
+from .cli import check_torque_delay, parse_qs
 from .estimate import DEFAULT_THRESHOLD_PCT
 from .fitting import DQ_MIN_FRACTION, SIGN_CHECK_MIN_KEPT
 from .loaders import parse_mapping
@@ -155,6 +155,7 @@ def fit_files(
     cutoff: float | None = None,
     decimation: int | None = None,
     trim: int | None = None,
+    torque_delay: float | str | None = None,
     consistent: bool = False,
     **options: Any,
 ) -> dict[str, Any]:
@@ -173,6 +174,11 @@ def fit_files(
         ``--map`` entries (:func:`~ident.loaders.parse_mapping`, ``robot=True``), ``--q-unit``.
     cutoff, decimation, trim
         ``--cutoff`` [Hz], ``--decimation``, ``--trim`` (None: chosen from the data).
+    torque_delay : float, "auto" or None
+        ``--torque-delay``: instant of the torque samples after the position samples
+        [samples], in [0, 1) (:class:`~ident.robot.loaders.RobotPreprocessing`); None or
+        ``"auto"`` (the spelling of :func:`ident.fitting.fit_models`): half a sample when every
+        run is a jointid MCAP log, else 0.
     consistent : bool
         ``--consistent``: also the physically consistent estimate of every model.
     **options
@@ -183,8 +189,8 @@ def fit_files(
     model = model_name(model, extra=("both",))  # "new": deprecated "paper" (ident.vocab)
     runs = load_runs(robot, inputs, mapping=mapping, q_unit=q_unit)
     val = load_runs(robot, validate, mapping=mapping, q_unit=q_unit) if validate else None
-    out = fit_robot(robot, runs, val, models=MODELS[model],
-                    preprocessing=RobotPreprocessing(cutoff, decimation, trim), **options)
+    pre = RobotPreprocessing(cutoff, decimation, trim, check_torque_delay(torque_delay))
+    out = fit_robot(robot, runs, val, models=MODELS[model], preprocessing=pre, **options)
     if consistent:
         add_consistent(out)
     return out
@@ -236,7 +242,9 @@ def fit_robot(
         Stiction area |dq_j| < dq_min left out of joint j's rows [rad/s]; None: 1 % of the
         largest |dq| of the identification data.
     preprocessing : RobotPreprocessing or None
-        Cut-off, decimation, trim (None entries: chosen by the chain's rules).
+        Cut-off, decimation, trim, torque delay (None entries: chosen by the chain's rules;
+        the record's ``preprocessing`` says the delay used, ``torque_delay`` [samples], and
+        whether it was given, ``torque_delay_given``).
     known_rotor_inertia : bool
         Rotor inertias of the robot file known, not identified
         (:class:`~ident.robot.regressor.RobotRegressor`).
@@ -300,6 +308,7 @@ def fit_robot(
         # trim, guard): a validation file at another rate was processed with other ones
         check_periods([*runs, *validation])
     pre = preprocessing or RobotPreprocessing()
+    delay_given = pre.torque_delay is not None
     notes: list[str] = []
     # base parameters the friction columns confound (a constant weight is an offset): regrouped
     # for every fit, with one line saying what and why (ident.robot.confounded); the paper
@@ -317,7 +326,8 @@ def fit_robot(
             refused["paper"] = regrouping.paper
     if chain == "columns":
         design = resolve_design(runs, instruments=method == "iv", cutoff_hz=pre.cutoff_hz,
-                                decimation=pre.decimation, trim=pre.trim, dq_min=dq_min)
+                                decimation=pre.decimation, trim=pre.trim,
+                                torque_delay=pre.torque_delay, dq_min=dq_min)
         # the instruments' columns also for the IDIM-IV check of the honest sigma
         iv_cols = method == "iv" or (sigma_blocks > 0 and all(r.q_ref is not None for r in runs))
         sig, dq_min = design_runs(runs, reg, design, instruments=iv_cols)
@@ -349,7 +359,7 @@ def fit_robot(
     else:
         settings = resolved_settings(runs, pre)
         pre = RobotPreprocessing(settings["cutoff_hz"], int(settings["decimation"]),
-                                 int(settings["trim"]))
+                                 int(settings["trim"]), settings["torque_delay"])
         sig = preprocess_runs(runs, joints, pre)
         val = preprocess_runs(validation, joints, pre) if validation else None
         if dq_min is None:
@@ -370,7 +380,8 @@ def fit_robot(
                   "numbers": list(robot.numbers)},
         "inputs": [r.source for r in runs],
         "validation_inputs": [r.source for r in validation or []],
-        "preprocessing": {**settings, "chain": chain, "dq_min": dq_min, "samples": sig.n,
+        "preprocessing": {**settings, "torque_delay_given": delay_given,
+                          "chain": chain, "dq_min": dq_min, "samples": sig.n,
                           "validation_samples": 0 if val is None else val.n,
                           # file edges where the filters are undefined: out of every figure
                           "edge_share": trimmed / raw_n if raw_n else 0.0},
@@ -877,7 +888,8 @@ def format_report(out: dict[str, Any]) -> str:
     pre = out["preprocessing"]
     lines.append(f"robot {r['name']} ({r['source']}): moving joints {', '.join(r['moving'])}")
     lines.append(f"preprocessing ({pre['chain']} chain): cut-off {pre['cutoff_hz']:g} Hz, "
-                 f"decimation {pre['decimation']}, trim {pre['trim']}, dq_min "
+                 f"decimation {pre['decimation']}, trim {pre['trim']}, "
+                 f"{_delay_text(pre)}, dq_min "
                  f"{pre['dq_min']:.4g} {out.get('_dq_unit', 'rad/s')}, {pre['samples']} "
                  f"samples x {len(r['moving'])} joint{'s' if len(r['moving']) > 1 else ''}; "
                  f"method {out['method']}, payload {out['payload']}")
@@ -965,6 +977,15 @@ def format_report(out: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _delay_text(pre: Mapping[str, Any]) -> str:
+    """The summary's torque delay: its value [samples] and whether given or the default."""
+    d = pre.get("torque_delay")
+    if d is None:  # a record of before the torque delay was reported
+        return "torque delay n/a"
+    how = "given" if pre.get("torque_delay_given") else "default"
+    return f"torque delay {d:g} sample ({how})"
+
+
 def _speed_unit(robot: Robot) -> str:
     """Unit of a velocity threshold of the moving joints: rad/s, m/s (every joint prismatic:
     the EMPS axis) or both (one dq_min for joints of both kinds)."""
@@ -986,7 +1007,8 @@ def run(args: argparse.Namespace) -> int:
     out = fit_files(robot, args.inputs, args.validate, model=args.model,
                     mapping=parse_mapping(args.map, robot=True), q_unit=args.q_unit,
                     cutoff=args.cutoff, decimation=args.decimation, trim=args.trim,
-                    method=args.method, q_s=parse_qs(args.q_s, scan=False), dq_min=args.dq_min,
+                    torque_delay=getattr(args, "torque_delay", None), method=args.method,
+                    q_s=parse_qs(args.q_s, scan=False), dq_min=args.dq_min,
                     known_rotor_inertia=args.known_rotor_inertia,
                     chain=args.chain or "columns", payload=args.payload,
                     feasibility=not getattr(args, "no_consistency", False),

@@ -101,11 +101,19 @@ class RobotPreprocessing:
         decimation, 0.8 (f_s/2)/r, stays at or above the cut-off), at least 1.
     trim : int or None
         Full-rate samples cut at both ends of each experiment; None: ceil(3 f_s / cut-off).
+    torque_delay : float or None
+        Instant of the torque samples after the position samples [samples of the log's
+        period], in [0, 1) (``--torque-delay``; the ``torque_delay`` of
+        :func:`ident.fitting.fit_models`): e.g. 0.5 for a command held over the cycle after
+        its sample, 0.125 for the same hold of a 1 kHz drive logged at 250 Hz. None:
+        :func:`ident.chain.default_torque_delay` (half a sample when every run is a jointid
+        MCAP log, else 0).
     """
 
     cutoff_hz: float | None = None
     decimation: int | None = None
     trim: int | None = None
+    torque_delay: float | None = None
 
 
 # -- reading --------------------------------------------------------------------------------
@@ -200,17 +208,20 @@ def _settings(runs: Sequence[RawRobotRun], pre: RobotPreprocessing) -> ChainSett
     """The chain's settings (:func:`ident.chain.resolve_settings`) with the states chain's
     decimation rule: r = floor(0.4 f_s / cut-off) when not given (the decimated states keep
     the motion's band); the torque delay of the columns chain (:func:`ident.chain.
-    default_torque_delay`: half a cycle for jointid logs, whose hold the chain completes)."""
+    default_torque_delay`: half a cycle for jointid logs, whose hold the chain completes)
+    unless ``pre`` gives one."""
     if not runs:
         raise RobotIdentError("no experiment to preprocess")
     dt = chain_period(runs)
     sources = [r.source for r in runs]
     s = resolve_settings(runs[0].q, dt, cutoff_hz=pre.cutoff_hz, decimation=pre.decimation,
-                         trim=pre.trim, sources=sources, error=RobotIdentError)
+                         trim=pre.trim, torque_delay=pre.torque_delay, sources=sources,
+                         error=RobotIdentError)
     if pre.decimation is None:
         r = max(1, int(0.4 / dt / s.cutoff_hz + 1e-9))  # 1e-9: an exact ratio stays whole
         s = resolve_settings(runs[0].q, dt, cutoff_hz=s.cutoff_hz, decimation=r,
-                             trim=pre.trim, sources=sources, error=RobotIdentError)
+                             trim=pre.trim, torque_delay=pre.torque_delay, sources=sources,
+                             error=RobotIdentError)
     return s
 
 
@@ -271,9 +282,11 @@ def preprocess_runs(
 
 def resolved_settings(runs: Sequence[RawRobotRun],
                       preprocessing: RobotPreprocessing | None = None) -> dict[str, float]:
-    """The cut-off [Hz], decimation and trim :func:`preprocess_runs` uses for ``runs``."""
+    """The cut-off [Hz], decimation, trim and torque delay [samples] :func:`preprocess_runs`
+    uses for ``runs``."""
     s = _settings(runs, preprocessing or RobotPreprocessing())
-    return {"cutoff_hz": s.cutoff_hz, "decimation": s.decimation, "trim": s.trim}
+    return {"cutoff_hz": s.cutoff_hz, "decimation": s.decimation, "trim": s.trim,
+            "torque_delay": s.torque_delay}
 
 
 def load_robot_signals(
