@@ -12,7 +12,7 @@ default (0) is not at 1 kHz, and a jointid log's (half a sample) is further off 
 (docs/robot-identification.md, "The default cut-off on logs slower than 1 kHz";
 ``benchmarks/bench_robot_cutoff_band.py --held --torque-delay hold``). Then the command line
 and the API: the JSON's ``preprocessing`` says the delay used and whether it was given, and a
-bad delay is one line naming the flag."""
+bad delay is one line naming the flag; the single-joint ``jointid fit`` takes the same flag."""
 
 from __future__ import annotations
 
@@ -142,3 +142,20 @@ def test_bad_torque_delay_is_one_line(tmp_path, value, shown):
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(lines) == 1, r.stderr
     assert f"--torque-delay {shown}: expected a delay in [0, 1) samples" in lines[0], lines
+
+
+def test_single_joint_takes_the_same_option(tmp_path, capfd):
+    """``jointid fit --torque-delay`` without ``--robot``: the same flag, unit and record key
+    (``fit_models(torque_delay=)`` of the JointModel ``jointid fit`` runs)."""
+    t = np.arange(4000) * 1e-3
+    q = 0.5 * np.sin(2 * np.pi * 0.7 * t) + 0.3 * np.sin(3.1 * t)
+    dq = np.gradient(q, t)
+    tau = 0.2 * np.gradient(dq, t) + 3 * np.cos(q) + 0.5 * dq + 0.8 * np.sign(dq)
+    np.savetxt(tmp_path / "one.csv", np.column_stack([t, q, tau]), delimiter=",",
+               header="t,q,tau", comments="", fmt="%.17g")
+    for extra, want in ((["--torque-delay", "0.3"], 0.3), ([], 0.0)):  # .csv default: 0
+        out = tmp_path / "one.json"
+        code = main(["fit", str(tmp_path / "one.csv"), "--model", "usual", *extra,
+                     "--json", str(out)])
+        assert code == 0, capfd.readouterr().err
+        assert json.loads(out.read_text())["preprocessing"]["torque_delay"] == want
