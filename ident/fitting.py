@@ -407,7 +407,8 @@ class FitReport:
             "inputs": list(self.sources),
             "validation_inputs": list(self.validation_sources),
             "joint": "revolute" if self.revolute else "prismatic",
-            "preprocessing": any_design.settings(),
+            "preprocessing": {**any_design.settings(),  # (and whether the delay was given)
+                              "torque_delay_given": bool(self.settings.get("torque_delay_given"))},
             "vmax": json_float(self.vmax),
             "bands": {"low": [0.0, 0.10], "high": [0.35, 1.0]},
             "q_s": self.q_s,
@@ -593,6 +594,7 @@ def fit_models(
         else []
     )
     ref = _references(references, data, s)
+    delay_given = not isinstance(torque_delay, str)  # the record says whether it was given
     if isinstance(torque_delay, str):
         if torque_delay != "auto":
             raise DataError(f"torque_delay {torque_delay!r}: expected a number [samples] or 'auto'")
@@ -614,6 +616,7 @@ def fit_models(
         guard=guard,
         dq_min_rel=DQ_MIN_FRACTION if dq_min is None else None,
         torque_delay=torque_delay,
+        torque_delay_given=delay_given,
     )
     qs0 = DEFAULT_QS if isinstance(q_s, str) else float(q_s)
     if not qs0 > 0:

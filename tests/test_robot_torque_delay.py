@@ -158,4 +158,5 @@ def test_single_joint_takes_the_same_option(tmp_path, capfd):
         code = main(["fit", str(tmp_path / "one.csv"), "--model", "usual", *extra,
                      "--json", str(out)])
         assert code == 0, capfd.readouterr().err
-        assert json.loads(out.read_text())["preprocessing"]["torque_delay"] == want
+        pre = json.loads(out.read_text())["preprocessing"]
+        assert (pre["torque_delay"], pre["torque_delay_given"]) == (want, bool(extra)), pre
