@@ -294,6 +294,9 @@ class FitReport:
     robot_signals : dict[str, RobotSignals]
         The samples each model's robot fit read (the paper model: with its products formed
         at full rate), for :meth:`refit_found_terms`; not serialised.
+    torque_delay_given : bool
+        Whether ``settings["torque_delay"]`` was given (``torque_delay`` of
+        :func:`fit_models`) or chosen (the JSON's ``preprocessing.torque_delay_given``).
     """
 
     models: dict[str, IdentModel]
@@ -312,6 +315,7 @@ class FitReport:
     qs_design: float = DEFAULT_QS
     robot_signals: dict[str, RobotSignals] = field(default_factory=dict, repr=False,
                                                    compare=False)
+    torque_delay_given: bool = False
 
     def refit_found_terms(self, name: str, terms: Sequence[Term],
                           design: Design | None = None) -> dict[str, Any]:
@@ -408,7 +412,7 @@ class FitReport:
             "validation_inputs": list(self.validation_sources),
             "joint": "revolute" if self.revolute else "prismatic",
             "preprocessing": {**any_design.settings(),  # (and whether the delay was given)
-                              "torque_delay_given": bool(self.settings.get("torque_delay_given"))},
+                              "torque_delay_given": self.torque_delay_given},
             "vmax": json_float(self.vmax),
             "bands": {"low": [0.0, 0.10], "high": [0.35, 1.0]},
             "q_s": self.q_s,
@@ -616,7 +620,6 @@ def fit_models(
         guard=guard,
         dq_min_rel=DQ_MIN_FRACTION if dq_min is None else None,
         torque_delay=torque_delay,
-        torque_delay_given=delay_given,
     )
     qs0 = DEFAULT_QS if isinstance(q_s, str) else float(q_s)
     if not qs0 > 0:
@@ -848,4 +851,5 @@ def fit_models(
         settings={**pre, **({} if quadrant_load is None else {"quadrant_load": quadrant_load})},
         qs_design=qs0,
         robot_signals=robot_signals,
+        torque_delay_given=delay_given,
     )
