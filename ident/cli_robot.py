@@ -46,9 +46,10 @@ from .results import DEFAULT_BANDS
 from .robot.confounded import regroup_friction
 from .robot.consistency import check_consistency
 from .robot.consistent_fit import add_consistent, format_record
-from .robot.design import design_runs, resolve_design, sign_checked
+from .robot.design import design_runs, full_rate_loads, resolve_design, sign_checked
 from .robot.estimate import QUADRANT_TOL, THIN_QUADRANT, RobotModel
 from .robot.friction_bounds import torque_peak
+from .robot.load_jitter import JITTER_SHARE, jitter_note, jitter_share
 from .robot.loaders import (
     RawRobotRun,
     RobotPreprocessing,
@@ -324,6 +325,7 @@ def fit_robot(
                 raise DataError(regrouping.paper)
             models = tuple(m for m in models if m != "paper")
             refused["paper"] = regrouping.paper
+    jitter = None  # (share, jitter) per joint of the paper model's warning (load_jitter)
     if chain == "columns":
         design = resolve_design(runs, instruments=method == "iv", cutoff_hz=pre.cutoff_hz,
                                 decimation=pre.decimation, trim=pre.trim,
@@ -343,8 +345,13 @@ def fit_robot(
             first = RobotModel(reg, model="usual", method=method, base=base,
                                payload_ratio=payload == "ratio",
                                payload_params=payload == "mass").fit(sig)
+            loads = full_rate_loads(sig, runs, design, first.load_torque)
             sig, kept = sign_checked(sig, runs, design, first.load_torque,
-                                     SIGN_CHECK_MIN_KEPT)
+                                     SIGN_CHECK_MIN_KEPT, loads=loads)
+            # the rows within the closed loop's load jitter of the quadrant boundary (a
+            # warning of the paper model's, below): the first fit's load, the checked rows
+            jitter = jitter_share(sig, loads, design.decimation)
+            del loads
             if val is not None:
                 # checked on the joints the identification data were checked on
                 val = sign_checked(val, validation, design, first.load_torque,
@@ -436,6 +443,11 @@ def fit_robot(
             flag_unidentified(rec)
             rec["quadrant_band_share"] = {j: float(x) for j, x in
                                           zip(joints, est.band_share_, strict=True)}
+            if jitter is not None:
+                rec["quadrant_jitter_share"] = {j: float(x) for j, x in
+                                                zip(joints, jitter[0], strict=True)}
+                notes.extend(jitter_note(j, x, h) for j, x, h in
+                             zip(joints, *jitter, strict=True) if x > JITTER_SHARE)
             for j, x, h in zip(joints, est.band_share_, est.band_, strict=True):
                 if x > ZERO_LOAD_SHARE:
                     notes.append(

@@ -248,6 +248,8 @@ def sign_checked(
     settings: DesignSettings,
     load_torque: Callable[[RobotSignals], np.ndarray],
     min_kept: float | np.ndarray = 0.0,
+    *,
+    loads: Sequence[tuple[FullRate, np.ndarray]] | None = None,
 ) -> tuple[RobotSignals, np.ndarray]:
     """Also leave out the rows where sign(tau_j) differs from sign(tau_out_hat_j), the
     paper's stiction-area rectangle (Fig. 2.b) where eq. 26's proxy sign(P) = sign(tau dq)
@@ -269,6 +271,9 @@ def sign_checked(
         of them (tau_out near zero over much of the data: no load to compare with); per
         joint when an array (inf: never checked, e.g. validation data checked where the
         identification data were).
+    loads : list or None
+        :func:`full_rate_loads` of these arguments when the caller has them (not evaluated
+        again).
 
     Returns
     -------
@@ -284,7 +289,9 @@ def sign_checked(
         raise RobotIdentError("sign_checked: expected design_runs signals and resolved "
                               "settings (dq_min)")
     keep = cols.keep.copy()
-    for i, (f, tau_out) in enumerate(full_rate_loads(signals, runs, settings, load_torque)):
+    if loads is None:
+        loads = full_rate_loads(signals, runs, settings, load_torque)
+    for i, (f, tau_out) in enumerate(loads):
         rows = np.flatnonzero(signals.experiment == i)
         keep[rows] = selection(f.dq, settings.dq_min, settings.guard,
                                decimation_index(f.n, settings.decimation),
