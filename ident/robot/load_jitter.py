@@ -17,9 +17,10 @@ measurement's own noise). It is a scalar per joint and run read for a warning on
 of any model is computed from it (the developers' rule: never fit the output with itself).
 
 Measured (2026-11-28, ``jointid fit --robot``'s defaults; share of the kept rows with
-|tau_out_hat_j| below the joint's jitter): the simulated arm3's gravity-free base yaw 18-39 %
-at 1 kHz, 500 and 250 Hz (seeds 1 and 2; its c_g1 23-41 sigma off at 1 kHz), the shoulder and
-elbow at most 3 %; the real KUKA recording A's base axis A1 11.7 %, A2-A6 at most 6 %.
+|tau_out_hat_j| below the joint's jitter; ``benchmarks/load_jitter_share.py``): the simulated
+arm3's gravity-free base yaw 18-39 % at 1 kHz, 500 and 250 Hz (seeds 1 and 2; its c_g1 23-41
+sigma off at 1 kHz), the shoulder and elbow at most 1.2 %; the real KUKA recording A's base
+axis A1 11.7 %, A2-A6 at most 6 %.
 """
 
 from __future__ import annotations
