@@ -54,6 +54,7 @@ from test_robot_cutoff_band import logged, simulated, z_scores  # noqa: E402
 from test_robot_fit import PAYLOADS  # noqa: E402
 
 import ident.cli_robot as cli_robot  # noqa: E402
+from ident import DataError  # noqa: E402
 from ident.chain import decimation_index, selection  # noqa: E402
 from ident.robot.design import full_rate_loads, sign_checked  # noqa: E402
 from sim_drivers.arm_plant import output_arm_torque  # noqa: E402
@@ -107,10 +108,16 @@ def main() -> None:
     def fit(**opts):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return cli_robot.fit_files(reg.robot, exps, model="both", feasibility=False,
-                                       **opts)
+            try:
+                return cli_robot.fit_files(reg.robot, exps, model="both", feasibility=False,
+                                           **opts)
+            except DataError as exc:  # neither model identifiable on the rows left
+                return {"models": {"paper": {"error": str(exc)}}}
 
     def show(label, out):
+        if "error" in out["models"]["paper"]:
+            print(f"{label:32s} not fitted: {out['models']['paper']['error'][:120]}")
+            return
         z, pruned = z_scores(out, "paper", truth)
         per = [sum(v * v for n, v in z.items() if n.endswith(str(j))) for j in reg.numbers]
         top = sorted(z, key=lambda n: -abs(z[n]))[:4]
