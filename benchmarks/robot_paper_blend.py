@@ -19,6 +19,9 @@ joint, the number pruned, the largest |z| and the value +- sigma of the largest:
 
 - ``default``: ``jointid fit --robot``'s defaults;
 - ``no sign check``, ``no prune``, ``eq. 15 sigma`` (``sigma_blocks=0``): one step off;
+- ``sign check on predicted tau``: the sign check compares the first usual fit's predicted
+  torque tau_hat (not the measured, low-passed one) with its tau_out_hat: a selection on the
+  states only;
 - ``dq_min 0.05 rad/s``: the stiction area widened (the default is 1 % of the largest |dq|),
   so that E = exp(-|dq|/q_s) varies less within the rows kept;
 - ``true-theta quadrants``: the paper model's quadrants decided by the simulator's true theta
@@ -64,8 +67,8 @@ def _banded(reject, share: dict):
     """``sign_checked`` followed by leaving out, on every joint, the decimated rows within the
     guard of a full-rate sample ``reject(i, f, tau_out_hat)`` marks (n_f, k) bool; the share
     of each joint's rows this leaves out in ``share["left"]``."""
-    def wrapped(sig, runs, design, load_torque, min_kept=0.0):
-        out, kept = sign_checked(sig, runs, design, load_torque, min_kept)
+    def wrapped(sig, runs, design, load_torque, min_kept=0.0, **kw):
+        out, kept = sign_checked(sig, runs, design, load_torque, min_kept, **kw)
         if not np.isscalar(min_kept):  # the validation data's call: left as it is
             return out, kept
         loads = full_rate_loads(sig, runs, design, load_torque)
@@ -78,6 +81,26 @@ def _banded(reject, share: dict):
         share["left"] = 1.0 - keep.sum(axis=0) / np.maximum(out.columns.keep.sum(axis=0), 1)
         return replace(out, columns=replace(out.columns, keep=keep)), kept
     return wrapped
+
+
+def _predicted_check(sig, runs, design, load_torque, min_kept=0.0, **_):
+    """``sign_checked`` with the first usual fit's predicted torque tau_hat in place of the
+    measured, low-passed one: rows where sign(tau_hat) != sign(tau_out_hat) left out (a
+    selection on the states only, not on the output)."""
+    first = load_torque.__self__  # the bound RobotModel.load_torque of the first usual fit
+    cols = sig.columns
+    keep = cols.keep.copy()
+    pred = full_rate_loads(sig, runs, design, first.predict)
+    for i, ((f, tau_hat), (_, tau_out)) in enumerate(
+            zip(pred, full_rate_loads(sig, runs, design, load_torque), strict=True)):
+        rows = np.flatnonzero(sig.experiment == i)
+        keep[rows] = selection(f.dq, design.dq_min, design.guard,
+                               decimation_index(f.n, design.decimation),
+                               np.sign(tau_hat) != np.sign(tau_out))
+    kept = keep.sum(axis=0) / np.maximum(cols.keep.sum(axis=0), 1)
+    skip = kept < np.broadcast_to(np.asarray(min_kept, dtype=float), kept.shape)
+    keep[:, skip] = cols.keep[:, skip]
+    return replace(sig, columns=replace(cols, keep=keep)), kept
 
 
 def _true_quadrants(truth):
@@ -159,6 +182,9 @@ def main() -> None:
     show("dq_min 0.05 rad/s", fit(dq_min=0.05))
     saved = cli_robot.RobotModel, cli_robot.sign_checked
     try:
+        cli_robot.sign_checked = _predicted_check
+        show("sign check on predicted tau", fit())
+        cli_robot.sign_checked = saved[1]
         cli_robot.RobotModel = _true_quadrants(truth)
         show("true-theta quadrants", fit())
         cli_robot.RobotModel = saved[0]
