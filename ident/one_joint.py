@@ -75,6 +75,7 @@ from .robot.design import (
     sign_checked,
 )
 from .robot.estimate import ZERO_COLUMN, RobotModel, renamed_reason
+from .robot.load_jitter import JITTER_SHARE, jitter_note, jitter_share
 from .robot.loaders import RawRobotRun
 from .robot.refit import refit_robot
 from .robot.signals import RobotSignals
@@ -361,6 +362,11 @@ class OneJointProblem:
                         "every sample is kept and the quadrant sign(P) is that of the first "
                         "fit's load, sign(tau_out_hat dq) (eq. 26's sign(tau dq) is not the "
                         "quadrant where the friction exceeds the load)")
+                if first is None:  # the robot path's jitter note (ident.robot.load_jitter)
+                    share, jit = jitter_share(sig, full_rate_loads(sig, self.runs, st,
+                                                                   self._loads), st.decimation)
+                    if share[0] > JITTER_SHARE:
+                        self.notes.append(jitter_note(None, share[0], jit[0]))
         except RobotIdentError as err:
             raise DataError(str(err)) from None
         self.signals = sig

@@ -7,13 +7,21 @@ are not. docs/robot-identification.md, "Known limit: quadrants blended by the lo
 
 from __future__ import annotations
 
+import json
+import tomllib
 import warnings
 
 import pytest
+from example_campaign import ROOT, payload_experiments, simulate_example_campaign
 from test_robot_cutoff_band import logged, simulated
 
+from daq.app.cli import main
+from daq.protocol.control import ControllerGains
 from ident.cli_robot import fit_files
+from ident.fitting import fit_models
 from ident.robot.load_jitter import JITTER_SHARE
+from tests.conftest import shared_path
+from trajectories.robot_campaign import RobotCampaign
 
 
 @pytest.mark.parametrize("seed", [1, 2])
@@ -31,3 +39,24 @@ def test_the_fit_names_the_joint_whose_load_jitters_across_zero(seed):
     assert len(named) == 1 and named[0].startswith("paper model, j1: "), named
     # the usual model has no quadrants: no share in its record
     assert "quadrant_jitter_share" not in out["models"]["usual"]
+
+
+def test_single_joint_fit_applies_the_same_rule(tmp_path):
+    """A joint is a 1-dof robot: ``jointid fit`` gives the same note. The example campaign's
+    joint (gravity keeps its load away from zero) is not named; the real EMPS (a prismatic
+    axis whose load is inertial only, long constant-velocity phases) is."""
+    plant, plan, _ = simulate_example_campaign()
+    with open(ROOT / "examples" / "campaign.toml", "rb") as fh:
+        camp = RobotCampaign.from_dict(tomllib.load(fh), "examples/campaign.toml")
+    exps = payload_experiments(plant, plan, ControllerGains(**camp.gains_kwargs()), 11,
+                               name="p{i}.csv")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rep = fit_models(exps, models=("usual", "paper"))
+    assert not [n for n in rep.notes if "jitter above the cut-off" in n], rep.notes
+    emps = shared_path("data", "emps")  # skips with a reason where ../shared is absent
+    out = tmp_path / "emps.json"
+    assert main(["fit", str(emps / "DATA_EMPS.mat"), "--joint", "prismatic", "--map",
+                 "q=qm,tau=vir", "--gain", "gtau", "--json", str(out)]) == 0
+    named = [n for n in json.loads(out.read_text())["notes"] if "jitter above the cut-off" in n]
+    assert len(named) == 1 and named[0].startswith("paper model: "), named

@@ -83,9 +83,11 @@ def jitter_share(
     return small / np.maximum(kept, 1), np.sqrt(power / max(count, 1))
 
 
-def jitter_note(joint: str, share: float, jitter: float) -> str:
-    """The fit's one-line warning for a joint above :data:`JITTER_SHARE`."""
-    return (f"paper model, {joint}: {100 * share:.0f} % of its rows have a predicted load "
+def jitter_note(joint: str | None, share: float, jitter: float) -> str:
+    """The fit's one-line warning for a joint above :data:`JITTER_SHARE` (``joint`` None:
+    the single-joint fit's)."""
+    who = "paper model" if joint is None else f"paper model, {joint}"
+    return (f"{who}: {100 * share:.0f} % of the rows have a predicted load "
             f"within the torque's jitter above the cut-off (RMS {jitter:.3g}): there the "
             "true quadrant flips within the filter window and the filtered friction mixes "
             "both; its dry-friction terms may be biased beyond their sigma "
