@@ -169,17 +169,24 @@ class ArmRun(LoopRecord):
         constant payload columns of docs/robot-data.md when the run carries a payload (mass
         [kg], CoM in the flange frame [m], inertia about the CoM [kg m^2]): without them
         the file reads as a run without payload."""
-        cols = self.columns()
-        pay = self.payload
-        if pay is not None:
-            n = self.t.size
-            cols["payload_mass_kg"] = np.full(n, pay.mass)
-            for a, v in zip("xyz", pay.com, strict=True):
-                cols[f"payload_com_{a}_m"] = np.full(n, v)
-            for a, v in zip(("xx", "xy", "xz", "yy", "yz", "zz"), pay.inertia, strict=True):
-                cols[f"payload_i{a}_kgm2"] = np.full(n, v)
-        np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",",
-                   header=",".join(cols), comments="", fmt="%.17g")
+        write_robot_csv(path, self.columns(), self.payload)
+
+
+def write_robot_csv(path: Any, cols: dict[str, np.ndarray], payload: Any = None) -> None:
+    """Write equal-length columns (name -> (n,) array) as a robot CSV with a header line
+    (docs/robot-data.md), plus the constant payload columns when ``payload`` (``mass``
+    [kg], ``com`` (3,) in the flange frame [m], ``inertia`` (6,) about the CoM [kg m^2]:
+    xx, xy, xz, yy, yz, zz) is given."""
+    cols = dict(cols)
+    if payload is not None:
+        n = len(next(iter(cols.values())))
+        cols["payload_mass_kg"] = np.full(n, payload.mass)
+        for a, v in zip("xyz", payload.com, strict=True):
+            cols[f"payload_com_{a}_m"] = np.full(n, v)
+        for a, v in zip(("xx", "xy", "xz", "yy", "yz", "zz"), payload.inertia, strict=True):
+            cols[f"payload_i{a}_kgm2"] = np.full(n, v)
+    np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",",
+               header=",".join(cols), comments="", fmt="%.17g")
 
 
 def feedforward_torque(

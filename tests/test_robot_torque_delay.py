@@ -32,6 +32,7 @@ from daq.app.cli import main
 from ident import DataError
 from ident.api import RobotFit
 from ident.cli_robot import fit_files
+from sim_drivers.arm_offline import write_robot_csv
 
 #: Every n-th sample of the 1 kHz log kept: 250 Hz.
 EVERY = 4
@@ -89,16 +90,7 @@ def _write_csv(run, path: Path) -> Path:
     cols = {"t": run.t, **{f"q{j + 1}": run.q[:, j] for j in range(k)},
             **{f"tau{j + 1}": run.tau[:, j] for j in range(k)},
             **{f"q_ref{j + 1}": run.q_ref[:, j] for j in range(k)}}
-    pay = run.payload
-    if pay.mass > 0:
-        n = run.t.size
-        cols["payload_mass_kg"] = np.full(n, pay.mass)
-        for a, v in zip("xyz", pay.com, strict=True):
-            cols[f"payload_com_{a}_m"] = np.full(n, v)
-        for a, v in zip(("xx", "xy", "xz", "yy", "yz", "zz"), pay.inertia, strict=True):
-            cols[f"payload_i{a}_kgm2"] = np.full(n, v)
-    np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols),
-               comments="", fmt="%.17g")
+    write_robot_csv(path, cols, run.payload if run.payload.mass > 0 else None)
     return path
 
 
