@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from trajectories import RobotError
-from trajectories.friction import DEFAULT_Q_S, stribeck_exp
+from trajectories.friction import DEFAULT_Q_S, quadrant_products, stribeck_exp
 from trajectories.robot import (
     BaseParameters,
     RobotPayloadData,
@@ -342,12 +342,11 @@ class LoadDependent(Term):
         w = self.inner.columns(s)
         pp, pm = power_split(s, self.load)
         e = exp_velocity(s, self.q_s)
+        pp, pm, e = pp[:, None], pm[:, None], e[:, None]
         n, k = w.shape
         out = np.empty((n, 4 * k))
-        out[:, 0 : 2 * k : 2] = pp[:, None] * w
-        out[:, 1 : 2 * k : 2] = (pp * e)[:, None] * w
-        out[:, 2 * k :: 2] = pm[:, None] * w
-        out[:, 2 * k + 1 :: 2] = -(pm * e)[:, None] * w
+        out[:, 0 : 2 * k : 2], out[:, 2 * k :: 2] = quadrant_products(w, pp, pm)
+        out[:, 1 : 2 * k : 2], out[:, 2 * k + 1 :: 2] = quadrant_products(w, pp, pm, e)
         return out
 
     def describe(self) -> str:
@@ -380,7 +379,9 @@ class QuadrantCoulomb(Term):
         pp, pm = power_split(s, self.load)
         e = exp_velocity(s, self.q_s)
         sg = np.sign(s.dq)
-        return np.column_stack([pp * sg, pp * e * sg, pm * sg, pm * e * sg])
+        m, g = quadrant_products(sg, pp, pm)
+        me, ge = quadrant_products(sg, pp, pm, e, load=False)
+        return np.column_stack([m, me, g, ge])
 
     def describe(self) -> str:
         return (

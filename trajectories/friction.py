@@ -7,7 +7,8 @@ that package so the single-joint plant and fit do not import pinocchio for one e
 friction of the ``paper`` model; planning, simulation (:mod:`sim_drivers`) and identification
 (:mod:`ident`) compute it with :func:`stribeck_exp` and take the default from
 :data:`DEFAULT_Q_S`. (The simulators' per-step scalar loops inline the same expression with
-``math.exp`` for speed; they say so where they do.)
+``math.exp`` for speed; they say so where they do.) :func:`quadrant_products` forms that
+model's quadrant friction columns (eq. 30, 42-44) for one joint and for n.
 """
 
 from __future__ import annotations
@@ -35,3 +36,45 @@ def stribeck_exp(dq: ArrayLike, q_s: ArrayLike) -> np.ndarray:
         E in (0, 1], the shape of ``dq`` broadcast with ``q_s``.
     """
     return np.exp(-np.abs(dq) / q_s)
+
+
+def quadrant_products(
+    x: np.ndarray,
+    p_plus: np.ndarray,
+    p_minus: np.ndarray,
+    e: np.ndarray | None = None,
+    *,
+    load: bool = True,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The quadrant products of the paper model's friction columns (eq. 30, 42-44), one half.
+
+    Without ``e`` the q_s-free half, ``(P+ x, P- x)``; with ``e`` the half that carries
+    E = exp(-|dq| / q_s) (eq. 29), ``(P+ E x, -P- E x)`` for load columns (``load``:
+    the b_m, b_g columns of eq. 42-43) or ``(P+ E x, P- E x)`` for x = sign(dq) (the d_m, d_g
+    columns of eq. 30). The halves are apart so that a q_s scan forms (and filters) the
+    q_s-free one once. One joint (:class:`ident.models.LoadDependent`,
+    :class:`ident.models.QuadrantCoulomb`) and n joints (:func:`ident.robot.design.
+    products_columns`) compute their columns here.
+
+    Parameters
+    ----------
+    x : ndarray
+        What the weights multiply: load columns W_in [N m per parameter unit] or sign(dq) [-],
+        any shape that broadcasts with the weights (e.g. (n, c) with weights (n, 1), or
+        (c, n) with weights (n,)).
+    p_plus, p_minus : ndarray
+        P+ = (1 + sign P) / 2 and P- = (1 - sign P) / 2 (eq. 27-28, 44) [-], per sample.
+    e : ndarray or None
+        E per sample [-], the shape of ``p_plus``; None for the q_s-free half.
+    load : bool
+        With ``e``: the generator product negated (load columns) or not (sign columns).
+
+    Returns
+    -------
+    tuple of ndarray
+        The motor and generator products, each of the broadcast shape.
+    """
+    if e is None:
+        return p_plus * x, p_minus * x
+    pe, me = p_plus * e, p_minus * e
+    return pe * x, (-me if load else me) * x

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from trajectories.friction import DEFAULT_Q_S, stribeck_exp
+from trajectories.friction import DEFAULT_Q_S, quadrant_products, stribeck_exp
 
 from ..chain import (
     ChainSettings,
@@ -404,10 +404,10 @@ def _products_fixed(exp: RawExperiment, i: int, run: RawRobotRun, cols: RobotCol
         sg = np.sign(dq)
         load = np.concatenate([W[j, pos[j]], known[None, :, j]], axis=0)  # (l + 1, n_f)
         loadz = None
-        parts = [pp * load, pm * load, np.stack([pp * sg, pm * sg, pp])]
+        parts = [*quadrant_products(load, pp, pm), np.stack([*quadrant_products(sg, pp, pm), pp])]
         if Wz is not None and knownz is not None:  # the instruments' load rows
             loadz = np.concatenate([Wz[j, pos[j]], knownz[None, :, j]], axis=0)
-            parts += [pp * loadz, pm * loadz]
+            parts += [*quadrant_products(loadz, pp, pm)]
         # the chain's filter, row by row (the same floats as in one stack)
         fixed = decimate(np.concatenate(parts).T, r)[0].T
         out.append((dq, pp, pm, sg, load, loadz, fixed))
@@ -437,7 +437,8 @@ def products_columns(
     column w of the joint (its base parameters' standard columns, ``rigid_kpn`` at full rate,
     then its known torque p_j: payload and known rotors) gives P+ w, P+ E w, P- w, -P- E w
     (a_m, b_m, a_g, b_g; eq. 42-43), sign(dq_j) gives P+ sign, P+ E sign, P- sign, P- E sign
-    (c_m, d_m, c_g, d_g; eq. 30), and P+ itself is kept for the quadrant counts. These rows
+    (c_m, d_m, c_g, d_g; eq. 30) (:func:`trajectories.friction.quadrant_products`, as the
+    single-joint terms), and P+ itself is kept for the quadrant counts. These rows
     are filtered and decimated by :func:`ident.chain.decimate`, the chain's own anti-alias
     filter and decimation (the same floats as in the chain's stack: the rows are filtered
     independently), so ``RobotModel(model="paper", form="products")`` reads them and gives,
@@ -537,10 +538,10 @@ def products_columns(
         for j, (dq, pp, pm, sg, load, loadz, fixed) in enumerate(per_joint):
             # the q_s-dependent rows: E = exp(-|dq| / q_s) times the fixed ones
             e = stribeck_exp(dq, qs[j])
-            pe, me = pp * e, pm * e
-            parts = [pe * load, -me * load, np.stack([pe * sg, me * sg])]
+            parts = [*quadrant_products(load, pp, pm, e),
+                     np.stack(quadrant_products(sg, pp, pm, e, load=False))]
             if loadz is not None:
-                parts += [pe * loadz, -me * loadz]
+                parts += [*quadrant_products(loadz, pp, pm, e)]
             dep = decimate(np.concatenate(parts).T, r)[0].T
             del parts
             nl = pos[j].size + 1
