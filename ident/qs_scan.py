@@ -18,6 +18,8 @@ from typing import Any
 import numpy as np
 import scipy.optimize
 
+from trajectories.friction import quadrant_products
+
 from . import DataError
 from .chain import _decimate_rows
 from .models import IdentModel, LoadDependent, QuadrantCoulomb, exp_velocity, power_split
@@ -119,11 +121,10 @@ class _EColumns(Term):
         _, pp, pm, x = hit
         e = exp_velocity(s, t.q_s)
         if isinstance(t, QuadrantCoulomb):
-            return np.column_stack([pp * e * x, pm * e * x])
+            return np.column_stack(quadrant_products(x, pp, pm, e, load=False))
         n, k = x.shape
         out = np.empty((n, 2 * k))
-        out[:, :k] = (pp * e)[:, None] * x
-        out[:, k:] = -(pm * e)[:, None] * x
+        out[:, :k], out[:, k:] = quadrant_products(x, pp[:, None], pm[:, None], e[:, None])
         return out
 
 
