@@ -7,9 +7,11 @@ Usage: ``python benchmarks/load_jitter_share.py [--seeds 1 2] [--duration 20]
 The simulated arm3 of tests/test_robot_cutoff_band.py (paper friction on every joint, three
 payload runs of ``--duration`` s at 1 kHz, the drives' log) at 1 kHz, 500 Hz and 250 Hz (every
 1st, 2nd, 4th sample), and the real KUKA recording A (../shared, when present), fitted by
-``jointid fit --robot``'s defaults (:func:`ident.cli_robot.fit_files`, no jackknife, no
-feasibility search: neither changes the share). Printed: the paper model's
-``quadrant_jitter_share`` per joint [%] and the joints the note names. Then ``jointid fit``'s
+``jointid fit --robot``'s defaults (:func:`ident.cli_robot.fit_files`, the honest sigma; no
+feasibility search, which changes no parameter). Printed: the paper model's
+``quadrant_jitter_share`` per joint [%] and the joints the note names, and the paper model's
+``sign_check_shift`` (:mod:`ident.robot.selection_shift`): how many parameters move beyond
+``SHIFT_Z`` sigma when the sign check's rows are kept, and the three largest. Then ``jointid fit``'s
 defaults on single joints (the same rule): the example campaign, the friction-dominated joint
 of tests/test_friction_dominated.py and the real EMPS (the note, or "not named").
 """
@@ -17,6 +19,8 @@ of tests/test_friction_dominated.py and the real EMPS (the note, or "not named")
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import os
 import sys
 import tempfile
@@ -30,6 +34,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 from test_robot_cutoff_band import logged, simulated  # noqa: E402
 
 from ident.cli_robot import fit_files  # noqa: E402
+from ident.robot.selection_shift import SHIFT_Z  # noqa: E402
 from trajectories.robot import load_robot  # noqa: E402
 
 KUKA = ROOT.parent / "shared" / "data" / "kuka_kr300_weigand2021"
@@ -40,8 +45,12 @@ def _show(label: str, out: dict) -> None:
     share = out["models"]["paper"]["quadrant_jitter_share"]
     named = [n.split(":")[0].removeprefix("paper model, ") for n in out["notes"]
              if "jitter above the cut-off" in n]
+    z = out["models"]["paper"].get("sign_check_shift") or {}
+    top = sorted(z, key=lambda n: -abs(z[n]))[:3]
+    big = sum(abs(v) > SHIFT_Z for v in z.values())
     print(f"{label:24s} " + "  ".join(f"{j} {100 * x:5.1f}" for j, x in share.items())
-          + f"   named: {', '.join(named) or '-'}", flush=True)
+          + f"   named: {', '.join(named) or '-'}   sign-check shift: {big} beyond "
+          f"{SHIFT_Z:g} (" + ", ".join(f"{n} {z[n]:+.1f}" for n in top) + ")", flush=True)
 
 
 def main() -> None:
@@ -55,7 +64,7 @@ def main() -> None:
         params, reg, runs, _ = simulated("paper", seed, a.duration)
         for every in (1, 2, 4):
             out = fit_files(reg.robot, logged(params, runs, every), model="both",
-                            sigma_blocks=0, feasibility=False)
+                            feasibility=False)
             _show(f"arm3 seed {seed} {1000 // every} Hz", out)
     if a.single_joint_only:
         pass
@@ -63,7 +72,7 @@ def main() -> None:
         robot = load_robot(ROOT / "examples" / "robots" / "kuka_kr300_r2500.toml")
         out = fit_files(robot, [KUKA / "recorded_2020-10-21_FF_A_08ms.mat"], model="both",
                         mapping=dict(x.split("=", 1) for x in KUKA_MAP.split(",")),
-                        q_unit="deg", sigma_blocks=0, feasibility=False)
+                        q_unit="deg", feasibility=False)
         _show("KUKA recording A", out)
     else:
         print(f"{KUKA}: absent (KUKA skipped)")
@@ -102,7 +111,7 @@ def _single_joint() -> None:
 
         from daq.app.cli import main
 
-        with tempfile.TemporaryDirectory() as d:
+        with tempfile.TemporaryDirectory() as d, contextlib.redirect_stdout(io.StringIO()):
             out = Path(d) / "emps.json"
             main(["fit", str(emps), "--joint", "prismatic", "--map", "q=qm,tau=vir", "--gain",
                   "gtau", "--json", str(out)])

@@ -62,6 +62,7 @@ from .robot.payload import format_misfit, payload_misfit
 from .robot.plots import write_robot_report
 from .robot.refine_joint import joint_coulomb, refine_joint
 from .robot.refit_accept import ALL_REFUSED, accept_refit
+from .robot.selection_shift import selection_shift, shift_note
 from .robot.signals import RobotSignals
 from .robot.tables import format_table_iii, format_uncertainty, table_iii
 from .robot.uncertainty import N_BLOCKS, assess, parameter_records
@@ -326,6 +327,7 @@ def fit_robot(
             models = tuple(m for m in models if m != "paper")
             refused["paper"] = regrouping.paper
     jitter = None  # (share, jitter) per joint of the paper model's warning (load_jitter)
+    unchecked = None  # the rows before the sign check, when it left some out (selection_shift)
     if chain == "columns":
         design = resolve_design(runs, instruments=method == "iv", cutoff_hz=pre.cutoff_hz,
                                 decimation=pre.decimation, trim=pre.trim,
@@ -346,8 +348,11 @@ def fit_robot(
                                payload_ratio=payload == "ratio",
                                payload_params=payload == "mass").fit(sig)
             loads = full_rate_loads(sig, runs, design, first.load_torque)
+            before = sig
             sig, kept = sign_checked(sig, runs, design, first.load_torque,
                                      SIGN_CHECK_MIN_KEPT, loads=loads)
+            if np.any(kept >= SIGN_CHECK_MIN_KEPT):  # the rows it chose: checked below
+                unchecked = before
             # the rows within the closed loop's load jitter of the quadrant boundary (a
             # warning of the paper model's, below): the first fit's load, the checked rows
             jitter = jitter_share(sig, loads, design.decimation)
@@ -409,15 +414,17 @@ def fit_robot(
         "_cycle_s": float(np.median(np.diff(runs[0].t))),
         "_keep": kept_rows(sig, est_dq_min),
     }
+    def model(name: str) -> RobotModel:
+        # one joint: exactly the single-joint fit's rows (no quadrant band; the sign check
+        # plays its part there)
+        return RobotModel(reg, model=name, method=method, q_s=q_s, dq_min=est_dq_min,
+                          base=base, payload_ratio=payload == "ratio",
+                          payload_params=payload == "mass",
+                          quadrant_band=0.0 if len(robot.moving) == 1 else 0.03)
+
     for name in models:
         try:
-            # one joint: exactly the single-joint fit's rows (no quadrant band; the sign
-            # check plays its part there)
-            est = RobotModel(reg, model=name, method=method, q_s=q_s, dq_min=est_dq_min,
-                             base=base,
-                             payload_ratio=payload == "ratio",
-                             payload_params=payload == "mass",
-                             quadrant_band=0.0 if len(robot.moving) == 1 else 0.03).fit(sig)
+            est = model(name).fit(sig)
         except IdentError as exc:
             if len(models) == 1:
                 raise
@@ -448,6 +455,15 @@ def fit_robot(
                                                 zip(joints, jitter[0], strict=True)}
                 notes.extend(jitter_note(j, x, h) for j, x, h in
                              zip(joints, *jitter, strict=True) if x > JITTER_SHARE)
+            if unchecked is not None:  # the estimate against the sign check's row choice
+                try:
+                    z = selection_shift(rec["parameters"], model(name).fit(unchecked))
+                except IdentError:  # not identifiable on those rows: nothing to compare
+                    z = None
+                if z is not None:
+                    rec["sign_check_shift"] = z
+                    if note := shift_note(z):
+                        notes.append(note)
             for j, x, h in zip(joints, est.band_share_, est.band_, strict=True):
                 if x > ZERO_LOAD_SHARE:
                     notes.append(
