@@ -458,8 +458,8 @@ def fit_robot(
             if unchecked is not None:  # the estimate against the sign check's row choice
                 try:
                     z = selection_shift(rec["parameters"], model(name).fit(unchecked))
-                except IdentError:  # not identifiable on those rows: nothing to compare
-                    z = None
+                except (IdentError, np.linalg.LinAlgError):  # a diagnostic: never fatal
+                    z = None  # (not identifiable on those rows: nothing to compare)
                 if z is not None:
                     rec["sign_check_shift"] = z
                     if note := shift_note(z):
