@@ -504,8 +504,12 @@ def test_stalled_master_names_itself_and_logs_no_stale_cycles(tmp_path, sync_sou
     # the drive faulted on its own during the stall (RPDO deadline 103 ms < 0.5 s): logged
     # (on a loaded host the master may also miss that deadline while enabling -- an EMCY at
     # cycle 0 the enable sequence resets -- which is logged too: not asserted absent)
+    # (on two busy cores the simulated drive's own thread may notice the missing SYNC or
+    # heartbeat only as the master resumes, so that its EMCY arrives after the log closed:
+    # then it is kept in the state file and named in the result's notes, not lost)
     emcy = [e for e in a.events if e["kind"] == "emcy"]
-    assert any(e["cycle"] >= run.fault_cycle for e in emcy), emcy
+    late = [n for n in r.notes if "EMCY" in n and "after the run of payload 0" in n]
+    assert any(e["cycle"] >= run.fault_cycle for e in emcy) or late, (emcy, r.notes)
     assert rig.drive.state in (State.FAULT, State.SWITCH_ON_DISABLED)
 
 

@@ -29,7 +29,8 @@ def _loading_scipy(pid: int) -> bool:
         return False
 
 
-def test_ctrl_c_during_start_up_is_one_line_exit_130(tmp_path):
+def _interrupted_start(tmp_path: Path) -> tuple[int, str, str]:
+    """(exit code, stdout, stderr) of ``jointid plan`` sent SIGINT once it loads scipy."""
     exe = shutil.which("jointid") or ""
     cmd = [exe] if exe else [sys.executable, "-m", "daq.app.cli"]
     env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1")
@@ -47,7 +48,19 @@ def test_ctrl_c_during_start_up_is_one_line_exit_130(tmp_path):
     finally:
         if proc.poll() is None:
             proc.kill()
+    return proc.returncode, out, err
+
+
+def test_ctrl_c_during_start_up_is_one_line_exit_130(tmp_path):
+    # On two busy cores this process may be descheduled between seeing scipy load and
+    # sending the signal, long enough for the child to finish the plan and be shutting
+    # down, where no handler runs (exit 0, the plan printed, nothing on stderr): the signal
+    # then missed the start-up and the case is tried again (at most 3 times).
+    for _ in range(3):
+        code, out, err = _interrupted_start(tmp_path)
+        if not (code == 0 and "condition number" in out and not err.strip()):
+            break
     assert "Traceback" not in err, err[-2000:]
-    assert proc.returncode == 130, (proc.returncode, err[-2000:])
+    assert code == 130, (code, err[-2000:])
     assert err.strip().splitlines()[-1] == "jointid: interrupted (SIGINT)"
     assert "condition number" not in out  # stopped before the plan was printed
