@@ -301,7 +301,7 @@ class JointModel(HyperParameters):
             threshold_pct=self.threshold,
             references=self._references(),
             payload=self.payload,
-            torque_delay="auto" if self.torque_delay is None else self.torque_delay,
+            torque_delay=self.torque_delay,
         )
         name = refined_model(report.models)
         if self.estimator == "iv" and report.models[name].estimator_ != "iv":

@@ -66,6 +66,7 @@ __all__ = [
     "decimation_index",
     "default_rates",
     "filter_chain",
+    "check_torque_delay",
     "default_torque_delay",
     "diffcent",
     "filter_experiment",
@@ -395,6 +396,31 @@ def default_torque_delay(sources: Iterable[str]) -> float:
     next cycle), else 0 (files of unknown timing, processed like the MATLAB scripts)."""
     names = [str(x) for x in sources]
     return TORQUE_DELAY if names and all(x.lower().endswith(".mcap") for x in names) else 0.0
+
+
+def check_torque_delay(value: float | str | None, what: str = "torque_delay") -> float | None:
+    """The torque delay a caller gives [samples], checked: None or ``"auto"`` for the
+    default (:func:`default_torque_delay`), else a number in [0, 1) (the bound of
+    :func:`resolve_settings`: a longer timing is whole cycles the log states,
+    ``campaign.torque_delay_cycles``, paired at load time). The single-joint and the robot
+    fit, their command lines (before any file is read) and APIs read it here.
+
+    Raises
+    ------
+    DataError
+        One line naming ``what`` and the value.
+    """
+    if value is None or (isinstance(value, str) and value == "auto"):
+        return None
+    try:
+        d = float(value)
+    except (TypeError, ValueError):
+        raise DataError(f"{what} {value!r}: expected a delay in [0, 1) samples of the log's "
+                        "period, or 'auto'") from None
+    if not 0.0 <= d < 1.0:  # NaN fails too
+        raise DataError(f"{what} {d:g}: expected a delay in [0, 1) samples of the log's period "
+                        "(e.g. 0.125: half a 1 kHz cycle in a log at 250 Hz)")
+    return d
 
 
 

@@ -256,30 +256,6 @@ def parse_qs(value: str | None, *, scan: bool = True) -> float | str:
     return v
 
 
-def check_torque_delay(value: float | str | None, what: str = "torque_delay") -> float | None:
-    """The torque delay a caller gives [samples], checked: None (or ``"auto"``, the spelling
-    of :func:`ident.fitting.fit_models`) for the default, else a number in [0, 1) (the
-    chain's bound, :func:`ident.chain.resolve_settings`: a longer timing is whole cycles the
-    log states, ``campaign.torque_delay_cycles``, paired at load time).
-
-    Raises
-    ------
-    DataError
-        One line naming ``what`` and the value.
-    """
-    if value is None or (isinstance(value, str) and value == "auto"):
-        return None
-    try:
-        d = float(value)
-    except (TypeError, ValueError):
-        raise DataError(f"{what} {value!r}: expected a delay in [0, 1) samples of the log's "
-                        "period, or 'auto'") from None
-    if not 0.0 <= d < 1.0:  # NaN fails too
-        raise DataError(f"{what} {d:g}: expected a delay in [0, 1) samples of the log's period "
-                        "(e.g. 0.125: half a 1 kHz cycle in a log at 250 Hz)")
-    return d
-
-
 def estimator_from_args(args: argparse.Namespace) -> JointModel:
     """The :class:`~ident.api.JointModel` ``jointid fit`` runs for these arguments."""
     from .api import JointModel
@@ -402,6 +378,7 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``jointid fit``; returns the exit code."""
     from . import cli_robot
     from .api import load
+    from .chain import check_torque_delay
     from .loaders import parse_mapping
     from .plots import write_plots
     from .refine_plots import plot_refinement

@@ -36,7 +36,8 @@ from trajectories.friction import DEFAULT_Q_S
 from trajectories.robot import Robot, RobotRegressor, base_parameters, load_robot
 
 from . import DataError, IdentError
-from .cli import check_torque_delay, parse_qs
+from .chain import check_torque_delay
+from .cli import parse_qs
 from .estimate import DEFAULT_THRESHOLD_PCT
 from .fitting import DQ_MIN_FRACTION, SIGN_CHECK_MIN_KEPT
 from .loaders import parse_mapping

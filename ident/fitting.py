@@ -38,7 +38,7 @@ import numpy as np
 from trajectories.friction import DEFAULT_Q_S
 
 from . import DataError
-from .chain import default_torque_delay, iv_band_note
+from .chain import check_torque_delay, default_torque_delay, iv_band_note
 from .effects import rigid_prediction
 from .loaders import Experiment, concat
 from .models import (
@@ -561,9 +561,10 @@ def fit_models(
         the E_xp ddq columns.
         ``"auto"`` (default): the experiments' ``q_ref`` attributes when every experiment
         has one without NaN, else OLS. None: OLS.
-    torque_delay : float or "auto"
-        Instant of the torque samples after the position samples, in samples, see
-        :func:`ident.preprocess.build_design`. ``"auto"``: half a cycle
+    torque_delay : float, "auto" or None
+        Instant of the torque samples after the position samples, in samples, in [0, 1)
+        (:func:`ident.chain.check_torque_delay`), see :func:`ident.preprocess.build_design`.
+        ``"auto"`` or None: half a cycle
         (:data:`ident.preprocess.TORQUE_DELAY`) when every experiment is a jointid MCAP log
         (``source`` ending in ``.mcap``: commands held over the next cycle), else 0 (files of
         unknown timing, processed like the MATLAB reference scripts).
@@ -598,11 +599,9 @@ def fit_models(
         else []
     )
     ref = _references(references, data, s)
-    delay_given = not isinstance(torque_delay, str)  # the record says whether it was given
-    if isinstance(torque_delay, str):
-        if torque_delay != "auto":
-            raise DataError(f"torque_delay {torque_delay!r}: expected a number [samples] or 'auto'")
-        torque_delay = default_torque_delay(sources)
+    given = check_torque_delay(torque_delay)  # None: "auto" (the record says which)
+    delay_given = given is not None
+    torque_delay = default_torque_delay(sources) if given is None else given
     has_payload = bool(np.any(s.payload_mass != 0)) if payload is None else bool(payload)
     notes: list[str] = []
     if not has_payload:
