@@ -341,7 +341,8 @@ class OneJointProblem:
             if self.first is not None:
                 self._loads = _RunLoads(self.first.load_torque)
             if paper and self.first is not None and (first is None or first_checked):
-                out, kept = sign_checked(sig, self.runs, st, self._loads)
+                loads = full_rate_loads(sig, self.runs, st, self._loads)  # (and the jitter's)
+                out, kept = sign_checked(sig, self.runs, st, self._loads, loads=loads)
                 if tau_keep is not None:  # the check's rows recomputed: tau_min again
                     keep = out.columns.keep & tau_keep
                     out = replace(out, columns=replace(out.columns, keep=keep))
@@ -363,8 +364,7 @@ class OneJointProblem:
                         "fit's load, sign(tau_out_hat dq) (eq. 26's sign(tau dq) is not the "
                         "quadrant where the friction exceeds the load)")
                 if first is None:  # the robot path's jitter note (ident.robot.load_jitter)
-                    share, jit = jitter_share(sig, full_rate_loads(sig, self.runs, st,
-                                                                   self._loads), st.decimation)
+                    share, jit = jitter_share(sig, loads, st.decimation)
                     if share[0] > JITTER_SHARE:
                         self.notes.append(jitter_note(None, share[0], jit[0]))
         except RobotIdentError as err:
