@@ -83,20 +83,14 @@ def _single_joint() -> None:
     """``jointid fit``'s defaults on one joint (the same rule, :class:`ident.one_joint.
     OneJointProblem`): the example campaign (simulated), the friction-dominated joint of
     tests/test_friction_dominated.py, the real EMPS; printed: the note, or that none came."""
-    import tomllib
-
-    from example_campaign import payload_experiments, simulate_example_campaign
+    from example_campaign import example_gains, payload_experiments, simulate_example_campaign
     from test_friction_dominated import friction_dominated
 
-    from daq.protocol.control import ControllerGains
     from ident.fitting import fit_models
-    from trajectories.robot_campaign import RobotCampaign
 
     plant, plan, _ = simulate_example_campaign()
-    with open(ROOT / "examples" / "campaign.toml", "rb") as fh:
-        camp = RobotCampaign.from_dict(tomllib.load(fh), "examples/campaign.toml")
-    cases = {"example campaign": payload_experiments(
-        plant, plan, ControllerGains(**camp.gains_kwargs()), 11, name="p{i}.csv")}
+    cases = {"example campaign": payload_experiments(plant, plan, example_gains(), 11,
+                                                     name="p{i}.csv")}
     txt = (ROOT / "sim_drivers" / "data" / "plant_default.toml").read_text()
     with tempfile.TemporaryDirectory() as d:
         fplant, fplan, fgains = friction_dominated(txt, Path(d) / "plant.toml", "fd")
@@ -111,11 +105,13 @@ def _single_joint() -> None:
 
         from daq.app.cli import main
 
-        with tempfile.TemporaryDirectory() as d, contextlib.redirect_stdout(io.StringIO()):
+        with tempfile.TemporaryDirectory() as d:
             out = Path(d) / "emps.json"
-            main(["fit", str(emps), "--joint", "prismatic", "--map", "q=qm,tau=vir", "--gain",
-                  "gtau", "--json", str(out)])
-            _note("EMPS (real)", json.loads(out.read_text())["notes"])
+            with contextlib.redirect_stdout(io.StringIO()):  # the command's own tables
+                main(["fit", str(emps), "--joint", "prismatic", "--map", "q=qm,tau=vir",
+                      "--gain", "gtau", "--json", str(out)])
+            notes = json.loads(out.read_text())["notes"]
+        _note("EMPS (real)", notes)
 
 
 def _note(label: str, notes: list[str]) -> None:

@@ -16,11 +16,20 @@ from trajectories.robot_campaign import RobotCampaign
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def _campaign() -> RobotCampaign:
+    with open(ROOT / "examples" / "campaign.toml", "rb") as fh:
+        return RobotCampaign.from_dict(tomllib.load(fh), "examples/campaign.toml")
+
+
+def example_gains() -> ControllerGains:
+    """The example campaign's controller gains (what :func:`simulate_example_campaign` runs)."""
+    return ControllerGains(**_campaign().gains_kwargs())
+
+
 def simulate_example_campaign(seed0: int = 11) -> tuple[PlantParams, CampaignPlan, list[SimRun]]:
     """The default plant, the planned example campaign and one simulated run per payload
     (noise seeds seed0, seed0 + 1, ...)."""
-    with open(ROOT / "examples" / "campaign.toml", "rb") as fh:
-        campaign = RobotCampaign.from_dict(tomllib.load(fh), "examples/campaign.toml")
+    campaign = _campaign()
     plan = plan_campaign(campaign)
     plant = load_plant(ROOT / "sim_drivers" / "data" / "plant_default.toml")
     gains = ControllerGains(**campaign.gains_kwargs())

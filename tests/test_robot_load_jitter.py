@@ -8,20 +8,17 @@ are not. docs/robot-identification.md, "Known limit: quadrants blended by the lo
 from __future__ import annotations
 
 import json
-import tomllib
 import warnings
 
 import pytest
-from example_campaign import ROOT, payload_experiments, simulate_example_campaign
+from example_campaign import example_gains, payload_experiments, simulate_example_campaign
 from test_robot_cutoff_band import logged, simulated
 
 from daq.app.cli import main
-from daq.protocol.control import ControllerGains
 from ident.cli_robot import fit_files
 from ident.fitting import fit_models
 from ident.robot.load_jitter import JITTER_SHARE
 from tests.conftest import shared_path
-from trajectories.robot_campaign import RobotCampaign
 
 
 @pytest.mark.parametrize("seed", [1, 2])
@@ -46,10 +43,7 @@ def test_single_joint_fit_applies_the_same_rule(tmp_path):
     joint (gravity keeps its load away from zero) is not named; the real EMPS (a prismatic
     axis whose load is inertial only, long constant-velocity phases) is."""
     plant, plan, _ = simulate_example_campaign()
-    with open(ROOT / "examples" / "campaign.toml", "rb") as fh:
-        camp = RobotCampaign.from_dict(tomllib.load(fh), "examples/campaign.toml")
-    exps = payload_experiments(plant, plan, ControllerGains(**camp.gains_kwargs()), 11,
-                               name="p{i}.csv")
+    exps = payload_experiments(plant, plan, example_gains(), 11, name="p{i}.csv")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         rep = fit_models(exps, models=("usual", "paper"))
