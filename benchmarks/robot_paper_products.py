@@ -45,6 +45,9 @@ per second at full rate of the true load sign(tau_out dq), of the first usual fi
 sign(tau_out_hat dq) and of the true load low-passed (4th-order Butterworth at the cut-off,
 zero phase), the share of full-rate samples where tau_out_hat's quadrant is not the true
 load's, and the share of the joint's kept rows whose full-rate P+ is fractional (blended).
+Printed last: how much torque that is not eq. 30 (the simulator's samples at rest or in its
+zero-load regime) the chain's anti-alias filter carries into the rows away from them
+(:func:`_leak`).
 """
 
 from __future__ import annotations
@@ -63,11 +66,12 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import numpy as np  # noqa: E402
 import scipy.stats  # noqa: E402
+from scipy.ndimage import binary_dilation  # noqa: E402
 from scipy.signal import butter, filtfilt  # noqa: E402
 from test_robot_cutoff_band import logged, simulated  # noqa: E402
 from test_robot_fit import PAYLOADS  # noqa: E402
 
-from ident.chain import decimation_index, selection  # noqa: E402
+from ident.chain import decimate, decimation_index, selection  # noqa: E402
 from ident.fitting import SIGN_CHECK_MIN_KEPT  # noqa: E402
 from ident.robot import RobotIdentError  # noqa: E402
 from ident.robot.base import base_parameters  # noqa: E402
@@ -79,6 +83,7 @@ from ident.robot.design import (  # noqa: E402
     sign_checked,
 )
 from ident.robot.estimate import RobotModel  # noqa: E402
+from ident.robot.signals import RobotPayloadData, RobotSignals  # noqa: E402
 from sim_drivers.arm_plant import output_arm_torque  # noqa: E402
 from trajectories.friction import DEFAULT_Q_S  # noqa: E402
 
@@ -89,6 +94,46 @@ BAND = 0.03
 def _flips(x: np.ndarray, dur_s: float) -> float:
     """Sign changes of x per second."""
     return float(np.sum(np.diff(np.sign(x)) != 0) / dur_s)
+
+
+def _leak(reg, base, sim, truth, design, k: slice) -> None:
+    """How much of the simulator's torque that is not eq. 30 (at rest, in the zero-load
+    regime) the chain's anti-alias filter carries into rows away from those samples: the
+    products form fitted on the true states at the log's rate with the applied torque on the
+    sliding samples only (no filter; quadrants of the true theta: the model is exact there),
+    e = tau_applied - its prediction on every sample (0 where the joint slides), then e
+    through :func:`ident.chain.decimate`; printed per run and joint, in % of the torque's RMS:
+    e's RMS, and the decimated e's RMS on the rows with |dq| > dq_min farther than 1, 2 and 4
+    guards from any sample that does not slide."""
+    sigs = []
+    for r, p in zip(sim, PAYLOADS, strict=True):
+        pay = RobotPayloadData() if p is None else RobotPayloadData(p.mass, p.com, p.inertia)
+        sigs.append(RobotSignals(t=r.t[k], q=r.q_true[k], dq=r.dq_true[k], ddq=r.ddq_true[k],
+                                 tau=r.tau_applied[k], joints=reg.joints, payloads=(pay,),
+                                 source=f"sim payload {r.payload_mass_kg} kg"))
+    sliding = [replace(s, tau=np.where(r.regime[k] == 0, s.tau, np.nan))
+               for s, r in zip(sigs, sim, strict=True)]
+    usual = RobotModel(reg, "usual", base=base).fit(sliding)
+    exact = RobotModel(reg, "paper", "ls", base=base, form="products", quadrant_band=0.0,
+                       quadrant_theta=usual.truth_vector(truth)[:usual.n_theta_]).fit(sliding)
+    g = design.guard
+    print(f"non-eq.-30 torque through the filter; per run and joint, % of the torque's RMS: "
+          f"e on the sliding samples (the exact model: 0), e, decimated e farther than {g}, "
+          f"{2 * g}, {4 * g} samples from a non-sliding one")
+    for i, (s, r) in enumerate(zip(sigs, sim, strict=True)):
+        e = s.tau - exact.predict(s)
+        slide = r.regime[k] == 0
+        de, idx = decimate(e, design.decimation)
+        for j in range(reg.k):
+            rms = np.sqrt(np.mean(s.tau[:, j] ** 2)) / 100
+            bad = r.regime[k][:, j] != 0
+            out = [np.sqrt(np.mean(e[slide[:, j], j] ** 2)) / rms,
+                   np.sqrt(np.mean(e[:, j] ** 2)) / rms]
+            for m in (1, 2, 4):
+                far = (~binary_dilation(bad, iterations=m * g)[idx]
+                       & (np.abs(s.dq[idx, j]) > design.dq_min))
+                out.append(np.sqrt(np.mean(de[far, j] ** 2)) / rms)
+            print(f"  run {i} j{j + 1}: {out[0]:.1e} " + " ".join(f"{x:7.3f}" for x in out[1:]))
 
 
 def main() -> None:
@@ -228,6 +273,7 @@ def main() -> None:
     held = replace(held, columns=replace(held.columns, keep=sig.columns.keep, full=states))
     held = products_columns(held, runs, reg, design, true_load, DEFAULT_Q_S, base=base)
     fit("  the same, held torque", no_regime(held), form="products")
+    _leak(reg, base, sim, truth, design, k)
     print(f"total {time.perf_counter() - t0:.0f} s")
 
 
