@@ -132,7 +132,8 @@ def _leak(reg, base, sim, truth, design, k: slice) -> None:
             for m in (1, 2, 4):
                 far = (~binary_dilation(bad, iterations=m * g)[idx]
                        & (np.abs(s.dq[idx, j]) > design.dq_min))
-                out.append(np.sqrt(np.mean(de[far, j] ** 2)) / rms)
+                # (nan: no such row)
+                out.append(np.sqrt(np.mean(de[far, j] ** 2)) / rms if far.any() else np.nan)
             print(f"  run {i} j{j + 1}: {out[0]:.1e} " + " ".join(f"{x:7.3f}" for x in out[1:]))
 
 
