@@ -35,7 +35,9 @@ joint, the number pruned, the largest |z| and the value +- sigma of the largest:
   load), k = 1 and 2.
 
 The band variants wrap :func:`ident.robot.design.sign_checked` where
-:mod:`ident.cli_robot` calls it (diagnostic only; nothing in the product does this).
+:mod:`ident.cli_robot` calls it (diagnostic only; nothing in the product does this). The
+products form on eq. 42's products formed at full rate (a low-passed, fractional quadrant) on
+the same logs: ``benchmarks/robot_paper_products.py``.
 """
 
 from __future__ import annotations
