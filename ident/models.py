@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from trajectories import RobotError
-from trajectories.friction import DEFAULT_Q_S, quadrant_products, stribeck_exp
+from trajectories.friction import DEFAULT_Q_S, quadrant_products, quadrant_weights, stribeck_exp
 from trajectories.robot import (
     BaseParameters,
     RobotPayloadData,
@@ -70,10 +70,10 @@ def power_split(s: Signals, load: Term | None = None) -> tuple[np.ndarray, np.nd
     Returns
     -------
     p_plus, p_minus : ndarray, shape (n,)
-        (1 + sign P)/2 and (1 - sign P)/2; both 0.5 where the product is 0.
+        (1 + sign P)/2 and (1 - sign P)/2 (:func:`trajectories.friction.quadrant_weights`);
+        both 0.5 where the product is 0.
     """
-    sp = s.sign_power if load is None else np.sign(load(s) * s.dq)
-    return 0.5 * (1.0 + sp), 0.5 * (1.0 - sp)
+    return quadrant_weights(s.sign_power if load is None else load(s) * s.dq)
 
 
 def exp_velocity(s: Signals, q_s: float) -> np.ndarray:

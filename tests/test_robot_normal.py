@@ -12,9 +12,10 @@ import pytest
 
 from ident.robot import estimate
 from ident.robot.estimate import RobotModel
-from ident.robot.moments import N_EXTRA, JointMoments, quadrant_weights
+from ident.robot.moments import N_EXTRA, JointMoments
 from ident.robot.paper import paper_coefficients, usual_coefficients
 from tests.test_robot_fit import _signals, _simulate
+from trajectories.friction import quadrant_weights
 
 
 def _moments(rng, nt: int, m: int, iv: bool) -> JointMoments:

@@ -12,9 +12,10 @@ import pytest
 
 from ident.robot import estimate
 from ident.robot.estimate import RobotModel
-from ident.robot.moments import IDQ, IP, N_EXTRA, JointMoments, quadrant_weights
+from ident.robot.moments import IDQ, IP, N_EXTRA, JointMoments
 from ident.robot.quadrants import QuadrantStore
 from tests.test_robot_fit import _signals, _simulate
+from trajectories.friction import quadrant_weights
 
 
 def _rows(rng, m: int, nt: int):
@@ -68,17 +69,18 @@ def test_move_equals_accumulating_in_the_new_quadrants():
     nt, m = 4, 3000
     VT, E = _rows(rng, m, nt)
     VzT = VT + 0.1 * rng.standard_normal(VT.shape)
-    p_old = quadrant_weights(rng.standard_normal(m))
-    p_new = p_old.copy()
+    s_old = np.sign(rng.standard_normal(m))
+    s_new = s_old.copy()
     flip = rng.random(m) < 0.1
-    p_new[flip] = 1.0 - p_new[flip]
-    p_new[:5] = 0.5  # P = 0 exactly
+    s_new[flip] = -s_new[flip]
+    s_new[:5] = 0.0  # P = 0 exactly: P+ = P- = 1/2
+    w_old, w_new = quadrant_weights(s_old), quadrant_weights(s_new)
     a = JointMoments(np.arange(nt), iv=True)
-    a.add(VT, p_old, E, VzT)
-    ch = p_new != p_old
-    a.move(VT[:, ch], (p_new - p_old)[ch], E[ch], VzT[:, ch])
+    a.add(VT, w_old, E, VzT)
+    ch = w_new[0] != w_old[0]
+    a.move(VT[:, ch], (w_new[0] - w_old[0])[ch], E[ch], VzT[:, ch])
     b = JointMoments(np.arange(nt), iv=True)
-    b.add(VT, p_new, E, VzT)
+    b.add(VT, w_new, E, VzT)
     for x, y in ((a.vv, b.vv), (a.zv, b.zv), (a.zz, b.zz)):
         np.testing.assert_allclose(x, y, rtol=1e-10, atol=1e-10 * np.abs(y).max())
     assert a.n == b.n == m

@@ -1,6 +1,7 @@
 """One vocabulary (issue 24): model ``paper`` (``new`` deprecated), estimators ``ls|wls|iv``
 (``ols`` deprecated), ``q_s`` in JSON; the deprecated spellings are mapped in ident.vocab and
-older JSON records read as current ones; E = exp(-|dq|/q_s) is one function."""
+older JSON records read as current ones; E = exp(-|dq|/q_s) is one function, and so are the
+quadrant weights P+, P- (eq. 27-28)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import pytest
 
 from ident import DataError
 from ident.vocab import method_name, model_name, upgrade_record
-from trajectories.friction import DEFAULT_Q_S, stribeck_exp
+from trajectories.friction import DEFAULT_Q_S, quadrant_weights, stribeck_exp
 
 
 def test_aliases_map_to_the_one_name_and_unknown_names_are_refused():
@@ -57,6 +58,23 @@ def test_stribeck_exp_is_the_expression_it_replaced():
     qs = np.array([0.02, 0.05])
     assert np.array_equal(stribeck_exp(dq[:, None][:10], qs), np.exp(-np.abs(dq[:10, None]) / qs))
     assert stribeck_exp(0.0, 0.03) == 1.0
+
+
+def test_quadrant_weights_are_the_expressions_they_replaced():
+    """P+ = (1 + sign P)/2 and P- = (1 - sign P)/2 bit for bit, P- = 1 - P+ (the form the n-dof
+    code wrote), 1/2 each at P = 0, the same from P or from sign(P)."""
+    rng = np.random.default_rng(4)
+    power = rng.normal(0.0, 1.0, 1000)
+    power[:7] = 0.0
+    pp, pm = quadrant_weights(power)
+    assert np.array_equal(pp, 0.5 * (1.0 + np.sign(power)))
+    assert np.array_equal(pm, 0.5 * (1.0 - np.sign(power)))
+    assert np.array_equal(pm, 1.0 - pp)
+    assert np.all(pp[:7] == 0.5) and np.all(pm[:7] == 0.5)
+    assert np.array_equal(pp[7:], (power[7:] > 0).astype(float))  # 1 in the motor quadrant
+    for a, b in zip(quadrant_weights(np.sign(power)), (pp, pm), strict=True):
+        assert np.array_equal(a, b)
+    assert np.isnan(quadrant_weights(np.nan)).all()
 
 
 def test_the_older_keyword_qs_is_renamed_with_a_warning_everywhere_and_typos_still_fail():

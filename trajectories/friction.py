@@ -7,8 +7,9 @@ that package so the single-joint plant and fit do not import pinocchio for one e
 friction of the ``paper`` model; planning, simulation (:mod:`sim_drivers`) and identification
 (:mod:`ident`) compute it with :func:`stribeck_exp` and take the default from
 :data:`DEFAULT_Q_S`. (The simulators' per-step scalar loops inline the same expression with
-``math.exp`` for speed; they say so where they do.) :func:`quadrant_products` forms that
-model's quadrant friction columns (eq. 30, 42-44) for one joint and for n.
+``math.exp`` for speed; they say so where they do.) :func:`quadrant_weights` forms that
+model's quadrant weights P+ and P- (eq. 27-28) and :func:`quadrant_products` its quadrant
+friction columns (eq. 30, 42-44), for one joint and for n.
 """
 
 from __future__ import annotations
@@ -38,6 +39,33 @@ def stribeck_exp(dq: ArrayLike, q_s: ArrayLike) -> np.ndarray:
     return np.exp(-np.abs(dq) / q_s)
 
 
+def quadrant_weights(power: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """The quadrant weights P+ = (1 + sign P) / 2 and P- = (1 - sign P) / 2 (eq. 27-28).
+
+    The one place the paper model's weights are formed: the single-joint columns
+    (:func:`ident.models.power_split`), the n-dof full-rate products
+    (:mod:`ident.robot.design`), the n-dof moments, quadrant store, prediction and refit
+    (:mod:`ident.robot.estimate`, :mod:`ident.robot.quadrants`, :mod:`ident.robot.refit`)
+    and the exported model's predictor (:mod:`ident.robot.export_model`) call it.
+
+    Parameters
+    ----------
+    power : array_like
+        P or anything with its sign, per sample: the load power tau_out dq [W] (the model
+        quadrant, from a load prediction) or the paper's proxy tau dq of eq. 26, or sign(P)
+        itself [-]. Only its sign is read.
+
+    Returns
+    -------
+    p_plus, p_minus : ndarray
+        P+ and P- [-], the shape of ``power``: 1 and 0 in the motor quadrant (P > 0), 0 and 1
+        in the generator quadrant (P < 0), both 0.5 where P = 0 (the sample counts half in
+        each), NaN where P is NaN. P+ + P- = 1.
+    """
+    sp = np.sign(power)
+    return 0.5 * (1.0 + sp), 0.5 * (1.0 - sp)
+
+
 def quadrant_products(
     x: np.ndarray,
     p_plus: np.ndarray,
@@ -63,7 +91,8 @@ def quadrant_products(
         any shape that broadcasts with the weights (e.g. (n, c) with weights (n, 1), or
         (c, n) with weights (n,)).
     p_plus, p_minus : ndarray
-        P+ = (1 + sign P) / 2 and P- = (1 - sign P) / 2 (eq. 27-28, 44) [-], per sample.
+        P+ = (1 + sign P) / 2 and P- = (1 - sign P) / 2 (eq. 27-28, 44) [-], per sample
+        (:func:`quadrant_weights`).
     e : ndarray or None
         E per sample [-], the shape of ``p_plus``; None for the q_s-free half.
     load : bool

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from trajectories.friction import DEFAULT_Q_S, quadrant_products, stribeck_exp
+from trajectories.friction import DEFAULT_Q_S, quadrant_products, quadrant_weights, stribeck_exp
 
 from ..chain import (
     ChainSettings,
@@ -50,7 +50,6 @@ from ..chain import (
 from . import RobotIdentError
 from .base import base_parameters, placed_payload
 from .loaders import RawRobotRun, chain_period
-from .moments import quadrant_weights
 from .refine_joint import joint_term_columns
 from .signals import FullRateProducts, RobotColumns, RobotSignals
 
@@ -399,8 +398,7 @@ def _products_fixed(exp: RawExperiment, i: int, run: RawRobotRun, cols: RobotCol
     out = []
     for j in range(k):
         dq = f.dq[:, j]
-        pp = quadrant_weights(tau_out[:, j] * dq)  # P+ of eq. 27, 1/2 where P = 0
-        pm = 1.0 - pp
+        pp, pm = quadrant_weights(tau_out[:, j] * dq)  # P+, P- of eq. 27-28, 1/2 where P = 0
         sg = np.sign(dq)
         load = np.concatenate([W[j, pos[j]], known[None, :, j]], axis=0)  # (l + 1, n_f)
         loadz = None

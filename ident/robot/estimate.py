@@ -63,7 +63,7 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
-from trajectories.friction import DEFAULT_Q_S, stribeck_exp
+from trajectories.friction import DEFAULT_Q_S, quadrant_weights, stribeck_exp
 
 from .. import DataError
 from ..estimate import DEFAULT_THRESHOLD_PCT
@@ -81,7 +81,7 @@ from ..hyperparams import HyperParameters
 from ..vocab import renamed_keywords
 from . import RobotIdentError
 from .base import base_parameters, payload_base, placed_payload
-from .moments import IDQ, IP, ISG, N_EXTRA, ONE, JointMoments, RowMoments, quadrant_weights
+from .moments import IDQ, IP, ISG, N_EXTRA, ONE, JointMoments, RowMoments
 from .packed import PackedMoments
 from .paper import (
     PAPER_BLOCK,
@@ -715,7 +715,7 @@ class RobotModel(HyperParameters):
                 else:
                     tout = theta[cols] @ WjT + po
                     sp = np.where(np.abs(tout) < h, 0.0, tout * dqo) if h > 0 else tout * dqo
-                pplus = quadrant_weights(sp)
+                pplus, pminus = quadrant_weights(sp)
                 rows += sp.size
                 if theta_prev is not None:
                     tp = theta_prev[cols] @ WjT + po
@@ -724,21 +724,19 @@ class RobotModel(HyperParameters):
                     changed += int(np.count_nonzero(
                         (np.sign(sp) != np.sign(spp)) & ((sp != 0) & (spp != 0) | (h == 0))))
                 E = stribeck_exp(dqo, self.q_s_[j])
-                pminus = None
                 if h > 0:  # rows in the band around the quadrant boundary are left out
                     inb = np.abs(tout) < h
                     in_band[j] += np.count_nonzero(inb)
                     considered[j] += inb.size
                     pplus[inb] = 0.0
-                    pminus = 1.0 - pplus
                     pminus[inb] = 0.0
                     keep = ~inb
-                    moms[j].add(VT[:, keep], pplus[keep], E[keep],
+                    moms[j].add(VT[:, keep], (pplus[keep], pminus[keep]), E[keep],
                                 None if VzT is None else VzT[:, keep])
                 else:
-                    moms[j].add(VT, pplus, E, VzT)
+                    moms[j].add(VT, (pplus, pminus), E, VzT)
                 if stores is not None:
-                    stores[j].offer(VT, VzT, E, pplus, tout, pminus)
+                    stores[j].offer(VT, VzT, E, (pplus, pminus), tout)
         if theta is not None and stride == 1:
             # the share of each joint's rows the quadrant band leaves out, at this pass
             self._pass_band_share = in_band / np.maximum(considered, 1)
@@ -1624,10 +1622,9 @@ class RobotModel(HyperParameters):
                 sp = (theta[cols] @ WjT + pj) * dqj
             else:
                 sp = tauj * dqj
-            pp = quadrant_weights(sp)
             E = stribeck_exp(dqj, self.q_s_[j])
             pred = np.zeros(dqj.size)
-            for s, ws in ((0, pp), (1, 1.0 - pp)):
+            for s, ws in enumerate(quadrant_weights(sp)):
                 c0, c1, _, _ = coeffs(th, blk, s)
                 pred += ws * (V @ c0 + E * (V @ c1))
             out[r, j] = pred

@@ -29,7 +29,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 import pinocchio as pin
 
-from trajectories.friction import stribeck_exp
+from trajectories.friction import quadrant_weights, stribeck_exp
 
 from . import RobotIdentError
 from .confounded import physical_friction
@@ -222,8 +222,9 @@ def exported_torque(friction: Mapping[str, Any], tau_rigid: np.ndarray, dq: np.n
     -------
     ndarray (n, k)
         Joint torques [N m or N]: usual ``tau_out + FC sign(dq) + FV dq + OFF``; paper eq. 30
-        with P+ = (1 + sign(tau_out dq)) / 2, E = exp(-|dq| / q_s); tau_out = tau_rigid +
-        Ia ddq.
+        with P+ = (1 + sign(tau_out dq)) / 2, P- = 1 - P+
+        (:func:`trajectories.friction.quadrant_weights`), E = exp(-|dq| / q_s); tau_out =
+        tau_rigid + Ia ddq.
     """
     tau_rigid, dq, ddq = (np.atleast_2d(np.asarray(a, dtype=float)) for a in
                           (tau_rigid, dq, ddq))
@@ -237,10 +238,10 @@ def exported_torque(friction: Mapping[str, Any], tau_rigid: np.ndarray, dq: np.n
             out[:, j] = t_out + jr["FC"] * s + jr["FV"] * v + jr["OFF"]
             continue
         e = stribeck_exp(v, jr["q_s"] if "q_s" in jr else jr["qs"])  # "qs": jointid-friction/1
-        pp = 0.5 * (1.0 + np.sign(t_out * v))
+        pp, pm = quadrant_weights(t_out * v)
         motor = (jr["a_m"] + jr["b_m"] * e) * t_out + (jr["c_m"] + jr["d_m"] * e) * s
         gen = (jr["a_g"] - jr["b_g"] * e) * t_out + (jr["c_g"] + jr["d_g"] * e) * s
-        out[:, j] = pp * motor + (1.0 - pp) * gen + jr["FV"] * v + jr["OFF"]
+        out[:, j] = pp * motor + pm * gen + jr["FV"] * v + jr["OFF"]
     return out
 
 

@@ -37,9 +37,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from trajectories.friction import quadrant_weights
+
 from . import RobotIdentError
 
-__all__ = ["E_TINY", "N_EXTRA", "JointMoments", "RowMoments", "quadrant_weights"]
+__all__ = ["E_TINY", "N_EXTRA", "JointMoments", "RowMoments"]
 
 #: E below this is treated as 0 in the E-weighted moments (relative contribution < 1e-14).
 E_TINY = 1e-14
@@ -47,11 +49,6 @@ E_TINY = 1e-14
 N_EXTRA = 5
 #: Local indices (offsets after the base columns) of the entries of v.
 IP, ISG, IDQ, ONE, IY = 0, 1, 2, 3, 4
-
-
-def quadrant_weights(sign_power: np.ndarray) -> np.ndarray:
-    """P+ of eq. 27: (1 + sign P) / 2, shape (m,) (0.5 where P = 0, as the single-joint code)."""
-    return 0.5 * (1.0 + np.sign(sign_power))
 
 
 @dataclass
@@ -88,16 +85,17 @@ class JointMoments:
     def nv(self) -> int:
         return len(self.cols) + N_EXTRA
 
-    def add(self, VT: np.ndarray, pplus: np.ndarray, E: np.ndarray,
+    def add(self, VT: np.ndarray, weights: tuple[np.ndarray, np.ndarray], E: np.ndarray,
             VzT: np.ndarray | None = None) -> None:
-        """Accumulate the rows given TRANSPOSED, VT (nv, m), with P+ (m,) and E (m,); VzT
-        the instrument rows (nv, m)."""
+        """Accumulate the rows given TRANSPOSED, VT (nv, m), with their quadrant weights
+        ``weights`` = (P+, P-) (each (m,), :func:`trajectories.friction.quadrant_weights`)
+        and E (m,); VzT the instrument rows (nv, m)."""
         if VT.shape[1] == 0:
             return
         if self.iv and VzT is None:
             raise RobotIdentError("JointMoments.add: instrument rows missing for IDIM-IV")
         self.n += VT.shape[1]
-        for s, w in ((0, pplus), (1, 1.0 - pplus)):
+        for s, w in enumerate(weights):
             sel = w > 0
             if not sel.any():
                 continue
@@ -338,8 +336,8 @@ class RowMoments(JointMoments):
         if VzT is not None and self.zv is not None and self.zz is not None:
             self.zv[0, 0] += VzT @ VT.T
             self.zz[0, 0] += VzT @ VzT.T
-        w = quadrant_weights(pplus - 0.5)
-        self.quadrant_n += (float(w.sum()), float(w.size - w.sum()))
+        w = quadrant_weights(pplus - 0.5)  # the low-passed P+ rounded: the quadrant counts
+        self.quadrant_n += (float(w[0].sum()), float(w[1].sum()))
 
     def add(self, *args, **kwargs) -> None:  # noqa: D102 (the rows are given whole)
         raise RobotIdentError("RowMoments: rows are given whole (add_rows), not by quadrant")

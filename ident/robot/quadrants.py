@@ -27,7 +27,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .moments import IDQ, IP, JointMoments, quadrant_weights
+from trajectories.friction import quadrant_weights
+
+from .moments import IDQ, IP, JointMoments
 
 __all__ = ["QuadrantStore", "MARGIN"]
 
@@ -53,8 +55,8 @@ class QuadrantStore:
         R_j: smallest r of the rows not kept (inf while every row is kept).
     VT, VzT : ndarray (nv, m)
         Kept rows (transposed) and their instrument rows (IV) or None.
-    WT, p, dq, E, pplus : ndarray
-        Their regressor columns (nt, m), payload torque, velocity, E and current P+.
+    WT, p, dq, E, pplus, pminus : ndarray
+        Their regressor columns (nt, m), payload torque, velocity, E and current P+, P-.
     """
 
     def __init__(self, theta0: np.ndarray, capacity: int,
@@ -84,14 +86,15 @@ class QuadrantStore:
         self.nt = self.theta0.size
 
     def offer(self, VT: np.ndarray, VzT: np.ndarray | None, E: np.ndarray,
-              pplus: np.ndarray, tau_out: np.ndarray, pminus: np.ndarray | None = None) -> None:
-        """Offer the rows of one chunk (VT (nv, m), tau_out = W theta_0 + p (m,)); keeps the
-        ``capacity`` rows of smallest r over everything offered so far. ``pminus``: P- when
-        it is not 1 - P+ (rows left out, |tau_out| < ``band``: both 0); the distance is then
-        to |tau_out| = band, where a row enters or leaves the fit (and beyond which it flips)."""
+              weights: tuple[np.ndarray, np.ndarray], tau_out: np.ndarray) -> None:
+        """Offer the rows of one chunk (VT (nv, m), tau_out = W theta_0 + p (m,)) with their
+        quadrant weights ``weights`` = (P+, P-) (each (m,),
+        :func:`trajectories.friction.quadrant_weights`; both 0 for the rows left out,
+        |tau_out| < ``band``); keeps the ``capacity`` rows of smallest r over everything
+        offered so far. With a band the distance is to |tau_out| = band, where a row enters or
+        leaves the fit (and beyond which it flips)."""
         nt = self.nt
-        if pminus is None:
-            pminus = 1.0 - pplus
+        pplus, pminus = weights
         U = self.Linv @ VT[:nt]
         wn = np.sqrt(np.einsum("im,im->m", U, U))
         a = np.abs(np.abs(tau_out) - self.band)
@@ -139,8 +142,7 @@ class QuadrantStore:
         nt = self.nt
         VT = self.VT
         tau_out = theta @ VT[:nt] + VT[nt + IP]
-        pnew = quadrant_weights(tau_out * VT[nt + IDQ])
-        mnew = 1.0 - pnew
+        pnew, mnew = quadrant_weights(tau_out * VT[nt + IDQ])
         if self.band > 0:
             out = np.abs(tau_out) < self.band
             pnew[out] = 0.0
