@@ -32,7 +32,11 @@ joint, the number pruned, the largest |z| and the value +- sigma of the largest:
 - ``band: k x torque above cut-off``: rows within the guard of a full-rate sample with
   |tau_out_hat| (the first usual fit's, as the sign check reads it) below k times the RMS of
   the joint's torque above the cut-off (tau - its low-pass: the closed loop's high-frequency
-  load), k = 1 and 2.
+  load), k = 1 and 2;
+- ``guard G r``: the guard around every rejected full-rate sample (and the trim) G = 6 and 12
+  decimation factors instead of 3 (``ident.chain.default_rates`` wrapped): whether the
+  anti-alias filter's reach beyond the guard (benchmarks/robot_paper_products.py) is the
+  cause.
 
 The band variants wrap :func:`ident.robot.design.sign_checked` where
 :mod:`ident.cli_robot` calls it (diagnostic only; nothing in the product does this). The
@@ -58,6 +62,7 @@ from scipy.signal import butter, filtfilt  # noqa: E402
 from test_robot_cutoff_band import logged, simulated, z_scores  # noqa: E402
 from test_robot_fit import PAYLOADS  # noqa: E402
 
+import ident.chain as chain  # noqa: E402
 import ident.cli_robot as cli_robot  # noqa: E402
 from ident import DataError  # noqa: E402
 from ident.chain import decimation_index, selection  # noqa: E402
@@ -203,6 +208,17 @@ def main() -> None:
             cli_robot.sign_checked = _banded(hf, share)
             show(f"band: {m:g} x torque above cut-off", fit())
             print("  rows left out per joint: " + " ".join(f"{x:.3f}" for x in share["left"]))
+        cli_robot.sign_checked = saved[1]
+        rates = chain.default_rates
+        for g in (6, 12):
+            def wider(fs, cutoff_hz, decimation=None, trim=None, guard=None, g=g):
+                r, t, gd = rates(fs, cutoff_hz, decimation, trim, guard)
+                return r, max(t, g * r), g * r if guard is None else gd
+            chain.default_rates = wider
+            try:
+                show(f"guard {g} r", fit())
+            finally:
+                chain.default_rates = rates
     finally:
         cli_robot.RobotModel, cli_robot.sign_checked = saved
 
