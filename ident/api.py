@@ -201,7 +201,9 @@ class JointModel(HyperParameters):
     models_ : dict[str, IdentModel]
         Every fitted model by name (both with ``model="both"``).
     report_ : FitReport
-        Tables I-IV (``format_tables()``) and the JSON record (``to_json()``).
+        Tables I-IV (``format_tables()``) and the JSON record (``to_json()``); the fit's
+        ``notes`` and the paper model's ``sign_check_shift`` (z per parameter against the
+        rows before the sign check, :mod:`ident.robot.selection_shift`).
     refinement_ : Refinement
         Only on the estimator returned by :meth:`refine`.
     """

@@ -80,6 +80,7 @@ from .results import (
 )
 from .robot.design import DQ_MIN_FRACTION
 from .robot.estimate import THIN_QUADRANT
+from .robot.selection_shift import selection_shift, shift_note
 from .robot.signals import RobotSignals
 from .signals import Signals
 from .terms import Library, Term
@@ -171,6 +172,23 @@ def _fitted(library: Library, name: str, fit: OneJointModel) -> IdentModel:
     m.robot_ = fit.robot
     m.robot_names_ = fit.names
     return m
+
+
+def _sign_check_shift(problem: OneJointProblem, m: IdentModel, q_s: float, eliminate: bool,
+                      threshold_pct: float | None) -> dict[str, float] | None:
+    """The paper model ``m``'s sign-check shift (:mod:`ident.robot.selection_shift`, as
+    ``jointid fit --robot``): its record's parameters against the same fit on the rows before
+    the sign check (:meth:`~ident.one_joint.OneJointProblem.unchecked_fit`). None when the
+    check left no row out, or the model cannot be fitted on those rows (a diagnostic: never
+    fatal)."""
+    try:
+        other = problem.unchecked_fit(q_s, eliminate=eliminate, threshold_pct=threshold_pct)
+    except (DataError, np.linalg.LinAlgError):
+        return None
+    if other is None:
+        return None
+    return selection_shift(parameters_json(m),
+                           dict(zip(other.result.names, other.result.chi.tolist(), strict=True)))
 
 
 def _one_sign_load(d: Design) -> str | None:
@@ -297,6 +315,11 @@ class FitReport:
     torque_delay_given : bool
         Whether ``settings["torque_delay"]`` was given (``torque_delay`` of
         :func:`fit_models`) or chosen (the JSON's ``preprocessing.torque_delay_given``).
+    sign_check_shift : dict[str, float] or None
+        When the sign check left rows out: per paper-model parameter, z = (its estimate on
+        the rows before the check - the reported one) / its reported std
+        (:func:`ident.robot.selection_shift.selection_shift`, the JSON's
+        ``models.paper.sign_check_shift``); None otherwise.
     """
 
     models: dict[str, IdentModel]
@@ -316,6 +339,7 @@ class FitReport:
     robot_signals: dict[str, RobotSignals] = field(default_factory=dict, repr=False,
                                                    compare=False)
     torque_delay_given: bool = False
+    sign_check_shift: dict[str, float] | None = None
 
     def refit_found_terms(self, name: str, terms: Sequence[Term],
                           design: Design | None = None) -> dict[str, Any]:
@@ -405,6 +429,8 @@ class FitReport:
                 rec["validation_rel_error"] = json_float(e["validation"])
             if name == "paper":
                 rec["q_s"] = self.q_s
+                if self.sign_check_shift is not None:
+                    rec["sign_check_shift"] = dict(self.sign_check_shift)
             models[name] = rec
         out: dict[str, Any] = {
             "format": FORMAT,
@@ -710,6 +736,7 @@ def fit_models(
     vfull = _combined(models, qs0, sv, has_payload, pre) if sv is not None else None
     failed: list[str] = []
     one_sign = None
+    shift = None  # the paper model's sign-check shift (ident.robot.selection_shift)
     def banded(d: Design) -> Design:
         """The paper model's design without its quadrant band's rows (the sign check
         skipped: :meth:`~ident.one_joint.OneJointProblem.band`), as its robot fit."""
@@ -751,6 +778,10 @@ def fit_models(
         identifiable = [n for n, r in m.removed_ if not r.startswith("not significant")]
         if identifiable:
             notes.append(f"{name} model: not identifiable on these data: {', '.join(identifiable)}")
+        if name == "paper":  # the estimate against the sign check's row choice
+            shift = _sign_check_shift(problem, m, qs_val, eliminate, threshold_pct)
+            if shift is not None and (note := shift_note(shift)):
+                notes.append(note)
 
     if not fitted:
         raise DataError("; ".join(failed))
@@ -851,4 +882,5 @@ def fit_models(
         qs_design=qs0,
         robot_signals=robot_signals,
         torque_delay_given=delay_given,
+        sign_check_shift=shift,
     )

@@ -14,7 +14,9 @@ joint with -- the n-dof path's one chain and one model class:
    with a first usual fit's tau_out_hat, skipped with a note below
    :data:`SIGN_CHECK_MIN_KEPT`), then eq. 42's columns formed at full rate
    (:func:`ident.robot.design.products_columns`) with that load model (or the measured
-   quadrant sign(tau dq), eq. 26, when the check is off or skipped);
+   quadrant sign(tau dq), eq. 26, when the check is off or skipped); where the check left
+   rows out, the paper model on the rows before it too (:meth:`OneJointProblem.unchecked_fit`,
+   the sign-check shift of :mod:`ident.robot.selection_shift`);
 4. :class:`ident.robot.estimate.RobotModel` ``"usual"`` (payload ratio eq. 35) and
    ``"paper"`` with ``form="products"``, LS or IDIM-IV, with the single-joint elimination
    (``eliminate``);
@@ -219,6 +221,15 @@ def _single(est: RobotModel, sig: RobotSignals, name: str, single_names: Sequenc
         names={v: (k, float(np.sign(rows[k][index[v]]))) for k, v in robot_name.items()})
 
 
+def _threshold(eliminate: bool, threshold_pct: float | None) -> float:
+    """The elimination threshold [%] of :meth:`OneJointProblem.fit`: without elimination
+    the rank rule still drops zero and dependent columns (as fit_least_squares does), no
+    parameter's deviation exceeding an infinite threshold."""
+    if not eliminate:
+        return np.inf
+    return DEFAULT_THRESHOLD_PCT if threshold_pct is None else float(threshold_pct)
+
+
 def _products_qs(library: Term) -> float | None:
     """The one q_s [rad/s] of the paper model's quadrant terms in ``library`` whose quadrant
     is the design's (no ``load`` of their own), or None (none, or several q_s)."""
@@ -323,6 +334,7 @@ class OneJointProblem:
         self.band_kept = 1.0  # share of the rows the band keeps (1: not decided yet)
         self._band_keep: np.ndarray | None = None
         self._loads: _RunLoads | None = None  # the quadrant model's full-rate loads
+        self._unchecked_keep: np.ndarray | None = None  # the rows the sign check left out too
         try:
             st = resolve_design(self.runs, instruments=self.iv, **settings)
             sig, dqm = design_runs(self.runs, self.reg, st, instruments=self.iv,
@@ -349,6 +361,8 @@ class OneJointProblem:
                     kept = keep.sum(axis=0) / np.maximum(sig.columns.keep.sum(axis=0), 1)
                 self.sign_kept = float(kept[0])
                 if kept[0] >= SIGN_CHECK_MIN_KEPT or first is not None:
+                    if kept[0] < 1.0:  # the rows before the check (:meth:`unchecked_fit`)
+                        self._unchecked_keep = sig.columns.keep
                     sig, self.sign_checked = out, True
                 else:
                     # every row kept, the quadrant still the model's: where sign(tau) and
@@ -603,10 +617,7 @@ class OneJointProblem:
     def fit(self, name: str, q_s: float = DEFAULT_Q_S, *, eliminate: bool = True,
             threshold_pct: float | None = None) -> OneJointModel:
         """Fit model ``name`` ("usual" or "paper", q_s [rad/s]) through RobotModel."""
-        # without elimination, the rank rule still drops zero and dependent columns (as
-        # fit_least_squares does): no parameter's deviation exceeds an infinite threshold
-        thr = (np.inf if not eliminate else DEFAULT_THRESHOLD_PCT if threshold_pct is None
-               else float(threshold_pct))
+        thr = _threshold(eliminate, threshold_pct)
         q_s = float(q_s)
         if not q_s > 0:
             raise DataError(f"q_s must be positive [rad/s], got {q_s}")
@@ -618,14 +629,34 @@ class OneJointProblem:
                                  threshold_pct=thr).fit(sig)
                 single = usual_model(self.revolute, payload=self.has_payload).names()
             elif name == "paper":
-                sig = self.products(q_s)
-                est = RobotModel(self.reg, "paper", self.method, base=self.base,
-                                 form="products", q_s=q_s, eliminate=True,
-                                 threshold_pct=thr).fit(sig)
-                single = new_model(q_s, self.revolute, payload=self.has_payload).names()
+                return self._fit_paper(self.products(q_s), q_s, thr)
             else:
                 raise DataError(f"model {name!r}: expected 'usual' or 'paper'")
             return _single(est, sig, name, single, self.smap, self.method)
+        except RobotIdentError as err:
+            raise DataError(str(err)) from None
+
+    def _fit_paper(self, sig: RobotSignals, q_s: float, thr: float) -> OneJointModel:
+        """The paper model (products form, elimination threshold ``thr`` [%]) on ``sig``."""
+        est = RobotModel(self.reg, "paper", self.method, base=self.base, form="products",
+                         q_s=q_s, eliminate=True, threshold_pct=thr).fit(sig)
+        single = new_model(q_s, self.revolute, payload=self.has_payload).names()
+        return _single(est, sig, "paper", single, self.smap, self.method)
+
+    def unchecked_fit(self, q_s: float = DEFAULT_Q_S, *, eliminate: bool = True,
+                      threshold_pct: float | None = None) -> OneJointModel | None:
+        """The paper model fitted as :meth:`fit` fits it (the same q_s [rad/s], elimination,
+        quadrants and products) on the rows before the sign check: the second fit of the
+        sign-check shift (:mod:`ident.robot.selection_shift`, as ``jointid fit --robot``).
+        The products do not depend on the rows kept: only ``keep`` differs. None when the
+        check left no row out (not made, skipped, or it kept every row)."""
+        if self._unchecked_keep is None or not self.sign_checked:
+            return None
+        thr = _threshold(eliminate, threshold_pct)
+        sig = self.products(float(q_s))
+        sig = replace(sig, columns=replace(sig.columns, keep=self._unchecked_keep))
+        try:
+            return self._fit_paper(sig, float(q_s), thr)
         except RobotIdentError as err:
             raise DataError(str(err)) from None
 

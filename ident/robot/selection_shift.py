@@ -15,6 +15,12 @@ The second fit is the paper model with the same settings on the rows before the 
 estimate is compared, parameter by parameter, with the reported (checked, pruned) fit's,
 in units of the reported honest sigma: z = (unchecked - checked) / sigma_checked. Pruned
 parameters (held at 0 in the reported fit) are not compared.
+
+A joint is a 1-dof robot: :func:`ident.fitting.fit_models` applies the same rule to the
+single-joint paper model (:meth:`ident.one_joint.OneJointProblem.unchecked_fit`, the same q_s,
+estimator, quadrants and elimination on the rows before the check; z against eq. 15's std of
+the record, ``FitReport.sign_check_shift``; the parameters eliminated in either fit are not
+compared).
 """
 
 from __future__ import annotations
@@ -37,10 +43,14 @@ def selection_shift(reported: Mapping[str, Mapping[str, Any]],
     Parameters
     ----------
     reported : mapping
-        The reported fit's ``parameters`` record (:func:`ident.robot.uncertainty.
-        parameter_records`: ``value``, ``std``, ``pruned``).
-    unchecked : RobotModel
-        The same model fitted on the rows before the sign check (``names_``, ``coef_``).
+        The reported fit's ``parameters`` record: name -> ``value``, ``std`` (and
+        ``pruned``): the robot record's (:func:`ident.robot.uncertainty.parameter_records`,
+        the honest std) or the single-joint record's (:func:`ident.results.parameters_json`,
+        eq. 15's std; the eliminated parameters are not in it).
+    unchecked : RobotModel or mapping
+        The same model fitted on the rows before the sign check: a fitted model
+        (``names_``, ``coef_`` arrays) or its values by name (the single-joint
+        ``IdentModel.coef_``).
 
     Returns
     -------
@@ -48,7 +58,11 @@ def selection_shift(reported: Mapping[str, Mapping[str, Any]],
         Parameter name -> z, for the parameters both fits have, not pruned, with a
         positive finite std.
     """
-    other = dict(zip(unchecked.names_, np.asarray(unchecked.coef_, dtype=float), strict=True))
+    if isinstance(unchecked, Mapping):
+        other = {str(n): float(v) for n, v in unchecked.items()}
+    else:
+        other = dict(zip(unchecked.names_, np.asarray(unchecked.coef_, dtype=float),
+                         strict=True))
     out = {}
     for name, rec in reported.items():
         std = rec.get("std")
