@@ -82,5 +82,4 @@ def shift_note(z: Mapping[str, float]) -> str | None:
     return (f"paper model: {len(big)} parameter(s) move beyond {SHIFT_Z:g} sigma when the "
             f"sign check's rows are kept ({top} sigma): its stated sigma does not cover the "
             "choice of rows, read it as a lower bound (docs/robot-identification.md, 'The "
-            "default cut-off on logs slower than 1 kHz'); the record's sign_check_shift has "
-            "every z")
+            "sign-check shift'); the record's sign_check_shift has every z")
