@@ -56,6 +56,11 @@ def test_demo_writes_logs_report_and_json(demo):
     assert "Table III" in html and "Table II" in html
     # the closing summary shows Table III and the refinement's before/after
     assert "Table III" in run.stdout and "Refinement of the paper model" in run.stdout
+    # the fit's warnings are printed, not only written: the sign check's share of the rows
+    # (the demo's paper fit leaves some out: fit.json's first note says how many)
+    notes = json.loads((out / "fit.json").read_text())["notes"]
+    assert any(n.startswith("sign check:") for n in notes), notes
+    assert "      note: sign check: " in run.stderr  # (the steps' lines go to stderr)
 
 
 def test_demo_shows_the_papers_pattern(demo):

@@ -55,11 +55,11 @@ def demo(tmp_path_factory):
     )
     assert run.returncode == 0, run.stderr[-3000:]
     fit = json.loads((out / "fit.json").read_text())
-    return fit, run.stdout
+    return fit, run.stdout, run.stderr  # (the steps' lines and notes go to stderr)
 
 
 def test_table_iii(demo):
-    fit, stdout = demo
+    fit, stdout, _ = demo
     text = _section()
     m = fit["models"]
     rows = {"all samples": "rel_error", "low velocities": "rel_error_low_velocity",
@@ -73,7 +73,7 @@ def test_table_iii(demo):
 
 
 def test_ripple_errors_and_steps(demo):
-    fit, _ = demo
+    fit, _, _ = demo
     text = _section()
     ref = fit["refinement"]
     assert len(ref["steps"]) == 1 and "Nothing else passes" in text  # one effect, no other
@@ -99,7 +99,7 @@ def test_ripple_errors_and_steps(demo):
 
 
 def test_qs_and_distance_to_the_truth(demo):
-    fit, _ = demo
+    fit, _, _ = demo
     text = _section()
     prior, adjusted, true_qs = _find(
         rf"a priori \({NUM} rad/s.*?adjusted with the refined model to {NUM} rad/s "
@@ -118,3 +118,15 @@ def test_qs_and_distance_to_the_truth(demo):
     assert z[0][1] == worst_name and _same(worst, z[0][0])
     # "within x": the smallest one-decimal bound of the others
     assert float(others) == math.ceil(z[1][0] * 10) / 10, z[:3]
+
+
+def test_the_notes_the_readme_names_are_printed(demo):
+    """README: under step 3 the demo prints the sign check's share and the sign-check shift
+    (the paper model misses its sigma on the demo: the undeclared ripple)."""
+    text = _section()
+    assert "the sign check's share of the rows" in text and "4 of their stated sigma" in text
+    fit, _, stderr = demo
+    step3 = stderr.split("[3/4]", 1)[1].split("[4/4]", 1)[0]
+    assert "      note: sign check: " in step3
+    assert "move beyond 4 sigma when the sign check's rows are kept" in step3
+    assert any("when the sign check's rows are kept" in n for n in fit["notes"]), fit["notes"]

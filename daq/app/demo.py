@@ -149,6 +149,8 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
     est = report.models["paper"].estimator_.upper()
     _say(stream, f"[3/4] fitted the usual and the paper model on {len(exps)} runs "
                  f"({est}, q_s = {qs0:g} rad/s a priori; {time.perf_counter() - t0:.1f} s)")
+    for note in report.notes:  # what the fit warns of (also in fit.json and the report)
+        _say(stream, "      note: " + note)
 
     # 4. close the loop: refine the paper model from its residual, then adjust q_s
     t0 = time.perf_counter()
