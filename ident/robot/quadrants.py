@@ -55,8 +55,10 @@ class QuadrantStore:
         R_j: smallest r of the rows not kept (inf while every row is kept).
     VT, VzT : ndarray (nv, m)
         Kept rows (transposed) and their instrument rows (IV) or None.
-    WT, p, dq, E, pplus, pminus : ndarray
-        Their regressor columns (nt, m), payload torque, velocity, E and current P+, P-.
+    r : ndarray (m,)
+        The kept rows' r_ij (the distance of theta_0 to the row's quadrant boundary, module doc).
+    E, pplus, pminus : ndarray (m,)
+        Their E = exp(-|dq| / q_s) and current P+, P- (eq. 27-28).
     """
 
     def __init__(self, theta0: np.ndarray, capacity: int,
