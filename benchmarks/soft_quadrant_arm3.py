@@ -4,7 +4,7 @@ today's rule (docs/robot-identification.md, "The default cut-off on logs slower 
 benchmarks/soft_quadrant_synthetic.py is the same on synthetic data). A design check; nothing
 in the product uses it yet.
 
-Usage: ``python benchmarks/soft_quadrant_arm3.py [--seed 1] [--joint 1]``
+Usage: ``python benchmarks/soft_quadrant_arm3.py [--seed 1] [--joint 1] [--theta usual]``
 
 The logs are benchmarks/robot_paper_blend.py's (arm3, paper friction, three payload runs of
 20 s, the drives' log at 1 kHz), through ``jointid fit --robot``'s chain (columns chain, the
@@ -12,7 +12,9 @@ sign check of a first usual WLS fit). To isolate the friction, the load is the s
 true theta on the chain's full-rate states, s = W theta + p (what a right load model
 predicts: the closed loop's jitter above the cut-off is not in those states), and only the
 joint's ten paper parameters are fitted on its decimated rows, by linear least squares with
-eq. 15's sigma (z = (estimate - truth) / sigma, sum of z^2 over the ten):
+eq. 15's sigma (z = (estimate - truth) / sigma, sum of z^2 over the ten). ``--theta usual``:
+the load of the first usual fit's theta instead (what the product has before the paper fit).
+Variants:
 
 - ``hard``: eq. 30 with P+ = [s dq > 0] formed at full rate, then the chain's decimation
   (the full-rate products of ``products_columns`` with the true theta);
@@ -58,7 +60,7 @@ from ident.robot.paper import PAPER_BLOCK  # noqa: E402
 from trajectories.friction import DEFAULT_Q_S, stribeck_exp  # noqa: E402
 
 
-def joint_rows(seed: int, j: int):
+def joint_rows(seed: int, j: int, theta: str = "truth"):
     """Joint j's decimated torque rows y, per run its full-rate (dq, s) and kept-row mask,
     the decimation factor, and the truth of its ten paper parameters with their names."""
     params, reg, sim, truth = simulated("paper", seed, 20.0)
@@ -73,7 +75,8 @@ def joint_rows(seed: int, j: int):
     true_load = RobotModel(reg, "usual", "wls", base=base).fit(sig)
     true_load.coef_ = true_load.coef_.copy()
     true_load.coef_[:true_load.n_theta_] = first.truth_vector(truth)[:first.n_theta_]
-    loads = full_rate_loads(sig, runs, design, true_load.load_torque)
+    loads = full_rate_loads(sig, runs, design, (true_load if theta == "truth" else first)
+                            .load_torque)
     sig, _ = sign_checked(sig, runs, design, first.load_torque, SIGN_CHECK_MIN_KEPT)
     names = [f"{p}{reg.numbers[j]}" for p in PAPER_BLOCK]
     ys, full = [], []
@@ -110,8 +113,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--joint", type=int, default=1, help="joint number (1 = the base yaw)")
+    ap.add_argument("--theta", choices=("truth", "usual"), default="truth",
+                    help="the load's theta: the simulator's or the first usual fit's")
     a = ap.parse_args()
-    y, full, r, names, tv = joint_rows(a.seed, a.joint - 1)
+    y, full, r, names, tv = joint_rows(a.seed, a.joint - 1, a.theta)
 
     def show(label: str, th: np.ndarray, sd: np.ndarray, e: float, extra: str = "") -> None:
         z = (th[:10] - tv) / sd[:10]
@@ -125,7 +130,7 @@ def main() -> None:
         C = res @ res / (y.size - W.shape[1]) * np.linalg.inv(W.T @ W)
         return th, np.sqrt(np.diag(C)), np.linalg.norm(res) / np.linalg.norm(y)
 
-    print(f"arm3, paper friction, seed {a.seed}, joint {a.joint}, 1 kHz, theta = truth, "
+    print(f"arm3, paper friction, seed {a.seed}, joint {a.joint}, 1 kHz, theta = {a.theta}, "
           f"{y.size} rows (chi^2 0.999 quantile for 10: 29.6)")
     show("hard", *linear(columns(full, r, None)))
     for sigma in (0.5, 1.0, 1.5, 2.0):
