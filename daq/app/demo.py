@@ -185,7 +185,11 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
     if abs(rs.q_s - qs0) > 0.01 * qs0:
         _say(stream, f"      q_s adjusted with the refined model: {qs0:g} -> {rs.q_s:.4g} rad/s")
         hb.status(f"fitting both models again with q_s = {rs.q_s:.4g} rad/s")
+        said = set(report.notes)
         report = fit_models(exps, ("usual", "paper"), q_s=rs.q_s, like=report)
+        for note in report.notes:  # the refit's own warnings (fit.json keeps these)
+            if note not in said:
+                _say(stream, "      note: " + note)
         ref = refine_new(report)
     fit = report.to_json()
     fit["q_s_a_priori"] = qs0
