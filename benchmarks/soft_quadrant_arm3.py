@@ -40,10 +40,11 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import numpy as np  # noqa: E402
 from scipy.optimize import least_squares  # noqa: E402
-from scipy.stats import norm  # noqa: E402
+from soft_quadrant_common import paper_columns  # noqa: E402
 from test_robot_cutoff_band import logged, simulated  # noqa: E402
 
 from ident.chain import decimate, decimation_index  # noqa: E402
@@ -57,7 +58,7 @@ from ident.robot.design import (  # noqa: E402
 )
 from ident.robot.estimate import RobotModel  # noqa: E402
 from ident.robot.paper import PAPER_BLOCK  # noqa: E402
-from trajectories.friction import DEFAULT_Q_S, stribeck_exp  # noqa: E402
+from trajectories.friction import DEFAULT_Q_S  # noqa: E402
 
 
 def joint_rows(seed: int, j: int, theta: str = "truth"):
@@ -93,20 +94,8 @@ def joint_rows(seed: int, j: int, theta: str = "truth"):
 def columns(full, r: int, sigma: float | None) -> np.ndarray:
     """The joint's ten paper columns (PAPER_BLOCK order) formed at full rate and decimated;
     hard quadrants with ``sigma`` None."""
-    out = []
-    for dq, s, keep in full:
-        sg = np.sign(dq)
-        e = stribeck_exp(dq, DEFAULT_Q_S)
-        mu = s * sg
-        if sigma is None:
-            pp, rr = (mu > 0) + 0.5 * (mu == 0), np.zeros_like(s)
-        else:
-            pp, rr = norm.cdf(mu / sigma), sigma * norm.pdf(mu / sigma) * sg
-        pm = 1.0 - pp
-        cols = [pp * s + rr, e * (pp * s + rr), pm * s - rr, -e * (pm * s - rr),
-                pp * sg, pp * e * sg, pm * sg, pm * e * sg, dq, np.ones_like(dq)]
-        out.append(decimate(np.stack(cols, axis=1), r)[0][keep])
-    return np.concatenate(out)
+    return np.concatenate([decimate(paper_columns(s, dq, sigma, DEFAULT_Q_S), r)[0][keep]
+                           for dq, s, keep in full])
 
 
 def main() -> None:

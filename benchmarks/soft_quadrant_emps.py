@@ -25,10 +25,12 @@ import numpy as np
 import scipy.io as sio
 from scipy.optimize import least_squares
 from scipy.signal import butter, filtfilt
-from scipy.stats import norm
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from soft_quadrant_common import paper_columns  # noqa: E402
 
 from ident.chain import decimate  # noqa: E402
 
@@ -50,18 +52,7 @@ def load(name: str):
 
 def columns(dq, ddq, sigma: float | None, q_s: float) -> np.ndarray:
     """The ten paper columns (a_m, b_m, a_g, b_g, c_m, d_m, c_g, d_g, F_V, offset), decimated."""
-    s = M * ddq
-    sg = np.sign(dq)
-    e = np.exp(-np.abs(dq) / q_s)
-    mu = s * sg
-    if sigma is None:
-        pp, rr = (mu > 0) + 0.5 * (mu == 0), np.zeros_like(s)
-    else:
-        pp, rr = norm.cdf(mu / sigma), sigma * norm.pdf(mu / sigma) * sg
-    pm = 1.0 - pp
-    c = [pp * s + rr, e * (pp * s + rr), pm * s - rr, -e * (pm * s - rr),
-         pp * sg, pp * e * sg, pm * sg, pm * e * sg, dq, np.ones_like(dq)]
-    return decimate(np.stack(c, axis=1), R)[0]
+    return decimate(paper_columns(M * ddq, dq, sigma, q_s), R)[0]
 
 
 def main() -> None:

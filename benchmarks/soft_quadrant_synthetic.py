@@ -37,7 +37,8 @@ import argparse
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.signal import butter, filtfilt
-from scipy.stats import norm
+
+from trajectories.friction import soft_quadrant_weights
 
 FS, T = 1000.0, 120.0  # [Hz], [s]
 TRUTH = np.array([1.25, 0.80, 0.7, 0.3])  # a_m, a_g, c [N m], F_V [N m s/rad]
@@ -66,10 +67,10 @@ def simulate(seed: int):
 
 
 def expected_plus(s: np.ndarray, dq: np.ndarray, sigma: float) -> np.ndarray:
-    """E[P+ x] for x = s + n, n ~ N(0, sigma^2) [N m], shape (n,)."""
-    sg = np.sign(dq)
-    mu = s * sg
-    return sg * (mu * norm.cdf(mu / sigma) + sigma * norm.pdf(mu / sigma))
+    """E[P+ x] for x = s + n, n ~ N(0, sigma^2) [N m], shape (n,)
+    (:func:`trajectories.friction.soft_quadrant_weights`)."""
+    pp, _, r = soft_quadrant_weights(s, dq, sigma)
+    return pp * s + r
 
 
 def one_seed(seed: int) -> None:

@@ -66,6 +66,45 @@ def quadrant_weights(power: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     return 0.5 * (1.0 + sp), 0.5 * (1.0 - sp)
 
 
+def soft_quadrant_weights(load: ArrayLike, dq: ArrayLike,
+                          sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The quadrant weights' expectation under a Gaussian jitter of the load (the soft
+    quadrant weight; docs/robot-identification.md, "Known limit: quadrants blended by the
+    low-pass"). Not used by the fits yet: the benchmarks ``soft_quadrant_*.py`` measure it.
+
+    With the true load x = s + n, n ~ N(0, sigma^2), mu = s sign(dq) and the hard weights of
+    :func:`quadrant_weights` on P = x dq: E[P+] = Phi(mu / sigma), E[P+ x] = E[P+] s + r and
+    E[P- x] = E[P-] s - r, with r = sigma phi(mu / sigma) sign(dq) the rectified jitter a
+    low-pass keeps (Phi, phi: the standard normal distribution and density).
+
+    Parameters
+    ----------
+    load : array_like
+        The model's load s [N m] (or [N]) per sample, tau_out_hat: never the measured torque.
+    dq : array_like
+        The velocity [rad/s] (or [m/s]), the shape of ``load``; only its sign is read.
+    sigma : float
+        The jitter's RMS [N m] (or [N]), > 0.
+
+    Returns
+    -------
+    p_plus, p_minus, rect : ndarray
+        E[P+], E[P-] = 1 - E[P+] [-] and r [N m], the shape of ``load``; 0.5, 0.5 and 0 where
+        dq = 0 (as :func:`quadrant_weights` at P = 0). As sigma -> 0 they tend to the hard
+        weights and 0 wherever s != 0.
+    """
+    sigma = float(sigma)
+    if not (np.isfinite(sigma) and sigma > 0):
+        raise ValueError(f"soft_quadrant_weights: sigma: expected a positive jitter RMS "
+                         f"[N m], got {sigma!r}")
+    from scipy.special import ndtr  # (here: the single-joint path imports this module)
+    sg = np.sign(np.asarray(dq, dtype=float))
+    z = np.asarray(load, dtype=float) * sg / sigma
+    p_plus = ndtr(z)
+    rect = sigma * np.exp(-0.5 * z * z) / np.sqrt(2.0 * np.pi) * sg
+    return p_plus, 1.0 - p_plus, rect
+
+
 def quadrant_products(
     x: np.ndarray,
     p_plus: np.ndarray,
