@@ -128,8 +128,7 @@ class _Rows:
 
     idx: np.ndarray  # row indices in the signals
     V: np.ndarray  # (m, nv): base columns, p, sign, dq, 1, 0 (ident.robot.moments)
-    pp: np.ndarray  # P+ (model quadrant, fixed)
-    pm: np.ndarray  # P- (the same quadrant; products form: 0)
+    pp: np.ndarray  # P+ (model quadrant, fixed; P- = 1 - P+: no band here)
     E: np.ndarray  # exp(-|dq| / q_s)
     X: np.ndarray  # (m, c) extra columns
     tau: np.ndarray  # measured torque [N m]
@@ -575,9 +574,7 @@ def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
         p = parts[j]
         p["idx"].append(idx[ok])
         p["V"].append(V[ok])
-        pp, pm = quadrant_weights(sp[ok])
-        p["pp"].append(pp)
-        p["pm"].append(pm)
+        p["pp"].append(quadrant_weights(sp[ok])[0])
         p["E"].append(stribeck_exp(dqj[ok], model.q_s_[j]))
         p["tau"].append(tauj[ok])
         if iv:  # the instruments' rows: Wz, pz with the same sign, dq, 1 (as _pass)
@@ -605,7 +602,6 @@ def _product_rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
         p["idx"].append(idx[ok])
         p["V"].append(np.concatenate([U[:, ok].T, np.zeros((m, 1))], axis=1))
         p["pp"].append(np.ones(m))
-        p["pm"].append(np.zeros(m))
         p["E"].append(np.zeros(m))
         if iv:
             p["Vz"].append(np.concatenate([z[0][:, ok].T, np.zeros((m, 1))], axis=1))
@@ -615,7 +611,7 @@ def _product_rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
 
 def _parts(k: int) -> list[dict[str, list[np.ndarray]]]:
     """Per joint, the chunks of its rows' fields (:class:`_Rows`) as a pass collects them."""
-    return [{n: [] for n in ("idx", "V", "pp", "pm", "E", "tau", "Vz")} for _ in range(k)]
+    return [{n: [] for n in ("idx", "V", "pp", "E", "tau", "Vz")} for _ in range(k)]
 
 
 def _assemble(parts: list[dict[str, list[np.ndarray]]], nv: Sequence[int],
@@ -632,7 +628,6 @@ def _assemble(parts: list[dict[str, list[np.ndarray]]], nv: Sequence[int],
     for j, p in enumerate(parts):
         idx = cat(p["idx"], (0,), int)
         out.append(_Rows(idx=idx, V=cat(p["V"], (0, nv[j])), pp=cat(p["pp"], (0,)),
-                         pm=cat(p["pm"], (0,)),
                          E=cat(p["E"], (0,)), X=X[j][idx], tau=cat(p["tau"], (0,)),
                          experiment=signals.experiment[idx],
                          Vz=None if Xz is None else cat(p["Vz"], (0, nv[j])),
@@ -666,7 +661,7 @@ class _System:
         pred = rw.X @ e
         J = Z = None
         parts, zparts = [], []
-        for s, ws in ((0, rw.pp), (1, rw.pm)):
+        for s, ws in ((0, rw.pp), (1, 1.0 - rw.pp)):
             c0, c1, D0, D1 = self.coeffs(th, blk, s)
             pred = pred + ws * (rw.V @ c0 + rw.E * (rw.V @ c1))
             if jac:
