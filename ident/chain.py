@@ -25,7 +25,9 @@ Per experiment of k axes (k = 1 for a single joint), with one :class:`ChainSetti
 3. edge trimming (``trim`` full-rate samples at both ends of each experiment);
 4. parallel filtering and decimation of the raw torque, the states and every column, as
    MATLAB's ``decimate`` does (Chebyshev I order 8, 0.05 dB ripple, cut-off 0.8 f_s/(2 r),
-   zero phase, keeping the last sample), in one call on the stacked rows;
+   zero phase, keeping the last sample), in one call on the stacked rows; optionally
+   (``ChainSettings.antialias = "fir"``) a Kaiser FIR of compact support instead, the guard
+   then at least its half-length (:func:`fir_antialias`);
 5. the selection, per axis: the stiction area |dq| < ``dq_min`` (plus what the builder
    rejects) evaluated at full rate, dilated by ``guard`` full-rate samples, with the first
    and last ``guard`` samples (:func:`guarded_keep`).
@@ -62,8 +64,11 @@ __all__ = [
     "RawExperiment",
     "chain_blocks",
     "choose_cutoff",
+    "ANTIALIAS",
     "decimate",
     "decimation_index",
+    "fir_antialias",
+    "fir_half_length",
     "default_rates",
     "filter_chain",
     "check_torque_delay",
@@ -194,7 +199,50 @@ def _antialias(f: int) -> np.ndarray:
     return sos
 
 
-def decimate(x: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
+#: Anti-alias filters :func:`decimate` takes: ``"cheby"`` (MATLAB's, the default) or
+#: ``"fir"`` (:func:`fir_antialias`: compact support, for a guard that contains its reach).
+ANTIALIAS = ("cheby", "fir")
+
+
+def _cheby_zero_phase_gain(w: float, r: int) -> float:
+    """|H(w)|^2 of :func:`decimate`'s Chebyshev stages, forward and backward, at ``w``
+    (a fraction of the Nyquist frequency of the full rate)."""
+    g, before = 1.0, 1
+    for f in _factors(r):  # each stage runs at the rate the stages before it left
+        _, h = scipy.signal.sosfreqz(_antialias(f), worN=[np.pi * w * before])
+        g *= float(np.abs(h[0])) ** 2
+        before *= f
+    return g
+
+
+@functools.lru_cache(maxsize=32)
+def fir_antialias(r: int) -> np.ndarray:
+    """Taps (odd length L, symmetric, unit DC gain) of :func:`decimate`'s ``"fir"`` filter.
+
+    A Kaiser-window low-pass (``scipy.signal.firwin``) meeting the Chebyshev's specification
+    for the same r: pass band up to 0.8 (f_s/2)/r, stop band from 1.2 (f_s/2)/r (the lowest
+    frequency that aliases into that pass band once decimated by r) with the attenuation the
+    zero-phase Chebyshev has there (63 dB for r = 20; the Kaiser ripple, 0.0007 there, is also
+    below the Chebyshev's 0.05 dB per pass in the pass band). Applied once, centred: linear
+    phase made zero phase, and an output sample depends on the inputs within (L - 1) / 2
+    samples of it only (:func:`fir_half_length`), none beyond (an IIR's tail has no end).
+    """
+    if r <= 1:
+        return np.ones(1)
+    atten = -10.0 * np.log10(_cheby_zero_phase_gain(1.2 / r, r))
+    numtaps, beta = scipy.signal.kaiserord(atten, 0.4 / r)
+    numtaps += 1 - numtaps % 2  # odd: a whole-sample centre
+    h = scipy.signal.firwin(numtaps, 1.0 / r, window=("kaiser", beta), scale=True)
+    h.flags.writeable = False
+    return h
+
+
+def fir_half_length(r: int) -> int:
+    """(L - 1) / 2 of :func:`fir_antialias` (r) [full-rate samples]: its reach each side."""
+    return (fir_antialias(r).size - 1) // 2
+
+
+def decimate(x: np.ndarray, r: int, filter: str = "cheby") -> tuple[np.ndarray, np.ndarray]:
     """Anti-alias filter and downsample by ``r`` along axis 0 (MATLAB ``decimate``).
 
     Chebyshev type I, order 8, 0.05 dB ripple, cut-off 0.8 (f_s/2)/r, applied forward and
@@ -205,12 +253,20 @@ def decimate(x: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
     signals (sin(2 pi q / P), exp(-|dq| / q_s)) are right. Y and every column of W share
     the filter, so least-squares estimates do not depend on this gain.
 
+    ``filter="fir"``: :func:`fir_antialias` (r) instead, in one stage, applied once centred
+    (odd extension of (L - 1) / 2 samples at both ends, as ``filtfilt`` pads), the same
+    kept samples. A kept sample then depends on the samples within :func:`fir_half_length`
+    of it only: a guard at least that long leaves no trace of a rejected sample in the rows
+    kept (the Chebyshev's, zero phase, reaches every sample).
+
     Parameters
     ----------
     x : ndarray, shape (n,) or (n, k)
         Samples (columns filtered independently).
     r : int
         Decimation factor.
+    filter : {"cheby", "fir"}
+        The anti-alias filter (:data:`ANTIALIAS`).
 
     Returns
     -------
@@ -221,9 +277,9 @@ def decimate(x: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
     """
     x = np.asarray(x, dtype=float)
     if x.ndim == 1:
-        y, index = _decimate_rows(x[None, :], r)
+        y, index = _decimate_rows(x[None, :], r, filter)
         return y[0], index
-    y, index = _decimate_rows(np.ascontiguousarray(x.T), r)
+    y, index = _decimate_rows(np.ascontiguousarray(x.T), r, filter)
     return y.T, index
 
 
@@ -237,12 +293,16 @@ def decimation_index(n: int, r: int) -> np.ndarray:
     return index
 
 
-def _decimate_rows(x: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
+def _decimate_rows(x: np.ndarray, r: int, filter: str = "cheby") -> tuple[np.ndarray, np.ndarray]:
     """:func:`decimate` along the last axis of a C-contiguous (k, n) array (2x faster
     than filtering along a strided axis 0)."""
     index = decimation_index(x.shape[-1], r)
     if r <= 1:
         return x, index
+    if filter == "fir":
+        return _fir_rows(x, r, index), index
+    if filter != "cheby":
+        raise ValueError(f"anti-alias filter {filter!r}: expected one of {ANTIALIAS}")
     y = x
     for f in _factors(r):
         sos = _antialias(f).copy()
@@ -250,6 +310,31 @@ def _decimate_rows(x: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
         y = _sosfiltfilt(sos, _antialias_zi(f), y, padlen)
         y = np.ascontiguousarray(y[:, (y.shape[-1] - 1) % f::f])
     return y, index
+
+
+def _fir_rows(x: np.ndarray, r: int, index: np.ndarray) -> np.ndarray:
+    """:func:`fir_antialias` (r) applied centred along the last axis of ``x`` (k, n), at the
+    samples ``index`` only (an odd extension of the half-length at both ends).
+
+    Direct sums over each kept sample's window (not by FFT, whose round-off would put
+    nonzero values beyond the taps' reach): a kept sample's value is exactly that of the
+    samples within the half-length."""
+    h = fir_antialias(r)
+    m = (h.size - 1) // 2
+    n = x.shape[-1]
+    pad = min(m, n - 1)
+    ext = scipy.signal._arraytools.odd_ext(x, pad, axis=-1) if pad > 0 else x
+    if pad < m:  # shorter than the filter: zeros beyond the odd extension
+        ext = np.pad(ext, ((0, 0), (m - pad, m - pad)))
+    # out[i] = sum_k h[k] x[i + k - m] (h symmetric); the kept samples are every r-th
+    step = int(index[1] - index[0]) if index.size > 1 else r
+    windows = np.lib.stride_tricks.sliding_window_view(ext, h.size, axis=-1)
+    windows = windows[:, int(index[0])::step][:, :index.size]
+    out = np.empty((x.shape[0], index.size))
+    chunk = max(1, 2**22 // max(1, x.shape[0] * h.size))  # about 32 MB of window at a time
+    for a in range(0, index.size, chunk):
+        out[:, a:a + chunk] = windows[:, a:a + chunk] @ h
+    return out
 
 
 @functools.lru_cache(maxsize=32)
@@ -482,6 +567,9 @@ class ChainSettings:
     dq_min : float or None
         Stiction threshold [rad/s]; None: ``dq_min_rel`` of :func:`run_chain` (a fraction
         of the largest full-rate |dq|), or no stiction criterion without it.
+    antialias : {"cheby", "fir"}
+        The decimation's anti-alias filter (:func:`decimate`); with ``"fir"`` the guard is
+        at least :func:`fir_half_length` (r).
     """
 
     cutoff_hz: float
@@ -490,11 +578,16 @@ class ChainSettings:
     guard: int
     torque_delay: float
     dq_min: float | None = None
+    antialias: str = "cheby"
 
-    def as_dict(self) -> dict[str, float | int | None]:
-        """The settings, for reports and JSON."""
-        return {"cutoff_hz": self.cutoff_hz, "decimation": self.decimation, "trim": self.trim,
-                "guard": self.guard, "torque_delay": self.torque_delay, "dq_min": self.dq_min}
+    def as_dict(self) -> dict[str, float | int | str | None]:
+        """The settings, for reports and JSON (``antialias`` only when not the default)."""
+        out: dict[str, float | int | str | None] = {
+            "cutoff_hz": self.cutoff_hz, "decimation": self.decimation, "trim": self.trim,
+            "guard": self.guard, "torque_delay": self.torque_delay, "dq_min": self.dq_min}
+        if self.antialias != "cheby":
+            out["antialias"] = self.antialias
+        return out
 
 
 def resolve_settings(
@@ -508,6 +601,7 @@ def resolve_settings(
     guard: int | None = None,
     torque_delay: float | None = None,
     dq_min: float | None = None,
+    antialias: str = "cheby",
     sources: Iterable[str] = (),
     error: type[Exception] = DataError,
 ) -> ChainSettings:
@@ -527,6 +621,11 @@ def resolve_settings(
         Given values (checked), or None for the defaults (:func:`default_rates`).
     torque_delay : float or None
         [samples]; None: :func:`default_torque_delay` of ``sources``.
+    antialias : {"cheby", "fir"}
+        The decimation's anti-alias filter (:func:`decimate`). With ``"fir"`` the default
+        guard is the larger of 3 r and :func:`fir_half_length` (r), and a given one shorter
+        than that half-length is refused: rows within it of a rejected sample would carry
+        that sample's torque.
     sources : iterable of str
         File names of the experiments (for the default torque delay; the first names the
         data in :func:`axes_cutoff`'s warning).
@@ -550,11 +649,20 @@ def resolve_settings(
                     f"frequency {fs / 2:g} Hz")
     if decimation is not None and int(decimation) < 1:
         raise error(f"decimation must be a positive integer, got {int(decimation)}")
+    if antialias not in ANTIALIAS:
+        raise error(f"antialias {antialias!r}: expected one of {', '.join(ANTIALIAS)}")
+    given_guard = guard
     r, trim, guard = default_rates(fs, cutoff_hz, decimation, trim, guard)
     if trim < 0:
         raise error(f"trim must be >= 0, got {trim}")
     if guard < 0:
         raise error(f"guard must be >= 0, got {guard}")
+    if antialias == "fir":
+        reach = fir_half_length(r)
+        if given_guard is not None and guard < reach:
+            raise error(f"guard {guard}: the FIR anti-alias filter reaches {reach} samples "
+                        f"each side (decimation {r}); expected a guard of at least {reach}")
+        guard = max(guard, reach)
     if torque_delay is None:
         torque_delay = default_torque_delay(sources)
     torque_delay = float(torque_delay)
@@ -563,7 +671,7 @@ def resolve_settings(
     if dq_min is not None and not dq_min >= 0:
         raise error(f"dq_min must be >= 0 [rad/s], got {dq_min}")
     return ChainSettings(cutoff_hz, r, trim, guard, torque_delay,
-                         None if dq_min is None else float(dq_min))
+                         None if dq_min is None else float(dq_min), antialias)
 
 
 # -- the per-experiment loop -------------------------------------------------------------
@@ -832,7 +940,8 @@ def chain_blocks(
         sizes = tuple(int(r.shape[0]) for r in rows)
         stack = np.concatenate([full.tau.T, full.q.T, full.dq.T, full.ddq.T, *rows], axis=0)
         del rows
-        dec, index = _decimate_rows(np.ascontiguousarray(stack), settings.decimation)
+        dec, index = _decimate_rows(np.ascontiguousarray(stack), settings.decimation,
+                                    settings.antialias)
         del stack
         blocks.append(ChainBlock(full=full, index=index, dec=dec, sizes=sizes,
                                  keep=selection(full.dq, dq_min, settings.guard, index, bad)))

@@ -407,7 +407,7 @@ def _products_fixed(exp: RawExperiment, i: int, run: RawRobotRun, cols: RobotCol
             loadz = np.concatenate([Wz[j, pos[j]], knownz[None, :, j]], axis=0)
             parts += [*quadrant_products(loadz, pp, pm)]
         # the chain's filter, row by row (the same floats as in one stack)
-        fixed = decimate(np.concatenate(parts).T, r)[0].T
+        fixed = decimate(np.concatenate(parts).T, r, settings.antialias)[0].T
         out.append((dq, pp, pm, sg, load, loadz, fixed))
     return out
 
@@ -540,7 +540,7 @@ def products_columns(
                      np.stack(quadrant_products(sg, pp, pm, e, load=False))]
             if loadz is not None:
                 parts += [*quadrant_products(loadz, pp, pm, e)]
-            dep = decimate(np.concatenate(parts).T, r)[0].T
+            dep = decimate(np.concatenate(parts).T, r, settings.antialias)[0].T
             del parts
             nl = pos[j].size + 1
             for block, src, at in ((0, fixed, 0), (1, dep, 0), (2, fixed, nl), (3, dep, nl)):
