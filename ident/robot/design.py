@@ -24,6 +24,14 @@ form="products")`` then reads them (``RobotColumns.products``) and on a one-join
 the single-joint paper fit. Memory: the full-rate regressor of one experiment, k p (1 + IV)
 floats per sample, refused above :data:`MAX_BYTES` (:func:`products_columns`: its own
 bound, in its doc).
+
+With ``keep_full`` the full-rate regressor and known torque the chain evaluated are kept
+too, per run, up to :data:`MAX_BYTES` over all runs (:class:`FullRateColumns`, in
+``RobotColumns.full_columns``): :func:`products_columns` then reads them instead of
+evaluating the regressor on the same full-rate signals again (a run past the bound is
+evaluated again: the same floats), and a load model can predict from them
+(:meth:`FullRateColumns.signals`; the single joint's, :class:`ident.one_joint.OneJointProblem`):
+the regressor is evaluated once per run.
 """
 
 from __future__ import annotations
@@ -53,8 +61,8 @@ from .loaders import RawRobotRun, chain_period
 from .refine_joint import joint_term_columns
 from .signals import FullRateProducts, RobotColumns, RobotSignals
 
-__all__ = ["DesignSettings", "design_runs", "joint_columns", "resolve_design", "sign_checked",
-           "full_rate_loads",
+__all__ = ["DesignSettings", "FullRateColumns", "design_runs", "joint_columns",
+           "resolve_design", "sign_checked", "full_rate_loads",
            "products_columns", "MAX_BYTES", "DQ_MIN_FRACTION"]
 
 #: Default stiction-area threshold: samples with |dq| below this fraction of the largest
@@ -106,6 +114,76 @@ def _known_torque(regressor, f: FullRate, acc: np.ndarray, pay) -> np.ndarray:
     return out
 
 
+class FullRateColumns:
+    """Per run, the regressor's full-rate columns the chain evaluated (:func:`design_runs`
+    with ``keep_full``), kept for what reads the same full-rate signals again: the load
+    prediction of the sign check and of the quadrants (:meth:`signals`) and the full-rate
+    products (:func:`products_columns`). A cache on the design (``RobotColumns.full_columns``),
+    keyed on the run's index.
+
+    Memory: per run, the standard regressor (k p floats per full-rate sample) and the known
+    torque (k), twice with the instruments; runs are kept while the total stays within
+    ``max_bytes`` (default :data:`MAX_BYTES`, the chain's bound on one run's regressor), the
+    others are evaluated again where needed (the same floats).
+
+    Attributes
+    ----------
+    max_bytes : int
+        The bound [bytes].
+    nbytes : int
+        Kept [bytes].
+    evaluations : dict of int to int
+        Per run, how many times its regressor was evaluated at full rate (the chain's, and
+        every evaluation again of a run not kept), counted by the functions of this module
+        and by the callers that evaluate a run's regressor themselves (:meth:`count`).
+    """
+
+    def __init__(self, max_bytes: int = MAX_BYTES) -> None:
+        self.max_bytes = int(max_bytes)
+        self.nbytes = 0
+        self.evaluations: dict[int, int] = {}
+        self._runs: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray | None,
+                                    np.ndarray | None]] = {}
+
+    def count(self, i: int) -> None:
+        """One more full-rate evaluation of run i's regressor."""
+        self.evaluations[i] = self.evaluations.get(i, 0) + 1
+
+    def keep(self, i: int, W: np.ndarray, known: np.ndarray, Wz: np.ndarray | None = None,
+             knownz: np.ndarray | None = None) -> bool:
+        """Keep run i's standard regressor W (k, p, n_f), known torque (n_f, k) [N m] and
+        their instruments (reference acceleration) when they fit in the bound; whether
+        kept."""
+        need = sum(a.nbytes for a in (W, known, Wz, knownz) if a is not None)
+        if i in self._runs or self.nbytes + need > self.max_bytes:
+            return False
+        self._runs[i] = (W, known, Wz, knownz)
+        self.nbytes += need
+        return True
+
+    def get(self, i: int, instruments: bool = False
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None] | None:
+        """Run i's (W, known, Wz, knownz) when kept (with the instruments' when asked),
+        else None."""
+        got = self._runs.get(i)
+        if got is None or (instruments and got[2] is None):
+            return None
+        return got
+
+    def signals(self, i: int, full: RobotSignals) -> RobotSignals:
+        """``full`` (run i's full-rate signals, as :func:`full_rate_loads` forms them)
+        carrying run i's kept regressor, known torque and sign(dq) as its columns (every
+        sample kept), so that a model reading ``RobotSignals.columns``
+        (``RobotModel.load_torque``, ``predict``) predicts without evaluating the regressor
+        again; ``full`` itself when run i is not kept."""
+        got = self.get(i)
+        if got is None or got[0].shape[2] != full.n:
+            return full
+        cols = RobotColumns(W=got[0], p=got[1], sign=np.sign(full.dq),
+                            keep=np.broadcast_to(np.True_, (full.n, full.k)))
+        return replace(full, columns=cols)
+
+
 def _experiments(runs: Sequence[RawRobotRun], refs: bool) -> list[RawExperiment]:
     return [RawExperiment(run.source, run.q, run.tau, run.q_ref if refs else None)
             for run in runs]
@@ -119,6 +197,7 @@ def design_runs(
     instruments: bool = False,
     base=None,
     keep_full: bool = False,
+    full_bytes: int = MAX_BYTES,
 ) -> tuple[RobotSignals, float]:
     """The chain with the n-dof regressor as column builder (module doc).
 
@@ -138,7 +217,10 @@ def design_runs(
     keep_full : bool
         Keep every run's full-rate signals in ``columns.full`` (read by :func:`sign_checked`,
         :func:`products_columns` and :func:`ident.preprocess.design_on_full_rate` instead of
-        filtering the runs again).
+        filtering the runs again), and its full-rate regressor and known torque in
+        ``columns.full_columns`` within ``full_bytes`` (:class:`FullRateColumns`).
+    full_bytes : int
+        The bound of those kept columns over all runs [bytes] (default :data:`MAX_BYTES`).
 
     Returns
     -------
@@ -175,6 +257,7 @@ def design_runs(
                                   " use the states chain (--chain states) or split the log")
 
     placed: dict = {}  # lever-arm payloads, placed (eq. 34-35)
+    kept = FullRateColumns(full_bytes) if keep_full else None
 
     def columns(i: int, f: FullRate) -> tuple[list[np.ndarray], None]:
         run = runs[i]
@@ -183,14 +266,18 @@ def design_runs(
         def torque(acc: np.ndarray) -> np.ndarray:
             return _known_torque(regressor, f, acc, pay)
 
-        rows = [torque(f.ddq).T, np.sign(f.dq).T,
-                np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ddq)).reshape(k * p, f.n)]
+        known, W = torque(f.ddq), np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ddq))
+        rows = [known.T, np.sign(f.dq).T, W.reshape(k * p, f.n)]
         if has_ref:
             rows.append(f.ref.T)  # type: ignore[union-attr]
+        Wz = knownz = None
         if instruments:
-            rows.append(np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ref_ddq)).reshape(k * p,
-                                                                                     f.n))
-            rows.append(torque(f.ref_ddq).T)  # type: ignore[arg-type]
+            Wz = np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ref_ddq))
+            knownz = torque(f.ref_ddq)  # type: ignore[arg-type]
+            rows += [Wz.reshape(k * p, f.n), knownz.T]
+        if kept is not None:
+            kept.count(i)
+            kept.keep(i, W, known, Wz, knownz)
         return rows, None
 
     blocks, dq_min = run_chain(_experiments(runs, has_ref), dt, settings, columns,
@@ -221,7 +308,8 @@ def design_runs(
     columns_ = RobotColumns(W=cat("W", 2), p=cat("p"), sign=cat("sign"), keep=cat("keep"),
                             Wz=cat("Wz", 2) if instruments else None,
                             pz=cat("pz") if instruments else None,
-                            full=tuple(b.full for b in blocks) if keep_full else None)
+                            full=tuple(b.full for b in blocks) if keep_full else None,
+                            full_columns=kept)
     sig = RobotSignals(t=cat("t"), q=cat("q"), dq=cat("dq"), ddq=cat("ddq"), tau=cat("tau"),
                        joints=joints, experiment=cat("e"),
                        payloads=tuple(run.payload for run in runs),
@@ -317,6 +405,9 @@ def full_rate_loads(signals: RobotSignals, runs: Sequence[RawRobotRun],
         full = RobotSignals(t=runs[i].t[f.keep], q=f.q, dq=f.dq, ddq=f.ddq, tau=f.tau_f,
                             joints=signals.joints, payloads=(runs[i].payload,),
                             source=exp.label)
+        kept = signals.columns.full_columns
+        if kept is not None:  # the chain's full-rate regressor, not evaluated again
+            full = kept.signals(i, full)
         out.append((f, np.asarray(load_torque(full), dtype=float)))
     return out
 
@@ -383,28 +474,39 @@ def _products_fixed(exp: RawExperiment, i: int, run: RawRobotRun, cols: RobotCol
     full = RobotSignals(t=run.t[f.keep], q=f.q, dq=f.dq, ddq=f.ddq, tau=f.tau_f,
                         joints=tuple(regressor.joints), payloads=(run.payload,),
                         source=exp.label)
+    if cols.full_columns is not None:  # the chain's full-rate regressor, not evaluated again
+        full = cols.full_columns.signals(i, full)
     tau_out = np.asarray(load_torque(full), dtype=float)
     if tau_out.shape != (f.n, k) or not np.all(np.isfinite(tau_out)):
         raise RobotIdentError(f"{exp.label}: load_torque gave {tau_out.shape} values "
                               f"(finite: {bool(np.all(np.isfinite(tau_out)))}), "
                               f"expected ({f.n}, {k}) finite [N m]")
-    pay = placed_payload(run.payload, regressor, base, run.source, placed)
-    known = _known_torque(regressor, f, f.ddq, pay)
-    W = np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ddq, columns=bcols))
-    Wz = knownz = None
-    if instruments:
-        Wz = np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ref_ddq, columns=bcols))
-        knownz = _known_torque(regressor, f, f.ref_ddq, pay)
+    kept = None if cols.full_columns is None else cols.full_columns.get(i, instruments)
+    at = pos  # joint j's load columns: W[j, at[j]]
+    if kept is not None and kept[0].shape[2] == f.n:  # the chain's, not evaluated again
+        W, known = kept[0], kept[1]  # standard columns: the base ones picked by index
+        Wz, knownz = (kept[2], kept[3]) if instruments else (None, None)
+        at = [bcols[c] for c in pos]
+    else:
+        if cols.full_columns is not None:
+            cols.full_columns.count(i)
+        pay = placed_payload(run.payload, regressor, base, run.source, placed)
+        known = _known_torque(regressor, f, f.ddq, pay)
+        W = np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ddq, columns=bcols))
+        Wz = knownz = None
+        if instruments:
+            Wz = np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ref_ddq, columns=bcols))
+            knownz = _known_torque(regressor, f, f.ref_ddq, pay)
     out = []
     for j in range(k):
         dq = f.dq[:, j]
         pp, pm = quadrant_weights(tau_out[:, j] * dq)  # P+, P- of eq. 27-28, 1/2 where P = 0
         sg = np.sign(dq)
-        load = np.concatenate([W[j, pos[j]], known[None, :, j]], axis=0)  # (l + 1, n_f)
+        load = np.concatenate([W[j, at[j]], known[None, :, j]], axis=0)  # (l + 1, n_f)
         loadz = None
         parts = [*quadrant_products(load, pp, pm), np.stack([*quadrant_products(sg, pp, pm), pp])]
         if Wz is not None and knownz is not None:  # the instruments' load rows
-            loadz = np.concatenate([Wz[j, pos[j]], knownz[None, :, j]], axis=0)
+            loadz = np.concatenate([Wz[j, at[j]], knownz[None, :, j]], axis=0)
             parts += [*quadrant_products(loadz, pp, pm)]
         # the chain's filter, row by row (the same floats as in one stack)
         fixed = decimate(np.concatenate(parts).T, r)[0].T
