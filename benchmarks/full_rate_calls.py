@@ -11,8 +11,9 @@ example campaign (``tests/example_campaign.py``, seed 11: LS; IDIM-IV with its r
 LS with a q_s scan, whose fit is at another q_s than the design's) and one robot fit
 (``ident.cli_robot.fit_robot``, columns chain, usual and paper models, LS, on two simulated
 runs of ``examples/robots/arm3.toml``). Then the time of one LS ``fit_models`` and of the
-robot fit (best of ``--repeat``), in the same process. The counters wrap the classes'
-methods in this script only (a measurement, not a test).
+robot fit (process CPU time, best of ``--repeat``), in the same process (the fit_models
+ratio between two trees: ``benchmarks/bench_fit_versions.py``, interleaved). The counters
+wrap the classes' methods in this script only (a measurement, not a test).
 """
 
 from __future__ import annotations
@@ -124,10 +125,10 @@ def main() -> None:
     for tag, fit in (("fit_models ls", lambda: fit_models(ls)), ("robot fit", robot_fit)):
         best = np.inf
         for _ in range(args.repeat):
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             fit()
-            best = min(best, time.perf_counter() - t0)
-        print(f"{tag}: {best:.3f} s (best of {args.repeat})")
+            best = min(best, time.process_time() - t0)
+        print(f"{tag}: {best:.3f} s CPU (best of {args.repeat})")
 
 
 if __name__ == "__main__":

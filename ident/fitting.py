@@ -880,6 +880,10 @@ def fit_models(
             except DataError as exc:  # that model not identifiable without the payloads
                 notes.append(f"Table IV without payload, {name} model: {exc}")
                 t4["without_payload"][name] = None
+    # the kept full-rate regressor served the fits: the report keeps no copy of it
+    for held in (problem, p0 if t4 is not None else None):
+        if held is not None and held.full_columns is not None:
+            held.full_columns.release()
     return FitReport(
         models=fitted,
         designs=designs,

@@ -37,8 +37,15 @@ q_s -- a_m_<n> ... b_g, c_m ... d_g -- are the robot chain's full-rate products
 :class:`ident.models.QuadrantCoulomb` evaluated again), and the load deciding the design's
 quadrants and sign check is the robot fit's prediction: each run's tau_out_hat is evaluated
 once per load model (:class:`_RunLoads`) for the sign check, the products, the quadrant band
-and the design. Another q_s than the design's (a scan, ``like=``) re-forms the paper columns
-from the terms (:func:`ident.fitting._part`); validation files are not the robot chain's
+and the design. The 1-dof regressor is evaluated at full rate once per run: the chain keeps
+it with the known torque (:class:`ident.robot.design.FullRateColumns`, within the chain's
+memory bound, ``full_bytes``; a run past it is evaluated again, the same floats), and the load
+predictions and the products read it (``OneJointProblem.full_columns.evaluations`` counts the
+evaluations, tests/test_full_rate_once.py). The paper model's design at another q_s than the
+design's (a scan's fit, :func:`ident.fitting._part`) takes its quadrant columns from the
+products at that q_s (:meth:`OneJointProblem.paper_columns`, appended by
+:meth:`ident.preprocess.Design.with_term` in the order the terms would have been: the rigid
+body and payload terms are not evaluated again); validation files are not the robot chain's
 (:func:`ident.preprocess.build_design`).
 ``tests/test_one_fit.py`` checks the fit gives the single-joint least squares' numbers on that
 design (to 1e-8) on the example campaign (LS and IDIM-IV with the half-cycle torque delay),

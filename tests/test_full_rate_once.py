@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from example_campaign import simulate_example_campaign
 
-from ident.fitting import _combined_library, _part
+from ident.fitting import _combined_library, _part, fit_models
 from ident.loaders import concat, make_experiment
 from ident.models import Payload, RigidBody, usual_model
 from ident.one_joint import OneJointProblem
@@ -119,3 +119,15 @@ def test_paper_design_at_another_qs_from_products(campaign, iv: bool) -> None:
     out = bare.with_term(_NotEvaluated(tuple(quad)), decimated=given)
     assert np.array_equal(out.W[:, -len(quad):], evaluated.W[:, [evaluated.names.index(n)
                                                                  for n in quad]])
+
+
+def test_fit_models_evaluates_once_and_releases(campaign) -> None:
+    """``fit_models`` with a q_s scan (the paper design at another q_s than the combined
+    design's): each run's regressor evaluated once at full rate, and released once the fits
+    are made (the report holds no full-rate regressor)."""
+    exps, _ = campaign
+    rep = fit_models(exps, q_s="scan")
+    assert rep.q_s != rep.qs_design
+    kept = rep.robot_signals["paper"].columns.full_columns
+    assert kept.evaluations == dict.fromkeys(range(len(exps)), 1)
+    assert kept.nbytes == 0 and kept.get(0) is None

@@ -32,6 +32,10 @@ evaluating the regressor on the same full-rate signals again (a run past the bou
 evaluated again: the same floats), and a load model can predict from them
 (:meth:`FullRateColumns.signals`; the single joint's, :class:`ident.one_joint.OneJointProblem`):
 the regressor is evaluated once per run.
+
+(Past 600 lines: the column builder, the sign check, the full-rate products and the kept
+full-rate regressor they share read the same runs' full-rate signals, in the order a fit
+calls them; :func:`joint_columns`, the n-dof refit's hook, could move out.)
 """
 
 from __future__ import annotations
@@ -160,6 +164,12 @@ class FullRateColumns:
         self._runs[i] = (W, known, Wz, knownz)
         self.nbytes += need
         return True
+
+    def release(self) -> None:
+        """Drop the kept columns (the counts stay): a run read afterwards is evaluated
+        again."""
+        self._runs.clear()
+        self.nbytes = 0
 
     def get(self, i: int, instruments: bool = False
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None] | None:
@@ -530,8 +540,10 @@ def products_columns(
     decimated like the other columns: what the single-joint chain does
     (:func:`ident.preprocess.build_design` with the ``load_model`` of a first usual fit).
 
-    Per run, the chain's full-rate signals are formed again (:func:`ident.chain.
-    filter_experiment`, as :func:`sign_checked` does); on them, per joint j, with the model
+    Per run, the chain's full-rate signals are those it kept (``keep_full``) or formed again
+    (:func:`ident.chain.filter_experiment`, as :func:`sign_checked` does), and its full-rate
+    regressor and known torque those it kept (``RobotColumns.full_columns``) or evaluated
+    again; on them, per joint j, with the model
     quadrant P+_j = (1 + sign(tau_out_hat_j dq_j)) / 2 (eq. 27-28, 44; tau_out_hat from
     ``load_torque``), P-_j = 1 - P+_j and E_j = exp(-|dq_j| / q_s,j) (eq. 29): each load
     column w of the joint (its base parameters' standard columns, ``rigid_kpn`` at full rate,
@@ -551,12 +563,12 @@ def products_columns(
     own instruments.
 
     Memory: at full rate, per run, the base regressor (k b floats per sample, b the base
-    parameters), every joint's q_s-free rows (its load rows, dq, P+, P-, sign: sum_j
-    (l_j + 1) + 4, the load rows twice with ``instruments``; kept across q_s with a
-    ``cache``) and one joint's filtered rows (4 (l_j + 1) + 5), twice the load parts with
-    ``instruments``; kept, per decimated sample, sum_j 4 (l_j + 1) + 5 k floats (plus
-    sum_j 4 (l_j + 1) with ``instruments``; l_j: joint j's base columns). Refused above
-    :data:`MAX_BYTES` at full rate.
+    parameters; none when the chain kept the standard one), every joint's q_s-free rows (its
+    load rows, dq, P+, P-, sign: sum_j (l_j + 1) + 4, the load rows twice with
+    ``instruments``; kept across q_s with a ``cache``) and one joint's filtered rows (4 (l_j
+    + 1) + 5), twice the load parts with ``instruments``; kept, per decimated sample, sum_j
+    4 (l_j + 1) + 5 k floats (plus sum_j 4 (l_j + 1) with ``instruments``; l_j: joint j's
+    base columns). Refused above :data:`MAX_BYTES` at full rate.
 
     Parameters
     ----------
