@@ -863,7 +863,7 @@ def fit_models(
                 **{k: pre[k] for k in given},
                 tau_min=tau_min, sign_check=False, first=problem.first,
                 first_checked="load_model" in pre and pre.get("sign_check", True),
-                model_quadrant="load_model" in pre)
+                model_quadrant="load_model" in pre, reuse=problem.reuse_for(empty))
             if quadrant_load is not None and p0.model_quadrant:
                 p0.requadrant(quadrant_load)  # the quadrants of the fit's final load
         except DataError as exc:  # too few samples without payload

@@ -87,7 +87,7 @@ from .robot.design import (
 )
 from .robot.estimate import ZERO_COLUMN, RobotModel, renamed_reason
 from .robot.load_jitter import JITTER_SHARE, jitter_note, jitter_share
-from .robot.loaders import RawRobotRun
+from .robot.loaders import RawRobotRun, chain_period
 from .robot.refit import refit_robot
 from .robot.signals import RobotSignals
 from .signals import G, Signals
@@ -306,6 +306,10 @@ class OneJointProblem:
         The bound of the full-rate regressor kept for the load predictions and the products
         [bytes] (:class:`~ident.robot.design.FullRateColumns`; a run past it is evaluated
         again, the same floats).
+    reuse : tuple or None
+        :meth:`reuse_for` of another problem on these experiments (some of its runs): their
+        full-rate signals and regressor are taken, not formed again, when the settings
+        resolved here and the sampling period are that problem's (else ignored).
     **settings
         ``cutoff_hz``, ``decimation``, ``dq_min``, ``trim``, ``guard``, ``torque_delay``
         (None: chosen from the data).
@@ -332,6 +336,7 @@ class OneJointProblem:
                  first: RobotModel | None = None, first_checked: bool = True,
                  model_quadrant: bool = False,
                  tau_min: float | None = None, full_bytes: int = MAX_BYTES,
+                 reuse: tuple[Any, list] | None = None,
                  **settings: float | None) -> None:
         self.revolute, self.has_payload = revolute, has_payload
         self.iv = references is not None
@@ -360,8 +365,12 @@ class OneJointProblem:
         self._unchecked_keep: np.ndarray | None = None  # the rows the sign check left out too
         try:
             st = resolve_design(self.runs, instruments=self.iv, **settings)
+            # the same filters only with the same settings and sampling period
+            same = reuse is not None and reuse[0] == (st, chain_period(self.runs))
+            given = reuse[1] if same else None  # type: ignore[index]
             sig, dqm = design_runs(self.runs, self.reg, st, instruments=self.iv,
-                                   base=self.base, keep_full=True, full_bytes=full_bytes)
+                                   base=self.base, keep_full=True, full_bytes=full_bytes,
+                                   reuse=given)
             self.settings = st = replace(st, dq_min=dqm)
             tau_keep = None
             if tau_min is not None:
@@ -446,6 +455,20 @@ class OneJointProblem:
         """``load_torque`` evaluated once per run, on the chain's kept full-rate regressor."""
         cols = (self.signals if sig is None else sig).columns
         return _RunLoads(load_torque, self.full_rate(sig), cols.full_columns)
+
+    def reuse_for(self, runs: Sequence[int]) -> tuple[Any, list]:
+        """The settings and sampling period [s] and, per run of ``runs`` (indices into these
+        experiments), its full-rate signals and kept regressor (W, and W with the
+        reference's acceleration, or None): the ``reuse`` of a problem on those experiments
+        (Table IV's fit without payload, :func:`ident.fitting.fit_models`), whose chain then
+        neither filters them nor evaluates their regressor again."""
+        full, kept = self.full_rate(), self.full_columns
+        out = []
+        for i in runs:
+            got = None if kept is None else kept.get(int(i))
+            out.append((full[int(i)], None if got is None else got[0],
+                        None if got is None else got[2]))
+        return (self.settings, chain_period(self.runs)), out
 
     @property
     def full_columns(self) -> FullRateColumns | None:

@@ -131,3 +131,28 @@ def test_fit_models_evaluates_once_and_releases(campaign) -> None:
     kept = rep.robot_signals["paper"].columns.full_columns
     assert kept.evaluations == dict.fromkeys(range(len(exps)), 1)
     assert kept.nbytes == 0 and kept.get(0) is None
+
+
+def test_table_iv_problem_reuses_the_fits_runs(campaign) -> None:
+    """Table IV's fit without payload (a problem on the runs without payload, the fit's
+    settled settings and first fit) takes those runs' full-rate signals and regressor from
+    the fit's problem (:meth:`~ident.one_joint.OneJointProblem.reuse_for`): no evaluation of
+    its own, and the same floats as filtering and evaluating them again."""
+    exps, _ = campaign
+    main = _problem(campaign, False)
+    empty = [i for i, e in enumerate(exps) if float(e.payload_mass) == 0]
+    assert 0 < len(empty) < len(exps)
+    st = main.settings
+    kw = dict(revolute=True, has_payload=False, references=None, paper=True,
+              torque_delay=TORQUE_DELAY, sign_check=False, first=main.first,
+              first_checked=main.sign_checked, model_quadrant=True, cutoff_hz=st.cutoff_hz,
+              decimation=st.decimation, dq_min=st.dq_min, trim=st.trim, guard=st.guard)
+    sub = [exps[i] for i in empty]
+    reused = OneJointProblem(sub, reuse=main.reuse_for(empty), **kw)
+    fresh = OneJointProblem(sub, **kw)
+    assert reused.full_rate()[0] is main.full_rate()[empty[0]]
+    fits, fits0 = _fits(reused), _fits(fresh)
+    assert reused.full_columns.evaluations == {}
+    assert fresh.full_columns.evaluations == dict.fromkeys(range(len(empty)), 1)
+    for a, b in zip(fits, fits0, strict=True):
+        assert np.array_equal(a, b)

@@ -29,9 +29,10 @@ With ``keep_full`` the full-rate regressor and known torque the chain evaluated 
 too, per run, up to :data:`MAX_BYTES` over all runs (:class:`FullRateColumns`, in
 ``RobotColumns.full_columns``): :func:`products_columns` then reads them instead of
 evaluating the regressor on the same full-rate signals again (a run past the bound is
-evaluated again: the same floats), and a load model can predict from them
-(:meth:`FullRateColumns.signals`; the single joint's, :class:`ident.one_joint.OneJointProblem`):
-the regressor is evaluated once per run.
+evaluated again: the same floats), :func:`full_rate_loads` hands them to the load model
+(:meth:`FullRateColumns.signals`: ``RobotModel.load_torque`` reads them), and another chain
+on some of the same runs and settings takes them (``design_runs(reuse=...)``): on the single
+joint (:class:`ident.one_joint.OneJointProblem`) the regressor is evaluated once per run.
 
 (Past 600 lines: the column builder, the sign check, the full-rate products and the kept
 full-rate regressor they share read the same runs' full-rate signals, in the order a fit
@@ -52,6 +53,7 @@ from ..chain import (
     ChainSettings,
     FullRate,
     RawExperiment,
+    chain_blocks,
     decimate,
     decimation_index,
     filter_experiment,
@@ -208,6 +210,7 @@ def design_runs(
     base=None,
     keep_full: bool = False,
     full_bytes: int = MAX_BYTES,
+    reuse: Sequence[tuple[FullRate, np.ndarray | None, np.ndarray | None]] | None = None,
 ) -> tuple[RobotSignals, float]:
     """The chain with the n-dof regressor as column builder (module doc).
 
@@ -231,6 +234,12 @@ def design_runs(
         ``columns.full_columns`` within ``full_bytes`` (:class:`FullRateColumns`).
     full_bytes : int
         The bound of those kept columns over all runs [bytes] (default :data:`MAX_BYTES`).
+    reuse : sequence or None
+        Per run, (its full-rate signals as the chain filtered it with these ``settings``, its
+        standard regressor W (k, p, n_f) or None, W with the reference's acceleration or
+        None): what an earlier chain on the same runs and settings kept (e.g. Table IV's fit
+        without payload on some runs of the fit, :func:`ident.fitting.fit_models`); the runs
+        are then not filtered again, nor their regressor evaluated where given.
 
     Returns
     -------
@@ -276,23 +285,43 @@ def design_runs(
         def torque(acc: np.ndarray) -> np.ndarray:
             return _known_torque(regressor, f, acc, pay)
 
-        known, W = torque(f.ddq), np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ddq))
+        given = (None, None) if reuse is None else reuse[i][1:]
+        evaluated = given[0] is None or (instruments and given[1] is None)
+        known = torque(f.ddq)
+        W = (np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ddq)) if given[0] is None
+             else given[0])
         rows = [known.T, np.sign(f.dq).T, W.reshape(k * p, f.n)]
         if has_ref:
             rows.append(f.ref.T)  # type: ignore[union-attr]
         Wz = knownz = None
         if instruments:
-            Wz = np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ref_ddq))
+            Wz = (np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ref_ddq)) if given[1] is None
+                  else given[1])
             knownz = torque(f.ref_ddq)  # type: ignore[arg-type]
             rows += [Wz.reshape(k * p, f.n), knownz.T]
         if kept is not None:
-            kept.count(i)
+            if evaluated:
+                kept.count(i)
             kept.keep(i, W, known, Wz, knownz)
         return rows, None
 
-    blocks, dq_min = run_chain(_experiments(runs, has_ref), dt, settings, columns,
-                               instruments=instruments, dq_min_rel=DQ_MIN_FRACTION,
-                               check=check, error=RobotIdentError)
+    if reuse is None:
+        blocks, dq_min = run_chain(_experiments(runs, has_ref), dt, settings, columns,
+                                   instruments=instruments, dq_min_rel=DQ_MIN_FRACTION,
+                                   check=check, error=RobotIdentError)
+    else:
+        fulls = [f for f, _, _ in reuse]
+        t = settings.trim
+        if len(fulls) != len(runs) or any(
+                f.keep != slice(t, run.q.shape[0] - t if t else run.q.shape[0])
+                or (instruments and f.ref_ddq is None)
+                for f, run in zip(fulls, runs, strict=False)):
+            raise RobotIdentError("design_runs: reuse: expected each run's full-rate signals "
+                                  "of these settings")
+        dq_min = settings.dq_min  # as ident.chain.filter_chain resolves it
+        if dq_min is None:
+            dq_min = DQ_MIN_FRACTION * max(float(np.max(np.abs(f.dq))) for f in fulls)
+        blocks = chain_blocks(fulls, settings, dq_min, columns)
     parts: dict[str, list[np.ndarray]] = {n: [] for n in (
         "t", "q", "dq", "ddq", "tau", "p", "sign", "keep", "W", "Wz", "pz", "ref", "e")}
     for i, (run, b) in enumerate(zip(runs, blocks, strict=True)):
@@ -407,7 +436,10 @@ def full_rate_loads(signals: RobotSignals, runs: Sequence[RawRobotRun],
     """Per run of ``signals`` (:func:`design_runs`'s output for ``runs`` with ``settings``):
     its full-rate signals as the chain filtered them and ``load_torque`` on them,
     tau_out_hat (n_f, k) [N m] -- what :func:`sign_checked` compares with the torque and the
-    single joint's quadrant band (:meth:`ident.one_joint.OneJointProblem.band`) reads."""
+    single joint's quadrant band (:meth:`ident.one_joint.OneJointProblem.band`) reads. Where
+    the chain kept a run's full-rate regressor (``design_runs(keep_full=True)``), the signals
+    handed to ``load_torque`` carry it as their columns (:meth:`FullRateColumns.signals`:
+    ``RobotModel.load_torque`` does not evaluate it again, the same floats)."""
     dt = chain_period(runs)
     out = []
     for i, exp in enumerate(_experiments(runs, False)):
