@@ -3,7 +3,9 @@
 Builds a few designs on simulated data -- single joint (``ident.preprocess.build_design``:
 the usual and paper columns, a ``reference`` for the IDIM-IV instruments, ``dq_min_rel``,
 ``tau_min``, a ``load_model``, ``Design.with_term`` and ``Design.select``), a 3-dof arm
-(``ident.robot.design.design_runs`` with instruments, ``sign_checked``) and the states chain
+(``ident.robot.design.design_runs`` with instruments, ``sign_checked``; ``products_columns``
+with a first usual fit's load, with and without the kept full-rate signals, LS and IDIM-IV,
+at two q_s with one cache, and the products form's estimate) and the states chain
 (``ident.robot.loaders.preprocess_runs``) -- and prints one SHA-256 per array (the bytes of
 the float64 values) and the settings. Run it before and after a refactoring of the chain and
 ``diff`` the two outputs: any changed float shows as a changed line.
@@ -17,6 +19,7 @@ from __future__ import annotations
 
 import hashlib
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +32,14 @@ from example_campaign import simulate_example_campaign  # noqa: E402
 from ident.fitting import _library  # noqa: E402
 from ident.loaders import concat, make_experiment  # noqa: E402
 from ident.preprocess import TORQUE_DELAY, build_design  # noqa: E402
-from ident.robot.design import design_runs, resolve_design, sign_checked  # noqa: E402
+from ident.robot import RobotIdentError  # noqa: E402
+from ident.robot.design import (  # noqa: E402
+    design_runs,
+    products_columns,
+    resolve_design,
+    sign_checked,
+)
+from ident.robot.estimate import RobotModel  # noqa: E402
 from ident.robot.loaders import RawRobotRun, preprocess_runs  # noqa: E402
 from ident.robot.regressor import RobotRegressor  # noqa: E402
 from ident.robot.signals import RobotPayloadData  # noqa: E402
@@ -122,6 +132,38 @@ def robot() -> None:
     print(f"robot checked: kept {_h(kept)}")
     _robot("robot checked", checked)
     _robot("robot states", preprocess_runs(runs, robot.moving))
+    robot_products(reg, runs)
+
+
+def robot_products(reg, runs) -> None:  # noqa: ANN001 - RobotRegressor, runs
+    """The full-rate products of the 3-dof arm with a first usual fit's load (its
+    ``load_torque`` at full rate: the sign check's and the products' quadrants)."""
+    for iv in (False, True):
+        method = "iv" if iv else "ls"
+        settings = resolve_design(runs, instruments=iv, torque_delay=TORQUE_DELAY)
+        for keep in (False, True):
+            tag = f"robot products iv={iv} keep_full={keep}"
+            sig, dq_min = design_runs(runs, reg, settings, instruments=iv, keep_full=keep)
+            st = replace(settings, dq_min=dq_min)
+            first = RobotModel(reg, "usual", method).fit(sig)
+            print(f"{tag}: first {_h(first.coef_)}")
+            checked, kept = sign_checked(sig, runs, st, first.load_torque, 0.7)
+            print(f"{tag}: kept {_h(kept)}")
+            cache: dict = {}
+            for q_s in (0.03, 0.01):
+                out = products_columns(checked, runs, reg, st, first.load_torque, q_s,
+                                       instruments=iv, cache=cache)
+                pr = out.columns.products
+                for j, a in enumerate(pr.loads):
+                    print(f"{tag} q_s={q_s}: loads[{j}] {_h(a)}")
+                for j, a in enumerate(pr.loads_z or ()):
+                    print(f"{tag} q_s={q_s}: loads_z[{j}] {_h(a)}")
+                print(f"{tag} q_s={q_s}: coulomb {_h(pr.coulomb)} pplus {_h(pr.pplus)}")
+                try:
+                    fit = RobotModel(reg, "paper", method, form="products", q_s=q_s).fit(out)
+                    print(f"{tag} q_s={q_s}: paper {_h(fit.coef_)}")
+                except RobotIdentError as err:  # arm3's j2: one load sign on these rows
+                    print(f"{tag} q_s={q_s}: paper refused: {err}")
 
 
 if __name__ == "__main__":

@@ -29,7 +29,7 @@ must equal :func:`with_qs`'s -- is :mod:`ident.qs_scan`; its public names (``qs_
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -261,17 +261,25 @@ def _combined(
     return build_design(lib, sig, reference=reference, **pre)
 
 
-def _part(d: Design, name: str, payload: bool, q: float, qs0: float) -> tuple[Library, Design]:
-    """The library of model ``name`` (q_s ``q``) and its columns of the combined design."""
+def _part(d: Design, name: str, payload: bool, q: float, qs0: float,
+          given: Callable[[float], Any] | None = None) -> tuple[Library, Design]:
+    """The library of model ``name`` (q_s ``q``) and its columns of the combined design.
+
+    At another q_s than the design's ``qs0`` the paper model's quadrant terms are formed
+    again (appended, :meth:`~ident.preprocess.Design.with_term`): from ``given(q)`` when it
+    gives their decimated columns (the robot chain's full-rate products at q,
+    :meth:`~ident.one_joint.OneJointProblem.paper_columns`, when ``d`` is that problem's
+    design), else evaluated on the design's full-rate signals."""
     lib = _library(name, q, d.signals.revolute, payload)
     keep = set(lib.names())
     sub = d.without([n for n in d.names if n not in keep])
     if name == "paper" and q != qs0:
         quad = [t for t in sub.library.terms() if isinstance(t, LoadDependent | QuadrantCoulomb)]
         sub = sub.without([n for t in quad for n in t.names()])
+        cols = None if given is None else given(q)
         for t in lib.terms():
             if isinstance(t, LoadDependent | QuadrantCoulomb):
-                sub = sub.with_term(t)
+                sub = sub.with_term(t, decimated=cols)
     return lib, sub
 
 
@@ -650,8 +658,9 @@ def fit_models(
     if not qs0 > 0:
         raise DataError(f"q_s must be positive [rad/s], got {qs0}")
 
-    def part(d: Design, name: str, payload: bool, q: float = qs0) -> tuple[Library, Design]:
-        return _part(d, name, payload, q, qs0)
+    def part(d: Design, name: str, payload: bool, q: float = qs0,
+             given: Callable[[float], Any] | None = None) -> tuple[Library, Design]:
+        return _part(d, name, payload, q, qs0, given)
 
     if like is not None:
         if list(like.sources) != sources or like.revolute != s.revolute:
@@ -744,8 +753,13 @@ def fit_models(
             return d
         return d.select(dq_min=d.dq_min, tau_min=d.tau_min, quadrant_band=problem.band_nm)
 
+    def products_at(q: float) -> Any:
+        """The paper model's columns at q from the robot chain's products (the design's
+        quadrant: ``full`` and the requadranted designs are built with ``load_model``)."""
+        return problem.paper_columns(q, pre.get("load_model"))
+
     for name in models:
-        lib, d = part(full, name, has_payload, qs_val)
+        lib, d = part(full, name, has_payload, qs_val, products_at)
         if name == "paper":
             one_sign = _one_sign_load(d)
             d = banded(d)
@@ -805,7 +819,8 @@ def fit_models(
             values = problem.load_values()
             pre["load_model"] = (inner, np.array([values.get(n, 0.0) for n in inner.names()]))
             lib, d = part(problem.design(plib, s, tau_min=tau_min, load_model=pre["load_model"],
-                                         sign_check=False), "paper", has_payload, qs_val)
+                                         sign_check=False), "paper", has_payload, qs_val,
+                          products_at)
             d = banded(d)
             m = _fitted(lib, "paper", problem.fit("paper", qs_val, eliminate=eliminate,
                                                   threshold_pct=threshold_pct))
@@ -848,7 +863,7 @@ def fit_models(
                 **{k: pre[k] for k in given},
                 tau_min=tau_min, sign_check=False, first=problem.first,
                 first_checked="load_model" in pre and pre.get("sign_check", True),
-                model_quadrant="load_model" in pre)
+                model_quadrant="load_model" in pre, reuse=problem.reuse_for(empty))
             if quadrant_load is not None and p0.model_quadrant:
                 p0.requadrant(quadrant_load)  # the quadrants of the fit's final load
         except DataError as exc:  # too few samples without payload
@@ -865,6 +880,10 @@ def fit_models(
             except DataError as exc:  # that model not identifiable without the payloads
                 notes.append(f"Table IV without payload, {name} model: {exc}")
                 t4["without_payload"][name] = None
+    # the kept full-rate regressor served the fits: the report keeps no copy of it
+    for held in (problem, p0 if t4 is not None else None):
+        if held is not None and held.full_columns is not None:
+            held.full_columns.release()
     return FitReport(
         models=fitted,
         designs=designs,

@@ -37,8 +37,15 @@ q_s -- a_m_<n> ... b_g, c_m ... d_g -- are the robot chain's full-rate products
 :class:`ident.models.QuadrantCoulomb` evaluated again), and the load deciding the design's
 quadrants and sign check is the robot fit's prediction: each run's tau_out_hat is evaluated
 once per load model (:class:`_RunLoads`) for the sign check, the products, the quadrant band
-and the design. Another q_s than the design's (a scan, ``like=``) re-forms the paper columns
-from the terms (:func:`ident.fitting._part`); validation files are not the robot chain's
+and the design. The 1-dof regressor is evaluated at full rate once per run: the chain keeps
+it with the known torque (:class:`ident.robot.design.FullRateColumns`, within the chain's
+memory bound, ``full_bytes``; a run past it is evaluated again, the same floats), and the load
+predictions and the products read it (``OneJointProblem.full_columns.evaluations`` counts the
+evaluations, tests/test_full_rate_once.py). The paper model's design at another q_s than the
+design's (a scan's fit, :func:`ident.fitting._part`) takes its quadrant columns from the
+products at that q_s (:meth:`OneJointProblem.paper_columns`, appended by
+:meth:`ident.preprocess.Design.with_term` in the order the terms would have been: the rigid
+body and payload terms are not evaluated again); validation files are not the robot chain's
 (:func:`ident.preprocess.build_design`).
 ``tests/test_one_fit.py`` checks the fit gives the single-joint least squares' numbers on that
 design (to 1e-8) on the example campaign (LS and IDIM-IV with the half-cycle torque delay),
@@ -70,6 +77,8 @@ from .preprocess import Design, design_on_full_rate
 from .robot import RobotIdentError
 from .robot.base import single_joint_map
 from .robot.design import (
+    MAX_BYTES,
+    FullRateColumns,
     design_runs,
     full_rate_loads,
     products_columns,
@@ -78,7 +87,7 @@ from .robot.design import (
 )
 from .robot.estimate import ZERO_COLUMN, RobotModel, renamed_reason
 from .robot.load_jitter import JITTER_SHARE, jitter_note, jitter_share
-from .robot.loaders import RawRobotRun
+from .robot.loaders import RawRobotRun, chain_period
 from .robot.refit import refit_robot
 from .robot.signals import RobotSignals
 from .signals import G, Signals
@@ -243,16 +252,25 @@ class _RunLoads:
     once per run: the sign check (:func:`~ident.robot.design.sign_checked`), the quadrants of
     the full-rate products (:func:`~ident.robot.design.products_columns`), the quadrant band
     and the design (:meth:`OneJointProblem.design`) read the same prediction. A run is known
-    by the chain's kept full-rate position array (``FullRate.q``) the signals hold."""
+    by the chain's kept full-rate position array (``FullRate.q``) the signals hold. The
+    signals carry the run's full-rate regressor the chain kept
+    (:meth:`~ident.robot.design.FullRateColumns.signals`: ``RobotModel.load_torque`` reads
+    them, the same floats); a run not kept (the memory bound) has its regressor evaluated
+    again by the load model, counted in ``kept.evaluations``."""
 
-    def __init__(self, load_torque: Any) -> None:
+    def __init__(self, load_torque: Any, full: Sequence[FullRate] = (),
+                 kept: FullRateColumns | None = None) -> None:
         self.load_torque = load_torque
+        self.full, self.kept = tuple(full), kept
         self._done: list[tuple[np.ndarray, np.ndarray]] = []
 
     def __call__(self, s: RobotSignals) -> np.ndarray:
         for q, out in self._done:
             if q is s.q:
                 return out
+        run = next((i for i, f in enumerate(self.full) if f.q is s.q), None)
+        if run is not None and self.kept is not None and s.columns is None:
+            self.kept.count(run)  # the load model evaluates the regressor on these signals
         out = np.asarray(self.load_torque(s), dtype=float)
         self._done.append((s.q, out))
         return out
@@ -284,6 +302,14 @@ class OneJointProblem:
     tau_min : float or None
         Rows within the guard of a full-rate sample with |tau| < tau_min (the low-passed
         torque) are left out too, as :func:`ident.preprocess.build_design` does.
+    full_bytes : int
+        The bound of the full-rate regressor kept for the load predictions and the products
+        [bytes] (:class:`~ident.robot.design.FullRateColumns`; a run past it is evaluated
+        again, the same floats).
+    reuse : tuple or None
+        :meth:`reuse_for` of another problem on these experiments (some of its runs): their
+        full-rate signals and regressor are taken, not formed again, when the settings
+        resolved here and the sampling period are that problem's (else ignored).
     **settings
         ``cutoff_hz``, ``decimation``, ``dq_min``, ``trim``, ``guard``, ``torque_delay``
         (None: chosen from the data).
@@ -309,7 +335,9 @@ class OneJointProblem:
                  references: list[np.ndarray] | None, paper: bool, sign_check: bool = True,
                  first: RobotModel | None = None, first_checked: bool = True,
                  model_quadrant: bool = False,
-                 tau_min: float | None = None, **settings: float | None) -> None:
+                 tau_min: float | None = None, full_bytes: int = MAX_BYTES,
+                 reuse: tuple[Any, list] | None = None,
+                 **settings: float | None) -> None:
         self.revolute, self.has_payload = revolute, has_payload
         self.iv = references is not None
         self.method = "iv" if self.iv else "ls"
@@ -337,8 +365,12 @@ class OneJointProblem:
         self._unchecked_keep: np.ndarray | None = None  # the rows the sign check left out too
         try:
             st = resolve_design(self.runs, instruments=self.iv, **settings)
+            # the same filters only with the same settings and sampling period
+            same = reuse is not None and reuse[0] == (st, chain_period(self.runs))
+            given = reuse[1] if same else None  # type: ignore[index]
             sig, dqm = design_runs(self.runs, self.reg, st, instruments=self.iv,
-                                   base=self.base, keep_full=True)
+                                   base=self.base, keep_full=True, full_bytes=full_bytes,
+                                   reuse=given)
             self.settings = st = replace(st, dq_min=dqm)
             tau_keep = None
             if tau_min is not None:
@@ -351,7 +383,7 @@ class OneJointProblem:
                                         payload_ratio=self._ratio, eliminate=True,
                                         threshold_pct=np.inf).fit(sig)
             if self.first is not None:
-                self._loads = _RunLoads(self.first.load_torque)
+                self._loads = self._run_loads(self.first.load_torque, sig)
             if paper and self.first is not None and (first is None or first_checked):
                 loads = full_rate_loads(sig, self.runs, st, self._loads)  # (and the jitter's)
                 out, kept = sign_checked(sig, self.runs, st, self._loads, loads=loads)
@@ -419,6 +451,33 @@ class OneJointProblem:
                                    np.abs(f.tau_f) < tau_min)
         return keep
 
+    def _run_loads(self, load_torque: Any, sig: RobotSignals | None = None) -> _RunLoads:
+        """``load_torque`` evaluated once per run, on the chain's kept full-rate regressor."""
+        cols = (self.signals if sig is None else sig).columns
+        return _RunLoads(load_torque, self.full_rate(sig), cols.full_columns)
+
+    def reuse_for(self, runs: Sequence[int]) -> tuple[Any, list]:
+        """The settings and sampling period [s] and, per run of ``runs`` (indices into these
+        experiments), its full-rate signals and kept regressor (W, and W with the
+        reference's acceleration, or None): the ``reuse`` of a problem on those experiments
+        (Table IV's fit without payload, :func:`ident.fitting.fit_models`), whose chain then
+        neither filters them nor evaluates their regressor again."""
+        full, kept = self.full_rate(), self.full_columns
+        out = []
+        for i in runs:
+            got = None if kept is None else kept.get(int(i))
+            out.append((full[int(i)], None if got is None else got[0],
+                        None if got is None else got[2]))
+        return (self.settings, chain_period(self.runs)), out
+
+    @property
+    def full_columns(self) -> FullRateColumns | None:
+        """Per run, the full-rate regressor the chain evaluated and kept, with the count of
+        every full-rate evaluation of each run's regressor
+        (:class:`~ident.robot.design.FullRateColumns`; ``evaluations``: 1 per run when every
+        run was kept)."""
+        return self.signals.columns.full_columns
+
     def full_rate(self, sig: RobotSignals | None = None) -> tuple[FullRate, ...]:
         """Every run's full-rate signals, as the columns chain filtered them (kept by
         :func:`~ident.robot.design.design_runs`)."""
@@ -454,6 +513,18 @@ class OneJointProblem:
                                    sign_check=sign_check, loads=loads,
                                    decimated=self.decimated_columns(
                                        _products_qs(library) if same else None))
+
+    def paper_columns(self, q_s: float, load_model: Any
+                      ) -> list[dict[str, tuple[np.ndarray, np.ndarray | None]]] | None:
+        """Per run, the paper model's decimated columns at ``q_s`` [rad/s] from the full-rate
+        products (:meth:`decimated_columns`) for a design of these experiments built by
+        :meth:`design` with ``load_model``, or None when that design's quadrant is not this
+        problem's (then its terms are evaluated): what :func:`ident.fitting._part` appends
+        for a fit at another q_s than the design's (:meth:`ident.preprocess.Design.with_term`),
+        instead of evaluating the rigid body and payload again at full rate."""
+        if (load_model is not None) != self._by_model():
+            return None
+        return self.decimated_columns(float(q_s))
 
     def decimated_columns(self, q_s: float | None = None
                           ) -> list[dict[str, tuple[np.ndarray, np.ndarray | None]]]:
@@ -553,7 +624,7 @@ class OneJointProblem:
         theta = np.linalg.lstsq(self.smap.matrix[rows], np.array([values[n] for n in names]),
                                 rcond=None)[0]
         self._quadrant_theta = theta
-        self._loads = _RunLoads(self._quadrant_model().load_torque)
+        self._loads = self._run_loads(self._quadrant_model().load_torque)
         self._products = {}
         self._products_cache = {}
         self._band_keep, self.band_kept, self.band_nm = None, 1.0, 0.0

@@ -208,20 +208,41 @@ class Design:
             "samples": len(self),
         }
 
-    def with_term(self, term: Term, *, states_only: bool = False) -> Design:
+    def with_term(self, term: Term, *, states_only: bool = False,
+                  decimated: Sequence[Mapping[str, tuple[np.ndarray, np.ndarray | None]]]
+                  | None = None) -> Design:
         """A new design with ``term``'s columns appended.
 
         The columns are computed on the same full-rate filtered signals, filtered,
         decimated and selected exactly as the existing ones. With ``states_only`` (every
         refinement candidate) the term sees :meth:`Signals.states` views: its columns cannot
         read the measured torque (:class:`~ident.OutputLeakError` if it tries).
+
+        ``decimated`` gives, per experiment, columns already evaluated, filtered and
+        decimated by the same chain with the same quadrant, as in
+        :func:`design_on_full_rate`: where every column of ``term`` is given, it is not
+        evaluated (e.g. the paper model's columns at another q_s from the robot chain's
+        full-rate products, :meth:`ident.one_joint.OneJointProblem.paper_columns`). Not with
+        ``states_only`` (given columns may have read the torque).
         """
         new = tuple(term.names())
         clash = set(new) & set(self.names)
         if clash:
             raise DataError(f"parameters {sorted(clash)} are already in the design")
+        if decimated is not None and (states_only or len(decimated) != len(self._blocks)):
+            raise DataError("with_term: decimated columns are given per experiment of the "
+                            f"design ({len(self._blocks)}), and not with states_only")
         blocks, cols, zcols = [], [], []
-        for b in self._blocks:
+        for e, b in enumerate(self._blocks):
+            given = None if decimated is None else decimated[e]
+            if given is not None and all(n in given for n in new):
+                rows, zdec = self._given_rows(e, b, new, given)
+                if zdec is not None:
+                    zcols.append(zdec[-len(new):, b.mask].T)
+                blocks.append(replace(b, dec=np.concatenate([b.dec, rows], axis=0),
+                                      zdec=zdec))
+                cols.append(rows[:, b.mask].T)
+                continue
             full = b.full.states() if states_only else b.full
             rows, _ = _decimate_rows(np.ascontiguousarray(term.columns(full).T), self.decimation)
             zdec = None
@@ -248,6 +269,27 @@ class Design:
             library=Library(*self.library.terms(), term),
             _blocks=blocks,
         )
+
+    @staticmethod
+    def _given_rows(e: int, b: _Block, names: tuple[str, ...],
+                    given: Mapping[str, tuple[np.ndarray, np.ndarray | None]]
+                    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """Experiment e's decimated rows of ``names`` from ``given`` (:meth:`with_term`), and
+        its instrument rows appended to ``b.zdec`` (the same row where no instrument row is
+        given), or None without instruments."""
+        m = b.index.size
+        rows = np.empty((len(names), m))
+        zrows = np.empty((len(names), m))
+        for j, n in enumerate(names):
+            w, z = given[n]
+            if np.shape(w) != (m,) or (z is not None and np.shape(z) != (m,)):
+                raise DataError(f"experiment {e}: the given column {n} has {np.size(w)} "
+                                f"decimated samples, the chain {m}")
+            rows[j] = w
+            zrows[j] = w if z is None else z
+        if b.zfull is None or b.zdec is None:
+            return rows, None
+        return rows, np.concatenate([b.zdec, zrows], axis=0)
 
     def reference_acceleration(self) -> np.ndarray | None:
         """The reference trajectory's acceleration on the design's rows, shape (m,)

@@ -24,6 +24,19 @@ form="products")`` then reads them (``RobotColumns.products``) and on a one-join
 the single-joint paper fit. Memory: the full-rate regressor of one experiment, k p (1 + IV)
 floats per sample, refused above :data:`MAX_BYTES` (:func:`products_columns`: its own
 bound, in its doc).
+
+With ``keep_full`` the full-rate regressor and known torque the chain evaluated are kept
+too, per run, up to :data:`MAX_BYTES` over all runs (:class:`FullRateColumns`, in
+``RobotColumns.full_columns``): :func:`products_columns` then reads them instead of
+evaluating the regressor on the same full-rate signals again (a run past the bound is
+evaluated again: the same floats), :func:`full_rate_loads` hands them to the load model
+(:meth:`FullRateColumns.signals`: ``RobotModel.load_torque`` reads them), and another chain
+on some of the same runs and settings takes them (``design_runs(reuse=...)``): on the single
+joint (:class:`ident.one_joint.OneJointProblem`) the regressor is evaluated once per run.
+
+(Past 600 lines: the column builder, the sign check, the full-rate products and the kept
+full-rate regressor they share read the same runs' full-rate signals, in the order a fit
+calls them; :func:`joint_columns`, the n-dof refit's hook, could move out.)
 """
 
 from __future__ import annotations
@@ -40,6 +53,7 @@ from ..chain import (
     ChainSettings,
     FullRate,
     RawExperiment,
+    chain_blocks,
     decimate,
     decimation_index,
     filter_experiment,
@@ -53,8 +67,8 @@ from .loaders import RawRobotRun, chain_period
 from .refine_joint import joint_term_columns
 from .signals import FullRateProducts, RobotColumns, RobotSignals
 
-__all__ = ["DesignSettings", "design_runs", "joint_columns", "resolve_design", "sign_checked",
-           "full_rate_loads",
+__all__ = ["DesignSettings", "FullRateColumns", "design_runs", "joint_columns",
+           "resolve_design", "sign_checked", "full_rate_loads",
            "products_columns", "MAX_BYTES", "DQ_MIN_FRACTION"]
 
 #: Default stiction-area threshold: samples with |dq| below this fraction of the largest
@@ -106,6 +120,82 @@ def _known_torque(regressor, f: FullRate, acc: np.ndarray, pay) -> np.ndarray:
     return out
 
 
+class FullRateColumns:
+    """Per run, the regressor's full-rate columns the chain evaluated (:func:`design_runs`
+    with ``keep_full``), kept for what reads the same full-rate signals again: the load
+    prediction of the sign check and of the quadrants (:meth:`signals`) and the full-rate
+    products (:func:`products_columns`). A cache on the design (``RobotColumns.full_columns``),
+    keyed on the run's index.
+
+    Memory: per run, the standard regressor (k p floats per full-rate sample) and the known
+    torque (k), twice with the instruments; runs are kept while the total stays within
+    ``max_bytes`` (default :data:`MAX_BYTES`, the chain's bound on one run's regressor), the
+    others are evaluated again where needed (the same floats).
+
+    Attributes
+    ----------
+    max_bytes : int
+        The bound [bytes].
+    nbytes : int
+        Kept [bytes].
+    evaluations : dict of int to int
+        Per run, how many times its regressor was evaluated at full rate (the chain's, and
+        every evaluation again of a run not kept), counted by the functions of this module
+        and by the callers that evaluate a run's regressor themselves (:meth:`count`).
+    """
+
+    def __init__(self, max_bytes: int = MAX_BYTES) -> None:
+        self.max_bytes = int(max_bytes)
+        self.nbytes = 0
+        self.evaluations: dict[int, int] = {}
+        self._runs: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray | None,
+                                    np.ndarray | None]] = {}
+
+    def count(self, i: int) -> None:
+        """One more full-rate evaluation of run i's regressor."""
+        self.evaluations[i] = self.evaluations.get(i, 0) + 1
+
+    def keep(self, i: int, W: np.ndarray, known: np.ndarray, Wz: np.ndarray | None = None,
+             knownz: np.ndarray | None = None) -> bool:
+        """Keep run i's standard regressor W (k, p, n_f), known torque (n_f, k) [N m] and
+        their instruments (reference acceleration) when they fit in the bound; whether
+        kept."""
+        need = sum(a.nbytes for a in (W, known, Wz, knownz) if a is not None)
+        if i in self._runs or self.nbytes + need > self.max_bytes:
+            return False
+        self._runs[i] = (W, known, Wz, knownz)
+        self.nbytes += need
+        return True
+
+    def release(self) -> None:
+        """Drop the kept columns (the counts stay): a run read afterwards is evaluated
+        again."""
+        self._runs.clear()
+        self.nbytes = 0
+
+    def get(self, i: int, instruments: bool = False
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None] | None:
+        """Run i's (W, known, Wz, knownz) when kept (with the instruments' when asked),
+        else None."""
+        got = self._runs.get(i)
+        if got is None or (instruments and got[2] is None):
+            return None
+        return got
+
+    def signals(self, i: int, full: RobotSignals) -> RobotSignals:
+        """``full`` (run i's full-rate signals, as :func:`full_rate_loads` forms them)
+        carrying run i's kept regressor, known torque and sign(dq) as its columns (every
+        sample kept), so that a model reading ``RobotSignals.columns``
+        (``RobotModel.load_torque``, ``predict``) predicts without evaluating the regressor
+        again; ``full`` itself when run i is not kept."""
+        got = self.get(i)
+        if got is None or got[0].shape[2] != full.n:
+            return full
+        cols = RobotColumns(W=got[0], p=got[1], sign=np.sign(full.dq),
+                            keep=np.broadcast_to(np.True_, (full.n, full.k)))
+        return replace(full, columns=cols)
+
+
 def _experiments(runs: Sequence[RawRobotRun], refs: bool) -> list[RawExperiment]:
     return [RawExperiment(run.source, run.q, run.tau, run.q_ref if refs else None)
             for run in runs]
@@ -119,6 +209,8 @@ def design_runs(
     instruments: bool = False,
     base=None,
     keep_full: bool = False,
+    full_bytes: int = MAX_BYTES,
+    reuse: Sequence[tuple[FullRate, np.ndarray | None, np.ndarray | None]] | None = None,
 ) -> tuple[RobotSignals, float]:
     """The chain with the n-dof regressor as column builder (module doc).
 
@@ -138,7 +230,16 @@ def design_runs(
     keep_full : bool
         Keep every run's full-rate signals in ``columns.full`` (read by :func:`sign_checked`,
         :func:`products_columns` and :func:`ident.preprocess.design_on_full_rate` instead of
-        filtering the runs again).
+        filtering the runs again), and its full-rate regressor and known torque in
+        ``columns.full_columns`` within ``full_bytes`` (:class:`FullRateColumns`).
+    full_bytes : int
+        The bound of those kept columns over all runs [bytes] (default :data:`MAX_BYTES`).
+    reuse : sequence or None
+        Per run, (its full-rate signals as the chain filtered it with these ``settings``, its
+        standard regressor W (k, p, n_f) or None, W with the reference's acceleration or
+        None): what an earlier chain on the same runs and settings kept (e.g. Table IV's fit
+        without payload on some runs of the fit, :func:`ident.fitting.fit_models`); the runs
+        are then not filtered again, nor their regressor evaluated where given.
 
     Returns
     -------
@@ -175,6 +276,7 @@ def design_runs(
                                   " use the states chain (--chain states) or split the log")
 
     placed: dict = {}  # lever-arm payloads, placed (eq. 34-35)
+    kept = FullRateColumns(full_bytes) if keep_full else None
 
     def columns(i: int, f: FullRate) -> tuple[list[np.ndarray], None]:
         run = runs[i]
@@ -183,19 +285,43 @@ def design_runs(
         def torque(acc: np.ndarray) -> np.ndarray:
             return _known_torque(regressor, f, acc, pay)
 
-        rows = [torque(f.ddq).T, np.sign(f.dq).T,
-                np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ddq)).reshape(k * p, f.n)]
+        given = (None, None) if reuse is None else reuse[i][1:]
+        evaluated = given[0] is None or (instruments and given[1] is None)
+        known = torque(f.ddq)
+        W = (np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ddq)) if given[0] is None
+             else given[0])
+        rows = [known.T, np.sign(f.dq).T, W.reshape(k * p, f.n)]
         if has_ref:
             rows.append(f.ref.T)  # type: ignore[union-attr]
+        Wz = knownz = None
         if instruments:
-            rows.append(np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ref_ddq)).reshape(k * p,
-                                                                                     f.n))
-            rows.append(torque(f.ref_ddq).T)  # type: ignore[arg-type]
+            Wz = (np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ref_ddq)) if given[1] is None
+                  else given[1])
+            knownz = torque(f.ref_ddq)  # type: ignore[arg-type]
+            rows += [Wz.reshape(k * p, f.n), knownz.T]
+        if kept is not None:
+            if evaluated:
+                kept.count(i)
+            kept.keep(i, W, known, Wz, knownz)
         return rows, None
 
-    blocks, dq_min = run_chain(_experiments(runs, has_ref), dt, settings, columns,
-                               instruments=instruments, dq_min_rel=DQ_MIN_FRACTION,
-                               check=check, error=RobotIdentError)
+    if reuse is None:
+        blocks, dq_min = run_chain(_experiments(runs, has_ref), dt, settings, columns,
+                                   instruments=instruments, dq_min_rel=DQ_MIN_FRACTION,
+                                   check=check, error=RobotIdentError)
+    else:
+        fulls = [f for f, _, _ in reuse]
+        t = settings.trim
+        if len(fulls) != len(runs) or any(
+                f.keep != slice(t, run.q.shape[0] - t if t else run.q.shape[0])
+                or (instruments and f.ref_ddq is None)
+                for f, run in zip(fulls, runs, strict=False)):
+            raise RobotIdentError("design_runs: reuse: expected each run's full-rate signals "
+                                  "of these settings")
+        dq_min = settings.dq_min  # as ident.chain.filter_chain resolves it
+        if dq_min is None:
+            dq_min = DQ_MIN_FRACTION * max(float(np.max(np.abs(f.dq))) for f in fulls)
+        blocks = chain_blocks(fulls, settings, dq_min, columns)
     parts: dict[str, list[np.ndarray]] = {n: [] for n in (
         "t", "q", "dq", "ddq", "tau", "p", "sign", "keep", "W", "Wz", "pz", "ref", "e")}
     for i, (run, b) in enumerate(zip(runs, blocks, strict=True)):
@@ -221,7 +347,8 @@ def design_runs(
     columns_ = RobotColumns(W=cat("W", 2), p=cat("p"), sign=cat("sign"), keep=cat("keep"),
                             Wz=cat("Wz", 2) if instruments else None,
                             pz=cat("pz") if instruments else None,
-                            full=tuple(b.full for b in blocks) if keep_full else None)
+                            full=tuple(b.full for b in blocks) if keep_full else None,
+                            full_columns=kept)
     sig = RobotSignals(t=cat("t"), q=cat("q"), dq=cat("dq"), ddq=cat("ddq"), tau=cat("tau"),
                        joints=joints, experiment=cat("e"),
                        payloads=tuple(run.payload for run in runs),
@@ -309,7 +436,10 @@ def full_rate_loads(signals: RobotSignals, runs: Sequence[RawRobotRun],
     """Per run of ``signals`` (:func:`design_runs`'s output for ``runs`` with ``settings``):
     its full-rate signals as the chain filtered them and ``load_torque`` on them,
     tau_out_hat (n_f, k) [N m] -- what :func:`sign_checked` compares with the torque and the
-    single joint's quadrant band (:meth:`ident.one_joint.OneJointProblem.band`) reads."""
+    single joint's quadrant band (:meth:`ident.one_joint.OneJointProblem.band`) reads. Where
+    the chain kept a run's full-rate regressor (``design_runs(keep_full=True)``), the signals
+    handed to ``load_torque`` carry it as their columns (:meth:`FullRateColumns.signals`:
+    ``RobotModel.load_torque`` does not evaluate it again, the same floats)."""
     dt = chain_period(runs)
     out = []
     for i, exp in enumerate(_experiments(runs, False)):
@@ -317,6 +447,9 @@ def full_rate_loads(signals: RobotSignals, runs: Sequence[RawRobotRun],
         full = RobotSignals(t=runs[i].t[f.keep], q=f.q, dq=f.dq, ddq=f.ddq, tau=f.tau_f,
                             joints=signals.joints, payloads=(runs[i].payload,),
                             source=exp.label)
+        kept = signals.columns.full_columns
+        if kept is not None:  # the chain's full-rate regressor, not evaluated again
+            full = kept.signals(i, full)
         out.append((f, np.asarray(load_torque(full), dtype=float)))
     return out
 
@@ -383,28 +516,39 @@ def _products_fixed(exp: RawExperiment, i: int, run: RawRobotRun, cols: RobotCol
     full = RobotSignals(t=run.t[f.keep], q=f.q, dq=f.dq, ddq=f.ddq, tau=f.tau_f,
                         joints=tuple(regressor.joints), payloads=(run.payload,),
                         source=exp.label)
+    if cols.full_columns is not None:  # the chain's full-rate regressor, not evaluated again
+        full = cols.full_columns.signals(i, full)
     tau_out = np.asarray(load_torque(full), dtype=float)
     if tau_out.shape != (f.n, k) or not np.all(np.isfinite(tau_out)):
         raise RobotIdentError(f"{exp.label}: load_torque gave {tau_out.shape} values "
                               f"(finite: {bool(np.all(np.isfinite(tau_out)))}), "
                               f"expected ({f.n}, {k}) finite [N m]")
-    pay = placed_payload(run.payload, regressor, base, run.source, placed)
-    known = _known_torque(regressor, f, f.ddq, pay)
-    W = np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ddq, columns=bcols))
-    Wz = knownz = None
-    if instruments:
-        Wz = np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ref_ddq, columns=bcols))
-        knownz = _known_torque(regressor, f, f.ref_ddq, pay)
+    kept = None if cols.full_columns is None else cols.full_columns.get(i, instruments)
+    at = pos  # joint j's load columns: W[j, at[j]]
+    if kept is not None and kept[0].shape[2] == f.n:  # the chain's, not evaluated again
+        W, known = kept[0], kept[1]  # standard columns: the base ones picked by index
+        Wz, knownz = (kept[2], kept[3]) if instruments else (None, None)
+        at = [bcols[c] for c in pos]
+    else:
+        if cols.full_columns is not None:
+            cols.full_columns.count(i)
+        pay = placed_payload(run.payload, regressor, base, run.source, placed)
+        known = _known_torque(regressor, f, f.ddq, pay)
+        W = np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ddq, columns=bcols))
+        Wz = knownz = None
+        if instruments:
+            Wz = np.asarray(regressor.rigid_kpn(f.q, f.dq, f.ref_ddq, columns=bcols))
+            knownz = _known_torque(regressor, f, f.ref_ddq, pay)
     out = []
     for j in range(k):
         dq = f.dq[:, j]
         pp, pm = quadrant_weights(tau_out[:, j] * dq)  # P+, P- of eq. 27-28, 1/2 where P = 0
         sg = np.sign(dq)
-        load = np.concatenate([W[j, pos[j]], known[None, :, j]], axis=0)  # (l + 1, n_f)
+        load = np.concatenate([W[j, at[j]], known[None, :, j]], axis=0)  # (l + 1, n_f)
         loadz = None
         parts = [*quadrant_products(load, pp, pm), np.stack([*quadrant_products(sg, pp, pm), pp])]
         if Wz is not None and knownz is not None:  # the instruments' load rows
-            loadz = np.concatenate([Wz[j, pos[j]], knownz[None, :, j]], axis=0)
+            loadz = np.concatenate([Wz[j, at[j]], knownz[None, :, j]], axis=0)
             parts += [*quadrant_products(loadz, pp, pm)]
         # the chain's filter, row by row (the same floats as in one stack)
         fixed = decimate(np.concatenate(parts).T, r, settings.antialias)[0].T
@@ -428,8 +572,10 @@ def products_columns(
     decimated like the other columns: what the single-joint chain does
     (:func:`ident.preprocess.build_design` with the ``load_model`` of a first usual fit).
 
-    Per run, the chain's full-rate signals are formed again (:func:`ident.chain.
-    filter_experiment`, as :func:`sign_checked` does); on them, per joint j, with the model
+    Per run, the chain's full-rate signals are those it kept (``keep_full``) or formed again
+    (:func:`ident.chain.filter_experiment`, as :func:`sign_checked` does), and its full-rate
+    regressor and known torque those it kept (``RobotColumns.full_columns``) or evaluated
+    again; on them, per joint j, with the model
     quadrant P+_j = (1 + sign(tau_out_hat_j dq_j)) / 2 (eq. 27-28, 44; tau_out_hat from
     ``load_torque``), P-_j = 1 - P+_j and E_j = exp(-|dq_j| / q_s,j) (eq. 29): each load
     column w of the joint (its base parameters' standard columns, ``rigid_kpn`` at full rate,
@@ -449,12 +595,12 @@ def products_columns(
     own instruments.
 
     Memory: at full rate, per run, the base regressor (k b floats per sample, b the base
-    parameters), every joint's q_s-free rows (its load rows, dq, P+, P-, sign: sum_j
-    (l_j + 1) + 4, the load rows twice with ``instruments``; kept across q_s with a
-    ``cache``) and one joint's filtered rows (4 (l_j + 1) + 5), twice the load parts with
-    ``instruments``; kept, per decimated sample, sum_j 4 (l_j + 1) + 5 k floats (plus
-    sum_j 4 (l_j + 1) with ``instruments``; l_j: joint j's base columns). Refused above
-    :data:`MAX_BYTES` at full rate.
+    parameters; none when the chain kept the standard one), every joint's q_s-free rows (its
+    load rows, dq, P+, P-, sign: sum_j (l_j + 1) + 4, the load rows twice with
+    ``instruments``; kept across q_s with a ``cache``) and one joint's filtered rows (4 (l_j
+    + 1) + 5), twice the load parts with ``instruments``; kept, per decimated sample, sum_j
+    4 (l_j + 1) + 5 k floats (plus sum_j 4 (l_j + 1) with ``instruments``; l_j: joint j's
+    base columns). Refused above :data:`MAX_BYTES` at full rate.
 
     Parameters
     ----------

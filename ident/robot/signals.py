@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -112,6 +113,10 @@ class RobotColumns:
         (``keep_full``): the sign check, the full-rate products and another model's design
         on the same samples (:func:`ident.preprocess.design_on_full_rate`) then read them
         instead of filtering the runs again. Memory: about 7 n_f k floats per run.
+    full_columns : ident.robot.design.FullRateColumns or None
+        With ``full``: per run, the full-rate regressor and known torque the chain
+        evaluated, kept within a memory bound, so that the load prediction and the full-rate
+        products do not evaluate them again.
     """
 
     W: np.ndarray
@@ -122,6 +127,7 @@ class RobotColumns:
     pz: np.ndarray | None = None
     products: FullRateProducts | None = None
     full: tuple | None = None
+    full_columns: Any = None
 
     def check(self, n: int, k: int, source: str) -> None:
         """Raise :class:`RobotIdentError` unless the shapes fit n samples of k joints."""
