@@ -86,7 +86,8 @@ def arm3(seed: int) -> None:
     for q in ("hard", "soft"):
         zz = list(z[q].values())
         print(f"  whole arm {q}: sum z^2 {sum(v * v for v in zz):.1f} over {len(zz)}, "
-              f"fit_files {res[q][1]:.1f} s (hard: with the jackknife), RobotModel.fit "
+              f"fit_files {res[q][1]:.1f} s"
+              f"{' (with the jackknife)' if q == 'hard' else ''}, RobotModel.fit "
               f"{_fit_only(res[q][0]):.1f} s")
     est = res["soft"][0]["_estimators"]["paper"]
     print(f"  soft sigma_j [N m]: {_sigmas(est, reg.joints)}; bounds "
