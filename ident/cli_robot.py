@@ -208,6 +208,9 @@ def _check_args(args: argparse.Namespace) -> None:
     if quadrants is not None and quadrants not in QUADRANTS:
         raise DataError(f"--quadrants: expected one of {', '.join(QUADRANTS)}, got "
                         f"{quadrants!r}")
+    if quadrants == "soft" and getattr(args, "model", None) == "usual":
+        raise DataError("--quadrants soft: a weight of the paper model's quadrants; the usual "
+                        "model has none (use --model paper or both)")
     if getattr(args, "axis", 0) not in (0, None):
         raise DataError("--axis: not used with --robot (every axis of the log is a moving joint)")
 

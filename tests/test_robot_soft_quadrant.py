@@ -151,6 +151,11 @@ def test_cli_quadrants_soft_json_and_bad_value(tmp_path, capfd):
     _out, err = capfd.readouterr()
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert code != 0 and len(lines) == 1 and "--quadrants" in lines[0] and "fuzzy" in lines[0]
+    code = main(["fit", "--robot", str(ARM3), *map(str, files), "--model", "usual",
+                 "--quadrants", "soft"])
+    _out, err = capfd.readouterr()
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert code != 0 and len(lines) == 1 and "usual model has none" in lines[0], lines
     code = main(["fit", str(files[0]), "--quadrants", "soft"])  # single joint: refused
     _out, err = capfd.readouterr()
     assert code != 0 and "--quadrants: applies to --robot fits only" in err
