@@ -102,6 +102,10 @@ class RobotFit(HyperParameters):
     sign_check : bool
         Leave out the paper model's rows where sign(tau) != sign(tau_out) of a first usual fit
         (False: ``--no-sign-check``).
+    quadrants : {"hard", "soft"}
+        ``--quadrants``: the paper model's quadrant weights (``RobotModel(quadrants=...)``;
+        "soft": a load jitter per joint fitted with the parameters, analytic σ only, no
+        pruning; :mod:`ident.robot.soft_fit`).
     **deprecated
         ``qs=``: the older spelling of ``q_s`` (accepted with a DeprecationWarning,
         :mod:`ident.vocab`).
@@ -152,6 +156,7 @@ class RobotFit(HyperParameters):
         sigma_blocks: int = N_BLOCKS,
         prune: bool = True,
         sign_check: bool = True,
+        quadrants: str = "hard",
         **deprecated: Any,
     ) -> None:
         q_s = renamed_keywords("RobotFit", deprecated).get("q_s", q_s)
@@ -174,6 +179,7 @@ class RobotFit(HyperParameters):
         self.sigma_blocks = sigma_blocks
         self.prune = prune
         self.sign_check = sign_check
+        self.quadrants = quadrants
 
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
@@ -215,7 +221,8 @@ class RobotFit(HyperParameters):
             q_s=self.q_s, dq_min=self.dq_min,
             known_rotor_inertia=self.known_rotor_inertia, chain=self.chain,
             payload=self.payload, feasibility=self.consistency,
-            sigma_blocks=self.sigma_blocks, prune=self.prune, sign_check=self.sign_check)
+            sigma_blocks=self.sigma_blocks, prune=self.prune, sign_check=self.sign_check,
+            quadrants=self.quadrants)
         self._set(out)
         return self
 

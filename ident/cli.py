@@ -120,6 +120,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "exceeds 30 %% (flagged unidentified) instead of pruning them and refitting",
     )
     p.add_argument(
+        "--quadrants",
+        metavar="{hard,soft}",
+        help="--robot only: the paper model's quadrant weights: hard (default, eq. 27-28) or "
+        "soft (their expectation under a load jitter sigma per joint, fitted with the "
+        "parameters; analytic std only, no pruning; docs/robot-identification.md)",
+    )
+    p.add_argument(
         "--consistent",
         action="store_true",
         help="--robot only: also compute the physically consistent estimate of every model "
@@ -286,6 +293,7 @@ _ROBOT_ONLY = (
     ("consistent", "--consistent", ""),
     ("sigma_blocks", "--sigma-blocks", ""),
     ("no_prune", "--no-prune", ""),
+    ("quadrants", "--quadrants", ""),
 )
 
 

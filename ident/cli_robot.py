@@ -65,6 +65,7 @@ from .robot.refine_joint import joint_coulomb, refine_joint
 from .robot.refit_accept import ALL_REFUSED, accept_refit
 from .robot.selection_shift import selection_shift, shift_note
 from .robot.signals import RobotSignals
+from .robot.soft_fit import QUADRANTS, soft_record
 from .robot.tables import format_table_iii, format_uncertainty, table_iii
 from .robot.uncertainty import N_BLOCKS, assess, parameter_records
 from .vocab import method_name, model_name, refined_model
@@ -203,6 +204,13 @@ def _check_args(args: argparse.Namespace) -> None:
     for attr, flag, hint in _SINGLE_ONLY:
         if getattr(args, attr, None) not in (None, False):
             raise DataError(f"{flag}: not used with --robot ({hint})")
+    quadrants = getattr(args, "quadrants", None)
+    if quadrants is not None and quadrants not in QUADRANTS:
+        raise DataError(f"--quadrants: expected one of {', '.join(QUADRANTS)}, got "
+                        f"{quadrants!r}")
+    if quadrants == "soft" and getattr(args, "model", None) == "usual":
+        raise DataError("--quadrants soft: a weight of the paper model's quadrants; the usual "
+                        "model has none (use --model paper or both)")
     if getattr(args, "axis", 0) not in (0, None):
         raise DataError("--axis: not used with --robot (every axis of the log is a moving joint)")
 
@@ -225,6 +233,7 @@ def fit_robot(
     sigma_blocks: int = N_BLOCKS,
     prune: bool = True,
     progress: Callable[[str], None] | None = None,
+    quadrants: str = "hard",
 ) -> dict[str, Any]:
     """Preprocess, fit each model, cross-validate; the JSON record (no file written).
 
@@ -282,6 +291,10 @@ def fit_robot(
         False (``--no-prune``): only flag them ``unidentified``.
     progress : callable or None
         Receives progress lines of the uncertainty assessment when it runs over 10 s.
+    quadrants : {"hard", "soft"}
+        ``--quadrants``: the paper model's quadrant weights (``RobotModel(quadrants=...)``;
+        "soft": a load jitter sigma_j per joint fitted with the parameters, analytic sigma
+        only, no pruning; :mod:`ident.robot.soft_fit`). The usual model is not affected.
 
     Returns
     -------
@@ -312,6 +325,9 @@ def fit_robot(
         check_periods([*runs, *validation])
     pre = preprocessing or RobotPreprocessing()
     delay_given = pre.torque_delay is not None
+    if quadrants not in QUADRANTS:
+        raise DataError(f"--quadrants: expected one of {', '.join(QUADRANTS)}, got "
+                        f"{quadrants!r}")
     notes: list[str] = []
     # base parameters the friction columns confound (a constant weight is an offset): regrouped
     # for every fit, with one line saying what and why (ident.robot.confounded); the paper
@@ -402,6 +418,7 @@ def fit_robot(
         "known_rotor_inertia": bool(known_rotor_inertia),
         "payload": payload,
         "q_s": q_s,
+        "quadrants": quadrants,
         "notes": notes,
         "models": {},
         # the unit of dq_min in the printed summary: the moving joints' kinds
@@ -421,7 +438,8 @@ def fit_robot(
         return RobotModel(reg, model=name, method=method, q_s=q_s, dq_min=est_dq_min,
                           base=base, payload_ratio=payload == "ratio",
                           payload_params=payload == "mass",
-                          quadrant_band=0.0 if len(robot.moving) == 1 else 0.03)
+                          quadrant_band=0.0 if len(robot.moving) == 1 else 0.03,
+                          quadrants=quadrants if name == "paper" else "hard")
 
     for name in models:
         try:
@@ -486,6 +504,7 @@ def fit_robot(
                                  "" if prune else ", or --no-prune") + "): kept in the fit, "
                              "their values are not identified")
         if name == "paper":
+            soft_record(est, rec, joints, notes)
             _settled(est, rec, out["_signals"][0], joints, notes)
             _one_signed_loads(est, rec, out["_signals"][0], joints, notes)
         expressions = getattr(est.base_, "expressions", None)
@@ -1045,6 +1064,7 @@ def run(args: argparse.Namespace) -> int:
                     sigma_blocks=N_BLOCKS if getattr(args, "sigma_blocks", None) is None
                     else args.sigma_blocks, prune=not getattr(args, "no_prune", False),
                     sign_check=not getattr(args, "no_sign_check", False),
+                    quadrants=getattr(args, "quadrants", None) or "hard",
                     progress=lambda m: print(m, file=sys.stderr))
     if getattr(args, "refine", False):
         refine_robot(out, max_steps=args.max_steps,

@@ -99,6 +99,7 @@ from .paper import (
 from .quadrants import QuadrantStore
 from .regressor import RobotRegressor
 from .signals import RobotSignals
+from .soft_fit import check_soft, fit_soft, predict_soft
 
 __all__ = ["RobotModel", "MODELS", "METHODS", "FORMS"]
 
@@ -255,6 +256,15 @@ class RobotModel(HyperParameters):
     threshold_pct : float
         Relative-deviation threshold [%] of ``eliminate``
         (:data:`ident.estimate.DEFAULT_THRESHOLD_PCT`).
+    quadrants : {"hard", "soft"}
+        Paper model, bilinear form only. ``"hard"`` (default): each row in one quadrant
+        (eq. 27-28). ``"soft"``: after the hard fit, theta, every joint's paper parameters
+        and a load jitter RMS sigma_j per joint [N m] are fitted together with each row's
+        quadrant weights replaced by their expectation under that jitter
+        (:mod:`ident.robot.soft_fit`; every usable row, no quadrant band); sigma_j bounded
+        by a fraction of the RMS of the model's own load (``quadrant_sigma_bounds_``).
+        Standard deviations analytic only (eq. 15 at the solution): no block jackknife, no
+        IDIM-IV check and no pruning (:func:`ident.robot.uncertainty.assess`).
     **deprecated
         ``qs=``: the older spelling of ``q_s`` (accepted with a DeprecationWarning,
         :mod:`ident.vocab`).
@@ -314,6 +324,10 @@ class RobotModel(HyperParameters):
         (docs/robot-identification.md, "quadrants blended by the low-pass").
     full_rate_products_ : bool
         The products form read the products formed at full rate (``form`` above).
+    quadrant_sigma_, quadrant_sigma_std_ : ndarray (k,)
+        ``quadrants="soft"``: the fitted load jitter RMS per joint [N m] and its std (NaN
+        where it sits on a bound: not identified, ``quadrant_sigma_at_bound_``);
+        ``quadrant_sigma_bounds_`` (k, 2) its bounds [N m].
     quadrant_from_ : ndarray or None
         The theta whose sign(tau_out_hat dq) decided the final quadrants (``quadrant="model"``
         of the paper model), else None: :mod:`ident.robot.uncertainty` rebuilds the moments of
@@ -342,6 +356,7 @@ class RobotModel(HyperParameters):
         form: str = "bilinear",
         eliminate: bool = False,
         threshold_pct: float = DEFAULT_THRESHOLD_PCT,
+        quadrants: str = "hard",
         **deprecated: Any,
     ) -> None:
         q_s = renamed_keywords("RobotModel", deprecated).get("q_s", q_s)
@@ -363,6 +378,7 @@ class RobotModel(HyperParameters):
         self.form = form
         self.eliminate = eliminate
         self.threshold_pct = threshold_pct
+        self.quadrants = quadrants
 
     def get_params(self, deep: bool = False) -> dict[str, Any]:
         """Hyper-parameters (scikit-learn convention; ``set_params`` sets them by name,
@@ -370,7 +386,8 @@ class RobotModel(HyperParameters):
         return {n: getattr(self, n) for n in (
             "regressor", "model", "method", "q_s", "base", "quadrant", "dq_min", "chunk_size",
             "max_iter", "tol", "max_passes", "payload_ratio", "quadrant_theta",
-            "quadrant_band", "payload_params", "form", "eliminate", "threshold_pct")}
+            "quadrant_band", "payload_params", "form", "eliminate", "threshold_pct",
+            "quadrants")}
 
     def __repr__(self) -> str:
         form = "" if self.form == "bilinear" else f", form={self.form!r}"
@@ -407,6 +424,7 @@ class RobotModel(HyperParameters):
         if self.quadrant not in ("model", "measured"):
             raise RobotIdentError(f"RobotModel.quadrant: expected 'model' or 'measured', got "
                                   f"{self.quadrant!r}")
+        check_soft(self)
         if int(self.chunk_size) < 1:
             raise RobotIdentError(f"RobotModel.chunk_size: expected >= 1, got "
                                   f"{self.chunk_size!r}")
@@ -1234,8 +1252,11 @@ class RobotModel(HyperParameters):
                     break
         if pending is not None:  # the last quadrants still leave a direction unexcited
             raise pending
-        return self._finish(moms, paper_coefficients, x, free, w, passes, it,
-                            theta_q if model_q else None)
+        self._finish(moms, paper_coefficients, x, free, w, passes, it,
+                     theta_q if model_q else None)
+        if self.quadrants == "soft":  # the hard fit is the start (ident.robot.soft_fit)
+            fit_soft(self, signals)
+        return self
 
     def _fit_products(self, signals: Any, moms: list[JointMoments], xu: np.ndarray,
                       passes: int) -> RobotModel:
@@ -1604,6 +1625,8 @@ class RobotModel(HyperParameters):
         """Predicted joint torques tau_hat (n, k) [N m] on the samples of ``signals``."""
         if getattr(self, "full_rate_products_", False):
             return self._predict_rows(signals)
+        if self.quadrants == "soft":
+            return predict_soft(self, signals)
         passes = self._fitted_rows(signals, "predict")
         out = np.full(signals.tau.shape, np.nan)
         coeffs = self._coefficients
@@ -1684,7 +1707,8 @@ class RobotModel(HyperParameters):
         stopped before the fit settled (``converged_`` False: Gauss-Newton at ``max_iter``)."""
         k = len(self.cols_)
         out = np.zeros(k)
-        if self.quadrant_from_ is None or not self._theta_x or self.quadrant_theta_ is not None:
+        if (self.quadrant_from_ is None or not self._theta_x or self.quadrant_theta_ is not None
+                or self.quadrants == "soft"):  # (soft: no hard quadrant to drift from)
             return out
         rows = self.fitted_rows(signals)
         theta, used = self.coef_[:self.n_theta_], self.quadrant_from_

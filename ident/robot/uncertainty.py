@@ -425,6 +425,9 @@ def assess(model: Any, signals: RobotSignals | Sequence[RobotSignals], *,
     if n_blocks < 0 or n_blocks == 1:
         raise RobotIdentError(f"uncertainty: n_blocks (--sigma-blocks): expected 0 (no "
                               f"jackknife) or >= 2, got {n_blocks!r}")
+    soft = getattr(model, "quadrants", "hard") == "soft"
+    if soft:  # (ident.robot.soft_fit: the jackknife and the pruning refit hard moments)
+        n_blocks, iv, prune = 0, False, False
     t0 = time.monotonic()
     last = [t0]
 
@@ -438,7 +441,8 @@ def assess(model: Any, signals: RobotSignals | Sequence[RobotSignals], *,
     units, text = jackknife_units(signals, max(n_blocks, 2))
     moms = _unit_moments(model, units) if n_blocks or prune else []
     say("sigma: unit moments done")
-    ivm, note = _iv_check(model, signals) if iv else (None, "not asked")
+    ivm, note = _iv_check(model, signals) if iv else (
+        None, "soft quadrants: analytic sigma only" if soft else "not asked")
     say("sigma: IDIM-IV check done")
     std_a, std_b, std, z, failed = _honest(model, moms, ivm, _free(model), n_blocks, say)
     pruned: list[str] = []
