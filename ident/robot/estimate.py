@@ -655,9 +655,17 @@ class RobotModel(HyperParameters):
             W, p = self._payload_block(W, q, dq, ddq, pay, std)
         known = getattr(reg, "known_Ia", None)
         kn = None
-        if given is None and known is not None and np.any(known):
-            # known rotor inertias (RobotRegressor); the columns chain carries them in p
+        if known is not None and np.any(known) and (given is None or (
+                self.payload_ratio and ddq is not None)):
+            # known rotor inertias (RobotRegressor). The columns chain carries them in p:
+            # with payload_ratio they are taken out of it (p is then the ratio's column, the
+            # payload's torque alone). The chain's decimated ddq went through the same linear
+            # filter as p, so Ia_j ddq_j is p's rotor part (to rounding). (IDIM-IV on the
+            # columns: no decimated reference acceleration; the instruments' ratio column
+            # keeps the rotors' torque of the reference, still an instrument.)
             kn = reg.known_torque(ddq)
+            if given is not None:
+                p = p - kn
         return W, p, kn
 
     def _joint(self, W: np.ndarray, p: np.ndarray, kn: np.ndarray | None,
