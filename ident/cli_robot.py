@@ -84,6 +84,14 @@ CHAINS = ("columns", "states")
 PAYLOADS = ("known", "ratio", "mass")
 #: ``--model`` -> the models fitted (``jointid fit --robot``, :class:`ident.api.RobotFit`).
 MODELS = {"usual": ("usual",), "paper": ("paper",), "both": ("usual", "paper")}
+#: Stages after the fit that read the paper model with hard quadrants: refused in one line
+#: with ``--quadrants soft`` (a soft model's prediction is not theirs).
+SOFT_REFUSED = {
+    "refine": "jointid fit --robot: --refine is not available with --quadrants soft (the "
+              "n-dof refit of the found terms uses hard quadrants)",
+    "consistent": "jointid fit --robot: --consistent is not available with --quadrants soft "
+                  "(the consistent estimate and the exported friction use hard quadrants)",
+}
 #: Options of the single-joint ``jointid fit`` that have no meaning with ``--robot``.
 _SINGLE_ONLY = (("joint", "--joint", "the robot file gives the joint types"),
                 ("gain", "--gain", "use drive_gain in the robot file's [joints.drive]"),
@@ -191,6 +199,8 @@ def fit_files(
         ``sigma_blocks``, ``prune``, ``progress``).
     """
     model = model_name(model, extra=("both",))  # "new": deprecated "paper" (ident.vocab)
+    if consistent and options.get("quadrants") == "soft" and model != "usual":
+        raise DataError(SOFT_REFUSED["consistent"])
     runs = load_runs(robot, inputs, mapping=mapping, q_unit=q_unit)
     val = load_runs(robot, validate, mapping=mapping, q_unit=q_unit) if validate else None
     pre = RobotPreprocessing(cutoff, decimation, trim, check_torque_delay(torque_delay))
@@ -211,6 +221,11 @@ def _check_args(args: argparse.Namespace) -> None:
     if quadrants == "soft" and getattr(args, "model", None) == "usual":
         raise DataError("--quadrants soft: a weight of the paper model's quadrants; the usual "
                         "model has none (use --model paper or both)")
+    if quadrants == "soft":  # the stages after the fit treat the paper model as hard
+        for attr, why in (("refine", SOFT_REFUSED["refine"]),
+                          ("consistent", SOFT_REFUSED["consistent"])):
+            if getattr(args, attr, False):
+                raise DataError(why)
     if getattr(args, "axis", 0) not in (0, None):
         raise DataError("--axis: not used with --robot (every axis of the log is a moving joint)")
 
@@ -467,8 +482,9 @@ def fit_robot(
         }
         if name == "paper":
             flag_unidentified(rec)
-            rec["quadrant_band_share"] = {j: float(x) for j, x in
-                                          zip(joints, est.band_share_, strict=True)}
+            if quadrants == "hard":  # soft: no quadrant band (ident.robot.soft_fit)
+                rec["quadrant_band_share"] = {j: float(x) for j, x in
+                                              zip(joints, est.band_share_, strict=True)}
             if jitter is not None:
                 rec["quadrant_jitter_share"] = {j: float(x) for j, x in
                                                 zip(joints, jitter[0], strict=True)}
@@ -484,7 +500,8 @@ def fit_robot(
                     if note := shift_note(z):
                         notes.append(note)
             for j, x, h in zip(joints, est.band_share_, est.band_, strict=True):
-                if x > ZERO_LOAD_SHARE:
+                # soft quadrants: no band, every row carries both quadrants' weights
+                if x > ZERO_LOAD_SHARE and quadrants == "hard":
                     notes.append(
                         f"paper model, {j}: {100 * x:.0f} % of its rows have a predicted load "
                         f"within the quadrant band (|tau_out| < {h:.3g}, "
@@ -615,6 +632,9 @@ def refine_robot(
     if model not in ests:
         raise DataError(f"refine: model {model!r} was not fitted ({', '.join(ests) or 'none'})")
     est = ests[model]
+    if getattr(est, "quadrants", "hard") == "soft":
+        raise DataError(f"refine: the {model} model was fitted with soft quadrants; "
+                        + SOFT_REFUSED["refine"].split(": ", 1)[1])
     sig: RobotSignals = out["_identification"]
     # the refined model's own rows (the paper model's leave its quadrant band out too): its
     # residual where it was fitted, what its n-dof refit reads
