@@ -366,14 +366,17 @@ def fit_robot(
                                 torque_delay=pre.torque_delay, dq_min=dq_min)
         # the instruments' columns also for the IDIM-IV check of the honest sigma
         iv_cols = method == "iv" or (sigma_blocks > 0 and all(r.q_ref is not None for r in runs))
-        sig, dq_min = design_runs(runs, reg, design, instruments=iv_cols)
+        # the sign check reads every run's full-rate signals and regressor again: kept from
+        # the chain (design_runs(keep_full=True), the same floats), freed after it
+        check = sign_check and "paper" in models
+        sig, dq_min = design_runs(runs, reg, design, instruments=iv_cols, keep_full=check)
         if payload == "ratio":  # after the payloads were placed on the robot (design_runs)
             _check_ratio_separable(runs)
         design = replace(design, dq_min=dq_min)
         val = design_runs(validation, reg, design)[0] if validation else None
         settings: dict[str, Any] = design.as_dict()
         est_dq_min = 0.0  # the stiction area is in the columns' keep mask
-        if sign_check and "paper" in models:
+        if check:
             # as the single-joint fit: a first usual fit estimates tau_out; rows where
             # sign(tau) != sign(tau_out) are left out of both models (and the validation)
             first = RobotModel(reg, model="usual", method=method, base=base,
@@ -389,6 +392,11 @@ def fit_robot(
             # warning of the paper model's, below): the first fit's load, the checked rows
             jitter = jitter_share(sig, loads, design.decimation)
             del loads
+            # the kept full-rate signals and regressor: not read after the check (the record
+            # keeps the signals, which would keep them too)
+            sig, before = _without_full(sig), _without_full(before)
+            if unchecked is not None:
+                unchecked = before
             if val is not None:
                 # checked on the joints the identification data were checked on
                 val = sign_checked(val, validation, design, first.load_torque,
@@ -932,6 +940,18 @@ def _one_signed_loads(est: RobotModel, rec: dict[str, Any], rows_sig: RobotSigna
             "parameters")
     rec["unidentified"] = [p for p, v in rec["parameters"].items() if v.get("unidentified")]
     rec["one_signed_load"] = found
+
+
+def _without_full(sig: RobotSignals) -> RobotSignals:
+    """``sig`` without the full-rate signals the chain kept (``design_runs(keep_full=True)``)
+    and with its kept full-rate regressor released (``full_columns`` then holds only its
+    counts of evaluations)."""
+    cols = sig.columns
+    if cols is None or (cols.full is None and cols.full_columns is None):
+        return sig
+    if cols.full_columns is not None:
+        cols.full_columns.release()
+    return replace(sig, columns=replace(cols, full=None))
 
 
 def selected(sig: RobotSignals, dq_min: float) -> RobotSignals:
