@@ -8,9 +8,10 @@ Counts, on the current code, the calls of the n-dof regressor (``RobotRegressor.
 those samples over the full-rate samples of the fit's runs (one pass: every run evaluated
 once at full rate; a call on decimated samples adds 1 / r). Three single-joint fits of the
 example campaign (``tests/example_campaign.py``, seed 11: LS; IDIM-IV with its references;
-LS with a q_s scan, whose fit is at another q_s than the design's) and one robot fit
-(``ident.cli_robot.fit_robot``, columns chain, usual and paper models, LS, on two simulated
-runs of ``examples/robots/arm3.toml``). Then the time of one LS ``fit_models`` and of the
+LS with a q_s scan, whose fit is at another q_s than the design's) and robot fits
+(``ident.cli_robot.fit_robot``, columns chain, usual and paper models, on two simulated
+runs of ``examples/robots/arm3.toml``: LS with each ``payload`` -- known, ratio, mass -- and
+IDIM-IV with the payload known). Then the time of one LS ``fit_models`` and of the
 robot fit (process CPU time, best of ``--repeat``), in the same process (the fit_models
 ratio between two trees: ``benchmarks/bench_fit_versions.py``, interleaved). The counters
 wrap the classes' methods in this script only (a measurement, not a test).
@@ -106,9 +107,10 @@ def main() -> None:
     robot, runs = arm_runs()
     pre = RobotPreprocessing(torque_delay=TORQUE_DELAY)
 
-    def robot_fit() -> dict:
-        return fit_robot(robot, runs, models=("usual", "paper"), method="ls",
-                         preprocessing=pre, feasibility=False, sigma_blocks=0)
+    def robot_fit(payload: str = "known", method: str = "ls") -> dict:
+        return fit_robot(robot, runs, models=("usual", "paper"), method=method,
+                         payload=payload, preprocessing=pre, feasibility=False,
+                         sigma_blocks=0)
 
     _install()
     for tag, fit in (("fit_models ls", lambda: fit_models(ls)),
@@ -118,10 +120,13 @@ def main() -> None:
         if rep.q_s != rep.qs_design:
             tag += f" (fit at q_s {rep.q_s:.4g}, design at {rep.qs_design:g})"
         _report(tag, _full_samples(rep.robot_signals["usual"].columns.full))
-    rec = robot_fit()
-    # the robot fit's full-rate samples: its runs after the chain's trim
-    trim = int(rec["preprocessing"]["trim"])
-    _report("robot fit", sum(r.t.size - 2 * trim for r in runs))
+    for payload, method in (("known", "ls"), ("ratio", "ls"), ("mass", "ls"),
+                            ("known", "iv")):
+        rec = robot_fit(payload, method)
+        # the robot fit's full-rate samples: its runs after the chain's trim
+        trim = int(rec["preprocessing"]["trim"])
+        _report(f"robot fit (payload {payload}, {method})",
+                sum(r.t.size - 2 * trim for r in runs))
     for tag, fit in (("fit_models ls", lambda: fit_models(ls)), ("robot fit", robot_fit)):
         best = np.inf
         for _ in range(args.repeat):

@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 # the fitting modules (scipy, pinocchio...) are imported by the functions that use them:
 # `jointid --help` must not wait seconds for them
 
-__all__ = ["register", "run", "consistent_from_record"]
+__all__ = ["register", "run", "consistent_from_record", "soft_quadrants"]
 
 #: Relative agreement asked of a refit with the record's parameters.
 REFIT_RTOL = 1e-6
@@ -115,6 +115,16 @@ def consistent_from_record(path: Path, rec: dict[str, Any], robot: Robot, name: 
     return consistent_record(est, cf), dict(est.fixed_)
 
 
+def soft_quadrants(rec: dict[str, Any], name: str) -> bool:
+    """Whether model ``name`` of the record was fitted with soft quadrant weights
+    (``jointid fit --robot --quadrants soft``: its ``quadrants``, else the record's for the
+    paper model)."""
+    q = rec["models"][name].get("quadrants")
+    if q is None and name == "paper":
+        q = rec.get("quadrants")
+    return q == "soft"
+
+
 def run(args: argparse.Namespace) -> int:
     """Execute ``jointid export-model``; returns the exit code."""
     from trajectories.robot import load_robot
@@ -130,6 +140,9 @@ def run(args: argparse.Namespace) -> int:
     if name not in fitted:
         raise DataError(f"{args.fit}: models.{name}: not identified in this record (it has "
                         f"{fitted or 'none'})")
+    if soft_quadrants(rec, name):  # the friction file has no sigma_j: hard quadrants
+        raise DataError(f"{args.fit}: model {name!r} was fitted with soft quadrants; "
+                        "export-model writes hard-quadrant friction only")
     robot = load_robot(args.robot or rec["robot"]["source"])
     if list(robot.moving) != list(rec["robot"]["moving"]):
         raise DataError(f"{args.robot or rec['robot']['source']}: moving joints "

@@ -84,6 +84,14 @@ CHAINS = ("columns", "states")
 PAYLOADS = ("known", "ratio", "mass")
 #: ``--model`` -> the models fitted (``jointid fit --robot``, :class:`ident.api.RobotFit`).
 MODELS = {"usual": ("usual",), "paper": ("paper",), "both": ("usual", "paper")}
+#: Stages after the fit that read the paper model with hard quadrants: refused in one line
+#: with ``--quadrants soft`` (a soft model's prediction is not theirs).
+SOFT_REFUSED = {
+    "refine": "jointid fit --robot: --refine is not available with --quadrants soft (the "
+              "n-dof refit of the found terms uses hard quadrants)",
+    "consistent": "jointid fit --robot: --consistent is not available with --quadrants soft "
+                  "(the consistent estimate and the exported friction use hard quadrants)",
+}
 #: Options of the single-joint ``jointid fit`` that have no meaning with ``--robot``.
 _SINGLE_ONLY = (("joint", "--joint", "the robot file gives the joint types"),
                 ("gain", "--gain", "use drive_gain in the robot file's [joints.drive]"),
@@ -191,6 +199,8 @@ def fit_files(
         ``sigma_blocks``, ``prune``, ``progress``).
     """
     model = model_name(model, extra=("both",))  # "new": deprecated "paper" (ident.vocab)
+    if consistent and options.get("quadrants") == "soft" and model != "usual":
+        raise DataError(SOFT_REFUSED["consistent"])
     runs = load_runs(robot, inputs, mapping=mapping, q_unit=q_unit)
     val = load_runs(robot, validate, mapping=mapping, q_unit=q_unit) if validate else None
     pre = RobotPreprocessing(cutoff, decimation, trim, check_torque_delay(torque_delay))
@@ -211,6 +221,11 @@ def _check_args(args: argparse.Namespace) -> None:
     if quadrants == "soft" and getattr(args, "model", None) == "usual":
         raise DataError("--quadrants soft: a weight of the paper model's quadrants; the usual "
                         "model has none (use --model paper or both)")
+    if quadrants == "soft":  # the stages after the fit treat the paper model as hard
+        for attr, why in (("refine", SOFT_REFUSED["refine"]),
+                          ("consistent", SOFT_REFUSED["consistent"])):
+            if getattr(args, attr, False):
+                raise DataError(why)
     if getattr(args, "axis", 0) not in (0, None):
         raise DataError("--axis: not used with --robot (every axis of the log is a moving joint)")
 
@@ -351,14 +366,17 @@ def fit_robot(
                                 torque_delay=pre.torque_delay, dq_min=dq_min)
         # the instruments' columns also for the IDIM-IV check of the honest sigma
         iv_cols = method == "iv" or (sigma_blocks > 0 and all(r.q_ref is not None for r in runs))
-        sig, dq_min = design_runs(runs, reg, design, instruments=iv_cols)
+        # the sign check reads every run's full-rate signals and regressor again: kept from
+        # the chain (design_runs(keep_full=True), the same floats), freed after it
+        check = sign_check and "paper" in models
+        sig, dq_min = design_runs(runs, reg, design, instruments=iv_cols, keep_full=check)
         if payload == "ratio":  # after the payloads were placed on the robot (design_runs)
             _check_ratio_separable(runs)
         design = replace(design, dq_min=dq_min)
         val = design_runs(validation, reg, design)[0] if validation else None
         settings: dict[str, Any] = design.as_dict()
         est_dq_min = 0.0  # the stiction area is in the columns' keep mask
-        if sign_check and "paper" in models:
+        if check:
             # as the single-joint fit: a first usual fit estimates tau_out; rows where
             # sign(tau) != sign(tau_out) are left out of both models (and the validation)
             first = RobotModel(reg, model="usual", method=method, base=base,
@@ -374,6 +392,11 @@ def fit_robot(
             # warning of the paper model's, below): the first fit's load, the checked rows
             jitter = jitter_share(sig, loads, design.decimation)
             del loads
+            # the kept full-rate signals and regressor: not read after the check (the record
+            # keeps the signals, which would keep them too)
+            sig, before = _without_full(sig), _without_full(before)
+            if unchecked is not None:
+                unchecked = before
             if val is not None:
                 # checked on the joints the identification data were checked on
                 val = sign_checked(val, validation, design, first.load_torque,
@@ -467,8 +490,9 @@ def fit_robot(
         }
         if name == "paper":
             flag_unidentified(rec)
-            rec["quadrant_band_share"] = {j: float(x) for j, x in
-                                          zip(joints, est.band_share_, strict=True)}
+            if quadrants == "hard":  # soft: no quadrant band (ident.robot.soft_fit)
+                rec["quadrant_band_share"] = {j: float(x) for j, x in
+                                              zip(joints, est.band_share_, strict=True)}
             if jitter is not None:
                 rec["quadrant_jitter_share"] = {j: float(x) for j, x in
                                                 zip(joints, jitter[0], strict=True)}
@@ -484,7 +508,8 @@ def fit_robot(
                     if note := shift_note(z):
                         notes.append(note)
             for j, x, h in zip(joints, est.band_share_, est.band_, strict=True):
-                if x > ZERO_LOAD_SHARE:
+                # soft quadrants: no band, every row carries both quadrants' weights
+                if x > ZERO_LOAD_SHARE and quadrants == "hard":
                     notes.append(
                         f"paper model, {j}: {100 * x:.0f} % of its rows have a predicted load "
                         f"within the quadrant band (|tau_out| < {h:.3g}, "
@@ -615,6 +640,9 @@ def refine_robot(
     if model not in ests:
         raise DataError(f"refine: model {model!r} was not fitted ({', '.join(ests) or 'none'})")
     est = ests[model]
+    if getattr(est, "quadrants", "hard") == "soft":
+        raise DataError(f"refine: the {model} model was fitted with soft quadrants; "
+                        + SOFT_REFUSED["refine"].split(": ", 1)[1])
     sig: RobotSignals = out["_identification"]
     # the refined model's own rows (the paper model's leave its quadrant band out too): its
     # residual where it was fitted, what its n-dof refit reads
@@ -912,6 +940,18 @@ def _one_signed_loads(est: RobotModel, rec: dict[str, Any], rows_sig: RobotSigna
             "parameters")
     rec["unidentified"] = [p for p, v in rec["parameters"].items() if v.get("unidentified")]
     rec["one_signed_load"] = found
+
+
+def _without_full(sig: RobotSignals) -> RobotSignals:
+    """``sig`` without the full-rate signals the chain kept (``design_runs(keep_full=True)``)
+    and with its kept full-rate regressor released (``full_columns`` then holds only its
+    counts of evaluations)."""
+    cols = sig.columns
+    if cols is None or (cols.full is None and cols.full_columns is None):
+        return sig
+    if cols.full_columns is not None:
+        cols.full_columns.release()
+    return replace(sig, columns=replace(cols, full=None))
 
 
 def selected(sig: RobotSignals, dq_min: float) -> RobotSignals:

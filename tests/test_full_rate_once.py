@@ -156,3 +156,47 @@ def test_table_iv_problem_reuses_the_fits_runs(campaign) -> None:
     assert fresh.full_columns.evaluations == dict.fromkeys(range(len(empty)), 1)
     for a, b in zip(fits, fits0, strict=True):
         assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("payload, method", [("known", "ls"), ("ratio", "ls"),
+                                             ("mass", "ls"), ("known", "iv")])
+def test_robot_fit_evaluates_once_and_releases(payload: str, method: str) -> None:
+    """``jointid fit --robot`` (``fit_robot``, columns chain, both models, sign check): each
+    run's regressor evaluated once at full rate -- the chain's, kept
+    (``design_runs(keep_full=True)``) for the sign check's load -- and released after it:
+    the record's signals hold neither the full-rate signals nor the regressor."""
+    import warnings
+    from pathlib import Path
+
+    from ident.cli_robot import fit_robot
+    from ident.robot.loaders import RawRobotRun, RobotPreprocessing
+    from ident.robot.signals import RobotPayloadData
+    from sim_drivers.arm import ArmGains, ArmParams, model_reference, simulate_arm
+    from sim_drivers.arm import Payload as ArmPayload
+    from trajectories.robot import load_robot
+
+    # the 3-dof arm of benchmarks/full_rate_calls.py: two 6 s runs, no payload and 5 kg
+    robot = load_robot(Path(__file__).resolve().parents[1] / "examples" / "robots"
+                       / "arm3.toml")
+    params = ArmParams.from_robot(robot)
+    ref = model_reference(params.model, center=[0.0, -1.9, 0.6], fraction=0.9,
+                          duration_s=6.0, seed=3)
+    runs = []
+    for i, mass in enumerate((0.0, 5.0)):
+        pay = ArmPayload(mass, [0.0, 0.0, 0.05]) if mass else None
+        r = simulate_arm(params, ref, ArmGains.for_params(params, payload=pay), payload=pay,
+                         seed=30 + i)
+        runs.append(RawRobotRun(f"run{i}.csv", r.t, r.q_true, r.tau_applied, q_ref=r.q_ref,
+                                payload=RobotPayloadData(mass, [0.0, 0.0, 0.05]) if mass
+                                else RobotPayloadData()))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        out = fit_robot(robot, runs, models=("usual", "paper"), method=method,
+                        payload=payload, preprocessing=RobotPreprocessing(
+                            torque_delay=TORQUE_DELAY), feasibility=False, sigma_blocks=0)
+    assert "paper" in out["_estimators"]
+    for sig in (out["_identification"], out["_signals"][0]):
+        cols = sig.columns
+        assert cols.full is None
+        assert cols.full_columns.evaluations == dict.fromkeys(range(len(runs)), 1)
+        assert cols.full_columns.nbytes == 0 and cols.full_columns.get(0) is None

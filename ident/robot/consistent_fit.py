@@ -265,6 +265,10 @@ def fit_consistent(model: Any, signals: Any = None, *, friction: str | None = No
     """
     if not hasattr(model, "coef_"):
         raise RobotIdentError("fit_consistent: the RobotModel is not fitted")
+    if getattr(model, "quadrants", "hard") == "soft":
+        raise RobotIdentError("fit_consistent: the model was fitted with soft quadrants "
+                              "(quadrants='soft'); the consistent estimate and the exported "
+                              "friction use hard quadrants")
     require_theta(model, "fit_consistent")
     if friction is None:
         friction = "profile" if model.model == "usual" else "fixed"

@@ -302,6 +302,9 @@ def refit_robot(
         signals without them.
     """
     model._check_fitted()
+    if getattr(model, "quadrants", "hard") == "soft":  # its rows weigh the quadrants softly
+        raise RobotIdentError("refit_robot: the model was fitted with soft quadrants "
+                              "(quadrants='soft'); the refit uses hard quadrants")
     linear = model.model == "usual" or model.form == "products"
     if model.method not in ("ls", "wls", "iv"):
         raise RobotIdentError(f"refit_robot: method {model.method!r} is not supported; "
