@@ -102,12 +102,13 @@ def single_joint() -> None:
     _design("sj select", d1.select(dq_min=0.05, tau_min=0.1))
 
 
-def robot() -> None:
+def arm_runs() -> tuple:
+    """The 3-dof arm: two simulated runs (no payload, 5 kg); also
+    ``benchmarks/full_rate_calls.py``'s."""
     robot = load_robot(ROOT / "examples" / "robots" / "arm3.toml")
     params = ArmParams.from_robot(robot)
     ref = model_reference(params.model, center=[0.0, -1.9, 0.6], fraction=0.9, duration_s=6.0,
                           seed=3)
-    reg = RobotRegressor(robot)
     runs = []
     for i, mass in enumerate((0.0, 5.0)):
         pay = RobotPayloadData(mass, [0.0, 0.0, 0.05]) if mass else RobotPayloadData()
@@ -116,6 +117,12 @@ def robot() -> None:
                          seed=30 + i)
         runs.append(RawRobotRun(f"run{i}.csv", r.t, r.q_true, r.tau_applied, q_ref=r.q_ref,
                                 payload=pay))
+    return robot, runs
+
+
+def robot() -> None:
+    robot, runs = arm_runs()
+    reg = RobotRegressor(robot)
     for iv in (False, True):
         settings = resolve_design(runs, instruments=iv, torque_delay=TORQUE_DELAY)
         print(f"robot iv={iv}: settings {settings.as_dict()}")

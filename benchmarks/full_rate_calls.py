@@ -33,16 +33,14 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
+from chain_fingerprint import arm_runs  # noqa: E402
 from fit_fingerprint import campaign_runs  # noqa: E402
 
 from ident import models as sj  # noqa: E402
 from ident.cli_robot import fit_robot  # noqa: E402
 from ident.fitting import fit_models  # noqa: E402
 from ident.preprocess import TORQUE_DELAY  # noqa: E402
-from ident.robot.loaders import RawRobotRun, RobotPreprocessing  # noqa: E402
-from ident.robot.signals import RobotPayloadData  # noqa: E402
-from sim_drivers.arm import ArmGains, ArmParams, Payload, model_reference, simulate_arm  # noqa: E402,E501
-from trajectories.robot import load_robot  # noqa: E402
+from ident.robot.loaders import RobotPreprocessing  # noqa: E402
 from trajectories.robot import regressor as rr  # noqa: E402
 
 #: label -> [calls, samples]
@@ -78,24 +76,6 @@ def _report(tag: str, full_samples: int) -> None:
 
 def _full_samples(full) -> int:  # noqa: ANN001 - tuple of FullRate
     return sum(int(f.n) for f in full)
-
-
-def arm_runs() -> tuple:
-    """The 3-dof arm of ``benchmarks/chain_fingerprint.py``: two simulated runs (no payload,
-    5 kg)."""
-    robot = load_robot(ROOT / "examples" / "robots" / "arm3.toml")
-    params = ArmParams.from_robot(robot)
-    ref = model_reference(params.model, center=[0.0, -1.9, 0.6], fraction=0.9, duration_s=6.0,
-                          seed=3)
-    runs = []
-    for i, mass in enumerate((0.0, 5.0)):
-        pay = RobotPayloadData(mass, [0.0, 0.0, 0.05]) if mass else RobotPayloadData()
-        p = Payload(mass, [0.0, 0.0, 0.05]) if mass else None
-        r = simulate_arm(params, ref, ArmGains.for_params(params, payload=p), payload=p,
-                         seed=30 + i)
-        runs.append(RawRobotRun(f"run{i}.csv", r.t, r.q_true, r.tau_applied, q_ref=r.q_ref,
-                                payload=pay))
-    return robot, runs
 
 
 def main() -> None:
