@@ -124,13 +124,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="{hard,soft}",
         help="--robot only: the paper model's quadrant weights: hard (default, eq. 27-28) or "
         "soft (their expectation under a load jitter sigma per joint, fitted with the "
-        "parameters; analytic std only, no pruning; docs/robot-identification.md)",
+        "parameters; analytic std only, no pruning; not with --refine, --consistent or "
+        "export-model; docs/robot-identification.md)",
     )
     p.add_argument(
         "--consistent",
         action="store_true",
         help="--robot only: also compute the physically consistent estimate of every model "
-        "(LMI fit, docs/model-export.md) and store it in the JSON for `jointid export-model`",
+        "(LMI fit, docs/model-export.md) and store it in the JSON for `jointid export-model` "
+        "(not with --quadrants soft)",
     )
     p.add_argument(
         "--payload",
@@ -222,7 +224,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="add the effects the residual points to (ident.refine), on the paper model "
         "(or the only model fitted); with --robot: every joint on the refined model's rows, "
-        "then the found terms refitted in the n-dof model",
+        "then the found terms refitted in the n-dof model (not with --quadrants soft)",
     )
     g3.add_argument("--max-steps", type=int, default=5, metavar="N", help="refinement steps")
     p.set_defaults(func=run)
