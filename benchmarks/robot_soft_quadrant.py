@@ -64,9 +64,11 @@ def _fit_only(out: dict) -> float:
 
 def _sigmas(est, joints) -> str:
     return ", ".join(
-        f"{j} {s:.3g}" + (" (on its bound)" if b else f" +- {sd:.2g}")
-        for j, s, sd, b in zip(joints, est.quadrant_sigma_, est.quadrant_sigma_std_,
-                               est.quadrant_sigma_at_bound_, strict=True))
+        f"{j} {s:.3g}" + (f" (reported on its bound {lo:.3g} .. {hi:.3g})" if b
+                          else f" +- {sd:.2g}")
+        for j, s, sd, b, (lo, hi) in zip(joints, est.quadrant_sigma_, est.quadrant_sigma_std_,
+                                         est.quadrant_sigma_at_bound_,
+                                         est.quadrant_sigma_bounds_, strict=True))
 
 
 def arm3(seed: int) -> None:
