@@ -65,7 +65,7 @@ from .robot.refine_joint import joint_coulomb, refine_joint
 from .robot.refit_accept import ALL_REFUSED, accept_refit
 from .robot.selection_shift import selection_shift, shift_note
 from .robot.signals import RobotSignals
-from .robot.soft_fit import QUADRANTS, soft_record
+from .robot.soft_fit import QUADRANTS, load_signs, soft_record
 from .robot.tables import format_table_iii, format_uncertainty, table_iii
 from .robot.uncertainty import N_BLOCKS, assess, parameter_records
 from .vocab import method_name, model_name, refined_model
@@ -496,9 +496,13 @@ def fit_robot(
             if jitter is not None:
                 rec["quadrant_jitter_share"] = {j: float(x) for j, x in
                                                 zip(joints, jitter[0], strict=True)}
+                # its warning is the hard quadrants' (biased dry friction where the low-pass
+                # blends both): the soft weight is that blend's model, no note (the share stays)
                 notes.extend(jitter_note(j, x, h) for j, x, h in
-                             zip(joints, *jitter, strict=True) if x > JITTER_SHARE)
+                             zip(joints, *jitter, strict=True)
+                             if x > JITTER_SHARE and quadrants == "hard")
             if unchecked is not None:  # the estimate against the sign check's row choice
+                # (model(name): the same quadrants, soft refitted soft, like with like)
                 try:
                     z = selection_shift(rec["parameters"], model(name).fit(unchecked))
                 except (IdentError, np.linalg.LinAlgError):  # a diagnostic: never fatal
@@ -880,8 +884,18 @@ def _settled(est: RobotModel, rec: dict[str, Any], rows_sig: RobotSignals,
     """Whether the paper fit settled its quadrants: ``converged``, ``quadrant_drift`` per joint
     (:meth:`RobotModel.quadrant_drift`) and, where a joint's drift exceeds ``QUADRANT_TOL``,
     ``rel_error_own_quadrants`` (the fitted parameters on their own quadrants, the same
-    rows) and a note: its reported error is then not the error of its values."""
+    rows) and a note: its reported error is then not the error of its values.
+
+    Soft quadrants (:mod:`ident.robot.soft_fit`): no hard quadrant to drift from (every row
+    weighs both), so no ``quadrant_drift``; ``converged`` is the least-squares solver's, a
+    note when it stopped at its evaluation limit."""
     rec["converged"] = bool(getattr(est, "converged_", True))
+    if getattr(est, "quadrants", "hard") == "soft":
+        if not rec["converged"]:
+            notes.append("paper model (soft quadrants): the least-squares fit stopped at its "
+                         "evaluation limit (20 x max_iter): its values are not a minimum of "
+                         "its residual")
+        return
     drift = est.quadrant_drift(rows_sig)
     rec["quadrant_drift"] = {j: float(x) for j, x in zip(joints, drift, strict=True)}
     bad = [(j, x) for j, x in zip(joints, drift, strict=True) if x > QUADRANT_TOL]
@@ -911,7 +925,11 @@ def _one_signed_loads(est: RobotModel, rec: dict[str, Any], rows_sig: RobotSigna
     through, the pruning held one or two of them at 0 and the others took their place with a
     tight sigma (found by the identification sweep: arm3's elbow, c_g3 pruned and c_m3 27
     sigma from the simulator's value). Those not pruned are flagged ``unidentified``
-    (``rec["unidentified"]``) with a note; ``rec["one_signed_load"]`` lists the joints."""
+    (``rec["unidentified"]``) with a note; ``rec["one_signed_load"]`` lists the joints.
+
+    Soft quadrants: the rows of each sign are those the soft weight expects under the fitted
+    load jitter (:func:`~ident.robot.soft_fit.load_signs`, sum of Phi(s / sigma_j)): a load
+    within sigma_j of zero gives the joint both quadrants, and they separate the three."""
     try:
         load = est.load_torque(rows_sig)
         rows = est.fitted_rows(rows_sig)
@@ -919,8 +937,7 @@ def _one_signed_loads(est: RobotModel, rec: dict[str, Any], rows_sig: RobotSigna
         return
     found = []
     for j, (joint, n) in enumerate(zip(joints, est.numbers_, strict=True)):
-        lj = load[rows[:, j], j]
-        pos, neg = int((lj > 0).sum()), int((lj < 0).sum())
+        pos, neg = load_signs(est, load[rows[:, j], j], j)
         if pos + neg == 0 or min(pos, neg) >= THIN_QUADRANT * (pos + neg):
             continue
         found.append(joint)
@@ -932,7 +949,10 @@ def _one_signed_loads(est: RobotModel, rec: dict[str, Any], rows_sig: RobotSigna
         pruned = [p for p in names if p in pars and pars[p].get("pruned")]
         notes.append(
             f"paper model, {joint}: its load tau_out_hat is {'> 0' if pos > neg else '< 0'} "
-            f"on {100 * max(pos, neg) / (pos + neg):.1f} % of its fitted rows, so its quadrant "
+            f"on {100 * max(pos, neg) / (pos + neg):.1f} % of its fitted rows"
+            + (f" (expected, load jitter sigma {float(est.quadrant_sigma_[j]):.3g} N m)"
+               if getattr(est, "quadrants", "hard") == "soft" else "")
+            + ", so its quadrant "
             f"is the sign of dq: {', '.join(names)} are not separable (a trajectory on which "
             "its load changes sign separates them)"
             + (f"; {', '.join(pruned)} pruned, " if pruned else "; ")

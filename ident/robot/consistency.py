@@ -23,10 +23,17 @@ to them one by one. This module does two things:
    said about them (listed as ``unchecked``). When the set is not realisable,
    ``fit_consistent`` (``jointid export-model``, docs/model-export.md) gives the nearest
    consistent estimate and its cost.
+
+A paper model fitted with soft quadrants (:mod:`ident.robot.soft_fit`) is checked alike: the
+direct checks read its values and covariance, and the d^2 of the convex program reads only
+its theta and covariance (no prediction, no quadrant), so it is its own. Its nearest
+consistent estimate is not offered: ``fit_consistent`` and ``jointid export-model`` refuse a
+soft model (their friction and prediction use hard quadrants).
 """
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -72,6 +79,7 @@ class ConsistencyReport:
     standard: dict[str, float] = field(default_factory=dict)
     unchecked: tuple[str, ...] = ()
     method: str = ""
+    soft: bool = False
 
     @property
     def ok(self) -> bool:
@@ -87,7 +95,10 @@ class ConsistencyReport:
             verdict = "yes" if self.feasible else "NO"
             lines.append(f"  regrouped base set realisable by physical links: {verdict} "
                          f"(d^2 = {self.d2:.3g}, 99 % limit {self.d2_limit:.3g})")
-            if not self.feasible:
+            if not self.feasible and self.soft:
+                lines.append("  nearest consistent estimate: not for a soft-quadrant fit "
+                             "(jointid export-model and --consistent use hard quadrants)")
+            elif not self.feasible:
                 lines.append("  nearest consistent estimate and its cost: jointid export-model "
                              "(ident.robot.consistent_fit, docs/model-export.md)")
         if self.unchecked:
@@ -144,6 +155,16 @@ def _standard_jacobian(z: np.ndarray, k: int) -> np.ndarray:
     return out
 
 
+def _d2_view(model: Any) -> Any:
+    """A shallow copy of a soft-quadrant ``model`` that ``fit_consistent`` takes: without
+    signals it reads only ``coef_``, ``cov_``, the names and the base (module doc), which
+    are the soft fit's; its refusal guards the consistent model's hard-quadrant friction and
+    prediction, neither of which :func:`check_consistency` reads."""
+    view = copy.copy(model)
+    view.quadrants = "hard"
+    return view
+
+
 def check_consistency(model: Any, *, feasibility: bool = True, starts: int = 3,
                       seed: int = 0, method: str = "lmi",
                       tau_peak: Any = None) -> ConsistencyReport:
@@ -163,7 +184,7 @@ def check_consistency(model: Any, *, feasibility: bool = True, starts: int = 3,
         raise RobotIdentError(f"check_consistency: method {method!r}: expected 'lmi' or "
                               "'cholesky'")
     require_theta(model, "check_consistency")
-    rep = ConsistencyReport()
+    rep = ConsistencyReport(soft=getattr(model, "quadrants", "hard") == "soft")
     base = model.base_
     pb = len(base.names)
     std_names = tuple(base.standard_names)
@@ -199,7 +220,8 @@ def check_consistency(model: Any, *, feasibility: bool = True, starts: int = 3,
     cf = None
     if method == "lmi":
         try:  # the convex program: global minimum of d^2 (profile metric C_bb^-1, module doc)
-            cf = fit_consistent(model, friction="profile", tau_peak=tau_peak)
+            cf = fit_consistent(_d2_view(model) if rep.soft else model, friction="profile",
+                                tau_peak=tau_peak)
         except (RobotIdentError, np.linalg.LinAlgError, ValueError):
             cf = None
     if cf is not None:

@@ -57,7 +57,7 @@ from . import RobotIdentError
 
 __all__ = ["QUADRANTS", "SIGMA_MAX_FRACTION", "SIGMA_MIN_FRACTION", "SIGMA_START_GRID",
            "fit_soft", "predict_soft", "check_soft",
-           "soft_record"]
+           "load_signs", "soft_record"]
 
 #: ``RobotModel(quadrants=...)``: the hard model quadrants of eq. 27-28, or their expectation
 #: under a fitted Gaussian load jitter.
@@ -376,6 +376,17 @@ def predict_soft(model: Any, signals: Any) -> np.ndarray:
                                  WjT, pj, dqj, np.sign(dqj) if sg is None else sg,
                                  stribeck_exp(dqj, model.q_s_[j]), jacobian=False)
     return out
+
+
+def load_signs(model: Any, load: np.ndarray, j: int) -> tuple[float, float]:
+    """Joint j's rows whose load is > 0 and < 0, given its model load tau_out_hat_j
+    ``load`` (m,) [N m]: counted (hard quadrants), or expected under the fitted load jitter
+    (soft: sum of Phi(s / sigma_j) and of Phi(-s / sigma_j), the weights the soft fit gives
+    the load's sign; its hard count as sigma_j -> 0)."""
+    if getattr(model, "quadrants", "hard") != "soft":
+        return float((load > 0).sum()), float((load < 0).sum())
+    p = ndtr(load / float(model.quadrant_sigma_[j]))
+    return float(p.sum()), float((1.0 - p).sum())
 
 
 def soft_record(model: Any, rec: dict[str, Any], joints: Any, notes: list[str]) -> None:
