@@ -956,6 +956,17 @@ class RobotModel(HyperParameters):
             A[np.ix_(free, free)], None if C is None else C[np.ix_(free, free)], sigma2)
         cov = np.zeros((x.size, x.size))
         cov[np.ix_(free, free)] = cov_f
+        self._store_solution(x, cov, sigma2, self._joint_sigma(moms, rr, free), n_rows, rr, yy)
+
+    def _store_solution(self, x: np.ndarray, cov: np.ndarray, sigma2: float,
+                        sigma_joint: np.ndarray, n: int, rr: np.ndarray,
+                        yy: np.ndarray) -> None:
+        """Set the fitted attributes of a solution ``x`` with covariance ``cov``: ``coef_``,
+        ``cov_``, ``std_``, ``rel_std_`` (eq. 16), ``params_``, ``sigma_`` (sqrt of the
+        residual variance ``sigma2``), ``sigma_joint_``, ``n_samples_`` and ``rel_error_``
+        (per joint sqrt(rr_j / yy_j), ``rr`` the residual and ``yy`` the torque sums of squares
+        [N^2 m^2]; "all" over every joint). Shared by the hard fit and
+        :func:`ident.robot.soft_fit.fit_soft`."""
         self.coef_ = x
         self.cov_ = cov
         self.std_ = np.sqrt(np.clip(np.diag(cov), 0, None))
@@ -963,8 +974,8 @@ class RobotModel(HyperParameters):
             self.rel_std_ = np.where(x != 0, 100.0 * self.std_ / np.abs(x), np.inf)
         self.params_ = dict(zip(self.names_, x.tolist(), strict=True))
         self.sigma_ = float(np.sqrt(sigma2))
-        self.sigma_joint_ = self._joint_sigma(moms, rr, free)
-        self.n_samples_ = n_rows
+        self.sigma_joint_ = sigma_joint
+        self.n_samples_ = n
         rel = {name: float(np.sqrt(rr[j] / yy[j])) if yy[j] > 0 else float("nan")
                for j, name in enumerate(self.joints_)}
         rel["all"] = float(np.sqrt(rr.sum() / yy.sum()))

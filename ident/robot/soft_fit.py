@@ -334,20 +334,9 @@ def fit_soft(model: Any, signals: Any) -> None:
     cov[np.ix_(pr.fi, pr.fi)] = cov_k[:nf, :nf]
     sstd = np.full(k, np.nan)
     sstd[~at_bound] = np.sqrt(np.clip(np.diag(cov_k)[nf:], 0, None))
-    model.coef_ = x
-    model.cov_ = cov
-    model.std_ = np.sqrt(np.clip(np.diag(cov), 0, None))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        model.rel_std_ = np.where(x != 0, 100.0 * model.std_ / np.abs(x), np.inf)
-    model.params_ = dict(zip(model.names_, x.tolist(), strict=True))
-    model.sigma_ = float(np.sqrt(sigma2))
-    model.sigma_joint_ = np.sqrt(rr / np.maximum(n - _joint_free(model, pr), 1))
-    model.n_samples_ = n
     yy = np.array([float(r.tau @ r.tau) for r in rows])
-    rel = {nm: float(np.sqrt(rr[j] / yy[j])) if yy[j] > 0 else float("nan")
-           for j, nm in enumerate(model.joints_)}
-    rel["all"] = float(np.sqrt(rr.sum() / yy.sum()))
-    model.rel_error_ = rel
+    model._store_solution(x, cov, sigma2,
+                          np.sqrt(rr / np.maximum(n - _joint_free(model, pr), 1)), n, rr, yy)
     model.weights_ = w
     model.cond_raw_ = float(np.linalg.cond(Jk)) if Jk.size else float("inf")
     model.cond_ = float(sv[0] / sv[-1])
