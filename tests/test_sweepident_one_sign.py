@@ -3,15 +3,18 @@ offset not separable, and the fit says so (found by the identification sweep).
 
 With tau_out_hat < 0 on every row of the elbow, the model quadrant is the sign of dq alone:
 P+ sign(dq), P- sign(dq) and 1 are dependent, only OFF - c_m and OFF + c_g are identified.
-``--chain states`` refuses the paper model with that evidence; the columns chain (the
-default) fitted it, because the low-passed sign(dq) near the reversals breaks the dependence
-by a hair, then pruned c_g3 and reported c_m3 with a 1.6 % relative std, 27 sigma from the
-simulator's value (3-dof arm, paper friction, three payload runs of 15 s). Now c_m3, c_g3 and
-OFF3 that are not pruned are flagged ``unidentified`` with a note; the states chain's refusal
-on the same runs is the evidence that they are not separable."""
+The estimator refuses the paper model with that evidence on decimated states whose Coulomb
+column is the sign of the decimated dq; the columns chain (the default) fitted it, because the
+low-passed sign(dq) near the reversals breaks the dependence by a hair, then pruned c_g3 and
+reported c_m3 with a 1.6 % relative std, 27 sigma from the simulator's value (3-dof arm, paper
+friction, three payload runs of 15 s). Now c_m3, c_g3 and OFF3 that are not pruned are flagged
+``unidentified`` with a note, on either chain (``--chain states`` carries the low-passed
+sign(dq) too, ``RobotSignals.sign``); the estimator's refusal with the step sign on the same
+runs is the evidence that they are not separable."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +22,10 @@ import pytest
 
 from ident import IdentError
 from ident.cli_robot import fit_robot
-from ident.robot.loaders import load_robot_runs
+from ident.robot.base import base_parameters
+from ident.robot.estimate import RobotModel
+from ident.robot.loaders import load_robot_runs, preprocess_runs
+from ident.robot.regressor import RobotRegressor
 from sim_drivers.arm import ArmGains, ArmParams, Payload, model_reference, simulate_arm
 from tests.robot_campaigns import write_arm_csv
 from trajectories.robot import load_robot
@@ -60,8 +66,17 @@ def test_one_signed_load_flags_c_m_c_g_and_offset(elbow_one_sign):
     assert rec["unidentified"] == [p for p, v in pars.items() if v["unidentified"]]
     assert any(n.startswith("paper model, j3: its load tau_out_hat is < 0") and
                "c_m3, c_g3, OFF3 are not separable" in n for n in out["notes"]), out["notes"]
-    # the estimator's own verdict on decimated states: not separable, on that joint
+    # the states chain (the low-passed sign(dq) as well): the same verdict
+    st = fit_robot(robot, runs, models=("paper",), chain="states", feasibility=False,
+                   sigma_blocks=0)
+    srec = st["models"]["paper"]
+    assert srec["one_signed_load"] == ["j3"]
+    assert all(srec["parameters"][p]["unidentified"] for p in names
+               if not srec["parameters"][p]["pruned"])
+    # the estimator's own verdict on decimated states with the step sign: not separable
+    reg = RobotRegressor(robot)
+    states = replace(preprocess_runs(runs, robot.moving), sign=None)
     with pytest.raises(IdentError, match=r"the load of j3 changes sign \(c_m, c_g and the "
                                          r"offset are not separable otherwise\)"):
-        fit_robot(robot, runs, models=("paper",), chain="states", feasibility=False,
-                  sigma_blocks=0)
+        RobotModel(reg, "paper", base=base_parameters(reg),
+                   dq_min=0.01 * float(np.max(np.abs(states.dq)))).fit(states)

@@ -353,7 +353,8 @@ def design_runs(
                        joints=joints, experiment=cat("e"),
                        payloads=tuple(run.payload for run in runs),
                        q_ref=cat("ref") if has_ref else None,
-                       source=", ".join(run.source for run in runs), columns=columns_)
+                       source=", ".join(run.source for run in runs), columns=columns_,
+                       sign=columns_.sign)  # (the states path's, without the columns)
     return sig, float(dq_min)  # type: ignore[arg-type]
 
 

@@ -39,7 +39,9 @@ grow with the number of samples; iterations reuse the moments). They are the obj
 Samples with |dq_j| <= ``dq_min`` (the stiction area, eq. 26) or non-finite values are left
 out of joint j's rows only; with ``RobotSignals.columns`` (the single-joint chain,
 :mod:`ident.robot.design`) the decimated columns are read instead of evaluating the regressor,
-and the rows their ``keep`` mask rejects are left out too.
+and the rows their ``keep`` mask rejects are left out too. The Coulomb column is sign(dq)
+formed at full rate and decimated with the torque when the signals carry it (the columns'
+``sign``, else ``RobotSignals.sign``), else the sign of the decimated dq.
 
 ``payload_ratio=True``: p_j is one more column of every joint's row, its parameter
 ``Ma_ratio`` = M_ae / M_aw (eq. 35) identified after the base parameters.
@@ -716,7 +718,8 @@ class RobotModel(HyperParameters):
                       for c, g, h in zip(self.cols_, grams, self._band_h, strict=True)]
         rows = changed = 0
         in_band, considered = np.zeros(len(self.cols_)), np.zeros(len(self.cols_))
-        for _sig, _r, q, dq, ddq, tau, zdd, pay, cc in self._chunks(signals, stride):
+        for sig, r, q, dq, ddq, tau, zdd, pay, cc in self._chunks(signals, stride):
+            sgn = self._sign(sig, r, cc)
             W, p, kn = self._rows(q, dq, ddq, tau, pay, None if cc is None else cc[:2])
             Wz = pz = knz = None
             if iv:
@@ -729,7 +732,7 @@ class RobotModel(HyperParameters):
                 if not every:
                     WjT = WjT[:, ok]
                 dqo, tauo, po = dqj[ok], tau[ok, j], pj[ok]
-                sgo = None if cc is None else cc[2][ok, j]
+                sgo = None if sgn is None else sgn[ok, j]
                 VT = self._v(WjT, po, dqo, tauo, sgo)
                 VzT = None
                 if iv:
@@ -767,6 +770,15 @@ class RobotModel(HyperParameters):
             # the share of each joint's rows the quadrant band leaves out, at this pass
             self._pass_band_share = in_band / np.maximum(considered, 1)
         return moms, rows, changed, stores
+
+    @staticmethod
+    def _sign(sig: RobotSignals, r: slice | np.ndarray, cc: tuple | None) -> np.ndarray | None:
+        """The Coulomb column (m, k) of a chunk: the columns' decimated sign(dq), else the
+        signals' (``RobotSignals.sign``, the states chain's), else None (sign of the
+        decimated dq)."""
+        if cc is not None:
+            return cc[2]
+        return None if sig.sign is None else sig.sign[r]
 
     def _usable(self, dqj: np.ndarray, tauj: np.ndarray, WjT: np.ndarray,
                 keep: np.ndarray | None) -> np.ndarray:
@@ -1626,8 +1638,9 @@ class RobotModel(HyperParameters):
                                   f"{type(signals).__name__}")
 
         def rows():
-            for _sig, r, q, dq, ddq, tau, zdd, pay, cc in self._chunks(signals,
-                                                                       iv=instruments):
+            for sig, r, q, dq, ddq, tau, zdd, pay, cc in self._chunks(signals,
+                                                                      iv=instruments):
+                sgn = self._sign(sig, r, cc)
                 W, p, kn = self._rows(q, dq, ddq, tau, pay, None if cc is None else cc[:2])
                 if instruments:
                     Wz, pz, knz = self._rows(q, dq, zdd, tau, pay,
@@ -1635,7 +1648,7 @@ class RobotModel(HyperParameters):
                 for j, cols in enumerate(self.cols_):
                     WjT, pj = self._joint(W, p, kn, j)
                     item = (r, j, cols, WjT, pj, dq[:, j], tau[:, j],
-                            None if cc is None else cc[2][:, j])
+                            None if sgn is None else sgn[:, j])
                     yield (item + (self._joint(Wz, pz, knz, j),)) if instruments else item
 
         return rows()

@@ -256,8 +256,10 @@ def preprocess_runs(
     has_ref = all(run.q_ref is not None for run in runs)
     exps = [RawExperiment(run.source, run.q, run.tau, run.q_ref if has_ref else None,
                           run.dq, run.ddq) for run in runs]
+    # sign(dq) at full rate, decimated with the torque: the Coulomb column (RobotSignals.sign)
     blocks, _ = run_chain(exps, chain_period(runs), settings,
-                          lambda _, f: ([f.ref.T] if has_ref else [], None),
+                          lambda _, f: (([f.ref.T] if has_ref else []) + [np.sign(f.dq).T],
+                                        None),
                           error=RobotIdentError)
     states = [b.states() for b in blocks]
 
@@ -277,6 +279,7 @@ def preprocess_runs(
         q_ref=(np.ascontiguousarray(np.concatenate([b.columns()[0].T for b in blocks]))
                if has_ref else None),
         source=", ".join(run.source for run in runs),
+        sign=np.ascontiguousarray(np.concatenate([b.columns()[-1].T for b in blocks])),
     )
 
 

@@ -173,6 +173,12 @@ class RobotSignals:
     columns : RobotColumns or None
         Regressor columns filtered and decimated in parallel with the torque (the
         single-joint chain); None: the estimators build the regressor from q, dq, ddq.
+    sign : ndarray, shape (n, k), optional
+        sign(dq) computed at full rate and decimated with the torque (the Coulomb column, as
+        ``RobotColumns.sign``; the states chain forms it): the estimators' Coulomb column
+        when they build the regressor from the states. None: sign of the decimated dq,
+        which near a reversal is a step where the decimated torque's Coulomb part is the
+        low-pass of one (a bias on the Coulomb parameter, docs/robot-data.md).
     """
 
     t: np.ndarray
@@ -186,13 +192,15 @@ class RobotSignals:
     q_ref: np.ndarray | None = None
     source: str = ""
     columns: RobotColumns | None = None
+    sign: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         t = np.asarray(self.t, dtype=float).reshape(-1)
         n, k = t.size, len(self.joints)
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "joints", tuple(self.joints))
-        for name in ("q", "dq", "ddq", "tau") + (("q_ref",) if self.q_ref is not None else ()):
+        for name in ("q", "dq", "ddq", "tau") + tuple(
+                o for o in ("q_ref", "sign") if getattr(self, o) is not None):
             a = np.asarray(getattr(self, name), dtype=float)
             if a.ndim == 1 and k == 1:
                 a = a[:, None]

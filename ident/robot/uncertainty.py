@@ -183,7 +183,8 @@ def _take(sig: RobotSignals, rows: np.ndarray) -> RobotSignals:
         Wz=None if c.Wz is None else c.Wz[:, :, rows], pz=None if c.pz is None else c.pz[rows])
     return replace(sig, t=sig.t[rows], q=sig.q[rows], dq=sig.dq[rows], ddq=sig.ddq[rows],
                    tau=sig.tau[rows], experiment=sig.experiment[rows],
-                   q_ref=None if sig.q_ref is None else sig.q_ref[rows], columns=cols)
+                   q_ref=None if sig.q_ref is None else sig.q_ref[rows], columns=cols,
+                   sign=None if sig.sign is None else sig.sign[rows])
 
 
 def jackknife_rows(groups: Sequence[np.ndarray], n_blocks: int = N_BLOCKS
