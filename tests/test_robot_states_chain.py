@@ -102,3 +102,18 @@ def test_coulomb_recovered_on_the_states_path(arm3_chains, chain):
     old = _fit(reg, base, replace(sigs[0], sign=None))
     z_old, _ = _z(old, truth)
     assert abs(z_old[old.names_.index("FC2")]) > z_fw, z_old
+
+
+def test_soft_quadrants_take_the_states_chains_sign(arm3_chains):
+    """The soft-quadrant fit's rows (``ident.robot.soft_fit._rows``, read on a fitted paper
+    model as ``fit_soft`` does after its hard start) carry the same Coulomb column as the hard
+    fit on the states chain: the decimated sign(dq), fractional near reversals, not the step
+    sign of the decimated dq."""
+    from ident.robot import soft_fit
+
+    reg, base, _truth, out = arm3_chains
+    states = out[0][1]
+    model = RobotModel(reg, "paper", "ls", base=base).fit(states)
+    for j, jr in enumerate(soft_fit._rows(model, states)):
+        assert np.all(np.isin(jr.sgc, states.sign[:, j])), j  # the chain's column
+        assert np.any(np.abs(jr.sgc) < 0.99), j  # fractional at its reversals: not the step

@@ -114,13 +114,14 @@ def _rows(model: Any, signals: Any) -> list[_JointRows]:
     """Every joint's rows under its row rule (``RobotModel._usable``; no quadrant band)."""
     k = len(model.cols_)
     parts: list[list[tuple]] = [[] for _ in range(k)]
-    for _sig, _r, q, dq, ddq, tau, _z, pay, cc in model._chunks(signals, iv=False):
+    for sig, r, q, dq, ddq, tau, _z, pay, cc in model._chunks(signals, iv=False):
         W, p, kn = model._rows(q, dq, ddq, tau, pay, None if cc is None else cc[:2])
+        sgs = model._sign(sig, r, cc)  # the chain's decimated sign(dq), as the hard fit's
         for j in range(k):
             WjT, pj = model._joint(W, p, kn, j)
             ok = model._usable(dq[:, j], tau[:, j], WjT, None if cc is None else cc[3][:, j])
             dqj = dq[ok, j]
-            sgc = np.sign(dqj) if cc is None else cc[2][ok, j]
+            sgc = np.sign(dqj) if sgs is None else sgs[ok, j]
             parts[j].append((WjT[:, ok], pj[ok], dqj, sgc, tau[ok, j]))
     out = []
     for j, pj in enumerate(parts):
