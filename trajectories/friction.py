@@ -70,7 +70,8 @@ def soft_quadrant_weights(load: ArrayLike, dq: ArrayLike,
                           sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The quadrant weights' expectation under a Gaussian jitter of the load (the soft
     quadrant weight; docs/robot-identification.md, "Known limit: quadrants blended by the
-    low-pass"). Not used by the fits yet: the benchmarks ``soft_quadrant_*.py`` measure it.
+    low-pass"). Used by the soft fit's start (:mod:`ident.robot.soft_fit`) and the
+    benchmarks ``soft_quadrant_*.py``.
 
     With the true load x = s + n, n ~ N(0, sigma^2), mu = s sign(dq) and the hard weights of
     :func:`quadrant_weights` on P = x dq: E[P+] = Phi(mu / sigma), E[P+ x] = E[P+] s + r and

@@ -51,7 +51,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.special import ndtr
 
-from trajectories.friction import stribeck_exp
+from trajectories.friction import soft_quadrant_weights, stribeck_exp
 
 from . import RobotIdentError
 
@@ -155,24 +155,24 @@ def _joint_model(th: np.ndarray, blk: np.ndarray, sigma: float, WT: np.ndarray, 
     # d xp / ds = E[P+], d xm / ds = E[P-]; d xp / d sigma = sg phi = - d xm / d sigma
     ds = A * pp + G * pm + sgc * (Cm - Cg) * phi * sg / sigma
     dsig = (A - G) * sg * phi - sgc * (Cm - Cg) * phi * z / sigma
-    dblk = np.stack([xp, E * xp, xm, -E * xm, pp * sgc, pp * E * sgc, pm * sgc,
+    return pred, ds[:, None] * WT.T, _columns(xp, xm, pp, pm, E, sgc, dq), dsig
+
+
+def _columns(xp: np.ndarray, xm: np.ndarray, pp: np.ndarray, pm: np.ndarray, E: np.ndarray,
+             sgc: np.ndarray, dq: np.ndarray) -> np.ndarray:
+    """The ten paper parameters' columns (m, 10) of the soft eq. 30 (a_m, b_m, a_g, b_g,
+    c_m, d_m, c_g, d_g, F_V, OFF) from the load products E[P+ x], E[P- x], the weights
+    E[P+], E[P-], E, the Coulomb column and dq [rad/s]."""
+    return np.stack([xp, E * xp, xm, -E * xm, pp * sgc, pp * E * sgc, pm * sgc,
                      pm * E * sgc, dq, np.ones_like(dq)], axis=1)
-    return pred, ds[:, None] * WT.T, dblk, dsig
 
 
 def _block_columns(th: np.ndarray, sigma: float, rw: _JointRows) -> np.ndarray:
     """The columns (m, 10) of one joint's ten paper parameters in the soft eq. 30 at theta's
     entries ``th`` and ``sigma`` (the prediction is their product with the block)."""
     s = th @ rw.WT + rw.p
-    sg = np.sign(rw.dq)
-    z = s * sg / sigma
-    pp = ndtr(z)
-    pm = 1.0 - pp
-    r = sigma * np.exp(-0.5 * z * z) / _SQRT_2PI * sg
-    xp, xm = pp * s + r, pm * s - r
-    E, sgc = rw.E, rw.sgc
-    return np.stack([xp, E * xp, xm, -E * xm, pp * sgc, pp * E * sgc, pm * sgc,
-                     pm * E * sgc, rw.dq, np.ones_like(rw.dq)], axis=1)
+    pp, pm, r = soft_quadrant_weights(s, rw.dq, sigma)
+    return _columns(pp * s + r, pm * s - r, pp, pm, rw.E, rw.sgc, rw.dq)
 
 
 def _profile(th: np.ndarray, blk: np.ndarray, fb: np.ndarray, rw: _JointRows,
