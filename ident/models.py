@@ -250,7 +250,12 @@ class Payload(Term):
 
 
 class Coulomb(Term):
-    """Symmetric dry friction ``F_C sign(dq)`` (eq. 5) -> ``F_C`` [N m]."""
+    """Symmetric dry friction ``F_C sign(dq)`` (eq. 5) -> ``F_C`` [N m].
+
+    sign(dq) is :attr:`Signals.direction <ident.signals.Signals.direction>`: on decimated
+    samples that carry it (a robot fit's rows), sign(dq) formed at full rate and decimated
+    with the torque; else the sign of the samples' dq.
+    """
 
     effect = "coulomb"
     variable = "direction"
@@ -259,7 +264,8 @@ class Coulomb(Term):
         return ("F_C",)
 
     def columns(self, s: Signals) -> np.ndarray:
-        return np.sign(s.dq).reshape(-1, 1).astype(float)
+        # the decimated full-rate sign(dq) on samples that carry it (Signals.direction)
+        return np.asarray(s.direction, dtype=float).reshape(-1, 1).copy()
 
     def describe(self) -> str:
         return "Coulomb F_C sign(dq)"
@@ -378,7 +384,7 @@ class QuadrantCoulomb(Term):
     def columns(self, s: Signals) -> np.ndarray:
         pp, pm = power_split(s, self.load)
         e = exp_velocity(s, self.q_s)
-        sg = np.sign(s.dq)
+        sg = np.asarray(s.direction, dtype=float)  # (Signals.direction: as Coulomb's)
         m, g = quadrant_products(sg, pp, pm)
         me, ge = quadrant_products(sg, pp, pm, e, load=False)
         return np.column_stack([m, me, g, ge])

@@ -73,6 +73,13 @@ class Signals:
         sign(P_out) decided by a model of the load, sign(τ̂_out q̇) (set by
         :func:`ident.preprocess.build_design` when it is given a ``load_model``); None: the
         paper's proxy sign(τ q̇) of eq. 26 (:attr:`sign_power`).
+    sign : ndarray or None
+        sign(q̇) formed at full rate and decimated with the torque, values in [-1, 1]
+        (fractional over a few samples at a reversal, where the decimated torque's dry
+        friction is the low-pass of a step): the direction of samples that were decimated
+        already, e.g. a robot fit's rows (``RobotSignals.sign``, carried by
+        :mod:`ident.robot.refine_joint`). None: sign(q̇) of these samples, right at full
+        rate (:attr:`direction`).
     """
 
     t: np.ndarray
@@ -87,6 +94,7 @@ class Signals:
     dtau: np.ndarray | None = field(default=None)
     extra: dict[str, np.ndarray] | None = field(default=None)
     quadrant: np.ndarray | None = field(default=None)
+    sign: np.ndarray | None = field(default=None)
 
     def __len__(self) -> int:
         return int(self.q.shape[0])
@@ -115,6 +123,17 @@ class Signals:
     def has_output(self) -> bool:
         """False on a :meth:`states` view."""
         return self.tau is not HIDDEN_OUTPUT
+
+    @property
+    def direction(self) -> np.ndarray:
+        """The dry friction's direction column [-]: :attr:`sign` when the samples carry it
+        (decimated samples: sign(q̇) formed at full rate, low-passed with the torque), else
+        sign(q̇) of the samples. The sign of a decimated q̇ is a step at a reversal where the
+        torque's Coulomb part is a ramp, which biased the Coulomb and Stribeck estimates of
+        the robot's states chain (docs/robot-identification.md)."""
+        if self.sign is not None:
+            return self.sign
+        return np.sign(self.dq)
 
     @property
     def sign_power(self) -> np.ndarray:

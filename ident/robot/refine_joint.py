@@ -29,6 +29,17 @@ differentiated again by :func:`ident.preprocess.build_design` with decimation 1 
 chain). A zero-order hold is named against the raw log's period ``cycle_s`` (the design's own
 period is the decimated one).
 
+The direction on the fit's rows: when the n-dof signals carry the fit's Coulomb column
+(``RobotSignals.sign``: sign(dq) formed at full rate and decimated with the torque, on both
+chains), joint j's signals carry it as :attr:`Signals.sign <ident.signals.Signals.sign>`,
+through the row selection, into the design's signals (the candidates' scoring) and into
+:func:`joint_term_columns` (the n-dof refit's columns); the terms that read
+:attr:`Signals.direction <ident.signals.Signals.direction>` -- the library's ``Coulomb``, the
+paper model's ``QuadrantCoulomb`` -- take it instead of the sign of the decimated dq, a step
+where the decimated torque's dry friction is a ramp (docs/robot-identification.md, "The
+direction on the fit's rows", for the figures and the effects that still read the step).
+Without ``keep`` (filtered again) the direction is that of the new dq.
+
 The found term is fitted here on the n-dof fit's residual (two stages: the n-dof parameters
 have already absorbed the part of its column in their span); :func:`joint_term_columns`
 gives its columns on the robot's samples, from the states only, for the n-dof refit
@@ -166,8 +177,8 @@ def refine_joint(
     s, names, lib = y_lib
     if keep is not None:
         design = fit_rows_design(lib, s, _joint_keep(keep, sig, j, "keep"))
-    else:
-        design = build_design(lib, s, decimation=1, dq_min=dq_min)
+    else:  # filtered again: the direction is that of the new dq (no decimated sign)
+        design = build_design(lib, replace(s, sign=None), decimation=1, dq_min=dq_min)
     val = None
     if validation is not None:
         vsig, vpred, vkeep = validation
@@ -176,7 +187,7 @@ def refine_joint(
         if vkeep is not None:
             val = fit_rows_design(lib, vs, _joint_keep(vkeep, vsig, j, "validation keep"))
         else:
-            val = build_design(lib, vs, decimation=1, dq_min=dq_min)
+            val = build_design(lib, replace(vs, sign=None), decimation=1, dq_min=dq_min)
     ref = refine(design, IdentModel(lib, "ndof" if torque == "measured" else "residual"),
                  max_steps=max_steps, vmax=vmax, others=names, validation=val,
                  reference=None if coulomb is None else {"F_C": float(coulomb)},
@@ -246,8 +257,12 @@ def _joint_signals(
             extra[dqn] = sig.dq[order, m]
             names += [qn, dqn]
     # the states as the fit has them (concat leaves dq, ddq at zero: build_design recomputes
-    # them; fit_rows_design reads them)
-    s = replace(concat(exps), dq=sig.dq[order, j], ddq=sig.ddq[order, j], extra=extra)
+    # them; fit_rows_design reads them), and the fit's Coulomb column: sign(dq) formed at
+    # full rate and decimated with the torque (RobotSignals.sign), the direction every
+    # column reads (Signals.direction) -- the sign of the decimated dq is a step where the
+    # decimated torque's dry friction is a ramp (module docstring)
+    s = replace(concat(exps), dq=sig.dq[order, j], ddq=sig.ddq[order, j], extra=extra,
+                sign=None if sig.sign is None else sig.sign[order, j])
     lib = Library(Coulomb(), Viscous(), Offset())
     if torque == "measured":
         lib = Library(NdofPrediction(), *lib.terms())
@@ -296,7 +311,9 @@ def fit_rows_design(lib: Library, s: Signals, keep: np.ndarray) -> Design:
 
     Every column, those added by the refinement too (:meth:`Design.with_term`), is evaluated
     on these samples with no further filtering or decimation (decimation 1, no trim, no
-    guard): the states and torque are the n-dof fit's, so are the rows.
+    guard): the states and torque are the n-dof fit's, so are the rows. When ``s`` carries
+    the fit's direction (``s.sign``, module docstring) the design's signals carry it on the
+    kept rows.
 
     Raises
     ------
@@ -318,6 +335,8 @@ def fit_rows_design(lib: Library, s: Signals, keep: np.ndarray) -> Design:
         blocks.append(_Block(sub=sub, full=sub, index=np.arange(idx.size), dec=stack,
                              mask=keep[idx]))
     Y, W, dsig, _ = _assemble(blocks, b, s.revolute)
+    if s.sign is not None:  # the kept rows' direction (the refinement's scoring reads it)
+        dsig = replace(dsig, sign=np.concatenate([bl.sub.sign[bl.mask] for bl in blocks]))
     return Design(Y=Y, W=W, names=tuple(lib.names()), library=lib, signals=dsig,
                   cutoff_hz=float("nan"), decimation=1, trim=0, dq_min=None, tau_min=None,
                   guard=0, torque_delay=0.0, _blocks=blocks)
