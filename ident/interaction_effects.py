@@ -59,7 +59,7 @@ class PositionDryFriction(Effect):
 
     def columns(self, s: Signals) -> np.ndarray:
         th = (2 * np.pi / self.period) * s.q
-        sg = np.sign(s.dq)
+        sg = s.direction
         return np.column_stack((np.sin(th) * sg, np.cos(th) * sg))
 
     def parameters(self, coef, cov):
@@ -102,7 +102,7 @@ class ReversalHysteresis(Effect):
         return (self._n("F_hyst"),)
 
     def columns(self, s: Signals) -> np.ndarray:
-        return (np.exp(-reversal_distance(s) / self.length) * np.sign(s.dq))[:, None]
+        return (np.exp(-reversal_distance(s) / self.length) * s.direction)[:, None]
 
     def parameters(self, coef, cov):
         sd = np.sqrt(np.clip(np.diag(cov), 0, None))

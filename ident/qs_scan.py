@@ -116,7 +116,7 @@ class _EColumns(Term):
         hit = self.memo.get(id(s))
         if hit is None or hit[0] is not s:
             pp, pm = power_split(s, t.load)
-            x = t.inner.columns(s) if isinstance(t, LoadDependent) else np.sign(s.dq)
+            x = t.inner.columns(s) if isinstance(t, LoadDependent) else s.direction
             hit = self.memo[id(s)] = (s, pp, pm, x)
         _, pp, pm, x = hit
         e = exp_velocity(s, t.q_s)

@@ -106,9 +106,16 @@ KUKA_MAP = "t=rec.time_cont,q=rec.act_pos_mot_deg,tau=rec.act_torque_abs_nm,q_re
 
 
 @pytest.mark.skipif(not KUKA_DATA.is_dir(), reason="../shared/data/kuka_kr300_weigand2021 absent")
-def test_kuka_a2_term_refused():
+def test_kuka_found_terms_refused():
+    """Real data: on KUKA recording C (A and B held out as validation) the per-joint
+    refinement finds terms on A4 that, refitted inside the n-dof model, raise the whole
+    robot's held-out error: every one is refused and the n-dof model stays the fit.
+
+    (Recording A gave such a case on A2 until the refinement read the fit's own decimated
+    Coulomb column on its rows, docs/robot-identification.md "The direction on the fit's
+    rows": it now finds no term there.)"""
     robot = load_robot(KUKA)
-    files = [KUKA_DATA / f"recorded_2020-10-21_FF_{x}_08ms.mat" for x in "ABC"]
+    files = [KUKA_DATA / f"recorded_2020-10-21_FF_{x}_08ms.mat" for x in "CAB"]
     out = fit_files(robot, files[:1], files[1:], model="usual",
                     mapping=parse_mapping(KUKA_MAP, robot=True), q_unit="deg")
     with warnings.catch_warnings(record=True) as caught:
@@ -119,8 +126,8 @@ def test_kuka_a2_term_refused():
     slow = [str(w.message) for w in caught if issubclass(w.category, SlowSamplingWarning)]
     assert not slow, slow
     found = [(j, st.term) for j, r in out["_refinements"].items() for st in r.steps]
-    assert [j for j, _ in found] == ["A2"], found
-    # refitted inside the n-dof model, the term raises the whole robot's held-out error
+    assert found and {j for j, _ in found} == {"A4"}, found
+    # refitted inside the n-dof model, the terms raise the whole robot's held-out error
     est, sig = out["_estimators"]["usual"], out["_identification"]
     val = out["_validation_all"]
     every = refit_robot(est, sig, [(sig.joints.index(j), t) for j, t in found],
@@ -128,15 +135,18 @@ def test_kuka_a2_term_refused():
                         validation=(val, est.predict(val), est.fitted_rows(val)))
     assert every.heldout["after"]["all"] > every.heldout["before"]["all"]
     fit = rec["refit"]
-    assert [(r["joint"], r["effect"]) for r in fit["refused"]] == [("A2", found[0][1].effect)]
+    assert sorted((r["joint"], r["effect"]) for r in fit["refused"]) == sorted(
+        (j, t.effect) for j, t in found)
     assert fit["extras"] == [] and fit["acceptance"]["all_refused"] is True
     h = fit["heldout_rel_error"]
     assert h["after"]["all"] <= h["before"]["all"]
+    # the first term dropped was dropped from the refit with every found term
     assert fit["refused"][0]["heldout_rel_error"]["with"]["all"] == pytest.approx(
         every.heldout["after"]["all"], rel=1e-9)
-    a2 = rec["joints"]["A2"]["heldout"]
-    print(f"\nA2's own refinement: held-out {a2['before']:.4%} -> {a2['after']:.4%}\n"
-          + fit["refused"][0]["reason"] + "\nthe refit with it, per joint: " + ", ".join(
+    a4 = rec["joints"]["A4"]["heldout"]
+    print(f"\nA4's own refinement: held-out {a4['before']:.4%} -> {a4['after']:.4%}\n"
+          + "\n".join(r["reason"] for r in fit["refused"]) + "\nthe refit with them, per "
+          "joint: " + ", ".join(
               f"{j} held-out {every.heldout['before'][j]:.4%} -> {every.heldout['after'][j]:.4%}"
               f" (validation {every.validation['before'][j]:.4%} -> "
               f"{every.validation['after'][j]:.4%})" for j in every.heldout["before"]))

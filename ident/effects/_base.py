@@ -136,7 +136,7 @@ def variable_values(variable: str, s: Signals, tau_out: Prediction | None = None
     if variable == "velocity":
         return s.dq
     if variable == "direction":
-        return _sign(s.dq)
+        return np.asarray(s.direction, dtype=float)
     if variable == "acceleration":
         return s.ddq
     if variable in ("load", "quadrant"):

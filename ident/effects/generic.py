@@ -15,7 +15,6 @@ from ._base import (
     Context,
     Effect,
     Prediction,
-    _sign,
     register,
     variable_values,
 )
@@ -84,7 +83,7 @@ class GenericBasis(Effect):
         x = np.clip(variable_values(self.variable, s, self.tau_out), self.lo, self.hi)
         H = np.maximum(x[:, None] - self.knots[None, :], 0.0)
         if self.signed:
-            H = H * _sign(s.dq)[:, None]
+            H = H * np.asarray(s.direction, dtype=float)[:, None]
         return H
 
     def describe(self) -> str:

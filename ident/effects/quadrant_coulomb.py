@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..signals import Signals
-from ._base import Candidate, Context, Effect, Prediction, _sign, model_quadrant, register
+from ._base import Candidate, Context, Effect, Prediction, model_quadrant, register
 
 
 class QuadrantCoulomb(Effect):
@@ -31,7 +31,7 @@ class QuadrantCoulomb(Effect):
         return (self._n("dF_Cq"),)
 
     def columns(self, s: Signals) -> np.ndarray:
-        return (0.5 * model_quadrant(s, self.tau_out) * _sign(s.dq))[:, None]
+        return (0.5 * model_quadrant(s, self.tau_out) * s.direction)[:, None]
 
     def describe(self) -> str:
         return "quadrant dry friction (c_m - c_g) sign(P) sign(dq) / 2"

@@ -8,7 +8,7 @@ import numpy as np
 from trajectories.friction import stribeck_exp
 
 from ..signals import Signals
-from ._base import Candidate, Context, Effect, _sign, register
+from ._base import Candidate, Context, Effect, register
 from ._scan import scan_log
 
 
@@ -38,7 +38,7 @@ class Stribeck(Effect):
         return (self._n("F_S"),)
 
     def columns(self, s: Signals) -> np.ndarray:
-        return (stribeck_exp(s.dq, self.q_s) * _sign(s.dq))[:, None]
+        return (stribeck_exp(s.dq, self.q_s) * s.direction)[:, None]
 
     def describe(self) -> str:
         return f"Stribeck F_S exp(-|dq|/{self.q_s:.4g}) sign(dq)"

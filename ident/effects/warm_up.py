@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..signals import Signals
-from ._base import Candidate, Context, Effect, Setting, _sign, register
+from ._base import Candidate, Context, Effect, Setting, register
 from ._scan import scan_log
 
 
@@ -38,7 +38,7 @@ class WarmUp(Effect):
         return (self._n("dF_C_warm"),)
 
     def columns(self, s: Signals) -> np.ndarray:
-        return (np.exp(-s.t / self.T_w) * _sign(s.dq))[:, None]
+        return (np.exp(-s.t / self.T_w) * s.direction)[:, None]
 
     def describe(self) -> str:
         return f"warm-up dF_C exp(-t/{self.T_w:.4g}) sign(dq)"
