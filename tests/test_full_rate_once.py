@@ -15,6 +15,8 @@ evaluated). The validation files' designs go through the robot chain too
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from example_campaign import simulate_example_campaign
@@ -162,6 +164,38 @@ def test_validation_designs_evaluate_once_per_run(campaign) -> None:
             a, b, c = getattr(d, what), getattr(ref, what), getattr(again[name], what)
             assert (a is None and b is None and c is None) or (
                 np.array_equal(a, b) and np.array_equal(a, c)), (name, what)
+
+
+@pytest.mark.slow
+def test_designs_for_is_the_validation_design_with_the_band(tmp_path) -> None:
+    """The friction-dominated joint (tests/test_friction_dominated.py: the sign check
+    skipped, the paper model's quadrant band), two runs fitted and the third as validation:
+    ``designs_for`` gives the validation designs, the band's rows left out too (before:
+    without the band, 9527 rows against 9055 at seed 1), and the validation run's regressor
+    is evaluated once."""
+    from test_friction_dominated import friction_dominated
+
+    from sim_drivers.offline import simulate
+
+    root = Path(__file__).resolve().parents[1]
+    txt = (root / "sim_drivers" / "data" / "plant_default.toml").read_text()
+    plant, plan, gains = friction_dominated(txt, tmp_path / "plant.toml", "fd")
+    exps = []
+    for i, p in enumerate(plan.payloads):
+        r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
+                     payload_arm=p.arm_m, seed=1 + i)
+        exps.append(make_experiment(f"p{i}.csv", r.t, r.q, r.tau_ref,
+                                    payload_mass=p.mass_kg, payload_arm=p.arm_m))
+    rep = fit_models(exps[:2], validation=exps[2:], table_iv=False)
+    assert rep.band_nm > 0 and any(n.startswith("sign check skipped") for n in rep.notes)
+    again = rep.designs_for(exps[2:])
+    assert len(again["paper"]) < len(again["usual"])  # the band's rows left out
+    for name, d in rep.validation_designs.items():
+        assert d.names == again[name].names
+        for what in ("Y", "W"):
+            assert np.array_equal(getattr(d, what), getattr(again[name], what)), (name, what)
+    kept = rep.validation_signals.columns.full_columns
+    assert kept.evaluations == {0: 1}
 
 
 def test_table_iv_problem_reuses_the_fits_runs(campaign) -> None:
