@@ -8,7 +8,11 @@ Counts, on the current code, the calls of the n-dof regressor (``RobotRegressor.
 those samples over the full-rate samples of the fit's runs (one pass: every run evaluated
 once at full rate; a call on decimated samples adds 1 / r). Three single-joint fits of the
 example campaign (``tests/example_campaign.py``, seed 11: LS; IDIM-IV with its references;
-LS with a q_s scan, whose fit is at another q_s than the design's) and robot fits
+LS with a q_s scan, whose fit is at another q_s than the design's), the validation file of a
+single-joint fit (two runs fitted, LS with a q_s scan, the third run as validation: the
+passes over the validation run's full-rate samples, the difference of the same fit with and
+without it, and the validation chain's own count, ``FitReport.validation_signals``) and
+robot fits
 (``ident.cli_robot.fit_robot``, columns chain, usual and paper models, on two simulated
 runs of ``examples/robots/arm3.toml``: LS with each ``payload`` -- known, ratio, mass -- and
 IDIM-IV with the payload known). Then the time of one LS ``fit_models`` and of the
@@ -78,6 +82,27 @@ def _full_samples(full) -> int:  # noqa: ANN001 - tuple of FullRate
     return sum(int(f.n) for f in full)
 
 
+def _validation(ls: list) -> None:
+    """The passes spent on a validation run: the same fit with and without it."""
+    fit, val = ls[:2], ls[2:]
+    fit_models(fit, q_s="scan")
+    alone = {k: v[:] for k, v in COUNTS.items()}
+    COUNTS.clear()
+    rep = fit_models(fit, validation=val, q_s="scan")
+    n = sum(len(e.t) - 2 * int(rep.settings["trim"]) for e in val)
+    tag = f"fit_models validation (q_s scan, fit at q_s {rep.q_s:.4g})"
+    for label in ("rigid_kpn", "payload_torque", "RigidBody.columns", "Payload.columns"):
+        calls, samples = COUNTS.get(label, [0, 0])
+        calls0, samples0 = alone.get(label, [0, 0])
+        print(f"{tag}: validation run: {label}: {calls - calls0} calls, "
+              f"{(samples - samples0) / n:.2f} passes")
+    sig = getattr(rep, "validation_signals", None)  # (older trees: none)
+    if sig is not None:
+        print(f"{tag}: validation chain's count per run: "
+              f"{sig.columns.full_columns.evaluations}")
+    COUNTS.clear()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=3)
@@ -100,6 +125,7 @@ def main() -> None:
         if rep.q_s != rep.qs_design:
             tag += f" (fit at q_s {rep.q_s:.4g}, design at {rep.qs_design:g})"
         _report(tag, _full_samples(rep.robot_signals["usual"].columns.full))
+    _validation(ls)
     for payload, method in (("known", "ls"), ("ratio", "ls"), ("mass", "ls"),
                             ("known", "iv")):
         rec = robot_fit(payload, method)

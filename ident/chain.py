@@ -30,7 +30,10 @@ Per experiment of k axes (k = 1 for a single joint), with one :class:`ChainSetti
    then at least its half-length (:func:`fir_antialias`);
 5. the selection, per axis: the stiction area |dq| < ``dq_min`` (plus what the builder
    rejects) evaluated at full rate, dilated by ``guard`` full-rate samples, with the first
-   and last ``guard`` samples (:func:`guarded_keep`).
+   and last ``guard`` samples (:func:`guarded_keep`); what a model rejects besides --
+   |tau| < ``tau_min``, the sign check sign(tau) != sign(tau_out_hat) and the quadrant band
+   -- is the one rule :func:`rejected`, for one joint (:mod:`ident.preprocess`) and for n
+   (:func:`ident.robot.design.sign_checked`).
 
 The settings are resolved once, by :func:`resolve_settings`, with the same rules for one
 joint and for n (cut-off: the largest :func:`choose_cutoff` over the axes of the first
@@ -80,6 +83,7 @@ __all__ = [
     "iv_floor",
     "keep_rows",
     "lowpass",
+    "rejected",
     "resolve_settings",
     "run_chain",
     "selection",
@@ -793,6 +797,44 @@ def keep_rows(bad: np.ndarray, guard: int, index: np.ndarray) -> np.ndarray:
     ``bad`` (n_f, k)."""
     return np.column_stack([guarded_keep(bad[:, j], guard, index)
                             for j in range(bad.shape[1])])
+
+
+def rejected(tau_f: np.ndarray, *, tau_min: float | None = None,
+             load: np.ndarray | None = None,
+             band: tuple[np.ndarray, float] | None = None) -> np.ndarray | None:
+    """Step 5's model criteria: the full-rate samples a model rejects besides the stiction
+    area (the ``bad`` of :func:`selection`), axis by axis, for one joint and for n.
+
+    Parameters
+    ----------
+    tau_f : ndarray, shape (n_f,) or (n_f, k)
+        The low-passed torque at full rate [N m] (``FullRate.tau_f``).
+    tau_min : float or None
+        Reject |tau_f| < ``tau_min`` [N m]: the sign of P = tau dq unreliable (eq. 26).
+    load : ndarray, shape of ``tau_f``, or None
+        tau_out_hat of a load model [N m]: reject sign(tau_f) != sign(tau_out_hat), the sign
+        check (the paper's stiction-area rectangle, Fig. 2.b, where eq. 26's proxy
+        sign(tau dq) is not sign(P_out)).
+    band : (ndarray, float) or None
+        (tau_out_hat of a load model [N m], shape of ``tau_f``; h [N m]): reject
+        |tau_out_hat| < h, the paper model's quadrant band.
+
+    Returns
+    -------
+    ndarray of bool, shape of ``tau_f``, or None
+        The rejected samples; None when no criterion is given.
+    """
+    if tau_min is None and load is None and band is None:
+        return None
+    tau_f = np.asarray(tau_f)
+    bad = np.zeros(tau_f.shape, dtype=bool)
+    if tau_min is not None:
+        bad |= np.abs(tau_f) < tau_min
+    if load is not None:
+        bad |= np.sign(tau_f) != np.sign(load)
+    if band is not None:
+        bad |= np.abs(band[0]) < band[1]
+    return bad
 
 
 def selection(dq: np.ndarray, dq_min: float | None, guard: int, index: np.ndarray,

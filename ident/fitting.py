@@ -20,7 +20,10 @@ elimination), held in an :class:`~ident.models.IdentModel` by the single-joint n
 Table III's bands, the plots, the refinement (:mod:`ident.refine`) and :func:`rescan_qs` read
 it) is built on the same chain's full-rate signals (:meth:`OneJointProblem.design`, the
 robot's load model: the same rows, checked), so the data are filtered once; validation
-files get theirs from :func:`ident.preprocess.build_design` with the settled settings.
+files (and :meth:`FitReport.designs_for`) get theirs the same way (:func:`_other_designs`: a
+problem on those files with the settled settings and the fit's first usual fit as load model,
+as Table IV's; the 1-dof regressor evaluated once per validation run; the same floats as
+:func:`ident.preprocess.build_design` with those settings).
 
 The q_s scan -- the grid, the bounded search, :func:`rescan_qs` and its fast designs, which
 must equal :func:`with_qs`'s -- is :mod:`ident.qs_scan`; its public names (``qs_grid``,
@@ -57,7 +60,7 @@ from .one_joint import (
     OneJointProblem,
     refit_found_terms,
 )
-from .preprocess import Design, build_design, check_reference
+from .preprocess import Design, check_reference
 from .qs_scan import (
     QS_SEARCH_EVALS,
     QS_WORKERS,
@@ -79,7 +82,7 @@ from .results import (
     removed_json,
 )
 from .robot.design import DQ_MIN_FRACTION
-from .robot.estimate import THIN_QUADRANT
+from .robot.estimate import THIN_QUADRANT, RobotModel
 from .robot.selection_shift import selection_shift, shift_note
 from .robot.signals import RobotSignals
 from .signals import Signals
@@ -247,18 +250,73 @@ def _combined_library(models: Sequence[str], qs0: float, revolute: bool,
     return Library(*terms)
 
 
-def _combined(
-    models: Sequence[str],
-    qs0: float,
+def _other_designs(
+    data: Sequence[Experiment] | Signals,
     sig: Signals,
-    payload: bool,
+    models: Sequence[str],
+    names: Sequence[str],
+    qs0: float,
+    q_s: float,
+    has_payload: bool,
     pre: dict[str, Any],
-    reference: np.ndarray | None = None,
-) -> Design:
-    """One design holding the columns of every requested model (built once) on other data
-    than the fit's (validation files), with the fit's settled preprocessing."""
-    lib = _combined_library(models, qs0, sig.revolute, payload)
-    return build_design(lib, sig, reference=reference, **pre)
+    first: RobotModel | None,
+    band_nm: float = 0.0,
+    fit_designs: dict[str, Design] | None = None,
+) -> tuple[dict[str, Design], RobotSignals]:
+    """The design of each model of ``names`` on other data than the fit's (validation
+    files), with the fit's settled preprocessing (``pre``: cut-off, decimation, thresholds,
+    torque delay, the sign check's ``load_model`` and ``quadrant_load``) and its load model
+    ``first`` (the first usual fit deciding the rows and quadrants, requadranted by
+    ``pre["quadrant_load"]`` as the fit was), built as the fit's designs are: the experiments
+    through the robot chain (:class:`~ident.one_joint.OneJointProblem` with the fit's
+    ``first``, as Table IV's problem), the design of every model in ``models`` on its
+    full-rate signals (:meth:`~ident.one_joint.OneJointProblem.design`), the paper model at
+    ``q_s`` from its products (:meth:`~ident.one_joint.OneJointProblem.paper_columns`) and
+    its quadrant band ``band_nm`` [N m] (0: none) left out: the 1-dof regressor is evaluated
+    once per run at full rate. A model's columns are in the order of its design in
+    ``fit_designs`` (the fit's), when given (the paper model's design after the quadrants were
+    decided again is its own library's, not the combined one's).
+
+    Returns
+    -------
+    designs : dict of str to Design
+    signals : RobotSignals
+        The chain's signals; ``columns.full_columns.evaluations`` counts the full-rate
+        evaluations of each run's regressor (its kept columns released).
+    """
+    exps, _ = _split(data, sig, None)
+    load_model = pre.get("load_model")
+    checked = load_model is not None and first is not None
+    settled = {k: pre[k] for k in ("cutoff_hz", "decimation", "dq_min", "trim", "guard")}
+    problem = OneJointProblem(
+        exps, revolute=sig.revolute, has_payload=has_payload, references=None,
+        paper="paper" in models, torque_delay=float(pre["torque_delay"]), **settled,
+        tau_min=pre.get("tau_min"), sign_check=False, first=first if checked else None,
+        first_checked=checked and pre.get("sign_check", True), model_quadrant=checked)
+    if pre.get("quadrant_load") is not None and problem.model_quadrant:
+        problem.requadrant(pre["quadrant_load"])  # the quadrants of the fit's final load
+
+    def design(lib: Library) -> Design:
+        return problem.design(lib, sig, tau_min=pre.get("tau_min"), load_model=load_model,
+                              sign_check=pre.get("sign_check", True))
+
+    full = design(_combined_library(models, qs0, sig.revolute, has_payload))
+    out = {}
+    for name in names:
+        d = _part(full, name, has_payload, q_s, qs0,
+                  lambda q: problem.paper_columns(q, load_model))[1]
+        if fit_designs is not None and name in fit_designs and (
+                fit_designs[name].names != d.names):  # the model's own library's order
+            own = design(_combined_library([name], qs0, sig.revolute, has_payload))
+            d = _part(own, name, has_payload, q_s, qs0,
+                      lambda q: problem.paper_columns(q, load_model))[1]
+        if name == "paper" and band_nm > 0 and load_model is not None:
+            d = d.select(dq_min=d.dq_min, tau_min=d.tau_min, quadrant_band=band_nm)
+        out[name] = d
+    sig_v = problem.signals  # its counts kept; its full-rate signals and columns released
+    if sig_v.columns.full_columns is not None:
+        sig_v.columns.full_columns.release()
+    return out, replace(sig_v, columns=replace(sig_v.columns, full=None))
 
 
 def _part(d: Design, name: str, payload: bool, q: float, qs0: float,
@@ -313,7 +371,8 @@ class FitReport:
         Whether the payload term was part of the models.
     settings : dict
         The preprocessing settled on the identification data (keyword arguments of
-        :func:`ident.preprocess.build_design`), reused for validation data.
+        :func:`ident.preprocess.build_design`, and ``quadrant_load`` when the quadrants were
+        decided again), reused for validation data.
     qs_design : float
         q_s the combined design was built with (the q_s-dependent columns are rebuilt
         when ``q_s`` differs).
@@ -328,6 +387,17 @@ class FitReport:
         the rows before the check - the reported one) / its reported std
         (:func:`ident.robot.selection_shift.selection_shift`, the JSON's
         ``models.paper.sign_check_shift``); None otherwise.
+    validation_signals : RobotSignals or None
+        The robot chain's signals of the validation files (``validation_designs`` are built
+        on them, :func:`_other_designs`): ``columns.full_columns.evaluations`` counts the
+        full-rate evaluations of each validation run's 1-dof regressor (1: once); not
+        serialised.
+    first_fit : RobotModel or None
+        The load model of the sign check and quadrants (the robot's first usual fit), which
+        :meth:`designs_for` applies to other data; None without one.
+    band_nm : float
+        The paper model's quadrant band [N m] (the sign check skipped,
+        :meth:`ident.one_joint.OneJointProblem.band`), 0 without one.
     """
 
     models: dict[str, IdentModel]
@@ -348,6 +418,9 @@ class FitReport:
                                                    compare=False)
     torque_delay_given: bool = False
     sign_check_shift: dict[str, float] | None = None
+    validation_signals: RobotSignals | None = field(default=None, repr=False, compare=False)
+    first_fit: RobotModel | None = field(default=None, repr=False, compare=False)
+    band_nm: float = 0.0
 
     def refit_found_terms(self, name: str, terms: Sequence[Term],
                           design: Design | None = None) -> dict[str, Any]:
@@ -390,7 +463,8 @@ class FitReport:
     def designs_for(self, data: Sequence[Experiment] | Signals) -> dict[str, Design]:
         """The system of other data (e.g. validation files) for every fitted model, with the
         preprocessing settled on the identification data (same cut-off, decimation,
-        thresholds and sign check), as ``validation_designs``.
+        thresholds, sign check, quadrants and quadrant band), as ``validation_designs``
+        (:func:`_other_designs`).
 
         Parameters
         ----------
@@ -398,11 +472,9 @@ class FitReport:
             Experiments to evaluate (their joint kind is taken as the fit's).
         """
         sig = _as_signals(data, self.revolute)
-        full = _combined(list(self.models), self.qs_design, sig, self.has_payload, self.settings)
-        return {
-            name: _part(full, name, self.has_payload, self.q_s, self.qs_design)[1]
-            for name in self.models
-        }
+        return _other_designs(data, sig, list(self.models), list(self.models),
+                              self.qs_design, self.q_s, self.has_payload, self.settings,
+                              self.first_fit, self.band_nm, self.designs)[0]
 
     def errors(self, name: str) -> dict[str, float | None]:
         """Table III entries of one model: ``all``, ``low``, ``high``, ``validation``."""
@@ -742,7 +814,7 @@ def fit_models(
     designs: dict[str, Design] = {}
     robot_signals: dict[str, RobotSignals] = {}
     vdesigns: dict[str, Design] = {}
-    vfull = _combined(models, qs0, sv, has_payload, pre) if sv is not None else None
+    vsignals = None
     failed: list[str] = []
     one_sign = None
     shift = None  # the paper model's sign-check shift (ident.robot.selection_shift)
@@ -781,9 +853,6 @@ def fit_models(
         _same_rows(name, m, d)
         fitted[name], designs[name] = m, d
         robot_signals[name] = problem.signals if name == "usual" else problem.products(qs_val)
-        if vfull is not None:
-            vd = part(vfull, name, has_payload, qs_val)[1]
-            vdesigns[name] = banded(vd) if name == "paper" else vd
         if m.cond_ > COND_WARN:
             notes.append(
                 f"{name} model: condition number {m.cond_:.3g} (scaled columns): the data "
@@ -842,9 +911,14 @@ def fit_models(
             notes.append(f"paper model: no quadrant band (it would keep only "
                          f"{100 * problem.band_kept:.0f} % of the rows: the load near zero "
                          "over much of the data)")
-        if quadrant_load is not None and vfull is not None:
-            vd = _combined(["paper"], qs0, sv, has_payload, pre)
-            vdesigns["paper"] = banded(part(vd, "paper", has_payload, qs_val)[1])
+    settings = {**pre, **({} if quadrant_load is None else {"quadrant_load": quadrant_load})}
+    band_nm = problem.band() if "paper" in fitted and "load_model" in pre else 0.0
+    if sv is not None:
+        # the validation files through the robot chain, with the fit's settled settings, its
+        # first fit's load and final quadrants: the regressor evaluated once per run
+        vdesigns, vsignals = _other_designs(validation, sv, models, list(fitted), qs0,
+                                            qs_val, has_payload, settings, problem.first,
+                                            band_nm, designs)
     if "paper" in designs and one_sign:
         notes.append(f"paper model: {one_sign}")
     t4 = None
@@ -897,9 +971,12 @@ def fit_models(
         validation_sources=vsources,
         notes=notes,
         has_payload=has_payload,
-        settings={**pre, **({} if quadrant_load is None else {"quadrant_load": quadrant_load})},
+        settings=settings,
         qs_design=qs0,
         robot_signals=robot_signals,
+        validation_signals=vsignals,
+        first_fit=problem.first if "load_model" in pre else None,
+        band_nm=band_nm,
         torque_delay_given=delay_given,
         sign_check_shift=shift,
     )

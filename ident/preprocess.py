@@ -10,7 +10,8 @@ its result in a :class:`Design`:
   filtered full-rate q, dq, ddq and the low-passed tau (for sign(P) = sign(tau dq), eq. 26);
 - the selection adds, to the chain's stiction area |dq| < ``dq_min``, the small torques
   |tau| < ``tau_min`` and, with a ``load_model``, the samples where sign(tau) is not the
-  load model's;
+  load model's (:func:`ident.chain.rejected`: the rule of the robot fit's sign check too,
+  :func:`ident.robot.design.sign_checked`);
 - the instruments Z of the IDIM-IV estimator (:func:`ident.estimate.fit_instrumental`) are
   the same columns with the measured acceleration replaced by the reference trajectory's
   (``reference``: the planned position, processed exactly as q), filtered, decimated and
@@ -53,6 +54,7 @@ from .chain import (
     filter_chain,
     guarded_keep,
     lowpass,
+    rejected,
     resolve_settings,
     selection,
     shift,
@@ -349,8 +351,10 @@ class Design:
         for b in self._blocks:
             tau_out = None if load_model is None else _load_torque(b.full, load_model)
             band = None if quadrant_band is None else (b.load, float(quadrant_band))
-            blocks.append(replace(b, mask=_selection(b.full, b.index, dq_min, tau_min,
-                                                     self.guard, tau_out, band)))
+            bad = rejected(b.full.tau, tau_min=tau_min, load=tau_out, band=band)
+            mask = selection(b.full.dq[:, None], dq_min, self.guard, b.index,
+                             None if bad is None else bad[:, None])[:, 0]
+            blocks.append(replace(b, mask=mask))
         Y, W, dsig, Z = _assemble(blocks, len(self.names), self.signals.revolute)
         return replace(
             self, Y=Y, W=W, Z=Z, signals=dsig, dq_min=dq_min, tau_min=tau_min, _blocks=blocks
@@ -365,40 +369,6 @@ def _instrument_rows(zcols: np.ndarray, wcols: np.ndarray, offset: int) -> list:
         for i, (z, w) in enumerate(zip(zcols, wcols, strict=True))
         if not np.array_equal(z, w)
     ]
-
-
-def _rejected(full: Signals, tau_min: float | None, tau_out: np.ndarray | None,
-              band: tuple[np.ndarray, float] | None = None) -> np.ndarray | None:
-    """Full-rate samples the single joint rejects besides the stiction area (n,) or None:
-    |tau| < ``tau_min``, sign(tau) != sign(tau_out_hat) (``tau_out``: the load model's
-    prediction [N m], see build_design) and, with ``band`` = (tau_out_hat of a load model,
-    h [N m]), |tau_out_hat| < h (:meth:`Design.select`)."""
-    if tau_min is None and tau_out is None and band is None:
-        return None
-    bad = np.zeros(len(full), dtype=bool)
-    if tau_min is not None:
-        bad |= np.abs(full.tau) < tau_min
-    if tau_out is not None:
-        bad |= np.sign(full.tau) != np.sign(tau_out)
-    if band is not None:
-        bad |= np.abs(band[0]) < band[1]
-    return bad
-
-
-def _selection(
-    full: Signals,
-    index: np.ndarray,
-    dq_min: float | None,
-    tau_min: float | None,
-    guard: int,
-    tau_out: np.ndarray | None,
-    band: tuple[np.ndarray, float] | None = None,
-) -> np.ndarray:
-    """Mask over the decimated samples ``index`` of one experiment (see build_design), the
-    chain's selection (:func:`ident.chain.selection`) on one axis."""
-    bad = _rejected(full, tau_min, tau_out, band)
-    return selection(full.dq[:, None], dq_min, guard, index,
-                     None if bad is None else bad[:, None])[:, 0]
 
 
 def _load_torque(full: Signals, load_model: tuple[Term, np.ndarray]) -> np.ndarray:
@@ -643,7 +613,7 @@ def design_on_full_rate(
             at += c.shape[0]
         made.append((sub, full, zfull, [j for j, _ in zrows], tau_out))
         rows = [cols, np.stack([r for _, r in zrows])] if zrows else [cols]
-        bad = _rejected(full, tau_min, tau_out if sign_check else None)
+        bad = rejected(full.tau, tau_min=tau_min, load=tau_out if sign_check else None)
         return rows, None if bad is None else bad[:, None]
 
     chained = chain_blocks(fulls, settings, dq_min, columns)

@@ -8,10 +8,14 @@ the products (:meth:`~ident.one_joint.OneJointProblem.paper_columns`) instead of
 the rigid body and payload terms again. Checked here: the count of full-rate evaluations
 per run (the cache's own counter), and that the fits and designs are the same floats as
 without the reuse (the cache bounded to 0 bytes: every evaluation made again; the terms
-evaluated).
+evaluated). The validation files' designs go through the robot chain too
+(``ident.fitting._other_designs``): once per validation run, the same floats as
+:func:`ident.preprocess.build_design`'s.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,7 +25,7 @@ from ident.fitting import _combined_library, _part, fit_models
 from ident.loaders import concat, make_experiment
 from ident.models import Payload, RigidBody, usual_model
 from ident.one_joint import OneJointProblem
-from ident.preprocess import TORQUE_DELAY
+from ident.preprocess import TORQUE_DELAY, build_design
 from ident.terms import Library, Term
 
 QS0, QS1 = 0.03, 0.05  # [rad/s]: the design's q_s and another
@@ -131,6 +135,67 @@ def test_fit_models_evaluates_once_and_releases(campaign) -> None:
     kept = rep.robot_signals["paper"].columns.full_columns
     assert kept.evaluations == dict.fromkeys(range(len(exps)), 1)
     assert kept.nbytes == 0 and kept.get(0) is None
+
+
+def test_validation_designs_evaluate_once_per_run(campaign) -> None:
+    """``fit_models`` with a validation file and a q_s scan (the paper design at another q_s
+    than the combined design's): the validation run's regressor is evaluated once at full
+    rate (before: three to four times -- the load model, the rigid body and payload terms,
+    the paper model's terms, again at the scan's q_s; ``benchmarks/full_rate_calls.py``),
+    released afterwards, and every validation design is the same floats as
+    :func:`~ident.preprocess.build_design`'s with the fit's settled settings (the terms
+    evaluated); :meth:`~ident.fitting.FitReport.designs_for` gives the same designs."""
+    exps, _ = campaign
+    val = exps[2:]
+    rep = fit_models(exps[:2], validation=val, q_s="scan")
+    assert rep.q_s != rep.qs_design and set(rep.validation_designs) == {"usual", "paper"}
+    kept = rep.validation_signals.columns.full_columns
+    assert kept.evaluations == dict.fromkeys(range(len(val)), 1)
+    assert kept.nbytes == 0 and kept.get(0) is None
+    assert rep.validation_signals.columns.full is None
+    pre = {k: v for k, v in rep.settings.items() if k != "quadrant_load"}
+    lib = _combined_library(list(rep.models), rep.qs_design, True, rep.has_payload)
+    terms = build_design(lib, concat(val), **pre)
+    again = rep.designs_for(val)
+    for name, d in rep.validation_designs.items():
+        ref = _part(terms, name, rep.has_payload, rep.q_s, rep.qs_design)[1]
+        assert d.names == ref.names == again[name].names
+        for what in ("Y", "W", "Z"):
+            a, b, c = getattr(d, what), getattr(ref, what), getattr(again[name], what)
+            assert (a is None and b is None and c is None) or (
+                np.array_equal(a, b) and np.array_equal(a, c)), (name, what)
+
+
+@pytest.mark.slow
+def test_designs_for_is_the_validation_design_with_the_band(tmp_path) -> None:
+    """The friction-dominated joint (tests/test_friction_dominated.py: the sign check
+    skipped, the paper model's quadrant band), two runs fitted and the third as validation:
+    ``designs_for`` gives the validation designs, the band's rows left out too (before:
+    without the band, 9527 rows against 9055 at seed 1), and the validation run's regressor
+    is evaluated once."""
+    from test_friction_dominated import friction_dominated
+
+    from sim_drivers.offline import simulate
+
+    root = Path(__file__).resolve().parents[1]
+    txt = (root / "sim_drivers" / "data" / "plant_default.toml").read_text()
+    plant, plan, gains = friction_dominated(txt, tmp_path / "plant.toml", "fd")
+    exps = []
+    for i, p in enumerate(plan.payloads):
+        r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
+                     payload_arm=p.arm_m, seed=1 + i)
+        exps.append(make_experiment(f"p{i}.csv", r.t, r.q, r.tau_ref,
+                                    payload_mass=p.mass_kg, payload_arm=p.arm_m))
+    rep = fit_models(exps[:2], validation=exps[2:], table_iv=False)
+    assert rep.band_nm > 0 and any(n.startswith("sign check skipped") for n in rep.notes)
+    again = rep.designs_for(exps[2:])
+    assert len(again["paper"]) < len(again["usual"])  # the band's rows left out
+    for name, d in rep.validation_designs.items():
+        assert d.names == again[name].names
+        for what in ("Y", "W"):
+            assert np.array_equal(getattr(d, what), getattr(again[name], what)), (name, what)
+    kept = rep.validation_signals.columns.full_columns
+    assert kept.evaluations == {0: 1}
 
 
 def test_table_iv_problem_reuses_the_fits_runs(campaign) -> None:

@@ -57,6 +57,7 @@ from ..chain import (
     decimate,
     decimation_index,
     filter_experiment,
+    rejected,
     resolve_settings,
     run_chain,
     selection,
@@ -381,7 +382,8 @@ def sign_checked(
     """Also leave out the rows where sign(tau_j) differs from sign(tau_out_hat_j), the
     paper's stiction-area rectangle (Fig. 2.b) where eq. 26's proxy sign(P) = sign(tau dq)
     is not sign(P_out): the single-joint ``load_model`` selection of
-    :func:`ident.preprocess.build_design`, per joint.
+    :func:`ident.preprocess.build_design`, per joint -- the one rule of both,
+    :func:`ident.chain.rejected`.
 
     Parameters
     ----------
@@ -422,7 +424,7 @@ def sign_checked(
         rows = np.flatnonzero(signals.experiment == i)
         keep[rows] = selection(f.dq, settings.dq_min, settings.guard,
                                decimation_index(f.n, settings.decimation),
-                               np.sign(f.tau_f) != np.sign(tau_out))
+                               rejected(f.tau_f, load=tau_out))
     before = cols.keep.sum(axis=0)
     kept = keep.sum(axis=0) / np.maximum(before, 1)
     skip = kept < np.broadcast_to(np.asarray(min_kept, dtype=float), kept.shape)
