@@ -45,8 +45,8 @@ evaluations, tests/test_full_rate_once.py). The paper model's design at another 
 design's (a scan's fit, :func:`ident.fitting._part`) takes its quadrant columns from the
 products at that q_s (:meth:`OneJointProblem.paper_columns`, appended by
 :meth:`ident.preprocess.Design.with_term` in the order the terms would have been: the rigid
-body and payload terms are not evaluated again); validation files are not the robot chain's
-(:func:`ident.preprocess.build_design`).
+body and payload terms are not evaluated again); validation files go through a problem of
+their own with the fit's settled settings (:func:`ident.fitting._other_designs`).
 ``tests/test_one_fit.py`` checks the fit gives the single-joint least squares' numbers on that
 design (to 1e-8) on the example campaign (LS and IDIM-IV with the half-cycle torque delay),
 the EMPS data and the demo's logs.
@@ -69,7 +69,7 @@ from trajectories.friction import DEFAULT_Q_S
 from trajectories.robot import RobotPayloadData, RobotRegressor, base_parameters, one_joint_robot
 
 from . import DataError
-from .chain import FullRate, decimation_index, selection
+from .chain import FullRate, decimation_index, rejected, selection
 from .estimate import DEFAULT_THRESHOLD_PCT, LSResult
 from .loaders import Experiment
 from .models import LoadDependent, QuadrantCoulomb, _signed_selection, new_model, usual_model
@@ -448,7 +448,7 @@ class OneJointProblem:
             rows = np.flatnonzero(sig.experiment == i)
             keep[rows] = selection(f.dq, st.dq_min, st.guard,
                                    decimation_index(f.n, st.decimation),
-                                   np.abs(f.tau_f) < tau_min)
+                                   rejected(f.tau_f, tau_min=tau_min))
         return keep
 
     def _run_loads(self, load_torque: Any, sig: RobotSignals | None = None) -> _RunLoads:
@@ -677,7 +677,7 @@ class OneJointProblem:
                 rows = np.flatnonzero(sig.experiment == i)
                 keep[rows] &= selection(f.dq, st.dq_min, st.guard,
                                         decimation_index(f.n, st.decimation),
-                                        np.abs(x[:, :1]) < self.band_nm)
+                                        rejected(f.tau_f, band=(x[:, :1], self.band_nm)))
             self.band_kept = float(keep.sum() / max(int(sig.columns.keep.sum()), 1))
             if self.band_kept >= SIGN_CHECK_MIN_KEPT:
                 self._band_keep = keep
