@@ -117,7 +117,8 @@ def test_cross_joint_sine_named_on_the_fit_rows(coupled_files):
     print(f"\nj1: {ref.rel_error_initial:.4%} -> {ref.rel_error_final:.4%}, exact column "
           f"{exact:.4%}, ratio {ratio:.3f}; held-out {ref.heldout_rel_error_initial:.4%} -> "
           f"{ref.heldout_rel_error_final:.4%}, floor {ref.noise_floor:.4%}; steps "
-          f"{[(s.named_effect, s.variables, s.generic) for s in ref.steps]}")
+          f"{[(s.named_effect, s.variables, s.generic) for s in ref.steps]}; first term "
+          f"{rec['joints']['j1']['refinement']['steps'][0].get('parameters')}")
     assert ratio <= WITHIN
     assert ref.rel_error_initial > 2 * exact  # the coupling was there to find
     j = rec["joints"]["j1"]

@@ -287,6 +287,13 @@ def test_cli_refine_refits_inside_the_ndof_model(tmp_path, capfd):
         rec["models"]["usual"]["parameters"])
     assert "j1:q3_c1" in names and fit["parameters"]["j1:q3_c1"]["std"] > 0
     assert "n-dof refit of the usual model" in text and "linear_q3_direction" in text
+    own = rec["refinement"]["joints"]["j1"]["fit"]
+    c1 = fit["parameters"]["j1:q3_c1"]
+    print(f"\nj1 {own['before']:.4%} -> {own['after']:.4%} (own refinement) -> "
+          f"{fit['rel_error']['after']['j1']:.4%} (n-dof refit), held-out "
+          f"{fit['heldout_rel_error']['before']['j1']:.4%} -> "
+          f"{fit['heldout_rel_error']['after']['j1']:.4%}; j1:q3_c1 {c1['value']:.4f} ± "
+          f"{2 * c1['std']:.4f} (2 sigma)")
 
 
 def test_heldout_is_leave_one_run_out_of_the_stacked_system():
