@@ -9,8 +9,10 @@ reason, when node/npm or the install is unavailable).
 
 from __future__ import annotations
 
+import fcntl
 import io
 import json
+import os
 import shutil
 import struct
 import subprocess
@@ -131,27 +133,37 @@ def _check_message_indexes(path: Path, summary) -> int:
 
 
 def _node_reader() -> Path | str:
-    """The node script with @mcap/core installed beside it, or why it is unavailable."""
+    """The node script with @mcap/core installed beside it, or why it is unavailable.
+
+    Two test sessions may start at once on a fresh machine (CI runs the suite beside another
+    copy): the check and the install run under an exclusive lock on the folder, so that one
+    session installs and the other waits and reuses it (a second ``npm install`` in the same
+    folder rewrites node_modules while the first session's node reads it)."""
     node, npm = shutil.which("node"), shutil.which("npm")
     if not node or not npm:
         return "node/npm not found: @mcap/core reader not run"
-    ok = all((NODE_DIR / "node_modules" / p.rsplit("@", 1)[0] / "package.json").is_file()
-             for p in NODE_PACKAGES)
-    if not ok:
-        NODE_DIR.mkdir(parents=True, exist_ok=True)
-        if not (NODE_DIR / "package.json").is_file():
-            (NODE_DIR / "package.json").write_text('{"name": "jointid-mcap-node", '
-                                                   '"private": true}\n')
-        try:
-            proc = subprocess.run([npm, "install", "--no-audit", "--no-fund", *NODE_PACKAGES],
-                                  cwd=NODE_DIR, capture_output=True, text=True, timeout=600)
-        except subprocess.TimeoutExpired:
-            return "npm install @mcap/core timed out"
-        if proc.returncode != 0:
-            return f"npm install @mcap/core failed: {proc.stderr.strip()[-300:]}"
-    script = NODE_DIR / "read_all.js"
-    if not script.is_file() or script.read_text() != NODE_READER:
-        script.write_text(NODE_READER)
+    NODE_DIR.mkdir(parents=True, exist_ok=True)
+    with open(NODE_DIR / ".install.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file is closed
+        ok = all((NODE_DIR / "node_modules" / p.rsplit("@", 1)[0] / "package.json").is_file()
+                 for p in NODE_PACKAGES)
+        if not ok:
+            if not (NODE_DIR / "package.json").is_file():
+                (NODE_DIR / "package.json").write_text('{"name": "jointid-mcap-node", '
+                                                       '"private": true}\n')
+            try:
+                proc = subprocess.run([npm, "install", "--no-audit", "--no-fund",
+                                       *NODE_PACKAGES], cwd=NODE_DIR, capture_output=True,
+                                      text=True, timeout=600)
+            except subprocess.TimeoutExpired:
+                return "npm install @mcap/core timed out"
+            if proc.returncode != 0:
+                return f"npm install @mcap/core failed: {proc.stderr.strip()[-300:]}"
+        script = NODE_DIR / "read_all.js"
+        if not script.is_file() or script.read_text() != NODE_READER:
+            tmp = script.with_suffix(f".{os.getpid()}.tmp")
+            tmp.write_text(NODE_READER)
+            tmp.replace(script)  # atomic: a reader never sees half a script
     return script
 
 
