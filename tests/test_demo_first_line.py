@@ -18,6 +18,14 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 HEAVY = ("scipy", "matplotlib", "pinocchio", "canopen", "mcap")
 
+def sigint_default() -> None:
+    """In the child before exec: SIGINT to its default, so that Python installs its
+    KeyboardInterrupt handler even where this suite runs with SIGINT ignored (a background
+    job of a non-interactive shell, ``nohup``: the child inherits SIG_IGN, jointid then
+    rightly leaves Ctrl-C ignored, and the signal this test sends does nothing)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 
 @pytest.mark.parametrize(("args", "first"), [
     (["--robot"], "      ... loading the robot demo's modules"),
@@ -28,7 +36,8 @@ def test_the_first_line_comes_before_the_heavy_imports(tmp_path, args, first):
         [sys.executable, "-X", "importtime", "-c",
          "import sys; from daq.app.cli import main; sys.exit(main())",
          "demo", *args, "--out", str(tmp_path / "demo")],
-        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        preexec_fn=sigint_default)
     lines: list[str] = []
     try:
         for line in proc.stderr:  # until the first heavy library finished importing

@@ -21,6 +21,14 @@ ROOT = Path(__file__).resolve().parents[1]
 pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(not Path("/proc/self/maps").exists(), reason="needs /proc")]
 
+def sigint_default() -> None:
+    """In the child before exec: SIGINT to its default, so that Python installs its
+    KeyboardInterrupt handler even where this suite runs with SIGINT ignored (a background
+    job of a non-interactive shell, ``nohup``: the child inherits SIG_IGN, jointid then
+    rightly leaves Ctrl-C ignored, and the signal this test sends does nothing)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 
 def _loading_scipy(pid: int) -> bool:
     try:
@@ -36,7 +44,8 @@ def _interrupted_start(tmp_path: Path) -> tuple[int, str, str]:
     env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1")
     proc = subprocess.Popen([*cmd, "plan", str(ROOT / "examples" / "campaign.toml")],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            cwd=tmp_path, env=env)
+                            cwd=tmp_path, env=env,
+                            preexec_fn=sigint_default)
     try:
         t_end = time.monotonic() + 60
         while not _loading_scipy(proc.pid) and proc.poll() is None:
