@@ -26,6 +26,11 @@ Per configuration it prints
 * per parameter: mean z^2 and the shares outside 2 and 3 sigma for eq. 15, the jackknife and
   the honest sigma of ``assess`` (max(eq. 15, jackknife), no pruning) and the robust one;
 * the filter factor 1 / (r var(decimate(white))) of the chain's decimation.
+
+``--ur10 N``: instead, the 2-sigma coverage of ``benchmarks/sigma_coverage.py`` (UR10, paper
+model, IDIM-WLS, friction-dominated wrists with drive noise in the motion: errors in
+variables; seeds 100 to 100 + N - 1) for eq. 15, the honest sigma of ``assess``, the robust
+covariance and max(robust, jackknife).
 """
 
 from __future__ import annotations
@@ -108,6 +113,34 @@ def filter_factor(r: int, n: int = 400_000) -> float:
     return 1.0 / (r * float(np.var(y[200:-200])))
 
 
+def ur10_coverage(n_seeds: int) -> None:
+    """The ``--ur10`` mode (module doc)."""
+    from sigma_cases import friction_mask, gauged_truth, wrist_arm, wrist_signals
+    params, reg, base = wrist_arm()
+    tags = ("eq. 15", "honest", "robust", "max(robust, jk)")
+    hits = {t: np.zeros(4) for t in tags}
+    for seed in range(100, 100 + n_seeds):
+        t0 = time.time()
+        sig = wrist_signals(params, reg, seed, 10.0)
+        m = RobotModel(reg, "paper", "wls", base=base).fit(sig)
+        u = assess(m, sig, n_blocks=10, iv=True, prune=False)
+        rob = np.sqrt(np.diag(robust_covariance(m, sig)))
+        err = np.abs(m.coef_ - gauged_truth(m, params))
+        mask = friction_mask(m)
+        wrist = mask & np.array([n[-1] in "456" for n in m.names_])
+        sds = {"eq. 15": u.std_analytic, "honest": u.std, "robust": rob,
+               "max(robust, jk)": np.fmax(rob, np.nan_to_num(u.std_jackknife))}
+        for t, sd in sds.items():
+            h = err <= 2 * sd
+            hits[t] += [h[mask].sum(), mask.sum(), h[wrist].sum(), wrist.sum()]
+        print(f"seed {seed}: {time.time() - t0:.1f} s, long-run factor per joint "
+              f"{np.round(long_run_factor(m, sig), 2)}", flush=True)
+    print(f"\nshare of 2-sigma intervals containing the truth, {n_seeds} seeds (friction "
+          f"parameters of the paper model; 95.4 % expected)")
+    for t, h in hits.items():
+        print(f"  {t:16s} all {h[0] / h[1]:6.1%}  wrists {h[2] / h[3]:6.1%}")
+
+
 def _key(chain: str, method: str) -> tuple[str, bool]:
     return chain, chain == "cols" and method == "iv"
 
@@ -117,7 +150,12 @@ def main(argv=None) -> None:
     ap.add_argument("--seeds", type=int, default=40)
     ap.add_argument("--only", default="", help='e.g. "cols ls,states iv"')
     ap.add_argument("--blocks", type=int, default=10, help="jackknife units (assess)")
+    ap.add_argument("--ur10", type=int, default=0, metavar="N",
+                    help="the UR10 coverage over N seeds instead (module doc)")
     a = ap.parse_args(argv)
+    if a.ur10:
+        ur10_coverage(a.ur10)
+        return
     warnings.simplefilter("ignore", UserWarning)  # the cut-off's lower bound, every seed
     configs = [c for c in CONFIGS if not a.only or f"{c[0]} {c[1]}" in a.only.split(",")]
     t0 = time.time()
