@@ -23,14 +23,16 @@ Per configuration it prints
 * tr(C^-1 S) / p, S the spread over seeds of the fit minus the noise-free fit (the noise's
   part, exact: the usual model is linear in the torque, the rows do not depend on it): the
   variance the covariance misses, 1 when calibrated;
-* per parameter: mean z^2 and the shares outside 2 and 3 sigma for eq. 15, the jackknife and
-  the honest sigma of ``assess`` (max(eq. 15, jackknife), no pruning) and the robust one;
+* per parameter: mean z^2 and the shares outside 2 and 3 sigma for eq. 15, the jackknife, the
+  robust one, the honest sigma of ``assess`` (max(robust, jackknife), raised to the IDIM-IV
+  difference where |z_iv| > 4; no pruning) and, for comparison, the honest sigma before
+  (max(eq. 15, jackknife) with the same raise: :func:`honest_before`);
 * the filter factor 1 / (r var(decimate(white))) of the chain's decimation.
 
 ``--ur10 N``: instead, the 2-sigma coverage of ``benchmarks/sigma_coverage.py`` (UR10, paper
 model, IDIM-WLS, friction-dominated wrists with drive noise in the motion: errors in
 variables; seeds 100 to 100 + N - 1) for eq. 15, the honest sigma of ``assess``, the robust
-covariance and max(robust, jackknife).
+covariance, and the honest sigma of ``assess`` before and after it took the robust one.
 """
 
 from __future__ import annotations
@@ -56,7 +58,12 @@ from ident.robot.estimate import RATIO, RobotModel  # noqa: E402
 from ident.robot.loaders import RawRobotRun, RobotPreprocessing, preprocess_runs  # noqa: E402
 from ident.robot.regressor import RobotRegressor  # noqa: E402
 from ident.robot.signals import RobotPayloadData  # noqa: E402
-from ident.robot.uncertainty import assess, long_run_factor, robust_covariance  # noqa: E402
+from ident.robot.uncertainty import (  # noqa: E402
+    Z_IV,
+    assess,
+    long_run_factor,
+    robust_covariance,
+)
 from sim_drivers.arm import ArmParams  # noqa: E402
 from trajectories.robot import load_robot  # noqa: E402
 
@@ -117,8 +124,9 @@ def ur10_coverage(n_seeds: int) -> None:
     """The ``--ur10`` mode (module doc)."""
     from sigma_cases import friction_mask, gauged_truth, wrist_arm, wrist_signals
     params, reg, base = wrist_arm()
-    tags = ("eq. 15", "honest", "robust", "max(robust, jk)")
+    tags = ("eq. 15", "honest before", "robust", "honest")
     hits = {t: np.zeros(4) for t in tags}
+    hits3 = {t: np.zeros(4) for t in tags}
     for seed in range(100, 100 + n_seeds):
         t0 = time.time()
         sig = wrist_signals(params, reg, seed, 10.0)
@@ -128,17 +136,34 @@ def ur10_coverage(n_seeds: int) -> None:
         err = np.abs(m.coef_ - gauged_truth(m, params))
         mask = friction_mask(m)
         wrist = mask & np.array([n[-1] in "456" for n in m.names_])
-        sds = {"eq. 15": u.std_analytic, "honest": u.std, "robust": rob,
-               "max(robust, jk)": np.fmax(rob, np.nan_to_num(u.std_jackknife))}
+        sds = {"eq. 15": u.std_analytic, "honest before": honest_before(m, u), "robust": rob,
+               "honest": u.std}
         for t, sd in sds.items():
             h = err <= 2 * sd
             hits[t] += [h[mask].sum(), mask.sum(), h[wrist].sum(), wrist.sum()]
+            h3 = err <= 3 * sd
+            hits3[t] += [h3[mask].sum(), mask.sum(), h3[wrist].sum(), wrist.sum()]
         print(f"seed {seed}: {time.time() - t0:.1f} s, long-run factor per joint "
               f"{np.round(long_run_factor(m, sig), 2)}", flush=True)
     print(f"\nshare of 2-sigma intervals containing the truth, {n_seeds} seeds (friction "
           f"parameters of the paper model; 95.4 % expected)")
     for t, h in hits.items():
         print(f"  {t:16s} all {h[0] / h[1]:6.1%}  wrists {h[2] / h[3]:6.1%}")
+    print("3-sigma intervals (99.7 % expected)")
+    for t, h in hits3.items():
+        print(f"  {t:16s} all {h[0] / h[1]:6.1%}  wrists {h[2] / h[3]:6.1%}")
+
+
+def honest_before(m: RobotModel, u) -> np.ndarray:
+    """The honest sigma as ``assess`` gave it before the robust eq. 15 (unpruned fit):
+    max(eq. 15, jackknife), raised to |chi - chi_iv| where |z_iv| > 4."""
+    std = np.fmax(u.std_analytic, u.std_jackknife)
+    if u.z_iv is None:
+        return std
+    d = m.coef_ - u.coef_iv
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = d / np.sqrt(u.std_iv ** 2 + std ** 2)
+    return np.where(np.abs(np.nan_to_num(z)) > Z_IV, np.fmax(std, np.abs(d)), std)
 
 
 def _key(chain: str, method: str) -> tuple[str, bool]:
@@ -174,7 +199,7 @@ def main(argv=None) -> None:
                 nb = m.n_base_ + 1
                 names = m.names_[:nb]
                 e0[c] = (m.coef_ - m.truth_vector(truth))[:nb]
-    rec = {c: {k: [] for k in ("e", "eq15", "het", "rob", "jack", "honest", "f")}
+    rec = {c: {k: [] for k in ("e", "eq15", "het", "rob", "jack", "honest", "old", "f")}
            for c in configs}
     for s in range(a.seeds):
         t1 = time.time()
@@ -191,6 +216,7 @@ def main(argv=None) -> None:
             u = assess(m, sig, n_blocks=a.blocks, prune=False)
             R["jack"].append(np.asarray(u.std_jackknife)[:nb])
             R["honest"].append(np.asarray(u.std)[:nb])
+            R["old"].append(honest_before(m, u)[:nb])
         print(f"seed {s}: {time.time() - t1:.1f} s", flush=True)
     q99 = scipy.stats.chi2.ppf(0.99, nb)
     print(f"\n{nb} parameters (base + ratio): chi-square mean {nb}, 99 % quantile {q99:.1f}; "
@@ -215,10 +241,9 @@ def main(argv=None) -> None:
             print(f"  {label:16s} Mahalanobis mean {d.mean():6.2f}, > q99 {int((d > q99).sum()):2d}"
                   f"/{len(d)}; noise's variance / covariance {lam:.3f}")
         sds = {"eq. 15": np.sqrt(np.array([np.diag(x) for x in C15])),
-               "jackknife": np.array(R["jack"]), "honest": np.array(R["honest"]),
+               "jackknife": np.array(R["jack"]),
                "robust": np.sqrt(np.array([np.diag(x) for x in R["rob"]])),
-               "max(robust, jk)": np.fmax(np.sqrt(np.array([np.diag(x) for x in R["rob"]])),
-                                          np.array(R["jack"]))}
+               "honest before": np.array(R["old"]), "honest": np.array(R["honest"])}
         for tag, sd in sds.items():
             Z = E / sd
             print(f"  {tag:16s} per parameter: mean z^2 {np.mean(Z ** 2):5.2f}, outside 2 sigma "

@@ -43,8 +43,10 @@ the torque noise, so a large |z_iv| says the fit is biased by errors in variable
 
 Honest sigma and the flag
 -------------------------
-``std = max(std_analytic, std_jackknife)`` per parameter, and ``|chi_fit - chi_iv|`` where
-|z_iv| > ``Z_IV`` (a bias of that size is then within one sigma). A joint is flagged
+``std = max(std_robust, std_jackknife)`` per parameter (``std_robust``: eq. 15 in its robust
+form, :func:`robust_covariance`; soft quadrants: eq. 15 itself, ``std_analytic``, the only
+sigma they have), and ``|chi_fit - chi_iv|`` where |z_iv| > ``Z_IV`` (a bias of that size is
+then within one sigma). ``RobotModel.std_`` and ``cov_`` stay eq. 15. A joint is flagged
 ``errors_in_variables`` when one of its parameters has a jackknife sigma above
 ``RATIO_FLAG`` times the analytic one, or |z_iv| > ``Z_IV``; the flag gives the numbers.
 
@@ -54,16 +56,20 @@ Robust eq. 15
 all joints (eq. 14 pools it; LS and IV then give the parameters the noisiest joint decides
 its share of the average) and white errors between rows (the decimation's anti-alias filter
 correlates them: :func:`long_run_factor`). On the simulated 3-dof arm it removes the 1.3-1.4x
-that eq. 15 misses (``benchmarks/robot_sigma_calibration.py``). Reported by the benchmark,
-not yet part of the honest sigma.
+that eq. 15 misses (``benchmarks/robot_sigma_calibration.py``). :func:`assess` takes its
+diagonal as the analytic side of the honest sigma, on the fit's moments (those of the
+jackknife's units summed) and with the long-run factors of the unpruned fit's residual (one
+pass predicting it; the pruning removes only parameters whose removal leaves the residual
+within its noise, so the pruned model reuses them).
 
 Pruning (eq. 14-16)
 -------------------
-Paper model: the prunable parameter with the largest relative sigma max(eq. 15, jackknife)
-above the threshold (:data:`ident.estimate.DEFAULT_THRESHOLD_PCT`) is removed -- held at 0, so
-the prediction does not use it -- and the model refitted on the same moments (the fit's
-quadrants and weights); repeated until every remaining one is below the threshold (the sigma
-of a refit: its analytic sigma times the first fit's ratio max(eq. 15, jackknife) / eq. 15),
+Paper model: the prunable parameter with the largest relative honest sigma
+max(robust eq. 15, jackknife) above the threshold
+(:data:`ident.estimate.DEFAULT_THRESHOLD_PCT`) is removed -- held at 0, so the prediction
+does not use it -- and the model refitted on the same moments (the fit's quadrants and
+weights); repeated until every remaining one is below the threshold (the sigma
+of a refit: its analytic sigma times the first fit's ratio max(robust, jackknife) / eq. 15),
 then the jackknife is re-run on the pruned model. A removal after which the joint's residual
 sum of squares exceeds the unpruned fit's by more than the chi-square(k) quantile at 99 %
 times the joint's residual variance (k parameters removed on that joint: :data:`PRUNE_ALPHA`)
@@ -125,6 +131,10 @@ class Uncertainty:
         The model's parameter names (``RobotModel.names_``).
     std_analytic, std_jackknife, std : ndarray (b,)
         Eq. 15, the jackknife spread (NaN when not run) and the honest sigma.
+    std_robust : ndarray (b,) or None
+        Eq. 15 in its robust form (:func:`robust_covariance`); None with soft quadrants.
+    long_run : dict or None
+        Per joint the residual's long-run factor it used (:func:`long_run_factor`).
     coef_iv, std_iv, z_iv : ndarray (b,) or None
         The IDIM-IV check (None when not made: no instruments, or the fit is IV).
     n_replicates, n_failed : int
@@ -160,13 +170,20 @@ class Uncertainty:
     unidentified: list[str] = field(default_factory=list)
     threshold_pct: float = DEFAULT_THRESHOLD_PCT
     iv_note: str = ""
+    std_robust: np.ndarray | None = None
+    long_run: dict[str, float] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The JSON block ``models.<m>.uncertainty`` of docs/robot-data.md (the per-parameter
         sigmas are in :func:`parameter_records`)."""
+        analytic = ("analytic eq. 15 (soft quadrants)" if self.std_robust is None else
+                    "max(robust eq. 15, block jackknife)" if self.n_replicates else
+                    "robust eq. 15")
         return {
-            "method": "max(analytic eq. 15, block jackknife)"
-                      + (", IDIM-IV check" if self.z_iv is not None else ""),
+            "method": analytic + (", IDIM-IV check" if self.z_iv is not None else ""),
+            "robust": None if self.std_robust is None else
+            "eq. 15 with each joint's residual variance times its residual long-run factor",
+            "long_run_factor": self.long_run,
             "n_replicates": int(self.n_replicates), "n_failed": int(self.n_failed),
             "units": self.units,
             "iv": None if self.z_iv is None else {
@@ -415,7 +432,7 @@ def assess(model: Any, signals: RobotSignals | Sequence[RobotSignals], *,
         The data of the fit.
     n_blocks : int
         Units of the jackknife wanted (module doc); 0: no jackknife (the honest sigma is the
-        analytic one and the IV check's), else at least 2.
+        robust eq. 15, raised by the IV check), else at least 2.
     iv : bool
         Make the IDIM-IV check when the data carry instruments.
     prune : bool
@@ -457,17 +474,22 @@ def assess(model: Any, signals: RobotSignals | Sequence[RobotSignals], *,
     ivm, note = _iv_check(model, signals) if iv else (
         None, "soft quadrants: analytic sigma only" if soft else "not asked")
     say("sigma: IDIM-IV check done")
-    std_a, std_b, std, z, failed = _honest(model, moms, ivm, _free(model), n_blocks, say)
+    robust = None if soft else _robust_sigma(model, signals, moms)
+    say("sigma: robust eq. 15 done")
+    std_a, std_b, std_r, std, z, failed = _honest(model, moms, ivm, _free(model), n_blocks,
+                                                  robust, say)
     pruned: list[str] = []
     if prune and model.model == "paper" and moms:
         # the spread decides (eq. 16 with the jackknife), not a bias the IV check suggests:
         # on a friction-dominated joint the IV estimate itself can be far off
-        inflate = np.fmax(std_a, np.nan_to_num(std_b)) / np.where(std_a > 0, std_a, 1.0)
+        inflate = (np.fmax(np.nan_to_num(std_r, nan=0.0) if std_r is not None else std_a,
+                           np.nan_to_num(std_b)) / np.where(std_a > 0, std_a, 1.0))
+        inflate = np.where(inflate > 0, inflate, 1.0)
         pruned = _prune(model, moms, _free(model), inflate, threshold_pct)
         if pruned:
             say(f"sigma: pruned {', '.join(pruned)}; jackknife of the pruned model")
-            std_a, std_b, std, z, failed = _honest(model, moms, ivm, _free(model, pruned),
-                                                   n_blocks, say)
+            std_a, std_b, std_r, std, z, failed = _honest(
+                model, moms, ivm, _free(model, pruned), n_blocks, robust, say)
     free = _free(model, pruned)
     rel = _rel(model.coef_, std)
     unid = [n for n, r, f in zip(model.names_, rel, free, strict=True)
@@ -478,22 +500,48 @@ def assess(model: Any, signals: RobotSignals | Sequence[RobotSignals], *,
                       n_replicates=len(units) if n_blocks else 0, n_failed=failed,
                       units=text if n_blocks else "",
                       flags=_flags(model, std_a, std_b, z), pruned=pruned, unidentified=unid,
-                      threshold_pct=float(threshold_pct), iv_note=note)
+                      threshold_pct=float(threshold_pct), iv_note=note, std_robust=std_r,
+                      long_run=None if robust is None else {
+                          j: float(f) for j, f in zip(model.joints_, robust[1], strict=True)})
     model.uncertainty_ = out
     model.std_honest_ = std
     model.pruned_ = list(pruned)
     return out
 
 
+def _robust_sigma(model: Any, signals: Any, moms: list[list[JointMoments]]
+                  ) -> tuple[list[JointMoments], np.ndarray]:
+    """The fit's moments (the units' summed, else one pass) and its residual's long-run factor
+    per joint: what :func:`_honest` needs for the robust eq. 15 at any estimate."""
+    if moms:
+        full = _sum(moms, np.ones(len(moms), dtype=int))
+    else:
+        powers = 1 if model.model == "usual" else 3
+        full = model._pass(signals, getattr(model, "quadrant_from_", None), powers)[0]
+    return full, long_run_factor(model, signals)
+
+
 def _honest(model: Any, moms: list[list[JointMoments]], ivm: Any, free: np.ndarray,
-            n_blocks: int, say: Callable[[str], None]) -> tuple:
-    """(analytic, jackknife, honest sigma, z_iv or None, replicates left out) at the model's
-    current estimate (module doc)."""
+            n_blocks: int, robust: tuple[list[JointMoments], np.ndarray] | None,
+            say: Callable[[str], None]) -> tuple:
+    """(analytic, jackknife, robust or None, honest sigma, z_iv or None, replicates left out)
+    at the model's current estimate (module doc); ``robust``: :func:`_robust_sigma`'s (None:
+    soft quadrants, the honest sigma's analytic side is eq. 15)."""
     std_a = model.std_.copy()
     std_b, failed = np.full(std_a.size, np.nan), 0
     if n_blocks:
         std_b, failed = _replicates(model, moms, free, say)
-    std = np.fmax(std_a, std_b)
+    std_r = None
+    side = std_a
+    if robust is not None:
+        try:
+            cov = _robust_cov(model, robust[0], robust[1], free)
+            std_r = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        except np.linalg.LinAlgError:
+            std_r = np.full(std_a.size, np.nan)
+        std_r = np.where(free, std_r, 0.0)
+        side = np.where(np.isfinite(std_r), std_r, std_a)  # (singular: eq. 15's)
+    std = np.fmax(side, std_b)
     z = None
     if ivm is not None:
         d = model.coef_ - ivm.coef_
@@ -501,7 +549,7 @@ def _honest(model: Any, moms: list[list[JointMoments]], ivm: Any, free: np.ndarr
             z = np.where(free, d / np.sqrt(ivm.std_**2 + std**2), np.nan)
         big = np.abs(np.nan_to_num(z)) > Z_IV
         std = np.where(big, np.fmax(std, np.abs(d)), std)
-    return std_a, std_b, np.where(free, std, 0.0), z, failed
+    return std_a, std_b, std_r, np.where(free, std, 0.0), z, failed
 
 
 #: significance level of the partial test that keeps a parameter whose removal raises its
@@ -642,7 +690,7 @@ def robust_covariance(model: Any, signals: RobotSignals | Sequence[RobotSignals]
     1.34, WLS 1.09; this covariance 0.96, 0.97, 0.95 (states chain, whose residual carries
     model error too: 0.88-0.92). The factor f_j scales the whole of B_j: exact when the
     noise's spectrum is flat where the regressor's columns are. Not used by :func:`assess`
-    (its honest sigma is unchanged).
+    (:func:`assess` takes its diagonal in the honest sigma; ``cov_`` stays eq. 15).
 
     Parameters
     ----------
@@ -667,11 +715,17 @@ def robust_covariance(model: Any, signals: RobotSignals | Sequence[RobotSignals]
                               "quadrants only)")
     powers = 1 if model.model == "usual" else 3
     moms = model._pass(signals, getattr(model, "quadrant_from_", None), powers)[0]
+    f = long_run_factor(model, signals, lags) if long_run else np.ones(len(moms))
+    return _robust_cov(model, moms, f, _free(model, getattr(model, "pruned_", ())))
+
+
+def _robust_cov(model: Any, moms: list[JointMoments], f: np.ndarray,
+                free: np.ndarray) -> np.ndarray:
+    """:func:`robust_covariance` on the fit's moments ``moms`` with the long-run factors
+    ``f`` and the free parameters ``free``."""
     coeffs = _coeffs(model)
-    free = _free(model, getattr(model, "pruned_", ()))
     w = getattr(model, "weights_", None)
     w = np.ones(len(moms)) if w is None else np.asarray(w, dtype=float)
-    f = long_run_factor(model, signals, lags) if long_run else np.ones(len(moms))
     x = model.coef_
     nx = x.size
     A = np.zeros((nx, nx))
@@ -692,15 +746,20 @@ def robust_covariance(model: Any, signals: RobotSignals | Sequence[RobotSignals]
 
 
 def parameter_records(model: Any) -> dict[str, dict[str, Any]]:
-    """``{name: {"value", "std", "rel_std_pct", "std_analytic", "std_jackknife", "pruned"}}``
-    of a fitted model: ``std`` the honest sigma when :func:`assess` ran (else eq. 15),
-    ``rel_std_pct`` 100 std / |value| (None when the value is 0)."""
+    """``{name: {"value", "std", "rel_std_pct", "std_analytic", "std_robust",
+    "std_jackknife", "pruned"}}`` of a fitted model: ``std`` the honest sigma when
+    :func:`assess` ran (else eq. 15), ``rel_std_pct`` 100 std / |value| (None when the value
+    is 0), ``std_robust`` the robust eq. 15 (None when not computed: soft quadrants, or no
+    assessment)."""
     u = getattr(model, "uncertainty_", None)
     std = model.std_ if u is None else u.std
     jack = np.full(std.size, np.nan) if u is None else u.std_jackknife
+    rob = (np.full(std.size, np.nan) if u is None or u.std_robust is None
+           else u.std_robust)
     pruned = set(getattr(model, "pruned_", ()))
     return {p: {"value": float(v), "std": float(s),
                 "rel_std_pct": float(100.0 * s / abs(v)) if v != 0 else None,
-                "std_analytic": float(sa), "std_jackknife": _num(sj), "pruned": p in pruned}
-            for p, v, s, sa, sj in zip(model.names_, model.coef_, std, model.std_, jack,
-                                       strict=True)}
+                "std_analytic": float(sa), "std_robust": _num(sr), "std_jackknife": _num(sj),
+                "pruned": p in pruned}
+            for p, v, s, sa, sr, sj in zip(model.names_, model.coef_, std, model.std_, rob,
+                                           jack, strict=True)}
