@@ -24,9 +24,11 @@ Per configuration it prints
   part, exact: the usual model is linear in the torque, the rows do not depend on it): the
   variance the covariance misses, 1 when calibrated;
 * per parameter: mean z^2 and the shares outside 2 and 3 sigma for eq. 15, the jackknife, the
-  robust one, the honest sigma of ``assess`` (max(robust, jackknife), raised to the IDIM-IV
-  difference where |z_iv| > 4; no pruning) and, for comparison, the honest sigma before
-  (max(eq. 15, jackknife) with the same raise: :func:`honest_before`);
+  robust one (``robust_covariance()``, its long-run factors as measured), the honest sigma of
+  ``assess`` (max(robust, jackknife) with the long-run factors at least
+  ``LONG_RUN_FLOOR`` = 1, raised to the IDIM-IV difference where |z_iv| > 4; no pruning)
+  and, for comparison, the honest sigma before (max(eq. 15, jackknife) with the same raise:
+  :func:`honest_before`);
 * the filter factor 1 / (r var(decimate(white))) of the chain's decimation.
 
 ``--ur10 N``: instead, the 2-sigma coverage of ``benchmarks/sigma_coverage.py`` (UR10, paper
