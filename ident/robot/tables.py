@@ -145,9 +145,9 @@ def format_uncertainty(block: Mapping[str, Any] | None) -> list[str]:
         f"no IDIM-IV check ({block['iv_note']})")
     lines = [f"std: honest sigma = {block['method']} ({reps}; {iv}); 'std eq15': eq. 15 alone"]
     if block.get("long_run_factor"):  # (records before the robust eq. 15 have no such key)
-        lines.append("robust eq. 15 (JSON std_robust): " + block["robust"] + " ("
-                     + ", ".join(f"{j} {f:.3g}" for j, f in block["long_run_factor"].items())
-                     + ")")
+        lines.append("robust eq. 15 (JSON std_robust): " + block["robust"] + "; measured "
+                     "long-run factors: "
+                     + ", ".join(f"{j} {f:.3g}" for j, f in block["long_run_factor"].items()))
     if block["pruned"]:
         lines.append(f"pruned (relative std above {block['threshold_pct']:g} %, eq. 14-16; "
                      f"held at 0, the model refitted without them, not used to predict): "
