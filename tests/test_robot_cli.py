@@ -214,10 +214,13 @@ def test_cli_fits_a_simulated_arm_like_the_python_api(tmp_path, arm_runs, capfd,
     assert list(usual["parameters"]) == list(est.names_)
     np.testing.assert_allclose([v["value"] for v in usual["parameters"].values()], est.coef_,
                                rtol=1e-9, atol=1e-12)
-    # eq. 15 beside the honest sigma (ident.robot.uncertainty), which is never below it
+    # eq. 15 beside the honest sigma (ident.robot.uncertainty), which is never below the
+    # robust eq. 15 nor the jackknife (it may be below eq. 15 on a joint quieter than the
+    # pooled residual variance says)
     np.testing.assert_allclose([v["std_analytic"] for v in usual["parameters"].values()],
                                est.std_, rtol=1e-9, atol=1e-12)
-    assert all(v["std"] >= v["std_analytic"] for v in usual["parameters"].values())
+    assert all(v["std"] >= max(v["std_robust"], v["std_jackknife"])
+               for v in usual["parameters"].values())
     assert set(rec["table_iii"]["validation"]) == set(robot.moving)
     assert rec["table_iii"]["fit"]["j2"]["usual"]["all"] == pytest.approx(
         usual["rel_error"]["j2"], rel=1e-9)

@@ -133,8 +133,9 @@ def format_table_iii(table: Mapping[str, Mapping[str, Mapping[str, float]]],
 
 def format_uncertainty(block: Mapping[str, Any] | None) -> list[str]:
     """Lines for a model record's ``uncertainty`` block (:meth:`Uncertainty.to_json
-    <ident.robot.uncertainty.Uncertainty.to_json>`): the method, the pruned parameters and,
-    per flagged joint, the errors-in-variables reason with its numbers."""
+    <ident.robot.uncertainty.Uncertainty.to_json>`): the method, the robust eq. 15 and its
+    long-run factors, the pruned parameters and, per flagged joint, the errors-in-variables
+    reason with its numbers."""
     if not block:
         return []
     reps = (f"{block['n_replicates']} jackknife replicates over {block['units']}"
@@ -143,6 +144,10 @@ def format_uncertainty(block: Mapping[str, Any] | None) -> list[str]:
     iv = "IDIM-IV check made" if block["iv"] is not None else (
         f"no IDIM-IV check ({block['iv_note']})")
     lines = [f"std: honest sigma = {block['method']} ({reps}; {iv}); 'std eq15': eq. 15 alone"]
+    if block.get("long_run_factor"):  # (records before the robust eq. 15 have no such key)
+        lines.append("robust eq. 15 (JSON std_robust): " + block["robust"] + "; measured "
+                     "long-run factors: "
+                     + ", ".join(f"{j} {f:.3g}" for j, f in block["long_run_factor"].items()))
     if block["pruned"]:
         lines.append(f"pruned (relative std above {block['threshold_pct']:g} %, eq. 14-16; "
                      f"held at 0, the model refitted without them, not used to predict): "
