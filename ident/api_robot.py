@@ -94,8 +94,8 @@ class RobotFit(HyperParameters):
     consistent : bool
         ``--consistent``: the physically consistent estimate of every model in the record.
     sigma_blocks : int
-        ``--sigma-blocks``: jackknife units of the honest σ (0: eq. 15 only, no IV check;
-        :mod:`ident.robot.uncertainty`).
+        ``--sigma-blocks``: jackknife units of the honest σ (0: the robust eq. 15 alone, no
+        IV check; :mod:`ident.robot.uncertainty`).
     prune : bool
         Prune the paper model's friction parameters above the relative-σ threshold (False:
         ``--no-prune``).
@@ -118,7 +118,8 @@ class RobotFit(HyperParameters):
         The fitted estimators by model name ("usual", "paper").
     params_, params_std_ : dict[str, dict[str, float]]
         Per model, the parameters and their standard deviations by name: the record's
-        ``std``, the honest one (max of eq. 15 and the jackknife, raised to the IDIM-IV
+        ``std``, the honest one (max of the robust eq. 15 -- per-joint residual variances and
+        long-run factors, ``std_robust`` -- and the jackknife, raised to the IDIM-IV
         difference; ``record_["models"][m]["parameters"][p]["std_analytic"]`` is eq. 15).
     coef_, std_ : dict[str, ndarray]
         Per model, the same as arrays aligned with ``coef_names_[model]``.

@@ -110,8 +110,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         type=int,
         metavar="N",
         help="--robot only: units of the jackknife behind the honest standard deviations "
-        "(experiments, or contiguous blocks of them; default 10) and the IDIM-IV check; 0: eq. 15 "
-        "alone (faster)",
+        "(experiments, or contiguous blocks of them; default 10) and the IDIM-IV check; 0: "
+        "the robust eq. 15 alone (faster)",
     )
     p.add_argument(
         "--no-prune",
