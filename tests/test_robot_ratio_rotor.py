@@ -41,10 +41,27 @@ SCALE = 0.8  # declared payload = SCALE x the true one: true ratio 1 / SCALE
 
 @pytest.fixture(scope="module")
 def arm3_ratio():
+    return simulate_arm3_ratio()
+
+
+def simulate_arm3_ratio():
+    """The 3-dof arm with the usual friction, 12 s, excitation seed 3 (also
+    tests/test_robot_sigma_calibration.py's data)."""
     robot = load_robot(ROOT / "examples" / "robots" / "arm3.toml")
     c = ArmParams.from_robot(robot).friction.c_m
     friction = dict(a_m=1.0, b_m=0.0, a_g=1.0, b_g=0.0, d_m=0.0, d_g=0.0, c_g=c)
     return _simulate("arm3", friction, duration_s=12.0, seed=3)
+
+
+def known_rotors(params, reg):
+    """The regressor with the robot file's rotor inertias known, its base and the truth (the
+    usual friction's F_C = c_m, the payload ratio 1 / SCALE)."""
+    known = RobotRegressor(reg.robot, known_rotor_inertia=True)
+    truth = params.truth(None)
+    for j in reg.numbers:
+        truth[f"FC{j}"] = truth[f"c_m{j}"]
+    truth[RATIO] = 1.0 / SCALE
+    return known, base_parameters(known), truth
 
 
 def _raw(params, runs, seed: int) -> list[RawRobotRun]:
@@ -78,13 +95,8 @@ def test_ratio_with_known_rotors_on_both_chains(arm3_ratio):
     decimated states) agree on the rigid-body parameters and the ratio within their
     combined sigma (family-wise bound)."""
     params, reg, _, runs = arm3_ratio
-    known = RobotRegressor(reg.robot, known_rotor_inertia=True)
+    known, kbase, truth = known_rotors(params, reg)
     assert np.all(known.known_Ia > 0)
-    kbase = base_parameters(known)
-    truth = params.truth(None)
-    for j in reg.numbers:
-        truth[f"FC{j}"] = truth[f"c_m{j}"]
-    truth[RATIO] = 1.0 / SCALE
     seeds = (0, 1)
     cols, states = [], []
     for s in seeds:
@@ -126,12 +138,7 @@ def test_iv_ratio_with_known_rotors_on_both_chains(arm3_ratio):
     (measured at most 0.075 sigma on these seeds, 0.19 over seeds 0-9) and no sigma by more
     than 1 % (measured 0.3 %): the rotors' torque in the instrument does not matter."""
     params, reg, base, runs = arm3_ratio
-    known = RobotRegressor(reg.robot, known_rotor_inertia=True)
-    kbase = base_parameters(known)
-    truth = params.truth(None)
-    for j in reg.numbers:
-        truth[f"FC{j}"] = truth[f"c_m{j}"]
-    truth[RATIO] = 1.0 / SCALE
+    known, kbase, truth = known_rotors(params, reg)
     seeds = (0, 1)
     cols, states, payload_only = [], [], []
     for s in seeds:

@@ -23,38 +23,20 @@ import warnings
 import numpy as np
 import pytest
 import scipy.stats
-from test_robot_fit import _simulate
-from test_robot_ratio_rotor import ROOT, SCALE, _design
+from test_robot_ratio_rotor import _design, known_rotors, simulate_arm3_ratio
 
 from ident.robot import RobotIdentError
-from ident.robot.base import base_parameters
-from ident.robot.estimate import RATIO, RobotModel
-from ident.robot.regressor import RobotRegressor
+from ident.robot.estimate import RobotModel
 from ident.robot.uncertainty import assess, long_run_factor, robust_covariance
-from sim_drivers.arm import ArmParams
-from trajectories.robot import load_robot
 
 SEEDS = range(40)  # 20 are not enough: eq. 15 passes on seeds 0-19 (sums 380, 379)
 
 
 @pytest.fixture(scope="module")
-def arm3_known(arm3_ratio):
-    params, reg, _, runs = arm3_ratio
-    known = RobotRegressor(reg.robot, known_rotor_inertia=True)
-    truth = params.truth(None)
-    for j in reg.numbers:
-        truth[f"FC{j}"] = truth[f"c_m{j}"]
-    truth[RATIO] = 1.0 / SCALE
-    return params, runs, known, base_parameters(known), truth
-
-
-@pytest.fixture(scope="module")
-def arm3_ratio():
-    """tests/test_robot_ratio_rotor.py's simulation (usual friction, 12 s)."""
-    robot = load_robot(ROOT / "examples" / "robots" / "arm3.toml")
-    c = ArmParams.from_robot(robot).friction.c_m
-    friction = dict(a_m=1.0, b_m=0.0, a_g=1.0, b_g=0.0, d_m=0.0, d_g=0.0, c_g=c)
-    return _simulate("arm3", friction, duration_s=12.0, seed=3)
+def arm3_known():
+    params, reg, _, runs = simulate_arm3_ratio()
+    known, base, truth = known_rotors(params, reg)
+    return params, runs, known, base, truth
 
 
 @pytest.mark.parametrize("method", ["ls", pytest.param("iv", marks=pytest.mark.slow)])
