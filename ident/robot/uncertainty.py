@@ -700,8 +700,9 @@ def robust_covariance(model: Any, signals: RobotSignals | Sequence[RobotSignals]
     seeds against the covariance, tr(C^-1 S) / p on the columns chain: eq. 15 LS 1.39, IV
     1.34, WLS 1.09; this covariance 0.96, 0.97, 0.95 (states chain, whose residual carries
     model error too: 0.88-0.92). The factor f_j scales the whole of B_j: exact when the
-    noise's spectrum is flat where the regressor's columns are. Not used by :func:`assess`
-    (:func:`assess` takes its diagonal in the honest sigma; ``cov_`` stays eq. 15).
+    noise's spectrum is flat where the regressor's columns are. :func:`assess` takes its
+    diagonal, with the factors taken at least :data:`LONG_RUN_FLOOR`, into the honest sigma;
+    ``cov_`` stays eq. 15.
 
     Parameters
     ----------
