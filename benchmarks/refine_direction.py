@@ -27,20 +27,16 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
 from robot_campaigns import ARM3_CENTRE, ARM3_PAYLOADS  # noqa: E402
+from test_robot_states_chain import noisy_chains  # noqa: E402
 
-from ident.preprocess import TORQUE_DELAY  # noqa: E402
 from ident.robot.base import base_parameters  # noqa: E402
-from ident.robot.design import design_runs, resolve_design  # noqa: E402
 from ident.robot.estimate import RobotModel  # noqa: E402
-from ident.robot.loaders import RawRobotRun, RobotPreprocessing, preprocess_runs  # noqa: E402
 from ident.robot.refine_joint import joint_coulomb, refine_joint  # noqa: E402
 from ident.robot.refit import refit_robot  # noqa: E402
 from ident.robot.regressor import RobotRegressor  # noqa: E402
-from ident.robot.signals import RobotPayloadData  # noqa: E402
 from sim_drivers.arm import ArmGains, ArmParams, model_reference, simulate_arm  # noqa: E402
 from trajectories.robot import load_robot  # noqa: E402
 
-NOISE = 0.01  # [-] torque noise, as a fraction of the drive's default noise scale
 DURATION_S = 12.0  # [s]
 EXCITATION_SEED = 3
 
@@ -61,19 +57,8 @@ def main(seeds: list[int]) -> None:
     print(f"true c {np.round(c, 4)}, d {np.round(params.friction.d_m, 4)}, "
           f"q_s {float(params.friction.q_s[0])} rad/s")
     for seed in seeds:
-        rng = np.random.default_rng(seed)
-        noise = NOISE * params.drive.torque_noise_std_Nm / 0.01
-        raw = []
-        for r, p in zip(runs, ARM3_PAYLOADS, strict=True):
-            pay = RobotPayloadData() if p is None else RobotPayloadData(p.mass, p.com,
-                                                                       p.inertia)
-            tau = r.tau_applied + rng.standard_normal(r.tau_applied.shape) * noise
-            raw.append(RawRobotRun(f"payload {r.payload_mass_kg} kg", r.t, r.q_true, tau,
-                                   q_ref=r.q_ref, payload=pay))
-        settings = resolve_design(raw, torque_delay=TORQUE_DELAY)
-        chains = {"columns": design_runs(raw, reg, settings)[0],
-                  "states": preprocess_runs(raw, reg.joints,
-                                            RobotPreprocessing(torque_delay=TORQUE_DELAY))}
+        columns, states = noisy_chains(params, reg, runs, seed)
+        chains = {"columns": columns, "states": states}
         for name, sig in chains.items():
             fit = RobotModel(reg, "usual", "ls", base=base).fit(sig)
             keep, pred = fit.fitted_rows(sig), fit.predict(sig)

@@ -23,7 +23,7 @@ from ident.preprocess import TORQUE_DELAY
 from ident.robot.design import design_runs, resolve_design
 from ident.robot.estimate import RobotModel
 from ident.robot.loaders import RawRobotRun, RobotPreprocessing, preprocess_runs
-from ident.robot.signals import RobotPayloadData
+from ident.robot.signals import RobotPayloadData, RobotSignals
 from sim_drivers.arm import ArmParams
 from trajectories.robot import load_robot
 
@@ -41,25 +41,27 @@ def arm3_chains():
     truth = params.truth(None)
     for j in reg.numbers:
         truth[f"FC{j}"] = truth[f"c_m{j}"]
-    out = []
-    for seed in SEEDS:
-        rng = np.random.default_rng(seed)
-        noise = NOISE * params.drive.torque_noise_std_Nm / 0.01  # 1 % of the load
-        raw = []
-        for r, p in zip(runs, PAYLOADS, strict=True):
-            pay = RobotPayloadData() if p is None else RobotPayloadData(p.mass, p.com,
-                                                                        p.inertia)
-            tau = r.tau_applied + rng.standard_normal(r.tau_applied.shape) * noise
-            raw.append(RawRobotRun(f"payload {r.payload_mass_kg} kg", r.t, r.q_true, tau,
-                                   q_ref=r.q_ref, payload=pay))
-        with warnings.catch_warnings():  # (the cut-off at its lower bound: the arm's motion)
-            warnings.simplefilter("ignore", UserWarning)
-            settings = resolve_design(raw, torque_delay=TORQUE_DELAY)
-            columns = design_runs(raw, reg, settings)[0]
-            states = preprocess_runs(raw, reg.joints,
-                                     RobotPreprocessing(torque_delay=TORQUE_DELAY))
-        out.append((columns, states))
-    return reg, base, truth, out
+    return reg, base, truth, [noisy_chains(params, reg, runs, seed) for seed in SEEDS]
+
+
+def noisy_chains(params, reg, runs, seed: int) -> tuple[RobotSignals, RobotSignals]:
+    """The runs' true positions and applied torque plus 1 % noise (noise seed ``seed``),
+    payloads known, through the columns chain and the states chain (also
+    benchmarks/refine_direction.py's data)."""
+    rng = np.random.default_rng(seed)
+    noise = NOISE * params.drive.torque_noise_std_Nm / 0.01  # 1 % of the load
+    raw = []
+    for r, p in zip(runs, PAYLOADS, strict=True):
+        pay = RobotPayloadData() if p is None else RobotPayloadData(p.mass, p.com, p.inertia)
+        tau = r.tau_applied + rng.standard_normal(r.tau_applied.shape) * noise
+        raw.append(RawRobotRun(f"payload {r.payload_mass_kg} kg", r.t, r.q_true, tau,
+                               q_ref=r.q_ref, payload=pay))
+    with warnings.catch_warnings():  # (the cut-off at its lower bound: the arm's motion)
+        warnings.simplefilter("ignore", UserWarning)
+        settings = resolve_design(raw, torque_delay=TORQUE_DELAY)
+        columns = design_runs(raw, reg, settings)[0]
+        states = preprocess_runs(raw, reg.joints, RobotPreprocessing(torque_delay=TORQUE_DELAY))
+    return columns, states
 
 
 def _fit(reg, base, sig) -> RobotModel:
