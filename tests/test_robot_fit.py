@@ -57,6 +57,23 @@ PAYLOADS = (None, Payload(5.0, [0.0, 0.0, 0.05]),
 CENTRES = {"arm3": [0.0, -1.9, 0.6], "ur10": [0.0, -1.9, 0.6, -1.0, 0.5, 0.0]}
 NOISE = 0.01  # measurement noise, fraction of each joint's load
 
+def noisy_raw_runs(params, runs, seed: int, payload_scale: float = 1.0) -> list[RawRobotRun]:
+    """The simulated runs as a user's logs: the true positions and the applied torque plus
+    NOISE (1 %) of each joint's load (noise seed ``seed``), each payload of PAYLOADS declared
+    at ``payload_scale`` times its true mass and inertia (same centre of mass)."""
+    rng = np.random.default_rng(seed)
+    noise = NOISE * params.drive.torque_noise_std_Nm / 0.01
+    raw = []
+    for r, p in zip(runs, PAYLOADS, strict=True):
+        pay = RobotPayloadData() if p is None else RobotPayloadData(
+            payload_scale * p.mass, p.com,
+            None if p.inertia is None else payload_scale * np.asarray(p.inertia))
+        tau = r.tau_applied + rng.standard_normal(r.tau_applied.shape) * noise
+        raw.append(RawRobotRun(f"payload {r.payload_mass_kg} kg", r.t, r.q_true, tau,
+                               q_ref=r.q_ref, payload=pay))
+    return raw
+
+
 
 def _simulate(name: str, friction=None, duration_s: float = 20.0, seed: int = 1):
     robot = load_robot(ROOT / "examples" / "robots" / f"{name}.toml")
@@ -667,14 +684,7 @@ def test_known_rotor_inertia_on_the_columns_chain(arm3_usual, method):
         truth[f"FC{j}"] = truth[f"c_m{j}"]
 
     def design(regressor, seed):
-        rng = np.random.default_rng(seed)
-        noise = NOISE * params.drive.torque_noise_std_Nm / 0.01
-        raw = []
-        for r, p in zip(runs, PAYLOADS, strict=True):
-            pay = RobotPayloadData() if p is None else RobotPayloadData(p.mass, p.com, p.inertia)
-            tau = r.tau_applied + rng.standard_normal(r.tau_applied.shape) * noise
-            raw.append(RawRobotRun(f"payload {r.payload_mass_kg} kg", r.t, r.q_true, tau,
-                                   q_ref=r.q_ref, payload=pay))
+        raw = noisy_raw_runs(params, runs, seed)
         # the torque of sample k is held over the cycle that follows it (the simulator)
         settings = resolve_design(raw, torque_delay=TORQUE_DELAY)
         return design_runs(raw, regressor, settings, instruments=method == "iv")[0]

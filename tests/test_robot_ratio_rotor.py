@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.stats
-from test_robot_fit import NOISE, PAYLOADS, _check_recovery, _simulate, _z
+from test_robot_fit import _check_recovery, _simulate, _z, noisy_raw_runs
 
 from ident.preprocess import TORQUE_DELAY
 from ident.robot.base import base_parameters
@@ -31,7 +31,7 @@ from ident.robot.design import design_runs, resolve_design
 from ident.robot.estimate import RATIO, RobotModel
 from ident.robot.loaders import RawRobotRun, RobotPreprocessing, preprocess_runs
 from ident.robot.regressor import RobotRegressor
-from ident.robot.signals import RobotPayloadData, RobotSignals
+from ident.robot.signals import RobotSignals
 from sim_drivers.arm import ArmParams
 from trajectories.robot import load_robot
 
@@ -65,18 +65,9 @@ def known_rotors(params, reg):
 
 
 def _raw(params, runs, seed: int) -> list[RawRobotRun]:
-    """The true positions and the applied torque plus 1 % noise, each payload declared at
-    SCALE times its true mass and inertia (same centre of mass)."""
-    rng = np.random.default_rng(seed)
-    noise = NOISE * params.drive.torque_noise_std_Nm / 0.01
-    raw = []
-    for r, p in zip(runs, PAYLOADS, strict=True):
-        pay = RobotPayloadData() if p is None else RobotPayloadData(
-            SCALE * p.mass, p.com, None if p.inertia is None else SCALE * np.asarray(p.inertia))
-        tau = r.tau_applied + rng.standard_normal(r.tau_applied.shape) * noise
-        raw.append(RawRobotRun(f"payload {r.payload_mass_kg} kg", r.t, r.q_true, tau,
-                               q_ref=r.q_ref, payload=pay))
-    return raw
+    """The runs plus 1 % noise, each payload declared at SCALE times its true mass and
+    inertia (same centre of mass)."""
+    return noisy_raw_runs(params, runs, seed, payload_scale=SCALE)
 
 
 def _design(params, runs, regressor, seed: int, iv: bool = False) -> RobotSignals:

@@ -17,13 +17,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import scipy.stats
-from test_robot_fit import NOISE, PAYLOADS, ROOT, _check_recovery, _simulate, _z
+from test_robot_fit import ROOT, _check_recovery, _simulate, _z, noisy_raw_runs
 
 from ident.preprocess import TORQUE_DELAY
 from ident.robot.design import design_runs, resolve_design
 from ident.robot.estimate import RobotModel
-from ident.robot.loaders import RawRobotRun, RobotPreprocessing, preprocess_runs
-from ident.robot.signals import RobotPayloadData, RobotSignals
+from ident.robot.loaders import RobotPreprocessing, preprocess_runs
+from ident.robot.signals import RobotSignals
 from sim_drivers.arm import ArmParams
 from trajectories.robot import load_robot
 
@@ -48,14 +48,7 @@ def noisy_chains(params, reg, runs, seed: int) -> tuple[RobotSignals, RobotSigna
     """The runs' true positions and applied torque plus 1 % noise (noise seed ``seed``),
     payloads known, through the columns chain and the states chain (also
     benchmarks/refine_direction.py's data)."""
-    rng = np.random.default_rng(seed)
-    noise = NOISE * params.drive.torque_noise_std_Nm / 0.01  # 1 % of the load
-    raw = []
-    for r, p in zip(runs, PAYLOADS, strict=True):
-        pay = RobotPayloadData() if p is None else RobotPayloadData(p.mass, p.com, p.inertia)
-        tau = r.tau_applied + rng.standard_normal(r.tau_applied.shape) * noise
-        raw.append(RawRobotRun(f"payload {r.payload_mass_kg} kg", r.t, r.q_true, tau,
-                               q_ref=r.q_ref, payload=pay))
+    raw = noisy_raw_runs(params, runs, seed)
     with warnings.catch_warnings():  # (the cut-off at its lower bound: the arm's motion)
         warnings.simplefilter("ignore", UserWarning)
         settings = resolve_design(raw, torque_delay=TORQUE_DELAY)
