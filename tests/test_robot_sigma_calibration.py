@@ -38,6 +38,15 @@ def arm3_known():
     known, base, truth = known_rotors(params, reg)
     return params, runs, known, base, truth
 
+def _fit_seed(arm3_known, seed: int, method: str):
+    """(signals, the usual model fitted with the payload ratio) of noise seed ``seed``."""
+    params, runs, known, base, _ = arm3_known
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # the cut-off's lower bound
+        sig = _design(params, runs, known, seed, iv=method == "iv")
+    return sig, RobotModel(known, "usual", method, base=base, payload_ratio=True).fit(sig)
+
+
 
 @pytest.mark.parametrize("method", ["ls", pytest.param("iv", marks=pytest.mark.slow)])
 def test_robust_covariance_is_calibrated_against_the_truth(arm3_known, method):
@@ -45,13 +54,10 @@ def test_robust_covariance_is_calibrated_against_the_truth(arm3_known, method):
     above 1 on every joint (the decimation's anti-alias filter correlates white noise between
     kept rows: flat band to 0.8 of the decimated Nyquist frequency, 1.18 for white noise at
     low frequency) and below 1.5."""
-    params, runs, known, base, truth = arm3_known
+    truth = arm3_known[4]
     total, total15, p, factors = 0.0, 0.0, 0, []
     for s in SEEDS:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # the cut-off's lower bound
-            sig = _design(params, runs, known, s, iv=method == "iv")
-        m = RobotModel(known, "usual", method, base=base, payload_ratio=True).fit(sig)
+        sig, m = _fit_seed(arm3_known, s, method)
         p = m.n_base_ + 1
         e = (m.coef_ - m.truth_vector(truth))[:p]
         C = robust_covariance(m, sig)[:p, :p]
@@ -92,13 +98,10 @@ def test_honest_sigma_covers_the_three_sigma_tails(arm3_known, method):
     conservative, so no lower bound); the honest sigma before (max(eq. 15, jackknife): eq. 15
     wherever the 12-unit jackknife comes out lower, and eq. 15 is 1.3-1.4x too small in
     variance here) leaves 10 and 11 (fails)."""
-    params, runs, known, base, truth = arm3_known
+    truth = arm3_known[4]
     out3 = out2 = n = 0
     for s in TAIL_SEEDS:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # the cut-off's lower bound
-            sig = _design(params, runs, known, s, iv=method == "iv")
-        m = RobotModel(known, "usual", method, base=base, payload_ratio=True).fit(sig)
+        sig, m = _fit_seed(arm3_known, s, method)
         p = m.n_base_ + 1
         u = assess(m, sig, n_blocks=10, prune=False)
         z = np.abs(m.coef_ - m.truth_vector(truth))[:p] / u.std[:p]
