@@ -35,9 +35,9 @@ chains), joint j's signals carry it as :attr:`Signals.sign <ident.signals.Signal
 through the row selection, into the design's signals (the candidates' scoring) and into
 :func:`joint_term_columns` (the n-dof refit's columns); the terms that read
 :attr:`Signals.direction <ident.signals.Signals.direction>` -- the library's ``Coulomb``, the
-paper model's ``QuadrantCoulomb`` -- take it instead of the sign of the decimated dq, a step
-where the decimated torque's dry friction is a ramp (docs/robot-identification.md, "The
-direction on the fit's rows", for the figures and the effects that still read the step).
+paper model's ``QuadrantCoulomb`` and the candidate effects of :mod:`ident.effects` -- take it
+instead of the sign of the decimated dq, a step where the decimated torque's dry friction is
+a ramp (docs/robot-identification.md, "The direction on the fit's rows", for the figures).
 Without ``keep`` (filtered again) the direction is that of the new dq.
 
 The found term is fitted here on the n-dof fit's residual (two stages: the n-dof parameters
