@@ -88,6 +88,7 @@ Pure numerics (no file access).
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -108,7 +109,7 @@ from .estimate import QUADRANT_TOL, _ref_acceleration
 from .paper import rows_coefficients
 from .signals import RobotSignals
 
-__all__ = ["RobotRefit", "refit_robot", "extra_name"]
+__all__ = ["RobotRefit", "refit_robot", "extra_name", "model_at_qs"]
 
 #: Gauss-Newton iterations at most (paper model) and relative step tolerance.
 MAX_ITER = 50
@@ -246,6 +247,7 @@ def refit_robot(
     columns: Sequence[np.ndarray] | None = None,
     instrument_columns: Sequence[np.ndarray] | None = None,
     refit_eliminated: bool = False,
+    errors_only: bool = False,
 ) -> RobotRefit:
     """Refit the n-dof ``model`` with the extra per-joint ``terms`` (module doc).
 
@@ -288,6 +290,12 @@ def refit_robot(
         :mod:`ident.robot.uncertainty`): the refinement refits without elimination. The zero
         and dependent columns stay at 0. Default False: every parameter the fit held stays
         held, the pruned ones included.
+    errors_only : bool
+        Only the estimate (``coef_``, ``params_``, ``names_``, ``n_iter``, ``n_rows``) and
+        the relative error after the refit (``rel_error["after"]``): no covariance, "before",
+        held-out errors, noise floors, Wald tests nor validation. What a q_s scan scores
+        each q_s with (:func:`ident.qs_scan.rescan_qs`): the same estimate and error as the
+        whole refit, in less time.
 
     Returns
     -------
@@ -375,6 +383,12 @@ def refit_robot(
     sys = _System(model, rows, ext_idx, coeffs, len(names), names)
     x, it, w = _estimate(sys, x0, free, linear, model.method)
     out = RobotRefit(model=model, terms=terms, names_=tuple(names), n_iter=it)
+    if errors_only:  # a q_s scan's score: the estimate and its error, nothing else
+        out.coef_ = x
+        out.params_ = dict(zip(names, x.tolist(), strict=True))
+        out.n_rows = {model.joints_[j]: int(rw.V.shape[0]) for j, rw in enumerate(rows)}
+        out.rel_error = {"after": _rel(model.joints_, sys.residuals(x)[0], rows)}
+        return out
     # the model's own parameters (the extra ones come after them)
     base = np.array([i < nx0 for i in range(len(names))])
     drift = model.quadrant_drift(signals) if hasattr(model, "quadrant_drift") else np.zeros(k)
@@ -796,3 +810,31 @@ class _System:
                     li, J = jacs[j]
                     out_r[j][m] = res[j][m] - J[m] @ step[li]
         return _rel(self.model.joints_, out_r, self.rows)
+
+
+def model_at_qs(model: Any, q_s: float, joints: Sequence[str] | None = None) -> Any:
+    """The fitted n-dof ``model`` with the velocity constant of ``joints`` (default every
+    joint) set to ``q_s`` [rad/s], its estimates unchanged: what :func:`refit_robot` refits
+    at another q_s (the paper model's E = exp(-|dq|/q_s) on the fit's rows, or, on the
+    full-rate products, the products formed at that q_s, which the model's check then
+    accepts). A shallow copy: ``model`` itself is not changed.
+
+    Raises
+    ------
+    RobotIdentError
+        A joint not of the model, or q_s not positive and finite.
+    """
+    model._check_fitted()
+    q = float(q_s)
+    if not (math.isfinite(q) and q > 0):
+        raise RobotIdentError(f"model_at_qs: q_s must be a positive velocity [rad/s], got "
+                              f"{q_s}")
+    names = tuple(model.joints_)
+    unknown = [j for j in (joints or ()) if j not in names]
+    if unknown:
+        raise RobotIdentError(f"model_at_qs: joints {unknown} are not the model's {names}")
+    out = copy.copy(model)
+    qs = np.array(model.q_s_, dtype=float)
+    qs[[names.index(j) for j in (names if joints is None else joints)]] = q
+    out.q_s_ = qs
+    return out
