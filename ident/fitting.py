@@ -17,17 +17,18 @@ first usual fit of the sign check, the q_s scan, the two models, Table IV -- is
 (the columns chain, eq. 42's products formed at full rate per q_s, the single-joint
 elimination), held in an :class:`~ident.models.IdentModel` by the single-joint names
 (:func:`_fitted`). The decimated system of each model (:class:`ident.preprocess.Design`:
-Table III's bands, the plots, the refinement (:mod:`ident.refine`) and :func:`rescan_qs` read
-it) is built on the same chain's full-rate signals (:meth:`OneJointProblem.design`, the
-robot's load model: the same rows, checked), so the data are filtered once; validation
+Table III's bands, the plots and the refinement (:mod:`ident.refine`) read it) is built on
+the same chain's full-rate signals (:meth:`OneJointProblem.design`, the robot's load model:
+the same rows, checked), so the data are filtered once; validation
 files (and :meth:`FitReport.designs_for`) get theirs the same way (:func:`_other_designs`: a
 problem on those files with the settled settings and the fit's first usual fit as load model,
 as Table IV's; the 1-dof regressor evaluated once per validation run; the same floats as
 :func:`ident.preprocess.build_design` with those settings).
 
-The q_s scan -- the grid, the bounded search, :func:`rescan_qs` and its fast designs, which
-must equal :func:`with_qs`'s -- is :mod:`ident.qs_scan`; its public names (``qs_grid``,
-``with_qs``, ``rescan_qs``, ``QsScan``, the ``QS_*`` constants) are re-exported here.
+The q_s scan -- the grid, the bounded search, and :func:`rescan_qs`, the rescan after a
+refinement through the robot model's refit of the found terms
+(:meth:`FitReport.rescan_found_terms` for a joint) -- is :mod:`ident.qs_scan`; its public
+names (``qs_grid``, ``rescan_qs``, ``QsScan``, the ``QS_*`` constants) are re-exported here.
 """
 
 from __future__ import annotations
@@ -59,6 +60,7 @@ from .one_joint import (
     OneJointModel,
     OneJointProblem,
     refit_found_terms,
+    rescan_found_terms,
 )
 from .preprocess import Design, check_reference
 from .qs_scan import (
@@ -69,7 +71,6 @@ from .qs_scan import (
     _scan,
     qs_grid,
     rescan_qs,
-    with_qs,
 )
 from .refine import quadrant_drift
 from .results import (
@@ -95,7 +96,6 @@ __all__ = [
     "fit_models",
     "qs_grid",
     "rescan_qs",
-    "with_qs",
     "QS_XTOL",
     "QS_SEARCH_EVALS",
     "QS_WORKERS",
@@ -398,6 +398,11 @@ class FitReport:
     band_nm : float
         The paper model's quadrant band [N m] (the sign check skipped,
         :meth:`ident.one_joint.OneJointProblem.band`), 0 without one.
+    paper_products : callable or None
+        q_s [rad/s] -> the paper model's robot signals with the full-rate products formed at
+        that q_s (:meth:`ident.one_joint.OneJointProblem.products`, its q_s-free part kept:
+        only the E products are formed again), for :meth:`rescan_found_terms`; None without
+        a paper fit; not serialised.
     """
 
     models: dict[str, IdentModel]
@@ -421,6 +426,8 @@ class FitReport:
     validation_signals: RobotSignals | None = field(default=None, repr=False, compare=False)
     first_fit: RobotModel | None = field(default=None, repr=False, compare=False)
     band_nm: float = 0.0
+    paper_products: Callable[[float], RobotSignals] | None = field(default=None, repr=False,
+                                                                   compare=False)
 
     def refit_found_terms(self, name: str, terms: Sequence[Term],
                           design: Design | None = None) -> dict[str, Any]:
@@ -433,21 +440,66 @@ class FitReport:
         torque), so the refit is the refinement's final fit computed by the robot model;
         without it they are evaluated on the decimated states
         (:func:`ident.robot.design.joint_columns`, as the n-dof refit does)."""
+        try:
+            m, sig, columns, zcols = self._found_terms(name, terms, design)
+        except DataError as exc:
+            return {"error": str(exc)}
+        return refit_found_terms(m.robot_, sig, terms, revolute=self.revolute,
+                                 names=getattr(m, "robot_names_", None), columns=columns,
+                                 instrument_columns=zcols)
+
+    def rescan_found_terms(self, name: str, terms: Sequence[Term],
+                           design: Design | None = None, *, n_grid: int = 13,
+                           progress: Callable[[int, int, float, float], None] | None = None
+                           ) -> QsScan:
+        """q_s chosen again with the terms a refinement of the paper model found
+        (:func:`ident.one_joint.rescan_found_terms`): at each q_s the refit of
+        :meth:`refit_found_terms` (the terms' columns ``design``'s, as there) on the robot
+        fit's full-rate products formed at that q_s (``paper_products``). The result's
+        ``record`` is that refit at the chosen q_s, by the single-joint names.
+
+        Raises
+        ------
+        DataError
+            Not the paper model, no robot fit or products to rescan, a design not on the
+            robot fit's rows, or the refit cannot be made (one line).
+        """
+        if name != "paper" or self.paper_products is None:
+            raise DataError(f"{name} model: no paper model's products to rescan q_s with "
+                            "(q_s is a parameter of the paper model)")
+        m, _, columns, zcols = self._found_terms(name, terms, design)
+        return rescan_found_terms(m.robot_, self.paper_products, terms, vmax=self.vmax,
+                                  revolute=self.revolute,
+                                  names=getattr(m, "robot_names_", None), columns=columns,
+                                  instrument_columns=zcols, n_grid=n_grid, progress=progress)
+
+    def _found_terms(self, name: str, terms: Sequence[Term], design: Design | None
+                     ) -> tuple[IdentModel, RobotSignals, list[np.ndarray] | None,
+                                list[np.ndarray] | None]:
+        """Model ``name``, its robot fit's signals and the found terms' columns and IDIM-IV
+        instruments from ``design`` (None without it) on the robot fit's rows, for
+        :meth:`refit_found_terms` and :meth:`rescan_found_terms`.
+
+        Raises
+        ------
+        DataError
+            No robot model, a design not on its rows or without a term's column.
+        """
         m = self.models[name]
         if getattr(m, "robot_", None) is None or name not in self.robot_signals:
-            return {"error": f"{name} model: no robot model to refit"}
+            raise DataError(f"{name} model: no robot model to refit")
         sig = self.robot_signals[name]
         columns = zcols = None
         if design is not None:
             rows = np.flatnonzero(m.robot_.fitted_rows(sig)[:, 0])
             if rows.size != len(design) or not np.allclose(design.Y, sig.tau[rows, 0],
                                                            rtol=1e-9, atol=0.0):
-                return {"error": f"{name} model: the refinement's design is not on the robot "
-                                 "fit's rows"}
+                raise DataError(f"{name} model: the refinement's design is not on the robot "
+                                "fit's rows")
             names = [n for t in terms for n in t.names()]
             missing = [n for n in names if n not in design.names]
             if missing:
-                return {"error": f"{name} model: the design has no column {missing[0]}"}
+                raise DataError(f"{name} model: the design has no column {missing[0]}")
             idx = [design.names.index(n) for n in names]
             X = np.zeros((sig.n, len(names)))
             X[rows] = design.W[:, idx]
@@ -456,9 +508,7 @@ class FitReport:
                 Xz = np.zeros((sig.n, len(names)))
                 Xz[rows] = design.Z[:, idx]
                 zcols = [Xz]
-        return refit_found_terms(m.robot_, sig, terms, revolute=self.revolute,
-                                 names=getattr(m, "robot_names_", None), columns=columns,
-                                 instrument_columns=zcols)
+        return m, sig, columns, zcols
 
     def designs_for(self, data: Sequence[Experiment] | Signals) -> dict[str, Design]:
         """The system of other data (e.g. validation files) for every fitted model, with the
@@ -977,6 +1027,7 @@ def fit_models(
         validation_signals=vsignals,
         first_fit=problem.first if "load_model" in pre else None,
         band_nm=band_nm,
+        paper_products=problem.products if "paper" in fitted else None,
         torque_delay_given=delay_given,
         sign_check_shift=shift,
     )

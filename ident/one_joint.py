@@ -51,15 +51,20 @@ their own with the fit's settled settings (:func:`ident.fitting._other_designs`)
 design (to 1e-8) on the example campaign (LS and IDIM-IV with the half-cycle torque delay),
 the EMPS data and the demo's logs.
 
+After a refinement, :func:`refit_found_terms` refits the found terms inside the joint's robot
+model (:func:`ident.robot.refit.refit_robot`) and :func:`rescan_found_terms` chooses q_s again
+with that refit at each q_s (:func:`ident.qs_scan.rescan_qs` on :meth:`OneJointProblem.
+products`): the n-dof refit and rescan's 1-dof instances.
+
 (Past 600 lines: the problem, its load memo and the columns it gives the single-joint design
-belong together; :func:`refit_found_terms`, a thin adapter of :func:`ident.robot.refit.
-refit_robot`, could move out.)
+belong together; :func:`refit_found_terms` and :func:`rescan_found_terms`, thin adapters of
+:func:`ident.robot.refit.refit_robot` and :func:`ident.qs_scan.rescan_qs`, could move out.)
 """
 
 from __future__ import annotations
 
 import copy
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -74,6 +79,7 @@ from .estimate import DEFAULT_THRESHOLD_PCT, LSResult
 from .loaders import Experiment
 from .models import LoadDependent, QuadrantCoulomb, _signed_selection, new_model, usual_model
 from .preprocess import Design, design_on_full_rate
+from .qs_scan import QsScan, rescan_qs
 from .robot import RobotIdentError
 from .robot.base import single_joint_map
 from .robot.design import (
@@ -93,7 +99,8 @@ from .robot.signals import RobotSignals
 from .signals import G, Signals
 from .terms import Term
 
-__all__ = ["OneJointModel", "OneJointProblem", "SIGN_CHECK_MIN_KEPT", "refit_found_terms"]
+__all__ = ["OneJointModel", "OneJointProblem", "SIGN_CHECK_MIN_KEPT", "refit_found_terms",
+           "rescan_found_terms"]
 
 #: The sign check is skipped when it would keep fewer samples than this fraction (as
 #: :data:`ident.fitting.SIGN_CHECK_MIN_KEPT`).
@@ -643,14 +650,15 @@ class OneJointProblem:
         """The signals with eq. 42's columns formed at full rate for ``q_s`` [rad/s]
         (the last one kept)."""
         q_s = float(q_s)
-        if q_s not in self._products:
+        sig = self._products.get(q_s)
+        if sig is None:  # (a q_s rescan asks from two threads: the last one kept)
             sig = products_columns(
                 self.signals, self.runs, self.reg, self.settings, self._load, q_s,
                 base=self.base, instruments=self.iv, cache=self._products_cache)
             if self.band() > 0:  # the quadrant band's rows left out (the check skipped)
                 sig = replace(sig, columns=replace(sig.columns, keep=self._band_keep))
             self._products = {q_s: sig}
-        return self._products[q_s]
+        return sig
 
     def band(self) -> float:
         """The quadrant band [N m] of the paper model where the sign check was skipped
@@ -778,6 +786,13 @@ def refit_found_terms(robot: RobotModel, signals: RobotSignals, terms: Sequence[
                           refit_eliminated=True).to_json()
     except (RobotIdentError, DataError) as exc:
         return {"error": str(exc)}
+    return _by_single_names(rec, names)
+
+
+def _by_single_names(rec: dict[str, Any], names: dict[str, tuple[str, float]] | None
+                     ) -> dict[str, Any]:
+    """The ``refit`` record ``rec`` with its parameters by the single-joint names (values
+    times the sign; the extra ones keep theirs)."""
     pars = {}
     for n, v in rec["parameters"].items():
         single, sign = (names or {}).get(n, (n, 1.0))
@@ -785,4 +800,51 @@ def refit_found_terms(robot: RobotModel, signals: RobotSignals, terms: Sequence[
                         "std": v["std"]}
     rec["parameters"] = pars
     return rec
+
+
+def rescan_found_terms(robot: RobotModel, products: Callable[[float], RobotSignals],
+                       terms: Sequence[Term], *, vmax: float, revolute: bool,
+                       names: dict[str, tuple[str, float]] | None = None,
+                       columns: Sequence[np.ndarray] | None = None,
+                       instrument_columns: Sequence[np.ndarray] | None = None,
+                       n_grid: int = 13, progress: Callable[[int, int, float, float], None]
+                       | None = None) -> QsScan:
+    """q_s chosen again after a single-joint refinement, through the joint's robot model:
+    :func:`ident.qs_scan.rescan_qs` on the one-joint robot, the fit at each q_s being
+    :func:`refit_found_terms`'s refit (every parameter estimated again, the found terms'
+    columns ``columns``) on the full-rate products formed at that q_s (``products``,
+    :meth:`OneJointProblem.products`) -- the n-dof rescan's 1-dof instance.
+
+    Parameters
+    ----------
+    robot : RobotModel
+        The paper model's robot fit (``IdentModel.robot_``), on full-rate products.
+    products : callable
+        q_s [rad/s] -> the signals with the products formed at q_s
+        (``FitReport.paper_products``).
+    terms : sequence of Term
+        The refinement's steps' terms, in order.
+    vmax : float
+        Maximum |dq| [rad/s] (``FitReport.vmax``), for the grid.
+    revolute : bool
+    names, columns, instrument_columns
+        As :func:`refit_found_terms`.
+    n_grid, progress
+        As :func:`ident.qs_scan.rescan_qs`.
+
+    Returns
+    -------
+    QsScan
+        Its ``record``: the refit at the chosen q_s by the single-joint names.
+
+    Raises
+    ------
+    DataError
+        The refit cannot be made (one line).
+    """
+    out = rescan_qs(robot, products, [(0, t) for t in terms], vmax=vmax, revolute=[revolute],
+                    columns=columns, instrument_columns=instrument_columns,
+                    refit_eliminated=True, n_grid=n_grid, progress=progress)
+    out.record = _by_single_names(out.record, names)
+    return out
 

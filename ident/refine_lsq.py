@@ -1,15 +1,15 @@
 """The residual of a full-rank least-squares (or IDIM-IV) fit, the same floats as
 :func:`ident.estimate.fit_least_squares` gives, without its statistics.
 
-A q_s scan (:func:`ident.fitting.rescan_qs`) and the exact refits of the refinement
-(:func:`ident.refine.refine`) need only the residual of most of their fits: the
-covariance, the deviations and the condition numbers of a fit that is then discarded are
-wasted, and so is the second column-pivoted QR that :func:`~ident.estimate.solve_ls` repeats
-after :func:`~ident.estimate.dependent_columns`. :func:`quick_residual` follows the same
-operations on the same arrays as :func:`~ident.estimate.fit_least_squares` (``eliminate=False``)
-up to the residual, so the estimate and the residual are bit for bit the same, and returns
-None whenever that function would drop a column or raise (zero or dependent columns,
-singular instruments, too few samples, non-finite values): the caller then fits as usual.
+The exact refits of the refinement (:func:`ident.refine.refine`) need only the residual of
+most of their fits: the covariance, the deviations and the condition numbers of a fit that
+is then discarded are wasted, and so is the second column-pivoted QR that
+:func:`~ident.estimate.solve_ls` repeats after :func:`~ident.estimate.dependent_columns`.
+:func:`quick_residual` follows the same operations on the same arrays as
+:func:`~ident.estimate.fit_least_squares` (``eliminate=False``) up to the residual, so the
+estimate and the residual are bit for bit the same, and returns None whenever that function
+would drop a column or raise (zero or dependent columns, singular instruments, too few
+samples, non-finite values): the caller then fits as usual.
 
 Full rank without the pivoted QR (instruments): for the column-scaled ``Ws`` (unit
 columns) and ``A = Q_z^T Ws`` (``Q_z`` orthonormal), every singular value of A is at most

@@ -123,12 +123,12 @@ def test_qs_rescanned_after_refinement_recovers_the_plant():
     """The demo's situation: quick campaign, a position ripple no model declares, q_s
     scanned. The scan with the declared model alone is pulled off by the ripple left in the
     residual (+36 % here); once refinement has modelled the ripple,
-    :func:`ident.fitting.rescan_qs` brings q_s back to +10 % and the q_s-sensitive b terms
+    :meth:`ident.fitting.FitReport.rescan_found_terms` (the found term refitted inside the
+    joint's robot model at each q_s) brings q_s back to +10 % and the q_s-sensitive b terms
     of eq. 42 much closer. What is left is the quick campaign's own limit: little data near
     q_s, and the residual criterion then lands 5-15 % high (0.0326 on these runs without any
     effect; the full campaign gives 0.0300), so b_m_MX stays 3.5 sigma off."""
     from daq.protocol.control import ControllerGains
-    from ident.fitting import rescan_qs
     from ident.refine import refine
     from sim_drivers.offline import simulate
     from sim_drivers.plant_config import load_plant
@@ -151,7 +151,7 @@ def test_qs_rescanned_after_refinement_recovers_the_plant():
                      table_iv=False, **SIM)  # fmt: skip
     ref = refine(rep.designs["paper"], rep.models["paper"], vmax=rep.vmax)
     assert "position_ripple" in [s.term.effect for s in ref.steps]
-    rs = rescan_qs(ref.final_design, ref.final_model, vmax=rep.vmax)
+    rs = rep.rescan_found_terms("paper", ref.terms, ref.final_design)
     q_s = plant.joint.q_s
     # the quick campaign has little data near q_s: without any effect its scan lands 5-10 %
     # high (0.0326 on these runs), with the ripple left in the residual 36 % high
@@ -159,13 +159,14 @@ def test_qs_rescanned_after_refinement_recovers_the_plant():
     assert [q for q, _ in rs.scan] == sorted(q for q, _ in rs.scan)
     truth = plant.truth()
 
-    def rel_err(m):
-        return {n: abs(m.coef_[n] - t) / abs(t) for n, t in truth.items()}
+    def rel_err(coef):
+        return {n: abs(coef[n] - t) / abs(t) for n, t in truth.items()}
 
-    before, after = rel_err(ref.final_model), rel_err(rs.model)
+    pars = rs.record["parameters"]
+    before = rel_err(ref.final_model.coef_)
+    after = rel_err({n: p["value"] for n, p in pars.items()})
     sensitive = ("b_m_MX", "b_g_MX", "b_m", "b_g", "b_m_J")
     assert all(after[n] < before[n] for n in sensitive)
     assert sum(after[n] for n in sensitive) < 0.5 * sum(before[n] for n in sensitive)
-    m = rs.model
-    z = {n: abs(m.coef_[n] - t) / m.std_[n] for n, t in truth.items()}
+    z = {n: abs(pars[n]["value"] - t) / pars[n]["std"] for n, t in truth.items()}
     assert max(z.values()) < 4.5, z

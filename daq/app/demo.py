@@ -85,7 +85,7 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
     import matplotlib
 
     from daq.runtime.progress import ProgressLine
-    from ident.fitting import fit_models, rescan_qs
+    from ident.fitting import fit_models
     from ident.loaders import load_experiments
     from ident.plots import write_plots
     from ident.refine import refine
@@ -178,8 +178,9 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
 
     hb.status("adjusting q_s with the refined model: fit 1")
     try:
-        rs = rescan_qs(ref.final_design, ref.final_model, vmax=report.vmax,
-                       progress=scan_progress)
+        # each q_s: the found terms refitted inside the joint's robot model (as ref.refit)
+        rs = report.rescan_found_terms("paper", ref.terms, ref.final_design,
+                                       progress=scan_progress)
     finally:
         bar.close()
     if abs(rs.q_s - qs0) > 0.01 * qs0:
