@@ -19,9 +19,11 @@ quadrants) and, for one joint (``--joint``, default wrist_3_joint), this prints:
 - the joint's friction block with theta held at the fit (the linear problem the HC3 side
   reads): the five rows of largest leverage h (E, load, residual / sigma_j, deleted residual
   e / (1 - h) / sigma_j) and b_m, d_m refitted without the largest;
+- b_m, d_m held at 0 and the block refitted (theta held): the rise of the joint's residual
+  sum of squares over the fit's, in sigma_j^2 (what the pruning's chi-square test reads);
 - with validation logs: the joint's RMS of tau - tau_hat on the validation rows where it
-  moves (|dq| >= 3 q_s, the monitor's rest band) for the fit and for the truth through the
-  same estimator [N m].
+  moves (|dq| >= 3 q_s, the monitor's rest band) for the fit, for the truth through the
+  same estimator and for the fit with b_m, d_m held at 0 as above [N m].
 
 Usage::
 
@@ -149,14 +151,26 @@ def report(path: Path, robot, val: list[Path], joint: str) -> None:
     b1 = np.linalg.lstsq(X[keep], y[keep], rcond=None)[0]
     print(f"  without the largest-leverage row: b_m {b1[1]:+.3g}, d_m {b1[5]:+.3g}, b_g "
           f"{b1[3]:+.3g}, d_g {b1[7]:+.3g}")
+    free = [0, 2, 3, 4, 6, 7, 8, 9]  # b_m, d_m held at 0
+    bz = np.linalg.lstsq(X[:, free], y, rcond=None)[0]
+    ez = y - X[:, free] @ bz
+    zero = copy.copy(est)
+    zero.coef_ = est.coef_.copy()
+    ix = list(est.names_)
+    for i, v in zip(free, bz, strict=True):
+        zero.coef_[ix.index(names[i])] = v
+    zero.coef_[ix.index(names[1])] = zero.coef_[ix.index(names[5])] = 0.0
+    print(f"  b_m, d_m held at 0 (block refitted): residual sum of squares up by "
+          f"{(ez @ ez - e @ e) / s ** 2:.1f} sigma_j^2")
     vs = out.get("_validation_all")
     if vs is not None:
         rms = []
-        for m in (est, o):
+        for m in (est, o, zero):
             r = vs.tau[:, j] - m.predict(vs)[:, j]
             ok = np.isfinite(r) & (np.abs(vs.dq[:, j]) >= REST_QS * qs)
             rms.append(float(np.sqrt(np.mean(r[ok] ** 2))))
-        print(f"  validation RMS where it moves: fit {rms[0]:.4f} N m, truth {rms[1]:.4f} N m")
+        print(f"  validation RMS where it moves: fit {rms[0]:.4f} N m, truth {rms[1]:.4f} N m, "
+              f"b_m, d_m held at 0 {rms[2]:.4f} N m")
 
 
 def main() -> None:
