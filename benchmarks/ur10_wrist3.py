@@ -11,6 +11,8 @@ quadrants) and, for one joint (``--joint``, default wrist_3_joint), this prints:
   .truth()``), the honest std and its sides (robust eq. 15, block jackknife, the friction
   block's HC3 ``std_leverage``), z with the honest std and z with the rule before the HC3
   side, max(robust, jackknife);
+- over every joint's free friction parameters: on how many the HC3 side raised the honest
+  sigma, and the largest ratio honest / max(robust, jackknife);
 - the same fit with the quadrants decided by the true theta (``quadrant_theta``): b_m, d_m,
   b_g, d_g and their z;
 - the fit's rows of the joint: motor / generator quadrant (by the true load tau_out), the
@@ -111,6 +113,12 @@ def report(path: Path, robot, val: list[Path], joint: str) -> None:
               f"{r['std_robust'] or float('nan'):8.3g} {r['std_jackknife'] or float('nan'):9.3g} "
               f"{r['std_leverage'] or float('nan'):8.3g} "
               f"{(r['value'] - tv[nm]) / r['std']:+5.1f} {(r['value'] - tv[nm]) / old:+7.1f}")
+    fr = [(nm, r["std"] / max(r["std_robust"] or 0.0, r["std_jackknife"] or 0.0))
+          for nm, r in rec.items() if r["std_leverage"] is not None and r["std"] > 0]
+    worst = max(fr, key=lambda t: t[1])
+    print(f"  HC3 raised the honest sigma of {sum(v > 1 for _, v in fr)} of {len(fr)} friction "
+          f"parameters; largest ratio {worst[1]:.1f} ({worst[0]}), median "
+          f"{np.median([v for _, v in fr]):.2f}")
     p = est.get_params()
     p.update(quadrant_theta=gauged(est, truth)[:est.n_theta_])
     tq = RobotModel(**p).fit(out["_signals"][0])
