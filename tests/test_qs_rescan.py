@@ -23,6 +23,7 @@ from robot_campaigns import ARM3, ARM3_CENTRE, ARM3_PAYLOADS
 from daq.protocol.control import ControllerGains
 from ident import DataError, qs_scan
 from ident.effects.position_ripple import PositionRipple
+from ident.effects.quadratic_viscous import QuadraticViscous
 from ident.fitting import fit_models, rescan_qs
 from ident.loaders import make_experiment
 from ident.models import IdentModel
@@ -30,8 +31,7 @@ from ident.robot.base import base_parameters
 from ident.robot.estimate import RobotModel
 from ident.robot.refit import refit_robot
 from ident.robot.signals import RobotSignals
-from ident.signals import Signals
-from ident.terms import Library, Term
+from ident.terms import Library
 from sim_drivers.arm import ArmEffects, ArmGains, ArmParams, model_reference, simulate_arm
 from sim_drivers.offline import simulate
 from sim_drivers.plant_config import load_plant
@@ -155,19 +155,6 @@ F_VV = 3.0
 QS_FIT = 0.06
 
 
-class _Drag(Term):
-    """dq |dq|: the drag's column, the found term of joint 3."""
-
-    effect = "drag"
-    variable = "velocity"
-
-    def names(self) -> tuple[str, ...]:
-        return ("F_VV",)
-
-    def columns(self, s: Signals) -> np.ndarray:
-        return (s.dq * np.abs(s.dq))[:, None]
-
-
 def _arm(seed: int, duration_s: float = 12.0, noise: float = 0.01, stride: int = 5):
     """The 3-dof arm with the load-dependent friction (b_m, b_g of eq. 29: q_s 0.03 rad/s on
     every joint; c_g = c_m and no d terms, as tests/robot_campaigns.py's usual friction, so
@@ -210,11 +197,11 @@ def test_robot_rescan_recovers_qs_and_the_drag(seed):
     truth = float(params.friction.q_s[0])
     assert np.all(params.friction.q_s == truth)
     fit = RobotModel(reg, "paper", base=base_parameters(reg), dq_min=0.02, q_s=QS_FIT).fit(sig)
-    rs = rescan_qs(fit, sig, [(2, _Drag())], vmax=float(np.abs(sig.dq).max()))
+    rs = rescan_qs(fit, sig, [(2, QuadraticViscous())], vmax=float(np.abs(sig.dq).max()))
     assert rs.joints == fit.joints_
     assert abs(rs.q_s / truth - 1) < 0.1, rs.q_s
     i = rs.refit.names_.index("j3:F_VV")
     assert abs(rs.refit.coef_[i] - F_VV) <= 2 * rs.refit.std_[i], rs.refit.coef_[i]
     # the scan's best is below the refit at the fit's own q_s
-    at_fit = refit_robot(fit, sig, [(2, _Drag())], errors_only=True)
+    at_fit = refit_robot(fit, sig, [(2, QuadraticViscous())], errors_only=True)
     assert min(e for _, e in rs.scan) < at_fit.rel_error["after"]["all"]
