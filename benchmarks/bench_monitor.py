@@ -11,8 +11,10 @@ Usage::
 ``--campaign`` is the robot campaign the stages derive theirs from (default the 3-dof demo,
 examples/campaign_robot3_demo.toml; e.g. the UR10's, examples/campaign_ur10_demo.toml): its
 robot, drives, gains, limits, payloads and segments; the derived campaigns change only the
-multi-sine's seed and number of periods, keep the multi-sine alone (detect, paced) and the
-first payload alone (detect, paced). Use one DIR per campaign.
+seeded multi-sine's seed and number of periods (a multi-sine with given coefficients, e.g.
+the slow pan of examples/campaign_ur10_lowspeed.toml, is kept as it is, like a trapezoid),
+keep the seeded multi-sine alone (detect, paced) and the first payload alone (detect,
+paced). Use one DIR per campaign.
 
 Stages (each a ``jointid monitor`` run through the whole stack: campaign -> runner ->
 canopen master -> virtual buses -> simulated CiA 402 drives + simulated arm -> MCAP; lockstep
@@ -158,9 +160,11 @@ def _multisine_periods(segments_s: float, total_s: float) -> int:
 
 
 def _multisines() -> list:
-    """The source campaign's multi-sine segments (the stages vary their seed and periods)."""
+    """The source campaign's seeded multi-sine segments (the stages vary their seed and
+    periods; a multi-sine with given coefficients ``a``, ``b`` is a fixed part of the plan,
+    like a trapezoid)."""
     _, c = _source()
-    ms = [s for s in c.segments if type(s).__name__ == "MultisineSegment"]
+    ms = [s for s in c.segments if type(s).__name__ == "MultisineSegment" and s.a is None]
     if not ms:
         raise SystemExit(f"{SOURCE['campaign']}: no multi-sine segment to derive the "
                          "stages' campaigns from")
@@ -180,8 +184,9 @@ def _plan_parts() -> tuple[float, float]:
 
 def _campaign(work: Path, name: str, *, seed: int, periods: int, multisine_only: bool,
               payloads: int = 2, daq: str = "") -> Path:
-    """A variant of the source campaign (its robot, drives, gains, limits): every
-    multi-sine with ``seed`` and ``periods``; ``multisine_only``: no other segment;
+    """A variant of the source campaign (its robot, drives, gains, limits): every seeded
+    multi-sine (not one with given ``a``, ``b``: kept as it is) with ``seed`` and
+    ``periods``; ``multisine_only``: no other segment;
     ``payloads`` 1: the first payload only (else all of the campaign's)."""
     src = SOURCE["campaign"]
     text = src.read_text()
@@ -192,7 +197,8 @@ def _campaign(work: Path, name: str, *, seed: int, periods: int, multisine_only:
                   count=1, flags=re.M)
     head, _, rest = text.partition("[[segments]]")
     segs = ["[[segments]]" + s for s in rest.split("[[segments]]")]
-    ms = [bool(re.search(r'^kind = "multisine"', s, re.M)) for s in segs]
+    ms = [bool(re.search(r'^kind = "multisine"', s, re.M)) and not re.search(r"^a = ", s, re.M)
+          for s in segs]
     segs = [re.sub(r"^periods = \d+\b", f"periods = {periods}",
                    re.sub(r"^seed = \d+\b", f"seed = {seed}", s, flags=re.M), flags=re.M)
             if m else s for s, m in zip(segs, ms, strict=True)]
