@@ -11,7 +11,9 @@ again), the found terms' columns those of the refinement's design.
 
 :mod:`ident.fitting` re-exports the public names (``qs_grid``, ``rescan_qs``, ``QsScan``);
 :func:`ident.fitting.fit_models` scans q_s with :func:`_scan` and :func:`qs_grid` on its own
-fits.
+fits; :func:`scan_qs` is the same scan of any fit given as a score, what
+``jointid fit --robot --q-s scan`` (:func:`ident.cli_robot.fit_robot`) scans the n-dof paper
+fit with (one q_s shared by every joint).
 """
 
 from __future__ import annotations
