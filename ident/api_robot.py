@@ -65,8 +65,11 @@ class RobotFit(HyperParameters):
         Models fitted (``--model``; "new" is accepted as a deprecated alias of "paper").
     method : {"ls", "wls", "iv"} or None
         Estimator (``--method``; None: "wls").
-    q_s : float
-        q_s of the paper model [rad/s] (``--q-s``).
+    q_s : float or "scan"
+        q_s of the paper model [rad/s] (``--q-s``), or ``"scan"``: one q_s shared by every
+        joint, the paper fit's smallest relative error on the single joint's grid and bounded
+        search (:func:`ident.cli_robot.fit_robot`; ``record_["q_s"]`` the chosen one,
+        ``record_["q_s_scan"]`` the scan). Ignored by the usual model.
     cutoff : float or None
         Butterworth cut-off on q [Hz] (``--cutoff``; None: chosen from the data).
     decimation, trim : int or None
@@ -141,7 +144,7 @@ class RobotFit(HyperParameters):
         model: str = "both",
         *,
         method: str | None = None,
-        q_s: float = DEFAULT_Q_S,
+        q_s: float | str = DEFAULT_Q_S,
         cutoff: float | None = None,
         decimation: int | None = None,
         trim: int | None = None,

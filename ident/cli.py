@@ -152,8 +152,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--qs",  # the older spelling, still accepted
         metavar="VALUE|scan",
         help="q_s of the paper model [rad/s], or 'scan' to minimise the residual (default "
-        f"{DEFAULT_Q_S:g}; refused with --model usual, which has no q_s; the scan is "
-        "single-joint only)",
+        f"{DEFAULT_Q_S:g}; refused with --model usual, which has no q_s; with --robot the "
+        "scan chooses one q_s shared by every joint)",
     )
     p.add_argument(
         "--validate",
@@ -245,23 +245,20 @@ def check_qs_model(args: argparse.Namespace) -> None:
                         "and --model usual has none; drop --q-s or fit --model paper or both")
 
 
-def parse_qs(value: str | None, *, scan: bool = True) -> float | str:
-    """``--q-s`` of ``jointid fit`` (``scan``: 'scan' accepted) or of ``--robot`` (no scan):
-    a finite velocity > 0 [rad/s or m/s], one line naming the flag otherwise; not given:
+def parse_qs(value: str | None) -> float | str:
+    """``--q-s`` of ``jointid fit``, with or without ``--robot``: a finite velocity > 0
+    [rad/s or m/s] or 'scan', one line naming the flag otherwise; not given:
     ``DEFAULT_Q_S``."""
     if value is None:
         return DEFAULT_Q_S
-    if scan and value.strip().lower() == "scan":
+    if value.strip().lower() == "scan":
         return "scan"
     try:
         v = float(value)
     except ValueError:
-        raise DataError(f"--q-s {value!r}: expected a number [rad/s] "
-                        + ("or 'scan'" if scan else "(the scan is single-joint only)")
-                        ) from None
+        raise DataError(f"--q-s {value!r}: expected a number [rad/s] or 'scan'") from None
     if not (math.isfinite(v) and v > 0):
-        raise DataError(f"--q-s {value!r}: expected a number > 0 [rad/s]"
-                        + (" or 'scan'" if scan else ""))
+        raise DataError(f"--q-s {value!r}: expected a number > 0 [rad/s] or 'scan'")
     return v
 
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -41,9 +42,10 @@ from .cli import parse_qs
 from .estimate import DEFAULT_THRESHOLD_PCT
 from .fitting import DQ_MIN_FRACTION, SIGN_CHECK_MIN_KEPT
 from .loaders import parse_mapping
+from .qs_scan import qs_grid, scan_qs
 from .refine_result import ONE_TRAJECTORY_NOTE
 from .report import write_json
-from .results import DEFAULT_BANDS
+from .results import DEFAULT_BANDS, json_float
 from .robot.confounded import regroup_friction
 from .robot.consistency import check_consistency
 from .robot.consistent_fit import add_consistent, format_record
@@ -237,7 +239,7 @@ def fit_robot(
     *,
     models: tuple[str, ...] = ("usual", "paper"),
     method: str | None = None,
-    q_s: float = DEFAULT_Q_S,
+    q_s: float | str = DEFAULT_Q_S,
     dq_min: float | None = None,
     preprocessing: RobotPreprocessing | None = None,
     known_rotor_inertia: bool = False,
@@ -263,8 +265,15 @@ def fit_robot(
         its residual deviation). On the KUKA recordings it cross-validates better than IV,
         whose instruments (the planned trajectory) are poor under the robot's own position
         loop and feed-forward (docs/robot-data.md).
-    q_s : float
-        q_s of the paper model [rad/s].
+    q_s : float or "scan"
+        q_s of the paper model [rad/s], or ``"scan"``: the q_s whose paper fit (every
+        parameter kept: before the uncertainty step's pruning) has the smallest relative error
+        over every joint's rows (``rel_error_["all"]``), on the grid of
+        :func:`ident.qs_scan.qs_grid` of the fitted rows' largest |dq| then a bounded search
+        between the best point's neighbours (:func:`ident.qs_scan.scan_qs`, the single joint's
+        rule); one q_s shared by every joint. The record's ``q_s`` is the chosen one and
+        ``q_s_scan`` every evaluated ``{q_s, rel_error}``. Without the paper model: the
+        default, as for one joint.
     dq_min : float or None
         Stiction area |dq_j| < dq_min left out of joint j's rows [rad/s]; None: 1 % of the
         largest |dq| of the identification data.
@@ -419,7 +428,19 @@ def fit_robot(
         est_dq_min = dq_min
         if payload == "ratio":
             _check_ratio_separable(runs)
+
+    def model(name: str, at: float | None = None) -> RobotModel:
+        # one joint: exactly the single-joint fit's rows (no quadrant band; the sign check
+        # plays its part there); at: the q_s of a scan's fit
+        return RobotModel(reg, model=name, method=method, q_s=q_s if at is None else at,
+                          dq_min=est_dq_min,
+                          base=base, payload_ratio=payload == "ratio",
+                          payload_params=payload == "mass",
+                          quadrant_band=0.0 if len(robot.moving) == 1 else 0.03,
+                          quadrants=quadrants if name == "paper" else "hard")
+
     val_all = val
+    q_s, qs_scan = _scan_qs(q_s, models, lambda q: model("paper", q), sig, notes)
     if val is not None:
         # the validation error is taken on the samples the fit would use (as the single-joint
         # validation design): joint j's torque in its stiction area is left out (NaN)
@@ -441,6 +462,8 @@ def fit_robot(
         "known_rotor_inertia": bool(known_rotor_inertia),
         "payload": payload,
         "q_s": q_s,
+        **({"q_s_scan": [{"q_s": q, "rel_error": json_float(e)} for q, e in qs_scan]}
+           if qs_scan else {}),
         "quadrants": quadrants,
         "notes": notes,
         "models": {},
@@ -455,15 +478,6 @@ def fit_robot(
         "_cycle_s": float(np.median(np.diff(runs[0].t))),
         "_keep": kept_rows(sig, est_dq_min),
     }
-    def model(name: str) -> RobotModel:
-        # one joint: exactly the single-joint fit's rows (no quadrant band; the sign check
-        # plays its part there)
-        return RobotModel(reg, model=name, method=method, q_s=q_s, dq_min=est_dq_min,
-                          base=base, payload_ratio=payload == "ratio",
-                          payload_params=payload == "mass",
-                          quadrant_band=0.0 if len(robot.moving) == 1 else 0.03,
-                          quadrants=quadrants if name == "paper" else "hard")
-
     for name in models:
         try:
             est = model(name).fit(sig)
@@ -814,6 +828,42 @@ def format_refit(fit: dict[str, Any], model: str) -> list[str]:
     return lines
 
 
+def _scan_qs(q_s: float | str, models: tuple[str, ...],
+             paper: Callable[[float], RobotModel], sig: RobotSignals,
+             notes: list[str]) -> tuple[float, list[tuple[float, float]]]:
+    """``q_s="scan"`` of :func:`fit_robot`: the q_s of the smallest relative error of the
+    paper fit ``paper(q).fit(sig)`` over every joint's rows (:func:`ident.qs_scan.scan_qs`;
+    a fit that fails scores inf), and the scan; a number is returned as it is, with no scan;
+    without the paper model, the default q_s. A note says the scan's figures.
+
+    Raises
+    ------
+    DataError
+        A string other than "scan", or the paper fit failing at every q_s.
+    """
+    if not isinstance(q_s, str):
+        return q_s, []
+    if q_s.strip().lower() != "scan":
+        raise DataError(f"q_s {q_s!r}: expected a number [rad/s] or 'scan'")
+    if "paper" not in models:  # the usual model has no q_s: ignored, as for one joint
+        return DEFAULT_Q_S, []
+
+    def score(q: float) -> float:
+        try:
+            return float(paper(q).fit(sig).rel_error_["all"])
+        except (IdentError, np.linalg.LinAlgError):
+            return math.inf
+
+    t0 = time.perf_counter()
+    vmax = float(_vmax(sig).max(initial=0.0))
+    best, scan = scan_qs(score, vmax)
+    notes.append(f"q_s scan (paper model, one q_s for every joint): {best:.4g} rad/s, the "
+                 f"smallest relative error over every joint's rows of {len(scan)} paper fits "
+                 f"(grid {qs_grid(vmax)[0]:.4g}..{qs_grid(vmax)[-1]:.4g} rad/s then a bounded "
+                 f"search; {time.perf_counter() - t0:.1f} s)")
+    return best, scan
+
+
 def _vmax(sel: RobotSignals) -> np.ndarray:
     """Per joint, max |dq| over the rows with a finite torque [rad/s]."""
     return np.array([float(np.abs(sel.dq[np.isfinite(sel.tau[:, j]), j]).max(initial=0.0))
@@ -1111,12 +1161,13 @@ def public_record(out: dict[str, Any]) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     """Execute ``jointid fit --robot``; returns the exit code."""
     _check_args(args)
+    q_s = parse_qs(args.q_s)  # refused in one line before any file is read
     robot = load_robot(args.robot)
     out = fit_files(robot, args.inputs, args.validate, model=args.model,
                     mapping=parse_mapping(args.map, robot=True), q_unit=args.q_unit,
                     cutoff=args.cutoff, decimation=args.decimation, trim=args.trim,
                     torque_delay=getattr(args, "torque_delay", None), method=args.method,
-                    q_s=parse_qs(args.q_s, scan=False), dq_min=args.dq_min,
+                    q_s=q_s, dq_min=args.dq_min,
                     known_rotor_inertia=args.known_rotor_inertia,
                     chain=args.chain or "columns", payload=args.payload,
                     feasibility=not getattr(args, "no_consistency", False),

@@ -11,7 +11,9 @@ again), the found terms' columns those of the refinement's design.
 
 :mod:`ident.fitting` re-exports the public names (``qs_grid``, ``rescan_qs``, ``QsScan``);
 :func:`ident.fitting.fit_models` scans q_s with :func:`_scan` and :func:`qs_grid` on its own
-fits.
+fits; :func:`scan_qs` is the same scan of any fit given as a score, what
+``jointid fit --robot --q-s scan`` (:func:`ident.cli_robot.fit_robot`) scans the n-dof paper
+fit with (one q_s shared by every joint).
 """
 
 from __future__ import annotations
@@ -30,7 +32,8 @@ from .robot.refit import RobotRefit, model_at_qs, refit_robot
 from .robot.signals import RobotSignals
 from .terms import Term
 
-__all__ = ["QsScan", "qs_grid", "rescan_qs", "QS_XTOL", "QS_SEARCH_EVALS", "QS_WORKERS"]
+__all__ = ["QsScan", "qs_grid", "rescan_qs", "scan_qs", "QS_XTOL", "QS_SEARCH_EVALS",
+           "QS_WORKERS"]
 
 #: Resolution of the q_s scan after the grid, on log q_s (1 %).
 QS_XTOL = 0.01
@@ -209,3 +212,52 @@ def rescan_qs(
     best = min(scan, key=lambda x: x[1])[0]
     out = refit(best, errors_only=False)
     return QsScan(q_s=best, refit=out, scan=scan, joints=scanned, record=out.to_json())
+
+
+def scan_qs(score: Callable[[float], float], vmax: float, *,
+            n_grid: int = 13) -> tuple[float, list[tuple[float, float]]]:
+    """The q_s scan of a fit given as a score: ``score(q_s)`` on the grid of :func:`qs_grid`,
+    then the bounded search on log q_s between the best grid point's neighbours (to
+    :data:`QS_XTOL`), as :func:`ident.fitting.fit_models` scans a joint. What
+    ``jointid fit --robot --q-s scan`` (:func:`ident.cli_robot.fit_robot`) scans with, the
+    score being the relative error of the n-dof paper fit at that q_s (one q_s shared by
+    every joint).
+
+    Parameters
+    ----------
+    score : callable
+        q_s [rad/s] -> the fit's relative error at that q_s (dimensionless); ``inf`` for a
+        q_s where the fit failed.
+    vmax : float
+        Maximum |dq| of the fitted rows [rad/s], for the grid.
+    n_grid : int
+        Grid points.
+
+    Returns
+    -------
+    q_s : float
+        The evaluated q_s of the smallest score [rad/s].
+    scan : list of (q_s, score)
+        Every evaluated q_s, sorted.
+
+    Raises
+    ------
+    DataError
+        ``vmax`` not positive and finite, or the fit failed at every q_s.
+    """
+    if not (np.isfinite(vmax) and vmax > 0):
+        raise DataError(f"q_s scan: the fitted rows' largest |dq| is {vmax!r} rad/s; expected "
+                        "a velocity > 0")
+    scan: list[tuple[float, float]] = []
+
+    def err(q: float) -> float:
+        e = float(score(q))
+        scan.append((q, e))
+        return e
+
+    _scan(err, qs_grid(vmax, n_grid))
+    scan.sort()
+    if not any(np.isfinite(e) for _, e in scan):
+        raise DataError("q_s scan: the paper model could not be fitted at any q_s of the grid "
+                        f"{qs_grid(vmax, n_grid)[0]:.4g}..{qs_grid(vmax, n_grid)[-1]:.4g} rad/s")
+    return min(scan, key=lambda x: x[1])[0], scan
