@@ -25,7 +25,7 @@ import sys
 
 import numpy as np
 import pytest
-from robot_campaigns import ARM3, write_arm_csv
+from robot_campaigns import ARM3, ARM3_CENTRE, ARM3_PAYLOADS, write_arm_csv
 from test_robot_fit import _simulate, noisy_raw_runs
 
 from daq.app.cli import main
@@ -33,7 +33,7 @@ from ident import DataError
 from ident.api import RobotFit
 from ident.preprocess import TORQUE_DELAY
 from ident.qs_scan import qs_grid
-from sim_drivers.arm import ArmGains, ArmParams, Payload, model_reference, simulate_arm
+from sim_drivers.arm import ArmEffects, ArmGains, ArmParams, Payload, model_reference, simulate_arm
 from trajectories.robot import load_robot
 
 FACTOR = 1.5  # tolerance on q_s / q_s_true (module doc)
@@ -114,3 +114,35 @@ def test_bad_qs_with_robot_is_one_line_before_reading(tmp_path, value):
 def test_api_bad_qs_string_is_one_line(arm_files):
     with pytest.raises(DataError, match=r"q_s 'scn': expected a number \[rad/s\] or 'scan'"):
         RobotFit(ARM3, model="paper", q_s="scn", consistency=False).fit(arm_files)
+
+
+def test_cli_refine_after_a_scan_scans_again_with_the_found_terms(tmp_path, capfd):
+    """``--q-s scan --refine``: after the found terms' n-dof refit, q_s is scanned again with
+    the kept terms (``refinement.q_s_rescan``, as ``jointid demo`` does for a joint). The arm
+    of tests/test_qs_rescan.py (load-dependent friction, q_s 0.03 rad/s, a drag F_VV dq|dq|
+    on joint 3 that no declared model has), three payload runs as robot CSVs through the
+    command line. The rescan must be the smallest error of its own scan and land within
+    FACTOR of the truth with the drag refitted."""
+    robot = load_robot(ARM3)
+    c = ArmParams.from_robot(robot).friction.c_m
+    params = ArmParams.from_robot(
+        robot, dict(a_m=1.0, b_m=0.25, a_g=1.0, b_g=0.27, d_m=0.0, d_g=0.0, c_g=c),
+        effects=ArmEffects.make(3, quadratic_viscous={2: {"F_VV": 3.0}}))
+    ref = model_reference(params.model, center=ARM3_CENTRE, fraction=0.9, duration_s=10.0,
+                          seed=11)
+    files = [write_arm_csv(simulate_arm(params, ref, ArmGains.for_params(params, payload=p),
+                                        payload=p, seed=110 + i), tmp_path / f"p{i}.csv")
+             for i, p in enumerate(ARM3_PAYLOADS)]
+    q_true = float(params.friction.q_s[0])
+    rec, text = _cli(tmp_path, capfd, files, "--model", "paper", "--q-s", "scan", "--refine",
+                     "--max-steps", "1", "--no-prune")
+    ref_rec = rec["refinement"]
+    added = [a["named_effect"] for a in ref_rec["joints"][robot.moving[2]]["added"]]
+    assert "quadratic_viscous" in added, ref_rec["joints"]
+    rs = ref_rec["q_s_rescan"]
+    assert "error" not in rs, rs
+    scan = [(d["q_s"], d["rel_error"]) for d in rs["scan"] if d["rel_error"] is not None]
+    assert rs["q_s"] == min(scan, key=lambda s: s[1])[0]
+    assert rs["q_s_fit"] == rec["q_s"]
+    assert abs(math.log(rs["q_s"] / q_true)) < math.log(FACTOR), (rs["q_s"], q_true)
+    assert "q_s scanned again with the kept terms" in text
