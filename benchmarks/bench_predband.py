@@ -33,7 +33,37 @@ rigid body's uncertainty is left out. Three variants:
 
 Printed and written (``--results``): false alarms per joint on the false logs and the
 largest |r - centre| / half-width, the detect log's pushes (delay per push) and the
-crossings outside them, per variant.
+crossings outside them, per variant; per push, k_u sigma_pred of the pushed joint in
+its first 50 ms.
+
+Measured 2026-11-28, 20:34-20:44 UTC (busy host), on copies of the work folders of
+docs/monitoring.md's "Low-speed campaign for the pan" (low: examples/campaign_ur10_lowspeed
+.toml, demo: examples/campaign_ur10_demo.toml; each folder's own model and logs); ``plain``
+gives the recorded live figures exactly (low: 1 false alarm, the pan at 0.83 s, r = +1.836
+against +1.834 N m; demo: 0). Delays [ms] that change (every other push as plain):
+
+===========  =====  ==============================  ==========================================
+folder       k_u    threshold                        interval
+===========  =====  ==============================  ==========================================
+low          3      FA 1 -> 0; 20 N pan 40 -> 42,   FA 1 -> 0; 20 N pan 40 -> 42; 40 N elbow
+                    elbow 38 -> 40; 40 N elbow       88 -> 162; wrist 2/3 rest bands 0.82 /
+                    88 -> 162                        0.57 -> 0.05 / 0.08 N m
+low          1      FA 1 -> 0; 20 N unchanged;       FA 1 -> 0; 20 N pan 40 -> 38; 40 N elbow
+                    40 N elbow 88 -> 104             88 -> 102
+demo         3      40 N pan 20 -> missed, elbow     40 N pan 20 -> missed, elbow 88 ->
+                    88 -> missed                     missed; 1 crossing outside the pushes
+demo         1      40 N pan 20 -> missed, elbow     40 N pan 20 -> 24, elbow 88 -> 102;
+                    88 -> 104                        1 crossing outside the pushes
+===========  =====  ==============================  ==========================================
+
+The demo model's pan has no identified Stribeck terms (its fit's std: b_m 1.1, b_g 1.6
+N m / N m, d_m 2.6, d_g 2.9 N m; no covariance to say that c_g + d_g is better known):
+3 sigma_pred reaches 252 N m on its false logs, 12.9 N m in the first 50 ms
+of the pan's first 40 N push (J^T F about 4 N m), 35 N m at its first 20 N push; wrist 3's
+fit b_m is -62 +- 17.5 where the exported (consistent) value is -0.18, so the record's std
+is not that of the exported model's parameter (3 sigma_pred up to 153 N m on the low
+folder's false logs). So the idea removes the low-speed false alarm but loses a push that
+was caught in 20 ms on the demo folder: not kept (the monitor is unchanged).
 """
 
 from __future__ import annotations
