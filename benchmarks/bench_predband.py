@@ -40,7 +40,8 @@ Measured 2026-11-28, 20:34-20:44 UTC (busy host), on copies of the work folders 
 docs/monitoring.md's "Low-speed campaign for the pan" (low: examples/campaign_ur10_lowspeed
 .toml, demo: examples/campaign_ur10_demo.toml; each folder's own model and logs); ``plain``
 gives the recorded live figures exactly (low: 1 false alarm, the pan at 0.83 s, r = +1.836
-against +1.834 N m; demo: 0). Delays [ms] that change (every other push as plain):
+against +1.834 N m; demo: 0). False alarms (FA) and the delays [ms] that change by more
+than 4 ms (the others move by 0-4 ms; with ``interval`` wrists 2 and 3 drop to 2 ms):
 
 ===========  =====  ==============================  ==========================================
 folder       k_u    threshold                        interval
@@ -51,9 +52,13 @@ low          3      FA 1 -> 0; 20 N pan 40 -> 42,   FA 1 -> 0; 20 N pan 40 -> 42
 low          1      FA 1 -> 0; 20 N unchanged;       FA 1 -> 0; 20 N pan 40 -> 38; 40 N elbow
                     40 N elbow 88 -> 104             88 -> 102
 demo         3      40 N pan 20 -> missed, elbow     40 N pan 20 -> missed, elbow 88 ->
-                    88 -> missed                     missed; 1 crossing outside the pushes
+                    88 -> missed                     missed; 1 crossing outside the pushes;
+                                                     20 N elbow 76 -> 30, pan (184, 16, 16)
+                                                     -> (180, 8, 8), lift 10-16 -> 6-8
 demo         1      40 N pan 20 -> missed, elbow     40 N pan 20 -> 24, elbow 88 -> 102;
-                    88 -> 104                        1 crossing outside the pushes
+                    88 -> 104                        1 crossing outside the pushes; 20 N
+                                                     elbow 76 -> 32, pan (184, 16, 16) ->
+                                                     (160, 8, 8), lift 10-16 -> 6-8
 ===========  =====  ==============================  ==========================================
 
 The demo model's pan has no identified Stribeck terms (its fit's std: b_m 1.1, b_g 1.6
