@@ -359,6 +359,24 @@ def truth_model(campaign: object) -> ExportedModel:
                          "simulator truth")
 
 
+def logged_states(log: Path, campaign: object, model: ExportedModel
+                  ) -> tuple[object, list, list, list, object, list[float]]:
+    """A monitored run log's monitor records and, at their cycles, the logged q [rad],
+    dq [rad/s], torque actual [N m] (lists of k values per cycle), with the model's predictor
+    for the log's payload (``_payload<i>`` in its name) and each joint's rest velocity
+    (3 q_s) [rad/s]: what :func:`replay` and ``bench_predband.py`` feed a residual."""
+    ml = read_monitor(log)
+    k = len(campaign.moving)
+    axes = [read_run(log, axis=j) for j in range(k)]
+    idx = np.searchsorted(axes[0].cycle, ml.cycle)
+    q, dq, tau = (np.stack([getattr(a, f)[idx] for a in axes], axis=1).tolist()
+                  for f in ("q", "dq", "tau_actual"))
+    m = re.search(r"_payload(\d+)\.mcap$", log.name)
+    payload = campaign.payloads[int(m.group(1))] if m else None
+    pred = model.predictor(payload)
+    return ml, q, dq, tau, pred, [REST_QS * x for x in pred.q_s]
+
+
 def replay(log: Path, campaign: object, model: ExportedModel, cutoff_hz: float = 20.0,
            kind: str = "filtered", gain: float = DEFAULT_OBSERVER_GAIN
            ) -> tuple[object, np.ndarray, np.ndarray]:
@@ -369,22 +387,14 @@ def replay(log: Path, campaign: object, model: ExportedModel, cutoff_hz: float =
     3 q_s) (with the log's own model and residual it gives the logged residual exactly).
     Returns (the log's :class:`MonitorLog`, residual, moving time (n, k) [s] at the model's
     rest velocity)."""
-    ml = read_monitor(log)
-    k = len(campaign.moving)
-    axes = [read_run(log, axis=j) for j in range(k)]
-    idx = np.searchsorted(axes[0].cycle, ml.cycle)
-    q, dq, tau = (np.stack([getattr(a, f)[idx] for a in axes], axis=1).tolist()
-                  for f in ("q", "dq", "tau_actual"))
-    m = re.search(r"_payload(\d+)\.mcap$", log.name)
-    payload = campaign.payloads[int(m.group(1))] if m else None
-    pred = model.predictor(payload)
-    v_rest = [REST_QS * x for x in pred.q_s]
+    ml, q, dq, tau, pred, v_rest = logged_states(log, campaign, model)
+    k, n = len(campaign.moving), len(q)
     fn = functools.partial(pred.band if kind == "filtered" else pred.observer_terms,
                            v_rest=v_rest)
     res = residual_for(kind, fn, k, campaign.cycle_s, cutoff_hz=cutoff_hz, gain=gain)
-    r = np.zeros((len(idx), k))
-    vel = np.zeros((len(idx), k))
-    for i in range(len(idx)):
+    r = np.zeros((n, k))
+    vel = np.zeros((n, k))
+    for i in range(n):
         r[i], _, _, vel[i] = res.step(q[i], dq[i], tau[i])
     return ml, r, moving_seconds(vel, v_rest, campaign.cycle_s)
 

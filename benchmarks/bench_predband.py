@@ -76,7 +76,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import re
 import sys
 import time
 from pathlib import Path
@@ -86,9 +85,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_monitor as bm  # noqa: E402
 
-from daq.app.monitor import DEFAULT_K_SIGMA, DEFAULT_PEAK_MARGIN, REST_QS  # noqa: E402
-from daq.protocol.reader import read_run  # noqa: E402
-from daq.runtime.monitor import FilteredResidual, moving_seconds, read_monitor  # noqa: E402
+from daq.app.monitor import DEFAULT_K_SIGMA, DEFAULT_PEAK_MARGIN  # noqa: E402
+from daq.runtime.monitor import FilteredResidual, moving_seconds  # noqa: E402
 from ident.monitor import TorquePredictor, load_exported, thresholds_from_residual  # noqa: E402
 
 PAPER_KEYS = ("a_m", "b_m", "a_g", "b_g", "c_m", "d_m", "c_g", "d_g", "FV", "OFF")
@@ -180,19 +178,11 @@ def replay(log: Path, campaign: object, model: object, std: list[list[float]], k
            ) -> dict:
     """The plain and widened residuals of one monitored log (n, k) [N m], the widening of
     the lower and upper edge (n, k) [N m], the moving time (n, k) [s]."""
-    ml = read_monitor(log)
+    ml, q, dq, tau, pred, v_rest = bm.logged_states(log, campaign, model)
     k = len(campaign.moving)
-    axes = [read_run(log, axis=j) for j in range(k)]
-    idx = np.searchsorted(axes[0].cycle, ml.cycle)
-    q, dq, tau = (np.stack([getattr(a, f)[idx] for a in axes], axis=1).tolist()
-                  for f in ("q", "dq", "tau_actual"))
-    m = re.search(r"_payload(\d+)\.mcap$", log.name)
-    payload = campaign.payloads[int(m.group(1))] if m else None
-    pred = model.predictor(payload)
-    v_rest = [REST_QS * x for x in pred.q_s]
     band = UncertainBand(pred, std, k_u, v_rest)
     res = FilteredResidual(band, k, campaign.cycle_s, 20.0)
-    n = len(idx)
+    n = len(q)
     band.rows = np.zeros((n, 4, k))
     r, tf, vel = np.zeros((n, k)), np.zeros((n, k)), np.zeros((n, k))
     for i in range(n):

@@ -104,6 +104,18 @@ def to_toml(raw: dict) -> str:
     return text
 
 
+def arm_csvs(d: Path, payloads: tuple[Payload | None, ...]) -> list[Path]:
+    """The simulated 3-dof arm's default parameters on one 6 s model multi-sine (seed 1,
+    about ``[0, -1.9, 0.6]``), one robot CSV per payload (``p<i>.csv`` in ``d``, noise seed
+    10 + i): the quick CLI and API fits' files."""
+    params = ArmParams.from_robot(load_robot(ARM3))
+    ref = model_reference(params.model, center=[0.0, -1.9, 0.6], fraction=0.9,
+                          duration_s=6.0, seed=1)
+    return [write_arm_csv(simulate_arm(params, ref, ArmGains.for_params(params, payload=p),
+                                       payload=p, seed=10 + i), d / f"p{i}.csv")
+            for i, p in enumerate(payloads)]
+
+
 def write_arm_csv(run: Any, path: Path) -> Path:
     """A simulated arm run (``sim_drivers.arm_offline.ArmRun``) as a robot CSV
     (:meth:`~sim_drivers.arm_offline.ArmRun.to_csv`: its columns and, with a payload, the

@@ -13,32 +13,22 @@ import re
 
 import numpy as np
 import pytest
-from robot_campaigns import ARM3, write_arm_csv
+from robot_campaigns import ARM3, arm_csvs
 from test_docs_blocks import DOCS, blocks
 
 from daq.app.cli import main
 from ident import DataError
 from ident.api import RobotFit
 from ident.robot.loaders import load_robot_signals
-from sim_drivers.arm import ArmGains, ArmParams, Payload, model_reference, simulate_arm
+from sim_drivers.arm import Payload
 from trajectories.robot import load_robot
 
 
 @pytest.fixture(scope="module")
 def arm_files(tmp_path_factory):
     """Two payload runs (0 kg, 5 kg) for the fit and one (10 kg) for validation, as CSV."""
-    robot = load_robot(ARM3)
-    params = ArmParams.from_robot(robot)
-    ref = model_reference(params.model, center=[0.0, -1.9, 0.6], fraction=0.9,
-                          duration_s=6.0, seed=1)
-    d = tmp_path_factory.mktemp("arm")
-    files = []
-    for i, pay in enumerate((None, Payload(5.0, [0.0, 0.0, 0.05]),
-                             Payload(10.0, [0.02, 0.0, 0.1]))):
-        run = simulate_arm(params, ref, ArmGains.for_params(params, payload=pay), payload=pay,
-                           seed=10 + i)
-        files.append(write_arm_csv(run, d / f"p{i}.csv"))
-    return robot, files
+    return load_robot(ARM3), arm_csvs(tmp_path_factory.mktemp("arm"), (
+        None, Payload(5.0, [0.0, 0.0, 0.05]), Payload(10.0, [0.02, 0.0, 0.1])))
 
 
 def _cli(tmp_path, capfd, robot_file, fit, val, *options):

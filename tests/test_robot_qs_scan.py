@@ -25,7 +25,7 @@ import sys
 
 import numpy as np
 import pytest
-from robot_campaigns import ARM3, ARM3_CENTRE, ARM3_PAYLOADS, write_arm_csv
+from robot_campaigns import ARM3, ARM3_CENTRE, ARM3_PAYLOADS, arm_csvs, write_arm_csv
 from test_robot_fit import _simulate, noisy_raw_runs
 
 from daq.app.cli import main
@@ -65,14 +65,7 @@ def test_scanned_qs_near_the_truth(seed):
 @pytest.fixture(scope="module")
 def arm_files(tmp_path_factory):
     """Two payload runs (0 kg, 5 kg) of the simulated arm, as robot CSVs."""
-    robot = load_robot(ARM3)
-    params = ArmParams.from_robot(robot)
-    ref = model_reference(params.model, center=[0.0, -1.9, 0.6], fraction=0.9,
-                          duration_s=6.0, seed=1)
-    d = tmp_path_factory.mktemp("arm")
-    return [write_arm_csv(simulate_arm(params, ref, ArmGains.for_params(params, payload=p),
-                                       payload=p, seed=10 + i), d / f"p{i}.csv")
-            for i, p in enumerate((None, Payload(5.0, [0.0, 0.0, 0.05])))]
+    return arm_csvs(tmp_path_factory.mktemp("arm"), (None, Payload(5.0, [0.0, 0.0, 0.05])))
 
 
 def _cli(tmp_path, capfd, files, *options):
