@@ -56,49 +56,45 @@ LEVERAGE_FLOOR = 1e-9
 
 def _rows(model: Any, signals: Any, free: np.ndarray):
     """Per chunk and joint: (j, block indices, J (m, nb) on the free block, residual (m,))
-    on the joint's fitted rows (module doc)."""
+    on the joint's fitted rows (module doc): the model's own pass and row rule
+    (:meth:`RobotModel.fitted_rows`: the usable rows, the quadrant band)."""
     coeffs = usual_coefficients if model.model == "usual" else paper_coefficients
     theta_q = model.quadrant_theta_ if getattr(model, "quadrant_theta_", None) is not None \
         else getattr(model, "quadrant_from_", None)
-    band = np.asarray(getattr(model, "band_", np.zeros(len(model.cols_))), dtype=float)
     x = model.coef_
-    for sig, r, _q, dq, _ddq, tau, _z, _pay, cc in model._chunks(signals, iv=False):
-        sgn = model._sign(sig, r, cc)
-        W, p, kn = model._rows(_q, dq, _ddq, tau, _pay, None if cc is None else cc[:2])
-        for j, cols in enumerate(model.cols_):
-            idx = model._local(j)
-            nt = model._nt(j)
-            bi = idx[nt:][free[idx[nt:]]]
-            if bi.size == 0:
-                continue
-            sel = np.isin(idx[nt:], bi)
-            WjT, pj = model._joint(W, p, kn, j)
-            dqj = dq[:, j]
-            ok = model._usable(dqj, tau[:, j], WjT, None if cc is None else cc[3][:, j])
-            WjT, pj, dqj, tj = WjT[:, ok], pj[ok], dqj[ok], tau[ok, j]
-            sg = None if sgn is None else sgn[ok, j]
-            V = model._v(WjT, pj, dqj, tj, sg).T[:, :-1]  # (m, nv) without the torque
-            if theta_q is None:
-                sp = tj * dqj
-            else:
-                tout = theta_q[cols] @ WjT + pj
-                sp = tout * dqj
-                if band[j] > 0:
-                    out = np.abs(tout) >= band[j]
-                    V, sp, dqj, tj = V[out], sp[out], dqj[out], tj[out]
-            if not tj.size:
-                continue
-            E = stribeck_exp(dqj, model.q_s_[j])
-            th, blk = x[idx[:nt]], x[idx[nt:]]
-            Jr = np.zeros((tj.size, bi.size))
-            pred = np.zeros(tj.size)
-            for s, ws in enumerate(quadrant_weights(sp)):
-                c0, c1, D0, D1 = coeffs(th, blk, s)
-                nv = V.shape[1]
-                pred += ws * (V @ c0[:nv] + E * (V @ c1[:nv]))
-                Jr += ws[:, None] * (V @ D0[:nv, nt:][:, sel]
-                                     + E[:, None] * (V @ D1[:nv, nt:][:, sel]))
-            yield j, bi, Jr, tj - pred
+    for sig in [signals] if isinstance(signals, RobotSignals) else signals:
+        yield from _joint_rows(model, sig, free, coeffs, theta_q, x)
+
+
+def _joint_rows(model: Any, signals: RobotSignals, free: np.ndarray, coeffs: Any,
+                theta_q: np.ndarray | None, x: np.ndarray):
+    """:func:`_rows` on one :class:`RobotSignals`."""
+    keep = None if signals.columns is None else signals.columns.keep
+    for r, j, cols, WjT, pj, dqj, tj, sg in model._fitted_rows(signals, "leverage_sigma"):
+        idx = model._local(j)
+        nt = model._nt(j)
+        bi = idx[nt:][free[idx[nt:]]]
+        if bi.size == 0:
+            continue
+        sel = np.isin(idx[nt:], bi)
+        ok = model._row_rule(j, cols, WjT, pj, dqj, tj, None if keep is None else keep[r, j])
+        if not ok.any():
+            continue
+        WjT, pj, dqj, tj = WjT[:, ok], pj[ok], dqj[ok], tj[ok]
+        sg = None if sg is None else sg[ok]
+        V = model._v(WjT, pj, dqj, tj, sg).T[:, :-1]  # (m, nv) without the torque
+        sp = tj * dqj if theta_q is None else (theta_q[cols] @ WjT + pj) * dqj
+        E = stribeck_exp(dqj, model.q_s_[j])
+        th, blk = x[idx[:nt]], x[idx[nt:]]
+        Jr = np.zeros((tj.size, bi.size))
+        pred = np.zeros(tj.size)
+        for s, ws in enumerate(quadrant_weights(sp)):
+            c0, c1, D0, D1 = coeffs(th, blk, s)
+            nv = V.shape[1]
+            pred += ws * (V @ c0[:nv] + E * (V @ c1[:nv]))
+            Jr += ws[:, None] * (V @ D0[:nv, nt:][:, sel]
+                                 + E[:, None] * (V @ D1[:nv, nt:][:, sel]))
+        yield j, bi, Jr, tj - pred
 
 
 def leverage_sigma(model: Any, signals: RobotSignals | Sequence[RobotSignals],
