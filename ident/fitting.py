@@ -68,9 +68,9 @@ from .qs_scan import (
     QS_WORKERS,
     QS_XTOL,
     QsScan,
-    _scan,
     qs_grid,
     rescan_qs,
+    scan_qs,
 )
 from .refine import quadrant_drift
 from .results import (
@@ -841,20 +841,14 @@ def fit_models(
         if q_s != "scan":
             raise DataError(f"q_s {q_s!r}: expected a number [rad/s] or 'scan'")
         if "paper" in models:
-
-            def err(q: float) -> float:
-                # full model (no elimination): the residual as a function of q_s alone,
-                # eq. 42's columns formed again at full rate for each q_s
-                e = problem.fit("paper", float(q), eliminate=False).result.rel_error
-                scan.append((float(q), e))
-                return e
-
-            # the grid steps by 36 %, and the b and d terms follow q_s closely (a 14 %
-            # error in q_s put b_m_MX 40 % off on the quick demo): the minimum is refined
-            # between the grid neighbours, on log q_s, to QS_XTOL
-            _scan(err, qs_grid(vmax))
-            scan.sort()
-            qs_val = min(scan, key=lambda x: x[1])[0]
+            # full model (no elimination): the residual as a function of q_s alone, eq. 42's
+            # columns formed again at full rate for each q_s; the grid steps by 36 %, and the
+            # b and d terms follow q_s closely (a 14 % error in q_s put b_m_MX 40 % off on
+            # the quick demo): the minimum is refined between the grid neighbours, on log
+            # q_s, to QS_XTOL (scan_qs, the robot's scan too)
+            qs_val, scan = scan_qs(
+                lambda q: problem.fit("paper", float(q), eliminate=False).result.rel_error,
+                vmax)
         else:
             qs_val = DEFAULT_QS
     else:
