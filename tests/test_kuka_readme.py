@@ -1,0 +1,91 @@
+"""The README's KUKA KR300 figures, rerun through the command line's entry point.
+
+README.md ("Whole robots") gives one command on the real recordings of Weigand et al.
+(``../shared/data/kuka_kr300_weigand2021``, not in the repository; the test is skipped
+without them): fit on recording A, cross-validate on B and C, ``--model both``. It quotes,
+for the paper model: 22 friction parameters pruned, a fit of 1.0 % against the usual
+model's 1.4 % on the same rows, and a cross-validation on B and C of 7.7 % against the
+usual model's 17.8 % (the usual model alone, ``--model usual``, the table above it: 15.3 %).
+This test runs that command, and ``--model usual``, in process (``daq.app.cli.main``, what
+the ``jointid`` script calls) and checks what the README's claim rests on.
+
+What breaks it (measured, docs/robot-identification.md "Pruning"): the greedy pruning reads
+the relative sigma, so any change of that sigma changes which parameters go, and with them
+the cross-validation. The pruning reading the honest sigma's HC3 side (2026-11-28 evening)
+pruned 19 other parameters and moved the cross-validation 7.7 -> 12.5 % (A4 79 -> 176 %);
+the honest sigma before 2026-11-28 (max(eq. 15, jackknife)) gave 9.3 %; no pruning at all
+(``--no-prune``) 23.9 %. The bound below catches all three.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+from daq.app.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+KUKA = ROOT / "examples" / "robots" / "kuka_kr300_r2500.toml"
+SHARED = Path(os.environ.get("JOINTID_SHARED", ROOT.parent / "shared"))  # as conftest.py
+DATA = SHARED / "data" / "kuka_kr300_weigand2021"
+MAP = "t=rec.time_cont,q=rec.act_pos_mot_deg,tau=rec.act_torque_abs_nm,q_ref=rec.ref_pos_deg"
+
+# The README's figure is 7.7 % (7.675 % printed 7.68 on 2026-11-28, bit for bit the same
+# with 1 and 2 BLAS threads). The bound is that figure + 10 % of it: far above the rounding
+# of the quoted digits (+-0.05, 0.7 % relative) and any floating-point noise of this
+# deterministic fit, below every other state documented for this command (9.3 %, 12.5 %,
+# 23.9 %, module docstring). Above it the README's "7.7 %" is no longer what the code
+# gives and must be measured again (or the change found).
+DOCUMENTED_CV_PCT = 7.7
+CV_BOUND_PCT = 1.10 * DOCUMENTED_CV_PCT
+# README: "22 parameters pruned". The count, not the names: the variant with the former
+# honest sigma pruned 22 too, other names, at 9.3 % (the bound above catches it). +-2 of
+# the 60 prunable parameters: one removal more or less, undone or not by the chi-square
+# test, is a change of the order worth re-reading the docs for, not of the claim.
+DOCUMENTED_PRUNED = 22
+PRUNED_TOL = 2
+
+pytestmark = pytest.mark.skipif(
+    not DATA.is_dir(), reason=f"real KUKA recordings absent: {DATA} (../shared not mounted)")
+
+
+def _fit(tmp_path: Path, capfd, model: str) -> dict:
+    """The README's command with ``--model MODEL``; its JSON record."""
+    out = tmp_path / f"kuka_{model}.json"
+    files = [DATA / f"recorded_2020-10-21_FF_{x}_08ms.mat" for x in "ABC"]
+    code = main(["fit", "--robot", str(KUKA), str(files[0]),
+                 "--validate", str(files[1]), str(files[2]),
+                 "--q-unit", "deg", "--map", MAP, "--model", model, "--json", str(out)])
+    _, err = capfd.readouterr()
+    assert code == 0, err
+    return json.loads(out.read_text())
+
+
+def test_readme_kuka_paper_model_cross_validation_and_pruning(tmp_path, capfd):
+    """The paper model cross-validates on B and C no worse than the usual model (fitted on
+    the same rows, and alone), below the documented figure's bound, with the documented
+    number of pruned parameters."""
+    both = _fit(tmp_path, capfd, "both")["models"]
+    alone = _fit(tmp_path, capfd, "usual")["models"]["usual"]
+    paper, usual = both["paper"], both["usual"]
+    assert "error" not in paper, paper
+    cv = 100 * paper["validation_rel_error"]["all"]
+    cv_usual = 100 * usual["validation_rel_error"]["all"]
+    cv_alone = 100 * alone["validation_rel_error"]["all"]
+    print(f"\nCV on B and C, all axes: paper {cv:.2f} %, usual (same rows) {cv_usual:.2f} %, "
+          f"usual alone {cv_alone:.2f} %; pruned {len(paper['uncertainty']['pruned'])}; "
+          f"fit: paper {100 * paper['rel_error']['all']:.2f} %, "
+          f"usual {100 * usual['rel_error']['all']:.2f} %")
+    assert cv <= cv_usual, (cv, cv_usual)
+    assert cv <= cv_alone, (cv, cv_alone)
+    assert cv < CV_BOUND_PCT, (
+        f"paper model's cross-validation on B and C {cv:.2f} % above {CV_BOUND_PCT:.2f} % "
+        f"(README: {DOCUMENTED_CV_PCT} %)")
+    pruned = paper["uncertainty"]["pruned"]
+    assert abs(len(pruned) - DOCUMENTED_PRUNED) <= PRUNED_TOL, pruned
+    assert all(paper["parameters"][p]["pruned"] for p in pruned)
+    # the README's fit figures: the paper model below the usual one on the same rows
+    assert paper["rel_error"]["all"] < usual["rel_error"]["all"]
