@@ -429,7 +429,8 @@ def _read_mat(path: Path) -> dict[str, object]:
         raw = scipy.io.loadmat(path, squeeze_me=True, struct_as_record=False)
     except NotImplementedError:  # scipy: "Please use HDF reader for matlab v7.3 files"
         return _read_mat_v73(path)
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError, scipy.io.matlab.MatReadError) as exc:
+        # MatReadError (not a ValueError): a file shorter than a MAT header, e.g. empty
         raise DataError(f"{path}: not a readable MAT file ({exc})") from None
     return {k: v for k, v in raw.items() if not k.startswith("__")}
 
