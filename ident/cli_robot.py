@@ -41,7 +41,7 @@ from .chain import check_torque_delay
 from .cli import parse_qs
 from .estimate import DEFAULT_THRESHOLD_PCT
 from .fitting import DQ_MIN_FRACTION, SIGN_CHECK_MIN_KEPT
-from .loaders import parse_mapping
+from .loaders import Q_UNITS, parse_mapping
 from .qs_scan import qs_grid, rescan_qs, scan_qs
 from .refine_result import ONE_TRAJECTORY_NOTE
 from .report import write_json
@@ -123,8 +123,28 @@ def load_runs(robot: Robot, data: Sequence[str | Path] | str | Path | Sequence[R
         return items  # type: ignore[return-value]
     if any(isinstance(r, RawRobotRun) for r in items):
         raise DataError("robot data: expected file paths or RawRobotRun objects, not a mix")
+    _check_q_unit_kind(robot, q_unit)
     return load_robot_runs(items, robot.moving, gains=robot_gains(robot),  # type: ignore[arg-type]
                            mapping=mapping, q_unit=q_unit)
+
+
+def _check_q_unit_kind(robot: Robot, q_unit: str | None) -> None:
+    """Refuse a ``--q-unit`` of the wrong kind for a moving joint (an angle for a prismatic
+    joint, a length for a revolute one), as the single-joint loader does: one unit scales
+    every axis, so ``--q-unit mm`` on a revolute arm read degrees as millimetres and fitted
+    on without a word. A unit that is no unit at all is left to the loader's message."""
+    if q_unit is None or str(q_unit).strip().lower() not in Q_UNITS:
+        return
+    unit = str(q_unit).strip().lower()
+    angle = Q_UNITS[unit][1]
+    wrong = [j for j in robot.moving
+             if (robot.types[robot.joint_names.index(j)] == "revolute") != angle]
+    if wrong:
+        raise DataError(
+            f"--q-unit {unit}: {'an angle' if angle else 'a length'}, but moving joint(s) "
+            f"{', '.join(wrong)} of the robot are {'prismatic' if angle else 'revolute'} "
+            f"(expected {'mm or m' if angle else 'deg or rad'}; one unit converts every axis: "
+            "with joints of both kinds give q in SI units and no --q-unit)")
 
 
 def _check_ratio_separable(runs: Sequence[RawRobotRun]) -> None:
