@@ -99,6 +99,9 @@ BUTTER_ORDER = 4
 #: simulated arm) is re-paired at load time so that this half cycle completes it
 #: (:func:`ident.timing.align_to_torque`).
 TORQUE_DELAY = 0.5
+#: Relative excess of 3 f_s / cut-off over a whole number that the default trim's ceil
+#: ignores (:func:`default_rates`): a rounding of the stored period, not a sample.
+TRIM_RTOL = 1e-6
 #: Lower bound of the default cut-off, as a fraction of f_s, when instruments are built.
 #: The columns are nonlinear in the filtered signals (E_xp ddq, sign(P)): a narrow band
 #: smears the breakaway and reversal transients, a bias no estimator removes (simulated
@@ -474,10 +477,16 @@ def default_rates(fs: float, cutoff_hz: float, decimation: int | None = None,
                   trim: int | None = None, guard: int | None = None) -> tuple[int, int, int]:
     """(decimation, trim, guard) with the defaults of :func:`build_design` for the None ones:
     r = round(f_s / cut-off) (at least 1), trim = max(ceil(3 f_s / cut-off), 2 r), guard = 3 r.
+    The ceil ignores a relative excess below :data:`TRIM_RTOL` (a period stored to 10 digits,
+    0.0039999999 s for 4 ms, gives 60.0000015 samples: the trim is 60, as with exactly 4 ms).
     Given values are returned as int, unchecked."""
     r = max(1, int(round(fs / cutoff_hz))) if decimation is None else int(decimation)
-    trim = max(int(np.ceil(3 * fs / cutoff_hz)), 2 * r) if trim is None else int(trim)
-    return r, trim, 3 * r if guard is None else int(guard)
+    if trim is None:
+        # ceil to the next whole sample, but not past a whole number that a stored period
+        # misses by a rounding (0.0039999999 s for 4 ms: 60.0000015 samples, not 61)
+        x = 3 * fs / cutoff_hz
+        trim = max(int(np.ceil(x - TRIM_RTOL * x)), 2 * r)
+    return r, int(trim), 3 * r if guard is None else int(guard)
 
 
 def default_torque_delay(sources: Iterable[str]) -> float:
