@@ -470,7 +470,10 @@ def fit_robot(
     out: dict[str, Any] = {
         "format": FORMAT,
         "robot": {"name": robot.name, "source": robot.source, "moving": list(joints),
-                  "numbers": list(robot.numbers)},
+                  "numbers": list(robot.numbers),
+                  # the file as an absolute path, for export-model run from another folder
+                  **({"path": str(Path(robot.source).resolve())}
+                     if Path(robot.source).is_file() else {})},
         "inputs": [r.source for r in runs],
         "validation_inputs": [r.source for r in validation or []],
         "preprocessing": {**settings, "torque_delay_given": delay_given,
