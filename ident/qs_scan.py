@@ -409,7 +409,12 @@ def scan_qs_joints(score: Callable[[np.ndarray], Mapping[str, float]],
                 return e
 
             _scan(err, window)
-            best = min(sorted(tried), key=lambda x: x[1])[0]
+            # the smallest score of the search, kept only if below the current value's (a
+            # search where every fit failed leaves the joint where it was)
+            best, low = float(current[j]), read(errors(current), j)
+            for q, e in sorted(tried):
+                if e < low:
+                    best, low = q, e
             if abs(math.log(best / current[j])) > QS_XTOL:
                 moved = True
             current[j] = best

@@ -19,11 +19,12 @@ returned the grid's first point (0.0038) or last (0.15) is a factor 8 or 5 off.
 scan_qs_joints``): the same arm with a distinct true q_s per joint, 0.03 / 0.05 / 0.1 rad/s
 (``QS_DISTINCT``), each scanned q_s within ``FACTOR_JOINTS`` = 1.8 of its joint's truth.
 Measured by benchmarks/robot_qs_joints.py (``--qs 0.03 0.05 0.1``) on seeds 1-8: the worst
-ratio over the joints was 1.56 (seed 2, j2 0.0782); the table is in docs/robot-
-identification.md, 'One q_s per joint'. A shared q_s cannot pass: it is off by at least
-sqrt(0.1 / 0.03) = 1.83 > 1.8 on j1 or j3 whatever its value (the shared scan chose 0.0625,
-0.0754 on seeds 1, 2). With 0.02 / 0.03 / 0.06 j1's q_s is not determined by these data (its
-rows below dq_min = 0.015 rad/s are out; the per-joint scan found 0.019-0.044 on seeds 1-4).
+ratio over the joints was 1.56 (seed 2, j2 0.0782) on seven seeds, and 2.27 on seed 5 (j1
+0.0132 for 0.03: the smallest q_s is the least determined, few rows below 3 q_s); so the
+factor holds on 7 of 8 seeds, seeds 1-2 checked here (the table is in docs/robot-
+identification.md, 'One q_s per joint'). It is set below sqrt(0.1 / 0.03) = 1.83 so that a
+shared q_s cannot pass: whatever its value it is off by at least that on j1 or j3 (the shared
+scan chose 0.0625, 0.0754 on seeds 1, 2).
 """
 
 from __future__ import annotations
