@@ -12,9 +12,9 @@ multi-sine, seed 100 + s, no payload) as the validation file.
 Prints per seed and per method: each joint's q_s, the fit's relative error per joint and
 over every joint (the record's ``rel_error``: after the uncertainty step's pruning), the
 held-out error, the number of paper fits of the scan, and the fit_robot wall time.
-``--criterion all`` scores each joint's q_s by the error over every joint's rows instead of
-its own rows' (the scan's ``criterion``; set here by replacing the function the fit calls,
-a measurement switch, not an option of the command).
+``--criterion joint`` scores each joint's q_s by its own rows' error instead of the error over
+every joint's rows (the scan's ``criterion``, default "all"; set here by replacing the function
+the fit calls, a measurement switch, not an option of the command).
 
 Usage::
 
@@ -68,10 +68,10 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4])
     ap.add_argument("--qs", type=float, nargs=3, default=[0.02, 0.03, 0.06])
     ap.add_argument("--duration", type=float, default=20.0)
-    ap.add_argument("--criterion", choices=("joint", "all"), default="joint")
+    ap.add_argument("--criterion", choices=("all", "joint"), default="all")
     ap.add_argument("--methods", nargs="+", default=["scan", "scan-joints", "truth"])
     a = ap.parse_args()
-    if a.criterion != "joint":
+    if a.criterion != "all":
         cli_robot.scan_qs_joints = functools.partial(scan_qs_joints, criterion=a.criterion)
     robot = load_robot(ARM3)
     params = ArmParams.from_robot(robot, {"q_s": np.array(a.qs)})

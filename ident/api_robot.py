@@ -70,8 +70,8 @@ class RobotFit(HyperParameters):
         by joint name), or ``"scan"``: one q_s shared by every joint, the paper fit's
         smallest relative error on the single joint's grid and bounded search
         (:func:`ident.cli_robot.fit_robot`; ``record_["q_s"]`` the chosen one,
-        ``record_["q_s_scan"]`` the scan), or ``"scan-joints"``: one q_s per joint, each
-        chosen on its own rows' error with the others held
+        ``record_["q_s_scan"]`` the scan), or ``"scan-joints"``: one q_s per joint, each in
+        turn on the same error with the others held
         (:func:`ident.qs_scan.scan_qs_joints`; ``record_["q_s"]`` by joint name,
         ``record_["q_s_scan_joints"]`` the scan). Ignored by the usual model.
     cutoff : float or None

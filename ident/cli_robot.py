@@ -274,7 +274,7 @@ def fit_robot(
         between the best point's neighbours (:func:`ident.qs_scan.scan_qs`, the single joint's
         rule); one q_s shared by every joint. The record's ``q_s`` is the chosen one and
         ``q_s_scan`` every evaluated ``{q_s, rel_error}``; or ``"scan-joints"``: one q_s per
-        joint, each scored by its own rows' error with the others held
+        joint, each in turn with the others held, on the same error
         (:func:`ident.qs_scan.scan_qs_joints`), the record's ``q_s`` by joint name and
         ``q_s_scan_joints`` the scan (docs/robot-data.md). Without the paper model: the
         default, as for one joint.
@@ -872,8 +872,8 @@ def _scan_qs(q_s: Any, models: tuple[str, ...],
     ``"scan"``: the q_s of the smallest relative error of the paper fit ``paper(q).fit(sig)``
     over every joint's rows (:func:`ident.qs_scan.scan_qs`; a fit that fails scores inf), one
     for every joint; ``q_s_scan`` every evaluated ``{q_s, rel_error}``. ``"scan-joints"``: one
-    q_s per joint (:func:`ident.qs_scan.scan_qs_joints`, each joint's q_s scored by its own
-    rows' error, the others held), returned by joint name; ``q_s_scan_joints`` the scan. A
+    q_s per joint (:func:`ident.qs_scan.scan_qs_joints`: on the same error, each joint's q_s
+    in turn with the others held), returned by joint name; ``q_s_scan_joints`` the scan. A
     number, sequence or mapping is returned as it is, with no scan; without the paper model,
     the default q_s. Notes say the scan's figures (one line per joint for ``scan-joints``).
 
@@ -912,8 +912,8 @@ def _scan_qs(q_s: Any, models: tuple[str, ...],
 def _scan_qs_joints(paper: Callable[[Any], RobotModel], sig: RobotSignals, vmax: np.ndarray,
                     notes: list[str], t0: float) -> tuple[dict[str, float], dict[str, Any]]:
     """``q_s="scan-joints"`` of :func:`_scan_qs`: :func:`ident.qs_scan.scan_qs_joints` on the
-    paper fit's per-joint relative errors, each joint's grid on its own largest |dq|; the
-    chosen q_s by joint, the record's ``q_s_scan_joints`` and one note per joint."""
+    paper fit's relative error over every joint's rows, each joint's grid on its own largest
+    |dq|; the chosen q_s by joint, the record's ``q_s_scan_joints`` and one note per joint."""
     joints = sig.joints
 
     def score(q: np.ndarray) -> dict[str, float]:
@@ -938,7 +938,7 @@ def _scan_qs_joints(paper: Callable[[Any], RobotModel], sig: RobotSignals, vmax:
                      f"{100 * res.error[j]:.3g} % ({len(res.scan[j])} points; grid "
                      f"{qs_grid(float(v))[0]:.4g}..{qs_grid(float(v))[-1]:.4g} rad/s)")
     return res.q_s, {"q_s_scan_joints": {
-        "criterion": "joint", "fits": res.fits, "sweeps": res.sweeps,
+        "criterion": "all", "fits": res.fits, "sweeps": res.sweeps,
         "converged": res.converged, "rel_error": {n: json_float(e) for n, e in res.error.items()},
         "joints": {n: [{"q_s": q, "rel_error": json_float(e), "sweep": k} for q, e, k in pts]
                    for n, pts in res.scan.items()}}}

@@ -14,8 +14,8 @@ again), the found terms' columns those of the refinement's design.
 fits; :func:`scan_qs` is the same scan of any fit given as a score, what
 ``jointid fit --robot --q-s scan`` (:func:`ident.cli_robot.fit_robot`) scans the n-dof paper
 fit with (one q_s shared by every joint); :func:`scan_qs_joints` chooses one q_s per joint
-(``--q-s scan-joints``): the shared grid read joint by joint, then coordinate sweeps of
-:func:`_scan` on each joint's error with the others held.
+(``--q-s scan-joints``): the shared grid, then coordinate sweeps of :func:`_scan` on each
+joint's q_s with the others held, on the same score.
 """
 
 from __future__ import annotations
@@ -305,14 +305,14 @@ class QsJointsScan:
 
 def scan_qs_joints(score: Callable[[np.ndarray], Mapping[str, float]],
                    vmax: float | Sequence[float], joints: Sequence[str], *,
-                   n_grid: int = 13, criterion: str = "joint",
+                   n_grid: int = 13, criterion: str = "all",
                    max_sweeps: int = QS_MAX_SWEEPS) -> QsJointsScan:
     """One q_s per joint: the paper fit at a vector of q_s, scored per joint, minimised one
     joint at a time with the others held (``jointid fit --robot --q-s scan-joints``).
 
     1. The shared grid: :func:`qs_grid` of each joint's own ``vmax`` (so every joint at the
        same fraction of its largest |dq|), one fit per grid point; each joint starts at its
-       grid point of the smallest score.
+       grid point of the smallest score (with ``criterion="all"``, the same point for all).
     2. Coordinate sweeps: for each joint in turn, :func:`_scan` of its score over q_s_j, the
        others held -- in the first sweep on the joint's grid point and its two neighbours
        (the bounded search between them, as :func:`scan_qs`), later on the current value
@@ -334,10 +334,12 @@ def scan_qs_joints(score: Callable[[np.ndarray], Mapping[str, float]],
         The joints, in the order of the q_s vectors.
     n_grid : int
         Grid points.
-    criterion : {"joint", "all"}
-        Score of joint j's q_s: the error of joint j's rows (default; q_s_j enters only
-        joint j's friction, the other rows move through the shared theta alone), or the
-        error over every joint's rows (the shared scan's score).
+    criterion : {"all", "joint"}
+        Score of joint j's q_s: the error over every joint's rows (default: the shared
+        scan's score, so the sweeps are a coordinate descent on one objective and end no
+        higher than the shared grid's best point), or the error of joint j's rows alone
+        (no common objective: on the KUKA KR300 its sweeps did not converge and ended above
+        the shared scan's error; docs/robot-identification.md, 'One q_s per joint').
     max_sweeps : int
         Cap on the coordinate sweeps.
 
