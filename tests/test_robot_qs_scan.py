@@ -35,19 +35,16 @@ import sys
 
 import numpy as np
 import pytest
-from example_campaign import simulate_example_campaign
 from robot_campaigns import ARM3, ARM3_CENTRE, ARM3_PAYLOADS, ROOT, arm_csvs, write_arm_csv
+from test_robot_design import example_campaign_runs
 from test_robot_fit import _simulate, noisy_raw_runs
 
 from daq.app.cli import main
 from ident import DataError
 from ident.api import RobotFit
 from ident.fitting import fit_models
-from ident.loaders import make_experiment
 from ident.preprocess import TORQUE_DELAY
 from ident.qs_scan import qs_grid
-from ident.robot.loaders import RawRobotRun
-from ident.robot.signals import RobotPayloadData
 from sim_drivers.arm import ArmEffects, ArmGains, ArmParams, Payload, model_reference, simulate_arm
 from trajectories.robot import load_robot
 
@@ -202,15 +199,8 @@ def test_scan_joints_recovers_each_joints_qs_where_a_shared_scan_cannot(seed):
 def one_joint_runs():
     """The example campaign (the demo's RX130L joint 3, three payloads, seeds 11-13) as
     one-joint robot runs of examples/robots/rx130l.toml and as single-joint experiments."""
-    _, plan, sims = simulate_example_campaign(11)
-    exps, runs = [], []
-    for i, (p, r) in enumerate(zip(plan.payloads, sims, strict=True)):
-        exps.append(make_experiment(f"payload{i}.csv", r.t, r.q, r.tau_ref,
-                                    payload_mass=p.mass_kg, payload_arm=p.arm_m))
-        pay = RobotPayloadData(p.mass_kg, arm_m=p.arm_m) if p.mass_kg else RobotPayloadData()
-        runs.append(RawRobotRun(f"payload{i}.csv", r.t, r.q[:, None], r.tau_ref[:, None],
-                                payload=pay))
-    return load_robot(RX130L), runs, exps
+    exps, runs, robot, _ = example_campaign_runs()
+    return robot, runs, exps
 
 
 def test_one_joint_robot_per_joint_scan_is_the_shared_scan(one_joint_runs):
