@@ -65,11 +65,15 @@ class RobotFit(HyperParameters):
         Models fitted (``--model``; "new" is accepted as a deprecated alias of "paper").
     method : {"ls", "wls", "iv"} or None
         Estimator (``--method``; None: "wls").
-    q_s : float or "scan"
-        q_s of the paper model [rad/s] (``--q-s``), or ``"scan"``: one q_s shared by every
-        joint, the paper fit's smallest relative error on the single joint's grid and bounded
-        search (:func:`ident.cli_robot.fit_robot`; ``record_["q_s"]`` the chosen one,
-        ``record_["q_s_scan"]`` the scan). Ignored by the usual model.
+    q_s : float, sequence or mapping of float, "scan" or "scan-joints"
+        q_s of the paper model [rad/s] (``--q-s``; one per joint as a sequence or a mapping
+        by joint name), or ``"scan"``: one q_s shared by every joint, the paper fit's
+        smallest relative error on the single joint's grid and bounded search
+        (:func:`ident.cli_robot.fit_robot`; ``record_["q_s"]`` the chosen one,
+        ``record_["q_s_scan"]`` the scan), or ``"scan-joints"``: one q_s per joint, each in
+        turn on the same error with the others held
+        (:func:`ident.qs_scan.scan_qs_joints`; ``record_["q_s"]`` by joint name,
+        ``record_["q_s_scan_joints"]`` the scan). Ignored by the usual model.
     cutoff : float or None
         Butterworth cut-off on q [Hz] (``--cutoff``; None: chosen from the data).
     decimation, trim : int or None
@@ -144,7 +148,7 @@ class RobotFit(HyperParameters):
         model: str = "both",
         *,
         method: str | None = None,
-        q_s: float | str = DEFAULT_Q_S,
+        q_s: float | str | Sequence[float] | Mapping[str, float] = DEFAULT_Q_S,
         cutoff: float | None = None,
         decimation: int | None = None,
         trim: int | None = None,

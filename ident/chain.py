@@ -443,7 +443,8 @@ def choose_cutoff(q: np.ndarray, dt: float, min_fraction: float = 0.05,
         warnings.warn(f"{where}cut-off {cut:g} Hz is the upper bound 0.4 f_s: {why}; "
                       "give --cutoff", stacklevel=2)
     elif 5.0 * fb < lo and 5.0 * fb < 0.5 * lo:
-        warnings.warn(f"{where}cut-off {cut:g} Hz is the lower bound {min_fraction:g} f_s "
+        also = ", here also the upper bound 0.4 f_s" if lo >= hi else ""
+        warnings.warn(f"{where}cut-off {cut:g} Hz is the lower bound {min_fraction:g} f_s{also} "
                       f"(5 x the motion bandwidth is {5.0 * fb:.3g} Hz); give --cutoff to "
                       "filter more", stacklevel=2)
     return cut

@@ -1,5 +1,5 @@
 """``jointid fit INPUTS... [--model usual|paper|both] [--method ls|wls|iv]
-[--joint revolute|prismatic] [--q-s VALUE|scan] [--validate FILES...] [--report DIR]
+[--joint revolute|prismatic] [--q-s VALUE|scan|scan-joints] [--validate FILES...] [--report DIR]
 [--json FILE]``: identify the usual and the paper model (names: :mod:`ident.vocab`).
 With ``--robot ROBOT`` the inputs are multi-axis runs of a robot (``ident.cli_robot``).
 
@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 from trajectories.friction import DEFAULT_Q_S
 
 from . import DataError
-from .vocab import METHOD_ALIASES, METHOD_NAMES, method_name, model_name
+from .vocab import METHOD_ALIASES, METHOD_NAMES, method_name, model_name, qs_value
 
 if TYPE_CHECKING:
     from .api import JointModel
@@ -150,10 +150,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--q-s",
         "--qs",  # the older spelling, still accepted
-        metavar="VALUE|scan",
+        metavar="VALUE|scan|scan-joints",
         help="q_s of the paper model [rad/s], or 'scan' to minimise the residual (default "
-        f"{DEFAULT_Q_S:g}; refused with --model usual, which has no q_s; with --robot the "
-        "scan chooses one q_s shared by every joint)",
+        f"{DEFAULT_Q_S:g}; refused with --model usual, which has no q_s); with --robot "
+        "'scan' chooses one q_s shared by every joint, 'scan-joints' one q_s per joint "
+        "(coordinate sweeps; several times the fits of 'scan'); on one joint 'scan-joints' "
+        "is 'scan'",
     )
     p.add_argument(
         "--validate",
@@ -247,19 +249,11 @@ def check_qs_model(args: argparse.Namespace) -> None:
 
 def parse_qs(value: str | None) -> float | str:
     """``--q-s`` of ``jointid fit``, with or without ``--robot``: a finite velocity > 0
-    [rad/s or m/s] or 'scan', one line naming the flag otherwise; not given:
-    ``DEFAULT_Q_S``."""
+    [rad/s or m/s] or one of :data:`ident.vocab.QS_WORDS` ('scan', 'scan-joints'), one line
+    naming the flag otherwise (:func:`ident.vocab.qs_value`); not given: ``DEFAULT_Q_S``."""
     if value is None:
         return DEFAULT_Q_S
-    if value.strip().lower() == "scan":
-        return "scan"
-    try:
-        v = float(value)
-    except ValueError:
-        raise DataError(f"--q-s {value!r}: expected a number [rad/s] or 'scan'") from None
-    if not (math.isfinite(v) and v > 0):
-        raise DataError(f"--q-s {value!r}: expected a number > 0 [rad/s] or 'scan'")
-    return v
+    return qs_value(value, what="--q-s")
 
 
 def estimator_from_args(args: argparse.Namespace) -> JointModel:

@@ -73,6 +73,13 @@ def read_fit_record(path: Path) -> dict[str, Any]:
     return rec
 
 
+def _recorded_robot(robot: dict[str, Any]) -> str:
+    """The robot file of a record: its absolute ``path`` (records since 2026-11-28) when that
+    file exists, else the ``source`` as the fit was given it (relative to the fit's folder)."""
+    path = robot.get("path")
+    return path if path and Path(path).is_file() else robot["source"]
+
+
 def consistent_from_record(path: Path, rec: dict[str, Any], robot: Robot, name: str,
                            mapping: Any = None, q_unit: str | None = None
                            ) -> tuple[dict[str, Any], dict[str, float]]:
@@ -143,9 +150,10 @@ def run(args: argparse.Namespace) -> int:
     if soft_quadrants(rec, name):  # the friction file has no sigma_j: hard quadrants
         raise DataError(f"{args.fit}: model {name!r} was fitted with soft quadrants; "
                         "export-model writes hard-quadrant friction only")
-    robot = load_robot(args.robot or rec["robot"]["source"])
+    robot_file = args.robot or _recorded_robot(rec["robot"])
+    robot = load_robot(robot_file)
     if list(robot.moving) != list(rec["robot"]["moving"]):
-        raise DataError(f"{args.robot or rec['robot']['source']}: moving joints "
+        raise DataError(f"{robot_file}: moving joints "
                         f"{list(robot.moving)}, the record's are {rec['robot']['moving']}")
     mapping = parse_mapping(args.map, robot=True) if args.map else None
     cons, fixed = consistent_from_record(args.fit, rec, robot, name, mapping, args.q_unit)

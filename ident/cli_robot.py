@@ -42,7 +42,7 @@ from .cli import parse_qs
 from .estimate import DEFAULT_THRESHOLD_PCT
 from .fitting import DQ_MIN_FRACTION, SIGN_CHECK_MIN_KEPT
 from .loaders import Q_UNITS, parse_mapping
-from .qs_scan import qs_grid, rescan_qs, scan_qs
+from .qs_scan import qs_grid, rescan_qs, scan_qs, scan_qs_joints
 from .refine_result import ONE_TRAJECTORY_NOTE
 from .report import write_json
 from .results import DEFAULT_BANDS, json_float
@@ -70,7 +70,7 @@ from .robot.signals import RobotSignals
 from .robot.soft_fit import QUADRANTS, load_signs, soft_record
 from .robot.tables import format_table_iii, format_uncertainty, table_iii
 from .robot.uncertainty import N_BLOCKS, assess, parameter_records
-from .vocab import method_name, model_name, refined_model
+from .vocab import method_name, model_name, qs_value, refined_model
 
 __all__ = ["run", "fit_robot", "fit_files", "load_runs", "public_record", "refine_robot",
            "format_report", "format_refinement", "format_refit", "FORMAT", "OLD_FORMATS",
@@ -259,7 +259,7 @@ def fit_robot(
     *,
     models: tuple[str, ...] = ("usual", "paper"),
     method: str | None = None,
-    q_s: float | str = DEFAULT_Q_S,
+    q_s: float | str | Sequence[float] | Mapping[str, float] = DEFAULT_Q_S,
     dq_min: float | None = None,
     preprocessing: RobotPreprocessing | None = None,
     known_rotor_inertia: bool = False,
@@ -285,14 +285,18 @@ def fit_robot(
         its residual deviation). On the KUKA recordings it cross-validates better than IV,
         whose instruments (the planned trajectory) are poor under the robot's own position
         loop and feed-forward (docs/robot-data.md).
-    q_s : float or "scan"
-        q_s of the paper model [rad/s], or ``"scan"``: the q_s whose paper fit (every
+    q_s : float, sequence or mapping of float, "scan" or "scan-joints"
+        q_s of the paper model [rad/s] (one, one per joint, or by joint name), or ``"scan"``:
+        the q_s whose paper fit (every
         parameter kept: before the uncertainty step's pruning) has the smallest relative error
         over every joint's rows (``rel_error_["all"]``), on the grid of
         :func:`ident.qs_scan.qs_grid` of the fitted rows' largest |dq| then a bounded search
         between the best point's neighbours (:func:`ident.qs_scan.scan_qs`, the single joint's
         rule); one q_s shared by every joint. The record's ``q_s`` is the chosen one and
-        ``q_s_scan`` every evaluated ``{q_s, rel_error}``. Without the paper model: the
+        ``q_s_scan`` every evaluated ``{q_s, rel_error}``; or ``"scan-joints"``: one q_s per
+        joint, each in turn with the others held, on the same error
+        (:func:`ident.qs_scan.scan_qs_joints`), the record's ``q_s`` by joint name and
+        ``q_s_scan_joints`` the scan (docs/robot-data.md). Without the paper model: the
         default, as for one joint.
     dq_min : float or None
         Stiction area |dq_j| < dq_min left out of joint j's rows [rad/s]; None: 1 % of the
@@ -460,7 +464,7 @@ def fit_robot(
                           quadrants=quadrants if name == "paper" else "hard")
 
     val_all = val
-    q_s, qs_scan = _scan_qs(q_s, models, lambda q: model("paper", q), sig, notes)
+    q_s, qs_record = _scan_qs(q_s, models, lambda q: model("paper", q), sig, notes)
     if val is not None:
         # the validation error is taken on the samples the fit would use (as the single-joint
         # validation design): joint j's torque in its stiction area is left out (NaN)
@@ -470,7 +474,10 @@ def fit_robot(
     out: dict[str, Any] = {
         "format": FORMAT,
         "robot": {"name": robot.name, "source": robot.source, "moving": list(joints),
-                  "numbers": list(robot.numbers)},
+                  "numbers": list(robot.numbers),
+                  # the file as an absolute path, for export-model run from another folder
+                  **({"path": str(Path(robot.source).resolve())}
+                     if Path(robot.source).is_file() else {})},
         "inputs": [r.source for r in runs],
         "validation_inputs": [r.source for r in validation or []],
         "preprocessing": {**settings, "torque_delay_given": delay_given,
@@ -482,8 +489,7 @@ def fit_robot(
         "known_rotor_inertia": bool(known_rotor_inertia),
         "payload": payload,
         "q_s": q_s,
-        **({"q_s_scan": [{"q_s": q, "rel_error": json_float(e)} for q, e in qs_scan]}
-           if qs_scan else {}),
+        **qs_record,
         "quadrants": quadrants,
         "notes": notes,
         "models": {},
@@ -880,25 +886,36 @@ def format_refit(fit: dict[str, Any], model: str) -> list[str]:
     return lines
 
 
-def _scan_qs(q_s: float | str, models: tuple[str, ...],
-             paper: Callable[[float], RobotModel], sig: RobotSignals,
-             notes: list[str]) -> tuple[float, list[tuple[float, float]]]:
-    """``q_s="scan"`` of :func:`fit_robot`: the q_s of the smallest relative error of the
-    paper fit ``paper(q).fit(sig)`` over every joint's rows (:func:`ident.qs_scan.scan_qs`;
-    a fit that fails scores inf), and the scan; a number is returned as it is, with no scan;
-    without the paper model, the default q_s. A note says the scan's figures.
+def _scan_qs(q_s: Any, models: tuple[str, ...],
+             paper: Callable[[Any], RobotModel], sig: RobotSignals,
+             notes: list[str]) -> tuple[Any, dict[str, Any]]:
+    """``q_s="scan"`` or ``"scan-joints"`` of :func:`fit_robot` (:data:`ident.vocab.QS_WORDS`),
+    and the record's entries of that scan.
+
+    ``"scan"``: the q_s of the smallest relative error of the paper fit ``paper(q).fit(sig)``
+    over every joint's rows (:func:`ident.qs_scan.scan_qs`; a fit that fails scores inf), one
+    for every joint; ``q_s_scan`` every evaluated ``{q_s, rel_error}``. ``"scan-joints"``: one
+    q_s per joint (:func:`ident.qs_scan.scan_qs_joints`: on the same error, each joint's q_s
+    in turn with the others held), returned by joint name; ``q_s_scan_joints`` the scan. A
+    number, sequence or mapping is returned as it is, with no scan; without the paper model,
+    the default q_s. Notes say the scan's figures (one line per joint for ``scan-joints``).
 
     Raises
     ------
     DataError
-        A string other than "scan", or the paper fit failing at every q_s.
+        A string other than a number or those words, or the paper fit failing at every q_s.
     """
     if not isinstance(q_s, str):
-        return q_s, []
-    if q_s.strip().lower() != "scan":
-        raise DataError(f"q_s {q_s!r}: expected a number [rad/s] or 'scan'")
+        return q_s, {}
+    q_s = qs_value(q_s)  # one rule and one message (ident.vocab)
+    if not isinstance(q_s, str):
+        return q_s, {}
     if "paper" not in models:  # the usual model has no q_s: ignored, as for one joint
-        return DEFAULT_Q_S, []
+        return DEFAULT_Q_S, {}
+    t0 = time.perf_counter()
+    vmax = _vmax(sig)
+    if q_s == "scan-joints":
+        return _scan_qs_joints(paper, sig, vmax, notes, t0)
 
     def score(q: float) -> float:
         try:
@@ -906,14 +923,48 @@ def _scan_qs(q_s: float | str, models: tuple[str, ...],
         except (IdentError, np.linalg.LinAlgError):
             return math.inf
 
-    t0 = time.perf_counter()
-    vmax = float(_vmax(sig).max(initial=0.0))
-    best, scan = scan_qs(score, vmax)
+    top = float(vmax.max(initial=0.0))
+    best, scan = scan_qs(score, top)
     notes.append(f"q_s scan (paper model, one q_s for every joint): {best:.4g} rad/s, the "
                  f"smallest relative error over every joint's rows of {len(scan)} paper fits "
-                 f"(grid {qs_grid(vmax)[0]:.4g}..{qs_grid(vmax)[-1]:.4g} rad/s then a bounded "
+                 f"(grid {qs_grid(top)[0]:.4g}..{qs_grid(top)[-1]:.4g} rad/s then a bounded "
                  f"search; {time.perf_counter() - t0:.1f} s)")
-    return best, scan
+    return best, {"q_s_scan": [{"q_s": q, "rel_error": json_float(e)} for q, e in scan]}
+
+
+def _scan_qs_joints(paper: Callable[[Any], RobotModel], sig: RobotSignals, vmax: np.ndarray,
+                    notes: list[str], t0: float) -> tuple[dict[str, float], dict[str, Any]]:
+    """``q_s="scan-joints"`` of :func:`_scan_qs`: :func:`ident.qs_scan.scan_qs_joints` on the
+    paper fit's relative error over every joint's rows, each joint's grid on its own largest
+    |dq|; the chosen q_s by joint, the record's ``q_s_scan_joints`` and one note per joint."""
+    joints = sig.joints
+
+    def score(q: np.ndarray) -> dict[str, float]:
+        try:
+            return dict(paper(q.tolist()).fit(sig).rel_error_)
+        except (IdentError, np.linalg.LinAlgError):
+            return {}  # every score inf
+
+    if not np.all(vmax > 0):  # a joint that did not move: no grid of its own
+        still = [j for j, v in zip(joints, vmax, strict=True) if not v > 0]
+        raise DataError(f"--q-s scan-joints: joint(s) {', '.join(still)} have no fitted row "
+                        "with |dq| > 0; give a q_s or use 'scan'")
+    res = scan_qs_joints(score, vmax, joints)
+    took = time.perf_counter() - t0
+    notes.append(f"q_s scan per joint (paper model, 'scan-joints'): {res.fits} paper fits, "
+                 f"the shared grid then {res.sweeps} coordinate sweep(s), "
+                 f"{'converged' if res.converged else 'stopped at the sweep cap'} "
+                 f"({took:.1f} s); error over every joint's rows "
+                 f"{100 * res.error['all']:.3g} %")
+    for j, v in zip(joints, vmax, strict=True):
+        notes.append(f"q_s scan, joint {j}: {res.q_s[j]:.4g} rad/s, its rows' relative error "
+                     f"{100 * res.error[j]:.3g} % ({len(res.scan[j])} points; grid "
+                     f"{qs_grid(float(v))[0]:.4g}..{qs_grid(float(v))[-1]:.4g} rad/s)")
+    return res.q_s, {"q_s_scan_joints": {
+        "criterion": "all", "fits": res.fits, "sweeps": res.sweeps,
+        "converged": res.converged, "rel_error": {n: json_float(e) for n, e in res.error.items()},
+        "joints": {n: [{"q_s": q, "rel_error": json_float(e), "sweep": k} for q, e, k in pts]
+                   for n, pts in res.scan.items()}}}
 
 
 def _vmax(sel: RobotSignals) -> np.ndarray:

@@ -88,7 +88,7 @@ from .robot.selection_shift import selection_shift, shift_note
 from .robot.signals import RobotSignals
 from .signals import Signals
 from .terms import Library, Term
-from .vocab import MODEL_NAMES, model_name, renamed_keywords
+from .vocab import MODEL_NAMES, QS_WORDS, model_name, qs_value, renamed_keywords
 
 __all__ = [
     "FitReport",
@@ -680,8 +680,9 @@ def fit_models(
         Identification experiments (one per payload run).
     models : sequence of {"usual", "paper"}
         Models to fit.
-    q_s : float or "scan"
-        q_s [rad/s] of the paper model, or ``"scan"`` to pick the one that minimises the new
+    q_s : float, "scan" or "scan-joints"
+        q_s [rad/s] of the paper model, or ``"scan"`` (``"scan-joints"``, the robot's per-joint
+        scan, is the same on one joint) to pick the one that minimises the new
         model's residual norm (section III.D): the best of :func:`qs_grid`, then a bounded
         1-D search between its neighbours (every evaluated q_s is in ``qs_scan``).
     joint : {"revolute", "prismatic"} or None
@@ -838,8 +839,9 @@ def fit_models(
 
     scan: list[tuple[float, float]] = []
     if isinstance(q_s, str):
-        if q_s != "scan":
-            raise DataError(f"q_s {q_s!r}: expected a number [rad/s] or 'scan'")
+        # ident.vocab's rule; "scan-joints" is "scan" on a joint (a 1-dof robot)
+        if qs_value(q_s) not in QS_WORDS:
+            raise DataError(f"q_s {q_s!r}: give a velocity as a number, not a string")
         if "paper" in models:
             # full model (no elimination): the residual as a function of q_s alone, eq. 42's
             # columns formed again at full rate for each q_s; the grid steps by 36 %, and the

@@ -13,12 +13,15 @@ again), the found terms' columns those of the refinement's design.
 :func:`ident.fitting.fit_models` scans q_s with :func:`_scan` and :func:`qs_grid` on its own
 fits; :func:`scan_qs` is the same scan of any fit given as a score, what
 ``jointid fit --robot --q-s scan`` (:func:`ident.cli_robot.fit_robot`) scans the n-dof paper
-fit with (one q_s shared by every joint).
+fit with (one q_s shared by every joint); :func:`scan_qs_joints` chooses one q_s per joint
+(``--q-s scan-joints``): the shared grid, then coordinate sweeps of :func:`_scan` on each
+joint's q_s with the others held, on the same score.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import math
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
@@ -32,8 +35,8 @@ from .robot.refit import RobotRefit, model_at_qs, refit_robot
 from .robot.signals import RobotSignals
 from .terms import Term
 
-__all__ = ["QsScan", "qs_grid", "rescan_qs", "scan_qs", "QS_XTOL", "QS_SEARCH_EVALS",
-           "QS_WORKERS"]
+__all__ = ["QsScan", "QsJointsScan", "qs_grid", "rescan_qs", "scan_qs", "scan_qs_joints",
+           "QS_XTOL", "QS_SEARCH_EVALS", "QS_WORKERS", "QS_MAX_SWEEPS"]
 
 #: Resolution of the q_s scan after the grid, on log q_s (1 %).
 QS_XTOL = 0.01
@@ -261,3 +264,176 @@ def scan_qs(score: Callable[[float], float], vmax: float, *,
         raise DataError("q_s scan: the paper model could not be fitted at any q_s of the grid "
                         f"{qs_grid(vmax, n_grid)[0]:.4g}..{qs_grid(vmax, n_grid)[-1]:.4g} rad/s")
     return min(scan, key=lambda x: x[1])[0], scan
+
+
+#: Cap on the coordinate sweeps of :func:`scan_qs_joints` after its shared-grid pass.
+QS_MAX_SWEEPS = 4
+
+
+@dataclass
+class QsJointsScan:
+    """Result of :func:`scan_qs_joints`.
+
+    Attributes
+    ----------
+    q_s : dict of str to float
+        The chosen q_s of each joint [rad/s].
+    scan : dict of str to list of (q_s, error, sweep)
+        Per joint, every evaluated q_s of that joint [rad/s] with the score that chose it
+        (dimensionless) and its pass: 0 the shared grid (every joint at the same fraction of
+        its own largest |dq|), 1.. the coordinate sweeps (the other joints held at their
+        values then); in evaluation order, a point evaluated again (the same q_s_j and
+        score) once.
+    fits : int
+        Distinct fits evaluated (a q_s vector evaluated twice is fitted once).
+    sweeps : int
+        Coordinate sweeps that searched at least one joint.
+    converged : bool
+        The last sweep moved no joint's q_s by more than :data:`QS_XTOL` on log q_s (False:
+        stopped at :data:`QS_MAX_SWEEPS`).
+    error : dict of str to float
+        The scores (every joint's and ``"all"``) of the fit at the chosen q_s.
+    """
+
+    q_s: dict[str, float]
+    scan: dict[str, list[tuple[float, float, int]]]
+    fits: int
+    sweeps: int
+    converged: bool
+    error: dict[str, float]
+
+
+def scan_qs_joints(score: Callable[[np.ndarray], Mapping[str, float]],
+                   vmax: float | Sequence[float], joints: Sequence[str], *,
+                   n_grid: int = 13, criterion: str = "all",
+                   max_sweeps: int = QS_MAX_SWEEPS) -> QsJointsScan:
+    """One q_s per joint: the paper fit at a vector of q_s, scored per joint, minimised one
+    joint at a time with the others held (``jointid fit --robot --q-s scan-joints``).
+
+    1. The shared grid: :func:`qs_grid` of each joint's own ``vmax`` (so every joint at the
+       same fraction of its largest |dq|), one fit per grid point; each joint starts at its
+       grid point of the smallest score (with ``criterion="all"``, the same point for all).
+    2. Coordinate sweeps: for each joint in turn, :func:`_scan` of its score over q_s_j, the
+       others held -- in the first sweep on the joint's grid point and its two neighbours
+       (the bounded search between them, as :func:`scan_qs`), later on the current value
+       and one grid step either side (a minimum at the window's edge moves there, the next
+       sweep goes on from it). A joint is searched again only when another joint moved by
+       more than :data:`QS_XTOL` (log q_s) since its last search. The sweeps stop when one
+       moves no joint by more than :data:`QS_XTOL`, or after ``max_sweeps``.
+
+    For one joint this is :func:`scan_qs` exactly: the same fits, the same q_s.
+
+    Parameters
+    ----------
+    score : callable
+        q_s vector [rad/s] (one per joint, in ``joints``' order) -> the fit's relative
+        errors by joint name and ``"all"`` (every joint's rows); ``inf`` where it failed.
+    vmax : float or sequence of float
+        Largest |dq| of each joint's fitted rows [rad/s], for its grid.
+    joints : sequence of str
+        The joints, in the order of the q_s vectors.
+    n_grid : int
+        Grid points.
+    criterion : {"all", "joint"}
+        Score of joint j's q_s: the error over every joint's rows (default: the shared
+        scan's score, so the sweeps are a coordinate descent on one objective and end no
+        higher than the shared grid's best point), or the error of joint j's rows alone
+        (no common objective: on the KUKA KR300 its sweeps did not converge and ended above
+        the shared scan's error; docs/robot-identification.md, 'One q_s per joint').
+    max_sweeps : int
+        Cap on the coordinate sweeps.
+
+    Returns
+    -------
+    QsJointsScan
+
+    Raises
+    ------
+    DataError
+        A ``vmax`` not positive and finite, or the fit failing at every point of the grid.
+    """
+    names = tuple(joints)
+    k = len(names)
+    vm = np.broadcast_to(np.asarray(vmax, dtype=float), (k,))
+    if not np.all(np.isfinite(vm) & (vm > 0)):
+        raise DataError(f"q_s scan per joint: the fitted rows' largest |dq| per joint is "
+                        f"{vm.tolist()} rad/s; expected velocities > 0")
+    if criterion not in ("joint", "all"):
+        raise DataError(f"q_s scan per joint: criterion {criterion!r}: expected 'joint' or "
+                        "'all'")
+    grids = [qs_grid(float(v), n_grid) for v in vm]
+    step = grids[0][1] / grids[0][0]  # the grid's ratio, the same for every joint
+    cache: dict[tuple[float, ...], dict[str, float]] = {}
+
+    def errors(q: np.ndarray) -> dict[str, float]:
+        key = tuple(float(x) for x in q)
+        if key not in cache:
+            got = score(np.array(key))
+            cache[key] = {n: _finite(got.get(n, math.inf)) for n in (*names, "all")}
+        return cache[key]
+
+    def read(e: dict[str, float], j: int) -> float:
+        return e[names[j] if criterion == "joint" else "all"]
+
+    scan: dict[str, list[tuple[float, float, int]]] = {n: [] for n in names}
+    first = [errors(np.array([g[i] for g in grids])) for i in range(n_grid)]
+    if not any(np.isfinite(e["all"]) for e in first):
+        raise DataError("q_s scan per joint: the paper model could not be fitted at any point "
+                        "of the shared grid")
+    start = np.empty(k, dtype=int)
+    for j, n in enumerate(names):
+        row = [read(e, j) for e in first]
+        scan[n] += [(float(grids[j][i]), row[i], 0) for i in range(n_grid)]
+        start[j] = int(np.argmin(row))
+    current = np.array([grids[j][start[j]] for j in range(k)])
+    held: list[np.ndarray | None] = [None] * k  # the others' q_s at each joint's last search
+    sweeps, converged = 0, False
+    for sweep in range(1, max_sweeps + 1):
+        moved, searched = False, False
+        for j in range(k):
+            others = np.delete(current, j)
+            if held[j] is not None and np.all(np.abs(np.log(others / held[j])) <= QS_XTOL):
+                continue  # nothing it depends on moved since its last search
+            searched = True
+            if sweep == 1:
+                window = grids[j][max(start[j] - 1, 0):start[j] + 2]
+            else:
+                window = current[j] * step ** np.array([-1.0, 0.0, 1.0])
+            tried: list[tuple[float, float]] = []
+
+            def err(q: float, j: int = j, tried: list = tried, sweep: int = sweep) -> float:
+                v = current.copy()
+                v[j] = q
+                e = read(errors(v), j)
+                tried.append((q, e))
+                if not any(p[:2] == (q, e) for p in scan[names[j]]):  # not a point again
+                    scan[names[j]].append((q, e, sweep))
+                return e
+
+            _scan(err, window)
+            # the smallest score of the search, kept only if below the current value's (a
+            # search where every fit failed leaves the joint where it was)
+            best, low = float(current[j]), read(errors(current), j)
+            for q, e in sorted(tried):
+                if e < low:
+                    best, low = q, e
+            if abs(math.log(best / current[j])) > QS_XTOL:
+                moved = True
+            current[j] = best
+            held[j] = np.delete(current, j)
+        if not searched:
+            converged = True
+            break
+        sweeps = sweep
+        if not moved:
+            converged = True
+            break
+    return QsJointsScan(q_s={n: float(q) for n, q in zip(names, current, strict=True)},
+                        scan=scan, fits=len(cache), sweeps=sweeps, converged=converged,
+                        error=dict(errors(current)))
+
+
+def _finite(x: Any) -> float:
+    """A score as a float, NaN (a failed fit) as inf."""
+    x = float(x)
+    return math.inf if math.isnan(x) else x

@@ -157,7 +157,8 @@ def _pretest(
     F0, p0 = _f_test(rss0, rss0 - c.gain, k_fast, p, n, max(n_eff, c.n_eff))
     rel_fast = rel * math.sqrt(max(rss0 - c.gain, 0.0) / rss0) if rss0 > 0 else rel
     if p0 >= level:
-        return f"F test not significant (F={F0:.3g}, p={p0:.2e})"
+        return (f"F test not significant (F={F0:.3g}, p={p0:.2e} >= level {level:.2g}: "
+                "alpha / candidates)")
     if rel_fast > rel * (1 - min_gain):
         return (
             f"relative error {_pct(rel)} -> {_pct(rel_fast)}: less than {100 * min_gain:g} % better"
@@ -699,7 +700,8 @@ def refine(
             )
             reason = None
             if pval >= alpha / n_cand:
-                reason = f"F test not significant (F={F:.3g}, p={pval:.2e})"
+                reason = (f"F test not significant (F={F:.3g}, p={pval:.2e} >= level "
+                          f"{alpha / n_cand:.2g}: alpha / candidates)")
             else:
                 try:
                     m1 = m1.model()

@@ -8,6 +8,7 @@ points (``jointid fit``, :class:`ident.api.JointModel`, :class:`ident.api_robot.
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Iterable, Mapping
 from typing import Any
@@ -33,6 +34,50 @@ KEY_ALIASES = {"qs": "q_s", "qs_scan": "q_s_scan"}
 #: Deprecated Python keywords -> canonical keyword (``JointModel``, ``RobotFit``,
 #: ``RobotModel``, ``fit_models``; their ``set_params`` too).
 KEYWORD_ALIASES = {"qs": "q_s"}
+
+
+#: The words ``q_s`` takes instead of a velocity (``jointid fit --q-s``, ``JointModel`` and
+#: ``RobotFit(q_s=...)``): ``scan``, one q_s for every joint chosen by the paper fit's error
+#: (:func:`ident.qs_scan.scan_qs`); ``scan-joints``, one q_s per joint
+#: (:func:`ident.qs_scan.scan_qs_joints`; a single joint, a 1-dof robot, scans as ``scan``).
+QS_WORDS = ("scan", "scan-joints")
+
+
+def qs_value(value: Any, *, what: str = "q_s") -> float | str:
+    """``q_s`` as given on input: a finite velocity > 0 [rad/s or m/s] (number or numeric
+    string), or one of :data:`QS_WORDS` (case and surrounding blanks ignored). The one rule
+    of ``jointid fit --q-s`` (:func:`ident.cli.parse_qs`), :class:`ident.api_robot.RobotFit`
+    and :func:`ident.fitting.fit_models`.
+
+    Parameters
+    ----------
+    value : float, str
+        The given q_s.
+    what : str
+        The option's name in the message (``"q_s"``, ``"--q-s"``).
+
+    Returns
+    -------
+    float or str
+        The velocity [rad/s], or the word in its canonical spelling.
+
+    Raises
+    ------
+    DataError
+        Anything else, one line listing the accepted words.
+    """
+    words = ", ".join(repr(w) for w in QS_WORDS[:-1]) + f" or {QS_WORDS[-1]!r}"
+    if isinstance(value, str):
+        word = value.strip().lower()
+        if word in QS_WORDS:
+            return word
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise DataError(f"{what} {value!r}: expected a number [rad/s], {words}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise DataError(f"{what} {value!r}: expected a number > 0 [rad/s], {words}")
+    return v
 
 
 def renamed_keywords(owner: str, kwargs: Mapping[str, Any], *, strict: bool = True

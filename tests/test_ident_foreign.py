@@ -248,13 +248,15 @@ def test_kuka_a1_inertia_positive(kuka_fits):
     assert u["rel_error"] < 0.20
 
 
-def test_kuka_a2_paper_model_not_identifiable_keeps_the_usual_one():
-    """Axis A2 (index 1): its predicted load keeps one sign, so the paper model's c_m, c_g,
-    d_g and the offset are dependent on its rows and that model cannot be fitted. With both
-    models asked the usual one is still fitted and reported (a note says why the paper one
-    is not, once); before, the whole fit ended in one error and the usual result was lost.
-    The paper model alone still gives that error."""
-    from ident import DataError
+def test_kuka_a2_paper_model_drops_its_dependent_column_and_keeps_both():
+    """Axis A2 (index 1): its predicted load keeps one sign, so the paper model's c_m, c_g
+    and the offset are dependent on its rows. The single-joint rank rule drops one of them
+    before the first solve and reports it with the other two as partners (as the
+    single-joint least squares did before 2026-11-27: c_m, "linear combination of tau_off,
+    c_g"); both models are fitted, and the note says why c_m, c_g and the offset are
+    combinations. From 2026-11-27 to 2026-11-28 the paper model was refused here (the
+    products form's rank rule covered the load columns only): this test then checked that
+    the usual model was kept beside the refusal."""
     from ident.fitting import fit_models
 
     kw = dict(mapping=_kuka_map(1), gain="para.u[1]", q_unit="deg")
@@ -262,13 +264,14 @@ def test_kuka_a2_paper_model_not_identifiable_keeps_the_usual_one():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         rep = fit_models(fit, ("usual", "paper"), cutoff_hz=5.0, decimation=4)
-        assert list(rep.models) == ["usual"]
-        note = [n for n in rep.notes if n.startswith("paper model: not fitted: ")]
-        assert len(note) == 1 and "not identifiable" in note[0]
-        assert "paper model: paper model" not in note[0]
-        assert rep.to_json()["models"]["usual"]["rel_error"] > 0
-        with pytest.raises(DataError, match="not identifiable"):
-            fit_models(fit, ("paper",), cutoff_hz=5.0, decimation=4)
+    assert list(rep.models) == ["usual", "paper"]
+    dep = {n: why for n, why in rep.models["paper"].removed_ if why.startswith("not sep")}
+    assert len(dep) == 1, rep.models["paper"].removed_
+    (name, why), = dep.items()
+    assert {name, *why.split("combination of ")[1].split(", ")} == {"c_m", "c_g", "tau_off"}
+    assert any("keeps one sign" in n for n in rep.notes)
+    assert not any("not fitted" in n for n in rep.notes)
+    assert rep.to_json()["models"]["paper"]["rel_error"] > 0
 
 
 def test_payload_changing_within_a_file_says_split_it(tmp_path):

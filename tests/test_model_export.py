@@ -261,6 +261,13 @@ def test_export_model_cli(tmp_path, capfd):
     j4.write_text(json.dumps(dict(rec4, inputs=[str(tmp_path / "gone.csv")])))
     assert main(["export-model", str(j4), "-o", str(tmp_path / "from_fit")]) == 0
     capfd.readouterr()
+    # the robot file by its absolute path: a record read from another folder than the fit's
+    # (its "source" as given does not resolve there; the "path" does)
+    assert rec["robot"]["path"] == str(Path(ARM3).resolve())
+    j5 = tmp_path / "fit5.json"
+    j5.write_text(json.dumps(dict(rec2, robot=dict(rec2["robot"], source="elsewhere/arm3.toml"))))
+    assert main(["export-model", str(j5), "-o", str(tmp_path / "moved")]) == 0
+    capfd.readouterr()
     # bad inputs
     bad = tmp_path / "bad.json"
     bad.write_text('{"format": "something/1"}')

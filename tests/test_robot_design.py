@@ -36,9 +36,15 @@ FRICTION = {"F_C": "FC3", "F_V": "FV3", "tau_off": "OFF3", "Ma_ratio": "Ma_ratio
 
 @pytest.fixture(scope="module")
 def campaign_runs():
+    """The example campaign: :func:`example_campaign_runs`."""
+    return example_campaign_runs()
+
+
+def example_campaign_runs():
     """The example campaign simulated offline (seeds 11-13): single-joint experiments and the
     same arrays as one-joint robot runs (the payload as the log gives it: mass, lever arm),
-    and each run's reference position (the planned trajectory at its cycles) [rad]."""
+    each run's reference position (the planned trajectory at its cycles) [rad], and the
+    robot (examples/robots/rx130l.toml)."""
     _, plan, sims = simulate_example_campaign(11)
     exps, runs, refs = [], [], []
     for i, (p, r) in enumerate(zip(plan.payloads, sims, strict=True)):

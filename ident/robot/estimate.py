@@ -1301,7 +1301,10 @@ class RobotModel(HyperParameters):
         it) or a linear combination of its other load columns there (UR10 shoulder pan:
         MX2 and XY2) are fixed at 0 (``fixed_``): the rank rule of every model
         (:func:`ident.estimators.rank_rule`, pivoted on the scaled Gram matrix); ``removed_``
-        names as a product's partners the same products of the load column's partners."""
+        names as a product's partners the same products of the load column's partners.
+        With ``eliminate``, the rank rule on every free column (:meth:`_rank_fix`) follows,
+        before the first solve, as in the usual fit: the single-joint fit's dependent
+        friction columns are dropped and reported, not an error."""
         pb, nbu = self.n_theta_, len(USUAL_BLOCK)
         model_q = self.quadrant == "model"
         theta_q = self.quadrant_theta_.copy() if self.quadrant_theta_ is not None else xu[:pb]
@@ -1336,6 +1339,14 @@ class RobotModel(HyperParameters):
                     self._fixed_why[self.names_[k]] = (
                         ZERO_COLUMN if not gram[c, c] > 0 else dependent_reason(
                             [self.names_[o + 2 * q] for q in partners[c]]))
+        if self.eliminate:
+            # the rank rule before the first solve, as the usual fit's (module doc,
+            # ``eliminate``): e.g. a load of one sign on every row, whose motor and generator
+            # rows make OFF a combination of c_m and c_g, is removed, not an error
+            for i, why in self._rank_fix(moms, coeffs, x, free):
+                free[i] = False
+                x[i] = 0.0
+                self._fixed_why[self.names_[i]] = why
         self.fixed_ = {self.names_[i]: 0.0 for i in np.flatnonzero(~free)}
         self.quadrant_rows_ = self._quadrant_rows(moms)
         try:
@@ -1562,13 +1573,10 @@ class RobotModel(HyperParameters):
             self.fixed_[self.names_[i]] = 0.0
             self.removed_.append((self.names_[i], why))
 
-        idx = np.flatnonzero(free)
-        G = self._w_gram(moms, coeffs, x)[np.ix_(idx, idx)]
-        dep, partners = rank_rule(G, first=int(np.sum(idx < self.n_base_)))
-        for k in dep:
-            fix(int(idx[k]), ZERO_COLUMN if not G[k, k] > 0 else dependent_reason(
-                [self.names_[idx[q]] for q in partners[k]]))
-        if dep.size:
+        dep = self._rank_fix(moms, coeffs, x, free)
+        for i, why in dep:
+            fix(i, why)
+        if dep:
             try:
                 x, w, it = self._fit_on(moms, coeffs, x, free, linear=True)
             except _Unidentifiable as e:
@@ -1585,6 +1593,24 @@ class RobotModel(HyperParameters):
             except _Unidentifiable as e:
                 raise RobotIdentError(self._evidence(e, moms)) from None
         return x, free, w, it
+
+    def _rank_fix(self, moms, coeffs: Coeffs, x: np.ndarray,
+                  free: np.ndarray) -> list[tuple[int, str]]:
+        """The rank rule (:func:`ident.estimators.rank_rule` on the Gram matrix of the free
+        parameters' columns at ``x``) of ``eliminate``: the free parameters whose columns are
+        zero or dependent, each with its reason (the partners named). Changes nothing.
+
+        Base parameters are pivoted first where ``x`` holds them (the usual form); the
+        products form holds none (its payload column's products are left out by the load
+        columns' own rule), so its columns are pivoted in their order, as the single-joint
+        least squares pivots its design's columns (the offset last: of c_m, c_g and the
+        offset made dependent by a load of one sign, the offset is left out there too)."""
+        idx = np.flatnonzero(free)
+        G = self._w_gram(moms, coeffs, x)[np.ix_(idx, idx)]
+        first = int(np.sum(idx < self.n_base_)) if self._theta_x else 0
+        dep, partners = rank_rule(G, first=first)
+        return [(int(idx[k]), ZERO_COLUMN if not G[k, k] > 0 else dependent_reason(
+            [self.names_[idx[q]] for q in partners[k]])) for k in dep]
 
     def _payload_groups(self, signals: Any) -> None:
         """``payload_params``: the distinct payload masses of the experiments
