@@ -333,11 +333,12 @@ KUKA_MAP = "t=rec.time_cont,q=rec.act_pos_mot_deg,tau=rec.act_torque_abs_nm,q_re
 
 @pytest.mark.skipif(not KUKA_DATA.is_dir(), reason="../shared/data/kuka_kr300_weigand2021 absent")
 def test_unsettled_paper_fit_before_is_the_model_refitted_without_the_terms():
-    """Real data: the paper model's fit on the KUKA's file A does not settle on A3, A4 (its
-    final values put 16 % and 32 % of their rows in another quadrant, README). Its refit's
-    "before" is the model refitted on the refit's quadrants without the terms, so that
-    before -> after is what the terms add: without terms before = after, while the fit as
-    it is (what "before" was) reads far off on those joints (A4 125 % against 4.8 %)."""
+    """Real data: the paper model's fit on the KUKA's file A does not settle on A4 (at the
+    default trim of 60 its final values put 34 % of A4's rows in another quadrant, the other
+    joints' none, README; 2026-11-28). Its refit's "before" is the model refitted on the
+    refit's quadrants without the terms, so that before -> after is what the terms add:
+    without terms before = after, while the fit as it is (what "before" was) reads far off on
+    the joints that moved (A4 117 % against 4.9 %)."""
     robot = load_robot(KUKA)
     out = fit_files(robot, [KUKA_DATA / "recorded_2020-10-21_FF_A_08ms.mat"], model="paper",
                     mapping=parse_mapping(KUKA_MAP, robot=True), q_unit="deg")
