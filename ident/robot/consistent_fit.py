@@ -173,7 +173,7 @@ def format_record(rec: Any) -> str:
     if fb.get("violated"):
         lines.append(f"  friction bounds violated by the free friction: "
                      f"{', '.join(fb['violated'])}; moved onto them: "
-                     f"{', '.join(fb['moved']) or 'none'} (d^2 +{fb['d2']:.4g})" + (
+                     f"{', '.join(fb['moved']) or 'none'} (d^2 {fb['d2']:+.4g})" + (
                          f"; still violated (fixed parameters): "
                          f"{', '.join(fb['still_violated'])}" if fb.get("still_violated")
                          else ""))
