@@ -544,7 +544,11 @@ def fit_robot(
             if unchecked is not None:  # the estimate against the sign check's row choice
                 # (model(name): the same quadrants, soft refitted soft, like with like)
                 try:
-                    z = selection_shift(rec["parameters"], model(name).fit(unchecked))
+                    alt = model(name).fit(unchecked)
+                    # columns dropped on those rows (held at 0): no estimate to compare with,
+                    # as when that fit was refused
+                    z = (None if getattr(alt, "dropped_evidence_", None)
+                         else selection_shift(rec["parameters"], alt))
                 except (IdentError, np.linalg.LinAlgError):  # a diagnostic: never fatal
                     z = None  # (not identifiable on those rows: nothing to compare)
                 if z is not None:
@@ -562,6 +566,23 @@ def fit_robot(
                         "by noise; its dry-friction terms may be biased beyond their sigma "
                         "(docs/robot-identification.md, 'quadrants blended by the low-pass'); "
                         "excite it with accelerated motion")
+            if removed := [(n, v["removed"]) for n, v in rec["parameters"].items()
+                           if v.get("removed")]:
+                # zero or exactly dependent columns on these data (the rank rule of every
+                # fit): held at 0 and reported with the refusal's evidence, not refused
+                rec["removed"] = [{"name": n, "reason": why} for n, why in removed]
+                rec["removed_evidence"] = list(getattr(est, "dropped_evidence_", []))
+                by_why: dict[str, list[str]] = {}
+                for n, why in removed:
+                    by_why.setdefault(why, []).append(n)
+                notes.append(
+                    f"paper model: {', '.join(n for n, _ in removed)} removed before the fit "
+                    "(not identifiable on these data, the rank rule of every fit: "
+                    + "; ".join(f"{', '.join(ns)}: {why}" for why, ns in by_why.items())
+                    + "): held at 0, the model fitted without them, as the single-joint fit "
+                    "does; the refusal it replaces: "
+                    + " | ".join(ev.removeprefix("paper model: ")
+                                 for ev in rec["removed_evidence"]))
             if unc.pruned:
                 notes.append(f"paper model: {', '.join(unc.pruned)} pruned (relative std "
                              f"above {DEFAULT_THRESHOLD_PCT:g} %, eq. 14-16): held at 0 and the "
@@ -1005,7 +1026,8 @@ def flag_unidentified(rec: dict[str, Any],
     for p, v in rec["parameters"].items():
         rs = v["rel_std_pct"]
         # a pruned parameter (held at 0) is removed from the model, not unidentified
-        v["unidentified"] = bool(not v.get("pruned") and (
+        # nor one the rank rule removed before the fit (not excited on these data, at 0)
+        v["unidentified"] = bool(not v.get("pruned") and not v.get("removed") and (
             rs is None or not math.isfinite(rs) or rs > threshold_pct))
         if v["unidentified"]:
             bad.append(p)
@@ -1096,7 +1118,9 @@ def _one_signed_loads(est: RobotModel, rec: dict[str, Any], rows_sig: RobotSigna
         found.append(joint)
         names = [f"{p}{n}" for p in ("c_m", "c_g", "OFF")]
         pars = rec["parameters"]
-        flagged = [p for p in names if p in pars and not pars[p].get("pruned")]
+        # (a column the rank rule removed before the fit is held at 0: neither)
+        flagged = [p for p in names if p in pars and not pars[p].get("pruned")
+                   and not pars[p].get("removed")]
         for p in flagged:
             pars[p]["unidentified"] = True
         pruned = [p for p in names if p in pars and pars[p].get("pruned")]
@@ -1167,10 +1191,11 @@ def format_report(out: dict[str, Any]) -> str:
         for p, v in rec["parameters"].items():
             rs = v["rel_std_pct"]
             rs_s = "inf" if rs is None or not math.isfinite(rs) else f"{rs:.1f}"
-            if v.get("pruned"):
+            if v.get("pruned") or v.get("removed"):
                 rs_s = "-"
             flag = ("  unidentified" if v.get("unidentified") else
-                    "  pruned" if v.get("pruned") else "")
+                    "  pruned" if v.get("pruned") else
+                    "  removed" if v.get("removed") else "")
             lines.append(f"{p:<14}{v['value']:>14.6g}{v['std']:>12.3g}{rs_s:>9}"
                          f"{v.get('std_analytic', v['std']):>12.3g}{flag}")
         lines.extend(format_uncertainty(rec.get("uncertainty")))

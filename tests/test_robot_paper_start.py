@@ -8,7 +8,9 @@ run with a 5 kg payload. On such wrists sign(tau dq) is "motor" on (nearly) ever
 start from the measured quadrant leaves a_g ... d_g without excitation, while the model
 quadrant sign(tau_out dq) puts about half the rows in the generator quadrant.
 
-Asserted: the measured quadrant fails with the evidence (rows per quadrant) and the fix; the
+Asserted: the measured quadrant leaves the wrists without generator rows: their a_g ... d_g
+are dropped (zero columns, held at 0, the rank rule of every fit; until 2026-11-28 the whole
+model was refused) with the evidence (rows per quadrant) and the fix (quadrant='model'); the
 default (model quadrant from the usual fit) identifies the model; one payload does not fix the
 scale of theta against a, b (its torque is in the span of the base columns), so a_m of the
 first joint is fixed; the fitted theta puts (nearly) every row in the quadrant the true theta
@@ -25,7 +27,6 @@ import pytest
 from sigma_cases import PAYLOAD, wrist_arm
 from test_robot_fit import _signals
 
-from ident.robot import RobotIdentError
 from ident.robot.estimate import RobotModel
 from sim_drivers.arm import ArmGains, model_reference, simulate_arm
 
@@ -49,18 +50,24 @@ def ur10_wrists():
     return params, reg, base, sigs
 
 
-def test_measured_quadrant_fails_with_evidence(ur10_wrists):
+def test_measured_quadrant_drops_the_wrists_generator_columns_with_evidence(ur10_wrists):
     params, reg, base, sigs = ur10_wrists
     s = sigs[0]
     ok = np.isfinite(s.tau[:, 3:])
     motor = np.mean((s.tau[:, 3:] * s.dq[:, 3:] > 0)[ok])
     assert motor > 0.99  # friction-dominated: the measured power is "motor"
-    with pytest.raises(RobotIdentError) as e:
-        RobotModel(reg, "paper", "wls", base=base, quadrant="measured").fit(sigs)
-    msg = str(e.value)
+    m = RobotModel(reg, "paper", "wls", base=base, quadrant="measured").fit(sigs)
+    empty = [j for j, (_, gen) in m.quadrant_rows_.items() if gen == 0]
+    assert empty and set(empty) <= {"wrist_1_joint", "wrist_2_joint", "wrist_3_joint"}
+    # the generator columns of exactly the joints without generator rows: held at 0
+    nums = [n for j, n in zip(reg.joints, reg.numbers, strict=True) if j in empty]
+    want = {f"{p}{n}" for n in nums for p in ("a_g", "b_g", "c_g", "d_g")}
+    assert {n for n, _ in m.removed_} == want, m.removed_
+    assert all(m.fixed_[n] == 0.0 for n in want)
+    msg = " ".join(m.dropped_evidence_)
     assert "\n" not in msg
     assert "rows motor" in msg and "generator" in msg and "Fix:" in msg, msg
-    assert "wrist_2_joint" in msg or "wrist_3_joint" in msg, msg
+    assert "quadrant='model'" in msg and all(j in msg for j in empty), msg
 
 
 def test_paper_model_identified_within_true_structure(ur10_wrists):

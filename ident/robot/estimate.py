@@ -1097,13 +1097,57 @@ class RobotModel(HyperParameters):
             return (*self._fit_on(moms, paper_coefficients, x, free, linear=False), None)
         except _Unidentifiable as e:
             if not damped_ok:
-                raise RobotIdentError(self._evidence(e, moms)) from None
+                return self._drop_unidentifiable(moms, x, free, e)
             self._damp = DAMPING
             try:
                 out = self._fit_on(moms, paper_coefficients, x, free, linear=False)
             finally:
                 self._damp = 0.0
-            return (*out, RobotIdentError(self._evidence(e, moms)))
+            err = RobotIdentError(self._evidence(e, moms))
+            err.cause = e  # type: ignore[attr-defined]  (for _drop_unidentifiable)
+            return (*out, err)
+
+    def _drop_unidentifiable(self, moms: list[JointMoments], x: np.ndarray, free: np.ndarray,
+                             e: _Unidentifiable) -> tuple[np.ndarray, np.ndarray, int, None]:
+        """The paper fit's normal equations are singular (``e``) on the final quadrants: the
+        rank rule (:meth:`_rank_fix`, the single-joint fit's and the usual fit's) fixes the
+        zero or exactly dependent columns at 0 (``fixed_``, their reasons in ``removed_``,
+        the refusal's evidence, rows per quadrant and load sign, in ``dropped_evidence_``)
+        and the fit is made without them (``free`` and ``x`` changed in place); repeated
+        while the rule finds columns. Refused in one line (the evidence) when it finds none
+        (singular beyond the rule's tolerance) or when a joint keeps neither a_m nor a_g
+        (nothing of its load model left). Returns (x, weights, iterations, None)."""
+        evidence = self._evidence(e, moms)
+        before = [n for n, v in self.fixed_.items() if v == 0.0]
+        if before:  # an earlier refusal's columns already dropped: say so in this one
+            evidence += f" (after {', '.join(before)} were dropped as not identifiable)"
+        nb = len(PAPER_BLOCK)
+        ia, ig = PAPER_BLOCK.index("a_m"), PAPER_BLOCK.index("a_g")
+        for _ in range(x.size):
+            dep = self._rank_fix(moms, paper_coefficients, x, free)
+            if not dep:
+                raise RobotIdentError(evidence)
+            for i, why in dep:
+                free[i] = False
+                x[i] = 0.0
+                self.fixed_[self.names_[i]] = 0.0
+                self._fixed_why[self.names_[i]] = why
+            self.dropped_evidence_.append(evidence)
+            for j, joint in enumerate(self.joints_):
+                b = self.n_theta_ + nb * j
+                if not (free[b + ia] or self.fixed_.get(self.names_[b + ia]) == 1.0) and \
+                        not (free[b + ig] or self.fixed_.get(self.names_[b + ig]) == 1.0):
+                    raise RobotIdentError(f"{evidence} (nothing of {joint}'s load model "
+                                          "is left: its a_m and a_g are both unexcited)")
+            if not free.any():
+                raise RobotIdentError(evidence)
+            try:
+                return (*self._fit_on(moms, paper_coefficients, x, free, linear=False), None)
+            except _Unidentifiable as e2:
+                evidence = (self._evidence(e2, moms) + " (after "
+                            + ", ".join(n for n, v in self.fixed_.items() if v == 0.0)
+                            + " were dropped as not identifiable)")
+        raise RobotIdentError(evidence)
 
     @staticmethod
     def _load_signs(m: JointMoments) -> tuple[int, int]:
@@ -1261,29 +1305,37 @@ class RobotModel(HyperParameters):
             x[i] = 1.0
             self.fixed_ = {self.names_[i]: 1.0}
         self.quadrant_rows_ = self._quadrant_rows(moms)
+        # the refusals' evidence where the rank rule dropped columns (_drop_unidentifiable)
+        self.dropped_evidence_: list[str] = []
         loop = model_q and not given
         x, w, it, pending = self._fit_paper(moms, x, free, damped_ok=loop)
-        if loop:
-            for _ in range(int(self.max_passes) - 1):
-                theta = x[:pb].copy()
-                if stores is not None and all(
-                        st.covers(theta[c]) for st, c in zip(stores, self.cols_, strict=True)):
-                    # no row outside the stores can flip: update by the flipped rows only
-                    changed = sum(st.update(theta[c], m) for st, c, m in
-                                  zip(stores, self.cols_, moms, strict=True))
-                    self.n_store_updates_ += 1
-                else:
-                    moms, rows, changed, stores = self._pass(signals, theta, 3, theta_q,
-                                                             capacity=cap, gram_from=moms)
-                    passes += 1
-                theta_q = theta
-                self.quadrant_rows_ = self._quadrant_rows(moms)
-                x, w, it, pending = self._fit_paper(moms, x, free, damped_ok=True)
-                self.quadrant_changes_.append(changed)
-                if changed <= QUADRANT_TOL * rows:
-                    break
-        if pending is not None:  # the last quadrants still leave a direction unexcited
-            raise pending
+        for _ in range(x.size):
+            if loop:
+                for _ in range(int(self.max_passes) - 1):
+                    theta = x[:pb].copy()
+                    if stores is not None and all(
+                            st.covers(theta[c])
+                            for st, c in zip(stores, self.cols_, strict=True)):
+                        # no row outside the stores can flip: update by the flipped rows only
+                        changed = sum(st.update(theta[c], m) for st, c, m in
+                                      zip(stores, self.cols_, moms, strict=True))
+                        self.n_store_updates_ += 1
+                    else:
+                        moms, rows, changed, stores = self._pass(
+                            signals, theta, 3, theta_q, capacity=cap, gram_from=moms)
+                        passes += 1
+                    theta_q = theta
+                    self.quadrant_rows_ = self._quadrant_rows(moms)
+                    x, w, it, pending = self._fit_paper(moms, x, free, damped_ok=True)
+                    self.quadrant_changes_.append(changed)
+                    if changed <= QUADRANT_TOL * rows:
+                        break
+            if pending is None:
+                break
+            # the last quadrants still leave a direction unexcited: the rank rule drops its
+            # columns (held at 0, reported; else the refusal), and the quadrants are settled
+            # again without them
+            x, w, it, pending = self._drop_unidentifiable(moms, x, free, pending.cause)
         self._finish(moms, paper_coefficients, x, free, w, passes, it,
                      theta_q if model_q else None)
         if self.quadrants == "soft":  # the hard fit is the start (ident.robot.soft_fit)

@@ -781,11 +781,12 @@ def _robust_cov(model: Any, moms: list[JointMoments], f: np.ndarray,
 
 def parameter_records(model: Any) -> dict[str, dict[str, Any]]:
     """``{name: {"value", "std", "rel_std_pct", "std_analytic", "std_robust",
-    "std_jackknife", "std_leverage", "pruned"}}`` of a fitted model: ``std`` the honest sigma
-    when :func:`assess` ran (else eq. 15), ``rel_std_pct`` 100 std / |value| (None when the
-    value is 0), ``std_robust`` the robust eq. 15 (None when not computed: soft quadrants, or
-    no assessment), ``std_leverage`` the friction blocks' HC3 sigma (None on the base
-    parameters, with IDIM-IV, soft quadrants or no assessment)."""
+    "std_jackknife", "std_leverage", "pruned"[, "removed"]}}`` of a fitted model: ``std`` the
+    honest sigma when :func:`assess` ran (else eq. 15), ``rel_std_pct`` 100 std / |value|
+    (None when the value is 0), ``std_robust`` the robust eq. 15 (None when not computed: soft
+    quadrants, or no assessment), ``std_leverage`` the friction blocks' HC3 sigma (None on the
+    base parameters, with IDIM-IV, soft quadrants or no assessment), ``removed`` (only on the
+    parameters the fit's rank rule held at 0, ``removed_``) its reason."""
     u = getattr(model, "uncertainty_", None)
     std = model.std_ if u is None else u.std
     lev = (np.full(std.size, np.nan) if u is None or u.std_leverage is None
@@ -794,9 +795,13 @@ def parameter_records(model: Any) -> dict[str, dict[str, Any]]:
     rob = (np.full(std.size, np.nan) if u is None or u.std_robust is None
            else u.std_robust)
     pruned = set(getattr(model, "pruned_", ()))
+    # the columns the rank rule dropped before the fit (zero or exactly dependent on these
+    # data, held at 0): "removed" with the reason, only on them
+    removed = dict(getattr(model, "removed_", ()))
     return {p: {"value": float(v), "std": float(s),
                 "rel_std_pct": float(100.0 * s / abs(v)) if v != 0 else None,
                 "std_analytic": float(sa), "std_robust": _num(sr), "std_jackknife": _num(sj),
-                "std_leverage": _num(sl), "pruned": p in pruned}
+                "std_leverage": _num(sl), "pruned": p in pruned,
+                **({"removed": removed[p]} if p in removed else {})}
             for p, v, s, sa, sr, sj, sl in zip(model.names_, model.coef_, std, model.std_,
                                                rob, jack, lev, strict=True)}
