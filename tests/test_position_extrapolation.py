@@ -12,19 +12,27 @@ positions and, independently, from the simulated runs' positions."""
 
 from __future__ import annotations
 
+import json
+import re
 import tomllib
 
 import numpy as np
 import pytest
 from example_campaign import ROOT
 
+from daq.app.cli import main
 from daq.protocol.control import ControllerGains
+from ident.api import load
+from ident.cli_robot import fit_files
 from ident.fitting import fit_models
-from ident.loaders import make_experiment
+from ident.loaders import make_experiment, parse_mapping
 from ident.results import POSITION_OUTSIDE_SHARE, position_split
+from ident.robot.loaders import RawRobotRun, RobotPayloadData
 from sim_drivers.offline import simulate
 from sim_drivers.plant_config import load_plant
+from tests.conftest import shared_path
 from trajectories.plan import plan_campaign
+from trajectories.robot import load_robot
 from trajectories.robot_campaign import RobotCampaign
 
 NOTE = "validation, paper model: "
@@ -118,13 +126,6 @@ def test_kuka_a1_validation_outside_the_fit_positions(tmp_path, capfd):
     reads the model's quadrant (the load of A1 keeps one sign on the fit's rows, which is
     why tau_off is not separable from c_m, c_g; eq. 26's proxy sign(tau dq) of the measured
     torque put 43 % of them on the other side and no note was given)."""
-    import json
-    import re
-
-    from daq.app.cli import main
-    from ident.api import load
-    from ident.loaders import parse_mapping
-    from tests.conftest import shared_path
 
     data = shared_path("data", "kuka_kr300_weigand2021")
     a, b, c = (str(data / f"recorded_2020-10-21_FF_{x}_08ms.mat") for x in "ABC")
@@ -161,3 +162,61 @@ def test_kuka_a1_validation_outside_the_fit_positions(tmp_path, capfd):
     assert js["error_outside"] > 10 * js["error_inside"]
     assert js["error_outside"] >= rec["models"]["paper"]["validation_rel_error"]
     assert any("keeps one sign" in n for n in rec["notes"])
+
+
+def _robot_runs(exps):
+    return [RawRobotRun(e.source, e.t, e.q[:, None], e.tau[:, None],
+                        payload=(RobotPayloadData(float(e.payload_mass), arm_m=float(e.payload_arm))
+                                 if e.payload_mass else RobotPayloadData()))
+            for e in exps]
+
+
+@pytest.mark.parametrize("outside", [True, False])
+def test_robot_fit_splits_the_validation_by_position(fit_runs, outside):
+    """``jointid fit --robot`` (``fit_files``) on the same runs as one-joint robot runs: the
+    per-joint split in each model's record, the note for the validation outside (share
+    computed here from the simulated runs' positions) and none for the one inside."""
+    robot = load_robot(ROOT / "examples" / "robots" / "rx130l.toml")
+    val = _runs(not outside, 21 if outside else 41)
+    out = fit_files(robot, _robot_runs(fit_runs), _robot_runs(val), model="paper")
+    (joint,) = out["models"]["paper"]["validation_position_split"]
+    sp = out["models"]["paper"]["validation_position_split"][joint]
+    notes = [n for n in out["notes"] if n.startswith(f"validation, {joint} (paper model): ")]
+    if outside:
+        qf = np.concatenate([e.q for e in fit_runs])
+        qv = np.concatenate([e.q for e in val])
+        raw = float(np.mean((qv < qf.min()) | (qv > qf.max())))
+        assert abs(sp["share_outside"] - raw) < 0.05, (sp, raw)
+        assert len(notes) == 1 and f"{100 * sp['share_outside']:.0f} % of the rows" in notes[0]
+    else:
+        assert sp["share_outside"] <= POSITION_OUTSIDE_SHARE and not notes, (sp, notes)
+
+
+def test_kuka_robot_fit_splits_each_joint():
+    """The real KUKA KR300 recordings through the robot path (A fitted, B and C validated,
+    ``--model paper``; ``../shared``, skipped without it): A1 moves over 0..45 deg in A and
+    below 0 in B and C (every validation row outside: a note), A5 inside (no note). The
+    shares are checked against the files' own positions where each axis moves."""
+    data = shared_path("data", "kuka_kr300_weigand2021")
+    a, b, c = (str(data / f"recorded_2020-10-21_FF_{x}_08ms.mat") for x in "ABC")
+    robot = load_robot(ROOT / "examples" / "robots" / "kuka_kr300_r2500.toml")
+    out = fit_files(robot, [a], [b, c], model="paper", q_unit="deg", mapping=parse_mapping(
+        ["t=rec.time_cont,q=rec.act_pos_mot_deg,tau=rec.act_torque_abs_nm,"
+         "q_ref=rec.ref_pos_deg"], robot=True))
+    split = out["models"]["paper"]["validation_position_split"]
+    noted = {n.split(" ")[1] for n in out["notes"] if n.startswith("validation, ")}
+    for k, joint in ((0, "A1"), (4, "A5")):
+        kw = dict(mapping=parse_mapping([f"t=rec.time_cont,q=rec.act_pos_mot_deg[{k}]",
+                                         f"tau=rec.act_torque_abs_nm[{k}]"]), q_unit="deg")
+
+        def moving(files: list[str], kw=kw) -> np.ndarray:
+            qs = []
+            for e in load(files, **kw):
+                dq = np.abs(np.gradient(e.q, e.t))
+                qs.append(e.q[dq > 0.02 * dq.max()])
+            return np.concatenate(qs)
+
+        qf, qv = moving([a]), moving([b, c])
+        raw = float(np.mean((qv < qf.min()) | (qv > qf.max())))
+        assert abs(split[joint]["share_outside"] - raw) < 0.05, (joint, split[joint], raw)
+        assert (joint in noted) == (raw > POSITION_OUTSIDE_SHARE), (joint, noted)
