@@ -45,7 +45,7 @@ from .loaders import Q_UNITS, parse_mapping
 from .qs_scan import qs_grid, rescan_qs, scan_qs, scan_qs_joints
 from .refine_result import ONE_TRAJECTORY_NOTE
 from .report import write_json
-from .results import DEFAULT_BANDS, json_float
+from .results import DEFAULT_BANDS, json_float, position_split, position_split_note
 from .robot.confounded import regroup_friction
 from .robot.consistency import check_consistency
 from .robot.consistent_fit import add_consistent, format_record
@@ -611,6 +611,8 @@ def fit_robot(
                 rec["payload_misfit"] = payload_misfit(est, out["_signals"][0])
         if val is not None:
             rec["validation_rel_error"] = {k: float(v) for k, v in est.rel_error(val).items()}
+            _position_extrapolation(est, rec, out["_signals"][0], val, joints, name,
+                                    out["validation_inputs"], notes)
         if val is not None and val_all is not None:
             rec["validation_rel_error_all_rows"] = {
                 k: float(v) for k, v in est.rel_error(val_all).items()}
@@ -1137,6 +1139,34 @@ def _one_signed_loads(est: RobotModel, rec: dict[str, Any], rows_sig: RobotSigna
             "parameters")
     rec["unidentified"] = [p for p, v in rec["parameters"].items() if v.get("unidentified")]
     rec["one_signed_load"] = found
+
+
+def _position_extrapolation(est: RobotModel, rec: dict[str, Any], rows_sig: RobotSignals,
+                            val: RobotSignals, joints: Sequence[str], name: str,
+                            files: Sequence[str], notes: list[str]) -> None:
+    """Each joint's validation error split by the fit's position range
+    (:func:`ident.results.position_split`): ``rec["validation_position_split"]`` per joint,
+    and a note for a joint with more than
+    :data:`~ident.results.POSITION_OUTSIDE_SHARE` of its validation rows (those the
+    cross-validation error uses) outside the positions of its fitted rows [rad]. Only the
+    positions decide the split; the headline validation error is unchanged."""
+    try:
+        rows = est.fitted_rows(rows_sig)
+    except IdentError:
+        rows = np.isfinite(rows_sig.tau)
+    rho = est.residual(val)
+    where = ", ".join(Path(f).name for f in files) or "the validation files"
+    split: dict[str, Any] = {}
+    for j, joint in enumerate(joints):
+        sp = position_split(rows_sig.q[rows[:, j], j], val.q[:, j], val.tau[:, j], rho[:, j])
+        if sp is None:
+            continue
+        split[joint] = {k: ([json_float(x) for x in v] if isinstance(v, list)
+                            else v if isinstance(v, int) else json_float(v))
+                        for k, v in sp.items()}
+        if note := position_split_note(sp, f"{joint} ({name} model)", where):
+            notes.append(note)
+    rec["validation_position_split"] = split
 
 
 def _without_full(sig: RobotSignals) -> RobotSignals:

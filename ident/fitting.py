@@ -35,6 +35,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -80,6 +81,8 @@ from .results import (
     format_table_iv,
     json_float,
     parameters_json,
+    position_split,
+    position_split_note,
     removed_json,
 )
 from .robot.design import DQ_MIN_FRACTION
@@ -199,7 +202,13 @@ def _one_sign_load(d: Design) -> str | None:
     the model's or eq. 26's proxy, times sign(dq)): the motor and the generator rows are then
     one direction each and c_m, c_g and the offset (d_m, d_g) trade off (section III.B); the
     elimination would keep a combination under one name. None otherwise."""
-    pos = float(np.mean(d.signals.sign_power * np.sign(d.signals.dq) > 0))
+    if "c_m" not in d.names or "c_g" not in d.names:
+        return None
+    # the model's quadrant as its columns carry it: c_m's column is P+ sign(dq), c_g's
+    # P- sign(dq), so their difference is sign(P) sign(dq), the load's sign (never the
+    # measured torque's proxy sign(tau dq) that Signals.sign_power falls back to)
+    load = d.W[:, d.names.index("c_m")] - d.W[:, d.names.index("c_g")]
+    pos = float(np.mean(load > 0))
     if min(pos, 1.0 - pos) >= THIN_QUADRANT:
         return None
     return (f"the load tau_out keeps one sign on {100 * max(pos, 1 - pos):.1f} % of the "
@@ -208,6 +217,12 @@ def _one_sign_load(d: Design) -> str | None:
             "combinations of them, not the friction of each quadrant (section III.B: a "
             "trajectory across the position where the gravity torque changes sign, or a "
             "payload that reverses the load)")
+
+
+def _split_json(split: dict[str, Any]) -> dict[str, Any]:
+    """:func:`ident.results.position_split` with JSON floats (null for NaN)."""
+    return {k: ([json_float(x) for x in v] if isinstance(v, list)
+                else v if isinstance(v, int) else json_float(v)) for k, v in split.items()}
 
 
 def _split(
@@ -536,6 +551,16 @@ class FitReport:
         out["validation"] = m.rel_error_on(vd) if vd is not None else None
         return out
 
+    def position_split(self, name: str) -> dict[str, Any] | None:
+        """One model's validation error split by the fit's position range
+        (:func:`ident.results.position_split`; q in [rad] or [m]), None without validation."""
+        vd = self.validation_designs.get(name)
+        if vd is None:
+            return None
+        m = self.models[name]
+        return position_split(self.designs[name].signals.q, vd.signals.q, vd.Y,
+                              vd.Y - m.predict(vd))
+
     def to_json(self) -> dict[str, Any]:
         """The JSON record documented in ``docs/fit-json.md``."""
         any_design = next(iter(self.designs.values()))
@@ -557,6 +582,9 @@ class FitReport:
             }
             if e["validation"] is not None:
                 rec["validation_rel_error"] = json_float(e["validation"])
+                split = self.position_split(name)
+                if split is not None:
+                    rec["validation_position_split"] = _split_json(split)
             if name == "paper":
                 rec["q_s"] = self.q_s
                 if self.sign_check_shift is not None:
@@ -965,6 +993,12 @@ def fit_models(
         vdesigns, vsignals = _other_designs(validation, sv, models, list(fitted), qs0,
                                             qs_val, has_payload, settings, problem.first,
                                             band_nm, designs)
+        files = ", ".join(Path(v).name for v in vsources) or "the validation data"
+        for name, vd in vdesigns.items():
+            split = position_split(designs[name].signals.q, vd.signals.q, vd.Y,
+                                   vd.Y - fitted[name].predict(vd))
+            if note := position_split_note(split, f"{name} model", files, s.revolute):
+                notes.append(note)
     if "paper" in designs and one_sign:
         notes.append(f"paper model: {one_sign}")
     t4 = None

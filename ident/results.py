@@ -21,6 +21,9 @@ __all__ = [
     "format_parameter_table",
     "format_error_table",
     "format_table_iv",
+    "POSITION_OUTSIDE_SHARE",
+    "position_split",
+    "position_split_note",
 ]
 
 class IdentModel(Protocol):
@@ -171,3 +174,75 @@ def _grid(rows: list[tuple[str, ...]]) -> str:
         if k == 0:
             lines.append("  ".join("-" * w for w in widths))
     return "\n".join(lines)
+
+
+#: Share of the validation rows outside the fit's position range above which a note says so:
+#: from 10 % of the rows on, the rows the fit never saw are a part of the cross-validation
+#: error that can decide it (a fit over a narrow range of q can carry gravity and friction
+#: constants that are nearly collinear there, with large cancelling coefficients that do not
+#: cancel elsewhere); below it, a few rows at the edge of the range are the ordinary case.
+POSITION_OUTSIDE_SHARE = 0.10
+
+
+def position_split(q_fit: np.ndarray, q_val: np.ndarray, y_val: np.ndarray,
+                   rho_val: np.ndarray) -> dict[str, Any] | None:
+    """The validation error split by position: rows inside the fit's range of q, and outside.
+
+    Only the positions decide the split; the measured torque enters only the errors.
+
+    Parameters
+    ----------
+    q_fit : ndarray, shape (n,)
+        The joint's positions on the fit's rows [rad] or [m].
+    q_val, y_val, rho_val : ndarray, shape (m,)
+        The validation rows' positions (same unit), measured torque and residual [N m] or
+        [N]; rows with a non-finite torque or residual are ignored.
+
+    Returns
+    -------
+    dict or None
+        ``q_fit_range`` [min, max] (unit of ``q_fit``), ``rows``, ``rows_outside``,
+        ``share_outside`` (fraction), ``error_inside`` and ``error_outside`` (||rho||/||y||
+        on those rows, None without rows); None when there are no fit or validation rows.
+    """
+    q_fit = np.asarray(q_fit, float)
+    q_fit = q_fit[np.isfinite(q_fit)]
+    ok = np.isfinite(q_val) & np.isfinite(y_val) & np.isfinite(rho_val)
+    q, y, rho = np.asarray(q_val)[ok], np.asarray(y_val)[ok], np.asarray(rho_val)[ok]
+    if q_fit.size == 0 or q.size == 0:
+        return None
+    lo, hi = float(q_fit.min()), float(q_fit.max())
+    out = (q < lo) | (q > hi)
+
+    def err(sel: np.ndarray) -> float | None:
+        ny = float(np.linalg.norm(y[sel]))
+        return float(np.linalg.norm(rho[sel]) / ny) if sel.any() and ny > 0 else None
+
+    return {"q_fit_range": [lo, hi], "rows": int(q.size), "rows_outside": int(out.sum()),
+            "share_outside": float(out.mean()), "error_inside": err(~out),
+            "error_outside": err(out)}
+
+
+def position_split_note(split: Mapping[str, Any] | None, what: str, files: str,
+                        revolute: bool = True) -> str | None:
+    """The note of :func:`position_split` when more than :data:`POSITION_OUTSIDE_SHARE` of
+    the validation rows lie outside the fit's positions, else None. ``what``: e.g.
+    ``"A1 (paper model)"``; ``files``: the validation files' names; q in [rad] ([m]
+    prismatic), with degrees for a revolute joint."""
+    if split is None or split["share_outside"] <= POSITION_OUTSIDE_SHARE:
+        return None
+    lo, hi = split["q_fit_range"]
+    rng = (f"q = {lo:.3g}..{hi:.3g} rad ({np.degrees(lo):.3g}..{np.degrees(hi):.3g} deg)"
+           if revolute else f"q = {lo:.3g}..{hi:.3g} m")
+    share = 100 * split["share_outside"]
+
+    def pct(x: float | None) -> str:
+        return "-" if x is None else f"{100 * x:.3g} %"
+
+    inside = (f", the {100 - share:.0f} % inside {pct(split['error_inside'])}"
+              if split["rows_outside"] < split["rows"] else "")
+    return (f"validation, {what}: {share:.0f} % of the rows of {files} lie outside the fit's "
+            f"positions {rng}: their error {pct(split['error_outside'])}{inside} (position "
+            "extrapolation: over a narrow range of q the gravity columns can be nearly "
+            "collinear with the friction constants, and what cancels on the fit's rows need "
+            "not elsewhere; the cross-validation error above includes these rows)")
