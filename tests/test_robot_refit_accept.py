@@ -139,7 +139,9 @@ def test_kuka_found_terms_refused():
         (j, t.effect) for j, t in found)
     assert fit["extras"] == [] and fit["acceptance"]["all_refused"] is True
     h = fit["heldout_rel_error"]
-    assert h["after"]["all"] <= h["before"]["all"]
+    # every term refused: "after" is the fit refitted without terms, "before" to rounding
+    # (4e-12 relative above it at the default trim of 60, 2026-11-28)
+    assert h["after"]["all"] <= h["before"]["all"] * (1 + 1e-9)
     # the first term dropped was dropped from the refit with every found term
     assert fit["refused"][0]["heldout_rel_error"]["with"]["all"] == pytest.approx(
         every.heldout["after"]["all"], rel=1e-9)
