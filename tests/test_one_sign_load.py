@@ -11,12 +11,10 @@ from __future__ import annotations
 import tomllib
 
 import pytest
-from example_campaign import ROOT
+from example_campaign import ROOT, payload_experiments
 
 from daq.protocol.control import ControllerGains
 from ident.fitting import fit_models
-from ident.loaders import make_experiment
-from sim_drivers.offline import simulate
 from sim_drivers.plant_config import load_plant
 from trajectories.plan import plan_campaign
 from trajectories.robot_campaign import RobotCampaign
@@ -42,12 +40,7 @@ def _fit(one_sided: bool, seed: int = 5, quick: bool = False,
     plan = plan_campaign(camp)
     plant = load_plant(ROOT / "sim_drivers" / "data" / "plant_default.toml")
     gains = ControllerGains(**camp.gains_kwargs())
-    exps = []
-    for i, p in enumerate(plan.payloads):
-        r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg, payload_arm=p.arm_m,
-                     seed=seed + i)
-        exps.append(make_experiment(f"p{i}.csv", r.t, r.q, r.tau_ref, payload_mass=p.mass_kg,
-                                    payload_arm=p.arm_m))
+    exps = payload_experiments(plant, plan, gains, seed, name="p{i}.csv")
     return fit_models(exps, models, table_iv=False)
 
 

@@ -18,17 +18,16 @@ import tomllib
 
 import numpy as np
 import pytest
-from example_campaign import ROOT
+from example_campaign import ROOT, payload_experiments
 
 from daq.app.cli import main
 from daq.protocol.control import ControllerGains
 from ident.api import load
 from ident.cli_robot import fit_files
 from ident.fitting import fit_models
-from ident.loaders import make_experiment, parse_mapping
+from ident.loaders import parse_mapping
 from ident.results import POSITION_OUTSIDE_SHARE, position_split
 from ident.robot.loaders import RawRobotRun, RobotPayloadData
-from sim_drivers.offline import simulate
 from sim_drivers.plant_config import load_plant
 from tests.conftest import shared_path
 from trajectories.plan import plan_campaign
@@ -37,6 +36,16 @@ from trajectories.robot_campaign import RobotCampaign
 
 NOTE = "validation, paper model: "
 LOW = 0.6  # [rad] the moved campaign's lower end
+
+
+def _moving_q(files: list[str], kw: dict) -> np.ndarray:
+    """The files' positions while the axis moves (|dq| above 2 % of its peak, by finite
+    differences), loaded with ``kw``."""
+    qs = []
+    for e in load(files, **kw):
+        dq = np.abs(np.gradient(e.q, e.t))
+        qs.append(e.q[dq > 0.02 * dq.max()])
+    return np.concatenate(qs)
 
 
 def _runs(moved: bool, seed: int):
@@ -52,13 +61,8 @@ def _runs(moved: bool, seed: int):
     plan = plan_campaign(camp)
     plant = load_plant(ROOT / "sim_drivers" / "data" / "plant_default.toml")
     gains = ControllerGains(**camp.gains_kwargs())
-    exps = []
-    for i, p in enumerate(plan.payloads):
-        r = simulate(plant, plan.reference, gains, payload_mass=p.mass_kg, payload_arm=p.arm_m,
-                     seed=seed + i)
-        exps.append(make_experiment(f"{'m' if moved else 'e'}{seed}p{i}.csv", r.t, r.q,
-                                    r.tau_ref, payload_mass=p.mass_kg, payload_arm=p.arm_m))
-    return exps
+    return payload_experiments(plant, plan, gains, seed,
+                               name=f"{'m' if moved else 'e'}{seed}p{{i}}.csv")
 
 
 @pytest.fixture(scope="module")
@@ -146,14 +150,7 @@ def test_kuka_a1_validation_outside_the_fit_positions(tmp_path, capfd):
     # at q = 0, inside A's range); 0.05: the fit's own velocity threshold and filter differ
     kw = dict(mapping=parse_mapping(maps), gain="para.u[0]", q_unit="deg")
 
-    def moving(files: list[str]) -> np.ndarray:
-        qs = []
-        for e in load(files, **kw):
-            dq = np.abs(np.gradient(e.q, e.t))
-            qs.append(e.q[dq > 0.02 * dq.max()])
-        return np.concatenate(qs)
-
-    qf, qv = moving([a]), moving([b, c])
+    qf, qv = _moving_q([a], kw), _moving_q([b, c], kw)
     raw = float(np.mean((qv < qf.min()) | (qv > qf.max())))
     assert raw > 0.9 and abs(js["share_outside"] - raw) < 0.05, (js, raw)
     share = int(re.search(r": (\d+) % of the rows", notes[0]).group(1))
@@ -209,14 +206,7 @@ def test_kuka_robot_fit_splits_each_joint():
         kw = dict(mapping=parse_mapping([f"t=rec.time_cont,q=rec.act_pos_mot_deg[{k}]",
                                          f"tau=rec.act_torque_abs_nm[{k}]"]), q_unit="deg")
 
-        def moving(files: list[str], kw=kw) -> np.ndarray:
-            qs = []
-            for e in load(files, **kw):
-                dq = np.abs(np.gradient(e.q, e.t))
-                qs.append(e.q[dq > 0.02 * dq.max()])
-            return np.concatenate(qs)
-
-        qf, qv = moving([a]), moving([b, c])
+        qf, qv = _moving_q([a], kw), _moving_q([b, c], kw)
         raw = float(np.mean((qv < qf.min()) | (qv > qf.max())))
         assert abs(split[joint]["share_outside"] - raw) < 0.05, (joint, split[joint], raw)
         assert (joint in noted) == (raw > POSITION_OUTSIDE_SHARE), (joint, noted)

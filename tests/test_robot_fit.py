@@ -180,12 +180,18 @@ def test_paper_beats_usual_at_low_velocity_on_every_joint(arm3, ur10, name):
 
 
 # --------------------------------------------------------------------------- usual model
-@pytest.fixture(scope="module")
-def arm3_usual():
+def arm3_usual_data():
+    """arm3 with the usual friction in the paper's form (a = 1, b = d = 0, c_g = c_m), 12 s,
+    seed 3: what :func:`_simulate` returns."""
     robot = load_robot(ROOT / "examples" / "robots" / "arm3.toml")
     c = ArmParams.from_robot(robot).friction.c_m
     friction = dict(a_m=1.0, b_m=0.0, a_g=1.0, b_g=0.0, d_m=0.0, d_g=0.0, c_g=c)
     return _simulate("arm3", friction, duration_s=12.0, seed=3)
+
+
+@pytest.fixture(scope="module")
+def arm3_usual():
+    return arm3_usual_data()
 
 
 @pytest.mark.parametrize("method", ["ls", "wls", "iv"])

@@ -18,7 +18,7 @@ import pytest
 import scipy.io
 import scipy.stats
 from test_robot_cli import ARM3, api_signals, run_cli
-from test_robot_fit import PAYLOADS, ROOT, _check_recovery, _signals, _simulate
+from test_robot_fit import PAYLOADS, ROOT, _check_recovery, _signals, _simulate, arm3_usual_data
 
 from ident.loaders import parse_mapping
 from ident.robot import RobotIdentError
@@ -36,10 +36,7 @@ SEEDS = (0, 1, 2)
 
 @pytest.fixture(scope="module")
 def arm3_usual():
-    robot = load_robot(ROOT / "examples" / "robots" / "arm3.toml")
-    c = ArmParams.from_robot(robot).friction.c_m
-    friction = dict(a_m=1.0, b_m=0.0, a_g=1.0, b_g=0.0, d_m=0.0, d_g=0.0, c_g=c)
-    return _simulate("arm3", friction, duration_s=12.0, seed=3)
+    return arm3_usual_data()
 
 
 def _truth(params, reg, model: RobotModel) -> dict[str, float]:

@@ -23,13 +23,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.stats
-from test_robot_fit import NOISE, PAYLOADS, ROOT, _signals, _simulate
+from test_robot_fit import NOISE, PAYLOADS, _signals, arm3_usual_data
 
 from ident.estimators import ZERO_COLUMN
 from ident.robot.estimate import RobotModel
 from ident.robot.signals import RobotPayloadData, RobotSignals
-from sim_drivers.arm import ArmParams
-from trajectories.robot import load_robot
 
 ELBOW = 2  # the joint left without generator rows (arm3's third)
 MARGIN = 5.0  # noise sigmas between the kept rows' true torque and zero
@@ -37,11 +35,8 @@ MARGIN = 5.0  # noise sigmas between the kept rows' true torque and zero
 
 @pytest.fixture(scope="module")
 def arm3_usual():
-    """As tests/test_robot_fit.py's ``arm3_usual``: the usual friction in the paper's form."""
-    robot = load_robot(ROOT / "examples" / "robots" / "arm3.toml")
-    c = ArmParams.from_robot(robot).friction.c_m
-    friction = dict(a_m=1.0, b_m=0.0, a_g=1.0, b_g=0.0, d_m=0.0, d_g=0.0, c_g=c)
-    return _simulate("arm3", friction, duration_s=12.0, seed=3)
+    """tests/test_robot_fit.py's ``arm3_usual``: the usual friction in the paper's form."""
+    return arm3_usual_data()
 
 
 def _motor_only_signals(params, reg, runs, seed: int) -> list[RobotSignals]:
