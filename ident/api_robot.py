@@ -20,6 +20,7 @@ their defaults are not the command line's.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -42,13 +43,41 @@ from .robot.estimate import RobotModel
 from .robot.loaders import RawRobotRun
 from .robot.signals import RobotSignals
 from .robot.uncertainty import N_BLOCKS
-from .vocab import model_name, renamed_keywords, warn_unused_qs
+from .vocab import QS_WORDS, model_name, qs_value, renamed_keywords, warn_unused_qs
 
 __all__ = ["RobotFit"]
 
 #: What :meth:`RobotFit.fit` accepts: file paths or runs read by
 #: :func:`ident.cli_robot.load_runs`.
 RobotData = Sequence[str | Path] | str | Path | Sequence[RawRobotRun]
+
+
+def check_qs(q_s: Any) -> None:
+    """Refuse a bad ``q_s`` of :class:`RobotFit` in one line, before any file is read: a
+    number > 0 [rad/s] or one of :data:`ident.vocab.QS_WORDS` (:func:`ident.vocab.qs_value`,
+    the rule of ``--q-s``), or a sequence or mapping (by joint name) of numbers > 0.
+
+    Raises
+    ------
+    DataError
+        Naming ``q_s`` (or the entry) and what is accepted.
+    """
+    if isinstance(q_s, Mapping):
+        entries = [(f"q_s[{k!r}]", v) for k, v in q_s.items()]
+    elif isinstance(q_s, Sequence) and not isinstance(q_s, str):
+        entries = [(f"q_s[{i}]", v) for i, v in enumerate(q_s)]
+    else:
+        qs_value(q_s)
+        return
+    words = ", ".join(repr(w) for w in QS_WORDS)
+    for what, v in entries:
+        try:
+            ok = not isinstance(v, bool) and math.isfinite(float(v)) and float(v) > 0
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise DataError(f"{what} {v!r}: expected a number > 0 [rad/s] per joint (q_s: a "
+                            f"number, {words}, or one number per joint)")
 
 
 class RobotFit(HyperParameters):
@@ -220,6 +249,7 @@ class RobotFit(HyperParameters):
         RobotFit
             ``self``, fitted.
         """
+        check_qs(self.q_s)  # refused in one line before any file is read
         warn_unused_qs("RobotFit", model_name(self.model, extra=("both",)), self.q_s,
                        DEFAULT_Q_S)
         out = fit_files(
