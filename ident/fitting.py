@@ -418,6 +418,11 @@ class FitReport:
         that q_s (:meth:`ident.one_joint.OneJointProblem.products`, its q_s-free part kept:
         only the E products are formed again), for :meth:`rescan_found_terms`; None without
         a paper fit; not serialised.
+    position_splits : dict[str, dict or None]
+        Per model with validation designs, its validation error split by the fit's position
+        range (:func:`ident.results.position_split`, q in [rad] or [m]) as :func:`fit_models`
+        computed it for its note; the JSON's ``validation_position_split`` reads it
+        (computed on demand by :meth:`position_split` for a model without an entry).
     """
 
     models: dict[str, IdentModel]
@@ -443,6 +448,8 @@ class FitReport:
     band_nm: float = 0.0
     paper_products: Callable[[float], RobotSignals] | None = field(default=None, repr=False,
                                                                    compare=False)
+    position_splits: dict[str, dict[str, Any] | None] = field(default_factory=dict,
+                                                              repr=False)
 
     def refit_found_terms(self, name: str, terms: Sequence[Term],
                           design: Design | None = None) -> dict[str, Any]:
@@ -553,7 +560,11 @@ class FitReport:
 
     def position_split(self, name: str) -> dict[str, Any] | None:
         """One model's validation error split by the fit's position range
-        (:func:`ident.results.position_split`; q in [rad] or [m]), None without validation."""
+        (:func:`ident.results.position_split`; q in [rad] or [m]), None without validation:
+        the one :func:`fit_models` computed for its note (``position_splits``), else
+        computed here."""
+        if name in self.position_splits:
+            return self.position_splits[name]
         vd = self.validation_designs.get(name)
         if vd is None:
             return None
@@ -889,6 +900,7 @@ def fit_models(
     robot_signals: dict[str, RobotSignals] = {}
     vdesigns: dict[str, Design] = {}
     vsignals = None
+    splits: dict[str, dict[str, Any] | None] = {}
     failed: list[str] = []
     one_sign = None
     shift = None  # the paper model's sign-check shift (ident.robot.selection_shift)
@@ -997,6 +1009,7 @@ def fit_models(
         for name, vd in vdesigns.items():
             split = position_split(designs[name].signals.q, vd.signals.q, vd.Y,
                                    vd.Y - fitted[name].predict(vd))
+            splits[name] = split  # the report's JSON reads this one (not computed again)
             if note := position_split_note(split, f"{name} model", files, s.revolute):
                 notes.append(note)
     if "paper" in designs and one_sign:
@@ -1060,4 +1073,5 @@ def fit_models(
         paper_products=problem.products if "paper" in fitted else None,
         torque_delay_given=delay_given,
         sign_check_shift=shift,
+        position_splits=splits,
     )
