@@ -45,7 +45,7 @@ from .loaders import Q_UNITS, parse_mapping
 from .qs_scan import qs_grid, rescan_qs, scan_qs, scan_qs_joints
 from .refine_result import ONE_TRAJECTORY_NOTE
 from .report import write_json
-from .results import DEFAULT_BANDS, json_float, position_split, position_split_note
+from .results import DEFAULT_BANDS, json_float, position_split, position_split_notes
 from .robot.confounded import regroup_friction
 from .robot.consistency import check_consistency
 from .robot.consistent_fit import add_consistent, format_record
@@ -1155,18 +1155,15 @@ def _position_extrapolation(est: RobotModel, rec: dict[str, Any], rows_sig: Robo
     except IdentError:
         rows = np.isfinite(rows_sig.tau)
     rho = est.residual(val)
-    where = ", ".join(Path(f).name for f in files) or "the validation files"
-    split: dict[str, Any] = {}
-    for j, joint in enumerate(joints):
-        sp = position_split(rows_sig.q[rows[:, j], j], val.q[:, j], val.tau[:, j], rho[:, j])
-        if sp is None:
-            continue
-        split[joint] = {k: ([json_float(x) for x in v] if isinstance(v, list)
-                            else v if isinstance(v, int) else json_float(v))
-                        for k, v in sp.items()}
-        if note := position_split_note(sp, f"{joint} ({name} model)", where):
-            notes.append(note)
-    rec["validation_position_split"] = split
+    splits = {joint: position_split(rows_sig.q[rows[:, j], j], val.q[:, j], val.tau[:, j],
+                                    rho[:, j]) for j, joint in enumerate(joints)}
+    splits = {joint: sp for joint, sp in splits.items() if sp is not None}
+    notes.extend(position_split_notes(((f"{joint} ({name} model)", sp)
+                                       for joint, sp in splits.items()), files))
+    rec["validation_position_split"] = {
+        joint: {k: ([json_float(x) for x in v] if isinstance(v, list)
+                    else v if isinstance(v, int) else json_float(v)) for k, v in sp.items()}
+        for joint, sp in splits.items()}
 
 
 def _without_full(sig: RobotSignals) -> RobotSignals:

@@ -35,7 +35,6 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -82,7 +81,7 @@ from .results import (
     json_float,
     parameters_json,
     position_split,
-    position_split_note,
+    position_split_notes,
     removed_json,
 )
 from .robot.design import DQ_MIN_FRACTION
@@ -1005,13 +1004,11 @@ def fit_models(
         vdesigns, vsignals = _other_designs(validation, sv, models, list(fitted), qs0,
                                             qs_val, has_payload, settings, problem.first,
                                             band_nm, designs)
-        files = ", ".join(Path(v).name for v in vsources) or "the validation data"
-        for name, vd in vdesigns.items():
-            split = position_split(designs[name].signals.q, vd.signals.q, vd.Y,
-                                   vd.Y - fitted[name].predict(vd))
-            splits[name] = split  # the report's JSON reads this one (not computed again)
-            if note := position_split_note(split, f"{name} model", files, s.revolute):
-                notes.append(note)
+        for name, vd in vdesigns.items():  # the report's JSON reads these (not again)
+            splits[name] = position_split(designs[name].signals.q, vd.signals.q, vd.Y,
+                                          vd.Y - fitted[name].predict(vd))
+        notes.extend(position_split_notes(((f"{n} model", sp) for n, sp in splits.items()),
+                                          vsources, s.revolute))
     if "paper" in designs and one_sign:
         notes.append(f"paper model: {one_sign}")
     t4 = None

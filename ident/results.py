@@ -7,7 +7,8 @@ Pure formatting and numerics; ``docs/fit-json.md`` documents the JSON layout.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
@@ -24,6 +25,7 @@ __all__ = [
     "POSITION_OUTSIDE_SHARE",
     "position_split",
     "position_split_note",
+    "position_split_notes",
 ]
 
 class IdentModel(Protocol):
@@ -257,3 +259,30 @@ def position_split_note(split: Mapping[str, Any] | None, what: str, files: str,
                "explain the cross-validation error")
     return (f"validation, {what}: {share:.0f} % of the rows of {files} lie outside the fit's "
             f"positions {rng}: their error {pct(e_out)}{inside} ({why})")
+
+
+def position_split_notes(splits: Iterable[tuple[str, Mapping[str, Any] | None]],
+                         files: Sequence[str | Path], revolute: bool = True) -> list[str]:
+    """The notes of :func:`position_split_note` for the splits of one fit on the same
+    validation files: the single-joint fit's models (:func:`ident.fitting.fit_models`) or the
+    robot fit's joints of one model (``ident.cli_robot``). The one place the files' names are
+    joined (``", "``, names without their folders; "the validation data" without files).
+
+    Parameters
+    ----------
+    splits : iterable of (str, dict or None)
+        ``(what, split)``: the note's subject, e.g. ``"A1 (paper model)"``, and its
+        :func:`position_split`.
+    files : sequence of str or Path
+        The validation files.
+    revolute : bool
+        Joint kind: q in [rad] with degrees, else [m].
+
+    Returns
+    -------
+    list of str
+        One note per split past :data:`POSITION_OUTSIDE_SHARE`, in the order given.
+    """
+    where = ", ".join(Path(f).name for f in files) or "the validation data"
+    return [n for what, sp in splits
+            if (n := position_split_note(sp, what, where, revolute)) is not None]

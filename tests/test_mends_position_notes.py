@@ -16,10 +16,13 @@ import pytest
 from example_campaign import ROOT, payload_experiments
 
 from daq.protocol.control import ControllerGains
+from ident.cli_robot import fit_files
 from ident.fitting import fit_models
-from ident.results import POSITION_OUTSIDE_SHARE
+from ident.results import POSITION_OUTSIDE_SHARE, position_split_notes
+from ident.robot.loaders import RawRobotRun, RobotPayloadData
 from sim_drivers.plant_config import load_plant
 from trajectories.plan import plan_campaign
+from trajectories.robot import load_robot
 from trajectories.robot_campaign import RobotCampaign
 
 LOW = 0.6  # [rad] the moved campaign's lower end
@@ -75,3 +78,29 @@ def test_json_split_is_the_notes(outside_fit):
         assert f"q = {lo:.3g}..{hi:.3g} rad" in note, note
         assert f"their error {_pct(sp['error_outside'])}" in note, note
         assert f"inside {_pct(sp['error_inside'])}" in note, note
+
+
+def _robot_runs(exps):
+    return [RawRobotRun(e.source, e.t, e.q[:, None], e.tau[:, None],
+                        payload=(RobotPayloadData(float(e.payload_mass),
+                                                  arm_m=float(e.payload_arm))
+                                 if e.payload_mass else RobotPayloadData()))
+            for e in exps]
+
+
+def test_one_builder_of_the_note_text(outside_fit):
+    """The single-joint fit and the robot fit (``fit_files`` on the same runs as a one-joint
+    robot) take their notes from the one builder, ``position_split_notes``: the notes are
+    its text on the splits each path recorded, the files' names joined there."""
+    rep, fit, val = outside_fit
+    files = [e.source for e in val]
+    mine = [n for n in rep.notes if n.startswith("validation, ")]
+    assert mine == position_split_notes(
+        [(f"{n} model", rep.position_splits[n]) for n in rep.models], files), mine
+    assert ", ".join(files) in mine[0], mine  # the names, joined by the builder
+    robot = load_robot(ROOT / "examples" / "robots" / "rx130l.toml")
+    out = fit_files(robot, _robot_runs(fit), _robot_runs(val), model="paper")
+    (joint,) = out["models"]["paper"]["validation_position_split"]
+    sp = out["models"]["paper"]["validation_position_split"][joint]
+    theirs = [n for n in out["notes"] if n.startswith("validation, ")]
+    assert theirs == position_split_notes([(f"{joint} (paper model)", sp)], files), theirs
