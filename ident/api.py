@@ -265,7 +265,8 @@ class JointModel(HyperParameters):
         method = method_name(self.estimator, extra=("auto",), what="estimator")
         return "auto" if method in ("auto", "iv") else None
 
-    def fit(self, data: Data, validation: Data | None = None) -> JointModel:
+    def fit(self, data: Data, validation: Data | None = None, *,
+            axis: str | None = None) -> JointModel:
         """Identify the model on all experiments in one least-squares system (eq. 36, 40).
 
         Parameters
@@ -276,6 +277,10 @@ class JointModel(HyperParameters):
         validation : same kinds, optional
             Data not used for the fit; ``validation_rel_error_`` and the JSON report
             their relative error, and :meth:`refine` uses them to accept a step.
+        axis : str, optional
+            The axis of a multi-axis file the data are (``jointid fit`` passes ``"axis N"``
+            for ``--axis N`` of an MCAP log, or the mapped position's path): named in the
+            report's notes about it (``axis`` of :func:`ident.fitting.fit_models`).
 
         Returns
         -------
@@ -304,6 +309,7 @@ class JointModel(HyperParameters):
             references=self._references(),
             payload=self.payload,
             torque_delay=self.torque_delay,
+            axis=axis,
         )
         name = refined_model(report.models)
         if self.estimator == "iv" and report.models[name].estimator_ != "iv":

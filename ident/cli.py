@@ -15,6 +15,7 @@ import json
 import math
 import os
 import sys
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -375,6 +376,19 @@ def check_foreign_options(args: argparse.Namespace) -> None:
                         "jointid MCAP log(s), with their own channels and joint-side torque")
 
 
+def _axis_label(inputs: Sequence[Path | str], mapping: Mapping[str, Any], axis: int
+                ) -> str | None:
+    """The axis the single-joint fit reads from multi-axis files, for its notes: the mapped
+    position's path when it picks a row or column (``"axis rec.act_pos_mot_deg[3]"``), or
+    ``"axis N"`` (``--axis N``) for MCAP logs; None otherwise (a one-axis file)."""
+    q = mapping.get("q")
+    if isinstance(q, str) and "[" in q:
+        return f"axis {q}"
+    if any(str(p).lower().endswith(".mcap") for p in inputs):
+        return f"axis {axis}"
+    return None
+
+
 def run(args: argparse.Namespace) -> int:
     """Execute ``jointid fit``; returns the exit code."""
     from . import cli_robot
@@ -409,7 +423,8 @@ def run(args: argparse.Namespace) -> int:
     )
     exps = load(args.inputs, **load_kw)
     val = load(args.validate, **load_kw) if args.validate else None
-    est = estimator_from_args(args).fit(exps, validation=val)
+    est = estimator_from_args(args).fit(exps, validation=val,
+                                        axis=_axis_label(args.inputs, mapping, args.axis))
     report = est.report_
     out = report.to_json()
     text = report.format_tables()

@@ -708,6 +708,7 @@ def fit_models(
     torque_delay: float | str = "auto",
     payload: bool | None = None,
     like: FitReport | None = None,
+    axis: str | None = None,
     **deprecated: Any,
 ) -> FitReport:
     """Identify the usual and/or the paper model on all experiments in one LS (eq. 36, 40).
@@ -774,6 +775,10 @@ def fit_models(
         design build fewer; the robot's first usual fit, which decides the rows and
         quadrants of the fit, is made again on the settled preprocessing: the same numbers).
         Its ``sources`` must be this call's.
+    axis : str, optional
+        The axis of a multi-axis file the experiments are (e.g. ``"axis 3"``, or the mapped
+        position's path ``"axis rec.act_pos_mot_deg[3]"``): named in the notes about it (the
+        position split's, ``"validation, axis 3 (paper model): ..."``). None: not named.
     **deprecated
         ``qs``: the older spelling of ``q_s`` (:mod:`ident.vocab`, with a DeprecationWarning).
 
@@ -1007,8 +1012,9 @@ def fit_models(
         for name, vd in vdesigns.items():  # the report's JSON reads these (not again)
             splits[name] = position_split(designs[name].signals.q, vd.signals.q, vd.Y,
                                           vd.Y - fitted[name].predict(vd))
-        notes.extend(position_split_notes(((f"{n} model", sp) for n, sp in splits.items()),
-                                          vsources, s.revolute))
+        notes.extend(position_split_notes(
+            ((f"{n} model" if axis is None else f"{axis} ({n} model)", sp)
+             for n, sp in splits.items()), vsources, s.revolute))
     if "paper" in designs and one_sign:
         notes.append(f"paper model: {one_sign}")
     t4 = None

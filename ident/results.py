@@ -262,11 +262,14 @@ def position_split_note(split: Mapping[str, Any] | None, what: str, files: str,
 
 
 def position_split_notes(splits: Iterable[tuple[str, Mapping[str, Any] | None]],
-                         files: Sequence[str | Path], revolute: bool = True) -> list[str]:
+                         files: Sequence[str | Path], revolute: bool = True, *,
+                         named: bool = False) -> list[str]:
     """The notes of :func:`position_split_note` for the splits of one fit on the same
-    validation files: the single-joint fit's models (:func:`ident.fitting.fit_models`) or the
-    robot fit's joints of one model (``ident.cli_robot``). The one place the files' names are
-    joined (``", "``, names without their folders; "the validation data" without files).
+    validation files: the single-joint fit's models (:func:`ident.fitting.fit_models`, the
+    subject naming the axis when known) or the robot fit's joints of one model
+    (``ident.cli_robot``). The one place the files' names are joined (``", "``, names
+    without their folders; "the validation data" without files), and said once per fit: the
+    first note names them, the next ones say "the same files".
 
     Parameters
     ----------
@@ -277,6 +280,9 @@ def position_split_notes(splits: Iterable[tuple[str, Mapping[str, Any] | None]],
         The validation files.
     revolute : bool
         Joint kind: q in [rad] with degrees, else [m].
+    named : bool
+        An earlier note of the same fit named the files already (the robot fit's earlier
+        model): every note then says "the same files".
 
     Returns
     -------
@@ -284,5 +290,10 @@ def position_split_notes(splits: Iterable[tuple[str, Mapping[str, Any] | None]],
         One note per split past :data:`POSITION_OUTSIDE_SHARE`, in the order given.
     """
     where = ", ".join(Path(f).name for f in files) or "the validation data"
-    return [n for what, sp in splits
-            if (n := position_split_note(sp, what, where, revolute)) is not None]
+    out: list[str] = []
+    for what, sp in splits:
+        said = named or bool(out)
+        if (n := position_split_note(sp, what, "the same files" if said else where,
+                                     revolute)) is not None:
+            out.append(n)
+    return out

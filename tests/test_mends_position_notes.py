@@ -9,18 +9,24 @@ tests/test_position_extrapolation.py)."""
 
 from __future__ import annotations
 
+import json
+import re
 import tomllib
 
 import numpy as np
 import pytest
 from example_campaign import ROOT, payload_experiments
 
+from daq.app.cli import main
 from daq.protocol.control import ControllerGains
+from ident.api import load
 from ident.cli_robot import fit_files
 from ident.fitting import fit_models
+from ident.loaders import parse_mapping
 from ident.results import POSITION_OUTSIDE_SHARE, position_split_notes
 from ident.robot.loaders import RawRobotRun, RobotPayloadData
 from sim_drivers.plant_config import load_plant
+from tests.conftest import shared_path
 from trajectories.plan import plan_campaign
 from trajectories.robot import load_robot
 from trajectories.robot_campaign import RobotCampaign
@@ -104,3 +110,85 @@ def test_one_builder_of_the_note_text(outside_fit):
     sp = out["models"]["paper"]["validation_position_split"][joint]
     theirs = [n for n in out["notes"] if n.startswith("validation, ")]
     assert theirs == position_split_notes([(f"{joint} (paper model)", sp)], files), theirs
+
+
+def test_notes_name_the_axis_and_the_files_once(outside_fit):
+    """``fit_models(axis=...)``: each model's note names the axis; the validation files are
+    named in the first note only, the next says "the same files"."""
+    _, fit, val = outside_fit
+    rep = fit_models(fit, ("usual", "paper"), validation=val, table_iv=False, axis="axis 2")
+    notes = [n for n in rep.notes if n.startswith("validation, ")]
+    assert [n.split(":")[0] for n in notes] == ["validation, axis 2 (usual model)",
+                                                "validation, axis 2 (paper model)"], notes
+    files = ", ".join(e.source for e in val)
+    assert sum(n.count(files) for n in notes) == 1 and files in notes[0], notes
+    assert "of the rows of the same files lie outside" in notes[1], notes
+
+
+KUKA = ["recorded_2020-10-21_FF_A_08ms.mat", "recorded_2020-10-21_FF_B_08ms.mat",
+        "recorded_2020-10-21_FF_C_08ms.mat"]
+
+
+def _moving_q(files: list[str], kw: dict) -> np.ndarray:
+    """The files' positions while the axis moves (|dq| above 2 % of its peak, by finite
+    differences), loaded with ``kw``."""
+    qs = []
+    for e in load(files, **kw):
+        dq = np.abs(np.gradient(e.q, e.t))
+        qs.append(e.q[dq > 0.02 * dq.max()])
+    return np.concatenate(qs)
+
+
+@pytest.mark.parametrize("row", [0, 3])
+def test_kuka_single_joint_notes_name_the_axis(tmp_path, capfd, row):
+    """The real KUKA KR300 (``../shared``; skipped without it), ``jointid fit`` on one axis
+    of the 6-axis MAT files (row ``row`` of the maps: A1, A4), both models, A fitted, B and C
+    validated: every position note names the axis by its mapped path, the files are named
+    once, and the share in the notes is the files' own (positions where the axis moves)."""
+    data = shared_path("data", "kuka_kr300_weigand2021")
+    a, b, c = (str(data / f) for f in KUKA)
+    maps = [f"t=rec.time_cont,q=rec.act_pos_mot_deg[{row}],q_ref=rec.ref_pos_deg[{row}]",
+            f"tau=rec.act_torque_abs_nm[{row}]"]
+    out = tmp_path / "fit.json"
+    code = main(["fit", a, "--model", "both", "--q-unit", "deg", "--gain", f"para.u[{row}]",
+                 "--map", maps[0], "--map", maps[1], "--cutoff", "5", "--decimation", "4",
+                 "--validate", b, c, "--json", str(out)])
+    _, err = capfd.readouterr()
+    assert code == 0, err
+    rec = json.loads(out.read_text())
+    notes = [n for n in rec["notes"] if n.startswith("validation, ")]
+    kw = dict(mapping=parse_mapping(maps), gain=f"para.u[{row}]", q_unit="deg")
+    qf, qv = _moving_q([a], kw), _moving_q([b, c], kw)
+    raw = float(np.mean((qv < qf.min()) | (qv > qf.max())))
+    assert raw > POSITION_OUTSIDE_SHARE + 0.05, raw  # both models get a note
+    axis = f"axis rec.act_pos_mot_deg[{row}]"
+    assert [n.split(":")[0] for n in notes] == [f"validation, {axis} (usual model)",
+                                                f"validation, {axis} (paper model)"], notes
+    names = f"{KUKA[1]}, {KUKA[2]}"
+    assert sum(n.count(names) for n in notes) == 1 and names in notes[0], notes
+    for n, name in zip(notes, ("usual", "paper"), strict=True):
+        share = int(re.search(r": (\d+) % of the rows", n).group(1))
+        sp = rec["models"][name]["validation_position_split"]
+        assert share == round(100 * sp["share_outside"]), (n, sp)
+        assert abs(sp["share_outside"] - raw) < 0.05, (sp, raw)
+
+
+def test_kuka_robot_fit_names_the_files_once():
+    """The real KUKA KR300 through the robot path, both models (``../shared``; skipped
+    without it): the joints' position notes of both models name the validation files once,
+    in the first; each note names its joint and model."""
+    data = shared_path("data", "kuka_kr300_weigand2021")
+    a, b, c = (str(data / f) for f in KUKA)
+    robot = load_robot(ROOT / "examples" / "robots" / "kuka_kr300_r2500.toml")
+    out = fit_files(robot, [a], [b, c], model="both", q_unit="deg", mapping=parse_mapping(
+        ["t=rec.time_cont,q=rec.act_pos_mot_deg,tau=rec.act_torque_abs_nm,"
+         "q_ref=rec.ref_pos_deg"], robot=True))
+    notes = [n for n in out["notes"] if n.startswith("validation, ")]
+    noted = {(n.split(" ")[1], n.split("(")[1].split(" ")[0]) for n in notes}
+    for name in ("usual", "paper"):
+        for joint, sp in out["models"][name]["validation_position_split"].items():
+            assert ((joint, name) in noted) == (sp["share_outside"] > POSITION_OUTSIDE_SHARE)
+    assert len({m for _, m in noted}) == 2, notes  # notes of both models
+    names = f"{KUKA[1]}, {KUKA[2]}"
+    assert sum(n.count(names) for n in notes) == 1 and names in notes[0], notes
+    assert all("of the rows of the same files" in n for n in notes[1:]), notes

@@ -142,7 +142,9 @@ def test_kuka_a1_validation_outside_the_fit_positions(tmp_path, capfd):
     _, err = capfd.readouterr()
     assert code == 0, err
     rec = json.loads(out.read_text())
-    notes = [n for n in rec["notes"] if n.startswith(NOTE)]
+    # the command line names the axis by its mapped position (ident.cli._axis_label)
+    notes = [n for n in rec["notes"]
+             if n.startswith("validation, axis rec.act_pos_mot_deg[0] (paper model): ")]
     assert len(notes) == 1, rec["notes"]
     js = rec["models"]["paper"]["validation_position_split"]
     # independently: the files' own positions where the axis moves (|dq| above 2 % of its
