@@ -94,6 +94,10 @@ class FaultInjector:
         ``drop_tpdo_from_cycle + drop_tpdo_cycles - 1``.
     drop_tpdo_cycles : int
         How many consecutive cycles lose their TPDOs.
+    drop_tpdo_period : int
+        0 (default): one window only. Else the window repeats every ``drop_tpdo_period``
+        cycles from ``drop_tpdo_from_cycle`` on (a bus that loses frames again and again:
+        ``drop_tpdo_cycles=2, drop_tpdo_period=3`` loses two cycles in three).
     """
 
     fault_at_cycle: int | None = None
@@ -101,6 +105,7 @@ class FaultInjector:
     stop_heartbeat_at_cycle: int | None = None
     drop_tpdo_from_cycle: int | None = None
     drop_tpdo_cycles: int = 1
+    drop_tpdo_period: int = 0
 
     def __post_init__(self) -> None:
         if not 0 < self.fault_code <= 0xFFFF:
@@ -110,6 +115,11 @@ class FaultInjector:
         if self.drop_tpdo_cycles < 0:
             raise ValueError(
                 f"FaultInjector.drop_tpdo_cycles: expected >= 0, got {self.drop_tpdo_cycles}"
+            )
+        if self.drop_tpdo_period < 0 or 0 < self.drop_tpdo_period <= self.drop_tpdo_cycles:
+            raise ValueError(
+                f"FaultInjector.drop_tpdo_period: expected 0 or > drop_tpdo_cycles "
+                f"({self.drop_tpdo_cycles}), got {self.drop_tpdo_period}"
             )
 
     def fault_now(self, cycle: int) -> bool:
@@ -123,4 +133,8 @@ class FaultInjector:
     def drop_tpdo(self, cycle: int) -> bool:
         """True when the TPDOs of ``cycle`` must not be sent."""
         start = self.drop_tpdo_from_cycle
-        return start is not None and start <= cycle < start + self.drop_tpdo_cycles
+        if start is None or cycle < start:
+            return False
+        if self.drop_tpdo_period:
+            return (cycle - start) % self.drop_tpdo_period < self.drop_tpdo_cycles
+        return cycle < start + self.drop_tpdo_cycles

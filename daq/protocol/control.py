@@ -13,6 +13,17 @@ its law, so that bus runs and offline runs share one control law; and the arm's
 
 with ``dq_est`` the backward difference of the measured position [rad/s], low-passed by a
 first-order filter of cut-off ``velocity_cutoff_hz``. Units: joint side, SI ([rad], [N m]).
+
+A cycle without a new measurement (the drive's TPDO missing or late, ``fresh=False``) does
+not feed the last position again as if the joint had stopped: the feedback part, ``kp * (q_ref
+- q) + kd * (dq_ref - dq_est)``, is held at its value of the last fresh cycle while the
+feed-forward follows the reference, and the next measurement's backward difference spans the
+cycles since the last one. Fed the stale position, the PD term grew by ``kp * dq * cycle_s``
+per missing cycle and the velocity estimate jumped between 0 and twice the speed: a torque
+that chattered by tens of N m every cycle (``tests/test_stale_feedback.py``) and, on late
+feedback over a loaded bus, a joint that ran away to the velocity limit. Held, the torque
+cannot grow without a measurement however long the gap (the supervisor's
+``tpdo_timeout_cycles`` bounds it).
 """
 
 from __future__ import annotations
@@ -69,29 +80,43 @@ class PDLaw:
         Control cycle [s].
     """
 
-    __slots__ = ("kp", "kd", "dt", "_q_prev", "_dq_est", "_alpha")
+    __slots__ = ("kp", "kd", "dt", "_q_prev", "_dq_est", "_alpha", "_gap", "_fb")
 
     def __init__(self, kp: Any, kd: Any, velocity_cutoff_hz: float, cycle_s: float) -> None:
         self.kp, self.kd = kp, kd
         self.dt = cycle_s
         self._q_prev: Any = None
         self._dq_est: Any = 0.0
+        self._gap = 0  # cycles since the last fresh measurement
+        self._fb: Any = 0.0  # feedback torque of the last fresh cycle [N m]
         wc = 2.0 * math.pi * velocity_cutoff_hz * cycle_s
         self._alpha = wc / (1.0 + wc)
 
     def reset(self) -> None:
         self._q_prev = None
         self._dq_est = 0.0
+        self._gap = 0
+        self._fb = 0.0
 
-    def torque(self, ff: Any, q_ref: Any, dq_ref: Any, q_meas: Any) -> Any:
+    def torque(self, ff: Any, q_ref: Any, dq_ref: Any, q_meas: Any, fresh: bool = True) -> Any:
         """Return the torque reference [N m] for this cycle from the feed-forward ``ff``
         [N m], the reference ``q_ref, dq_ref`` [rad, rad/s] and the measured position
-        ``q_meas`` [rad]."""
+        ``q_meas`` [rad].
+
+        ``fresh=False``: no new measurement this cycle (``q_meas`` is the last one, not
+        used); the feedback torque of the last fresh cycle is held (module docstring), 0
+        before the first fresh cycle."""
+        if not fresh:  # the feedback of the last fresh cycle (none before the first one)
+            self._gap += self._q_prev is not None
+            return ff + self._fb
         if self._q_prev is not None:
-            raw = (q_meas - self._q_prev) / self.dt
+            raw = (q_meas - self._q_prev) / (self.dt * (self._gap + 1))
             self._dq_est = self._dq_est + self._alpha * (raw - self._dq_est)
         self._q_prev = q_meas
-        return ff + self.kp * (q_ref - q_meas) + self.kd * (dq_ref - self._dq_est)
+        self._gap = 0
+        p, d = self.kp * (q_ref - q_meas), self.kd * (dq_ref - self._dq_est)
+        self._fb = p + d
+        return ff + p + d  # this order: the runs before the hold, bit for bit
 
 
 class PositionController(PDLaw):
@@ -114,8 +139,10 @@ class PositionController(PDLaw):
         self.g = gains
         self.revolute = revolute
 
-    def update(self, q_ref: float, dq_ref: float, ddq_ref: float, q_meas: float) -> float:
-        """Return the torque reference [N m] for this cycle."""
+    def update(self, q_ref: float, dq_ref: float, ddq_ref: float, q_meas: float,
+               fresh: bool = True) -> float:
+        """Return the torque reference [N m] for this cycle (``fresh``: see
+        :meth:`PDLaw.torque`)."""
         g = self.g
         tau = g.J_ff * ddq_ref + g.Fv_ff * dq_ref
         if dq_ref > 0.0:
@@ -124,4 +151,4 @@ class PositionController(PDLaw):
             tau -= g.Fc_ff
         if self.revolute and (g.MX_ff or g.MY_ff):
             tau += G * (g.MX_ff * math.cos(q_ref) + g.MY_ff * math.sin(q_ref))
-        return self.torque(tau, q_ref, dq_ref, q_meas)
+        return self.torque(tau, q_ref, dq_ref, q_meas, fresh)

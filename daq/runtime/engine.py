@@ -435,7 +435,9 @@ class Engine(Supervisor):
                         x = 0
                         target_raw = round(q_ref * cpr[d])
                     else:
-                        tau = ctrls[d].update(q_ref, dq_refs[cd], ddq_refs[cd], q)
+                        # a cycle without this drive's TPDO predicts q (PDLaw.torque)
+                        tau = ctrls[d].update(q_ref, dq_refs[cd], ddq_refs[cd], q,
+                                              not flags & FLAG_TPDO_MISSING)
                         x = round(tau / tpu[d])
                         if x > xmax[d]:
                             x = xmax[d]
