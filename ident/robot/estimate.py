@@ -1161,15 +1161,17 @@ class RobotModel(HyperParameters):
     def _drop_unidentifiable(self, moms: list[JointMoments], x: np.ndarray, free: np.ndarray,
                              e: _Unidentifiable) -> tuple[np.ndarray, np.ndarray, int, None]:
         """The paper fit's normal equations are singular (``e``) on the final quadrants: the
-        rank rule (:meth:`_rank_fix`, the single-joint fit's and the usual fit's, on the matrix
-        the solver refused: ``e.at``, ``e.weights``) fixes the zero, dependent or nearly
-        dependent columns at 0 (``fixed_``, their reasons in ``removed_``, the refusal's
-        evidence, rows per quadrant and load sign, in ``dropped_evidence_``) and the fit is
-        made without them (``free`` and ``x`` changed in place); repeated while the rule
-        finds columns. Refused in one line (the evidence: the cond and the columns of the
-        weakest direction) when it names none (no column lies within the rule's tolerance of
-        the others' span) or when a joint keeps neither a_m nor a_g (nothing of its load
-        model left). Returns (x, weights, iterations, None)."""
+        rank rule (:meth:`_rank_fix`, the single-joint fit's and the usual fit's, with the
+        solver's criterion and tolerance; with the weights ``e.weights`` of the refused
+        matrix, at ``x``, where the fit goes on from, and where it names nothing there at the
+        refused iterate ``e.at``) fixes the zero, dependent or nearly dependent columns at 0
+        (``fixed_``, their reasons in ``removed_``, the refusal's evidence, rows per quadrant
+        and load sign, in ``dropped_evidence_``) and the fit is made without them (``free``
+        and ``x`` changed in place); repeated while the rule finds columns. Refused in one
+        line (the evidence: the cond and the columns of the weakest direction) when it names
+        none (no column lies within the rule's tolerance of the others' span) or when a joint
+        keeps neither a_m nor a_g (nothing of its load model left). Returns (x, weights,
+        iterations, None)."""
         evidence = self._evidence(e, moms)
         before = [n for n, v in self.fixed_.items() if v == 0.0]
         if before:  # an earlier refusal's columns already dropped: say so in this one
