@@ -1464,9 +1464,7 @@ class RobotModel(HyperParameters):
             # ``eliminate``): e.g. a load of one sign on every row, whose motor and generator
             # rows make OFF a combination of c_m and c_g, is removed, not an error
             for i, why in self._rank_fix(moms, coeffs, x, free):
-                free[i] = False
-                x[i] = 0.0
-                self._fixed_why[self.names_[i]] = why
+                self._drop(i, why, free, x)
         self.fixed_ = {self.names_[i]: 0.0 for i in np.flatnonzero(~free)}
         self.quadrant_rows_ = self._quadrant_rows(moms)
         try:
