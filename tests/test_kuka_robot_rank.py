@@ -8,18 +8,22 @@ are zero) -- evidence ...: A4: 0 rows motor, 25 generator, ...": A4 has no row i
 quadrant at that trim. The single-joint fit drops such columns; the n-dof fit now does too:
 held at 0, ``removed`` in the record with the reason and the refusal's evidence (rows per
 quadrant, which trajectory would fix it), a note, then pruning, honest sigma and validation
-as on any fit. (Figures at trims 60-73: docs/robot-identification.md, "Refused or dropped".)
+as on any fit. (Figures at trims 60-73: docs/robot-data.md, "How much of the paper model's
+figure is the data".) At ``--trim 73`` the refusal was a near-dependence the pivots missed;
+the one rule (the solver's test, :meth:`ident.robot.estimate.RobotModel._rank_fix`) drops it.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import re
 
 from test_kuka_readme import DATA, KUKA, MAP, pytestmark  # noqa: F401  (skip without data)
 
 from daq.app.cli import main
-from ident.estimators import ZERO_COLUMN
+from ident.estimators import DEPENDENT_PREFIX, ZERO_COLUMN
+from ident.robot.estimate import RANK_TOL
 
 A4_MOTOR = ("a_m4", "b_m4", "c_m4", "d_m4")
 
@@ -55,4 +59,44 @@ def test_trim_67_fits_and_reports_a4_motor_columns_dropped(tmp_path, capfd):
     assert not set(paper["uncertainty"]["pruned"]) & set(A4_MOTOR)
     cv = paper["validation_rel_error"]
     assert set(cv) >= {"A1", "A2", "A3", "A4", "A5", "A6", "all"}
+    assert all(math.isfinite(v) for v in cv.values()), cv
+
+
+def test_trim_73_nearly_dependent_columns_are_dropped_not_refused(tmp_path, capfd):
+    """At ``--trim 73`` A4 keeps no row in the motor quadrant (a_m4 ... d_m4 dropped, as at
+    67), and its generator rows then dominate the base columns they share: on them MY4R and
+    MY6 (link 4's and link 6's first moments) are nearly collinear, the wrist staying near
+    q5 = 0 (-7 .. 27 deg on recording A), where axes 4 and 6 align. The solver refused the
+    scaled normal matrix at cond 6.2e13 (> 1 / RANK_TOL = 1e12) while the pivoted rank rule
+    found nothing to drop: exit 2 before the one rule. Now the rule leaves out the nearly
+    dependent columns by the solver's own test and says so, with the cond, in the evidence;
+    the fit goes on (pruning, cross-validation) as on any fit. Figures in
+    docs/robot-data.md ("How much of the paper model's figure is the data")."""
+    out = tmp_path / "kuka_73.json"
+    files = [DATA / f"recorded_2020-10-21_FF_{x}_08ms.mat" for x in "ABC"]
+    code = main(["fit", "--robot", str(KUKA), str(files[0]),
+                 "--validate", str(files[1]), str(files[2]),
+                 "--q-unit", "deg", "--map", MAP, "--model", "paper", "--trim", "73",
+                 "--json", str(out)])
+    _, err = capfd.readouterr()
+    assert code == 0, err
+    paper = json.loads(out.read_text())["models"]["paper"]
+    assert "error" not in paper, paper
+    removed = {r["name"]: r["reason"] for r in paper["removed"]}
+    # A4's motor columns (zero or dependent: one motor row, then none) ...
+    assert set(A4_MOTOR) <= set(removed), removed
+    # ... and the near-dependence the refusal named, named by the rule with its partners
+    near = [n for n in removed if n not in A4_MOTOR]
+    assert near and {"MY4R", "MY6"} & (set(near) | {
+        p for n in near for p in removed[n][len(DEPENDENT_PREFIX):].split(", ")}), removed
+    for n in near:
+        assert removed[n].startswith(DEPENDENT_PREFIX), removed[n]
+        assert paper["parameters"][n]["value"] == 0.0
+    ev = " ".join(paper["removed_evidence"])
+    m = re.search(r"left out ([^(]*) as nearly dependent \(scaled normal matrix cond "
+                  r"([0-9.e+]+) > 1 / RANK_TOL", ev)
+    assert m is not None, ev
+    assert float(m.group(2)) > 1 / RANK_TOL
+    assert set(m.group(1).split(", ")) <= set(near), (m.group(1), near)
+    cv = paper["validation_rel_error"]
     assert all(math.isfinite(v) for v in cv.values()), cv

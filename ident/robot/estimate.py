@@ -72,6 +72,7 @@ from ..estimate import DEFAULT_THRESHOLD_PCT
 from ..estimators import (
     DEPENDENT_PREFIX,
     ESTIMATORS,
+    PARTNER_TOL,
     RCOND,
     ZERO_COLUMN,
     Estimator,
@@ -149,12 +150,16 @@ Coeffs = Callable[..., tuple[np.ndarray, ...]]  # (theta, blk, s, jacobian=True)
 
 class _Unidentifiable(RobotIdentError):
     """The normal matrix is singular: ``names`` (zero columns or the weakest direction), the
-    smallest and largest singular values of the column-scaled matrix."""
+    smallest and largest singular values of the column-scaled matrix; ``at`` and ``weights``
+    the Gauss-Newton iterate and the joints' weights of the refused matrix (set by
+    :meth:`RobotModel._gauss_newton`: the rank rule judges that matrix)."""
 
     def __init__(self, msg: str, names: list[str], lo: float, hi: float,
                  zero: bool = False) -> None:
         super().__init__(msg)
         self.names, self.lo, self.hi, self.zero = names, lo, hi, zero
+        self.at: np.ndarray | None = None
+        self.weights: np.ndarray | None = None
 
 
 def renamed_reason(why: str, names: Mapping[str, str]) -> str:
@@ -163,6 +168,47 @@ def renamed_reason(why: str, names: Mapping[str, str]) -> str:
     if not why.startswith(DEPENDENT_PREFIX):
         return why
     return dependent_reason([names.get(n, n) for n in why[len(DEPENDENT_PREFIX):].split(", ")])
+
+
+def _near_dependent(Gs: np.ndarray, kept: np.ndarray,
+                    first: int) -> tuple[dict[int, list[int]], float]:
+    """Step 2 of :meth:`RobotModel._rank_fix`: the columns of the unit-diagonal Gram matrix
+    ``Gs`` to leave out of ``kept`` (indices into ``Gs``) until the kept block passes the
+    solver's test lambda_min > RANK_TOL lambda_max, each with its partners (indices into
+    ``Gs``). A column is left out when it lies within RCOND sigma_max of the span of the
+    other kept columns by the weakest eigenvector v (residual sqrt(lambda_min) / |v_i|),
+    the one with the largest |v_i| of the columns ``>= first`` that qualify, else of all that
+    qualify; none qualifies: stops (the solver's refusal stands). Empty when the block
+    passes. The partners, as :func:`ident.estimators.rank_rule`'s: the kept columns whose
+    coefficients in the left-out column's least-squares expression on them exceed
+    PARTNER_TOL times the largest. Also returns lambda_max / lambda_min of the kept block
+    before the first column left out (nan when none is)."""
+    out: dict[int, list[int]] = {}
+    cond = float("nan")
+    kept = list(int(k) for k in kept)
+    while len(kept) > 1:
+        ev, vec = np.linalg.eigh(Gs[np.ix_(kept, kept)])
+        lo, hi = float(ev[0]), float(ev[-1])
+        if lo > RANK_TOL * hi:
+            break
+        v = np.abs(vec[:, 0])
+        qualify = np.maximum(lo, 0.0) <= RANK_TOL * hi * v**2  # lo / v_i^2 <= RANK_TOL hi
+        if not qualify.any():
+            break
+        if not out:
+            cond = hi / lo if lo > 0 else float("inf")
+        later = qualify & (np.array(kept) >= first)
+        pool = later if later.any() else qualify
+        i = int(np.argmax(np.where(pool, v, -np.inf)))
+        out[kept[i]] = []
+        del kept[i]
+    if out and kept:  # partners as rank_rule's: the LS expression on the columns kept
+        K = Gs[np.ix_(kept, kept)]
+        for c in out:
+            coef = np.abs(scipy.linalg.solve(K, Gs[kept, c], assume_a="sym"))
+            big = coef > PARTNER_TOL * max(float(coef.max(initial=0.0)), 1e-300)
+            out[c] = [kept[t] for t in np.flatnonzero(big)]
+    return out, cond
 
 
 def _ref_acceleration(t: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
@@ -934,11 +980,16 @@ class RobotModel(HyperParameters):
         for it in range(1, int(self.max_iter) + 1):
             if packed is not None:  # every joint at once
                 A, g = packed.normal(x, weights)
-                step = self._solve_step(A, g, free)
-                poly = packed.line_cost(x, step, weights)[::-1]
             else:
                 A, g, _, _, _ = self._normal(moms, coeffs, x, weights)
+            try:
                 step = self._solve_step(A, g, free)
+            except _Unidentifiable as e:  # the rank rule judges the matrix refused here
+                e.at, e.weights = x.copy(), np.array(weights, dtype=float)
+                raise
+            if packed is not None:
+                poly = packed.line_cost(x, step, weights)[::-1]
+            else:
                 poly = self._line_cost(moms, coeffs, x, step, weights)[::-1]
             lam = 1.0
             while True:  # step halving; the trial costs from the polynomial in lam
@@ -1110,13 +1161,17 @@ class RobotModel(HyperParameters):
     def _drop_unidentifiable(self, moms: list[JointMoments], x: np.ndarray, free: np.ndarray,
                              e: _Unidentifiable) -> tuple[np.ndarray, np.ndarray, int, None]:
         """The paper fit's normal equations are singular (``e``) on the final quadrants: the
-        rank rule (:meth:`_rank_fix`, the single-joint fit's and the usual fit's) fixes the
-        zero or exactly dependent columns at 0 (``fixed_``, their reasons in ``removed_``,
-        the refusal's evidence, rows per quadrant and load sign, in ``dropped_evidence_``)
-        and the fit is made without them (``free`` and ``x`` changed in place); repeated
-        while the rule finds columns. Refused in one line (the evidence) when it finds none
-        (singular beyond the rule's tolerance) or when a joint keeps neither a_m nor a_g
-        (nothing of its load model left). Returns (x, weights, iterations, None)."""
+        rank rule (:meth:`_rank_fix`, the single-joint fit's and the usual fit's, with the
+        solver's criterion and tolerance; with the weights ``e.weights`` of the refused
+        matrix, at ``x``, where the fit goes on from, and where it names nothing there at the
+        refused iterate ``e.at``) fixes the zero, dependent or nearly dependent columns at 0
+        (``fixed_``, their reasons in ``removed_``, the refusal's evidence, rows per quadrant
+        and load sign, in ``dropped_evidence_``) and the fit is made without them (``free``
+        and ``x`` changed in place); repeated while the rule finds columns. Refused in one
+        line (the evidence: the cond and the columns of the weakest direction) when it names
+        none (no column lies within the rule's tolerance of the others' span) or when a joint
+        keeps neither a_m nor a_g (nothing of its load model left). Returns (x, weights,
+        iterations, None)."""
         evidence = self._evidence(e, moms)
         before = [n for n, v in self.fixed_.items() if v == 0.0]
         if before:  # an earlier refusal's columns already dropped: say so in this one
@@ -1124,14 +1179,20 @@ class RobotModel(HyperParameters):
         nb = len(PAPER_BLOCK)
         ia, ig = PAPER_BLOCK.index("a_m"), PAPER_BLOCK.index("a_g")
         for _ in range(x.size):
-            dep = self._rank_fix(moms, paper_coefficients, x, free)
+            # the columns at the point the fit goes on from; else at the refused matrix's
+            dep = self._rank_fix(moms, paper_coefficients, x, free, e.weights)
+            if not dep and e.at is not None:
+                dep = self._rank_fix(moms, paper_coefficients, e.at, free, e.weights)
             if not dep:
-                raise RobotIdentError(evidence)
+                raise RobotIdentError(evidence + (
+                    " (the rank rule names no column to drop: none lies within RCOND "
+                    "sigma_max of the others' span)" if self._estimator.symmetric else
+                    " (the rank rule names no column of the regressor to drop: the singular "
+                    "matrix is the instruments' Z^T W)"))
             for i, why in dep:
-                free[i] = False
-                x[i] = 0.0
-                self.fixed_[self.names_[i]] = 0.0
-                self._fixed_why[self.names_[i]] = why
+                self._drop(i, why, free, x)
+            if self._near_evidence:
+                evidence += f" ({self._near_evidence})"
             self.dropped_evidence_.append(evidence)
             for j, joint in enumerate(self.joints_):
                 b = self.n_theta_ + nb * j
@@ -1144,10 +1205,20 @@ class RobotModel(HyperParameters):
             try:
                 return (*self._fit_on(moms, paper_coefficients, x, free, linear=False), None)
             except _Unidentifiable as e2:
+                e = e2
                 evidence = (self._evidence(e2, moms) + " (after "
                             + ", ".join(n for n, v in self.fixed_.items() if v == 0.0)
                             + " were dropped as not identifiable)")
         raise RobotIdentError(evidence)
+
+    def _drop(self, i: int, why: str, free: np.ndarray, x: np.ndarray) -> None:
+        """Fix parameter ``i`` at 0 (``free`` and ``x`` changed in place) with its reason:
+        ``fixed_`` and the reason that ``removed_`` reports (the rank rule's drops, the
+        elimination's)."""
+        free[i] = False
+        x[i] = 0.0
+        self.fixed_[self.names_[i]] = 0.0
+        self._fixed_why[self.names_[i]] = why
 
     @staticmethod
     def _load_signs(m: JointMoments) -> tuple[int, int]:
@@ -1256,12 +1327,9 @@ class RobotModel(HyperParameters):
             # the single-joint rank rule before the first solve (fit_least_squares drops
             # zero and dependent columns first): e.g. one payload in every run, whose
             # ratio's column is a combination of J and MX, is removed, not an error
-            G = self._w_gram(moms, usual_coefficients, xu0)
-            dep, partners = rank_rule(G, first=self.n_base_)
-            for c in dep:
+            for c, why in self._rank_fix(moms, usual_coefficients, xu0, free_u):
                 free_u[c] = False
-                self._fixed_why[self.names_[c]] = ZERO_COLUMN if not G[c, c] > 0 else (
-                    dependent_reason([self.names_[q] for q in partners[c]]))
+                self._fixed_why[self.names_[c]] = why
         xu, wu, it = self._fit_on(moms, usual_coefficients, xu0, free_u, linear=True)
         self.block_ = saved[0]
         self._layout(self.form == "products")
@@ -1396,9 +1464,7 @@ class RobotModel(HyperParameters):
             # ``eliminate``): e.g. a load of one sign on every row, whose motor and generator
             # rows make OFF a combination of c_m and c_g, is removed, not an error
             for i, why in self._rank_fix(moms, coeffs, x, free):
-                free[i] = False
-                x[i] = 0.0
-                self._fixed_why[self.names_[i]] = why
+                self._drop(i, why, free, x)
         self.fixed_ = {self.names_[i]: 0.0 for i in np.flatnonzero(~free)}
         self.quadrant_rows_ = self._quadrant_rows(moms)
         try:
@@ -1558,10 +1624,12 @@ class RobotModel(HyperParameters):
         ``eliminate`` (linear forms) after the single-joint elimination (:meth:`_eliminate`)."""
         self.quadrant_from_ = quadrant_from
         self.band_share_ = self._pass_band_share.copy()
-        why = getattr(self, "_fixed_why", {})
-        self.removed_ = [(n, why[n]) for n in self.fixed_ if n in why]
+        if not hasattr(self, "_fixed_why"):
+            self._fixed_why = {}
         if self.eliminate and coeffs is not paper_coefficients:
             x, free, w, it = self._eliminate(moms, coeffs, x, free.copy(), w, it)
+        why = self._fixed_why
+        self.removed_ = [(n, why[n]) for n in self.fixed_ if n in why]
         self._statistics(moms, coeffs, x, free, w)
         self._condition(moms, coeffs, x, free)
         self.weights_ = w
@@ -1570,13 +1638,16 @@ class RobotModel(HyperParameters):
         self.converged_ = bool(coeffs is not paper_coefficients or it < int(self.max_iter))
         return self
 
-    def _w_gram(self, moms, coeffs: Coeffs, x: np.ndarray) -> np.ndarray:
+    def _w_gram(self, moms, coeffs: Coeffs, x: np.ndarray,
+                weights: np.ndarray | None = None) -> np.ndarray:
         """J^T J (nx, nx) of the regressor (the Jacobian at ``x``: the regressor itself for a
         linear form) from the moments sum v v^T, whatever the estimator (IDIM-IV's normal
-        matrix is Z^T W: not this)."""
+        matrix is Z^T W: not this); with ``weights`` (one per joint, WLS) sum_j w_j J_j^T J_j,
+        the normal matrix of LS and WLS."""
         nx = x.size
         G = np.zeros((nx, nx))
         for j, mom in enumerate(moms):
+            wj = 1.0 if weights is None else float(weights[j])
             idx = self._local(j)
             nt = self._nt(j)
             th, blk = x[idx[:nt]], x[idx[nt:]]
@@ -1586,7 +1657,7 @@ class RobotModel(HyperParameters):
                 for e in (0, 1):
                     for f in (0, 1):
                         if np.any(D[e]) and np.any(D[f]):
-                            G[np.ix_(idx, idx)] += D[e].T @ mom.vv[s, e + f] @ D[f]
+                            G[np.ix_(idx, idx)] += wj * (D[e].T @ mom.vv[s, e + f] @ D[f])
         return G
 
     def _condition(self, moms, coeffs: Coeffs, x: np.ndarray, free: np.ndarray) -> None:
@@ -1618,16 +1689,9 @@ class RobotModel(HyperParameters):
         Each goes to ``fixed_`` (at 0) and ``removed_`` (name, reason). Returns the final (x,
         free, weights, iterations)."""
         thr = float(self.threshold_pct)
-
-        def fix(i: int, why: str) -> None:
-            free[i] = False
-            x[i] = 0.0
-            self.fixed_[self.names_[i]] = 0.0
-            self.removed_.append((self.names_[i], why))
-
-        dep = self._rank_fix(moms, coeffs, x, free)
+        dep = self._rank_fix(moms, coeffs, x, free, w)
         for i, why in dep:
-            fix(i, why)
+            self._drop(i, why, free, x)
         if dep:
             try:
                 x, w, it = self._fit_on(moms, coeffs, x, free, linear=True)
@@ -1639,18 +1703,43 @@ class RobotModel(HyperParameters):
             k = int(np.argmax(rel))
             if not rel[k] > thr:
                 break
-            fix(k, f"not significant: relative deviation {rel[k]:.3g} % > {thr:g} %")
+            self._drop(k, f"not significant: relative deviation {rel[k]:.3g} % > {thr:g} %",
+                       free, x)
             try:
                 x, w, it = self._fit_on(moms, coeffs, x, free, linear=True)
             except _Unidentifiable as e:
                 raise RobotIdentError(self._evidence(e, moms)) from None
         return x, free, w, it
 
-    def _rank_fix(self, moms, coeffs: Coeffs, x: np.ndarray,
-                  free: np.ndarray) -> list[tuple[int, str]]:
-        """The rank rule (:func:`ident.estimators.rank_rule` on the Gram matrix of the free
-        parameters' columns at ``x``) of ``eliminate``: the free parameters whose columns are
-        zero or dependent, each with its reason (the partners named). Changes nothing.
+    def _rank_fix(self, moms, coeffs: Coeffs, x: np.ndarray, free: np.ndarray,
+                  weights: np.ndarray | None = None) -> list[tuple[int, str]]:
+        """The rank rule of the n-dof fit on the normal matrix of the free parameters at ``x``
+        (``weights``: the joints' WLS weights; None: ones), with the criterion and tolerance
+        of the solver's refusal (``Estimator.solve_normal``): the column-scaled matrix is
+        rank deficient when lambda_min <= RANK_TOL lambda_max (RANK_TOL = RCOND^2: a
+        singular value of the unit-norm regressor at most RCOND sigma_max; RCOND = 1e-6,
+        relative to the columns' scale, so independent of the units, and RANK_TOL = 1e-12
+        well above the rounding of the summed moments, ~b * 1e-16 for b columns). Returns
+        the free parameters whose columns are zero, dependent or nearly dependent, each with
+        its reason (the partners named), such that the kept columns pass that test; changes
+        nothing but ``_near_evidence`` (the columns step 2 left out and the cond, or ""). It
+        names nothing only when the matrix passes, or when the dependence is spread so that
+        no column alone lies within RCOND sigma_max of the others' span (then the caller's
+        refusal stands, naming the weakest direction and the cond).
+
+        1. :func:`ident.estimators.rank_rule` (the pivoted Cholesky of the single-joint fit,
+           unchanged): a column whose residual on the columns pivoted before it is at most
+           RCOND (zero and exactly dependent columns). Each such drop is one the criterion
+           calls for: the pivot bounds lambda_min from above and lambda_max >= 1.
+        2. While the kept columns still fail the criterion (a near-dependence the greedy
+           pivots miss: the real KUKA KR300 at trim 73, MY4R and MY6 nearly collinear on
+           A4's rows at cond 6.2e13, smallest pivot 7.3e-13 after the first columns taken
+           in their order), the column of the weakest eigenvector v with the largest
+           |v_i| (:func:`_near_dependent`): it lies within sqrt(lambda_min) / |v_i| of the
+           others' span (||W_s v|| = sqrt(lambda_min)) and is taken when that is at most
+           RCOND sigma_max; a later column (friction, payload) before a base parameter, as
+           in step 1. Its partners: the columns whose coefficients -v_k / v_i exceed
+           :data:`ident.estimators.PARTNER_TOL` times the largest.
 
         Base parameters are pivoted first where ``x`` holds them (the usual form); the
         products form holds none (its payload column's products are left out by the load
@@ -1658,9 +1747,22 @@ class RobotModel(HyperParameters):
         least squares pivots its design's columns (the offset last: of c_m, c_g and the
         offset made dependent by a load of one sign, the offset is left out there too)."""
         idx = np.flatnonzero(free)
-        G = self._w_gram(moms, coeffs, x)[np.ix_(idx, idx)]
+        G = self._w_gram(moms, coeffs, x, weights)[np.ix_(idx, idx)]
         first = int(np.sum(idx < self.n_base_)) if self._theta_x else 0
+        self._near_evidence = ""
         dep, partners = rank_rule(G, first=first)
+        d = np.sqrt(np.clip(np.diagonal(G), 0.0, None))
+        if np.all(np.isfinite(G)) and (d > 0).any():
+            kept = np.setdiff1d(np.flatnonzero(d > 0), dep)
+            ds = np.where(d > 0, d, 1.0)
+            near, cond = _near_dependent(G / ds[:, None] / ds[None, :], kept, first)
+            dep = np.array(sorted([*dep.tolist(), *near]), dtype=int)
+            partners.update(near)
+            if near:
+                self._near_evidence = (
+                    f"the rank rule left out {', '.join(self.names_[idx[k]] for k in near)} as "
+                    f"nearly dependent (scaled normal matrix cond {cond:.2g} > 1 / RANK_TOL "
+                    f"= {1 / RANK_TOL:.0e} after the pivoted columns)")
         return [(int(idx[k]), ZERO_COLUMN if not G[k, k] > 0 else dependent_reason(
             [self.names_[idx[q]] for q in partners[k]])) for k in dep]
 
