@@ -28,16 +28,22 @@ from ident.robot.estimate import RANK_TOL
 A4_MOTOR = ("a_m4", "b_m4", "c_m4", "d_m4")
 
 
-def test_trim_67_fits_and_reports_a4_motor_columns_dropped(tmp_path, capfd):
-    out = tmp_path / "kuka_67.json"
+def _fit_paper(tmp_path, capfd, trim: int):
+    """``jointid fit --robot`` of recording A, validated on B and C, paper model at ``trim``:
+    (the record, what was printed); the exit code must be 0."""
+    out = tmp_path / f"kuka_{trim}.json"
     files = [DATA / f"recorded_2020-10-21_FF_{x}_08ms.mat" for x in "ABC"]
     code = main(["fit", "--robot", str(KUKA), str(files[0]),
                  "--validate", str(files[1]), str(files[2]),
-                 "--q-unit", "deg", "--map", MAP, "--model", "paper", "--trim", "67",
+                 "--q-unit", "deg", "--map", MAP, "--model", "paper", "--trim", str(trim),
                  "--json", str(out)])
     printed, err = capfd.readouterr()
     assert code == 0, err
-    rec = json.loads(out.read_text())
+    return json.loads(out.read_text()), printed
+
+
+def test_trim_67_fits_and_reports_a4_motor_columns_dropped(tmp_path, capfd):
+    rec, printed = _fit_paper(tmp_path, capfd, 67)
     paper = rec["models"]["paper"]
     assert "error" not in paper, paper
     # dropped with the rank rule's reason, held at 0, neither pruned nor "unidentified"
@@ -72,15 +78,7 @@ def test_trim_73_nearly_dependent_columns_are_dropped_not_refused(tmp_path, capf
     dependent columns by the solver's own test and says so, with the cond, in the evidence;
     the fit goes on (pruning, cross-validation) as on any fit. Figures in
     docs/robot-data.md ("How much of the paper model's figure is the data")."""
-    out = tmp_path / "kuka_73.json"
-    files = [DATA / f"recorded_2020-10-21_FF_{x}_08ms.mat" for x in "ABC"]
-    code = main(["fit", "--robot", str(KUKA), str(files[0]),
-                 "--validate", str(files[1]), str(files[2]),
-                 "--q-unit", "deg", "--map", MAP, "--model", "paper", "--trim", "73",
-                 "--json", str(out)])
-    _, err = capfd.readouterr()
-    assert code == 0, err
-    paper = json.loads(out.read_text())["models"]["paper"]
+    paper = _fit_paper(tmp_path, capfd, 73)[0]["models"]["paper"]
     assert "error" not in paper, paper
     removed = {r["name"]: r["reason"] for r in paper["removed"]}
     # A4's motor columns (zero or dependent: one motor row, then none) ...

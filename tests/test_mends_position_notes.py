@@ -11,43 +11,21 @@ from __future__ import annotations
 
 import json
 import re
-import tomllib
 
 import numpy as np
 import pytest
-from example_campaign import ROOT, payload_experiments
+from example_campaign import ROOT
 
 from daq.app.cli import main
-from daq.protocol.control import ControllerGains
 from ident.api import load
 from ident.cli_robot import fit_files
 from ident.fitting import fit_models
 from ident.loaders import parse_mapping
 from ident.results import POSITION_OUTSIDE_SHARE, position_split_notes
 from ident.robot.loaders import RawRobotRun, RobotPayloadData
-from sim_drivers.plant_config import load_plant
 from tests.conftest import shared_path
-from trajectories.plan import plan_campaign
+from tests.test_position_extrapolation import _runs
 from trajectories.robot import load_robot
-from trajectories.robot_campaign import RobotCampaign
-
-LOW = 0.6  # [rad] the moved campaign's lower end
-
-
-def _runs(moved: bool, seed: int):
-    with open(ROOT / "examples" / "campaign.toml", "rb") as fh:
-        d = tomllib.load(fh)
-    if moved:
-        for seg in d["segments"]:
-            if seg["kind"] == "trapezoid":
-                seg["range"] = [max(LOW, seg["range"][0]), seg["range"][1]]
-            else:
-                seg.update(amplitude=0.8, center=1.45)
-    camp = RobotCampaign.from_dict(d, "moved" if moved else "example").quick()
-    plant = load_plant(ROOT / "sim_drivers" / "data" / "plant_default.toml")
-    gains = ControllerGains(**camp.gains_kwargs())
-    return payload_experiments(plant, plan_campaign(camp), gains, seed,
-                               name=f"{'m' if moved else 'e'}{seed}p{{i}}.csv")
 
 
 @pytest.fixture(scope="module")
