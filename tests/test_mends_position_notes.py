@@ -17,14 +17,13 @@ import pytest
 from example_campaign import ROOT
 
 from daq.app.cli import main
-from ident.api import load
 from ident.cli_robot import fit_files
 from ident.fitting import fit_models
 from ident.loaders import parse_mapping
 from ident.results import POSITION_OUTSIDE_SHARE, position_split_notes
 from ident.robot.loaders import RawRobotRun, RobotPayloadData
 from tests.conftest import shared_path
-from tests.test_position_extrapolation import _runs
+from tests.test_position_extrapolation import _moving_q, _runs
 from trajectories.robot import load_robot
 
 
@@ -105,16 +104,6 @@ def test_notes_name_the_axis_and_the_files_once(outside_fit):
 
 KUKA = ["recorded_2020-10-21_FF_A_08ms.mat", "recorded_2020-10-21_FF_B_08ms.mat",
         "recorded_2020-10-21_FF_C_08ms.mat"]
-
-
-def _moving_q(files: list[str], kw: dict) -> np.ndarray:
-    """The files' positions while the axis moves (|dq| above 2 % of its peak, by finite
-    differences), loaded with ``kw``."""
-    qs = []
-    for e in load(files, **kw):
-        dq = np.abs(np.gradient(e.q, e.t))
-        qs.append(e.q[dq > 0.02 * dq.max()])
-    return np.concatenate(qs)
 
 
 @pytest.mark.parametrize("row", [0, 3])
