@@ -45,7 +45,13 @@ from .loaders import Q_UNITS, parse_mapping
 from .qs_scan import qs_grid, rescan_qs, scan_qs, scan_qs_joints
 from .refine_result import ONE_TRAJECTORY_NOTE
 from .report import write_json
-from .results import DEFAULT_BANDS, json_float, position_split, position_split_notes
+from .results import (
+    DEFAULT_BANDS,
+    json_float,
+    position_split,
+    position_split_json,
+    position_split_notes,
+)
 from .robot.confounded import regroup_friction
 from .robot.consistency import check_consistency
 from .robot.consistent_fit import add_consistent, format_record
@@ -1167,8 +1173,7 @@ def _position_extrapolation(est: RobotModel, rec: dict[str, Any], rows_sig: Robo
                                  for joint, sp in splits.items()), files, named=named)
     notes.extend(said)
     rec["validation_position_split"] = {
-        joint: {k: ([json_float(x) for x in v] if isinstance(v, list)
-                    else v if isinstance(v, int) else json_float(v)) for k, v in sp.items()}
+        joint: position_split_json(sp)
         for joint, sp in splits.items()}
     return named or bool(said)
 

@@ -81,6 +81,7 @@ from .results import (
     json_float,
     parameters_json,
     position_split,
+    position_split_json,
     position_split_notes,
     removed_json,
 )
@@ -216,12 +217,6 @@ def _one_sign_load(d: Design) -> str | None:
             "combinations of them, not the friction of each quadrant (section III.B: a "
             "trajectory across the position where the gravity torque changes sign, or a "
             "payload that reverses the load)")
-
-
-def _split_json(split: dict[str, Any]) -> dict[str, Any]:
-    """:func:`ident.results.position_split` with JSON floats (null for NaN)."""
-    return {k: ([json_float(x) for x in v] if isinstance(v, list)
-                else v if isinstance(v, int) else json_float(v)) for k, v in split.items()}
 
 
 def _split(
@@ -594,7 +589,7 @@ class FitReport:
                 rec["validation_rel_error"] = json_float(e["validation"])
                 split = self.position_split(name)
                 if split is not None:
-                    rec["validation_position_split"] = _split_json(split)
+                    rec["validation_position_split"] = position_split_json(split)
             if name == "paper":
                 rec["q_s"] = self.q_s
                 if self.sign_check_shift is not None:

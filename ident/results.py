@@ -231,6 +231,13 @@ def position_split(q_fit: np.ndarray, q_val: np.ndarray, y_val: np.ndarray,
 OUTSIDE_ERROR_RATIO = 2.0
 
 
+def position_split_json(split: Mapping[str, Any]) -> dict[str, Any]:
+    """:func:`position_split` with JSON floats (null for NaN): the record's
+    ``validation_position_split`` (per model, per joint on the robot path)."""
+    return {k: ([json_float(x) for x in v] if isinstance(v, list)
+                else v if isinstance(v, int) else json_float(v)) for k, v in split.items()}
+
+
 def position_split_note(split: Mapping[str, Any] | None, what: str, files: str,
                         revolute: bool = True) -> str | None:
     """The note of :func:`position_split` when more than :data:`POSITION_OUTSIDE_SHARE` of
