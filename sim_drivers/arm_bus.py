@@ -159,8 +159,11 @@ class ArmOnBus:
         channel by its SYNCs (``SimNetwork(sync_cycle_s=cycle_s)``: heartbeats paced by
         SYNC), and needs ``"inline"``. None: ``"sync"`` with ``"inline"``, else ``"wall"``.
     payload : Payload, optional
+    fault_injectors : mapping of node id to FaultInjector, optional
+        Scripted misbehaviour of the drive of that node (:mod:`sim_drivers.faults`).
     drive_kwargs
-        Passed to every :class:`SimulatedDrive` (``fault_injector`` per drive is not).
+        Passed to every :class:`SimulatedDrive` (``fault_injector`` per drive is not: use
+        ``fault_injectors``).
 
     Attributes
     ----------
@@ -175,8 +178,12 @@ class ArmOnBus:
                  eds: Any = None, substeps: int = 10, seed: int = 0, q0: Any = None,
                  dispatch: str = "inline", payload: Payload | None = None,
                  channels: Any = None, clock: str | None = None,
-                 **drive_kwargs: Any) -> None:
+                 fault_injectors: Any = None, **drive_kwargs: Any) -> None:
         node_ids = [int(n) for n in node_ids]
+        injectors = dict(fault_injectors or {})
+        if stray := sorted(set(injectors) - set(node_ids)):
+            raise SimError(f"ArmOnBus: fault injectors for nodes {stray}, which are not the "
+                           f"arm's {node_ids}")
         if len(node_ids) != params.k:
             raise SimError(f"ArmOnBus: expected {params.k} node ids (one per moving joint), "
                            f"got {len(node_ids)}")
@@ -225,7 +232,7 @@ class ArmOnBus:
                 joint = ArmJoint(self, j, m_diag[j])
                 net = self.sims[ch].network
                 drive = SimulatedDrive(net, nid, joint, eds, cycle_s=cycle_s, clock=clock,
-                                       **drive_kwargs)
+                                       fault_injector=injectors.get(nid), **drive_kwargs)
                 self.sims[ch].add(drive)
                 self.drives.append(drive)
         except Exception:

@@ -160,14 +160,17 @@ def start_arm_sim(cfg: DaqConfig, params: ArmParams, campaign: RobotCampaign,
         raise ConfigError(f"{campaign.source}: --simulate: the arm has {params.k} moving "
                           f"joints, the campaign {len(cfg.drives)} drives")
     dispatch = "inline" if cfg.clock == "lockstep" else "thread"
-    if fault_injectors:
-        raise ConfigError(f"{campaign.source}: --simulate: fault injectors are not supported "
-                          f"with a simulated arm")
+    nodes = [d.node_id for d in cfg.drives]
+    if set(fault_injectors) - set(nodes):
+        raise ConfigError(f"{campaign.source}: --simulate: fault injectors for nodes "
+                          f"{sorted(set(fault_injectors) - set(nodes))}, not the campaign's "
+                          f"drives {nodes}")
     arm = ArmOnBus(params, cfg.drives[0].channel or cfg.channel,
                    [d.node_id for d in cfg.drives],
                    channels=[d.channel or cfg.channel for d in cfg.drives],
                    cycle_s=campaign.cycle_s, eds=cfg.drives[0].eds, seed=seed,
-                   q0=list(campaign.start), dispatch=dispatch)
+                   q0=list(campaign.start), dispatch=dispatch,
+                   fault_injectors=fault_injectors)
     return ArmRig(arm)
 
 
