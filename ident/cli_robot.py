@@ -42,7 +42,7 @@ from .cli import parse_qs
 from .estimate import DEFAULT_THRESHOLD_PCT
 from .fitting import DQ_MIN_FRACTION, SIGN_CHECK_MIN_KEPT
 from .loaders import Q_UNITS, parse_mapping
-from .qs_scan import qs_grid, rescan_qs, scan_qs, scan_qs_joints
+from .qs_scan import qs_grid, rescan_qs, rescan_qs_joints, scan_qs, scan_qs_joints
 from .refine_result import ONE_TRAJECTORY_NOTE
 from .report import write_json
 from .results import (
@@ -791,9 +791,12 @@ def refine_robot(
         except IdentError as exc:
             rec["refit"] = {"error": str(exc)}
         else:
+            rev = [types.get(jn, True) for jn in sig.joints]
             if out.get("q_s_scan") and model == "paper" and fitted.terms:
-                rec["q_s_rescan"] = _rescan(est, sig, fitted.terms, pred, keep,
-                                            [types.get(jn, True) for jn in sig.joints], say)
+                rec["q_s_rescan"] = _rescan(est, sig, fitted.terms, pred, keep, rev, say)
+            elif out.get("q_s_scan_joints") and model == "paper" and fitted.terms:
+                rec["q_s_rescan"] = _rescan_joints(est, sig, fitted.terms, pred, keep, rev,
+                                                   say)
     out["refinement"] = rec
     out["_refinements"] = refs
     return rec
@@ -817,6 +820,28 @@ def _rescan(est: Any, sig: RobotSignals, terms: Sequence[tuple[int, Any]], pred:
     return {"q_s": float(rs.q_s), "q_s_fit": float(est.q_s_[0]),
             "rel_error": json_float(rs.refit.rel_error["after"]["all"]),
             "scan": [{"q_s": q, "rel_error": json_float(e)} for q, e in rs.scan]}
+
+
+def _rescan_joints(est: Any, sig: RobotSignals, terms: Sequence[tuple[int, Any]],
+                   pred: np.ndarray, keep: np.ndarray, revolute: list[bool],
+                   say: Callable[[str], None]) -> dict[str, Any]:
+    """One q_s per joint scanned again with the kept found terms, after ``--q-s scan-joints``
+    (:func:`ident.qs_scan.rescan_qs_joints`: at each q_s vector the n-dof refit of the terms;
+    the grid of each joint on its kept rows' largest |dq|). Informative, as :func:`_rescan`:
+    the record's refit stays at the fit's q_s. ``{"error": ...}`` when it cannot be done."""
+    vmax = [float(np.abs(sig.dq[keep[:, j], j]).max(initial=0.0)) for j in range(sig.k)]
+    say(f"q_s scanned again per joint with the {len(terms)} kept term(s)")
+    try:
+        res, rf = rescan_qs_joints(est, sig, terms, vmax=vmax, revolute=revolute,
+                                   prediction=pred, keep=keep)
+    except IdentError as exc:
+        return {"error": str(exc)}
+    return {"q_s": dict(res.q_s),
+            "q_s_fit": {n: float(q) for n, q in zip(est.joints_, est.q_s_, strict=True)},
+            "rel_error": json_float(rf.rel_error["after"]["all"]), "fits": res.fits,
+            "converged": res.converged,
+            "scan": {n: [{"q_s": q, "rel_error": json_float(e), "sweep": k} for q, e, k in pts]
+                     for n, pts in res.scan.items()}}
 
 
 def _revolute(out: dict[str, Any]) -> list[bool]:
@@ -855,7 +880,12 @@ def format_refinement(rec: dict[str, Any]) -> str:
         lines.append("")
         lines += format_refit(rec["refit"], rec["model"])
     rs = rec.get("q_s_rescan")
-    if rs:
+    if rs and isinstance(rs.get("q_s"), dict):  # --q-s scan-joints: one q_s per joint
+        lines.append("q_s scanned again per joint with the kept terms: " + ", ".join(
+            f"{j} {rs['q_s_fit'][j]:.4g} -> {q:.4g}" for j, q in rs["q_s"].items())
+            + f" rad/s ({rs['fits']} refits, error {_pct(rs['rel_error']).strip()} %; the "
+            "refit above stays at the fit's q_s)")
+    elif rs:
         lines.append(f"q_s scanned again with the kept terms: not done: {rs['error']}"
                      if "error" in rs else
                      f"q_s scanned again with the kept terms: {rs['q_s_fit']:.4g} -> "

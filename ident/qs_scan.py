@@ -15,7 +15,9 @@ fits; :func:`scan_qs` is the same scan of any fit given as a score, what
 ``jointid fit --robot --q-s scan`` (:func:`ident.cli_robot.fit_robot`) scans the n-dof paper
 fit with (one q_s shared by every joint); :func:`scan_qs_joints` chooses one q_s per joint
 (``--q-s scan-joints``): the shared grid, then coordinate sweeps of :func:`_scan` on each
-joint's q_s with the others held, on the same score.
+joint's q_s with the others held, on the same score; :func:`rescan_qs_joints` is that per-joint
+scan again after a refinement, each point the n-dof refit of the found terms (what
+``--q-s scan-joints --refine`` reports, as :func:`rescan_qs` for ``--q-s scan``).
 """
 
 from __future__ import annotations
@@ -35,8 +37,8 @@ from .robot.refit import RobotRefit, model_at_qs, refit_robot
 from .robot.signals import RobotSignals
 from .terms import Term
 
-__all__ = ["QsScan", "QsJointsScan", "qs_grid", "rescan_qs", "scan_qs", "scan_qs_joints",
-           "QS_XTOL", "QS_SEARCH_EVALS", "QS_WORKERS", "QS_MAX_SWEEPS"]
+__all__ = ["QsScan", "QsJointsScan", "qs_grid", "rescan_qs", "rescan_qs_joints", "scan_qs",
+           "scan_qs_joints", "QS_XTOL", "QS_SEARCH_EVALS", "QS_WORKERS", "QS_MAX_SWEEPS"]
 
 #: Resolution of the q_s scan after the grid, on log q_s (1 %).
 QS_XTOL = 0.01
@@ -431,6 +433,83 @@ def scan_qs_joints(score: Callable[[np.ndarray], Mapping[str, float]],
     return QsJointsScan(q_s={n: float(q) for n, q in zip(names, current, strict=True)},
                         scan=scan, fits=len(cache), sweeps=sweeps, converged=converged,
                         error=dict(errors(current)))
+
+
+def rescan_qs_joints(
+    model: Any,
+    signals: RobotSignals,
+    terms: Sequence[tuple[int, Term]],
+    *,
+    vmax: Sequence[float],
+    revolute: Sequence[bool] | None = None,
+    prediction: np.ndarray | None = None,
+    keep: np.ndarray | None = None,
+    n_grid: int = 13,
+) -> tuple[QsJointsScan, RobotRefit]:
+    """One q_s per joint chosen again after a refinement: :func:`scan_qs_joints` (the shared
+    grid, then coordinate sweeps, on the error over every joint's rows) where the fit at each
+    q_s vector is :func:`ident.robot.refit.refit_robot` of ``terms`` on the model with those
+    q_s (:func:`ident.robot.refit.model_at_qs` joint by joint; scored with ``errors_only``),
+    every parameter of every joint estimated together; the chosen vector is then refitted
+    whole. The per-joint counterpart of :func:`rescan_qs` (``--q-s scan-joints`` then
+    ``--refine``).
+
+    Parameters
+    ----------
+    model : RobotModel
+        The fitted n-dof paper model.
+    signals : RobotSignals
+        What it was fitted on.
+    terms : sequence of (int, Term)
+        (joint index, found term), as :func:`~ident.robot.refit.refit_robot`.
+    vmax : sequence of float
+        Largest |dq| of each joint's rows [rad/s] (the model's joints' order), its grid.
+    revolute, prediction, keep
+        As :func:`~ident.robot.refit.refit_robot`; ``prediction`` (the terms' load variable)
+        is the model's at its own q_s whatever q_s is scanned (computed once when None).
+    n_grid : int
+        Grid points.
+
+    Returns
+    -------
+    (QsJointsScan, RobotRefit)
+        The scan (its ``error`` the refit's relative errors at the chosen q_s) and the whole
+        refit there.
+
+    Raises
+    ------
+    DataError
+        Not a paper model, bad ``vmax``, or the refit failing at every point of the grid.
+    """
+    if getattr(model, "model", None) != "paper":
+        raise DataError("rescan_qs_joints: q_s is a parameter of the paper model; this model "
+                        f"is {getattr(model, 'model', type(model).__name__)!r}")
+    names = tuple(model.joints_)
+    if prediction is None:
+        prediction = model.predict(signals)
+
+    def at(q: np.ndarray) -> Any:
+        m = model
+        for n, v in zip(names, q, strict=True):
+            m = model_at_qs(m, float(v), [n])
+        return m
+
+    def refit(q: np.ndarray, errors_only: bool = True) -> RobotRefit:
+        return refit_robot(at(q), signals, terms, prediction=prediction, keep=keep,
+                           revolute=revolute, errors_only=errors_only)
+
+    def score(q: np.ndarray) -> dict[str, float]:
+        try:
+            return dict(refit(q).rel_error["after"])
+        except RobotIdentError:
+            return {}  # every score inf
+
+    res = scan_qs_joints(score, vmax, names, n_grid=n_grid)
+    best = np.array([res.q_s[n] for n in names])
+    try:
+        return res, refit(best, errors_only=False)
+    except RobotIdentError as exc:
+        raise DataError(f"rescan_qs_joints at q_s = {best.tolist()} rad/s: {exc}") from None
 
 
 def _finite(x: Any) -> float:

@@ -263,7 +263,8 @@ def refit_robot(
     terms : sequence of (int, Term)
         (joint index, single-joint term), e.g. every step of
         :func:`~ident.robot.refine_joint.refine_joint` on each joint. Empty: the refit is
-        the first fit (before = after, up to the iterations of the paper model).
+        the first fit to rounding, unless its final theta moves rows of a paper fit to
+        another quadrant (``unsettled``; docs/refinement.md section 8.8).
     prediction : ndarray, shape (n, k), optional
         ``model.predict(signals)`` when already computed: the terms' load variable.
     keep : ndarray of bool, shape (n, k), optional
