@@ -221,8 +221,20 @@ class Device402Mixin:
                 tx.count += 1
                 if tx.count >= tx.every:
                     tx.count = 0
+        elif inj is not None and inj.delay_tpdo(cycle):
+            held = []  # this cycle's set, sent late (FaultInjector.delay_tpdo_from_cycle)
+            for tx in self._tx_sync:
+                tx.count += 1
+                if tx.count >= tx.every:
+                    tx.count = 0
+                    held.append((tx.cob_id, tx.payload(self)))
+            inj.held_tpdos.append(held)
         else:
             send = self._send
+            if inj is not None and inj.held_tpdos:  # catching up: one late set first
+                for cob_id, data in inj.held_tpdos.pop(0):
+                    send(cob_id, data)
+                    self.tpdo_sent += 1
             for tx in self._tx_sync:
                 tx.count += 1
                 if tx.count >= tx.every:

@@ -25,7 +25,7 @@ Error codes (0x603F, EMCY) follow CiA 301 / CiA 402's error-code table:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 FOLLOWING_ERROR = 0x8611
 EXCESS_TORQUE = 0x8311
@@ -98,6 +98,13 @@ class FaultInjector:
         0 (default): one window only. Else the window repeats every ``drop_tpdo_period``
         cycles from ``drop_tpdo_from_cycle`` on (a bus that loses frames again and again:
         ``drop_tpdo_cycles=2, drop_tpdo_period=3`` loses two cycles in three).
+    delay_tpdo_from_cycle : int or None
+        The TPDOs of cycles ``delay_tpdo_from_cycle`` to ``+ delay_tpdo_cycles - 1`` are
+        held back and sent late: each later cycle sends the oldest held set before its own,
+        until none is left (a drive's process that stalled and catches up: the master sees
+        two sets a cycle, the first one old).
+    delay_tpdo_cycles : int
+        How many consecutive cycles' TPDOs are held back.
     """
 
     fault_at_cycle: int | None = None
@@ -106,6 +113,10 @@ class FaultInjector:
     drop_tpdo_from_cycle: int | None = None
     drop_tpdo_cycles: int = 1
     drop_tpdo_period: int = 0
+    delay_tpdo_from_cycle: int | None = None
+    delay_tpdo_cycles: int = 1
+    #: the sets held back, oldest first: lists of (COB-ID, data) (the drive's state)
+    held_tpdos: list = field(default_factory=list, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not 0 < self.fault_code <= 0xFFFF:
@@ -115,6 +126,10 @@ class FaultInjector:
         if self.drop_tpdo_cycles < 0:
             raise ValueError(
                 f"FaultInjector.drop_tpdo_cycles: expected >= 0, got {self.drop_tpdo_cycles}"
+            )
+        if self.delay_tpdo_cycles < 0:
+            raise ValueError(
+                f"FaultInjector.delay_tpdo_cycles: expected >= 0, got {self.delay_tpdo_cycles}"
             )
         if self.drop_tpdo_period < 0 or 0 < self.drop_tpdo_period <= self.drop_tpdo_cycles:
             raise ValueError(
@@ -129,6 +144,11 @@ class FaultInjector:
     def stop_heartbeat_now(self, cycle: int) -> bool:
         """True at the cycle the heartbeat producer stops."""
         return self.stop_heartbeat_at_cycle is not None and cycle == self.stop_heartbeat_at_cycle
+
+    def delay_tpdo(self, cycle: int) -> bool:
+        """True when the TPDOs of ``cycle`` must be held back (sent late)."""
+        start = self.delay_tpdo_from_cycle
+        return start is not None and start <= cycle < start + self.delay_tpdo_cycles
 
     def drop_tpdo(self, cycle: int) -> bool:
         """True when the TPDOs of ``cycle`` must not be sent."""

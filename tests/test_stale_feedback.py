@@ -71,17 +71,24 @@ def test_fault_injector_period_is_checked():
 
 
 # ------------------------------------------------------------------ on the bus
-def _run(out_root, inj: FaultInjector | None):
+def _log(out_root, inj: FaultInjector | None, timeout_cycles: int = 3):
+    """One lockstep run of a loaded joint (6 kg at 1 m, a 0.3 rad 0.5 Hz sine) with the
+    drive's fault injector ``inj``; its log (axis 0)."""
     c = joint_campaign(
         "stale", cycle_s=0.001, sine={"amplitude": 0.3, "frequency_hz": 0.5, "periods": 1},
         payload_masses=(6.0,),
-        daq={"channel": f"stale_{os.getpid()}_{next(_chan)}", "tpdo_timeout_cycles": 3,
-             "lockstep_wait_s": 0.02})
+        daq={"channel": f"stale_{os.getpid()}_{next(_chan)}",
+             "tpdo_timeout_cycles": timeout_cycles, "lockstep_wait_s": 0.02})
     out = out_root / f"run{next(_chan)}"
     r = run_campaign(c, out_dir=out, simulate=default_plant(), yes=True,
                      fault_injectors={1: inj} if inj else None)
     assert r.status == "done", r.reason
-    a = read_run(r.runs[0].path)
+    return read_run(r.runs[0].path)
+
+
+def _stats(a) -> tuple[float, float, float]:
+    """(torque change std [N m], rms tracking error [rad], share of valid cycles) while the
+    plan runs."""
     valid = np.asarray(a.valid, bool)
     run = np.asarray(a.segment) >= 0
     tau = np.asarray(a.tau_ref)[run]
@@ -90,9 +97,15 @@ def _run(out_root, inj: FaultInjector | None):
 
 
 @pytest.fixture(scope="module")
-def without_losses(tmp_path_factory):
-    """The same run without losses: (torque change std [N m], rms tracking error [rad])."""
-    return _run(tmp_path_factory.mktemp("stale"), None)[:2]
+def clean_log(tmp_path_factory):
+    """The run without losses."""
+    return _log(tmp_path_factory.mktemp("stale"), None)
+
+
+@pytest.fixture(scope="module")
+def without_losses(clean_log):
+    """(torque change std [N m], rms tracking error [rad]) of the run without losses."""
+    return _stats(clean_log)[:2]
 
 
 @pytest.mark.parametrize("lost,period", [(1, 2), (2, 3)])
@@ -104,7 +117,7 @@ def test_lost_tpdos_do_not_make_the_torque_chatter(tmp_path, without_losses, los
     d_ok, e_ok = without_losses
     inj = FaultInjector(drop_tpdo_from_cycle=300, drop_tpdo_cycles=lost,
                         drop_tpdo_period=period)
-    d_lost, e_lost, share = _run(tmp_path, inj)
+    d_lost, e_lost, share = _stats(_log(tmp_path, inj))
     assert share < 1.0 - 0.9 * lost / period  # the losses happened
     assert d_lost <= 1.5 * d_ok, (d_lost, d_ok)
     assert e_lost <= 1.1 * e_ok, (e_lost, e_ok)
@@ -144,3 +157,26 @@ def test_an_arm_joint_losing_tpdos_keeps_its_torque_and_the_others_theirs(tmp_pa
     for j in range(3):
         assert lost[j][0] <= 1.5 * ok[j][0], (j, lost[j][0], ok[j][0])
         assert lost[j][1] <= 1.1 * ok[j][1], (j, lost[j][1], ok[j][1])
+
+
+# ------------------------------------------------------------------ late answers in a burst
+def test_a_burst_of_late_tpdos_is_not_taken_one_set_a_cycle(tmp_path, clean_log,
+                                                          without_losses):
+    """The drive holds back its TPDOs for 30 cycles (its process stalled), then sends the
+    oldest held set before each cycle's own until it has caught up. Taken one set per cycle,
+    as the first full set the master's receive loop met, the backlog never cleared: the loop
+    ran on old positions flagged fresh (after the burst the master's positions differed from
+    the run without it by 7.9 mrad rms, half the tracking error). Every queued frame is
+    taken every cycle now, the newest values winning: from 100 cycles after the burst the
+    positions are those of the run without it (0.008 mrad; asserted within 5 % of its rms
+    tracking error)."""
+    inj = FaultInjector(delay_tpdo_from_cycle=300, delay_tpdo_cycles=30)
+    a = _log(tmp_path, inj, timeout_cycles=50)
+    valid = np.asarray(a.valid, bool)
+    run = np.asarray(a.segment) >= 0
+    assert (~valid[run]).sum() >= 30  # the held cycles came late: missing
+    assert not inj.held_tpdos  # the drive caught up
+    n = min(len(a.q), len(clean_log.q))
+    after = np.flatnonzero(valid[:n] & (np.arange(n) > 430))
+    diff = np.asarray(a.q)[after] - np.asarray(clean_log.q)[after]
+    assert np.sqrt(np.mean(diff ** 2)) <= 0.05 * without_losses[1]

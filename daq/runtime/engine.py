@@ -246,7 +246,6 @@ class Engine(Supervisor):
         self.rpdo_msgs = [can.Message(arbitration_id=0x200 + d.node_id, data=bytes(
             d.specs[0].n_bytes), is_extended_id=False) for d in drives]
         self.sync_count = 0
-        self._resync = False
         self.notes: list[str] = []  # start-up warnings, logged at cycle 0 of every run
         self.bus_lost = False  # a bus error ended a run: no more frames can be sent
         #: per-cycle torque monitor (daq.runtime.monitor.TorqueMonitor), None: none
@@ -263,13 +262,17 @@ class Engine(Supervisor):
         self.sync_count += 1
         timeout = deadline - time.perf_counter() if self.paced else self.cfg.lockstep_wait_s
         ok = io.pump(self.bus, timeout) if io.direct else io.wait(timeout)
-        if self._resync and io.direct:
-            # the previous cycle timed out: its TPDOs may have arrived since and been taken
-            # for this cycle's; take whatever is queued so that the newest values win
+        if io.direct:
+            # every cycle, not only after one that timed out: take whatever else is queued,
+            # so that the newest values win. The pump stops at the first full set, which may
+            # be late answers to earlier SYNCs; after a stall of the drive's side they arrive
+            # as a burst (through a bridge, spread over several cycles), and taken one set per
+            # cycle they never cleared: the loop ran on TPDOs 55-124 ms old, flagged fresh,
+            # and oscillated to the velocity limit (1 ms, loopback bridge, 4 busy loops;
+            # tests/test_stale_feedback.py)
             recv, on = self.bus.recv, io.on_message_received
             while (msg := recv(0.0)) is not None:
                 on(msg)
-        self._resync = not ok
         return io.full if ok else io.mask
 
     def run_payload(self, index: int, payload: Any, ref: Any, log: RunLog,
@@ -435,7 +438,7 @@ class Engine(Supervisor):
                         x = 0
                         target_raw = round(q_ref * cpr[d])
                     else:
-                        # a cycle without this drive's TPDO predicts q (PDLaw.torque)
+                        # a cycle without this drive's TPDO holds the feedback (PDLaw.torque)
                         tau = ctrls[d].update(q_ref, dq_refs[cd], ddq_refs[cd], q,
                                               not flags & FLAG_TPDO_MISSING)
                         x = round(tau / tpu[d])
