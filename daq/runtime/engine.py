@@ -13,9 +13,11 @@ file, cycle by cycle:
 
 1. SYNC (the drives latch the RPDOs of the previous cycle, step, and answer with TPDOs);
 2. wait for every drive's TPDO1/TPDO2 (``lockstep``: as long as needed, deterministic;
-   ``paced``: until 80 % of the period has elapsed);
+   ``paced``: until 80 % of the period has elapsed), then take every frame already queued,
+   so that the newest values win (a burst of late answers is never used one set per cycle);
 3. per drive: decode (struct), the position controller
-   :class:`daq.protocol.control.PositionController` (CST) or the position target (CSP),
+   :class:`daq.protocol.control.PositionController` (CST; on a cycle without the drive's
+   TPDO it holds the feedback torque of the last fresh cycle) or the position target (CSP),
    limits and watchdog, RPDO out;
 4. log the joint states, the setpoint and every CAN frame of the cycle.
 
