@@ -30,9 +30,8 @@ from daq.app.cli import main
 from ident.cli_robot import fit_files
 from ident.qs_scan import rescan_qs_joints
 from ident.robot.refit import extra_name, refit_robot
-from ident.signals import Signals
-from ident.terms import Term
 from sim_drivers.arm import ArmEffects, ArmGains, ArmParams, model_reference, simulate_arm
+from tests.test_robot_refit import _TrueDrag
 from trajectories.robot import load_robot
 
 QS_DISTINCT = (0.03, 0.05, 0.1)  # true q_s of j1, j2, j3 [rad/s]
@@ -42,19 +41,6 @@ F_VV = 3.0  # [N m s^2/rad^2], joint 3's drag (tests/test_robot_qs_scan.py)
 
 def _off(q: float, truth: float) -> float:
     return math.exp(abs(math.log(q / truth)))
-
-
-class _TrueDrag(Term):
-    """The true drag column dq|dq| (tests/test_robot_refit.py)."""
-
-    effect = "true_drag"
-    variable = "velocity"
-
-    def names(self) -> tuple[str, ...]:
-        return ("true_F_VV",)
-
-    def columns(self, s: Signals) -> np.ndarray:
-        return (s.dq * np.abs(s.dq))[:, None]
 
 
 def _files(tmp_path: Path, seed: int) -> list[Path]:
