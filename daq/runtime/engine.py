@@ -264,17 +264,14 @@ class Engine(Supervisor):
         self.sync_count += 1
         timeout = deadline - time.perf_counter() if self.paced else self.cfg.lockstep_wait_s
         ok = io.pump(self.bus, timeout) if io.direct else io.wait(timeout)
-        if io.direct:
-            # every cycle, not only after one that timed out: take whatever else is queued,
-            # so that the newest values win. The pump stops at the first full set, which may
-            # be late answers to earlier SYNCs; after a stall of the drive's side they arrive
-            # as a burst (through a bridge, spread over several cycles), and taken one set per
-            # cycle they never cleared: the loop ran on TPDOs 55-124 ms old, flagged fresh,
-            # and oscillated to the velocity limit (1 ms, loopback bridge, 4 busy loops;
-            # tests/test_stale_feedback.py)
-            recv, on = self.bus.recv, io.on_message_received
-            while (msg := recv(0.0)) is not None:
-                on(msg)
+        # every cycle, not only after one that timed out: take whatever else is queued, so
+        # that the newest values win. The pump stops at the first full set, which may be late
+        # answers to earlier SYNCs; after a stall of the drive's side they arrive as a burst
+        # (through a bridge, spread over several cycles), and taken one set per cycle they
+        # never cleared: the loop ran on TPDOs 55-124 ms old, flagged fresh, and oscillated
+        # to the velocity limit (1 ms, loopback bridge, 4 busy loops;
+        # tests/test_stale_feedback.py)
+        self._drain()
         return io.full if ok else io.mask
 
     def run_payload(self, index: int, payload: Any, ref: Any, log: RunLog,
