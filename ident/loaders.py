@@ -74,6 +74,7 @@ from trajectories.robot.payload import RobotPayloadData
 from . import DataError
 from .robot import RobotIdentError
 from .signals import Signals
+from .timebase import GAP_PERIODS, IRREGULAR_TOL, STEP_BAND, ResamplingWarning, uniform_grid
 from .timing import align_to_torque
 
 __all__ = [
@@ -99,20 +100,6 @@ __all__ = [
 
 #: Fewest samples accepted in one experiment.
 MIN_SAMPLES = 50
-#: Relative spread of the sampling period above which a file is resampled.
-IRREGULAR_TOL = 0.01
-#: A step of the time column longer than this many median periods is a gap in the recording
-#: (samples lost, logger paused): refused, never interpolated across.
-GAP_PERIODS = 5.0
-#: How far (a fraction of the median period) the stamps of one step may span from one period,
-#: and of two consecutive steps from two, for each sample to hold its own period
-#: (:func:`uniform_grid`): then no sample was lost (a step of about 2 periods) nor added (two
-#: steps of about one), and the values may be taken as one sample per period however far the
-#: stamps drift. Midway between one period and two (and between two and one): a clock whose
-#: steps vary by s (std, normal) keeps all of 10^5 steps and pairs within it for s up to about
-#: 8 %, while a lost sample's step (2 periods, spread s sqrt(2)) falls inside with a
-#: probability below 1e-5 there.
-STEP_BAND = 0.5
 #: Sanity bound on |q|, |q_ref| [rad or m] and |tau| [N m or N] after unit conversion and gain:
 #: no joint signal comes near it; values beyond are a wrong column, unit or gain (or garbage)
 #: and would overflow the least-squares sums.
@@ -141,9 +128,6 @@ _NAME_START = re.compile(r"^[A-Za-z_]")
 #: Most names listed in an error message.
 _MAX_LISTED = 40
 
-
-class ResamplingWarning(UserWarning):
-    """An experiment was irregularly sampled and has been resampled to a uniform grid."""
 
 
 class SlowSamplingWarning(UserWarning):
@@ -1241,223 +1225,6 @@ def read_file(
     if ext == ".mat":
         return _read_table(p, _read_mat(p), joints, gains, scale, mapping, False)
     raise DataError(f"{p}: unknown file type {ext!r}, expected .mcap, .csv or .mat")
-
-
-def _hf_noise(x: np.ndarray, dt: float) -> float:
-    """Noise of positions ``x`` (shape (n,) or (n, k)) in the complement of the excitation
-    band: per axis, the median power of the Hann-windowed position spectrum above f_s/4
-    (where the motion of an identification trajectory has no content), summed in log over
-    the axes (a ratio between two gridings of the same axes is a product of per-axis ratios).
-    """
-    a = np.asarray(x, dtype=float).reshape(len(x), -1)
-    n = a.shape[0]
-    f = np.fft.rfftfreq(n, dt)
-    upper = f > 0.25 / dt
-    win = np.hanning(n)
-    out = 0.0
-    for col in a.T:
-        c = col - np.polyval(np.polyfit(np.arange(n), col, 1), np.arange(n))
-        p = np.abs(np.fft.rfft(c * win)) ** 2
-        out += float(np.log(max(float(np.median(p[upper])), 1e-300)))
-    return out
-
-
-def _reading_noise(x: np.ndarray, times: np.ndarray, dt: float) -> float:
-    """Noise above f_s/4 (:func:`_hf_noise`) of positions ``x`` (shape (n,) or (n, k)) read at
-    ``times`` [s]: of each sample's departure from the straight line through its two
-    neighbours at their times. Neither reading of :func:`uniform_grid` is resampled to be
-    judged: interpolating one of them would average its samples' own noise (white noise:
-    down to a third at Nyquist) and favour it -- what read a simulated joint's uniformly
-    sampled values under a 1 % random-walk clock at their stamps, at 4x its clean fit error.
-    The measurement noise then weighs the same in both readings (neighbour weights near 1/2),
-    and only the wrong times add q̇ x (their error's departure from its neighbours')."""
-    a = np.asarray(x, dtype=float).reshape(len(x), -1)
-    w = ((times[2:] - times[1:-1]) / (times[2:] - times[:-2]))[:, None]
-    return _hf_noise(a[1:-1] - (w * a[:-2] + (1.0 - w) * a[2:]), dt)
-
-
-#: Lag-1 autocorrelation of the time steps above which the stamp errors accumulate (a clock
-#: whose every period errs on its own: consecutive steps uncorrelated, 0) rather than each
-#: stamp erring about its own slot (white stamp jitter: -0.5); midway between the two.
-ACCUMULATING_LAG1 = -0.25
-
-
-def step_spread(d: np.ndarray) -> float:
-    """Spread of the time steps ``d`` [s] as a fraction of their median: the standard
-    deviation from the median absolute deviation (x 1.4826, so that an isolated lost sample
-    does not count), the plain one where that is 0 (steps quantised to a few values)."""
-    med = float(np.median(d))
-    mad = 1.4826 * float(np.median(np.abs(d - med)))
-    return (mad if mad > 0 else float(np.std(d))) / med
-
-
-def _slot_misfit(far: float, far2: float) -> str:
-    """The warning's words for the step (``far``, in periods) or pair of steps (``far2``)
-    that leaves some sample without a period of its own (:data:`STEP_BAND`)."""
-    if abs(far - 1) >= STEP_BAND:
-        return f"a step of {far:.3g} periods: a sample {'lost' if far > 1 else 'added'}"
-    return f"two steps of {far2:.3g} periods: a sample {'lost' if far2 > 2 else 'added'}"
-
-
-def _drift_advice(t: np.ndarray, d: np.ndarray, pos: np.ndarray, b: float, med: float) -> str:
-    """What the warning of :func:`uniform_grid` adds when the values are read at their stamps
-    because the uniform reading was no candidate (some stamp more than half a period off a
-    uniform grid and some step beyond :data:`STEP_BAND`): whether the stamp errors accumulate
-    (a drifting clock: consecutive steps uncorrelated, :data:`ACCUMULATING_LAG1`) and, when the
-    values as they are (the sample index as the time base) are quieter above f_s/4 than
-    read at the stamps (the judge of the two readings, :func:`_reading_noise`), that the
-    drive's cycle times are the remedy for values of a fixed-cycle clock (a lost cycle then
-    keeps its slot; a uniform time column would shift every later value by a period)."""
-    x = d - d.mean()
-    xx = float(np.dot(x, x))
-    lag1 = float(np.dot(x[1:], x[:-1])) / xx if xx > 0 and x.size > 1 else -0.5
-    if lag1 <= ACCUMULATING_LAG1:
-        return (f"; the steps anticorrelated (lag-1 {lag1:.2f}): not a drifting clock (stamps "
-                "jittered about their slots, or a sample lost)")
-    out = (f"; accumulating (consecutive steps uncorrelated, lag-1 {lag1:.2f}: a drifting "
-           "clock)")
-    n_axes = int(pos.reshape(t.size, -1).shape[1])
-    ti = t[0] + b * np.arange(t.size)
-    ratio = float(np.exp((_reading_noise(pos, t, med) - _reading_noise(pos, ti, b)) / n_axes))
-    if ratio > 1.0:
-        out += (f"; taken as uniformly sampled, the positions' noise above f_s/4 would be "
-                f"{ratio:.3g}x lower: if the values come from a fixed-cycle clock (a drive's) "
-                "and the stamps from another, give the drive's cycle times as the time column "
-                "(cycle number x period: a lost cycle keeps its slot)")
-    return out
-
-
-def uniform_grid(
-    t: np.ndarray,
-    arrays: Mapping[str, np.ndarray | None],
-    *,
-    source: str = "",
-    judge: str = "q",
-    warn: bool = True,
-    stacklevel: int = 2,
-) -> tuple[np.ndarray, dict[str, np.ndarray | None], str | None]:
-    """Put samples with irregular time stamps on a uniform grid (the one resampling of the
-    single-joint and the robot loaders, and of :func:`ident.preprocess.choose_cutoff`).
-
-    Stamps whose steps stay within :data:`IRREGULAR_TOL` of their median are regular:
-    returned as given. Otherwise two readings of the stamps are possible, and the data say
-    which holds:
-
-    * the values were taken at their stamps (irregular sampling instants): linear
-      interpolation onto the grid of the median period;
-    * the values were sampled uniformly and only the stamps err (a host clock stamping a
-      drive's cycles): the values as they are, on the least-squares line through the stamps
-      (t ≈ a + b k). A candidate only when each sample holds its own period: every stamp
-      within half a period of its slot on that line (white jitter), or every step within
-      :data:`STEP_BAND` of one median period and every two consecutive steps within it of
-      two (a clock that drifts, e.g. a random walk whose stamps wander several periods off
-      the line, one step per period). Otherwise a sample was lost (a step of about 2
-      periods; the gaps beyond :data:`GAP_PERIODS` are refused by the callers) or added (two
-      steps of about one), and taken as uniformly sampled every later value would be a
-      period off its time: the values are read at their stamps.
-
-    The reading whose positions (``arrays[judge]``) have less noise in the complement of the
-    excitation band (:func:`_reading_noise`: spectrum above f_s/4 of each sample's departure
-    from its neighbours, at that reading's times; neither reading resampled) is taken: reading
-    values at the wrong instants adds q̇ × (stamp error) there, broadband noise that no
-    cut-off chosen from the data survives; reading values taken at irregular instants as
-    uniform adds the same, the other way. A :class:`ResamplingWarning` names the reading and
-    the noise ratio that chose it. On a copy of the real EMPS run whose stamps are a
-    random-walk clock (steps dt (1 + s e), s = 1 % and 3 %, seeds 1-3) the stamps wander up
-    to several periods off the line; the values are read as uniformly sampled and fitted as
-    the original (4.035 %) where the stamps read as instants gave 7.7-20.1 %
-    (tests/test_clock_reading_drift.py).
-
-    Parameters
-    ----------
-    t : ndarray, shape (n,)
-        Strictly increasing time stamps [s] (gaps refused by the callers beforehand).
-    arrays : mapping of str to ndarray (shape (n,) or (n, k)) or None
-        The signals sampled at ``t``; None entries are passed through.
-    source : str
-        Names the data in the warning.
-    judge : str
-        The key of the positions the readings are compared on.
-    warn : bool
-        Warn when the stamps are irregular.
-    stacklevel : int
-        Of the warning.
-
-    Returns
-    -------
-    t : ndarray, shape (m,)
-        Uniform time [s] (m = n for regular stamps and for the uniform reading).
-    arrays : dict
-        The signals on ``t``.
-    note : str or None
-        What was done (the warning's text), None for regular stamps.
-    """
-    t = np.asarray(t, dtype=float).reshape(-1)
-    out: dict[str, np.ndarray | None] = dict(arrays)
-    d = np.diff(t)
-    med = float(np.median(d))
-    if d.size == 0 or np.max(np.abs(d - med)) <= IRREGULAR_TOL * med:
-        return t, out, None
-    where = f"{source}: " if source else ""
-    spread = step_spread(d)
-    span = (f"period {d.min():.3g}..{d.max():.3g} s, the steps vary {100 * spread:.3g} % of "
-            "the period (std)")
-    n = int(round((t[-1] - t[0]) / med)) + 1
-    tu = t[0] + med * np.arange(n)
-    tu = tu[tu <= t[-1] + 1e-12 * abs(t[-1])]
-
-    def at_stamps(a: np.ndarray) -> np.ndarray:
-        a = np.asarray(a, dtype=float)
-        if a.ndim == 1:
-            return np.interp(tu, t, a)
-        return np.column_stack([np.interp(tu, t, a[:, j]) for j in range(a.shape[1])])
-
-    k = np.arange(t.size, dtype=float)
-    b, a0 = np.polyfit(k, t, 1)
-    ti = a0 + b * k
-    off = float(np.max(np.abs(t - ti))) / b if b > 0 else np.inf  # [periods]
-    # the step farthest from one period, and the pair of steps farthest from two [periods]
-    far = float(d[np.argmax(np.abs(d - med))]) / med
-    d2 = t[2:] - t[:-2]
-    far2 = float(d2[np.argmax(np.abs(d2 - 2 * med))]) / med if d2.size else 2.0
-    in_slots = off < 0.5
-    one_per_step = b > 0 and abs(far - 1) < STEP_BAND and abs(far2 - 2) < STEP_BAND
-    pos = arrays.get(judge)
-    if (in_slots or one_per_step) and pos is not None and t.size >= 16:
-        noise_stamps = _reading_noise(pos, t, med)
-        noise_index = _reading_noise(pos, ti, b)
-        n_axes = int(np.asarray(pos).reshape(t.size, -1).shape[1])
-        ratio = float(np.exp((noise_stamps - noise_index) / n_axes))  # per axis, geometric
-        if ratio > 1.0:
-            how = ("jitter of uniformly sampled values" if in_slots else
-                   f"a drifting clock's stamps of uniformly sampled values (up to {off:.3g} "
-                   f"periods off a uniform grid, every step within {STEP_BAND:g} period of one "
-                   "and every two of two: no sample lost or added)")
-            note = (f"{where}irregular time stamps ({span}) taken as {how}, on a uniform grid "
-                    f"of {t.size} samples at {b:.6g} s: read at the stamps, the positions' "
-                    f"noise above f_s/4 is {ratio:.3g}x higher")
-            if warn:
-                warnings.warn(note, ResamplingWarning, stacklevel=stacklevel)
-            return ti, out, note
-        why = (f" (values taken at their stamps: their noise above f_s/4 is {1 / ratio:.3g}x "
-               "lower than taken as uniformly sampled)")
-    else:
-        why = ("" if pos is None or t.size < 16 else
-               " (values taken at their stamps: some stamp is more than half a period off "
-               f"a uniform grid ({off:.3g} periods at most) and "
-               f"{_slot_misfit(far, far2)}, or a clock too irregular to tell"
-               f"{_drift_advice(t, d, np.asarray(pos, dtype=float), b, med)})")
-    for name, a in arrays.items():
-        out[name] = None if a is None else at_stamps(a)
-    # the torque is interpolated with the positions: its noise is averaged between
-    # neighbouring samples (white noise: variance x 2/3 on average), so the fit's error and
-    # noise floor measure that smoothed torque, below what the same samples on their own give
-    note = (f"{where}irregular sampling ({span}), resampled to {tu.size} samples at {med:.6g} s"
-            f"{why}; every signal interpolated, the torque too: its noise averaged between "
-            "neighbouring samples, the fit's error and noise floor measure that smoother torque")
-    if warn:
-        warnings.warn(note, ResamplingWarning, stacklevel=stacklevel)
-    return tu, out, note
 
 
 # -- the single joint: a view of the run of a one-joint robot ---------------------------------

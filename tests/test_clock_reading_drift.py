@@ -12,8 +12,9 @@ each reading, neither resampled, chooses:
   uniformly sampled values under random-walk stamps are read as uniform and fit as the clean
   file too (read at their stamps, s = 1 %: 1.5 % for 0.355 %).
 
-The lost and added sample (no candidate: the stamp reading stays) are in
-tests/test_mends_clock_drift.py."""
+An added sample (no candidate: the stamp reading stays) is in
+tests/test_mends_clock_drift.py; lost samples, counted into their slots, in
+tests/test_clock_counted_slots.py."""
 
 from __future__ import annotations
 
