@@ -168,7 +168,7 @@ def _drift_advice(t: np.ndarray, d: np.ndarray, pos: np.ndarray, b: float, med: 
         return (f"; the steps anticorrelated (lag-1 {lag1:.2f}): not a drifting clock (stamps "
                 "jittered about their slots, or a sample lost)")
     out = (f"; accumulating (consecutive steps uncorrelated, lag-1 {lag1:.2f}: a drifting "
-           "clock)")
+           "clock, or values truly taken at irregular instants)")
     n_axes = int(pos.reshape(t.size, -1).shape[1])
     ti = t[0] + b * np.arange(t.size)
     ratio = float(np.exp((_reading_noise(pos, t, med) - _reading_noise(pos, ti, b)) / n_axes))
