@@ -510,7 +510,8 @@ def fit_robot(
         "_cycle_s": float(np.median(np.diff(runs[0].t))),
         "_keep": kept_rows(sig, est_dq_min),
     }
-    files_named = False  # the validation files named in a position-split note of the fit
+    # what the position-split notes of the fit said already (the files, each reason in full)
+    said: set[str] = set()
     for name in models:
         try:
             est = model(name).fit(sig)
@@ -618,9 +619,10 @@ def fit_robot(
                 rec["payload_misfit"] = payload_misfit(est, out["_signals"][0])
         if val is not None:
             rec["validation_rel_error"] = {k: float(v) for k, v in est.rel_error(val).items()}
-            files_named = _position_extrapolation(est, rec, out["_signals"][0], val, joints,
-                                                  name, out["validation_inputs"], notes,
-                                                  files_named)
+            _position_extrapolation(est, rec, out["_signals"][0], val, joints, name,
+                                    out["validation_inputs"], notes, said,
+                                    [robot.types[robot.joint_names.index(j)] == "revolute"
+                                     for j in joints])
         if val is not None and val_all is not None:
             rec["validation_rel_error_all_rows"] = {
                 k: float(v) for k, v in est.rel_error(val_all).items()}
@@ -1181,31 +1183,32 @@ def _one_signed_loads(est: RobotModel, rec: dict[str, Any], rows_sig: RobotSigna
 
 def _position_extrapolation(est: RobotModel, rec: dict[str, Any], rows_sig: RobotSignals,
                             val: RobotSignals, joints: Sequence[str], name: str,
-                            files: Sequence[str], notes: list[str], named: bool = False
-                            ) -> bool:
+                            files: Sequence[str], notes: list[str], said: set[str],
+                            revolute: Sequence[bool]) -> None:
     """Each joint's validation error split by the fit's position range
     (:func:`ident.results.position_split`): ``rec["validation_position_split"]`` per joint,
     and a note for a joint with more than
     :data:`~ident.results.POSITION_OUTSIDE_SHARE` of its validation rows (those the
-    cross-validation error uses) outside the positions of its fitted rows [rad]. Only the
-    positions decide the split; the headline validation error is unchanged. The files are
-    named in the fit's first such note (``named``: an earlier model's did); returns whether
-    they are named now."""
+    cross-validation error uses) outside the positions of its fitted rows ([rad], [m] for a
+    prismatic joint: ``revolute``, per joint). Only the positions decide the split; the
+    headline validation error is unchanged. ``said``: what the fit's earlier notes said (the
+    files named, the reasons explained; :func:`ident.results.position_split_notes`), updated
+    here."""
     try:
         rows = est.fitted_rows(rows_sig)
     except IdentError:
         rows = np.isfinite(rows_sig.tau)
     rho = est.residual(val)
+    kind = dict(zip(joints, revolute, strict=True))
     splits = {joint: position_split(rows_sig.q[rows[:, j], j], val.q[:, j], val.tau[:, j],
                                     rho[:, j]) for j, joint in enumerate(joints)}
     splits = {joint: sp for joint, sp in splits.items() if sp is not None}
-    said = position_split_notes(((f"{joint} ({name} model)", sp)
-                                 for joint, sp in splits.items()), files, named=named)
-    notes.extend(said)
+    notes.extend(position_split_notes(((f"{joint} ({name} model)", sp)
+                                       for joint, sp in splits.items()), files,
+                                      [kind[joint] for joint in splits], said=said))
     rec["validation_position_split"] = {
         joint: position_split_json(sp)
         for joint, sp in splits.items()}
-    return named or bool(said)
 
 
 def _without_full(sig: RobotSignals) -> RobotSignals:

@@ -22,6 +22,7 @@ scan again after a refinement, each point the n-dof refit of the found terms (wh
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -38,7 +39,8 @@ from .robot.signals import RobotSignals
 from .terms import Term
 
 __all__ = ["QsScan", "QsJointsScan", "qs_grid", "rescan_qs", "rescan_qs_joints", "scan_qs",
-           "scan_qs_joints", "QS_XTOL", "QS_SEARCH_EVALS", "QS_WORKERS", "QS_MAX_SWEEPS"]
+           "scan_qs_joints", "model_at_qs_joints", "QS_XTOL", "QS_SEARCH_EVALS", "QS_WORKERS",
+           "QS_MAX_SWEEPS"]
 
 #: Resolution of the q_s scan after the grid, on log q_s (1 %).
 QS_XTOL = 0.01
@@ -164,9 +166,7 @@ def rescan_qs(
     DataError
         Not a paper model, a q_s the refit cannot be made at (one line, the refit's reason).
     """
-    if getattr(model, "model", None) != "paper":
-        raise DataError("rescan_qs: q_s is a parameter of the paper model; this model is "
-                        f"{getattr(model, 'model', type(model).__name__)!r}")
+    _check_paper(model, "rescan_qs")
     at = signals if callable(signals) else (lambda _q: signals)
     scanned = tuple(model.joints_ if joints is None else joints)
     if prediction is None and columns is None:  # the terms' load: the model's own
@@ -180,14 +180,10 @@ def rescan_qs(
                                 "differ, and the signals are formed per q_s)")
             prediction = model.predict(at(own.pop()))
 
-    def refit(q: float, errors_only: bool = True) -> RobotRefit:
-        try:
-            return refit_robot(model_at_qs(model, q, scanned), at(q), terms,
-                               prediction=prediction, keep=keep, revolute=revolute,
-                               columns=columns, instrument_columns=instrument_columns,
-                               refit_eliminated=refit_eliminated, errors_only=errors_only)
-        except RobotIdentError as exc:
-            raise DataError(f"rescan_qs at q_s = {q:.4g} rad/s: {exc}") from None
+    refit = _refitter("rescan_qs", lambda q: model_at_qs(model, q, scanned), at, terms,
+                      prediction=prediction, keep=keep, revolute=revolute, columns=columns,
+                      instrument_columns=instrument_columns,
+                      refit_eliminated=refit_eliminated)
 
     def score(q: float) -> float:
         return float(refit(q).rel_error["after"]["all"])
@@ -449,7 +445,7 @@ def rescan_qs_joints(
     """One q_s per joint chosen again after a refinement: :func:`scan_qs_joints` (the shared
     grid, then coordinate sweeps, on the error over every joint's rows) where the fit at each
     q_s vector is :func:`ident.robot.refit.refit_robot` of ``terms`` on the model with those
-    q_s (:func:`ident.robot.refit.model_at_qs` joint by joint; scored with ``errors_only``),
+    q_s (:func:`model_at_qs_joints`, one copy per vector; scored with ``errors_only``),
     every parameter of every joint estimated together; the chosen vector is then refitted
     whole. The per-joint counterpart of :func:`rescan_qs` (``--q-s scan-joints`` then
     ``--refine``).
@@ -481,35 +477,79 @@ def rescan_qs_joints(
     DataError
         Not a paper model, bad ``vmax``, or the refit failing at every point of the grid.
     """
-    if getattr(model, "model", None) != "paper":
-        raise DataError("rescan_qs_joints: q_s is a parameter of the paper model; this model "
-                        f"is {getattr(model, 'model', type(model).__name__)!r}")
+    _check_paper(model, "rescan_qs_joints")
     names = tuple(model.joints_)
     if prediction is None:
         prediction = model.predict(signals)
 
-    def at(q: np.ndarray) -> Any:
-        m = model
-        for n, v in zip(names, q, strict=True):
-            m = model_at_qs(m, float(v), [n])
-        return m
-
-    def refit(q: np.ndarray, errors_only: bool = True) -> RobotRefit:
-        return refit_robot(at(q), signals, terms, prediction=prediction, keep=keep,
-                           revolute=revolute, errors_only=errors_only)
+    refit = _refitter("rescan_qs_joints", lambda q: model_at_qs_joints(model, q),
+                      lambda _q: signals, terms, prediction=prediction, keep=keep,
+                      revolute=revolute)
 
     def score(q: np.ndarray) -> dict[str, float]:
         try:
             return dict(refit(q).rel_error["after"])
-        except RobotIdentError:
+        except _RefitFailed:
             return {}  # every score inf
 
     res = scan_qs_joints(score, vmax, names, n_grid=n_grid)
-    best = np.array([res.q_s[n] for n in names])
-    try:
-        return res, refit(best, errors_only=False)
-    except RobotIdentError as exc:
-        raise DataError(f"rescan_qs_joints at q_s = {best.tolist()} rad/s: {exc}") from None
+    return res, refit(np.array([res.q_s[n] for n in names]), errors_only=False)
+
+
+def model_at_qs_joints(model: Any, q_s: Sequence[float]) -> Any:
+    """The fitted n-dof ``model`` with joint j's velocity constant set to ``q_s[j]`` [rad/s]
+    (the model's joints' order), its estimates unchanged: :func:`ident.robot.refit.model_at_qs`
+    with one q_s per joint, in one shallow copy (``model`` itself is not changed).
+
+    Raises
+    ------
+    RobotIdentError
+        Not one q_s per joint, or a q_s not positive and finite.
+    """
+    model._check_fitted()
+    names = tuple(model.joints_)
+    q = np.array(q_s, dtype=float)
+    if q.shape != (len(names),):
+        raise RobotIdentError(f"model_at_qs_joints: {q.size} q_s for the model's joints "
+                              f"{names}; expected one per joint")
+    bad = [n for n, v in zip(names, q, strict=True) if not (math.isfinite(v) and v > 0)]
+    if bad:
+        raise RobotIdentError(f"model_at_qs_joints: q_s of {bad} must be positive velocities "
+                              f"[rad/s], got {q.tolist()}")
+    out = copy.copy(model)
+    out.q_s_ = q
+    return out
+
+
+def _check_paper(model: Any, who: str) -> None:
+    """Refuse, in one line naming ``who``, a model other than the paper model (the only one
+    with a q_s to scan)."""
+    if getattr(model, "model", None) != "paper":
+        raise DataError(f"{who}: q_s is a parameter of the paper model; this model is "
+                        f"{getattr(model, 'model', type(model).__name__)!r}")
+
+
+class _RefitFailed(DataError):
+    """The refit of a rescan failed at a q_s (:func:`_refitter`; the message names where)."""
+
+
+def _refitter(who: str, model_at: Callable[[Any], Any],
+              signals_at: Callable[[Any], RobotSignals], terms: Sequence[tuple[int, Term]],
+              **kw: Any) -> Callable[..., RobotRefit]:
+    """The refit of a rescan at a q_s: ``refit(q, errors_only=True)`` is
+    :func:`~ident.robot.refit.refit_robot` of ``terms`` on ``model_at(q)`` with
+    ``signals_at(q)`` and the options ``kw``; ``q`` a q_s [rad/s] (:func:`rescan_qs`) or one
+    per joint (:func:`rescan_qs_joints`). A refit that cannot be made raises
+    :class:`_RefitFailed` (a :class:`~ident.DataError`), one line naming ``who`` and q."""
+
+    def refit(q: Any, errors_only: bool = True) -> RobotRefit:
+        try:
+            return refit_robot(model_at(q), signals_at(q), terms, errors_only=errors_only, **kw)
+        except RobotIdentError as exc:
+            at = f"{q:.4g}" if np.ndim(q) == 0 else f"{np.asarray(q).tolist()}"
+            raise _RefitFailed(f"{who} at q_s = {at} rad/s: {exc}") from None
+
+    return refit
 
 
 def _finite(x: Any) -> float:

@@ -238,17 +238,43 @@ def position_split_json(split: Mapping[str, Any]) -> dict[str, Any]:
                 else v if isinstance(v, int) else json_float(v)) for k, v in split.items()}
 
 
+#: The reasons a position note gives: (short form, full explanation). The full one is said
+#: once per report, in the first note that gives the reason (:func:`position_split_notes`);
+#: the later notes give the short form.
+_WHY = {
+    "extrapolation": ("position extrapolation",
+                      "position extrapolation: over a narrow range of q the gravity columns can "
+                      "be nearly collinear with the friction constants, and what cancels on the "
+                      "fit's rows need not elsewhere; the cross-validation error above includes "
+                      "these rows"),
+    "inside": ("about as large inside: not the positions",
+               "inside the range the error is about as large: the positions alone do not "
+               "explain the cross-validation error"),
+}
+
+
+def _reason(split: Mapping[str, Any]) -> str:
+    """The key in :data:`_WHY` of a split's note: position extrapolation where the rows
+    outside err more than :data:`OUTSIDE_ERROR_RATIO` times those inside (or one part has
+    no rows), else the positions do not explain the error."""
+    e_in, e_out = split["error_inside"], split["error_outside"]
+    if e_in is None or e_out is None or e_out > OUTSIDE_ERROR_RATIO * e_in:
+        return "extrapolation"
+    return "inside"
+
+
 def position_split_note(split: Mapping[str, Any] | None, what: str, files: str,
-                        revolute: bool = True) -> str | None:
+                        revolute: bool = True, explain: bool = True) -> str | None:
     """The note of :func:`position_split` when more than :data:`POSITION_OUTSIDE_SHARE` of
     the validation rows lie outside the fit's positions, else None. ``what``: e.g.
-    ``"A1 (paper model)"``; ``files``: the validation files' names; q in [rad] ([m]
-    prismatic), with degrees for a revolute joint."""
+    ``"A1 (paper model)"``; ``files``: the validation files' names; q in [rad] with degrees
+    for a revolute joint, in [m] with millimetres for a prismatic one; ``explain``: the
+    reason in full (False: its short form, an earlier note of the report explained it)."""
     if split is None or split["share_outside"] <= POSITION_OUTSIDE_SHARE:
         return None
     lo, hi = split["q_fit_range"]
     rng = (f"q = {lo:.3g}..{hi:.3g} rad ({np.degrees(lo):.3g}..{np.degrees(hi):.3g} deg)"
-           if revolute else f"q = {lo:.3g}..{hi:.3g} m")
+           if revolute else f"q = {lo:.3g}..{hi:.3g} m ({1e3 * lo:.3g}..{1e3 * hi:.3g} mm)")
     share = 100 * split["share_outside"]
 
     def pct(x: float | None) -> str:
@@ -256,27 +282,22 @@ def position_split_note(split: Mapping[str, Any] | None, what: str, files: str,
 
     inside = (f", the {100 - share:.0f} % inside {pct(split['error_inside'])}"
               if split["rows_outside"] < split["rows"] else "")
-    e_in, e_out = split["error_inside"], split["error_outside"]
-    if e_in is None or e_out is None or e_out > OUTSIDE_ERROR_RATIO * e_in:
-        why = ("position extrapolation: over a narrow range of q the gravity columns can be "
-               "nearly collinear with the friction constants, and what cancels on the fit's "
-               "rows need not elsewhere; the cross-validation error above includes these rows")
-    else:  # not the positions: say so rather than blame them
-        why = ("inside the range the error is about as large: the positions alone do not "
-               "explain the cross-validation error")
+    why = _WHY[_reason(split)][1 if explain else 0]
     return (f"validation, {what}: {share:.0f} % of the rows of {files} lie outside the fit's "
-            f"positions {rng}: their error {pct(e_out)}{inside} ({why})")
+            f"positions {rng}: their error {pct(split['error_outside'])}{inside} ({why})")
 
 
 def position_split_notes(splits: Iterable[tuple[str, Mapping[str, Any] | None]],
-                         files: Sequence[str | Path], revolute: bool = True, *,
-                         named: bool = False) -> list[str]:
+                         files: Sequence[str | Path], revolute: bool | Sequence[bool] = True,
+                         *, said: set[str] | None = None) -> list[str]:
     """The notes of :func:`position_split_note` for the splits of one fit on the same
     validation files: the single-joint fit's models (:func:`ident.fitting.fit_models`, the
     subject naming the axis when known) or the robot fit's joints of one model
-    (``ident.cli_robot``). The one place the files' names are joined (``", "``, names
-    without their folders; "the validation data" without files), and said once per fit: the
-    first note names them, the next ones say "the same files".
+    (``ident.cli_robot``), one line each. The one place the files' names are joined
+    (``", "``, names without their folders; "the validation data" without files), and said
+    once per report: the first note names them, the next ones say "the same files"; each
+    reason is explained in full once too (the first note giving it; the next ones give its
+    short form, e.g. "(position extrapolation)").
 
     Parameters
     ----------
@@ -285,11 +306,13 @@ def position_split_notes(splits: Iterable[tuple[str, Mapping[str, Any] | None]],
         :func:`position_split`.
     files : sequence of str or Path
         The validation files.
-    revolute : bool
-        Joint kind: q in [rad] with degrees, else [m].
-    named : bool
-        An earlier note of the same fit named the files already (the robot fit's earlier
-        model): every note then says "the same files".
+    revolute : bool or sequence of bool
+        Joint kind (q in [rad] with degrees, else [m] with millimetres): one for every
+        split, or one per split in the order given (a robot's joints).
+    said : set of str, optional
+        What earlier notes of the same report said, updated here: ``"files"`` once the
+        files are named, and the reasons explained in full (keys of ``_WHY``). The robot
+        fit passes one set through its models, so that each is said once per report.
 
     Returns
     -------
@@ -297,10 +320,14 @@ def position_split_notes(splits: Iterable[tuple[str, Mapping[str, Any] | None]],
         One note per split past :data:`POSITION_OUTSIDE_SHARE`, in the order given.
     """
     where = ", ".join(Path(f).name for f in files) or "the validation data"
+    said = set() if said is None else said
     out: list[str] = []
-    for what, sp in splits:
-        said = named or bool(out)
-        if (n := position_split_note(sp, what, "the same files" if said else where,
-                                     revolute)) is not None:
+    for i, (what, sp) in enumerate(splits):
+        rev = bool(revolute if np.ndim(revolute) == 0 else revolute[i])
+        why = None if sp is None else _reason(sp)
+        n = position_split_note(sp, what, "the same files" if "files" in said else where,
+                                rev, explain=why not in said)
+        if n is not None:
             out.append(n)
+            said.update(("files", why))
     return out

@@ -28,8 +28,9 @@ from robot_campaigns import ARM3, ARM3_CENTRE, ARM3_PAYLOADS, write_arm_csv
 
 from daq.app.cli import main
 from ident.cli_robot import fit_files
-from ident.qs_scan import rescan_qs_joints
-from ident.robot.refit import extra_name, refit_robot
+from ident.qs_scan import model_at_qs_joints, rescan_qs_joints
+from ident.robot import RobotIdentError
+from ident.robot.refit import extra_name, model_at_qs, refit_robot
 from sim_drivers.arm import ArmEffects, ArmGains, ArmParams, model_reference, simulate_arm
 from tests.test_robot_refit import _TrueDrag
 from trajectories.robot import load_robot
@@ -90,6 +91,15 @@ def test_rescan_joints_with_the_true_drag(tmp_path, seed):
           f"{at_fit.rel_error['after']['all']:.5%}, rescanned {rf.rel_error['after']['all']:.5%}"
           f" ({res.fits} refits, {res.sweeps} sweeps)")
     np.testing.assert_array_equal(rf.model.q_s_, q)  # the refit returned is at the scan's q_s
+    # the scan's model at a q_s vector (one copy) is model_at_qs joint by joint, est untouched
+    fit_qs = np.array(est.q_s_)
+    chained = est
+    for n, v in zip(joints, q, strict=True):
+        chained = model_at_qs(chained, v, [n])
+    np.testing.assert_array_equal(model_at_qs_joints(est, q).q_s_, chained.q_s_)
+    np.testing.assert_array_equal(est.q_s_, fit_qs)
+    with pytest.raises(RobotIdentError, match=rf"q_s of \['{joints[1]}'\] must be positive"):
+        model_at_qs_joints(est, [q[0], -q[1], q[2]])
     assert rf.rel_error["after"]["all"] == pytest.approx(res.error["all"], rel=1e-12)
     assert max(off.values()) < FACTOR_JOINTS, off
     # the fit without the drag lets joint 3's Stribeck term take part of it (q_s too high:

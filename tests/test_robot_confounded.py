@@ -95,17 +95,23 @@ rotor_inertia = 5.0e-5
 """
 
 
+def cylindrical_arm(folder: Path) -> tuple[Path, ArmParams]:
+    """The robot file written in ``folder`` and the simulator's parameters: usual friction
+    on every joint (no load-dependent terms, c_g = c_m)."""
+    path = folder / "cyl3.toml"
+    path.write_text(CYLINDRICAL)
+    robot = load_robot(path)
+    c = ArmParams.from_robot(robot).friction.c_m
+    return path, ArmParams.from_robot(robot, dict(a_m=1.0, b_m=0.0, a_g=1.0, b_g=0.0,
+                                                  d_m=0.0, d_g=0.0, c_g=c))
+
+
 @pytest.fixture(scope="module")
 def cylindrical(tmp_path_factory) -> tuple[Path, Path, dict[str, float]]:
     """The robot file, one simulated run as a robot CSV (usual friction on every joint, the
     simulator's drive noise) and the simulator's truth."""
     d = tmp_path_factory.mktemp("cyl3")
-    path = d / "cyl3.toml"
-    path.write_text(CYLINDRICAL)
-    robot = load_robot(path)
-    c = ArmParams.from_robot(robot).friction.c_m
-    params = ArmParams.from_robot(robot, dict(a_m=1.0, b_m=0.0, a_g=1.0, b_g=0.0, d_m=0.0,
-                                              d_g=0.0, c_g=c))
+    path, params = cylindrical_arm(d)
     ref = model_reference(params.model, fraction=0.9, duration_s=12.0, seed=1)
     run = simulate_arm(params, ref, ArmGains.for_params(params), seed=0)
     return path, write_arm_csv(run, d / "run0.csv"), params.truth()
