@@ -14,6 +14,7 @@ import argparse
 import json
 import math
 import os
+import re
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -380,12 +381,22 @@ def _axis_label(inputs: Sequence[Path | str], mapping: Mapping[str, Any], axis: 
                 ) -> str | None:
     """The axis the single-joint fit reads from multi-axis files, for its notes: the mapped
     position's path when it picks a row or column (``"axis rec.act_pos_mot_deg[3]"``), or
-    ``"axis N"`` (``--axis N``) for MCAP logs; None otherwise (a one-axis file)."""
+    ``"axis N"`` (``--axis N``) for MCAP logs of more than one drive (their ``drive<i>``
+    metadata; a log without it counts as several); None otherwise (a one-axis file)."""
+    from daq.protocol.reader import LogReadError, read_metadata
+
     q = mapping.get("q")
     if isinstance(q, str) and "[" in q:
         return f"axis {q}"
-    if any(str(p).lower().endswith(".mcap") for p in inputs):
-        return f"axis {axis}"
+    for p in inputs:
+        if not str(p).lower().endswith(".mcap"):
+            continue
+        try:
+            drives = sum(1 for k in read_metadata(p) if re.fullmatch(r"drive\d+", k))
+        except (LogReadError, OSError):  # the loader has read it already; say the axis
+            drives = 0
+        if drives != 1:
+            return f"axis {axis}"
     return None
 
 
