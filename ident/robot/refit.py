@@ -159,8 +159,9 @@ class RobotRefit:
         the columns d pred_j / d q_s,j = sum over quadrants of P (V c1) dE/dq_s (E =
         exp(-|dq|/q_s)): what the parameters' spread is when q_s is chosen from the same data
         (``--q-s scan-joints``, :func:`ident.qs_scan.rescan_qs_joints`), which ``std_``, at
-        q_s fixed, leaves out (docs/refinement.md, section 8.9). ``std_`` for the linear
-        forms and IDIM-IV (no q_s in the rows, or no eq. 15).
+        q_s fixed, leaves out (docs/refinement.md, section 8.9). ``std_`` itself for the
+        usual model (no q_s), the products form (q_s fixed with its products) and IDIM-IV
+        (its covariance is not eq. 15's).
     cov_ : ndarray
     params_ : dict
         name -> value.
@@ -508,8 +509,7 @@ def _qs_free_std(sys: _System, x: np.ndarray, free: np.ndarray, w: np.ndarray,
     std_qs_``): sigma^2 (J_q^T W J_q)^-1 on the free parameters and the joints' q_s, J_q the
     system's Jacobian at x with one more column per joint (:func:`_qs_columns`). A joint
     whose column is zero (no Stribeck term on its rows) adds nothing. The paper model's
-    bilinear form, LS or WLS (the linear forms have no q_s in their rows; IDIM-IV no eq.
-    15)."""
+    bilinear form, LS or WLS (``refit_robot`` gives ``std_`` itself for the others)."""
     nx, k = sys.nx, len(sys.rows)
     A = np.zeros((nx + k, nx + k))
     cols = _qs_columns(sys, x)
