@@ -153,6 +153,15 @@ class RobotRefit:
     coef_, std_ : ndarray
         Estimates and standard deviations (eq. 15, sigma^2 (J^T J)^-1 at the solution;
         IDIM-IV: the sandwich sigma^2 (Z^T J)^-1 Z^T Z (J^T Z)^-1).
+    std_qs_ : ndarray
+        The standard deviations with every joint's q_s of the paper model (bilinear form on
+        the decimated rows) estimated beside the parameters, eq. 15 on the Jacobian with
+        the columns d pred_j / d q_s,j = sum over quadrants of P (V c1) dE/dq_s (E =
+        exp(-|dq|/q_s)): what the parameters' spread is when q_s is chosen from the same data
+        (``--q-s scan-joints``, :func:`ident.qs_scan.rescan_qs_joints`), which ``std_``, at
+        q_s fixed, leaves out (docs/refinement.md, section 8.9). ``std_`` itself for the
+        usual model (no q_s), the products form (q_s fixed with its products) and IDIM-IV
+        (its covariance is not eq. 15's).
     cov_ : ndarray
     params_ : dict
         name -> value.
@@ -189,6 +198,7 @@ class RobotRefit:
     names_: tuple[str, ...] = ()
     coef_: np.ndarray = field(default_factory=lambda: np.zeros(0))
     std_: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    std_qs_: np.ndarray = field(default_factory=lambda: np.zeros(0))
     cov_: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     params_: dict[str, float] = field(default_factory=dict)
     extras: list[dict[str, Any]] = field(default_factory=list)
@@ -416,11 +426,13 @@ def refit_robot(
     cov[np.ix_(free, free)] = sys.est.normal_covariance(A, C, sigma2)
     out.coef_, out.cov_ = x, cov
     out.std_ = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    out.std_qs_ = out.std_.copy() if linear or iv else _qs_free_std(sys, x, free, w, sigma2)
     out.params_ = dict(zip(names, x.tolist(), strict=True))
     for ex, (_, t) in zip(extras, terms, strict=True):
         i = np.array(ex.pop("index"))
         ex["values"] = x[i].tolist()
         ex["std"] = out.std_[i].tolist()
+        ex["std_qs"] = out.std_qs_[i].tolist()
         ex["wald"], ex["significant"] = _wald(x[i], cov[np.ix_(i, i)])
         ex["parameters"] = {}
         if hasattr(t, "parameters"):
@@ -471,6 +483,52 @@ def _estimate(sys: _System, x0: np.ndarray, free: np.ndarray, linear: bool,
         w = 1.0 / sj**2
         x, it = sys.solve(x, free, w, linear)
     return x, it, w
+
+
+def _qs_columns(sys: _System, x: np.ndarray) -> list[np.ndarray]:
+    """Per joint j, d pred_j / d q_s,j at x on its rows: sum_s P_s (V c1_s) dE/dq_s, with
+    dE/dq_s = E |dq| / q_s^2 = -E ln(E) / q_s (the paper model's bilinear form)."""
+    m = sys.model
+    out = []
+    for j, rw in enumerate(sys.rows):
+        nt = m._nt(j)
+        li = m._local(j)
+        th, blk = x[li[:nt]], x[li[nt:]]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dE = np.where(rw.E > 0, -rw.E * np.log(rw.E) / float(m.q_s_[j]), 0.0)
+        col = np.zeros(rw.E.size)
+        for s, ws in ((0, rw.pp), (1, 1.0 - rw.pp)):
+            col = col + ws * dE * (rw.V @ sys.coeffs(th, blk, s)[1])
+        out.append(col)
+    return out
+
+
+def _qs_free_std(sys: _System, x: np.ndarray, free: np.ndarray, w: np.ndarray,
+                 sigma2: float) -> np.ndarray:
+    """Eq. 15's standard deviations with each joint's q_s estimated too (``RobotRefit.
+    std_qs_``): sigma^2 (J_q^T W J_q)^-1 on the free parameters and the joints' q_s, J_q the
+    system's Jacobian at x with one more column per joint (:func:`_qs_columns`). A joint
+    whose column is zero (no Stribeck term on its rows) adds nothing. The paper model's
+    bilinear form, LS or WLS (``refit_robot`` gives ``std_`` itself for the others)."""
+    nx, k = sys.nx, len(sys.rows)
+    A = np.zeros((nx + k, nx + k))
+    cols = _qs_columns(sys, x)
+    has_q = np.array([bool(np.any(c != 0)) for c in cols])
+    for j, qcol in enumerate(cols):
+        li = sys.local(j)
+        _, J = sys.joint(j, x)
+        J = np.where(free[li][None, :], J, 0.0)
+        idx = np.append(li, nx + j)
+        Jq = np.concatenate([J, qcol[:, None]], axis=1)
+        A[np.ix_(idx, idx)] += w[j] * (Jq.T @ Jq)
+    fi = np.flatnonzero(np.concatenate([free, has_q]))
+    Af = A[np.ix_(fi, fi)]
+    d = np.sqrt(np.abs(np.diag(Af)))
+    d[d == 0] = 1.0
+    cov = np.linalg.pinv(Af / d[:, None] / d[None, :], rcond=1e-12) / d[:, None] / d[None, :]
+    std = np.zeros(nx + k)
+    std[fi] = np.sqrt(np.clip(sigma2 * np.diag(cov), 0.0, None))
+    return std[:nx]
 
 
 def _wald(x: np.ndarray, cov: np.ndarray) -> tuple[float | None, bool]:
