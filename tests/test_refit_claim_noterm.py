@@ -9,8 +9,9 @@ model always); with the fit's own quadrants (``quadrant_theta_ = quadrant_from_`
 the fit to rounding whenever the fit's Gauss-Newton converged -- the quadrants are the only
 difference. A paper fit whose last pass left rows in another quadrant is flagged
 (``unsettled``): the 3-dof arm, seed 3, 61 of 6309 rows of j2 (IDIM-WLS; parameters up to
-1.37 sigma, 5 of 46 above one); the KUKA KR300's file A at the default trim of 60, 34 % of
-A4's rows (b_g4 38 sigma, 13 of 100 above one sigma, A4 2.04 -> 4.90 %).
+1.37 sigma, 5 of 46 above one); the KUKA KR300's file A at the default trim of 60, 5 % of
+A3's and 43 % of A4's rows (parameters up to 26.8 sigma, 59 of 100 above one sigma; 34 % of
+A4's, b_g4 38 sigma, before the band-aware quadrant passes of 2026-11-29).
 
 Data: the offline 3-dof arm simulator (tests/robot_campaigns.py, true states, 1 % noise)
 over seeds 2, 3, 5, and the real KUKA recordings of Weigand et al. (skipped without them).
