@@ -1098,21 +1098,30 @@ def band_left_out(sel: RobotSignals, every: RobotSignals,
 
 def _settled(est: RobotModel, rec: dict[str, Any], rows_sig: RobotSignals,
              joints: Sequence[str], notes: list[str]) -> None:
-    """Whether the paper fit settled its quadrants: ``converged``, ``quadrant_drift`` per joint
-    (:meth:`RobotModel.quadrant_drift`) and, where a joint's drift exceeds ``QUADRANT_TOL``,
-    ``rel_error_own_quadrants`` (the fitted parameters on their own quadrants, the same
-    rows) and a note: its reported error is then not the error of its values.
+    """Whether the paper fit settled its quadrants: ``converged`` (``RobotModel.converged_``:
+    false when its last Gauss-Newton stopped at its iteration limit or its quadrant passes at
+    ``max_passes`` with rows still changing quadrant or crossing the quadrant band and the
+    parameters still moving; then ``convergence``, the estimator's reason, and a note),
+    ``quadrant_drift`` per joint (:meth:`RobotModel.quadrant_drift`) and, where a joint's
+    drift exceeds ``QUADRANT_TOL``, ``rel_error_own_quadrants`` (the fitted parameters on
+    their own quadrants, the same rows) and a note: its reported error is then not the error
+    of its values.
 
     Soft quadrants (:mod:`ident.robot.soft_fit`): no hard quadrant to drift from (every row
     weighs both), so no ``quadrant_drift``; ``converged`` is the least-squares solver's, a
     note when it stopped at its evaluation limit."""
     rec["converged"] = bool(getattr(est, "converged_", True))
+    if not rec["converged"]:
+        rec["convergence"] = str(getattr(est, "convergence_", "") or "")
     if getattr(est, "quadrants", "hard") == "soft":
         if not rec["converged"]:
             notes.append("paper model (soft quadrants): the least-squares fit stopped at its "
                          "evaluation limit (20 x max_iter): its values are not a minimum of "
                          "its residual")
         return
+    if not rec["converged"] and rec["convergence"]:
+        notes.append(f"paper model: the fit did not converge: {rec['convergence']}; its "
+                     "values are those of the last pass, not a settled estimate")
     drift = est.quadrant_drift(rows_sig)
     rec["quadrant_drift"] = {j: float(x) for j, x in zip(joints, drift, strict=True)}
     bad = [(j, x) for j, x in zip(joints, drift, strict=True) if x > QUADRANT_TOL]
@@ -1121,7 +1130,7 @@ def _settled(est: RobotModel, rec: dict[str, Any], rows_sig: RobotSignals,
     own = est.rel_error(replace(rows_sig, tau=np.where(est.fitted_rows(rows_sig), rows_sig.tau,
                                                        np.nan)))
     rec["rel_error_own_quadrants"] = {k: float(v) for k, v in own.items()}
-    why = "" if rec["converged"] else " (Gauss-Newton stopped at its iteration limit)"
+    why = "" if rec["converged"] else " (not converged: above)"
     notes.append(
         f"paper model: the fit did not settle{why}: with its final values the model quadrant "
         "changes on " + ", ".join(f"{100 * x:.0f} % of {j}'s rows" for j, x in bad)

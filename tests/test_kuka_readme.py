@@ -3,13 +3,20 @@
 README.md ("Whole robots") gives one command on the real recordings of Weigand et al.
 (``../shared/data/kuka_kr300_weigand2021``, not in the repository; the test is skipped
 without them): fit on recording A, cross-validate on B and C, ``--model both``. It quotes,
-for the paper model: 23 friction parameters pruned, a fit of 1.0 % against the usual
-model's 1.4 % on the same rows, and a cross-validation on B and C of 11.4 % against the
-usual model's 18.2 % on the same rows.
-This test runs that command, and ``--model usual``, in process (``daq.app.cli.main``, what
-the ``jointid`` script calls) and checks what the README's claim rests on.
+for the paper model: a fit of 1.0 % against the usual model's 1.4 % on the same rows, a
+cross-validation on B and C of 19.8 % against the usual model's 18.2 % on the same rows (no
+better), and a fit that does not converge (Gauss-Newton at its iteration limit, the quadrant
+passes at their cap with rows still crossing the quadrant band); 19 friction parameters
+pruned (docs/robot-data.md).
+This test runs that command in process (``daq.app.cli.main``, what the ``jointid`` script
+calls) and checks those figures.
 
-What breaks it (measured, docs/robot-identification.md "Pruning"): the greedy pruning reads
+Until 2026-11-29 the quadrant passes stopped on quadrant flips alone, after two
+re-decisions with rows still crossing the band: 11.4 % against 18.2 %, 23 pruned, and the
+paper model below the usual one fitted alone (15.0 %), which this test asserted then.
+
+What breaks it (measured before 2026-11-29's stopping rule, docs/robot-identification.md
+"Pruning"): the greedy pruning reads
 the relative sigma, so any change of that sigma changes which parameters go, and with them
 the cross-validation. With the trim of 61 samples the default gave until 2026-11-28 (below),
 the pruning reading the honest sigma's HC3 side pruned 19 other parameters and moved the
@@ -19,7 +26,7 @@ trim 60). So does a change of which decimated rows are kept: the default trim is
 ceil(3 f_s / cut-off) samples;
 the files store their period as 0.0039999999 s, which made it ceil(60.0000015) = 61 until
 the ceil ignored a sub-ppm excess (``ident.chain.TRIM_RTOL``); it is 60 now, as with an
-exact 4 ms. Over trims 60 to 66 the paper model cross-validates at 11.4, 7.7, 36.0, 30.3,
+exact 4 ms. Over trims 60 to 66 the paper model cross-validates at 19.8, 9.5, 36.0, 34.5,
 35.2, 16.8 and 27.8 % (docs/robot-data.md): the README's figure is that of this command,
 not a property of the recordings, and this test says when it moves.
 """
@@ -40,20 +47,21 @@ SHARED = Path(os.environ.get("JOINTID_SHARED", ROOT.parent / "shared"))  # as co
 DATA = SHARED / "data" / "kuka_kr300_weigand2021"
 MAP = "t=rec.time_cont,q=rec.act_pos_mot_deg,tau=rec.act_torque_abs_nm,q_ref=rec.ref_pos_deg"
 
-# The README's figure is 11.4 % (11.37 % printed on 2026-11-28 with the trim of 60). The
-# bound is that figure + 10 % of it: far above the rounding of the quoted digits (+-0.05,
-# 0.4 % relative) and any floating-point noise of this deterministic fit, below the
-# neighbouring trims' 16.8-36 % and, narrowly, no pruning's 12.7 % at this trim (module
-# docstring: 23.9 % at trim 61; a pruning that kept everything would just pass). Above it the
-# README's "11.4 %" is no longer what the code gives and must be measured again (or the
-# change found).
-DOCUMENTED_CV_PCT = 11.4
-CV_BOUND_PCT = 1.10 * DOCUMENTED_CV_PCT
-# README: "23 parameters pruned". The count, not the names: the variant with the former
-# honest sigma pruned 22 at trim 61 too, other names, at 9.3 %. +-2 of
+# The README's figure is 19.8 % (19.78 % printed on 2026-11-29 with the trim of 60 and the
+# band-aware quadrant passes). The band is that figure +- 10 % of it: far beyond the rounding
+# of the quoted digits (+-0.05) and any floating-point noise of this deterministic fit, and
+# excluding the neighbouring trims' 9.5 and 36.0 % and the former stopping rule's 11.4 %.
+# Outside it the README's "19.8 %" is no longer what the code gives and must be measured again
+# (or the change found).
+DOCUMENTED_CV_PCT = 19.8
+CV_BAND_PCT = 0.10 * DOCUMENTED_CV_PCT
+# README: the usual model on the same rows, 18.2 % (18.23): the usual fit is linear, one pass,
+# unaffected by the quadrant passes; to its printed digit.
+DOCUMENTED_CV_USUAL_PCT = 18.2
+# docs/robot-data.md: 19 parameters pruned. The count, not the names: +-2 of
 # the 60 prunable parameters: one removal more or less, undone or not by the chi-square
 # test, is a change of the order worth re-reading the docs for, not of the claim.
-DOCUMENTED_PRUNED = 23
+DOCUMENTED_PRUNED = 19
 PRUNED_TOL = 2
 
 pytestmark = pytest.mark.skipif(
@@ -73,25 +81,27 @@ def _fit(tmp_path: Path, capfd, model: str) -> dict:
 
 
 def test_readme_kuka_paper_model_cross_validation_and_pruning(tmp_path, capfd):
-    """The paper model cross-validates on B and C no worse than the usual model (fitted on
-    the same rows, and alone), below the documented figure's bound, with the documented
-    number of pruned parameters."""
+    """The paper model cross-validates on B and C at the documented figure, no better than
+    the usual model on the same rows; its fit does not converge (the README says why), with
+    the documented number of pruned parameters."""
     both = _fit(tmp_path, capfd, "both")["models"]
-    alone = _fit(tmp_path, capfd, "usual")["models"]["usual"]
     paper, usual = both["paper"], both["usual"]
     assert "error" not in paper, paper
     cv = 100 * paper["validation_rel_error"]["all"]
     cv_usual = 100 * usual["validation_rel_error"]["all"]
-    cv_alone = 100 * alone["validation_rel_error"]["all"]
-    print(f"\nCV on B and C, all axes: paper {cv:.2f} %, usual (same rows) {cv_usual:.2f} %, "
-          f"usual alone {cv_alone:.2f} %; pruned {len(paper['uncertainty']['pruned'])}; "
+    print(f"\nCV on B and C, all axes: paper {cv:.2f} %, usual (same rows) {cv_usual:.2f} %; "
+          f"pruned {len(paper['uncertainty']['pruned'])}; "
           f"fit: paper {100 * paper['rel_error']['all']:.2f} %, "
-          f"usual {100 * usual['rel_error']['all']:.2f} %")
-    assert cv <= cv_usual, (cv, cv_usual)
-    assert cv <= cv_alone, (cv, cv_alone)
-    assert cv < CV_BOUND_PCT, (
-        f"paper model's cross-validation on B and C {cv:.2f} % above {CV_BOUND_PCT:.2f} % "
-        f"(README: {DOCUMENTED_CV_PCT} %)")
+          f"usual {100 * usual['rel_error']['all']:.2f} %; converged {paper['converged']}: "
+          f"{paper.get('convergence')}")
+    assert abs(cv - DOCUMENTED_CV_PCT) <= CV_BAND_PCT, (
+        f"paper model's cross-validation on B and C {cv:.2f} % outside "
+        f"{DOCUMENTED_CV_PCT} +- {CV_BAND_PCT:.2f} % (README)")
+    assert abs(cv_usual - DOCUMENTED_CV_USUAL_PCT) <= 0.05 + 1e-9, cv_usual
+    assert cv >= cv_usual, (cv, cv_usual)  # README: "no better"
+    # README: not converged, Gauss-Newton at its limit and the passes at their cap
+    assert paper["converged"] is False
+    assert "max_iter" in paper["convergence"] and "max_passes=8" in paper["convergence"]
     pruned = paper["uncertainty"]["pruned"]
     assert abs(len(pruned) - DOCUMENTED_PRUNED) <= PRUNED_TOL, pruned
     assert all(paper["parameters"][p]["pruned"] for p in pruned)

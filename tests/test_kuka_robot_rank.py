@@ -19,6 +19,7 @@ import json
 import math
 import re
 
+import pytest
 from test_kuka_readme import DATA, KUKA, MAP, pytestmark  # noqa: F401  (skip without data)
 
 from daq.app.cli import main
@@ -68,6 +69,12 @@ def test_trim_67_fits_and_reports_a4_motor_columns_dropped(tmp_path, capfd):
     assert all(math.isfinite(v) for v in cv.values()), cv
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "since the band-aware quadrant passes (2026-11-29) trim 73's passes run to their cap and "
+    "end on quadrants where A4 keeps motor rows: nothing is dropped (38.6 %, 1 pruned), so "
+    "this case no longer arises here; the rule itself: tests/test_rank_rule_near.py. Trim 68 "
+    "is now refused on such a near-dependence the pivoted rule does not name "
+    "(docs/robot-data.md)"))
 def test_trim_73_nearly_dependent_columns_are_dropped_not_refused(tmp_path, capfd):
     """At ``--trim 73`` A4 keeps no row in the motor quadrant (a_m4 ... d_m4 dropped, as at
     67), and its generator rows then dominate the base columns they share: on them MY4R and

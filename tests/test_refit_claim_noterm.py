@@ -9,8 +9,9 @@ model always); with the fit's own quadrants (``quadrant_theta_ = quadrant_from_`
 the fit to rounding whenever the fit's Gauss-Newton converged -- the quadrants are the only
 difference. A paper fit whose last pass left rows in another quadrant is flagged
 (``unsettled``): the 3-dof arm, seed 3, 61 of 6309 rows of j2 (IDIM-WLS; parameters up to
-1.37 sigma, 5 of 46 above one); the KUKA KR300's file A at the default trim of 60, 34 % of
-A4's rows (b_g4 38 sigma, 13 of 100 above one sigma, A4 2.04 -> 4.90 %).
+1.37 sigma, 5 of 46 above one); the KUKA KR300's file A at the default trim of 60, 5 % of
+A3's and 43 % of A4's rows (parameters up to 26.8 sigma, 59 of 100 above one sigma; 34 % of
+A4's, b_g4 38 sigma, before the band-aware quadrant passes of 2026-11-29).
 
 Data: the offline 3-dof arm simulator (tests/robot_campaigns.py, true states, 1 % noise)
 over seeds 2, 3, 5, and the real KUKA recordings of Weigand et al. (skipped without them).
@@ -89,7 +90,9 @@ def test_arm_refit_without_terms_differs_from_the_fit_by_the_quadrants_only(seed
     _common(usual, sig)
     _same(refit_robot(usual, sig, []), usual)
     est = RobotModel(reg, "paper", base=base, dq_min=0.02, method=method).fit(sig)
-    assert est.converged_
+    # its Gauss-Newton converged (converged_ asks settled quadrant passes too: on this arm
+    # rows keep crossing the band, docs/refinement.md)
+    assert est.n_iter_ < est.max_iter
     rf, drift = _common(est, sig)
     _same(_at_fit_quadrants(est, sig), est)
     z = _sigmas(rf, est)
@@ -118,7 +121,7 @@ def test_kuka_refit_without_terms():
     rf, drift = _common(paper, sig)
     assert rf.unsettled  # the real data's unsettled paper fit (A4)
     at = _at_fit_quadrants(paper, sig)
-    if paper.converged_:
+    if paper.n_iter_ < paper.max_iter:  # its Gauss-Newton converged
         _same(at, paper)
     else:
         assert _sigmas(at, paper).max() < 1.0

@@ -119,9 +119,15 @@ METHODS = tuple(ESTIMATORS)
 #: RCOND on the singular values of the scaled regressor, squared on its normal matrix.
 RANK_TOL = RCOND**2
 
-#: Fraction of the rows whose quadrant may still change when the passes stop
-#: (``quadrant="model"``); such rows have tau_out ~ 0, where the quadrant hardly matters.
+#: Fraction of the rows that may still move when the passes stop settled (``quadrant="model"``):
+#: change quadrant, or enter or leave the quadrant band; such rows have tau_out ~ 0 (or ~ the
+#: band's edge), where the quadrant hardly matters.
 QUADRANT_TOL = 1e-4
+
+#: The quadrant passes also stop when no parameter of the paper fit moved by more than this
+#: fraction of its standard deviation (eq. 15) since the previous pass: the rows still moving
+#: then barely change the estimate (``RobotModel.quadrant_steps_``).
+THETA_TOL = 0.1
 
 #: ``quadrant="model"`` on more samples than this: the starting fit reads every stride-th
 #: row (stride = samples // START_ROWS); it only gives the first theta: the quadrants are then
@@ -256,8 +262,12 @@ class RobotModel(HyperParameters):
         P_out = 0. 0: every row.
     max_passes : int
         Quadrant decisions at most (``quadrant="model"``): the usual fit's, then re-decisions
-        with the paper fit's theta; they stop earlier once fewer than ``QUADRANT_TOL`` of the
-        rows change, or when the count stops decreasing (a cycle of boundary rows).
+        with the paper fit's theta; they stop earlier, settled, once at most ``QUADRANT_TOL``
+        of the rows moved -- changed quadrant, or entered or left the quadrant band (a row
+        leaving the fit changes theta as a flip does; with a band rows cross it long before
+        they flip) -- or once no parameter moved by ``THETA_TOL`` (0.1) of its sigma since the
+        previous re-decision. Stopped at ``max_passes`` otherwise: ``converged_`` False (rows
+        near the band's edges can cycle in and out: the 3-dof arm, docs/robot-identification.md).
     payload_ratio : bool
         Identify the payload ratio M_ae / M_aw (``Ma_ratio``, eq. 35) instead of taking the
         payload torque as known; needs an experiment with a payload.
@@ -357,14 +367,22 @@ class RobotModel(HyperParameters):
         and Gauss-Newton iterations of the final fit.
     converged_ : bool
         False when the paper model's final Gauss-Newton stopped at ``max_iter`` instead of
-        its step tolerance (the parameters still moving; see :meth:`quadrant_drift`).
+        its step tolerance (the parameters still moving; see :meth:`quadrant_drift`), or its
+        quadrant passes at ``max_passes`` before they settled (``max_passes`` above).
+    convergence_ : str
+        Why ``converged_`` is False, one line naming the cap reached and the figures (rows
+        still moving, the last step in sigma); "" when it is True.
     start_stride_ : int
         Rows read by the start pass: every start_stride_-th (``START_ROWS``).
     n_store_updates_ : int
         Quadrant re-decisions made on the stored near-boundary rows instead of a pass
         (:mod:`ident.robot.quadrants`).
     quadrant_changes_ : list of int
-        Samples whose quadrant changed at each re-decision (``quadrant="model"``).
+        Rows that moved at each re-decision (``quadrant="model"``): into another quadrant, or
+        into or out of the quadrant band.
+    quadrant_steps_ : list of float
+        At each re-decision, the largest change of a parameter of the paper fit since the
+        previous one, in its standard deviation (eq. 15; inf while a direction is unexcited).
     band_share_ : ndarray (k,)
         Share of each joint's rows (after ``dq_min`` and the columns' ``keep``) left out by
         the quadrant band at the last full pass (0 without a band). Large on a joint that
@@ -748,8 +766,9 @@ class RobotModel(HyperParameters):
               ) -> tuple[list[JointMoments], int, int, list[QuadrantStore] | None]:
         """One pass: the moments of every joint; quadrants from ``theta`` (model) or tau.
 
-        Returns the moments, the number of rows, how many rows are in another quadrant
-        than with ``theta_prev`` (counted on the fly: nothing of size n is kept), and with
+        Returns the moments, the number of rows, how many rows moved with respect to
+        ``theta_prev`` -- into another quadrant, or into or out of the quadrant band (counted
+        on the fly: nothing of size n is kept) --, and with
         ``theta`` and ``capacity`` > 0 the per-joint :class:`QuadrantStore` of the rows
         nearest to their quadrant boundary (:mod:`ident.robot.quadrants`), in the metric of
         the base columns' Gram matrices of ``gram_from`` (moments of the same rows).
@@ -796,9 +815,9 @@ class RobotModel(HyperParameters):
                 if theta_prev is not None:
                     tp = theta_prev[cols] @ WjT + po
                     spp = np.where(np.abs(tp) < h, 0.0, tp * dqo) if h > 0 else tp * dqo
-                    # rows that changed quadrant (entering or leaving the band is no change)
-                    changed += int(np.count_nonzero(
-                        (np.sign(sp) != np.sign(spp)) & ((sp != 0) & (spp != 0) | (h == 0))))
+                    # rows that moved: changed quadrant, or entered or left the band (sign 0);
+                    # either changes the moments (a row crossing the band flips only later)
+                    changed += int(np.count_nonzero(np.sign(sp) != np.sign(spp)))
                 E = stribeck_exp(dqo, self.q_s_[j])
                 if h > 0:  # rows in the band around the quadrant boundary are left out
                     inb = np.abs(tout) < h
@@ -1006,20 +1025,28 @@ class RobotModel(HyperParameters):
                 break
         return x, it
 
-    def _statistics(self, moms, coeffs: Coeffs, x: np.ndarray, free: np.ndarray,
-                    weights: np.ndarray) -> None:
+    def _covariance(self, moms, coeffs: Coeffs, x: np.ndarray, free: np.ndarray,
+                    weights: np.ndarray) -> tuple:
+        """(cov (b, b), sigma^2, rr, yy, rows per joint) of the fit ``x`` (eq. 14-15; 0 on
+        the fixed parameters); cov None without a degree of freedom."""
         A, _, rr, C, yy = self._normal(moms, coeffs, x, weights)
-        nfree = int(free.sum())
         n_rows = np.array([m.n for m in moms])
-        dof = int(n_rows.sum()) - nfree
+        dof = int(n_rows.sum()) - int(free.sum())
         if dof <= 0:
-            raise RobotIdentError(f"RobotModel.fit: {int(n_rows.sum())} rows for {nfree} "
-                                  f"parameters")
+            return None, np.nan, rr, yy, n_rows
         sigma2 = float(weights @ rr) / dof
         cov_f = self._estimator.normal_covariance(
             A[np.ix_(free, free)], None if C is None else C[np.ix_(free, free)], sigma2)
         cov = np.zeros((x.size, x.size))
         cov[np.ix_(free, free)] = cov_f
+        return cov, sigma2, rr, yy, n_rows
+
+    def _statistics(self, moms, coeffs: Coeffs, x: np.ndarray, free: np.ndarray,
+                    weights: np.ndarray) -> None:
+        cov, sigma2, rr, yy, n_rows = self._covariance(moms, coeffs, x, free, weights)
+        if cov is None:
+            raise RobotIdentError(f"RobotModel.fit: {int(n_rows.sum())} rows for "
+                                  f"{int(free.sum())} parameters")
         self._store_solution(x, cov, sigma2, self._joint_sigma(moms, rr, free), n_rows, rr, yy)
 
     def _store_solution(self, x: np.ndarray, cov: np.ndarray, sigma2: float,
@@ -1336,6 +1363,9 @@ class RobotModel(HyperParameters):
         self.names_ = saved[1]
         self.fixed_: dict[str, float] = {}
         self.quadrant_changes_: list[int] = []
+        self.quadrant_steps_: list[float] = []
+        # why the quadrant passes did not settle ("" when they did, or made none)
+        self._unsettled = ""
         self.n_store_updates_ = 0
         # the theta that decided the final moments' quadrants (ident.robot.uncertainty)
         self.quadrant_from_ = None
@@ -1379,13 +1409,16 @@ class RobotModel(HyperParameters):
         x, w, it, pending = self._fit_paper(moms, x, free, damped_ok=loop)
         for _ in range(x.size):
             if loop:
+                self._unsettled = (
+                    f"max_passes={int(self.max_passes)}: the quadrants of the usual fit's "
+                    "theta were never re-decided with the paper fit's")
                 for _ in range(int(self.max_passes) - 1):
-                    theta = x[:pb].copy()
+                    theta, x_prev = x[:pb].copy(), x
                     if stores is not None and all(
                             st.covers(theta[c])
                             for st, c in zip(stores, self.cols_, strict=True)):
-                        # no row outside the stores can flip: update by the flipped rows only
-                        changed = sum(st.update(theta[c], m) for st, c, m in
+                        # no row outside the stores can move: update by the moved rows only
+                        changed = sum(self._store_update(st, theta[c], m) for st, c, m in
                                       zip(stores, self.cols_, moms, strict=True))
                         self.n_store_updates_ += 1
                     else:
@@ -1396,7 +1429,19 @@ class RobotModel(HyperParameters):
                     self.quadrant_rows_ = self._quadrant_rows(moms)
                     x, w, it, pending = self._fit_paper(moms, x, free, damped_ok=True)
                     self.quadrant_changes_.append(changed)
-                    if changed <= QUADRANT_TOL * rows:
+                    step = (np.inf if pending is not None
+                            else self._step_sigma(moms, x_prev, x, free, w))
+                    self.quadrant_steps_.append(step)
+                    # settled: (almost) no row changed quadrant or crossed the band, or the
+                    # parameters moved by a small fraction of their sigma
+                    self._unsettled = (
+                        "" if changed <= QUADRANT_TOL * rows or step < THETA_TOL else
+                        f"the quadrant passes stopped at max_passes={int(self.max_passes)} "
+                        f"with {changed} of {rows} rows still changing quadrant or crossing "
+                        f"the quadrant band at the last one (settled: at most "
+                        f"{QUADRANT_TOL:g} of them) and the parameters moving "
+                        f"{step:.3g} sigma (settled: below {THETA_TOL:g})")
+                    if not self._unsettled:
                         break
             if pending is None:
                 break
@@ -1408,6 +1453,8 @@ class RobotModel(HyperParameters):
                      theta_q if model_q else None)
         if self.quadrants == "soft":  # the hard fit is the start (ident.robot.soft_fit)
             fit_soft(self, signals)
+            self.convergence_ = "" if self.converged_ else (
+                "the soft quadrants' least squares stopped at its evaluation limit")
         return self
 
     def _fit_products(self, signals: Any, moms: list[JointMoments], xu: np.ndarray,
@@ -1634,9 +1681,37 @@ class RobotModel(HyperParameters):
         self._condition(moms, coeffs, x, free)
         self.weights_ = w
         self.n_passes_, self.n_iter_ = passes, it
-        # Gauss-Newton stopped by its step tolerance (linear forms: always)
-        self.converged_ = bool(coeffs is not paper_coefficients or it < int(self.max_iter))
+        # Gauss-Newton stopped by its step tolerance (linear forms: always), and the quadrant
+        # passes settled (fit's loop: rows no longer moving, or theta no longer)
+        why = [] if coeffs is not paper_coefficients or it < int(self.max_iter) else [
+            f"the last Gauss-Newton stopped at max_iter={int(self.max_iter)} with the "
+            "parameters still moving"]
+        if getattr(self, "_unsettled", ""):
+            why.append(self._unsettled)
+        self.convergence_ = "; ".join(why)
+        self.converged_ = not why
         return self
+
+    def _store_update(self, store: QuadrantStore, theta: np.ndarray, mom: JointMoments) -> int:
+        """Re-decide the stored rows at ``theta`` (:meth:`QuadrantStore.update`); returns the
+        rows that moved: into another quadrant, or into or out of the quadrant band (where
+        both weights are 0), as :meth:`_pass` counts them."""
+        before = store.pplus, store.pminus  # update() replaces the arrays, never writes them
+        store.update(theta, mom)
+        return int(np.count_nonzero((store.pplus != before[0]) | (store.pminus != before[1])))
+
+    def _step_sigma(self, moms, x_prev: np.ndarray, x: np.ndarray, free: np.ndarray,
+                    w: np.ndarray) -> float:
+        """Largest |x - x_prev| / sigma over the free parameters with a sigma > 0, sigma
+        the standard deviations (eq. 15) of the paper fit ``x`` (weights ``w``) on ``moms``;
+        inf when they are not defined (no degree of freedom)."""
+        cov, *_ = self._covariance(moms, paper_coefficients, x, free, w)
+        if cov is None:
+            return float("inf")
+        sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))[free]
+        d = np.abs(x - x_prev)[free]
+        ok = np.isfinite(sd) & (sd > 0)
+        return float(np.max(d[ok] / sd[ok], initial=0.0))
 
     def _w_gram(self, moms, coeffs: Coeffs, x: np.ndarray,
                 weights: np.ndarray | None = None) -> np.ndarray:
@@ -1917,7 +1992,9 @@ class RobotModel(HyperParameters):
         (``quadrant_from_``), shape (k,); zeros without model quadrants. Above
         :data:`QUADRANT_TOL` the joint's ``rel_error_`` is not the error of the fitted
         parameters on their own quadrants (what :meth:`predict` gives): the quadrant passes
-        stopped before the fit settled (``converged_`` False: Gauss-Newton at ``max_iter``)."""
+        stopped before the fit settled (``converged_`` False: Gauss-Newton at ``max_iter``, or
+        the passes at ``max_passes``). Rows the final theta would move into or out of the band
+        are not counted: :meth:`predict` uses no band."""
         k = len(self.cols_)
         out = np.zeros(k)
         if (self.quadrant_from_ is None or not self._theta_x or self.quadrant_theta_ is not None
