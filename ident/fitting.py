@@ -982,6 +982,15 @@ def fit_models(
             fitted["paper"], designs["paper"] = m, d
             robot_signals["paper"] = problem.products(qs_val)
             passes += 1
+        else:  # the cap, not the break: say so rather than call the last pass settled
+            d, m = designs["paper"], fitted["paper"]
+            if paper_load_values(d.library, m.coef_) is not None:
+                left = quadrant_drift(d, d.library, m.coef_) or 0.0
+                if left > QUADRANT_TOL:
+                    notes.append(f"paper model: the quadrants did not settle in "
+                                 f"{REQUADRANT_PASSES} passes ({100 * left:.2f} % of the rows "
+                                 "would change quadrant again): the estimate is the last "
+                                 "pass's")
         if passes:
             notes.append(f"paper model: the quadrants decided again by its own fitted load "
                          f"({passes} time(s); the first usual fit's put {100 * moved:.1f} % of "
