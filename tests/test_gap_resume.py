@@ -212,3 +212,29 @@ def test_the_arm_shoulder_resumes_without_a_torque_step(tmp_path, arm_clean, sta
         crun = np.asarray(arm_clean[j].segment) >= 0
         e = (np.asarray(arm_clean[j].q_ref) - np.asarray(arm_clean[j].q))[crun]
         assert np.sqrt(np.mean(d ** 2)) <= 0.05 * np.sqrt(np.mean(e ** 2)), j
+
+
+# ------------------------------------------------------------------ late answers
+@pytest.mark.parametrize("seed", [1, 2])
+def test_late_answers_with_the_drives_velocity_make_no_torque_spikes(seed):
+    """A joint at 0.3 rad/s whose answers are, at random cycles (one in three), those of
+    the SYNC before (late through a loaded bridge, taken as this cycle's): the backward
+    difference sees a zero step then a double one, and the kd term turns them into torque
+    spikes (34 N m at most here); filtering the drive's own velocity instead
+    (``drive_velocity``, the runner's paced clock) the torque changes per cycle by no more
+    than the reference's own kp x v x dt (1.8 N m) plus 10 %."""
+    rng = np.random.default_rng(seed)
+    dt, v, kp, kd = 0.001, 0.3, 6000.0, 200.0
+    diff_law, drive_law = PDLaw(kp, kd, 100.0, dt), PDLaw(kp, kd, 100.0, dt,
+                                                           drive_velocity=True)
+    taus: dict[str, list[float]] = {"diff": [], "drive": []}
+    for k in range(600):
+        lag = 1 if k > 100 and rng.random() < 1 / 3 else 0
+        q = v * (k - lag) * dt  # the sample the master takes as this cycle's
+        q_ref = v * k * dt
+        taus["diff"].append(diff_law.torque(0.0, q_ref, v, q, dq_meas=v))
+        taus["drive"].append(drive_law.torque(0.0, q_ref, v, q, dq_meas=v))
+    d_diff = np.abs(np.diff(taus["diff"][100:])).max()
+    d_drive = np.abs(np.diff(taus["drive"][100:])).max()
+    assert d_drive <= 1.1 * kp * v * dt, d_drive
+    assert d_diff > 5 * kp * v * dt, d_diff  # the spikes the difference made
