@@ -17,8 +17,8 @@ file, cycle by cycle:
    so that the newest values win (a burst of late answers is never used one set per cycle);
 3. per drive: decode (struct), the position controller
    :class:`daq.protocol.control.PositionController` (CST; on a cycle without the drive's
-   TPDO it holds the feedback torque of the last fresh cycle) or the position target (CSP),
-   limits and watchdog, RPDO out;
+   TPDO it holds the last fresh feedback torque, then blends back to the law; paced, its
+   velocity is the drive's own) or the position target (CSP), limits and watchdog, RPDO out;
 4. log the joint states, the setpoint and every CAN frame of the cycle.
 
 The campaign is a :class:`~trajectories.robot_campaign.RobotCampaign` (either file format)
@@ -310,7 +310,7 @@ class Engine(Supervisor):
         tpu = [s.torque_per_unit for s in self.scalings]
         xmax = [min(32767, int(tm / t)) for tm, t in zip(self.tau_max, tpu, strict=True)]
         csp = [d.cfg.mode is Mode.CYCLIC_SYNC_POSITION for d in self.drives]
-        ctrls = [PositionController(g, cycle_s, rv)
+        ctrls = [PositionController(g, cycle_s, rv, drive_velocity=self.paced)
                  for g, rv in zip(self.gains, self.revolute, strict=True)]
         q_lo, q_hi, v_max, tau_act_max = self.q_lo, self.q_hi, self.v_max, self.tau_act_max
         shared = self.shared_reference
@@ -437,9 +437,9 @@ class Engine(Supervisor):
                         x = 0
                         target_raw = round(q_ref * cpr[d])
                     else:
-                        # a cycle without this drive's TPDO holds the feedback (PDLaw.torque)
+                        # no TPDO: the feedback held, then blended back (PDLaw.torque)
                         tau = ctrls[d].update(q_ref, dq_refs[cd], ddq_refs[cd], q,
-                                              not flags & FLAG_TPDO_MISSING)
+                                              not flags & FLAG_TPDO_MISSING, dq)
                         x = round(tau / tpu[d])
                         if x > xmax[d]:
                             x = xmax[d]
