@@ -229,7 +229,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "(or the only model fitted); with --robot: every joint on the refined model's rows, "
         "then the found terms refitted in the n-dof model (not with --quadrants soft)",
     )
-    g3.add_argument("--max-steps", type=int, default=5, metavar="N", help="refinement steps")
+    g3.add_argument("--max-steps", type=int, default=None, metavar="N",
+                    help="refinement steps (default 5; with --refine only)")
     p.set_defaults(func=run)
 
 
@@ -323,6 +324,27 @@ def check_numbers(args: argparse.Namespace) -> None:
             raise DataError(f"{flag} {v:g}: expected {expected}")
 
 
+#: refinement steps at most when ``--refine`` is given without ``--max-steps``
+DEFAULT_MAX_STEPS = 5
+
+
+def check_refine_steps(args: argparse.Namespace) -> None:
+    """``--max-steps`` without ``--refine`` would be ignored in silence: refused in one line;
+    not given, it is :data:`DEFAULT_MAX_STEPS` (set on ``args``).
+
+    Raises
+    ------
+    DataError
+        ``--max-steps N`` given without ``--refine``.
+    """
+    if getattr(args, "max_steps", None) is None:
+        args.max_steps = DEFAULT_MAX_STEPS
+    elif not getattr(args, "refine", False):
+        raise DataError(f"--max-steps {args.max_steps}: expected with --refine (the steps of "
+                        f"the refinement, which runs only with --refine); add --refine or "
+                        f"drop --max-steps")
+
+
 def _check_output(flag: str, path: Path | None, directory: bool) -> None:
     """Refuse an output path that cannot be written, before anything is fitted: the
     directory ``--report`` names (created if absent) or the file ``--json`` names (its
@@ -401,6 +423,7 @@ def run(args: argparse.Namespace) -> int:
     from .report_build import build_report
 
     check_numbers(args)
+    check_refine_steps(args)
     args.torque_delay = check_torque_delay(getattr(args, "torque_delay", None),
                                            "--torque-delay")
     check_outputs(args)
