@@ -15,7 +15,8 @@ real entry point (:func:`daq.app.cli.main`, real simulated runs, real MCAP logs)
 - ``fit`` of a log cut inside its first chunk said "no cycle with the drive in OPERATION
   ENABLED" (a drive-state matter) for a log that holds no cycle at all;
 - ``monitor --thresholds cal/thresholds.json -o cal`` replaced the calibration run's logs and
-  monitor.json by the monitored run's.
+  monitor.json by the monitored run's;
+- ``run --payload 0 --payload 0`` ran payload 0 twice, its second log replacing the first.
 """
 
 from __future__ import annotations
@@ -178,3 +179,14 @@ def test_monitor_into_its_calibration_folder_is_refused(tmp_path, arm3, capfd): 
                      str(cal / "thresholds.json"), "-o", str(cal)],
              f"-o {cal}", "calibration run", "another folder")
     assert _files(cal) == before
+
+
+def test_run_refuses_a_payload_given_twice(tmp_path, capfd):
+    """``--payload 0 --payload 0`` ran payload 0 twice, the second log replacing the first
+    (rc 0); refused before anything is created."""
+    out = tmp_path / "out"
+    _refused(capfd, ["run", str(CAMPAIGN), "--simulate", str(ROOT / "examples" /
+                                                            "plant_rx130l.toml"),
+                     "--out", str(out), "--yes", "--quick", "--payload", "0", "--payload", "0"],
+             "payload index 0", "given twice")
+    assert not out.exists()
