@@ -1228,6 +1228,9 @@ def read_file(
     p = Path(path)
     if not p.exists():
         raise DataError(f"{p}: no such file")
+    if p.is_dir():  # `jointid fit logs/` for `jointid fit logs/*.mcap`
+        raise DataError(f"{p}: a folder, expected a file (.mcap, .csv or .mat); give its "
+                        f"files, e.g. {p / '*.mcap'}")
     scale = 1.0 if q_unit is None else Q_UNITS[str(q_unit).strip().lower()][0]
     ext = p.suffix.lower()
     if ext == ".mcap":

@@ -16,7 +16,8 @@ real entry point (:func:`daq.app.cli.main`, real simulated runs, real MCAP logs)
   ENABLED" (a drive-state matter) for a log that holds no cycle at all;
 - ``monitor --thresholds cal/thresholds.json -o cal`` replaced the calibration run's logs and
   monitor.json by the monitored run's;
-- ``run --payload 0 --payload 0`` ran payload 0 twice, its second log replacing the first.
+- ``run --payload 0 --payload 0`` ran payload 0 twice, its second log replacing the first;
+- ``fit logs/`` (a folder for ``logs/*.mcap``) said "unknown file type ''".
 """
 
 from __future__ import annotations
@@ -190,3 +191,12 @@ def test_run_refuses_a_payload_given_twice(tmp_path, capfd):
                      "--out", str(out), "--yes", "--quick", "--payload", "0", "--payload", "0"],
              "payload index 0", "given twice")
     assert not out.exists()
+
+
+@pytest.mark.parametrize("robot", [False, True])
+def test_fit_of_a_folder_names_it_and_the_fix(tmp_path, capfd, robot):
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    args = ["--robot", str(ROOT / "examples" / "robots" / "arm3.toml")] if robot else []
+    _refused(capfd, ["fit", *args, str(logs)], "logs: a folder, expected a file",
+             f"{logs / '*.mcap'}")
