@@ -17,7 +17,9 @@ real entry point (:func:`daq.app.cli.main`, real simulated runs, real MCAP logs)
 - ``monitor --thresholds cal/thresholds.json -o cal`` replaced the calibration run's logs and
   monitor.json by the monitored run's;
 - ``run --payload 0 --payload 0`` ran payload 0 twice, its second log replacing the first;
-- ``fit logs/`` (a folder for ``logs/*.mcap``) said "unknown file type ''".
+- ``fit logs/`` (a folder for ``logs/*.mcap``) said "unknown file type ''";
+- ``export-model FIT.json -o FILE`` refitted the record's inputs first (seconds), then failed
+  on whatever came first, without naming ``-o``.
 """
 
 from __future__ import annotations
@@ -200,3 +202,21 @@ def test_fit_of_a_folder_names_it_and_the_fix(tmp_path, capfd, robot):
     args = ["--robot", str(ROOT / "examples" / "robots" / "arm3.toml")] if robot else []
     _refused(capfd, ["fit", *args, str(logs)], "logs: a folder, expected a file",
              f"{logs / '*.mcap'}")
+
+
+def test_export_model_output_that_is_a_file(tmp_path, capfd):
+    """Checked before the record's inputs are read and refitted."""
+    t = np.arange(3000) * 1e-3
+    cols = [t, *(0.3 * np.sin((j + 1) * t) for j in (1, 2, 3)),
+            *(5 * np.cos((j + 1) * t) for j in (1, 2, 3))]
+    data = tmp_path / "arm.csv"
+    np.savetxt(data, np.column_stack(cols), delimiter=",", fmt="%.10g",
+               header="t,q1,q2,q3,tau1,tau2,tau3", comments="")
+    rec = tmp_path / "fit.json"
+    assert main(["fit", "--robot", str(ROOT / "examples" / "robots" / "arm3.toml"), str(data),
+                 "--model", "usual", "--no-consistency", "--json", str(rec)]) == 0
+    capfd.readouterr()
+    f = tmp_path / "model"
+    f.write_text("not a folder\n")
+    _refused(capfd, ["export-model", str(rec), "-o", str(f)], f"-o {f}", "is a file")
+    assert f.read_text() == "not a folder\n"
