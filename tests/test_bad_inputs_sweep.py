@@ -18,6 +18,8 @@ real entry point (:func:`daq.app.cli.main`, real simulated runs, real MCAP logs)
   monitor.json by the monitored run's;
 - ``run --payload 0 --payload 0`` ran payload 0 twice, its second log replacing the first;
 - ``fit logs/`` (a folder for ``logs/*.mcap``) said "unknown file type ''";
+- a robot campaign's payload inertia with a negative moment: pinocchio's traceback
+  ("The 3d inertia should be positive"), after the file was read;
 - ``export-model FIT.json -o FILE`` refitted the record's inputs first (seconds), then failed
   on whatever came first, without naming ``-o``.
 """
@@ -220,3 +222,20 @@ def test_export_model_output_that_is_a_file(tmp_path, capfd):
     f.write_text("not a folder\n")
     _refused(capfd, ["export-model", str(rec), "-o", str(f)], f"-o {f}", "is a file")
     assert f.read_text() == "not a folder\n"
+
+
+@pytest.mark.parametrize("inertia", [
+    "[-0.015, 0.0, 0.0, 0.015, 0.0, 0.01]",  # a negative moment
+    "[0.01, 0.0, 0.0, 0.01, 0.0, 0.05]",  # ZZ beyond XX + YY: no body has it
+])  # fmt: skip
+def test_robot_campaign_payload_inertia_must_be_physical(tmp_path, capfd, inertia):
+    src = ROOT / "examples" / "campaign_robot3.toml"
+    text = src.read_text()
+    old = "inertia = [0.015, 0.0, 0.0, 0.015, 0.0, 0.01]"
+    assert old in text
+    (tmp_path / "robots").mkdir()
+    (tmp_path / "robots" / "arm3.toml").write_text((ROOT / "examples" / "robots" /
+                                                    "arm3.toml").read_text())
+    (tmp_path / "c.toml").write_text(text.replace(old, f"inertia = {inertia}"))
+    _refused(capfd, ["plan", str(tmp_path / "c.toml")], "c.toml: payloads[1].inertia",
+             "physically valid inertia")
