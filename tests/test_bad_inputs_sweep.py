@@ -20,6 +20,7 @@ real entry point (:func:`daq.app.cli.main`, real simulated runs, real MCAP logs)
 - ``fit logs/`` (a folder for ``logs/*.mcap``) said "unknown file type ''";
 - a robot campaign's payload inertia with a negative moment: pinocchio's traceback
   ("The 3d inertia should be positive"), after the file was read;
+  the same in a robot file (MDH TOML) link's inertia;
 - ``export-model FIT.json -o FILE`` refitted the record's inputs first (seconds), then failed
   on whatever came first, without naming ``-o``.
 """
@@ -239,3 +240,16 @@ def test_robot_campaign_payload_inertia_must_be_physical(tmp_path, capfd, inerti
     (tmp_path / "c.toml").write_text(text.replace(old, f"inertia = {inertia}"))
     _refused(capfd, ["plan", str(tmp_path / "c.toml")], "c.toml: payloads[1].inertia",
              "physically valid inertia")
+
+
+def test_robot_file_link_inertia_must_be_physical(tmp_path, capfd):
+    src = ROOT / "examples" / "robots" / "arm3.toml"
+    old = "inertia = [0.50, 0.0, 0.0, 0.50, 0.0, 0.12]"
+    text = src.read_text()
+    assert old in text
+    bad = tmp_path / "arm3.toml"
+    bad.write_text(text.replace(old, "inertia = [-0.50, 0.0, 0.0, 0.50, 0.0, 0.12]", 1))
+    data = tmp_path / "r.csv"
+    data.write_text("t,q1,q2,q3,tau1,tau2,tau3\n0,0,0,0,0,0,0\n")
+    _refused(capfd, ["fit", "--robot", str(bad), str(data)],
+             "arm3.toml: joints[j1].inertia", "positive", "got [-0.5, 0.0, 0.0, 0.5, 0.0, 0.12]")
