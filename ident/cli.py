@@ -375,6 +375,12 @@ def check_outputs(args: argparse.Namespace) -> None:
     """:func:`_check_output` of ``--report`` (a directory) and ``--json`` (a file)."""
     _check_output("--report", getattr(args, "report", None), True)
     _check_output("--json", getattr(args, "json", None), False)
+    js = getattr(args, "json", None)
+    if js is not None and js.is_file():  # `--json run.csv`: the record would replace the data
+        for f in [*getattr(args, "inputs", []), *(getattr(args, "validate", None) or [])]:
+            if Path(f).is_file() and os.path.samefile(js, f):
+                raise DataError(f"--json {js}: is the input file {f}; expected a new file "
+                                f"name (the JSON record would replace the data)")
 
 
 def check_foreign_options(args: argparse.Namespace) -> None:

@@ -21,6 +21,7 @@ real entry point (:func:`daq.app.cli.main`, real simulated runs, real MCAP logs)
 - a robot campaign's payload inertia with a negative moment: pinocchio's traceback
   ("The 3d inertia should be positive"), after the file was read;
   the same in a robot file (MDH TOML) link's inertia;
+- ``fit run.csv --json run.csv`` replaced the data by the JSON record (rc 0);
 - ``export-model FIT.json -o FILE`` refitted the record's inputs first (seconds), then failed
   on whatever came first, without naming ``-o``.
 """
@@ -253,3 +254,16 @@ def test_robot_file_link_inertia_must_be_physical(tmp_path, capfd):
     data.write_text("t,q1,q2,q3,tau1,tau2,tau3\n0,0,0,0,0,0,0\n")
     _refused(capfd, ["fit", "--robot", str(bad), str(data)],
              "arm3.toml: joints[j1].inertia", "positive", "got [-0.5, 0.0, 0.0, 0.5, 0.0, 0.12]")
+
+
+@pytest.mark.parametrize("robot", [False, True])
+def test_fit_json_onto_an_input_is_refused(tmp_path, capfd, robot):
+    f = _csv(tmp_path / "run.csv")
+    data = f.read_bytes()
+    args = ["--robot", str(ROOT / "examples" / "robots" / "rx130l.toml")] if robot else []
+    _refused(capfd, ["fit", *args, str(f), "--model", "usual", "--json", str(f)],
+             f"--json {f}", "input file")
+    assert f.read_bytes() == data
+    v = _csv(tmp_path / "val.csv")
+    _refused(capfd, ["fit", *args, str(f), "--validate", str(v), "--model", "usual",
+                     "--json", str(tmp_path / "." / "val.csv")], "val.csv", "input file")
