@@ -230,7 +230,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "(or the only model fitted); with --robot: every joint on the refined model's rows, "
         "then the found terms refitted in the n-dof model (not with --quadrants soft)",
     )
-    g3.add_argument("--max-steps", type=int, default=5, metavar="N", help="refinement steps")
+    g3.add_argument("--max-steps", type=int, default=None, metavar="N",
+                    help="refinement steps (default 5; with --refine only)")
     p.set_defaults(func=run)
 
 
@@ -324,6 +325,27 @@ def check_numbers(args: argparse.Namespace) -> None:
             raise DataError(f"{flag} {v:g}: expected {expected}")
 
 
+#: refinement steps at most when ``--refine`` is given without ``--max-steps``
+DEFAULT_MAX_STEPS = 5
+
+
+def check_refine_steps(args: argparse.Namespace) -> None:
+    """``--max-steps`` without ``--refine`` would be ignored in silence: refused in one line;
+    not given, it is :data:`DEFAULT_MAX_STEPS` (set on ``args``).
+
+    Raises
+    ------
+    DataError
+        ``--max-steps N`` given without ``--refine``.
+    """
+    if getattr(args, "max_steps", None) is None:
+        args.max_steps = DEFAULT_MAX_STEPS
+    elif not getattr(args, "refine", False):
+        raise DataError(f"--max-steps {args.max_steps}: expected with --refine (the steps of "
+                        f"the refinement, which runs only with --refine); add --refine or "
+                        f"drop --max-steps")
+
+
 def _check_output(flag: str, path: Path | None, directory: bool) -> None:
     """Refuse an output path that cannot be written, before anything is fitted: the
     directory ``--report`` names (created if absent) or the file ``--json`` names (its
@@ -354,6 +376,12 @@ def check_outputs(args: argparse.Namespace) -> None:
     """:func:`_check_output` of ``--report`` (a directory) and ``--json`` (a file)."""
     _check_output("--report", getattr(args, "report", None), True)
     _check_output("--json", getattr(args, "json", None), False)
+    js = getattr(args, "json", None)
+    if js is not None and js.is_file():  # `--json run.csv`: the record would replace the data
+        for f in [*getattr(args, "inputs", []), *(getattr(args, "validate", None) or [])]:
+            if Path(f).is_file() and os.path.samefile(js, f):
+                raise DataError(f"--json {js}: is the input file {f}; expected a new file "
+                                f"name (the JSON record would replace the data)")
 
 
 def check_foreign_options(args: argparse.Namespace) -> None:
@@ -412,6 +440,7 @@ def run(args: argparse.Namespace) -> int:
     from .report_build import build_report
 
     check_numbers(args)
+    check_refine_steps(args)
     args.torque_delay = check_torque_delay(getattr(args, "torque_delay", None),
                                            "--torque-delay")
     check_outputs(args)

@@ -141,6 +141,8 @@ def run(args: argparse.Namespace) -> int:
     from .robot.consistent_fit import format_record
     from .robot.export_model import export_model
 
+    if args.output.exists() and not args.output.is_dir():  # before the refit (seconds)
+        raise DataError(f"-o {args.output}: is a file, expected a folder (created if absent)")
     rec = read_fit_record(args.fit)
     fitted = [n for n, r in rec.get("models", {}).items() if "error" not in r]
     name = model_name(args.model) if args.model else ("paper" if "paper" in fitted else "usual")

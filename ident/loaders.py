@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import re
 import warnings
 from collections.abc import Mapping, Sequence
@@ -872,6 +873,10 @@ def _read_mcap(path: Path, joints: Sequence[str] | None, axis: int | None) -> Ra
                 )
     _warn_unfinished(path, runs[0].metadata.get("result", {}))
     cycles = runs[0].cycle
+    if cycles.size == 0:  # e.g. a log cut within its first chunk: not a drive-state matter
+        cut = " (the log is cut short)" if getattr(runs[0], "truncated", False) else ""
+        raise DataError(f"{path}: no cycle logged{cut}: expected a run log holding at least "
+                        f"one complete chunk of /joint/0/state")
     for i, run in enumerate(runs[1:], start=1):
         if run.cycle.shape != cycles.shape or np.any(run.cycle != cycles):
             raise DataError(f"{path}: /joint/{i}/state does not cover the cycles of "
@@ -1035,7 +1040,18 @@ def _missing(table: Mapping[str, object], key: str, path: Path,
 
 
 def _gain_value(table: Mapping[str, object], gain: float | str, path: Path) -> float:
-    """``gain``: a number, a path to a scalar/constant, or a product ``A*B*...`` of them."""
+    """``gain``: a number, a path to a scalar/constant, or a product ``A*B*...`` of them;
+    refused (:class:`DataError` naming the file and the gain) unless finite and non-zero:
+    a zero gain makes every torque 0 (the fit ran on, dividing by its norm)."""
+    g = _gain_product(table, gain, path)
+    if not (math.isfinite(g) and g != 0.0):
+        raise DataError(f"{path}: gain {gain!r} is {g:g}: expected a finite, non-zero drive "
+                        f"gain (tau = gain x column)")
+    return g
+
+
+def _gain_product(table: Mapping[str, object], gain: float | str, path: Path) -> float:
+    """:func:`_gain_value` before its check."""
     if not isinstance(gain, str):
         return float(gain)
     g = 1.0
@@ -1212,6 +1228,9 @@ def read_file(
     p = Path(path)
     if not p.exists():
         raise DataError(f"{p}: no such file")
+    if p.is_dir():  # `jointid fit logs/` for `jointid fit logs/*.mcap`
+        raise DataError(f"{p}: a folder, expected a file (.mcap, .csv or .mat); give its "
+                        f"files, e.g. {p / '*.mcap'}")
     scale = 1.0 if q_unit is None else Q_UNITS[str(q_unit).strip().lower()][0]
     ext = p.suffix.lower()
     if ext == ".mcap":

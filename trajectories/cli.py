@@ -24,7 +24,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from . import LimitError
+from . import LimitError, TrajectoryError
 
 if TYPE_CHECKING:
     from .sampled import RobotPlan
@@ -32,7 +32,7 @@ if TYPE_CHECKING:
 # the planner's modules (scipy, pinocchio...) are imported by the functions that use them:
 # `jointid --help` and `jointid plan --help` must not wait seconds for them
 
-__all__ = ["file_named", "plot_plan", "plot_robot_plan", "register", "run"]
+__all__ = ["check_plot_path", "file_named", "plot_plan", "plot_robot_plan", "register", "run"]
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -59,10 +59,40 @@ def run(args: argparse.Namespace) -> int:
     with the campaign file, as every other mistake (:func:`file_named`)."""
     from .campaign_file import load_campaign
 
+    if args.plot is not None:  # before the planning: a wrong name fails at once
+        check_plot_path(args.plot)
     # one path: a [joint] campaign is a robot with one moving joint
     rc = load_campaign(args.campaign)
     with file_named(rc.source):
         return _plan(args, rc)
+
+
+def check_plot_path(path: Path) -> None:
+    """Refuse a ``--plot`` file matplotlib cannot write, before anything is planned.
+
+    Parameters
+    ----------
+    path : Path
+        The image file to write.
+
+    Raises
+    ------
+    TrajectoryError
+        Its extension is no image format matplotlib writes (``.txt``...), it names a
+        folder, or its folder does not exist; the message names the file.
+    """
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    formats = FigureCanvasBase.get_supported_filetypes()
+    ext = path.suffix.lower().lstrip(".")
+    if ext not in formats:
+        raise TrajectoryError(f"--plot {path}: expected an image file name ending in "
+                              f"{', '.join('.' + f for f in sorted(formats))}, got "
+                              f"{repr('.' + ext) if ext else 'no extension'}")
+    if path.is_dir():
+        raise TrajectoryError(f"--plot {path}: is a folder, expected an image file name")
+    if not path.parent.is_dir():
+        raise TrajectoryError(f"--plot {path}: folder {path.parent} does not exist")
 
 
 @contextmanager

@@ -78,7 +78,8 @@ loss -- the joint named ``joint``, without a drive of its own (its drives are th
 :func:`trajectories.multi.plan_robot_campaign`, and the runtime (:mod:`daq.runtime`) take
 only this type.
 
-The payload inertia is given about the payload's centre of mass, in the flange frame.
+The payload inertia is given about the payload's centre of mass, in the flange frame, and
+must be physically valid (principal moments >= 0, triangle inequality).
 The robot file itself is read by :func:`trajectories.robot.load_robot` (not here: this
 module never touches files).
 """
@@ -89,6 +90,8 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any, Literal
+
+import numpy as np
 
 # the single-joint schema's pieces: the same limits table, raw tables, name check, segment
 # fields and plan-size check
@@ -717,7 +720,7 @@ def _build(raw: Mapping[str, Any], source: str) -> RobotCampaign:
 
     payloads = tuple(
         RobotPayload(p["mass_kg"], _fixed(source, f"payloads[{i}].com", p["com"], 3),
-                     _fixed(source, f"payloads[{i}].inertia", p["inertia"], 6))
+                     _inertia(source, f"payloads[{i}].inertia", p["inertia"]))
         for i, p in enumerate(top["payloads"])
     )
     segments = tuple(_segment(s, f"segments[{i}]", source, joints_t, start)
@@ -758,6 +761,20 @@ def _min_durations(segments: tuple[RobotSegment, ...],
 def _fixed(source: str, key: str, values: tuple[float, ...], n: int) -> tuple:
     if len(values) != n:
         raise fail(source, key, f"exactly {n} numbers", list(values))
+    return tuple(values)
+
+
+def _inertia(source: str, key: str, values: tuple[float, ...]) -> tuple:
+    """A payload's XX XY XZ YY YZ ZZ about its CoM [kg m^2], physically valid: its principal
+    moments >= 0 and each at most the sum of the other two (pinocchio refused a negative one
+    with a traceback, after the file was read)."""
+    xx, xy, xz, yy, yz, zz = _fixed(source, key, values, 6)
+    ev = np.linalg.eigvalsh(np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]))
+    tol = 1e-9 * max(1.0, float(np.abs(ev).max()))
+    if not (ev.min() >= -tol and 2 * ev.max() <= ev.sum() + tol):
+        raise fail(source, key, "a physically valid inertia about the CoM [kg m^2] (XX XY XZ "
+                   "YY YZ ZZ: principal moments >= 0, each at most the sum of the other two)",
+                   list(values))
     return tuple(values)
 
 

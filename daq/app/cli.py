@@ -15,6 +15,7 @@ import signal
 import sys
 import threading
 import warnings
+from typing import NoReturn
 
 
 def _interrupted_at_start(signum: int, frame: object) -> None:
@@ -74,8 +75,18 @@ USER_ERRORS: tuple[type[BaseException], ...] = (DaqError, TrajectoryError, Ident
                                                  OSError)
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line, ``jointid CMD: error: ...``, like
+    every other refusal (argparse prints the usage first: six lines for ``jointid fit``).
+    The subcommands' parsers are of this class too (``add_subparsers`` uses the parent's)."""
+
+    def error(self, message: str) -> NoReturn:
+        """Print ``PROG: error: MESSAGE (PROG --help)`` on stderr and exit 2."""
+        self.exit(2, f"{self.prog}: error: {message} ({self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="jointid",
         description="Dynamic identification of robot joints over CANopen "
         "(plan the excitation, run it, log to MCAP, fit and refine friction models).",

@@ -298,8 +298,46 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_demo)
 
 
+#: files a demo writes first (its plan, then its record): a folder holding one of them is an
+#: earlier demo's, which a demo regenerates
+DEMO_MARKS = ("demo.json", "campaign_plan.png")
+
+
+def check_demo_args(out: Path, max_steps: int | None) -> None:
+    """Refuse, before anything runs, what the demo would fail on or destroy late.
+
+    Parameters
+    ----------
+    out : Path
+        The ``--out`` folder: absent, empty, or an earlier demo's (it holds one of
+        :data:`DEMO_MARKS`), which the demo regenerates. Any other folder with files in it
+        (a ``jointid run`` folder, a ``jointid fit --report`` folder...) is refused: the demo
+        would replace its ``fit.json`` and ``report.html`` or mix its logs in.
+    max_steps : int or None
+        ``--max-steps``: >= 0 (None: the default).
+
+    Raises
+    ------
+    DaqError
+        Naming the option and what was expected.
+    """
+    if max_steps is not None and max_steps < 0:
+        raise DaqError(f"--max-steps {max_steps}: expected a number of refinement steps >= 0")
+    if out.exists() and not out.is_dir():
+        raise DaqError(f"--out {out}: is a file, expected a folder (new, empty, or an "
+                       f"earlier demo's)")
+    if out.is_dir() and not any((out / m).exists() for m in DEMO_MARKS):
+        found = sorted(p.name for p in out.iterdir())
+        if found:
+            shown = ", ".join(found[:3]) + (", ..." if len(found) > 3 else "")
+            raise DaqError(f"--out {out}: holds files that are not an earlier demo's "
+                           f"({shown}; no demo.json): expected a new or empty folder, the "
+                           f"demo writes logs/, fit.json and report.html there")
+
+
 def _demo(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
+    check_demo_args(args.out, args.max_steps)
     if args.robot is not None:
         if args.quick:
             raise DaqError("--quick: expected the single-joint demo (the robot demo is "

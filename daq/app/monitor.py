@@ -283,6 +283,13 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
     from .running import run_with_bar
 
     stream = stream if stream is not None else sys.stderr
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"-o {out}: is a file, expected a folder")
+    if thresholds is not None and thresholds.resolve().parent == out.resolve():
+        # the calibration's logs, monitor.json and report would be replaced by this run's
+        raise ConfigError(f"-o {out}: holds the calibration run of --thresholds {thresholds}; "
+                          f"expected another folder (this run would replace its logs, "
+                          f"monitor.json and report.html)")
     campaign = load_campaign(campaign_path, paced)
     joints = list(campaign.moving)
     specs = [parse_push(p, joints) for p in pushes or []]

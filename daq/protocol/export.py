@@ -240,12 +240,16 @@ def export_can(mcap_path: str | Path, out_path: str | Path, *, channel: int = 1)
     Raises
     ------
     ExportError
-        Unknown extension, unreadable log, log without a ``/can/raw`` channel, a multi-bus
-        run to ``.csv`` (no channel column), unwritable output.
+        Unknown extension, an existing output file (never replaced), unreadable log, log
+        without a ``/can/raw`` channel, a multi-bus run to ``.csv`` (no channel column),
+        unwritable output.
     """
     src = Path(mcap_path)
     out = Path(out_path)
     _format_of(out)
+    if out.exists():  # a trace (or anything) there is never replaced
+        raise ExportError(f"{out}: already exists; export writes a new file (remove it first "
+                          f"or give another --can)")
     if not src.is_file():
         raise ExportError(f"{src}: expected a jointid run log (.mcap), file not found")
     try:

@@ -281,7 +281,8 @@ def run_campaign(
     progress : callable or None
         Called with a :class:`Progress` every ~250 cycles.
     payloads : sequence of int or None
-        Indices of the payloads to run (default: all).
+        Indices of the payloads to run (default: all), each once (a repeated index is
+        refused: its second log would replace the first).
     resume : bool
         Skip the payloads the state file lists as completed, once their logs are checked
         (:func:`~daq.runtime.runfolder.check_completed_logs`: a completed payload's log
@@ -342,9 +343,11 @@ def run_campaign(
     plan = plan_robot_campaign(campaign)  # a [joint] campaign: a robot with one moving joint
     n_pay = len(campaign.payloads)
     todo = list(range(n_pay)) if payloads is None else list(payloads)
-    for i in todo:
+    for k, i in enumerate(todo):
         if not 0 <= i < n_pay:
             raise ConfigError(f"payload index {i}: expected 0..{n_pay - 1}")
+        if i in todo[:k]:  # run twice, its second log would replace the first
+            raise ConfigError(f"payload index {i}: given twice, expected each payload once")
     out = Path(out_dir)
     stem = file_stem(campaign.name)
     lock = FolderLock(out)  # one run per folder, from here to the end

@@ -155,8 +155,15 @@ def _inertia(src: str, key: str, j: Mapping) -> pin.Inertia:
     if m == 0:
         if np.any(com):
             raise _err(src, f"{key}.com", "zero for a massless link", list(com))
-        return pin.Inertia(0.0, np.zeros(3), i_o)
-    i_c = i_o - m * (com @ com * np.eye(3) - np.outer(com, com))  # Huygens, about the CoM
-    return pin.Inertia(m, com, i_c)
+        com = np.zeros(3)
+        i_c = i_o
+    else:
+        i_c = i_o - m * (com @ com * np.eye(3) - np.outer(com, com))  # Huygens, about the CoM
+    try:  # pinocchio refuses a non-positive one with a RuntimeError (was a traceback)
+        return pin.Inertia(m, com, i_c)
+    except RuntimeError as exc:
+        raise _err(src, f"{key}.inertia", "XX XY XZ YY YZ ZZ about the link's origin [kg m^2] "
+                   f"of a real body: about its CoM positive ({exc})",
+                   [float(v) for v in (xx, xy, xz, yy, yz, zz)]) from None
 
 
