@@ -194,6 +194,8 @@ class PDLaw:
             self._blend_n = 0  # the blend's last cycle: the law's own value
         self._fb = p + d
         return ff + p + d  # this order: the runs before the hold, bit for bit
+
+
 class PositionController(PDLaw):
     """Stateful PD + feed-forward position loop of one joint; call :meth:`update` once per
     cycle: the :class:`PDLaw` of ``gains`` around the model feed-forward of ``gains``.
