@@ -34,17 +34,28 @@ from ident.robot.estimate import QUADRANT_TOL, THETA_TOL, RobotModel
 DQ_MIN = 0.02
 
 
-def _status(est: RobotModel, sig, theta: np.ndarray) -> np.ndarray:
-    """Per sample and joint: 0 in the band, +-1 the quadrant sign(tau_out dq), 9 unusable,
-    with ``theta`` deciding (shape (n, k))."""
+def _status(est: RobotModel, sig, theta: np.ndarray, next_pass: bool) -> np.ndarray:
+    """Per sample and joint: 0 left out by the band, +-1 the quadrant sign(tau_out dq), 9
+    unusable (shape (n, k)), with ``theta`` deciding the quadrants; the band's rows those of
+    the fit (``fitted_rows``: its hysteresis over the thetas that decided the passes,
+    ``band_from_``), or with ``next_pass`` those of a re-decision at ``theta``."""
     m = copy.copy(est)
     m.coef_ = est.coef_.copy()
     m.coef_[:est.n_theta_] = theta
-    tout = m.load_torque(sig)
-    s = np.sign(tout * sig.dq)
-    s = np.where(np.abs(tout) < est.band_[None, :], 0.0, s)
+    if next_pass and getattr(est, "band_from_", None) is not None:
+        m.band_from_ = np.vstack([est.band_from_, theta])
+    s = np.sign(m.load_torque(sig) * sig.dq)
+    s = np.where(m.fitted_rows(sig), s, 0.0)
     usable = (np.abs(sig.dq) > DQ_MIN) & np.isfinite(sig.tau)
     return np.where(usable, s, 9.0)
+
+
+def _next_moves(est: RobotModel, sig) -> tuple[int, int]:
+    """(rows the next re-decision, with the final theta, would move: into another quadrant,
+    into or out of the band; usable rows)."""
+    final = _status(est, sig, est.coef_[:est.n_theta_], True)
+    used = _status(est, sig, est.quadrant_from_, False)
+    return int(np.count_nonzero(final != used)), int(np.count_nonzero(used != 9))
 
 
 @pytest.fixture(scope="module", params=[1, 2, 3, 4, 5])
@@ -58,10 +69,7 @@ def test_converged_only_when_the_passes_settled(arm, method):
     seed, reg, base, sig = arm
     est = RobotModel(reg, "paper", method, base=base, dq_min=DQ_MIN).fit(sig)
     assert est.n_iter_ < est.max_iter  # Gauss-Newton converged on every one of these
-    final = _status(est, sig, est.coef_[:est.n_theta_])
-    used = _status(est, sig, est.quadrant_from_)
-    rows = int(np.count_nonzero(used != 9))
-    moving = int(np.count_nonzero(final != used))  # what the next re-decision would move
+    moving, rows = _next_moves(est, sig)  # what the next re-decision would move
     steps = getattr(est, "quadrant_steps_", [np.inf])
     print(f"\nseed {seed} {method}: passes {est.n_passes_}, moved {est.quadrant_changes_}, "
           f"next {moving} of {rows}, converged {est.converged_}: "
@@ -98,3 +106,28 @@ def test_one_decision_is_not_converged(arm):
     est = RobotModel(reg, "paper", "wls", base=base, dq_min=DQ_MIN, max_passes=1).fit(sig)
     assert not est.converged_ and "max_passes=1" in est.convergence_
     assert est.quadrant_changes_ == [] and est.n_iter_ < est.max_iter
+
+
+def test_the_passes_reach_a_fixed_point():
+    """The band's hysteresis (``BAND_LEAVE``): rows at the band's edge no longer enter and
+    leave it at every pass, so most fits settle, and a settled fit is a fixed point: the next
+    re-decision, with its final theta, moves (almost) no row. With a band re-decided from the
+    current theta alone the passes cycled: 1 of these 10 fits settled (seed 2 LS moving the
+    same 47 rows at every pass, theta alternating by 0.31 sigma); with the hysteresis 8 of
+    10 (seeds 3 and 4 WLS still at the cap; /tmp/bandsettle/measure_arm.py, 2026-11-29).
+    At least 7 of 10: one seed more or less is not the claim, the cycle is."""
+    settled, fixed = [], []
+    for seed in (1, 2, 3, 4, 5):
+        reg, sig, _ = arm3_true_state_signals(None, seed, 12.0, noise=0.01, stride=5)
+        base = base_parameters(reg)
+        for method in ("ls", "wls"):
+            est = RobotModel(reg, "paper", method, base=base, dq_min=DQ_MIN).fit(sig)
+            if not est.converged_:
+                continue
+            moving, rows = _next_moves(est, sig)
+            settled.append((seed, method))
+            if moving <= QUADRANT_TOL * rows:
+                fixed.append((seed, method))
+    print(f"\nsettled {settled}; fixed points {fixed}")
+    assert len(settled) >= 7, settled
+    assert fixed == settled, (settled, fixed)
