@@ -46,7 +46,7 @@ def _fit_paper(tmp_path, capfd, trim: int):
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "since the band's hysteresis (2026-11-29) trim 67's passes settle on quadrants where A4 "
+    "since the band's hysteresis (2026-11-29) trim 67's passes end on quadrants where A4 "
     "keeps motor rows: nothing is dropped (3340 %, 9 pruned), so this case no longer arises "
     "here (nor at trims 60, 61, 68, 73); the rule itself on simulated data: "
     "tests/test_robot_rank_drop.py"))
