@@ -1,8 +1,10 @@
 """``jointid fit --robot`` on the real KUKA KR300 no longer refuses the paper model where some
 of its columns are zero on the data: it drops them (the rank rule of every fit) and goes on.
 
-README.md's KUKA command with ``--trim 67`` (data ``../shared/data/kuka_kr300_weigand2021``,
-not in the repository: skipped without them) ended in exit 2, "paper model: parameters not
+README.md's KUKA command with ``--trim 67`` (until 2026-11-29's band hysteresis; since then
+A4 keeps motor rows at that trim and the test is a strict xfail; data
+``../shared/data/kuka_kr300_weigand2021``, not in the repository: skipped without them) ended
+in exit 2, "paper model: parameters not
 identifiable on these data: ['a_m4', 'b_m4', 'c_m4', 'd_m4'] have no excitation (their columns
 are zero) -- evidence ...: A4: 0 rows motor, 25 generator, ...": A4 has no row in the motor
 quadrant at that trim. The single-joint fit drops such columns; the n-dof fit now does too:
@@ -43,6 +45,11 @@ def _fit_paper(tmp_path, capfd, trim: int):
     return json.loads(out.read_text()), printed
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "since the band's hysteresis (2026-11-29) trim 67's passes end on quadrants where A4 "
+    "keeps motor rows: nothing is dropped (3340 %, 9 pruned), so this case no longer arises "
+    "here (nor at trims 60, 61, 68, 73); the rule itself on simulated data: "
+    "tests/test_robot_rank_drop.py"))
 def test_trim_67_fits_and_reports_a4_motor_columns_dropped(tmp_path, capfd):
     rec, printed = _fit_paper(tmp_path, capfd, 67)
     paper = rec["models"]["paper"]
@@ -70,11 +77,10 @@ def test_trim_67_fits_and_reports_a4_motor_columns_dropped(tmp_path, capfd):
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "since the band-aware quadrant passes (2026-11-29) trim 73's passes run to their cap and "
-    "end on quadrants where A4 keeps motor rows: nothing is dropped (38.6 %, 1 pruned), so "
-    "this case no longer arises here; the rule itself: tests/test_rank_rule_near.py. Trim 68 "
-    "is now refused on such a near-dependence the pivoted rule does not name "
-    "(docs/robot-data.md)"))
+    "since the band-aware quadrant passes (2026-11-29) trim 73's passes end on quadrants "
+    "where A4 keeps motor rows: nothing is dropped (with the band's hysteresis 64.8 %, 26 "
+    "pruned, not converged), so this case no longer arises here; the rule itself: "
+    "tests/test_rank_rule_near.py (docs/robot-data.md)"))
 def test_trim_73_nearly_dependent_columns_are_dropped_not_refused(tmp_path, capfd):
     """At ``--trim 73`` A4 keeps no row in the motor quadrant (a_m4 ... d_m4 dropped, as at
     67), and its generator rows then dominate the base columns they share: on them MY4R and

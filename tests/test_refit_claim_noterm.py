@@ -109,8 +109,11 @@ def test_kuka_refit_without_terms():
     """Real data, the README's command (file A, ``--model both``, default trim 60, IDIM-WLS):
     the usual model's refit is its fit to rounding; the paper model's is the fit on its rows
     with its held parameters, unsettled on the joints whose rows its final theta moves, and
-    with the fit's quadrants within one sigma of the fit (its Gauss-Newton stopped at its
-    iteration cap: measured 0.11 sigma)."""
+    with the fit's quadrants within one sigma of the fit. Its Gauss-Newton stopped at its
+    iteration cap until 2026-11-29 (measured 0.11 sigma); with the band's hysteresis it stops
+    by its step tolerance at 47 of 50 iterations, on a flat valley (A4 to A6's parameters
+    unidentified), and the refit from its values runs to its own cap 0.22 sigma away: not
+    the fit to rounding, as on the arm, but within one sigma."""
     robot = load_robot(KUKA)
     out = fit_files(robot, [KUKA_DATA / "recorded_2020-10-21_FF_A_08ms.mat"], model="both",
                     mapping=parse_mapping(KUKA_MAP, robot=True), q_unit="deg")
@@ -121,10 +124,7 @@ def test_kuka_refit_without_terms():
     rf, drift = _common(paper, sig)
     assert rf.unsettled  # the real data's unsettled paper fit (A4)
     at = _at_fit_quadrants(paper, sig)
-    if paper.n_iter_ < paper.max_iter:  # its Gauss-Newton converged
-        _same(at, paper)
-    else:
-        assert _sigmas(at, paper).max() < 1.0
+    assert _sigmas(at, paper).max() < 1.0
     z = _sigmas(rf, paper)
     print(f"\nKUKA paper: drift {drift.round(4).tolist()}, refit max |d|/sigma {z.max():.3g}, "
           f"{(z > 1).sum()} of {z.size} above 1; with the fit's quadrants "

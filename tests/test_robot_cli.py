@@ -437,7 +437,11 @@ def test_kuka_paper_model_is_identified_from_the_model_quadrant(tmp_path, capfd)
     for axis in ("A1", "A2", "A3", "A4", "A5", "A6"):
         assert paper["rel_error"][axis] < rec["usual"]["rel_error"][axis], axis
     unsettled = [a for a, x in paper["quadrant_drift"].items() if x > QUADRANT_TOL]
-    assert unsettled and not paper["converged"]  # A3, A4 (docs/robot-data.md)
+    # A4 (docs/robot-data.md); converged or not: since the band's hysteresis (2026-11-29) the
+    # passes settle (the last re-decision moves no row, the parameters < THETA_TOL sigma) and
+    # Gauss-Newton stops by its step tolerance, while A4's unidentified parameters still move
+    # its loads across zero on 36 % of its rows (before: not converged, A3 and A4)
+    assert unsettled
     own = paper["rel_error_own_quadrants"]
     note = next(line for line in out.splitlines() if "did not settle" in line)
     for axis in ("A1", "A2", "A3", "A4", "A5", "A6"):

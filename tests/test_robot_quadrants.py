@@ -121,13 +121,18 @@ def test_start_on_every_stride_th_row_gives_the_same_fit(arm3_short, monkeypatch
     assert b.start_stride_ >= 4
     # both stop settled -- fewer than QUADRANT_TOL of the rows still changing quadrant or
     # crossing the band, or the parameters moving less than THETA_TOL sigma --: a small
-    # fraction of a standard deviation apart
+    # fraction of a standard deviation apart. The band's hysteresis (BAND_LEAVE) makes the
+    # fixed point depend on the path: a row whose load lies between band_ and BAND_LEAVE x
+    # band_ is in or out as the thetas before left it, and the two starts' first thetas
+    # differ; each stops within THETA_TOL of its own fixed point: 2 THETA_TOL apart at most
+    # (0.117 sigma measured, 2026-11-29; 0.1 was the bound while the band followed the
+    # current theta alone, which cycled on other seeds: tests/test_band_stop.py)
     for m in (a, b):
         assert m.converged_, m.convergence_
         assert (m.quadrant_changes_[-1] <= estimate.QUADRANT_TOL * m.n_samples_.sum()
                 or m.quadrant_steps_[-1] < estimate.THETA_TOL)
     dz = np.abs(b.coef_ - a.coef_) / a.std_
-    assert dz.max() <= 0.1, dz.max()
+    assert dz.max() <= 2 * estimate.THETA_TOL, dz.max()
     np.testing.assert_allclose(b.std_, a.std_, rtol=1e-2)
 
 

@@ -159,10 +159,11 @@ def test_paper_model_pruned_terms_left_out_of_the_prediction(arm3_usual):
     m.q_s_ = m.q_s_ / 3.0
     np.testing.assert_allclose(after[:, gone], before[:, gone], rtol=1e-12, atol=1e-12)
     e_full, e_pruned = full.rel_error(held), m.rel_error(held)
-    # a fit whose quadrant passes do not settle (rows cycling across the quadrant band up to
-    # max_passes, converged_ False; here since the passes count them, 2026-11-29) has a
-    # held-out error that moves from one capped pass to the next (j2: 0.4 %): the pruning may
-    # not add more than that jitter, measured over the caps 5 to 10
+    # a fit whose quadrant passes do not settle (converged_ False: at max_passes with rows
+    # still moving; rows at the band's edge cycled so before the band's hysteresis,
+    # 2026-11-29) has a held-out error that moves from one capped pass to the next (j2:
+    # 0.4 % then): the pruning may not add more than that jitter, measured over the caps 5
+    # to 10; a settled fit gets none
     jitter = dict.fromkeys(reg.joints, 0.0)
     if not full.converged_:
         errs = [RobotModel(reg, "paper", "wls", base=base, max_passes=k).fit(sig).rel_error(held)

@@ -129,6 +129,13 @@ QUADRANT_TOL = 1e-4
 #: then barely change the estimate (``RobotModel.quadrant_steps_``).
 THETA_TOL = 0.1
 
+#: A row in the quadrant band (|tau_out_hat| < ``band_``) returns to the fit only where its
+#: |tau_out_hat| reaches this multiple of the band (hysteresis, ``RobotModel._in_band``): a
+#: row at the band's edge no longer enters and leaves it at every pass as theta moves by a
+#: fraction of its sigma (the 3-dof arm cycled so, docs/robot-identification.md
+#: "Quadrants"). Not the paper's: its quadrants are sign(P) with no band (eq. 26-28).
+BAND_LEAVE = 1.5
+
 #: ``quadrant="model"`` on more samples than this: the starting fit reads every stride-th
 #: row (stride = samples // START_ROWS); it only gives the first theta: the quadrants are then
 #: re-decided on every row until fewer than QUADRANT_TOL of them change.
@@ -259,15 +266,19 @@ class RobotModel(HyperParameters):
         RMS of the usual fit's tau_out_hat of joint j are left out of its rows (``band_``
         [N m]): their quadrant is uncertain, and a wrong one costs the jump c_m - c_g of the
         dry friction (eq. 30) -- the paper's stiction-area rectangle (Fig. 2.b) around
-        P_out = 0. 0: every row.
+        P_out = 0; the band itself is this package's (the paper's quadrants are sign(P) on
+        every row, eq. 26-28). With hysteresis over the passes: a row left out returns only
+        where |tau_out_hat| reaches ``BAND_LEAVE`` (1.5) x ``band_`` (``band_from_``). 0:
+        every row.
     max_passes : int
         Quadrant decisions at most (``quadrant="model"``): the usual fit's, then re-decisions
         with the paper fit's theta; they stop earlier, settled, once at most ``QUADRANT_TOL``
         of the rows moved -- changed quadrant, or entered or left the quadrant band (a row
         leaving the fit changes theta as a flip does; with a band rows cross it long before
         they flip) -- or once no parameter moved by ``THETA_TOL`` (0.1) of its sigma since the
-        previous re-decision. Stopped at ``max_passes`` otherwise: ``converged_`` False (rows
-        near the band's edges can cycle in and out: the 3-dof arm, docs/robot-identification.md).
+        previous re-decision. Stopped at ``max_passes`` otherwise: ``converged_`` False (without
+        the band's hysteresis rows near its edges cycled in and out on the 3-dof arm; with it 8
+        of 10 of its fits settle on a fixed point, docs/robot-identification.md "Quadrants").
     payload_ratio : bool
         Identify the payload ratio M_ae / M_aw (``Ma_ratio``, eq. 35) instead of taking the
         payload torque as known; needs an experiment with a payload.
@@ -394,6 +405,10 @@ class RobotModel(HyperParameters):
         ``quadrants="soft"``: the fitted load jitter RMS per joint [N m] and its std (NaN
         where it sits on a bound: not identified, ``quadrant_sigma_at_bound_``);
         ``quadrant_sigma_bounds_`` (k, 2) its bounds [N m].
+    band_from_ : ndarray (m, p_b) or None
+        The thetas that decided the quadrant passes, in order (the usual fit's first), whose
+        loads decide with the band's hysteresis which rows the band leaves out
+        (:meth:`fitted_rows`); None without a band.
     quadrant_from_ : ndarray or None
         The theta whose sign(tau_out_hat dq) decided the final quadrants (``quadrant="model"``
         of the paper model), else None: :mod:`ident.robot.uncertainty` rebuilds the moments of
@@ -538,6 +553,7 @@ class RobotModel(HyperParameters):
         self._layout(self.form == "products")
         self._damp = 0.0
         self._band_h = np.zeros(k)
+        self.band_from_: np.ndarray | None = None
         if not (np.isfinite(float(self.quadrant_band)) and float(self.quadrant_band) >= 0):
             raise RobotIdentError(f"RobotModel.quadrant_band: expected a fraction >= 0, got "
                                   f"{self.quadrant_band!r}")
@@ -780,8 +796,8 @@ class RobotModel(HyperParameters):
             grams = [None] * len(self.cols_) if gram_from is None else [
                 (m.vv[0, 0, :len(c), :len(c)] + m.vv[1, 0, :len(c), :len(c)]) / max(m.n, 1)
                 for m, c in zip(gram_from, self.cols_, strict=True)]
-            stores = [QuadrantStore(theta[c], capacity, g, h)
-                      for c, g, h in zip(self.cols_, grams, self._band_h, strict=True)]
+            stores = [QuadrantStore(theta[c], capacity, g, h, BAND_LEAVE) for c, g, h in
+                      zip(self.cols_, grams, self._band_h, strict=True)]
         rows = changed = 0
         in_band, considered = np.zeros(len(self.cols_)), np.zeros(len(self.cols_))
         for sig, r, q, dq, ddq, tau, zdd, pay, cc in self._chunks(signals, stride):
@@ -805,22 +821,25 @@ class RobotModel(HyperParameters):
                     WzT, pzj = self._joint(Wz, pz, knz, j)
                     VzT = self._v(WzT if every else WzT[:, ok], pzj[ok], dqo, tauo, sgo)
                 h = 0.0 if theta is None else self._band_h[j]
+                inb = inb_prev = None
                 if theta is None:
                     sp = tauo * dqo
                 else:
                     tout = theta[cols] @ WjT + po
-                    sp = np.where(np.abs(tout) < h, 0.0, tout * dqo) if h > 0 else tout * dqo
+                    if h > 0:  # the band, with hysteresis over the deciding thetas
+                        inb, inb_prev = self._in_band(cols, WjT, po, h)
+                    sp = tout * dqo if inb is None else np.where(inb, 0.0, tout * dqo)
                 pplus, pminus = quadrant_weights(sp)
                 rows += sp.size
                 if theta_prev is not None:
-                    tp = theta_prev[cols] @ WjT + po
-                    spp = np.where(np.abs(tp) < h, 0.0, tp * dqo) if h > 0 else tp * dqo
-                    # rows that moved: changed quadrant, or entered or left the band (sign 0);
-                    # either changes the moments (a row crossing the band flips only later)
+                    spp = (theta_prev[cols] @ WjT + po) * dqo
+                    if inb_prev is not None:
+                        spp = np.where(inb_prev, 0.0, spp)
+                    # rows that moved: changed quadrant, or entered or left the band (sign
+                    # 0); either changes the moments (a row crossing the band flips only later)
                     changed += int(np.count_nonzero(np.sign(sp) != np.sign(spp)))
                 E = stribeck_exp(dqo, self.q_s_[j])
-                if h > 0:  # rows in the band around the quadrant boundary are left out
-                    inb = np.abs(tout) < h
+                if inb is not None:  # rows in the band around the quadrant boundary: left out
                     in_band[j] += np.count_nonzero(inb)
                     considered[j] += inb.size
                     pplus[inb] = 0.0
@@ -831,7 +850,7 @@ class RobotModel(HyperParameters):
                 else:
                     moms[j].add(VT, (pplus, pminus), E, VzT)
                 if stores is not None:
-                    stores[j].offer(VT, VzT, E, (pplus, pminus), tout)
+                    stores[j].offer(VT, VzT, E, (pplus, pminus), tout, inb)
         if theta is not None and stride == 1:
             # the share of each joint's rows the quadrant band leaves out, at this pass
             self._pass_band_share = in_band / np.maximum(considered, 1)
@@ -1414,6 +1433,8 @@ class RobotModel(HyperParameters):
                     "theta were never re-decided with the paper fit's")
                 for _ in range(int(self.max_passes) - 1):
                     theta, x_prev = x[:pb].copy(), x
+                    if self.band_from_ is not None:  # the band's hysteresis (_in_band)
+                        self.band_from_ = np.vstack([self.band_from_, theta])
                     if stores is not None and all(
                             st.covers(theta[c])
                             for st, c in zip(stores, self.cols_, strict=True)):
@@ -1658,11 +1679,29 @@ class RobotModel(HyperParameters):
 
     def _set_band(self, moms: list[JointMoments], theta_q: np.ndarray, model_q: bool) -> None:
         """``band_`` [N m] (``quadrant_band`` x each joint's RMS predicted load with
-        ``theta_q``, with model quadrants; else 0), the band the passes leave out."""
+        ``theta_q``, with model quadrants; else 0), the band the passes leave out, and
+        ``band_from_`` = [``theta_q``] (None without a band): the thetas whose load decides
+        the band's rows (:meth:`_in_band`)."""
         self.band_ = np.zeros(len(moms))
+        self.band_from_ = None
         if model_q and float(self.quadrant_band) > 0:
             self.band_ = float(self.quadrant_band) * self._rms_load(moms, theta_q)
+            self.band_from_ = np.array(theta_q, dtype=float)[None, :]
         self._band_h = self.band_
+
+    def _in_band(self, cols: np.ndarray, WjT: np.ndarray, pj: np.ndarray,
+                 h: float) -> tuple[np.ndarray, np.ndarray]:
+        """The rows of a joint's chunk (columns ``cols``, WjT (nt, m), p_j (m,), band ``h``
+        [N m]) the quadrant band leaves out, with hysteresis over the thetas that decided
+        the passes' quadrants (``band_from_``, in order): a row enters the band where
+        |W_j theta + p_j| < h and leaves it only where it reaches ``BAND_LEAVE`` x h. Returns
+        that mask at the last theta and at the one before (the previous decision's; the
+        same with one theta), (m,) bool each."""
+        load = np.abs(self.band_from_[:, cols] @ WjT + pj)
+        out = prev = load[0] < h
+        for a in load[1:]:
+            prev, out = out, (a < h) | (out & (a < BAND_LEAVE * h))
+        return out, prev
 
     def _finish(self, moms: list[JointMoments], coeffs: Coeffs, x: np.ndarray,
                 free: np.ndarray, w: np.ndarray, passes: int, it: int,
@@ -1962,9 +2001,9 @@ class RobotModel(HyperParameters):
     def fitted_rows(self, signals: RobotSignals) -> np.ndarray:
         """Which samples of ``signals`` the fit's row rule takes into each joint's rows,
         shape (n, k) bool: |dq_j| > ``dq_min``, finite torque and regressor, the columns'
-        ``keep`` mask, and (paper model, model quadrants) outside the quadrant band,
-        |tau_out_hat_j| >= ``band_[j]`` with the theta that decided the final quadrants
-        (``quadrant_from_``) -- the rows ``rel_error_`` is measured on."""
+        ``keep`` mask, and (paper model, model quadrants) outside the quadrant band as the
+        passes left it (|tau_out_hat_j| against ``band_[j]`` with the hysteresis over
+        ``band_from_``, :meth:`_in_band`) -- the rows ``rel_error_`` is measured on."""
         passes = self._fitted_rows(signals, "fitted_rows")
         out = np.zeros(signals.tau.shape, dtype=bool)
         keep = None if signals.columns is None else signals.columns.keep
@@ -1976,14 +2015,12 @@ class RobotModel(HyperParameters):
     def _row_rule(self, j: int, cols: np.ndarray, WjT: np.ndarray, pj: np.ndarray,
                   dqj: np.ndarray, tauj: np.ndarray, keep: np.ndarray | None) -> np.ndarray:
         """Joint j's rows of a chunk after the fit (:meth:`fitted_rows`, the n-dof refit's
-        rows): :meth:`_usable`, and outside the quadrant band with the theta that decided
-        the final quadrants (``quadrant_theta_``, else ``quadrant_from_``); shape (m,)."""
+        rows): :meth:`_usable`, and outside the quadrant band as the passes left it
+        (:meth:`_in_band` over ``band_from_``); shape (m,)."""
         ok = self._usable(dqj, tauj, WjT, keep)
         band = float(np.asarray(getattr(self, "band_", np.zeros(len(self.cols_))))[j])
-        theta = self.quadrant_theta_ if self.quadrant_theta_ is not None else (
-            self.quadrant_from_)
-        if band > 0 and theta is not None:
-            ok &= np.abs(theta[cols] @ WjT + pj) >= band
+        if band > 0 and getattr(self, "band_from_", None) is not None:
+            ok &= ~self._in_band(cols, WjT, pj, band)[0]
         return ok
 
     def quadrant_drift(self, signals: RobotSignals) -> np.ndarray:

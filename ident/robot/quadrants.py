@@ -48,6 +48,12 @@ class QuadrantStore:
         Rows kept at most (memory: capacity x nv floats, twice for IDIM-IV).
     gram : ndarray (nt, nt) or None
         Metric G of the bound (module doc); None: the identity (Euclidean norm).
+    band : float
+        The joint's quadrant band [N m] (``RobotModel.band_``): rows with |tau_out| below it
+        are left out; 0: none.
+    leave : float
+        A row left out by the band returns only where |tau_out| reaches ``leave`` x ``band``
+        (the band's hysteresis, ``ident.robot.estimate.BAND_LEAVE``); 1: none.
 
     Attributes
     ----------
@@ -59,12 +65,16 @@ class QuadrantStore:
         The kept rows' r_ij (the distance of theta_0 to the row's quadrant boundary, module doc).
     E, pplus, pminus : ndarray (m,)
         Their E = exp(-|dq| / q_s) and current P+, P- (eq. 27-28).
+    out : ndarray (m,) bool
+        The kept rows the band leaves out at the last decision.
     """
 
     def __init__(self, theta0: np.ndarray, capacity: int,
-                 gram: np.ndarray | None = None, band: float = 0.0) -> None:
+                 gram: np.ndarray | None = None, band: float = 0.0,
+                 leave: float = 1.0) -> None:
         self.theta0 = np.array(theta0, dtype=float)
         self.band = float(band)
+        self.leave = float(leave)
         nt = self.theta0.size
         self.L = np.eye(nt)
         if gram is not None and nt:
@@ -85,21 +95,28 @@ class QuadrantStore:
         self.E = np.empty(0)
         self.pplus = np.empty(0)
         self.pminus = np.empty(0)
+        self.out = np.empty(0, dtype=bool)
         self.nt = self.theta0.size
 
     def offer(self, VT: np.ndarray, VzT: np.ndarray | None, E: np.ndarray,
-              weights: tuple[np.ndarray, np.ndarray], tau_out: np.ndarray) -> None:
+              weights: tuple[np.ndarray, np.ndarray], tau_out: np.ndarray,
+              out: np.ndarray | None = None) -> None:
         """Offer the rows of one chunk (VT (nv, m), tau_out = W theta_0 + p (m,)) with their
         quadrant weights ``weights`` = (P+, P-) (each (m,),
-        :func:`trajectories.friction.quadrant_weights`; both 0 for the rows left out,
-        |tau_out| < ``band``); keeps the ``capacity`` rows of smallest r over everything
-        offered so far. With a band the distance is to |tau_out| = band, where a row enters or
-        leaves the fit (and beyond which it flips)."""
+        :func:`trajectories.friction.quadrant_weights`; both 0 for the rows left out by the
+        band, ``out`` (m,) bool, None: |tau_out| < ``band``); keeps the ``capacity`` rows of
+        smallest r over everything offered so far. With a band the distance is to the edge
+        where a row changes state: |tau_out| = band for a row in the fit (it enters the band
+        there, and flips only beyond), = ``leave`` x band for a row left out (it returns
+        there: the band's hysteresis, ``RobotModel._in_band``)."""
         nt = self.nt
         pplus, pminus = weights
         U = self.Linv @ VT[:nt]
         wn = np.sqrt(np.einsum("im,im->m", U, U))
-        a = np.abs(np.abs(tau_out) - self.band)
+        if out is None:
+            out = np.abs(tau_out) < self.band if self.band > 0 else np.zeros(
+                tau_out.shape, dtype=bool)
+        a = np.abs(np.abs(tau_out) - np.where(out, self.leave * self.band, self.band))
         # ||W|| = 0: tau_out = p does not depend on theta, the row never changes quadrant
         r = np.divide(a, wn, out=np.full(a.shape, np.inf), where=wn > 0)
         cand = r < self.radius
@@ -116,6 +133,7 @@ class QuadrantStore:
             Vz_all = (VzT[:, idx] if self.VzT is None
                       else np.concatenate([self.VzT, VzT[:, idx]], 1))
         E_all = np.concatenate([self.E, E[idx]])
+        o_all = np.concatenate([self.out, out[idx]])
         p_all = np.concatenate([self.pplus, pplus[idx]])
         m_all = np.concatenate([self.pminus, pminus[idx]])
         if r_all.size > self.capacity:
@@ -125,11 +143,11 @@ class QuadrantStore:
             mask[keep] = False
             self.radius = min(self.radius, float(r_all[mask].min()))
             r_all, V_all, E_all, p_all = r_all[keep], V_all[:, keep], E_all[keep], p_all[keep]
-            m_all = m_all[keep]
+            m_all, o_all = m_all[keep], o_all[keep]
             if Vz_all is not None:
                 Vz_all = Vz_all[:, keep]
         self.r, self.VT, self.VzT, self.E, self.pplus = r_all, V_all, Vz_all, E_all, p_all
-        self.pminus = m_all
+        self.pminus, self.out = m_all, o_all
 
     def covers(self, theta: np.ndarray) -> bool:
         """True when no row outside the store can be in another quadrant at ``theta``."""
@@ -145,10 +163,12 @@ class QuadrantStore:
         VT = self.VT
         tau_out = theta @ VT[:nt] + VT[nt + IP]
         pnew, mnew = quadrant_weights(tau_out * VT[nt + IDQ])
-        if self.band > 0:
-            out = np.abs(tau_out) < self.band
+        if self.band > 0:  # the band's hysteresis (RobotModel._in_band)
+            a = np.abs(tau_out)
+            out = (a < self.band) | (self.out & (a < self.leave * self.band))
             pnew[out] = 0.0
             mnew[out] = 0.0
+            self.out = out
         changed = (pnew != self.pplus) | (mnew != self.pminus)
         # rows that changed quadrant (entering or leaving the band is no change)
         flipped = changed if self.band <= 0 else changed & (
