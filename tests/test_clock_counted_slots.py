@@ -26,15 +26,18 @@ import pytest
 import scipy.io as sio
 
 from ident import DataError
-from ident.api import JointModel, load
+from ident.api import load
 from ident.loaders import ResamplingWarning
 from ident.timebase import counted_slots, uniform_grid
 from tests.conftest import shared_path
-from tests.test_clock_reading_drift import _sim_fit, quick_runs, random_walk  # noqa: F401
+from tests.test_clock_reading_drift import (  # noqa: F401 (fixtures)
+    _fit,
+    _sim_fit,
+    quick_runs,
+    random_walk,
+)
 
 KW = dict(mapping={"q": "qm", "tau": "vir"}, gain="gtau", joint="prismatic")
-# the reference script's preprocessing (tests/test_ident_emps.py)
-FIT = dict(model="usual", cutoff=100, decimation=10, dq_min=0, sign_check=False)
 LOST = {
     "one": (12000,),
     "five spread": (4000, 8000, 12000, 16000, 20000),
@@ -42,14 +45,9 @@ LOST = {
 }
 
 
-def _fit(data) -> float:
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return JointModel(**FIT).fit(data).rel_error_
-
-
 @pytest.fixture(scope="module")
 def emps():
+    """DATA_EMPS.mat and its fit error as read (``test_clock_reading_drift``'s settings)."""
     path = shared_path("data", "emps") / "DATA_EMPS.mat"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

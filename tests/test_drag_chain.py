@@ -29,12 +29,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from robot_campaigns import ARM3, ARM3_CENTRE, ARM3_PAYLOADS, write_arm_csv
+from robot_campaigns import ARM3, write_arm_csv
 
 from ident.cli_robot import fit_files
 from ident.qs_scan import rescan_qs_joints
 from ident.robot.refit import _qs_columns, _rows, _System, extra_name, model_at_qs, refit_robot
-from sim_drivers.arm import ArmEffects, ArmGains, ArmParams, model_reference, simulate_arm
+from tests.test_qs_joints_refine import drag_runs
 from tests.test_robot_refit import _arm, _TrueDrag
 from trajectories.robot import load_robot
 
@@ -72,19 +72,6 @@ def test_qs_columns_are_the_derivative_and_std_qs_covers_std():
     np.testing.assert_array_equal(rf.std_qs_, rf.std_)
 
 
-def _runs(seed: int) -> list:
-    robot = load_robot(ARM3)
-    c = ArmParams.from_robot(robot).friction.c_m
-    params = ArmParams.from_robot(
-        robot, dict(a_m=1.0, b_m=0.25, a_g=1.0, b_g=0.27, d_m=0.0, d_g=0.0, c_g=c,
-                    q_s=list(QS)),
-        effects=ArmEffects.make(3, quadratic_viscous={2: {"F_VV": F_VV}}))
-    ref = model_reference(params.model, center=ARM3_CENTRE, fraction=0.9, duration_s=10.0,
-                          seed=seed)
-    return [simulate_arm(params, ref, ArmGains.for_params(params, payload=p), payload=p,
-                         seed=10 * seed + i) for i, p in enumerate(ARM3_PAYLOADS)]
-
-
 def _refit(files: list[Path], chain: str, true_dq: list | None = None):
     out = fit_files(load_robot(ARM3), files, model="paper", q_s=list(QS), chain=chain,
                     prune=False, feasibility=False)
@@ -111,7 +98,7 @@ def test_drag_at_the_true_qs_states_chain_and_columns_chain(tmp_path, seed):
     """Measured (2026-11-29, F_VV ± 2 sigma): states chain 2.981 ± 0.193, 2.956 ± 0.175,
     3.117 ± 0.176; columns chain 3.779 ± 0.288, 3.364 ± 0.204, 3.205 ± 0.175, with the drag
     column on the true states 3.803 / 3.362 / 3.199 (section 8.9)."""
-    runs = _runs(seed)
+    runs = drag_runs(seed)
     files = [write_arm_csv(r, tmp_path / f"p{i}.csv") for i, r in enumerate(runs)]
     (v_s, sd_s), _ = _refit(files, "states")
     (v_c, sd_c), (v_t, _) = _refit(files, "columns", runs)
@@ -128,7 +115,7 @@ def test_drag_after_the_per_joint_rescan_states_chain(tmp_path, seed):
     """Measured (2026-11-29): rescanned q_s of j3 0.1044 / 0.1042 / 0.1035 rad/s on seeds 11,
     12, 14 (truth 0.1); F_VV 2.830 / 2.816 / 2.760, std_ 0.099 / 0.090 / 0.098, std_qs_
     0.131 / 0.115 / 0.143 (section 8.9)."""
-    files = [write_arm_csv(r, tmp_path / f"p{i}.csv") for i, r in enumerate(_runs(seed))]
+    files = [write_arm_csv(r, tmp_path / f"p{i}.csv") for i, r in enumerate(drag_runs(seed))]
     out = fit_files(load_robot(ARM3), files, model="paper", q_s="scan-joints", chain="states",
                     prune=False, feasibility=False)
     est, sig = out["_estimators"]["paper"], out["_identification"]

@@ -65,15 +65,21 @@ def setup(tmp_path_factory):
     return out
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("seed", [1, 21])
-def test_quadrant_from_the_model_where_the_sign_check_is_skipped(setup, seed):
+def _experiments(setup, seed: int) -> list:
+    """The campaign's payload runs on the friction-dominated joint (seeds seed, seed + 1,
+    ...), as experiments."""
     plant, plan, gains = setup
     runs = [simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
                      payload_arm=p.arm_m, seed=seed + i) for i, p in enumerate(plan.payloads)]
-    exps = [make_experiment(f"p{i}.csv", r.t, r.q, r.tau_ref, payload_mass=p.mass_kg,
+    return [make_experiment(f"p{i}.csv", r.t, r.q, r.tau_ref, payload_mass=p.mass_kg,
                             payload_arm=p.arm_m)
             for i, (p, r) in enumerate(zip(plan.payloads, runs, strict=True))]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 21])
+def test_quadrant_from_the_model_where_the_sign_check_is_skipped(setup, seed):
+    exps = _experiments(setup, seed)
     rep = fit_models(exps, ("paper",), table_iv=False)
     note = [n for n in rep.notes if n.startswith("sign check skipped")]
     assert note and "sign(tau_out_hat dq)" in note[0], rep.notes
@@ -103,12 +109,7 @@ def test_quadrants_decided_again_by_the_paper_fit_without_the_band(setup, monkey
     import ident.one_joint as one_joint
 
     monkeypatch.setattr(one_joint, "SKIPPED_CHECK_BAND", 0.0)
-    plant, plan, gains = setup
-    runs = [simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
-                     payload_arm=p.arm_m, seed=1 + i) for i, p in enumerate(plan.payloads)]
-    exps = [make_experiment(f"p{i}.csv", r.t, r.q, r.tau_ref, payload_mass=p.mass_kg,
-                            payload_arm=p.arm_m)
-            for i, (p, r) in enumerate(zip(plan.payloads, runs, strict=True))]
+    exps = _experiments(setup, 1)
     rep = fit_models(exps, ("paper",), table_iv=False)
     m, d = rep.models["paper"], rep.designs["paper"]
     again = [n for n in rep.notes if n.startswith("paper model: the quadrants decided again")]
@@ -131,12 +132,7 @@ def test_quadrant_passes_stopped_by_their_cap_say_so(setup, monkeypatch):
 
     monkeypatch.setattr(one_joint, "SKIPPED_CHECK_BAND", 0.0)
     monkeypatch.setattr(fitting, "REQUADRANT_PASSES", 0)
-    plant, plan, gains = setup
-    runs = [simulate(plant, plan.reference, gains, payload_mass=p.mass_kg,
-                     payload_arm=p.arm_m, seed=1 + i) for i, p in enumerate(plan.payloads)]
-    exps = [make_experiment(f"p{i}.csv", r.t, r.q, r.tau_ref, payload_mass=p.mass_kg,
-                            payload_arm=p.arm_m)
-            for i, (p, r) in enumerate(zip(plan.payloads, runs, strict=True))]
+    exps = _experiments(setup, 1)
     rep = fit_models(exps, ("paper",), table_iv=False)
     m, d = rep.models["paper"], rep.designs["paper"]
     left = quadrant_drift(d, d.library, m.coef_)

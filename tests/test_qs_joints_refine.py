@@ -44,9 +44,9 @@ def _off(q: float, truth: float) -> float:
     return math.exp(abs(math.log(q / truth)))
 
 
-def _files(tmp_path: Path, seed: int) -> list[Path]:
+def drag_runs(seed: int) -> list:
     """Three payload runs of 10 s of the arm (load-dependent friction, QS_DISTINCT, the drag
-    F_VV on joint 3), as robot CSVs."""
+    F_VV on joint 3), simulated (also tests/test_drag_chain.py's)."""
     robot = load_robot(ARM3)
     c = ArmParams.from_robot(robot).friction.c_m
     params = ArmParams.from_robot(
@@ -56,9 +56,13 @@ def _files(tmp_path: Path, seed: int) -> list[Path]:
     np.testing.assert_array_equal(params.friction.q_s, QS_DISTINCT)
     ref = model_reference(params.model, center=ARM3_CENTRE, fraction=0.9, duration_s=10.0,
                           seed=seed)
-    return [write_arm_csv(simulate_arm(params, ref, ArmGains.for_params(params, payload=p),
-                                       payload=p, seed=10 * seed + i), tmp_path / f"p{i}.csv")
-            for i, p in enumerate(ARM3_PAYLOADS)]
+    return [simulate_arm(params, ref, ArmGains.for_params(params, payload=p), payload=p,
+                         seed=10 * seed + i) for i, p in enumerate(ARM3_PAYLOADS)]
+
+
+def _files(tmp_path: Path, seed: int) -> list[Path]:
+    """:func:`drag_runs` as robot CSVs."""
+    return [write_arm_csv(r, tmp_path / f"p{i}.csv") for i, r in enumerate(drag_runs(seed))]
 
 
 @pytest.mark.parametrize("seed", [11, 12, 13])
