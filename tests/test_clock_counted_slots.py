@@ -19,7 +19,6 @@ from their neighbours, and one warning says how many were lost and where.
 from __future__ import annotations
 
 import re
-import warnings
 
 import numpy as np
 import pytest
@@ -29,10 +28,10 @@ from ident import DataError
 from ident.api import load
 from ident.loaders import ResamplingWarning
 from ident.timebase import counted_slots, uniform_grid
-from tests.conftest import shared_path
 from tests.test_clock_reading_drift import (  # noqa: F401 (fixtures)
     _fit,
     _sim_fit,
+    emps_data,
     quick_runs,
     random_walk,
 )
@@ -48,10 +47,7 @@ LOST = {
 @pytest.fixture(scope="module")
 def emps():
     """DATA_EMPS.mat and its fit error as read (``test_clock_reading_drift``'s settings)."""
-    path = shared_path("data", "emps") / "DATA_EMPS.mat"
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return sio.loadmat(path), _fit(load(path, **KW))
+    return emps_data()
 
 
 def _drifted(m: dict, path, s: float, seed: int, lost: tuple[int, ...]):

@@ -55,12 +55,17 @@ def _fit(data) -> float:
         return JointModel(**FIT).fit(data).rel_error_
 
 
-@pytest.fixture(scope="module")
-def emps():
+def emps_data() -> tuple:
+    """DATA_EMPS.mat (scipy.io) and the usual model's error on it as read (``FIT``)."""
     path = shared_path("data", "emps") / "DATA_EMPS.mat"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         return sio.loadmat(path), _fit(load(path, **KW))
+
+
+@pytest.fixture(scope="module")
+def emps():
+    return emps_data()
 
 
 @pytest.mark.parametrize("s", [0.01, 0.03])
