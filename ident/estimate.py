@@ -6,7 +6,9 @@ and ``"iv"``, shared with the n-dof fit); this module adds the statistics of eq.
 removal of unidentifiable and non-significant parameters. The regressor columns are scaled to
 unit norm before the factorisation (the estimate is unchanged, the conditioning is not
 squared); a column-pivoted QR detects zero and linearly dependent columns (the one rank rule,
-:data:`ident.estimators.RCOND`) and says which parameters cannot be separated.
+:data:`ident.estimators.RCOND`) and says which parameters cannot be separated; with
+instruments the same rule on what IDIM-IV solves (the regressor projected on the instruments)
+says which ones the instruments do not determine.
 
 IDIM-IV (Janot, Vandanjon & Gautier, "A generic instrumental variable approach for
 industrial robot identification", IEEE TCST 2014): with instruments Z (m x b) correlated
@@ -172,7 +174,10 @@ def fit_least_squares(
 
     1. zero columns are removed ("no excitation on these data");
     2. linearly dependent columns are removed, with the parameters they depend on;
-    3. if ``eliminate``, the parameter with the largest relative deviation above
+    3. with instruments, the columns they do not determine (IDIM-IV's rank rule on the
+       projected regressor P_Z W, :meth:`ident.estimators.Estimator.rank_drops`) are removed,
+       with the parameters whose instrumented parts they are a combination of;
+    4. if ``eliminate``, the parameter with the largest relative deviation above
        ``threshold_pct`` [%] is removed and the system refitted, until none is above.
 
     Parameters
@@ -233,6 +238,17 @@ def fit_least_squares(
         for n, partners in deps:
             removed.append((n, dependent_reason(partners)))
         cols = [i for i in cols if names[i] not in drop]
+    if Z is not None and cols:
+        # IDIM-IV's own rule on the columns kept: the instruments must determine them
+        Wk, Zk = W[:, cols], Z[:, cols]
+        weak = get_estimator("iv").rank_drops(Wk.T @ Wk, [names[i] for i in cols],
+                                              A=Zk.T @ Wk, C=Zk.T @ Zk)
+        if weak and not drop_unidentifiable:
+            raise IdentifiabilityError("instruments: " + "; ".join(
+                f"{names[cols[k]]}: {why}" for k, why in weak))
+        removed += [(names[cols[k]], why) for k, why in weak]
+        gone = {k for k, _ in weak}
+        cols = [c for k, c in enumerate(cols) if k not in gone]
     while True:
         sub = [names[i] for i in cols]
         res = solve_ls(W[:, cols], Y, sub, None if Z is None else Z[:, cols])

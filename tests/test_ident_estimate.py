@@ -8,6 +8,7 @@ import pytest
 
 from ident import IdentifiabilityError
 from ident.estimate import dependent_columns, fit_least_squares, solve_ls
+from ident.estimators import WEAK_PREFIX
 
 
 def _system(m=2000, seed=0, noise=0.5):
@@ -136,5 +137,11 @@ def test_instruments_follow_column_elimination_and_are_checked():
     assert r.names == ("k", "c") and r.removed[0][0] == "dead"
     with pytest.raises(Exception, match="instruments Z have shape"):
         fit_instrumental(W, Y, Z[:, :1], ["k", "c"])
+    # both instruments the constant: IV cannot determine k (its instrumented column is c's
+    # times mean(x)); left out with that reason, or refused without dropping
+    same = np.column_stack([Z[:, 1], Z[:, 1]])
+    r = fit_instrumental(W, Y, same, ["k", "c"], eliminate=False)
+    assert r.names == ("c",) and r.removed[0][0] == "k"
+    assert r.removed[0][1].startswith(WEAK_PREFIX) and "of c" in r.removed[0][1]
     with pytest.raises(IdentifiabilityError, match="instruments"):
-        fit_instrumental(W, Y, np.column_stack([Z[:, 1], Z[:, 1]]), ["k", "c"])
+        fit_instrumental(W, Y, same, ["k", "c"], drop_unidentifiable=False)

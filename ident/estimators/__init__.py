@@ -5,8 +5,9 @@ A new estimator is one module here with a subclass of :class:`Estimator` and one
 ``RobotModel.method`` come from that table.
 
 Modules: :mod:`~ident.estimators.base` (the contract, :class:`Solution`, the rank rule
-``RCOND``), :mod:`~ident.estimators.ls` (IDIM-LS), :mod:`~ident.estimators.wls` (IDIM-WLS,
-per-group weights), :mod:`~ident.estimators.iv` (IDIM-IV).
+``RCOND``; ``Estimator.rank_drops``: on W^T W, and for IV on the projected regressor P_Z W),
+:mod:`~ident.estimators.ls` (IDIM-LS), :mod:`~ident.estimators.wls` (IDIM-WLS, per-group
+weights), :mod:`~ident.estimators.iv` (IDIM-IV).
 """
 
 from __future__ import annotations
@@ -16,21 +17,26 @@ from .base import (
     DEPENDENT_PREFIX,
     PARTNER_TOL,
     RCOND,
+    WEAK_PREFIX,
     ZERO_COLUMN,
     Estimator,
     RankDeficientError,
     Solution,
     dependent_columns,
     dependent_reason,
+    instrumented_gram,
     rank_rule,
+    weak_instruments,
+    weak_reason,
 )
 from .iv import IV
 from .ls import LS
 from .wls import WLS
 
-__all__ = ["DEPENDENT_PREFIX", "ESTIMATORS", "PARTNER_TOL", "RCOND", "ZERO_COLUMN", "Estimator",
-           "IV", "LS", "RankDeficientError", "Solution", "WLS", "dependent_columns",
-           "dependent_reason", "get_estimator", "rank_rule"]
+__all__ = ["DEPENDENT_PREFIX", "ESTIMATORS", "PARTNER_TOL", "RCOND", "WEAK_PREFIX", "ZERO_COLUMN",
+           "Estimator", "IV", "LS", "RankDeficientError", "Solution", "WLS",
+           "dependent_columns", "dependent_reason", "get_estimator", "instrumented_gram",
+           "rank_rule", "weak_instruments", "weak_reason"]
 
 #: name -> class: the registered estimators (the CLI choices, in this order).
 ESTIMATORS: dict[str, type[Estimator]] = {cls.name: cls for cls in (LS, WLS, IV)}

@@ -29,8 +29,10 @@ import scipy.linalg
 
 from .. import DataError, IdentifiabilityError
 
-__all__ = ["DEPENDENT_PREFIX", "PARTNER_TOL", "RCOND", "ZERO_COLUMN", "Estimator", "Solution",
-           "RankDeficientError", "scaled", "dependent_columns", "dependent_reason", "rank_rule"]
+__all__ = ["DEPENDENT_PREFIX", "PARTNER_TOL", "RCOND", "WEAK_PREFIX", "ZERO_COLUMN", "Estimator",
+           "Solution", "RankDeficientError", "scaled", "dependent_columns", "dependent_reason",
+           "instrumented_gram", "rank_rule", "weak_instruments",
+           "weak_reason"]
 
 #: Relative singular-value tolerance of the column-scaled regressor (module doc). On normal
 #: equations the threshold is RCOND**2 = 1e-12 (their eigenvalues are squared singular values;
@@ -129,8 +131,8 @@ def dependent_reason(partners: Sequence[str]) -> str:
 PARTNER_TOL = 1e-3
 
 
-def rank_rule(G: np.ndarray, tol: float = RCOND,
-              first: int = 0) -> tuple[np.ndarray, dict[int, list[int]]]:
+def rank_rule(G: np.ndarray, tol: float = RCOND, first: int = 0,
+              norms: np.ndarray | None = None) -> tuple[np.ndarray, dict[int, list[int]]]:
     """The rank rule (module doc) on a Gram matrix G = W^T W, shape (b, b): the columns of W
     left out and, for each nonzero one, its partners.
 
@@ -155,6 +157,12 @@ def rank_rule(G: np.ndarray, tol: float = RCOND,
         RCOND of the module doc (on |R_kk| / |R_00|, i.e. sqrt of the scaled pivots).
     first : int
         Columns pivoted first (above).
+    norms : ndarray, shape (b,), or None
+        Scale the columns by these instead of sqrt(diag(G)): IDIM-IV's G = W^T P_Z W
+        (:func:`instrumented_gram`) scaled by the norms of W's own columns, so that a column
+        the instruments hardly predict has a short scaled column (:func:`weak_instruments`).
+        The tolerance is then relative to the longest scaled column (|R_00| of the pivoted
+        QR when nothing is pivoted first); None: unit columns, |R_00| = 1.
 
     Returns
     -------
@@ -166,19 +174,26 @@ def rank_rule(G: np.ndarray, tol: float = RCOND,
     out = [int(i) for i in np.flatnonzero(~(d > 0))]
     if not live.size:
         return np.array(out, dtype=int), {}
-    Gs = G[np.ix_(live, live)] / d[live, None] / d[None, live]
+    if norms is not None:
+        s = np.asarray(norms, dtype=float)
+        s = np.where(s > 0, s, d)
+    else:
+        s = d
+    Gs = G[np.ix_(live, live)] / s[live, None] / s[None, live]
     n = live.size
     L = np.zeros((n, n))
     r = np.diagonal(Gs).copy()
+    # |R_00| (the longest scaled column): 1 for unit columns, so tol itself as before
+    ref = tol * (1.0 if norms is None else float(np.sqrt(max(r.max(), 0.0))))
     left = np.ones(n, dtype=bool)
     piv: list[int] = []
     group = live < int(first)
     for k in range(n):
         i = int(np.argmax(np.where(left & group, r, -np.inf)))
-        if not (group[i] and left[i] and np.sqrt(max(r[i], 0.0)) > tol):
+        if not (group[i] and left[i] and np.sqrt(max(r[i], 0.0)) > ref):
             group[:] = False  # the first columns are all taken (or dependent)
             i = int(np.argmax(np.where(left, r, -np.inf)))
-        if not np.sqrt(max(r[i], 0.0)) > tol:  # |R_00| = 1: unit columns
+        if not np.sqrt(max(r[i], 0.0)) > ref:
             break
         col = (Gs[:, i] - L[:, :k] @ L[i, :k]) / np.sqrt(r[i])
         L[:, k] = col
@@ -212,6 +227,76 @@ def dependent_columns(
     W = np.asarray(W, dtype=float)
     out, partners = rank_rule(W.T @ W, tol)
     return [(names[i], [names[p] for p in partners.get(int(i), [])]) for i in out]
+
+
+#: Why IDIM-IV leaves a column out that the rows alone would keep (:func:`weak_instruments`):
+#: its part the instruments predict (P_Z w) is within RCOND of the kept columns' (or of 0).
+WEAK_PREFIX = "not determined by the instruments (IDIM-IV): "
+
+
+def weak_reason(partners: Sequence[str]) -> str:
+    """Why IDIM-IV fixes a column at 0 that the rows alone would keep: its instrumented part
+    is a combination of ``partners``' (or nearly zero: the instruments do not predict it)."""
+    if partners:
+        return (WEAK_PREFIX + "its instrumented column is a linear combination of those of "
+                + ", ".join(partners))
+    return WEAK_PREFIX + "its instrumented column is zero (the instruments do not predict it)"
+
+
+def instrumented_gram(A: np.ndarray, C: np.ndarray, tol: float = RCOND) -> np.ndarray:
+    """W^T P_Z W (b, b), the Gram matrix of the regressor projected on the instruments' column
+    space, from A = Z^T W and C = Z^T Z (rows or moments summed chunk by chunk alike).
+
+    IDIM-IV's estimate depends on Z only through that space (theta = (Z^T W)^-1 Z^T y and
+    C_theta = sigma^2 (W^T P_Z W)^-1): it is IDIM-LS on P_Z W. The instruments' own rank rule
+    (unit-norm columns of Z, a direction with a singular value at most ``tol`` times the
+    largest spans nothing) truncates C's pseudo-inverse: nearly dependent instruments span
+    fewer directions, so P_Z W loses rank and :func:`rank_rule` leaves a column out.
+
+    Parameters
+    ----------
+    A : ndarray, shape (bz, b)
+        Z^T W.
+    C : ndarray, shape (bz, bz)
+        Z^T Z.
+    tol : float
+        RCOND on the unit-norm instruments (eigenvalues of the scaled C against tol^2).
+    """
+    A = np.asarray(A, dtype=float)
+    C = np.asarray(C, dtype=float)
+    dz = np.sqrt(np.clip(np.diagonal(C), 0.0, None))
+    dz = np.where(dz > 0, dz, 1.0)
+    ev, V = np.linalg.eigh(C / dz[:, None] / dz[None, :])
+    keep = ev > tol**2 * max(float(ev[-1]), 0.0) if ev.size else ev > 0
+    B = V[:, keep].T @ (A / dz[:, None]) / np.sqrt(ev[keep])[:, None]  # L^-1 Z^T W
+    return B.T @ B
+
+
+def weak_instruments(G: np.ndarray, A: np.ndarray, C: np.ndarray, tol: float = RCOND,
+                     first: int = 0) -> tuple[np.ndarray, dict[int, list[int]]]:
+    """The rank rule of IDIM-IV: :func:`rank_rule` on W^T P_Z W (:func:`instrumented_gram`),
+    its columns scaled by W's own norms sqrt(diag(G)), G = W^T W.
+
+    A column is left out when the part of it the instruments predict lies within ``tol``
+    times the longest such part (W's columns at unit norm) of the span of the other columns'
+    parts: the column-pivoted QR of P_Z W_s, which is what IDIM-IV solves (the LS rule on
+    W_s, relative to the largest). Callers run :func:`rank_rule` on G first and this on the
+    columns it keeps, so that a column the rows already cannot separate keeps that reason.
+
+    Parameters
+    ----------
+    G, A, C : ndarray
+        W^T W (b, b), Z^T W (bz, b) and Z^T Z (bz, bz).
+    tol, first
+        As :func:`rank_rule`'s.
+
+    Returns
+    -------
+    (ndarray of int, dict of int to list of int)
+        As :func:`rank_rule`'s: the columns left out and the partners of each.
+    """
+    norms = np.sqrt(np.clip(np.diagonal(G), 0.0, None))
+    return rank_rule(instrumented_gram(A, C, tol), tol, first, norms=norms)
 
 
 def dependency_message(deps: list[tuple[str, list[str]]]) -> str:
@@ -328,6 +413,56 @@ class Estimator:
         """(theta_s, cov_s) for the unit-norm columns Ws = Q R P^T (full rank): the estimate
         and the covariance factor, sigma^2 excluded."""
         raise NotImplementedError
+
+    # ------------------------------------------------------------------ the rank rule
+    def rank_drops(self, G: np.ndarray, names: Sequence[str], *, A: np.ndarray | None = None,
+                   C: np.ndarray | None = None, first: int = 0,
+                   tol: float = RCOND) -> list[tuple[int, str]]:
+        """The columns this estimator cannot determine, each with its reason: the one rank
+        rule on what it solves, for one joint's rows and the n-dof moments alike.
+
+        :func:`rank_rule` on G = W^T W (zero and dependent columns: :data:`ZERO_COLUMN`,
+        :func:`dependent_reason`); for an estimator with instruments given A = Z^T W and
+        C = Z^T Z, then :func:`weak_instruments` on the columns kept (IDIM-IV solves
+        Z^T W theta = Z^T y, i.e. least squares on P_Z W: a column whose instrumented part is
+        within RCOND of the others' is left out, :func:`weak_reason`).
+
+        Parameters
+        ----------
+        G : ndarray, shape (b, b)
+            W^T W (WLS: weighted), any column scaling.
+        names : sequence of str
+            Column names, for the reasons.
+        A, C : ndarray or None
+            Z^T W (b, b) and Z^T Z (b, b) (IV: Z column for column with W, so a column left
+            out takes its instrument along, and the rule is repeated on the rest until it
+            leaves nothing out); ignored by estimators without instruments.
+        first, tol
+            As :func:`rank_rule`'s.
+
+        Returns
+        -------
+        list of (int, str)
+            Column index and reason, sorted by index.
+        """
+        G = np.asarray(G, dtype=float)
+        dep, partners = rank_rule(G, tol, first)
+        out = [(int(k), ZERO_COLUMN if not G[k, k] > 0 else
+                dependent_reason([names[p] for p in partners[int(k)]])) for k in dep]
+        if self.needs_instruments and A is not None and C is not None:
+            A = np.asarray(A, dtype=float)
+            C = np.asarray(C, dtype=float)
+            kept = np.setdiff1d(np.arange(G.shape[0]), dep)
+            while kept.size:  # a column left out takes its instrument along: until none
+                sub = np.ix_(kept, kept)
+                weak, wp = weak_instruments(G[sub], A[sub], C[sub], tol,
+                                            int(np.sum(kept < first)))
+                if not weak.size:
+                    break
+                out += [(int(kept[k]), weak_reason([names[kept[p]] for p in wp.get(int(k), [])]))
+                        for k in weak]
+                kept = np.delete(kept, weak)
+        return sorted(out)
 
     # ------------------------------------------------------------------ normal equations
     def solve_normal(self, As: np.ndarray, gs: np.ndarray,

@@ -5,6 +5,14 @@ error: theta = (Z^T W)^-1 Z^T y; sigma^2 = ||y - W theta||^2 / (m - b) and
 C = sigma^2 (Z^T W)^-1 Z^T Z (W^T Z)^-1, which is the LS covariance when Z = W. Z enters only
 through its column space: with Z = Q_z R_z (thin QR of the unit-norm Z), A = Q_z^T W_s,
 theta_s = A^-1 Q_z^T y and the covariance factor is A^-1 A^-T.
+
+Rank rule (:meth:`~ident.estimators.base.Estimator.rank_drops`): IV is least squares on the
+projected regressor P_Z W (P_Z the projector on Z's columns), so the rule judges P_Z W_s (W's
+columns at unit norm) after the rows' rule on W_s: a column whose instrumented part lies within
+RCOND times the longest one of the others' span is not determined
+(:func:`~ident.estimators.base.weak_instruments`), even when W^T W alone would keep it (weak
+instruments in that direction: a column nearly constant on the reference trajectory, or nearly
+the same as another one there, while the measured one varies).
 """
 
 from __future__ import annotations
@@ -13,7 +21,7 @@ import numpy as np
 import scipy.linalg
 
 from .. import DataError
-from .base import RCOND, Estimator, RankDeficientError, dependency_message, dependent_columns
+from .base import RCOND, Estimator, RankDeficientError
 from .base import scaled as _scaled
 
 __all__ = ["IV"]
@@ -34,12 +42,13 @@ class IV(Estimator):
         if not np.all(np.isfinite(Z)):
             raise DataError("instruments Z hold NaN or infinite values")
         Zs, _ = _scaled(Z)
-        Qz, Rz = scipy.linalg.qr(Zs, mode="economic")
-        dz = np.abs(np.diag(Rz))
-        if b and (dz.max() == 0 or dz.min() <= RCOND * dz.max()):
-            deps = dependent_columns(Z, names) or [(names[int(np.argmin(dz))], [])]
-            raise RankDeficientError("instruments: " + dependency_message(deps),
-                                     [n for n, _ in deps])
+        # the rank rule of what IV solves (least squares on P_Z W_s; W_s passed it already)
+        weak = self.rank_drops(Ws.T @ Ws, names, A=Zs.T @ Ws, C=Zs.T @ Zs)
+        if weak:
+            raise RankDeficientError(
+                "instruments: " + "; ".join(f"{names[i]}: {why}" for i, why in weak),
+                [names[i] for i, _ in weak])
+        Qz, _ = scipy.linalg.qr(Zs, mode="economic")
         A = Qz.T @ Ws
         try:
             lu = scipy.linalg.lu_factor(A, check_finite=False)
