@@ -12,10 +12,15 @@ measurement (the reference plus noise, the regressor):
   with its own noise.
 
 The rows' rule (W^T W) keeps both columns (the noise separates them); IDIM-IV cannot: before
-this change the single-joint fit refused the whole fit ("instruments: ..."), and the n-dof
-path's solver (singular values of the scaled Z^T W against RCOND^2) kept the column, e.g. at
-delta = 1e-6 the ``constant`` column came out -19.0 +- 140.5 and 20.2 +- 140.6 for a truth of
-0.7 over two seeds (/tmp script of the change's report). The rule now leaves it out with its
+this change the single-joint rows fit refused the whole fit ("instruments: ..."), and the
+n-dof path -- the rows' rule, then the solver's test on the singular values of the scaled
+Z^T W against RCOND^2 -- keeps the column with a sigma 10^3 to 10^4 times the others' and its
+value anywhere inside it (delta = 3e-7, seeds 0-2: ``constant`` k = 0.571 +- 1.55, 0.078 +- 10.4,
+0.341 +- 1.38; ``duplicate`` k4 = 0.489 +- 1.21, 0.607 +- 1.57, -1.82 +- 13.0, truth 0.7,
+against +- 0.0008 to 0.0015 for every parameter once the rule leaves it out; at delta = 1e-8,
+seed 2, its variance came out negative. :func:`test_the_n_dof_path_without_the_iv_rule_keeps_it`
+prints them with ``-s``; the n-dof drop, ``RobotModel._rank_fix``, still calls the rows' rule
+only). The rule now leaves it out with its
 reason (:data:`ident.estimators.WEAK_PREFIX`, the partner named), on rows
 (:func:`ident.estimate.fit_instrumental`, ``IV.solve``) and on moments summed chunk by chunk
 (``Estimator.rank_drops``, the n-dof entry) alike; the kept parameters then come out within
@@ -134,3 +139,39 @@ def test_instrumented_gram_is_the_projected_regressors():
     assert rank_rule(PW.T @ PW, norms=norms)[0].size == 0
     Z[:, 3] = Z[:, 0] * (1.0 + 0.1 * RCOND * rng.standard_normal(300))
     assert rank_rule(instrumented_gram(Z.T @ W, Z.T @ Z), norms=norms)[0].size == 1
+
+
+def _normal_fit(W, y, Z, keep):
+    """The n-dof path on the columns ``keep``: the estimator's ``solve_normal`` on the
+    column-scaled Z^T W (its RCOND^2 test), then ``normal_covariance`` (the IV sandwich)."""
+    iv = get_estimator("iv")
+    W, Z = W[:, keep], Z[:, keep]
+    A = Z.T @ W
+    d = np.sqrt(np.abs(np.diag(A)))
+    theta = iv.solve_normal(A / d[:, None] / d[None, :], Z.T @ y / d) / d
+    r = y - W @ theta
+    cov = iv.normal_covariance(A, Z.T @ Z, float(r @ r) / (len(y) - len(keep)))
+    return theta, np.sqrt(np.abs(np.diag(cov)))
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("kind", ["constant", "duplicate"])
+def test_the_n_dof_path_without_the_iv_rule_keeps_it(kind, seed):
+    """The n-dof path as ``RobotModel._rank_fix`` runs it (the rows' rule on W^T W only) keeps
+    the column IV cannot determine: the solver accepts it, its sigma over 100 times the
+    largest of the fit after ``rank_drops``, whose kept values are within 3 sigma of their
+    truth."""
+    W, y, Z, names, truth, weak, _ = _case(kind, 3e-7, seed)
+    assert rank_rule(W.T @ W)[0].size == 0
+    theta0, sd0 = _normal_fit(W, y, Z, [0, 1, 2, 3])
+    drops = get_estimator("iv").rank_drops(W.T @ W, names, A=Z.T @ W, C=Z.T @ Z)
+    keep = [i for i in range(4) if i not in {k for k, _ in drops}]
+    theta, sd = _normal_fit(W, y, Z, keep)
+    fmt = {"float_kind": lambda v: f"{v:.2g}"}
+    print(f"\n{kind} seed {seed}: rows' rule only: {weak} = {theta0[3]:.3g} +- {sd0[3]:.3g} "
+          f"(truth {THETA[3]}), sigmas {np.array2string(sd0, formatter=fmt)}; IV's rule: "
+          f"{[names[i] for i in keep]} sigmas {np.array2string(sd, formatter=fmt)}")
+    assert [names[i] for i in keep] == [n for n in names if n != weak]
+    assert sd0[3] > 100 * sd.max()
+    for i, v, s in zip(keep, theta, sd, strict=True):
+        assert abs(v - truth[names[i]]) < 3 * s, (names[i], v, s)
