@@ -15,7 +15,11 @@ scaled regressor whose singular value is at most ``RCOND`` times the largest is 
 identifiable. On rows this is the diagonal of the column-pivoted QR (|R_kk| <= RCOND |R_00|);
 on a symmetric normal matrix A = W^T W (scaled to unit diagonal), whose eigenvalues are the
 squared singular values, it reads lambda_min <= RCOND^2 lambda_max; on an IV normal matrix
-Z^T W (not symmetric) its singular values are compared with RCOND^2 too.
+Z^T W (not symmetric) its singular values are compared with RCOND^2 too (the solver's
+refusal). Which columns an estimator leaves out is :meth:`Estimator.rank_drops`: the pivots on
+W^T W, and for IDIM-IV then on what it solves, the regressor projected on the instruments
+(W^T P_Z W from Z^T W and Z^T Z, its columns at W's unit norm, the tolerance relative to the
+longest: :func:`weak_instruments`), on rows and summed moments alike.
 """
 
 from __future__ import annotations
