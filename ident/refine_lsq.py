@@ -27,6 +27,7 @@ import numpy as np
 import scipy.linalg
 
 from .estimate import RANK_TOL
+from .estimators import get_estimator
 from .estimators.base import scaled as _scaled
 
 __all__ = ["MARGIN", "quick_residual"]
@@ -89,6 +90,9 @@ def quick_residual(
         dz = np.abs(np.diag(Rz))
         if dz.max() == 0 or dz.min() <= RANK_TOL * dz.max():
             return None
+        if get_estimator("iv").rank_drops(Ws.T @ Ws, [str(k) for k in range(b)],
+                                          A=Zs.T @ Ws, C=Zs.T @ Zs):
+            return None  # IV's rank rule leaves a column out (fit_least_squares would)
         A = Qz.T @ Ws
         try:
             lu = scipy.linalg.lu_factor(A, check_finite=False)

@@ -19,8 +19,8 @@ value anywhere inside it (delta = 3e-7, seeds 0-2: ``constant`` k = 0.571 +- 1.5
 0.341 +- 1.38; ``duplicate`` k4 = 0.489 +- 1.21, 0.607 +- 1.57, -1.82 +- 13.0, truth 0.7,
 against +- 0.0008 to 0.0015 for every parameter once the rule leaves it out; at delta = 1e-8,
 seed 2, its variance came out negative. :func:`test_the_n_dof_path_without_the_iv_rule_keeps_it`
-prints them with ``-s``; the n-dof drop, ``RobotModel._rank_fix``, still calls the rows' rule
-only). The rule now leaves it out with its
+prints them with ``-s``; the n-dof drop, ``RobotModel._rank_fix``, called the rows' rule
+only, and now calls ``rank_drops`` after it). The rule now leaves it out with its
 reason (:data:`ident.estimators.WEAK_PREFIX`, the partner named), on rows
 (:func:`ident.estimate.fit_instrumental`, ``IV.solve``) and on moments summed chunk by chunk
 (``Estimator.rank_drops``, the n-dof entry) alike; the kept parameters then come out within
@@ -157,7 +157,7 @@ def _normal_fit(W, y, Z, keep):
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("kind", ["constant", "duplicate"])
 def test_the_n_dof_path_without_the_iv_rule_keeps_it(kind, seed):
-    """The n-dof path as ``RobotModel._rank_fix`` runs it (the rows' rule on W^T W only) keeps
+    """The n-dof path as ``RobotModel._rank_fix`` ran it (the rows' rule on W^T W only) keeps
     the column IV cannot determine: the solver accepts it, its sigma over 100 times the
     largest of the fit after ``rank_drops``, whose kept values are within 3 sigma of their
     truth."""

@@ -1877,8 +1877,16 @@ class RobotModel(HyperParameters):
                     f"the rank rule left out {', '.join(self.names_[idx[k]] for k in near)} as "
                     f"nearly dependent (scaled normal matrix cond {cond:.2g} > 1 / RANK_TOL "
                     f"= {1 / RANK_TOL:.0e} after the pivoted columns)")
-        return [(int(idx[k]), ZERO_COLUMN if not G[k, k] > 0 else dependent_reason(
+        out = [(int(idx[k]), ZERO_COLUMN if not G[k, k] > 0 else dependent_reason(
             [self.names_[idx[q]] for q in partners[k]])) for k in dep]
+        if self._estimator.needs_instruments:  # IDIM-IV: the rule on what it solves
+            A, _, _, C, _ = self._normal(moms, coeffs, x, np.ones(len(moms)))
+            kept = np.setdiff1d(np.arange(idx.size), dep)
+            sub = np.ix_(idx[kept], idx[kept])
+            out += [(int(idx[kept[k]]), why) for k, why in self._estimator.rank_drops(
+                G[np.ix_(kept, kept)], [self.names_[i] for i in idx[kept]], A=A[sub],
+                C=C[sub], first=int(np.sum(kept < first)))]
+        return sorted(out)
 
     def _payload_groups(self, signals: Any) -> None:
         """``payload_params``: the distinct payload masses of the experiments
