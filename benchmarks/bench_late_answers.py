@@ -11,7 +11,8 @@ A python-can-remote bridge on 127.0.0.1, the simulated drive (node 3) in another
 periods (the campaign of ``tests/test_cross_process.py``, TPDO watchdog 50 cycles), beside
 ``--busy`` busy loops (``sh -c 'while :; do :; done'``, started and stopped here by their
 pid). ``--velocity difference`` makes the master's law use the backward difference of the
-position even though the clock is paced (what it did before ``drive_velocity``).
+position even though the clock is paced (``[daq] velocity_source = "difference"``: what it
+did before ``drive_velocity``).
 
 Per run, from its log: status and reason; the start-up (cycles before the plan moves) and
 the plan's share of cycles without the drive's answer; the TPDO1 frames' delay after the
@@ -37,13 +38,12 @@ sys.path.insert(0, str(ROOT))
 
 from test_cross_process import remote_campaign  # noqa: E402
 
-import daq.runtime.engine as engine  # noqa: E402
 from daq.protocol.reader import read_frames, read_run  # noqa: E402
 from daq.runtime.runner import run_campaign  # noqa: E402
 from sim_drivers.remote import ServeProcess  # noqa: E402
 
 
-def one_run(out: Path, k: int, cycle: float, hops: int, periods: int) -> dict:
+def one_run(out: Path, k: int, cycle: float, hops: int, periods: int, velocity: str) -> dict:
     """One campaign through the bridge; the figures of its log."""
     if hops == 2:
         bridge = ServeProcess((), channel=f"late{k}")
@@ -56,7 +56,7 @@ def one_run(out: Path, k: int, cycle: float, hops: int, periods: int) -> dict:
         servers, url = (s,), s.url
     try:
         c = remote_campaign(url, 3, periods=periods, cycle_s=cycle, tpdo_timeout_cycles=50,
-                            heartbeat_timeout_s=0.5)
+                            heartbeat_timeout_s=0.5, velocity_source=velocity)
         r = run_campaign(c, out_dir=out / f"r{k}", prompt=lambda *a: True)
     finally:
         for s in servers:
@@ -99,18 +99,11 @@ def main() -> None:
     ap.add_argument("--periods", type=int, default=5)
     ap.add_argument("--velocity", choices=("drive", "difference"), default="drive")
     args = ap.parse_args()
-    if args.velocity == "difference":  # the engine's law without drive_velocity
-        orig = engine.PositionController
-
-        def ctrl(*a, drive_velocity=False, **kw):  # noqa: ARG001 - forced off
-            return orig(*a, **kw)
-
-        engine.PositionController = ctrl  # type: ignore[assignment,misc]
     busy = [subprocess.Popen(["sh", "-c", "while :; do :; done"]) for _ in range(args.busy)]
     try:
         with tempfile.TemporaryDirectory() as tmp:
             for k in range(args.runs):
-                row = one_run(Path(tmp), k, args.cycle, args.hops, args.periods)
+                row = one_run(Path(tmp), k, args.cycle, args.hops, args.periods, args.velocity)
                 print(json.dumps({"velocity": args.velocity, "busy": args.busy,
                                   "hops": args.hops, **row}), flush=True)
     finally:

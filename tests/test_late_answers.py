@@ -79,6 +79,7 @@ def test_late_answers_keep_the_torque_smooth(tmp_path, seed):
     runs = sum(1 for k in inj.late_cycles if k - 1 not in inj.late_cycles)
     clean = _run(tmp_path, seed, None, "drive")
     late = _run(tmp_path, seed, _late(seed), "drive")
+    assert late.metadata["campaign"]["velocity_source"] == "drive"  # the key, recorded
     missing = int((~np.asarray(late.valid, bool)).sum())
     assert missing == runs + int((~np.asarray(clean.valid, bool)).sum())  # each run's first
     bound = _dtau_max(clean) + KP * float(np.abs(clean.dq_ref).max()) * CYCLE

@@ -49,6 +49,13 @@ project's generic EDS, cyclic synchronous torque)::
     allow_beyond_drive_limits = false  # true: accept a velocity watchdog above the drive's
                                   # max motor speed 0x6080 (refused by default: it could
                                   # never fire)
+    velocity_source = "drive"     # torque mode: the velocity the master's position loop
+                                  # filters (daq.protocol.control.PDLaw): "drive" (the drive's
+                                  # own 0x606C: a late answer, to an earlier SYNC taken as this
+                                  # one's, does not make it spike) or "difference" (the
+                                  # backward difference of 0x6064). Left out: "drive" on the
+                                  # paced clock, "difference" in lockstep (every answer is
+                                  # that SYNC's; the logs of lockstep runs stay as they were)
     torque_delay_cycles = 1.5     # timing written in each log for identification [cycles]:
                                   # from the SYNC whose position the master reads to the
                                   # middle of the cycle the torque it sends acts over. 1.5 on
@@ -98,6 +105,8 @@ from trajectories.campaign import SANE_LIMITS
 from trajectories.schema import ArrayOfTables, Field, Table
 
 MODES = {"cst": Mode.CYCLIC_SYNC_TORQUE, "csp": Mode.CYCLIC_SYNC_POSITION}
+#: the velocity the torque loop filters: the drive's 0x606C or the position's difference
+VELOCITY_SOURCES = ("drive", "difference")
 
 
 @dataclass(frozen=True)
@@ -216,6 +225,7 @@ class DaqConfig:
     switch_interval_s: float = 0.0002  # [s] GIL switch interval of a paced run (0: Python's)
     allow_beyond_drive_limits: bool = False  # supervision limits above the drive's own
     torque_delay_cycles: float = 1.5  # [cycles] the logs' torque timing (module docstring)
+    velocity_source: str = "difference"  # "drive" (0x606C) or "difference" (resolved)
 
     @property
     def heartbeat_consumer_ms(self) -> int:
@@ -310,6 +320,7 @@ _DAQ = Table(
         "allow_beyond_drive_limits": Field(bool, required=False, default=False),
         "torque_delay_cycles": Field(float, required=False, default=1.5, ge=0, le=10,
                                      unit="cycles"),
+        "velocity_source": Field(str, required=False, default=None, choices=VELOCITY_SOURCES),
     }
 )
 
@@ -482,6 +493,8 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "", *,
         switch_interval_s=d["switch_interval_s"],
         allow_beyond_drive_limits=d["allow_beyond_drive_limits"],
         torque_delay_cycles=d["torque_delay_cycles"],
+        velocity_source=d["velocity_source"] or (
+            "drive" if clock == "paced" else "difference"),
     )
 
 

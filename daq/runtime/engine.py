@@ -17,8 +17,9 @@ file, cycle by cycle:
    so that the newest values win (a burst of late answers is never used one set per cycle);
 3. per drive: decode (struct), the position controller
    :class:`daq.protocol.control.PositionController` (CST; on a cycle without the drive's
-   TPDO it holds the last fresh feedback torque, then blends back to the law; paced, its
-   velocity is the drive's own) or the position target (CSP), limits and watchdog, RPDO out;
+   TPDO it holds the last fresh feedback torque, then blends back to the law; its velocity
+   the drive's own or the position's difference, ``[daq] velocity_source``, left out the
+   drive's on the paced clock) or the position target (CSP), limits and watchdog, RPDO out;
 4. log the joint states, the setpoint and every CAN frame of the cycle.
 
 The campaign is a :class:`~trajectories.robot_campaign.RobotCampaign` (either file format)
@@ -310,7 +311,8 @@ class Engine(Supervisor):
         tpu = [s.torque_per_unit for s in self.scalings]
         xmax = [min(32767, int(tm / t)) for tm, t in zip(self.tau_max, tpu, strict=True)]
         csp = [d.cfg.mode is Mode.CYCLIC_SYNC_POSITION for d in self.drives]
-        ctrls = [PositionController(g, cycle_s, rv, drive_velocity=self.paced)
+        drive_v = cfg.velocity_source == "drive"  # [daq] velocity_source (paced: drive)
+        ctrls = [PositionController(g, cycle_s, rv, drive_velocity=drive_v)
                  for g, rv in zip(self.gains, self.revolute, strict=True)]
         q_lo, q_hi, v_max, tau_act_max = self.q_lo, self.q_hi, self.v_max, self.tau_act_max
         shared = self.shared_reference

@@ -143,6 +143,8 @@ def _metadata(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, index: int, pa
             "torque_delay_cycles": repr(float(cfg.torque_delay_cycles
                                               if torque_delay_cycles is None
                                               else torque_delay_cycles)),
+            # the velocity the master's torque loop filtered ([daq] velocity_source)
+            "velocity_source": cfg.velocity_source,
             # the campaign as loaded (campaign_id.campaign_definition): a run folder holds
             # the logs of one campaign
             "definition": definition,
