@@ -163,6 +163,9 @@ sync_source = "{sync_source}"
 tpdo_timeout_cycles = 200
 max_following_error = 0.5
 chunk_seconds = 0.2
+# beside busy loops on purpose: the start-up lateness check holds but never refuses
+lateness_warn = 1.0
+lateness_stop = 1.0
 [[daq.drives]]
 node_id = {NODE}
 [daq.drives.scaling]
