@@ -4,6 +4,7 @@ Usage::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_late_answers.py [--cycle 0.001]
         [--runs 3] [--busy 4] [--hops 2] [--periods 5] [--velocity drive|difference]
+        [--check-s 0.5]
 
 A python-can-remote bridge on 127.0.0.1, the simulated drive (node 3) in another process
 (``--hops 2``: behind the bridge; 1: served by the bridge's own process) and the master
@@ -11,9 +12,15 @@ A python-can-remote bridge on 127.0.0.1, the simulated drive (node 3) in another
 periods (the campaign of ``tests/test_cross_process.py``, TPDO watchdog 50 cycles), beside
 ``--busy`` busy loops (``sh -c 'while :; do :; done'``, started and stopped here by their
 pid). ``--velocity difference`` makes the master's law use the backward difference of the
-position even though the clock is paced (what it did before ``drive_velocity``).
+position even though the clock is paced (``[daq] velocity_source = "difference"``: what it
+did before ``drive_velocity``).
 
-Per run, from its log: status and reason; the start-up (cycles before the plan moves) and
+``--check-s``: the start-up lateness check's hold ``[daq] lateness_check_s`` [s], its limits
+set to 1 so that the run goes on whatever it measures (the calibration of ``lateness_warn``
+and ``lateness_stop``, :mod:`daq.runtime.safety`).
+
+Per run, from its log: status and reason; the start-up lateness check's share of late or
+missing answers (``check``); the start-up (cycles before the plan moves) and
 the plan's share of cycles without the drive's answer; the TPDO1 frames' delay after the
 SYNC they follow (p50/p90/p99 [ms], and the share later than a cycle); the rms tracking
 error [mrad] and the largest |dq| [rad/s] on answered cycles; the torque reference's
@@ -37,13 +44,13 @@ sys.path.insert(0, str(ROOT))
 
 from test_cross_process import remote_campaign  # noqa: E402
 
-import daq.runtime.engine as engine  # noqa: E402
 from daq.protocol.reader import read_frames, read_run  # noqa: E402
 from daq.runtime.runner import run_campaign  # noqa: E402
 from sim_drivers.remote import ServeProcess  # noqa: E402
 
 
-def one_run(out: Path, k: int, cycle: float, hops: int, periods: int) -> dict:
+def one_run(out: Path, k: int, cycle: float, hops: int, periods: int, velocity: str,
+            check_s: float) -> dict:
     """One campaign through the bridge; the figures of its log."""
     if hops == 2:
         bridge = ServeProcess((), channel=f"late{k}")
@@ -56,7 +63,8 @@ def one_run(out: Path, k: int, cycle: float, hops: int, periods: int) -> dict:
         servers, url = (s,), s.url
     try:
         c = remote_campaign(url, 3, periods=periods, cycle_s=cycle, tpdo_timeout_cycles=50,
-                            heartbeat_timeout_s=0.5)
+                            heartbeat_timeout_s=0.5, velocity_source=velocity,
+                            lateness_check_s=check_s, lateness_warn=1.0, lateness_stop=1.0)
         r = run_campaign(c, out_dir=out / f"r{k}", prompt=lambda *a: True)
     finally:
         for s in servers:
@@ -76,8 +84,11 @@ def one_run(out: Path, k: int, cycle: float, hops: int, periods: int) -> dict:
     plan, answered = seg >= 0, (seg >= 0) & ~miss
     run_lat = lat[idx >= move]
     tau = np.asarray(a.tau_ref)[plan]
+    chk = [e["message"].rsplit(": ", 1)[1] for e in a.events
+           if e["message"].startswith("start-up lateness check: late")]
     return {
-        "status": run.status, "reason": run.reason[:80], "startup_cycles": move,
+        "status": run.status, "reason": run.reason[:80], "check": chk[0] if chk else "",
+        "startup_cycles": move,
         "startup_missing": round(float(miss[:move].mean()), 3),
         "plan_missing": round(float(miss[plan].mean()), 3),
         "delay_ms_p50_p90_p99": [round(1e3 * x, 2) for x in np.quantile(run_lat, [.5, .9, .99])],
@@ -98,19 +109,14 @@ def main() -> None:
     ap.add_argument("--hops", type=int, choices=(1, 2), default=2)
     ap.add_argument("--periods", type=int, default=5)
     ap.add_argument("--velocity", choices=("drive", "difference"), default="drive")
+    ap.add_argument("--check-s", type=float, default=0.5)
     args = ap.parse_args()
-    if args.velocity == "difference":  # the engine's law without drive_velocity
-        orig = engine.PositionController
-
-        def ctrl(*a, drive_velocity=False, **kw):  # noqa: ARG001 - forced off
-            return orig(*a, **kw)
-
-        engine.PositionController = ctrl  # type: ignore[assignment,misc]
     busy = [subprocess.Popen(["sh", "-c", "while :; do :; done"]) for _ in range(args.busy)]
     try:
         with tempfile.TemporaryDirectory() as tmp:
             for k in range(args.runs):
-                row = one_run(Path(tmp), k, args.cycle, args.hops, args.periods)
+                row = one_run(Path(tmp), k, args.cycle, args.hops, args.periods, args.velocity,
+                              args.check_s)
                 print(json.dumps({"velocity": args.velocity, "busy": args.busy,
                                   "hops": args.hops, **row}), flush=True)
     finally:

@@ -221,6 +221,17 @@ class Device402Mixin:
                 tx.count += 1
                 if tx.count >= tx.every:
                     tx.count = 0
+        elif inj is not None and inj.late_tpdo(cycle):
+            held = []  # this cycle's set, sent next cycle; the one held before goes now
+            for tx in self._tx_sync:
+                tx.count += 1
+                if tx.count >= tx.every:
+                    tx.count = 0
+                    held.append((tx.cob_id, tx.payload(self)))
+            for cob_id, data in inj.late_held:  # the previous cycle's state as this one's
+                self._send(cob_id, data)
+                self.tpdo_sent += 1
+            inj.late_held = held
         elif inj is not None and inj.delay_tpdo(cycle):
             held = []  # this cycle's set, sent late (FaultInjector.delay_tpdo_from_cycle)
             for tx in self._tx_sync:
@@ -235,6 +246,11 @@ class Device402Mixin:
                 for cob_id, data in inj.held_tpdos.pop(0):
                     send(cob_id, data)
                     self.tpdo_sent += 1
+            if inj is not None and inj.late_held:  # the late answer before this one's
+                for cob_id, data in inj.late_held[:-1]:  # (FaultInjector.late_tpdo_cycles)
+                    send(cob_id, data)
+                    self.tpdo_sent += 1
+                inj.late_held = []
             for tx in self._tx_sync:
                 tx.count += 1
                 if tx.count >= tx.every:

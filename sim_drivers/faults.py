@@ -25,6 +25,7 @@ Error codes (0x603F, EMCY) follow CiA 301 / CiA 402's error-code table:
 
 from __future__ import annotations
 
+import random
 from dataclasses import dataclass, field
 
 FOLLOWING_ERROR = 0x8611
@@ -105,6 +106,27 @@ class FaultInjector:
         two sets a cycle, the first one old).
     delay_tpdo_cycles : int
         How many consecutive cycles' TPDOs are held back.
+    late_tpdo_from_cycle : int or None
+        Late answers (a busy machine, a loaded bridge): from this cycle on, for
+        ``late_tpdo_cycles`` cycles, the cycles :meth:`late_tpdo` names answer one cycle late.
+        A late cycle sends the set held back from the cycle before (the previous cycle's
+        state: what a master that cannot tell an answer to an earlier SYNC from this one's
+        takes as this cycle's), or nothing if the cycle before was on time (the first late
+        answer of a run is not there by the deadline), and holds its own back; the next
+        on-time cycle sends the held set before its own (both arrive, the newest last)
+        without its last PDO, which its own supersedes: a master completes its set only with
+        this cycle's (else, in lockstep, whether it took the old or the new values would
+        depend on the threads' timing; every TPDO1, the answer a master counts, is sent).
+    late_tpdo_cycles : int
+        Length of the late window [cycles].
+    late_tpdo_share : float
+        Share of the window's cycles that answer late, in (0, 1]; 1: every one. The cycles
+        are drawn once from ``late_tpdo_seed`` (the same seed, the same cycles).
+    late_tpdo_run : int
+        Late cycles come in runs of 1 to ``late_tpdo_run`` consecutive cycles (uniform), so
+        that a late run of k cycles gives one missing answer and k - 1 previous-cycle states.
+    late_tpdo_seed : int
+        Seed of the late cycles' draw.
     """
 
     fault_at_cycle: int | None = None
@@ -115,8 +137,17 @@ class FaultInjector:
     drop_tpdo_period: int = 0
     delay_tpdo_from_cycle: int | None = None
     delay_tpdo_cycles: int = 1
+    late_tpdo_from_cycle: int | None = None
+    late_tpdo_cycles: int = 0
+    late_tpdo_share: float = 1.0
+    late_tpdo_run: int = 1
+    late_tpdo_seed: int = 0
     #: the sets held back, oldest first: lists of (COB-ID, data) (the drive's state)
     held_tpdos: list = field(default_factory=list, repr=False, compare=False)
+    #: the set a late cycle held back: list of (COB-ID, data) (the drive's state)
+    late_held: list = field(default_factory=list, repr=False, compare=False)
+    #: the late window's late cycles (drawn in __post_init__)
+    late_cycles: frozenset = field(default=frozenset(), repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not 0 < self.fault_code <= 0xFFFF:
@@ -136,6 +167,29 @@ class FaultInjector:
                 f"FaultInjector.drop_tpdo_period: expected 0 or > drop_tpdo_cycles "
                 f"({self.drop_tpdo_cycles}), got {self.drop_tpdo_period}"
             )
+        if self.late_tpdo_cycles < 0:
+            raise ValueError(
+                f"FaultInjector.late_tpdo_cycles: expected >= 0, got {self.late_tpdo_cycles}"
+            )
+        if not 0.0 < self.late_tpdo_share <= 1.0:
+            raise ValueError(
+                f"FaultInjector.late_tpdo_share: expected in (0, 1], got {self.late_tpdo_share}"
+            )
+        if self.late_tpdo_run < 1:
+            raise ValueError(
+                f"FaultInjector.late_tpdo_run: expected >= 1, got {self.late_tpdo_run}"
+            )
+        top = (1 + self.late_tpdo_run) / (3 + self.late_tpdo_run)  # on-time gaps of 1
+        if top < self.late_tpdo_share < 1.0:
+            raise ValueError(
+                f"FaultInjector.late_tpdo_share: expected 1 or at most (late_tpdo_run + 1) / "
+                f"(late_tpdo_run + 3) = {top:.3g} (late runs are apart), got "
+                f"{self.late_tpdo_share}"
+            )
+        if self.late_tpdo_from_cycle is not None:
+            self.late_cycles = frozenset(late_runs(
+                self.late_tpdo_from_cycle, self.late_tpdo_cycles, self.late_tpdo_share,
+                self.late_tpdo_run, self.late_tpdo_seed))
 
     def fault_now(self, cycle: int) -> bool:
         """True at the cycle the fault is injected."""
@@ -150,6 +204,11 @@ class FaultInjector:
         start = self.delay_tpdo_from_cycle
         return start is not None and start <= cycle < start + self.delay_tpdo_cycles
 
+    def late_tpdo(self, cycle: int) -> bool:
+        """True when the answer of ``cycle`` is late: the drive sends the set held back from
+        the cycle before (if any) and holds back its own (``late_tpdo_from_cycle``)."""
+        return cycle in self.late_cycles
+
     def drop_tpdo(self, cycle: int) -> bool:
         """True when the TPDOs of ``cycle`` must not be sent."""
         start = self.drop_tpdo_from_cycle
@@ -158,3 +217,29 @@ class FaultInjector:
         if self.drop_tpdo_period:
             return (cycle - start) % self.drop_tpdo_period < self.drop_tpdo_cycles
         return cycle < start + self.drop_tpdo_cycles
+
+
+def late_runs(start: int, cycles: int, share: float, run: int, seed: int) -> list[int]:
+    """The late cycles of a window of ``cycles`` cycles from ``start``: runs of 1 to ``run``
+    consecutive cycles (uniform) separated by on-time runs of at least one cycle (one plus a
+    geometric number, of the mean that makes ``share`` of the window late); every cycle when
+    ``share`` is 1. Deterministic for a ``seed``."""
+    if share >= 1.0:
+        return list(range(start, start + cycles))
+    rng = random.Random(seed)
+    extra = (1 + run) / 2 * (1.0 - share) / share - 1.0  # mean on-time cycles beyond one
+    p_more = extra / (1.0 + extra)
+
+    def gap() -> int:
+        n = 1
+        while rng.random() < p_more:
+            n += 1
+        return n
+
+    out: list[int] = []
+    k = start + gap() - 1
+    while k < start + cycles:
+        n = rng.randint(1, run)
+        out.extend(range(k, min(k + n, start + cycles)))
+        k += n + gap()
+    return out

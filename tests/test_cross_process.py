@@ -45,6 +45,9 @@ def remote_campaign(url: str, node_id: int = 1, *, sync_source: str = "runner",
              # test tolerate that (3 cycles + 400 ms, within the served drive's 0.5 s
              # SYNC-loss floor)
              "tpdo_timeout_cycles": 200, "rpdo_margin_ms": 400, "max_following_error": 0.5,
+             # the start-up lateness check holds but never refuses these runs beside busy
+             # loops (4 ms, two busy loops: 26-40 % late or missing, daq.runtime.safety)
+             "lateness_warn": 1.0, "lateness_stop": 1.0,
              # the served drives are simulated single joints (serve prints their timing)
              "torque_delay_cycles": TORQUE_DELAY_CYCLES,
              "drives": [{"node_id": node_id, "scaling": {

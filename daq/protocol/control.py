@@ -53,8 +53,11 @@ has no sequence number) and uses it as this cycle's, so the backward difference 
 step of two or three cycles by one, or a zero step: velocity spikes that the kd term turns
 into torque steps. With ``drive_velocity=True`` the filter's input is the drive's own
 velocity (0x606C, ``dq_meas``) on every fresh cycle, the velocity at the time of the sample
-whichever SYNC it answers. The runner sets it for its paced clock (in lockstep every answer is
-this SYNC's, and the logs, the demo's among them, are unchanged). Measured at 1 ms through
+whichever SYNC it answers. The runner sets it from ``[daq] velocity_source``, left out for
+its paced clock (in lockstep every answer is this SYNC's, and the logs, the demo's among
+them, are unchanged); in lockstep against a simulated drive answering late on 30 % of the
+cycles it keeps the torque's change per cycle at 6.5 N m at most, against 80 N m with the
+difference (``tests/test_late_answers.py``). Measured at 1 ms through
 two bridge hops beside 4 busy loops (``benchmarks/bench_late_answers.py``, 10 s of a 0.1 rad
 sine, 3 runs each; 21-50 % of the plan's cycles without an answer, the 99th percentile of the
 answers' delay 2.4-5.4 ms): the torque's cycle-to-cycle change 0.78-1.0 N m std and 12-22 N m

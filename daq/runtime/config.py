@@ -49,6 +49,24 @@ project's generic EDS, cyclic synchronous torque)::
     allow_beyond_drive_limits = false  # true: accept a velocity watchdog above the drive's
                                   # max motor speed 0x6080 (refused by default: it could
                                   # never fire)
+    velocity_source = "drive"     # torque mode: the velocity the master's position loop
+                                  # filters (daq.protocol.control.PDLaw): "drive" (the drive's
+                                  # own 0x606C: a late answer, to an earlier SYNC taken as this
+                                  # one's, does not make it spike) or "difference" (the
+                                  # backward difference of 0x6064). Left out: "drive" on the
+                                  # paced clock, "difference" in lockstep (every answer is
+                                  # that SYNC's; the logs of lockstep runs stay as they were)
+    lateness_check_s = 0.5        # before the plan moves (drives enabled, holding the start
+                                  # position): hold this long [s] measuring, per bus, the
+                                  # share of the drives' answers missing at the cycle's
+                                  # deadline or come with an older one (an answer to an
+                                  # earlier SYNC); a share within 2 sigmas of lateness_stop is
+                                  # measured again, at most 3 x this long in all. Left out:
+                                  # 0.5 on the paced clock, 0 (no check, no hold) in lockstep
+    lateness_warn = 0.1           # a share above this: the run goes on, with a warning (log
+                                  # event, summary)
+    lateness_stop = 0.3           # a share above this: the run is refused (drives disabled,
+                                  # log closed), one line naming the bus and what was measured
     torque_delay_cycles = 1.5     # timing written in each log for identification [cycles]:
                                   # from the SYNC whose position the master reads to the
                                   # middle of the cycle the torque it sends acts over. 1.5 on
@@ -98,6 +116,15 @@ from trajectories.campaign import SANE_LIMITS
 from trajectories.schema import ArrayOfTables, Field, Table
 
 MODES = {"cst": Mode.CYCLIC_SYNC_TORQUE, "csp": Mode.CYCLIC_SYNC_POSITION}
+#: the velocity the torque loop filters: the drive's 0x606C or the position's difference
+VELOCITY_SOURCES = ("drive", "difference")
+#: [s] the start-up lateness check's hold on the paced clock when ``lateness_check_s`` is
+#: left out (lockstep: 0, no check)
+LATENESS_CHECK_S = 0.5
+#: the start-up lateness check's limits: share of the drives' answers late or missing
+#: during the hold (calibration: :mod:`daq.runtime.safety`)
+LATENESS_WARN = 0.1
+LATENESS_STOP = 0.3
 
 
 @dataclass(frozen=True)
@@ -216,6 +243,10 @@ class DaqConfig:
     switch_interval_s: float = 0.0002  # [s] GIL switch interval of a paced run (0: Python's)
     allow_beyond_drive_limits: bool = False  # supervision limits above the drive's own
     torque_delay_cycles: float = 1.5  # [cycles] the logs' torque timing (module docstring)
+    velocity_source: str = "difference"  # "drive" (0x606C) or "difference" (resolved)
+    lateness_check_s: float = 0.0  # [s] the start-up lateness check's hold (resolved; 0: none)
+    lateness_warn: float = LATENESS_WARN  # share of late/missing answers: warning above
+    lateness_stop: float = LATENESS_STOP  # share of late/missing answers: refused above
 
     @property
     def heartbeat_consumer_ms(self) -> int:
@@ -310,6 +341,11 @@ _DAQ = Table(
         "allow_beyond_drive_limits": Field(bool, required=False, default=False),
         "torque_delay_cycles": Field(float, required=False, default=1.5, ge=0, le=10,
                                      unit="cycles"),
+        "velocity_source": Field(str, required=False, default=None, choices=VELOCITY_SOURCES),
+        "lateness_check_s": Field(float, required=False, default=None, ge=0, le=10,
+                                  unit="s"),
+        "lateness_warn": Field(float, required=False, default=LATENESS_WARN, ge=0, le=1),
+        "lateness_stop": Field(float, required=False, default=LATENESS_STOP, ge=0, le=1),
     }
 )
 
@@ -454,6 +490,12 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "", *,
     if clock == "lockstep" and d["interface"] not in ("virtual", "config"):
         raise ConfigError(f"{source}: daq.clock: expected 'paced' on a real interface "
                           f"({d['interface']!r}), got 'lockstep'")
+    if d["lateness_warn"] > d["lateness_stop"]:
+        raise ConfigError(f"{source}: daq.lateness_warn: expected at most daq.lateness_stop "
+                          f"({d['lateness_stop']:g}), got {d['lateness_warn']:g}")
+    check_s = d["lateness_check_s"]
+    if check_s is None:
+        check_s = LATENESS_CHECK_S if clock == "paced" else 0.0
     return DaqConfig(
         interface=d["interface"],
         channel=d["channel"],
@@ -482,6 +524,11 @@ def parse_daq(raw: Mapping[str, Any] | None, source: str = "", *,
         switch_interval_s=d["switch_interval_s"],
         allow_beyond_drive_limits=d["allow_beyond_drive_limits"],
         torque_delay_cycles=d["torque_delay_cycles"],
+        velocity_source=d["velocity_source"] or (
+            "drive" if clock == "paced" else "difference"),
+        lateness_check_s=check_s,
+        lateness_warn=d["lateness_warn"],
+        lateness_stop=d["lateness_stop"],
     )
 
 

@@ -51,6 +51,9 @@ class CycleIO(can.Listener):
         self.emcy: list[tuple[int, int, int]] = []  # (drive, code, register)
         self.log_frames = True
         self.direct = False  # True: the main thread pumps the bus itself (see pump)
+        #: per drive, its TPDO1 frames received since begin_cycle (two or more: an answer to
+        #: an earlier SYNC came with this one's; the start-up lateness check counts them)
+        self.answers = [0] * self.n
 
     def on_message_received(self, msg: can.Message) -> None:
         cid = msg.arbitration_id
@@ -68,6 +71,8 @@ class CycleIO(can.Listener):
         if slot is not None:
             d, s, bit = slot
             self.data[d][s] = data
+            if not s:
+                self.answers[d] += 1
             m = self.mask | bit
             self.mask = m
             if m == self.full and not self.direct:
@@ -110,6 +115,7 @@ class CycleIO(can.Listener):
 
     def begin_cycle(self) -> None:
         self.mask = 0
+        self.answers = [0] * self.n
         q = self.q
         while not q.empty():
             q.get_nowait()

@@ -17,8 +17,9 @@ file, cycle by cycle:
    so that the newest values win (a burst of late answers is never used one set per cycle);
 3. per drive: decode (struct), the position controller
    :class:`daq.protocol.control.PositionController` (CST; on a cycle without the drive's
-   TPDO it holds the last fresh feedback torque, then blends back to the law; paced, its
-   velocity is the drive's own) or the position target (CSP), limits and watchdog, RPDO out;
+   TPDO it holds the last fresh feedback torque, then blends back to the law; its velocity
+   the drive's own or the position's difference, ``[daq] velocity_source``, left out the
+   drive's on the paced clock) or the position target (CSP), limits and watchdog, RPDO out;
 4. log the joint states, the setpoint and every CAN frame of the cycle.
 
 The campaign is a :class:`~trajectories.robot_campaign.RobotCampaign` (either file format)
@@ -56,9 +57,11 @@ Position, velocity, torque limits (``[daq.limits]``, else the campaign's joint l
 at the torque limit), following error, TPDO missing for ``tpdo_timeout_cycles`` consecutive
 cycles, heartbeat silent for ``heartbeat_timeout_s`` (the frames waiting in the receive queue
 are taken first: a stalled master has not read them), EMCY, a drive leaving OPERATION ENABLED,
-SIGINT/SIGTERM/SIGHUP, a torque-monitor crossing with ``stop`` (``jointid monitor``,
-:mod:`daq.runtime.monitor`: checked each cycle of the run phase, event kind ``collision``),
-the master's own stall (paced: a cycle later than the RPDO deadline
+SIGINT/SIGTERM/SIGHUP, the start-up lateness check (before the plan moves, drives enabled
+and holding: a bus whose share of late or missing answers is above ``[daq] lateness_stop``
+refuses the run, :mod:`daq.runtime.safety`), a torque-monitor crossing with ``stop``
+(``jointid monitor``, :mod:`daq.runtime.monitor`: checked each cycle of the run phase, event
+kind ``collision``), the master's own stall (paced: a cycle later than the RPDO deadline
 the drives were given, 3 cycles + 100 ms: "master stalled for X s"; a shorter stall of more
 than a cycle is named in the reason of an EMCY read right after it; with periodic SYNC the
 TPDOs queued meanwhile are taken at once, not logged as cycles), the run log's file failing
@@ -118,11 +121,14 @@ from .safety import (
     CW_RUN,
     CW_SHUTDOWN,
     DISABLE_MAX_CYCLES,
+    LATENESS_MAX_ROUNDS,
     SHUTDOWN_CYCLES,
     NullLog,
     Supervisor,
     interrupt_reason,
+    lateness_verdict,
     log_failed,
+    redact_url_secret,
 )
 
 logger = logging.getLogger(__name__)
@@ -252,6 +258,8 @@ class Engine(Supervisor):
         self.bus_lost = False  # a bus error ended a run: no more frames can be sent
         #: per-cycle torque monitor (daq.runtime.monitor.TorqueMonitor), None: none
         self.monitor: Any = None
+        #: the last run's start-up lateness warning (one line), if any (the runner's summary)
+        self.lateness_notes: list[str] = []
 
     # -- one cycle ------------------------------------------------------------------------
     def _exchange(self, cycle: int, deadline: float) -> int:
@@ -280,10 +288,14 @@ class Engine(Supervisor):
 
         Phases (one cycle counter, no gaps): read the drives' state; enable them (CiA 402
         path, fault reset by a rising edge of bit 7) while holding the measured position;
-        approach the plan's start with a quintic (segment -1) if needed; the plan; settle
-        (``SETTLE_CYCLES``); shutdown (controlword 0x0006). On a fault, SIGINT or a watchdog:
-        quick stop for ``quick_stop_cycles``, then disable voltage until the drives report
-        it (at most ``DISABLE_MAX_CYCLES`` more cycles).
+        the start-up lateness check (``daq.lateness_check_s``, paced by default: hold that
+        position, limits checked, counting the late or missing answers; refused above
+        ``lateness_stop``, a warning above ``lateness_warn``:
+        :func:`~daq.runtime.safety.lateness_verdict`); approach the plan's start with a
+        quintic (segment -1) if needed; the plan; settle (``SETTLE_CYCLES``); shutdown
+        (controlword 0x0006). On a fault, SIGINT or a watchdog: quick stop for
+        ``quick_stop_cycles``, then disable voltage until the drives report it (at most
+        ``DISABLE_MAX_CYCLES`` more cycles).
 
         Parameters
         ----------
@@ -310,7 +322,8 @@ class Engine(Supervisor):
         tpu = [s.torque_per_unit for s in self.scalings]
         xmax = [min(32767, int(tm / t)) for tm, t in zip(self.tau_max, tpu, strict=True)]
         csp = [d.cfg.mode is Mode.CYCLIC_SYNC_POSITION for d in self.drives]
-        ctrls = [PositionController(g, cycle_s, rv, drive_velocity=self.paced)
+        drive_v = cfg.velocity_source == "drive"  # [daq] velocity_source (paced: drive)
+        ctrls = [PositionController(g, cycle_s, rv, drive_velocity=drive_v)
                  for g, rv in zip(self.gains, self.revolute, strict=True)]
         q_lo, q_hi, v_max, tau_act_max = self.q_lo, self.q_hi, self.v_max, self.tau_act_max
         shared = self.shared_reference
@@ -348,6 +361,10 @@ class Engine(Supervisor):
         if monitor is not None:
             monitor.begin(index, payload, log)
         mq, mdq, mtau = [0.0] * n_dr, [0.0] * n_dr, [0.0] * n_dr
+        #: the start-up lateness check's tally while it runs: per drive, the cycles whose
+        #: answer was missing at the deadline or came with an older one (None: not counting)
+        chk: list[int] | None = None
+        self.lateness_notes = []
         if self.paced:
             w = log._w
             sid = w.register_schema("jointid_msgs/msg/CycleTiming", "ros2msg",
@@ -382,6 +399,7 @@ class Engine(Supervisor):
             elif self.periodic:
                 # SYNC comes from the periodic task: a cycle is the arrival of the TPDOs
                 io.mask = 0
+                io.answers = [0] * n_dr
                 ok = io.pump(self.bus, 2.0 * cycle_s)
                 mask = io.full if ok else io.mask
                 t_sync = time.perf_counter()
@@ -418,8 +436,12 @@ class Engine(Supervisor):
                     sw[d], counts[d], tq[d] = unpack1(data[d][0])
                     vel[d] = unpack2(data[d][1])[0]
                     missing_run[d] = 0
+                    if chk is not None and io.answers[d] > 1:  # an older answer came too
+                        chk[d] += 1
                 else:
                     flags |= FLAG_TPDO_MISSING
+                    if chk is not None:  # not there by the deadline: late or lost
+                        chk[d] += 1
                     missing_run[d] += 1
                     if mode == "run" or mode == "enable":
                         missed += 0 if self.paced else 1
@@ -661,6 +683,40 @@ class Engine(Supervisor):
                                 f"({names})", cycle, cycle * cycle_s, log, -1)
                 if not self._stop_reason:
                     log.event(cycle, cycle * cycle_s, "info", "operation enabled")
+                if not self._stop_reason and cfg.lateness_check_s > 0:
+                    # 1b. the start-up lateness check: hold the start position (limits and
+                    # following error checked), count the late or missing answers per drive
+                    n_chk = max(1, math.ceil(cfg.lateness_check_s / cycle_s - 1e-9))
+                    chk = [0] * n_dr
+                    done = 0
+                    report("check", -1, cycle + n_chk)
+                    for _ in range(LATENESS_MAX_ROUNDS):
+                        for _ in range(n_chk):
+                            do_cycle(q_hold, zero, zero, -1, "run")
+                            if self._stop_reason:
+                                break
+                        done += n_chk
+                        if self._stop_reason:
+                            break
+                        level, why, unsure = lateness_verdict(
+                            chk, done, [redact_url_secret(d.cfg.channel or cfg.channel)
+                                        for d in self.drives],
+                            [d.name for d in self.drives], cfg, cycle_s)
+                        if not unsure:
+                            break
+                    shares = ", ".join(f"{d.name} {chk[k] / max(1, done):.1%}"
+                                       for k, d in enumerate(self.drives))
+                    chk = None
+                    if not self._stop_reason:
+                        log.event(cycle, cycle * cycle_s, "info", f"start-up lateness check: "
+                                  f"late or missing answers over {done} cycles: {shares}")
+                        if level == "stop":
+                            self._fault(why, cycle, cycle * cycle_s, log, -1, kind="watchdog")
+                        elif level == "warning":
+                            log.event(cycle, cycle * cycle_s, "warning", why)
+                            self.lateness_notes.append(why)
+                            logger.warning("%s", why)
+                if not self._stop_reason:
                     # 2. approach the plan start, then the plan, then settle (columns of
                     # the plan built before the schedule started: nothing long here)
                     lims = self.joint_limits[:n_col]

@@ -61,7 +61,7 @@ from .runfolder import (
     read_state,
     write_state,
 )
-from .safety import StopSignals, interrupt_reason
+from .safety import StopSignals, interrupt_reason, redact_url_secret
 from .simrig import SimRig, start_sim
 
 __all__ = ["CampaignResult", "PayloadResult", "Progress", "check_daq", "file_stem",
@@ -143,6 +143,8 @@ def _metadata(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, index: int, pa
             "torque_delay_cycles": repr(float(cfg.torque_delay_cycles
                                               if torque_delay_cycles is None
                                               else torque_delay_cycles)),
+            # the velocity the master's torque loop filtered ([daq] velocity_source)
+            "velocity_source": cfg.velocity_source,
             # the campaign as loaded (campaign_id.campaign_definition): a run folder holds
             # the logs of one campaign
             "definition": definition,
@@ -183,18 +185,6 @@ def _metadata(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, index: int, pa
     return md
 
 
-_URL_SECRET = re.compile(r"\b(wss?://[^/\s]+)/[^\s:+]+")
-
-
-def redact_url_secret(text: str) -> str:
-    """``text`` with the path of every ``ws://``/``wss://`` URL replaced by ``<token>``.
-
-    A python-can-remote bridge's URL carries its access token as its path
-    (``ws://127.0.0.1:<port>/<token>``, :mod:`sim_drivers.bridge`); the log keeps host and
-    port, never the token. The same URL always gives the same text, so the bus mapping of
-    ``jointid export`` is unchanged.
-    """
-    return _URL_SECRET.sub(r"\1/<token>", text)
 
 
 def _sync_period_us(cfg: DaqConfig, cycle_s: float) -> int:
@@ -575,6 +565,8 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
             finally:
                 signals.engine = None
             runs.append(r)
+            for note in engine.lateness_notes:  # the start-up check's warning (in the log)
+                notes.append(f"{note} (payload {i}, {path.name})")
             if engine.bus_lost:  # nothing can be sent any more: no NMT, no SDO
                 status, reason = r.status, r.reason
                 break
