@@ -436,7 +436,7 @@ def run(args: argparse.Namespace) -> int:
     from .loaders import parse_mapping
     from .plots import write_plots
     from .refine_plots import plot_refinement
-    from .report import write_json
+    from .report import staged_folder, write_json, write_text_atomic
     from .report_build import build_report
 
     check_numbers(args)
@@ -480,17 +480,19 @@ def run(args: argparse.Namespace) -> int:
             print("\n" + "\n".join(cli_robot.format_refit(ref.refit, refined.name_)))
         out["refinement"] = refined.refinement_json()
     if args.report is not None:
-        args.report.mkdir(parents=True, exist_ok=True)
-        (args.report / "tables.txt").write_text(text + "\n")
-        files = write_plots(report, args.report)
-        if ref is not None:
-            files += plot_refinement(ref, args.report)
-        out["figures"] = [str(f) for f in files]
-        write_json(args.report / "fit.json", out)
-        html = build_report(args.report, title="jointid fit report")
-        print(f"\nreport: {html} ({len(files)} figures, tables.txt, fit.json)")
+        # written whole or not at all: a temporary sibling folder, moved in at the end
+        with staged_folder(args.report) as tmp:
+            (tmp / "tables.txt").write_text(text + "\n")
+            files = write_plots(report, tmp)
+            if ref is not None:
+                files += plot_refinement(ref, tmp)
+            out["figures"] = [str(args.report / f.name) for f in files]
+            write_json(tmp / "fit.json", out)
+            build_report(tmp, title="jointid fit report")
+        print(f"\nreport: {args.report / 'report.html'} ({len(files)} figures, tables.txt, "
+              "fit.json)")
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(out, indent=2) + "\n")
+        write_text_atomic(args.json, json.dumps(out, indent=2) + "\n")
         print(f"json: {args.json}")
     return 0

@@ -7,7 +7,9 @@ FIT.json is the record of ``jointid fit --robot ... --json``. When its model car
 exported as it is; otherwise the fit is made again from the record's inputs and settings
 (the record has no covariance, which the consistent estimate needs), checked to give the
 record's parameters, and the consistent estimate is computed. Everything is computed before a
-file is written: a bad input leaves nothing behind.
+file is written: a bad input leaves nothing behind; the files are written into a temporary
+sibling of OUTDIR moved in at the end (:func:`ident.report.staged_folder`), so an interrupt
+leaves nothing half-written either.
 """
 
 from __future__ import annotations
@@ -137,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
     from trajectories.robot import load_robot
 
     from .loaders import parse_mapping
-    from .report import write_json
+    from .report import staged_folder, write_json
     from .robot.consistent_fit import format_record
     from .robot.export_model import export_model
 
@@ -164,9 +166,10 @@ def run(args: argparse.Namespace) -> int:
         raise DataError(f"{args.fit}: models.{name}.consistent: " + (
             f"friction bounds {', '.join(left)} still violated (on parameters held fixed)"
             if left else "a link is not physically valid") + "; nothing exported")
-    files = export_model(robot, cons, args.output, fixed)
-    files.append(write_json(args.output / "consistent.json", cons))
+    with staged_folder(args.output) as tmp:  # written whole or not at all
+        files = export_model(robot, cons, tmp, fixed)
+        files.append(write_json(tmp / "consistent.json", cons))
     print(f"{name} model: " + format_record(cons))
     for f in files:
-        print(f"wrote {f}")
+        print(f"wrote {args.output / f.name}")
     return 0

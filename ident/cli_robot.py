@@ -44,7 +44,7 @@ from .fitting import DQ_MIN_FRACTION, SIGN_CHECK_MIN_KEPT
 from .loaders import Q_UNITS, parse_mapping
 from .qs_scan import qs_grid, rescan_qs, rescan_qs_joints, scan_qs, scan_qs_joints
 from .refine_result import ONE_TRAJECTORY_NOTE
-from .report import write_json
+from .report import staged_folder, write_json
 from .results import (
     DEFAULT_BANDS,
     json_float,
@@ -1394,9 +1394,10 @@ def run(args: argparse.Namespace) -> int:
     # everything computed: only now write files (a bad input leaves nothing behind)
     print(text)
     if args.report is not None:
-        figures = write_robot_report(args.report, out, text)
-        public["figures"] = [str(f) for f in figures]
-        write_json(args.report / "fit.json", public)
+        with staged_folder(args.report) as tmp:  # written whole or not at all
+            figures = write_robot_report(tmp, out, text)
+            public["figures"] = [str(args.report / f.name) for f in figures]
+            write_json(tmp / "fit.json", public)
         print(f"\nreport: {args.report / 'report.html'} ({len(figures)} figures, tables.txt, "
               "fit.json)")
     if args.json is not None:
