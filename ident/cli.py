@@ -16,7 +16,9 @@ import math
 import os
 import re
 import sys
-from collections.abc import Mapping, Sequence
+import warnings
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -370,6 +372,14 @@ def _check_output(flag: str, path: Path | None, directory: bool) -> None:
         raise DataError(f"{flag} {path}: {anc} is a file, not a directory")
     if not os.access(anc, os.W_OK | os.X_OK):
         raise DataError(f"{flag} {path}: {anc} is not writable")
+    for name in REPORT_FILES if directory and path.is_dir() else ():
+        if (path / name).is_dir():
+            raise DataError(f"{flag} {path}: {path / name} is a folder, expected a file "
+                            "name (the report writes it)")
+
+
+#: the files ``--report DIR`` always writes (besides the figures)
+REPORT_FILES = ("tables.txt", "fit.json", "report.html")
 
 
 def check_outputs(args: argparse.Namespace) -> None:
@@ -403,6 +413,31 @@ def check_foreign_options(args: argparse.Namespace) -> None:
         logs = files[0] + (f" and {len(files) - 1} more" if len(files) > 1 else "")
         raise DataError(f"{' and '.join(used)}: apply to CSV and MAT files only; {logs}: "
                         "jointid MCAP log(s), with their own channels and joint-side torque")
+
+
+@contextmanager
+def warnings_held() -> Iterator[None]:
+    """Warnings of the block held back until it ends: shown then (in order, each once) when
+    it ends normally or by an interrupt, dropped when it ends in an error, so a refusal is
+    its one line (``jointid fit --trim 2000`` said "cut-off 50 Hz is the lower bound" before
+    "too few samples after trimming"; a log cut at 2 kB, "truncated run log" before "no cycle
+    logged (the log is cut short)"). Around the reading and fitting of ``jointid fit`` and
+    the refit of ``export-model`` (seconds; minutes for a robot's long logs, whose progress
+    lines are not held), never around a campaign run."""
+    with warnings.catch_warnings(record=True) as seen:
+        try:
+            yield
+        except Exception:
+            seen.clear()
+            raise
+        finally:
+            held = list(seen)
+    shown = set()
+    for w in held:
+        key = (str(w.message), w.category)
+        if key not in shown:
+            shown.add(key)
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno, w.file, w.line)
 
 
 def _axis_label(inputs: Sequence[Path | str], mapping: Mapping[str, Any], axis: int
@@ -461,10 +496,11 @@ def run(args: argparse.Namespace) -> int:
     load_kw: dict[str, Any] = dict(
         mapping=mapping, gain=gain, joint=args.joint, axis=args.axis, q_unit=args.q_unit
     )
-    exps = load(args.inputs, **load_kw)
-    val = load(args.validate, **load_kw) if args.validate else None
-    est = estimator_from_args(args).fit(exps, validation=val,
-                                        axis=_axis_label(args.inputs, mapping, args.axis))
+    with warnings_held():  # a refusal is its one line, without the warnings before it
+        exps = load(args.inputs, **load_kw)
+        val = load(args.validate, **load_kw) if args.validate else None
+        est = estimator_from_args(args).fit(exps, validation=val,
+                                            axis=_axis_label(args.inputs, mapping, args.axis))
     report = est.report_
     out = report.to_json()
     text = report.format_tables()

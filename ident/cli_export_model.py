@@ -138,8 +138,10 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``jointid export-model``; returns the exit code."""
     from trajectories.robot import load_robot
 
+    from .cli import warnings_held
     from .loaders import parse_mapping
     from .report import staged_folder, write_json
+    from .robot import RobotIdentError
     from .robot.consistent_fit import format_record
     from .robot.export_model import export_model
 
@@ -160,7 +162,14 @@ def run(args: argparse.Namespace) -> int:
         raise DataError(f"{robot_file}: moving joints "
                         f"{list(robot.moving)}, the record's are {rec['robot']['moving']}")
     mapping = parse_mapping(args.map, robot=True) if args.map else None
-    cons, fixed = consistent_from_record(args.fit, rec, robot, name, mapping, args.q_unit)
+    with warnings_held():  # a refusal is its one line, without the solver's warnings
+        try:
+            cons, fixed = consistent_from_record(args.fit, rec, robot, name, mapping,
+                                                 args.q_unit)
+        except RobotIdentError as e:  # the solver's refusal, named after the record's model
+            if str(e).startswith(str(args.fit)):
+                raise
+            raise DataError(f"{args.fit}: models.{name}: {e}") from None
     if not cons.get("valid", False):
         left = cons.get("friction_bounds", {}).get("still_violated", [])
         raise DataError(f"{args.fit}: models.{name}.consistent: " + (

@@ -38,7 +38,7 @@ from trajectories.robot import Robot, RobotRegressor, base_parameters, load_robo
 
 from . import DataError, IdentError
 from .chain import check_torque_delay
-from .cli import parse_qs
+from .cli import parse_qs, warnings_held
 from .estimate import DEFAULT_THRESHOLD_PCT
 from .fitting import DQ_MIN_FRACTION, SIGN_CHECK_MIN_KEPT
 from .loaders import Q_UNITS, parse_mapping
@@ -1372,20 +1372,21 @@ def run(args: argparse.Namespace) -> int:
     _check_args(args)
     q_s = parse_qs(args.q_s)  # refused in one line before any file is read
     robot = load_robot(args.robot)
-    out = fit_files(robot, args.inputs, args.validate, model=args.model,
-                    mapping=parse_mapping(args.map, robot=True), q_unit=args.q_unit,
-                    cutoff=args.cutoff, decimation=args.decimation, trim=args.trim,
-                    torque_delay=getattr(args, "torque_delay", None), method=args.method,
-                    q_s=q_s, dq_min=args.dq_min,
-                    known_rotor_inertia=args.known_rotor_inertia,
-                    chain=args.chain or "columns", payload=args.payload,
-                    feasibility=not getattr(args, "no_consistency", False),
-                    consistent=getattr(args, "consistent", False),
-                    sigma_blocks=N_BLOCKS if getattr(args, "sigma_blocks", None) is None
-                    else args.sigma_blocks, prune=not getattr(args, "no_prune", False),
-                    sign_check=not getattr(args, "no_sign_check", False),
-                    quadrants=getattr(args, "quadrants", None) or "hard",
-                    progress=lambda m: print(m, file=sys.stderr))
+    with warnings_held():  # a refusal is its one line, without the warnings before it
+        out = fit_files(robot, args.inputs, args.validate, model=args.model,
+                        mapping=parse_mapping(args.map, robot=True), q_unit=args.q_unit,
+                        cutoff=args.cutoff, decimation=args.decimation, trim=args.trim,
+                        torque_delay=getattr(args, "torque_delay", None), method=args.method,
+                        q_s=q_s, dq_min=args.dq_min,
+                        known_rotor_inertia=args.known_rotor_inertia,
+                        chain=args.chain or "columns", payload=args.payload,
+                        feasibility=not getattr(args, "no_consistency", False),
+                        consistent=getattr(args, "consistent", False),
+                        sigma_blocks=N_BLOCKS if getattr(args, "sigma_blocks", None) is None
+                        else args.sigma_blocks, prune=not getattr(args, "no_prune", False),
+                        sign_check=not getattr(args, "no_sign_check", False),
+                        quadrants=getattr(args, "quadrants", None) or "hard",
+                        progress=lambda m: print(m, file=sys.stderr))
     if getattr(args, "refine", False):
         refine_robot(out, max_steps=args.max_steps,
                      progress=lambda m: print(m, file=sys.stderr))

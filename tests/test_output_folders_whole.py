@@ -22,26 +22,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from robot_campaigns import write_arm_csv
+from robot_campaigns import arm_csvs
+from test_bad_inputs_sweep import _csv
 
 from daq.app.cli import main
-from sim_drivers.arm import ArmGains, ArmParams, Payload, model_reference, simulate_arm
-from trajectories.robot import load_robot
+from sim_drivers.arm import Payload
 
 ROOT = Path(__file__).resolve().parents[1]
 ARM3 = ROOT / "examples" / "robots" / "arm3.toml"
 #: seconds a jointid process may take to fit before it writes (2 shared cores, CI beside)
 PATIENCE_S = 180.0
-
-
-def _csv(path: Path) -> Path:
-    """A single-joint CSV (t, q, tau) that fits in a few seconds."""
-    t = np.arange(3000) * 1e-3
-    q = 0.5 * np.sin(2 * np.pi * t) + 0.3 * np.sin(7 * t)
-    tau = 10 * np.cos(2 * np.pi * t) + 3 + np.sign(np.cos(2 * np.pi * t))
-    np.savetxt(path, np.column_stack([t, q, tau]), delimiter=",", fmt="%.10g",
-               header="t,q,tau", comments="")
-    return path
 
 
 def _arm_csv(path: Path) -> Path:
@@ -162,35 +152,42 @@ def _umask() -> int:
     return m
 
 
-def test_fit_report_error_while_moving_in_leaves_the_folder(tmp_path, capfd):
-    """DIR/fit.json is a folder: one line naming it, exit 2, and DIR as it was (the old code
-    replaced DIR's figures, then failed on fit.json with the new figures in place)."""
+def _refused_on_a_folder(tmp_path: Path, capfd, name: str, argv: list[str]) -> None:
+    """A report folder of a fit whose file ``name`` is replaced by a folder: ``jointid ARGV``
+    exits 2 with one line naming that file and leaves the tree as it was."""
     data = _csv(tmp_path / "run.csv")
     rep = tmp_path / "rep"
     assert main(["fit", str(data), "--model", "usual", "--report", str(rep)]) == 0
-    (rep / "fit.json").unlink()
-    (rep / "fit.json").mkdir()
+    (rep / name).unlink()
+    (rep / name).mkdir()
     capfd.readouterr()
     before = _snapshot(tmp_path)
-    assert main(["fit", str(data), "--model", "paper", "--report", str(rep)]) == 2
-    err = [ln for ln in capfd.readouterr().err.splitlines() if "error" in ln]
-    assert len(err) == 1 and str(rep / "fit.json") in err[0], err
+    assert main([a.format(data=data, rep=rep) for a in argv]) == 2
+    err = capfd.readouterr().err.splitlines()
+    bad = [ln for ln in err if ln.startswith("jointid") and "warning" not in ln]
+    assert len(bad) == 1 and str(rep / name) in bad[0] and "Traceback" not in err, err
     assert _snapshot(tmp_path) == before
+
+
+def test_fit_report_error_while_moving_in_leaves_the_folder(tmp_path, capfd):
+    """DIR/direct_validation_usual.png is a folder (known only once the figures are drawn):
+    the old code failed there with tables.txt replaced by the new fit's."""
+    _refused_on_a_folder(tmp_path, capfd, "direct_validation_usual.png",
+                         ["fit", "{data}", "--model", "both", "--report", "{rep}"])
+
+
+def test_fit_report_whose_record_is_a_folder_refused_before_the_fit(tmp_path, capfd):
+    """DIR/fit.json is a folder: refused before any file is read (the old code replaced
+    DIR's figures, then failed on fit.json)."""
+    _refused_on_a_folder(tmp_path, capfd, "fit.json",
+                         ["fit", "{data}", "--model", "paper", "--report", "{rep}"])
+    assert "warning" not in capfd.readouterr().err
 
 
 def test_report_that_cannot_be_replaced_leaves_no_part_file(tmp_path, capfd):
-    """``jointid report DIR`` whose report.html is a folder: one line, no report.html.part."""
-    data = _csv(tmp_path / "run.csv")
-    rep = tmp_path / "rep"
-    assert main(["fit", str(data), "--model", "usual", "--report", str(rep)]) == 0
-    (rep / "report.html").unlink()
-    (rep / "report.html").mkdir()
-    capfd.readouterr()
-    before = _snapshot(tmp_path)
-    assert main(["report", str(rep)]) == 2
-    err = [ln for ln in capfd.readouterr().err.splitlines() if ln.strip()]
-    assert len(err) == 1 and "report.html" in err[0], err
-    assert _snapshot(tmp_path) == before
+    """``jointid report DIR`` whose report.html is a folder: the old code left
+    report.html.part behind."""
+    _refused_on_a_folder(tmp_path, capfd, "report.html", ["report", "{rep}"])
 
 
 @pytest.fixture(scope="module")
@@ -198,15 +195,7 @@ def arm3_record(tmp_path_factory) -> Path:
     """``jointid fit --robot arm3.toml --consistent --json``: a record export-model writes
     without a refit (simulated payload runs, as tests/test_model_export.py)."""
     d = tmp_path_factory.mktemp("arm3_record")
-    robot = load_robot(ARM3)
-    params = ArmParams.from_robot(robot)
-    ref = model_reference(params.model, center=[0.0, -1.9, 0.6], fraction=0.9,
-                          duration_s=8.0, seed=1)
-    files = []
-    for i, pay in enumerate((None, Payload(5.0, [0.0, 0.0, 0.05]))):
-        run = simulate_arm(params, ref, ArmGains.for_params(params, payload=pay),
-                           payload=pay, seed=10 + i)
-        files.append(str(write_arm_csv(run, d / f"p{i}.csv")))
+    files = [str(f) for f in arm_csvs(d, (None, Payload(5.0, [0.0, 0.0, 0.05])))]
     rec = d / "fit.json"
     assert main(["fit", "--robot", str(ARM3), *files, "--model", "usual", "--consistent",
                  "--no-consistency", "--json", str(rec)]) == 0
