@@ -348,10 +348,10 @@ def check_refine_steps(args: argparse.Namespace) -> None:
                         f"drop --max-steps")
 
 
-def _check_output(flag: str, path: Path | None, directory: bool) -> None:
+def check_output(flag: str, path: Path | None, directory: bool) -> None:
     """Refuse an output path that cannot be written, before anything is fitted: the
-    directory ``--report`` names (created if absent) or the file ``--json`` names (its
-    folder created if absent).
+    directory ``--report`` (or ``export-model -o``) names (created if absent) or the file
+    ``--json`` names (its folder created if absent).
 
     Raises
     ------
@@ -360,6 +360,15 @@ def _check_output(flag: str, path: Path | None, directory: bool) -> None:
     """
     if path is None:
         return
+    try:
+        _check_writable(flag, path, directory)
+    except OSError as e:  # a folder on the way that cannot be read (no x permission)
+        raise DataError(f"{flag} {path}: {e.strerror or e}"
+                        + (f" ({e.filename})" if e.filename else "")) from None
+
+
+def _check_writable(flag: str, path: Path, directory: bool) -> None:
+    """:func:`check_output` of a given path (OSError where its folders cannot be read)."""
     if path.exists() and path.is_dir() != directory:
         what = "a file" if directory else "a directory"
         raise DataError(f"{flag} {path}: is {what}, expected "
@@ -372,7 +381,7 @@ def _check_output(flag: str, path: Path | None, directory: bool) -> None:
         raise DataError(f"{flag} {path}: {anc} is a file, not a directory")
     if not os.access(anc, os.W_OK | os.X_OK):
         raise DataError(f"{flag} {path}: {anc} is not writable")
-    for name in REPORT_FILES if directory and path.is_dir() else ():
+    for name in REPORT_FILES if flag == "--report" and path.is_dir() else ():
         if (path / name).is_dir():
             raise DataError(f"{flag} {path}: {path / name} is a folder, expected a file "
                             "name (the report writes it)")
@@ -383,15 +392,45 @@ REPORT_FILES = ("tables.txt", "fit.json", "report.html")
 
 
 def check_outputs(args: argparse.Namespace) -> None:
-    """:func:`_check_output` of ``--report`` (a directory) and ``--json`` (a file)."""
-    _check_output("--report", getattr(args, "report", None), True)
-    _check_output("--json", getattr(args, "json", None), False)
+    """:func:`check_output` of ``--report`` (a directory) and ``--json`` (a file)."""
+    check_output("--report", getattr(args, "report", None), True)
+    check_output("--json", getattr(args, "json", None), False)
     js = getattr(args, "json", None)
+    rep = getattr(args, "report", None)
+    if js is not None and rep is not None and js.absolute() == rep.absolute():
+        raise DataError(f"--json {js}: is the --report folder; expected a file name (the "
+                        f"report holds the record as {rep / 'fit.json'})")
     if js is not None and js.is_file():  # `--json run.csv`: the record would replace the data
         for f in [*getattr(args, "inputs", []), *(getattr(args, "validate", None) or [])]:
             if Path(f).is_file() and os.path.samefile(js, f):
                 raise DataError(f"--json {js}: is the input file {f}; expected a new file "
                                 f"name (the JSON record would replace the data)")
+
+
+def check_inputs_distinct(args: argparse.Namespace) -> None:
+    """Refuse a file given twice among the inputs and ``--validate`` (``runs/*.mcap
+    runs/a.mcap``): as an input twice it would count its samples twice in the fit, as an
+    input and a validation file it would be cross-validated on the data it was fitted on.
+
+    Raises
+    ------
+    DataError
+        One line naming the file and its two places.
+    """
+    seen: list[tuple[Path, str]] = []
+    for where, files in (("the inputs", getattr(args, "inputs", [])),
+                         ("the --validate files", getattr(args, "validate", None) or [])):
+        for f in map(Path, files):
+            if not f.is_file():
+                continue  # the loader names it
+            for g, gwhere in seen:
+                if os.path.samefile(f, g):
+                    same = "" if str(f) == str(g) else f" (also as {g})"
+                    places = (f"twice among {where}" if where == gwhere
+                              else f"among {gwhere} and {where}")
+                    raise DataError(f"{f}: given {places}{same}; expected each file once "
+                                    "(fitted twice, or validated on the data it was fitted on)")
+            seen.append((f, where))
 
 
 def check_foreign_options(args: argparse.Namespace) -> None:
@@ -479,6 +518,7 @@ def run(args: argparse.Namespace) -> int:
     args.torque_delay = check_torque_delay(getattr(args, "torque_delay", None),
                                            "--torque-delay")
     check_outputs(args)
+    check_inputs_distinct(args)
     check_foreign_options(args)
     # the one vocabulary (ident.vocab): "new" is a deprecated "paper", "ols" a deprecated "ls"
     args.model = model_name(args.model, extra=("both",))

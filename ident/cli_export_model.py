@@ -138,15 +138,14 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``jointid export-model``; returns the exit code."""
     from trajectories.robot import load_robot
 
-    from .cli import warnings_held
+    from .cli import check_output, warnings_held
     from .loaders import parse_mapping
     from .report import staged_folder, write_json
     from .robot import RobotIdentError
     from .robot.consistent_fit import format_record
     from .robot.export_model import export_model
 
-    if args.output.exists() and not args.output.is_dir():  # before the refit (seconds)
-        raise DataError(f"-o {args.output}: is a file, expected a folder (created if absent)")
+    check_output("-o", args.output, directory=True)  # a writable folder, before the refit
     rec = read_fit_record(args.fit)
     fitted = [n for n, r in rec.get("models", {}).items() if "error" not in r]
     name = model_name(args.model) if args.model else ("paper" if "paper" in fitted else "usual")

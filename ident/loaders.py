@@ -411,6 +411,12 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
         raise DataError(f"{path}: unreadable numeric data ({exc})") from None
     if data.shape[1] != len(header):
         raise DataError(f"{path}: {data.shape[1]} columns of data for {len(header)} header names")
+    seen: dict[str, int] = {}
+    for i, h in enumerate(header):
+        if h and h in seen:  # the later column replaced the earlier one, in silence
+            raise DataError(f"{path}: column {h!r} twice in the header (columns "
+                            f"{seen[h] + 1} and {i + 1}), expected each name once")
+        seen[h] = i
     return {h: data[:, i] for i, h in enumerate(header)}
 
 
