@@ -556,7 +556,7 @@ def run(args: argparse.Namespace) -> int:
             print("\n" + "\n".join(cli_robot.format_refit(ref.refit, refined.name_)))
         out["refinement"] = refined.refinement_json()
     if args.report is not None:
-        # written whole or not at all: a temporary sibling folder, moved in at the end
+        # written whole or not at all: a temporary folder, moved in at the end
         with staged_folder(args.report) as tmp:
             (tmp / "tables.txt").write_text(text + "\n")
             files = write_plots(report, tmp)

@@ -8,8 +8,8 @@ exported as it is; otherwise the fit is made again from the record's inputs and 
 (the record has no covariance, which the consistent estimate needs), checked to give the
 record's parameters, and the consistent estimate is computed. Everything is computed before a
 file is written: a bad input leaves nothing behind; the files are written into a temporary
-sibling of OUTDIR moved in at the end (:func:`ident.report.staged_folder`), so an interrupt
-leaves nothing half-written either.
+folder (beside or inside OUTDIR) moved in at the end (:func:`ident.report.staged_folder`), so
+an interrupt leaves nothing half-written either.
 """
 
 from __future__ import annotations

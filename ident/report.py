@@ -213,12 +213,13 @@ def _move_in(tmp: Path, final: Path) -> None:
 
 @contextmanager
 def staged_folder(final: Path | str) -> Iterator[Path]:
-    """An output folder written whole or not at all: yields a temporary sibling
-    ``.NAME.part-<pid>-<hex>`` of ``final`` to write into, moved into ``final`` when the block
-    ends (:func:`_move_in`: a rename when ``final`` is absent, else one rename per file,
-    signals held). On an error or an interrupt (Ctrl-C) inside the block, the temporary folder
-    and the parent folders created for it are removed: ``final`` is left as it was (absent, or
-    its previous files intact), nothing half-written remains.
+    """An output folder written whole or not at all: yields a temporary folder
+    ``.NAME.part-<pid>-<hex>`` to write into -- beside ``final`` when it is absent, inside it
+    when it exists (its parent need not be writable: ``--report .``) --, moved into ``final``
+    when the block ends (:func:`_move_in`: a rename when ``final`` is absent, else one rename
+    per file, signals held). On an error or an interrupt (Ctrl-C) inside the block, the
+    temporary folder and the parent folders created for it are removed: ``final`` is left as
+    it was (absent, or its previous files intact), nothing half-written remains.
 
     Parameters
     ----------
@@ -231,13 +232,14 @@ def staged_folder(final: Path | str) -> Iterator[Path]:
         The temporary folder, empty.
     """
     final = Path(final)
-    parent = final.absolute().parent
+    full = final.absolute()  # "." -> the working folder, its name
+    parent = full if full.is_dir() else full.parent
     created = []  # the missing parent folders, outermost first, to remove on failure
     anc = parent
     while not anc.exists() and anc != anc.parent:
         created.insert(0, anc)
         anc = anc.parent
-    tmp = parent / f".{final.name}.part-{os.getpid()}-{secrets.token_hex(3)}"
+    tmp = parent / f".{full.name or 'out'}.part-{os.getpid()}-{secrets.token_hex(3)}"
     try:
         parent.mkdir(parents=True, exist_ok=True)
         tmp.mkdir()

@@ -56,10 +56,12 @@ def _pngs(folder: Path) -> dict[str, int]:
 
 def _written(out: Path, before: dict[str, int]) -> bool:
     """Writing has started: a new PNG in ``out`` (the old code's way; ``before``: its PNGs
-    then) or a PNG in a staged sibling."""
+    then) or a PNG in the staged folder (beside ``out``, or in it when it exists)."""
     if out.is_dir() and _pngs(out) != before:
         return True
-    return any(any(d.glob("*.png")) for d in out.parent.glob(f".{out.name}.part-*"))
+    staged = [*out.parent.glob(f".{out.name}.part-*"),
+              *(out.glob(f".{out.name}.part-*") if out.is_dir() else ())]
+    return any(any(d.glob("*.png")) for d in staged)
 
 
 def _interrupt_while_writing(argv: list[str], out: Path, cwd: Path) -> tuple[int, str]:
@@ -111,7 +113,7 @@ def test_fit_report_interrupted_leaves_nothing(tmp_path, robot):
 
 def test_fit_report_interrupted_keeps_the_existing_folder(tmp_path, capfd):
     """An existing report folder (an earlier fit's, plus a note of the user's) interrupted
-    while the new report is written: every file as it was, no staged sibling."""
+    while the new report is written: every file as it was, no staged folder."""
     data = _csv(tmp_path / "run.csv")
     rep = tmp_path / "rep"
     assert main(["fit", str(data), "--model", "usual", "--report", str(rep)]) == 0
@@ -129,7 +131,7 @@ def test_fit_report_interrupted_keeps_the_existing_folder(tmp_path, capfd):
 
 def test_fit_report_completed_over_an_existing_folder(tmp_path, capfd):
     """Not interrupted: the new files replace their namesakes, the user's other files stay,
-    the record names the figures in DIR (not in the staged folder), no staged sibling."""
+    the record names the figures in DIR (not in the staged folder), no staged folder."""
     data = _csv(tmp_path / "run.csv")
     rep = tmp_path / "rep"
     rep.mkdir()
@@ -144,6 +146,19 @@ def test_fit_report_completed_over_an_existing_folder(tmp_path, capfd):
     assert (rep / "notes.txt").read_text() == "mine\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rep", "run.csv"]
     assert oct(rep.stat().st_mode & 0o777) == oct(0o777 & ~_umask())
+
+
+def test_fit_report_into_the_working_folder(tmp_path, capfd, monkeypatch):
+    """``--report .``: staged inside the folder (its parent may be read-only), the new files
+    beside the data, no staged folder left."""
+    monkeypatch.chdir(tmp_path)
+    _csv(tmp_path / "run.csv")
+    assert main(["fit", "run.csv", "--model", "usual", "--report", "."]) == 0
+    capfd.readouterr()
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert {"run.csv", "fit.json", "report.html", "tables.txt"} <= set(names), names
+    assert not [n for n in names if ".part" in n], names
+    assert not [p for p in tmp_path.parent.iterdir() if ".part-" in p.name]
 
 
 def _umask() -> int:
