@@ -16,7 +16,9 @@ import math
 import os
 import re
 import sys
-from collections.abc import Mapping, Sequence
+import warnings
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -346,10 +348,10 @@ def check_refine_steps(args: argparse.Namespace) -> None:
                         f"drop --max-steps")
 
 
-def _check_output(flag: str, path: Path | None, directory: bool) -> None:
+def check_output(flag: str, path: Path | None, directory: bool) -> None:
     """Refuse an output path that cannot be written, before anything is fitted: the
-    directory ``--report`` names (created if absent) or the file ``--json`` names (its
-    folder created if absent).
+    directory ``--report`` (or ``export-model -o``) names (created if absent) or the file
+    ``--json`` names (its folder created if absent).
 
     Raises
     ------
@@ -358,6 +360,15 @@ def _check_output(flag: str, path: Path | None, directory: bool) -> None:
     """
     if path is None:
         return
+    try:
+        _check_writable(flag, path, directory)
+    except OSError as e:  # a folder on the way that cannot be read (no x permission)
+        raise DataError(f"{flag} {path}: {e.strerror or e}"
+                        + (f" ({e.filename})" if e.filename else "")) from None
+
+
+def _check_writable(flag: str, path: Path, directory: bool) -> None:
+    """:func:`check_output` of a given path (OSError where its folders cannot be read)."""
     if path.exists() and path.is_dir() != directory:
         what = "a file" if directory else "a directory"
         raise DataError(f"{flag} {path}: is {what}, expected "
@@ -370,18 +381,56 @@ def _check_output(flag: str, path: Path | None, directory: bool) -> None:
         raise DataError(f"{flag} {path}: {anc} is a file, not a directory")
     if not os.access(anc, os.W_OK | os.X_OK):
         raise DataError(f"{flag} {path}: {anc} is not writable")
+    for name in REPORT_FILES if flag == "--report" and path.is_dir() else ():
+        if (path / name).is_dir():
+            raise DataError(f"{flag} {path}: {path / name} is a folder, expected a file "
+                            "name (the report writes it)")
+
+
+#: the files ``--report DIR`` always writes (besides the figures)
+REPORT_FILES = ("tables.txt", "fit.json", "report.html")
 
 
 def check_outputs(args: argparse.Namespace) -> None:
-    """:func:`_check_output` of ``--report`` (a directory) and ``--json`` (a file)."""
-    _check_output("--report", getattr(args, "report", None), True)
-    _check_output("--json", getattr(args, "json", None), False)
+    """:func:`check_output` of ``--report`` (a directory) and ``--json`` (a file)."""
+    check_output("--report", getattr(args, "report", None), True)
+    check_output("--json", getattr(args, "json", None), False)
     js = getattr(args, "json", None)
+    rep = getattr(args, "report", None)
+    if js is not None and rep is not None and js.absolute() == rep.absolute():
+        raise DataError(f"--json {js}: is the --report folder; expected a file name (the "
+                        f"report holds the record as {rep / 'fit.json'})")
     if js is not None and js.is_file():  # `--json run.csv`: the record would replace the data
         for f in [*getattr(args, "inputs", []), *(getattr(args, "validate", None) or [])]:
             if Path(f).is_file() and os.path.samefile(js, f):
                 raise DataError(f"--json {js}: is the input file {f}; expected a new file "
                                 f"name (the JSON record would replace the data)")
+
+
+def check_inputs_distinct(args: argparse.Namespace) -> None:
+    """Refuse a file given twice among the inputs and ``--validate`` (``runs/*.mcap
+    runs/a.mcap``): as an input twice it would count its samples twice in the fit, as an
+    input and a validation file it would be cross-validated on the data it was fitted on.
+
+    Raises
+    ------
+    DataError
+        One line naming the file and its two places.
+    """
+    seen: list[tuple[Path, str]] = []
+    for where, files in (("the inputs", getattr(args, "inputs", [])),
+                         ("the --validate files", getattr(args, "validate", None) or [])):
+        for f in map(Path, files):
+            if not f.is_file():
+                continue  # the loader names it
+            for g, gwhere in seen:
+                if os.path.samefile(f, g):
+                    same = "" if str(f) == str(g) else f" (also as {g})"
+                    places = (f"twice among {where}" if where == gwhere
+                              else f"among {gwhere} and {where}")
+                    raise DataError(f"{f}: given {places}{same}; expected each file once "
+                                    "(fitted twice, or validated on the data it was fitted on)")
+            seen.append((f, where))
 
 
 def check_foreign_options(args: argparse.Namespace) -> None:
@@ -403,6 +452,31 @@ def check_foreign_options(args: argparse.Namespace) -> None:
         logs = files[0] + (f" and {len(files) - 1} more" if len(files) > 1 else "")
         raise DataError(f"{' and '.join(used)}: apply to CSV and MAT files only; {logs}: "
                         "jointid MCAP log(s), with their own channels and joint-side torque")
+
+
+@contextmanager
+def warnings_held() -> Iterator[None]:
+    """Warnings of the block held back until it ends: shown then (in order, each once) when
+    it ends normally or by an interrupt, dropped when it ends in an error, so a refusal is
+    its one line (``jointid fit --trim 2000`` said "cut-off 50 Hz is the lower bound" before
+    "too few samples after trimming"; a log cut at 2 kB, "truncated run log" before "no cycle
+    logged (the log is cut short)"). Around the reading and fitting of ``jointid fit`` and
+    the refit of ``export-model`` (seconds; minutes for a robot's long logs, whose progress
+    lines are not held), never around a campaign run."""
+    with warnings.catch_warnings(record=True) as seen:
+        try:
+            yield
+        except Exception:
+            seen.clear()
+            raise
+        finally:
+            held = list(seen)
+    shown = set()
+    for w in held:
+        key = (str(w.message), w.category)
+        if key not in shown:
+            shown.add(key)
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno, w.file, w.line)
 
 
 def _axis_label(inputs: Sequence[Path | str], mapping: Mapping[str, Any], axis: int
@@ -436,7 +510,7 @@ def run(args: argparse.Namespace) -> int:
     from .loaders import parse_mapping
     from .plots import write_plots
     from .refine_plots import plot_refinement
-    from .report import write_json
+    from .report import staged_folder, write_json, write_text_atomic
     from .report_build import build_report
 
     check_numbers(args)
@@ -444,6 +518,7 @@ def run(args: argparse.Namespace) -> int:
     args.torque_delay = check_torque_delay(getattr(args, "torque_delay", None),
                                            "--torque-delay")
     check_outputs(args)
+    check_inputs_distinct(args)
     check_foreign_options(args)
     # the one vocabulary (ident.vocab): "new" is a deprecated "paper", "ols" a deprecated "ls"
     args.model = model_name(args.model, extra=("both",))
@@ -461,10 +536,11 @@ def run(args: argparse.Namespace) -> int:
     load_kw: dict[str, Any] = dict(
         mapping=mapping, gain=gain, joint=args.joint, axis=args.axis, q_unit=args.q_unit
     )
-    exps = load(args.inputs, **load_kw)
-    val = load(args.validate, **load_kw) if args.validate else None
-    est = estimator_from_args(args).fit(exps, validation=val,
-                                        axis=_axis_label(args.inputs, mapping, args.axis))
+    with warnings_held():  # a refusal is its one line, without the warnings before it
+        exps = load(args.inputs, **load_kw)
+        val = load(args.validate, **load_kw) if args.validate else None
+        est = estimator_from_args(args).fit(exps, validation=val,
+                                            axis=_axis_label(args.inputs, mapping, args.axis))
     report = est.report_
     out = report.to_json()
     text = report.format_tables()
@@ -480,17 +556,19 @@ def run(args: argparse.Namespace) -> int:
             print("\n" + "\n".join(cli_robot.format_refit(ref.refit, refined.name_)))
         out["refinement"] = refined.refinement_json()
     if args.report is not None:
-        args.report.mkdir(parents=True, exist_ok=True)
-        (args.report / "tables.txt").write_text(text + "\n")
-        files = write_plots(report, args.report)
-        if ref is not None:
-            files += plot_refinement(ref, args.report)
-        out["figures"] = [str(f) for f in files]
-        write_json(args.report / "fit.json", out)
-        html = build_report(args.report, title="jointid fit report")
-        print(f"\nreport: {html} ({len(files)} figures, tables.txt, fit.json)")
+        # written whole or not at all: a temporary folder, moved in at the end
+        with staged_folder(args.report) as tmp:
+            (tmp / "tables.txt").write_text(text + "\n")
+            files = write_plots(report, tmp)
+            if ref is not None:
+                files += plot_refinement(ref, tmp)
+            out["figures"] = [str(args.report / f.name) for f in files]
+            write_json(tmp / "fit.json", out)
+            build_report(tmp, title="jointid fit report")
+        print(f"\nreport: {args.report / 'report.html'} ({len(files)} figures, tables.txt, "
+              "fit.json)")
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(out, indent=2) + "\n")
+        write_text_atomic(args.json, json.dumps(out, indent=2) + "\n")
         print(f"json: {args.json}")
     return 0

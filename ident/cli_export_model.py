@@ -7,7 +7,9 @@ FIT.json is the record of ``jointid fit --robot ... --json``. When its model car
 exported as it is; otherwise the fit is made again from the record's inputs and settings
 (the record has no covariance, which the consistent estimate needs), checked to give the
 record's parameters, and the consistent estimate is computed. Everything is computed before a
-file is written: a bad input leaves nothing behind.
+file is written: a bad input leaves nothing behind; the files are written into a temporary
+folder (beside or inside OUTDIR) moved in at the end (:func:`ident.report.staged_folder`), so
+an interrupt leaves nothing half-written either.
 """
 
 from __future__ import annotations
@@ -136,13 +138,14 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``jointid export-model``; returns the exit code."""
     from trajectories.robot import load_robot
 
+    from .cli import check_output, warnings_held
     from .loaders import parse_mapping
-    from .report import write_json
+    from .report import staged_folder, write_json
+    from .robot import RobotIdentError
     from .robot.consistent_fit import format_record
     from .robot.export_model import export_model
 
-    if args.output.exists() and not args.output.is_dir():  # before the refit (seconds)
-        raise DataError(f"-o {args.output}: is a file, expected a folder (created if absent)")
+    check_output("-o", args.output, directory=True)  # a writable folder, before the refit
     rec = read_fit_record(args.fit)
     fitted = [n for n, r in rec.get("models", {}).items() if "error" not in r]
     name = model_name(args.model) if args.model else ("paper" if "paper" in fitted else "usual")
@@ -158,15 +161,23 @@ def run(args: argparse.Namespace) -> int:
         raise DataError(f"{robot_file}: moving joints "
                         f"{list(robot.moving)}, the record's are {rec['robot']['moving']}")
     mapping = parse_mapping(args.map, robot=True) if args.map else None
-    cons, fixed = consistent_from_record(args.fit, rec, robot, name, mapping, args.q_unit)
+    with warnings_held():  # a refusal is its one line, without the solver's warnings
+        try:
+            cons, fixed = consistent_from_record(args.fit, rec, robot, name, mapping,
+                                                 args.q_unit)
+        except RobotIdentError as e:  # the solver's refusal, named after the record's model
+            if str(e).startswith(str(args.fit)):
+                raise
+            raise DataError(f"{args.fit}: models.{name}: {e}") from None
     if not cons.get("valid", False):
         left = cons.get("friction_bounds", {}).get("still_violated", [])
         raise DataError(f"{args.fit}: models.{name}.consistent: " + (
             f"friction bounds {', '.join(left)} still violated (on parameters held fixed)"
             if left else "a link is not physically valid") + "; nothing exported")
-    files = export_model(robot, cons, args.output, fixed)
-    files.append(write_json(args.output / "consistent.json", cons))
+    with staged_folder(args.output) as tmp:  # written whole or not at all
+        files = export_model(robot, cons, tmp, fixed)
+        files.append(write_json(tmp / "consistent.json", cons))
     print(f"{name} model: " + format_record(cons))
     for f in files:
-        print(f"wrote {f}")
+        print(f"wrote {args.output / f.name}")
     return 0

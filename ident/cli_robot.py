@@ -38,13 +38,13 @@ from trajectories.robot import Robot, RobotRegressor, base_parameters, load_robo
 
 from . import DataError, IdentError
 from .chain import check_torque_delay
-from .cli import parse_qs
+from .cli import parse_qs, warnings_held
 from .estimate import DEFAULT_THRESHOLD_PCT
 from .fitting import DQ_MIN_FRACTION, SIGN_CHECK_MIN_KEPT
 from .loaders import Q_UNITS, parse_mapping
 from .qs_scan import qs_grid, rescan_qs, rescan_qs_joints, scan_qs, scan_qs_joints
 from .refine_result import ONE_TRAJECTORY_NOTE
-from .report import write_json
+from .report import staged_folder, write_json
 from .results import (
     DEFAULT_BANDS,
     json_float,
@@ -1372,20 +1372,21 @@ def run(args: argparse.Namespace) -> int:
     _check_args(args)
     q_s = parse_qs(args.q_s)  # refused in one line before any file is read
     robot = load_robot(args.robot)
-    out = fit_files(robot, args.inputs, args.validate, model=args.model,
-                    mapping=parse_mapping(args.map, robot=True), q_unit=args.q_unit,
-                    cutoff=args.cutoff, decimation=args.decimation, trim=args.trim,
-                    torque_delay=getattr(args, "torque_delay", None), method=args.method,
-                    q_s=q_s, dq_min=args.dq_min,
-                    known_rotor_inertia=args.known_rotor_inertia,
-                    chain=args.chain or "columns", payload=args.payload,
-                    feasibility=not getattr(args, "no_consistency", False),
-                    consistent=getattr(args, "consistent", False),
-                    sigma_blocks=N_BLOCKS if getattr(args, "sigma_blocks", None) is None
-                    else args.sigma_blocks, prune=not getattr(args, "no_prune", False),
-                    sign_check=not getattr(args, "no_sign_check", False),
-                    quadrants=getattr(args, "quadrants", None) or "hard",
-                    progress=lambda m: print(m, file=sys.stderr))
+    with warnings_held():  # a refusal is its one line, without the warnings before it
+        out = fit_files(robot, args.inputs, args.validate, model=args.model,
+                        mapping=parse_mapping(args.map, robot=True), q_unit=args.q_unit,
+                        cutoff=args.cutoff, decimation=args.decimation, trim=args.trim,
+                        torque_delay=getattr(args, "torque_delay", None), method=args.method,
+                        q_s=q_s, dq_min=args.dq_min,
+                        known_rotor_inertia=args.known_rotor_inertia,
+                        chain=args.chain or "columns", payload=args.payload,
+                        feasibility=not getattr(args, "no_consistency", False),
+                        consistent=getattr(args, "consistent", False),
+                        sigma_blocks=N_BLOCKS if getattr(args, "sigma_blocks", None) is None
+                        else args.sigma_blocks, prune=not getattr(args, "no_prune", False),
+                        sign_check=not getattr(args, "no_sign_check", False),
+                        quadrants=getattr(args, "quadrants", None) or "hard",
+                        progress=lambda m: print(m, file=sys.stderr))
     if getattr(args, "refine", False):
         refine_robot(out, max_steps=args.max_steps,
                      progress=lambda m: print(m, file=sys.stderr))
@@ -1394,9 +1395,10 @@ def run(args: argparse.Namespace) -> int:
     # everything computed: only now write files (a bad input leaves nothing behind)
     print(text)
     if args.report is not None:
-        figures = write_robot_report(args.report, out, text)
-        public["figures"] = [str(f) for f in figures]
-        write_json(args.report / "fit.json", public)
+        with staged_folder(args.report) as tmp:  # written whole or not at all
+            figures = write_robot_report(tmp, out, text)
+            public["figures"] = [str(args.report / f.name) for f in figures]
+            write_json(tmp / "fit.json", public)
         print(f"\nreport: {args.report / 'report.html'} ({len(figures)} figures, tables.txt, "
               "fit.json)")
     if args.json is not None:

@@ -411,6 +411,12 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
         raise DataError(f"{path}: unreadable numeric data ({exc})") from None
     if data.shape[1] != len(header):
         raise DataError(f"{path}: {data.shape[1]} columns of data for {len(header)} header names")
+    seen: dict[str, int] = {}
+    for i, h in enumerate(header):
+        if h and h in seen:  # the later column replaced the earlier one, in silence
+            raise DataError(f"{path}: column {h!r} twice in the header (columns "
+                            f"{seen[h] + 1} and {i + 1}), expected each name once")
+        seen[h] = i
     return {h: data[:, i] for i, h in enumerate(header)}
 
 
@@ -856,14 +862,21 @@ def _read_mcap(path: Path, joints: Sequence[str] | None, axis: int | None) -> Ra
     else:
         joints = tuple(joints or ())
         k = len(joints)
-        first = read_run(path, axis=0)
-        n_axes = _mcap_axes(path, first)
-        if n_axes != k:
-            raise DataError(
-                f"{path}: the log has {n_axes} axes (/joint/0..{n_axes - 1}/state), the robot "
-                f"moves {k} joints ({_names(joints)})"
-            )
-        runs = [first, *(read_run(path, axis=i) for i in range(1, k))]
+        # each axis is one scan of the file, each warning the same of it (truncated, damaged
+        # chunks): said once; none before a refusal
+        with warnings.catch_warnings(record=True) as seen:
+            warnings.simplefilter("always")
+            first = read_run(path, axis=0)
+            n_axes = _mcap_axes(path, first)
+            if n_axes != k:
+                raise DataError(
+                    f"{path}: the log has {n_axes} axes (/joint/0..{n_axes - 1}/state), the "
+                    f"robot moves {k} joints ({_names(joints)})"
+                )
+            runs = [first, *(read_run(path, axis=i) for i in range(1, k))]
+        for key in dict.fromkeys((str(w.message), w.category) for w in seen):
+            w = next(w for w in seen if (str(w.message), w.category) == key)
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         for i, (run, name) in enumerate(zip(runs, joints, strict=True)):
             logged = run.metadata.get(f"drive{i}", {}).get("joint")
             if logged and logged != name:

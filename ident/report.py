@@ -13,7 +13,13 @@ import base64
 import html
 import json
 import math
-from collections.abc import Iterable, Mapping, Sequence
+import os
+import secrets
+import shutil
+import signal
+import threading
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -142,13 +148,111 @@ def render(title: str, subtitle: str, sections: Sequence[Section]) -> str:
     return "\n".join(parts)
 
 
+def write_text_atomic(path: Path | str, text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` through ``PATH.part`` and a rename: an interrupt or
+    an error while writing leaves ``path`` as it was (absent, or the previous file) and no
+    ``.part`` file behind."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".part")
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        tmp.replace(path)
+    except BaseException as e:
+        with suppress(OSError):
+            tmp.unlink(missing_ok=True)
+        if isinstance(e, OSError) and e.filename == str(tmp):  # name the file the user asked
+            raise type(e)(e.errno, e.strerror, str(path)) from None
+        raise
+    return path
+
+
 def write_html(path: Path, title: str, subtitle: str, sections: Sequence[Section]) -> Path:
     """Write the report atomically (temporary file, then rename): no half-written report."""
-    text = render(title, subtitle, sections)
-    tmp = path.with_suffix(".html.part")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)
-    return path
+    return write_text_atomic(path, render(title, subtitle, sections))
+
+
+#: signals held back while a staged folder is moved in (:func:`staged_folder`)
+_HELD_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+@contextmanager
+def _signals_held() -> Iterator[None]:
+    """Hold :data:`_HELD_SIGNALS` back (main thread only): a Ctrl-C arriving meanwhile is
+    delivered when the block ends, after the renames, not between two of them."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def _move_in(tmp: Path, final: Path) -> None:
+    """The staged folder ``tmp`` becomes ``final``: renamed to it when ``final`` is absent,
+    else its files replace their namesakes in ``final`` one rename each (the other files of
+    ``final`` are kept), signals held over the whole move."""
+    if final.is_dir():  # a name of ours taken by a folder: refused before any rename
+        for f in tmp.iterdir():
+            if (final / f.name).is_dir() and not f.is_dir():
+                raise IdentError(f"{final / f.name}: is a folder, expected a file name (the "
+                                 f"output written into {final}); nothing written")
+    with _signals_held():
+        if not final.exists():
+            try:
+                tmp.rename(final)
+                return
+            except OSError:  # created meanwhile: move the files in as below
+                if not final.is_dir():
+                    raise
+        for f in sorted(tmp.iterdir()):
+            f.replace(final / f.name)
+        tmp.rmdir()
+
+
+@contextmanager
+def staged_folder(final: Path | str) -> Iterator[Path]:
+    """An output folder written whole or not at all: yields a temporary folder
+    ``.NAME.part-<pid>-<hex>`` to write into -- beside ``final`` when it is absent, inside it
+    when it exists (its parent need not be writable: ``--report .``) --, moved into ``final``
+    when the block ends (:func:`_move_in`: a rename when ``final`` is absent, else one rename
+    per file, signals held). On an error or an interrupt (Ctrl-C) inside the block, the
+    temporary folder and the parent folders created for it are removed: ``final`` is left as
+    it was (absent, or its previous files intact), nothing half-written remains.
+
+    Parameters
+    ----------
+    final : Path or str
+        The folder the user named (``jointid fit --report DIR``, ``export-model -o DIR``).
+
+    Yields
+    ------
+    Path
+        The temporary folder, empty.
+    """
+    final = Path(final)
+    full = final.absolute()  # "." -> the working folder, its name
+    parent = full if full.is_dir() else full.parent
+    created = []  # the missing parent folders, outermost first, to remove on failure
+    anc = parent
+    while not anc.exists() and anc != anc.parent:
+        created.insert(0, anc)
+        anc = anc.parent
+    tmp = parent / f".{full.name or 'out'}.part-{os.getpid()}-{secrets.token_hex(3)}"
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        tmp.mkdir()
+        yield tmp
+        _move_in(tmp, final)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        for d in reversed(created):
+            try:
+                d.rmdir()
+            except OSError:  # not empty (something else wrote there) or gone: left
+                break
+        raise
 
 
 def load_json(path: Path) -> dict:
@@ -162,11 +266,9 @@ def load_json(path: Path) -> dict:
 
 
 def write_json(path: Path, data: Mapping[str, Any]) -> Path:
-    tmp = Path(path).with_suffix(".json.part")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=False, default=_json_default) + "\n",
-                   encoding="utf-8")
-    tmp.replace(path)
-    return Path(path)
+    """Write ``data`` as indented JSON, atomically (:func:`write_text_atomic`)."""
+    return write_text_atomic(path, json.dumps(data, indent=2, sort_keys=False,
+                                              default=_json_default) + "\n")
 
 
 def _json_default(o: Any) -> Any:

@@ -109,34 +109,34 @@ def counted_slots(d: np.ndarray, med: float) -> np.ndarray | None:
     and no step beyond :data:`GAP_PERIODS` periods; else None (a sample added, steps that are
     no whole numbers of periods -- sampling at irregular instants --, or a gap). A step of
     m >= 2 periods holds m - 1 lost samples; without one, the slots are the sample indices.
+    (:func:`_slots_or_misfit`, which also says which step fails.)
     """
-    if d.size == 0 or not med > 0 or float(np.max(d)) > GAP_PERIODS * med:
-        return None
-    r = d / med
-    m = np.rint(r)
-    if float(np.min(m)) < 1 or float(np.max(np.abs(r - m))) >= STEP_BAND:
-        return None
-    if d.size > 1 and float(np.max(np.abs(r[1:] + r[:-1] - m[1:] - m[:-1]))) >= STEP_BAND:
-        return None
-    return np.r_[0.0, np.cumsum(m)]
+    return _slots_or_misfit(d, med)[0]
 
 
-def _slot_misfit(d: np.ndarray, med: float) -> str:
-    """The warning's words for the step or pair of steps ``d`` [s] (period ``med`` [s]) that
-    leaves some sample without a slot of its own (:func:`counted_slots`)."""
+def _slots_or_misfit(d: np.ndarray, med: float) -> tuple[np.ndarray | None, str]:
+    """The one rule of :func:`counted_slots`: ``(slots, "")``, or ``(None, words)`` with the
+    warning's words for the first check that fails (a gap, a sample added, a step of no whole
+    number of periods, a pair of steps off the sum of their counts)."""
+    if d.size == 0 or not med > 0:
+        return None, "no step of a positive period"
     r = d / med
     m = np.rint(r)
     if float(np.max(r)) > GAP_PERIODS:
-        return f"a step of {float(np.max(r)):.3g} periods: a gap"
+        return None, f"a step of {float(np.max(r)):.3g} periods: a gap"
     if float(np.min(m)) < 1:
-        return f"a step of {float(np.min(r)):.3g} periods: a sample added"
+        return None, f"a step of {float(np.min(r)):.3g} periods: a sample added"
     i = int(np.argmax(np.abs(r - m)))
     if abs(r[i] - m[i]) >= STEP_BAND:
-        return f"a step of {r[i]:.3g} periods: no whole number of periods"
-    r2, m2 = r[1:] + r[:-1], m[1:] + m[:-1]
-    i = int(np.argmax(np.abs(r2 - m2)))
-    return (f"two steps of {r2[i]:.3g} periods, counted {m2[i]:.0f}: a sample "
-            f"{'added' if r2[i] < m2[i] else 'lost'}, or steps of no whole number of periods")
+        return None, f"a step of {r[i]:.3g} periods: no whole number of periods"
+    if d.size > 1:
+        r2, m2 = r[1:] + r[:-1], m[1:] + m[:-1]
+        i = int(np.argmax(np.abs(r2 - m2)))
+        if abs(r2[i] - m2[i]) >= STEP_BAND:
+            return None, (f"two steps of {r2[i]:.3g} periods, counted {m2[i]:.0f}: a sample "
+                          f"{'added' if r2[i] < m2[i] else 'lost'}, or steps of no whole "
+                          "number of periods")
+    return np.r_[0.0, np.cumsum(m)], ""
 
 
 def _lost_where(slots: np.ndarray, t: np.ndarray) -> str:
@@ -274,7 +274,7 @@ def uniform_grid(
             return np.interp(grid, at, a)
         return np.column_stack([np.interp(grid, at, a[:, j]) for j in range(a.shape[1])])
 
-    slots = counted_slots(d, med)
+    slots, misfit = _slots_or_misfit(d, med)
     k = np.arange(t.size, dtype=float) if slots is None else slots
     b, a0 = np.polyfit(k, t, 1)
     ti = a0 + b * k
@@ -322,7 +322,7 @@ def uniform_grid(
     else:
         why = ("" if pos is None or t.size < 16 else
                " (values taken at their stamps: some stamp is more than half a period off "
-               f"a uniform grid ({off:.3g} periods at most) and {_slot_misfit(d, med)}, or a "
+               f"a uniform grid ({off:.3g} periods at most) and {misfit}, or a "
                "clock too irregular to tell"
                f"{_drift_advice(t, d, np.asarray(pos, dtype=float), b, med)})")
     for name, a in arrays.items():

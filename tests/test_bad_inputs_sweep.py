@@ -24,10 +24,24 @@ real entry point (:func:`daq.app.cli.main`, real simulated runs, real MCAP logs)
 - ``fit run.csv --json run.csv`` replaced the data by the JSON record (rc 0);
 - ``export-model FIT.json -o FILE`` refitted the record's inputs first (seconds), then failed
   on whatever came first, without naming ``-o``.
+
+The second sweep (same day, ``fit``/``report``/``export-model``/``plan``/``run``: wrong
+suffixes, empty files, a missing column, non-UTF-8, folders without permission):
+
+- ``fit a.csv a.csv`` fitted the file twice, ``fit a.csv --validate a.csv`` validated on the
+  fitted data (rc 0 both);
+- a CSV header naming a column twice: the second replaced the first in silence;
+- ``--report``/``--json`` under a folder without permission: "Permission denied" without the
+  flag; ``export-model -o`` in a read-only folder refitted first; ``report`` of a read-only
+  folder named ``report.html.part``.
 """
 
 from __future__ import annotations
 
+import os
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -267,3 +281,94 @@ def test_fit_json_onto_an_input_is_refused(tmp_path, capfd, robot):
     v = _csv(tmp_path / "val.csv")
     _refused(capfd, ["fit", *args, str(f), "--validate", str(v), "--model", "usual",
                      "--json", str(tmp_path / "." / "val.csv")], "val.csv", "input file")
+
+
+# ------------------------------------------------------------------ the sweep of 2026-11-29 (2)
+@pytest.mark.parametrize("robot", [False, True])
+def test_fit_of_a_file_given_twice_is_refused(tmp_path, capfd, robot):
+    """``fit runs/*.csv runs/a.csv`` fitted a's samples twice; ``--validate`` of an input
+    cross-validated on the fitted data (rc 0 both)."""
+    f = _csv(tmp_path / "run.csv")
+    args = ["--robot", str(ROOT / "examples" / "robots" / "rx130l.toml")] if robot else []
+    _refused(capfd, ["fit", *args, str(f), str(f)], f"{f}: given twice among the inputs")
+    _refused(capfd, ["fit", *args, str(f), "--validate", str(tmp_path / "." / "run.csv")],
+             "run.csv: given among the inputs and the --validate files")
+
+
+def test_fit_json_onto_the_report_folder_is_refused(tmp_path, capfd):
+    """``--report x --json x``: the report was written, then "x: Is a directory" (rc 2)."""
+    f = _csv(tmp_path / "run.csv")
+    out = tmp_path / "x"
+    _refused(capfd, ["fit", str(f), "--report", str(out), "--json", str(out)],
+             f"--json {out}: is the --report folder")
+    assert not out.exists()
+
+
+def test_run_out_that_is_a_file_and_a_failed_first_run(tmp_path, capfd, monkeypatch):
+    """``run --out run.csv`` said "run.csv: File exists"; a run that fails before writing
+    anything (no drive on the bus) left its new --out folder with its lock file."""
+    monkeypatch.chdir(tmp_path)
+    f = _csv(tmp_path / "run.csv")
+    _refused(capfd, ["run", str(CAMPAIGN), "--simulate", str(ROOT / "examples" /
+                                                              "plant_rx130l.toml"),
+                     "--out", str(f), "--yes"], f"--out {f}: is a file, expected a folder")
+    _refused(capfd, ["run", str(CAMPAIGN), "--out", "logs", "--yes"], "no answer")
+    assert not (tmp_path / "logs").exists()
+
+
+def test_csv_column_named_twice_is_refused(tmp_path, capfd):
+    """``t,q,tau,tau``: the second tau replaced the first in silence (rc 0)."""
+    f = _csv(tmp_path / "run.csv")
+    lines = f.read_text().splitlines()
+    f.write_text("\n".join([lines[0] + ",tau"] + [ln + ",0" for ln in lines[1:]]) + "\n")
+    _refused(capfd, ["fit", str(f)], f"{f}: column 'tau' twice in the header (columns 3 and 4)")
+
+
+def _unprivileged(argv: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    """``jointid ARGV`` in a process that file permissions bind: as root (CI, this machine)
+    without the capabilities that override them (setpriv), else as the user it is."""
+    cmd = [sys.executable, "-m", "daq.app.cli", *argv]
+    if os.geteuid() == 0:
+        if shutil.which("setpriv") is None:
+            pytest.skip("root without setpriv: permissions cannot bind")
+        cmd = ["setpriv", "--bounding-set=-dac_override,-dac_read_search", "--", *cmd]
+    return subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=600,
+                          env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
+
+
+def _one_line(r: subprocess.CompletedProcess, *needles: str) -> None:
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert r.returncode == 2 and len(lines) == 1, (r.returncode, r.stderr[-2000:])
+    for n in needles:
+        assert n in lines[0], (n, lines[0])
+
+
+def test_folders_without_permission(tmp_path, capfd):
+    """A folder without permission on the way of an output: named with its flag in one line,
+    before any fit (``--report noperm/rep`` said "noperm/rep: Permission denied" without the
+    flag; ``export-model -o ro/m`` refitted the record first, then failed on whatever came
+    first; ``report`` of a read-only folder named ``report.html.part``)."""
+    f = _csv(tmp_path / "run.csv")
+    rep = tmp_path / "rep"
+    assert main(["fit", str(f), "--model", "usual", "--report", str(rep)]) == 0
+    capfd.readouterr()
+    (tmp_path / "noperm").mkdir()
+    (tmp_path / "ro").mkdir()
+    rec = tmp_path / "rec.json"
+    rec.write_text('{"format": "jointid-robot-fit/2"}\n')  # refused on its keys, if read
+    try:
+        for d, mode in (("noperm", 0o000), ("ro", 0o555), ("rep", 0o555)):
+            (tmp_path / d).chmod(mode)
+        _one_line(_unprivileged(["fit", "run.csv", "--report", "noperm/rep"], tmp_path),
+                  "jointid fit: error: --report noperm/rep: Permission denied")
+        _one_line(_unprivileged(["fit", "run.csv", "--json", "noperm/a.json"], tmp_path),
+                  "jointid fit: error: --json noperm/a.json: Permission denied")
+        _one_line(_unprivileged(["export-model", "rec.json", "-o", "ro/m"], tmp_path),
+                  "jointid export-model: error: -o ro/m: ro is not writable")
+        _one_line(_unprivileged(["report", "rep"], tmp_path),
+                  "jointid report: error: rep/report.html: Permission denied")
+    finally:
+        for d in ("noperm", "ro", "rep"):
+            (tmp_path / d).chmod(0o755)
+    assert sorted(p.name for p in (tmp_path / "ro").iterdir()) == []
+    assert not any(p.name.endswith(".part") for p in rep.iterdir())

@@ -86,6 +86,8 @@ def main(args: argparse.Namespace) -> int:
     from .runner import prompt_payload, run_campaign
     from .safety import interrupt_signal
 
+    if args.out.exists() and not args.out.is_dir():  # "run.csv: File exists" before
+        raise ConfigError(f"--out {args.out}: is a file, expected a folder (created if absent)")
     campaign = load_campaign(args.campaign)
     if args.quick:  # one moving joint, trapezoids and sines (else a one-line SchemaError)
         campaign = campaign.quick()
@@ -107,11 +109,16 @@ def main(args: argparse.Namespace) -> int:
         bar.close()
         return prompt_payload(index, payload, n)
 
+    fresh = not args.out.exists()
     try:
         with file_named(campaign.source):  # a limit the plan exceeds: named with the file
             result = run_campaign(campaign, out_dir=args.out, simulate=plant, yes=args.yes,
                                   progress=show, payloads=args.payload, resume=args.resume,
                                   prompt=None if args.yes else ask, overwrite=args.overwrite)
+    except BaseException:
+        if fresh:
+            _remove_if_only_lock(args.out)
+        raise
     finally:
         bar.close()
     print(result.summary(), file=sys.stderr)
@@ -122,3 +129,17 @@ def main(args: argparse.Namespace) -> int:
         return 128 + interrupt_signal(result.reason)
     return {"stopped": 3, "aborted": 1}.get(result.status, 3)
 
+
+def _remove_if_only_lock(folder: Path) -> None:
+    """Remove the ``--out`` folder this run created when it failed before writing anything
+    but its lock file (no drive answering, a refused option...): a stranger's first
+    ``jointid run`` without hardware left ``runs/.jointid-run.lock`` behind. A folder holding
+    anything else (a log, the resume state) is kept as it is."""
+    from .runfolder import LOCK_NAME
+
+    try:
+        if {p.name for p in folder.iterdir()} <= {LOCK_NAME}:
+            (folder / LOCK_NAME).unlink(missing_ok=True)
+            folder.rmdir()
+    except OSError:  # gone, or written meanwhile: left
+        pass
