@@ -1004,10 +1004,13 @@ def fit_models(
             if own is None:
                 break
             before, rows = problem.decision()
-            problem.requadrant(own)
-            after = problem.decision()[0]
+            cand = problem.loads_for(own)
             # rows moved: into another quadrant, or into or out of the band (RobotModel's count)
-            changed = int(np.count_nonzero(rows & (before != after)))
+            changed = int(np.count_nonzero(rows & (before != problem.decision(cand)[0])))
+            if not changed:  # a fixed point: the same rows and quadrants, the same fit
+                record.record(0, int(rows.sum()), 0.0)
+                break
+            problem.requadrant(own, cand)
             quadrant_load = own
             loads.append(own)
             inner = pre["load_model"][0]
@@ -1030,7 +1033,7 @@ def fit_models(
         m.quadrant_changes_, m.quadrant_steps_ = record.changes, record.steps
         if loads:
             pre["quadrant_loads"] = loads
-        if record.changes:
+        if any(record.changes):  # (a re-decision that moved no row changes nothing)
             notes.append(f"paper model: the quadrants decided again by its own fitted load "
                          f"({len(record.changes)} time(s); rows moved, into another quadrant "
                          f"or across the band: {', '.join(map(str, record.changes))})")

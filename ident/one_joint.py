@@ -118,7 +118,9 @@ SIGN_CHECK_MIN_KEPT = 0.7
 #: made). 3 % here fails the friction-dominated joint (tests/test_friction_dominated.py, seeds
 #: 1 / 21: b_g -4.3 / -4.5 sigma, beyond the test's 3; c_m -8.2 / -6.3 sigma; the band 7.4 /
 #: 7.2 % of the rows and one requadrant pass; at 10 %: b_g -2.0 / -1.3, c_m -6.2 / -4.2, 12.2 %
-#: of the rows, error 0.82 % against 0.83 %). 10 % there refuses the KUKA table's paper model
+#: of the rows, error 0.82 % against 0.83 %; since the n-dof fit's passes, 2026-11-30,
+#: :mod:`ident.quadrant_band`: b_g -0.7 / +0.5, c_m -4.1 / -2.3, 18.4 % of the rows, 0.80 %).
+#: 10 % there refuses the KUKA table's paper model
 #: (docs/robot-data.md, recording A, WLS: every row of A4 falls in the band, "Ia4, a_m4 ...
 #: have no excitation"; at 3 % the band takes A2 1.7 %, A3 3.8 %, A4 7.1 % of the rows and the
 #: table's figures hold); and 3 of the 8 tests of tests/test_robot_quadrants.py (RobotModel's
@@ -270,6 +272,7 @@ class _RunLoads:
                  kept: FullRateColumns | None = None) -> None:
         self.load_torque = load_torque
         self.full, self.kept = tuple(full), kept
+        self.theta: np.ndarray | None = None  # the base parameters, when set (loads_for)
         self._done: list[tuple[np.ndarray, np.ndarray]] = []
 
     def __call__(self, s: RobotSignals) -> np.ndarray:
@@ -617,10 +620,10 @@ class OneJointProblem:
             return self._loads(s)
         return s.tau
 
-    def _quadrant_model(self) -> RobotModel:
+    def _quadrant_model(self, theta: np.ndarray | None = None) -> RobotModel:
         """The fit whose load decides the quadrants: the first usual fit, or its copy with
-        the load parameters :meth:`requadrant` set."""
-        theta = getattr(self, "_quadrant_theta", None)
+        the load parameters :meth:`requadrant` set (or ``theta``, the base parameters)."""
+        theta = getattr(self, "_quadrant_theta", None) if theta is None else theta
         if theta is None:
             return self.first
         m = copy.copy(self.first)
@@ -628,18 +631,28 @@ class OneJointProblem:
         m.coef_[:self.first.n_base_] = theta
         return m
 
-    def requadrant(self, values: dict[str, float]) -> None:
-        """Decide the quadrants (with the check skipped: ``model_quadrant``) by another load
-        model, e.g. the paper fit's own (J, MX, MY by the single-joint names); the products
-        formed before are dropped. The quadrant band keeps its h (decided by the first load,
-        :meth:`band`) and its rows are decided again with the hysteresis over every load
-        that decided the quadrants so far (:func:`ident.quadrant_band.band_out`)."""
+    def loads_for(self, values: dict[str, float]) -> _RunLoads:
+        """The full-rate loads of the load model ``values`` (J, MX, MY by the single-joint
+        names, e.g. the paper fit's own), evaluated once per run: what :meth:`requadrant`
+        decides by and :meth:`decision` previews."""
         names = [n for n in self.smap.names if n in values]
         rows = [self.smap.names.index(n) for n in names]
         theta = np.linalg.lstsq(self.smap.matrix[rows], np.array([values[n] for n in names]),
                                 rcond=None)[0]
-        self._quadrant_theta = theta
-        self._loads = self._run_loads(self._quadrant_model().load_torque)
+        loads = self._run_loads(self._quadrant_model(theta).load_torque)
+        loads.theta = theta
+        return loads
+
+    def requadrant(self, values: dict[str, float], loads: _RunLoads | None = None) -> None:
+        """Decide the quadrants (with the check skipped: ``model_quadrant``) by another load
+        model, e.g. the paper fit's own (J, MX, MY by the single-joint names; ``loads``: its
+        :meth:`loads_for`, when made already); the products formed before are dropped. The
+        quadrant band keeps its h (decided by the first load, :meth:`band`) and its rows are
+        decided again with the hysteresis over every load that decided the quadrants so far
+        (:func:`ident.quadrant_band.band_out`)."""
+        loads = self.loads_for(values) if loads is None else loads
+        self._quadrant_theta = loads.theta
+        self._loads = loads
         self._products = {}
         self._products_cache = {}
         if self._band_h:  # the band decided: its rows again, with the hysteresis
@@ -657,21 +670,25 @@ class OneJointProblem:
         for values in loads:
             self.requadrant(values)
 
-    def decision(self) -> tuple[np.ndarray, np.ndarray]:
+    def decision(self, loads: _RunLoads | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The quadrant of each row at its own full-rate sample (eq. 27-28 with the load
-        deciding the quadrants, :meth:`_load`): P+ sign(tau_out_hat dq), 0 on the rows the
-        quadrant band leaves out -- the rows moved between two decisions are those whose
-        sign changed, as ``RobotModel`` counts them -- and the rows considered (n,) bool (the
-        chain's, before the band)."""
+        deciding the quadrants, :meth:`_load`, or with ``loads`` (:meth:`loads_for`) as
+        :meth:`requadrant` would decide them, previewed: nothing changes): sign(tau_out_hat
+        dq), 0 on the rows the quadrant band leaves out -- the rows moved between two
+        decisions are those whose sign changed, as ``RobotModel`` counts them -- and the rows
+        considered (n,) bool (the chain's, before the band)."""
         st, sig = self.settings, self.signals
         elig = sig.columns.keep[:, 0]
         sp = np.zeros(sig.n)
-        for i, (f, x) in enumerate(full_rate_loads(sig, self.runs, st, self._load)):
+        load = self._load if loads is None else loads
+        for i, (f, x) in enumerate(full_rate_loads(sig, self.runs, st, load)):
             rows = np.flatnonzero(sig.experiment == i)
             idx = decimation_index(f.n, st.decimation)
             sp[rows] = x[idx, 0] * np.reshape(f.dq, (f.n, -1))[idx, 0]
         if self.band() > 0:
-            sp[~self._band_keep[:, 0]] = 0.0
+            keep = (self._band_keep if loads is None
+                    else self._band_rows([*self._band_from, loads])[0])
+            sp[~keep[:, 0]] = 0.0
         return np.sign(sp), elig
 
     def load_values(self) -> dict[str, float]:
@@ -722,21 +739,23 @@ class OneJointProblem:
             rms = np.sqrt(np.mean(np.concatenate([x[:, 0] for _, x in loads]) ** 2))
             self._band_h = SKIPPED_CHECK_BAND * float(rms)
             self._band_from = [self._loads]
-            self._band_rows()
+            self._band_keep, self._band_out, self.band_kept = self._band_rows(self._band_from)
             if self.band_kept < SIGN_CHECK_MIN_KEPT:
                 self._band_h, self._band_keep, self._band_out = 0.0, None, None
         elif self._band_h > 0 and self._band_keep is None:
             if not self._band_from:  # h given (:meth:`replay`): the first load decides
                 self._band_from = [self._loads]
-            self._band_rows()
+            self._band_keep, self._band_out, self.band_kept = self._band_rows(self._band_from)
         self.band_nm = self._band_h
         return self.band_nm
 
-    def _band_rows(self) -> None:
-        """``_band_keep`` (n, 1), ``_band_out`` (per run, the full-rate samples (n_f, 1) the
-        band leaves out) and ``band_kept``, with the band's hysteresis over ``_band_from``."""
+    def _band_rows(self, band_from: Sequence[_RunLoads]
+                   ) -> tuple[np.ndarray, list[np.ndarray], float]:
+        """The rows (n, 1) the band keeps, the full-rate samples (n_f, 1) it leaves out per
+        run, and the share of the rows kept, with the band's hysteresis over the loads
+        ``band_from`` (in the order they decided the quadrants)."""
         st, sig, h = self.settings, self.signals, float(self._band_h)
-        per_load = [full_rate_loads(sig, self.runs, st, lo) for lo in self._band_from]
+        per_load = [full_rate_loads(sig, self.runs, st, lo) for lo in band_from]
         keep = sig.columns.keep.copy()
         outs = []
         for i, (f, _x) in enumerate(per_load[0]):
@@ -745,8 +764,7 @@ class OneJointProblem:
             keep[rows] &= selection(f.dq, st.dq_min, st.guard,
                                     decimation_index(f.n, st.decimation), out)
             outs.append(out)
-        self.band_kept = float(keep.sum() / max(int(sig.columns.keep.sum()), 1))
-        self._band_keep, self._band_out = keep, outs
+        return keep, outs, float(keep.sum() / max(int(sig.columns.keep.sum()), 1))
 
     def band_masks(self) -> list[np.ndarray] | None:
         """Per run, the full-rate samples (n_f,) the quadrant band leaves out (with its
