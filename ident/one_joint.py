@@ -119,7 +119,9 @@ SIGN_CHECK_MIN_KEPT = 0.7
 #: 1 / 21: b_g -4.3 / -4.5 sigma, beyond the test's 3; c_m -8.2 / -6.3 sigma; the band 7.4 /
 #: 7.2 % of the rows and one requadrant pass; at 10 %: b_g -2.0 / -1.3, c_m -6.2 / -4.2, 12.2 %
 #: of the rows, error 0.82 % against 0.83 %; since the n-dof fit's passes, 2026-11-30,
-#: :mod:`ident.quadrant_band`: b_g -0.7 / +0.5, c_m -4.1 / -2.3, 18.4 % of the rows, 0.80 %).
+#: :mod:`ident.quadrant_band`: at 3 % b_g -3.9 / -4.0, c_m -7.4 / -5.0, 8.4 % of the rows,
+#: 0.82 / 0.83 %; at 10 % b_g -0.7 / +0.5, c_m -4.1 / -2.3, 18.4 % of the rows, 0.80 %,
+#: ``benchmarks/quadrant_band_rules.py``'s joint([0.03, 0.1])).
 #: 10 % there refuses the KUKA table's paper model
 #: (docs/robot-data.md, recording A, WLS: every row of A4 falls in the band, "Ia4, a_m4 ...
 #: have no excitation"; at 3 % the band takes A2 1.7 %, A3 3.8 %, A4 7.1 % of the rows and the
