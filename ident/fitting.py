@@ -72,7 +72,8 @@ from .qs_scan import (
     rescan_qs,
     scan_qs,
 )
-from .refine import quadrant_drift
+from .quadrant_band import MAX_PASSES, QuadrantPasses
+from .quadrant_band import QUADRANT_TOL as QUADRANT_TOL
 from .results import (
     band_errors,
     format_error_table,
@@ -142,10 +143,10 @@ def _as_signals(data: Sequence[Experiment] | Signals, joint: str | bool | None) 
     return s
 
 
-#: Quadrant re-decisions of the single-joint paper model at most, the sign check skipped
-REQUADRANT_PASSES = 5
-#: Share of the rows whose quadrant may still change when the re-decisions stop
-QUADRANT_TOL = 1e-3
+#: Quadrant decisions of the single-joint paper model at most (the first usual fit's
+#: included), the sign check skipped: the n-dof fit's cap (:mod:`ident.quadrant_band`, the
+#: passes' one rule; ``QUADRANT_TOL``, ``THETA_TOL`` and ``BAND_LEAVE`` are its)
+REQUADRANT_PASSES = MAX_PASSES
 
 
 def paper_load_values(lib: Library, coef: dict[str, float]) -> dict[str, float] | None:
@@ -164,6 +165,31 @@ def _same_rows(name: str, m: IdentModel, d: Design) -> None:
     if m.result_.m != len(d):
         raise DataError(f"{name} model: the robot fit has {m.result_.m} rows, the design "
                         f"{len(d)}: not the same samples")
+
+
+def _quadrant_loads(settings: dict[str, Any]) -> list[dict[str, float]]:
+    """The loads of a fit's quadrant re-decisions, in order (``quadrant_loads``; an older
+    record's final ``quadrant_load`` alone)."""
+    loads = settings.get("quadrant_loads")
+    if loads:
+        return list(loads)
+    last = settings.get("quadrant_load")
+    return [] if last is None else [last]
+
+
+def _step_sigma(before: IdentModel, after: IdentModel) -> float:
+    """The largest change of a parameter between two fits of one model, in the standard
+    deviation of the later fit (eq. 15; a removed parameter counts as 0): the step of the
+    quadrant passes' rule (:func:`ident.quadrant_band.settled`); inf where a parameter with
+    a changed value has no deviation."""
+    step = 0.0
+    for n in set(before.coef_) | set(after.coef_):
+        delta = abs(after.coef_.get(n, 0.0) - before.coef_.get(n, 0.0))
+        if delta == 0.0:
+            continue
+        sd = after.std_.get(n, 0.0) or before.std_.get(n, 0.0)
+        step = max(step, delta / sd if sd > 0 else np.inf)
+    return step
 
 
 def _fitted(library: Library, name: str, fit: OneJointModel) -> IdentModel:
@@ -302,7 +328,10 @@ def _other_designs(
         paper="paper" in models, torque_delay=float(pre["torque_delay"]), **settled,
         tau_min=pre.get("tau_min"), sign_check=False, first=first if checked else None,
         first_checked=checked and pre.get("sign_check", True), model_quadrant=checked)
-    if pre.get("quadrant_load") is not None and problem.model_quadrant:
+    if problem.model_quadrant and band_nm > 0:
+        # the fit's band h and passes: the band's rows with its hysteresis (quadrant_band)
+        problem.replay(_quadrant_loads(pre), band_nm)
+    elif pre.get("quadrant_load") is not None and problem.model_quadrant:
         problem.requadrant(pre["quadrant_load"])  # the quadrants of the fit's final load
 
     def design(lib: Library) -> Design:
@@ -319,8 +348,10 @@ def _other_designs(
             own = design(_combined_library([name], qs0, sig.revolute, has_payload))
             d = _part(own, name, has_payload, q_s, qs0,
                       lambda q: problem.paper_columns(q, load_model))[1]
+        masks = problem.band_masks() if problem.model_quadrant else None
         if name == "paper" and band_nm > 0 and load_model is not None:
-            d = d.select(dq_min=d.dq_min, tau_min=d.tau_min, quadrant_band=band_nm)
+            d = d.select(dq_min=d.dq_min, tau_min=d.tau_min,
+                         quadrant_band=band_nm if masks is None else masks)
         out[name] = d
     sig_v = problem.signals  # its counts kept; its full-rate signals and columns released
     if sig_v.columns.full_columns is not None:
@@ -592,6 +623,11 @@ class FitReport:
                     rec["validation_position_split"] = position_split_json(split)
             if name == "paper":
                 rec["q_s"] = self.q_s
+                if m.quadrant_changes_ is not None:  # the model quadrants decided again
+                    rec["quadrant_passes"] = 1 + len(m.quadrant_changes_)
+                    rec["converged"] = bool(m.converged_)
+                    if not m.converged_:
+                        rec["convergence"] = m.convergence_
                 if self.sign_check_shift is not None:
                     rec["sign_check_shift"] = dict(self.sign_check_shift)
             models[name] = rec
@@ -851,7 +887,7 @@ def fit_models(
     # sign check skipped: the paper fit's own, below); like= takes it as it is
     quadrant_load = None if like is None else like.settings.get("quadrant_load")
     if quadrant_load is not None and problem.model_quadrant:
-        problem.requadrant(quadrant_load)
+        problem.replay(_quadrant_loads(like.settings))  # the passes of like='s fit, in order
     if like is None and sign_check and "paper" in models:
         if (problem.sign_checked or problem.model_quadrant) and problem.first is not None:
             # the same rows and quadrants in the design: the load model of the robot's first
@@ -908,7 +944,7 @@ def fit_models(
         skipped: :meth:`~ident.one_joint.OneJointProblem.band`), as its robot fit."""
         if problem.band() <= 0 or "load_model" not in pre:
             return d
-        return d.select(dq_min=d.dq_min, tau_min=d.tau_min, quadrant_band=problem.band_nm)
+        return d.select(dq_min=d.dq_min, tau_min=d.tau_min, quadrant_band=problem.band_masks())
 
     def products_at(q: float) -> Any:
         """The paper model's columns at q from the robot chain's products (the design's
@@ -959,16 +995,24 @@ def fit_models(
         # tests/test_friction_dominated.py's joint); decide them again, and the band, by the
         # paper fit's own load until they settle (the robot path's model-quadrant passes)
         plib = _combined_library(["paper"], qs0, s.revolute, has_payload)
-        passes, moved = 0, 0.0
-        for _ in range(REQUADRANT_PASSES):
+        record = QuadrantPasses(REQUADRANT_PASSES)
+        loads: list[dict[str, float]] = []
+        problem.band()  # its h, decided once by the first load (quadrant_band)
+        for _ in range(record.redecisions):
             d, m = designs["paper"], fitted["paper"]
             own = paper_load_values(d.library, m.coef_)
-            share = quadrant_drift(d, d.library, m.coef_) or 0.0
-            if own is None or share <= QUADRANT_TOL:
+            if own is None:
                 break
-            moved = share if not passes else moved
-            problem.requadrant(own)
+            before, rows = problem.decision()
+            cand = problem.loads_for(own)
+            # rows moved: into another quadrant, or into or out of the band (RobotModel's count)
+            changed = int(np.count_nonzero(rows & (before != problem.decision(cand)[0])))
+            if not changed:  # a fixed point: the same rows and quadrants, the same fit
+                record.record(0, int(rows.sum()), 0.0)
+                break
+            problem.requadrant(own, cand)
             quadrant_load = own
+            loads.append(own)
             inner = pre["load_model"][0]
             values = problem.load_values()
             pre["load_model"] = (inner, np.array([values.get(n, 0.0) for n in inner.names()]))
@@ -979,22 +1023,23 @@ def fit_models(
             m = _fitted(lib, "paper", problem.fit("paper", qs_val, eliminate=eliminate,
                                                   threshold_pct=threshold_pct))
             _same_rows("paper", m, d)
+            step = _step_sigma(fitted["paper"], m)
             fitted["paper"], designs["paper"] = m, d
             robot_signals["paper"] = problem.products(qs_val)
-            passes += 1
-        else:  # the cap, not the break: say so rather than call the last pass settled
-            d, m = designs["paper"], fitted["paper"]
-            if paper_load_values(d.library, m.coef_) is not None:
-                left = quadrant_drift(d, d.library, m.coef_) or 0.0
-                if left > QUADRANT_TOL:
-                    notes.append(f"paper model: the quadrants did not settle in "
-                                 f"{REQUADRANT_PASSES} passes ({100 * left:.2f} % of the rows "
-                                 "would change quadrant again): the estimate is the last "
-                                 "pass's")
-        if passes:
+            if record.record(changed, int(rows.sum()), step):
+                break
+        m = fitted["paper"]
+        m.converged_, m.convergence_ = record.converged, record.reason
+        m.quadrant_changes_, m.quadrant_steps_ = record.changes, record.steps
+        if loads:
+            pre["quadrant_loads"] = loads
+        if any(record.changes):  # (a re-decision that moved no row changes nothing)
             notes.append(f"paper model: the quadrants decided again by its own fitted load "
-                         f"({passes} time(s); the first usual fit's put {100 * moved:.1f} % of "
-                         "the rows in another quadrant)")
+                         f"({len(record.changes)} time(s); rows moved, into another quadrant "
+                         f"or across the band: {', '.join(map(str, record.changes))})")
+        if not record.converged:
+            notes.append(f"paper model: the quadrants did not settle: {record.reason}; the "
+                         "estimate is the last pass's")
         if problem.band_nm > 0:
             notes.append(f"paper model: rows near zero load left out (the quadrant band, "
                          f"|tau_out_hat| < {problem.band_nm:.3g} {'N m' if s.revolute else 'N'}, "
@@ -1039,7 +1084,7 @@ def fit_models(
                 first_checked="load_model" in pre and pre.get("sign_check", True),
                 model_quadrant="load_model" in pre, reuse=problem.reuse_for(empty))
             if quadrant_load is not None and p0.model_quadrant:
-                p0.requadrant(quadrant_load)  # the quadrants of the fit's final load
+                p0.replay(_quadrant_loads(settings))  # the fit's passes, in order
         except DataError as exc:  # too few samples without payload
             notes.append(f"Table IV without payload: {exc}")
             p0 = None

@@ -459,7 +459,23 @@ class IdentModel:
         The final estimator result.
     estimator_ : {"ls", "iv"}
         Least squares (eq. 12) or IDIM-IV (when the design has instruments).
+    converged_ : bool
+        False when the paper model's quadrant passes (:func:`ident.fitting.fit_models`, the
+        sign check skipped: model quadrants decided again by the fit's own load) stopped at
+        their cap before they settled (:mod:`ident.quadrant_band`, the n-dof fit's one rule);
+        True otherwise (a least-squares fit has nothing else to converge).
+    convergence_ : str
+        Why ``converged_`` is False, one line with the figures; "" when it is True.
+    quadrant_changes_, quadrant_steps_ : list or None
+        With those passes: the rows moved at each re-decision (into another quadrant, or
+        across the quadrant band) and the largest parameter change, in its sigma; else None.
     """
+
+    #: class defaults: a fit without quadrant passes (see the attributes above)
+    converged_: bool = True
+    convergence_: str = ""
+    quadrant_changes_: list[int] | None = None
+    quadrant_steps_: list[float] | None = None
 
     def __init__(self, library: Term, name: str = "usual") -> None:
         self.library = library if isinstance(library, Library) else Library(library)

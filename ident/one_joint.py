@@ -80,6 +80,7 @@ from .loaders import Experiment
 from .models import LoadDependent, QuadrantCoulomb, _signed_selection, new_model, usual_model
 from .preprocess import Design, design_on_full_rate
 from .qs_scan import QsScan, rescan_qs
+from .quadrant_band import band_out
 from .robot import RobotIdentError
 from .robot.base import single_joint_map
 from .robot.design import (
@@ -117,7 +118,11 @@ SIGN_CHECK_MIN_KEPT = 0.7
 #: made). 3 % here fails the friction-dominated joint (tests/test_friction_dominated.py, seeds
 #: 1 / 21: b_g -4.3 / -4.5 sigma, beyond the test's 3; c_m -8.2 / -6.3 sigma; the band 7.4 /
 #: 7.2 % of the rows and one requadrant pass; at 10 %: b_g -2.0 / -1.3, c_m -6.2 / -4.2, 12.2 %
-#: of the rows, error 0.82 % against 0.83 %). 10 % there refuses the KUKA table's paper model
+#: of the rows, error 0.82 % against 0.83 %; since the n-dof fit's passes, 2026-11-30,
+#: :mod:`ident.quadrant_band`: at 3 % b_g -3.9 / -4.0, c_m -7.4 / -5.0, 8.4 % of the rows,
+#: 0.82 / 0.83 %; at 10 % b_g -0.7 / +0.5, c_m -4.1 / -2.3, 18.4 % of the rows, 0.80 %,
+#: ``benchmarks/quadrant_band_rules.py``'s joint([0.03, 0.1])).
+#: 10 % there refuses the KUKA table's paper model
 #: (docs/robot-data.md, recording A, WLS: every row of A4 falls in the band, "Ia4, a_m4 ...
 #: have no excitation"; at 3 % the band takes A2 1.7 %, A3 3.8 %, A4 7.1 % of the rows and the
 #: table's figures hold); and 3 of the 8 tests of tests/test_robot_quadrants.py (RobotModel's
@@ -269,6 +274,7 @@ class _RunLoads:
                  kept: FullRateColumns | None = None) -> None:
         self.load_torque = load_torque
         self.full, self.kept = tuple(full), kept
+        self.theta: np.ndarray | None = None  # the base parameters, when set (loads_for)
         self._done: list[tuple[np.ndarray, np.ndarray]] = []
 
     def __call__(self, s: RobotSignals) -> np.ndarray:
@@ -368,6 +374,11 @@ class OneJointProblem:
         self.band_nm = 0.0  # the paper model's quadrant band [N m] (:meth:`band`)
         self.band_kept = 1.0  # share of the rows the band keeps (1: not decided yet)
         self._band_keep: np.ndarray | None = None
+        self._band_out: list[np.ndarray] | None = None  # per run, full-rate samples left out
+        # the band h [N m], decided once by the first load (None: not yet; 0: not applied)
+        self._band_h: float | None = None
+        # the load models that decided the passes, in order: the band's hysteresis
+        self._band_from: list[_RunLoads] = []
         self._loads: _RunLoads | None = None  # the quadrant model's full-rate loads
         self._unchecked_keep: np.ndarray | None = None  # the rows the sign check left out too
         try:
@@ -611,10 +622,10 @@ class OneJointProblem:
             return self._loads(s)
         return s.tau
 
-    def _quadrant_model(self) -> RobotModel:
+    def _quadrant_model(self, theta: np.ndarray | None = None) -> RobotModel:
         """The fit whose load decides the quadrants: the first usual fit, or its copy with
-        the load parameters :meth:`requadrant` set."""
-        theta = getattr(self, "_quadrant_theta", None)
+        the load parameters :meth:`requadrant` set (or ``theta``, the base parameters)."""
+        theta = getattr(self, "_quadrant_theta", None) if theta is None else theta
         if theta is None:
             return self.first
         m = copy.copy(self.first)
@@ -622,19 +633,65 @@ class OneJointProblem:
         m.coef_[:self.first.n_base_] = theta
         return m
 
-    def requadrant(self, values: dict[str, float]) -> None:
-        """Decide the quadrants (with the check skipped: ``model_quadrant``) by another load
-        model, e.g. the paper fit's own (J, MX, MY by the single-joint names); the products
-        formed before are dropped."""
+    def loads_for(self, values: dict[str, float]) -> _RunLoads:
+        """The full-rate loads of the load model ``values`` (J, MX, MY by the single-joint
+        names, e.g. the paper fit's own), evaluated once per run: what :meth:`requadrant`
+        decides by and :meth:`decision` previews."""
         names = [n for n in self.smap.names if n in values]
         rows = [self.smap.names.index(n) for n in names]
         theta = np.linalg.lstsq(self.smap.matrix[rows], np.array([values[n] for n in names]),
                                 rcond=None)[0]
-        self._quadrant_theta = theta
-        self._loads = self._run_loads(self._quadrant_model().load_torque)
+        loads = self._run_loads(self._quadrant_model(theta).load_torque)
+        loads.theta = theta
+        return loads
+
+    def requadrant(self, values: dict[str, float], loads: _RunLoads | None = None) -> None:
+        """Decide the quadrants (with the check skipped: ``model_quadrant``) by another load
+        model, e.g. the paper fit's own (J, MX, MY by the single-joint names; ``loads``: its
+        :meth:`loads_for`, when made already); the products formed before are dropped. The
+        quadrant band keeps its h (decided by the first load, :meth:`band`) and its rows are
+        decided again with the hysteresis over every load that decided the quadrants so far
+        (:func:`ident.quadrant_band.band_out`)."""
+        loads = self.loads_for(values) if loads is None else loads
+        self._quadrant_theta = loads.theta
+        self._loads = loads
         self._products = {}
         self._products_cache = {}
-        self._band_keep, self.band_kept, self.band_nm = None, 1.0, 0.0
+        if self._band_h:  # the band decided: its rows again, with the hysteresis
+            self._band_from.append(self._loads)
+            self._band_keep = self._band_out = None
+
+    def replay(self, loads: Sequence[dict[str, float]], band_nm: float | None = None) -> None:
+        """Decide the quadrants and the band's rows as a fit's passes did: the band first
+        (:meth:`band`; with ``band_nm`` [N m], that fit's h instead of one decided on these
+        data: validation files), then :meth:`requadrant` by each load of ``loads`` in order
+        (the loads of the fit's re-decisions, ``FitReport.settings["quadrant_loads"]``)."""
+        if band_nm is not None and self._band_h is None and self.model_quadrant:
+            self._band_h = float(band_nm)
+        self.band()
+        for values in loads:
+            self.requadrant(values)
+
+    def decision(self, loads: _RunLoads | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The quadrant of each row at its own full-rate sample (eq. 27-28 with the load
+        deciding the quadrants, :meth:`_load`, or with ``loads`` (:meth:`loads_for`) as
+        :meth:`requadrant` would decide them, previewed: nothing changes): sign(tau_out_hat
+        dq), 0 on the rows the quadrant band leaves out -- the rows moved between two
+        decisions are those whose sign changed, as ``RobotModel`` counts them -- and the rows
+        considered (n,) bool (the chain's, before the band)."""
+        st, sig = self.settings, self.signals
+        elig = sig.columns.keep[:, 0]
+        sp = np.zeros(sig.n)
+        load = self._load if loads is None else loads
+        for i, (f, x) in enumerate(full_rate_loads(sig, self.runs, st, load)):
+            rows = np.flatnonzero(sig.experiment == i)
+            idx = decimation_index(f.n, st.decimation)
+            sp[rows] = x[idx, 0] * np.reshape(f.dq, (f.n, -1))[idx, 0]
+        if self.band() > 0:
+            keep = (self._band_keep if loads is None
+                    else self._band_rows([*self._band_from, loads])[0])
+            sp[~keep[:, 0]] = 0.0
+        return np.sign(sp), elig
 
     def load_values(self) -> dict[str, float]:
         """The load parameters deciding the quadrants by the single-joint names (J, MX, MY,
@@ -662,36 +719,62 @@ class OneJointProblem:
 
     def band(self) -> float:
         """The quadrant band [N m] of the paper model where the sign check was skipped
-        (``model_quadrant``): :data:`SKIPPED_CHECK_BAND` x the RMS of the load deciding the
-        quadrants over every run's full-rate samples; 0 otherwise. The paper model's rows
-        within the guard of a full-rate sample with |tau_out_hat| below it are left out
-        (``_band_keep``): there the quadrant is uncertain, and the joint can slide at zero
-        load with its dry friction anywhere between the two quadrants' values (eq. 30 does
-        not hold; the paper's stiction-area rectangle, Fig. 2.b, around P_out = 0), the rows
-        the sign check would have left out. Not applied (0, ``band_kept`` < 1 says what it
-        would keep) where it would keep fewer than :data:`SIGN_CHECK_MIN_KEPT` of the rows,
+        (``model_quadrant``): :data:`SKIPPED_CHECK_BAND` x the RMS of the first load deciding
+        the quadrants over every run's full-rate samples, decided once and kept when the
+        quadrants are decided again (as ``RobotModel.band_`` by the usual fit's theta); 0
+        otherwise. The paper model's rows within the guard of a full-rate sample left out by
+        the band are left out (``_band_keep``): a sample enters it where |tau_out_hat| < h and
+        returns only where it reaches ``BAND_LEAVE`` x h, over the loads that decided the
+        quadrants in order (:func:`ident.quadrant_band.band_out`, the n-dof fit's one rule).
+        There the quadrant is uncertain, and the joint can slide at zero load with its dry
+        friction anywhere between the two quadrants' values (eq. 30 does not hold; the
+        paper's stiction-area rectangle, Fig. 2.b, around P_out = 0), the rows the sign check
+        would have left out. Not applied (0, ``band_kept`` < 1 says what it would keep) where
+        the first load's band would keep fewer than :data:`SIGN_CHECK_MIN_KEPT` of the rows,
         as the sign check: a load near zero over much of the data (a horizontal axis
         cruising) leaves the dry friction's quadrant terms too few rows."""
         if not (self.model_quadrant and not self.sign_checked and SKIPPED_CHECK_BAND > 0
                 and self.first is not None):
             return 0.0
-        if self._band_keep is None and self.band_kept == 1.0:
-            st, sig = self.settings, self.signals
-            loads = full_rate_loads(sig, self.runs, st, self._load)
+        if self._band_h is None:  # decided once, by the first load
+            loads = full_rate_loads(self.signals, self.runs, self.settings, self._load)
             rms = np.sqrt(np.mean(np.concatenate([x[:, 0] for _, x in loads]) ** 2))
-            self.band_nm = SKIPPED_CHECK_BAND * float(rms)
-            keep = sig.columns.keep.copy()
-            for i, (f, x) in enumerate(loads):
-                rows = np.flatnonzero(sig.experiment == i)
-                keep[rows] &= selection(f.dq, st.dq_min, st.guard,
-                                        decimation_index(f.n, st.decimation),
-                                        rejected(f.tau_f, band=(x[:, :1], self.band_nm)))
-            self.band_kept = float(keep.sum() / max(int(sig.columns.keep.sum()), 1))
-            if self.band_kept >= SIGN_CHECK_MIN_KEPT:
-                self._band_keep = keep
-            else:
-                self.band_nm = 0.0
+            self._band_h = SKIPPED_CHECK_BAND * float(rms)
+            self._band_from = [self._loads]
+            self._band_keep, self._band_out, self.band_kept = self._band_rows(self._band_from)
+            if self.band_kept < SIGN_CHECK_MIN_KEPT:
+                self._band_h, self._band_keep, self._band_out = 0.0, None, None
+        elif self._band_h > 0 and self._band_keep is None:
+            if not self._band_from:  # h given (:meth:`replay`): the first load decides
+                self._band_from = [self._loads]
+            self._band_keep, self._band_out, self.band_kept = self._band_rows(self._band_from)
+        self.band_nm = self._band_h
         return self.band_nm
+
+    def _band_rows(self, band_from: Sequence[_RunLoads]
+                   ) -> tuple[np.ndarray, list[np.ndarray], float]:
+        """The rows (n, 1) the band keeps, the full-rate samples (n_f, 1) it leaves out per
+        run, and the share of the rows kept, with the band's hysteresis over the loads
+        ``band_from`` (in the order they decided the quadrants)."""
+        st, sig, h = self.settings, self.signals, float(self._band_h)
+        per_load = [full_rate_loads(sig, self.runs, st, lo) for lo in band_from]
+        keep = sig.columns.keep.copy()
+        outs = []
+        for i, (f, _x) in enumerate(per_load[0]):
+            out = band_out([loads[i][1][:, :1] for loads in per_load], h)[0]
+            rows = np.flatnonzero(sig.experiment == i)
+            keep[rows] &= selection(f.dq, st.dq_min, st.guard,
+                                    decimation_index(f.n, st.decimation), out)
+            outs.append(out)
+        return keep, outs, float(keep.sum() / max(int(sig.columns.keep.sum()), 1))
+
+    def band_masks(self) -> list[np.ndarray] | None:
+        """Per run, the full-rate samples (n_f,) the quadrant band leaves out (with its
+        hysteresis, :meth:`band`), or None without a band: the single-joint design's
+        (:meth:`ident.preprocess.Design.select`'s ``quadrant_band``) as the robot fit's."""
+        if self.band() <= 0 or self._band_out is None:
+            return None
+        return [o[:, 0] for o in self._band_out]
 
     def fit(self, name: str, q_s: float = DEFAULT_Q_S, *, eliminate: bool = True,
             threshold_pct: float | None = None) -> OneJointModel:

@@ -338,20 +338,33 @@ class Design:
         dq_min: float | None = None,
         tau_min: float | None = None,
         load_model: tuple[Term, np.ndarray] | None = None,
-        quadrant_band: float | None = None,
+        quadrant_band: float | Sequence[np.ndarray] | None = None,
     ) -> Design:
         """The same design with another sample selection (see :func:`build_design`),
         without recomputing or re-filtering any column. ``quadrant_band`` = h [N m]: also
         leave out the rows within the guard of a full-rate sample whose |tau_out_hat| < h,
-        tau_out_hat the prediction of the load model the design was built with
-        (:meth:`ident.one_joint.OneJointProblem.band`)."""
-        if quadrant_band is not None and any(b.load is None for b in self._blocks):
+        tau_out_hat the prediction of the load model the design was built with; or, per
+        experiment, the full-rate samples (n_f,) bool the band leaves out, decided with its
+        hysteresis over the quadrant passes (:meth:`ident.one_joint.OneJointProblem.
+        band_masks`, :mod:`ident.quadrant_band`)."""
+        masks = None
+        if quadrant_band is not None and not np.isscalar(quadrant_band):
+            masks = list(quadrant_band)
+            if len(masks) != len(self._blocks) or any(
+                    np.shape(m) != (b.full.tau.size,) for m, b in zip(masks, self._blocks,
+                                                                      strict=False)):
+                raise DataError("quadrant_band: expected one full-rate mask (n_f,) per "
+                                f"experiment ({len(self._blocks)})")
+        elif quadrant_band is not None and any(b.load is None for b in self._blocks):
             raise DataError("quadrant_band: the design was built without a load model")
         blocks = []
-        for b in self._blocks:
+        for i, b in enumerate(self._blocks):
             tau_out = None if load_model is None else _load_torque(b.full, load_model)
-            band = None if quadrant_band is None else (b.load, float(quadrant_band))
+            band = (None if quadrant_band is None or masks is not None
+                    else (b.load, float(quadrant_band)))  # type: ignore[arg-type]
             bad = rejected(b.full.tau, tau_min=tau_min, load=tau_out, band=band)
+            if masks is not None:
+                bad = masks[i] if bad is None else bad | masks[i]
             mask = selection(b.full.dq[:, None], dq_min, self.guard, b.index,
                              None if bad is None else bad[:, None])[:, 0]
             blocks.append(replace(b, mask=mask))

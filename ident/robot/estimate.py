@@ -81,6 +81,15 @@ from ..estimators import (
     rank_rule,
 )
 from ..hyperparams import HyperParameters
+from ..quadrant_band import (  # the passes' one rule; the tolerances re-exported
+    BAND_LEAVE,
+    MAX_PASSES,
+    band_out,
+    never_redecided,
+    unsettled_reason,
+)
+from ..quadrant_band import QUADRANT_TOL as QUADRANT_TOL
+from ..quadrant_band import THETA_TOL as THETA_TOL
 from ..vocab import renamed_keywords
 from . import RobotIdentError
 from .base import base_parameters, payload_base, placed_payload
@@ -119,22 +128,8 @@ METHODS = tuple(ESTIMATORS)
 #: RCOND on the singular values of the scaled regressor, squared on its normal matrix.
 RANK_TOL = RCOND**2
 
-#: Fraction of the rows that may still move when the passes stop settled (``quadrant="model"``):
-#: change quadrant, or enter or leave the quadrant band; such rows have tau_out ~ 0 (or ~ the
-#: band's edge), where the quadrant hardly matters.
-QUADRANT_TOL = 1e-4
-
-#: The quadrant passes also stop when no parameter of the paper fit moved by more than this
-#: fraction of its standard deviation (eq. 15) since the previous pass: the rows still moving
-#: then barely change the estimate (``RobotModel.quadrant_steps_``).
-THETA_TOL = 0.1
-
-#: A row in the quadrant band (|tau_out_hat| < ``band_``) returns to the fit only where its
-#: |tau_out_hat| reaches this multiple of the band (hysteresis, ``RobotModel._in_band``): a
-#: row at the band's edge no longer enters and leaves it at every pass as theta moves by a
-#: fraction of its sigma (the 3-dof arm cycled so, docs/robot-identification.md
-#: "Quadrants"). Not the paper's: its quadrants are sign(P) with no band (eq. 26-28).
-BAND_LEAVE = 1.5
+#: QUADRANT_TOL, THETA_TOL, BAND_LEAVE: the model-quadrant passes' one rule, from one joint to
+#: n (:mod:`ident.quadrant_band`: the band's hysteresis, when the passes stop).
 
 #: ``quadrant="model"`` on more samples than this: the starting fit reads every stride-th
 #: row (stride = samples // START_ROWS); it only gives the first theta: the quadrants are then
@@ -429,7 +424,7 @@ class RobotModel(HyperParameters):
         chunk_size: int = 20000,
         max_iter: int = 50,
         tol: float = 1e-10,
-        max_passes: int = 8,
+        max_passes: int = MAX_PASSES,
         payload_ratio: bool = False,
         quadrant_theta: Any = None,
         quadrant_band: float = 0.03,
@@ -1428,9 +1423,7 @@ class RobotModel(HyperParameters):
         x, w, it, pending = self._fit_paper(moms, x, free, damped_ok=loop)
         for _ in range(x.size):
             if loop:
-                self._unsettled = (
-                    f"max_passes={int(self.max_passes)}: the quadrants of the usual fit's "
-                    "theta were never re-decided with the paper fit's")
+                self._unsettled = never_redecided(self.max_passes)
                 for _ in range(int(self.max_passes) - 1):
                     theta, x_prev = x[:pb].copy(), x
                     if self.band_from_ is not None:  # the band's hysteresis (_in_band)
@@ -1455,13 +1448,7 @@ class RobotModel(HyperParameters):
                     self.quadrant_steps_.append(step)
                     # settled: (almost) no row changed quadrant or crossed the band, or the
                     # parameters moved by a small fraction of their sigma
-                    self._unsettled = (
-                        "" if changed <= QUADRANT_TOL * rows or step < THETA_TOL else
-                        f"the quadrant passes stopped at max_passes={int(self.max_passes)} "
-                        f"with {changed} of {rows} rows still changing quadrant or crossing "
-                        f"the quadrant band at the last one (settled: at most "
-                        f"{QUADRANT_TOL:g} of them) and the parameters moving "
-                        f"{step:.3g} sigma (settled: below {THETA_TOL:g})")
+                    self._unsettled = unsettled_reason(changed, rows, step, self.max_passes)
                     if not self._unsettled:
                         break
             if pending is None:
@@ -1697,11 +1684,7 @@ class RobotModel(HyperParameters):
         |W_j theta + p_j| < h and leaves it only where it reaches ``BAND_LEAVE`` x h. Returns
         that mask at the last theta and at the one before (the previous decision's; the
         same with one theta), (m,) bool each."""
-        load = np.abs(self.band_from_[:, cols] @ WjT + pj)
-        out = prev = load[0] < h
-        for a in load[1:]:
-            prev, out = out, (a < h) | (out & (a < BAND_LEAVE * h))
-        return out, prev
+        return band_out(self.band_from_[:, cols] @ WjT + pj, h)
 
     def _finish(self, moms: list[JointMoments], coeffs: Coeffs, x: np.ndarray,
                 free: np.ndarray, w: np.ndarray, passes: int, it: int,

@@ -29,6 +29,7 @@ import numpy as np
 
 from trajectories.friction import quadrant_weights
 
+from ..quadrant_band import band_edge, band_step
 from .moments import IDQ, IP, JointMoments
 
 __all__ = ["QuadrantStore", "MARGIN"]
@@ -53,7 +54,7 @@ class QuadrantStore:
         are left out; 0: none.
     leave : float
         A row left out by the band returns only where |tau_out| reaches ``leave`` x ``band``
-        (the band's hysteresis, ``ident.robot.estimate.BAND_LEAVE``); 1: none.
+        (the band's hysteresis, :data:`ident.quadrant_band.BAND_LEAVE`); 1: none.
 
     Attributes
     ----------
@@ -108,7 +109,7 @@ class QuadrantStore:
         smallest r over everything offered so far. With a band the distance is to the edge
         where a row changes state: |tau_out| = band for a row in the fit (it enters the band
         there, and flips only beyond), = ``leave`` x band for a row left out (it returns
-        there: the band's hysteresis, ``RobotModel._in_band``)."""
+        there: the band's hysteresis, :func:`ident.quadrant_band.band_edge`)."""
         nt = self.nt
         pplus, pminus = weights
         U = self.Linv @ VT[:nt]
@@ -116,7 +117,7 @@ class QuadrantStore:
         if out is None:
             out = np.abs(tau_out) < self.band if self.band > 0 else np.zeros(
                 tau_out.shape, dtype=bool)
-        a = np.abs(np.abs(tau_out) - np.where(out, self.leave * self.band, self.band))
+        a = band_edge(tau_out, out, self.band, self.leave)  # the band's one rule
         # ||W|| = 0: tau_out = p does not depend on theta, the row never changes quadrant
         r = np.divide(a, wn, out=np.full(a.shape, np.inf), where=wn > 0)
         cand = r < self.radius
@@ -163,9 +164,8 @@ class QuadrantStore:
         VT = self.VT
         tau_out = theta @ VT[:nt] + VT[nt + IP]
         pnew, mnew = quadrant_weights(tau_out * VT[nt + IDQ])
-        if self.band > 0:  # the band's hysteresis (RobotModel._in_band)
-            a = np.abs(tau_out)
-            out = (a < self.band) | (self.out & (a < self.leave * self.band))
+        if self.band > 0:  # the band's hysteresis (ident.quadrant_band, its one rule)
+            out = band_step(tau_out, self.out, self.band, self.leave)
             pnew[out] = 0.0
             mnew[out] = 0.0
             self.out = out
