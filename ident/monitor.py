@@ -415,6 +415,12 @@ class Thresholds:
         Per joint and bin: times the validation entered it (separate motions).
     min_samples, min_episodes : int
         A bin with fewer samples or episodes (or no spread) has no band of its own.
+    stuck_velocity : tuple of float
+        Per joint [rad/s], with a stuck bin (``edges_s`` starting at 0): a joint is stuck
+        while its measured |dq| is at most this (its moving time is then minus the time it
+        has been stuck, bin 0); empty without a stuck bin. Bin 0's statistics are of all its
+        samples (the residual is 0 inside the static band), its band at least as wide as the
+        narrowest band of the joint's other bins with their own statistics.
     thin_bins : str
         What such a bin takes (:data:`THIN_BINS`): ``pooled``, the band of its samples
         pooled with the nearest shorter bins (moving time below it) until the pool has
@@ -448,6 +454,7 @@ class Thresholds:
     residual: str = "filtered"
     observer_gain: float = 0.0
     thin_bins: str = "pooled"
+    stuck_velocity: tuple[float, ...] = ()
 
     @property
     def half_width(self) -> list[float]:
@@ -475,8 +482,10 @@ class Thresholds:
     def bin_used(self) -> list[list[bool]]:
         """Per joint and bin: its own statistics set its band (enough samples and
         episodes, spread > 0); else the constant band."""
-        return [[n >= self.min_samples and e >= self.min_episodes and s > 0
-                 for n, e, s in zip(ns, es, ss, strict=True)]
+        stuck = _has_stuck(self.edges_s)  # its spread may be 0: the floor sets its band
+        return [[n >= self.min_samples and e >= self.min_episodes
+                 and (s > 0 or (stuck and not i))
+                 for i, (n, e, s) in enumerate(zip(ns, es, ss, strict=True))]
                 for ns, es, ss in zip(self.bin_samples, self.bin_episodes, self.bin_sigma,
                                       strict=True)]
 
@@ -493,6 +502,14 @@ class Thresholds:
             b = [_band(self.bin_mean[j][i], self.bin_sigma[j][i], self.bin_peak[j][i],
                        self.k_sigma, self.peak_margin) if u else self._thin_band(j, i)
                  for i, u in enumerate(used)]
+            if _has_stuck(self.edges_s) and used[0]:
+                # the stuck bin: at least as wide as the narrowest band of the joint's motion
+                # with its own statistics (the residual's noise where the model holds best;
+                # none: the constant band), about the stuck samples' mean
+                h = min([(y - x) / 2 for (x, y), u in zip(b[1:], used[1:], strict=True) if u]
+                        or [self.half_width[j]])
+                m = self.bin_mean[j][0]
+                b[0] = (min(b[0][0], m - h), max(b[0][1], m + h))
             lo.append([x for x, _ in b])
             hi.append([x for _, x in b])
         return lo, hi
@@ -503,7 +520,10 @@ class Thresholds:
         c = (self.lower[j], self.upper[j])
         if self.thin_bins != "pooled":
             return c
-        for a in range(i - 1, -1, -1):  # the nearest shorter bins first
+        first = 1 if _has_stuck(self.edges_s) else 0  # never pooled with the stuck bin
+        if i < first:
+            return c
+        for a in range(i - 1, first - 1, -1):  # the nearest shorter bins first
             n = self.bin_samples[j][a:i + 1]
             # a motion enters bins a..i through bin a (the moving time grows one cycle at a
             # time or restarts at 0): the pool's episodes are bin a's
@@ -519,7 +539,7 @@ class Thresholds:
     def constant(self) -> Thresholds:
         """The same statistics without the regime bins: the constant band (format /1)."""
         return dataclasses.replace(self, edges_s=(), bin_mean=(), bin_sigma=(), bin_peak=(),
-                                   bin_samples=(), bin_episodes=())
+                                   bin_samples=(), bin_episodes=(), stuck_velocity=())
 
     def with_k(self, k_sigma: float | None = None, peak_margin: float | None = None
                ) -> Thresholds:
@@ -549,7 +569,7 @@ class Thresholds:
                 "samples": [list(x) for x in self.bin_samples],
                 "episodes": [list(x) for x in self.bin_episodes],
                 "own": self.bin_used, "thin_bins": self.thin_bins, "lower": lo,
-                "upper": hi}
+                "upper": hi, "stuck_velocity": list(self.stuck_velocity) or None}
         return d
 
     @classmethod
@@ -601,9 +621,18 @@ class Thresholds:
 
 
 def _increasing(edges: Sequence[float]) -> bool:
-    """True when ``edges`` are > 0 and strictly increasing (or empty)."""
-    return all(e > 0 for e in edges[:1]) and all(
-        edges[i + 1] > edges[i] for i in range(len(edges) - 1))
+    """True when ``edges`` are strictly increasing (or empty) and > 0, or start at 0 or
+    below with 0 among them: then bin 0 is the stuck bin (:func:`_has_stuck`)."""
+    return (all(edges[i + 1] > edges[i] for i in range(len(edges) - 1))
+            and all(e > 0 or 0.0 in edges for e in edges[:1]))
+
+
+def _has_stuck(edges: Sequence[float]) -> bool:
+    """True when bin 0 of ``edges`` [s] is the stuck bin: the first edge is 0 or below, so
+    bin 0 holds the samples of moving time below it (minus the time the joint has been held
+    by its static friction, ``daq.runtime.monitor``: a first edge -T leaves the first T
+    seconds of each hold, the filters' settling, to the bins between -T and 0)."""
+    return bool(edges) and edges[0] <= 0.0
 
 
 def _read_regime(p: Path, reg: Any, th: Thresholds) -> Thresholds:
@@ -624,7 +653,7 @@ def _read_regime(p: Path, reg: Any, th: Thresholds) -> Thresholds:
         raise DataError(f"{p}: regime: key {e.args[0] if e.args else '?'!r} missing or "
                         "not numbers") from None
     if not _increasing(edges):
-        raise DataError(f"{p}: regime.edges_s: expected increasing numbers > 0 [s]")
+        raise DataError(f"{p}: regime.edges_s: expected increasing numbers >= 0 [s]")
     if not (mins >= 1 and mine >= 1):
         raise DataError(f"{p}: regime.min_samples, min_episodes: expected integers >= 1")
     shape = (len(th.joints), len(edges) + 1)
@@ -639,7 +668,17 @@ def _read_regime(p: Path, reg: Any, th: Thresholds) -> Thresholds:
     if thin not in THIN_BINS:
         raise DataError(f"{p}: regime.thin_bins: expected one of {', '.join(THIN_BINS)}, "
                         f"got {thin!r}")
+    vs = reg.get("stuck_velocity")
+    try:
+        stuck = () if vs is None else tuple(float(x) for x in vs)
+    except (TypeError, ValueError):
+        stuck = (-1.0,)
+    if _has_stuck(edges) != bool(stuck) or len(stuck) not in (0, shape[0]) or any(
+            not x >= 0 for x in stuck):
+        raise DataError(f"{p}: regime.stuck_velocity: expected {shape[0]} numbers >= 0 "
+                        "[rad/s] when edges_s starts at 0 (the stuck bin), else null")
     return dataclasses.replace(th, edges_s=edges, bin_mean=tabs[0], bin_sigma=tabs[1],
+                               stuck_velocity=stuck,
                                bin_peak=tabs[2], bin_samples=counts, bin_episodes=eps,
                                min_samples=mins, min_episodes=mine, thin_bins=thin)
 
@@ -660,7 +699,8 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
                              min_samples: int = DEFAULT_MIN_SAMPLES,
                              min_episodes: int = DEFAULT_MIN_EPISODES,
                              kind: str = "filtered", observer_gain: float = 0.0,
-                             thin_bins: str = "pooled") -> Thresholds:
+                             thin_bins: str = "pooled",
+                             stuck_velocity: Sequence[float] | None = None) -> Thresholds:
     """Thresholds from a residual (n, k) [N m] recorded without collision: per joint the
     mean, standard deviation and peak of its samples off the static band (residual not
     exactly 0; near rest the model predicts an interval, :meth:`TorquePredictor.band`);
@@ -668,7 +708,9 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
     time order), the same per bin of ``edges_s``, and how many times each bin was entered
     (episodes: separate motions). ``kind`` and ``observer_gain`` [1/s] say which
     residual it is (recorded in the file, :class:`Thresholds`); ``thin_bins`` what a bin
-    with too few samples or episodes takes (:data:`THIN_BINS`).
+    with too few samples or episodes takes (:data:`THIN_BINS`). ``edges_s`` starting at 0:
+    bin 0 is the stuck bin (``moving_s`` < 0, the monitor's with ``stuck_velocity`` [rad/s]
+    per joint, recorded in the file), its statistics of all its samples.
 
     Raises
     ------
@@ -686,13 +728,16 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
         raise DataError(f"k_sigma: expected a number > 0, got {k_sigma}")
     edges = tuple(float(e) for e in edges_s)
     if not _increasing(edges):
-        raise DataError(f"regime edges: expected increasing numbers > 0 [s], got {edges}")
+        raise DataError(f"regime edges: expected increasing numbers >= 0 [s], got {edges}")
     if not (int(min_samples) >= 1 and int(min_episodes) >= 1):
         raise DataError(f"regime min_samples, min_episodes: expected integers >= 1, got "
                         f"{min_samples}, {min_episodes}")
     if thin_bins not in THIN_BINS:
         raise DataError(f"thin_bins: expected one of {', '.join(THIN_BINS)}, got "
                         f"{thin_bins!r}")
+    if _has_stuck(edges) and (stuck_velocity is None or len(stuck_velocity) != len(joints)):
+        raise DataError(f"regime edges {edges}: a first edge 0 or below (the stuck bin) needs "
+                        f"stuck_velocity, {len(joints)} values [rad/s]")
     s = None
     if moving_s is not None:
         s = np.asarray(moving_s, dtype=float)
@@ -718,6 +763,10 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
             b = np.searchsorted(edges, s[off, j], side="right")
             bins.append([_stats(x[b == i]) for i in range(nb)])
             counts.append(tuple(int(n) for n in np.bincount(b, minlength=nb)))
+            if _has_stuck(edges):  # the stuck bin: every sample (0 inside the static band)
+                held = s[:, j] < edges[0]
+                bins[-1][0] = _stats(r[held, j])
+                counts[-1] = (int(held.sum()), *counts[-1][1:])
             ball = np.searchsorted(edges, s[:, j], side="right")  # every sample, in order
             enter = ball[np.r_[True, ball[1:] != ball[:-1]]]
             episodes.append(tuple(int(n) for n in np.bincount(enter, minlength=nb)))
@@ -734,4 +783,6 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
         bin_sigma=tuple(tuple(v[1] for v in bj) for bj in bins),
         bin_peak=tuple(tuple(v[2] for v in bj) for bj in bins),
         bin_samples=tuple(counts), bin_episodes=tuple(episodes),
-        min_samples=int(min_samples), min_episodes=int(min_episodes), thin_bins=thin_bins)
+        min_samples=int(min_samples), min_episodes=int(min_episodes), thin_bins=thin_bins,
+        stuck_velocity=tuple(float(v) for v in stuck_velocity or ()) if _has_stuck(edges)
+        else ())

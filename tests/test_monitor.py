@@ -332,6 +332,10 @@ def test_monitor_bad_inputs_one_line(tmp_path, arm3, capfd):
           "0.1,0.05"], "--regime-edges"),
         (["monitor", str(model), str(camp), "--simulate", "--thresholds", str(th),
           "--regime-edges", "0.1"], "--calibrate"),
+        (["monitor", str(model), str(camp), "--simulate", "--thresholds", str(th),
+          "--stuck-velocity", "0"], "--stuck-velocity"),
+        (["monitor", str(model), str(camp), "--simulate", "--calibrate",
+          "--stuck-velocity", "-1"], "--stuck-velocity"),
     ]
     for argv, what in cases:
         out = tmp_path / "never"

@@ -1,5 +1,8 @@
 """``jointid monitor``: run a robot campaign with torque monitoring (docs/monitoring.md).
 
+(Past 600 lines: the command's checks, run, calibration and report read one summary; split,
+each part would re-derive the options' meaning.)
+
 MODEL (an ``export-model`` folder, or a fit record whose consistent estimate is taken) gives
 the predicted torque (:mod:`ident.monitor`); the campaign runs on its buses (``--simulate``:
 the simulated arm) with :class:`daq.runtime.monitor.TorqueMonitor` checking every cycle.
@@ -30,6 +33,7 @@ import dataclasses
 import functools
 import html
 import json
+import math
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
@@ -50,7 +54,7 @@ if TYPE_CHECKING:
 # functions that use them: `jointid --help` must not wait seconds for them
 
 __all__ = ["analyse", "load_campaign", "parse_edges", "parse_push", "per_joint", "register",
-           "run_monitor"]
+           "run_monitor", "stuck_edges"]
 
 #: default --rest-velocity: this many times each joint's Stribeck velocity q_s (E < 5 %)
 REST_QS = 3.0
@@ -112,6 +116,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rest-velocity", type=float, default=None,
                    help="below this |dq| [rad/s] the friction is the static band "
                    f"(default: {REST_QS:g} q_s of each joint, the Stribeck region)")
+    p.add_argument("--stuck-velocity", type=float, default=None, metavar="V",
+                   help="--calibrate: a regime bin of its own for a joint whose measured |dq| "
+                   "is at most V [rad/s] (held by its static friction; 0: the drive reads "
+                   "zero); recorded in the thresholds file. Default: no such bin")
     p.add_argument("--push", action="append", default=[], metavar="JOINT:FORCE:T0[:DT]",
                    help="simulated arm: push the link of JOINT with FORCE [N] from T0 [s] "
                    "after the run starts for DT [s] (default 0.2); repeatable")
@@ -120,6 +128,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--paced", action="store_true",
                    help="real-time clock (daq.clock = 'paced'): cycles on the wall clock")
     p.set_defaults(func=_run)
+
+
+def stuck_edges(edges: tuple[float, ...], residual: str, cutoff_hz: float,
+                gain: float) -> tuple[float, ...]:
+    """The regime edges [s] with the stuck bins in front (``--stuck-velocity``): ``(-T, 0,
+    *edges)``, T [s] the residual's settling time after the joint stops (the filters' 4 /
+    (zeta omega_n), 45 ms at 20 Hz; the observer's 4 / K_O): bin 0 holds a joint stuck for
+    longer than T (its own statistics: the static band's), bin 1 the first T of each hold
+    (the transient of the stop)."""
+    settle = 4.0 / gain if residual == "observer" else 4.0 / (2 ** -0.5 * 2 * math.pi
+                                                                * cutoff_hz)
+    return (-round(settle, 4), 0.0, *edges)
 
 
 def parse_edges(text: str) -> tuple[float, ...]:
@@ -259,7 +279,8 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
                 regime_edges: str | None = None, constant_band: bool = False,
                 cutoff_hz: float = 20.0, residual: str = "filtered",
                 observer_gain: float | None = None,
-                rest_velocity: float | None = None, pushes: list[str] | None = None,
+                rest_velocity: float | None = None, stuck_velocity: float | None = None,
+                pushes: list[str] | None = None,
                 stop: bool = False, paced: bool = False,
                 stream: TextIO | None = None) -> dict[str, Any]:
     """``jointid monitor`` (module docstring); returns the content of ``monitor.json``.
@@ -300,6 +321,9 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
         raise ConfigError("--calibrate: a validation run takes no --push and no --stop")
     if rest_velocity is not None and not rest_velocity >= 0:
         raise ConfigError(f"--rest-velocity: expected a number >= 0, got {rest_velocity}")
+    if stuck_velocity is not None and not (calibrate and stuck_velocity >= 0):
+        raise ConfigError(f"--stuck-velocity: expected --calibrate and a number >= 0 [rad/s], "
+                          f"got {stuck_velocity} (a thresholds file holds its own)")
     if k_sigma is not None and not k_sigma > 0:
         raise ConfigError(f"--k-sigma: expected a number > 0, got {k_sigma}")
     if peak_margin is not None and not peak_margin >= 0:
@@ -317,6 +341,7 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
         raise ConfigError(f"--observer-gain: expected 0 < K_O < {1 / campaign.cycle_s:g} "
                           f"[1/s] (1 / the campaign's cycle), got {observer_gain}")
     edges = DEFAULT_EDGES_S if regime_edges is None else parse_edges(regime_edges)
+    v_stuck = None if stuck_velocity is None else [stuck_velocity] * len(joints)
     robot = robot_for_campaign(campaign)
     exported = load_model(model, robot, model_name)
     pred0 = exported.predictor(None)
@@ -346,9 +371,12 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
         th = th.with_k(k_sigma, peak_margin)
         if constant_band:
             th = th.constant()
+        v_stuck = list(th.stuck_velocity) or None
 
     gain = (DEFAULT_OBSERVER_GAIN if observer_gain is None else observer_gain
             ) if residual == "observer" else 0.0
+    if calibrate and v_stuck is not None:  # bins 0, 1: the joint held by its static friction
+        edges = stuck_edges(edges, residual, cutoff_hz, gain)
 
     def predictor_for(payload: Any) -> Any:
         pred = exported.predictor(payload)
@@ -360,7 +388,8 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
     mon = TorqueMonitor(predictor_for, joints, campaign.cycle_s, lower=lower, upper=upper,
                         edges_s=() if th is None else th.edges_s, rest_velocity=v_rest,
                         cutoff_hz=cutoff_hz, stop=stop, pushes=specs, residual=residual,
-                        observer_gain=gain or DEFAULT_OBSERVER_GAIN)
+                        observer_gain=gain or DEFAULT_OBSERVER_GAIN,
+                        stuck_velocity=v_stuck)
     out.mkdir(parents=True, exist_ok=True)
     result, wall = run_with_bar(campaign, out / "logs", True if simulate else None, stream,
                                 payloads=payloads, monitor=mon)
@@ -369,7 +398,8 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
         "campaign": str(campaign_path), "model": exported.source, "joints": joints,
         "cycle_s": campaign.cycle_s, "clock": campaign.daq.get("clock", "default"),
         "cutoff_hz": cutoff_hz, "residual": residual, "observer_gain": gain or None,
-        "rest_velocity": v_rest, "status": result.status, "reason": result.reason,
+        "rest_velocity": v_rest, "stuck_velocity": v_stuck, "status": result.status,
+        "reason": result.reason,
         "wall_s": wall, "missed_cycles": [r.missed for r in result.runs],
         "logs": [str(p.relative_to(out)) for p in logs]}
     if calibrate and result.status != "done":
@@ -392,7 +422,8 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
                                       else peak_margin,
                                       np.concatenate(mov) if edges else None, edges,
                                       DEFAULT_MIN_SAMPLES, DEFAULT_MIN_EPISODES,
-                                      kind=residual, observer_gain=gain)
+                                      kind=residual, observer_gain=gain,
+                                      stuck_velocity=v_stuck)
         write_json(out / "thresholds.json", th.to_json())
         summary["thresholds"] = th.to_json()
     else:
@@ -543,7 +574,8 @@ def _run(args: argparse.Namespace) -> int:
                     regime_edges=args.regime_edges, constant_band=args.constant_band,
                     cutoff_hz=args.cutoff_hz, residual=args.residual,
                     observer_gain=args.observer_gain,
-                    rest_velocity=args.rest_velocity, pushes=args.push, stop=args.stop,
+                    rest_velocity=args.rest_velocity,
+                    stuck_velocity=args.stuck_velocity, pushes=args.push, stop=args.stop,
                     paced=args.paced)
     print(format_summary(s))
     if s["status"] == "interrupted":  # Ctrl-C: exit 128 + the signal (130), as jointid run

@@ -2,6 +2,9 @@
 generalized-momentum observer's), its thresholds, collision events, an optional safe stop,
 and staged pushes on a simulated arm.
 
+(Past 600 lines: the two residuals, the per-cycle check that logs them and the reader of
+their log channels share the message layout; one module keeps it in one place.)
+
 Every cycle of a run's ``run`` phase (approach, plan, settle) the engine
 (:mod:`daq.runtime.engine`) hands :meth:`TorqueMonitor.step` the measured joint positions q
 [rad], velocities dq [rad/s] (0x606C) and torques tau [N m] (torque actual 0x6077). The same
@@ -30,11 +33,13 @@ regime.
 
 Each joint's regime is its *moving time* ``moving_s``: how long [s] its filtered velocity has
 kept its sign with ``|dq_f,j| >= v_rest_j`` (0 at rest, at a reversal and at breakaway; the
-rest velocity of the model's band). The thresholds may depend on it: ``edges_s`` cut it
-into bins (bin b: ``edges_s[b-1] <= moving_s < edges_s[b]``) and each bin has its band,
-so the band can be wide right after a reversal or a start and narrow while the joint moves
-steadily (``ident.monitor.Thresholds``: the validation residual's statistics per bin). The
-bin is found by bisection over the few edges: O(k) per cycle.
+rest velocity of the model's band); with a stuck velocity ``v_stuck_j``, minus the time [s]
+the *measured* |dq_j| has stayed at most v_stuck_j (held by static friction). The thresholds
+may depend on it: ``edges_s`` cut it into bins (bin b: ``edges_s[b-1] <= moving_s <
+edges_s[b]``) and each bin has its band, so the band can be wide right after a reversal or
+a start and narrow while the joint moves steadily (``ident.monitor.Thresholds``: the
+validation residual's statistics per bin). The bin is found by bisection over the few
+edges: O(k) per cycle.
 
 A joint's residual outside ``[lower_j, upper_j]`` of its current bin (``mean +- k sigma``
 of a validation run) after the first ``warmup_s`` of the phase is a ``collision``
@@ -87,7 +92,8 @@ float64 tau_filtered  # [N m] measured torque (0x6077), low-passed
 float64 tau_predicted # [N m] the model's torque at the filtered state (nearest in its
                       # interval near rest)
 float64 moving_s      # [s] time the filtered velocity has kept its sign above the rest
-                      # velocity (the regime of the thresholds)
+                      # velocity (the regime of the thresholds); negative: minus the time
+                      # the measured velocity has been within the stuck velocity
 uint8 armed           # 1 when crossings count (after the warm-up)
 """
 _SAMPLE = struct.Struct("<4sqdddddddB")
@@ -283,11 +289,14 @@ def _table(x: Sequence[Any] | None, k: int, nb: int, default: float) -> list[lis
     return rows
 
 
-def moving_seconds(dq_f: Any, rest_velocity: Any, cycle_s: float) -> np.ndarray:
-    """The moving time [s] of :class:`TorqueMonitor` over a run, offline: (n, k) from the
+def moving_seconds(dq_f: Any, rest_velocity: Any, cycle_s: float, dq: Any = None,
+                   stuck_velocity: Any = None) -> np.ndarray:
+    """The regime [s] of :class:`TorqueMonitor` over a run, offline: (n, k) from the
     filtered velocities ``dq_f`` (n, k) [rad/s] of its cycles, ``rest_velocity`` per joint
     [rad/s] (the same per-cycle rule: 0 when the sign changed or ``|dq_f| < v_rest``, else
-    one cycle more)."""
+    one cycle more); with the measured velocities ``dq`` (n, k) [rad/s] and
+    ``stuck_velocity`` per joint [rad/s], minus the time a joint has been stuck (``|dq| <=
+    v_stuck`` this cycle and the ones before) where it is."""
     d = np.asarray(dq_f, float)
     vr = np.broadcast_to(np.asarray(rest_velocity, float), d.shape[1:])
     sg = np.sign(d).astype(int)
@@ -296,6 +305,11 @@ def moving_seconds(dq_f: Any, rest_velocity: Any, cycle_s: float) -> np.ndarray:
     idx = np.arange(d.shape[0])[:, None]
     last = np.maximum.accumulate(np.where(reset, idx, -1), axis=0)
     n = np.where(last >= 0, idx - last, idx + 1)  # never reset yet: counting from the start
+    if dq is not None and stuck_velocity is not None:
+        vs = np.broadcast_to(np.asarray(stuck_velocity, float), d.shape[1:])
+        st = np.abs(np.asarray(dq, float)) <= vs
+        free = np.maximum.accumulate(np.where(~st, idx, -1), axis=0)  # last cycle not stuck
+        n = np.where(st, -(idx - free), n)
     return n * float(cycle_s)
 
 
@@ -353,6 +367,9 @@ class TorqueMonitor:
         Edges of the regime bins on the moving time [s] (increasing; empty: one band).
     rest_velocity : float or sequence of float
         Per joint [rad/s]: below it the joint's moving time is 0 (the model's rest band).
+    stuck_velocity : float or sequence of float, optional
+        Per joint [rad/s]: while the measured |dq| is at most this, the joint is stuck and
+        its regime is minus the time it has been (None: never stuck, the regime >= 0).
     cutoff_hz : float
         Cut-off of the filter [Hz] (filtered residual).
     residual : str
@@ -374,7 +391,8 @@ class TorqueMonitor:
                  edges_s: Sequence[float] = (), rest_velocity: float | Sequence[float] = 0.0,
                  cutoff_hz: float = 20.0, warmup_s: float = 0.25, stop: bool = False,
                  pushes: Sequence[PushSpec] = (), residual: str = "filtered",
-                 observer_gain: float = DEFAULT_OBSERVER_GAIN) -> None:
+                 observer_gain: float = DEFAULT_OBSERVER_GAIN,
+                 stuck_velocity: float | Sequence[float] | None = None) -> None:
         self.predictor_for = predictor_for
         self.joints = list(joints)
         k = self.k = len(self.joints)
@@ -392,6 +410,11 @@ class TorqueMonitor:
         self.rest_velocity = [float(v) for v in vr]  # type: ignore[union-attr]
         if len(self.rest_velocity) != k:
             raise ConfigError(f"monitor: rest_velocity: expected {k} values (one per joint)")
+        vs = (-1.0 if stuck_velocity is None else stuck_velocity)
+        vs = vs if np.ndim(vs) else [vs] * k
+        self.stuck_velocity = [float(v) for v in vs]  # type: ignore[union-attr]
+        if len(self.stuck_velocity) != k:
+            raise ConfigError(f"monitor: stuck_velocity: expected {k} values (one per joint)")
         self.cutoff_hz = float(cutoff_hz)
         self.warmup_cycles = int(round(warmup_s / self.cycle_s))
         self.stop = bool(stop)
@@ -416,6 +439,7 @@ class TorqueMonitor:
         self._out = [False] * k
         self._moving = [0] * k  # cycles the filtered velocity kept its sign above v_rest
         self._sign = [0] * k
+        self._stuck = [0] * k  # cycles the measured |dq| stayed at most v_stuck
 
     # -- per run ---------------------------------------------------------------------------
     def begin(self, index: int, payload: Any, log: Any) -> None:
@@ -437,6 +461,7 @@ class TorqueMonitor:
                 "lower": json.dumps(self.lower), "upper": json.dumps(self.upper),
                 "edges_s": json.dumps(self.edges_s),
                 "rest_velocity": json.dumps(self.rest_velocity),
+                "stuck_velocity": json.dumps(self.stuck_velocity),
                 "warmup_cycles": str(self.warmup_cycles), "stop": str(self.stop).lower(),
                 "pushes": json.dumps([p.__dict__ for p in self.pushes])})
         self._n = 0
@@ -445,6 +470,7 @@ class TorqueMonitor:
         self._out = [False] * self.k
         self._moving = [0] * self.k
         self._sign = [0] * self.k
+        self._stuck = [0] * self.k
         self.records.append(MonitorRecord(index))
 
     def step(self, cycle: int, t: float, q: Sequence[float], dq: Sequence[float],
@@ -468,6 +494,7 @@ class TorqueMonitor:
         rec.armed_cycles += armed
         lo, hi, out = self.lower, self.upper, self._out
         moving, sign, v_rest = self._moving, self._sign, self.rest_velocity
+        stuck, v_stuck = self._stuck, self.stuck_velocity
         edges, cycle_s = self.edges_s, self.cycle_s
         chans = self._channels
         add = getattr(log, "_add", None) if chans else None
@@ -479,7 +506,10 @@ class TorqueMonitor:
             sg = 1 if v > 0.0 else -1 if v < 0.0 else 0
             moving[j] = 0 if sg != sign[j] or abs(v) < v_rest[j] else moving[j] + 1
             sign[j] = sg
-            mv = moving[j] * cycle_s
+            # stuck: the measured velocity at most v_stuck (static friction holds the joint);
+            # logged as minus the time it has been stuck
+            stuck[j] = stuck[j] + 1 if abs(dq[j]) <= v_stuck[j] else 0
+            mv = -stuck[j] * cycle_s if stuck[j] else moving[j] * cycle_s
             b = bisect_right(edges, mv) if edges else 0
             lo_j, hi_j = lo[j][b], hi[j][b]
             x, pred, r = tau_f[j], pred_all[j], res[j]
