@@ -432,8 +432,40 @@ def _read_mat(path: Path) -> dict[str, object]:
         return _read_mat_v73(path)
     except (ValueError, OSError, scipy.io.matlab.MatReadError) as exc:
         # MatReadError (not a ValueError): a file shorter than a MAT header, e.g. empty
-        raise DataError(f"{path}: not a readable MAT file ({exc})") from None
+        raise DataError(f"{path}: not a readable MAT file ({exc})"
+                        + _looks_like(path)) from None
     return {k: v for k, v in raw.items() if not k.startswith("__")}
+
+
+def _looks_like(path: Path) -> str:
+    """What a file that is not a MAT file looks like, from its first bytes, as the tail of
+    the refusal ("; it looks like a CSV text file: name it .csv"); "" when unknown."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4096)
+    except OSError:
+        return ""
+    if not head:
+        return "; the file is empty"
+    if head.startswith(b"\x89MCAP"):
+        return "; it looks like an MCAP log (jointid run): name it .mcap"
+    if head.startswith(b"PK\x03\x04"):
+        return "; it looks like a zip archive (an .xlsx workbook?): export it as CSV (.csv)"
+    if b"\0" in head:
+        return ""
+    try:
+        text = head.decode("utf-8")
+    except UnicodeDecodeError as exc:  # cut inside a character at the 4096th byte
+        if exc.start < len(head) - 3:
+            return ""
+        text = head[:exc.start].decode("utf-8")
+    text = text.lstrip("\ufeff \t\r\n")
+    if text[:1] in ("{", "["):
+        return "; it looks like a JSON text file (a jointid record?), not a data file"
+    line = text.split("\n", 1)[0]
+    if any(d in line for d in ",;\t "):  # the delimiters _read_csv sniffs
+        return "; it looks like a CSV text file: name it .csv"
+    return "; it looks like a text file, not a MAT file" if text else ""
 
 
 class _MatStruct:

@@ -9,7 +9,8 @@ from pathlib import Path
 
 from trajectories.robot_campaign import RobotCampaign, campaign_from_dict
 
-from . import CampaignFileError
+from . import CampaignFileError, SchemaError
+from .schema import mixup_hint
 
 __all__ = ["load_any_campaign", "load_campaign"]
 
@@ -35,11 +36,20 @@ def load_campaign(path: str | Path) -> RobotCampaign:
         The file is not valid TOML (the one-line message names the file, line and column)
         or is not UTF-8.
     trajectories.SchemaError
-        The content does not match the schema (the message names the file and the key).
+        The content does not match the schema (the message names the file and the key;
+        a robot or plant file's adds what it looks like and where it goes:
+        :func:`trajectories.schema.mixup_hint`).
     OSError
         The file cannot be read.
     """
-    return campaign_from_dict(_read(path), source=str(path))
+    raw = _read(path)
+    try:
+        return campaign_from_dict(raw, source=str(path))
+    except SchemaError as exc:  # a robot or plant file given as the campaign: say so
+        hint = mixup_hint(raw, "campaign")
+        if not hint:
+            raise
+        raise SchemaError(f"{exc}; {hint}") from None
 
 
 #: the former name of :func:`load_campaign` (which reads both formats)

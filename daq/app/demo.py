@@ -9,8 +9,11 @@ write, and the fit reads them back with :mod:`ident.loaders`.
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
@@ -44,6 +47,89 @@ def _say(stream: TextIO, text: str) -> None:
     stream.flush()
 
 
+#: the files of a demo's report that describe its logs: an earlier demo's are removed when
+#: a new demo starts replacing its logs (:meth:`DemoFolder.replacing_logs`)
+REPORT_RECORDS = ("report.html", "fit.json", "demo.json", "summary.txt")
+#: the plan's figure, written into DIR before the run (a rerun recognises DIR by it)
+PLAN_PNG = "campaign_plan.png"
+
+
+@dataclass
+class DemoFolder:
+    """A demo's ``--out`` folder while the demo runs (:func:`demo_folder`).
+
+    Attributes
+    ----------
+    out : Path
+        The folder the user named.
+    staged : Path
+        Where the report is written: fit.json, demo.json, the figures, report.html (moved
+        into ``out`` when the demo ends; :func:`ident.report.staged_folder`).
+    logs_done : bool
+        The campaign's run completed: its logs in ``out/logs`` are whole.
+    """
+
+    out: Path
+    staged: Path
+    logs_done: bool = False
+
+    @property
+    def logs(self) -> Path:
+        """``out/logs``: the campaign's run folder."""
+        return self.out / "logs"
+
+    def replacing_logs(self) -> None:
+        """The run is about to replace an earlier demo's logs: its report records
+        (:data:`REPORT_RECORDS`) go with them, so that a demo stopped from here on leaves its
+        own logs and no report, not the earlier demo's report beside logs it does not
+        describe."""
+        for name in REPORT_RECORDS:
+            (self.out / name).unlink(missing_ok=True)
+
+
+@contextmanager
+def demo_folder(out: Path) -> Iterator[DemoFolder]:
+    """The rule of what a demo leaves in ``out``, whatever stops it.
+
+    As the demo goes, ``out`` gets the plan's figure (campaign_plan.png) and the run's
+    folder ``out/logs`` (each payload's MCAP log closed as its run ends, kept when a stop
+    or Ctrl-C ends the run: :mod:`daq.runtime.runfolder`). The report (fit.json, demo.json,
+    the figures, report.html, summary.txt) is written into a staged folder and moved into
+    ``out`` at the end, one rename per file (:func:`ident.report.staged_folder`). So an
+    error or an interrupt (Ctrl-C, SIGTERM) leaves the logs and no report: none of its
+    files, and not an earlier demo's (:meth:`DemoFolder.replacing_logs`). A demo stopped
+    before its first log leaves nothing: ``out`` and the parent folders it created are
+    removed. An interrupt after the run completed says where its logs are kept.
+
+    Yields
+    ------
+    DemoFolder
+        ``out`` created, the staged folder empty.
+    """
+    from daq.runtime.runfolder import missing_folders, remove_unused_folders
+    from ident.report import staged_folder
+
+    created = missing_folders(out)
+    folder = None
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with staged_folder(out) as tmp:
+            folder = DemoFolder(out, tmp)
+            yield folder
+    except BaseException as exc:
+        logs = out / "logs"
+        if not any(logs.glob("*.mcap")):  # before its first log: nothing of it is kept
+            remove_unused_folders([logs])
+            if created and {p.name for p in out.iterdir()} <= {PLAN_PNG}:
+                (out / PLAN_PNG).unlink(missing_ok=True)
+            remove_unused_folders(created)
+        elif (isinstance(exc, KeyboardInterrupt) and folder is not None and folder.logs_done
+              and not getattr(exc, "detail", "")):
+            exc.detail = (f"the demo's logs are complete in {logs}; "  # type: ignore[attr-defined]
+                          f"its report was not written")
+        raise
+
+
 def run_demo(out_dir: str | Path, *, quick: bool = False, max_steps: int = 3,
              stream: TextIO | None = None, campaign_path: Path | None = None,
              plant_path: Path | None = None) -> DemoResult:
@@ -52,7 +138,8 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, max_steps: int = 3,
     Parameters
     ----------
     out_dir : path-like
-        Output folder: ``logs/*.mcap``, ``fit.json``, ``demo.json``, PNG figures, ``report.html``.
+        Output folder: ``logs/*.mcap``, ``fit.json``, ``demo.json``, PNG figures, ``report.html``
+        (the report written whole or not at all, the logs kept: :func:`demo_folder`).
     quick : bool
         Use :meth:`trajectories.robot_campaign.RobotCampaign.quick` (a shortened campaign).
     max_steps : int
@@ -82,6 +169,20 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
     # the demo's first line at once: the imports take seconds on a loaded machine (about
     # 4.5 s on 2 cores at load average 2, the robot demo's 6 s)
     hb.status("loading the pipeline's modules", say=True)
+    out = Path(out_dir)
+    with demo_folder(out) as folder:  # the logs kept, the report whole or absent
+        res = _demo_steps(hb, folder, quick=quick, max_steps=max_steps,
+                          campaign_path=campaign_path, plant_path=plant_path)
+    # moved into out: the report's files by their names
+    return DemoResult(out, out / res.report.name, out / res.fit_json.name, res.logs,
+                      res.summary, res.fit)
+
+
+def _demo_steps(hb: Heartbeat, folder: DemoFolder, *, quick: bool, max_steps: int,
+                campaign_path: Path | None, plant_path: Path | None) -> DemoResult:
+    """The demo's steps under ``hb`` (its status "loading the pipeline's modules" until
+    they are): the plan's figure and the logs into ``folder.out``, the report into
+    ``folder.staged`` (:func:`demo_folder`)."""
     import matplotlib
 
     from daq.runtime.progress import ProgressLine
@@ -102,8 +203,7 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
     hb.status(None)
     matplotlib.use("Agg")
     stream = hb.stream
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out, staged = folder.out, folder.staged
     t_start = time.perf_counter()
     cpath = campaign_path or examples.path("campaign.toml")
     ppath = plant_path or examples.path("plant_rx130l.toml")
@@ -119,17 +219,19 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
     hb.status("planning the campaign")
     plan = plan_robot_campaign(campaign)
     summary = plan.summary()
-    plot_plan(plan, out / "campaign_plan.png")
+    plot_plan(plan, out / PLAN_PNG)  # in out at once: a rerun knows the folder by it
     _say(stream, f"[1/4] planned {campaign.name}: {len(campaign.payloads)} payloads x "
                  f"{plan.run_duration_s:.1f} s at {1 / campaign.cycle_s:.0f} Hz")
 
     # 2. run on the simulated drive over the virtual CAN bus (its own progress bar)
     hb.status(None)
-    result, run_wall = run_with_bar(campaign, out / "logs", plant, stream)
-    stop_if_interrupted(result, out / "logs")  # Ctrl-C: exit 130, not a failure
+    folder.replacing_logs()
+    result, run_wall = run_with_bar(campaign, folder.logs, plant, stream)
+    stop_if_interrupted(result, folder.logs)  # Ctrl-C: exit 130, not a failure
     if result.status != "done":
         raise DaqError(f"demo campaign {result.status}: {result.reason} "
-                       f"(logs kept in {out / 'logs'})")
+                       f"(logs kept in {folder.logs})")
+    folder.logs_done = True
     logs = tuple(r.path for r in result.runs)
     sim_s = sum(r.cycles for r in result.runs) * campaign.cycle_s
     _say(stream, f"[2/4] ran {sum(r.cycles for r in result.runs)} cycles over the virtual CAN "
@@ -208,9 +310,9 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
 
     # figures (captions and grouping: report_build.discover_figures)
     hb.status("drawing the figures and writing the report")
-    written = [out / "campaign_plan.png", *write_plots(report, out),
-               *plot_refinement(ref, out)]
-    figures = discover_figures(out, only=written)
+    shutil.copy2(out / PLAN_PNG, staged / PLAN_PNG)  # the report's folder holds its figures
+    written = [staged / PLAN_PNG, *write_plots(report, staged), *plot_refinement(ref, staged)]
+    figures = discover_figures(staged, only=written)
 
     truth = plant.truth()
     demo = {
@@ -232,9 +334,9 @@ def _run_demo(hb: Heartbeat, out_dir: str | Path, *, quick: bool, max_steps: int
         "figures": figures,
         "logs": [str(p.relative_to(out)) for p in logs],
     }
-    write_json(out / "demo.json", demo)
-    fit_path = write_json(out / "fit.json", fit)
-    html = build_report(out, title=TITLE)
+    write_json(staged / "demo.json", demo)
+    fit_path = write_json(staged / "fit.json", fit)
+    html = build_report(staged, title=TITLE)
     text = _summary(fit, ref, time.perf_counter() - t_start)
     return DemoResult(out, html, fit_path, logs, text, fit)
 
@@ -312,7 +414,8 @@ def check_demo_args(out: Path, max_steps: int | None) -> None:
         The ``--out`` folder: absent, empty, or an earlier demo's (it holds one of
         :data:`DEMO_MARKS`), which the demo regenerates. Any other folder with files in it
         (a ``jointid run`` folder, a ``jointid fit --report`` folder...) is refused: the demo
-        would replace its ``fit.json`` and ``report.html`` or mix its logs in.
+        would replace its ``fit.json`` and ``report.html`` or mix its logs in; so is one
+        where a name of the report (:data:`REPORT_RECORDS`) is a folder.
     max_steps : int or None
         ``--max-steps``: >= 0 (None: the default).
 
@@ -333,6 +436,10 @@ def check_demo_args(out: Path, max_steps: int | None) -> None:
             raise DaqError(f"--out {out}: holds files that are not an earlier demo's "
                            f"({shown}; no demo.json): expected a new or empty folder, the "
                            f"demo writes logs/, fit.json and report.html there")
+    for name in REPORT_RECORDS:  # else known only as the report is moved in, after the run
+        if (out / name).is_dir():
+            raise DaqError(f"--out {out}: {out / name} is a folder, expected the demo's file "
+                           f"name (remove or rename it, or give another --out)")
 
 
 def _demo(args: argparse.Namespace) -> int:

@@ -26,6 +26,7 @@ both.
 from __future__ import annotations
 
 import html
+import shutil
 import sys
 import time
 from dataclasses import dataclass
@@ -57,7 +58,7 @@ from trajectories.excitation import Quality, assess_robot_campaign, condition_nu
 from trajectories.robot_campaign import RobotCampaign
 from trajectories.robot_model import RobotDynamics, prepare_robot_campaign, robot_for_campaign
 
-from .demo import ROBOT_DEMOS
+from .demo import PLAN_PNG, ROBOT_DEMOS, DemoFolder, demo_folder
 from .running import run_with_bar, stop_if_interrupted
 
 __all__ = ["ROBOT_DEMOS", "RobotDemoResult", "logged_condition_number", "run_robot_demo"]
@@ -118,7 +119,8 @@ def run_robot_demo(out_dir: str | Path, *, robot: str = "3", max_steps: int = 2,
     Parameters
     ----------
     out_dir : path-like
-        ``logs/*.mcap``, ``fit.json``, ``demo.json``, figures, ``report.html``.
+        ``logs/*.mcap``, ``fit.json``, ``demo.json``, figures, ``report.html`` (the report
+        written whole or not at all, the logs kept: :func:`.demo.demo_folder`).
     robot : {"3", "6"}
         The shipped 3-dof arm (``examples/campaign_robot3_demo.toml``) or the UR10
         (``examples/campaign_ur10_demo.toml``).
@@ -143,10 +145,21 @@ def _run_robot_demo(hb: Heartbeat, out_dir: str | Path, *, robot: str, max_steps
                     campaign_path: Path | None) -> RobotDemoResult:
     """:func:`run_robot_demo`'s body; ``hb.stream`` is the progress stream, ``hb.status``
     names the step running (a line at least every few seconds on a silent step)."""
+    out = Path(out_dir)
+    with demo_folder(out) as folder:  # the logs kept, the report whole or absent
+        res = _robot_demo_steps(hb, folder, robot=robot, max_steps=max_steps,
+                                campaign_path=campaign_path)
+    # moved into out: the report's files by their names
+    return RobotDemoResult(out, out / res.report.name, res.logs, res.summary, res.figures)
+
+
+def _robot_demo_steps(hb: Heartbeat, folder: DemoFolder, *, robot: str, max_steps: int,
+                      campaign_path: Path | None) -> RobotDemoResult:
+    """The robot demo's steps: the plan's figure and the logs into ``folder.out``, the
+    report into ``folder.staged`` (:func:`.demo.demo_folder`)."""
     matplotlib.use("Agg")
     stream = hb.stream
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out, staged = folder.out, folder.staged
     t_start = time.perf_counter()
     if campaign_path is None:
         if robot not in ROBOT_DEMOS:
@@ -166,7 +179,7 @@ def _run_robot_demo(hb: Heartbeat, out_dir: str | Path, *, robot: str, max_steps
                                        inverse_dynamics=dyn.inverse_dynamics)
     pred = assessment.quality
     plan = assessment.plan
-    plot_robot_plan(plan, out / "campaign_plan.png")
+    plot_robot_plan(plan, out / PLAN_PNG)  # in out at once: a rerun knows the folder by it
     timing["plan_s"] = time.perf_counter() - t0
     _say(stream, f"[1/5] planned {campaign.name}: {len(campaign.payloads)} payloads x "
                  f"{plan.duration_s:.1f} s at {1 / campaign.cycle_s:.0f} Hz, {plan.n_joints} "
@@ -176,12 +189,14 @@ def _run_robot_demo(hb: Heartbeat, out_dir: str | Path, *, robot: str, max_steps
 
     # 2. run on the simulated buses (its own progress bar)
     hb.status(None)
-    result, run_wall = run_with_bar(campaign, out / "logs", True, stream)
+    folder.replacing_logs()
+    result, run_wall = run_with_bar(campaign, folder.logs, True, stream)
     timing["run_s"] = run_wall
-    stop_if_interrupted(result, out / "logs")  # Ctrl-C: exit 130, not a failure
+    stop_if_interrupted(result, folder.logs)  # Ctrl-C: exit 130, not a failure
     if result.status != "done":
         raise DaqError(f"robot demo campaign {result.status}: {result.reason} "
-                       f"(logs kept in {out / 'logs'})")
+                       f"(logs kept in {folder.logs})")
+    folder.logs_done = True
     logs = tuple(r.path for r in result.runs)
     cycles = sum(r.cycles for r in result.runs)
     sim_s = cycles * campaign.cycle_s
@@ -256,9 +271,10 @@ def _run_robot_demo(hb: Heartbeat, out_dir: str | Path, *, robot: str, max_steps
     # figures and report
     hb.status("drawing the figures and writing the report")
     figures: dict[str, list[str]] = {}
+    shutil.copy2(out / PLAN_PNG, staged / PLAN_PNG)  # the report's folder holds its figures
     for name, est in ests.items():
         for j, joint in enumerate(rob.moving):
-            p = out / f"direct_validation_{name}_{joint}.png"
+            p = staged / f"direct_validation_{name}_{joint}.png"
             joint_validation(est, sig, None, j, name).savefig(p, dpi=90)
             figures.setdefault(name, []).append(p.name)
     truth_std = arm_truth(played).truth()
@@ -267,7 +283,7 @@ def _run_robot_demo(hb: Heartbeat, out_dir: str | Path, *, robot: str, max_steps
     summary = _summary(campaign, t3, refinements, refits, pred.cond, logged, sim_s, run_wall,
                        wall)
     public = {k: v for k, v in fit.items() if not k.startswith("_")}
-    write_json(out / "fit.json", public)
+    write_json(staged / "fit.json", public)
     demo = {
         "campaign": str(campaign_path), "robot": rob.source, "joints": list(rob.moving),
         "predicted_condition_number": pred.cond, "logged_condition_number": logged,
@@ -278,8 +294,8 @@ def _run_robot_demo(hb: Heartbeat, out_dir: str | Path, *, robot: str, max_steps
         "refit": refits,
         "logs": [str(p.relative_to(out)) for p in logs],
     }
-    write_json(out / "demo.json", demo)
-    report = _write_report(out, campaign, rob, assessment, result, fit, text, t3, ests,
+    write_json(staged / "demo.json", demo)
+    report = _write_report(staged, campaign, rob, assessment, result, fit, text, t3, ests,
                            truth_std, refinements, refits, logged, figures, summary, sim_s)
     return RobotDemoResult(out, report, logs, summary, figures)
 
@@ -340,7 +356,7 @@ def _write_report(out: Path, campaign: RobotCampaign, rob: Any, assessment: Any,
         "reads them back. The simulator's true parameters are shown beside the identified "
         "ones; with real data that column does not exist.")
     intro.raw(f"<pre>{html.escape(str(assessment))}</pre>")
-    intro.figure(out / "campaign_plan.png", "one payload run of the plan")
+    intro.figure(out / PLAN_PNG, "one payload run of the plan")
     cond = Section("Excitation: predicted vs logged condition number").para(
         f"Condition number of the robot model's regressor (standard parameters, rotor "
         f"inertias, usual friction; {pred.rank} base columns chosen at random states) over "

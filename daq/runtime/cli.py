@@ -51,8 +51,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "payload the free space is checked against the log's expected size. Every end runs "
         "the stop sequence (quick stop, disable): a fault, a failing log file (disk full: "
         "'log write failed: FILE: ...', exit 3), SIGINT, SIGTERM or SIGHUP (exit 128 + "
-        "signal). Exit codes: 0 done, 1 the operator declined a payload, 2 refusal (nothing "
-        "moved), 3 stopped on a fault, 130/143/129 interrupted.",
+        "signal). A run that ends before its first log removes the folders it created (--out "
+        "a/b/c: c, b and a when it created them). Exit codes: 0 done, 1 the operator declined "
+        "a payload, 2 refusal (nothing moved), 3 stopped on a fault, 130/143/129 interrupted.",
     )
     p.add_argument("campaign", type=Path, help="campaign file (TOML)")
     p.add_argument("--simulate", type=Path, metavar="PLANT.toml", default=None, nargs="?",
@@ -83,6 +84,7 @@ def main(args: argparse.Namespace) -> int:
     from trajectories.cli import file_named
 
     from .progress import ProgressLine
+    from .runfolder import missing_folders, remove_unused_folders
     from .runner import prompt_payload, run_campaign
     from .safety import interrupt_signal
 
@@ -109,37 +111,22 @@ def main(args: argparse.Namespace) -> int:
         bar.close()
         return prompt_payload(index, payload, n)
 
-    fresh = not args.out.exists()
+    created = missing_folders(args.out)  # --out a/b/c: the folders this run creates
     try:
         with file_named(campaign.source):  # a limit the plan exceeds: named with the file
             result = run_campaign(campaign, out_dir=args.out, simulate=plant, yes=args.yes,
                                   progress=show, payloads=args.payload, resume=args.resume,
                                   prompt=None if args.yes else ask, overwrite=args.overwrite)
     except BaseException:
-        if fresh:
-            _remove_if_only_lock(args.out)
+        remove_unused_folders(created)
         raise
     finally:
         bar.close()
     print(result.summary(), file=sys.stderr)
     if result.status == "done":
         return 0
+    remove_unused_folders(created)  # ended before its first log (declined, interrupted)
     print(f"jointid run: {result.status}: {result.reason}", file=sys.stderr)
     if result.status == "interrupted":
         return 128 + interrupt_signal(result.reason)
     return {"stopped": 3, "aborted": 1}.get(result.status, 3)
-
-
-def _remove_if_only_lock(folder: Path) -> None:
-    """Remove the ``--out`` folder this run created when it failed before writing anything
-    but its lock file (no drive answering, a refused option...): a stranger's first
-    ``jointid run`` without hardware left ``runs/.jointid-run.lock`` behind. A folder holding
-    anything else (a log, the resume state) is kept as it is."""
-    from .runfolder import LOCK_NAME
-
-    try:
-        if {p.name for p in folder.iterdir()} <= {LOCK_NAME}:
-            (folder / LOCK_NAME).unlink(missing_ok=True)
-            folder.rmdir()
-    except OSError:  # gone, or written meanwhile: left
-        pass

@@ -104,6 +104,32 @@ class FolderLock:
         self.release()
 
 
+def missing_folders(folder: Path) -> list[Path]:
+    """The folders of ``folder``'s path that do not exist yet (``folder`` itself included),
+    outermost first: what a run into ``folder`` creates, for :func:`remove_unused_folders`."""
+    out: list[Path] = []
+    f = Path(folder).absolute()
+    while not f.exists() and f != f.parent:
+        out.insert(0, f)
+        f = f.parent
+    return out
+
+
+def remove_unused_folders(created: list[Path]) -> None:
+    """Remove the folders a run created (:func:`missing_folders`) when it failed before
+    writing anything but its lock file (no drive answering, a refused option...): the
+    innermost when it holds nothing else, then each parent while it is empty. A folder
+    holding anything else (a log, the resume state, a file written meanwhile) is kept, and
+    so are its parents."""
+    for k, d in enumerate(reversed(created)):
+        try:
+            if k == 0 and {p.name for p in d.iterdir()} <= {LOCK_NAME}:
+                (d / LOCK_NAME).unlink(missing_ok=True)
+            d.rmdir()
+        except OSError:  # not empty, gone, or written meanwhile: left, with its parents
+            return
+
+
 # ------------------------------------------------------------------------------ state file
 @dataclass
 class RunState:
