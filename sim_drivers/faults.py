@@ -154,22 +154,14 @@ class FaultInjector:
             raise ValueError(
                 f"FaultInjector.fault_code: expected 0x0001..0xFFFF, got {self.fault_code}"
             )
-        if self.drop_tpdo_cycles < 0:
-            raise ValueError(
-                f"FaultInjector.drop_tpdo_cycles: expected >= 0, got {self.drop_tpdo_cycles}"
-            )
-        if self.delay_tpdo_cycles < 0:
-            raise ValueError(
-                f"FaultInjector.delay_tpdo_cycles: expected >= 0, got {self.delay_tpdo_cycles}"
-            )
+        for name in ("drop_tpdo_cycles", "delay_tpdo_cycles", "late_tpdo_cycles"):
+            if getattr(self, name) < 0:
+                raise ValueError(
+                    f"FaultInjector.{name}: expected >= 0, got {getattr(self, name)}")
         if self.drop_tpdo_period < 0 or 0 < self.drop_tpdo_period <= self.drop_tpdo_cycles:
             raise ValueError(
                 f"FaultInjector.drop_tpdo_period: expected 0 or > drop_tpdo_cycles "
                 f"({self.drop_tpdo_cycles}), got {self.drop_tpdo_period}"
-            )
-        if self.late_tpdo_cycles < 0:
-            raise ValueError(
-                f"FaultInjector.late_tpdo_cycles: expected >= 0, got {self.late_tpdo_cycles}"
             )
         if not 0.0 < self.late_tpdo_share <= 1.0:
             raise ValueError(

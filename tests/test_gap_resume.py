@@ -126,14 +126,15 @@ def test_velocity_after_a_gap_is_the_drives_own():
 
 
 # ------------------------------------------------------------------ on the bus
-def _joint_log(out_root, seed: int, inj: FaultInjector | None):
+def _joint_log(out_root, seed: int, inj: FaultInjector | None, **daq):
     """A lockstep run of the loaded joint (6 kg at 1 m, a 0.3 rad 0.5 Hz sine, 1 ms) with
-    plant seed ``seed`` and the drive's fault injector ``inj``; its log (axis 0)."""
+    plant seed ``seed``, the drive's fault injector ``inj`` and ``daq`` keys over these
+    (``tests/test_late_answers.py`` runs it too); its log (axis 0)."""
     c = joint_campaign(
         "gap", cycle_s=0.001, sine={"amplitude": 0.3, "frequency_hz": 0.5, "periods": 1},
         payload_masses=(6.0,),
         daq={"channel": f"gap_{os.getpid()}_{next(_chan)}", "tpdo_timeout_cycles": GAP + 15,
-             "lockstep_wait_s": 0.02})
+             "lockstep_wait_s": 0.02, **daq})
     p = default_plant()
     p = dataclasses.replace(p, drive=dataclasses.replace(p.drive, seed=seed))
     r = run_campaign(c, out_dir=out_root / f"run{next(_chan)}", simulate=p, yes=True,

@@ -22,18 +22,13 @@ only; checked by putting it back locally) 91-92 N m.
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
-import os
 
 import numpy as np
 import pytest
-from daq_campaigns import joint_campaign
+from test_gap_resume import _joint_log
 
-from daq.protocol.reader import read_run
-from daq.runtime.runner import run_campaign
 from sim_drivers.faults import FaultInjector
-from sim_drivers.plant_config import default_plant
 
 _chan = itertools.count()
 KP = 6000.0  # [N m/rad] joint_campaign's gain
@@ -43,18 +38,8 @@ CYCLE = 0.001  # [s]
 def _run(out_root, seed: int, inj: FaultInjector | None, velocity: str):
     """A lockstep run of the loaded joint (6 kg at 1 m, a 0.3 rad 0.5 Hz sine, 1 ms) with
     plant seed ``seed``, the drive's fault injector ``inj`` and the master's
-    ``velocity_source``; its log."""
-    c = joint_campaign(
-        "late", cycle_s=CYCLE, sine={"amplitude": 0.3, "frequency_hz": 0.5, "periods": 1},
-        payload_masses=(6.0,),
-        daq={"channel": f"late_{os.getpid()}_{next(_chan)}", "tpdo_timeout_cycles": 60,
-             "lockstep_wait_s": 0.02, "velocity_source": velocity})
-    p = default_plant()
-    p = dataclasses.replace(p, drive=dataclasses.replace(p.drive, seed=seed))
-    r = run_campaign(c, out_dir=out_root / f"run{next(_chan)}", simulate=p, yes=True,
-                     fault_injectors={1: inj} if inj else None)
-    assert r.status == "done", r.reason
-    return read_run(r.runs[0].path)
+    ``velocity_source``; its log (``test_gap_resume``'s run, another watchdog)."""
+    return _joint_log(out_root, seed, inj, tpdo_timeout_cycles=60, velocity_source=velocity)
 
 
 def _late(seed: int) -> FaultInjector:

@@ -74,12 +74,20 @@ def _motion(seconds: float, seed: int, bump_nm: float, steps=()) -> tuple[np.nda
     return t, dq, tau
 
 
-def _run(mon: TorqueMonitor, t, dq, tau) -> _Log:
-    log = _Log()
+def _run(mon: TorqueMonitor, t, dq, tau, log: _Log | None = None) -> _Log:
+    return _run_velocity(mon, t, dq, tau, log)[0]
+
+
+def _run_velocity(mon: TorqueMonitor, t, dq, tau,
+                  log: _Log | None = None) -> tuple[_Log, np.ndarray]:
+    """The monitor over the motion: its log, and its filtered velocity each cycle [rad/s]."""
+    log = _Log() if log is None else log
     mon.begin(0, None, log)
+    dqf = []
     for c in range(t.size):
         mon.step(c, t[c], [0.0], [dq[c]], [tau[c]], log)
-    return log
+        dqf.append(mon.velocity[0])
+    return log, np.array(dqf)
 
 
 def _zero(payload):
@@ -103,14 +111,9 @@ def test_moving_time_online_is_the_offline_rule():
     filtered velocity: 0 at a reversal and below the rest velocity, one cycle more else."""
     t, dq, tau = _motion(6.0, 2, 0.0)
     mon = TorqueMonitor(_zero, ["a"], CYCLE_S, rest_velocity=[V_REST])
-    log = _Log()
-    mon.begin(0, None, log)
-    dqf = []
-    for c in range(t.size):
-        mon.step(c, t[c], [0.0], [dq[c]], [tau[c]], log)
-        dqf.append(mon.velocity[0])
+    log, dqf = _run_velocity(mon, t, dq, tau)
     logged = log.samples(0)["moving_s"]
-    np.testing.assert_allclose(logged, moving_seconds(np.array(dqf)[:, None], [V_REST],
+    np.testing.assert_allclose(logged, moving_seconds(dqf[:, None], [V_REST],
                                                       CYCLE_S)[:, 0], atol=1e-12)
     assert logged.max() > 1.5  # one swing, 2 s less the time near rest
     reset = np.flatnonzero(logged == 0.0)

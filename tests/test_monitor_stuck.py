@@ -10,10 +10,13 @@ import json
 
 import numpy as np
 import pytest
+from test_monitor_regime import _Log as _RegimeLog
+from test_monitor_regime import _run as _regime_run
+from test_monitor_regime import _run_velocity
 
 from daq import ConfigError
 from daq.app.monitor import stuck_edges
-from daq.runtime.monitor import _SAMPLE_DTYPE, TorqueMonitor, moving_seconds
+from daq.runtime.monitor import TorqueMonitor, moving_seconds
 from ident import DataError
 from ident.monitor import DEFAULT_EDGES_S, Thresholds, thresholds_from_residual
 
@@ -24,34 +27,10 @@ F_STATIC = 5.0  # [N m] the model's static band: +-F_STATIC below V_REST
 STUCK_EDGES = stuck_edges(DEFAULT_EDGES_S, "filtered", 20.0, 0.0)
 
 
-class _Log:
-    """What TorqueMonitor writes into a run log: its MonitorSample messages per channel."""
+class _Log(_RegimeLog):
+    """What TorqueMonitor writes into a run log (``test_monitor_regime``'s, at 2 ms)."""
 
     start_ns, cycle_ns = 0, 2_000_000
-
-    def __init__(self) -> None:
-        self._w = self
-        self.msgs: dict[int, list[bytes]] = {}
-        self.events: list[tuple[int, str, int]] = []
-
-    def register_schema(self, *a) -> int:
-        return 1
-
-    def register_channel(self, topic, *a) -> int:
-        self.msgs[len(self.msgs)] = []
-        return len(self.msgs) - 1
-
-    def add_metadata(self, *a) -> None:
-        pass
-
-    def _add(self, chan, ts, data, now_ns, cycle) -> None:
-        self.msgs[chan].append(data)
-
-    def event(self, cycle, t, kind, message, axis=-1) -> None:
-        self.events.append((cycle, kind, axis))
-
-    def samples(self, j: int) -> np.ndarray:
-        return np.frombuffer(b"".join(self.msgs[j]), _SAMPLE_DTYPE)
 
 
 def _static(payload):
@@ -85,11 +64,7 @@ def _motion(seconds: float, seed: int, held_nm: float = 0.0, pushes=()
 
 
 def _run(mon: TorqueMonitor, t, dq, tau) -> _Log:
-    log = _Log()
-    mon.begin(0, None, log)
-    for c in range(t.size):
-        mon.step(c, t[c], [0.0], [dq[c]], [tau[c]], log)
-    return log
+    return _regime_run(mon, t, dq, tau, _Log())
 
 
 def _validation(stuck: bool, seed: int = 1) -> Thresholds:
@@ -109,15 +84,10 @@ def test_stuck_time_online_is_the_offline_rule():
     while it is, else the moving time: :func:`moving_seconds` with the measured velocity."""
     t, dq, tau = _motion(8.0, 2)
     mon = TorqueMonitor(_static, ["a"], CYCLE_S, rest_velocity=[V_REST], stuck_velocity=[0.0])
-    log = _Log()
-    mon.begin(0, None, log)
-    dqf = []
-    for c in range(t.size):
-        mon.step(c, t[c], [0.0], [dq[c]], [tau[c]], log)
-        dqf.append(mon.velocity[0])
+    log, dqf = _run_velocity(mon, t, dq, tau, _Log())
     logged = log.samples(0)["moving_s"]
     np.testing.assert_allclose(
-        logged, moving_seconds(np.array(dqf)[:, None], [V_REST], CYCLE_S, dq[:, None],
+        logged, moving_seconds(dqf[:, None], [V_REST], CYCLE_S, dq[:, None],
                                [0.0])[:, 0], atol=1e-12)
     assert np.all((logged < 0) == (dq == 0.0))
     assert logged.min() == pytest.approx(-1.0, abs=2 * CYCLE_S)  # a whole rest
