@@ -16,12 +16,11 @@ differences), it is at least ``std_`` and equals it for the usual model; then, s
   with the sigma that counts q_s as estimated (``RobotRefit.std_qs_``; measured -1.3, -1.6,
   +0.5, -1.7 sigma on seeds 11-14, spread over them 0.135 against a mean sigma of 0.130),
   where eq. 15 at q_s fixed (``std_``: -1.7, -2.0, +0.7, -2.5 sigma; mean 0.094) misses;
-* the columns chain (the default: the model's columns formed at full rate and decimated, the
-  bilinear paper model's quadrant and E products P_s E w formed at FULL rate and decimated
-  like the torque, ``RobotModel(full_rate=True)``): F_VV within 2 sigma of the truth; with
-  ``full_rate=False`` (E and the quadrants applied to the DECIMATED columns, the default
-  until 2026-11-29) the same refit reads F_VV above the truth on every seed (its bias,
-  measured +0.2..+0.85), and the drag column formed on the true states instead of the
+* the columns chain with the bilinear paper model's quadrant and E products P_s E w formed at
+  FULL rate and decimated like the torque (``RobotModel(full_rate=True)``, opt-in): F_VV
+  within 2 sigma of the truth; by default (``full_rate=False``: E and the quadrants applied
+  to the DECIMATED columns) the same refit reads F_VV above the truth on every seed (its
+  bias, measured +0.2..+0.85), and the drag column formed on the true states instead of the
   decimated ones moves it by less than half its sigma: the column is not the cause;
 * where the full-rate products exceed ``ident.robot.design.MAX_BYTES`` the fit says so in one
   warning and is the decimated one (``full_rate=False``) to the last bit.
@@ -85,14 +84,13 @@ def _drag(est, sig, **kw) -> tuple[float, float]:
     return float(rf.coef_[i]), float(rf.std_[i])
 
 
-def _refit(files: list[Path], chain: str, true_dq: list | None = None, decimated: bool = False):
+def _refit(files: list[Path], chain: str, true_dq: list | None = None, full: bool = False):
     out = fit_files(load_robot(ARM3), files, model="paper", q_s=list(QS), chain=chain,
                     prune=False, feasibility=False)
     est, sig = out["_estimators"]["paper"], out["_identification"]
-    if decimated:  # the paper model's products on the decimated columns (full_rate=False)
-        est = RobotModel(**{**est.get_params(), "full_rate": False}).fit(sig)
-        assert not est.full_rate_paper_
-    elif chain == "columns":
+    assert not est.full_rate_paper_  # the default: the products on the decimated columns
+    if full:  # the products formed at full rate (opt-in)
+        est = RobotModel(**{**est.get_params(), "full_rate": True}).fit(sig)
         assert est.full_rate_paper_
     keep = est.fitted_rows(sig)
     got = _drag(est, sig)
@@ -115,13 +113,13 @@ def test_drag_at_the_true_qs_states_chain_and_columns_chain(tmp_path, seed):
     """Measured (2026-11-29, F_VV ± 2 sigma): states chain 2.981 ± 0.193, 2.956 ± 0.175,
     3.117 ± 0.176; columns chain on the decimated products (``full_rate=False``) 3.779 ±
     0.288, 3.364 ± 0.204, 3.205 ± 0.175, with the drag column on the true states 3.803 /
-    3.362 / 3.199; the default columns chain (products at full rate) in the -s output
-    (section 8.9)."""
+    3.362 / 3.199; with the products at full rate 3.168 ± 0.230, 3.146 ± 0.208, 3.089 ±
+    0.175 (section 8.9)."""
     runs = drag_runs(seed)
     files = [write_arm_csv(r, tmp_path / f"p{i}.csv") for i, r in enumerate(runs)]
     (v_s, sd_s), _ = _refit(files, "states")
-    (v_c, sd_c), _ = _refit(files, "columns")
-    (v_d, sd_d), (v_t, _) = _refit(files, "columns", runs, decimated=True)
+    (v_c, sd_c), _ = _refit(files, "columns", full=True)
+    (v_d, sd_d), (v_t, _) = _refit(files, "columns", runs)
     print(f"\nseed {seed}: F_VV states chain {v_s:.3f} ± {2 * sd_s:.3f}, columns chain "
           f"{v_c:.3f} ± {2 * sd_c:.3f}, on the decimated products {v_d:.3f} ± {2 * sd_d:.3f} "
           f"(drag column on the true states {v_t:.3f}); truth {F_VV}")
@@ -138,8 +136,8 @@ def test_products_past_the_memory_bound_fall_back_with_one_warning(tmp_path, mon
     out = fit_files(load_robot(ARM3), files, model="paper", q_s=list(QS), prune=False,
                     feasibility=False)
     est, sig = out["_estimators"]["paper"], out["_identification"]
-    assert est.full_rate_paper_
-    params = est.get_params()
+    params = {**est.get_params(), "full_rate": True}
+    assert RobotModel(**params).fit(sig).full_rate_paper_
     old = RobotModel(**{**params, "full_rate": False}).fit(sig)
     sig.columns.source._caches.clear()  # (the products the fit formed: not formed again)
     monkeypatch.setattr(design_mod, "MAX_BYTES", 1024)

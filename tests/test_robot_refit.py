@@ -337,9 +337,8 @@ def test_unsettled_paper_fit_before_is_the_model_refitted_without_the_terms():
     default trim of 60 its final values put 34 % of A4's rows in another quadrant, the other
     joints' none, README; 2026-11-28). Its refit's "before" is the model refitted on the
     refit's quadrants without the terms, so that before -> after is what the terms add:
-    without terms before = after, while the fit as it is (what "before" was) reads above it on
-    the joints that moved (on the decimated products A4 117 % against 4.9 %; with the
-    products formed at full rate, the default since 2026-11-29, 1.06 x on A1, A2)."""
+    without terms before = after, while the fit as it is (what "before" was) reads far off on
+    the joints that moved (A4 117 % against 4.9 %)."""
     robot = load_robot(KUKA)
     out = fit_files(robot, [KUKA_DATA / "recorded_2020-10-21_FF_A_08ms.mat"], model="paper",
                     mapping=parse_mapping(KUKA_MAP, robot=True), q_unit="deg")
@@ -356,10 +355,8 @@ def test_unsettled_paper_fit_before_is_the_model_refitted_without_the_terms():
     for i, j in enumerate(est.joints_):
         r = rows[:, i]
         as_is = np.linalg.norm(sig.tau[r, i] - pred[r, i]) / np.linalg.norm(sig.tau[r, i])
-        if j in moved:  # "before" is not the fit as it is: strictly below it (the products
-            # at full rate blend a moved row's quadrants: 1.06 x on A1, A2 since 2026-11-29;
-            # on the decimated rows A4 read 117 % against 4.9 %, docs/refinement.md 8.9)
-            assert as_is > (1 + 1e-6) * rf.rel_error["before"][j], (j, as_is, rf.rel_error)
+        if j in moved:
+            assert as_is > 1.1 * rf.rel_error["before"][j], (j, as_is, rf.rel_error)
     text = "\n".join(format_refit(rf.to_json(), "paper"))
     assert "had not settled on" in text and all(j in text for j in moved)
     assert rf.to_json()["unsettled"] == rf.unsettled

@@ -14,9 +14,10 @@ The paper model is bilinear in (theta, per-joint a, b, c, d) by default; ``form=
 identifies instead eq. 42's free products per joint (a_m theta_i, b_m theta_i, ... as
 independent linear parameters, no theta: the single-joint model on each joint, linear
 least squares; :mod:`ident.robot.paper`, "Products form"), on the columns formed at full
-rate when the signals carry them (:func:`ident.robot.design.products_columns`). On the
-columns chain's signals the bilinear form too reads its quadrant and E products formed at
-full rate, with its own load deciding the quadrants (``full_rate``, docs/refinement.md 8.9).
+rate when the signals carry them (:func:`ident.robot.design.products_columns`). With
+``full_rate=True`` (opt-in), on the columns chain's signals the bilinear form too reads its
+quadrant and E products formed at full rate, with its own load deciding the quadrants
+(docs/refinement.md 8.9).
 
 W_j is the joint's row of the base regressor (rigid body + rotor inertias, ``RobotRegressor``
 reduced by ``BaseParameters.reduce``), p_j the known payload torque of the sample's experiment
@@ -348,9 +349,13 @@ class RobotModel(HyperParameters):
         like the torque (:func:`ident.robot.design.products_columns`), and the fit reads
         those rows whole (:func:`~ident.robot.paper.bilinear_rows_coefficients`): the
         measured torque is the decimation of the full-rate product, not the product of the
-        decimated factors (docs/refinement.md section 8.9). Default True
-        (``full_rate_paper_`` says whether it applied). No quadrant band then (``band_`` 0:
-        the low-pass blends both quadrants near a change, as the torque does). Not with
+        decimated factors (docs/refinement.md section 8.9). Default False (opt-in: on the
+        simulated arm it removes the drag's bias at the true q_s, but the KUKA's fit of the
+        README no longer converges with it, and each quadrant pass forms the products
+        again; docs/refinement.md 8.9); ``full_rate_paper_`` says whether it applied. The
+        quadrant band then applies at full rate, decided once by the usual fit's load (a
+        row whose full-rate sample's load is within ``band_`` is left out; no hysteresis:
+        the band does not move). Not with
         ``payload_ratio``, ``payload_params``, ``quadrants="soft"``, ``quadrant="measured"``,
         a base without standard columns, signals without ``columns.source`` (the states
         chain) nor IDIM-IV without the instruments: there, and where a run's full-rate rows
@@ -463,7 +468,7 @@ class RobotModel(HyperParameters):
         eliminate: bool = False,
         threshold_pct: float = DEFAULT_THRESHOLD_PCT,
         quadrants: str = "hard",
-        full_rate: bool = True,
+        full_rate: bool = False,
         **deprecated: Any,
     ) -> None:
         q_s = renamed_keywords("RobotModel", deprecated).get("q_s", q_s)
@@ -1783,7 +1788,19 @@ class RobotModel(HyperParameters):
         quadrants of the load at ``theta``; returns the moments, the rows used and how many
         rows' low-passed P+ moved since the previous such pass (0 at the first)."""
         items = [signals] if isinstance(signals, RobotSignals) else list(signals)
-        prods = [self._banded(self._products_at(s, theta)) for s in items]
+        prods = [self._products_at(s, theta) for s in items]
+        k = len(self.cols_)
+        in_band, considered = np.zeros(k), np.zeros(k)
+        for i, s in enumerate(prods):
+            band = self._full_band(s)
+            if band is None:
+                continue
+            ok = s.columns.keep & (np.abs(s.dq) > self.dq_min) & np.isfinite(s.tau)
+            considered += ok.sum(axis=0)
+            in_band += (ok & ~band).sum(axis=0)
+            prods[i] = replace(s, columns=replace(s.columns, keep=s.columns.keep & band))
+        # the share of each joint's rows the band leaves out (band_share_, as _pass's)
+        self._pass_band_share = in_band / np.maximum(considered, 1)
         moms = self._pass_rows(prods)
         pp = [p.columns.products.pplus for p in prods]
         prev = self._fr_pp

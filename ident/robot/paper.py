@@ -58,8 +58,8 @@ joint, as the single-joint chain does (``RobotColumns.products``); the products 
 reads these rows whole (:func:`rows_coefficients`, :class:`~ident.robot.moments.RowMoments`):
 the same parameters and names, on a one-joint robot the single-joint paper fit to 1e-8.
 
-The bilinear form reads them too on the columns chain (``RobotModel(full_rate=True)``, the
-default): its prediction is the products form's with the products of its own parameters
+The bilinear form reads them too on the columns chain with ``RobotModel(full_rate=True)``
+(opt-in): its prediction is the products form's with the products of its own parameters
 (a_m theta_i, ...; :func:`bilinear_rows_coefficients`), the products formed at full rate with
 the quadrants of its own load prediction, so the measured torque and the model are filtered
 alike (docs/refinement.md section 8.9).
