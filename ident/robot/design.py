@@ -57,6 +57,7 @@ from ..chain import (
     decimate,
     decimation_index,
     filter_experiment,
+    keep_rows,
     rejected,
     resolve_settings,
     run_chain,
@@ -66,9 +67,10 @@ from . import RobotIdentError
 from .base import base_parameters, placed_payload
 from .loaders import RawRobotRun, chain_period
 from .refine_joint import joint_term_columns
-from .signals import FullRateProducts, RobotColumns, RobotSignals
+from .signals import FullRateProducts, ProductsTooLarge, RobotColumns, RobotSignals
 
-__all__ = ["DesignSettings", "FullRateColumns", "design_runs", "joint_columns",
+__all__ = ["DesignSettings", "FullRateColumns", "FullRateSource", "ProductsTooLarge",
+           "design_runs", "joint_columns",
            "resolve_design", "sign_checked", "full_rate_loads",
            "products_columns", "MAX_BYTES", "DQ_MIN_FRACTION"]
 
@@ -79,6 +81,74 @@ DQ_MIN_FRACTION = 0.01
 
 #: Largest full-rate regressor of one experiment the columns chain builds [bytes].
 MAX_BYTES = 4 * 2**30
+
+#: Load models whose full-rate products' q_s-free part a design's source keeps
+#: (:meth:`FullRateSource.cache`).
+SOURCE_CACHES = 4
+
+class FullRateSource:
+    """What built a design's columns (:func:`design_runs`: the runs, the regressor, the
+    resolved settings), kept on them (``RobotColumns.source``) so that the bilinear paper
+    model forms its quadrant and E products at FULL rate with its own load prediction and
+    q_s (:meth:`products`), then decimated like the torque -- the measured torque is the
+    decimation of the full-rate product, not the product of decimated factors
+    (docs/refinement.md section 8.9). Holds references only (the runs' raw arrays)."""
+
+    def __init__(self, runs: Sequence[RawRobotRun], regressor, settings: ChainSettings,
+                 instruments: bool) -> None:
+        self.runs = tuple(runs)
+        self.regressor = regressor
+        self.settings = settings
+        self.instruments = bool(instruments)
+        self._caches: dict = {}
+
+    def cache(self, key: Any) -> tuple[dict, dict]:
+        """For a load model and base (``key``), the :func:`products_columns` cache of its
+        q_s-free part and a dict for the products formed (the caller's, by q_s); the last
+        :data:`SOURCE_CACHES` keys are kept. Memory: about (5 + l_j) n_f floats per run and
+        joint per key (:func:`products_columns`'s ``cache``)."""
+        got = self._caches.pop(key, None)
+        if got is None:
+            got = ({}, {})
+        self._caches[key] = got  # the most recent last
+        while len(self._caches) > SOURCE_CACHES:
+            self._caches.pop(next(iter(self._caches)))
+        return got
+
+    def band(self, signals: RobotSignals, load_torque: Callable[[RobotSignals], np.ndarray],
+             h: np.ndarray) -> np.ndarray:
+        """The decimated rows (n, k) bool of ``signals`` (this design's) whose full-rate
+        sample's load (``load_torque``) lies outside the quadrant band, |tau_out_hat_j| >=
+        ``h[j]`` [N m]: the n-dof paper model's quadrant band at full rate (not dilated by the
+        guard: the products blend a neighbouring sample's quadrant as the torque does, and
+        dilated the band left out 23 % of the rows of an accelerated joint,
+        tests/test_robot_zero_load.py)."""
+        h = np.asarray(h, dtype=float)
+        out = np.ones(signals.tau.shape, dtype=bool)
+        for i, (f, tau_out) in enumerate(full_rate_loads(signals, self.runs, self.settings,
+                                                         load_torque)):
+            rows = np.flatnonzero(signals.experiment == i)
+            out[rows] = keep_rows(np.abs(tau_out) < h[None, :], 0,
+                                  decimation_index(f.n, self.settings.decimation))
+        return out
+
+    def products(self, signals: RobotSignals, load_torque: Callable[[RobotSignals],
+                                                                    np.ndarray],
+                 q_s: np.ndarray, *, base=None, instruments: bool = False,
+                 cache: dict | None = None) -> RobotSignals:
+        """``signals`` (this design's, any ``keep``) carrying the products formed at full rate
+        with ``load_torque`` deciding the quadrants and E at ``q_s`` [rad/s] per joint
+        (:func:`products_columns`; ``cache``: its q_s-free part, for the same load).
+
+        Raises
+        ------
+        ProductsTooLarge
+            A run's full-rate rows past :data:`MAX_BYTES`.
+        """
+        return products_columns(signals, self.runs, self.regressor, self.settings,
+                                load_torque, q_s, base=base, instruments=instruments,
+                                cache=cache)
+
 
 #: The resolved settings of :func:`design_runs`: the chain's (``dq_min`` None:
 #: :data:`ident.fitting.DQ_MIN_FRACTION` of the largest full-rate |dq| of the
@@ -349,7 +419,10 @@ def design_runs(
                             Wz=cat("Wz", 2) if instruments else None,
                             pz=cat("pz") if instruments else None,
                             full=tuple(b.full for b in blocks) if keep_full else None,
-                            full_columns=kept)
+                            full_columns=kept,
+                            source=FullRateSource(runs, regressor,
+                                                  replace(settings, dq_min=float(dq_min)),
+                                                  instruments))
     sig = RobotSignals(t=cat("t"), q=cat("q"), dq=cat("dq"), ddq=cat("ddq"), tau=cat("tau"),
                        joints=joints, experiment=cat("e"),
                        payloads=tuple(run.payload for run in runs),
@@ -506,7 +579,7 @@ def _products_fixed(exp: RawExperiment, i: int, run: RawRobotRun, cols: RobotCol
     need = (exp.q.shape[0] - 2 * settings.trim) * 8 * (
         iv * k * bcols.size + held + max(width) + (iv - 1) * (max(width) - 5) + 4 * k)
     if need > MAX_BYTES:
-        raise RobotIdentError(f"{exp.label}: the full-rate products need "
+        raise ProductsTooLarge(f"{exp.label}: the full-rate products need "
                               f"{need / 2**30:.1f} GiB (more than "
                               f"{MAX_BYTES / 2**30:.0f}); split the log")
     f = _full_rate(cols, i, exp, dt, settings, instruments)

@@ -14,7 +14,10 @@ The paper model is bilinear in (theta, per-joint a, b, c, d) by default; ``form=
 identifies instead eq. 42's free products per joint (a_m theta_i, b_m theta_i, ... as
 independent linear parameters, no theta: the single-joint model on each joint, linear
 least squares; :mod:`ident.robot.paper`, "Products form"), on the columns formed at full
-rate when the signals carry them (:func:`ident.robot.design.products_columns`).
+rate when the signals carry them (:func:`ident.robot.design.products_columns`). With
+``full_rate=True`` (opt-in), on the columns chain's signals the bilinear form too reads its
+quadrant and E products formed at full rate, with its own load deciding the quadrants
+(docs/refinement.md 8.9).
 
 W_j is the joint's row of the base regressor (rigid body + rotor inertias, ``RobotRegressor``
 reduced by ``BaseParameters.reduce``), p_j the known payload torque of the sample's experiment
@@ -59,7 +62,9 @@ into the last link's base parameters instead (only the mass at the flange origin
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -98,6 +103,7 @@ from .packed import PackedMoments
 from .paper import (
     PAPER_BLOCK,
     USUAL_BLOCK,
+    bilinear_rows_coefficients,
     paper_coefficients,
     paper_start,
     products_coefficients,
@@ -110,7 +116,7 @@ from .paper import (
 )
 from .quadrants import QuadrantStore
 from .regressor import RobotRegressor
-from .signals import RobotSignals
+from .signals import ProductsTooLarge, RobotSignals
 from .soft_fit import check_soft, fit_soft, predict_soft
 
 __all__ = ["RobotModel", "MODELS", "METHODS", "FORMS"]
@@ -329,6 +335,28 @@ class RobotModel(HyperParameters):
         by a fraction of the RMS of the model's own load (``quadrant_sigma_bounds_``).
         Standard deviations analytic only (eq. 15 at the solution): no block jackknife, no
         IDIM-IV check and no pruning (:func:`ident.robot.uncertainty.assess`).
+    full_rate : bool
+        The bilinear paper model with model quadrants on the columns chain's signals
+        (``RobotColumns.source``, :func:`ident.robot.design.design_runs`): its quadrant and E
+        products P_s E^e w are formed at FULL rate -- P_s from the model's own full-rate
+        load W theta + p (the usual fit's theta first, then the paper fit's at each
+        re-decision), E at q_s, fixed during a solve -- and then low-passed and decimated
+        like the torque (:func:`ident.robot.design.products_columns`), and the fit reads
+        those rows whole (:func:`~ident.robot.paper.bilinear_rows_coefficients`): the
+        measured torque is the decimation of the full-rate product, not the product of the
+        decimated factors (docs/refinement.md section 8.9). Default False (opt-in: on the
+        simulated arm it removes the drag's bias at the true q_s, but the KUKA's fit of the
+        README no longer converges with it, and each quadrant pass forms the products
+        again; docs/refinement.md 8.9); ``full_rate_paper_`` says whether it applied. The
+        quadrant band then applies at full rate, decided once by the usual fit's load (a
+        row whose full-rate sample's load is within ``band_`` is left out; no hysteresis:
+        the band does not move). Not with
+        ``payload_ratio``, ``payload_params``, ``quadrants="soft"``, ``quadrant="measured"``,
+        a base without standard columns, signals without ``columns.source`` (the states
+        chain) nor IDIM-IV without the instruments: there, and where a run's full-rate rows
+        exceed :data:`ident.robot.design.MAX_BYTES` (one warning), the decimated columns'
+        P and E as before. :meth:`predict` and the n-dof refit read the products too, formed
+        again from the signals' source (the decimated rows on signals without one).
     **deprecated
         ``qs=``: the older spelling of ``q_s`` (accepted with a DeprecationWarning,
         :mod:`ident.vocab`).
@@ -396,6 +424,8 @@ class RobotModel(HyperParameters):
         (docs/robot-identification.md, "quadrants blended by the low-pass").
     full_rate_products_ : bool
         The products form read the products formed at full rate (``form`` above).
+    full_rate_paper_ : bool
+        The bilinear paper model read its products formed at full rate (``full_rate``).
     quadrant_sigma_, quadrant_sigma_std_ : ndarray (k,)
         ``quadrants="soft"``: the fitted load jitter RMS per joint [N m] and its std (NaN
         where it sits on a bound: not identified, ``quadrant_sigma_at_bound_``);
@@ -433,6 +463,7 @@ class RobotModel(HyperParameters):
         eliminate: bool = False,
         threshold_pct: float = DEFAULT_THRESHOLD_PCT,
         quadrants: str = "hard",
+        full_rate: bool = False,
         **deprecated: Any,
     ) -> None:
         q_s = renamed_keywords("RobotModel", deprecated).get("q_s", q_s)
@@ -455,6 +486,7 @@ class RobotModel(HyperParameters):
         self.eliminate = eliminate
         self.threshold_pct = threshold_pct
         self.quadrants = quadrants
+        self.full_rate = full_rate
 
     def get_params(self, deep: bool = False) -> dict[str, Any]:
         """Hyper-parameters (scikit-learn convention; ``set_params`` sets them by name,
@@ -463,7 +495,7 @@ class RobotModel(HyperParameters):
             "regressor", "model", "method", "q_s", "base", "quadrant", "dq_min", "chunk_size",
             "max_iter", "tol", "max_passes", "payload_ratio", "quadrant_theta",
             "quadrant_band", "payload_params", "form", "eliminate", "threshold_pct",
-            "quadrants")}
+            "quadrants", "full_rate")}
 
     def __repr__(self) -> str:
         form = "" if self.form == "bilinear" else f", form={self.form!r}"
@@ -1186,13 +1218,13 @@ class RobotModel(HyperParameters):
         ones may excite them). A failure names its evidence (rows per quadrant and load sign
         of the joints involved, singular values) and what data would fix it, in one line."""
         try:
-            return (*self._fit_on(moms, paper_coefficients, x, free, linear=False), None)
+            return (*self._fit_on(moms, self._paper_cf, x, free, linear=False), None)
         except _Unidentifiable as e:
             if not damped_ok:
                 return self._drop_unidentifiable(moms, x, free, e)
             self._damp = DAMPING
             try:
-                out = self._fit_on(moms, paper_coefficients, x, free, linear=False)
+                out = self._fit_on(moms, self._paper_cf, x, free, linear=False)
             finally:
                 self._damp = 0.0
             err = RobotIdentError(self._evidence(e, moms))
@@ -1221,9 +1253,9 @@ class RobotModel(HyperParameters):
         ia, ig = PAPER_BLOCK.index("a_m"), PAPER_BLOCK.index("a_g")
         for _ in range(x.size):
             # the columns at the point the fit goes on from; else at the refused matrix's
-            dep = self._rank_fix(moms, paper_coefficients, x, free, e.weights)
+            dep = self._rank_fix(moms, self._paper_cf, x, free, e.weights)
             if not dep and e.at is not None:
-                dep = self._rank_fix(moms, paper_coefficients, e.at, free, e.weights)
+                dep = self._rank_fix(moms, self._paper_cf, e.at, free, e.weights)
             if not dep:
                 raise RobotIdentError(evidence + (
                     " (the rank rule names no column to drop: none lies within RCOND "
@@ -1244,7 +1276,7 @@ class RobotModel(HyperParameters):
             if not free.any():
                 raise RobotIdentError(evidence)
             try:
-                return (*self._fit_on(moms, paper_coefficients, x, free, linear=False), None)
+                return (*self._fit_on(moms, self._paper_cf, x, free, linear=False), None)
             except _Unidentifiable as e2:
                 e = e2
                 evidence = (self._evidence(e2, moms) + " (after "
@@ -1344,6 +1376,9 @@ class RobotModel(HyperParameters):
         paper = self.model == "paper"
         model_q = paper and self.quadrant == "model"
         self.full_rate_products_ = self._full_rate(signals)
+        self.full_rate_paper_ = False
+        self._paper_cf: Coeffs = paper_coefficients
+        self._fr_pp: list | None = None
         # quadrant="model": the start (the usual fit) only needs a first theta; on large data
         # it is taken on every stride-th row, and the full pass with the model quadrants
         # follows (module constant START_ROWS)
@@ -1400,8 +1435,23 @@ class RobotModel(HyperParameters):
         # the theta that decides the moments' quadrants
         given = self.quadrant_theta_ is not None
         theta_q = self.quadrant_theta_.copy() if given else xu[:pb].copy()
+        fr_moms = None
+        if model_q and self._full_rate_ok(signals):
+            try:  # the quadrant and E products at full rate (``full_rate``)
+                fr_moms, rows, _ = self._rows_pass(signals, theta_q)
+            except ProductsTooLarge as e:
+                warnings.warn(f"paper model: {e}; its quadrant and E products are taken on "
+                              "the decimated columns instead (docs/refinement.md 8.9)",
+                              stacklevel=2)
+        fr = self.full_rate_paper_ = fr_moms is not None
         self._set_band(moms, theta_q, model_q)
-        if model_q:
+        if fr:
+            self._paper_cf = bilinear_rows_coefficients
+            if self.band_from_ is not None:  # the band at full rate, decided once: again
+                fr_moms, rows, _ = self._rows_pass(signals, theta_q)
+            moms = fr_moms
+            passes += 1
+        elif model_q:
             # the model quadrant sign(tau_out_hat dq) of the usual fit, never the measured
             # torque's: on a joint whose dry friction exceeds its load, sign(tau dq) is
             # "motor" on every row whatever the load does
@@ -1426,7 +1476,7 @@ class RobotModel(HyperParameters):
                 self._unsettled = never_redecided(self.max_passes)
                 for _ in range(int(self.max_passes) - 1):
                     theta, x_prev = x[:pb].copy(), x
-                    if self.band_from_ is not None:  # the band's hysteresis (_in_band)
+                    if self.band_from_ is not None and not fr:  # the band's hysteresis
                         self.band_from_ = np.vstack([self.band_from_, theta])
                     if stores is not None and all(
                             st.covers(theta[c])
@@ -1435,6 +1485,9 @@ class RobotModel(HyperParameters):
                         changed = sum(self._store_update(st, theta[c], m) for st, c, m in
                                       zip(stores, self.cols_, moms, strict=True))
                         self.n_store_updates_ += 1
+                    elif fr:  # the products formed again with this theta's quadrants
+                        moms, rows, changed = self._rows_pass(signals, theta)
+                        passes += 1
                     else:
                         moms, rows, changed, stores = self._pass(
                             signals, theta, 3, theta_q, capacity=cap, gram_from=moms)
@@ -1457,7 +1510,7 @@ class RobotModel(HyperParameters):
             # columns (held at 0, reported; else the refusal), and the quadrants are settled
             # again without them
             x, w, it, pending = self._drop_unidentifiable(moms, x, free, pending.cause)
-        self._finish(moms, paper_coefficients, x, free, w, passes, it,
+        self._finish(moms, self._paper_cf, x, free, w, passes, it,
                      theta_q if model_q else None)
         if self.quadrants == "soft":  # the hard fit is the start (ident.robot.soft_fit)
             fit_soft(self, signals)
@@ -1664,6 +1717,136 @@ class RobotModel(HyperParameters):
         return ((r, j, U, ok, self._row_block(fr, j, dqj, iv=True)) for
                 r, j, fr, dqj, _tauj, U, ok in self._row_chunks(signals))
 
+    # ------------------------------------------------------------------ full rate (bilinear)
+    def _full_rate_ok(self, signals: Any) -> bool:
+        """Whether the bilinear paper fit can form its products at full rate
+        (``full_rate``): the option on, hard model quadrants, no payload ratio or payload
+        parameters, standard columns in the base, and every signal carrying the columns
+        chain's ``source`` (with its instruments for IDIM-IV)."""
+        if not (self.full_rate and self.model == "paper" and self.form == "bilinear"
+                and self.quadrant == "model" and self.quadrants == "hard"
+                and not self.payload_ratio and not self.payload_params and self._kpn):
+            return False
+        items = [signals] if isinstance(signals, RobotSignals) else list(signals)
+        return bool(items) and all(
+            isinstance(s, RobotSignals) and s.columns is not None
+            and s.columns.source is not None
+            and (self.method != "iv" or s.columns.source.instruments) for s in items)
+
+    def _load_at(self, theta: np.ndarray) -> Callable[[RobotSignals], np.ndarray]:
+        """signals -> W_j theta + p_j (n, k) [N m] at ``theta`` (:meth:`load_torque`
+        before the fit has one): the load that decides the full-rate quadrants."""
+        theta = np.array(theta, dtype=float)
+
+        def load(sig: RobotSignals) -> np.ndarray:
+            out = np.full(sig.tau.shape, np.nan)
+            for _s, r, q, dq, ddq, tau, _z, pay, cc in self._chunks(sig, iv=False):
+                W, p, kn = self._rows(q, dq, ddq, tau, pay, None if cc is None else cc[:2])
+                for j, cols in enumerate(self.cols_):
+                    WjT, pj = self._joint(W, p, kn, j)
+                    out[r, j] = theta[cols] @ WjT + pj
+            return out
+
+        return load
+
+    def _products_at(self, sig: RobotSignals, theta: np.ndarray) -> RobotSignals:
+        """``sig`` carrying the products formed at full rate (``sig.columns.source``) with
+        the load at ``theta`` deciding the quadrants and E at ``q_s_``. The source keeps, for
+        its last few thetas (:meth:`~ident.robot.design.FullRateSource.cache`, shared by every
+        model fitted on these signals: a q_s scan's fits start from the same usual fit), the
+        q_s-free part and the products of the last q_s, so that another q_s
+        (:func:`~ident.robot.refit.model_at_qs`, a rescan) forms only the E products again."""
+        src = sig.columns.source
+        iv = self.method == "iv"
+        key = (np.asarray(theta, dtype=float).tobytes(), self.base_.columns.tobytes()
+               if hasattr(self.base_.columns, "tobytes") else tuple(self.base_.columns), iv)
+        cache, formed = src.cache(key)
+        qb = np.asarray(self.q_s_, dtype=float).tobytes()
+        prod = formed.get(qb)
+        if prod is None:
+            prod = src.products(sig, self._load_at(theta), np.array(self.q_s_, dtype=float),
+                                base=self.base_, instruments=iv, cache=cache).columns.products
+            formed.clear()
+            formed[qb] = prod
+        return replace(sig, columns=replace(sig.columns, products=prod))
+
+    def _rows_pass(self, signals: Any, theta: np.ndarray) -> tuple[list[RowMoments], int, int]:
+        """The full-rate products' rows of every joint (:meth:`_pass_rows`) with the
+        quadrants of the load at ``theta``; returns the moments, the rows used and how many
+        rows' low-passed P+ moved since the previous such pass (0 at the first)."""
+        items = [signals] if isinstance(signals, RobotSignals) else list(signals)
+        prods = [self._products_at(s, theta) for s in items]
+        k = len(self.cols_)
+        in_band, considered = np.zeros(k), np.zeros(k)
+        for i, s in enumerate(prods):
+            band = self._full_band(s)
+            if band is None:
+                continue
+            ok = s.columns.keep & (np.abs(s.dq) > self.dq_min) & np.isfinite(s.tau)
+            considered += ok.sum(axis=0)
+            in_band += (ok & ~band).sum(axis=0)
+            prods[i] = replace(s, columns=replace(s.columns, keep=s.columns.keep & band))
+        # the share of each joint's rows the band leaves out (band_share_, as _pass's)
+        self._pass_band_share = in_band / np.maximum(considered, 1)
+        moms = self._pass_rows(prods)
+        pp = [p.columns.products.pplus for p in prods]
+        prev = self._fr_pp
+        changed = 0 if prev is None else sum(
+            int(np.count_nonzero(np.abs(a - b) > 1e-9)) for a, b in zip(pp, prev, strict=True))
+        self._fr_pp = pp
+        return moms, sum(m.n for m in moms), changed
+
+    def _full_band(self, sig: RobotSignals) -> np.ndarray | None:
+        """The rows (n, k) of ``sig`` outside the quadrant band at full rate
+        (:meth:`~ident.robot.design.FullRateSource.band`: the load of the theta that decided
+        the first quadrants, ``band_from_[0]``, against ``band_``; decided once, so no
+        hysteresis); None without a band."""
+        if getattr(self, "band_from_", None) is None or not np.any(self.band_ > 0):
+            return None
+        theta = self.band_from_[0]
+        key = ("band", theta.tobytes(), np.asarray(self.band_, dtype=float).tobytes())
+        _, formed = sig.columns.source.cache(key)
+        if "rows" not in formed:
+            formed["rows"] = sig.columns.source.band(sig, self._load_at(theta), self.band_)
+        return formed["rows"]
+
+    def _banded(self, sig: RobotSignals) -> RobotSignals:
+        """``sig`` with the full-rate band's rows (:meth:`_full_band`) out of its ``keep``."""
+        rows = self._full_band(sig)
+        if rows is None:
+            return sig
+        return replace(sig, columns=replace(sig.columns, keep=sig.columns.keep & rows))
+
+    def full_rate_signals(self, signals: RobotSignals) -> RobotSignals | None:
+        """``signals`` carrying the products formed at full rate as the fitted bilinear paper
+        model predicts on them (``full_rate_paper_``: the quadrants of its final theta, as
+        :meth:`predict` decides them on the decimated rows, or ``quadrant_theta``; E at
+        ``q_s_``); None when the model did not fit on them or ``signals`` cannot form them
+        (no ``columns.source``, or not that design's full set of rows: then the decimated
+        rows serve, :meth:`predict`)."""
+        if not getattr(self, "full_rate_paper_", False) or not self._full_rate_ok(signals):
+            return None
+        theta = (self.quadrant_theta_ if self.quadrant_theta_ is not None
+                 else self.coef_[:self.n_theta_])
+        try:
+            return self._banded(self._products_at(signals, theta))
+        except ProductsTooLarge:
+            return None
+        except RobotIdentError:  # not the design's rows (a part of them)
+            return None
+
+    def _predict_full_rate(self, psig: RobotSignals) -> np.ndarray:
+        """:meth:`predict` of the bilinear form on the products formed at full rate."""
+        out = np.full(psig.tau.shape, np.nan)
+        for _s, r, _q, dq, _ddq, _tau, _z, _pay, cc in self._chunks(psig, iv=False):
+            for j in range(len(self.cols_)):
+                idx = self._local(j)
+                nt = self._nt(j)
+                c0 = bilinear_rows_coefficients(self.coef_[idx[:nt]], self.coef_[idx[nt:]], 0,
+                                                jacobian=False)[0]
+                out[r, j] = c0[:-1] @ self._row_block(cc[6], j, dq[:, j])
+        return out
+
     def _set_band(self, moms: list[JointMoments], theta_q: np.ndarray, model_q: bool) -> None:
         """``band_`` [N m] (``quadrant_band`` x each joint's RMS predicted load with
         ``theta_q``, with model quadrants; else 0), the band the passes leave out, and
@@ -1695,7 +1878,8 @@ class RobotModel(HyperParameters):
         self.band_share_ = self._pass_band_share.copy()
         if not hasattr(self, "_fixed_why"):
             self._fixed_why = {}
-        if self.eliminate and coeffs is not paper_coefficients:
+        bilinear = coeffs in (paper_coefficients, bilinear_rows_coefficients)
+        if self.eliminate and not bilinear:
             x, free, w, it = self._eliminate(moms, coeffs, x, free.copy(), w, it)
         why = self._fixed_why
         self.removed_ = [(n, why[n]) for n in self.fixed_ if n in why]
@@ -1705,7 +1889,7 @@ class RobotModel(HyperParameters):
         self.n_passes_, self.n_iter_ = passes, it
         # Gauss-Newton stopped by its step tolerance (linear forms: always), and the quadrant
         # passes settled (fit's loop: rows no longer moving, or theta no longer)
-        why = [] if coeffs is not paper_coefficients or it < int(self.max_iter) else [
+        why = [] if not bilinear or it < int(self.max_iter) else [
             f"the last Gauss-Newton stopped at max_iter={int(self.max_iter)} with the "
             "parameters still moving"]
         if getattr(self, "_unsettled", ""):
@@ -1727,7 +1911,7 @@ class RobotModel(HyperParameters):
         """Largest |x - x_prev| / sigma over the free parameters with a sigma > 0, sigma
         the standard deviations (eq. 15) of the paper fit ``x`` (weights ``w``) on ``moms``;
         inf when they are not defined (no degree of freedom)."""
-        cov, *_ = self._covariance(moms, paper_coefficients, x, free, w)
+        cov, *_ = self._covariance(moms, self._paper_cf, x, free, w)
         if cov is None:
             return float("inf")
         sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))[free]
@@ -1905,7 +2089,10 @@ class RobotModel(HyperParameters):
         """The coefficient function of the fitted model and form (:mod:`ident.robot.paper`)."""
         if self.model == "usual":
             return usual_coefficients
-        return products_coefficients if self.form == "products" else paper_coefficients
+        if self.form == "products":
+            return products_coefficients
+        return (bilinear_rows_coefficients if getattr(self, "full_rate_paper_", False)
+                else paper_coefficients)
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "coef_"):
@@ -1943,6 +2130,9 @@ class RobotModel(HyperParameters):
         """Predicted joint torques tau_hat (n, k) [N m] on the samples of ``signals``."""
         if getattr(self, "full_rate_products_", False):
             return self._predict_rows(signals)
+        psig = self.full_rate_signals(signals)
+        if psig is not None:
+            return self._predict_full_rate(psig)
         if self.quadrants == "soft":
             return predict_soft(self, signals)
         passes = self._fitted_rows(signals, "predict")
@@ -1998,6 +2188,11 @@ class RobotModel(HyperParameters):
         passes = self._fitted_rows(signals, "fitted_rows")
         out = np.zeros(signals.tau.shape, dtype=bool)
         keep = None if signals.columns is None else signals.columns.keep
+        psig = self.full_rate_signals(signals)
+        if psig is not None:  # the full-rate products' rows, their band (keep) included
+            for r, j, _fr, _dq, _tau, _U, ok in self._row_chunks(psig):
+                out[r, j] = ok
+            return out
         for r, j, cols, WjT, pj, dqj, tauj, _sg in passes:
             out[r, j] = self._row_rule(j, cols, WjT, pj, dqj, tauj,
                                        None if keep is None else keep[r, j])

@@ -57,6 +57,12 @@ low velocity). :func:`ident.robot.design.products_columns` forms them at full ra
 joint, as the single-joint chain does (``RobotColumns.products``); the products form then
 reads these rows whole (:func:`rows_coefficients`, :class:`~ident.robot.moments.RowMoments`):
 the same parameters and names, on a one-joint robot the single-joint paper fit to 1e-8.
+
+The bilinear form reads them too on the columns chain with ``RobotModel(full_rate=True)``
+(opt-in): its prediction is the products form's with the products of its own parameters
+(a_m theta_i, ...; :func:`bilinear_rows_coefficients`), the products formed at full rate with
+the quadrants of its own load prediction, so the measured torque and the model are filtered
+alike (docs/refinement.md section 8.9).
 """
 
 from __future__ import annotations
@@ -70,7 +76,7 @@ from .moments import IDQ, IP, ISG, N_EXTRA, ONE
 
 __all__ = ["PAPER_BLOCK", "USUAL_BLOCK", "PRODUCT_PREFIXES", "paper_coefficients",
            "usual_coefficients", "products_coefficients", "products_names", "products_start",
-           "rows_coefficients",
+           "rows_coefficients", "bilinear_rows_coefficients",
            "products_size", "paper_start", "batch_coefficients", "require_theta"]
 
 #: Per-joint parameter prefixes of the paper model (ROBOT_FORMAT order).
@@ -219,6 +225,42 @@ def rows_coefficients(theta: np.ndarray, blk: np.ndarray, s: int,
     if not jacobian:
         return c0, c1
     return c0, c1, np.eye(nx + 1, nx), np.zeros((nx + 1, nx))
+
+
+def bilinear_rows_coefficients(theta: np.ndarray, blk: np.ndarray, s: int,
+                               jacobian: bool = True) -> tuple[np.ndarray, ...]:
+    """(c0, c1, D0, D1) of the BILINEAR paper model (eq. 30, theta times a, b) on rows given
+    whole, v = [u, tau] with u the products formed at full rate in
+    :func:`products_names`'s order (:meth:`~ident.robot.estimate.RobotModel._row_block`:
+    per load column w_i -- the joint's base columns, then its known torque p -- filt(P+ w),
+    filt(P+ E w), then filt(P- w), -filt(P- E w); filt(P+ sign), filt(P+ E sign), filt(P-
+    sign), filt(P- E sign); dq; 1).
+
+    The products form's coefficients are the products of the bilinear parameters (eq.
+    42-43): a_m theta_i, b_m theta_i, a_g theta_i, b_g theta_i of each base column, a_m,
+    b_m, a_g, b_g of p (its coefficient is 1), then c_m, d_m, c_g, d_g, FV, OFF. So c0 =
+    those products (0 on tau), c1 = D1 = 0, and D0 their derivatives over (theta, blk),
+    ``blk`` = (a_m, b_m, a_g, b_g, c_m, d_m, c_g, d_g, FV, OFF). The same in both slots
+    ``s`` (only s = 0 holds rows: :class:`~ident.robot.moments.RowMoments`)."""
+    nt = theta.shape[0]
+    nl = nt + 1
+    nu = 4 * nl + len(PRODUCTS_TAIL)
+    load = np.r_[theta, 1.0]
+    c0 = np.zeros(nu + 1)
+    for q in range(4):  # a_m, b_m (motor), a_g, b_g (generator)
+        c0[(q // 2) * 2 * nl + q % 2:(q // 2 + 1) * 2 * nl:2] = blk[q] * load
+    c0[4 * nl:nu] = blk[4:]
+    c1 = np.zeros(nu + 1)
+    if not jacobian:
+        return c0, c1
+    D0 = np.zeros((nu + 1, nt + len(PAPER_BLOCK)))
+    i = np.arange(nt)
+    for q in range(4):
+        rows = (q // 2) * 2 * nl + q % 2 + 2 * np.arange(nl)
+        D0[rows[:nt], i] = blk[q]
+        D0[rows, nt + q] = load
+    D0[4 * nl + np.arange(len(PRODUCTS_TAIL)), nt + 4 + np.arange(len(PRODUCTS_TAIL))] = 1.0
+    return c0, c1, D0, np.zeros_like(D0)
 
 
 def products_start(theta: np.ndarray, usual_blk: np.ndarray) -> np.ndarray:

@@ -114,6 +114,8 @@ __all__ = ["RobotRefit", "refit_robot", "extra_name", "model_at_qs"]
 #: Gauss-Newton iterations at most (paper model) and relative step tolerance.
 MAX_ITER = 50
 TOL = 1e-10
+#: Relative step of q_s for the derivative of the products formed at full rate (``std_qs_``).
+QS_STEP = 1e-4
 #: Level of the Wald test that tells whether a found term stays significant in the refit.
 WALD_ALPHA = 0.05
 
@@ -136,6 +138,7 @@ class _Rows:
     experiment: np.ndarray
     Vz: np.ndarray | None = None  # IDIM-IV: the instruments' rows of V (the model's own)
     Xz: np.ndarray | None = None  # IDIM-IV: the extra columns' instruments
+    Vq: np.ndarray | None = None  # rows given whole: d V / d q_s of the joint (std_qs_)
 
 
 @dataclass
@@ -376,7 +379,7 @@ def refit_robot(
         ext_idx[j] += extras[-1]["index"]
         names += own
     # X[j]'s columns are in the order of the terms on joint j, as ext_idx[j]
-    rows = _rows(model, signals, X, keep, Xz)
+    rows = _rows(model, signals, X, keep, Xz, qs_deriv=not (errors_only or linear or iv))
     # held at 0 as the first fit held them; with refit_eliminated, not those its elimination
     # found not significant (eq. 14-16): they are estimated again, as the refinement's refits
     # do (no elimination)
@@ -494,6 +497,9 @@ def _qs_columns(sys: _System, x: np.ndarray) -> list[np.ndarray]:
         nt = m._nt(j)
         li = m._local(j)
         th, blk = x[li[:nt]], x[li[nt:]]
+        if rw.Vq is not None:  # rows given whole (products at full rate): d u / d q_s
+            out.append(rw.Vq @ sys.coeffs(th, blk, 0)[0])
+            continue
         with np.errstate(divide="ignore", invalid="ignore"):
             dE = np.where(rw.E > 0, -rw.E * np.log(rw.E) / float(m.q_s_[j]), 0.0)
         col = np.zeros(rw.E.size)
@@ -614,10 +620,14 @@ def _extra_instruments(signals: RobotSignals, pred: np.ndarray,
 
 
 def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
-          keep: np.ndarray | None, Xz: list[np.ndarray] | None = None) -> list[_Rows]:
+          keep: np.ndarray | None, Xz: list[np.ndarray] | None = None,
+          qs_deriv: bool = False) -> list[_Rows]:
     """Every joint's rows of the stacked system, as the model's own pass selects them; with
     ``Xz`` (IDIM-IV) their instruments too: the model's own (:meth:`RobotModel._pass`'s
-    ``Wz``, ``pz``; the products' ``loads_z``) and ``Xz``."""
+    ``Wz``, ``pz``; the products' ``loads_z``) and ``Xz``. The bilinear paper model fitted
+    on its products formed at full rate (``full_rate_paper_``) reads them again
+    (:meth:`~ident.robot.estimate.RobotModel.full_rate_signals`, at its ``q_s_``), with
+    ``qs_deriv`` their derivative in each joint's q_s too (``std_qs_``)."""
     k = len(model.joints_)
     if keep is None and signals.columns is not None:
         keep = signals.columns.keep
@@ -628,6 +638,9 @@ def _rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
                                   f"{signals.tau.shape}")
     if _full_rate(model):
         return _product_rows(model, signals, X, keep, Xz)
+    psig = model.full_rate_signals(signals) if hasattr(model, "full_rate_signals") else None
+    if psig is not None:
+        return _bilinear_rows(model, psig, X, keep, Xz, qs_deriv)
     # the theta that decided the fit's quadrants (products form: the usual fit's, as predict)
     theta_q = model.coef_[:model.n_theta_] if model._theta_x else model.quadrant_from_
     if model.quadrant_theta_ is not None:
@@ -685,9 +698,57 @@ def _product_rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
     return _assemble(parts, [int(b) + 1 for b in model._bsize], signals, X, Xz)
 
 
+def _bilinear_rows(model: Any, psig: RobotSignals, X: list[np.ndarray],
+                   keep: np.ndarray | None, Xz: list[np.ndarray] | None,
+                   qs_deriv: bool) -> list[_Rows]:
+    """The rows of the bilinear paper model fitted on its products formed at full rate, as
+    the fit read them (``psig``: the signals carrying them, its row rule and ``keep``): V =
+    [u, 0] in :func:`~ident.robot.paper.products_names`'s order, one quadrant slot (P+ = 1,
+    E = 0: the quadrants and E are in the products), the coefficients
+    :func:`~ident.robot.paper.bilinear_rows_coefficients`. With ``qs_deriv`` each row's
+    d u / d q_s,j by central differences (relative step ``QS_STEP``; joint j's products
+    depend on its own q_s only, so two formations serve every joint)."""
+    parts = _parts(len(model.joints_))
+    iv = Xz is not None
+    dU = None
+    if qs_deriv:
+        up, dn = copy.copy(model), copy.copy(model)
+        up.q_s_ = np.asarray(model.q_s_, dtype=float) * (1.0 + QS_STEP)
+        dn.q_s_ = np.asarray(model.q_s_, dtype=float) * (1.0 - QS_STEP)
+        sig_up, sig_dn = up.full_rate_signals(psig), dn.full_rate_signals(psig)
+        if sig_up is not None and sig_dn is not None:
+            dU = (sig_up, sig_dn, 2.0 * QS_STEP * np.asarray(model.q_s_, dtype=float))
+    for r, j, fr, dqj, tauj, U, ok in model._row_chunks(psig):
+        idx = np.arange(psig.n)[r]
+        if keep is not None:
+            ok = ok & keep[idx, j]
+        m = int(ok.sum())
+        p = parts[j]
+        p["idx"].append(idx[ok])
+        p["V"].append(np.concatenate([U[:, ok].T, np.zeros((m, 1))], axis=1))
+        p["pp"].append(np.ones(m))
+        p["E"].append(np.zeros(m))
+        if iv:
+            Uz = model._row_block(fr, j, dqj, iv=True)
+            p["Vz"].append(np.concatenate([Uz[:, ok].T, np.zeros((m, 1))], axis=1))
+        if dU is not None:
+            a = model._row_block(dU[0].columns.products.take(r), j, dqj)
+            b = model._row_block(dU[1].columns.products.take(r), j, dqj)
+            p["Vq"].append(np.concatenate([((a - b)[:, ok] / dU[2][j]).T, np.zeros((m, 1))],
+                                          axis=1))
+        p["tau"].append(tauj[ok])
+    return _assemble(parts, [int(b) + 1 for b in _widths(model)], psig, X, Xz)
+
+
+def _widths(model: Any) -> list[int]:
+    """Per joint, the width of the products' rows u (:func:`~ident.robot.paper.
+    products_size` of its base columns)."""
+    return [4 * (len(c) + 1) + 6 for c in model.cols_]
+
+
 def _parts(k: int) -> list[dict[str, list[np.ndarray]]]:
     """Per joint, the chunks of its rows' fields (:class:`_Rows`) as a pass collects them."""
-    return [{n: [] for n in ("idx", "V", "pp", "E", "tau", "Vz")} for _ in range(k)]
+    return [{n: [] for n in ("idx", "V", "pp", "E", "tau", "Vz", "Vq")} for _ in range(k)]
 
 
 def _assemble(parts: list[dict[str, list[np.ndarray]]], nv: Sequence[int],
@@ -707,7 +768,8 @@ def _assemble(parts: list[dict[str, list[np.ndarray]]], nv: Sequence[int],
                          E=cat(p["E"], (0,)), X=X[j][idx], tau=cat(p["tau"], (0,)),
                          experiment=signals.experiment[idx],
                          Vz=None if Xz is None else cat(p["Vz"], (0, nv[j])),
-                         Xz=None if Xz is None else Xz[j][idx]))
+                         Xz=None if Xz is None else Xz[j][idx],
+                         Vq=cat(p["Vq"], (0, nv[j])) if p["Vq"] else None))
     return out
 
 

@@ -81,6 +81,12 @@ class FullRateProducts:
                                 tuple(a[:, :, rows] for a in self.loads_z))
 
 
+class ProductsTooLarge(RobotIdentError):
+    """The full-rate products of a run need more than ``ident.robot.design.MAX_BYTES``
+    (:func:`ident.robot.design.products_columns`): the bilinear paper fit then reads the
+    decimated columns (``RobotModel(full_rate=True)``, one warning)."""
+
+
 @dataclass(frozen=True)
 class RobotColumns:
     """Regressor columns filtered and decimated in parallel with the torque (the single-joint
@@ -117,6 +123,10 @@ class RobotColumns:
         With ``full``: per run, the full-rate regressor and known torque the chain
         evaluated, kept within a memory bound, so that the load prediction and the full-rate
         products do not evaluate them again.
+    source : ident.robot.design.FullRateSource or None
+        The runs and settings that built these columns (:func:`ident.robot.design.
+        design_runs`): the bilinear paper model forms its products at full rate from them,
+        at its own q_s and quadrants (``RobotModel(full_rate=True)``).
     """
 
     W: np.ndarray
@@ -128,6 +138,7 @@ class RobotColumns:
     products: FullRateProducts | None = None
     full: tuple | None = None
     full_columns: Any = None
+    source: Any = None
 
     def check(self, n: int, k: int, source: str) -> None:
         """Raise :class:`RobotIdentError` unless the shapes fit n samples of k joints."""

@@ -231,7 +231,8 @@ def _take(sig: RobotSignals, rows: np.ndarray) -> RobotSignals:
     c = sig.columns
     cols = None if c is None else RobotColumns(
         W=c.W[:, :, rows], p=c.p[rows], sign=c.sign[rows], keep=c.keep[rows],
-        Wz=None if c.Wz is None else c.Wz[:, :, rows], pz=None if c.pz is None else c.pz[rows])
+        Wz=None if c.Wz is None else c.Wz[:, :, rows], pz=None if c.pz is None else c.pz[rows],
+        products=None if c.products is None else c.products.take(rows))
     return replace(sig, t=sig.t[rows], q=sig.q[rows], dq=sig.dq[rows], ddq=sig.ddq[rows],
                    tau=sig.tau[rows], experiment=sig.experiment[rows],
                    q_ref=None if sig.q_ref is None else sig.q_ref[rows], columns=cols,
@@ -285,12 +286,14 @@ def _sum(moms: list[list[JointMoments]], counts: np.ndarray) -> list[JointMoment
     """sum_u counts[u] moms[u] per joint."""
     out = []
     for j, m0 in enumerate(moms[0]):
-        m = JointMoments(m0.cols, iv=m0.iv, powers=m0.powers)
+        m = type(m0)(m0.cols, iv=m0.iv, powers=m0.powers)  # (rows given whole: RowMoments)
         for c, mu in zip(counts, moms, strict=True):
             if c == 0:
                 continue
             mj = mu[j]
             m.vv += c * mj.vv
+            if hasattr(m, "quadrant_n"):
+                m.quadrant_n += c * mj.quadrant_n
             if m.iv:
                 m.zv += c * mj.zv
                 m.zz += c * mj.zz
@@ -301,7 +304,32 @@ def _sum(moms: list[list[JointMoments]], counts: np.ndarray) -> list[JointMoment
 
 # ------------------------------------------------------------------------------ model hooks
 def _coeffs(model: Any):
-    return usual_coefficients if model.model == "usual" else paper_coefficients
+    if model.model == "usual":
+        return usual_coefficients
+    return model._coefficients if getattr(model, "full_rate_paper_", False) else (
+        paper_coefficients)
+
+
+def _full_rate(model: Any, signals: Any) -> Any:
+    """``signals`` carrying the fitted bilinear paper model's products formed at full rate
+    on the fit's quadrants (``quadrant_from_``; ``RobotModel(full_rate=True)``), so that
+    every unit's moments are the fit's rows (:func:`_moments`); ``signals`` otherwise."""
+    if not getattr(model, "full_rate_paper_", False) or not isinstance(signals, RobotSignals):
+        return signals
+    try:
+        return model._banded(model._products_at(signals, model.quadrant_from_))
+    except RobotIdentError:
+        return signals
+
+
+def _moments(model: Any, sig: Any, theta: Any, powers: int) -> list[JointMoments]:
+    """The fit's moments on ``sig``: the full-rate products' rows when the model was fitted
+    on them and ``sig`` carries them, else the model's pass with the quadrants of
+    ``theta``."""
+    if getattr(model, "full_rate_paper_", False) and isinstance(sig, RobotSignals) and (
+            sig.columns is not None and sig.columns.products is not None):
+        return model._pass_rows(sig)
+    return model._pass(sig, theta, powers)[0]
 
 
 def _free(model: Any, pruned: Sequence[str] = ()) -> np.ndarray:
@@ -313,7 +341,7 @@ def _unit_moments(model: Any, units: list[RobotSignals]) -> list[list[JointMomen
     """Each unit's moments with the quadrants the fit ended on."""
     powers = 1 if model.model == "usual" else 3
     theta = getattr(model, "quadrant_from_", None)
-    return [model._pass(u, theta, powers)[0] for u in units]
+    return [_moments(model, u, theta, powers) for u in units]
 
 
 def _refit(model: Any, moms: list[JointMoments], free: np.ndarray,
@@ -490,7 +518,7 @@ def assess(model: Any, signals: RobotSignals | Sequence[RobotSignals], *,
             last[0] = now
             progress(f"{msg} ({now - t0:.0f} s)")
 
-    units, text = jackknife_units(signals, max(n_blocks, 2))
+    units, text = jackknife_units(_full_rate(model, signals), max(n_blocks, 2))
     moms = _unit_moments(model, units) if n_blocks or prune else []
     say("sigma: unit moments done")
     ivm, note = _iv_check(model, signals) if iv else (
@@ -546,7 +574,8 @@ def _robust_sigma(model: Any, signals: Any, moms: list[list[JointMoments]]
         full = _sum(moms, np.ones(len(moms), dtype=int))
     else:
         powers = 1 if model.model == "usual" else 3
-        full = model._pass(signals, getattr(model, "quadrant_from_", None), powers)[0]
+        full = _moments(model, _full_rate(model, signals),
+                        getattr(model, "quadrant_from_", None), powers)
     return full, long_run_factor(model, signals)
 
 
@@ -748,7 +777,8 @@ def robust_covariance(model: Any, signals: RobotSignals | Sequence[RobotSignals]
         raise RobotIdentError("robust_covariance: soft quadrants are not supported (hard "
                               "quadrants only)")
     powers = 1 if model.model == "usual" else 3
-    moms = model._pass(signals, getattr(model, "quadrant_from_", None), powers)[0]
+    moms = _moments(model, _full_rate(model, signals), getattr(model, "quadrant_from_", None),
+                    powers)
     f = long_run_factor(model, signals, lags) if long_run else np.ones(len(moms))
     return _robust_cov(model, moms, f, _free(model, getattr(model, "pruned_", ())))
 
