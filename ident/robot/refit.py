@@ -531,9 +531,13 @@ def _qs_free_std(sys: _System, x: np.ndarray, free: np.ndarray, w: np.ndarray,
     Af = A[np.ix_(fi, fi)]
     d = np.sqrt(np.abs(np.diag(Af)))
     d[d == 0] = 1.0
-    cov = np.linalg.pinv(Af / d[:, None] / d[None, :], rcond=1e-12) / d[:, None] / d[None, :]
     std = np.zeros(nx + k)
-    std[fi] = np.sqrt(np.clip(sigma2 * np.diag(cov), 0.0, None))
+    try:  # the estimator's eq. 15 (no silent truncation: a singular matrix has no sigma)
+        cov = sys.est.normal_covariance(Af / d[:, None] / d[None, :], None, sigma2)
+    except np.linalg.LinAlgError:
+        std[fi] = np.nan
+        return std[:nx]
+    std[fi] = np.sqrt(np.clip(np.diag(cov), 0.0, None)) / d
     return std[:nx]
 
 
