@@ -68,7 +68,7 @@ from typing import Any
 
 from trajectories import SchemaError
 from trajectories.friction import DEFAULT_Q_S
-from trajectories.schema import Field, Table, fail
+from trajectories.schema import Field, Table, fail, mixup_hint
 
 from . import PlantConfigError
 from .effects import (  # noqa: F401 - re-exported: the effects' parameter dataclasses
@@ -494,7 +494,13 @@ def load_plant(path: str | Path) -> PlantParams:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise PlantConfigError(f"{p}: not valid TOML ({exc})") from None
-    return plant_from_dict(raw, str(p))
+    try:
+        return plant_from_dict(raw, str(p))
+    except PlantConfigError as exc:  # a campaign or robot file given as the plant: say so
+        hint = mixup_hint(raw, "plant")
+        if not hint:
+            raise
+        raise PlantConfigError(f"{exc}; {hint}") from None
 
 
 def default_plant() -> PlantParams:

@@ -142,13 +142,17 @@ def test_a_mat_file_that_is_not_one_says_what_it_looks_like(tmp_path, capfd, con
      "it looks like a robot file", "not a campaign file"),
     (["fit", "--robot", "{ex}/campaign.toml", "{tmp}/run.csv"],
      "it looks like a campaign file", "not a robot file"),
+    (["run", "{ex}/campaign.toml", "--simulate", "{ex}/campaign_robot3.toml", "--out",
+      "{tmp}/runs"], "it looks like a campaign file", "not a simulated joint's plant file"),
+    (["run", "{ex}/campaign.toml", "--simulate", "{robots}/arm3.toml", "--out", "{tmp}/runs"],
+     "it looks like a robot file", "not a simulated joint's plant file"),
     (["fit", "--robot", "{ex}/campaign_robot3_demo.toml", "{tmp}/run.csv"],
      "it looks like a campaign file", "not a robot file"),
 ])
 def test_a_file_of_another_kind_names_the_mix_up(tmp_path, capfd, argv, looks, expected):
     _csv(tmp_path / "run.csv")
     args = [a.format(ex=EXAMPLES, robots=EXAMPLES / "robots", tmp=tmp_path) for a in argv]
-    named = next(a for a in args if a.endswith(".toml"))
+    named = [a for a in args if a.endswith(".toml")][-1]  # the file of the wrong kind
     line = _refused(capfd, args, named, "not this unknown key", looks, expected)
     assert f"{looks}" in line.split("not this unknown key; ", 1)[1], line
     assert not (tmp_path / "runs").exists()
