@@ -38,8 +38,9 @@ RTOL = 1e-12
 N_FIRST = 100
 _VOLATILE = {("result", "wall_s")}
 #: metadata written since the freeze, checked on their own: the campaign as loaded
-#: (daq.runtime.campaign_id; a run folder holds the logs of one campaign)
-_ADDED = {("campaign", "definition")}
+#: (daq.runtime.campaign_id; a run folder holds the logs of one campaign), the velocity the
+#: torque loop filtered ([daq] velocity_source; lockstep: the position's difference)
+_ADDED = {("campaign", "definition"), ("campaign", "velocity_source")}
 
 _RAW = {
     "name": "sj-log",
@@ -64,6 +65,7 @@ def _fingerprint(out_dir: Path, channel: str) -> dict:
     for k, run in enumerate(result.runs):
         runs = [read_run(run.path, axis=a) for a in range(2)]
         assert runs[0].metadata["campaign"]["definition"] == campaign_definition(campaign)
+        assert runs[0].metadata["campaign"]["velocity_source"] == "difference"
         md = {rec: {key: v for key, v in sorted(fields.items())
                     if (rec, key) not in _VOLATILE | _ADDED}
               for rec, fields in sorted(runs[0].metadata.items()) if rec != "software"}
