@@ -688,18 +688,34 @@ def _product_rows(model: Any, signals: RobotSignals, X: list[np.ndarray],
     iv = Xz is not None
     for r, j, U, ok, *z in model.products_rows(signals, instruments=iv):
         idx = np.arange(signals.n)[r]
-        if keep is not None:
-            ok = ok & keep[idx, j]
-        m = int(ok.sum())
         p = parts[j]
-        p["idx"].append(idx[ok])
-        p["V"].append(np.concatenate([U[:, ok].T, np.zeros((m, 1))], axis=1))
-        p["pp"].append(np.ones(m))
-        p["E"].append(np.zeros(m))
+        ok = _add_product_rows(p, idx, U, ok, keep, j)
         if iv:
-            p["Vz"].append(np.concatenate([z[0][:, ok].T, np.zeros((m, 1))], axis=1))
+            p["Vz"].append(_tau_slot(z[0][:, ok].T))
         p["tau"].append(signals.tau[idx[ok], j])
     return _assemble(parts, [int(b) + 1 for b in model._bsize], signals, X, Xz)
+
+
+def _tau_slot(V: np.ndarray) -> np.ndarray:
+    """``V`` (m, p) with the zero tau slot of :func:`~ident.robot.paper.rows_coefficients`
+    appended: (m, p + 1)."""
+    return np.concatenate([V, np.zeros((V.shape[0], 1))], axis=1)
+
+
+def _add_product_rows(p: dict, idx: np.ndarray, U: np.ndarray, ok: np.ndarray,
+                      keep: np.ndarray | None, j: int) -> np.ndarray:
+    """Append one chunk's kept rows of products of joint ``j`` (``U`` (p, rows), ``ok`` the
+    fit's kept ones, and ``keep[idx, j]`` too when given) to its part ``p``: V = [u, 0], one
+    quadrant slot P+ = 1, E = 0 (the quadrants, and E, are in the products already);
+    returns the rows kept."""
+    if keep is not None:
+        ok = ok & keep[idx, j]
+    m = int(ok.sum())
+    p["idx"].append(idx[ok])
+    p["V"].append(_tau_slot(U[:, ok].T))
+    p["pp"].append(np.ones(m))
+    p["E"].append(np.zeros(m))
+    return ok
 
 
 def _bilinear_rows(model: Any, psig: RobotSignals, X: list[np.ndarray],
@@ -724,22 +740,14 @@ def _bilinear_rows(model: Any, psig: RobotSignals, X: list[np.ndarray],
             dU = (sig_up, sig_dn, 2.0 * QS_STEP * np.asarray(model.q_s_, dtype=float))
     for r, j, fr, dqj, tauj, U, ok in model._row_chunks(psig):
         idx = np.arange(psig.n)[r]
-        if keep is not None:
-            ok = ok & keep[idx, j]
-        m = int(ok.sum())
         p = parts[j]
-        p["idx"].append(idx[ok])
-        p["V"].append(np.concatenate([U[:, ok].T, np.zeros((m, 1))], axis=1))
-        p["pp"].append(np.ones(m))
-        p["E"].append(np.zeros(m))
+        ok = _add_product_rows(p, idx, U, ok, keep, j)
         if iv:
-            Uz = model._row_block(fr, j, dqj, iv=True)
-            p["Vz"].append(np.concatenate([Uz[:, ok].T, np.zeros((m, 1))], axis=1))
+            p["Vz"].append(_tau_slot(model._row_block(fr, j, dqj, iv=True)[:, ok].T))
         if dU is not None:
             a = model._row_block(dU[0].columns.products.take(r), j, dqj)
             b = model._row_block(dU[1].columns.products.take(r), j, dqj)
-            p["Vq"].append(np.concatenate([((a - b)[:, ok] / dU[2][j]).T, np.zeros((m, 1))],
-                                          axis=1))
+            p["Vq"].append(_tau_slot(((a - b)[:, ok] / dU[2][j]).T))
         p["tau"].append(tauj[ok])
     return _assemble(parts, [int(b) + 1 for b in _widths(model)], psig, X, Xz)
 
