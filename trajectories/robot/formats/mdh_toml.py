@@ -30,6 +30,7 @@ from ..description import (
     _vector,
     mdh_placement,
 )
+from ..file_kinds import mixup_hint
 from .urdf import LOCATOR, _from_urdf, example_robot_urdf
 
 __all__ = ["read", "robot_from_dict"]
@@ -52,20 +53,6 @@ def read(path: Path) -> Robot:
     return robot_from_dict(raw, src, base_dir=path.parent)
 
 
-def _other_kind(raw: Mapping[str, Any]) -> str:
-    """The likely mix-up of a campaign or plant file given as the robot file, as the tail of
-    the unknown-key error; "" for none. The robot model is the ground floor: the same rule as
-    :func:`trajectories.schema.toml_file_kind` (campaign, plant), kept here."""
-    keys = set(raw)
-    if keys & {"segments", "payloads"}:
-        return ("; it looks like a campaign file ([[segments]], [[payloads]]), not a robot "
-                "file: give it to jointid plan or jointid run")
-    if keys & {"body", "friction"}:
-        return ("; it looks like a simulated joint's plant file ([body], [friction]), not a "
-                "robot file: give it to jointid run CAMPAIGN --simulate")
-    return ""
-
-
 def robot_from_dict(raw: Mapping[str, Any], source: str = "",
                     base_dir: str | Path | None = None) -> Robot:
     """Validate a parsed robot TOML mapping (see :func:`load_robot`); a relative ``urdf`` is
@@ -73,7 +60,8 @@ def robot_from_dict(raw: Mapping[str, Any], source: str = "",
     try:
         _keys(source, "", raw, {"robot", "joints", "motion"})
     except RobotError as exc:  # a campaign or plant file given as the robot file: say so
-        raise RobotError(f"{exc}{_other_kind(raw)}") from None
+        hint = mixup_hint(raw, "robot")
+        raise RobotError(f"{exc}; {hint}" if hint else str(exc)) from None
     r = raw.get("robot")
     if not isinstance(r, Mapping):
         raise _err(source, "robot", "a [robot] table (name, gravity, urdf)")
