@@ -73,6 +73,7 @@ from daq.protocol.reader import LogReadError, RunArrays, read_run
 from trajectories.robot.payload import RobotPayloadData
 
 from . import DataError
+from .held_warnings import warnings_held
 from .robot import RobotIdentError
 from .signals import Signals
 from .timebase import GAP_PERIODS, IRREGULAR_TOL, STEP_BAND, ResamplingWarning, uniform_grid
@@ -896,8 +897,7 @@ def _read_mcap(path: Path, joints: Sequence[str] | None, axis: int | None) -> Ra
         k = len(joints)
         # each axis is one scan of the file, each warning the same of it (truncated, damaged
         # chunks): said once; none before a refusal
-        with warnings.catch_warnings(record=True) as seen:
-            warnings.simplefilter("always")
+        with warnings_held():
             first = read_run(path, axis=0)
             n_axes = _mcap_axes(path, first)
             if n_axes != k:
@@ -906,16 +906,13 @@ def _read_mcap(path: Path, joints: Sequence[str] | None, axis: int | None) -> Ra
                     f"robot moves {k} joints ({_names(joints)})"
                 )
             runs = [first, *(read_run(path, axis=i) for i in range(1, k))]
-        for key in dict.fromkeys((str(w.message), w.category) for w in seen):
-            w = next(w for w in seen if (str(w.message), w.category) == key)
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        for i, (run, name) in enumerate(zip(runs, joints, strict=True)):
-            logged = run.metadata.get(f"drive{i}", {}).get("joint")
-            if logged and logged != name:
-                raise DataError(
-                    f"{path}: metadata drive{i}.joint is {logged!r}, the robot's moving joint "
-                    f"{i + 1} is {name!r} (moving: {_names(joints)})"
-                )
+            for i, (run, name) in enumerate(zip(runs, joints, strict=True)):
+                logged = run.metadata.get(f"drive{i}", {}).get("joint")
+                if logged and logged != name:
+                    raise DataError(
+                        f"{path}: metadata drive{i}.joint is {logged!r}, the robot's moving "
+                        f"joint {i + 1} is {name!r} (moving: {_names(joints)})"
+                    )
     _warn_unfinished(path, runs[0].metadata.get("result", {}))
     cycles = runs[0].cycle
     if cycles.size == 0:  # e.g. a log cut within its first chunk: not a drive-state matter
