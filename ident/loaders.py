@@ -69,7 +69,7 @@ import h5py
 import numpy as np
 import scipy.io
 
-from daq.protocol.reader import LogReadError, RunArrays, read_run
+from daq.protocol.reader import RunArrays, read_run, read_runs
 from trajectories.robot.payload import RobotPayloadData
 
 from . import DataError
@@ -834,18 +834,11 @@ def log_torque_delay(metadata: Mapping[str, Mapping[str, str]], path: Path | str
     return value
 
 
-def _mcap_axes(path: Path, first: RunArrays) -> int:
-    """Number of drives of a jointid log (``drive<i>`` metadata, else probing channels)."""
-    drives = [k for k in first.metadata if re.fullmatch(r"drive\d+", k)]
-    if drives:
-        return len(drives)
-    n = 1
-    while True:
-        try:
-            read_run(path, axis=n)
-        except LogReadError:
-            return n
-        n += 1
+def _mcap_axes(runs: Sequence[RunArrays]) -> int:
+    """Number of drives of a jointid log: its ``drive<i>`` metadata, else the axes read
+    (:func:`daq.protocol.reader.read_runs`: channels ``/joint/0..n-1/state``)."""
+    drives = [k for k in runs[0].metadata if re.fullmatch(r"drive\d+", k)]
+    return len(drives) if drives else len(runs)
 
 
 def _meta_number(meta: Mapping[str, str], key: str, unit: str, path: Path) -> float:
@@ -895,17 +888,19 @@ def _read_mcap(path: Path, joints: Sequence[str] | None, axis: int | None) -> Ra
     else:
         joints = tuple(joints or ())
         k = len(joints)
-        # each axis is one scan of the file, each warning the same of it (truncated, damaged
-        # chunks): said once; none before a refusal
+        # every axis from one scan of the file (each warning of it said once); none of its
+        # warnings before a refusal
         with warnings_held():
-            first = read_run(path, axis=0)
-            n_axes = _mcap_axes(path, first)
+            runs = read_runs(path)
+            n_axes = _mcap_axes(runs)
             if n_axes != k:
                 raise DataError(
                     f"{path}: the log has {n_axes} axes (/joint/0..{n_axes - 1}/state), the "
                     f"robot moves {k} joints ({_names(joints)})"
                 )
-            runs = [first, *(read_run(path, axis=i) for i in range(1, k))]
+            if len(runs) < k:  # drive metadata for a channel missing: the reader names it
+                runs = read_runs(path, range(k))
+            runs = runs[:k]
             for i, (run, name) in enumerate(zip(runs, joints, strict=True)):
                 logged = run.metadata.get(f"drive{i}", {}).get("joint")
                 if logged and logged != name:
