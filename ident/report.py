@@ -189,10 +189,53 @@ def _signals_held() -> Iterator[None]:
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
+#: the list of the files a staged folder moved into its folder (hidden, in that folder): the
+#: next output written there removes those of them it does not rewrite (no stale figure of
+#: an earlier report left to look current), and never any other file
+WRITTEN_LIST = ".jointid-written.json"
+
+
+def written_files(folder: Path) -> list[str]:
+    """The names of the files the last output staged into ``folder`` wrote
+    (:data:`WRITTEN_LIST`; empty when absent or unreadable: a folder of an earlier version,
+    or none of ours). Only plain names: nothing outside ``folder`` is ever named."""
+    try:
+        names = json.loads((folder / WRITTEN_LIST).read_text(encoding="utf-8"))["files"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
+    if not isinstance(names, list):
+        return []
+    return [n for n in names if isinstance(n, str) and n not in ("", ".", "..", WRITTEN_LIST)
+            and Path(n).name == n and "\\" not in n]
+
+
+def _write_list(folder: Path, names: Iterable[str]) -> None:
+    write_text_atomic(folder / WRITTEN_LIST, json.dumps(
+        {"written_by": "jointid (ident.report.staged_folder)", "files": sorted(set(names))},
+        indent=1) + "\n")
+
+
+def remove_written(folder: Path, keep: Iterable[str] = ()) -> list[str]:
+    """Remove the files of ``folder`` that its last staged output wrote
+    (:func:`written_files`), but those named in ``keep``; folders and the user's other files
+    are left. Returns the names removed."""
+    keep = set(keep)
+    gone = []
+    for name in written_files(folder):
+        p = folder / name
+        if name not in keep and (p.is_symlink() or p.is_file()):
+            p.unlink(missing_ok=True)
+            gone.append(name)
+    return gone
+
+
 def _move_in(tmp: Path, final: Path) -> None:
     """The staged folder ``tmp`` becomes ``final``: renamed to it when ``final`` is absent,
-    else its files replace their namesakes in ``final`` one rename each (the other files of
-    ``final`` are kept), signals held over the whole move."""
+    else its files replace their namesakes in ``final`` one rename each and the files of
+    the earlier output there that this one does not rewrite are removed (the user's other
+    files are kept), signals held over the whole move."""
+    new = sorted(f.name for f in tmp.iterdir() if f.name != WRITTEN_LIST)
+    _write_list(tmp, new)
     if final.is_dir():  # a name of ours taken by a folder: refused before any rename
         for f in tmp.iterdir():
             if (final / f.name).is_dir() and not f.is_dir():
@@ -206,8 +249,10 @@ def _move_in(tmp: Path, final: Path) -> None:
             except OSError:  # created meanwhile: move the files in as below
                 if not final.is_dir():
                     raise
-        for f in sorted(tmp.iterdir()):
-            f.replace(final / f.name)
+        for name in new:
+            (tmp / name).replace(final / name)
+        remove_written(final, keep=new)
+        (tmp / WRITTEN_LIST).replace(final / WRITTEN_LIST)
         tmp.rmdir()
 
 
@@ -217,9 +262,10 @@ def staged_folder(final: Path | str) -> Iterator[Path]:
     ``.NAME.part-<pid>-<hex>`` to write into -- beside ``final`` when it is absent, inside it
     when it exists (its parent need not be writable: ``--report .``) --, moved into ``final``
     when the block ends (:func:`_move_in`: a rename when ``final`` is absent, else one rename
-    per file, signals held). On an error or an interrupt (Ctrl-C) inside the block, the
-    temporary folder and the parent folders created for it are removed: ``final`` is left as
-    it was (absent, or its previous files intact), nothing half-written remains.
+    per file, signals held, and the files of the earlier output there that this one does not
+    rewrite removed: :data:`WRITTEN_LIST`). On an error or an interrupt (Ctrl-C) inside the
+    block, the temporary folder and the parent folders created for it are removed: ``final``
+    is left as it was (absent, or its previous files intact), nothing half-written remains.
 
     Parameters
     ----------
