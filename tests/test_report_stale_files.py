@@ -1,6 +1,7 @@
 """No stale file of an earlier output: a report (``jointid fit --report``, a demo's, an
 ``export-model -o``) moved into a folder that holds an earlier one removes the earlier one's
-files it does not rewrite (:data:`ident.report.WRITTEN_LIST`), never the user's other files.
+files it does not rewrite (:data:`ident.report.WRITTEN_LIST`), never the user's other files;
+a SIGKILL during the move leaves a mix that the next output clears.
 
 Before: ``fit --model both --report DIR`` then ``fit --model usual --report DIR`` left the
 paper model's figures of the first fit in DIR, which ``jointid report DIR`` then showed
@@ -11,6 +12,11 @@ logs.
 from __future__ import annotations
 
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -19,6 +25,8 @@ from test_bad_inputs_sweep import _csv
 from daq.app.cli import main
 from daq.app.demo import PLAN_PNG, DemoFolder
 from ident.report import WRITTEN_LIST, staged_folder, written_files
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _output(final: Path, names: list[str], text: str = "x") -> None:
@@ -116,3 +124,70 @@ def test_demo_replacing_its_logs_removes_the_earlier_reports_figures(tmp_path):
     DemoFolder(out, out / ".staged").replacing_logs()
     assert _names(out) == {PLAN_PNG, "logs"}
     assert (out / PLAN_PNG).read_text() == "the new plan"
+
+
+# -- a SIGKILL while the output is moved in ---------------------------------------------------
+
+N_NEW = 3000
+WRITER = """
+import sys
+from pathlib import Path
+from ident.report import staged_folder
+final, n = Path(sys.argv[1]), int(sys.argv[2])
+with staged_folder(final) as tmp:
+    for i in range(n):
+        (tmp / f"new_{i:05d}.png").write_text("new")
+    print("staged", flush=True)
+"""
+
+
+def test_sigkill_while_moving_in_leaves_a_mix_the_next_output_clears(tmp_path):
+    """What remains: the move into an existing folder is one rename per file (not atomic), so a
+    SIGKILL between two renames leaves some new files beside the earlier output's. The list
+    then names both outputs' files: the next output removes them all (and the killed
+    process's staged folder)."""
+    rep = tmp_path / "rep"
+    _output(rep, [f"old_{i:05d}.png" for i in range(N_NEW)], "old")
+    (rep / "notes.txt").write_text("mine\n")
+    proc = subprocess.Popen([sys.executable, "-c", WRITER, str(rep), str(N_NEW)], cwd=ROOT,
+                            stdout=subprocess.PIPE, text=True)
+    first = rep / "new_00000.png"
+    try:
+        assert proc.stdout.readline().strip() == "staged"
+        t_end = time.monotonic() + 60
+        while not first.exists():
+            assert proc.poll() is None and time.monotonic() < t_end, "no file moved in"
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    names = _names(rep)
+    new = {n for n in names if n.startswith("new_")}
+    old = {n for n in names if n.startswith("old_")}
+    assert new and (len(new) < N_NEW or old), "the kill came after the move"  # a mix
+    assert new | old <= set(written_files(rep))  # both outputs' files listed as ours
+    assert any(".part-" in n for n in names)  # the killed process's staged folder
+    _output(rep, ["fit.json", "third.png"])
+    assert _names(rep) == {"fit.json", "third.png", "notes.txt", WRITTEN_LIST}
+    assert (rep / "notes.txt").read_text() == "mine\n"
+
+
+def test_a_staged_folder_of_a_live_writer_is_left(tmp_path):
+    """Only a dead writer's staged folder goes: another process still writing keeps its."""
+    rep = tmp_path / "rep"
+    _output(rep, ["fig.png"])
+    live = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    try:
+        (rep / f".rep.part-{live.pid}-00abcd").mkdir()
+        (rep / f".rep.part-{dead.pid}-00abcd").mkdir()
+        (rep / f".rep.part-{dead.pid}-notours").mkdir()  # not a name staged_folder gives
+        _output(rep, ["fig.png"])
+        assert _names(rep) == {"fig.png", WRITTEN_LIST, f".rep.part-{live.pid}-00abcd",
+                               f".rep.part-{dead.pid}-notours"}
+    finally:
+        live.kill()
+        live.wait()
