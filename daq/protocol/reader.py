@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import struct
 import warnings
 import zlib
@@ -532,8 +533,10 @@ def read_run(path: str | Path, axis: int = 0) -> RunArrays:
 class _EveryAxis:
     """The topics filter of every axis's state and setpoint and the shared ``/setpoint``."""
 
+    _TOPIC = re.compile(r"/setpoint|/joint/\d+/(state|setpoint)")
+
     def __contains__(self, topic: object) -> bool:
-        return isinstance(topic, str) and (topic == "/setpoint" or topic.startswith("/joint/"))
+        return isinstance(topic, str) and self._TOPIC.fullmatch(topic) is not None
 
 
 def read_runs(path: str | Path, axes: Sequence[int] | None = None) -> list[RunArrays]:
