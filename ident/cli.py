@@ -16,15 +16,14 @@ import math
 import os
 import re
 import sys
-import warnings
-from collections.abc import Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from trajectories.friction import DEFAULT_Q_S
 
 from . import DataError
+from .held_warnings import warnings_held  # also for cli_robot, cli_export_model
 from .vocab import METHOD_ALIASES, METHOD_NAMES, method_name, model_name, qs_value
 
 if TYPE_CHECKING:
@@ -452,31 +451,6 @@ def check_foreign_options(args: argparse.Namespace) -> None:
         logs = files[0] + (f" and {len(files) - 1} more" if len(files) > 1 else "")
         raise DataError(f"{' and '.join(used)}: apply to CSV and MAT files only; {logs}: "
                         "jointid MCAP log(s), with their own channels and joint-side torque")
-
-
-@contextmanager
-def warnings_held() -> Iterator[None]:
-    """Warnings of the block held back until it ends: shown then (in order, each once) when
-    it ends normally or by an interrupt, dropped when it ends in an error, so a refusal is
-    its one line (``jointid fit --trim 2000`` said "cut-off 50 Hz is the lower bound" before
-    "too few samples after trimming"; a log cut at 2 kB, "truncated run log" before "no cycle
-    logged (the log is cut short)"). Around the reading and fitting of ``jointid fit`` and
-    the refit of ``export-model`` (seconds; minutes for a robot's long logs, whose progress
-    lines are not held), never around a campaign run."""
-    with warnings.catch_warnings(record=True) as seen:
-        try:
-            yield
-        except Exception:
-            seen.clear()
-            raise
-        finally:
-            held = list(seen)
-    shown = set()
-    for w in held:
-        key = (str(w.message), w.category)
-        if key not in shown:
-            shown.add(key)
-            warnings.showwarning(w.message, w.category, w.filename, w.lineno, w.file, w.line)
 
 
 def _axis_label(inputs: Sequence[Path | str], mapping: Mapping[str, Any], axis: int

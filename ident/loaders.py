@@ -69,10 +69,11 @@ import h5py
 import numpy as np
 import scipy.io
 
-from daq.protocol.reader import LogReadError, RunArrays, read_run
+from daq.protocol.reader import RunArrays, read_run, read_runs
 from trajectories.robot.payload import RobotPayloadData
 
 from . import DataError
+from .held_warnings import warnings_held
 from .robot import RobotIdentError
 from .signals import Signals
 from .timebase import GAP_PERIODS, IRREGULAR_TOL, STEP_BAND, ResamplingWarning, uniform_grid
@@ -833,18 +834,11 @@ def log_torque_delay(metadata: Mapping[str, Mapping[str, str]], path: Path | str
     return value
 
 
-def _mcap_axes(path: Path, first: RunArrays) -> int:
-    """Number of drives of a jointid log (``drive<i>`` metadata, else probing channels)."""
-    drives = [k for k in first.metadata if re.fullmatch(r"drive\d+", k)]
-    if drives:
-        return len(drives)
-    n = 1
-    while True:
-        try:
-            read_run(path, axis=n)
-        except LogReadError:
-            return n
-        n += 1
+def _mcap_axes(runs: Sequence[RunArrays]) -> int:
+    """Number of drives of a jointid log: its ``drive<i>`` metadata, else the axes read
+    (:func:`daq.protocol.reader.read_runs`: channels ``/joint/0..n-1/state``)."""
+    drives = [k for k in runs[0].metadata if re.fullmatch(r"drive\d+", k)]
+    return len(drives) if drives else len(runs)
 
 
 def _meta_number(meta: Mapping[str, str], key: str, unit: str, path: Path) -> float:
@@ -894,28 +888,26 @@ def _read_mcap(path: Path, joints: Sequence[str] | None, axis: int | None) -> Ra
     else:
         joints = tuple(joints or ())
         k = len(joints)
-        # each axis is one scan of the file, each warning the same of it (truncated, damaged
-        # chunks): said once; none before a refusal
-        with warnings.catch_warnings(record=True) as seen:
-            warnings.simplefilter("always")
-            first = read_run(path, axis=0)
-            n_axes = _mcap_axes(path, first)
+        # every axis from one scan of the file (each warning of it said once); none of its
+        # warnings before a refusal
+        with warnings_held():
+            runs = read_runs(path)
+            n_axes = _mcap_axes(runs)
             if n_axes != k:
                 raise DataError(
                     f"{path}: the log has {n_axes} axes (/joint/0..{n_axes - 1}/state), the "
                     f"robot moves {k} joints ({_names(joints)})"
                 )
-            runs = [first, *(read_run(path, axis=i) for i in range(1, k))]
-        for key in dict.fromkeys((str(w.message), w.category) for w in seen):
-            w = next(w for w in seen if (str(w.message), w.category) == key)
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        for i, (run, name) in enumerate(zip(runs, joints, strict=True)):
-            logged = run.metadata.get(f"drive{i}", {}).get("joint")
-            if logged and logged != name:
-                raise DataError(
-                    f"{path}: metadata drive{i}.joint is {logged!r}, the robot's moving joint "
-                    f"{i + 1} is {name!r} (moving: {_names(joints)})"
-                )
+            if len(runs) < k:  # drive metadata for a channel missing: the reader names it
+                runs = read_runs(path, range(k))
+            runs = runs[:k]
+            for i, (run, name) in enumerate(zip(runs, joints, strict=True)):
+                logged = run.metadata.get(f"drive{i}", {}).get("joint")
+                if logged and logged != name:
+                    raise DataError(
+                        f"{path}: metadata drive{i}.joint is {logged!r}, the robot's moving "
+                        f"joint {i + 1} is {name!r} (moving: {_names(joints)})"
+                    )
     _warn_unfinished(path, runs[0].metadata.get("result", {}))
     cycles = runs[0].cycle
     if cycles.size == 0:  # e.g. a log cut within its first chunk: not a drive-state matter

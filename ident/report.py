@@ -14,6 +14,7 @@ import html
 import json
 import math
 import os
+import re
 import secrets
 import shutil
 import signal
@@ -189,10 +190,60 @@ def _signals_held() -> Iterator[None]:
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
+#: the list of the files a staged folder moved into its folder (hidden, in that folder): the
+#: next output written there removes those of them it does not rewrite (no stale figure of
+#: an earlier report left to look current), and never any other file
+WRITTEN_LIST = ".jointid-written.json"
+
+
+def written_files(folder: Path) -> list[str]:
+    """The names of the files the last output staged into ``folder`` wrote
+    (:data:`WRITTEN_LIST`; empty when absent or unreadable: a folder of an earlier version,
+    or none of ours). Only plain names: nothing outside ``folder`` is ever named."""
+    try:
+        names = json.loads((folder / WRITTEN_LIST).read_text(encoding="utf-8"))["files"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
+    if not isinstance(names, list):
+        return []
+    return [n for n in names if isinstance(n, str) and n not in ("", ".", "..", WRITTEN_LIST)
+            and Path(n).name == n and "\\" not in n]
+
+
+def _write_list(folder: Path, names: Iterable[str]) -> None:
+    write_text_atomic(folder / WRITTEN_LIST, json.dumps(
+        {"written_by": "jointid (ident.report.staged_folder)", "files": sorted(set(names))},
+        indent=1) + "\n")
+
+
+def remove_written(folder: Path, keep: Iterable[str] = ()) -> list[str]:
+    """Remove the files of ``folder`` that its last staged output wrote
+    (:func:`written_files`), but those named in ``keep``; folders and the user's other files
+    are left. Returns the names removed."""
+    keep = set(keep)
+    gone = []
+    for name in written_files(folder):
+        p = folder / name
+        if name not in keep and (p.is_symlink() or p.is_file()):
+            p.unlink(missing_ok=True)
+            gone.append(name)
+    return gone
+
+
 def _move_in(tmp: Path, final: Path) -> None:
     """The staged folder ``tmp`` becomes ``final``: renamed to it when ``final`` is absent,
-    else its files replace their namesakes in ``final`` one rename each (the other files of
-    ``final`` are kept), signals held over the whole move."""
+    else its files replace their namesakes in ``final`` one rename each and the files of
+    the earlier output there that this one does not rewrite are removed (the user's other
+    files are kept), signals held over the whole move.
+
+    Not atomic when ``final`` exists: a SIGKILL between two renames leaves ``final`` with
+    some new files and some old ones. :data:`WRITTEN_LIST` is first rewritten to name both
+    outputs' files, so the next output written there still removes every file of both that
+    it does not rewrite (and :func:`staged_folder` the killed process's staged folder). A
+    whole-folder switch is not possible here: ``final`` holds the user's files (kept) and a
+    demo's logs (written into it as the demo runs), and ``--report .`` is staged inside it."""
+    new = sorted(f.name for f in tmp.iterdir() if f.name != WRITTEN_LIST)
+    _write_list(tmp, new)
     if final.is_dir():  # a name of ours taken by a folder: refused before any rename
         for f in tmp.iterdir():
             if (final / f.name).is_dir() and not f.is_dir():
@@ -206,9 +257,35 @@ def _move_in(tmp: Path, final: Path) -> None:
             except OSError:  # created meanwhile: move the files in as below
                 if not final.is_dir():
                     raise
-        for f in sorted(tmp.iterdir()):
-            f.replace(final / f.name)
+        old = written_files(final)
+        _write_list(final, [*old, *new])  # both outputs' files, until the move is done
+        for name in new:
+            (tmp / name).replace(final / name)
+        remove_written(final, keep=new)
+        (tmp / WRITTEN_LIST).replace(final / WRITTEN_LIST)
         tmp.rmdir()
+
+
+def _remove_dead_staging(final: Path) -> None:
+    """Remove the staged folders ``.NAME.part-<pid>-<hex>`` of ``final`` (beside it, or in
+    it) left by a process killed while writing (SIGKILL: its pid is gone)."""
+    full = final.absolute()
+    pattern = re.compile(rf"\.{re.escape(full.name or 'out')}\.part-(\d+)-[0-9a-f]{{6}}")
+    for where in (full.parent, full):
+        try:
+            entries = list(where.iterdir()) if where.is_dir() else []
+        except OSError:
+            continue
+        for d in entries:
+            m = pattern.fullmatch(d.name)
+            if m is None or not d.is_dir() or int(m.group(1)) == os.getpid():
+                continue
+            try:
+                os.kill(int(m.group(1)), 0)
+            except ProcessLookupError:  # its writer is gone
+                shutil.rmtree(d, ignore_errors=True)
+            except OSError:  # alive, another user's
+                pass
 
 
 @contextmanager
@@ -217,9 +294,12 @@ def staged_folder(final: Path | str) -> Iterator[Path]:
     ``.NAME.part-<pid>-<hex>`` to write into -- beside ``final`` when it is absent, inside it
     when it exists (its parent need not be writable: ``--report .``) --, moved into ``final``
     when the block ends (:func:`_move_in`: a rename when ``final`` is absent, else one rename
-    per file, signals held). On an error or an interrupt (Ctrl-C) inside the block, the
-    temporary folder and the parent folders created for it are removed: ``final`` is left as
-    it was (absent, or its previous files intact), nothing half-written remains.
+    per file, signals held, and the files of the earlier output there that this one does not
+    rewrite removed: :data:`WRITTEN_LIST`). On an error or an interrupt (Ctrl-C) inside the
+    block, the temporary folder and the parent folders created for it are removed: ``final``
+    is left as it was (absent, or its previous files intact), nothing half-written remains.
+    A SIGKILL during the move leaves a mix of both outputs (:func:`_move_in`), which the next
+    output written there clears.
 
     Parameters
     ----------
@@ -245,6 +325,7 @@ def staged_folder(final: Path | str) -> Iterator[Path]:
         tmp.mkdir()
         yield tmp
         _move_in(tmp, final)
+        _remove_dead_staging(final)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         for d in reversed(created):

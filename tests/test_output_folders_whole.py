@@ -26,6 +26,7 @@ from robot_campaigns import arm_csvs
 from test_bad_inputs_sweep import _csv
 
 from daq.app.cli import main
+from ident.report import WRITTEN_LIST
 from sim_drivers.arm import Payload
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -233,6 +234,6 @@ def test_export_model_error_while_writing_leaves_nothing(tmp_path, capfd, arm3_r
     assert main(["export-model", str(arm3_record), "-o", str(fresh)]) == 0
     text = capfd.readouterr().out
     assert f"wrote {fresh / 'arm3.urdf'}" in text
-    assert sorted(p.name for p in fresh.iterdir()) == ["arm3.urdf", "consistent.json",
-                                                       "friction.json"]
+    assert sorted(p.name for p in fresh.iterdir()) == [WRITTEN_LIST, "arm3.urdf",
+                                                       "consistent.json", "friction.json"]
     assert sorted(p.name for p in fresh.parent.iterdir()) == ["fresh"]

@@ -10,6 +10,7 @@ before "no cycle logged (the log is cut short)".
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +18,10 @@ import pytest
 from robot_campaigns import arm3_campaign
 
 from daq.app.cli import main
+from daq.protocol.reader import read_metadata
 from daq.runtime.runner import run_campaign
+from ident import DataError
+from ident.loaders import read_file
 
 ROOT = Path(__file__).resolve().parents[1]
 ARM3 = str(ROOT / "examples" / "robots" / "arm3.toml")
@@ -96,3 +100,22 @@ def test_trim_beyond_the_data_is_one_line(tmp_path, capfd, robot):
     ok = _stderr(capfd, ["fit", *args, str(data), "--model", "usual", "--no-consistency"]
                  if robot else ["fit", str(data), "--model", "usual"], 0)
     assert any("warning" in ln and "cut-off" in ln for ln in ok), ok  # shown when it fits
+
+
+def test_robot_loader_says_a_truncation_once(tmp_path, arm_log):
+    """The robot's reading of a truncated log (every axis, ``ident.loaders.read_file``, no
+    CLI around it): "truncated run log" once; a refusal of the same log (a drive's logged
+    joint is not the robot's) is said alone, without it."""
+    cut = _cut(arm_log, tmp_path / "cut.mcap", int(0.7 * arm_log.stat().st_size))
+    joints = tuple(read_metadata(arm_log)[f"drive{i}"]["joint"] for i in range(3))
+    with warnings.catch_warnings(record=True) as log:
+        warnings.simplefilter("always")
+        run = read_file(cut, joints)
+    assert run.q.shape[1] == 3
+    said = [str(w.message) for w in log if TRUNCATED in str(w.message)]
+    assert len(said) == 1, said
+    with warnings.catch_warnings(record=True) as log:
+        warnings.simplefilter("always")
+        with pytest.raises(DataError, match=r"metadata drive1\.joint"):
+            read_file(cut, (joints[0], "elsewhere", joints[2]))
+    assert [str(w.message) for w in log] == []

@@ -79,12 +79,17 @@ class DemoFolder:
         return self.out / "logs"
 
     def replacing_logs(self) -> None:
-        """The run is about to replace an earlier demo's logs: its report records
-        (:data:`REPORT_RECORDS`) go with them, so that a demo stopped from here on leaves its
-        own logs and no report, not the earlier demo's report beside logs it does not
-        describe."""
+        """The run is about to replace an earlier demo's logs: its report goes with them --
+        its records (:data:`REPORT_RECORDS`) and the figures its report wrote
+        (:func:`ident.report.remove_written`), not the new plan's figure --, so that a demo
+        stopped from here on leaves its own logs and no report, not the earlier demo's report
+        or figures beside logs they do not describe."""
+        from ident.report import WRITTEN_LIST, remove_written
+
         for name in REPORT_RECORDS:
             (self.out / name).unlink(missing_ok=True)
+        remove_written(self.out, keep=(PLAN_PNG,))
+        (self.out / WRITTEN_LIST).unlink(missing_ok=True)
 
 
 @contextmanager

@@ -18,10 +18,11 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import struct
 import warnings
 import zlib
-from collections.abc import Iterator
+from collections.abc import Container, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from io import BytesIO
@@ -161,7 +162,8 @@ class _Scan:
     lost_cycles: list[tuple[int, int]] = field(default_factory=list)
 
 
-def _walk_chunk(data: bytes, scan: _Scan, topics: set[str], raw_topics: set[str]) -> None:
+def _walk_chunk(data: bytes, scan: _Scan, topics: Container[str],
+                raw_topics: set[str]) -> None:
     """Collect the records of one decompressed chunk into ``scan``.
 
     Raises
@@ -308,7 +310,7 @@ def _opened(path: Path) -> Iterator[tuple[Any, int, Summary | None]]:
         yield f, size, _read_summary(f, size)
 
 
-def _scan(path: Path, topics: set[str], raw_topics: set[str] = frozenset(),
+def _scan(path: Path, topics: Container[str], raw_topics: set[str] = frozenset(),
           attachments: bool = False) -> _Scan:
     scan = _Scan()
     with _opened(path) as (f, size, summary):
@@ -339,7 +341,7 @@ def _record_at(f: Any, offset: int, length: int, kind: int) -> Any:
     return cls.read(_stream(buf[9:]))
 
 
-def _scan_indexed(f: Any, path: Path, summary: Summary, scan: _Scan, topics: set[str],
+def _scan_indexed(f: Any, path: Path, summary: Summary, scan: _Scan, topics: Container[str],
                   raw_topics: set[str], attachments: bool) -> None:
     """A closed file: every chunk found through its chunk index; a damaged one is skipped."""
     for sid, sch in summary.schemas.items():
@@ -422,7 +424,7 @@ class RecordWalk:
                 return
 
 
-def _scan_stream(f: Any, path: Path, size: int, scan: _Scan, topics: set[str],
+def _scan_stream(f: Any, path: Path, size: int, scan: _Scan, topics: Container[str],
                  raw_topics: set[str], attachments: bool) -> None:
     """A file without a (usable) summary: its records one after the other, up to the first
     that runs past the end of the file (a killed writer). A chunk whose data is damaged
@@ -523,10 +525,63 @@ def read_run(path: str | Path, axis: int = 0) -> RunArrays:
     LogReadError
         If the file is missing, not MCAP, or has no state of that axis.
     """
+    path = Path(path)  # scanned here, not through read_runs: the warnings' stacklevel
+    scan = _scan(path, {"/setpoint", f"/joint/{axis}/state", f"/joint/{axis}/setpoint"})
+    return _run_arrays(path, scan, axis)
+
+
+class _EveryAxis:
+    """The topics filter of every axis's state and setpoint and the shared ``/setpoint``."""
+
+    _TOPIC = re.compile(r"/setpoint|/joint/\d+/(state|setpoint)")
+
+    def __contains__(self, topic: object) -> bool:
+        return isinstance(topic, str) and self._TOPIC.fullmatch(topic) is not None
+
+
+def read_runs(path: str | Path, axes: Sequence[int] | None = None) -> list[RunArrays]:
+    """Read several axes of one payload run in one scan of the file, each as
+    :func:`read_run` reads it (a damaged chunk or a truncated tail warned about once).
+
+    Parameters
+    ----------
+    path : path-like
+        A ``*.mcap`` file written by :class:`daq.runtime.mcaplog.RunLog`.
+    axes : sequence of int or None
+        Drive indices (channels ``/joint/<axis>/state``); None: every axis of the log,
+        ``/joint/0/state``, ``/joint/1/state``... up to the first channel missing.
+
+    Returns
+    -------
+    list of RunArrays
+        One per axis, in the order of ``axes``.
+
+    Raises
+    ------
+    LogReadError
+        If the file is missing, not MCAP, or has no state of one of the axes (of axis 0
+        with ``axes`` None).
+    """
     path = Path(path)
+    if axes is None:
+        scan = _scan(path, _EveryAxis())
+        present = {t for t, _ in scan.channels.values()}
+        n = 0
+        while f"/joint/{n}/state" in present:
+            n += 1
+        axes = range(max(n, 1))
+    else:
+        wanted = {"/setpoint"}
+        for axis in axes:
+            wanted |= {f"/joint/{axis}/state", f"/joint/{axis}/setpoint"}
+        scan = _scan(path, wanted)
+    return [_run_arrays(path, scan, axis) for axis in axes]
+
+
+def _run_arrays(path: Path, scan: _Scan, axis: int) -> RunArrays:
+    """The arrays of axis ``axis`` from a scan that read its topics."""
     topic = f"/joint/{axis}/state"
     sp_topic = f"/joint/{axis}/setpoint"
-    scan = _scan(path, {topic, "/setpoint", sp_topic})
     topics = {t for t, _ in scan.channels.values()}
     if topic not in topics:
         raise LogReadError(f"{path}: no channel {topic} (not a jointid run log, or no data)")
@@ -567,7 +622,7 @@ def read_run(path: str | Path, axis: int = 0) -> RunArrays:
         payload_mass_kg=float(payload.get("mass_kg", "nan")),
         payload_arm_m=float(payload.get("arm_m", "nan")),
         revolute=campaign.get("joint_kind", "revolute") != "prismatic",
-        metadata=scan.metadata,
+        metadata={name: dict(rec) for name, rec in scan.metadata.items()},
         events=events,
         truncated=scan.truncated,
         lost_cycles=tuple(scan.lost_cycles),
