@@ -142,6 +142,10 @@ class RobotFit(HyperParameters):
         ``--quadrants``: the paper model's quadrant weights (``RobotModel(quadrants=...)``;
         "soft": a load jitter per joint fitted with the parameters, analytic σ only, no
         pruning; :mod:`ident.robot.soft_fit`).
+    full_rate : bool
+        ``--full-rate`` (opt-in): the paper model's quadrant and E products formed at full
+        rate (``RobotModel(full_rate=True)``; docs/robot-identification.md, docs/refinement.md
+        section 8.9).
     **deprecated
         ``qs=``: the older spelling of ``q_s`` (accepted with a DeprecationWarning,
         :mod:`ident.vocab`).
@@ -194,6 +198,7 @@ class RobotFit(HyperParameters):
         prune: bool = True,
         sign_check: bool = True,
         quadrants: str = "hard",
+        full_rate: bool = False,
         **deprecated: Any,
     ) -> None:
         q_s = renamed_keywords("RobotFit", deprecated).get("q_s", q_s)
@@ -217,6 +222,7 @@ class RobotFit(HyperParameters):
         self.prune = prune
         self.sign_check = sign_check
         self.quadrants = quadrants
+        self.full_rate = full_rate
 
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
@@ -260,7 +266,7 @@ class RobotFit(HyperParameters):
             known_rotor_inertia=self.known_rotor_inertia, chain=self.chain,
             payload=self.payload, feasibility=self.consistency,
             sigma_blocks=self.sigma_blocks, prune=self.prune, sign_check=self.sign_check,
-            quadrants=self.quadrants)
+            quadrants=self.quadrants, full_rate=self.full_rate)
         self._set(out)
         return self
 

@@ -277,6 +277,7 @@ def fit_robot(
     prune: bool = True,
     progress: Callable[[str], None] | None = None,
     quadrants: str = "hard",
+    full_rate: bool = False,
 ) -> dict[str, Any]:
     """Preprocess, fit each model, cross-validate; the JSON record (no file written).
 
@@ -349,6 +350,13 @@ def fit_robot(
         ``--quadrants``: the paper model's quadrant weights (``RobotModel(quadrants=...)``;
         "soft": a load jitter sigma_j per joint fitted with the parameters, analytic sigma
         only, no pruning; :mod:`ident.robot.soft_fit`). The usual model is not affected.
+    full_rate : bool
+        ``--full-rate`` (opt-in): the paper model's quadrant and E products formed at full
+        rate, then low-passed and decimated like the torque (``RobotModel(full_rate=True)``,
+        docs/refinement.md section 8.9); the record's ``"full_rate"`` and each paper record's
+        ``"full_rate_applied"`` (False, with a note, where the model falls back to the
+        decimated columns: the states chain, ``payload`` ratio or mass, soft quadrants). The
+        usual model is not affected.
 
     Returns
     -------
@@ -467,7 +475,8 @@ def fit_robot(
                           base=base, payload_ratio=payload == "ratio",
                           payload_params=payload == "mass",
                           quadrant_band=0.0 if len(robot.moving) == 1 else 0.03,
-                          quadrants=quadrants if name == "paper" else "hard")
+                          quadrants=quadrants if name == "paper" else "hard",
+                          full_rate=bool(full_rate) and name == "paper")
 
     val_all = val
     q_s, qs_record = _scan_qs(q_s, models, lambda q: model("paper", q), sig, notes)
@@ -497,6 +506,7 @@ def fit_robot(
         "q_s": q_s,
         **qs_record,
         "quadrants": quadrants,
+        "full_rate": bool(full_rate),
         "notes": notes,
         "models": {},
         # the unit of dq_min in the printed summary: the moving joints' kinds
@@ -538,6 +548,13 @@ def fit_robot(
         }
         if name == "paper":
             flag_unidentified(rec)
+            if full_rate:
+                rec["full_rate_applied"] = bool(est.full_rate_paper_)
+                if not est.full_rate_paper_:
+                    notes.append("--full-rate: the paper model's quadrant and E products were "
+                                 "taken on the decimated columns (the full-rate products need "
+                                 "the columns chain, a known payload and hard quadrants; "
+                                 "docs/robot-identification.md)")
             if quadrants == "hard":  # soft: no quadrant band (ident.robot.soft_fit)
                 rec["quadrant_band_share"] = {j: float(x) for j, x in
                                               zip(joints, est.band_share_, strict=True)}
@@ -1386,6 +1403,7 @@ def run(args: argparse.Namespace) -> int:
                         else args.sigma_blocks, prune=not getattr(args, "no_prune", False),
                         sign_check=not getattr(args, "no_sign_check", False),
                         quadrants=getattr(args, "quadrants", None) or "hard",
+                        full_rate=bool(getattr(args, "full_rate", False)),
                         progress=lambda m: print(m, file=sys.stderr))
     if getattr(args, "refine", False):
         refine_robot(out, max_steps=args.max_steps,

@@ -442,7 +442,11 @@ class Estimator:
             out takes its instrument along, and the rule is repeated on the rest until it
             leaves nothing out); ignored by estimators without instruments.
         first, tol
-            As :func:`rank_rule`'s.
+            As :func:`rank_rule`'s. ``first`` orders the rows' rule only: IV's step pivots by
+            the instrumented length alone (:func:`weak_instruments` with ``first = 0``), so
+            that the column the instruments predict least is left out -- with the base
+            parameters pivoted first, a weak base column's dependence fell on a friction
+            column's rounding and nothing was left out (tests/test_robot_iv_weak.py).
 
         Returns
         -------
@@ -459,8 +463,10 @@ class Estimator:
             kept = np.setdiff1d(np.arange(G.shape[0]), dep)
             while kept.size:  # a column left out takes its instrument along: until none
                 sub = np.ix_(kept, kept)
-                weak, wp = weak_instruments(G[sub], A[sub], C[sub], tol,
-                                            int(np.sum(kept < first)))
+                # pivoted by the instrumented length alone (first = 0): the column the
+                # instruments predict least goes, not one pivoted after it (a base parameter
+                # pivoted first would leave a friction column out in its place)
+                weak, wp = weak_instruments(G[sub], A[sub], C[sub], tol)
                 if not weak.size:
                     break
                 out += [(int(kept[k]), weak_reason([names[kept[p]] for p in wp.get(int(k), [])]))

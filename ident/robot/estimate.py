@@ -1528,8 +1528,12 @@ class RobotModel(HyperParameters):
         payload torque without payload or known rotor, a payload parameter not acting on
         it) or a linear combination of its other load columns there (UR10 shoulder pan:
         MX2 and XY2) are fixed at 0 (``fixed_``): the rank rule of every model
-        (:func:`ident.estimators.rank_rule`, pivoted on the scaled Gram matrix); ``removed_``
-        names as a product's partners the same products of the load column's partners.
+        (:meth:`ident.estimators.Estimator.rank_drops` on the load columns' Gram matrix,
+        and for IDIM-IV then on what it solves, the load columns projected on their
+        instruments: a load column the instruments do not determine, e.g. nearly a
+        duplicate of another on the reference trajectory, is left out with
+        :data:`ident.estimators.WEAK_PREFIX`'s reason); ``removed_`` names as a product's
+        partners the same products of the load column's partners.
         With ``eliminate``, the rank rule on every free column (:meth:`_rank_fix`) follows,
         before the first solve, as in the usual fit: the single-joint fit's dependent
         friction columns are dropped and reported, not an error."""
@@ -1552,21 +1556,23 @@ class RobotModel(HyperParameters):
                             for j, c in enumerate(self.cols_)])
         free = np.ones(x.size, dtype=bool)
         self._fixed_why: dict[str, str] = {}
+        est = self._estimator
         for j, m in enumerate(moms):
             nl = len(self.cols_[j]) + 1
-            # the load columns (theta's, then p) on the joint's rows
-            gram = self._load_gram(m, nl)
-            dep, partners = rank_rule(gram, first=nl - 1)
+            # the load columns (theta's, then p) on the joint's rows: W^T W, and for IDIM-IV
+            # Z^T W and Z^T Z (what it solves on them)
+            gram, A, C = self._load_moments(m, nl)
             # load column 0's a_m, b_m, a_g, b_g (products_names' order); column c's: + 2 c
             off = self._bstart[j] + np.array([0, 1, 2 * nl, 2 * nl + 1])
-            for c in dep:
-                i = off + 2 * c
-                free[i] = False
-                x[i] = 0.0
-                for o, k in zip(off, i, strict=True):  # the same product of each partner
-                    self._fixed_why[self.names_[k]] = (
-                        ZERO_COLUMN if not gram[c, c] > 0 else dependent_reason(
-                            [self.names_[o + 2 * q] for q in partners[c]]))
+            # the rule once per product, so that each reason names the same product of the
+            # partners (the columns left out do not depend on the names)
+            drops = [est.rank_drops(gram, [self.names_[o + 2 * q] for q in range(nl)],
+                                    A=A, C=C, first=nl - 1) for o in off]
+            for t, (c, _) in enumerate(drops[0]):
+                for o, d in zip(off, drops, strict=True):
+                    free[o + 2 * c] = False
+                    x[o + 2 * c] = 0.0
+                    self._fixed_why[self.names_[o + 2 * c]] = d[t][1]
         if self.eliminate:
             # the rank rule before the first solve, as the usual fit's (module doc,
             # ``eliminate``): e.g. a load of one sign on every row, whose motor and generator
@@ -1583,17 +1589,22 @@ class RobotModel(HyperParameters):
                             theta_q if model_q else None)
 
     @staticmethod
-    def _load_gram(m: JointMoments, nl: int) -> np.ndarray:
-        """Gram matrix (nl, nl) of a joint's load columns (its base columns, then p) on its
-        rows: from the quadrant moments, or, rows given whole (:class:`RowMoments`), from
-        the products' moments: P+ w + P- w = w (the low-pass is linear), so the sum of the
-        a_m and a_g columns of each load column."""
+    def _load_moments(m: JointMoments, nl: int
+                      ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """W^T W, Z^T W and Z^T Z (nl, nl) of a joint's load columns W (its base columns,
+        then p) and their instruments Z on its rows (None, None without instruments): from
+        the quadrant moments, or, rows given whole (:class:`RowMoments`), from the products'
+        moments: P+ w + P- w = w (the low-pass is linear), so the sum of the a_m and a_g
+        columns of each load column (of each instrument column alike)."""
         if not isinstance(m, RowMoments):
-            return m.vv[0, 0, :nl, :nl] + m.vv[1, 0, :nl, :nl]
-        S = np.zeros((m.nv, nl))
-        S[2 * np.arange(nl), np.arange(nl)] = 1.0
-        S[2 * nl + 2 * np.arange(nl), np.arange(nl)] = 1.0
-        return S.T @ m.vv[0, 0] @ S
+            out = [None if M is None else M[0, 0, :nl, :nl] + M[1, 0, :nl, :nl]
+                   for M in (m.vv, m.zv, m.zz)]
+        else:
+            S = np.zeros((m.nv, nl))
+            S[2 * np.arange(nl), np.arange(nl)] = 1.0
+            S[2 * nl + 2 * np.arange(nl), np.arange(nl)] = 1.0
+            out = [None if M is None else S.T @ M[0, 0] @ S for M in (m.vv, m.zv, m.zz)]
+        return out[0], out[1], out[2]
 
     def _full_rate(self, signals: Any) -> bool:
         """Whether the fit reads the paper model's products formed at full rate
