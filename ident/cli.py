@@ -123,6 +123,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "exceeds 30 %% (flagged unidentified) instead of pruning them and refitting",
     )
     p.add_argument(
+        "--full-rate",
+        action="store_true",
+        help="--robot only, columns chain: the paper model's quadrant and Stribeck products "
+        "formed at full rate, then low-passed and decimated like the torque (less bias of a "
+        "drag or Stribeck term near reversals; slower; docs/robot-identification.md)",
+    )
+    p.add_argument(
         "--quadrants",
         metavar="{hard,soft}",
         help="--robot only: the paper model's quadrant weights: hard (default, eq. 27-28) or "
@@ -291,6 +298,7 @@ _ROBOT_ONLY = (
     ("sigma_blocks", "--sigma-blocks", ""),
     ("no_prune", "--no-prune", ""),
     ("quadrants", "--quadrants", ""),
+    ("full_rate", "--full-rate", ""),
 )
 
 

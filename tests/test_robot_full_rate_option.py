@@ -14,11 +14,13 @@ chain, which has no full-rate source, it falls back to the decimated products wi
 from __future__ import annotations
 
 import functools
+import json
 from pathlib import Path
 
 import numpy as np
 from robot_campaigns import ARM3, write_arm_csv
 
+from daq.app.cli import main
 from ident.api_robot import RobotFit
 from ident.cli_robot import fit_files
 from ident.robot.estimate import RobotModel
@@ -67,3 +69,21 @@ def test_robot_fit_keyword():
     assert est.get_params()["full_rate"] is True
     assert RobotFit(ARM3).get_params()["full_rate"] is False
     assert "full_rate=True" in repr(est)
+
+
+def test_full_rate_flag_of_jointid_fit(tmp_path, capfd):
+    """``jointid fit --robot ... --full-rate`` reaches the paper model; without ``--robot``
+    it is refused in one line."""
+    files = _files(tmp_path)
+    out = tmp_path / "fit.json"
+    code = main(["fit", "--robot", str(ARM3), *map(str, files), "--model", "paper",
+                 "--q-s", "0.05", "--no-prune", "--no-consistency",
+                 "--sigma-blocks", "0", "--full-rate", "--json", str(out)])
+    err = capfd.readouterr().err
+    assert code == 0, err
+    rec = json.loads(out.read_text())
+    assert rec["full_rate"] is True and rec["models"]["paper"]["full_rate_applied"] is True
+    code = main(["fit", str(files[0]), "--full-rate"])
+    err = capfd.readouterr().err
+    assert code != 0 and "--full-rate: applies to --robot fits only" in err
+    assert len(err.strip().splitlines()) == 1, err
