@@ -21,7 +21,10 @@ and ``lateness_stop``, :mod:`daq.runtime.safety`).
 
 Per run, from its log: status and reason; the start-up lateness check's share of late or
 missing answers (``check``); the start-up (cycles before the plan moves) and
-the plan's share of cycles without the drive's answer; the TPDO1 frames' delay after the
+the plan's share of cycles without the drive's answer; the plan's share of cycles whose
+newest TPDO1 was received before the cycle's SYNC was sent (``plan_stale``: the loop ran on
+the answer to an earlier SYNC; outside the check's hold the master's wait stops at such a
+queued set, so one late answer can keep it a cycle behind); the TPDO1 frames' delay after the
 SYNC they follow (p50/p90/p99 [ms], and the share later than a cycle); the rms tracking
 error [mrad] and the largest |dq| [rad/s] on answered cycles; the torque reference's
 cycle-to-cycle change (std and max [N m]) while the plan runs.
@@ -83,6 +86,14 @@ def one_run(out: Path, k: int, cycle: float, hops: int, periods: int, velocity: 
     move = int(np.flatnonzero(seg >= 0)[0]) if (seg >= 0).any() else len(seg)
     plan, answered = seg >= 0, (seg >= 0) & ~miss
     run_lat = lat[idx >= move]
+    cyc = np.asarray(fr["cycle"])
+    sync_c = cyc[ids == 0x80]
+    t_sync = dict(zip(sync_c.tolist(), sync_t.tolist(), strict=True))
+    newest: dict[int, float] = {}
+    for c, x in zip(cyc[ids == 0x183].tolist(), tp.tolist(), strict=True):
+        newest[c] = max(x, newest.get(c, x))
+    plan_c = np.flatnonzero(seg >= 0)
+    stale = [newest[c] < t_sync[c] for c in plan_c.tolist() if c in newest and c in t_sync]
     tau = np.asarray(a.tau_ref)[plan]
     chk = [e["message"].rsplit(": ", 1)[1] for e in a.events
            if e["message"].startswith("start-up lateness check: late")]
@@ -91,6 +102,7 @@ def one_run(out: Path, k: int, cycle: float, hops: int, periods: int, velocity: 
         "startup_cycles": move,
         "startup_missing": round(float(miss[:move].mean()), 3),
         "plan_missing": round(float(miss[plan].mean()), 3),
+        "plan_stale": round(float(np.mean(stale)), 3) if stale else 0.0,
         "delay_ms_p50_p90_p99": [round(1e3 * x, 2) for x in np.quantile(run_lat, [.5, .9, .99])],
         "later_than_a_cycle": round(float(np.mean(run_lat > cycle)), 3),
         "rms_err_mrad": round(1e3 * float(np.sqrt(np.mean(

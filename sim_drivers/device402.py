@@ -232,6 +232,18 @@ class Device402Mixin:
                 self._send(cob_id, data)
                 self.tpdo_sent += 1
             inj.late_held = held
+        elif inj is not None and inj.lag_tpdo(cycle):
+            held = []  # this cycle's set, sent when the master's next RPDO arrives
+            for tx in self._tx_sync:
+                tx.count += 1
+                if tx.count >= tx.every:
+                    tx.count = 0
+                    held.append((tx.cob_id, tx.payload(self)))
+            for cob_id, data in inj.lag_held:  # no RPDO came since the last: that set first
+                self._send(cob_id, data)
+                self.tpdo_sent += 1
+            inj.lag_held = held
+            self._hook_lag_release()
         elif inj is not None and inj.delay_tpdo(cycle):
             held = []  # this cycle's set, sent late (FaultInjector.delay_tpdo_from_cycle)
             for tx in self._tx_sync:
@@ -246,6 +258,11 @@ class Device402Mixin:
                 for cob_id, data in inj.held_tpdos.pop(0):
                     send(cob_id, data)
                     self.tpdo_sent += 1
+            if inj is not None and inj.lag_held:  # the lag window ended before an RPDO
+                for cob_id, data in inj.lag_held:
+                    send(cob_id, data)
+                    self.tpdo_sent += 1
+                inj.lag_held = []
             if inj is not None and inj.late_held:  # the late answer before this one's
                 for cob_id, data in inj.late_held[:-1]:  # (FaultInjector.late_tpdo_cycles)
                     send(cob_id, data)
@@ -260,6 +277,27 @@ class Device402Mixin:
             if self._tx_event:
                 self._send_event_tpdos()
         self.cycle = cycle + 1
+
+    def _hook_lag_release(self) -> None:
+        """Subscribe :meth:`_release_lagged` to this drive's synchronous RPDOs, once (the
+        steady lag of :class:`~sim_drivers.faults.FaultInjector`, ``lag_tpdo_*``)."""
+        hooked = self.__dict__.setdefault("_lag_hooked", set())
+        for rx in self._rx_sync:
+            if rx.cob_id not in hooked:
+                hooked.add(rx.cob_id)
+                self.network.subscribe(rx.cob_id, self._release_lagged)
+
+    def _release_lagged(self, can_id: int, data: bytes, timestamp: float) -> None:
+        """The master's RPDO arrived: send the answer held back since the last SYNC (after
+        the master's wait for it, before the next SYNC: ``FaultInjector.lag_tpdo_*``)."""
+        inj = self.injector
+        if inj is None or not inj.lag_held:
+            return
+        with self._lock:
+            held, inj.lag_held = inj.lag_held, []
+            for cob_id, payload in held:
+                self._send(cob_id, payload)
+                self.tpdo_sent += 1
 
     def _update_actuals(self) -> None:
         plant = self.plant

@@ -127,6 +127,20 @@ class FaultInjector:
         that a late run of k cycles gives one missing answer and k - 1 previous-cycle states.
     late_tpdo_seed : int
         Seed of the late cycles' draw.
+    lag_tpdo_from_cycle : int or None
+        A steady lag (a host or bridge that delivers every answer just after the master
+        stopped waiting for it): from this cycle on, for ``lag_tpdo_cycles`` cycles, the drive
+        holds its answer to each SYNC back and sends it when the master's next RPDO arrives,
+        i.e. after the master's wait for it (the master sends its RPDO once its wait is over)
+        and before the next SYNC (the master sends the RPDO first). The master's cycle k+1
+        then finds the answer to SYNC k waiting and takes it as its own: every cycle runs on
+        the state one cycle old, and no cycle but the window's first lacks an answer. A set
+        still held at the next SYNC (no RPDO came) is sent then, before anything else.
+        Unlike ``late_tpdo_*`` (the previous cycle's set sent right after the next SYNC,
+        which a master cannot tell from an on-time answer), the answers arrive before the
+        SYNC of the cycle that takes them.
+    lag_tpdo_cycles : int
+        Length of the lag window [cycles].
     """
 
     fault_at_cycle: int | None = None
@@ -142,6 +156,10 @@ class FaultInjector:
     late_tpdo_share: float = 1.0
     late_tpdo_run: int = 1
     late_tpdo_seed: int = 0
+    lag_tpdo_from_cycle: int | None = None
+    lag_tpdo_cycles: int = 0
+    #: the set a lagging cycle held back until the next RPDO: list of (COB-ID, data)
+    lag_held: list = field(default_factory=list, repr=False, compare=False)
     #: the sets held back, oldest first: lists of (COB-ID, data) (the drive's state)
     held_tpdos: list = field(default_factory=list, repr=False, compare=False)
     #: the set a late cycle held back: list of (COB-ID, data) (the drive's state)
@@ -154,7 +172,8 @@ class FaultInjector:
             raise ValueError(
                 f"FaultInjector.fault_code: expected 0x0001..0xFFFF, got {self.fault_code}"
             )
-        for name in ("drop_tpdo_cycles", "delay_tpdo_cycles", "late_tpdo_cycles"):
+        for name in ("drop_tpdo_cycles", "delay_tpdo_cycles", "late_tpdo_cycles",
+                     "lag_tpdo_cycles"):
             if getattr(self, name) < 0:
                 raise ValueError(
                     f"FaultInjector.{name}: expected >= 0, got {getattr(self, name)}")
@@ -200,6 +219,12 @@ class FaultInjector:
         """True when the answer of ``cycle`` is late: the drive sends the set held back from
         the cycle before (if any) and holds back its own (``late_tpdo_from_cycle``)."""
         return cycle in self.late_cycles
+
+    def lag_tpdo(self, cycle: int) -> bool:
+        """True when the answer of ``cycle`` is held back until the master's next RPDO (the
+        steady lag, ``lag_tpdo_from_cycle``)."""
+        start = self.lag_tpdo_from_cycle
+        return start is not None and start <= cycle < start + self.lag_tpdo_cycles
 
     def drop_tpdo(self, cycle: int) -> bool:
         """True when the TPDOs of ``cycle`` must not be sent."""

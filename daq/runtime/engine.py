@@ -260,12 +260,30 @@ class Engine(Supervisor):
         self.monitor: Any = None
         #: the last run's start-up lateness warning (one line), if any (the runner's summary)
         self.lateness_notes: list[str] = []
+        #: while the start-up lateness check runs: take the frames already queued before each
+        #: SYNC is sent (:meth:`_exchange`), and per drive the TPDO1 frames so taken
+        self._peek = False
+        self.pre_answers = [0] * len(drives)
 
     # -- one cycle ------------------------------------------------------------------------
     def _exchange(self, cycle: int, deadline: float) -> int:
         """SYNC and wait for the TPDOs; returns the bit mask of TPDOs received."""
         io = self.io
         io.begin_cycle()
+        queued = 0
+        if self._peek and io.direct:
+            # the start-up lateness check: what is already queued came before this SYNC, so
+            # it answers an earlier one (a drive one cycle behind, every cycle: its answer
+            # misses the wait and waits for the next cycle). Taken here, it is known for what
+            # it is, and it does not end the wait for this SYNC's answers: the pump would take
+            # it as a full set and stop, and a master one cycle behind once (one answer late)
+            # stayed behind for tens of cycles, the fresh answer always arriving after the
+            # pump had stopped (paced, 10 ms, beside 4 busy loops: the check then counted
+            # 44-50 % on an on-time drive; daq.runtime.safety). Without a fresher one by the
+            # deadline it is used (newest wins), and the cycle counts as late
+            self._drain()
+            self.pre_answers = io.answers.copy()
+            queued, io.mask = io.mask, 0
         now = time.time()
         self.bus.send(self.sync_msg)
         io.sent(now, 0x80, b"")
@@ -280,6 +298,9 @@ class Engine(Supervisor):
         # to the velocity limit (1 ms, loopback bridge, 4 busy loops;
         # tests/test_stale_feedback.py)
         self._drain()
+        if queued and not ok:
+            io.mask |= queued
+            ok = io.mask == io.full
         return io.full if ok else io.mask
 
     def run_payload(self, index: int, payload: Any, ref: Any, log: RunLog,
@@ -362,8 +383,11 @@ class Engine(Supervisor):
             monitor.begin(index, payload, log)
         mq, mdq, mtau = [0.0] * n_dr, [0.0] * n_dr, [0.0] * n_dr
         #: the start-up lateness check's tally while it runs: per drive, the cycles whose
-        #: answer was missing at the deadline or came with an older one (None: not counting)
+        #: answer was missing at the deadline, came with an older one, or was queued before
+        #: the SYNC (None: not counting)
         chk: list[int] | None = None
+        #: of those, per drive, the cycles that ran on an answer queued before their SYNC
+        stale = [0] * n_dr
         self.lateness_notes = []
         if self.paced:
             w = log._w
@@ -419,6 +443,7 @@ class Engine(Supervisor):
                 t_sync = late = 0.0
                 mask = self._exchange(cycle, 0.0)
             stopping = mode != "run" and mode != "enable"
+            pre = self.pre_answers  # TPDO1 frames queued before the SYNC (the check only)
             m_ok = True  # every drive answered this cycle (the monitor's data are fresh)
             tpdo_fault = ""
             if io.emcy:  # before the state checks: the first one names the cause
@@ -436,8 +461,11 @@ class Engine(Supervisor):
                     sw[d], counts[d], tq[d] = unpack1(data[d][0])
                     vel[d] = unpack2(data[d][1])[0]
                     missing_run[d] = 0
-                    if chk is not None and io.answers[d] > 1:  # an older answer came too
+                    if chk is not None and (io.answers[d] > 1 or pre[d]):
+                        # an older answer came too, or the only one came before the SYNC:
+                        # the cycle runs on the answer to an earlier SYNC (a steady lag)
                         chk[d] += 1
+                        stale[d] += io.answers[d] == pre[d]
                 else:
                     flags |= FLAG_TPDO_MISSING
                     if chk is not None:  # not there by the deadline: late or lost
@@ -688,6 +716,7 @@ class Engine(Supervisor):
                     # following error checked), count the late or missing answers per drive
                     n_chk = max(1, math.ceil(cfg.lateness_check_s / cycle_s - 1e-9))
                     chk = [0] * n_dr
+                    self._peek, self.pre_answers = True, [0] * n_dr
                     done = 0
                     report("check", -1, cycle + n_chk)
                     for _ in range(LATENESS_MAX_ROUNDS):
@@ -701,12 +730,15 @@ class Engine(Supervisor):
                         level, why, unsure = lateness_verdict(
                             chk, done, [redact_url_secret(d.cfg.channel or cfg.channel)
                                         for d in self.drives],
-                            [d.name for d in self.drives], cfg, cycle_s)
+                            [d.name for d in self.drives], cfg, cycle_s, stale)
                         if not unsure:
                             break
-                    shares = ", ".join(f"{d.name} {chk[k] / max(1, done):.1%}"
-                                       for k, d in enumerate(self.drives))
+                    shares = ", ".join(
+                        f"{d.name} {chk[k] / max(1, done):.1%}"
+                        + (f" of which {stale[k]} on an earlier SYNC's answer" if stale[k] else "")
+                        for k, d in enumerate(self.drives))
                     chk = None
+                    self._peek, self.pre_answers = False, [0] * n_dr
                     if not self._stop_reason:
                         log.event(cycle, cycle * cycle_s, "info", f"start-up lateness check: "
                                   f"late or missing answers over {done} cycles: {shares}")
@@ -793,6 +825,7 @@ class Engine(Supervisor):
             log.event(cycle, cycle * cycle_s, "fault", reason)
         finally:
             wall = time.perf_counter() - t_wall0
+            self._peek = False
             sys.setswitchinterval(switch_was)
             if cfg.gc_freeze:
                 gc.unfreeze()

@@ -14,19 +14,54 @@ cleans up after. The ``jointid`` exit code is 128 + the signal number (130, 143,
 
 Start-up lateness check
 -----------------------
-A busy host answers late: the drive's answer to SYNC k misses cycle k's deadline and comes
-in cycle k+1 (which takes it as its own, or with its own, the newest winning); past a few in
-a row the TPDO watchdog stops the run mid-plan, or the drives' own RPDO deadline faults them.
-So before the plan moves (drives enabled, holding the start position, limits checked) the
-engine holds for ``[daq] lateness_check_s`` (0.5 s on the paced clock, none in lockstep
-unless given) and counts per drive the cycles whose answer was missing at the deadline or came
-with an older one (two TPDO1 in the cycle): one late answer counts twice (the cycle without,
-the cycle with two), a lost one once; a steady lag of exactly one cycle is seen only at its
-ends. :func:`lateness_verdict`: per bus, the share of its drives' cycles so counted; the worst
-bus above ``lateness_stop`` refuses the run (a ``watchdog`` event, the stop sequence: drives
-disabled, log closed), above ``lateness_warn`` the run goes on with a warning (log event,
-run summary). A share within two binomial sigmas of ``lateness_stop`` is measured again, at
-most :data:`LATENESS_MAX_ROUNDS` holds in all.
+A busy host answers late: the drive's answer to SYNC k misses cycle k's deadline and comes in
+cycle k+1 (which takes it as its own, or with its own, the newest winning); past a few in a
+row the TPDO watchdog stops the run mid-plan, or the drives' own RPDO deadline faults them.
+A drive, bridge or host that answers *every* SYNC after the master's wait makes every cycle
+run on the state one cycle old without a missing answer: a steady lag (for identification a
+constant time shift of the log, for the loop a phase lag). So before the plan moves (drives
+enabled, holding the start position, limits checked) the engine holds for ``[daq]
+lateness_check_s`` (0.5 s on the paced clock, none in lockstep unless given) and counts per
+drive the cycles that did not run on their own SYNC's answer: missing at the deadline, come
+with an older one (two TPDO1 in the cycle), or the only answer already queued before the
+cycle's SYNC was sent (an answer to an earlier SYNC). During the hold the engine takes what is
+queued before each SYNC, and a set so taken does not end the wait for this SYNC's answers;
+without a fresher one by the deadline it is used and the cycle counts. One late answer counts
+twice (the cycle without, the cycle with two), a lost one once, a steady lag on every cycle
+it lasts (until 2026-11-29 only at its ends: 0 % on a hold inside it, a 25-cycle lag in the
+hold 2 cycles instead of 26, ``tests/test_late_answers.py``). :func:`lateness_verdict`: per
+bus, the share of its drives' cycles so counted; the worst bus above ``lateness_stop`` refuses
+the run (a ``watchdog`` event, the stop sequence: drives disabled, log closed; the line names
+the bus, each drive's share and how many of its cycles ran on an earlier SYNC's answer),
+above ``lateness_warn`` the run goes on with a warning (log event, run summary). A share
+within two binomial sigmas of ``lateness_stop`` is measured again, at most
+:data:`LATENESS_MAX_ROUNDS` holds in all.
+
+Measured (``tests/test_late_answers.py``; two drives, lockstep 2 ms, 200-cycle hold): node 2
+answering every SYNC after the master's wait, node 1 on time: node 2 100 %, node 1 0 %, the
+bus 50 %, refused (before: 0 %, the run went on); on the paced clock (10 ms, 0.5 s hold, one
+drive, beside 4 busy loops at a load average of 8-10) such a drive 70 and 74 % (the cycles
+where the drive's thread answered after the next SYNC look on time), an on-time one 0-6 %.
+The wait past a queued set matters: without it, an on-time drive beside 4 busy loops counted
+44 and 50 % in two of four such holds, the master itself staying a cycle behind after one
+late answer, the fresh answer always arriving just after its wait had stopped.
+
+What it cannot see: an answer a whole cycle old that arrives after the next SYNC was sent
+(a latency between one cycle and the next deadline, or a drive reporting the state latched at
+the SYNC before): a TPDO carries no SYNC number, so it looks on time
+(``FaultInjector.late_tpdo_*`` with share 1 is such a drive: 0 % counted). With
+``sync_source = "periodic"`` the SYNC comes from a timer and nothing is taken before it: a
+steady lag counts at its ends only. In lockstep (virtual channels only) the master waits for
+every answer up to ``lockstep_wait_s`` and the simulated drives answer inside the SYNC's
+send, so only an injected lag, or an answer later than ``lockstep_wait_s``, makes a cycle run
+on an earlier answer; there is no hold unless ``lateness_check_s`` is given, and with it the
+count is deterministic (a steady lag costs ``lockstep_wait_s`` per held cycle). After the
+hold (the run itself) the master's wait still stops at a queued set, so one late answer can
+keep the loop a cycle behind until an answer comes in time to be drained with it
+(``benchmarks/bench_late_answers.py``, ``plan_stale``: 1 ms through the loopback bridge, no
+busy loop, a load average of 7-11 from other work: 58, 67, 69 % of the plan's cycles ran on
+the answer before, and 46-97 % before this change while the hold counted 0.8-19.6 %; with the
+same wait in every paced cycle, tried locally and not part of the engine, 0.1-2.1 %).
 
 Calibration (``benchmarks/bench_late_answers.py --periods 2 --runs 3``, the drive behind a
 loopback python-can-remote bridge in another process, the master paced, on the project's
@@ -47,6 +82,12 @@ process on python-can's virtual bus, no busy loop: 2.4-4.8 at 1 ms, 7.6-14.0 at 
 ``lateness_stop = 0.3`` (above every run without busy loops, below every run beside 4) and
 ``lateness_warn = 0.1`` (above the usual runs without busy loops, which a host loaded by
 others exceeds now and then). On real drives on socketcan the share should be near 0.
+
+The count that waits past a queued set and counts an earlier SYNC's answer (2026-11-29, the
+same bench at 1 ms, ``--periods 2 --runs 3``, a load average of 7-11 from other work) measured
+more for the same host: no busy loop 2.2, 26.8, 34.4 and 1.4, 7.2, 29.0 % (the old count in
+the same hour: 0.8, 2.4, 19.6), 4 busy loops 44.4, 66.0, 72.2 %. The limits are unchanged, so
+on such a host a start without busy loops is now refused now and then (one hold in six).
 """
 
 from __future__ import annotations
@@ -315,13 +356,16 @@ class Supervisor:
 
 
 def lateness_verdict(late: list[int], cycles: int, buses: list[str], names: list[str],
-                     cfg: DaqConfig, cycle_s: float) -> tuple[str, str, bool]:
+                     cfg: DaqConfig, cycle_s: float,
+                     stale: list[int] | None = None) -> tuple[str, str, bool]:
     """The start-up lateness check's verdict on a hold of ``cycles`` cycles.
 
     ``late[d]``: the cycles of drive ``d`` (named ``names[d]``, on bus ``buses[d]``) whose
-    answer was missing at the cycle's deadline or came with an older one (an answer to an
-    earlier SYNC). Per bus, the share of its drives' answers that were late or missing;
-    the worst bus decides: above ``cfg.lateness_stop`` the run is refused, above
+    answer was missing at the cycle's deadline, came with an older one, or was there before
+    the cycle's SYNC was sent (an answer to an earlier SYNC: a steady lag counts on every
+    cycle). ``stale[d]`` (optional, named in the line): of those, the cycles whose only
+    answer came before their SYNC. Per bus, the share of its drives' answers that were late
+    or missing; the worst bus decides: above ``cfg.lateness_stop`` the run is refused, above
     ``cfg.lateness_warn`` it goes on with a warning.
 
     Returns
@@ -346,7 +390,9 @@ def lateness_verdict(late: list[int], cycles: int, buses: list[str], names: list
     if worst <= warn:
         return "", "", unsure
     level = "stop" if worst > stop else "warning"
-    per = ", ".join(f"{names[d]} {late[d] / max(1, cycles):.0%}" for d in ds)
+    per = ", ".join(f"{names[d]} {late[d] / max(1, cycles):.0%}" + (
+        f" of which {stale[d]} on an earlier SYNC's answer" if stale and stale[d] else "")
+        for d in ds)
     what = (f"bus {bus}: {worst:.1%} of the drives' answers late or missing over the "
             f"{cycles} cycles ({cycles * cycle_s:.2f} s) of the start-up hold ({per})")
     if level == "stop":
