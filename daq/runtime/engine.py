@@ -271,16 +271,19 @@ class Engine(Supervisor):
         io = self.io
         io.begin_cycle()
         queued = 0
-        if self._peek and io.direct:
-            # the start-up lateness check: what is already queued came before this SYNC, so
-            # it answers an earlier one (a drive one cycle behind, every cycle: its answer
-            # misses the wait and waits for the next cycle). Taken here, it is known for what
-            # it is, and it does not end the wait for this SYNC's answers: the pump would take
-            # it as a full set and stop, and a master one cycle behind once (one answer late)
-            # stayed behind for tens of cycles, the fresh answer always arriving after the
-            # pump had stopped (paced, 10 ms, beside 4 busy loops: the check then counted
-            # 44-50 % on an on-time drive; daq.runtime.safety). Without a fresher one by the
-            # deadline it is used (newest wins), and the cycle counts as late
+        if (self._peek or self.paced) and io.direct:
+            # every paced cycle, and the start-up lateness check's (lockstep too): what is already
+            # queued came before this SYNC, so it answers an earlier one (a drive one cycle behind,
+            # every cycle: its answer misses the wait and waits for the next cycle). Taken here, it
+            # is known for what it is, and it does not end the wait for this SYNC's answers: the
+            # pump would take it as a full set and stop, and a master one cycle behind once (one
+            # answer late) stayed behind for tens of cycles, the fresh answer always arriving after
+            # the pump had stopped (paced, 10 ms, beside 4 busy loops: the check then counted 44-50
+            # % on an on-time drive; daq.runtime.safety). Without a fresher one by the deadline it
+            # is used (newest wins), and the cycle counts as late. During a paced plan the same:
+            # taken as a full set, the queued answers had the loop run on the previous SYNC's
+            # feedback on 46-97 % of the plan's cycles (1 ms, loopback bridge, no busy loop, load
+            # 7-11), 0.1-2.1 % with this wait (benchmarks/bench_late_answers.py, plan_stale)
             self._drain()
             self.pre_answers = io.answers.copy()
             queued, io.mask = io.mask, 0
