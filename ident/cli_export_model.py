@@ -66,6 +66,10 @@ def read_fit_record(path: Path) -> dict[str, Any]:
         rec = json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as e:
         raise DataError(f"{path}: not JSON ({e.msg}, line {e.lineno})") from None
+    except UnicodeDecodeError as e:  # a log, a MAT file...: not a text file at all
+        raise DataError(f"{path}: not UTF-8 text (byte 0x{e.object[e.start]:02x} at offset "
+                        f"{e.start}); expected the JSON record of jointid fit --robot ... "
+                        "--json") from None
     if isinstance(rec, dict) and rec.get("format") in OLD_FORMATS:
         rec = upgrade_record(rec)  # older spellings ("qs", "new", "ols"): ident.vocab
     elif not isinstance(rec, dict) or rec.get("format") != FORMAT:

@@ -47,3 +47,16 @@ def test_export_model_without_the_fits_map_says_to_give_it(tmp_path, capfd):
     assert str(fit) in err and "--map" in err and "--q-unit" in err
     assert "give export-model" in err, err
     assert not out.exists() and not list(tmp_path.glob(".model.part-*"))
+
+
+def test_export_model_given_a_binary_file_is_one_line(tmp_path, capfd):
+    """A log (or any non-text file) given as FIT.json: one line naming it and what was
+    expected, exit 2, nothing written (before: a UnicodeDecodeError traceback, exit 1)."""
+    log = tmp_path / "run_payload0.mcap"
+    log.write_bytes(b"\x89MCAP0\r\n" + bytes(range(256)))
+    out = tmp_path / "model"
+    assert main(["export-model", str(log), "-o", str(out)]) == 2
+    err = capfd.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert str(log) in err and "jointid fit --robot" in err, err
+    assert not out.exists()
