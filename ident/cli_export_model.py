@@ -66,6 +66,10 @@ def read_fit_record(path: Path) -> dict[str, Any]:
         rec = json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as e:
         raise DataError(f"{path}: not JSON ({e.msg}, line {e.lineno})") from None
+    except UnicodeDecodeError as e:  # a log, a MAT file...: not a text file at all
+        raise DataError(f"{path}: not UTF-8 text (byte 0x{e.object[e.start]:02x} at offset "
+                        f"{e.start}); expected the JSON record of jointid fit --robot ... "
+                        "--json") from None
     if isinstance(rec, dict) and rec.get("format") in OLD_FORMATS:
         rec = upgrade_record(rec)  # older spellings ("qs", "new", "ols"): ident.vocab
     elif not isinstance(rec, dict) or rec.get("format") != FORMAT:
@@ -88,17 +92,16 @@ def consistent_from_record(path: Path, rec: dict[str, Any], robot: Robot, name: 
     """The consistent estimate of model ``name`` of the record: its ``consistent`` block, or
     a refit of its inputs (checked against its parameters) and :func:`fit_consistent`.
     Returns (consistent record, parameters held fixed by the fit)."""
-    from .cli_robot import fit_robot, robot_gains
+    from .cli_robot import fit_robot
     from .robot.consistent_fit import consistent_record, fit_consistent
-    from .robot.loaders import RobotPreprocessing, load_robot_runs
+    from .robot.loaders import RobotPreprocessing
 
     mrec = rec["models"][name]
     if "consistent" in mrec:
         return mrec["consistent"], {}
     pre = rec.get("preprocessing", {})
     try:
-        runs = load_robot_runs(rec["inputs"], robot.moving, gains=robot_gains(robot),
-                               mapping=mapping, q_unit=q_unit)
+        runs = _read_inputs(path, rec, robot, name, mapping, q_unit)
         # the record's torque delay (absent from older records: the default, as then)
         settings = RobotPreprocessing(pre.get("cutoff_hz"), pre.get("decimation"),
                                       pre.get("trim"), pre.get("torque_delay"))
@@ -122,6 +125,28 @@ def consistent_from_record(path: Path, rec: dict[str, Any], robot: Robot, name: 
                         "other --map/--q-unit)")
     cf = fit_consistent(est, out["_signals"][0], tau_peak=out["_tau_peak"])
     return consistent_record(est, cf), dict(est.fixed_)
+
+
+def _read_inputs(path: Path, rec: dict[str, Any], robot: Robot, name: str, mapping: Any,
+                 q_unit: str | None) -> list[Any]:
+    """The record's inputs read again (``load_robot_runs``). The record does not keep
+    ``jointid fit``'s ``--map`` and ``--q-unit``: a read failing without them says to give
+    them to export-model (one line naming the record and the model)."""
+    from . import IdentError
+    from .cli_robot import robot_gains
+    from .robot.loaders import load_robot_runs
+
+    try:
+        return load_robot_runs(rec["inputs"], robot.moving, gains=robot_gains(robot),
+                               mapping=mapping, q_unit=q_unit)
+    except IdentError as e:
+        foreign = [f for f in rec["inputs"] if Path(f).suffix.lower() in (".csv", ".mat")]
+        if (mapping is not None or q_unit is not None or not foreign
+                or not all(Path(f).is_file() for f in rec["inputs"])):
+            raise  # not a question of --map: the files are logs, or missing
+        raise DataError(f"{path}: models.{name}: {e}; export-model reads the record's inputs "
+                        "again and the record does not keep jointid fit's --map and --q-unit: "
+                        "give export-model the ones given to jointid fit") from None
 
 
 def soft_quadrants(rec: dict[str, Any], name: str) -> bool:

@@ -107,7 +107,7 @@ def main(args: argparse.Namespace) -> int:
         frac = p.cycle / p.n_cycles if p.n_cycles else 0.0
         bar.update(frac, p.text())
 
-    def ask(index, payload, n) -> bool:
+    def ask(index, payload, n) -> bool | None:
         bar.close()
         return prompt_payload(index, payload, n)
 

@@ -216,15 +216,17 @@ def _attachments(campaign: RobotCampaign, cfg: DaqConfig,
     return out
 
 
-def prompt_payload(index: int, payload: Any, n: int) -> bool:
-    """Ask the operator to mount a payload; False to abort the campaign."""
+def prompt_payload(index: int, payload: Any, n: int) -> bool | None:
+    """Ask the operator to mount a payload; False to abort the campaign, None when the
+    standard input is closed (no one to answer: a script, a notebook, CI)."""
     where = (f"at {payload.arm_m:g} m" if getattr(payload, "arm_m", None) is not None else
              f"CoM {', '.join(f'{x:g}' for x in payload.com)} m in the flange frame")
     try:
         answer = input(f"Mount payload {index + 1}/{n}: {payload.mass_kg:g} kg {where}, "
                        f"then press Enter (q to quit): ")
     except EOFError:
-        return False
+        print()  # end the prompt's line
+        return None
     return answer.strip().lower() not in ("q", "quit", "n", "no")
 
 
@@ -512,6 +514,11 @@ def _run_locked(campaign: RobotCampaign, cfg: DaqConfig, plan: Any, load: Any, o
                 except KeyboardInterrupt as exc:
                     sig = signal.Signals(getattr(exc, "signum", signal.SIGINT)).name
                     status, reason = "interrupted", interrupt_reason(sig)
+                    break
+                if accepted is None:
+                    status, reason = "aborted", (
+                        f"no answer at the prompt of payload {i} (standard input closed); "
+                        "run with --yes (-y) to mount the payloads without prompts")
                     break
                 if not accepted:
                     status, reason = "aborted", f"operator declined payload {i}"
