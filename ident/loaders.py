@@ -60,6 +60,7 @@ import csv
 import json
 import math
 import re
+import tomllib
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -70,6 +71,7 @@ import numpy as np
 import scipy.io
 
 from daq.protocol.reader import RunArrays, read_run, read_runs
+from trajectories.robot.file_kinds import TOML_FILE_KINDS, toml_file_kind
 from trajectories.robot.payload import RobotPayloadData
 
 from . import DataError
@@ -1280,7 +1282,26 @@ def read_file(
         return _read_table(p, table, joints, gains, scale, mapping, True)
     if ext == ".mat":
         return _read_table(p, _read_mat(p), joints, gains, scale, mapping, False)
-    raise DataError(f"{p}: unknown file type {ext!r}, expected .mcap, .csv or .mat")
+    raise DataError(f"{p}: unknown file type {ext!r}, expected .mcap, .csv or .mat"
+                    + _other_kind_hint(p, ext))
+
+
+def _other_kind_hint(p: Path, ext: str) -> str:
+    """The tail of the unknown-file-type line when ``p`` is one of jointid's other files (a
+    robot, campaign or plant file; :func:`trajectories.robot.file_kinds.toml_file_kind`):
+    where it goes instead; "" otherwise."""
+    if ext == ".urdf":
+        return "; it looks like a robot file (URDF): jointid fit takes it as --robot"
+    if ext != ".toml":
+        return ""
+    try:
+        kind = toml_file_kind(tomllib.loads(p.read_text(encoding="utf-8")))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return ""
+    if kind is None:
+        return ""
+    looks, where = TOML_FILE_KINDS[kind]
+    return f"; it looks like {looks}: {where}"
 
 
 # -- the single joint: a view of the run of a one-joint robot ---------------------------------

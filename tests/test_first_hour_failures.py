@@ -167,3 +167,29 @@ def test_a_campaign_whose_robot_file_is_a_campaign_names_the_mix_up(tmp_path, ca
     assert bad.read_text() != src
     _refused(capfd, ["plan", str(bad)], str(EXAMPLES / "campaign.toml"),
              "it looks like a campaign file", "not a robot file")
+
+
+@pytest.mark.parametrize(("argv", "named", "hint"), [
+    # --robot forgotten: the robot file taken for a measurement
+    (["fit", "{robots}/arm3.toml", "{tmp}/run.csv"], "{robots}/arm3.toml",
+     "it looks like a robot file ([[joints]] of MDH parameters): a campaign names it in "
+     "[robot] file = ..., jointid fit takes it as --robot"),
+    (["fit", "{ex}/campaign.toml"], "{ex}/campaign.toml",
+     "it looks like a campaign file ([[segments]], [[payloads]]): give it to jointid plan or "
+     "jointid run"),
+    (["fit", "{tmp}/arm.urdf"], "{tmp}/arm.urdf",
+     "it looks like a robot file (URDF): jointid fit takes it as --robot"),
+    # a log where the campaign is expected
+    (["plan", "{tmp}/run.mcap"], "{tmp}/run.mcap",
+     "an MCAP log, not a campaign file: give it to jointid fit or jointid export"),
+    (["plan", "{tmp}/bin.toml"], "{tmp}/bin.toml", "expected a campaign file (TOML text)"),
+])
+def test_a_measurement_or_campaign_of_another_kind_says_where_it_goes(tmp_path, capfd, argv,
+                                                                        named, hint):
+    _csv(tmp_path / "run.csv")
+    (tmp_path / "arm.urdf").write_text("<robot name='x'/>\n")
+    (tmp_path / "run.mcap").write_bytes(b"\x89MCAP0\r\n" + bytes(range(128, 256)))
+    (tmp_path / "bin.toml").write_bytes(bytes(range(128, 256)))
+    fmt = dict(ex=EXAMPLES, robots=EXAMPLES / "robots", tmp=tmp_path)
+    line = _refused(capfd, [a.format(**fmt) for a in argv], named.format(**fmt))
+    assert line.endswith(hint), line

@@ -62,8 +62,10 @@ def _read(path: str | Path) -> dict:
     try:
         raw = tomllib.loads(data.decode("utf-8"))
     except UnicodeDecodeError as exc:
+        what = ("an MCAP log, not a campaign file: give it to jointid fit or jointid export"
+                if data.startswith(b"\x89MCAP") else "expected a campaign file (TOML text)")
         raise CampaignFileError(
-            f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from exc
+            f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start}); {what}") from exc
     except tomllib.TOMLDecodeError as exc:
         raise CampaignFileError(f"{path}: invalid TOML: {exc}") from exc
     return raw
