@@ -129,13 +129,17 @@ def consistent_from_record(path: Path, rec: dict[str, Any], robot: Robot, name: 
 
 def _read_inputs(path: Path, rec: dict[str, Any], robot: Robot, name: str, mapping: Any,
                  q_unit: str | None) -> list[Any]:
-    """The record's inputs read again (``load_robot_runs``). The record does not keep
-    ``jointid fit``'s ``--map`` and ``--q-unit``: a read failing without them says to give
-    them to export-model (one line naming the record and the model)."""
+    """The record's inputs read again (``load_robot_runs``), with ``jointid fit``'s ``--map``
+    and ``--q-unit`` as the record keeps them (``"reading"``) unless given here. A record
+    written before it kept them: a read failing without them says to give them to
+    export-model (one line naming the record and the model)."""
     from . import IdentError
     from .cli_robot import robot_gains
     from .robot.loaders import load_robot_runs
 
+    reading = rec.get("reading") or {}
+    if mapping is None and q_unit is None and isinstance(reading, dict):
+        mapping, q_unit = reading.get("map"), reading.get("q_unit")
     try:
         return load_robot_runs(rec["inputs"], robot.moving, gains=robot_gains(robot),
                                mapping=mapping, q_unit=q_unit)

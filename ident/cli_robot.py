@@ -233,6 +233,8 @@ def fit_files(
     val = load_runs(robot, validate, mapping=mapping, q_unit=q_unit) if validate else None
     pre = RobotPreprocessing(cutoff, decimation, trim, check_torque_delay(torque_delay))
     out = fit_robot(robot, runs, val, models=MODELS[model], preprocessing=pre, **options)
+    # how the inputs were read (--map, --q-unit): export-model reads them again with these
+    out["reading"] = {"map": None if mapping is None else dict(mapping), "q_unit": q_unit}
     if consistent:
         add_consistent(out)
     return out
