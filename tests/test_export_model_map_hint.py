@@ -1,9 +1,10 @@
 """``jointid export-model`` on a record of a MAT/CSV fit made with ``--map``/``--q-unit``.
 
 A record written before ``"reading"`` does not keep the fit's ``--map`` and ``--q-unit``;
-export-model reads the inputs again, so without them the read fails. The refusal must say what to do (give export-model the
-fit's ``--map``/``--q-unit``), in one line, exit 2, nothing written (README, "Commands";
-docs/model-export.md)."""
+export-model reads the inputs again, so without them the read fails. The refusal must say
+what to do (give export-model the fit's ``--map``/``--q-unit``), in one line, exit 2, nothing
+written (README, "Commands"; docs/model-export.md). A newer record keeps them and
+export-model reads the inputs with them."""
 
 from __future__ import annotations
 
