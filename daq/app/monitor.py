@@ -516,7 +516,7 @@ def _report(out: Path, logs: list[Path], summary: dict[str, Any], mon: TorqueMon
     if th:
         sections.append(Section("Thresholds").para(
             f"Constant band: mean +- max({th['k_sigma']:g}, {th['peak_margin']:g} peak) "
-            "sigma of the validation residual.").table(
+            f"sigma of the validation residual. {_rule_text(th)}").table(
             ["joint", "mean [N m]", "sigma [N m]", "k", "lower", "upper", "peak/sigma"],
             [[j, f"{m:.4g}", f"{s:.4g}", f"{th['k_sigma']:g}", f"{lo:.4g}", f"{hi:.4g}",
               f"{pk:.3g}"] for j, m, s, lo, hi, pk in zip(
@@ -571,6 +571,17 @@ def _report(out: Path, logs: list[Path], summary: dict[str, Any], mon: TorqueMon
         f"<pre>{html.escape(json.dumps(summary, indent=1, default=str)[:20000])}</pre>"))
     return write_html(out / "report.html", "jointid monitor",
                       f"jointid {__version__} — torque monitoring", sections)
+
+
+def _rule_text(th: dict[str, Any]) -> str:
+    """The crossing rule of a thresholds record, in a sentence."""
+    p = int(th.get("persist_cycles", 1))
+    hz = th.get("horizon")
+    return ((f"A crossing counts after {p} consecutive cycles out of the band; the peaks are "
+             "of that statistic" if p > 1 else "A crossing counts at its first cycle out of "
+             "the band")
+            + (f", extrapolated from the validation's {hz['validation_s']:.1f} s to "
+               f"{hz['horizon_s']:g} s of monitoring." if hz else "."))
 
 
 def _bin_names(edges: list[float]) -> list[str]:
