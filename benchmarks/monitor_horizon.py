@@ -4,7 +4,7 @@ Usage::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/monitor_horizon.py --work DIR \
         [--campaign examples/campaign_ur10_demo.toml] [--false-also DIR2 ...] [--oracle] \
-        [--cache FILE.pkl] [--json OUT.json]
+        [--cache FILE.pkl] [--constant-band] [--json OUT.json]
 
 DIR is a ``bench_monitor.py`` work folder whose ``model``, ``calibrate``, ``false`` and
 ``detect`` stages ran (the filtered residual); each ``--false-also`` folder holds another
@@ -26,7 +26,8 @@ bins):
     (``ident.monitor.horizon_factor``).
 
 Printed per joint: the bands (half-widths [N m], ``*`` no statistics of its own), the false
-alarms (crossings) and largest excursion / band on each false stage, and per pushed link
+alarms (crossings) and largest excursion / band on each false stage (``after``: the smallest
+of each ``DEFAULT_PERSIST_CYCLES`` consecutive ones, what the rule compares), and per pushed link
 and force the delays [ms] of the detect log's pushes (from the staging cycle to the first
 crossing on any joint; ``None`` missed) and the crossings outside the pushes. The live
 monitor gives the same figures (its moving time, bands and persistence are these
@@ -76,9 +77,10 @@ def replay(work: Path, also: list[Path], oracle: bool, cache: Path | None
     return runs, joints, cs
 
 
-def evaluate(runs: dict, joints: list[str], cs: float, after: bool) -> dict:
+def evaluate(runs: dict, joints: list[str], cs: float, after: bool, constant: bool = False
+             ) -> dict:
     """Thresholds from the calibrate runs, false alarms per false folder, detection
-    (module docstring)."""
+    (module docstring); ``constant``: the constant band (``--constant-band``)."""
     cal = [d for (s, _), d in runs.items() if s == "calibrate"]
 
     def regime(d: dict) -> np.ndarray:
@@ -88,9 +90,12 @@ def evaluate(runs: dict, joints: list[str], cs: float, after: bool) -> dict:
         np.concatenate([d["r"][d["armed"]] for d in cal]), joints, DEFAULT_K_SIGMA,
         "offline", DEFAULT_PEAK_MARGIN, np.concatenate([regime(d)[d["armed"]] for d in cal]),
         DEFAULT_EDGES_S, **(bm.rule_kwargs("filtered", 0.0, cs) if after else {}))
+    if constant:
+        th = th.constant()
     out: dict = {"bands": [[round((h - lo) / 2, 3) for lo, h in zip(a, b, strict=True)]
                            for a, b in zip(*th.bands(), strict=True)],
-                 "own": th.bin_used, "persist_cycles": th.persist_cycles,
+                 "own": th.bin_used or [[True]] * len(joints),
+                 "persist_cycles": th.persist_cycles,
                  "horizon_s": th.horizon_s, "validation_s": th.validation_s}
     false: dict = {}
     pushes, outside = [], 0
@@ -107,8 +112,12 @@ def evaluate(runs: dict, joints: list[str], cs: float, after: bool) -> dict:
                 "worst": np.zeros(len(joints))})
             f["false_alarms"] += hits.sum(axis=0)
             f["minutes"] += float(a.sum()) * cs / 60.0
-            f["worst"] = np.maximum(f["worst"], (np.abs(d["r"][a] - (lo[a] + hi[a]) / 2)
-                                                 / ((hi[a] - lo[a]) / 2)).max(axis=0))
+            # the excursion the rule sees: the smallest of persist_cycles consecutive ones
+            x = np.abs(d["r"] - (lo + hi) / 2) / ((hi - lo) / 2)
+            for i in range(1, th.persist_cycles):
+                x[i:] = np.minimum(x[i:], x[:-i])
+                x[:i] = 0.0
+            f["worst"] = np.maximum(f["worst"], x[a].max(axis=0))
             continue
         used = np.zeros(len(d["cycle"]), bool)
         for e in (e for e in d["events"] if e["kind"] == "push"):
@@ -152,15 +161,20 @@ def main() -> None:
     ap.add_argument("--false-also", type=Path, action="append", default=[])
     ap.add_argument("--oracle", action="store_true")
     ap.add_argument("--cache", type=Path, default=None)
+    ap.add_argument("--constant-band", action="store_true",
+                    help="evaluate the constant band (jointid monitor --constant-band)")
     ap.add_argument("--json", type=Path, default=None)
     a = ap.parse_args()
     bm.SOURCE["campaign"] = a.campaign.resolve()
     runs, joints, cs = replay(a.work, a.false_also, a.oracle, a.cache)
-    res = {"before": evaluate(runs, joints, cs, False), "after": evaluate(runs, joints, cs, True),
+    res = {"before": evaluate(runs, joints, cs, False, a.constant_band),
+           "after": evaluate(runs, joints, cs, True, a.constant_band),
+           "constant_band": a.constant_band,
            "model": "oracle" if a.oracle else "identified", "work": str(a.work),
            "false_also": [str(p) for p in a.false_also]}
     for tag in ("before", "after"):
-        show(f"{res['model']} {tag}", res[tag], joints)
+        show(f"{res['model']} {tag}{' (constant band)' if a.constant_band else ''}", res[tag],
+             joints)
     if a.json:
         a.json.write_text(json.dumps(res, indent=1))
 
