@@ -35,11 +35,11 @@ clock unless said, i.e. simulated time):
     regime bin of the moving time, and the constant band).
 ``false``
     At least ``--false-minutes`` (default 10) of excitation without pushes: the campaign
-    with another multi-sine (seed 7) of as many periods as that takes over all payloads
-    (``--false-periods`` to set them); the monitor logs its residual, and the crossings of
-    the calibration's thresholds are counted on it (the thresholds do not change the
-    residual, so counting them on the log, with its moving time, is what the live check
-    would count), for the regime bands and for the constant band.
+    with another multi-sine (seed 7, ``--false-seed``) of as many periods as that takes
+    over all payloads (``--false-periods`` to set them); the monitor logs its residual, and
+    the crossings of the calibration's thresholds are counted on it (the thresholds do not
+    change the residual, so counting them on the log, with its moving time, is what the
+    live check would count), for the regime bands and for the constant band.
 ``detect``
     Pushes of 20 N and 40 N on the link of every moving joint (default point and direction
     of ``sim_drivers.arm_push.staged_push``) for 0.2 s, every 1.5 s (3 per link and force,
@@ -99,9 +99,12 @@ import numpy as np
 
 from daq.app.monitor import (
     AFTER_PUSH_S,
+    DEFAULT_HORIZON_S,
     DEFAULT_K_SIGMA,
     DEFAULT_PEAK_MARGIN,
+    DEFAULT_PERSIST_CYCLES,
     REST_QS,
+    independent_rate,
     load_campaign,
     run_monitor,
 )
@@ -119,6 +122,7 @@ from ident.monitor import (
     ExportedModel,
     Thresholds,
     load_exported,
+    persistent,
     thresholds_from_residual,
 )
 from ident.robot.export_model import friction_record, urdf_text
@@ -243,6 +247,15 @@ def stage_calibrate(work: Path) -> dict:
             "missed": s["missed_cycles"]}
 
 
+def rule_kwargs(kind: str, gain: float, cycle_s: float) -> dict:
+    """The crossing rule of a new ``jointid monitor --calibrate`` (persistence, horizon)
+    as keywords of ``thresholds_from_residual``."""
+    return {"persist_cycles": DEFAULT_PERSIST_CYCLES, "horizon_s": DEFAULT_HORIZON_S,
+            "cycle_s": cycle_s,
+            "independent_per_s": independent_rate(kind, 20.0, gain if kind == "observer"
+                                                  else 0.0)}
+
+
 def sample_bands(th: Thresholds, moving_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(lower, upper) (n, k) [N m] of ``th`` at each sample's moving time (n, k) [s]: the
     band the live check uses (the constant band when ``th`` has no regime bins)."""
@@ -259,19 +272,20 @@ def crossings(path: Path, th: Thresholds) -> tuple[list, float, list]:
     ml = read_monitor(path)
     r = ml.residual[ml.armed]
     lo, hi = sample_bands(th, ml.moving_s[ml.armed])
-    out = (r < lo) | (r > hi)
+    out = persistent((r < lo) | (r > hi), th.persist_cycles)
     edges = ((out[1:] & ~out[:-1]).sum(axis=0) + out[0]).astype(int).tolist()
     cycle_s = float(np.median(np.diff(ml.t)))
     worst = (np.abs(r - (lo + hi) / 2) / ((hi - lo) / 2)).max(axis=0)
     return edges, r.shape[0] * cycle_s, worst.tolist()
 
 
-def stage_false(work: Path, minutes: float, periods: int | None = None) -> dict:
+def stage_false(work: Path, minutes: float, periods: int | None = None, seed: int = 7
+                ) -> dict:
     _, c = _source()
     other_s, period_s = _plan_parts()
     if periods is None:  # at least `minutes` of plan over all payloads
         periods = _multisine_periods(period_s, 60.0 * minutes / len(c.payloads) - other_s)
-    camp = _campaign(work, "false", seed=_other_seed(7), periods=periods,
+    camp = _campaign(work, "false", seed=_other_seed(seed), periods=periods,
                      multisine_only=False, payloads=len(c.payloads))
     s = run_monitor(work / "model", camp, work / "false", simulate=True, calibrate=True)
     return {"logs": s["logs"], "wall_s": s["wall_s"], "missed": s["missed_cycles"],
@@ -317,7 +331,7 @@ def stage_detect(work: Path) -> dict:
         for tag, t in (("constant", th.constant()), ("regime", th)):
             lo, hi = sample_bands(t, ml.moving_s)
             offline[tag].append(detect_offline(ml, ml.residual, lo, hi, list(c.moving),
-                                               c.cycle_s))
+                                               c.cycle_s, th.persist_cycles))
     return {"runs": s["runs"], "wall_s": s["wall_s"], "missed": s["missed_cycles"],
             "offline": offline}
 
@@ -399,20 +413,21 @@ def replay(log: Path, campaign: object, model: ExportedModel, cutoff_hz: float =
     return ml, r, moving_seconds(vel, v_rest, campaign.cycle_s)
 
 
-def _rising(r: np.ndarray, armed: np.ndarray, lo: np.ndarray, hi: np.ndarray
-            ) -> np.ndarray:
-    """(n, k) bool: the armed samples where r leaves the band [lo, hi] (first sample out)."""
-    out = ((r < lo) | (r > hi)) & armed[:, None]
+def _rising(r: np.ndarray, armed: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+            persist: int = 1) -> np.ndarray:
+    """(n, k) bool: the armed samples where r has been out of the band [lo, hi] for
+    ``persist`` consecutive armed samples (first such sample: the live crossing)."""
+    out = persistent(((r < lo) | (r > hi)) & armed[:, None], persist)
     prev = np.vstack([np.zeros((1, r.shape[1]), bool), out[:-1]])
     return out & ~prev
 
 
 def detect_offline(ml: object, r: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                   joints: list[str], cycle_s: float) -> dict:
+                   joints: list[str], cycle_s: float, persist: int = 1) -> dict:
     """The detect stage's pushes (the log's push events) against residual ``r`` and bands
     ``lo``, ``hi`` (n, k): detection, delay, joints crossed; crossings outside the push
     windows."""
-    hits = _rising(r, ml.armed, lo, hi)
+    hits = _rising(r, ml.armed, lo, hi, persist)
     used = np.zeros(len(ml.cycle), bool)
     span = int(round((PUSH_S + AFTER_PUSH_S) / cycle_s))
     pushes = []
@@ -443,18 +458,19 @@ def stage_oracle(work: Path) -> dict:
     res = [replay(p, c, model) for p in logs]
     th = thresholds_from_residual(np.concatenate([r[ml.armed] for ml, r, _ in res]), joints,
                                   DEFAULT_K_SIGMA, "oracle", DEFAULT_PEAK_MARGIN,
-                                  np.concatenate([m[ml.armed] for ml, _, m in res]))
+                                  np.concatenate([m[ml.armed] for ml, _, m in res]),
+                                  **rule_kwargs("filtered", 0.0, c.cycle_s))
     out: dict = {"thresholds": th.to_json()}
     false_n, secs = np.zeros(len(joints), int), 0.0
     for p in sorted((work / "false" / "logs").glob("*.mcap")):
         ml, r, m = replay(p, c, model)
-        false_n += _rising(r, ml.armed, *sample_bands(th, m)).sum(axis=0)
+        false_n += _rising(r, ml.armed, *sample_bands(th, m), th.persist_cycles).sum(axis=0)
         secs += float(ml.armed.sum()) * c.cycle_s
     out["false_alarms"] = {"per_joint": false_n.tolist(), "monitored_s": secs}
     pushes, outside = [], 0
     for p in sorted((work / "detect" / "logs").glob("*.mcap")):
         ml, r, m = replay(p, c, model)
-        d = detect_offline(ml, r, *sample_bands(th, m), joints, c.cycle_s)
+        d = detect_offline(ml, r, *sample_bands(th, m), joints, c.cycle_s, th.persist_cycles)
         pushes += d["pushes"]
         outside += d["crossings_outside"]
     out["detect"] = {"pushes": pushes, "crossings_outside": outside}
@@ -477,7 +493,8 @@ def _evaluate(work: Path, campaign: object, model: ExportedModel, kind: str, gai
                                   DEFAULT_K_SIGMA, f"{kind} offline", DEFAULT_PEAK_MARGIN,
                                   np.concatenate([m[ml.armed] for ml, _, m in res]),
                                   kind=kind, observer_gain=gain if kind == "observer" else 0.0,
-                                  thin_bins=thin_bins)
+                                  thin_bins=thin_bins,
+                                  **rule_kwargs(kind, gain, campaign.cycle_s))
     out: dict = {"thresholds": th.to_json()}
     bands = {"": th, "constant_": th.constant()}  # the regime bands, and the constant band
     false_n = {t: np.zeros(len(joints), int) for t in bands}
@@ -489,7 +506,7 @@ def _evaluate(work: Path, campaign: object, model: ExportedModel, kind: str, gai
         a = ml.armed
         for t, x in bands.items():
             lo, hi = sample_bands(x, m)
-            false_n[t] += _rising(r, a, lo, hi).sum(axis=0)
+            false_n[t] += _rising(r, a, lo, hi, th.persist_cycles).sum(axis=0)
             worst[t] = np.maximum(worst[t], (np.abs(r[a] - (lo[a] + hi[a]) / 2)
                                              / ((hi[a] - lo[a]) / 2)).max(axis=0))
     pushes: dict = {t: [] for t in bands}
@@ -497,7 +514,8 @@ def _evaluate(work: Path, campaign: object, model: ExportedModel, kind: str, gai
     for p in sorted((work / "detect" / "logs").glob("*.mcap")):
         ml, r, m = replay(p, campaign, model, kind=kind, gain=gain)
         for t, x in bands.items():
-            d = detect_offline(ml, r, *sample_bands(x, m), joints, campaign.cycle_s)
+            d = detect_offline(ml, r, *sample_bands(x, m), joints, campaign.cycle_s,
+                               th.persist_cycles)
             pushes[t] += d["pushes"]
             outside[t] += d["crossings_outside"]
     for t in bands:
@@ -812,6 +830,9 @@ def main() -> None:
     ap.add_argument("--false-periods", type=int, default=None,
                     help="false stage: periods of the multi-sine (instead of "
                     "--false-minutes)")
+    ap.add_argument("--false-seed", type=int, default=7,
+                    help="false stage: the multi-sine's seed (default 7; the next free one "
+                    "+10 when the campaign's uses it)")
     ap.add_argument("--paced-seconds", type=float, default=30.0)
     ap.add_argument("--realtime", type=int, default=0,
                     help="paced stage: SCHED_FIFO priority of the cycle loop (daq."
@@ -845,7 +866,8 @@ def main() -> None:
         elif st == "calibrate":
             res["calibrate"] = stage_calibrate(a.work)
         elif st == "false":
-            res["false"] = stage_false(a.work, a.false_minutes, a.false_periods)
+            res["false"] = stage_false(a.work, a.false_minutes, a.false_periods,
+                                       a.false_seed)
         elif st == "detect":
             res["detect"] = stage_detect(a.work)
         elif st == "oracle":

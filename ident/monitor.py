@@ -46,7 +46,8 @@ from .vocab import upgrade_record
 
 __all__ = ["DEFAULT_EDGES_S", "DEFAULT_MIN_EPISODES", "DEFAULT_MIN_SAMPLES",
            "RESIDUAL_KINDS", "THIN_BINS", "THRESHOLDS_FORMAT", "Thresholds", "TorquePredictor",
-           "exported_from_fit", "load_exported", "load_model", "thresholds_from_residual"]
+           "exported_from_fit", "horizon_factor", "load_exported", "load_model", "persistent",
+           "thresholds_from_residual"]
 
 THRESHOLDS_FORMAT = "jointid-monitor-thresholds/2"
 #: the residuals a thresholds file can be calibrated on (its ``residual`` key; a /2 file
@@ -360,6 +361,45 @@ DEFAULT_MIN_EPISODES = 20
 THIN_BINS = ("pooled", "constant")
 
 
+def persistent(out: Any, cycles: int) -> np.ndarray:
+    """(n, k) bool: the samples where ``out`` (n, k) has been true for ``cycles``
+    consecutive samples (this one included): the live check's crossing condition
+    (``daq.runtime.monitor.TorqueMonitor`` with ``persist_cycles``)."""
+    o = np.asarray(out, dtype=bool)
+    res = o.copy()
+    for i in range(1, int(cycles)):
+        res[i:] &= o[:-i]
+        res[:i] = False
+    return res
+
+
+def _persist_dev(dev: np.ndarray, cycles: int) -> np.ndarray:
+    """|dev| where ``dev`` (n,) kept its sign for ``cycles`` samples, as the smallest |dev|
+    of those samples (0 elsewhere): a band of half-width h is left for ``cycles``
+    consecutive samples exactly where this exceeds h."""
+    up, dn = np.maximum(dev, 0.0), np.maximum(-dev, 0.0)
+    for i in range(1, int(cycles)):
+        up[i:] = np.minimum(up[i:], up[:-i])
+        dn[i:] = np.minimum(dn[i:], dn[:-i])
+        up[:i] = dn[:i] = 0.0
+    return np.maximum(up, dn)
+
+
+def horizon_factor(seconds: float, validation_s: float, horizon_s: float,
+                   independent_per_s: float) -> float:
+    """How much further [ratio] the largest deviation seen in ``seconds`` [s] of validation
+    samples (a regime bin's) is expected to reach over ``horizon_s`` [s] of monitoring,
+    the whole validation having lasted ``validation_s`` [s] (the bin then gets H / T times
+    as many samples): the largest of n independent Gaussian values grows as sqrt(2 ln n),
+    so ``sqrt(ln(n H / T) / ln n)`` with n = ``seconds`` x ``independent_per_s`` (about
+    twice the residual's bandwidth: 2 f_c for the filtered residual, K_O / pi for the
+    observer), n at least e; 1 when H <= T or no rate is given."""
+    if not (horizon_s > validation_s > 0 and independent_per_s > 0 and seconds > 0):
+        return 1.0
+    n = max(seconds * independent_per_s, math.e)
+    return math.sqrt(math.log(n * horizon_s / validation_s) / math.log(n))
+
+
 def _band(mean: float, sigma: float, peak: float, k_sigma: float, margin: float
           ) -> tuple[float, float]:
     """(lower, upper) [N m] of ``mean +- max(k_sigma, margin peak) sigma``."""
@@ -430,6 +470,14 @@ class Thresholds:
     residual : str
         The residual the statistics are of (:data:`RESIDUAL_KINDS`): ``filtered`` or
         ``observer`` (the generalized-momentum observer, docs/monitoring.md).
+    persist_cycles : int
+        A crossing counts when the residual has been outside the band for this many
+        consecutive cycles; the peaks are of that statistic (the smallest deviation of each
+        ``persist_cycles`` consecutive samples of one sign, :func:`persistent`).
+    horizon_s, validation_s, independent_per_s : float
+        The peaks are extrapolated from the validation's ``validation_s`` [s] to
+        ``horizon_s`` [s] of monitoring (:func:`horizon_factor`, with
+        ``independent_per_s`` [1/s]); 0: not extrapolated (files before the key).
     observer_gain : float
         The observer's gain K_O [1/s] the statistics were taken with (0: the filtered
         residual).
@@ -455,6 +503,10 @@ class Thresholds:
     observer_gain: float = 0.0
     thin_bins: str = "pooled"
     stuck_velocity: tuple[float, ...] = ()
+    persist_cycles: int = 1
+    horizon_s: float = 0.0
+    validation_s: float = 0.0
+    independent_per_s: float = 0.0
 
     @property
     def half_width(self) -> list[float]:
@@ -558,6 +610,10 @@ class Thresholds:
             "regime": None}
         if self.residual == "observer":
             d["observer_gain_per_s"] = self.observer_gain
+        d["persist_cycles"] = self.persist_cycles
+        d["horizon"] = ({"horizon_s": self.horizon_s, "validation_s": self.validation_s,
+                         "independent_per_s": self.independent_per_s}
+                        if self.horizon_s > 0 else None)
         if self.regime:
             lo, hi = self.bands()
             d["regime"] = {
@@ -614,8 +670,23 @@ class Thresholds:
             if isinstance(gain, bool) or not isinstance(gain, int | float) or not gain > 0:
                 raise DataError(f"{p}: observer_gain_per_s: expected a number > 0 [1/s] (the "
                                 "observer residual's gain)")
+        persist = d.get("persist_cycles", 1)
+        if isinstance(persist, bool) or not isinstance(persist, int) or persist < 1:
+            raise DataError(f"{p}: persist_cycles: expected an integer >= 1 (consecutive "
+                            "cycles outside the band)")
+        hz = d.get("horizon")
+        try:
+            hor = ((0.0, 0.0, 0.0) if hz is None else
+                   tuple(float(hz[x]) for x in ("horizon_s", "validation_s",
+                                                "independent_per_s")))
+        except (KeyError, TypeError, ValueError):
+            hor = (-1.0, 0.0, 0.0)
+        if hz is not None and not all(x > 0 for x in hor):
+            raise DataError(f"{p}: horizon: expected null or horizon_s, validation_s [s], "
+                            "independent_per_s [1/s], numbers > 0")
         th = cls(joints, k, vals[0], vals[1], vals[2], n, str(d.get("source", "")), margin,
-                 residual=kind, observer_gain=float(gain))
+                 residual=kind, observer_gain=float(gain), persist_cycles=persist,
+                 horizon_s=hor[0], validation_s=hor[1], independent_per_s=hor[2])
         reg = d.get("regime") if d["format"] == THRESHOLDS_FORMAT else None
         return th if reg is None else _read_regime(p, reg, th)
 
@@ -700,7 +771,10 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
                              min_episodes: int = DEFAULT_MIN_EPISODES,
                              kind: str = "filtered", observer_gain: float = 0.0,
                              thin_bins: str = "pooled",
-                             stuck_velocity: Sequence[float] | None = None) -> Thresholds:
+                             stuck_velocity: Sequence[float] | None = None,
+                             persist_cycles: int = 1, horizon_s: float = 0.0,
+                             cycle_s: float = 0.0, independent_per_s: float = 0.0
+                             ) -> Thresholds:
     """Thresholds from a residual (n, k) [N m] recorded without collision: per joint the
     mean, standard deviation and peak of its samples off the static band (residual not
     exactly 0; near rest the model predicts an interval, :meth:`TorquePredictor.band`);
@@ -711,6 +785,12 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
     with too few samples or episodes takes (:data:`THIN_BINS`). ``edges_s`` starting at 0:
     bin 0 is the stuck bin (``moving_s`` < 0, the monitor's with ``stuck_velocity`` [rad/s]
     per joint, recorded in the file), its statistics of all its samples.
+
+    The peaks are those of the crossing rule's statistic: with ``persist_cycles`` P the
+    smallest deviation from the mean of each P consecutive samples of one sign (P = 1:
+    ``|r - mean|``); with ``horizon_s`` > 0 [s] each is extrapolated from the validation's
+    duration (samples x ``cycle_s`` [s]) to the horizon (:func:`horizon_factor` on the
+    bin's seconds, ``independent_per_s`` [1/s]).
 
     Raises
     ------
@@ -738,13 +818,31 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
     if _has_stuck(edges) and (stuck_velocity is None or len(stuck_velocity) != len(joints)):
         raise DataError(f"regime edges {edges}: a first edge 0 or below (the stuck bin) needs "
                         f"stuck_velocity, {len(joints)} values [rad/s]")
+    if isinstance(persist_cycles, bool) or int(persist_cycles) != persist_cycles or not (
+            persist_cycles >= 1):
+        raise DataError(f"persist_cycles: expected an integer >= 1, got {persist_cycles}")
+    if horizon_s and not (horizon_s > 0 and cycle_s > 0 and independent_per_s > 0):
+        raise DataError(f"horizon {horizon_s} s: expected a number > 0 with cycle_s and "
+                        f"independent_per_s > 0, got {cycle_s}, {independent_per_s}")
+    pc = int(persist_cycles)
+    val_s = r.shape[0] * cycle_s if horizon_s else 0.0
+
+    def peak(col: np.ndarray, sel: np.ndarray, m: float, sd: float) -> float:
+        # the rule's statistic over the time-ordered column, at the selected samples,
+        # extrapolated to the horizon (sigmas)
+        if not sd > 0 or not sel.any():
+            return 0.0
+        dev = _persist_dev(np.where(col != 0.0, col - m, 0.0), pc)
+        f = horizon_factor(int(sel.sum()) * cycle_s, val_s, horizon_s, independent_per_s)
+        return float(dev[sel].max() / sd * f)
+
     s = None
     if moving_s is not None:
         s = np.asarray(moving_s, dtype=float)
         if s.shape != r.shape or not np.isfinite(s).all():
             raise DataError(f"{source}: moving_s: expected {r.shape} finite values (the "
                             "residual's samples)")
-    mean, sigma, peak = [], [], []
+    mean, sigma, peaks = [], [], []
     bins: list[list[tuple[float, float, float]]] = []
     counts: list[tuple[int, ...]] = []
     episodes: list[tuple[int, ...]] = []
@@ -754,28 +852,40 @@ def thresholds_from_residual(residual: Any, joints: Sequence[str], k_sigma: floa
         if x.size < 100 or not x.std() > 0:
             raise DataError(f"{source}: residual of {name}: {x.size} samples off its static "
                             "band, expected at least 100 that vary (did the joint move?)")
-        m, sd, pk = _stats(x)
+        m, sd, _ = _stats(x)
         mean.append(m)
         sigma.append(sd)
-        peak.append(pk)
+        peaks.append(peak(r[:, j], off, m, sd))
         if s is not None:
             nb = len(edges) + 1
-            b = np.searchsorted(edges, s[off, j], side="right")
-            bins.append([_stats(x[b == i]) for i in range(nb)])
-            counts.append(tuple(int(n) for n in np.bincount(b, minlength=nb)))
+            ball = np.searchsorted(edges, s[:, j], side="right")  # every sample, in order
+            row = []
+            for i in range(nb):
+                sel = off & (ball == i)
+                bm, bsd, _ = _stats(r[sel, j])
+                row.append((bm, bsd, peak(r[:, j], sel, bm, bsd)))
+            bins.append(row)
+            counts.append(tuple(int(n) for n in np.bincount(ball[off], minlength=nb)))
             if _has_stuck(edges):  # the stuck bin: every sample (0 inside the static band)
                 held = s[:, j] < edges[0]
-                bins[-1][0] = _stats(r[held, j])
+                bm, bsd, _ = _stats(r[held, j])
+                # inside the static band r is 0 exactly: the deviation from the mean counts
+                dev = _persist_dev(r[:, j] - bm, pc)
+                f = horizon_factor(int(held.sum()) * cycle_s, val_s, horizon_s,
+                                   independent_per_s)
+                bins[-1][0] = (bm, bsd, float(dev[held].max() / bsd * f) if bsd > 0
+                               else 0.0)
                 counts[-1] = (int(held.sum()), *counts[-1][1:])
-            ball = np.searchsorted(edges, s[:, j], side="right")  # every sample, in order
             enter = ball[np.r_[True, ball[1:] != ball[:-1]]]
             episodes.append(tuple(int(n) for n in np.bincount(enter, minlength=nb)))
     if kind not in RESIDUAL_KINDS or (kind == "observer") != (observer_gain > 0):
         raise DataError(f"residual {kind!r}, gain {observer_gain}: expected one of "
                         f"{', '.join(RESIDUAL_KINDS)} (the observer's with its gain > 0)")
-    th = Thresholds(tuple(joints), float(k_sigma), tuple(mean), tuple(sigma), tuple(peak),
+    th = Thresholds(tuple(joints), float(k_sigma), tuple(mean), tuple(sigma), tuple(peaks),
                     int(r.shape[0]), source, float(peak_margin), residual=kind,
-                    observer_gain=float(observer_gain))
+                    observer_gain=float(observer_gain), persist_cycles=pc,
+                    horizon_s=float(horizon_s) if horizon_s else 0.0, validation_s=val_s,
+                    independent_per_s=float(independent_per_s) if horizon_s else 0.0)
     if s is None:
         return th
     return dataclasses.replace(

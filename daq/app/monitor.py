@@ -54,7 +54,7 @@ if TYPE_CHECKING:
 # functions that use them: `jointid --help` must not wait seconds for them
 
 __all__ = ["analyse", "load_campaign", "parse_edges", "parse_push", "per_joint", "register",
-           "run_monitor", "stuck_edges"]
+           "independent_rate", "run_monitor", "stuck_edges"]
 
 #: default --rest-velocity: this many times each joint's Stribeck velocity q_s (E < 5 %)
 REST_QS = 3.0
@@ -62,6 +62,10 @@ REST_QS = 3.0
 DEFAULT_K_SIGMA, DEFAULT_PEAK_MARGIN = 6.0, 1.5
 #: a crossing up to this long [s] after a push ended still counts as its detection
 AFTER_PUSH_S = 0.5
+#: defaults of --persist-cycles (consecutive cycles outside the band for a crossing) and
+#: --horizon-s (the monitored duration [s] the validation's peaks are extrapolated to:
+#: issue 25's 10 min) of a new calibration
+DEFAULT_PERSIST_CYCLES, DEFAULT_HORIZON_S = 2, 600.0
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -120,6 +124,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="--calibrate: a regime bin of its own for a joint whose measured |dq| "
                    "is at most V [rad/s] (held by its static friction; 0: the drive reads "
                    "zero); recorded in the thresholds file. Default: no such bin")
+    p.add_argument("--persist-cycles", type=int, default=None, metavar="N",
+                   help="--calibrate: a crossing counts when the residual has been outside "
+                   f"its band for N consecutive cycles (default {DEFAULT_PERSIST_CYCLES}); "
+                   "the peaks are of that statistic; recorded in the thresholds file")
+    p.add_argument("--horizon-s", type=float, default=None, metavar="S",
+                   help="--calibrate: extrapolate the validation's peaks to S seconds of "
+                   f"monitoring (default {DEFAULT_HORIZON_S:g}; 0: not extrapolated); "
+                   "recorded in the thresholds file")
     p.add_argument("--push", action="append", default=[], metavar="JOINT:FORCE:T0[:DT]",
                    help="simulated arm: push the link of JOINT with FORCE [N] from T0 [s] "
                    "after the run starts for DT [s] (default 0.2); repeatable")
@@ -140,6 +152,14 @@ def stuck_edges(edges: tuple[float, ...], residual: str, cutoff_hz: float,
     settle = 4.0 / gain if residual == "observer" else 4.0 / (2 ** -0.5 * 2 * math.pi
                                                                 * cutoff_hz)
     return (-round(settle, 4), 0.0, *edges)
+
+
+def independent_rate(residual: str, cutoff_hz: float, gain: float) -> float:
+    """About how many independent values per second [1/s] the residual has: twice its
+    bandwidth, 2 f_c for the filtered residual, K_O / pi for the observer's first-order
+    low-pass (bandwidth K_O / (2 pi)); the horizon's extrapolation counts them
+    (``ident.monitor.horizon_factor``)."""
+    return gain / math.pi if residual == "observer" else 2.0 * cutoff_hz
 
 
 def parse_edges(text: str) -> tuple[float, ...]:
@@ -280,6 +300,7 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
                 cutoff_hz: float = 20.0, residual: str = "filtered",
                 observer_gain: float | None = None,
                 rest_velocity: float | None = None, stuck_velocity: float | None = None,
+                persist_cycles: int | None = None, horizon_s: float | None = None,
                 pushes: list[str] | None = None,
                 stop: bool = False, paced: bool = False,
                 stream: TextIO | None = None) -> dict[str, Any]:
@@ -324,6 +345,12 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
     if stuck_velocity is not None and not (calibrate and stuck_velocity >= 0):
         raise ConfigError(f"--stuck-velocity: expected --calibrate and a number >= 0 [rad/s], "
                           f"got {stuck_velocity} (a thresholds file holds its own)")
+    if persist_cycles is not None and not (calibrate and persist_cycles >= 1):
+        raise ConfigError(f"--persist-cycles: expected --calibrate and an integer >= 1, got "
+                          f"{persist_cycles} (a thresholds file holds its own)")
+    if horizon_s is not None and not (calibrate and horizon_s >= 0):
+        raise ConfigError(f"--horizon-s: expected --calibrate and a number >= 0 [s], got "
+                          f"{horizon_s} (a thresholds file holds its own)")
     if k_sigma is not None and not k_sigma > 0:
         raise ConfigError(f"--k-sigma: expected a number > 0, got {k_sigma}")
     if peak_margin is not None and not peak_margin >= 0:
@@ -389,7 +416,8 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
                         edges_s=() if th is None else th.edges_s, rest_velocity=v_rest,
                         cutoff_hz=cutoff_hz, stop=stop, pushes=specs, residual=residual,
                         observer_gain=gain or DEFAULT_OBSERVER_GAIN,
-                        stuck_velocity=v_stuck)
+                        stuck_velocity=v_stuck,
+                        persist_cycles=1 if th is None else th.persist_cycles)
     out.mkdir(parents=True, exist_ok=True)
     result, wall = run_with_bar(campaign, out / "logs", True if simulate else None, stream,
                                 payloads=payloads, monitor=mon)
@@ -423,7 +451,15 @@ def run_monitor(model: Path, campaign_path: Path, out: Path, *, simulate: bool =
                                       np.concatenate(mov) if edges else None, edges,
                                       DEFAULT_MIN_SAMPLES, DEFAULT_MIN_EPISODES,
                                       kind=residual, observer_gain=gain,
-                                      stuck_velocity=v_stuck)
+                                      stuck_velocity=v_stuck,
+                                      persist_cycles=(DEFAULT_PERSIST_CYCLES
+                                                      if persist_cycles is None
+                                                      else persist_cycles),
+                                      horizon_s=(DEFAULT_HORIZON_S if horizon_s is None
+                                                 else horizon_s),
+                                      cycle_s=campaign.cycle_s,
+                                      independent_per_s=independent_rate(residual,
+                                                                         cutoff_hz, gain))
         write_json(out / "thresholds.json", th.to_json())
         summary["thresholds"] = th.to_json()
     else:
@@ -480,7 +516,7 @@ def _report(out: Path, logs: list[Path], summary: dict[str, Any], mon: TorqueMon
     if th:
         sections.append(Section("Thresholds").para(
             f"Constant band: mean +- max({th['k_sigma']:g}, {th['peak_margin']:g} peak) "
-            "sigma of the validation residual.").table(
+            f"sigma of the validation residual. {_rule_text(th)}").table(
             ["joint", "mean [N m]", "sigma [N m]", "k", "lower", "upper", "peak/sigma"],
             [[j, f"{m:.4g}", f"{s:.4g}", f"{th['k_sigma']:g}", f"{lo:.4g}", f"{hi:.4g}",
               f"{pk:.3g}"] for j, m, s, lo, hi, pk in zip(
@@ -537,6 +573,17 @@ def _report(out: Path, logs: list[Path], summary: dict[str, Any], mon: TorqueMon
                       f"jointid {__version__} — torque monitoring", sections)
 
 
+def _rule_text(th: dict[str, Any]) -> str:
+    """The crossing rule of a thresholds record, in a sentence."""
+    p = int(th.get("persist_cycles", 1))
+    hz = th.get("horizon")
+    return ((f"A crossing counts after {p} consecutive cycles out of the band; the peaks are "
+             "of that statistic" if p > 1 else "A crossing counts at its first cycle out of "
+             "the band")
+            + (f", extrapolated from the validation's {hz['validation_s']:.1f} s to "
+               f"{hz['horizon_s']:g} s of monitoring." if hz else "."))
+
+
 def _bin_names(edges: list[float]) -> list[str]:
     """Column titles of the regime bins: moving-time ranges [s]."""
     b = [0.0, *edges]
@@ -575,7 +622,9 @@ def _run(args: argparse.Namespace) -> int:
                     cutoff_hz=args.cutoff_hz, residual=args.residual,
                     observer_gain=args.observer_gain,
                     rest_velocity=args.rest_velocity,
-                    stuck_velocity=args.stuck_velocity, pushes=args.push, stop=args.stop,
+                    stuck_velocity=args.stuck_velocity,
+                    persist_cycles=args.persist_cycles, horizon_s=args.horizon_s,
+                    pushes=args.push, stop=args.stop,
                     paced=args.paced)
     print(format_summary(s))
     if s["status"] == "interrupted":  # Ctrl-C: exit 128 + the signal (130), as jointid run

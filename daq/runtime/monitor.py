@@ -381,6 +381,9 @@ class TorqueMonitor:
         filter's start transient).
     stop : bool
         A crossing stops the run (quick stop, disable).
+    persist_cycles : int
+        A crossing counts when the residual has been outside its band for this many
+        consecutive armed cycles (1: at once; the thresholds file's).
     pushes : sequence of PushSpec
         Pushes to stage on the simulated arm (needs :attr:`arm`).
     """
@@ -392,8 +395,14 @@ class TorqueMonitor:
                  cutoff_hz: float = 20.0, warmup_s: float = 0.25, stop: bool = False,
                  pushes: Sequence[PushSpec] = (), residual: str = "filtered",
                  observer_gain: float = DEFAULT_OBSERVER_GAIN,
-                 stuck_velocity: float | Sequence[float] | None = None) -> None:
+                 stuck_velocity: float | Sequence[float] | None = None,
+                 persist_cycles: int = 1) -> None:
         self.predictor_for = predictor_for
+        if isinstance(persist_cycles, bool) or int(persist_cycles) != persist_cycles or not (
+                persist_cycles >= 1):
+            raise ConfigError(f"monitor: persist_cycles: expected an integer >= 1, got "
+                              f"{persist_cycles}")
+        self.persist_cycles = int(persist_cycles)
         self.joints = list(joints)
         k = self.k = len(self.joints)
         self.cycle_s = float(cycle_s)
@@ -440,6 +449,7 @@ class TorqueMonitor:
         self._moving = [0] * k  # cycles the filtered velocity kept its sign above v_rest
         self._sign = [0] * k
         self._stuck = [0] * k  # cycles the measured |dq| stayed at most v_stuck
+        self._over = [0] * k  # consecutive armed cycles outside the band
 
     # -- per run ---------------------------------------------------------------------------
     def begin(self, index: int, payload: Any, log: Any) -> None:
@@ -463,6 +473,7 @@ class TorqueMonitor:
                 "rest_velocity": json.dumps(self.rest_velocity),
                 "stuck_velocity": json.dumps(self.stuck_velocity),
                 "warmup_cycles": str(self.warmup_cycles), "stop": str(self.stop).lower(),
+                "persist_cycles": str(self.persist_cycles),
                 "pushes": json.dumps([p.__dict__ for p in self.pushes])})
         self._n = 0
         self._disarmed_until = 0
@@ -471,6 +482,7 @@ class TorqueMonitor:
         self._moving = [0] * self.k
         self._sign = [0] * self.k
         self._stuck = [0] * self.k
+        self._over = [0] * self.k
         self.records.append(MonitorRecord(index))
 
     def step(self, cycle: int, t: float, q: Sequence[float], dq: Sequence[float],
@@ -492,7 +504,8 @@ class TorqueMonitor:
             self._stage(cycle, t, log, rec)
         armed = n >= self.warmup_cycles and n >= self._disarmed_until
         rec.armed_cycles += armed
-        lo, hi, out = self.lower, self.upper, self._out
+        lo, hi, out, over, persist = (self.lower, self.upper, self._out, self._over,
+                                      self.persist_cycles)
         moving, sign, v_rest = self._moving, self._sign, self.rest_velocity
         stuck, v_stuck = self._stuck, self.stuck_velocity
         edges, cycle_s = self.edges_s, self.cycle_s
@@ -517,8 +530,10 @@ class TorqueMonitor:
                 add(chans[j], ts, _SAMPLE.pack(_CDR_HEADER, cycle, t, r, lo_j, hi_j, x, pred,
                                                mv, armed), now_ns, cycle)
             if not armed:
+                over[j] = 0
                 continue
-            crossed = r < lo_j or r > hi_j
+            over[j] = over[j] + 1 if r < lo_j or r > hi_j else 0
+            crossed = over[j] >= persist
             if crossed and not out[j]:
                 rec.detections.append((cycle, j, r))
                 why = (f"{self.joints[j]}: torque residual {r:+.3f} N m outside "
