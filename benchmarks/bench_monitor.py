@@ -422,6 +422,24 @@ def _rising(r: np.ndarray, armed: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     return out & ~prev
 
 
+def push_delays(cycle: np.ndarray, events: list[dict], hits: np.ndarray, joints: list[str],
+                span: int, cycle_s: float) -> tuple[list[dict], int]:
+    """Per push event of a run (``events``' ``push`` entries, cycles ``cycle``): its joint,
+    force [N] and the delay of the first crossing (``hits``, (n, k)) within ``span`` cycles
+    [ms] (None: missed); and the crossings outside the push windows."""
+    used = np.zeros(len(cycle), bool)
+    pushes = []
+    for e in (e for e in events if e["kind"] == "push"):
+        win = (cycle >= e["cycle"]) & (cycle <= e["cycle"] + span)
+        used |= win
+        rows = np.flatnonzero(win & hits.any(axis=1))
+        pushes.append({"joint": joints[e["axis"]],
+                       "force_N": float(e["message"].split(":")[1].split("N")[0]),
+                       "delay_ms": round(1000 * (cycle[rows[0]] - e["cycle"]) * cycle_s)
+                       if rows.size else None})
+    return pushes, int(hits[~used].sum())
+
+
 def detect_offline(ml: object, r: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                    joints: list[str], cycle_s: float, persist: int = 1) -> dict:
     """The detect stage's pushes (the log's push events) against residual ``r`` and bands

@@ -119,16 +119,9 @@ def evaluate(runs: dict, joints: list[str], cs: float, after: bool, constant: bo
                 x[:i] = 0.0
             f["worst"] = np.maximum(f["worst"], x[a].max(axis=0))
             continue
-        used = np.zeros(len(d["cycle"]), bool)
-        for e in (e for e in d["events"] if e["kind"] == "push"):
-            win = (d["cycle"] >= e["cycle"]) & (d["cycle"] <= e["cycle"] + span)
-            used |= win
-            rows = np.flatnonzero(win & hits.any(axis=1))
-            pushes.append({"joint": joints[e["axis"]],
-                           "force_N": float(e["message"].split(":")[1].split("N")[0]),
-                           "delay_ms": round(1000 * (d["cycle"][rows[0]] - e["cycle"]) * cs)
-                           if rows.size else None})
-        outside += int(hits[~used].sum())
+        found, out_n = bm.push_delays(d["cycle"], d["events"], hits, joints, span, cs)
+        pushes += found
+        outside += out_n
     out["false"] = {k: {"false_alarms": v["false_alarms"].tolist(),
                         "minutes": round(v["minutes"], 2),
                         "worst": v["worst"].round(3).tolist()} for k, v in false.items()}

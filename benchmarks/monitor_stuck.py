@@ -111,16 +111,9 @@ def evaluate(runs: dict, c: object, stuck: float | None) -> dict:
             worst = np.maximum(worst, (np.abs(d["r"][a] - (lo[a] + hi[a]) / 2)
                                        / ((hi[a] - lo[a]) / 2)).max(axis=0))
             continue
-        used = np.zeros(len(d["cycle"]), bool)
-        for e in (e for e in d["events"] if e["kind"] == "push"):
-            win = (d["cycle"] >= e["cycle"]) & (d["cycle"] <= e["cycle"] + span)
-            used |= win
-            rows = np.flatnonzero(win & hits.any(axis=1))
-            pushes.append({"joint": joints[e["axis"]],
-                           "force_N": float(e["message"].split(":")[1].split("N")[0]),
-                           "delay_ms": round(1000 * (d["cycle"][rows[0]] - e["cycle"]) * cs)
-                           if rows.size else None})
-        outside += int(hits[~used].sum())
+        found, out_n = bm.push_delays(d["cycle"], d["events"], hits, joints, span, cs)
+        pushes += found
+        outside += out_n
     out.update(false_alarms=fa.tolist(), false_minutes=secs / 60.0,
                worst=worst.round(3).tolist(), pushes=pushes, outside=outside)
     return out
