@@ -440,6 +440,15 @@ def push_delays(cycle: np.ndarray, events: list[dict], hits: np.ndarray, joints:
     return pushes, int(hits[~used].sum())
 
 
+def print_push_delays(pushes: list[dict]) -> None:
+    """One line per pushed joint and force: the delays [ms] of :func:`push_delays`."""
+    by: dict = {}
+    for p in pushes:
+        by.setdefault((p["joint"], p["force_N"]), []).append(p["delay_ms"])
+    for (name, force), d in by.items():
+        print(f"  push {name} {force:g} N: delays [ms] {d}")
+
+
 def detect_offline(ml: object, r: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                    joints: list[str], cycle_s: float, persist: int = 1) -> dict:
     """The detect stage's pushes (the log's push events) against residual ``r`` and bands

@@ -140,11 +140,7 @@ def show(tag: str, res: dict, joints: list[str]) -> None:
         print(f"  false stage {k}: false alarms {f['false_alarms']} in {f['minutes']:.1f} min, "
               f"largest excursion / band {f['worst']}")
     print(f"  crossings outside the pushes {res['outside']}")
-    by: dict = {}
-    for p in res["pushes"]:
-        by.setdefault((p["joint"], p["force_N"]), []).append(p["delay_ms"])
-    for (name, force), d in by.items():
-        print(f"  push {name} {force:g} N: delays [ms] {d}")
+    bm.print_push_delays(res["pushes"])
 
 
 def main() -> None:

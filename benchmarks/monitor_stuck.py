@@ -127,11 +127,7 @@ def show(tag: str, res: dict, joints: list[str]) -> None:
         print(f"  {name:22s} bands {bands}")
     print(f"  false alarms {res['false_alarms']} in {res['false_minutes']:.1f} min, largest "
           f"excursion / band {res['worst']}; crossings outside the pushes {res['outside']}")
-    by: dict = {}
-    for p in res["pushes"]:
-        by.setdefault((p["joint"], p["force_N"]), []).append(p["delay_ms"])
-    for (name, force), d in by.items():
-        print(f"  push {name} {force:g} N: delays [ms] {d}")
+    bm.print_push_delays(res["pushes"])
 
 
 def main() -> None:
