@@ -71,6 +71,19 @@ def arm3_campaign(**kw: Any) -> RobotCampaign:
     return RobotCampaign.from_dict(arm3_raw(**kw), "arm3-test.toml")
 
 
+def arm3_log(out: Path, seed: int) -> Path:
+    """A real run log of the simulated 3-dof arm on the bus (one 3 s multi-sine period of
+    ``seed``, one payload run without payload), written in ``out``."""
+    from daq.runtime.runner import run_campaign
+
+    c = arm3_campaign(segments=[{"kind": "multisine", "period_s": 3.0, "periods": 1,
+                                 "harmonics": 4, "fill": 0.6, "seed": seed}],
+                      payloads=[{"mass_kg": 0.0}])
+    r = run_campaign(c, out_dir=out, simulate=True, yes=True)
+    assert r.ok, r.reason
+    return r.runs[0].path
+
+
 def to_toml(raw: dict) -> str:
     """Minimal TOML writer for the campaign mappings above (tables, arrays, numbers)."""
     def val(v):

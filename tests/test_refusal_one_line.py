@@ -15,11 +15,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from robot_campaigns import arm3_campaign
+from robot_campaigns import arm3_log
 
 from daq.app.cli import main
 from daq.protocol.reader import read_metadata
-from daq.runtime.runner import run_campaign
 from ident import DataError
 from ident.loaders import read_file
 
@@ -31,13 +30,7 @@ TRUNCATED = "truncated run log"
 @pytest.fixture(scope="module")
 def arm_log(tmp_path_factory) -> Path:
     """A real run log of the simulated 3-dof arm (one multi-sine period, one payload)."""
-    out = tmp_path_factory.mktemp("arm_log")
-    c = arm3_campaign(segments=[{"kind": "multisine", "period_s": 3.0, "periods": 1,
-                                 "harmonics": 4, "fill": 0.6, "seed": 1}],
-                      payloads=[{"mass_kg": 0.0}])
-    r = run_campaign(c, out_dir=out, simulate=True, yes=True)
-    assert r.ok, r.reason
-    return r.runs[0].path
+    return arm3_log(tmp_path_factory.mktemp("arm_log"), seed=1)
 
 
 def _cut(src: Path, dst: Path, size: int) -> Path:

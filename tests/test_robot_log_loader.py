@@ -15,10 +15,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from robot_campaigns import arm3_campaign
+from robot_campaigns import arm3_log
 
 from daq.protocol.reader import RunArrays, read_metadata, read_run, read_runs
-from daq.runtime.runner import run_campaign
 from ident import DataError
 from ident.loaders import read_file
 
@@ -29,12 +28,7 @@ TRUNCATED = "truncated run log"
 def logs(tmp_path_factory) -> dict[str, Path]:
     """A closed run log of the simulated arm (one multi-sine period) and its first 70 %."""
     out = tmp_path_factory.mktemp("arm_log")
-    c = arm3_campaign(segments=[{"kind": "multisine", "period_s": 3.0, "periods": 1,
-                                 "harmonics": 4, "fill": 0.6, "seed": 2}],
-                      payloads=[{"mass_kg": 0.0}])
-    r = run_campaign(c, out_dir=out, simulate=True, yes=True)
-    assert r.ok, r.reason
-    closed = r.runs[0].path
+    closed = arm3_log(out, seed=2)
     cut = out / "cut.mcap"
     cut.write_bytes(closed.read_bytes()[: int(0.7 * closed.stat().st_size)])
     return {"closed": closed, "truncated": cut}
