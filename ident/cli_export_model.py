@@ -149,7 +149,8 @@ def _read_inputs(path: Path, rec: dict[str, Any], robot: Robot, name: str, mappi
                 or not all(Path(f).is_file() for f in rec["inputs"])):
             raise  # not a question of --map: the files are logs, or missing
         raise DataError(f"{path}: models.{name}: {e}; export-model reads the record's inputs "
-                        "again and the record does not keep jointid fit's --map and --q-unit: "
+                        "again and the record (written before jointid fit kept them) does not keep "
+                        "jointid fit's --map and --q-unit: "
                         "give export-model the ones given to jointid fit") from None
 
 
