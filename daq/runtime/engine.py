@@ -261,7 +261,8 @@ class Engine(Supervisor):
         #: the last run's start-up lateness warning (one line), if any (the runner's summary)
         self.lateness_notes: list[str] = []
         #: while the start-up lateness check runs: take the frames already queued before each
-        #: SYNC is sent (:meth:`_exchange`), and per drive the TPDO1 frames so taken
+        #: SYNC is sent (:meth:`_exchange`; every paced cycle does it too), and per drive
+        #: count the TPDO1 frames so taken (the check only)
         self._peek = False
         self.pre_answers = [0] * len(drives)
 
@@ -285,7 +286,8 @@ class Engine(Supervisor):
             # feedback on 46-97 % of the plan's cycles (1 ms, loopback bridge, no busy loop, load
             # 7-11), 0.1-2.1 % with this wait (benchmarks/bench_late_answers.py, plan_stale)
             self._drain()
-            self.pre_answers = io.answers.copy()
+            if self._peek:  # the check's tally only: not copied on every plan cycle
+                self.pre_answers = io.answers.copy()
             queued, io.mask = io.mask, 0
         now = time.time()
         self.bus.send(self.sync_msg)
